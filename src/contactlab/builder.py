@@ -1,0 +1,245 @@
+"""ModelBuilder: add materials, bodies, particles and obstacles, then ``finalize()``.
+
+Values are checked as they are added; a bad one raises :class:`~contactlab.errors.InputError`
+naming the argument (the scene loader prefixes the scene-file path to it).
+
+Example::
+
+    builder = ModelBuilder()
+    builder.add_material("rubber", friction=0.8, restitution=0.5)
+    builder.add_body(shape="sphere", radius=0.1, mass=1.0, position=(0, 0, 1), material="rubber")
+    builder.add_obstacle(shape="plane", normal=(0, 0, 1), offset=0.0)
+    model = builder.finalize()
+    state = model.state()
+"""
+
+import numpy as np
+
+from . import rotations, shapes
+from .errors import InputError
+from .model import Model
+from .state import State
+
+DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
+
+
+def _vector(value, name, size=3):
+    array = np.asarray(value, dtype=float)
+    if array.shape != (size,):
+        raise InputError(name, f"expected a list of {size} numbers, found {value!r}")
+    if not np.isfinite(array).all():
+        raise InputError(name, f"expected finite numbers, found {value!r}")
+    return array
+
+
+def _number(value, name, minimum=None, strict=False, maximum=None):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InputError(name, f"expected a number, found {value!r}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise InputError(name, f"expected a finite number, found {value!r}")
+    if minimum is not None and (value <= minimum if strict else value < minimum):
+        bound = "greater than" if strict else "at least"
+        raise InputError(name, f"must be {bound} {minimum:g}, found {value:g}")
+    if maximum is not None and value > maximum:
+        raise InputError(name, f"must be at most {maximum:g}, found {value:g}")
+    return value
+
+
+def _orientation(value, name):
+    q = _vector(value, name, 4)
+    norm = np.linalg.norm(q)
+    if norm < 1e-12:
+        raise InputError(name, "a zero quaternion is no rotation; use [1, 0, 0, 0] for none")
+    return q / norm
+
+
+class ModelBuilder:
+    """Collects a scene and freezes it into a :class:`~contactlab.model.Model`."""
+
+    def __init__(self, gravity=(0.0, 0.0, -9.81)):
+        self.gravity = _vector(gravity, "gravity")
+        self._materials = []          # (name, friction, restitution)
+        self._bodies = []             # dicts
+        self._particles = []          # dicts of arrays
+        self._obstacles = []          # dicts
+
+    # -- materials -------------------------------------------------------------------
+    def add_material(self, name, friction=0.5, restitution=0.0) -> int:
+        """Add a material; returns its index. friction: Coulomb μ ≥ 0; restitution ε in [0, 1]."""
+        if not isinstance(name, str) or not name:
+            raise InputError("name", f"expected a non-empty string, found {name!r}")
+        if any(m[0] == name for m in self._materials):
+            raise InputError("name", f"material {name!r} is defined twice; give each a distinct name")
+        self._materials.append((name, _number(friction, "friction", 0.0),
+                                _number(restitution, "restitution", 0.0, maximum=1.0)))
+        return len(self._materials) - 1
+
+    def _material_index(self, material) -> int:
+        if material is None:
+            for i, m in enumerate(self._materials):
+                if m[0] == DEFAULT_MATERIAL[0]:
+                    return i
+            self._materials.append(DEFAULT_MATERIAL)
+            return len(self._materials) - 1
+        if isinstance(material, (int, np.integer)) and not isinstance(material, bool):
+            if 0 <= material < len(self._materials):
+                return int(material)
+            raise InputError("material", f"no material with index {material}")
+        names = [m[0] for m in self._materials]
+        if material in names:
+            return names.index(material)
+        known = ", ".join(repr(n) for n in names) or "none defined"
+        raise InputError("material", f"unknown material {material!r} (known: {known})")
+
+    # -- rigid bodies ----------------------------------------------------------------
+    def add_body(self, shape, *, radius=None, half_extents=None, mass=None, density=None,
+                 position=(0, 0, 0), orientation=(1, 0, 0, 0), velocity=(0, 0, 0),
+                 angular_velocity=(0, 0, 0), material=None, name=None) -> int:
+        """Add a rigid body; returns its index.
+
+        shape: "sphere" (needs radius [m]) or "box" (needs half_extents [m], 3 numbers).
+        Give exactly one of mass [kg] or density [kg/m³]; the inertia tensor follows from the
+        shape as a uniform solid. angular_velocity is in the world frame [rad/s].
+        """
+        kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES)
+        if (mass is None) == (density is None):
+            raise InputError("mass", "give exactly one of mass (kg) or density (kg/m^3)")
+        if mass is not None:
+            mass = _number(mass, "mass", 0.0, strict=True)
+        else:
+            mass = _number(density, "density", 0.0, strict=True) * shapes.volume(kind, params)
+        index = len(self._bodies)
+        self._bodies.append(dict(
+            name=str(name) if name is not None else f"body{index}",
+            kind=kind, params=params, mass=mass,
+            inertia=shapes.principal_inertia(kind, params, mass),
+            position=_vector(position, "position"),
+            orientation=_orientation(orientation, "orientation"),
+            velocity=_vector(velocity, "velocity"),
+            angular_velocity=_vector(angular_velocity, "angular_velocity"),
+            material=self._material_index(material)))
+        return index
+
+    @staticmethod
+    def _solid_shape(shape, radius, half_extents, allowed):
+        if shape not in allowed:
+            raise InputError("shape", f"expected one of {', '.join(allowed)}, found {shape!r}")
+        kind = allowed[shape]
+        params = np.zeros(4)
+        if kind == shapes.SPHERE:
+            if radius is None:
+                raise InputError("radius", "a sphere needs a radius (m)")
+            params[0] = _number(radius, "radius", 0.0, strict=True)
+        elif kind == shapes.BOX:
+            if half_extents is None:
+                raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")
+            he = _vector(half_extents, "half_extents")
+            if (he <= 0).any():
+                raise InputError("half_extents", f"every half extent must be positive, found {list(he)}")
+            params[:3] = he
+        return kind, params
+
+    # -- particles -------------------------------------------------------------------
+    def add_particles(self, position, velocity=None, *, mass=1.0, radius=0.0, material=None):
+        """Add particles; returns their indices (range).
+
+        position, velocity: (count, 3) [m], [m/s]; mass [kg] and radius [m] are per particle
+        (one number for all, or one per particle). A radius of 0 makes a point.
+        """
+        position = np.asarray(position, dtype=float)
+        if position.ndim == 1 and position.shape == (3,):
+            position = position[None]
+        if position.ndim != 2 or position.shape[1] != 3 or len(position) == 0:
+            raise InputError("position", "expected a non-empty list of [x, y, z] points")
+        if not np.isfinite(position).all():
+            raise InputError("position", "expected finite numbers")
+        count = len(position)
+        if velocity is None:
+            velocity = np.zeros_like(position)
+        velocity = np.asarray(velocity, dtype=float).reshape(-1, 3) if np.size(velocity) else velocity
+        if np.shape(velocity) != position.shape:
+            raise InputError("velocity", f"expected {count} velocities, one per position")
+        if not np.isfinite(velocity).all():
+            raise InputError("velocity", "expected finite numbers")
+        masses = np.broadcast_to(np.asarray(mass, dtype=float), (count,)).copy()
+        for m in masses:
+            _number(m, "mass", 0.0, strict=True)
+        radii = np.broadcast_to(np.asarray(radius, dtype=float), (count,)).copy()
+        for r in radii:
+            _number(r, "radius", 0.0)
+        start = sum(len(p["position"]) for p in self._particles)
+        self._particles.append(dict(position=position, velocity=velocity, mass=masses,
+                                    radius=radii, material=self._material_index(material)))
+        return range(start, start + count)
+
+    # -- static obstacles ------------------------------------------------------------
+    def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None,
+                     position=(0, 0, 0), orientation=(1, 0, 0, 0), material=None) -> int:
+        """Add static geometry; returns its index.
+
+        "plane": the half-space normal · x ≤ offset is solid (normal need not be unit).
+        "sphere": radius, position. "box": half_extents, position, orientation.
+        """
+        if shape == "plane":
+            if normal is None:
+                raise InputError("normal", "a plane needs a normal = [nx, ny, nz]")
+            n = _vector(normal, "normal")
+            length = np.linalg.norm(n)
+            if length < 1e-12:
+                raise InputError("normal", "the normal must not be zero")
+            params = np.concatenate([n / length, [_number(offset, "offset") / length]])
+            kind = shapes.PLANE
+        else:
+            kind, params = self._solid_shape(shape, radius, half_extents, shapes.OBSTACLE_SHAPES)
+        self._obstacles.append(dict(kind=kind, params=params, position=_vector(position, "position"),
+                                    orientation=_orientation(orientation, "orientation"),
+                                    material=self._material_index(material)))
+        return len(self._obstacles) - 1
+
+    # -- freeze ------------------------------------------------------------------------
+    def finalize(self) -> Model:
+        """Freeze into a Model whose ``state()`` is the initial state."""
+        if not self._materials:
+            self._material_index(None)
+        bodies, particles, obstacles = self._bodies, self._particles, self._obstacles
+
+        def stack(items, key, shape, dtype=float):
+            return np.array([item[key] for item in items], dtype=dtype).reshape(shape)
+
+        def cat(key, shape):
+            return (np.concatenate([p[key] for p in particles]).reshape(shape) if particles
+                    else np.zeros(shape if shape[0] != -1 else (0,) + shape[1:]))
+
+        initial = State(
+            time=0.0,
+            body_position=stack(bodies, "position", (-1, 3)),
+            body_orientation=stack(bodies, "orientation", (-1, 4)),
+            body_velocity=stack(bodies, "velocity", (-1, 3)),
+            body_angular_velocity=stack(bodies, "angular_velocity", (-1, 3)),
+            particle_position=cat("position", (-1, 3)),
+            particle_velocity=cat("velocity", (-1, 3)),
+        )
+        particle_material = (np.concatenate([np.full(len(p["position"]), p["material"]) for p in particles])
+                             if particles else np.zeros(0, dtype=np.int64))
+        return Model(
+            gravity=self.gravity.copy(),
+            material_names=tuple(m[0] for m in self._materials),
+            material_friction=np.array([m[1] for m in self._materials]),
+            material_restitution=np.array([m[2] for m in self._materials]),
+            body_names=tuple(b["name"] for b in bodies),
+            body_shape=stack(bodies, "kind", (-1,), np.int64),
+            body_params=stack(bodies, "params", (-1, 4)),
+            body_mass=stack(bodies, "mass", (-1,)),
+            body_inertia=stack(bodies, "inertia", (-1, 3)),
+            body_material=stack(bodies, "material", (-1,), np.int64),
+            particle_mass=cat("mass", (-1,)),
+            particle_radius=cat("radius", (-1,)),
+            particle_material=particle_material.astype(np.int64),
+            obstacle_shape=stack(obstacles, "kind", (-1,), np.int64),
+            obstacle_params=stack(obstacles, "params", (-1, 4)),
+            obstacle_position=stack(obstacles, "position", (-1, 3)),
+            obstacle_orientation=stack(obstacles, "orientation", (-1, 4)),
+            obstacle_material=stack(obstacles, "material", (-1,), np.int64),
+            initial=initial,
+        )

@@ -1,0 +1,132 @@
+"""Collision detection: ``collide(model, state) -> Contacts``. It knows nothing of responses.
+
+Colliders are numbered globally: rigid bodies 0..B−1, particles B..B+P−1 (spheres of their
+contact radius), static obstacles B+P..B+P+O−1. Dynamic pairs come from the sweep-and-prune
+broad phase; each dynamic collider is tested against the obstacles its bounds reach.
+"""
+
+import numpy as np
+from numba import njit
+
+from .. import rotations, shapes
+from ..contacts import Contacts, tangent_basis
+from ..errors import InputError
+from .broad_phase import overlapping_pairs
+from .narrow_phase import MAX_PER_PAIR, collide_pair, supported
+
+
+def check_supported(model):
+    """Raise InputError naming the first pair of shapes in the model with no contact routine."""
+    kinds = np.concatenate([model.body_shape, np.full(model.particle_count, shapes.POINT)])
+    dynamic, counts = np.unique(kinds, return_counts=True)
+    count_of = dict(zip(dynamic.tolist(), counts.tolist()))
+    static = sorted(set(model.obstacle_shape.tolist()))
+    for a in dynamic.tolist():
+        partners = [b for b in dynamic.tolist() if b > a or (b == a and count_of[a] > 1)] + static
+        for b in partners:
+            if not supported(a, b):
+                raise InputError("bodies", f"contact between a {shapes.NAMES[a]} and a {shapes.NAMES[b]} "
+                                 "is not supported yet; change the shape of one of them")
+
+
+@njit(cache=True)
+def _generate(pairs, kinds, params, centers, rotations_, margin):
+    capacity = len(pairs) * MAX_PER_PAIR
+    point = np.empty((capacity, 3))
+    normal = np.empty((capacity, 3))
+    depth = np.empty(capacity)
+    feature = np.empty(capacity, dtype=np.int64)
+    owner = np.empty(capacity, dtype=np.int64)      # which pair each contact came from
+    count = 0
+    for k in range(len(pairs)):
+        a, b = pairs[k, 0], pairs[k, 1]
+        written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
+                               kinds[b], params[b], centers[b], rotations_[b],
+                               margin, point, normal, depth, feature, count)
+        owner[count:count + written] = k
+        count += written
+    return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
+
+
+def _colliders(model, state):
+    """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
+    B, P = model.body_count, model.particle_count
+    particle_params = np.zeros((P, 4))
+    particle_params[:, 0] = model.particle_radius
+    kinds = np.concatenate([model.body_shape, np.full(P, shapes.POINT), model.obstacle_shape])
+    params = np.concatenate([model.body_params, particle_params, model.obstacle_params])
+    centers = np.concatenate([state.body_position, state.particle_position, model.obstacle_position])
+    rots = np.concatenate([rotations.to_matrix(state.body_orientation), np.broadcast_to(np.eye(3), (P, 3, 3)),
+                           rotations.to_matrix(model.obstacle_orientation)])
+    return kinds.astype(np.int64), params, centers, np.ascontiguousarray(rots)
+
+
+def _bounds(kinds, params, centers, rots, margin):
+    """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin; planes infinite."""
+    half = np.where(kinds[:, None] == shapes.BOX,
+                    np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),
+                    params[:, :1])
+    half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin
+    return centers - half, centers + half
+
+
+def collide(model, state, margin=0.0) -> Contacts:
+    """All contacts of the state, including gaps down to −margin [m]."""
+    B, P, O = model.body_count, model.particle_count, model.obstacle_count
+    dynamic = B + P
+    kinds, params, centers, rots = _colliders(model, state)
+    lower, upper = _bounds(kinds, params, centers, rots, margin)
+    dyn_pairs = overlapping_pairs(lower[:dynamic], upper[:dynamic])
+    # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
+    static_pairs = []
+    for o in range(O):
+        g = dynamic + o
+        if kinds[g] == shapes.PLANE:
+            n, offset = params[g, :3], params[g, 3]
+            reach = np.abs(upper[:dynamic] - lower[:dynamic]) @ np.abs(n) * 0.5
+            mid = 0.5 * (upper[:dynamic] + lower[:dynamic])
+            near = mid @ n - offset <= reach
+        else:
+            near = ((lower[:dynamic] <= upper[g]) & (lower[g] <= upper[:dynamic])).all(axis=1)
+        hit = np.nonzero(near)[0]
+        static_pairs.append(np.stack([hit, np.full(len(hit), g)], axis=1))
+    pairs = np.concatenate([dyn_pairs] + static_pairs).astype(np.int64) if static_pairs else dyn_pairs
+    if len(pairs) == 0:
+        return Contacts.empty()
+    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, margin)
+    a, b = pairs[owner, 0], pairs[owner, 1]
+    return _assemble(model, a, b, point, normal, depth, feature, dynamic + O)
+
+
+def _side(model, collider):
+    """Body index, particle indices (C,3) and weights (C,3) of each collider's side."""
+    B, P = model.body_count, model.particle_count
+    body = np.where(collider < B, collider, -1)
+    particles = np.full((len(collider), 3), -1, dtype=np.int64)
+    weights = np.zeros((len(collider), 3))
+    is_particle = (collider >= B) & (collider < B + P)
+    particles[is_particle, 0] = collider[is_particle] - B
+    weights[is_particle, 0] = 1.0
+    return body, particles, weights
+
+
+def _material(model, collider):
+    B, P = model.body_count, model.particle_count
+    table = np.concatenate([model.body_material, model.particle_material, model.obstacle_material])
+    return table[collider]
+
+
+def _assemble(model, a, b, point, normal, depth, feature, total):
+    body_a, particles_a, weights_a = _side(model, a)
+    body_b, particles_b, weights_b = _side(model, b)
+    mat_a, mat_b = _material(model, a), _material(model, b)
+    t1, t2 = tangent_basis(normal)
+    return Contacts(
+        body_a=body_a, body_b=body_b, particles_a=particles_a, particles_b=particles_b,
+        weights_a=weights_a, weights_b=weights_b, point=point, normal=normal, depth=depth,
+        tangent1=t1, tangent2=t2,
+        # combination rule: friction geometric mean, restitution the larger
+        friction=np.sqrt(model.material_friction[mat_a] * model.material_friction[mat_b]),
+        restitution=np.maximum(model.material_restitution[mat_a], model.material_restitution[mat_b]),
+        feature_id=(a * total + b) * MAX_PER_PAIR + feature,
+    )

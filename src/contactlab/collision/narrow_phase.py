@@ -1,0 +1,166 @@
+"""Narrow phase: one compiled function per shape pair, and a dispatcher.
+
+Every pair function takes shape A then shape B and writes contacts whose normal points
+from B into A, ``depth`` > 0 when overlapping (contacts down to ``depth = −margin`` are kept,
+for speculative use), and ``point`` midway between the two surfaces. It returns how many
+contacts it wrote (at most ``MAX_PER_PAIR``) and a feature number for each, which makes the
+contact id persistent. Shapes are described as in :mod:`contactlab.shapes`: a kind, a row of
+4 parameters, a centre and a rotation matrix (body → world).
+"""
+
+import numpy as np
+from numba import njit
+
+from .. import shapes
+
+MAX_PER_PAIR = 8
+
+SPHERE, BOX, PLANE, POINT = shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT
+
+
+@njit(cache=True)
+def _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, feature):
+    for i in range(3):
+        out_point[slot, i] = point[i]
+        out_normal[slot, i] = normal[i]
+    out_depth[slot] = depth
+    out_feature[slot] = feature
+
+
+@njit(cache=True)
+def sphere_plane(center, radius, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
+    """Sphere (or particle of this radius) A against the plane B = (n, offset)."""
+    normal = plane[:3]
+    distance = center[0] * normal[0] + center[1] * normal[1] + center[2] * normal[2] - plane[3]
+    depth = radius - distance
+    if depth < -margin:
+        return 0
+    point = center - normal * (0.5 * (radius + distance))
+    _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, 0)
+    return 1
+
+
+@njit(cache=True)
+def sphere_sphere(center_a, radius_a, center_b, radius_b, margin,
+                  out_point, out_normal, out_depth, out_feature, slot):
+    """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0)."""
+    d = center_a - center_b
+    distance = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    depth = radius_a + radius_b - distance
+    if depth < -margin:
+        return 0
+    if distance > 1e-12:
+        normal = d / distance
+    else:                       # concentric: any direction separates; pick +z
+        normal = np.array([0.0, 0.0, 1.0])
+    surface_a = center_a - normal * radius_a
+    surface_b = center_b + normal * radius_b
+    _write(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, 0)
+    return 1
+
+
+@njit(cache=True)
+def box_plane(center, rotation, half_extents, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
+    """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
+    normal = plane[:3]
+    count = 0
+    for corner in range(8):
+        sx = 1.0 if corner & 1 else -1.0
+        sy = 1.0 if corner & 2 else -1.0
+        sz = 1.0 if corner & 4 else -1.0
+        local = np.array([sx * half_extents[0], sy * half_extents[1], sz * half_extents[2]])
+        x = center + rotation @ local
+        distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
+        if -distance >= -margin:
+            _write(out_point, out_normal, out_depth, out_feature, slot + count,
+                   x - normal * (0.5 * distance), normal, -distance, corner)
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def sphere_box(center, radius, box_center, box_rotation, half_extents, margin,
+               out_point, out_normal, out_depth, out_feature, slot):
+    """Sphere A (or particle) against box B, by the closest point of the box to the centre.
+
+    A centre inside the box is pushed out through the nearest face (feature = 1 + face);
+    outside, the feature is 0.
+    """
+    local = box_rotation.T @ (center - box_center)
+    closest = np.minimum(np.maximum(local, -half_extents), half_extents)
+    delta = local - closest
+    distance = np.sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2])
+    if distance > 1e-12:
+        normal_local = delta / distance
+        depth = radius - distance
+        feature = 0
+    else:
+        # inside: leave through the face with the least penetration
+        gaps = half_extents - np.abs(local)
+        axis = np.argmin(gaps)
+        normal_local = np.zeros(3)
+        sign = 1.0 if local[axis] >= 0.0 else -1.0
+        normal_local[axis] = sign
+        closest = local.copy()
+        closest[axis] = sign * half_extents[axis]
+        depth = radius + gaps[axis]
+        feature = 1 + 2 * axis + (1 if sign > 0 else 0)
+    if depth < -margin:
+        return 0
+    normal = box_rotation @ normal_local
+    surface_b = box_center + box_rotation @ closest
+    surface_a = center - normal * radius
+    _write(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
+    return 1
+
+
+@njit(cache=True)
+def supported(kind_a, kind_b):
+    """Whether a contact routine exists for this pair (order does not matter)."""
+    if kind_a > kind_b:
+        kind_a, kind_b = kind_b, kind_a
+    if kind_b == PLANE:
+        return kind_a != PLANE
+    if kind_a == BOX and kind_b == BOX:
+        return False
+    return True
+
+
+@njit(cache=True)
+def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                     margin, out_point, out_normal, out_depth, out_feature, slot):
+    """The pairs in their canonical order: round–round, round–plane, box–plane, round–box."""
+    round_a = kind_a == SPHERE or kind_a == POINT
+    round_b = kind_b == SPHERE or kind_b == POINT
+    if round_a and round_b:
+        return sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin,
+                             out_point, out_normal, out_depth, out_feature, slot)
+    if round_a and kind_b == PLANE:
+        return sphere_plane(center_a, params_a[0], params_b, margin, out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == BOX and kind_b == PLANE:
+        return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
+                         out_point, out_normal, out_depth, out_feature, slot)
+    if round_a and kind_b == BOX:
+        return sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
+                          out_point, out_normal, out_depth, out_feature, slot)
+    return 0
+
+
+@njit(cache=True)
+def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                 margin, out_point, out_normal, out_depth, out_feature, slot):
+    """Contacts of shape A against shape B written from ``slot`` on; returns their count.
+
+    A pair given out of canonical order is computed swapped and its normals flipped, so
+    swapping the two shapes flips the normal and nothing else.
+    """
+    swap = kind_a == PLANE or (kind_a == BOX and (kind_b == SPHERE or kind_b == POINT))
+    if not swap:
+        return _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                                margin, out_point, out_normal, out_depth, out_feature, slot)
+    count = _collide_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
+                             margin, out_point, out_normal, out_depth, out_feature, slot)
+    for i in range(slot, slot + count):
+        for k in range(3):
+            out_normal[i, k] = -out_normal[i, k]
+    return count

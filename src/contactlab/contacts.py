@@ -1,0 +1,179 @@
+"""Contacts: the one struct of arrays every method consumes, and its Jacobian (SPEC D1).
+
+A contact joins side A and side B. Each side is a rigid body (``body_*`` ≥ 0), or a point
+carried by up to three particles with barycentric weights (a particle: one index with weight
+1; a sample on a cloth triangle: three), or nothing (static geometry). The normal points from
+B into A (the direction that separates A), ``depth`` > 0 when penetrating, and the relative
+velocity is v_rel = v_A − v_B, so ``normal · v_rel`` < 0 means approaching.
+
+Generalized velocity (DOF layout): body i owns entries [6i, 6i+6) = (linear, world angular);
+particle j owns [6B + 3j, 6B + 3j + 3). The velocity of the contact point is J v with
+
+* rigid body: J = [I, −[r]×] (normal row [nᵀ, (r × n)ᵀ]), r = point − centre of mass;
+* particle(s): J = [w0 I, w1 I, w2 I].
+
+Forces distribute as F_x = Jᵀ F_p (D1). Shapes: C contacts.
+"""
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+
+@dataclass
+class Contacts:
+    body_a: np.ndarray        # (C,) int, −1 when side A is not a rigid body
+    body_b: np.ndarray        # (C,) int
+    particles_a: np.ndarray   # (C, 3) int particle indices carrying side A's point, −1 unused
+    particles_b: np.ndarray   # (C, 3) int
+    weights_a: np.ndarray     # (C, 3) barycentric weights of those particles
+    weights_b: np.ndarray     # (C, 3)
+    point: np.ndarray         # (C, 3) world contact point, midway between the surfaces [m]
+    normal: np.ndarray        # (C, 3) unit, from B into A
+    depth: np.ndarray         # (C,) penetration [m], > 0 overlapping, < 0 a gap
+    tangent1: np.ndarray      # (C, 3) unit, ⟂ normal
+    tangent2: np.ndarray      # (C, 3) unit, normal × tangent1
+    friction: np.ndarray      # (C,) combined Coulomb μ
+    restitution: np.ndarray   # (C,) combined ε
+    feature_id: np.ndarray    # (C,) int64 persistent id: (collider pair, feature), stable while the contact lasts
+
+    @property
+    def count(self) -> int:
+        return len(self.depth)
+
+    @classmethod
+    def empty(cls) -> "Contacts":
+        return cls.concatenate([])
+
+    @classmethod
+    def concatenate(cls, parts) -> "Contacts":
+        """Join several Contacts (empty list → no contacts)."""
+        shapes = dict(body_a=(0,), body_b=(0,), particles_a=(0, 3), particles_b=(0, 3),
+                      weights_a=(0, 3), weights_b=(0, 3), point=(0, 3), normal=(0, 3), depth=(0,),
+                      tangent1=(0, 3), tangent2=(0, 3), friction=(0,), restitution=(0,), feature_id=(0,))
+        ints = {"body_a", "body_b", "particles_a", "particles_b", "feature_id"}
+        out = {}
+        for f in fields(cls):
+            arrays = [getattr(p, f.name) for p in parts]
+            dtype = np.int64 if f.name in ints else float
+            out[f.name] = np.concatenate(arrays).astype(dtype) if arrays else np.zeros(shapes[f.name], dtype)
+        return cls(**out)
+
+
+def tangent_basis(normal):
+    """Two unit tangents (C, 3) each, with (t1, t2, n) right-handed, from unit normals (C, 3)."""
+    # cross with the world axis least aligned with n: never degenerate
+    axis = np.zeros_like(normal)
+    axis[np.arange(len(normal)), np.argmin(np.abs(normal), axis=1)] = 1.0
+    t1 = np.cross(normal, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    return t1, t2
+
+
+def jacobian(contacts: Contacts, body_position, body_count: int, particle_count: int):
+    """The contact Jacobian as a SciPy CSR matrix, shape (3C, 6B + 3P).
+
+    Rows 3c, 3c+1, 3c+2 are the normal, tangent1 and tangent2 directions of contact c
+    applied to v_rel = v_A − v_B. ``body_position`` (B, 3) are the centres of mass the lever
+    arms are measured from (the positions the contacts were detected at).
+    """
+    C = contacts.count
+    directions = np.stack([contacts.normal, contacts.tangent1, contacts.tangent2], axis=1)  # (C,3,3)
+    rows, cols, vals = [], [], []
+    row_index = np.arange(3 * C).reshape(C, 3)
+    for body, particles, weights, sign in (
+            (contacts.body_a, contacts.particles_a, contacts.weights_a, 1.0),
+            (contacts.body_b, contacts.particles_b, contacts.weights_b, -1.0)):
+        has_body = body >= 0
+        if has_body.any():
+            c = np.nonzero(has_body)[0]
+            r = contacts.point[c] - body_position[body[c]]                  # (k,3)
+            linear = directions[c]                                          # (k,3,3)
+            angular = np.cross(r[:, None, :], linear)                       # r × d
+            block = np.concatenate([linear, angular], axis=2) * sign        # (k,3,6)
+            rows.append(np.repeat(row_index[c], 6, axis=1).ravel())
+            cols.append((6 * body[c][:, None, None] + np.arange(6)[None, None, :]).repeat(3, axis=1).ravel())
+            vals.append(block.ravel())
+        for k in range(3):
+            has = particles[:, k] >= 0
+            if has.any():
+                c = np.nonzero(has)[0]
+                block = directions[c] * (sign * weights[c, k])[:, None, None]   # (k,3,3)
+                rows.append(np.repeat(row_index[c], 3, axis=1).ravel())
+                col0 = 6 * body_count + 3 * particles[c, k]
+                cols.append((col0[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1).ravel())
+                vals.append(block.ravel())
+    shape = (3 * C, 6 * body_count + 3 * particle_count)
+    if not rows:
+        return sp.csr_matrix(shape)
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+
+
+# ---- matrix-free application of J and Jᵀ, one contact side at a time (compiled) ------------
+
+@njit(cache=True)
+def side_point_velocity(body, particles, weights, r, direction,
+                        body_velocity, body_angular_velocity, particle_velocity):
+    """direction · (velocity of one side's contact point); r = lever arm from the body centre."""
+    result = 0.0
+    if body >= 0:
+        v = body_velocity[body]
+        w = body_angular_velocity[body]
+        # (v + w × r) · d
+        result += (v[0] * direction[0] + v[1] * direction[1] + v[2] * direction[2]
+                   + (w[1] * r[2] - w[2] * r[1]) * direction[0]
+                   + (w[2] * r[0] - w[0] * r[2]) * direction[1]
+                   + (w[0] * r[1] - w[1] * r[0]) * direction[2])
+    for k in range(3):
+        p = particles[k]
+        if p >= 0:
+            v = particle_velocity[p]
+            result += weights[k] * (v[0] * direction[0] + v[1] * direction[1] + v[2] * direction[2])
+    return result
+
+
+@njit(cache=True)
+def side_inverse_mass(body, particles, weights, r, direction,
+                      body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass):
+    """dᵀ J M⁻¹ Jᵀ d for one side: 1/m + (r×d)ᵀ I⁻¹ (r×d) for a body, Σ w² / m for particles."""
+    result = 0.0
+    if body >= 0:
+        a0 = r[1] * direction[2] - r[2] * direction[1]
+        a1 = r[2] * direction[0] - r[0] * direction[2]
+        a2 = r[0] * direction[1] - r[1] * direction[0]
+        Ii = body_inverse_inertia_world[body]
+        result += body_inverse_mass[body] + (
+            a0 * (Ii[0, 0] * a0 + Ii[0, 1] * a1 + Ii[0, 2] * a2)
+            + a1 * (Ii[1, 0] * a0 + Ii[1, 1] * a1 + Ii[1, 2] * a2)
+            + a2 * (Ii[2, 0] * a0 + Ii[2, 1] * a1 + Ii[2, 2] * a2))
+    for k in range(3):
+        p = particles[k]
+        if p >= 0:
+            result += weights[k] * weights[k] * particle_inverse_mass[p]
+    return result
+
+
+@njit(cache=True)
+def side_apply_impulse(body, particles, weights, r, direction, impulse,
+                       body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
+                       body_velocity, body_angular_velocity, particle_velocity):
+    """Velocity change M⁻¹ Jᵀ (impulse · d) for one side [N s]; changes the velocity arrays in place."""
+    if body >= 0:
+        scale = impulse * body_inverse_mass[body]
+        for i in range(3):
+            body_velocity[body, i] += scale * direction[i]
+        a0 = (r[1] * direction[2] - r[2] * direction[1]) * impulse
+        a1 = (r[2] * direction[0] - r[0] * direction[2]) * impulse
+        a2 = (r[0] * direction[1] - r[1] * direction[0]) * impulse
+        Ii = body_inverse_inertia_world[body]
+        for i in range(3):
+            body_angular_velocity[body, i] += Ii[i, 0] * a0 + Ii[i, 1] * a1 + Ii[i, 2] * a2
+    for k in range(3):
+        p = particles[k]
+        if p >= 0:
+            scale = impulse * weights[k] * particle_inverse_mass[p]
+            for i in range(3):
+                particle_velocity[p, i] += scale * direction[i]

@@ -1,0 +1,87 @@
+"""The frozen, static description of a scene: struct of arrays.
+
+A :class:`Model` is built once by :class:`contactlab.builder.ModelBuilder` and never changes;
+everything that evolves in time lives in :class:`contactlab.state.State`. Arrays are read-only.
+
+Counts: B rigid bodies, P particles, O static obstacles, M materials.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import shapes
+
+
+@dataclass(frozen=True)
+class Model:
+    gravity: np.ndarray                 # (3,) m/s²
+    # materials
+    material_names: tuple               # (M,)
+    material_friction: np.ndarray       # (M,) Coulomb μ
+    material_restitution: np.ndarray    # (M,) ε in [0, 1]
+    # rigid bodies (6 DOF each: linear velocity, world angular velocity)
+    body_names: tuple                   # (B,)
+    body_shape: np.ndarray              # (B,) int, a kind from contactlab.shapes
+    body_params: np.ndarray             # (B, 4) shape parameters [m]
+    body_mass: np.ndarray               # (B,) kg
+    body_inertia: np.ndarray            # (B, 3) principal moments in the body frame, kg m²
+    body_material: np.ndarray           # (B,) int index into materials
+    # particles (3 DOF each)
+    particle_mass: np.ndarray           # (P,) kg
+    particle_radius: np.ndarray         # (P,) contact radius, m
+    particle_material: np.ndarray       # (P,) int
+    # static obstacles
+    obstacle_shape: np.ndarray          # (O,) int kind
+    obstacle_params: np.ndarray         # (O, 4) shape parameters (see contactlab.shapes)
+    obstacle_position: np.ndarray       # (O, 3) m (centre; unused for planes)
+    obstacle_orientation: np.ndarray    # (O, 4) unit quaternion (w, x, y, z)
+    obstacle_material: np.ndarray       # (O,) int
+    # the state at time 0
+    initial: "object" = field(repr=False, default=None)
+
+    def __post_init__(self):
+        for name, value in vars(self).items():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+
+    @property
+    def body_count(self) -> int:
+        return len(self.body_names)
+
+    @property
+    def particle_count(self) -> int:
+        return len(self.particle_mass)
+
+    @property
+    def obstacle_count(self) -> int:
+        return len(self.obstacle_shape)
+
+    @property
+    def body_inverse_mass(self) -> np.ndarray:
+        """(B,) 1/kg."""
+        return 1.0 / self.body_mass
+
+    @property
+    def body_inverse_inertia(self) -> np.ndarray:
+        """(B, 3) inverse principal moments, 1/(kg m²)."""
+        return 1.0 / self.body_inertia
+
+    @property
+    def particle_inverse_mass(self) -> np.ndarray:
+        """(P,) 1/kg."""
+        return 1.0 / self.particle_mass
+
+    def state(self):
+        """A fresh copy of the state at time 0."""
+        return self.initial.copy()
+
+    def describe(self) -> str:
+        kinds = {}
+        for k in self.body_shape:
+            kinds[shapes.NAMES[int(k)]] = kinds.get(shapes.NAMES[int(k)], 0) + 1
+        parts = [f"{n} {k}{'es' if k == 'box' and n > 1 else 's' if n > 1 else ''}" for k, n in kinds.items()]
+        if self.particle_count:
+            parts.append(f"{self.particle_count} particle{'s' if self.particle_count > 1 else ''}")
+        parts.append(f"{self.obstacle_count} obstacle{'s' if self.obstacle_count != 1 else ''}")
+        return ", ".join(parts)

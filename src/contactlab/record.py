@@ -1,0 +1,83 @@
+"""Recorder: samples states and diagnostics every K steps; writes the trajectory atomically.
+
+The simulation never does I/O: it hands states to :meth:`Recorder.sample`; files are written
+once, at the end, by :func:`write_outputs` (a temporary file, then a rename, so an interrupted
+run leaves no half-written file). The arrays are documented in ``docs/trajectory.md``.
+"""
+
+import json
+import os
+import tempfile
+
+import numpy as np
+
+from . import diagnostics
+from .collision import collide
+
+SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
+          "particle_position", "particle_velocity", "energy_kinetic", "energy_potential",
+          "energy_elastic", "max_penetration", "contact_count", "solver_iterations", "solver_residual")
+
+
+class Recorder:
+    """Collects samples (T of them) of a run of ``model``."""
+
+    def __init__(self, model, record_every=1):
+        self.model = model
+        self.record_every = record_every
+        self.samples = {name: [] for name in SERIES}
+
+    def sample(self, state, info=None):
+        """Record ``state``; penetration is measured on its own positions (collision pass)."""
+        model = self.model
+        contacts = collide(model, state)
+        values = dict(
+            time=state.time,
+            body_position=state.body_position, body_orientation=state.body_orientation,
+            body_velocity=state.body_velocity, body_angular_velocity=state.body_angular_velocity,
+            particle_position=state.particle_position, particle_velocity=state.particle_velocity,
+            energy_kinetic=diagnostics.kinetic_energy(model, state),
+            energy_potential=diagnostics.potential_energy(model, state),
+            energy_elastic=info.energy_elastic if info else 0.0,
+            max_penetration=diagnostics.max_penetration(contacts),
+            contact_count=info.contacts.count if info else contacts.count,
+            solver_iterations=info.solver_iterations if info else 0,
+            solver_residual=info.solver_residual if info else 0.0,
+        )
+        for name, value in values.items():
+            self.samples[name].append(np.array(value, copy=True))
+
+    def arrays(self) -> dict:
+        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,)."""
+        model = self.model
+        empty = {"body_position": (0, model.body_count, 3), "body_orientation": (0, model.body_count, 4),
+                 "body_velocity": (0, model.body_count, 3), "body_angular_velocity": (0, model.body_count, 3),
+                 "particle_position": (0, model.particle_count, 3),
+                 "particle_velocity": (0, model.particle_count, 3)}
+        out = {}
+        for name, values in self.samples.items():
+            out[name] = np.array(values) if values else np.zeros(empty.get(name, (0,)))
+        out["contact_count"] = out["contact_count"].astype(np.int64)
+        out["solver_iterations"] = out["solver_iterations"].astype(np.int64)
+        out["body_names"] = np.array(model.body_names, dtype=str)
+        return out
+
+
+def _atomic_write(path, write):
+    directory = os.path.dirname(os.path.abspath(path))
+    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=os.path.basename(path))
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            write(stream)
+        os.replace(temporary, path)
+    except BaseException:
+        os.unlink(temporary)
+        raise
+
+
+def write_outputs(directory, arrays, summary):
+    """Write ``trajectory.npz`` and ``summary.json`` into ``directory`` (created if needed)."""
+    os.makedirs(directory, exist_ok=True)
+    _atomic_write(os.path.join(directory, "trajectory.npz"), lambda s: np.savez_compressed(s, **arrays))
+    _atomic_write(os.path.join(directory, "summary.json"),
+                  lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))

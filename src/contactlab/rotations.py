@@ -1,0 +1,64 @@
+"""Unit quaternions (w, x, y, z) and rotation matrices.
+
+Vectorized over the leading axis: ``q`` has shape (count, 4), matrices (count, 3, 3).
+Angular velocities are in the world frame [rad/s].
+"""
+
+import numpy as np
+
+
+def normalize(q):
+    """Unit quaternions, shape (count, 4); a zero quaternion is an input error upstream."""
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def to_matrix(q):
+    """Rotation matrices R (count, 3, 3) with x_world = R x_body, from unit q (count, 4)."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def multiply(p, q):
+    """Hamilton product p ⊗ q, shapes (count, 4)."""
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    ], axis=-1)
+
+
+def from_rotation_vector(phi):
+    """Quaternions (count, 4) of rotations by angle |phi| about phi/|phi|; phi (count, 3) [rad]."""
+    angle = np.linalg.norm(phi, axis=-1)
+    half = 0.5 * angle
+    # sin(half)/angle, with its limit 1/2 for tiny angles
+    small = angle < 1e-8
+    scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([np.cos(half)[..., None], phi * scale[..., None]], axis=-1)
+
+
+def integrate(q, angular_velocity, dt):
+    """Orientation after rotating at constant world angular velocity for dt seconds.
+
+    Uses the exponential map q⁺ = exp(dt ω / 2) ⊗ q, which stays unit; renormalized
+    against round-off. Shapes: q (count, 4), angular_velocity (count, 3).
+    """
+    return normalize(multiply(from_rotation_vector(angular_velocity * dt), q))
+
+
+def world_inertia(R, principal):
+    """World-frame tensors R diag(principal) Rᵀ, shape (count, 3, 3); principal (count, 3)."""
+    return np.einsum("bij,bj,bkj->bik", R, principal, R)

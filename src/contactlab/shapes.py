@@ -1,0 +1,54 @@
+"""Shape kinds, their parameters, and mass properties.
+
+Every collider carries an integer ``kind`` and a parameter row of 4 floats:
+
+=========  =============================================  ======================
+kind       params                                         used by
+=========  =============================================  ======================
+SPHERE     (radius, 0, 0, 0)                              bodies, obstacles
+BOX        (half_x, half_y, half_z, 0)                    bodies, obstacles
+PLANE      (normal_x, normal_y, normal_z, offset)         obstacles
+POINT      (radius, 0, 0, 0)  a particle: sphere of r ≥ 0 particles
+=========  =============================================  ======================
+
+A plane is the set {x : normal · x = offset}; its solid side is normal · x < offset.
+"""
+
+import numpy as np
+
+SPHERE = 0
+BOX = 1
+PLANE = 2
+POINT = 3
+
+BODY_SHAPES = {"sphere": SPHERE, "box": BOX}
+OBSTACLE_SHAPES = {"plane": PLANE, "sphere": SPHERE, "box": BOX}
+NAMES = {SPHERE: "sphere", BOX: "box", PLANE: "plane", POINT: "particle"}
+
+
+def volume(kind, params):
+    """Volume [m³] of a solid shape."""
+    if kind == SPHERE:
+        return 4.0 / 3.0 * np.pi * params[0] ** 3
+    if kind == BOX:
+        return 8.0 * params[0] * params[1] * params[2]
+    raise ValueError(f"shape {NAMES[kind]} has no volume")
+
+
+def principal_inertia(kind, params, mass):
+    """Principal moments of inertia [kg m²], shape (3,), of a uniform solid about its centre."""
+    if kind == SPHERE:
+        return np.full(3, 0.4 * mass * params[0] ** 2)
+    if kind == BOX:
+        x2, y2, z2 = (2.0 * params[0]) ** 2, (2.0 * params[1]) ** 2, (2.0 * params[2]) ** 2
+        return mass / 12.0 * np.array([y2 + z2, x2 + z2, x2 + y2])
+    raise ValueError(f"shape {NAMES[kind]} has no inertia")
+
+
+def bounding_radius(kind, params):
+    """Radius [m] of a sphere about the shape's centre that encloses it."""
+    if kind in (SPHERE, POINT):
+        return params[0]
+    if kind == BOX:
+        return float(np.linalg.norm(params[:3]))
+    return np.inf

@@ -1,0 +1,55 @@
+"""What changes in time: positions, velocities, orientations, and per-method carried data.
+
+Shapes: B bodies, P particles. Angular velocity is in the world frame. ``carried`` holds
+what a method keeps from one step to the next (warm-start impulses, penalty anchors), by name.
+"""
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+
+@dataclass
+class State:
+    time: float                          # s
+    body_position: np.ndarray            # (B, 3) centre of mass, m
+    body_orientation: np.ndarray         # (B, 4) unit quaternion (w, x, y, z)
+    body_velocity: np.ndarray            # (B, 3) m/s
+    body_angular_velocity: np.ndarray    # (B, 3) rad/s, world frame
+    particle_position: np.ndarray        # (P, 3) m
+    particle_velocity: np.ndarray        # (P, 3) m/s
+    carried: dict = field(default_factory=dict)
+
+    @classmethod
+    def assemble(cls, time, positions, velocities, carried=None) -> "State":
+        """A state from (body_position, body_orientation, particle_position) and
+        (body_velocity, body_angular_velocity, particle_velocity)."""
+        (bx, bq, px), (bv, bw, pv) = positions, velocities
+        return cls(time, bx, bq, bv, bw, px, pv, {} if carried is None else carried)
+
+    @property
+    def positions(self):
+        """(body_position, body_orientation, particle_position)."""
+        return self.body_position, self.body_orientation, self.particle_position
+
+    @property
+    def velocities(self):
+        """(body_velocity, body_angular_velocity, particle_velocity)."""
+        return self.body_velocity, self.body_angular_velocity, self.particle_velocity
+
+    def copy(self) -> "State":
+        return replace(
+            self,
+            body_position=self.body_position.copy(),
+            body_orientation=self.body_orientation.copy(),
+            body_velocity=self.body_velocity.copy(),
+            body_angular_velocity=self.body_angular_velocity.copy(),
+            particle_position=self.particle_position.copy(),
+            particle_velocity=self.particle_velocity.copy(),
+            carried={k: (v.copy() if hasattr(v, "copy") else v) for k, v in self.carried.items()},
+        )
+
+    def is_finite(self) -> bool:
+        return all(np.isfinite(a).all() for a in (
+            self.body_position, self.body_orientation, self.body_velocity,
+            self.body_angular_velocity, self.particle_position, self.particle_velocity))

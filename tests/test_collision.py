@@ -1,0 +1,146 @@
+"""Narrow phase against hand-computed configurations, the broad phase against brute force."""
+
+import numpy as np
+import pytest
+
+from contactlab import ModelBuilder, collide, rotations
+from contactlab.collision.broad_phase import brute_force_pairs, overlapping_pairs
+from contactlab.errors import InputError
+
+
+def contacts_of(builder):
+    model = builder.finalize()
+    return collide(model, model.state())
+
+
+def test_sphere_plane_depth_normal_point():
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0.3, -0.2, 0.09))
+    b.add_obstacle("plane", normal=(0, 0, 2), offset=0.0)     # normal is normalized
+    c = contacts_of(b)
+    assert c.count == 1
+    assert c.depth[0] == pytest.approx(0.01)
+    np.testing.assert_allclose(c.normal[0], [0, 0, 1])
+    np.testing.assert_allclose(c.point[0], [0.3, -0.2, -0.005])     # midway between the surfaces
+    assert c.body_a[0] == 0 and c.body_b[0] == -1 and (c.particles_b[0] == -1).all()
+
+
+def test_tilted_plane_with_offset():
+    b = ModelBuilder()
+    n = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)
+    b.add_obstacle("plane", normal=n, offset=0.5)
+    b.add_body("sphere", radius=0.2, mass=1, position=tuple(n * (0.5 + 0.15)))
+    c = contacts_of(b)
+    assert c.depth[0] == pytest.approx(0.05)
+    np.testing.assert_allclose(c.normal[0], n, atol=1e-12)
+
+
+def test_sphere_sphere_normal_points_from_b_into_a():
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0))
+    b.add_body("sphere", radius=0.2, mass=1, position=(0.25, 0, 0))
+    c = contacts_of(b)
+    assert c.count == 1 and c.depth[0] == pytest.approx(0.05)
+    # A is the lower index (body 0), B is body 1 on its +x side: normal B→A is −x
+    assert (c.body_a[0], c.body_b[0]) == (0, 1)
+    np.testing.assert_allclose(c.normal[0], [-1, 0, 0])
+    np.testing.assert_allclose(c.point[0], [0.075, 0, 0])
+
+
+def test_particles_against_plane_and_static_sphere():
+    b = ModelBuilder()
+    b.add_particles([[0, 0, -0.01], [5, 0, 1.0], [5, 0, 0.5 + 0.003]], radius=0.0)
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
+    b.add_obstacle("sphere", radius=0.5, position=(5, 0, 0))
+    c = contacts_of(b)
+    assert c.count == 1                      # the point above the sphere is 3 mm off
+    assert c.particles_a[0, 0] == 0 and c.weights_a[0, 0] == 1.0
+    assert c.depth[0] == pytest.approx(0.01)
+    b2 = ModelBuilder()
+    b2.add_particles([[5, 0, 0.49]], radius=0.02)
+    b2.add_obstacle("sphere", radius=0.5, position=(5, 0, 0))
+    c2 = contacts_of(b2)
+    assert c2.depth[0] == pytest.approx(0.03)
+    np.testing.assert_allclose(c2.normal[0], [0, 0, 1])
+
+
+def test_box_plane_gives_the_penetrating_corners():
+    b = ModelBuilder()
+    b.add_body("box", half_extents=(0.2, 0.1, 0.05), mass=1, position=(0, 0, 0.049))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    c = contacts_of(b)
+    assert c.count == 4
+    np.testing.assert_allclose(c.depth, 0.001)
+    np.testing.assert_allclose(np.sort(np.abs(c.point[:, :2]), axis=0), [[0.2, 0.1]] * 4)
+    assert len(set(c.feature_id)) == 4
+
+
+def test_tilted_box_touches_with_one_corner():
+    angle = np.radians(30)
+    q = (np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0)   # about y
+    half = np.array([0.5, 0.025, 0.025])
+    R = rotations.to_matrix(np.array([q]))[0]
+    lowest = min((R @ (half * s))[2] for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3))
+    b = ModelBuilder()
+    b.add_body("box", half_extents=half, mass=1, position=(0, 0, -lowest - 0.002), orientation=q)
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    c = contacts_of(b)
+    assert c.count == 2                          # the two corners of the lowest edge (thin in y)
+    np.testing.assert_allclose(c.depth, 0.002, atol=1e-12)
+
+
+def test_sphere_against_static_box_outside_and_inside():
+    b = ModelBuilder()
+    b.add_obstacle("box", half_extents=(1, 1, 1), position=(0, 0, 0))
+    b.add_body("sphere", radius=0.1, mass=1, position=(1.05, 1.05, 0.0))   # near an edge
+    c = contacts_of(b)
+    expected_normal = np.array([1, 1, 0]) / np.sqrt(2)
+    np.testing.assert_allclose(c.normal[0], expected_normal)
+    assert c.depth[0] == pytest.approx(0.1 - np.sqrt(2) * 0.05)
+    b2 = ModelBuilder()
+    b2.add_obstacle("box", half_extents=(1, 1, 1))
+    b2.add_body("sphere", radius=0.1, mass=1, position=(0.0, 0.0, 0.95))   # centre inside, near the top
+    c2 = contacts_of(b2)
+    np.testing.assert_allclose(c2.normal[0], [0, 0, 1])
+    assert c2.depth[0] == pytest.approx(0.15)
+
+
+def test_swapping_shapes_flips_the_normal_and_nothing_else():
+    from contactlab.collision.narrow_phase import collide_pair
+    from contactlab import shapes
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        q = rotations.normalize(rng.normal(size=(1, 4)))
+        R = rotations.to_matrix(q)[0]
+        box = (shapes.BOX, np.array([0.3, 0.2, 0.1, 0]), rng.normal(scale=0.1, size=3), R)
+        sphere = (shapes.SPHERE, np.array([0.15, 0, 0, 0]), rng.normal(scale=0.2, size=3), np.eye(3))
+        out = [np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64)]
+        out2 = [np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64)]
+        n1 = collide_pair(*box, *sphere, 0.0, *out, 0)
+        n2 = collide_pair(*sphere, *box, 0.0, *out2, 0)
+        assert n1 == n2
+        np.testing.assert_allclose(out[1][:n1], -out2[1][:n2])
+        np.testing.assert_allclose(out[0][:n1], out2[0][:n2])
+        np.testing.assert_allclose(out[2][:n1], out2[2][:n2])
+
+
+def test_broad_phase_equals_brute_force(rng):
+    for count in (1, 2, 50, 500):
+        centers = rng.uniform(-1, 1, size=(count, 3))
+        half = rng.uniform(0.01, 0.15, size=(count, 3))
+        fast = overlapping_pairs(centers - half, centers + half)
+        slow = brute_force_pairs(centers - half, centers + half)
+        assert sorted(map(tuple, fast)) == sorted(map(tuple, slow))
+
+
+def test_contact_ids_persist_while_the_contact_lasts():
+    b = ModelBuilder()
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0, 0, 0.099))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    state = model.state()
+    first = collide(model, state)
+    state.body_position[0, 0] += 0.01
+    state.body_position[0, 2] -= 0.0005
+    second = collide(model, state)
+    assert sorted(first.feature_id) == sorted(second.feature_id)
