@@ -1,0 +1,62 @@
+"""ModelBuilder: mass properties, frozen arrays, and one clear error per bad value."""
+
+import numpy as np
+import pytest
+
+from contactlab import InputError, ModelBuilder
+
+
+def test_inertia_from_shape_and_density():
+    b = ModelBuilder()
+    b.add_body("box", half_extents=(0.5, 0.25, 0.1), density=1000.0)
+    b.add_body("sphere", radius=0.2, mass=3.0)
+    model = b.finalize()
+    mass = 1000.0 * 1.0 * 0.5 * 0.2
+    assert model.body_mass[0] == pytest.approx(mass)
+    np.testing.assert_allclose(model.body_inertia[0], mass / 12 * np.array([0.25 + 0.04, 1 + 0.04, 1 + 0.25]))
+    np.testing.assert_allclose(model.body_inertia[1], 0.4 * 3.0 * 0.04)
+
+
+def test_model_is_frozen_and_state_is_a_fresh_copy():
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.2, mass=3.0, position=(1, 2, 3))
+    model = b.finalize()
+    with pytest.raises(ValueError):
+        model.body_mass[0] = 5.0
+    s1 = model.state()
+    s1.body_position[0, 0] = 99.0
+    assert model.state().body_position[0, 0] == 1.0
+
+
+def test_empty_groups_give_empty_arrays():
+    b = ModelBuilder()
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    assert model.body_count == 0 and model.particle_count == 0
+    assert model.state().body_position.shape == (0, 3)
+    assert model.state().particle_velocity.shape == (0, 3)
+
+
+@pytest.mark.parametrize("call, field", [
+    (lambda b: b.add_body("sphere", radius=-1.0, mass=1.0), "radius"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=-2.0), "mass"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=0.0), "mass"),
+    (lambda b: b.add_body("sphere", radius=0.1), "mass"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, density=5.0), "mass"),
+    (lambda b: b.add_body("box", half_extents=(1, 0, 1), mass=1.0), "half_extents"),
+    (lambda b: b.add_body("box", half_extents=(1, 1), mass=1.0), "half_extents"),
+    (lambda b: b.add_body("cylinder", radius=1.0, mass=1.0), "shape"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, position=(0, float("nan"), 0)), "position"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, orientation=(0, 0, 0, 0)), "orientation"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, material="steel"), "material"),
+    (lambda b: b.add_material("m", friction=-0.1), "friction"),
+    (lambda b: b.add_material("m", restitution=1.5), "restitution"),
+    (lambda b: b.add_particles([[0, 0, 0]], mass=0.0), "mass"),
+    (lambda b: b.add_particles([[0, 0, 0]], velocity=[[0, 0, 0], [1, 1, 1]]), "velocity"),
+    (lambda b: b.add_obstacle("plane", normal=(0, 0, 0)), "normal"),
+])
+def test_bad_values_raise_one_clear_error(call, field):
+    with pytest.raises(InputError) as error:
+        call(ModelBuilder())
+    assert error.value.field == field
+    assert "\n" not in str(error.value)
