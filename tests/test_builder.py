@@ -54,9 +54,19 @@ def test_empty_groups_give_empty_arrays():
     (lambda b: b.add_particles([[0, 0, 0]], mass=0.0), "mass"),
     (lambda b: b.add_particles([[0, 0, 0]], velocity=[[0, 0, 0], [1, 1, 1]]), "velocity"),
     (lambda b: b.add_obstacle("plane", normal=(0, 0, 0)), "normal"),
+    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, velocity="fast"), "velocity"),
+    (lambda b: b.add_particles([[0, 0, 0], [1, 1]]), "position"),
+    (lambda b: b.add_particles([[0, 0, 0], [1, 1, 1]], mass=[1.0, 2.0, 3.0]), "mass"),
+    (lambda b: b.add_particles([[0, 0, 0]], radius=-0.5), "radius"),
 ])
 def test_bad_values_raise_one_clear_error(call, field):
     with pytest.raises(InputError) as error:
         call(ModelBuilder())
     assert error.value.field == field
     assert "\n" not in str(error.value)
+
+
+def test_messages_show_plain_numbers():
+    with pytest.raises(InputError) as error:
+        ModelBuilder().add_body("box", half_extents=(0.1, -0.1, 0.1), mass=1.0)
+    assert "[0.1, -0.1, 0.1]" in str(error.value)

@@ -23,8 +23,16 @@ from .state import State
 DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
 
 
+def _array(value, name, what):
+    """value as a float array, or InputError naming the field (strings, ragged lists)."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(name, f"expected {what}, found {value!r}") from None
+
+
 def _vector(value, name, size=3):
-    array = np.asarray(value, dtype=float)
+    array = _array(value, name, f"a list of {size} numbers")
     if array.shape != (size,):
         raise InputError(name, f"expected a list of {size} numbers, found {value!r}")
     if not np.isfinite(array).all():
@@ -104,7 +112,8 @@ class ModelBuilder:
         """
         kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES)
         if (mass is None) == (density is None):
-            raise InputError("mass", "give exactly one of mass (kg) or density (kg/m^3)")
+            found = "neither" if mass is None else "both"
+            raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
         if mass is not None:
             mass = _number(mass, "mass", 0.0, strict=True)
         else:
@@ -136,7 +145,7 @@ class ModelBuilder:
                 raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")
             he = _vector(half_extents, "half_extents")
             if (he <= 0).any():
-                raise InputError("half_extents", f"every half extent must be positive, found {list(he)}")
+                raise InputError("half_extents", f"every half extent must be positive, found {he.tolist()}")
             params[:3] = he
         return kind, params
 
@@ -147,7 +156,7 @@ class ModelBuilder:
         position, velocity: (count, 3) [m], [m/s]; mass [kg] and radius [m] are per particle
         (one number for all, or one per particle). A radius of 0 makes a point.
         """
-        position = np.asarray(position, dtype=float)
+        position = _array(position, "position", "a list of [x, y, z] points")
         if position.ndim == 1 and position.shape == (3,):
             position = position[None]
         if position.ndim != 2 or position.shape[1] != 3 or len(position) == 0:
@@ -157,21 +166,29 @@ class ModelBuilder:
         count = len(position)
         if velocity is None:
             velocity = np.zeros_like(position)
-        velocity = np.asarray(velocity, dtype=float).reshape(-1, 3) if np.size(velocity) else velocity
-        if np.shape(velocity) != position.shape:
+        velocity = _array(velocity, "velocity", "a list of [vx, vy, vz] velocities")
+        if velocity.shape != position.shape:
             raise InputError("velocity", f"expected {count} velocities, one per position")
         if not np.isfinite(velocity).all():
             raise InputError("velocity", "expected finite numbers")
-        masses = np.broadcast_to(np.asarray(mass, dtype=float), (count,)).copy()
-        for m in masses:
-            _number(m, "mass", 0.0, strict=True)
-        radii = np.broadcast_to(np.asarray(radius, dtype=float), (count,)).copy()
-        for r in radii:
-            _number(r, "radius", 0.0)
+        masses = self._per_particle(mass, "mass", count)
+        if (masses <= 0).any() or not np.isfinite(masses).all():
+            raise InputError("mass", f"must be greater than 0 (kg) for every particle, found {masses.min():g}")
+        radii = self._per_particle(radius, "radius", count)
+        if (radii < 0).any() or not np.isfinite(radii).all():
+            raise InputError("radius", f"must be at least 0 (m) for every particle, found {radii.min():g}")
         start = sum(len(p["position"]) for p in self._particles)
         self._particles.append(dict(position=position, velocity=velocity, mass=masses,
                                     radius=radii, material=self._material_index(material)))
         return range(start, start + count)
+
+    @staticmethod
+    def _per_particle(value, name, count):
+        array = _array(value, name, f"a number or a list of {count} numbers")
+        if array.ndim == 0 or array.shape == (count,):
+            return np.broadcast_to(array, (count,)).copy()
+        raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), "
+                               f"found {array.size}")
 
     # -- static obstacles ------------------------------------------------------------
     def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None,

@@ -76,8 +76,20 @@ def _atomic_write(path, write):
 
 
 def write_outputs(directory, arrays, summary):
-    """Write ``trajectory.npz`` and ``summary.json`` into ``directory`` (created if needed)."""
+    """Write ``trajectory.npz`` and ``summary.json`` into ``directory`` (created if needed).
+
+    On failure nothing is left behind: no partial file, and no folder this call created.
+    """
+    created = not os.path.isdir(directory)
     os.makedirs(directory, exist_ok=True)
-    _atomic_write(os.path.join(directory, "trajectory.npz"), lambda s: np.savez_compressed(s, **arrays))
-    _atomic_write(os.path.join(directory, "summary.json"),
-                  lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
+    try:
+        _atomic_write(os.path.join(directory, "trajectory.npz"), lambda s: np.savez_compressed(s, **arrays))
+        _atomic_write(os.path.join(directory, "summary.json"),
+                      lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
+    except BaseException:
+        if created:
+            for name in ("trajectory.npz", "summary.json"):
+                if os.path.exists(os.path.join(directory, name)):
+                    os.unlink(os.path.join(directory, name))
+            os.rmdir(directory)
+        raise

@@ -6,10 +6,11 @@ One step, stage by stage as on the slide:
 2. integrate positions with v* (a prediction);
 3. collision detection at the predicted positions;
 4. formulate the contacts as impulses and solve them, in two phases:
-   a. collisions (I2, R1–R4, F2): each approaching contact, one pair at a time, gets the
-      normal impulse J_n = −(1 + ε) v_n / (J M⁻¹ Jᵀ) (R4 is this effective mass written out
-      for two rigid bodies) and a friction impulse of at most μ J_n; repeated until nothing
-      approaches, so an impact travels down a chain of touching bodies (Newton's cradle);
+   a. collisions (I2, R1–R4, F2): the contacts approaching now get, together, the normal
+      impulses J_n = −(1 + ε) v_n / (J M⁻¹ Jᵀ) (R4 is this effective mass written out for two
+      rigid bodies) and friction impulses of at most μ J_n; then the contacts those impulses
+      set approaching, and so on: an impact travels down a chain of touching bodies one link
+      at a time (Newton's cradle), while simultaneous impacts stay simultaneous;
    b. resting contacts (M2): sequential impulses with the accumulated normal impulse clamped
       at λ ≥ 0 and friction clamped to μ λ, until no impulse changes a velocity by more than
       the tolerance — this is projected Gauss-Seidel on velocities, the matrix-free twin of
@@ -65,56 +66,72 @@ def resolve_collisions(body_a, body_b, particles_a, particles_b, weights_a, weig
                        r_a, r_b, normal, tangent1, tangent2, friction, restitution, gravity_normal,
                        gap_at_start, dt, threshold, body_inverse_mass, body_inverse_inertia_world,
                        particle_inverse_mass, body_velocity, body_angular_velocity, particle_velocity,
-                       max_impacts, tau):
-    """Collision impulses, one pair at a time (I2, F2), until no contact approaches.
+                       max_waves, sweeps, tolerance, tau):
+    """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
-    A contact takes part when, at the current velocities, it would be closed by the end of
-    the step and its impact velocity u = v_n + g_n (τ − ½) h is below −threshold. τ is where
-    in the step it closes: d₀ / (−h v_n) for a gap d₀ > 0 at the start, else 0; it is written
-    into ``tau`` (C,), which is −1 for contacts that had no impact. The impulse is
-    J_n = (target − v_n) / (J M⁻¹ Jᵀ) with target −ε u + g_n (½ − τ) h (restitution; see
-    ``relative_gravity``), then friction: the tangential impulse that stops the sliding, or
-    μ J_n against it if that is not enough (F2). The most violent impact is resolved first,
-    then the next, so an impact travels down a chain in order (Newton's cradle: one ball in,
-    one ball out); at most ``max_impacts`` per step. Returns how many were resolved.
+    A wave is every contact that is approaching now: at the current velocities it would be
+    closed by the end of the step, and its impact velocity u = v_n + g_n (τ − ½) h is below
+    −threshold (τ: where in the step it closes, d₀ / (−h v_n) for a gap d₀ > 0 at the start,
+    else 0). The wave's impulses are solved together — accumulated, λ ≥ 0 — so that each
+    member leaves at −ε u + g_n (½ − τ) h (restitution; see ``relative_gravity``), with
+    friction of at most μ λ (F2). Simultaneous impacts (a box landing flat on four corners)
+    are thus one wave and stay symmetric, while an impact passed along a chain of touching
+    bodies makes one wave per link (Newton's cradle: one ball in, one ball out). ``tau`` (C,)
+    receives each contact's τ, −1 where it had no impact. Returns the number of waves.
     """
     C = normal.shape[0]
-    impact = np.empty(C)
+    target = np.empty(C)
     closes = np.empty(C)
+    k_normal = np.empty(C)
+    impulses = np.zeros((C, 3))
+    members = np.empty(C, dtype=np.int64)
     for c in range(C):
         tau[c] = -1.0
-    for resolved in range(max_impacts):
-        # the most violent impact first: an impact then travels along a chain in its own order
-        worst = -1
+        k_normal[c] = _effective_mass(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
+                                      weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world,
+                                      particle_inverse_mass)
+    for wave in range(max_waves):
+        count = 0
         for c in range(C):
-            if restitution[c] <= 0.0:
+            if restitution[c] <= 0.0 or k_normal[c] <= 0.0:
                 continue
             vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
                                     r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
             if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:      # separating, or still open at the end
                 continue
             closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
-            impact[c] = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
-            if impact[c] < -threshold and (worst < 0 or impact[c] < impact[worst]):
-                worst = c
-        if worst < 0:
-            return resolved
-        c = worst
-        tau[c] = closes[c] if tau[c] < 0.0 else min(tau[c], closes[c])
-        k = _effective_mass(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                            r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
-        vn = impact[c] - gravity_normal[c] * (closes[c] - 0.5) * dt
-        target = -restitution[c] * impact[c] + gravity_normal[c] * (0.5 - closes[c]) * dt
-        jn = (target - vn) / k
-        _apply(c, normal[c], jn, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-               body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-               body_velocity, body_angular_velocity, particle_velocity)
-        if friction[c] > 0.0:
-            _friction_impulse(c, 0.0, 0.0, friction[c] * jn, body_a, body_b, particles_a, particles_b,
-                              weights_a, weights_b, r_a, r_b, tangent1, tangent2, body_inverse_mass,
-                              body_inverse_inertia_world, particle_inverse_mass, body_velocity,
-                              body_angular_velocity, particle_velocity)
-    return max_impacts
+            impact = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
+            if impact < -threshold:
+                target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes[c]) * dt
+                tau[c] = closes[c] if tau[c] < 0.0 else min(tau[c], closes[c])
+                impulses[c, 0] = impulses[c, 1] = impulses[c, 2] = 0.0
+                members[count] = c
+                count += 1
+        if count == 0:
+            return wave
+        for sweep in range(sweeps):
+            change = 0.0
+            for m in range(count):
+                c = members[m]
+                vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
+                                        weights_b, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
+                old = impulses[c, 0]
+                impulses[c, 0] = max(0.0, old - (vn - target[c]) / k_normal[c])
+                _apply(c, normal[c], impulses[c, 0] - old, body_a, body_b, particles_a, particles_b, weights_a,
+                       weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
+                       body_velocity, body_angular_velocity, particle_velocity)
+                change = max(change, abs(impulses[c, 0] - old) * k_normal[c])
+                if friction[c] > 0.0:
+                    new1, new2, friction_change = _friction_impulse(
+                        c, impulses[c, 1], impulses[c, 2], friction[c] * impulses[c, 0], body_a, body_b,
+                        particles_a, particles_b, weights_a, weights_b, r_a, r_b, tangent1, tangent2,
+                        body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass, body_velocity,
+                        body_angular_velocity, particle_velocity)
+                    impulses[c, 1], impulses[c, 2] = new1, new2
+                    change = max(change, friction_change)
+            if change <= tolerance:
+                break
+    return max_waves
 
 
 @njit(cache=True)
@@ -236,9 +253,12 @@ def _apply(c, d, impulse, body_a, body_b, particles_a, particles_b, weights_a, w
 
 def lever_arms(contacts, body_position):
     """r = point − centre of mass for each side, (C, 3) each; zero for non-body sides."""
-    r_a = np.where((contacts.body_a >= 0)[:, None], contacts.point - body_position[contacts.body_a], 0.0)
-    r_b = np.where((contacts.body_b >= 0)[:, None], contacts.point - body_position[contacts.body_b], 0.0)
-    return r_a, r_b
+    def arm(body):
+        r = np.zeros((contacts.count, 3))
+        has = body >= 0
+        r[has] = contacts.point[has] - body_position[body[has]]
+        return r
+    return arm(contacts.body_a), arm(contacts.body_b)
 
 
 def relative_normal_velocity(contacts, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity):
@@ -289,7 +309,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     velocities = (v_body_new, w_body_new, v_particle_new)
     tau_contact = np.empty(contacts.count)
     resolve_collisions(*arrays, contacts.restitution, relative_gravity(model, contacts), gap_at_start, dt,
-                       threshold, *masses, *velocities, options.iterations * contacts.count, tau_contact)
+                       threshold, *masses, *velocities, options.iterations, options.iterations, options.tolerance,
+                       tau_contact)
     impulses, sweeps, change = solve_sequential_impulses(*arrays, resting_target(gap_at_start, dt, options),
                                                          *masses, *velocities, options.iterations,
                                                          options.tolerance)

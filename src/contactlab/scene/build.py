@@ -1,0 +1,62 @@
+"""From a validated scene dict (see :mod:`.schema`) to a :class:`~contactlab.model.Model`.
+
+Everything goes through :class:`~contactlab.builder.ModelBuilder`, which checks the physical
+values; its errors name the builder argument (``mass``), and are re-raised here with the scene
+path in front (``bodies[2].mass``). ``array`` tables are expanded here: a body is copied on a
+grid of ``count`` = [nx, ny, nz] positions ``spacing`` = [dx, dy, dz] apart, starting at its
+``position`` (x varies fastest, then y, then z); the copies are named ``NAME_i``.
+"""
+
+import numpy as np
+
+from ..builder import ModelBuilder
+from ..errors import InputError
+
+
+def _call(prefix, function, **arguments):
+    """``function(**arguments)`` (None arguments left out) with InputError fields prefixed."""
+    try:
+        return function(**{name: value for name, value in arguments.items() if value is not None})
+    except InputError as error:
+        field = f"{prefix}.{error.field}" if error.field else prefix
+        raise InputError(field, error.message) from None
+
+
+def grid_offsets(array):
+    """Offsets (count, 3) [m] of the copies an ``array`` table makes; one zero row without one."""
+    if array is None:
+        return np.zeros((1, 3))
+    (nx, ny, nz), spacing = array["count"], np.asarray(array["spacing"])
+    iz, iy, ix = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    return np.stack([ix.ravel(), iy.ravel(), iz.ravel()], axis=1) * spacing
+
+
+def build_model(scene):
+    """The Model of a validated scene dict."""
+    builder = _call("simulation", ModelBuilder, gravity=scene["simulation"]["gravity"])
+    for i, material in enumerate(scene["materials"]):
+        _call(f"materials[{i}]", builder.add_material, **material)
+    for i, body in enumerate(scene["bodies"]):
+        arguments = {key: value for key, value in body.items() if key != "array"}
+        offsets = grid_offsets(body["array"])
+        for copy, offset in enumerate(offsets):
+            if body["array"] is not None:
+                arguments["position"] = (np.asarray(body["position"]) + offset).tolist()
+                arguments["name"] = f"{body['name']}_{copy}" if body["name"] is not None else None
+            _call(f"bodies[{i}]", builder.add_body, **arguments)
+    for i, particles in enumerate(scene["particles"]):
+        offsets = grid_offsets(particles["array"])
+        position = np.asarray(particles["position"])
+        velocity = particles["velocity"]
+        position = (position[None, :, :] + offsets[:, None, :]).reshape(-1, 3)
+        if velocity is not None:
+            if len(velocity) != len(particles["position"]):
+                # checked here, before the array copies, so the counts match what the file says
+                raise InputError(f"particles[{i}].velocity", f"expected {len(particles['position'])} "
+                                 f"velocities, one per position, found {len(velocity)}")
+            velocity = np.tile(np.asarray(velocity), (len(offsets), 1))
+        _call(f"particles[{i}]", builder.add_particles, position=position, velocity=velocity,
+              mass=particles["mass"], radius=particles["radius"], material=particles["material"])
+    for i, obstacle in enumerate(scene["obstacles"]):
+        _call(f"obstacles[{i}]", builder.add_obstacle, **obstacle)
+    return builder.finalize()

@@ -1,0 +1,133 @@
+"""Finding a scene (a built-in name or a .toml path), reading it and turning it into a :class:`Scene`.
+
+    scene = load_scene("bouncing_ball", overrides=["simulation.dt=0.0005"])
+    run = simulate(scene.model, scene.method, scene.dt, scene.duration,
+                   scene.method_options.get(scene.method), scene.integrator)
+
+Order: read the text → parse TOML → apply ``--set`` overrides to the raw dict → validate
+against the schema → check the ``[method.NAME]`` tables of available methods → check that the
+selected method is available → build the Model. Every mistake is an InputError.
+"""
+
+import difflib
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from .. import methods
+from ..errors import InputError
+from ..model import Model
+from .build import build_model
+from .overrides import apply_overrides
+from .schema import show, validate
+from .toml import parse_toml
+
+BUILTIN_PACKAGE = __package__          # scene files live in <this package>/builtin/*.toml
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A loaded scene: the Model plus how to simulate it.
+
+    name: built-in name or file stem; dt, duration [s]; method and integrator names;
+    method_options: method name -> the raw ``[method.NAME]`` table (a dict);
+    description: one line; source: the file path, or ``builtin:NAME``.
+    """
+    name: str
+    model: Model
+    method: str = "impulse"
+    dt: float = 0.004
+    duration: float = 2.0
+    integrator: str = "symplectic_euler"
+    method_options: dict = field(default_factory=dict)
+    description: str = ""
+    source: str = ""
+
+
+def _builtin_dir():
+    return resources.files(BUILTIN_PACKAGE).joinpath("builtin")
+
+
+def _builtin_names():
+    return sorted(entry.name[:-len(".toml")] for entry in _builtin_dir().iterdir()
+                  if entry.name.endswith(".toml"))
+
+
+def builtin_scenes():
+    """(name, description) of every built-in scene, sorted by name."""
+    result = []
+    for name in _builtin_names():
+        raw = parse_toml(_builtin_dir().joinpath(f"{name}.toml").read_text(encoding="utf-8"))
+        result.append((name, raw.get("description", "")))
+    return result
+
+
+def _read_file(path):
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError("", f"no such file {repr(str(path))}") from None
+    except IsADirectoryError:
+        raise InputError("", f"expected a .toml file, found the directory {repr(str(path))}") from None
+    except OSError as error:
+        raise InputError("", f"cannot read {repr(str(path))} ({error.strerror or error})") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InputError("", f"expected UTF-8 text, found a byte 0x{data[error.start]:02x} at offset "
+                             f"{error.start} that is not") from None
+
+
+def read_source(source):
+    """(name, text, origin) of a built-in name or a path to a .toml file."""
+    text_source = os.fspath(source) if isinstance(source, os.PathLike) else source
+    if not isinstance(text_source, str) or not text_source:
+        raise InputError("", f"expected a built-in scene name or a path to a .toml file, found {show(source)}")
+    looks_like_path = (isinstance(source, os.PathLike) or text_source.endswith(".toml")
+                       or os.sep in text_source or "/" in text_source or os.path.exists(text_source))
+    if looks_like_path:
+        return Path(text_source).stem, _read_file(text_source), text_source
+    names = _builtin_names()
+    if text_source not in names:
+        close = difflib.get_close_matches(text_source, names, n=3)
+        hint = f" (did you mean {', '.join(show(c) for c in close)}?)" if close else ""
+        raise InputError("", f"unknown built-in scene {show(text_source)}{hint}; run `contactlab scenes` "
+                             f"to list them, or give the path of a .toml file")
+    text = _builtin_dir().joinpath(f"{text_source}.toml").read_text(encoding="utf-8")
+    return text_source, text, f"builtin:{text_source}"
+
+
+def _check_methods(scene):
+    """Options tables of available methods against their Options; the selected method exists."""
+    for name, table in scene["method"].items():
+        if name in methods.AVAILABLE:
+            methods.make_options(methods.get(name), table, f"method.{name}")
+    try:
+        methods.get(scene["simulation"]["method"])
+    except InputError as error:
+        raise InputError("simulation.method", error.message) from None
+
+
+def load_scene(source, overrides=()) -> Scene:
+    """Load a scene from a built-in name (``"bouncing_ball"``) or a path to a .toml file.
+
+    overrides: ``"dotted.path=VALUE"`` strings (``--set``), applied before validation.
+    Raises InputError, with the field path of the mistake, for anything wrong.
+    """
+    name, text, origin = read_source(source)
+    raw = apply_overrides(parse_toml(text), overrides)
+    scene = validate(raw)
+    _check_methods(scene)
+    simulation = scene["simulation"]
+    return Scene(
+        name=name,
+        model=build_model(scene),
+        method=simulation["method"],
+        dt=simulation["dt"],
+        duration=simulation["duration"],
+        integrator=simulation["integrator"],
+        method_options=scene["method"],
+        description=scene["description"],
+        source=origin,
+    )

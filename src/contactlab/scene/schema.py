@@ -1,0 +1,341 @@
+"""Scene-file schema v1: which keys each table takes, their kind, unit and default.
+
+The schema is a few declarative tables (``TOP``, ``SIMULATION``, ``MATERIAL``, ``BODY``,
+``PARTICLES``, ``OBSTACLE``, ``ARRAY``) of :class:`Key` entries. :func:`validate` walks a raw
+TOML dict against them and returns a normalized copy in which every key is present (``None``
+where the key was left out and the builder supplies the default).
+
+Structure and types are checked here (unknown keys, strings where numbers belong, lists of
+the wrong length, non-finite numbers, a non-positive time step). Physical values — positive
+mass and sizes, restitution in [0, 1], a non-zero normal or quaternion, known material
+names — are checked by :class:`contactlab.builder.ModelBuilder`, which the loader calls with
+the same argument names and whose errors it prefixes with the scene path.
+
+Every error is an :class:`~contactlab.errors.InputError` whose field is the full path of the
+offending value (``bodies[0].mass``) and whose message is one sentence.
+"""
+
+import difflib
+import math
+from dataclasses import dataclass
+
+from .. import methods
+from ..dynamics.integrators import INTEGRATORS
+from ..errors import InputError
+
+# Shapes the schema knows but the library cannot simulate yet: a clear "not supported yet".
+PLANNED_BODY_SHAPES = ("capsule", "convex", "mesh")
+PLANNED_OBSTACLE_SHAPES = ("mesh",)
+MAX_ARRAY_COPIES = 1_000_000
+
+
+def show(value, limit=60):
+    """A value for a message (TOML spelling, strings quoted as repr), shortened to about ``limit`` characters."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = repr(value)              # quoted as the builder and contactlab.methods quote names
+    elif isinstance(value, (int, float)):
+        text = repr(value)
+    elif isinstance(value, dict):
+        text = "a table {" + ", ".join(f"{k} = {show(v, limit)}" for k, v in value.items()) + "}"
+    elif isinstance(value, list):
+        text = "[" + ", ".join(show(v, limit) for v in value) + "]"
+    else:
+        text = str(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def path_join(path, key):
+    """``bodies[0]`` + ``mass`` -> ``bodies[0].mass``; integers become ``[i]``."""
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else key
+
+
+def _unit(unit):
+    return f" ({unit})" if unit else ""
+
+
+# -- kinds of value ---------------------------------------------------------------------------
+class Number:
+    """A finite int or float (never a bool), returned as float; ``positive`` demands > 0."""
+
+    def __init__(self, positive=False):
+        self.positive = positive
+
+    def check(self, value, field, unit=""):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(field, f"expected a number{_unit(unit)}, found {show(value)}")
+        if not math.isfinite(value):
+            raise InputError(field, f"expected a finite number{_unit(unit)}, found {show(value)}")
+        if self.positive and value <= 0:
+            raise InputError(field, f"expected a number greater than 0{_unit(unit)}, found {show(value)}")
+        return float(value)
+
+    def describe(self):
+        return "number > 0" if self.positive else "number"
+
+
+class Text:
+    """A string on one line."""
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, str):
+            raise InputError(field, f"expected a string, found {show(value)}")
+        if "\n" in value or "\r" in value:
+            raise InputError(field, f"expected a single line, found {show(value)}")
+        return value
+
+    def describe(self):
+        return "string"
+
+
+class Choice:
+    """One of ``values``; names in ``planned`` get a "not supported yet" error."""
+
+    def __init__(self, values, planned=(), what="value"):
+        self.values, self.planned, self.what = tuple(values), tuple(planned), what
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, str):
+            raise InputError(field, f"expected one of {', '.join(self.values)}, found {show(value)}")
+        if value in self.planned:
+            raise InputError(field, f"the {self.what} {show(value)} is not supported yet; "
+                                    f"use one of {', '.join(self.values)}")
+        if value not in self.values:
+            raise InputError(field, f"unknown {self.what} {show(value)}{_did_you_mean(value, self.values)}")
+        return value
+
+    def describe(self):
+        return " | ".join(self.values)
+
+
+class Vector:
+    """A list of ``size`` numbers; ``whole`` demands integers ≥ 1."""
+
+    def __init__(self, size, whole=False):
+        self.size, self.whole = size, whole
+
+    def check(self, value, field, unit=""):
+        what = (f"a list of {self.size} whole numbers ≥ 1" if self.whole
+                else f"a list of {self.size} numbers{_unit(unit)}")
+        if (not isinstance(value, list) or len(value) != self.size
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)):
+            raise InputError(field, f"expected {what}, found {show(value)}")
+        if self.whole:
+            if any(not isinstance(x, int) or x < 1 for x in value):
+                raise InputError(field, f"expected {what}, found {show(value)}")
+            return [int(x) for x in value]
+        if not all(math.isfinite(x) for x in value):
+            raise InputError(field, f"expected finite numbers{_unit(unit)}, found {show(value)}")
+        return [float(x) for x in value]
+
+    def describe(self):
+        return f"[{', '.join('n' if self.whole else 'x' for _ in range(self.size))}]"
+
+
+class Points:
+    """A non-empty list of [x, y, z] points."""
+
+    point = Vector(3)
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, list) or not value:
+            raise InputError(field, f"expected a non-empty list of [x, y, z] points{_unit(unit)}, "
+                                    f"found {show(value)}")
+        return [self.point.check(p, f"{field}[{i}]", unit) for i, p in enumerate(value)]
+
+    def describe(self):
+        return "[[x, y, z], ...]"
+
+
+class Table:
+    """A table with the keys of ``keys`` (a dict name -> Key)."""
+
+    def __init__(self, keys, shape_key=None):
+        self.keys, self.shape_key = keys, shape_key
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, dict):
+            raise InputError(field, f"expected a table, found {show(value)}")
+        return validate_table(value, self.keys, field, self.shape_key)
+
+    def describe(self):
+        return "table"
+
+
+class GridArray(Table):
+    """The ``array`` table of a body or particle group: copies on a grid (see .build)."""
+
+    def check(self, value, field, unit=""):
+        array = super().check(value, field, unit)
+        copies = math.prod(array["count"])
+        if copies > MAX_ARRAY_COPIES:
+            raise InputError(f"{field}.count", f"expected at most {MAX_ARRAY_COPIES} copies in all, "
+                                               f"found {show(array['count'])} = {copies}")
+        for axis, (count, spacing) in enumerate(zip(array["count"], array["spacing"])):
+            if count > 1 and spacing == 0:
+                raise InputError(f"{field}.spacing", f"expected a non-zero spacing along {'xyz'[axis]}, "
+                                                     f"where count is {count}, found {show(array['spacing'])}")
+        return array
+
+
+class TableList:
+    """An array of tables (``[[name]]`` in TOML), each checked as ``Table``."""
+
+    def __init__(self, keys, shape_key=None):
+        self.table = Table(keys, shape_key)
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
+            short = field.rsplit(".", 1)[-1]
+            raise InputError(field, f"expected an array of tables written [[{short}]], found {show(value)}")
+        return [self.table.check(item, f"{field}[{i}]") for i, item in enumerate(value)]
+
+    def describe(self):
+        return "array of tables"
+
+
+class MethodTables:
+    """``[method.NAME]`` tables: NAME a method of contactlab.methods, the content kept as is
+    (its keys are validated against the method's Options by the loader)."""
+
+    names = methods.AVAILABLE + methods.PLANNED
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, dict):
+            raise InputError(field, f"expected tables [method.NAME], found {show(value)}")
+        for name, table in value.items():
+            if name not in self.names:
+                raise InputError(path_join(field, name),
+                                 f"unknown method {show(name)}{_did_you_mean(name, self.names)}")
+            if not isinstance(table, dict):
+                raise InputError(path_join(field, name), f"expected a table of options, found {show(table)}")
+        return {name: dict(table) for name, table in value.items()}
+
+    def describe(self):
+        return "tables"
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a table: its kind, unit, default and, for shape-specific keys, the shapes."""
+    kind: object
+    default: object = None        # None: left to the builder (or absent)
+    unit: str = ""
+    required: bool = False
+    shapes: tuple = ()            # non-empty: only these shapes take the key
+
+
+def _did_you_mean(word, known):
+    close = difflib.get_close_matches(str(word), list(known), n=1)
+    if close:
+        return f"; did you mean {show(close[0])}?"
+    return f"; expected one of: {', '.join(known)}"
+
+
+# -- the schema -------------------------------------------------------------------------------
+SIMULATION = {
+    "dt": Key(Number(positive=True), 0.004, "s"),
+    "duration": Key(Number(positive=True), 2.0, "s"),
+    "gravity": Key(Vector(3), [0.0, 0.0, -9.81], "m/s^2"),
+    "method": Key(Choice(methods.AVAILABLE + methods.PLANNED, what="method"), "impulse"),
+    "integrator": Key(Choice(INTEGRATORS, what="integrator"), "symplectic_euler"),
+}
+
+MATERIAL = {
+    "name": Key(Text(), required=True),
+    "friction": Key(Number(), 0.5, "Coulomb mu"),
+    "restitution": Key(Number(), 0.0, "epsilon"),
+}
+
+ARRAY = {
+    "count": Key(Vector(3, whole=True), required=True),
+    "spacing": Key(Vector(3), required=True, unit="m"),
+}
+
+BODY = {
+    "name": Key(Text()),
+    "shape": Key(Choice(("sphere", "box"), PLANNED_BODY_SHAPES, what="body shape"), required=True),
+    "radius": Key(Number(), unit="m", shapes=("sphere",)),
+    "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
+    "mass": Key(Number(), unit="kg"),
+    "density": Key(Number(), unit="kg/m^3"),
+    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
+    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z"),
+    "velocity": Key(Vector(3), [0.0, 0.0, 0.0], "m/s"),
+    "angular_velocity": Key(Vector(3), [0.0, 0.0, 0.0], "rad/s"),
+    "material": Key(Text()),
+    "array": Key(GridArray(ARRAY)),
+}
+
+PARTICLES = {
+    "position": Key(Points(), required=True, unit="m"),
+    "velocity": Key(Points(), unit="m/s"),
+    "mass": Key(Number(), 1.0, "kg"),
+    "radius": Key(Number(), 0.0, "m"),
+    "material": Key(Text()),
+    "array": Key(GridArray(ARRAY)),
+}
+
+OBSTACLE = {
+    "shape": Key(Choice(("plane", "sphere", "box"), PLANNED_OBSTACLE_SHAPES, what="obstacle shape"),
+                 required=True),
+    "normal": Key(Vector(3), shapes=("plane",)),
+    "offset": Key(Number(), 0.0, "m", shapes=("plane",)),
+    "radius": Key(Number(), unit="m", shapes=("sphere",)),
+    "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
+    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=("sphere", "box")),
+    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z", shapes=("box",)),
+    "material": Key(Text()),
+}
+
+TOP = {
+    "description": Key(Text(), ""),
+    "simulation": Key(Table(SIMULATION), {}),
+    "method": Key(MethodTables(), {}),
+    "materials": Key(TableList(MATERIAL), []),
+    "bodies": Key(TableList(BODY, shape_key="shape"), []),
+    "particles": Key(TableList(PARTICLES), []),
+    "obstacles": Key(TableList(OBSTACLE, shape_key="shape"), []),
+}
+
+TABLES = {"top level": TOP, "[simulation]": SIMULATION, "[[materials]]": MATERIAL,
+          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[obstacles]]": OBSTACLE, "array": ARRAY}
+
+
+def validate_table(table, keys, path, shape_key=None):
+    """Check ``table`` against ``keys``; a normalized dict with every key (None where absent)."""
+    for name in table:
+        if name not in keys:
+            raise InputError(path_join(path, name), f"unknown key{_did_you_mean(name, keys)}")
+    for name, key in keys.items():
+        if key.required and name not in table:
+            hint = f" (one of {', '.join(key.kind.values)})" if isinstance(key.kind, Choice) else ""
+            raise InputError(path_join(path, name), f"missing required key {show(name)}{hint}")
+    result = {}
+    shape = None
+    if shape_key is not None:
+        shape = result[shape_key] = keys[shape_key].kind.check(table[shape_key], path_join(path, shape_key))
+    for name, key in keys.items():
+        if name == shape_key:
+            continue
+        if name not in table:
+            default = key.default if not key.shapes or shape in key.shapes else None
+            if isinstance(key.kind, Table) and default is not None:
+                default = key.kind.check(default, path_join(path, name))
+            result[name] = list(default) if isinstance(default, list) else default
+            continue
+        if key.shapes and shape not in key.shapes:
+            takes = ", ".join(k for k, v in keys.items() if shape in v.shapes)
+            raise InputError(path_join(path, name), f"a {shape} takes no {name} (a {shape} takes: {takes})")
+        result[name] = key.kind.check(table[name], path_join(path, name), key.unit)
+    return result
+
+
+def validate(raw):
+    """The whole scene: a normalized dict with the keys of ``TOP``; InputError on the first mistake."""
+    if not isinstance(raw, dict):
+        raise InputError("", f"expected a TOML document (a table), found {show(raw)}")
+    return validate_table(raw, TOP, "")

@@ -1,0 +1,132 @@
+"""The command line end to end: outputs, the JSON summary, and one clear line per mistake."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from contactlab.record import write_outputs
+
+
+def contactlab(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "contactlab", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=600)
+
+
+def test_run_bouncing_ball_json_and_trajectory(tmp_path):
+    result = contactlab("run", "bouncing_ball", "--method", "impulse", "--json", "--duration", "3.5", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)                    # stdout is exactly one JSON object
+    for key in ("scene", "method", "dt", "steps", "wall_seconds", "steps_per_second", "bodies", "particles",
+                "max_contacts", "max_penetration", "energy", "trajectory"):
+        assert key in summary
+    assert set(summary["energy"]) == {"initial", "final", "max"}
+    assert summary["scene"] == "bouncing_ball" and summary["method"] == "impulse"
+    out = tmp_path / "out" / "bouncing_ball-impulse"
+    assert json.loads((out / "summary.json").read_text()) == summary
+    run = np.load(out / "trajectory.npz")
+    T = len(run["time"])
+    assert T == summary["steps"] + 1
+    assert run["body_position"].shape == (T, 1, 3) and run["body_orientation"].shape == (T, 1, 4)
+    assert run["particle_position"].shape == (T, 0, 3)        # empty, not missing
+    for name in ("body_velocity", "body_angular_velocity", "particle_velocity", "energy_kinetic",
+                 "energy_potential", "energy_elastic", "max_penetration", "contact_count"):
+        assert name in run.files
+    assert list(run["body_names"]) == ["ball"] or len(run["body_names"]) == 1
+    # the rebound apexes follow h0 eps^(2n) (the scene: 1 m drop, eps = 0.8, r = 0.1)
+    z = run["body_position"][:, 0, 2] - 0.1
+    vz = run["body_velocity"][:, 0, 2]
+    turning = np.nonzero((vz[:-1] > 0) & (vz[1:] <= 0))[0]
+    apexes = np.array([z[i:i + 2].max() for i in turning])[:3]
+    np.testing.assert_allclose(apexes, 0.8 ** (2 * np.arange(1, 4)), rtol=0.02)
+
+
+def test_record_every_and_out(tmp_path):
+    result = contactlab("run", "sliding_block", "--record-every", "10", "--duration", "0.2", "--out", "here",
+                        "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    run = np.load(tmp_path / "here" / "trajectory.npz")
+    steps = json.loads(result.stdout)["steps"]
+    assert len(run["time"]) == steps // 10 + 1
+
+
+def test_set_overrides_a_field_by_path(tmp_path):
+    result = contactlab("run", "sliding_block", "--set", "bodies.0.velocity=[1,0,0]", "--duration", "0.01",
+                        "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    run = np.load(tmp_path / "out" / "sliding_block-impulse" / "trajectory.npz")
+    assert run["body_velocity"][0, 0, 0] == 1.0
+
+
+def test_demo_runs_the_default_scene_and_says_where(tmp_path):
+    result = contactlab(cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "out/bouncing_ball-impulse/trajectory.npz" in result.stdout
+    assert (tmp_path / "out" / "bouncing_ball-impulse" / "trajectory.npz").exists()
+
+
+def test_scenes_lists_one_line_each(tmp_path):
+    result = contactlab("scenes", cwd=tmp_path)
+    lines = result.stdout.strip().splitlines()
+    assert result.returncode == 0 and any(line.startswith("bouncing_ball ") for line in lines)
+
+
+BAD_SCENE = """
+[simulation]
+dt = 0.001
+[[bodies]]
+shape = "sphere"
+radius = 0.1
+mass = -1.0
+"""
+
+
+@pytest.mark.parametrize("args, scene_text, expected", [
+    (["run", "scene.toml"], BAD_SCENE, "bodies[0].mass"),
+    (["run", "scene.toml"], BAD_SCENE.replace("radius", "raduis"), "did you mean 'radius'"),
+    (["run", "scene.toml"], "[simulation\ndt = 1", "scene.toml"),
+    (["run", "missing.toml"], None, "missing.toml"),
+    (["run", "no_such_scene"], None, "no_such_scene"),
+    (["run", "bouncing_ball", "--dt", "0"], None, "simulation.dt"),
+    (["run", "bouncing_ball", "--dt", "nan"], None, "simulation.dt"),
+    (["run", "bouncing_ball", "--method", "warp"], None, "method"),
+    (["run", "bouncing_ball", "--set", "bodies.7.mass=1"], None, "bodies"),
+    (["run", "bouncing_ball", "--set", "nonsense"], None, "nonsense"),
+    (["run", "bouncing_ball", "--set", "materials.0.friction=-1"], None, "materials[0].friction"),
+    (["run", "bouncing_ball", "--record-every", "0"], None, "--record-every"),
+    (["run", "bouncing_ball", "--integrator", "rk4"], None, "integrator"),
+    (["run", "bouncing_ball", "--set", "method.impulse.iteratons=3"], None, "did you mean 'iterations'"),
+    (["run", "bouncing_ball", "--dt", "abc"], None, "simulation.dt"),
+    (["frobnicate"], None, "invalid choice"),
+])
+def test_wrong_input_gives_one_line_exit_2_and_no_output(tmp_path, args, scene_text, expected):
+    if scene_text is not None:
+        (tmp_path / "scene.toml").write_text(scene_text)
+    result = contactlab(*args, cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error: ") and expected in lines[0]
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_failed_write_leaves_no_folder_and_no_partial_file(tmp_path):
+    target = tmp_path / "run"
+
+    class Unsaveable:
+        def __array__(self, *args, **kwargs):
+            raise OSError("disk full")
+
+    with pytest.raises(OSError):
+        write_outputs(str(target), {"time": np.zeros(3), "bad": Unsaveable()}, {})
+    assert not target.exists()
+    existing = tmp_path / "existing"
+    existing.mkdir()
+    with pytest.raises(OSError):
+        write_outputs(str(existing), {"bad": Unsaveable()}, {})
+    assert os.listdir(existing) == []
