@@ -48,7 +48,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False):
     scene = load_scene(scene_source, overrides)
     options = scene.method_options.get(scene.method, {})
     result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
-                      record_every, progress=not as_json or sys.stderr.isatty(), scene_name=scene.name)
+                      record_every, progress=sys.stderr.isatty(), scene_name=scene.name)
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     result.summary["trajectory"] = os.path.join(out, "trajectory.npz")
     write_outputs(out, result.arrays, result.summary)
@@ -63,7 +63,8 @@ def _plain_summary(summary, scene):
     energy = summary["energy"]
     return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
             f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
-            f"({summary['steps_per_second']:.0f} steps/s); at most {summary['max_contacts']} contacts, "
+            f"({summary['steps_per_second']:.0f} steps/s after a first step of {summary['first_step_seconds']:.2f} s); "
+            f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
             f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
             f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end.\n"
             f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}")
