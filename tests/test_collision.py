@@ -144,3 +144,47 @@ def test_contact_ids_persist_while_the_contact_lasts():
     state.body_position[0, 2] -= 0.0005
     second = collide(model, state)
     assert sorted(first.feature_id) == sorted(second.feature_id)
+
+
+# ---- no tunnelling: speculative contacts over the swept step ------------------------------
+
+def _fast_scene(add_obstacles, body="sphere"):
+    from contactlab import simulate
+    b = ModelBuilder(gravity=(0, 0, 0))
+    b.add_material("m", friction=0.0, restitution=0.0)
+    radius, dt = 0.01, 0.001
+    speed = 10 * radius / dt                                  # 10 radii per step
+    if body == "sphere":
+        b.add_body("sphere", radius=radius, mass=1.0, position=(-0.0537, 0, 0), velocity=(speed, 0, 0), material="m")
+    else:
+        b.add_particles([[-0.0537, 0, 0]], velocity=[[speed, 0, 0]], radius=radius, material="m")
+    add_obstacles(b)
+    run = simulate(b.finalize(), "impulse", dt=dt, duration=0.02)
+    key = "body_position" if body == "sphere" else "particle_position"
+    return run.arrays[key][:, 0, 0], radius
+
+
+@pytest.mark.parametrize("body", ["sphere", "particle"])
+def test_nothing_fast_passes_through_a_plane(body):
+    x, radius = _fast_scene(lambda b: b.add_obstacle("plane", normal=(-1, 0, 0), offset=0.0, material="m"), body)
+    assert x.max() <= -radius + 1e-12
+
+
+@pytest.mark.parametrize("body", ["sphere", "particle"])
+def test_nothing_fast_passes_through_a_thin_box_wall(body):
+    # a wall 2 mm thick: at 10 radii (0.1 m) per step, a test at the end positions would miss it
+    x, radius = _fast_scene(lambda b: b.add_obstacle("box", half_extents=(0.001, 1, 1), position=(0, 0, 0),
+                                                     material="m"), body)
+    assert x.max() <= -0.001 - radius + 1e-12
+
+
+def test_fast_sphere_does_not_pass_through_another():
+    from contactlab import simulate
+    b = ModelBuilder(gravity=(0, 0, 0))
+    b.add_material("m", friction=0.0, restitution=0.0)
+    b.add_body("sphere", radius=0.01, mass=1.0, position=(-0.0537, 0, 0), velocity=(100.0, 0, 0), material="m")
+    b.add_body("sphere", radius=0.01, mass=1.0, position=(0.0, 0, 0), material="m")
+    run = simulate(b.finalize(), "impulse", dt=0.001, duration=0.02)
+    x = run.arrays["body_position"][:, :, 0]
+    assert (x[:, 1] - x[:, 0] >= 2 * 0.01 - 1e-9).all()        # never overlapping, never crossed
+    np.testing.assert_allclose(run.arrays["body_velocity"][-1, :, 0], [50.0, 50.0])   # inelastic: shared

@@ -45,10 +45,8 @@ def principal_inertia(kind, params, mass):
     raise ValueError(f"shape {NAMES[kind]} has no inertia")
 
 
-def bounding_radius(kind, params):
-    """Radius [m] of a sphere about the shape's centre that encloses it."""
-    if kind in (SPHERE, POINT):
-        return params[0]
-    if kind == BOX:
-        return float(np.linalg.norm(params[:3]))
-    return np.inf
+def bounding_radii(kinds, params):
+    """Radii [m] (N,) of spheres about the shapes' centres that enclose them; planes: inf."""
+    kinds = np.asarray(kinds)
+    return np.select([kinds == BOX, kinds == PLANE], [np.linalg.norm(params[:, :3], axis=1), np.inf],
+                     default=params[:, 0])

@@ -29,8 +29,11 @@ def check_supported(model):
                                  "is not supported yet; change the shape of one of them")
 
 
+FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
+
+
 @njit(cache=True)
-def _generate(pairs, kinds, params, centers, rotations_, margin):
+def _generate(pairs, kinds, params, centers, rotations_, reach):
     capacity = len(pairs) * MAX_PER_PAIR
     point = np.empty((capacity, 3))
     normal = np.empty((capacity, 3))
@@ -42,7 +45,7 @@ def _generate(pairs, kinds, params, centers, rotations_, margin):
         a, b = pairs[k, 0], pairs[k, 1]
         written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
                                kinds[b], params[b], centers[b], rotations_[b],
-                               margin, point, normal, depth, feature, count)
+                               reach[a] + reach[b], point, normal, depth, feature, count)
         owner[count:count + written] = k
         count += written
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
@@ -62,20 +65,30 @@ def _colliders(model, state):
 
 
 def _bounds(kinds, params, centers, rots, margin):
-    """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin; planes infinite."""
+    """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin (N,); planes infinite."""
     half = np.where(kinds[:, None] == shapes.BOX,
                     np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),
                     params[:, :1])
-    half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin
+    half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin[:, None]
     return centers - half, centers + half
 
 
-def collide(model, state, margin=0.0) -> Contacts:
-    """All contacts of the state, including gaps down to −margin [m]."""
+def collide(model, state, margin=0.0, sweep=None) -> Contacts:
+    """All contacts of the state, including gaps down to −margin [m].
+
+    sweep: optional (B + P,) distances [m] each body and particle may travel in the coming
+    step. A pair's gaps are then reported down to −(margin + sweep_a + sweep_b), so a contact
+    that the step's motion could close is found before it is crossed (speculative contacts:
+    this is how nothing tunnels through a thin wall, however fast it moves).
+    """
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
     kinds, params, centers, rots = _colliders(model, state)
-    lower, upper = _bounds(kinds, params, centers, rots, margin)
+    # each collider reaches half the margin plus its own sweep; a pair, the sum of the two
+    reach = np.full(dynamic + O, 0.5 * float(margin))
+    if sweep is not None:
+        reach[:dynamic] += sweep
+    lower, upper = _bounds(kinds, params, centers, rots, reach)
     dyn_pairs = overlapping_pairs(lower[:dynamic], upper[:dynamic])
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
     static_pairs = []
@@ -83,9 +96,9 @@ def collide(model, state, margin=0.0) -> Contacts:
         g = dynamic + o
         if kinds[g] == shapes.PLANE:
             n, offset = params[g, :3], params[g, 3]
-            reach = np.abs(upper[:dynamic] - lower[:dynamic]) @ np.abs(n) * 0.5
+            half_width = np.abs(upper[:dynamic] - lower[:dynamic]) @ np.abs(n) * 0.5
             mid = 0.5 * (upper[:dynamic] + lower[:dynamic])
-            near = mid @ n - offset <= reach
+            near = mid @ n - offset <= half_width
         else:
             near = ((lower[:dynamic] <= upper[g]) & (lower[g] <= upper[:dynamic])).all(axis=1)
         hit = np.nonzero(near)[0]
@@ -93,7 +106,7 @@ def collide(model, state, margin=0.0) -> Contacts:
     pairs = np.concatenate([dyn_pairs] + static_pairs).astype(np.int64) if static_pairs else dyn_pairs
     if len(pairs) == 0:
         return Contacts.empty()
-    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, margin)
+    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach)
     a, b = pairs[owner, 0], pairs[owner, 1]
     return _assemble(model, a, b, point, normal, depth, feature, dynamic + O)
 
@@ -128,5 +141,5 @@ def _assemble(model, a, b, point, normal, depth, feature, total):
         # combination rule: friction geometric mean, restitution the larger
         friction=np.sqrt(model.material_friction[mat_a] * model.material_friction[mat_b]),
         restitution=np.maximum(model.material_restitution[mat_a], model.material_restitution[mat_b]),
-        feature_id=(a * total + b) * MAX_PER_PAIR + feature,
+        feature_id=((a * total + b) << FEATURE_BITS) | feature,
     )

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from .. import shapes
+from .box_box import box_box
 
 MAX_PER_PAIR = 8
 
@@ -121,15 +122,13 @@ def supported(kind_a, kind_b):
         kind_a, kind_b = kind_b, kind_a
     if kind_b == PLANE:
         return kind_a != PLANE
-    if kind_a == BOX and kind_b == BOX:
-        return False
     return True
 
 
 @njit(cache=True)
 def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
                      margin, out_point, out_normal, out_depth, out_feature, slot):
-    """The pairs in their canonical order: round–round, round–plane, box–plane, round–box."""
+    """The pairs in their canonical order: round–round, round–plane, box–plane, round–box, box–box."""
     round_a = kind_a == SPHERE or kind_a == POINT
     round_b = kind_b == SPHERE or kind_b == POINT
     if round_a and round_b:
@@ -143,6 +142,9 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
     if round_a and kind_b == BOX:
         return sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
                           out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == BOX and kind_b == BOX:
+        return box_box(center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3], margin,
+                       out_point, out_normal, out_depth, out_feature, slot)
     return 0
 
 

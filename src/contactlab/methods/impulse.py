@@ -3,8 +3,9 @@
 One step, stage by stage as on the slide:
 
 1. internal forces: gravity → free velocities v*;
-2. integrate positions with v* (a prediction);
-3. collision detection at the predicted positions;
+2. integrate positions with v* (a prediction), which says how far everything sweeps;
+3. collision detection over the swept step: contacts at the start positions with gaps down
+   to what the motion could close (speculative contacts), so nothing tunnels;
 4. formulate the contacts as impulses and solve them, in two phases:
    a. collisions (I2, R1–R4, F2): the contacts approaching now get, together, the normal
       impulses J_n = −(1 + ε) v_n / (J M⁻¹ Jᵀ) (R4 is this effective mass written out for two
@@ -34,6 +35,7 @@ from ..collision import collide
 from ..contacts import side_apply_impulse, side_inverse_mass, side_point_velocity
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
+from ..shapes import bounding_radii
 from ..state import State
 from . import StepInfo
 
@@ -285,19 +287,20 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         move = (state.body_velocity, state.body_angular_velocity, state.particle_velocity)
     else:
         move = (v_body, w_body, v_particle)
-    # 2. integrate positions (prediction)
+    # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     free = (v_body, w_body, v_particle)
-    predicted = State.assemble(state.time + dt, advance_positions(*state.positions, *move, dt, dt), free,
-                               state.carried)
-    # 3. collision detection at the predicted positions
-    contacts = collide(model, predicted, options.contact_margin)
+    predicted = advance_positions(*state.positions, *move, dt, dt)
+    sweep = swept_distances(model, state, predicted, w_body, dt)
+    # 3. collision detection over the swept step: contacts at the start positions, with gaps
+    #    down to what the motion could close (speculative contacts: nothing tunnels)
+    contacts = collide(model, state, options.contact_margin, sweep)
     if contacts.count == 0:
-        return predicted, StepInfo(contacts)
+        return State.assemble(state.time + dt, predicted, free, state.carried), StepInfo(contacts)
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
-    r_a, r_b = lever_arms(contacts, predicted.body_position)
-    inverse_inertia = world_inverse_inertia(model, predicted.body_orientation)
+    r_a, r_b = lever_arms(contacts, state.body_position)
+    inverse_inertia = world_inverse_inertia(model, state.body_orientation)
     vn_free = relative_normal_velocity(contacts, r_a, r_b, v_body, w_body, v_particle)
-    gap_at_start = -contacts.depth - dt * vn_free          # d₀, along the straight prediction
+    gap_at_start = -contacts.depth                         # d₀
     threshold = options.restitution_threshold
     if threshold < 0:
         threshold = 2.0 * np.linalg.norm(model.gravity) * dt
@@ -324,6 +327,16 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     positions = advance_positions(*mid, *corrected, (1 - tau_body) * dt, (1 - tau_particle) * dt)
     new = State.assemble(state.time + dt, positions, solved, state.carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
+
+
+def swept_distances(model, state, predicted, angular_velocity, dt):
+    """How far each body and particle may move this step, (B + P,) [m]: its displacement to
+    the predicted position plus, for a body, how far its farthest point turns (h |ω| r)."""
+    body_reach = bounding_radii(model.body_shape, model.body_params)
+    body = (np.linalg.norm(predicted[0] - state.body_position, axis=1)
+            + dt * np.linalg.norm(angular_velocity, axis=1) * body_reach)
+    particle = np.linalg.norm(predicted[2] - state.particle_position, axis=1)
+    return np.concatenate([body, particle])
 
 
 def resting_target(gap_at_start, dt, options):
