@@ -11,8 +11,9 @@ from contactlab.scene import Scene, builtin_scenes, load_scene
 from contactlab.scene import schema
 from contactlab.simulation import simulate
 
-BUILTIN = ["bouncing_ball", "incline", "newtons_cradle", "particles_box", "rod_impact",
-           "rolling_sphere", "sliding_block", "sphere_pile"]
+BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "card_house", "domino_chain", "incline",
+           "mass_ratio_stack", "newtons_cradle", "particles_box", "rod_impact", "rolling_sphere", "sliding_block",
+           "sphere_pile"]
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
 
 # A small valid scene; the error cases below change one thing in it.
@@ -401,3 +402,9 @@ def test_document_example_loads(tmp_path):
     scene = load_scene(write(tmp_path, example))
     assert scene.model.body_count == 1 + 9 and scene.model.particle_count == 2
     assert scene.method_options == {"impulse": {"iterations": 20}}
+
+
+def test_every_builtin_scene_is_documented():
+    text = (Path(__file__).parent.parent / "docs" / "scene-format.md").read_text()
+    for name, description in builtin_scenes():
+        assert f"- `{name}` — {description}" in text
