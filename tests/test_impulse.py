@@ -231,3 +231,20 @@ def test_domino_chain_falls_all_the_way():
     tilt = np.degrees(np.arccos(np.clip(R[:, 2, 2], -1, 1)))       # body z axis against the vertical
     assert (tilt > 60).all()                                        # every domino went over
     assert run.summary["max_penetration"] < 1e-3
+
+
+def test_warm_starting_carries_impulses_by_contact_id_and_steadies_a_pyramid():
+    from contactlab.scene import load_scene
+    scene = load_scene("box_pyramid")
+    run = simulate(scene.model, "impulse", scene.dt, 2.0, {"warm_start": 1.0})
+    moved = np.linalg.norm(run.arrays["body_position"][-1] - run.arrays["body_position"][0], axis=1)
+    assert moved.max() < 1e-4                          # 0.1 mm in 2 s
+    # the carried impulses hold the weight: the floor's contacts carry all 15 boxes, m g h per step
+    from contactlab.collision import FEATURE_BITS
+    ids, values = run.state.carried["impulse_ids"], run.state.carried["impulse_values"]
+    colliders = scene.model.body_count + scene.model.obstacle_count
+    on_floor = (ids >> FEATURE_BITS) % colliders == scene.model.body_count      # B is the floor plane
+    assert values[on_floor, 0].sum() == pytest.approx(15 * 1.0 * G * scene.dt, rel=1e-3)
+    cold = simulate(scene.model, "impulse", scene.dt, 2.0, {"warm_start": 0.0})
+    moved_cold = np.linalg.norm(cold.arrays["body_position"][-1] - cold.arrays["body_position"][0], axis=1)
+    assert moved_cold.max() > 10 * moved.max()         # what warm starting buys

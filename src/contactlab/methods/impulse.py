@@ -50,6 +50,7 @@ class Options:
     slop: float = 0.0005                  # m of penetration left alone by the stabilization
     time_of_impact: bool = True           # split the step at the impact (see module docs)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
+    warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
 
     def __post_init__(self):
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 1:
@@ -59,6 +60,7 @@ class Options:
         self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
         self.slop = _number(self.slop, "slop", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
@@ -184,8 +186,11 @@ def solve_sequential_impulses(body_a, body_b, particles_a, particles_b, weights_
                               r_a, r_b, normal, tangent1, tangent2, friction, target_normal_velocity,
                               body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
                               body_velocity, body_angular_velocity, particle_velocity,
-                              iterations, tolerance):
+                              iterations, tolerance, initial_impulses):
     """Contact impulses with accumulated clamping; changes the velocity arrays in place (M2).
+
+    ``initial_impulses`` (C, 3) are applied first (warm starting: last step's impulses of the
+    same contacts), then corrected like any accumulated impulse.
 
     For every contact c (in order, repeatedly): the normal impulse that brings the normal
     relative velocity to ``target_normal_velocity[c]``, with the accumulated impulse kept ≥ 0
@@ -194,12 +199,17 @@ def solve_sequential_impulses(body_a, body_b, particles_a, particles_b, weights_
     velocity change in the last sweep [m/s]).
     """
     C = normal.shape[0]
-    impulses = np.zeros((C, 3))
+    impulses = initial_impulses.copy()
     k_normal = np.empty(C)
     for c in range(C):
         k_normal[c] = _effective_mass(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
                                       weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world,
                                       particle_inverse_mass)
+        for d in range(3):
+            direction = normal[c] if d == 0 else (tangent1[c] if d == 1 else tangent2[c])
+            _apply(c, direction, impulses[c, d], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
+                   r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
+                   body_velocity, body_angular_velocity, particle_velocity)
     sweeps = 0
     change = 0.0
     for sweep in range(iterations):
@@ -295,7 +305,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     #    down to what the motion could close (speculative contacts: nothing tunnels)
     contacts = collide(model, state, options.contact_margin, sweep)
     if contacts.count == 0:
-        return State.assemble(state.time + dt, predicted, free, state.carried), StepInfo(contacts)
+        carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
+        return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
     r_a, r_b = lever_arms(contacts, state.body_position)
     inverse_inertia = world_inverse_inertia(model, state.body_orientation)
@@ -314,9 +325,10 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     resolve_collisions(*arrays, contacts.restitution, relative_gravity(model, contacts), gap_at_start, dt,
                        threshold, *masses, *velocities, options.iterations, options.iterations, options.tolerance,
                        tau_contact)
+    warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
     impulses, sweeps, change = solve_sequential_impulses(*arrays, resting_target(gap_at_start, dt, options),
                                                          *masses, *velocities, options.iterations,
-                                                         options.tolerance)
+                                                         options.tolerance, warm)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:
         tau_contact[:] = -1.0
@@ -325,8 +337,22 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
     mid = advance_positions(*state.positions, *move, tau_body * dt, tau_particle * dt)
     positions = advance_positions(*mid, *corrected, (1 - tau_body) * dt, (1 - tau_particle) * dt)
-    new = State.assemble(state.time + dt, positions, solved, state.carried)
+    carried = dict(state.carried, impulse_ids=contacts.feature_id, impulse_values=impulses)
+    new = State.assemble(state.time + dt, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
+
+
+def warm_start_impulses(carried, feature_id, fraction):
+    """Last step's resting-contact impulses (C, 3) for the contacts that persist, by id; 0 for new ones."""
+    warm = np.zeros((len(feature_id), 3))
+    ids, values = carried.get("impulse_ids"), carried.get("impulse_values")
+    if fraction <= 0.0 or ids is None or len(ids) == 0:
+        return warm
+    order = np.argsort(ids)
+    place = np.clip(np.searchsorted(ids, feature_id, sorter=order), 0, len(ids) - 1)
+    found = ids[order[place]] == feature_id
+    warm[found] = fraction * values[order[place[found]]]
+    return warm
 
 
 def swept_distances(model, state, predicted, angular_velocity, dt):
