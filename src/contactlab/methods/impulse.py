@@ -117,22 +117,11 @@ def resolve_collisions(body_a, body_b, particles_a, particles_b, weights_a, weig
             change = 0.0
             for m in range(count):
                 c = members[m]
-                vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
-                                        weights_b, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
-                old = impulses[c, 0]
-                impulses[c, 0] = max(0.0, old - (vn - target[c]) / k_normal[c])
-                _apply(c, normal[c], impulses[c, 0] - old, body_a, body_b, particles_a, particles_b, weights_a,
-                       weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                       body_velocity, body_angular_velocity, particle_velocity)
-                change = max(change, abs(impulses[c, 0] - old) * k_normal[c])
-                if friction[c] > 0.0:
-                    new1, new2, friction_change = _friction_impulse(
-                        c, impulses[c, 1], impulses[c, 2], friction[c] * impulses[c, 0], body_a, body_b,
-                        particles_a, particles_b, weights_a, weights_b, r_a, r_b, tangent1, tangent2,
-                        body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass, body_velocity,
-                        body_angular_velocity, particle_velocity)
-                    impulses[c, 1], impulses[c, 2] = new1, new2
-                    change = max(change, friction_change)
+                change = max(change, _solve_contact(
+                    c, target[c], k_normal[c], impulses, body_a, body_b, particles_a, particles_b, weights_a,
+                    weights_b, r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass,
+                    body_inverse_inertia_world, particle_inverse_mass, body_velocity, body_angular_velocity,
+                    particle_velocity))
             if change <= tolerance:
                 break
     return max_waves
@@ -218,26 +207,41 @@ def solve_sequential_impulses(body_a, body_b, particles_a, particles_b, weights_
         for c in range(C):
             if k_normal[c] <= 0.0:        # static against static: nothing can move
                 continue
-            vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                                    r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
-            old = impulses[c, 0]
-            impulses[c, 0] = max(0.0, old - (vn - target_normal_velocity[c]) / k_normal[c])
-            delta = impulses[c, 0] - old
-            _apply(c, normal[c], delta, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-                   body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                   body_velocity, body_angular_velocity, particle_velocity)
-            change = max(change, abs(delta) * k_normal[c])
-            if friction[c] > 0.0:
-                new1, new2, friction_change = _friction_impulse(
-                    c, impulses[c, 1], impulses[c, 2], friction[c] * impulses[c, 0], body_a, body_b,
-                    particles_a, particles_b, weights_a, weights_b, r_a, r_b, tangent1, tangent2,
-                    body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass, body_velocity,
-                    body_angular_velocity, particle_velocity)
-                impulses[c, 1], impulses[c, 2] = new1, new2
-                change = max(change, friction_change)
+            change = max(change, _solve_contact(
+                c, target_normal_velocity[c], k_normal[c], impulses, body_a, body_b, particles_a, particles_b,
+                weights_a, weights_b, r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass,
+                body_inverse_inertia_world, particle_inverse_mass, body_velocity, body_angular_velocity,
+                particle_velocity))
         if change <= tolerance:
             break
     return impulses, sweeps, change
+
+
+@njit(cache=True)
+def _solve_contact(c, target, k_normal, impulses, body_a, body_b, particles_a, particles_b, weights_a, weights_b,
+                   r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass, body_inverse_inertia_world,
+                   particle_inverse_mass, body_velocity, body_angular_velocity, particle_velocity):
+    """One Gauss-Seidel update of contact c (C7 on velocities): the normal impulse that brings
+    v_n to ``target`` with the accumulated impulse kept ≥ 0 (C2), then friction kept in the
+    disk μ λ_n (F2). Updates ``impulses[c]`` and the velocities; returns the largest velocity
+    change it made [m/s]."""
+    vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
+                            r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
+    old = impulses[c, 0]
+    impulses[c, 0] = max(0.0, old - (vn - target) / k_normal)
+    _apply(c, normal[c], impulses[c, 0] - old, body_a, body_b, particles_a, particles_b, weights_a, weights_b,
+           r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
+           body_velocity, body_angular_velocity, particle_velocity)
+    change = abs(impulses[c, 0] - old) * k_normal
+    if friction[c] > 0.0:
+        new1, new2, friction_change = _friction_impulse(
+            c, impulses[c, 1], impulses[c, 2], friction[c] * impulses[c, 0], body_a, body_b,
+            particles_a, particles_b, weights_a, weights_b, r_a, r_b, tangent1, tangent2,
+            body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass, body_velocity,
+            body_angular_velocity, particle_velocity)
+        impulses[c, 1], impulses[c, 2] = new1, new2
+        change = max(change, friction_change)
+    return change
 
 
 @njit(cache=True)
