@@ -70,3 +70,20 @@ def test_messages_show_plain_numbers():
     with pytest.raises(InputError) as error:
         ModelBuilder().add_body("box", half_extents=(0.1, -0.1, 0.1), mass=1.0)
     assert "[0.1, -0.1, 0.1]" in str(error.value)
+
+
+def test_capsule_mass_properties_against_voxels():
+    b = ModelBuilder()
+    b.add_body("capsule", radius=0.05, half_length=0.12, density=1000.0)
+    model = b.finalize()
+    r, h, n = 0.05, 0.12, 161
+    axis = [np.linspace(-r, r, n), np.linspace(-r, r, n), np.linspace(-h - r, h + r, 3 * n)]
+    x, y, z = np.meshgrid(*axis, indexing="ij")
+    inside = x ** 2 + y ** 2 + np.maximum(np.abs(z) - h, 0) ** 2 <= r ** 2
+    cell = np.prod([a[1] - a[0] for a in axis])
+    mass = 1000.0 * inside.sum() * cell
+    assert model.body_mass[0] == pytest.approx(mass, rel=3e-3)
+    dm = 1000.0 * cell
+    Ixx = dm * np.sum((y ** 2 + z ** 2)[inside])
+    Izz = dm * np.sum((x ** 2 + y ** 2)[inside])
+    np.testing.assert_allclose(model.body_inertia[0], [Ixx, Ixx, Izz], rtol=5e-3)

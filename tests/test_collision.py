@@ -188,3 +188,31 @@ def test_fast_sphere_does_not_pass_through_another():
     x = run.arrays["body_position"][:, :, 0]
     assert (x[:, 1] - x[:, 0] >= 2 * 0.01 - 1e-9).all()        # never overlapping, never crossed
     np.testing.assert_allclose(run.arrays["body_velocity"][-1, :, 0], [50.0, 50.0])   # inelastic: shared
+
+
+def test_bounds_enclose_every_shape(rng):
+    """The broad phase's boxes contain every point of the shapes (sampled on their surfaces)."""
+    from contactlab.collision import _bounds, _colliders
+    b = ModelBuilder()
+    for _ in range(20):
+        q = rng.normal(size=4)
+        b.add_body("capsule", radius=0.05, half_length=0.2, mass=1, orientation=q, position=rng.normal(size=3))
+        b.add_body("box", half_extents=(0.3, 0.1, 0.05), mass=1, orientation=rng.normal(size=4),
+                   position=rng.normal(size=3))
+        b.add_body("sphere", radius=0.1, mass=1, position=rng.normal(size=3))
+    model = b.finalize()
+    state = model.state()
+    kinds, params, centers, rots = _colliders(model, state)
+    lower, upper = _bounds(kinds, params, centers, rots, np.zeros(len(kinds)))
+    R = rotations.to_matrix(state.body_orientation)
+    directions = rng.normal(size=(500, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for i, (kind, p) in enumerate(zip(model.body_shape, model.body_params)):
+        if kind == 4:      # capsule: segment ends plus radius
+            local = np.concatenate([directions * p[0] + [0, 0, p[1]], directions * p[0] - [0, 0, p[1]]])
+        elif kind == 1:
+            local = np.clip(directions * 10, -p[:3], p[:3])
+        else:
+            local = directions * p[0]
+        world = local @ R[i].T + state.body_position[i]
+        assert (world >= lower[i] - 1e-12).all() and (world <= upper[i] + 1e-12).all()

@@ -248,3 +248,23 @@ def test_warm_starting_carries_impulses_by_contact_id_and_steadies_a_pyramid():
     cold = simulate(scene.model, "impulse", scene.dt, 2.0, {"warm_start": 0.0})
     moved_cold = np.linalg.norm(cold.arrays["body_position"][-1] - cold.arrays["body_position"][0], axis=1)
     assert moved_cold.max() > 10 * moved.max()         # what warm starting buys
+
+
+def test_capsules_come_to_rest_lying_flat_stacked_and_on_a_box():
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5)
+    lying = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0)          # axis along world y
+    b.add_body("capsule", radius=0.05, half_length=0.2, mass=1.0, position=(0, 0, 0.06), orientation=lying,
+               material="m")
+    b.add_body("capsule", radius=0.05, half_length=0.2, mass=1.0, position=(0, 0, 0.17), orientation=lying,
+               material="m")
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, position=(0.5, 0, 0.1), material="m")
+    b.add_body("capsule", radius=0.05, half_length=0.05, mass=1.0, position=(0.5, 0, 0.26), orientation=lying,
+               material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    run = simulate(b.finalize(), "impulse", 1 / 240, 1.5)
+    z = run.arrays["body_position"][-1, :, 2]
+    np.testing.assert_allclose(z, [0.05, 0.15, 0.1, 0.25], atol=1e-3)
+    assert np.abs(run.arrays["body_velocity"][-1]).max() < 1e-3
+    assert run.summary["energy"]["max"] <= run.summary["energy"]["initial"] + 1e-9   # nothing launched
+    assert run.summary["max_penetration"] < 1e-3

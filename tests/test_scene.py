@@ -11,7 +11,7 @@ from contactlab.scene import Scene, builtin_scenes, load_scene
 from contactlab.scene import schema
 from contactlab.simulation import simulate
 
-BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "card_house", "domino_chain", "incline",
+BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "capsule_pile", "card_house", "domino_chain", "incline",
            "mass_ratio_stack", "newtons_cradle", "particles_box", "rod_impact", "rolling_sphere", "sliding_block",
            "sphere_pile"]
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
@@ -213,7 +213,7 @@ ERROR_CASES = [
      "unknown material"),
     ("missing shape", replace('shape = "sphere"', ""), "bodies[0].shape", "missing required key"),
     ("unknown shape", replace('shape = "sphere"', 'shape = "spere"'), "bodies[0].shape", "did you mean 'sphere'"),
-    ("planned body shape", replace('shape = "sphere"', 'shape = "capsule"'), "bodies[0].shape", "not supported yet"),
+    ("planned body shape", replace('shape = "sphere"', 'shape = "convex"'), "bodies[0].shape", "not supported yet"),
     ("planned obstacle shape", replace('shape = "plane"', 'shape = "mesh"'), "obstacles[0].shape",
      "not supported yet"),
     ("key of another shape", replace("half_extents = [0.1, 0.1, 0.1]", "radius = 0.1"), "bodies[1].radius",

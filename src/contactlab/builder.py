@@ -101,16 +101,17 @@ class ModelBuilder:
         raise InputError("material", f"unknown material {material!r} (known: {known})")
 
     # -- rigid bodies ----------------------------------------------------------------
-    def add_body(self, shape, *, radius=None, half_extents=None, mass=None, density=None,
+    def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, mass=None, density=None,
                  position=(0, 0, 0), orientation=(1, 0, 0, 0), velocity=(0, 0, 0),
                  angular_velocity=(0, 0, 0), material=None, name=None) -> int:
         """Add a rigid body; returns its index.
 
-        shape: "sphere" (needs radius [m]) or "box" (needs half_extents [m], 3 numbers).
+        shape: "sphere" (needs radius [m]), "box" (needs half_extents [m], 3 numbers) or
+        "capsule" (needs radius and half_length [m]: the segment along the body z axis).
         Give exactly one of mass [kg] or density [kg/m³]; the inertia tensor follows from the
         shape as a uniform solid. angular_velocity is in the world frame [rad/s].
         """
-        kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES)
+        kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
@@ -131,15 +132,19 @@ class ModelBuilder:
         return index
 
     @staticmethod
-    def _solid_shape(shape, radius, half_extents, allowed):
+    def _solid_shape(shape, radius, half_extents, allowed, half_length=None):
         if shape not in allowed:
             raise InputError("shape", f"expected one of {', '.join(allowed)}, found {shape!r}")
         kind = allowed[shape]
         params = np.zeros(4)
-        if kind == shapes.SPHERE:
+        if kind in (shapes.SPHERE, shapes.CAPSULE):
             if radius is None:
-                raise InputError("radius", "a sphere needs a radius (m)")
+                raise InputError("radius", f"a {shape} needs a radius (m)")
             params[0] = _number(radius, "radius", 0.0, strict=True)
+        if kind == shapes.CAPSULE:
+            if half_length is None:
+                raise InputError("half_length", "a capsule needs a half_length (m): half its segment's length")
+            params[1] = _number(half_length, "half_length", 0.0)
         elif kind == shapes.BOX:
             if half_extents is None:
                 raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")

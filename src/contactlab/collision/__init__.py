@@ -66,9 +66,11 @@ def _colliders(model, state):
 
 def _bounds(kinds, params, centers, rots, margin):
     """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin (N,); planes infinite."""
-    half = np.where(kinds[:, None] == shapes.BOX,
-                    np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),
-                    params[:, :1])
+    half = np.select(
+        [kinds[:, None] == shapes.BOX, kinds[:, None] == shapes.CAPSULE],
+        [np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),                # box: |R| h
+         np.abs(rots[:, :, 2]) * params[:, 1:2] + params[:, :1]],             # capsule: |axis| h + r
+        default=params[:, :1])
     half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin[:, None]
     return centers - half, centers + half
 

@@ -13,10 +13,11 @@ from numba import njit
 
 from .. import shapes
 from .box_box import box_box
+from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
 
 MAX_PER_PAIR = 8
 
-SPHERE, BOX, PLANE, POINT = shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT
+SPHERE, BOX, PLANE, POINT, CAPSULE = shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT, shapes.CAPSULE
 
 
 @njit(cache=True)
@@ -126,25 +127,49 @@ def supported(kind_a, kind_b):
 
 
 @njit(cache=True)
+def _rank(kind):
+    """Canonical order of a pair: the lower rank is shape A (round < capsule < box < plane)."""
+    if kind == SPHERE or kind == POINT:
+        return 0
+    if kind == CAPSULE:
+        return 1
+    if kind == BOX:
+        return 2
+    return 9
+
+
+@njit(cache=True)
 def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
                      margin, out_point, out_normal, out_depth, out_feature, slot):
-    """The pairs in their canonical order: round–round, round–plane, box–plane, round–box, box–box."""
+    """The pairs in canonical order (rank of A ≤ rank of B); 0 contacts for an unknown pair."""
     round_a = kind_a == SPHERE or kind_a == POINT
     round_b = kind_b == SPHERE or kind_b == POINT
     if round_a and round_b:
         return sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin,
                              out_point, out_normal, out_depth, out_feature, slot)
-    if round_a and kind_b == PLANE:
-        return sphere_plane(center_a, params_a[0], params_b, margin, out_point, out_normal, out_depth, out_feature, slot)
-    if kind_a == BOX and kind_b == PLANE:
-        return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
-                         out_point, out_normal, out_depth, out_feature, slot)
+    if round_a and kind_b == CAPSULE:
+        return sphere_capsule(center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1], margin,
+                              out_point, out_normal, out_depth, out_feature, slot)
     if round_a and kind_b == BOX:
         return sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
                           out_point, out_normal, out_depth, out_feature, slot)
+    if round_a and kind_b == PLANE:
+        return sphere_plane(center_a, params_a[0], params_b, margin, out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == CAPSULE and kind_b == CAPSULE:
+        return capsule_capsule(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, params_b[0],
+                               params_b[1], margin, out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == CAPSULE and kind_b == BOX:
+        return capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, params_b[:3],
+                           margin, out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == CAPSULE and kind_b == PLANE:
+        return capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
+                             out_point, out_normal, out_depth, out_feature, slot)
     if kind_a == BOX and kind_b == BOX:
         return box_box(center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3], margin,
                        out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == BOX and kind_b == PLANE:
+        return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
+                         out_point, out_normal, out_depth, out_feature, slot)
     return 0
 
 
@@ -156,8 +181,7 @@ def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, cente
     A pair given out of canonical order is computed swapped and its normals flipped, so
     swapping the two shapes flips the normal and nothing else.
     """
-    swap = kind_a == PLANE or (kind_a == BOX and (kind_b == SPHERE or kind_b == POINT))
-    if not swap:
+    if _rank(kind_a) <= _rank(kind_b):
         return _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
                                 margin, out_point, out_normal, out_depth, out_feature, slot)
     count = _collide_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,

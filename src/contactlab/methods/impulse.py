@@ -48,6 +48,7 @@ class Options:
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
     stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
     slop: float = 0.0005                  # m of penetration left alone by the stabilization
+    max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see module docs)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
     warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
@@ -59,6 +60,7 @@ class Options:
         self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
         self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
         self.slop = _number(self.slop, "slop", 0.0)
+        self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
         if not isinstance(self.time_of_impact, bool):
@@ -375,10 +377,12 @@ def resting_target(gap_at_start, dt, options):
     Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
     be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
     speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
-    ``stabilization`` of its depth beyond ``slop`` per step.
+    ``stabilization`` of its depth beyond ``slop`` per step, never faster than
+    ``max_push_velocity`` (a deep overlap must not turn into a launch).
     """
-    return np.where(gap_at_start >= 0.0, -gap_at_start / dt,
-                    options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt)
+    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
+                      options.max_push_velocity)
+    return np.where(gap_at_start >= 0.0, -gap_at_start / dt, push)
 
 
 def relative_gravity(model, contacts):

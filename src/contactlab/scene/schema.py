@@ -24,7 +24,7 @@ from ..dynamics.integrators import INTEGRATORS
 from ..errors import InputError
 
 # Shapes the schema knows but the library cannot simulate yet: a clear "not supported yet".
-PLANNED_BODY_SHAPES = ("capsule", "convex", "mesh")
+PLANNED_BODY_SHAPES = ("convex", "mesh")
 PLANNED_OBSTACLE_SHAPES = ("mesh",)
 MAX_ARRAY_COPIES = 1_000_000
 
@@ -257,9 +257,10 @@ ARRAY = {
 
 BODY = {
     "name": Key(Text()),
-    "shape": Key(Choice(("sphere", "box"), PLANNED_BODY_SHAPES, what="body shape"), required=True),
-    "radius": Key(Number(), unit="m", shapes=("sphere",)),
+    "shape": Key(Choice(("sphere", "box", "capsule"), PLANNED_BODY_SHAPES, what="body shape"), required=True),
+    "radius": Key(Number(), unit="m", shapes=("sphere", "capsule")),
     "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
+    "half_length": Key(Number(), unit="m", shapes=("capsule",)),
     "mass": Key(Number(), unit="kg"),
     "density": Key(Number(), unit="kg/m^3"),
     "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
