@@ -555,7 +555,7 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
     p = _axpy(origin, s, direction)
     q = np.empty(3)
     outside = 0
-    face_axis = np.int64(0)                     # (np.int64: no literal-typed duplicate compilations)
+    face_axis = np.int64(0)         # np.int64, not 0: callees are compiled once, not also for Literal[int](0)
     largest = -1e300
     for k in range(3):
         q[k] = _clamp(p[k], -half_extents[k], half_extents[k])
@@ -673,6 +673,7 @@ def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, ma
                                       half_extents[best_edge])
     p = _axpy(origin, s, direction)
     q = _axpy(edge_center, t, edge_direction)
-    _write_local(_midpoint(_axpy(p, -radius_a, normal_local), q), normal_local, depth, np.int64(CAPSULE_BOX_CROSS_FEATURE),
-                 box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot)
+    _write_local(_midpoint(_axpy(p, -radius_a, normal_local), q), normal_local, depth,
+                 np.int64(CAPSULE_BOX_CROSS_FEATURE), box_center, box_rotation,
+                 out_point, out_normal, out_depth, out_feature, slot)
     return 1
