@@ -44,6 +44,8 @@ small temporary arrays.
 import numpy as np
 from numba import njit
 
+from .contact_output import write_contact
+
 MAX_CONTACTS = 2            # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3         # capsule axes with |sin angle| below this are "parallel" (2-point contact)
 OVERLAP_REL = 1e-6          # a parallel overlap shorter than this × (sum of half lengths and radii) is a point
@@ -55,15 +57,6 @@ CROSS_AXIS_EPS = 1e-8       # |axis × box edge| below this: no SAT axis of its 
 CAPSULE_BOX_EDGE_FEATURE = 12     # capsule–box contacts alongside a box edge: 12 + 2 · edge + end (12..35)
 CAPSULE_BOX_CROSS_FEATURE = 36    # the capsule–box contact of a segment inside the box, across an edge
 CAPSULE_CAPSULE_SINGLE_FEATURE = 0
-
-
-@njit(cache=True)
-def _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, feature):
-    for i in range(3):
-        out_point[slot, i] = point[i]
-        out_normal[slot, i] = normal[i]
-    out_depth[slot] = depth
-    out_feature[slot] = feature
 
 
 @njit(cache=True)
@@ -202,7 +195,7 @@ def capsule_plane(center, rotation, radius, half_length, plane, margin,
         depth = radius - distance
         if depth >= -margin:
             point = _axpy(x, -0.5 * (radius + distance), normal)
-            _write(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth, end)
+            write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth, end)
             count += 1
     return count
 
@@ -236,7 +229,7 @@ def sphere_capsule(center_a, radius_a, center_b, rotation_b, radius_b, half_leng
     else:
         normal = _column(rotation_b, 0)
     point = _midpoint(_axpy(center_a, -radius_a, normal), _axpy(closest, radius_b, normal))
-    _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, np.int64(0))
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, np.int64(0))
     return 1
 
 
@@ -312,13 +305,13 @@ def capsule_capsule(center_a, rotation_a, radius_a, half_a, center_b, rotation_b
                 if depth_end >= -margin:
                     surface_a = _axpy(_axpy(center_a, s_end, axis_a), -radius_a, normal)
                     point = _axpy(surface_a, 0.5 * depth_end, normal)
-                    _write(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end,
+                    write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end,
                            1 + end)
                     count += 1
             return count
 
     point = _midpoint(_axpy(point_a, -radius_a, normal), _axpy(point_b, radius_b, normal))
-    _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth,
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth,
            np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))
     return 1
 
@@ -434,7 +427,7 @@ def _face_contact(origin, direction, s, radius, half_extents, face_axis, face_si
         return 0
     normal_local = _unit_axis(face_axis, face_sign)
     point = _axpy(box_center, 1.0, _rotate(box_rotation, _axpy(x, -0.5 * (radius + height), normal_local)))
-    _write(out_point, out_normal, out_depth, out_feature, slot, point, _rotate(box_rotation, normal_local), depth,
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, _rotate(box_rotation, normal_local), depth,
            feature)
     return 1
 
@@ -475,7 +468,7 @@ def _face_patch(origin, direction, half_length, radius, half_extents, face_axis,
 def _write_local(point_local, normal_local, depth, feature, box_center, box_rotation,
                  out_point, out_normal, out_depth, out_feature, slot):
     """Write a contact given in the box frame."""
-    _write(out_point, out_normal, out_depth, out_feature, slot,
+    write_contact(out_point, out_normal, out_depth, out_feature, slot,
            _axpy(box_center, 1.0, _rotate(box_rotation, point_local)),
            _rotate(box_rotation, normal_local), depth, feature)
 

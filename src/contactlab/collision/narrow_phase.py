@@ -12,21 +12,13 @@ import numpy as np
 from numba import njit
 
 from .. import shapes
+from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
 
 MAX_PER_PAIR = 8
 
 SPHERE, BOX, PLANE, POINT, CAPSULE = shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT, shapes.CAPSULE
-
-
-@njit(cache=True)
-def _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, feature):
-    for i in range(3):
-        out_point[slot, i] = point[i]
-        out_normal[slot, i] = normal[i]
-    out_depth[slot] = depth
-    out_feature[slot] = feature
 
 
 @njit(cache=True)
@@ -38,7 +30,7 @@ def sphere_plane(center, radius, plane, margin, out_point, out_normal, out_depth
     if depth < -margin:
         return 0
     point = center - normal * (0.5 * (radius + distance))
-    _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, 0)
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, 0)
     return 1
 
 
@@ -57,7 +49,7 @@ def sphere_sphere(center_a, radius_a, center_b, radius_b, margin,
         normal = np.array([0.0, 0.0, 1.0])
     surface_a = center_a - normal * radius_a
     surface_b = center_b + normal * radius_b
-    _write(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, 0)
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, 0)
     return 1
 
 
@@ -74,7 +66,7 @@ def box_plane(center, rotation, half_extents, plane, margin, out_point, out_norm
         x = center + rotation @ local
         distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
         if -distance >= -margin:
-            _write(out_point, out_normal, out_depth, out_feature, slot + count,
+            write_contact(out_point, out_normal, out_depth, out_feature, slot + count,
                    x - normal * (0.5 * distance), normal, -distance, corner)
             count += 1
     return count
@@ -112,7 +104,7 @@ def sphere_box(center, radius, box_center, box_rotation, half_extents, margin,
     normal = box_rotation @ normal_local
     surface_b = box_center + box_rotation @ closest
     surface_a = center - normal * radius
-    _write(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
     return 1
 
 
