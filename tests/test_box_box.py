@@ -515,12 +515,12 @@ def test_agrees_with_fcl(random_scenes):
 
 def test_dispatcher_and_collide_use_box_box():
     from contactlab import ModelBuilder, collide
-    from contactlab.collision.narrow_phase import BOX, collide_pair, supported
+    from contactlab.collision.narrow_phase import BOX, collide_pair, empty_hull_store, supported
 
     assert supported(BOX, BOX)
     params = np.array([0.5, 0.5, 0.5, 0.0])
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
-    count = collide_pair(BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, *out, 0)
+    count = collide_pair(BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), *out, 0)
     assert count == 4
     np.testing.assert_allclose(out[1][:4], np.tile([0.0, 0.0, 1.0], (4, 1)))
 

@@ -106,7 +106,7 @@ def test_sphere_against_static_box_outside_and_inside():
 
 
 def test_swapping_shapes_flips_the_normal_and_nothing_else():
-    from contactlab.collision.narrow_phase import collide_pair
+    from contactlab.collision.narrow_phase import collide_pair, empty_hull_store
     from contactlab import shapes
     rng = np.random.default_rng(3)
     for _ in range(200):
@@ -116,8 +116,8 @@ def test_swapping_shapes_flips_the_normal_and_nothing_else():
         sphere = (shapes.SPHERE, np.array([0.15, 0, 0, 0]), rng.normal(scale=0.2, size=3), np.eye(3))
         out = [np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64)]
         out2 = [np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64)]
-        n1 = collide_pair(*box, *sphere, 0.0, *out, 0)
-        n2 = collide_pair(*sphere, *box, 0.0, *out2, 0)
+        n1 = collide_pair(*box, *sphere, 0.0, empty_hull_store(), *out, 0)
+        n2 = collide_pair(*sphere, *box, 0.0, empty_hull_store(), *out2, 0)
         assert n1 == n2
         np.testing.assert_allclose(out[1][:n1], -out2[1][:n2])
         np.testing.assert_allclose(out[0][:n1], out2[0][:n2])
@@ -216,3 +216,50 @@ def test_bounds_enclose_every_shape(rng):
             local = directions * p[0]
         world = local @ R[i].T + state.body_position[i]
         assert (world >= lower[i] - 1e-12).all() and (world <= upper[i] + 1e-12).all()
+
+
+def test_mesh_bowl_holds_everything_dropped_into_it():
+    from contactlab import simulate
+    from contactlab.scene import load_scene
+    scene = load_scene("mesh_bowl")
+    run = simulate(scene.model, scene.method, scene.dt, 2.0)
+    mesh = scene.model.meshes[0]
+    lowest_inner = 0.04                                       # the bowl's wall is 4 cm thick at the bottom
+    assert run.arrays["particle_position"][:, :, 2].min() >= lowest_inner + 0.01 - 1e-3
+    radial = np.linalg.norm(run.arrays["particle_position"][-1, :, :2], axis=1)
+    assert radial.max() < 0.5                                 # all inside the rim
+    assert np.abs(run.arrays["particle_velocity"][-1]).max() < 1e-3
+    assert run.summary["max_penetration"] < 3e-3
+    assert mesh.triangles.shape[0] == 1536
+
+
+@pytest.mark.parametrize("body", ["sphere", "particle"])
+def test_nothing_fast_passes_through_a_one_triangle_sheet(tmp_path, body):
+    (tmp_path / "sheet.obj").write_text("v 0 -1 -1\nv 0 1 -1\nv 0 0 2\nf 1 3 2\n")   # front side −x
+    def sheet(b):
+        b.add_obstacle("mesh", file=str(tmp_path / "sheet.obj"), material="m")
+    x, radius = _fast_scene(sheet, body)
+    assert x.max() <= -radius + 1e-9
+
+
+def test_mesh_input_errors(tmp_path):
+    (tmp_path / "junk.obj").write_text("this is not a mesh\n")
+    for file, words in (("missing.obj", "missing.obj"), ("junk.obj", "junk.obj")):
+        b = ModelBuilder()
+        with pytest.raises(InputError) as error:
+            b.add_obstacle("mesh", file=str(tmp_path / file))
+        assert error.value.field == "file" and words in error.value.message
+    with pytest.raises(InputError) as error:
+        ModelBuilder().add_obstacle("mesh", file=str(tmp_path / "junk.obj"), scale=0.0)
+    assert error.value.field == "scale"
+
+
+def test_shapes_without_a_mesh_routine_are_a_clear_error(tmp_path):
+    from contactlab.collision import check_supported
+    (tmp_path / "sheet.obj").write_text("v 0 -1 -1\nv 0 1 -1\nv 0 0 2\nf 1 2 3\n")
+    b = ModelBuilder()
+    b.add_obstacle("mesh", file=str(tmp_path / "sheet.obj"))
+    b.add_body("capsule", radius=0.1, half_length=0.2, mass=1.0)
+    with pytest.raises(InputError) as error:
+        check_supported(b.finalize())
+    assert "capsule" in error.value.message and "mesh" in error.value.message

@@ -12,7 +12,7 @@ from contactlab.scene import schema
 from contactlab.simulation import simulate
 
 BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "capsule_pile", "card_house", "domino_chain", "incline",
-           "mass_ratio_stack", "newtons_cradle", "particles_box", "rod_impact", "rolling_sphere", "sliding_block",
+           "mass_ratio_stack", "mesh_bowl", "newtons_cradle", "particles_box", "rod_impact", "rolling_sphere", "sliding_block",
            "sphere_pile"]
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
 
@@ -213,9 +213,7 @@ ERROR_CASES = [
      "unknown material"),
     ("missing shape", replace('shape = "sphere"', ""), "bodies[0].shape", "missing required key"),
     ("unknown shape", replace('shape = "sphere"', 'shape = "spere"'), "bodies[0].shape", "did you mean 'sphere'"),
-    ("planned body shape", replace('shape = "sphere"', 'shape = "convex"'), "bodies[0].shape", "not supported yet"),
-    ("planned obstacle shape", replace('shape = "plane"', 'shape = "mesh"'), "obstacles[0].shape",
-     "not supported yet"),
+    ("planned body shape", replace('shape = "sphere"', 'shape = "mesh"'), "bodies[0].shape", "not supported"),
     ("key of another shape", replace("half_extents = [0.1, 0.1, 0.1]", "radius = 0.1"), "bodies[1].radius",
      "a box takes no radius"),
     ("plane with position", BASE + "position = [0.0, 0.0, 0.0]\n", "obstacles[0].position", "a plane takes no"),
@@ -408,3 +406,47 @@ def test_every_builtin_scene_is_documented():
     text = (Path(__file__).parent.parent / "docs" / "scene-format.md").read_text()
     for name, description in builtin_scenes():
         assert f"- `{name}` — {description}" in text
+
+
+def test_convex_bodies_from_points_and_from_a_mesh_file(tmp_path):
+    import trimesh
+    trimesh.creation.box(extents=(0.2, 0.1, 0.1)).export(tmp_path / "brick.obj")
+    (tmp_path / "scene.toml").write_text("""
+[[bodies]]
+shape = "convex"
+file = "brick.obj"
+scale = 2.0
+density = 1000.0
+position = [0.0, 0.0, 1.0]
+
+[[bodies]]
+shape = "convex"
+points = [[0, 0, 0], [0.3, 0, 0], [0, 0.3, 0], [0, 0, 0.3]]
+mass = 2.0
+position = [1.0, 0.0, 0.0]
+
+[[obstacles]]
+shape = "convex"
+points = [[-1, -1, -0.1], [1, -1, -0.1], [-1, 1, -0.1], [1, 1, -0.1], [-1, -1, 0], [1, -1, 0], [-1, 1, 0], [1, 1, 0]]
+""")
+    model = load_scene(str(tmp_path / "scene.toml")).model       # the file is found beside the scene
+    assert model.body_mass[0] == pytest.approx(1000.0 * 0.4 * 0.2 * 0.2)
+    # the hull's centre of mass is placed from the frame its points are given in
+    np.testing.assert_allclose(model.state().body_position[1], [1.075, 0.075, 0.075])
+    np.testing.assert_allclose(model.state().body_position[0], [0, 0, 1.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("entry, field, words", [
+    ('points = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]', "bodies[0].points", "4"),
+    ('points = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]', "bodies[0].points", "flat"),
+    ('file = "missing.obj"', "bodies[0].file", "missing.obj"),
+    ('file = "broken.obj"', "bodies[0].file", "broken.obj"),
+    ('points = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]\nscale = 0', "bodies[0].scale", "greater than 0"),
+])
+def test_convex_input_errors(tmp_path, entry, field, words):
+    (tmp_path / "broken.obj").write_text("v 1 2\nf 1 2 9\ngarbage\n")
+    (tmp_path / "scene.toml").write_text(f'[[bodies]]\nshape = "convex"\n{entry}\nmass = 1.0\n')
+    with pytest.raises(InputError) as error:
+        load_scene(str(tmp_path / "scene.toml"))
+    assert error.value.field == field and words in error.value.message
+    assert "\n" not in str(error.value)

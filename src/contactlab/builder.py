@@ -71,6 +71,8 @@ class ModelBuilder:
         self._bodies = []             # dicts
         self._particles = []          # dicts of arrays
         self._obstacles = []          # dicts
+        self._hulls = []              # contactlab.hulls.Hull of the convex shapes
+        self._meshes = []             # contactlab.meshes.TriangleMesh, world frame
 
     # -- materials -------------------------------------------------------------------
     def add_material(self, name, friction=0.5, restitution=0.0) -> int:
@@ -101,35 +103,61 @@ class ModelBuilder:
         raise InputError("material", f"unknown material {material!r} (known: {known})")
 
     # -- rigid bodies ----------------------------------------------------------------
-    def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, mass=None, density=None,
-                 position=(0, 0, 0), orientation=(1, 0, 0, 0), velocity=(0, 0, 0),
-                 angular_velocity=(0, 0, 0), material=None, name=None) -> int:
+    def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, points=None, file=None,
+                 scale=1.0, mass=None, density=None, position=(0, 0, 0), orientation=(1, 0, 0, 0),
+                 velocity=(0, 0, 0), angular_velocity=(0, 0, 0), material=None, name=None) -> int:
         """Add a rigid body; returns its index.
 
-        shape: "sphere" (needs radius [m]), "box" (needs half_extents [m], 3 numbers) or
-        "capsule" (needs radius and half_length [m]: the segment along the body z axis).
-        Give exactly one of mass [kg] or density [kg/m³]; the inertia tensor follows from the
-        shape as a uniform solid. angular_velocity is in the world frame [rad/s].
+        shape: "sphere" (needs radius [m]), "box" (needs half_extents [m], 3 numbers),
+        "capsule" (needs radius and half_length [m]: the segment along the body z axis) or
+        "convex" (the hull of ``points`` (n, 3) [m], or of the vertices of a mesh ``file``
+        (OBJ/STL/PLY), times ``scale``; the points must be convex). Give exactly one of mass [kg]
+        or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid.
+        position and orientation place the body's frame (for a convex shape, the frame its points
+        are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
         """
-        kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
-        if mass is not None:
-            mass = _number(mass, "mass", 0.0, strict=True)
+        position = _vector(position, "position")
+        orientation = _orientation(orientation, "orientation")
+        if shape == "convex":
+            hull = self._hull(points, file, scale, mass=mass, density=density)
+            kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
+            self._hulls.append(hull)
+            mass, inertia = hull.mass, hull.inertia
+            position, orientation = hull.body_pose(position, orientation)
         else:
-            mass = _number(density, "density", 0.0, strict=True) * shapes.volume(kind, params)
+            kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
+            if mass is not None:
+                mass = _number(mass, "mass", 0.0, strict=True)
+            else:
+                mass = _number(density, "density", 0.0, strict=True) * shapes.volume(kind, params)
+            inertia = shapes.principal_inertia(kind, params, mass)
         index = len(self._bodies)
         self._bodies.append(dict(
             name=str(name) if name is not None else f"body{index}",
-            kind=kind, params=params, mass=mass,
-            inertia=shapes.principal_inertia(kind, params, mass),
-            position=_vector(position, "position"),
-            orientation=_orientation(orientation, "orientation"),
+            kind=kind, params=params, mass=mass, inertia=inertia,
+            position=position, orientation=orientation,
             velocity=_vector(velocity, "velocity"),
             angular_velocity=_vector(angular_velocity, "angular_velocity"),
             material=self._material_index(material)))
         return index
+
+    @staticmethod
+    def _hull(points, file, scale, mass=None, density=None):
+        """The convex hull of ``points`` or of a mesh file's vertices (InputError if not convex)."""
+        from .hulls import build_hull, load_hull_points
+        if (points is None) == (file is None):
+            raise InputError("points", "a convex shape needs exactly one of points = [[x, y, z], ...] or file")
+        scale = _number(scale, "scale", 0.0, strict=True)
+        if file is not None:
+            points, field = load_hull_points(file, scale, field="file"), "file"
+        else:
+            points, field = _array(points, "points", "a list of [x, y, z] points") * scale, "points"
+        if mass is None and density is None:
+            mass = 1.0                   # static geometry: the mass is not used
+        return build_hull(points, field, mass=mass, density=density, require_convex=True)
 
     @staticmethod
     def _solid_shape(shape, radius, half_extents, allowed, half_length=None):
@@ -196,13 +224,18 @@ class ModelBuilder:
                                f"found {array.size}")
 
     # -- static obstacles ------------------------------------------------------------
-    def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None,
-                     position=(0, 0, 0), orientation=(1, 0, 0, 0), material=None) -> int:
+    def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None, points=None,
+                     file=None, scale=1.0, position=(0, 0, 0), orientation=(1, 0, 0, 0), material=None) -> int:
         """Add static geometry; returns its index.
 
         "plane": the half-space normal · x ≤ offset is solid (normal need not be unit).
         "sphere": radius, position. "box": half_extents, position, orientation.
+        "convex": points or file (and scale), placed by position and orientation.
+        "mesh": a triangle mesh file (OBJ/STL/PLY) times scale, placed by position and
+        orientation; its triangles' winding makes their front side the outside.
         """
+        position = _vector(position, "position")
+        orientation = _orientation(orientation, "orientation")
         if shape == "plane":
             if normal is None:
                 raise InputError("normal", "a plane needs a normal = [nx, ny, nz]")
@@ -212,12 +245,38 @@ class ModelBuilder:
                 raise InputError("normal", "the normal must not be zero")
             params = np.concatenate([n / length, [_number(offset, "offset") / length]])
             kind = shapes.PLANE
+        elif shape == "mesh":
+            from .meshes import load_mesh
+            if file is None:
+                raise InputError("file", "a mesh obstacle needs a file (OBJ, STL or PLY)")
+            scale = _number(scale, "scale", 0.0, strict=True)
+            mesh = load_mesh(file, scale, field="file").transformed(position, orientation)
+            kind, params = shapes.MESH, np.array([len(self._meshes), 0.0, 0.0, 0.0])
+            self._meshes.append(mesh)
+        elif shape == "convex":
+            hull = self._hull(points, file, scale)
+            kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
+            self._hulls.append(hull)
+            position, orientation = hull.body_pose(position, orientation)
         else:
             kind, params = self._solid_shape(shape, radius, half_extents, shapes.OBSTACLE_SHAPES)
-        self._obstacles.append(dict(kind=kind, params=params, position=_vector(position, "position"),
-                                    orientation=_orientation(orientation, "orientation"),
+        self._obstacles.append(dict(kind=kind, params=params, position=position, orientation=orientation,
                                     material=self._material_index(material)))
         return len(self._obstacles) - 1
+
+    def _pack_hulls(self, shapes_with_params):
+        """Pack the convex hulls, then one 8-corner hull per box (its index stored in params[3])."""
+        from .collision.convex import box_as_hull
+        from .hulls import pack_hulls
+        packs = [pack_hulls(self._hulls)]
+        count = len(self._hulls)
+        for item in shapes_with_params:
+            if item["kind"] == shapes.BOX:
+                item["params"] = item["params"].copy()
+                item["params"][3] = count
+                packs.append(box_as_hull(item["params"][:3]))
+                count += 1
+        return _concatenate_packed(packs)
 
     # -- freeze ------------------------------------------------------------------------
     def finalize(self) -> Model:
@@ -225,6 +284,7 @@ class ModelBuilder:
         if not self._materials:
             self._material_index(None)
         bodies, particles, obstacles = self._bodies, self._particles, self._obstacles
+        hulls = self._pack_hulls(bodies + obstacles)
 
         def stack(items, key, shape, dtype=float):
             return np.array([item[key] for item in items], dtype=dtype).reshape(shape)
@@ -263,5 +323,24 @@ class ModelBuilder:
             obstacle_position=stack(obstacles, "position", (-1, 3)),
             obstacle_orientation=stack(obstacles, "orientation", (-1, 4)),
             obstacle_material=stack(obstacles, "material", (-1,), np.int64),
+            hulls=hulls,
+            meshes=tuple(self._meshes),
             initial=initial,
         )
+
+
+def _concatenate_packed(packs):
+    """Join packed hull dicts (contactlab.hulls.pack_hulls layout), shifting their start indices."""
+    starts = {"vertex_start": "vertices", "face_start": "face_normal", "edge_start": "edge_vertex",
+              "face_vertex_start": "face_vertex_index"}
+    out = {key: [] for key in packs[0]}
+    base = {key: 0 for key in starts}
+    for number, pack in enumerate(packs):
+        for key, values in pack.items():
+            if key in starts:
+                shifted = values + base[key]
+                out[key].append(shifted if number == 0 else shifted[1:])
+                base[key] += len(pack[starts[key]])
+            else:
+                out[key].append(values)
+    return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}

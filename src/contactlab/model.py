@@ -37,13 +37,25 @@ class Model:
     obstacle_position: np.ndarray       # (O, 3) m (centre; unused for planes)
     obstacle_orientation: np.ndarray    # (O, 4) unit quaternion (w, x, y, z)
     obstacle_material: np.ndarray       # (O,) int
+    # convex hulls (of convex shapes and of every box), packed: see contactlab.hulls.pack_hulls
+    hulls: dict = field(repr=False, default=None)
+    # static triangle meshes in world coordinates (contactlab.meshes.TriangleMesh), by index
+    meshes: tuple = field(repr=False, default=())
     # the state at time 0
     initial: "object" = field(repr=False, default=None)
 
     def __post_init__(self):
         for name, value in vars(self).items():
-            if isinstance(value, np.ndarray):
-                value.flags.writeable = False
+            for array in (value.values() if isinstance(value, dict) else [value]):
+                if isinstance(array, np.ndarray):
+                    array.flags.writeable = False
+
+    @property
+    def hull_store(self) -> tuple:
+        """The packed hull arrays as the compiled routines take them (see collision.convex.hull_view)."""
+        h = self.hulls
+        return (h["vertex_start"], h["vertices"], h["face_start"], h["face_normal"], h["face_offset"],
+                h["face_vertex_start"], h["face_vertex_index"], h["edge_start"], h["edge_vertex"], h["edge_face"])
 
     @property
     def body_count(self) -> int:

@@ -10,7 +10,12 @@ BOX        (half_x, half_y, half_z, 0)                    bodies, obstacles
 PLANE      (normal_x, normal_y, normal_z, offset)         obstacles
 POINT      (radius, 0, 0, 0)  a particle: sphere of r ≥ 0 particles
 CAPSULE    (radius, half_length, 0, 0)                    bodies
+CONVEX     (hull index, bounding radius, 0, 0)            bodies, obstacles
+MESH       (mesh index, 0, 0, 0)                          obstacles (static triangle meshes)
 =========  =============================================  ======================
+
+A box also keeps, in its 4th parameter, the index of its own 8-corner hull in the model's
+hull store, so that box–convex pairs run through the convex routines.
 
 A plane is the set {x : normal · x = offset}; its solid side is normal · x < offset.
 A capsule is the segment from −half_length to +half_length along its body z axis, swept by a
@@ -24,10 +29,13 @@ BOX = 1
 PLANE = 2
 POINT = 3
 CAPSULE = 4
+CONVEX = 5
+MESH = 6
 
-BODY_SHAPES = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
-OBSTACLE_SHAPES = {"plane": PLANE, "sphere": SPHERE, "box": BOX}
-NAMES = {SPHERE: "sphere", BOX: "box", PLANE: "plane", POINT: "particle", CAPSULE: "capsule"}
+BODY_SHAPES = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE, "convex": CONVEX}
+OBSTACLE_SHAPES = {"plane": PLANE, "sphere": SPHERE, "box": BOX, "convex": CONVEX, "mesh": MESH}
+NAMES = {SPHERE: "sphere", BOX: "box", PLANE: "plane", POINT: "particle", CAPSULE: "capsule", CONVEX: "convex",
+         MESH: "mesh"}
 
 
 def volume(kind, params):
@@ -64,6 +72,6 @@ def principal_inertia(kind, params, mass):
 def bounding_radii(kinds, params):
     """Radii [m] (N,) of spheres about the shapes' centres that enclose them; planes: inf."""
     kinds = np.asarray(kinds)
-    return np.select([kinds == BOX, kinds == PLANE, kinds == CAPSULE],
-                     [np.linalg.norm(params[:, :3], axis=1), np.inf, params[:, 0] + params[:, 1]],
+    return np.select([kinds == BOX, kinds == PLANE, kinds == CAPSULE, kinds == CONVEX],
+                     [np.linalg.norm(params[:, :3], axis=1), np.inf, params[:, 0] + params[:, 1], params[:, 1]],
                      default=params[:, 0])

@@ -12,6 +12,7 @@ from .. import rotations, shapes
 from ..contacts import Contacts, tangent_basis
 from ..errors import InputError
 from .broad_phase import overlapping_pairs
+from .mesh import MAX_PER_SHAPE, shapes_against_mesh
 from .narrow_phase import MAX_PER_PAIR, collide_pair, supported
 
 
@@ -29,11 +30,12 @@ def check_supported(model):
                                  "is not supported yet; change the shape of one of them")
 
 
+MESH_PARTNERS = (shapes.SPHERE, shapes.POINT, shapes.BOX)   # dynamic shapes with a routine against meshes
 FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
 @njit(cache=True)
-def _generate(pairs, kinds, params, centers, rotations_, reach):
+def _generate(pairs, kinds, params, centers, rotations_, reach, hull_store):
     capacity = len(pairs) * MAX_PER_PAIR
     point = np.empty((capacity, 3))
     normal = np.empty((capacity, 3))
@@ -45,7 +47,7 @@ def _generate(pairs, kinds, params, centers, rotations_, reach):
         a, b = pairs[k, 0], pairs[k, 1]
         written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
                                kinds[b], params[b], centers[b], rotations_[b],
-                               reach[a] + reach[b], point, normal, depth, feature, count)
+                               reach[a] + reach[b], hull_store, point, normal, depth, feature, count)
         owner[count:count + written] = k
         count += written
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
@@ -67,9 +69,10 @@ def _colliders(model, state):
 def _bounds(kinds, params, centers, rots, margin):
     """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin (N,); planes infinite."""
     half = np.select(
-        [kinds[:, None] == shapes.BOX, kinds[:, None] == shapes.CAPSULE],
+        [kinds[:, None] == shapes.BOX, kinds[:, None] == shapes.CAPSULE, kinds[:, None] == shapes.CONVEX],
         [np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),                # box: |R| h
-         np.abs(rots[:, :, 2]) * params[:, 1:2] + params[:, :1]],             # capsule: |axis| h + r
+         np.abs(rots[:, :, 2]) * params[:, 1:2] + params[:, :1],              # capsule: |axis| h + r
+         np.broadcast_to(params[:, 1:2], (len(params), 3))],                  # convex: bounding sphere
         default=params[:, :1])
     half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin[:, None]
     return centers - half, centers + half
@@ -94,8 +97,12 @@ def collide(model, state, margin=0.0, sweep=None) -> Contacts:
     dyn_pairs = overlapping_pairs(lower[:dynamic], upper[:dynamic])
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
     static_pairs = []
+    mesh_parts = []
     for o in range(O):
         g = dynamic + o
+        if kinds[g] == shapes.MESH:
+            mesh_parts.append(_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic))
+            continue
         if kinds[g] == shapes.PLANE:
             n, offset = params[g, :3], params[g, 3]
             half_width = np.abs(upper[:dynamic] - lower[:dynamic]) @ np.abs(n) * 0.5
@@ -106,11 +113,25 @@ def collide(model, state, margin=0.0, sweep=None) -> Contacts:
         hit = np.nonzero(near)[0]
         static_pairs.append(np.stack([hit, np.full(len(hit), g)], axis=1))
     pairs = np.concatenate([dyn_pairs] + static_pairs).astype(np.int64) if static_pairs else dyn_pairs
-    if len(pairs) == 0:
+    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach, model.hull_store)
+    parts = [(pairs[owner, 0], pairs[owner, 1], point, normal, depth, feature)] + mesh_parts
+    a, b, point, normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
+    if len(a) == 0:
         return Contacts.empty()
-    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach)
-    a, b = pairs[owner, 0], pairs[owner, 1]
     return _assemble(model, a, b, point, normal, depth, feature, dynamic + O)
+
+
+def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):
+    """Contacts of the dynamic colliders near mesh obstacle ``g`` (global index) with it."""
+    mesh = model.meshes[int(params[g, 0])]
+    grow = mesh.max_depth + reach[g]
+    near = ((lower[:dynamic] <= mesh.bounds[1] + grow) & (mesh.bounds[0] - grow <= upper[:dynamic])).all(axis=1)
+    near &= np.isin(kinds[:dynamic], MESH_PARTNERS)
+    chosen = np.nonzero(near)[0]
+    point, normal, depth, feature, owner = shapes_against_mesh(
+        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], mesh.geometry,
+        MAX_PER_SHAPE)
+    return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
 
 
 def _side(model, collider):

@@ -15,10 +15,12 @@ from .. import shapes
 from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
+from .convex import convex_convex, convex_plane, hull_view, sphere_convex
 
 MAX_PER_PAIR = 8
 
-SPHERE, BOX, PLANE, POINT, CAPSULE = shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT, shapes.CAPSULE
+SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT,
+                                              shapes.CAPSULE, shapes.CONVEX)
 
 
 @njit(cache=True)
@@ -115,25 +117,47 @@ def supported(kind_a, kind_b):
         kind_a, kind_b = kind_b, kind_a
     if kind_b == PLANE:
         return kind_a != PLANE
+    if kind_a == CAPSULE and kind_b == CONVEX:
+        return False
+    if kind_b == shapes.MESH:            # meshes are static: only dynamic shapes meet them
+        return kind_a == SPHERE or kind_a == POINT or kind_a == BOX
     return True
+
+
+def empty_hull_store():
+    """A hull store with no hulls, for pairs that need none (see Model.hull_store).
+
+    Read-only like a Model's, so the compiled dispatch is the same one (Numba types read-only
+    and writable arrays apart and would compile everything twice)."""
+    store = (np.zeros(1, dtype=np.int64), np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((0, 3)),
+             np.zeros(0), np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64),
+             np.zeros((0, 2), dtype=np.int64), np.zeros((0, 2), dtype=np.int64))
+    for array in store:
+        array.flags.writeable = False
+    return store
 
 
 @njit(cache=True)
 def _rank(kind):
-    """Canonical order of a pair: the lower rank is shape A (round < capsule < box < plane)."""
+    """Canonical order of a pair: the lower rank is shape A (round < capsule < box < convex < plane)."""
     if kind == SPHERE or kind == POINT:
         return 0
     if kind == CAPSULE:
         return 1
     if kind == BOX:
         return 2
+    if kind == CONVEX:
+        return 3
     return 9
 
 
 @njit(cache=True)
 def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                     margin, out_point, out_normal, out_depth, out_feature, slot):
-    """The pairs in canonical order (rank of A ≤ rank of B); 0 contacts for an unknown pair."""
+                     margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
+    """The pairs in canonical order (rank of A ≤ rank of B); 0 contacts for an unknown pair.
+
+    hull_store: the model's packed hulls (Model.hull_store); convex shapes and boxes index it.
+    """
     round_a = kind_a == SPHERE or kind_a == POINT
     round_b = kind_b == SPHERE or kind_b == POINT
     if round_a and round_b:
@@ -162,12 +186,35 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
     if kind_a == BOX and kind_b == PLANE:
         return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
                          out_point, out_normal, out_depth, out_feature, slot)
+    if round_a and kind_b == CONVEX:
+        b = _hull(hull_store, params_b[0])
+        return sphere_convex(center_a, params_a[0], center_b, rotation_b, b[0], b[1], b[2], b[3], b[4], margin,
+                             out_point, out_normal, out_depth, out_feature, slot)
+    if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
+        a = _hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
+        b = _hull(hull_store, params_b[0])
+        return convex_convex(center_a, rotation_a, a[0], a[1], a[2], a[3], a[4], a[5], a[6],
+                             center_b, rotation_b, b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
+                             out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == CONVEX and kind_b == PLANE:
+        a = _hull(hull_store, params_a[0])
+        return convex_plane(center_a, rotation_a, a[0], params_b, margin,
+                            out_point, out_normal, out_depth, out_feature, slot)
     return 0
 
 
 @njit(cache=True)
+def _hull(hull_store, index):
+    """Hull number ``index`` (a float parameter) out of the store, as collision.convex.hull_view gives it."""
+    (vertex_start, vertices, face_start, face_normal, face_offset, face_vertex_start, face_vertex_index,
+     edge_start, edge_vertex, edge_face) = hull_store
+    return hull_view(vertex_start, vertices, face_start, face_normal, face_offset, face_vertex_start,
+                     face_vertex_index, edge_start, edge_vertex, edge_face, np.int64(index))
+
+
+@njit(cache=True)
 def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                 margin, out_point, out_normal, out_depth, out_feature, slot):
+                 margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
     """Contacts of shape A against shape B written from ``slot`` on; returns their count.
 
     A pair given out of canonical order is computed swapped and its normals flipped, so
@@ -175,9 +222,9 @@ def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, cente
     """
     if _rank(kind_a) <= _rank(kind_b):
         return _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                                margin, out_point, out_normal, out_depth, out_feature, slot)
+                                margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
     count = _collide_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
-                             margin, out_point, out_normal, out_depth, out_feature, slot)
+                             margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
     for i in range(slot, slot + count):
         for k in range(3):
             out_normal[i, k] = -out_normal[i, k]

@@ -7,6 +7,8 @@ grid of ``count`` = [nx, ny, nz] positions ``spacing`` = [dx, dy, dz] apart, sta
 ``position`` (x varies fastest, then y, then z); the copies are named ``NAME_i``.
 """
 
+from pathlib import Path
+
 import numpy as np
 
 from ..builder import ModelBuilder
@@ -31,13 +33,20 @@ def grid_offsets(array):
     return np.stack([ix.ravel(), iy.ravel(), iz.ravel()], axis=1) * spacing
 
 
-def build_model(scene):
-    """The Model of a validated scene dict."""
+def _resolve_files(entry, base):
+    """The entry with a relative ``file`` made relative to the scene file's folder ``base``."""
+    if entry.get("file") is None or base is None or Path(entry["file"]).is_absolute():
+        return entry
+    return dict(entry, file=str(Path(str(base)) / entry["file"]))
+
+
+def build_model(scene, base=None):
+    """The Model of a validated scene dict; ``file`` keys are relative to the folder ``base``."""
     builder = _call("simulation", ModelBuilder, gravity=scene["simulation"]["gravity"])
     for i, material in enumerate(scene["materials"]):
         _call(f"materials[{i}]", builder.add_material, **material)
     for i, body in enumerate(scene["bodies"]):
-        arguments = {key: value for key, value in body.items() if key != "array"}
+        arguments = {key: value for key, value in _resolve_files(body, base).items() if key != "array"}
         offsets = grid_offsets(body["array"])
         for copy, offset in enumerate(offsets):
             if body["array"] is not None:
@@ -58,5 +67,5 @@ def build_model(scene):
         _call(f"particles[{i}]", builder.add_particles, position=position, velocity=velocity,
               mass=particles["mass"], radius=particles["radius"], material=particles["material"])
     for i, obstacle in enumerate(scene["obstacles"]):
-        _call(f"obstacles[{i}]", builder.add_obstacle, **obstacle)
+        _call(f"obstacles[{i}]", builder.add_obstacle, **_resolve_files(obstacle, base))
     return builder.finalize()

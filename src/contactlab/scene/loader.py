@@ -120,9 +120,10 @@ def load_scene(source, overrides=()) -> Scene:
     scene = validate(raw)
     _check_methods(scene)
     simulation = scene["simulation"]
+    base = _builtin_dir() if origin.startswith("builtin:") else Path(origin).parent
     return Scene(
         name=name,
-        model=build_model(scene),
+        model=build_model(scene, base),
         method=simulation["method"],
         dt=simulation["dt"],
         duration=simulation["duration"],

@@ -24,8 +24,8 @@ from ..dynamics.integrators import INTEGRATORS
 from ..errors import InputError
 
 # Shapes the schema knows but the library cannot simulate yet: a clear "not supported yet".
-PLANNED_BODY_SHAPES = ("convex", "mesh")
-PLANNED_OBSTACLE_SHAPES = ("mesh",)
+PLANNED_BODY_SHAPES = ("mesh",)
+PLANNED_OBSTACLE_SHAPES = ()
 MAX_ARRAY_COPIES = 1_000_000
 
 
@@ -257,10 +257,14 @@ ARRAY = {
 
 BODY = {
     "name": Key(Text()),
-    "shape": Key(Choice(("sphere", "box", "capsule"), PLANNED_BODY_SHAPES, what="body shape"), required=True),
+    "shape": Key(Choice(("sphere", "box", "capsule", "convex"), PLANNED_BODY_SHAPES, what="body shape"),
+                 required=True),
     "radius": Key(Number(), unit="m", shapes=("sphere", "capsule")),
     "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
     "half_length": Key(Number(), unit="m", shapes=("capsule",)),
+    "points": Key(Points(), unit="m", shapes=("convex",)),
+    "file": Key(Text(), shapes=("convex",)),
+    "scale": Key(Number(positive=True), 1.0, shapes=("convex",)),
     "mass": Key(Number(), unit="kg"),
     "density": Key(Number(), unit="kg/m^3"),
     "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
@@ -281,14 +285,17 @@ PARTICLES = {
 }
 
 OBSTACLE = {
-    "shape": Key(Choice(("plane", "sphere", "box"), PLANNED_OBSTACLE_SHAPES, what="obstacle shape"),
-                 required=True),
+    "shape": Key(Choice(("plane", "sphere", "box", "convex", "mesh"), PLANNED_OBSTACLE_SHAPES,
+                        what="obstacle shape"), required=True),
     "normal": Key(Vector(3), shapes=("plane",)),
     "offset": Key(Number(), 0.0, "m", shapes=("plane",)),
     "radius": Key(Number(), unit="m", shapes=("sphere",)),
     "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
-    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=("sphere", "box")),
-    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z", shapes=("box",)),
+    "points": Key(Points(), unit="m", shapes=("convex",)),
+    "file": Key(Text(), shapes=("convex", "mesh")),
+    "scale": Key(Number(positive=True), 1.0, shapes=("convex", "mesh")),
+    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=("sphere", "box", "convex", "mesh")),
+    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z", shapes=("box", "convex", "mesh")),
     "material": Key(Text()),
 }
 
