@@ -110,7 +110,7 @@ def test_builtin_bowl_is_closed_and_faces_outward():
 
 
 def test_load_errors(tmp_path):
-    with pytest.raises(InputError, match="not found") as error:
+    with pytest.raises(InputError, match="no file") as error:
         load_mesh(tmp_path / "missing.obj", field="obstacles[0].file")
     assert error.value.field == "obstacles[0].file"
     garbage_text = tmp_path / "garbage.obj"

@@ -47,7 +47,6 @@ array                  shape        meaning
 compiled routines of :mod:`contactlab.collision.convex`.
 """
 
-import os
 from dataclasses import dataclass, field as dataclass_field
 
 import numpy as np
@@ -57,7 +56,6 @@ from .errors import InputError
 TOLERANCE = 1e-9          # geometric tolerance, × the diagonal of the points' bounding box
 CONVEX_TOLERANCE = 1e-6   # require_convex: a point deeper inside than this × the diagonal is "inside"
 DEFAULT_DENSITY = 1000.0  # [kg/m³] when neither mass nor density is given (water)
-HULL_FORMATS = (".obj", ".stl", ".ply")
 
 
 @dataclass(frozen=True)
@@ -529,46 +527,14 @@ def _quaternion_multiply(p, q):
 
 
 def load_hull_points(path, scale=1.0, field="file") -> np.ndarray:
-    """The vertices (n, 3) [m] of an OBJ, STL or PLY file, × ``scale``; faces are ignored
-    (the hull of the vertices is what :func:`build_hull` makes of them).
+    """The vertices (n, 3) [m] of the triangles of an OBJ, STL or PLY file, × ``scale``: the
+    hull of the vertices is what :func:`build_hull` makes of them.
 
-    Reads with ``trimesh`` (without processing, so nothing is repaired or merged); a PLY point
-    cloud without faces is accepted. Raises :class:`~contactlab.errors.InputError` naming
-    ``field`` for a bad scale, a missing file, an unsupported format, a file trimesh cannot
-    read, and a file with no vertices.
+    Read by :func:`contactlab.meshes.load_mesh`, with its errors (InputError naming ``field``
+    for a bad scale, a missing file, an unsupported format, an unreadable file, no triangles).
     """
-    try:
-        scale = float(scale)
-    except (TypeError, ValueError):
-        raise InputError(field, f"expected the scale to be a positive number, found {scale!r}") from None
-    if not (np.isfinite(scale) and scale > 0.0):
-        raise InputError(field, f"expected the scale to be a positive finite number, found {scale}")
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise InputError(field, f"expected an existing file, found no file at {path}")
-    extension = os.path.splitext(path)[1].lower()
-    if extension not in HULL_FORMATS:
-        raise InputError(field, f"expected an .obj, .stl or .ply file, found '{extension}' ({path})")
-    try:
-        import trimesh
-    except ImportError:                                   # pragma: no cover - a runtime dependency
-        raise InputError(field, "reading hull files needs the 'trimesh' package (pip install trimesh)") from None
-    try:
-        loaded = trimesh.load(path, process=False)
-        if isinstance(loaded, trimesh.Scene):
-            parts = [np.asarray(g.vertices, dtype=float) for g in loaded.geometry.values() if hasattr(g, "vertices")]
-            vertices = np.concatenate(parts) if parts else np.zeros((0, 3))
-        else:
-            vertices = np.asarray(loaded.vertices, dtype=float)
-    except Exception as error:                            # trimesh raises many types on broken files
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise InputError(field, "expected a readable mesh file, "
-                         f"found one trimesh cannot read: {path} ({reason})") from None
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or len(vertices) == 0:
-        raise InputError(field, f"expected vertices in the mesh file, found none in {path}")
-    if not np.isfinite(vertices).all():
-        raise InputError(field, f"expected finite vertex coordinates, found NaN or infinite values in {path}")
-    return vertices * scale
+    from .meshes import load_mesh
+    return load_mesh(path, scale, field=field).vertices.copy()
 
 
 # ------------------------------------------------------------------------------------------

@@ -371,7 +371,7 @@ def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) ->
         raise InputError(field, f"the mesh scale must be a positive finite number, found {scale}")
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise InputError(field, f"mesh file not found: {path}")
+        raise InputError(field, f"expected an existing file, found no file at {path}")
     extension = os.path.splitext(path)[1].lower()
     if extension not in MESH_FORMATS:
         raise InputError(field, f"unsupported mesh format '{extension}' of {path}; expected .obj, .stl or .ply")

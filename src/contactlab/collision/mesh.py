@@ -87,6 +87,7 @@ from numba import njit
 from .. import rotations, shapes
 from ..errors import InputError
 from ..meshes import TriangleMesh, mesh_triangles_near, vertex_normals
+from .contact_output import write_contact
 
 MAX_PER_SHAPE = 8         # the usual cap of contacts per shape against one mesh (as MAX_PER_PAIR)
 CORNER_CONTACTS = 4       # box–mesh contacts kept per box corner (the deepest local minima)
@@ -150,15 +151,6 @@ def _pseudo_normal(mesh, triangle, region):
     if region <= EDGE2:
         return mesh.edge_normals[mesh.triangle_edges[triangle, region - EDGE0]]
     return mesh.vertex_pseudo_normals[mesh.triangles[triangle, region - VERTEX0]]
-
-
-@njit(cache=True)
-def _write(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, feature):
-    for i in range(3):
-        out_point[slot, i] = point[i]
-        out_normal[slot, i] = normal[i]
-    out_depth[slot] = depth
-    out_feature[slot] = feature
 
 
 @njit(cache=True)
@@ -414,7 +406,7 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
     written = 0
     for i in range(count):
         if taken[i]:
-            _write(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i],
+            write_contact(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i],
                    feature[i])
             written += 1
     return written
@@ -516,7 +508,7 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
     written = 0
     for i in range(count):
         if chosen[i]:
-            _write(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i],
+            write_contact(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i],
                    feature[i])
             written += 1
     return written
