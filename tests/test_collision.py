@@ -263,3 +263,52 @@ def test_shapes_without_a_mesh_routine_are_a_clear_error(tmp_path):
     with pytest.raises(InputError) as error:
         check_supported(b.finalize())
     assert "capsule" in error.value.message and "mesh" in error.value.message
+
+
+# ---- SPEC P2 granularity and P4/P5 normals for rigid polytopes --------------------------
+
+def _box_and_hull_on_plane(tilt=0.0):
+    b = ModelBuilder()
+    q = (np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0)
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0, 0, 0.099), orientation=q)
+    cube = [[x, y, z] for x in (-.1, .1) for y in (-.1, .1) for z in (-.1, .1)]
+    b.add_body("convex", points=cube, mass=1, position=(1, 0, 0.098), orientation=q)
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    return b.finalize()
+
+
+@pytest.mark.parametrize("granularity, samples, per_body", [("object", 2, 1), ("vertex", 2, 4), ("samples", 2, 8),
+                                                            ("samples", 3, 18)])
+def test_p2_granularity_counts(granularity, samples, per_body):
+    model = _box_and_hull_on_plane()
+    c = collide(model, model.state(), 0.0, None, granularity, "object", samples)
+    assert np.bincount(c.body_a).tolist() == [per_body, per_body]
+    np.testing.assert_allclose(c.normal, np.tile([0, 0, 1.0], (c.count, 1)))
+    # the deepest contact of each body is its true depth
+    assert [c.depth[c.body_a == i].max() for i in (0, 1)] == pytest.approx([0.001, 0.002])
+    assert len(set(c.feature_id)) == c.count
+
+
+def test_p5_normal_is_the_negated_surface_normal_of_the_body():
+    model = _box_and_hull_on_plane()
+    c = collide(model, model.state(), 0.0, None, "vertex", "vertex")
+    corners = c.point - model.state().body_position[c.body_a]
+    expected = -np.sign(corners) / np.sqrt(3)                                  # −(a cube corner's own normal)
+    np.testing.assert_allclose(c.normal, expected, atol=1e-12)                   # a diagonal, not the plane's
+    assert (c.normal[:, 2] > 0).all() and (np.abs(c.normal[:, :2]) > 0.5).all()  # not the plane's normal
+
+
+def test_vertex_and_sample_contacts_hold_a_box_flat_one_contact_per_object_does_not():
+    """The lecture's trade-off of P2: one force for the whole object cannot hold a box flat."""
+    from contactlab import simulate
+    drift = {}
+    for options in ({"granularity": "object"}, {"granularity": "samples", "samples": 2}, {"granularity": "vertex"}):
+        b = ModelBuilder()
+        b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0, 0, 0.1))
+        b.add_obstacle("plane", normal=(0, 0, 1))
+        run = simulate(b.finalize(), "impulse", 1 / 240, 1.0, options)
+        drift[options["granularity"]] = np.abs(run.arrays["body_position"][-1] - [0, 0, 0.1]).max()
+    assert drift["vertex"] < 1e-4 and drift["samples"] < 1e-4
+    assert drift["object"] > 10 * drift["vertex"]
+    with pytest.raises(InputError):
+        simulate(b.finalize(), "impulse", 1 / 240, 0.1, {"granularity": "faces"})

@@ -450,3 +450,12 @@ def test_convex_input_errors(tmp_path, entry, field, words):
         load_scene(str(tmp_path / "scene.toml"))
     assert error.value.field == field and words in error.value.message
     assert "\n" not in str(error.value)
+
+
+def test_every_impulse_option_is_documented():
+    from dataclasses import fields
+    from contactlab.methods import impulse
+    text = DOCS.read_text(encoding="utf-8")
+    section = text[text.index("### `[method.impulse]`"):]
+    for field in fields(impulse.Options):
+        assert f"| `{field.name}` |" in section, field.name

@@ -276,7 +276,9 @@ class ModelBuilder:
                 item["params"][3] = count
                 packs.append(box_as_hull(item["params"][:3]))
                 count += 1
-        return _concatenate_packed(packs)
+        packed = _concatenate_packed(packs)
+        packed.update(_fan_triangles(packed))
+        return packed
 
     # -- freeze ------------------------------------------------------------------------
     def finalize(self) -> Model:
@@ -344,3 +346,20 @@ def _concatenate_packed(packs):
             else:
                 out[key].append(values)
     return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}
+
+
+def _fan_triangles(packed):
+    """Triangles of every hull's faces, fanned from each face's first corner (built once).
+
+    Returns triangle_start (H+1,) int64 and triangles (T, 3) int64, local vertex indices, wound
+    like the faces (counter-clockwise from outside)."""
+    triangles, counts = [], []
+    fvs, fvi = packed["face_vertex_start"], packed["face_vertex_index"]
+    for h in range(len(packed["vertex_start"]) - 1):
+        before = len(triangles)
+        for f in range(packed["face_start"][h], packed["face_start"][h + 1]):
+            corners = fvi[fvs[f]:fvs[f + 1]]
+            triangles.extend((corners[0], corners[i], corners[i + 1]) for i in range(1, len(corners) - 1))
+        counts.append(len(triangles) - before)
+    return {"triangle_start": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+            "triangles": np.array(triangles, dtype=np.int64).reshape(-1, 3)}

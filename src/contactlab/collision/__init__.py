@@ -12,6 +12,7 @@ from .. import rotations, shapes
 from ..contacts import Contacts, tangent_basis
 from ..errors import InputError
 from .broad_phase import overlapping_pairs
+from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE, shapes_against_mesh
 from .narrow_phase import MAX_PER_PAIR, collide_pair, supported
 
@@ -78,8 +79,13 @@ def _bounds(kinds, params, centers, rots, margin):
     return centers - half, centers + half
 
 
-def collide(model, state, margin=0.0, sweep=None) -> Contacts:
+def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2) -> Contacts:
     """All contacts of the state, including gaps down to −margin [m].
+
+    granularity ("object" | "vertex" | "samples", SPEC P2a/b/c), normal ("object" | "vertex",
+    SPEC P4/P5) and samples (per triangle edge, for "samples") choose how boxes and convex
+    bodies touch static planes, spheres, boxes and meshes (see collision.granularity); the
+    defaults are the corner contacts with the surface's normal.
 
     sweep: optional (B + P,) distances [m] each body and particle may travel in the coming
     step. A pair's gaps are then reported down to −(margin + sweep_a + sweep_b), so a contact
@@ -113,12 +119,21 @@ def collide(model, state, margin=0.0, sweep=None) -> Contacts:
         hit = np.nonzero(near)[0]
         static_pairs.append(np.stack([hit, np.full(len(hit), g)], axis=1))
     pairs = np.concatenate([dyn_pairs] + static_pairs).astype(np.int64) if static_pairs else dyn_pairs
-    point, normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach, model.hull_store)
-    parts = [(pairs[owner, 0], pairs[owner, 1], point, normal, depth, feature)] + mesh_parts
-    a, b, point, normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
+    if granularity != "vertex" or normal != "object":
+        reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
+        surface_parts, bodies, obstacles = polytope_contacts(model, state, granularity, normal, samples,
+                                                             reach_all, dynamic + O)
+        replaced = np.isin(pairs[:, 0], bodies) & np.isin(pairs[:, 1], dynamic + obstacles)
+        pairs = pairs[~replaced]
+        mesh_parts = [tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))]
+                            for column in part) for part in mesh_parts] + surface_parts
+    contact_point, contact_normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach,
+                                                                     model.hull_store)
+    parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
+    a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
     if len(a) == 0:
         return Contacts.empty()
-    return _assemble(model, a, b, point, normal, depth, feature, dynamic + O)
+    return _assemble(model, a, b, contact_point, contact_normal, depth, feature, dynamic + O)
 
 
 def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from ..builder import _number
-from ..collision import collide
+from ..collision import GRANULARITIES, NORMALS, collide
 from ..contacts import side_apply_impulse, side_inverse_mass, side_point_velocity
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
@@ -52,6 +52,9 @@ class Options:
     time_of_impact: bool = True           # split the step at the impact (see module docs)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
     warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
+    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
+    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
+    samples: int = 2                      # samples per triangle edge for granularity = "samples"
 
     def __post_init__(self):
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 1:
@@ -63,6 +66,11 @@ class Options:
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        for name, allowed in (("granularity", GRANULARITIES), ("normal", NORMALS)):
+            if getattr(self, name) not in allowed:
+                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
+            raise InputError("samples", f"expected a whole number ≥ 1, found {self.samples!r}")
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
@@ -309,7 +317,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     sweep = swept_distances(model, state, predicted, w_body, dt)
     # 3. collision detection over the swept step: contacts at the start positions, with gaps
     #    down to what the motion could close (speculative contacts: nothing tunnels)
-    contacts = collide(model, state, options.contact_margin, sweep)
+    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
+                       options.samples)
     if contacts.count == 0:
         carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
         return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)

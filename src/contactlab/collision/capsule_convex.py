@@ -1,0 +1,400 @@
+"""Capsule against a convex hull: up to 2 contacts.
+
+Conventions as in :mod:`contactlab.collision.capsule` and :mod:`contactlab.collision.convex`:
+capsule A's segment runs along its body z axis (third column of its rotation), ``center ±
+half_length · axis``; hull B is given by its body-frame arrays (``vertices`` (V, 3),
+``face_normal`` (F, 3), ``face_offset`` (F,), ``face_vertex_start`` (F+1,) — global offsets,
+its first entry is subtracted —, ``face_vertex_index`` (K,), ``edge_vertex`` (E, 2),
+``edge_face`` (E, 2)), a centre and a rotation (body → world). The normal is a unit vector
+from B into A, ``depth`` > 0 when overlapping, contacts kept down to ``depth = −margin``, each
+point midway between the two surfaces.
+
+The routine mirrors :func:`contactlab.collision.capsule.capsule_box` feature by feature, with
+the box's 6 faces, 12 edges and 8 corners replaced by the hull's; on a hull that is a box
+(:func:`contactlab.collision.convex.box_as_hull`) it gives the same deepest contact.
+
+1. **Segment apart from the hull** (distance > ``BOX_REL_EPS`` × size): the exact segment–hull
+   distance is the minimum over (each segment end, each face polygon it projects into) and
+   (the segment, each hull edge) (:func:`capsule.segment_closest_parameters`); the closest
+   points ``p`` (segment) and ``q`` (hull) give the normal ``(p − q)/|p − q|`` and the depth
+   ``radius − |p − q|``. By the hull feature ``q`` lies on (a face interior wins ties within
+   the tolerance):
+
+   * a face: a *face patch*: the segment is clipped against the side planes of the face
+     polygon and both ends of the clipped part are contacts with the face normal and their own
+     depth (``radius −`` height above the face, exact): a capsule lying flat gets 2 contacts of
+     equal depth, one standing on its end 1;
+   * an edge the segment is parallel to (``|sin| < PARALLEL_SIN``): 2 contacts at the ends of
+     the part of the segment alongside the edge, normal of the closest points, depth along it;
+   * otherwise (an edge at an angle, a vertex): the closest-point contact, plus the far end of
+     the *dominant face*'s patch (the face whose plane ``p`` is highest above) within margin.
+2. **Segment touching or inside the hull**: separating axis test of the segment against the
+   hull. The faces of the Minkowski sum of a segment and a polytope are the hull faces and the
+   parallelograms ``segment × edge``; an edge gives a face only when the plane normal to the
+   segment crosses the edge's Gauss arc (its two face normals lie on opposite sides of it),
+   and then its outward normal is ``±(axis × edge)`` oriented into the arc, with the edge
+   itself as the hull's support; so the test is O(F + E) and exact. A face axis is preferred
+   to an edge axis within ``BOX_REL_EPS`` × size. A face axis gives a face patch as in 1; an
+   edge axis one contact (closest points of the segment and that edge), depth ``radius +``
+   overlap.
+
+The deepest contact is exact: ``radius − distance`` apart, ``radius +`` the minimum overlap
+(the segment–hull minimum translation distance) otherwise. Where the face patch of a face
+axis would leave out the segment's deepest end (it does not lie over the face polygon), the
+patch is stretched to that end, whose contact point then lies over the face's plane just
+beyond its polygon (``capsule_box`` clips there instead and under-reports the depth).
+
+Features (0..255), stable while the contact keeps its kind and hull feature:
+
+* face patch points (also the closest-point contact of the third case of 1, which stands for
+  the dominant face's patch end on its side): ``(2 · face + end) mod 256``, ``end`` = 0 for
+  the end toward the capsule's −z end, 1 toward its +z end;
+* parallel edge line contacts: ``(2 · (F + edge) + end) mod 256`` (F = face count);
+* the edge-axis contact of case 2: ``CAPSULE_CONVEX_CROSS_FEATURE`` (255).
+
+The two contacts of a pair always differ (the same face or edge, different ``end``).
+
+Everything is compiled (``@njit(cache=True)``), float64, no fastmath.
+"""
+
+import numpy as np
+from numba import njit
+
+from .capsule import (BOX_REL_EPS, CROSS_AXIS_EPS, PARALLEL_SIN, _axpy, _clamp, _column, _dot, _midpoint,
+                      _rotate, _scaled, _unrotate, segment_closest_parameters)
+from .contact_output import write_contact
+
+MAX_CONTACTS = 2
+CAPSULE_CONVEX_CROSS_FEATURE = 255
+
+
+@njit(cache=True)
+def _write_local(point_local, normal_local, depth, feature, hull_center, hull_rotation,
+                 out_point, out_normal, out_depth, out_feature, slot):
+    """Write a contact given in the hull frame."""
+    write_contact(out_point, out_normal, out_depth, out_feature, slot,
+                  _axpy(hull_center, 1.0, _rotate(hull_rotation, point_local)),
+                  _rotate(hull_rotation, normal_local), depth, np.int64(feature))
+
+
+@njit(cache=True)
+def _face_interval(origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index,
+                   face, tol):
+    """Parameters ``(lo, hi)`` of the part of the segment over face ``face`` (inside all side
+    planes of its polygon, widened by ``tol``); ``lo > hi`` when there is none."""
+    base = face_vertex_start[0]
+    start = face_vertex_start[face] - base
+    stop = face_vertex_start[face + 1] - base
+    n = face_normal[face]
+    lo = -half_length
+    hi = half_length
+    for i in range(start, stop):
+        a = vertices[face_vertex_index[i]]
+        b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
+        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        # outward side normal e × n (corners counter-clockwise seen from outside)
+        m0 = e1 * n[2] - e2 * n[1]
+        m1 = e2 * n[0] - e0 * n[2]
+        m2 = e0 * n[1] - e1 * n[0]
+        length = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+        if length == 0.0:
+            continue
+        m0, m1, m2 = m0 / length, m1 / length, m2 / length
+        limit = m0 * a[0] + m1 * a[1] + m2 * a[2] + tol
+        at_origin = m0 * origin[0] + m1 * origin[1] + m2 * origin[2]
+        rate = m0 * direction[0] + m1 * direction[1] + m2 * direction[2]
+        if rate == 0.0:
+            if at_origin > limit:
+                return 1.0, -1.0
+            continue
+        t = (limit - at_origin) / rate
+        if rate > 0.0:
+            hi = min(hi, t)
+        else:
+            lo = max(lo, t)
+    return lo, hi
+
+
+@njit(cache=True)
+def _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_index, face):
+    """Whether the point ``x`` (3,) projects into face ``face``'s polygon (closed)."""
+    base = face_vertex_start[0]
+    start = face_vertex_start[face] - base
+    stop = face_vertex_start[face + 1] - base
+    n = face_normal[face]
+    for i in range(start, stop):
+        a = vertices[face_vertex_index[i]]
+        b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
+        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        m0 = e1 * n[2] - e2 * n[1]
+        m1 = e2 * n[0] - e0 * n[2]
+        m2 = e0 * n[1] - e1 * n[0]
+        if m0 * (x[0] - a[0]) + m1 * (x[1] - a[1]) + m2 * (x[2] - a[2]) > 0.0:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _face_contact(origin, direction, s, radius, normal, offset, feature, margin,
+                  hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot):
+    """One contact of the segment point ``s`` (hull frame) against a face plane (normal, offset):
+    depth ``radius − height``; written if ≥ −margin. Returns 1 if written, else 0."""
+    x = _axpy(origin, s, direction)
+    height = _dot(normal, x) - offset
+    depth = radius - height
+    if depth < -margin:
+        return 0
+    _write_local(_axpy(x, -0.5 * (radius + height), normal), normal, depth, feature, hull_center, hull_rotation,
+                 out_point, out_normal, out_depth, out_feature, slot)
+    return 1
+
+
+@njit(cache=True)
+def _face_patch(origin, direction, half_length, radius, vertices, face_normal, face_offset, face_vertex_start,
+                face_vertex_index, face, s_keep, margin, tol, hull_center, hull_rotation,
+                out_point, out_normal, out_depth, out_feature, slot):
+    """The two ends of the part of the segment over face ``face`` (``s_keep``, unless nan, kept
+    inside that part), each with its own depth; a part shorter than ``tol`` gives 1 contact at
+    its deeper end. Features ``(2 · face + end) mod 256``."""
+    lo, hi = _face_interval(origin, direction, half_length, vertices, face_normal, face_vertex_start,
+                            face_vertex_index, face, tol)
+    if s_keep == s_keep:
+        lo = min(lo, s_keep)
+        hi = max(hi, s_keep)
+    if lo > hi:
+        lo = _clamp(0.5 * (lo + hi), -half_length, half_length)
+        hi = lo
+    normal = face_normal[face]
+    offset = face_offset[face]
+    if hi - lo > tol:
+        count = _face_contact(origin, direction, lo, radius, normal, offset, (2 * face) & 255, margin,
+                              hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
+        count += _face_contact(origin, direction, hi, radius, normal, offset, (2 * face + 1) & 255, margin,
+                               hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot + count)
+        return count
+    if _dot(normal, direction) * (hi - lo) < 0.0:
+        lo = hi
+    end = 1 if lo > 0.0 else 0
+    return _face_contact(origin, direction, lo, radius, normal, offset, (2 * face + end) & 255, margin,
+                         hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
+
+
+@njit(cache=True)
+def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rotation_b, vertices, face_normal,
+                   face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face, margin,
+                   out_point, out_normal, out_depth, out_feature, slot):
+    """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.
+
+    center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);
+    radius_a, half_length_a [m]; center_b (3,) [m], rotation_b (3, 3) and the hull's body-frame
+    arrays (module docstring); margin [m]. Returns the number of contacts written (0..2).
+    Algorithm and features: module docstring.
+    """
+    origin = _unrotate(rotation_b, _axpy(center_a, -1.0, center_b))
+    direction = _unrotate(rotation_b, _column(rotation_a, 2))
+    face_count = face_offset.shape[0]
+    extent = 0.0
+    for v in range(vertices.shape[0]):
+        extent = max(extent, abs(vertices[v, 0]) + abs(vertices[v, 1]) + abs(vertices[v, 2]))
+    size = half_length_a + radius_a + extent
+    tol = BOX_REL_EPS * size
+    reach = radius_a + margin
+
+    # separating axis test of the segment: faces
+    best_face = 0
+    best_face_overlap = np.inf
+    for f in range(face_count):
+        n = face_normal[f]
+        overlap = face_offset[f] - _dot(n, origin) + half_length_a * abs(_dot(n, direction))
+        if overlap < -reach:
+            return 0                            # separated by more than radius + margin
+        if overlap < best_face_overlap:
+            best_face_overlap = overlap
+            best_face = f
+    # edges whose Gauss arc the plane normal to the segment crosses
+    best_edge = -1
+    best_edge_overlap = np.inf
+    best_edge_axis = np.zeros(3)
+    for e in range(edge_vertex.shape[0]):
+        n0 = face_normal[edge_face[e, 0]]
+        n1 = face_normal[edge_face[e, 1]]
+        c0 = _dot(n0, direction)
+        c1 = _dot(n1, direction)
+        if c0 * c1 > 0.0 or (c0 == 0.0 and c1 == 0.0):
+            continue
+        a = vertices[edge_vertex[e, 0]]
+        b = vertices[edge_vertex[e, 1]]
+        u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        u_length = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        if u_length == 0.0:
+            continue
+        u0, u1, u2 = u0 / u_length, u1 / u_length, u2 / u_length
+        l0 = direction[1] * u2 - direction[2] * u1
+        l1 = direction[2] * u0 - direction[0] * u2
+        l2 = direction[0] * u1 - direction[1] * u0
+        length = np.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+        if length < CROSS_AXIS_EPS:
+            continue
+        l0, l1, l2 = l0 / length, l1 / length, l2 / length
+        if l0 * (n0[0] + n1[0]) + l1 * (n0[1] + n1[1]) + l2 * (n0[2] + n1[2]) < 0.0:
+            l0, l1, l2 = -l0, -l1, -l2          # into the arc: the edge supports the hull along it
+        overlap = l0 * (a[0] - origin[0]) + l1 * (a[1] - origin[1]) + l2 * (a[2] - origin[2])
+        if overlap < -reach:
+            return 0
+        if overlap < best_edge_overlap:
+            best_edge_overlap = overlap
+            best_edge = e
+            best_edge_axis[0], best_edge_axis[1], best_edge_axis[2] = l0, l1, l2
+
+    if min(best_face_overlap, best_edge_overlap) < 0.0:
+        # apart: the exact distance over (segment ends × face polygons) and (segment × edges)
+        ends = 2 if half_length_a > 0.0 else 1
+        face_distance = np.inf
+        face_s = 0.0
+        face_id = -1
+        for f in range(face_count):
+            n = face_normal[f]
+            for end in range(ends):
+                s = -half_length_a if end == 0 else half_length_a
+                x = _axpy(origin, s, direction)
+                height = _dot(n, x) - face_offset[f]
+                if height > 0.0 and height < face_distance:
+                    if _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_index, f):
+                        face_distance = height
+                        face_s = s
+                        face_id = f
+        edge_distance = np.inf
+        edge_s = 0.0
+        edge_id = -1
+        edge_at_end = False
+        edge_q = np.zeros(3)
+        for e in range(edge_vertex.shape[0]):
+            a = vertices[edge_vertex[e, 0]]
+            b = vertices[edge_vertex[e, 1]]
+            middle = _midpoint(a, b)
+            span = _axpy(b, -1.0, a)
+            half = 0.5 * np.sqrt(_dot(span, span))
+            if half == 0.0:
+                continue
+            unit = _scaled(0.5 / half, span)
+            s, t = segment_closest_parameters(origin, direction, half_length_a, middle, unit, half)
+            p = _axpy(origin, s, direction)
+            q = _axpy(middle, t, unit)
+            d = _axpy(p, -1.0, q)
+            distance = np.sqrt(_dot(d, d))
+            if distance < edge_distance:
+                edge_distance = distance
+                edge_s = s
+                edge_id = e
+                edge_at_end = abs(t) >= half
+                edge_q = q
+        distance = min(face_distance, edge_distance)
+        depth = radius_a - distance
+        if depth < -margin:
+            return 0
+        if distance > tol:
+            if face_id >= 0 and face_distance <= edge_distance + tol:
+                # the closest point lies inside a face: a face patch
+                return _face_patch(origin, direction, half_length_a, radius_a, vertices, face_normal, face_offset,
+                                   face_vertex_start, face_vertex_index, face_id, face_s, margin, tol,
+                                   center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
+            return _apart_edge(origin, direction, edge_s, edge_q, edge_distance, edge_id, edge_at_end, radius_a,
+                               half_length_a, vertices, face_normal, face_offset, face_vertex_start,
+                               face_vertex_index, edge_vertex, margin, tol, center_b, rotation_b,
+                               out_point, out_normal, out_depth, out_feature, slot)
+
+    # touching or overlapping: the separating axis with the least overlap (faces win near ties)
+    if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
+        # the patch is clipped to the face; should that cut off the segment's deepest end
+        # (which has the exact depth radius + overlap), the patch is stretched to keep it
+        s_keep = np.nan
+        slope = _dot(face_normal[best_face], direction)
+        if slope != 0.0 and half_length_a > 0.0:
+            s_deep = -half_length_a if slope > 0.0 else half_length_a
+            lo, hi = _face_interval(origin, direction, half_length_a, vertices, face_normal, face_vertex_start,
+                                    face_vertex_index, best_face, tol)
+            if lo > hi or -slope * (s_deep - _clamp(s_deep, lo, hi)) > tol:
+                s_keep = s_deep
+        return _face_patch(origin, direction, half_length_a, radius_a, vertices, face_normal, face_offset,
+                           face_vertex_start, face_vertex_index, best_face, s_keep, margin, tol,
+                           center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
+    depth = radius_a + best_edge_overlap
+    if depth < -margin:
+        return 0
+    normal_local = best_edge_axis
+    a = vertices[edge_vertex[best_edge, 0]]
+    b = vertices[edge_vertex[best_edge, 1]]
+    span = _axpy(b, -1.0, a)
+    half = 0.5 * np.sqrt(_dot(span, span))
+    s, t = segment_closest_parameters(origin, direction, half_length_a, _midpoint(a, b), _scaled(0.5 / half, span),
+                                      half)
+    p = _axpy(origin, s, direction)
+    q = _axpy(_midpoint(a, b), t, _scaled(0.5 / half, span))
+    _write_local(_midpoint(_axpy(p, -radius_a, normal_local), q), normal_local, depth, CAPSULE_CONVEX_CROSS_FEATURE,
+                 center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
+    return 1
+
+
+@njit(cache=True)
+def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, half_length_a, vertices, face_normal,
+                face_offset, face_vertex_start, face_vertex_index, edge_vertex, margin, tol,
+                hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot):
+    """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
+    (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter."""
+    depth = radius_a - distance
+    p = _axpy(origin, s, direction)
+    normal_local = _scaled(1.0 / distance, _axpy(p, -1.0, q))
+    slope = _dot(normal_local, direction)
+    face_count = face_offset.shape[0]
+    if not at_vertex:
+        a = vertices[edge_vertex[edge, 0]]
+        b = vertices[edge_vertex[edge, 1]]
+        span = _axpy(b, -1.0, a)
+        length = np.sqrt(_dot(span, span))
+        unit = _scaled(1.0 / length, span)
+        along = _dot(unit, direction)
+        across = np.sqrt(max(0.0, 1.0 - along * along))
+        if across < PARALLEL_SIN and abs(along) > 0.0:
+            # parallel to the edge: the part of the segment alongside it
+            t0 = (_dot(unit, a) - _dot(unit, origin)) / along
+            t1 = (_dot(unit, b) - _dot(unit, origin)) / along
+            lo = max(-half_length_a, min(t0, t1))
+            hi = min(half_length_a, max(t0, t1))
+            if hi - lo > tol and lo - tol <= s <= hi + tol:
+                count = 0
+                for end in range(2):
+                    s_end = lo if end == 0 else hi
+                    depth_end = depth - slope * (s_end - s)
+                    if depth_end >= -margin:
+                        surface_a = _axpy(_axpy(origin, s_end, direction), -radius_a, normal_local)
+                        _write_local(_axpy(surface_a, 0.5 * depth_end, normal_local), normal_local, depth_end,
+                                     (2 * (face_count + edge) + end) & 255, hull_center, hull_rotation,
+                                     out_point, out_normal, out_depth, out_feature, slot + count)
+                        count += 1
+                return count
+    # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
+    # dominant face's patch on its side; the other end of that patch is kept too
+    face = 0
+    highest = -np.inf
+    for f in range(face_count):
+        height = _dot(face_normal[f], p) - face_offset[f]
+        if height > highest:
+            highest = height
+            face = f
+    lo, hi = _face_interval(origin, direction, half_length_a, vertices, face_normal, face_vertex_start,
+                            face_vertex_index, face, tol)
+    if lo <= hi:
+        end = 1 if s > 0.5 * (lo + hi) else 0
+    else:
+        end = 1 if s > 0.0 else 0
+    point_local = _midpoint(_axpy(p, -radius_a, normal_local), q)
+    _write_local(point_local, normal_local, depth, (2 * face + end) & 255, hull_center, hull_rotation,
+                 out_point, out_normal, out_depth, out_feature, slot)
+    count = 1
+    if hi - lo > tol:
+        other = lo if end == 1 else hi
+        if abs(other - s) > tol:
+            count += _face_contact(origin, direction, other, radius_a, face_normal[face], face_offset[face],
+                                   (2 * face + 1 - end) & 255, margin, hull_center, hull_rotation,
+                                   out_point, out_normal, out_depth, out_feature, slot + count)
+    return count
