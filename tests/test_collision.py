@@ -254,17 +254,22 @@ def test_mesh_input_errors(tmp_path):
     assert error.value.field == "scale"
 
 
-def test_shapes_without_a_mesh_routine_are_a_clear_error(tmp_path):
-    from contactlab.collision import check_supported
-    (tmp_path / "sheet.obj").write_text("v 0 -1 -1\nv 0 1 -1\nv 0 0 2\nf 1 2 3\n")
+def test_every_dynamic_shape_rests_on_a_mesh_floor(tmp_path):
+    from contactlab import simulate
+    (tmp_path / "floor.obj").write_text("v -2 -2 0\nv 2 -2 0\nv 2 2 0\nv -2 2 0\nf 1 2 3\nf 1 3 4\n")
     b = ModelBuilder()
-    b.add_obstacle("mesh", file=str(tmp_path / "sheet.obj"))
-    b.add_body("capsule", radius=0.1, half_length=0.2, mass=1.0)
-    with pytest.raises(InputError) as error:
-        check_supported(b.finalize())
-    assert "capsule" in error.value.message and "mesh" in error.value.message
-
-
+    b.add_material("m", friction=0.6)
+    b.add_obstacle("mesh", file=str(tmp_path / "floor.obj"), material="m")
+    lying = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0)
+    b.add_body("capsule", radius=0.05, half_length=0.2, mass=1, position=(-1, 0, 0.06), orientation=lying,
+               material="m")
+    cube = [[x, y, z] for x in (-.1, .1) for y in (-.1, .1) for z in (-.1, .1)]
+    b.add_body("convex", points=cube, mass=1, position=(1, 0, 0.11), material="m")
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0, 1, 0.11), material="m")
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, -1, 0.11), material="m")
+    run = simulate(b.finalize(), "impulse", 1 / 240, 1.0)
+    np.testing.assert_allclose(run.arrays["body_position"][-1, :, 2], [0.05, 0.1, 0.1, 0.1], atol=1e-3)
+    assert np.abs(run.arrays["body_velocity"][-1]).max() < 1e-3
 # ---- SPEC P2 granularity and P4/P5 normals for rigid polytopes --------------------------
 
 def _box_and_hull_on_plane(tilt=0.0):

@@ -268,3 +268,17 @@ def test_capsules_come_to_rest_lying_flat_stacked_and_on_a_box():
     assert np.abs(run.arrays["body_velocity"][-1]).max() < 1e-3
     assert run.summary["energy"]["max"] <= run.summary["energy"]["initial"] + 1e-9   # nothing launched
     assert run.summary["max_penetration"] < 1e-3
+
+
+def test_capsule_rests_lying_on_a_convex_hull_and_a_hull_rests_on_a_capsule_bed():
+    b = ModelBuilder()
+    b.add_material("m", friction=0.6)
+    slab = [[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (0.0, 0.1)]
+    b.add_obstacle("convex", points=slab, material="m")
+    lying = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0)
+    b.add_body("capsule", radius=0.04, half_length=0.15, mass=1.0, position=(0, 0, 0.145), orientation=lying,
+               material="m")
+    run = simulate(b.finalize(), "impulse", 1 / 240, 1.5)
+    np.testing.assert_allclose(run.arrays["body_position"][-1, 0], [0, 0, 0.14], atol=1e-3)
+    assert np.abs(run.arrays["body_angular_velocity"][-1]).max() < 1e-3        # two contacts: no rocking
+    assert run.summary["max_penetration"] < 1e-3

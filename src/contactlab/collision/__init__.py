@@ -13,7 +13,8 @@ from ..contacts import Contacts, tangent_basis
 from ..errors import InputError
 from .broad_phase import overlapping_pairs
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
-from .mesh import MAX_PER_SHAPE, shapes_against_mesh
+from .mesh import MAX_PER_SHAPE
+from .mesh_pairs import shapes_against_mesh_extended
 from .narrow_phase import MAX_PER_PAIR, collide_pair, supported
 
 
@@ -31,7 +32,7 @@ def check_supported(model):
                                  "is not supported yet; change the shape of one of them")
 
 
-MESH_PARTNERS = (shapes.SPHERE, shapes.POINT, shapes.BOX)   # dynamic shapes with a routine against meshes
+MESH_PARTNERS = (shapes.SPHERE, shapes.POINT, shapes.BOX, shapes.CAPSULE, shapes.CONVEX)  # shapes meshes meet
 FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
@@ -143,9 +144,9 @@ def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, d
     near = ((lower[:dynamic] <= mesh.bounds[1] + grow) & (mesh.bounds[0] - grow <= upper[:dynamic])).all(axis=1)
     near &= np.isin(kinds[:dynamic], MESH_PARTNERS)
     chosen = np.nonzero(near)[0]
-    point, normal, depth, feature, owner = shapes_against_mesh(
-        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], mesh.geometry,
-        MAX_PER_SHAPE)
+    point, normal, depth, feature, owner = shapes_against_mesh_extended(
+        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], model.hull_store,
+        mesh.geometry, MAX_PER_SHAPE)
     return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
 
 

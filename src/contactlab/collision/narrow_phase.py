@@ -15,6 +15,7 @@ from .. import shapes
 from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
+from .capsule_convex import capsule_convex
 from .convex import convex_convex, convex_plane, hull_view, sphere_convex
 
 MAX_PER_PAIR = 8
@@ -117,10 +118,8 @@ def supported(kind_a, kind_b):
         kind_a, kind_b = kind_b, kind_a
     if kind_b == PLANE:
         return kind_a != PLANE
-    if kind_a == CAPSULE and kind_b == CONVEX:
-        return False
     if kind_b == shapes.MESH:            # meshes are static: only dynamic shapes meet them
-        return kind_a == SPHERE or kind_a == POINT or kind_a == BOX
+        return kind_a != PLANE
     return True
 
 
@@ -177,6 +176,11 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
     if kind_a == CAPSULE and kind_b == BOX:
         return capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, params_b[:3],
                            margin, out_point, out_normal, out_depth, out_feature, slot)
+    if kind_a == CAPSULE and kind_b == CONVEX:
+        b = _hull(hull_store, params_b[0])
+        return capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
+                              b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
+                              out_point, out_normal, out_depth, out_feature, slot)
     if kind_a == CAPSULE and kind_b == PLANE:
         return capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
                              out_point, out_normal, out_depth, out_feature, slot)
