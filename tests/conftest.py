@@ -18,3 +18,9 @@ def ball_on_plane(restitution=0.0, friction=0.5, height=1.0, radius=0.1, mass=1.
                      angular_velocity=angular_velocity, material="m")
     builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="m")
     return builder.finalize()
+
+
+def random_rotations(rng, count):
+    """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
+    from contactlab import rotations
+    return rotations.to_matrix(rotations.normalize(rng.normal(size=(count, 4))))

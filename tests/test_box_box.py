@@ -12,6 +12,7 @@ import pytest
 
 from contactlab.collision.box_box import (EDGE_FEATURE, FACE_ABS_TOL, FACE_REL_TOL, box_box,
                                           sat_overlaps)
+from conftest import random_rotations
 
 HALF = np.array([0.5, 0.5, 0.5])
 I3 = np.eye(3)
@@ -31,17 +32,6 @@ def rot_y(angle):
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
-
-def random_rotations(rng, count):
-    """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
-    q = rng.normal(size=(count, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    R = np.empty((count, 3, 3))
-    R[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1)
-    R[:, 1] = np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1)
-    R[:, 2] = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
-    return R
 
 
 def contacts(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin=0.0):

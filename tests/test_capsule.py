@@ -33,6 +33,7 @@ import pytest
 from contactlab.collision.capsule import (CAPSULE_BOX_CROSS_FEATURE, CAPSULE_BOX_EDGE_FEATURE, PARALLEL_SIN,
                                           capsule_box, capsule_capsule, capsule_plane, segment_box_closest,
                                           segment_closest_parameters, sphere_capsule)
+from conftest import random_rotations
 
 I3 = np.eye(3)
 RANDOM_COUNT = 2000
@@ -57,17 +58,6 @@ def rot_z(angle):
 ALONG_X = rot_y(np.pi / 2)      # body z → world +x
 ALONG_Y = rot_x(-np.pi / 2)     # body z → world +y
 
-
-def random_rotations(rng, count):
-    """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
-    q = rng.normal(size=(count, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    R = np.empty((count, 3, 3))
-    R[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1)
-    R[:, 1] = np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1)
-    R[:, 2] = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
-    return R
 
 
 def random_unit(rng, count):

@@ -22,6 +22,7 @@ from scipy.spatial import ConvexHull
 from contactlab.collision import convex as cx
 from contactlab.errors import InputError
 from contactlab.hulls import Hull, build_hull, hull_arrays, load_hull_points, pack_hulls
+from conftest import random_rotations
 
 I3 = np.eye(3)
 CUBE = np.array(list(itertools.product((-0.5, 0.5), repeat=3)))       # unit cube corners
@@ -31,17 +32,6 @@ REGULAR_TETRAHEDRON = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, 
 # ------------------------------------------------------------------------------------------
 # helpers
 
-
-def random_rotations(rng, count):
-    """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
-    q = rng.normal(size=(count, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    R = np.empty((count, 3, 3))
-    R[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1)
-    R[:, 1] = np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1)
-    R[:, 2] = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
-    return R
 
 
 def rot_x(angle):
