@@ -65,6 +65,8 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 import numpy as np
 from numba import njit
 
+from .clipping import clip_polygon
+
 FACE_REL_TOL = 0.05       # relative tolerance favouring the reference face's box, and faces over edges
 FACE_ABS_TOL = 1e-5       # absolute part of that tolerance, × the largest half extent of the pair [-]
 PARALLEL_SIN2 = 1e-12     # |a_i × b_j|² below this (edges within 1e-6 rad of parallel): no edge axis
@@ -133,39 +135,12 @@ def sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, ove
 
 
 @njit(cache=True)
-def _clip(source, source_label, count, coordinate, sign, limit, target, target_label):
-    """Sutherland–Hodgman: keep the part of polygon ``source`` where sign·x[coordinate] ≤ limit.
-
-    Points are rows (u, v, h); each carries the label of the incident corner it comes from.
-    A point exactly on the plane is kept once and never duplicated. Returns the new count.
-    """
-    out = 0
-    if count == 0:
-        return 0
-    prev = count - 1
-    d_prev = sign * source[prev, coordinate] - limit
-    for cur in range(count):
-        d_cur = sign * source[cur, coordinate] - limit
-        if d_cur <= 0.0:
-            if d_prev > 0.0 and d_cur < 0.0:        # entering: the crossing replaces the cut corner prev
-                s = d_prev / (d_prev - d_cur)
-                for c in range(3):
-                    target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])
-                target_label[out] = source_label[prev]
-                out += 1
-            for c in range(3):
-                target[out, c] = source[cur, c]
-            target_label[out] = source_label[cur]
-            out += 1
-        elif d_prev < 0.0:                           # leaving: the crossing replaces the cut corner cur
-            s = d_prev / (d_prev - d_cur)
-            for c in range(3):
-                target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])
-            target_label[out] = source_label[cur]
-            out += 1
-        prev = cur
-        d_prev = d_cur
-    return out
+def _clip(source, source_label, count, coordinate, sign, limit, target, target_label, distance):
+    """Clip polygon ``source`` (rows (u, v, h), labelled by incident corner) to sign·x[coordinate] ≤ limit;
+    ``distance`` is scratch space. Returns the new count (see clipping.clip_polygon)."""
+    for k in range(count):
+        distance[k] = sign * source[k, coordinate] - limit
+    return clip_polygon(source, source_label, count, distance, target, target_label)
 
 
 @njit(cache=True)
@@ -351,6 +326,7 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
         for c in range(3):
             polygon[0, corner, c] = local[0, c] + su * local[1, c] + sv * local[2, c]
         labels[0, corner] = corner
+    distance = np.empty(polygon.shape[1])
     count = polygon.shape[1] // 2       # 4 corners (not a literal constant: spares Numba a specialization)
     source = 0
     for plane in range(4):              # u ≤ hu, −u ≤ hu, v ≤ hv, −v ≤ hv
@@ -358,7 +334,7 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
         sign = 1.0 if plane % 2 == 0 else -1.0
         limit = hu if coordinate == 0 else hv
         count = _clip(polygon[source], labels[source], count, coordinate, sign, limit,
-                      polygon[1 - source], labels[1 - source])
+                      polygon[1 - source], labels[1 - source], distance)
         source = 1 - source
     points = polygon[0]
     # the polygon lies inside both faces: its size sets the tolerance for straight corners

@@ -83,6 +83,8 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 import numpy as np
 from numba import njit
 
+from .clipping import clip_polygon
+
 from .. import hulls as _hulls
 
 MAX_CONTACTS = 4          # contacts written per pair, at most
@@ -382,41 +384,14 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
 
 @njit(cache=True)
 def _clip_side(source, label, count, plane_point, plane_normal, distance, target, target_label):
-    """Sutherland–Hodgman: keep the part of polygon ``source`` (rows, 3) where
-    plane_normal · (x − plane_point) ≤ 0 (one side plane of the reference face).
-
-    Each point carries the ``label`` of an incident vertex: its own, or for a crossing point
-    the vertex that was cut off there (as in :mod:`.box_box`), so that a corner cut by a
-    hair keeps its label. A point exactly on the plane is kept once. Returns the new count."""
-    if count == 0:
-        return 0
+    """Clip polygon ``source`` (rows, 3) to plane_normal · (x − plane_point) ≤ 0 (one side plane of
+    the reference face); ``distance`` is scratch space. Returns the new count (see
+    clipping.clip_polygon)."""
     for k in range(count):
         distance[k] = (plane_normal[0] * (source[k, 0] - plane_point[0])
                        + plane_normal[1] * (source[k, 1] - plane_point[1])
                        + plane_normal[2] * (source[k, 2] - plane_point[2]))
-    out = 0
-    for cur in range(count):
-        prev = cur - 1 if cur > 0 else count - 1
-        d_prev = distance[prev]
-        d_cur = distance[cur]
-        if d_cur <= 0.0:
-            if d_prev > 0.0 and d_cur < 0.0:      # entering: the crossing replaces the cut vertex prev
-                s = d_prev / (d_prev - d_cur)
-                for c in range(3):
-                    target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])
-                target_label[out] = label[prev]
-                out += 1
-            for c in range(3):
-                target[out, c] = source[cur, c]
-            target_label[out] = label[cur]
-            out += 1
-        elif d_prev < 0.0:                       # leaving: the crossing replaces the cut vertex cur
-            s = d_prev / (d_prev - d_cur)
-            for c in range(3):
-                target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])
-            target_label[out] = label[cur]
-            out += 1
-    return out
+    return clip_polygon(source, label, count, distance, target, target_label)
 
 
 @njit(cache=True)
