@@ -31,7 +31,7 @@ def _parser():
     run.add_argument("--method", help="penalty | projection | impulse | constraints (default: the scene's)")
     run.add_argument("--dt", help="time step in seconds (default: the scene's)")
     run.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
-    run.add_argument("--integrator", help="symplectic_euler | explicit_euler (default: the scene's)")
+    run.add_argument("--integrator", help="symplectic_euler | explicit_euler | backward_euler (default: the scene's)")
     run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                      help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]")
     run.add_argument("--out", help="output folder (default: out/<scene>-<method>/)")

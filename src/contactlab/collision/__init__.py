@@ -55,6 +55,15 @@ def _generate(pairs, kinds, params, centers, rotations_, reach, hull_store):
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
 
 
+def swept_distances(model, body_velocity, body_angular_velocity, particle_velocity, dt):
+    """How far each body and particle may move in a step of dt [s] at the given velocities,
+    (B + P,) [m]: h |v|, plus for a body how far its farthest point turns, h |ω| r. This is the
+    ``sweep`` argument of :func:`collide`."""
+    body_reach = shapes.bounding_radii(model.body_shape, model.body_params)
+    body = dt * (np.linalg.norm(body_velocity, axis=1) + np.linalg.norm(body_angular_velocity, axis=1) * body_reach)
+    return np.concatenate([body, dt * np.linalg.norm(particle_velocity, axis=1)])
+
+
 def _colliders(model, state):
     """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
     B, P = model.body_count, model.particle_count

@@ -7,6 +7,10 @@ Two integrators, named in ``[simulation] integrator``:
   angular momentum and the rotational energy of a free spinning body.
 * ``explicit_euler``: x⁺ = x + h v (the old velocity), v⁺ = v + h M⁻¹ f, gyroscopic term
   explicit. Included to show why the symplectic variant is the default.
+* ``backward_euler``: v⁺ = v + h M⁻¹ f(x⁺, v⁺), x⁺ = x + h v⁺, the forces that depend on the
+  state (penalty contacts, cloth springs) linearized and solved as one sparse system by the
+  method that owns them (see contactlab.methods.penalty). Gravity does not depend on the
+  state, so for the free motion it coincides with symplectic Euler (gyroscopic term implicit).
 
 Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 """
@@ -15,7 +19,7 @@ import numpy as np
 
 from .. import rotations
 
-INTEGRATORS = ("symplectic_euler", "explicit_euler")
+INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
 
 def world_inverse_inertia(model, orientation):
@@ -77,7 +81,7 @@ def free_velocities(model, state, dt, integrator="symplectic_euler",
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
     if particle_force is not None:
         particle_velocity += dt * particle_force * model.particle_inverse_mass[:, None]
-    gyroscopic = _gyroscopic_implicit if integrator == "symplectic_euler" else _gyroscopic_explicit
+    gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
     angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
     if body_torque is not None:
         inv = world_inverse_inertia(model, state.body_orientation)

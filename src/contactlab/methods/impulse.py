@@ -31,11 +31,10 @@ import numpy as np
 from numba import njit
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide
+from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import side_apply_impulse, side_inverse_mass, side_point_velocity
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
-from ..shapes import bounding_radii
 from ..state import State
 from . import StepInfo
 
@@ -314,7 +313,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     free = (v_body, w_body, v_particle)
     predicted = advance_positions(*state.positions, *move, dt, dt)
-    sweep = swept_distances(model, state, predicted, w_body, dt)
+    sweep = swept_distances(model, move[0], w_body, move[2], dt)
     # 3. collision detection over the swept step: contacts at the start positions, with gaps
     #    down to what the motion could close (speculative contacts: nothing tunnels)
     contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
@@ -368,16 +367,6 @@ def warm_start_impulses(carried, feature_id, fraction):
     found = ids[order[place]] == feature_id
     warm[found] = fraction * values[order[place[found]]]
     return warm
-
-
-def swept_distances(model, state, predicted, angular_velocity, dt):
-    """How far each body and particle may move this step, (B + P,) [m]: its displacement to
-    the predicted position plus, for a body, how far its farthest point turns (h |ω| r)."""
-    body_reach = bounding_radii(model.body_shape, model.body_params)
-    body = (np.linalg.norm(predicted[0] - state.body_position, axis=1)
-            + dt * np.linalg.norm(angular_velocity, axis=1) * body_reach)
-    particle = np.linalg.norm(predicted[2] - state.particle_position, axis=1)
-    return np.concatenate([body, particle])
 
 
 def resting_target(gap_at_start, dt, options):
