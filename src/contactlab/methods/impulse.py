@@ -32,7 +32,6 @@ from numba import njit
 
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
-from ..contacts import side_apply_impulse, side_inverse_mass, side_point_velocity
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
 from ..state import State
@@ -74,42 +73,171 @@ class Options:
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
 
+# ---- the compiled solver: every contact as three rows of J over the generalized velocity ----
+#
+# The generalized velocity u (6B + 3P,) is the DOF layout of contactlab.contacts: body i owns
+# u[6i:6i+3] (linear, m/s) and u[6i+3:6i+6] (world angular, rad/s), particle j owns
+# u[6B+3j:6B+3j+3]. A contact touches at most ROW_WIDTH entries of u (6 per rigid-body side,
+# 3 per particle of a side). For each contact c and direction d (0: normal, 1: tangent1,
+# 2: tangent2) ``jac[c, d]`` holds that row of J (v_n = Σ jac · u[index]) and ``push[c, d]``
+# the matching column of M⁻¹ Jᵀ (an impulse λ changes u[index] by λ · push), so that
+# k[c, d] = jac · push = dᵀ J M⁻¹ Jᵀ d is the effective inverse mass of R4. Precomputing the
+# rows once per step keeps the Gauss-Seidel sweeps to two short dot products per update.
+
+ROW_WIDTH = 18
+
+
 @njit(cache=True)
-def resolve_collisions(body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                       r_a, r_b, normal, tangent1, tangent2, friction, restitution, gravity_normal,
-                       gap_at_start, dt, threshold, body_inverse_mass, body_inverse_inertia_world,
-                       particle_inverse_mass, body_velocity, body_angular_velocity, particle_velocity,
-                       max_waves, sweeps, tolerance, tau):
+def contact_rows(body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
+                 normal, tangent1, tangent2, body_inverse_mass, body_inverse_inertia_world,
+                 particle_inverse_mass):
+    """The contacts' Jacobian rows over the generalized velocity (see above).
+
+    Shapes: C contacts; r_a, r_b (C, 3) lever arms [m]; body_inverse_inertia_world (B, 3, 3).
+    Returns index (C, ROW_WIDTH) int (entries of u), width (C,) int (how many are used),
+    jac (C, 3, ROW_WIDTH) [1 or m], push (C, 3, ROW_WIDTH) [1/kg or 1/(kg m)] and
+    k (C, 3) [1/kg]: the effective inverse mass of each row.
+    """
+    C = normal.shape[0]
+    B = body_inverse_mass.shape[0]
+    index = np.zeros((C, ROW_WIDTH), dtype=np.int64)
+    width = np.zeros(C, dtype=np.int64)
+    jac = np.zeros((C, 3, ROW_WIDTH))
+    push = np.zeros((C, 3, ROW_WIDTH))
+    k = np.zeros((C, 3))
+    direction = np.empty(3)
+    for c in range(C):
+        n = 0
+        for side in range(2):
+            sign = 1.0 if side == 0 else -1.0
+            body = body_a[c] if side == 0 else body_b[c]
+            if body >= 0:
+                r = r_a[c] if side == 0 else r_b[c]
+                inverse_inertia = body_inverse_inertia_world[body]
+                for i in range(6):
+                    index[c, n + i] = 6 * body + i
+                for d in range(3):
+                    for i in range(3):
+                        direction[i] = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
+                    a0 = r[1] * direction[2] - r[2] * direction[1]        # r × d
+                    a1 = r[2] * direction[0] - r[0] * direction[2]
+                    a2 = r[0] * direction[1] - r[1] * direction[0]
+                    for i in range(3):
+                        jac[c, d, n + i] = sign * direction[i]
+                        push[c, d, n + i] = sign * direction[i] * body_inverse_mass[body]
+                        jac[c, d, n + 3 + i] = sign * (a0 if i == 0 else (a1 if i == 1 else a2))
+                        push[c, d, n + 3 + i] = sign * (inverse_inertia[i, 0] * a0 + inverse_inertia[i, 1] * a1
+                                                        + inverse_inertia[i, 2] * a2)
+                n += 6
+            for m in range(3):
+                p = particles_a[c, m] if side == 0 else particles_b[c, m]
+                if p < 0:
+                    continue
+                w = weights_a[c, m] if side == 0 else weights_b[c, m]
+                for i in range(3):
+                    index[c, n + i] = 6 * B + 3 * p + i
+                for d in range(3):
+                    for i in range(3):
+                        value = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
+                        jac[c, d, n + i] = sign * w * value
+                        push[c, d, n + i] = sign * w * value * particle_inverse_mass[p]
+                n += 3
+        width[c] = n
+        for d in range(3):
+            total = 0.0
+            for e in range(n):
+                total += jac[c, d, e] * push[c, d, e]
+            k[c, d] = total
+    return index, width, jac, push, k
+
+
+@njit(cache=True, inline="always")
+def _row_velocity(c, d, index, width, jac, u):
+    """Row d of contact c applied to u: dᵀ(v_A − v_B) at the contact [m/s]."""
+    total = 0.0
+    for e in range(width[c]):
+        total += jac[c, d, e] * u[index[c, e]]
+    return total
+
+
+@njit(cache=True, inline="always")
+def _apply(c, d, amount, index, width, push, u):
+    """Impulse ``amount`` [N s] along row d of contact c: +amount·d on A, −amount·d on B (R1, R2)."""
+    for e in range(width[c]):
+        u[index[c, e]] += amount * push[c, d, e]
+
+
+@njit(cache=True, inline="always")
+def _friction_impulse(c, limit, impulses, index, width, jac, push, k, u):
+    """Coulomb friction (F2) on top of the accumulated tangential impulse ``impulses[c, 1:3]``.
+
+    The impulse that cancels the tangential relative velocity, with the total kept in the disk
+    of radius ``limit`` = μ λ_n [N s]: if it does not stop the sliding the maximum applies,
+    against the sliding. Updates ``impulses[c]`` and u; returns the largest velocity change [m/s].
+    """
+    old1, old2 = impulses[c, 1], impulses[c, 2]
+    new1 = old1 - _row_velocity(c, 1, index, width, jac, u) / k[c, 1]
+    new2 = old2 - _row_velocity(c, 2, index, width, jac, u) / k[c, 2]
+    magnitude = np.sqrt(new1 * new1 + new2 * new2)
+    if magnitude > limit:
+        scale = limit / magnitude
+        new1 *= scale
+        new2 *= scale
+    _apply(c, 1, new1 - old1, index, width, push, u)
+    _apply(c, 2, new2 - old2, index, width, push, u)
+    impulses[c, 1], impulses[c, 2] = new1, new2
+    return max(abs(new1 - old1) * k[c, 1], abs(new2 - old2) * k[c, 2])
+
+
+@njit(cache=True, inline="always")
+def _solve_contact(c, target, impulses, index, width, jac, push, k, friction, u):
+    """One Gauss-Seidel update of contact c (C7 on velocities): the normal impulse that brings
+    v_n to ``target`` [m/s] with the accumulated impulse kept ≥ 0 (C2), then friction kept in
+    the disk μ λ_n (F2). Updates ``impulses[c]`` [N s] and u; returns the largest velocity
+    change it made [m/s]."""
+    vn = _row_velocity(c, 0, index, width, jac, u)
+    old = impulses[c, 0]
+    impulses[c, 0] = max(0.0, old - (vn - target) / k[c, 0])
+    _apply(c, 0, impulses[c, 0] - old, index, width, push, u)
+    change = abs(impulses[c, 0] - old) * k[c, 0]
+    if friction[c] > 0.0:
+        change = max(change, _friction_impulse(c, friction[c] * impulses[c, 0], impulses, index, width, jac,
+                                               push, k, u))
+    return change
+
+
+@njit(cache=True)
+def resolve_collisions(index, width, jac, push, k, friction, restitution, gravity_normal, gap_at_start, dt,
+                       threshold, u, max_waves, sweeps, tolerance, tau):
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
     A wave is every contact that is approaching now: at the current velocities it would be
-    closed by the end of the step, and its impact velocity u = v_n + g_n (τ − ½) h is below
+    closed by the end of the step, and its impact velocity u_n = v_n + g_n (τ − ½) h is below
     −threshold (τ: where in the step it closes, d₀ / (−h v_n) for a gap d₀ > 0 at the start,
     else 0). The wave's impulses are solved together — accumulated, λ ≥ 0 — so that each
-    member leaves at −ε u + g_n (½ − τ) h (restitution; see ``relative_gravity``), with
-    friction of at most μ λ (F2). Simultaneous impacts (a box landing flat on four corners)
-    are thus one wave and stay symmetric, while an impact passed along a chain of touching
-    bodies makes one wave per link (Newton's cradle: one ball in, one ball out). ``tau`` (C,)
-    receives each contact's τ, −1 where it had no impact. Returns the number of waves.
+    member leaves at −ε u_n + g_n (½ − τ) h (restitution; see ``relative_gravity``), with
+    friction of at most μ λ (F2). A single contact gets j = −(1 + ε) u_n / k in one update
+    (R4 with k = J M⁻¹ Jᵀ). Simultaneous impacts (a box landing flat on four corners) are
+    thus one wave and stay symmetric, while an impact passed along a chain of touching
+    bodies makes one wave per link (Newton's cradle: one ball in, one ball out).
+
+    Rows as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
+    generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
+    it had no impact. Returns the number of waves.
     """
-    C = normal.shape[0]
+    C = k.shape[0]
     target = np.empty(C)
     closes = np.empty(C)
-    k_normal = np.empty(C)
     impulses = np.zeros((C, 3))
     members = np.empty(C, dtype=np.int64)
     for c in range(C):
         tau[c] = -1.0
-        k_normal[c] = _effective_mass(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
-                                      weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world,
-                                      particle_inverse_mass)
     for wave in range(max_waves):
         count = 0
         for c in range(C):
-            if restitution[c] <= 0.0 or k_normal[c] <= 0.0:
+            if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
                 continue
-            vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                                    r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
+            vn = _row_velocity(c, 0, index, width, jac, u)
             if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:      # separating, or still open at the end
                 continue
             closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
@@ -126,154 +254,62 @@ def resolve_collisions(body_a, body_b, particles_a, particles_b, weights_a, weig
             change = 0.0
             for m in range(count):
                 c = members[m]
-                change = max(change, _solve_contact(
-                    c, target[c], k_normal[c], impulses, body_a, body_b, particles_a, particles_b, weights_a,
-                    weights_b, r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass,
-                    body_inverse_inertia_world, particle_inverse_mass, body_velocity, body_angular_velocity,
-                    particle_velocity))
+                change = max(change, _solve_contact(c, target[c], impulses, index, width, jac, push, k,
+                                                    friction, u))
             if change <= tolerance:
                 break
     return max_waves
 
 
 @njit(cache=True)
-def _effective_mass(c, d, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-                    body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass):
-    """dᵀ J M⁻¹ Jᵀ d at contact c, both sides."""
-    return (side_inverse_mass(body_a[c], particles_a[c], weights_a[c], r_a[c], d,
-                              body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
-            + side_inverse_mass(body_b[c], particles_b[c], weights_b[c], r_b[c], d,
-                                body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass))
-
-
-@njit(cache=True)
-def _friction_impulse(c, old1, old2, limit, body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                      r_a, r_b, tangent1, tangent2, body_inverse_mass, body_inverse_inertia_world,
-                      particle_inverse_mass, body_velocity, body_angular_velocity, particle_velocity):
-    """Coulomb friction (F2) on top of an existing tangential impulse (old1, old2).
-
-    The impulse that cancels the tangential relative velocity, with the total kept in the disk
-    of radius ``limit`` = μ J_n. Returns the new total (t1, t2) and the largest velocity change.
-    """
-    k1 = _effective_mass(c, tangent1[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                         r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
-    k2 = _effective_mass(c, tangent2[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                         r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
-    vt1 = _relative_velocity(c, tangent1[c], body_a, body_b, particles_a, particles_b, weights_a,
-                             weights_b, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
-    vt2 = _relative_velocity(c, tangent2[c], body_a, body_b, particles_a, particles_b, weights_a,
-                             weights_b, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
-    new1 = old1 - vt1 / k1
-    new2 = old2 - vt2 / k2
-    magnitude = np.sqrt(new1 * new1 + new2 * new2)
-    if magnitude > limit:
-        scale = limit / magnitude
-        new1 *= scale
-        new2 *= scale
-    _apply(c, tangent1[c], new1 - old1, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-           body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-           body_velocity, body_angular_velocity, particle_velocity)
-    _apply(c, tangent2[c], new2 - old2, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-           body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-           body_velocity, body_angular_velocity, particle_velocity)
-    return new1, new2, max(abs(new1 - old1) * k1, abs(new2 - old2) * k2)
-
-
-@njit(cache=True)
-def solve_sequential_impulses(body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                              r_a, r_b, normal, tangent1, tangent2, friction, target_normal_velocity,
-                              body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                              body_velocity, body_angular_velocity, particle_velocity,
+def solve_sequential_impulses(index, width, jac, push, k, friction, target_normal_velocity, u,
                               iterations, tolerance, initial_impulses):
-    """Contact impulses with accumulated clamping; changes the velocity arrays in place (M2).
+    """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
 
-    ``initial_impulses`` (C, 3) are applied first (warm starting: last step's impulses of the
-    same contacts), then corrected like any accumulated impulse.
+    ``initial_impulses`` (C, 3) [N s] are applied first (warm starting: last step's impulses
+    of the same contacts), then corrected like any accumulated impulse.
 
     For every contact c (in order, repeatedly): the normal impulse that brings the normal
-    relative velocity to ``target_normal_velocity[c]``, with the accumulated impulse kept ≥ 0
-    (never attractive, C2), then friction with the accumulated tangential impulse kept in the
-    disk μ λ_n (F2). Returns (impulses (C, 3) [N s] as (normal, t1, t2), sweeps made, largest
-    velocity change in the last sweep [m/s]).
+    relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated impulse
+    kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential impulse
+    kept in the disk μ λ_n (F2). Returns (impulses (C, 3) [N s] as (normal, t1, t2), sweeps
+    made, largest velocity change in the last sweep [m/s]).
     """
-    C = normal.shape[0]
+    C = k.shape[0]
     impulses = initial_impulses.copy()
-    k_normal = np.empty(C)
     for c in range(C):
-        k_normal[c] = _effective_mass(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a,
-                                      weights_b, r_a, r_b, body_inverse_mass, body_inverse_inertia_world,
-                                      particle_inverse_mass)
         for d in range(3):
-            direction = normal[c] if d == 0 else (tangent1[c] if d == 1 else tangent2[c])
-            _apply(c, direction, impulses[c, d], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                   r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                   body_velocity, body_angular_velocity, particle_velocity)
+            _apply(c, d, impulses[c, d], index, width, push, u)
     sweeps = 0
     change = 0.0
     for sweep in range(iterations):
         sweeps = sweep + 1
         change = 0.0
         for c in range(C):
-            if k_normal[c] <= 0.0:        # static against static: nothing can move
+            if k[c, 0] <= 0.0:        # static against static: nothing can move
                 continue
-            change = max(change, _solve_contact(
-                c, target_normal_velocity[c], k_normal[c], impulses, body_a, body_b, particles_a, particles_b,
-                weights_a, weights_b, r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass,
-                body_inverse_inertia_world, particle_inverse_mass, body_velocity, body_angular_velocity,
-                particle_velocity))
+            change = max(change, _solve_contact(c, target_normal_velocity[c], impulses, index, width, jac, push,
+                                                k, friction, u))
         if change <= tolerance:
             break
     return impulses, sweeps, change
 
 
-@njit(cache=True)
-def _solve_contact(c, target, k_normal, impulses, body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                   r_a, r_b, normal, tangent1, tangent2, friction, body_inverse_mass, body_inverse_inertia_world,
-                   particle_inverse_mass, body_velocity, body_angular_velocity, particle_velocity):
-    """One Gauss-Seidel update of contact c (C7 on velocities): the normal impulse that brings
-    v_n to ``target`` with the accumulated impulse kept ≥ 0 (C2), then friction kept in the
-    disk μ λ_n (F2). Updates ``impulses[c]`` and the velocities; returns the largest velocity
-    change it made [m/s]."""
-    vn = _relative_velocity(c, normal[c], body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-                            r_a, r_b, body_velocity, body_angular_velocity, particle_velocity)
-    old = impulses[c, 0]
-    impulses[c, 0] = max(0.0, old - (vn - target) / k_normal)
-    _apply(c, normal[c], impulses[c, 0] - old, body_a, body_b, particles_a, particles_b, weights_a, weights_b,
-           r_a, r_b, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-           body_velocity, body_angular_velocity, particle_velocity)
-    change = abs(impulses[c, 0] - old) * k_normal
-    if friction[c] > 0.0:
-        new1, new2, friction_change = _friction_impulse(
-            c, impulses[c, 1], impulses[c, 2], friction[c] * impulses[c, 0], body_a, body_b,
-            particles_a, particles_b, weights_a, weights_b, r_a, r_b, tangent1, tangent2,
-            body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass, body_velocity,
-            body_angular_velocity, particle_velocity)
-        impulses[c, 1], impulses[c, 2] = new1, new2
-        change = max(change, friction_change)
-    return change
+def generalized_velocity(body_velocity, body_angular_velocity, particle_velocity):
+    """Pack (B, 3), (B, 3), (P, 3) velocities into u (6B + 3P,) in the contacts' DOF layout."""
+    B = len(body_velocity)
+    u = np.empty(6 * B + 3 * len(particle_velocity))
+    bodies = u[:6 * B].reshape(B, 6)
+    bodies[:, :3] = body_velocity
+    bodies[:, 3:] = body_angular_velocity
+    u[6 * B:] = particle_velocity.ravel()
+    return u
 
 
-@njit(cache=True)
-def _relative_velocity(c, d, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-                       body_velocity, body_angular_velocity, particle_velocity):
-    """dᵀ (v_A − v_B) at contact c."""
-    return (side_point_velocity(body_a[c], particles_a[c], weights_a[c], r_a[c], d,
-                                body_velocity, body_angular_velocity, particle_velocity)
-            - side_point_velocity(body_b[c], particles_b[c], weights_b[c], r_b[c], d,
-                                  body_velocity, body_angular_velocity, particle_velocity))
-
-
-@njit(cache=True)
-def _apply(c, d, impulse, body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-           body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-           body_velocity, body_angular_velocity, particle_velocity):
-    """+impulse·d on side A and −impulse·d on side B (R1)."""
-    side_apply_impulse(body_a[c], particles_a[c], weights_a[c], r_a[c], d, impulse,
-                       body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                       body_velocity, body_angular_velocity, particle_velocity)
-    side_apply_impulse(body_b[c], particles_b[c], weights_b[c], r_b[c], d, -impulse,
-                       body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                       body_velocity, body_angular_velocity, particle_velocity)
+def split_velocity(u, body_count):
+    """Unpack u (6B + 3P,) into copies of (body_velocity, body_angular_velocity, particle_velocity)."""
+    bodies = u[:6 * body_count].reshape(body_count, 6)
+    return bodies[:, :3].copy(), bodies[:, 3:].copy(), u[6 * body_count:].reshape(-1, 3).copy()
 
 
 def lever_arms(contacts, body_position):
@@ -284,21 +320,6 @@ def lever_arms(contacts, body_position):
         r[has] = contacts.point[has] - body_position[body[has]]
         return r
     return arm(contacts.body_a), arm(contacts.body_b)
-
-
-def relative_normal_velocity(contacts, r_a, r_b, body_velocity, body_angular_velocity, particle_velocity):
-    """nᵀ(v_A − v_B) per contact, (C,), vectorized."""
-    def side(body, particles, weights, r):
-        v = np.zeros((contacts.count, 3))
-        has = body >= 0
-        v[has] = body_velocity[body[has]] + np.cross(body_angular_velocity[body[has]], r[has])
-        for k in range(3):
-            p = particles[:, k]
-            v[p >= 0] += weights[p >= 0, k, None] * particle_velocity[p[p >= 0]]
-        return v
-    v_rel = (side(contacts.body_a, contacts.particles_a, contacts.weights_a, r_a)
-             - side(contacts.body_b, contacts.particles_b, contacts.weights_b, r_b))
-    return np.einsum("ci,ci->c", v_rel, contacts.normal)
 
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
@@ -324,25 +345,23 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
     r_a, r_b = lever_arms(contacts, state.body_position)
     inverse_inertia = world_inverse_inertia(model, state.body_orientation)
-    vn_free = relative_normal_velocity(contacts, r_a, r_b, v_body, w_body, v_particle)
     gap_at_start = -contacts.depth                         # d₀
     threshold = options.restitution_threshold
     if threshold < 0:
         threshold = 2.0 * np.linalg.norm(model.gravity) * dt
-    v_body_new, w_body_new, v_particle_new = v_body.copy(), w_body.copy(), v_particle.copy()
-    arrays = (contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-              contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-              contacts.tangent2, contacts.friction)
-    masses = (model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass)
-    velocities = (v_body_new, w_body_new, v_particle_new)
+    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
+                        contacts.tangent2, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass)
+    u = generalized_velocity(v_body, w_body, v_particle)
     tau_contact = np.empty(contacts.count)
-    resolve_collisions(*arrays, contacts.restitution, relative_gravity(model, contacts), gap_at_start, dt,
-                       threshold, *masses, *velocities, options.iterations, options.iterations, options.tolerance,
+    resolve_collisions(*rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
+                       gap_at_start, dt, threshold, u, options.iterations, options.iterations, options.tolerance,
                        tau_contact)
     warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
-    impulses, sweeps, change = solve_sequential_impulses(*arrays, resting_target(gap_at_start, dt, options),
-                                                         *masses, *velocities, options.iterations,
-                                                         options.tolerance, warm)
+    impulses, sweeps, change = solve_sequential_impulses(*rows, contacts.friction,
+                                                         resting_target(gap_at_start, dt, options), u,
+                                                         options.iterations, options.tolerance, warm)
+    v_body_new, w_body_new, v_particle_new = split_velocity(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:
         tau_contact[:] = -1.0
