@@ -41,7 +41,7 @@ from . import StepInfo
 @dataclass
 class Options:
     """Settings of ``[method.impulse]``."""
-    iterations: int = 30                  # sweeps of sequential impulses per step (at most)
+    iterations: int = 100                 # sweeps of sequential impulses per step (at most)
     tolerance: float = 1e-6               # m/s: stop sweeping when no impulse changes a velocity more
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
     stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
@@ -208,7 +208,7 @@ def _solve_contact(c, target, impulses, index, width, jac, push, k, friction, u)
 
 @njit(cache=True)
 def resolve_collisions(index, width, jac, push, k, friction, restitution, gravity_normal, gap_at_start, dt,
-                       threshold, u, max_waves, sweeps, tolerance, tau):
+                       threshold, u, max_waves, sweeps, tolerance, tau, order):
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
     A wave is every contact that is approaching now: at the current velocities it would be
@@ -223,7 +223,8 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
 
     Rows as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
     generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
-    it had no impact. Returns the number of waves.
+    it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
+    ``solve_order``). Returns the number of waves.
     """
     C = k.shape[0]
     target = np.empty(C)
@@ -234,7 +235,8 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
         tau[c] = -1.0
     for wave in range(max_waves):
         count = 0
-        for c in range(C):
+        for o in range(C):
+            c = order[o]
             if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
                 continue
             vn = _row_velocity(c, 0, index, width, jac, u)
@@ -263,13 +265,13 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
 
 @njit(cache=True)
 def solve_sequential_impulses(index, width, jac, push, k, friction, target_normal_velocity, u,
-                              iterations, tolerance, initial_impulses):
+                              iterations, tolerance, initial_impulses, order):
     """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
 
     ``initial_impulses`` (C, 3) [N s] are applied first (warm starting: last step's impulses
     of the same contacts), then corrected like any accumulated impulse.
 
-    For every contact c (in order, repeatedly): the normal impulse that brings the normal
+    For every contact c (in ``order`` (C,) int, see ``solve_order``; repeatedly): the normal impulse that brings the normal
     relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated impulse
     kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential impulse
     kept in the disk μ λ_n (F2). Returns (impulses (C, 3) [N s] as (normal, t1, t2), sweeps
@@ -285,7 +287,8 @@ def solve_sequential_impulses(index, width, jac, push, k, friction, target_norma
     for sweep in range(iterations):
         sweeps = sweep + 1
         change = 0.0
-        for c in range(C):
+        for o in range(C):
+            c = order[o]
             if k[c, 0] <= 0.0:        # static against static: nothing can move
                 continue
             change = max(change, _solve_contact(c, target_normal_velocity[c], impulses, index, width, jac, push,
@@ -353,14 +356,15 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
                         contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
                         contacts.tangent2, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass)
     u = generalized_velocity(v_body, w_body, v_particle)
+    order = solve_order(contacts, model.gravity)
     tau_contact = np.empty(contacts.count)
     resolve_collisions(*rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
                        gap_at_start, dt, threshold, u, options.iterations, options.iterations, options.tolerance,
-                       tau_contact)
+                       tau_contact, order)
     warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
     impulses, sweeps, change = solve_sequential_impulses(*rows, contacts.friction,
                                                          resting_target(gap_at_start, dt, options), u,
-                                                         options.iterations, options.tolerance, warm)
+                                                         options.iterations, options.tolerance, warm, order)
     v_body_new, w_body_new, v_particle_new = split_velocity(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:
@@ -373,6 +377,20 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     carried = dict(state.carried, impulse_ids=contacts.feature_id, impulse_values=impulses)
     new = State.assemble(state.time + dt, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
+
+
+def solve_order(contacts, gravity):
+    """The order of the Gauss-Seidel sweeps (C,) int: highest contact point first along −g.
+
+    In a stack the top contact is solved first, and the impulse it puts on the body below is
+    passed on, contact by contact, down to the ground within the same sweep: the load path is
+    followed in one sweep instead of creeping one link per sweep. This is what keeps a heavy
+    body on a light one (mass ratio 100) from sinking with a modest iteration count. Contacts
+    at one height (the four corners of a face) keep the collision order (a stable sort);
+    without gravity the order is that of the collision detection.
+    """
+    height = contacts.point @ -np.asarray(gravity, dtype=float)
+    return np.argsort(-height, kind="stable")
 
 
 def warm_start_impulses(carried, feature_id, fraction):
