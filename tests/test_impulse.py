@@ -18,7 +18,7 @@ def apexes(height, velocity):
     return np.array([height[i:i + 2].max() for i in turning])
 
 
-@pytest.mark.parametrize("restitution", [0.5, 0.8, 1.0])
+@pytest.mark.parametrize("restitution", [0.0, 0.5, 0.8, 1.0])
 def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution):
     model = ball_on_plane(restitution=restitution, height=1.0)
     fall = np.sqrt(2 * 1.0 / G)
@@ -26,6 +26,12 @@ def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution):
     run = simulate(model, "impulse", dt=0.001, duration=fifth_apex + 0.1)
     z = run.arrays["body_position"][:, 0, 2] - 0.1
     found = apexes(z, run.arrays["body_velocity"][:, 0, 2])[:5]
+    if restitution == 0.0:
+        # h0 ε²ⁿ = 0: no apex at all, the ball stays down from the first touch on
+        assert len(found) == 0
+        landed = run.arrays["time"] > fall + 0.002
+        np.testing.assert_allclose(z[landed], 0.0, atol=1e-9)
+        return
     expected = 1.0 * restitution ** (2 * np.arange(1, 6))
     assert len(found) == 5
     np.testing.assert_allclose(found, expected, rtol=0.01)
@@ -282,3 +288,174 @@ def test_capsule_rests_lying_on_a_convex_hull_and_a_hull_rests_on_a_capsule_bed(
     np.testing.assert_allclose(run.arrays["body_position"][-1, 0], [0, 0, 0.14], atol=1e-3)
     assert np.abs(run.arrays["body_angular_velocity"][-1]).max() < 1e-3        # two contacts: no rocking
     assert run.summary["max_penetration"] < 1e-3
+
+
+def block_on_incline(theta, mu):
+    """The built-in ``incline`` scene with any angle and friction: a 1 kg, 0.1 m cube whose bottom
+    face lies on a plane through the origin tilted by ``theta`` [rad] about y."""
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    b = ModelBuilder()
+    b.add_material("wood", friction=mu, restitution=0.0)
+    b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=0.05 * normal,
+               orientation=(np.cos(-theta / 2), 0.0, np.sin(-theta / 2), 0.0), material="wood")
+    b.add_obstacle("plane", normal=normal, offset=0.0, material="wood")
+    return b.finalize(), normal
+
+
+def test_block_on_the_builtin_incline_sticks_when_tan_theta_is_below_mu():
+    from contactlab.scene import load_scene
+    scene = load_scene("incline")
+    assert scene.method_options == {}                                  # the defaults
+    normal = scene.model.obstacle_params[0, :3]
+    theta = np.arccos(normal[2])
+    assert np.tan(theta) < scene.model.material_friction[0]            # 0.36 < 0.5: static friction holds
+    run = simulate(scene.model, "impulse", scene.dt, 2.0)
+    drift = np.linalg.norm(run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0], axis=1)
+    assert drift.max() < 1e-3                                          # under 1 mm in 2 s
+
+
+@pytest.mark.parametrize("degrees, mu", [(20, 0.2), (30, 0.3), (35, 0.1)])
+def test_block_slides_down_an_incline_at_g_sin_minus_mu_cos(degrees, mu):
+    theta = np.radians(degrees)
+    assert np.tan(theta) > mu
+    model, normal = block_on_incline(theta, mu)
+    run = simulate(model, "impulse", 0.004, 1.0)
+    downhill = np.array([-np.cos(theta), 0.0, -np.sin(theta)])        # along the plane, ⟂ normal
+    assert downhill @ normal == pytest.approx(0.0, abs=1e-15)
+    t = run.arrays["time"]
+    speed = run.arrays["body_velocity"][:, 0] @ downhill
+    slope = np.polyfit(t[t > 0.05], speed[t > 0.05], 1)[0]
+    assert slope == pytest.approx(G * (np.sin(theta) - mu * np.cos(theta)), rel=0.03)
+    # it slides on its face: it neither leaves the plane nor tips
+    height = run.arrays["body_position"][:, 0] @ normal
+    assert np.abs(height - 0.05).max() < 1e-3
+    tilt = 2 * np.arccos(np.clip(np.abs(rotations_relative(run.arrays["body_orientation"][:, 0],
+                                                           run.arrays["body_orientation"][0, 0])), 0, 1))
+    assert tilt.max() < 1e-3
+
+
+def rotations_relative(q, q0):
+    """w component of q ⊗ q0⁻¹ for unit quaternions q (T, 4), q0 (4,): cos of half the turn between them."""
+    return q @ q0
+
+
+def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
+    """j = −(1+ε) v_n / (J M⁻¹ Jᵀ) from the solver's Jacobian rows against R4 written out, for two
+    boxes in random orientations; the solver's single-contact impulse then satisfies R2 and R3."""
+    from conftest import random_rotations
+    from contactlab.contacts import tangent_basis
+    for trial in range(20):
+        R = random_rotations(rng, 2)                                   # R_a, R_b (2, 3, 3)
+        mass = rng.uniform(0.2, 5.0, 2)
+        half = rng.uniform(0.02, 0.5, (2, 3))
+        inertia_body = mass[:, None] / 3 * (half[:, [1, 0, 0]] ** 2 + half[:, [2, 2, 1]] ** 2)   # box moments
+        inverse_world = np.array([R[i] @ np.diag(1 / inertia_body[i]) @ R[i].T for i in range(2)])   # M⁻¹
+        r_body = rng.uniform(-1, 1, (2, 3)) * half                     # r_a, r_b in the body frames
+        r_world = np.einsum("bij,bj->bi", R, r_body)                   # R r
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        v, w = rng.normal(size=(2, 3)), rng.normal(size=(2, 3))
+        eps = rng.uniform(0, 1)
+        # R4, term by term
+        v_rel = v[0] + np.cross(w[0], r_world[0]) - v[1] - np.cross(w[1], r_world[1])
+        denominator = (1 / mass[0] + 1 / mass[1]
+                       + n @ np.cross(inverse_world[0] @ np.cross(r_world[0], n), r_world[0])
+                       + n @ np.cross(inverse_world[1] @ np.cross(r_world[1], n), r_world[1]))
+        j_r4 = -(1 + eps) * (n @ v_rel) / denominator
+        # the Jacobian form, from the rows the solver sweeps
+        t1, t2 = tangent_basis(n[None])
+        index, width, jac, push, k = impulse.contact_rows(
+            np.array([0]), np.array([1]), -np.ones((1, 3), np.int64), -np.ones((1, 3), np.int64),
+            np.zeros((1, 3)), np.zeros((1, 3)), r_world[:1], r_world[1:], n[None], t1, t2,
+            1 / mass, inverse_world, np.zeros(0))
+        u = impulse.generalized_velocity(v, w, np.zeros((0, 3)))
+        J = np.zeros(12)
+        J[index[0, :width[0]]] = jac[0, 0, :width[0]]
+        M_inv = np.zeros((12, 12))
+        for i in range(2):
+            M_inv[6 * i:6 * i + 3, 6 * i:6 * i + 3] = np.eye(3) / mass[i]
+            M_inv[6 * i + 3:6 * i + 6, 6 * i + 3:6 * i + 6] = inverse_world[i]
+        assert J @ u == pytest.approx(n @ v_rel, rel=1e-12, abs=1e-12)                  # v_n = J v
+        assert k[0, 0] == pytest.approx(J @ M_inv @ J, rel=1e-12)                     # J M⁻¹ Jᵀ
+        assert k[0, 0] == pytest.approx(denominator, rel=1e-12)                       # = R4's denominator
+        j = -(1 + eps) * (J @ u) / k[0, 0]
+        assert j == pytest.approx(j_r4, rel=1e-12, abs=1e-12)
+        # the collision stage applies exactly this j when the bodies approach (R2, R3)
+        if n @ v_rel >= 0:
+            continue
+        tau = np.empty(1)
+        impulse.resolve_collisions(index, width, jac, push, k, np.zeros(1), np.array([eps]), np.zeros(1),
+                                   np.zeros(1), 1e-3, 0.0, u, 10, 10, 1e-12, tau, np.array([0]))
+        after_v, after_w, _ = impulse.split_velocity(u, 2)
+        for i, sign in ((0, 1.0), (1, -1.0)):
+            np.testing.assert_allclose(after_v[i], v[i] + sign * j * n / mass[i], rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(after_w[i], w[i] + inverse_world[i] @ np.cross(r_world[i], sign * j * n),
+                                       rtol=1e-10, atol=1e-12)
+        v_rel_after = after_v[0] + np.cross(after_w[0], r_world[0]) - after_v[1] - np.cross(after_w[1], r_world[1])
+        assert n @ v_rel_after == pytest.approx(-eps * (n @ v_rel), abs=1e-12)
+
+
+def positions_moved_and_sunk(run):
+    """(largest displacement of any body from its start [m], deepest any body got below its start [m])."""
+    p = run.arrays["body_position"]
+    moved = np.linalg.norm(p - p[0], axis=2).max()
+    sunk = (p[0, :, 2] - p[:, :, 2]).max()
+    return moved, sunk
+
+
+@pytest.mark.parametrize("name", ["box_stack", "box_pyramid", "mass_ratio_stack"])
+def test_stacks_stand_for_ten_seconds_with_default_settings(name):
+    """Every box moves < 1 cm and nothing sinks > 5 mm in 10 s, with no [method.impulse] tuning."""
+    from contactlab.scene import load_scene
+    scene = load_scene(name)
+    assert scene.method == "impulse" and scene.method_options == {}
+    run = simulate(scene.model, "impulse", scene.dt, 10.0)
+    moved, sunk = positions_moved_and_sunk(run)
+    assert moved < 0.01
+    assert sunk < 0.005
+    assert run.summary["max_penetration"] < 0.005
+
+
+def test_position_correction_removes_a_fraction_of_the_overlap_per_step():
+    """A box started 3 mm into the floor: with stabilization β the overlap beyond the slop shrinks
+    by (1 − β) per step, (d − slop)ₙ = (d₀ − slop)(1 − β)ⁿ; with β = 0 it stays. The JSON summary's
+    max_penetration is the same 3 mm for both (the worst overlap of the run): the correction shows
+    in the per-sample max_penetration of the trajectory."""
+    d0 = 0.003
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5)
+    b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=(0, 0, 0.05 - d0), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    options = impulse.Options()
+    beta, slop = options.stabilization, options.slop
+    corrected = simulate(model, "impulse", 0.004, 0.2)
+    n = np.arange(len(corrected.arrays["time"]))
+    expected = slop + (d0 - slop) * (1 - beta) ** n
+    # the solver stops once no impulse changes a velocity by more than its tolerance: each step may
+    # leave up to tolerance × h of the correction undone
+    assert np.all(np.abs(corrected.arrays["max_penetration"] - expected) <= options.tolerance * 0.004 * n + 1e-15)
+    assert corrected.summary["max_penetration"] == pytest.approx(d0, rel=1e-9)
+    left = simulate(model, "impulse", 0.004, 0.2, {"stabilization": 0.0})
+    assert np.all(np.abs(left.arrays["max_penetration"] - d0) <= options.tolerance * 0.004 * n + 1e-15)
+    assert left.summary["max_penetration"] == pytest.approx(d0, abs=options.tolerance * 0.2)
+
+
+def builtin_names():
+    from contactlab.scene import builtin_scenes
+    return [name for name, _ in builtin_scenes()]
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_every_builtin_scene_runs_without_diverging(name):
+    """Every built-in scene (rigid bodies, particles, both) for 0.25 s with the impulse method: the
+    state stays finite, nothing sinks deep, and no energy is created beyond the small push that
+    removes the overlaps a scene may start with."""
+    from contactlab.scene import load_scene
+    scene = load_scene(name)
+    options = scene.method_options if scene.method == "impulse" else {}
+    run = simulate(scene.model, "impulse", scene.dt, min(0.25, scene.duration), options)
+    assert run.state.is_finite()
+    assert run.summary["max_penetration"] < 0.01
+    energy = run.summary["energy"]
+    assert energy["max"] <= energy["initial"] + 0.1 * abs(energy["initial"]) + 1e-9
