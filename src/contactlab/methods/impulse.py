@@ -15,7 +15,8 @@ One step, stage by stage as on the slide:
    b. resting contacts (M2): sequential impulses with the accumulated normal impulse clamped
       at λ ≥ 0 and friction clamped to μ λ, until no impulse changes a velocity by more than
       the tolerance — this is projected Gauss-Seidel on velocities, the matrix-free twin of
-      the constraints method;
+      the constraints method — swept from the highest contact down along gravity (see
+      ``solve_order``) and warm-started from last step's impulses;
 5. recompute velocities and positions: x = x₀ + h v⁺ — so a body at rest stays put — with the
    time-of-impact correction below; advance time.
 
@@ -40,8 +41,8 @@ from . import StepInfo
 
 @dataclass
 class Options:
-    """Settings of ``[method.impulse]``."""
-    iterations: int = 100                 # sweeps of sequential impulses per step (at most)
+    """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md)."""
+    iterations: int = 100                 # sweeps of sequential impulses per step, and collision waves (at most)
     tolerance: float = 1e-6               # m/s: stop sweeping when no impulse changes a velocity more
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
     stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
