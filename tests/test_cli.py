@@ -130,3 +130,23 @@ def test_a_failed_write_leaves_no_folder_and_no_partial_file(tmp_path):
     with pytest.raises(OSError):
         write_outputs(str(existing), {"bad": Unsaveable()}, {})
     assert os.listdir(existing) == []
+
+
+def test_penalty_stiffness_too_high_for_dt_warns_in_one_line_and_still_runs(tmp_path):
+    result = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
+                        "--duration", "0.02", "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: penalty stiffness 1e+06 N/m")
+    assert "backward_euler" in lines[0] and "Traceback" not in result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["method"] == "penalty" and summary["options"]["stiffness"] == 1e6
+
+
+def test_penalty_with_backward_euler_from_the_command_line(tmp_path):
+    result = contactlab("run", "box_stack", "--method", "penalty", "--integrator", "backward_euler",
+                        "--duration", "0.2", "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["integrator"] == "backward_euler" and summary["solver"]["max_iterations"] >= 1
+    assert summary["max_penetration"] < 0.005          # k = m g / 1 mm for the heaviest box, implicit

@@ -219,7 +219,7 @@ ERROR_CASES = [
     ("plane with position", BASE + "position = [0.0, 0.0, 0.0]\n", "obstacles[0].position", "a plane takes no"),
     ("unknown method", replace("duration = 0.1", 'duration = 0.1\nmethod = "impuls"'), "simulation.method",
      "did you mean 'impulse'"),
-    ("planned method", replace("duration = 0.1", 'duration = 0.1\nmethod = "penalty"'), "simulation.method",
+    ("planned method", replace("duration = 0.1", 'duration = 0.1\nmethod = "projection"'), "simulation.method",
      "not available"),
     ("unknown method table", BASE + "[method.impuls]\niterations = 3\n", "method.impuls", "did you mean 'impulse'"),
     ("method table not a table", BASE + "[method]\nimpulse = 3\n", "method.impulse", "expected a table"),
@@ -323,10 +323,17 @@ def test_set_creates_missing_keys_and_tables(tmp_path):
         load_scene("bouncing_ball", ["bodies.0.density=1000"])
 
 
-def test_set_plain_string_that_is_not_toml_selects_a_planned_method():
+def test_set_plain_string_that_is_not_toml_selects_a_method():
+    assert load_scene("bouncing_ball", ["simulation.method=penalty"]).method == "penalty"
     with pytest.raises(InputError) as info:
-        load_scene("bouncing_ball", ["simulation.method=penalty"])
+        load_scene("bouncing_ball", ["simulation.method=projection"])
     assert info.value.field == "simulation.method" and "not available" in info.value.message
+
+
+def test_penalty_table_is_checked_when_loaded():
+    with pytest.raises(InputError) as info:
+        load_scene("bouncing_ball", ["method.penalty.stifness=1e4"])
+    assert info.value.field == "method.penalty.stifness" and "did you mean 'stiffness'" in info.value.message
 
 
 def test_set_new_key_is_validated():
@@ -452,10 +459,12 @@ def test_convex_input_errors(tmp_path, entry, field, words):
     assert "\n" not in str(error.value)
 
 
-def test_every_impulse_option_is_documented():
+@pytest.mark.parametrize("name", ["impulse", "penalty"])
+def test_every_method_option_is_documented(name):
     from dataclasses import fields
-    from contactlab.methods import impulse
+    from contactlab import methods
     text = DOCS.read_text(encoding="utf-8")
-    section = text[text.index("### `[method.impulse]`"):]
-    for field in fields(impulse.Options):
+    section = text[text.index(f"### `[method.{name}]`"):]
+    section = section[:section.index("\n## ")] if "\n## " in section else section
+    for field in fields(methods.get(name).Options):
         assert f"| `{field.name}` |" in section, field.name

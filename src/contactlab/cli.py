@@ -9,6 +9,7 @@ import argparse
 import json
 import os
 import sys
+import warnings
 
 from .errors import InputError, SimulationDiverged
 
@@ -70,8 +71,14 @@ def _plain_summary(summary, scene):
             f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}")
 
 
+def _print_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings (e.g. a penalty stiffness too high for the time step) as one line, no source."""
+    print(f"warning: {message}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    warnings.showwarning = _print_warning
     try:
         if args.command in (None, "demo"):
             _run(DEFAULT_SCENE)

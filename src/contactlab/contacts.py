@@ -62,6 +62,24 @@ class Contacts:
         return cls(**out)
 
 
+def values_by_id(previous_ids, previous_values, feature_id, width):
+    """What a method carried for each contact from the last step, matched by persistent id.
+
+    previous_ids (K,) int64 and previous_values (K, width) as stored last step (None: nothing
+    carried); feature_id (C,) the contacts now. Returns (values (C, width), zero for contacts
+    that are new, found (C,) bool).
+    """
+    C = len(feature_id)
+    values = np.zeros((C, width))
+    if previous_ids is None or len(previous_ids) == 0 or C == 0:
+        return values, np.zeros(C, dtype=bool)
+    order = np.argsort(previous_ids)
+    place = np.clip(np.searchsorted(previous_ids, feature_id, sorter=order), 0, len(previous_ids) - 1)
+    found = previous_ids[order[place]] == feature_id
+    values[found] = previous_values[order[place[found]]]
+    return values, found
+
+
 def tangent_basis(normal):
     """Two unit tangents (C, 3) each, with (t1, t2, n) right-handed, from unit normals (C, 3)."""
     # cross with the world axis least aligned with n: never degenerate

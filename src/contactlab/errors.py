@@ -23,3 +23,9 @@ class InputError(ValueError):
 
 class SimulationDiverged(RuntimeError):
     """The state became non-finite: the time step is too large for the scene (or a stiffness too high)."""
+
+
+class StabilityWarning(UserWarning):
+    """A setting that will likely make the run blow up or ring (e.g. a penalty stiffness that
+    explicit integration cannot follow at the chosen time step). The command line prints it as
+    one line on stderr; the run goes on."""

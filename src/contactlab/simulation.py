@@ -6,7 +6,7 @@
 """
 
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from tqdm import tqdm
@@ -17,6 +17,9 @@ from .collision import check_supported
 from .dynamics.integrators import INTEGRATORS
 from .errors import InputError, SimulationDiverged
 from .record import Recorder
+
+
+MAX_SPEED = 1e6   # m/s: a point of a body or a particle moving faster has blown up (no contact scene gets near)
 
 
 @dataclass
@@ -45,6 +48,8 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     if options is None or isinstance(options, dict):
         options = methods.make_options(module, options or {}, f"method.{method}")
     check_supported(model)
+    if hasattr(module, "prepare"):
+        options = module.prepare(model, dt, options, integrator)
     state = model.state() if state is None else state.copy()
     steps = max(1, int(round(duration / dt)))
     recorder = Recorder(model, record_every)
@@ -57,10 +62,10 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         for step_index in range(1, steps + 1):
             state, info = module.step(model, state, dt, options, integrator)
             max_contacts = max(max_contacts, info.contacts.count)
-            if not state.is_finite():
+            if not state.is_finite() or state.max_speed() > MAX_SPEED:
                 raise SimulationDiverged(
-                    f"the simulation blew up at t = {state.time:.4g} s (positions or velocities became "
-                    f"infinite); use a smaller dt than {dt:g} s")
+                    f"the simulation blew up at t = {state.time:.4g} s (velocities passed {MAX_SPEED:g} m/s or "
+                    f"became infinite); use a smaller dt than {dt:g} s")
             if step_index % record_every == 0 or step_index == steps:
                 recorder.sample(state, info)
             if step_index == 1:     # includes compiling the kernels on first use: timed apart
@@ -72,6 +77,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
     summary = {
         "scene": scene_name, "method": method, "integrator": integrator, "dt": dt, "steps": steps,
+        "options": asdict(options),
         "wall_seconds": first_step_seconds + wall,
         "first_step_seconds": first_step_seconds,
         "steps_per_second": (steps - 1) / wall if steps > 1 and wall > 0 else 1.0 / max(first_step_seconds, 1e-9),

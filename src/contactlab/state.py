@@ -49,6 +49,11 @@ class State:
             carried={k: (v.copy() if hasattr(v, "copy") else v) for k, v in self.carried.items()},
         )
 
+    def max_speed(self) -> float:
+        """The largest linear speed of a body centre or particle [m/s] (0 with none)."""
+        return float(max(np.linalg.norm(self.body_velocity, axis=1).max(initial=0.0),
+                         np.linalg.norm(self.particle_velocity, axis=1).max(initial=0.0)))
+
     def is_finite(self) -> bool:
         return all(np.isfinite(a).all() for a in (
             self.body_position, self.body_orientation, self.body_velocity,

@@ -44,9 +44,17 @@ def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=
     """
     if len(angular_velocity) == 0:
         return angular_velocity.copy()
-    R = rotations.to_matrix(orientation)
-    inertia = model.body_inertia                                     # (B,3) principal
-    w1 = np.einsum("bji,bj->bi", R, angular_velocity)                 # body frame
+    # a body whose ω is along a principal axis, or whose inertia is isotropic (a sphere), has
+    # no gyroscopic torque: only the others need the Newton solve
+    inertia_all = model.body_inertia
+    spinning = np.abs(inertia_all - inertia_all.mean(axis=1, keepdims=True)).max(axis=1) > 0.0
+    spinning &= np.any(angular_velocity != 0.0, axis=1)
+    result = angular_velocity.copy()
+    if not spinning.any():
+        return result
+    R = rotations.to_matrix(orientation[spinning])
+    inertia = inertia_all[spinning]                                  # (b,3) principal
+    w1 = np.einsum("bji,bj->bi", R, angular_velocity[spinning])       # body frame
     w2 = w1.copy()
     for _ in range(newton_steps):
         mid = 0.5 * (w1 + w2)
@@ -54,7 +62,8 @@ def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=
         jacobian = (np.eye(3)[None] * inertia[:, None, :]
                     + 0.5 * dt * (_skew(mid) * inertia[:, None, :] - _skew(inertia * mid)))
         w2 = w2 - np.linalg.solve(jacobian, residual[..., None])[..., 0]
-    return np.einsum("bij,bj->bi", R, w2)
+    result[spinning] = np.einsum("bij,bj->bi", R, w2)
+    return result
 
 
 def _gyroscopic_explicit(model, orientation, angular_velocity, dt):

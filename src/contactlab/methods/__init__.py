@@ -5,7 +5,10 @@ A method module provides:
 * ``Options``: a dataclass of its settings (the ``[method.NAME]`` table of a scene file),
   every field with a default and a docstring line;
 * ``step(model, state, dt, options, integrator) -> (State, StepInfo)``: one time step that
-  follows the method's loop (L1, L2 or L3) in named stages.
+  follows the method's loop (L1, L2 or L3) in named stages;
+* optionally ``prepare(model, dt, options, integrator) -> Options``: called once before the
+  first step to resolve settings that depend on the scene (e.g. an "auto" stiffness) and to
+  warn about ones that cannot work (``StabilityWarning``).
 """
 
 from dataclasses import dataclass, fields
@@ -23,8 +26,8 @@ class StepInfo:
     energy_elastic: float = 0.0   # energy stored in contact springs [J]
 
 
-AVAILABLE = ("impulse",)
-PLANNED = ("penalty", "projection", "constraints")
+AVAILABLE = ("penalty", "impulse")
+PLANNED = ("projection", "constraints")
 
 
 def get(name):
@@ -32,6 +35,9 @@ def get(name):
     if name == "impulse":
         from . import impulse
         return impulse
+    if name == "penalty":
+        from . import penalty
+        return penalty
     if name in PLANNED:
         raise InputError("method", f"method {name!r} is not available in this version yet; "
                          f"use one of: {', '.join(AVAILABLE)}")

@@ -1,0 +1,59 @@
+"""The generalized velocity and the mass matrix of SPEC D1.
+
+Every degree of freedom in one vector v of length N = 6B + 3P: body i owns [6i, 6i+6) =
+(linear velocity [m/s], world angular velocity [rad/s]); particle j owns [6B + 3j, 6B + 3j + 3).
+The mass matrix is block diagonal: m I₃ and the world inertia tensor per body, m I₃ per
+particle. This is the layout of ``contacts.jacobian``, so a contact force F_p (3C,) acts on the
+degrees of freedom as f = Jᵀ F_p and changes their velocities by h M⁻¹ Jᵀ F_p.
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import rotations
+
+
+def dof_count(model) -> int:
+    """N = 6B + 3P."""
+    return 6 * model.body_count + 3 * model.particle_count
+
+
+def stack(body_velocity, body_angular_velocity, particle_velocity):
+    """v (N,) from body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)."""
+    bodies = np.concatenate([body_velocity, body_angular_velocity], axis=1).ravel()
+    return np.concatenate([bodies, particle_velocity.ravel()])
+
+
+def unstack(model, v):
+    """(body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)) from v (N,)."""
+    B = model.body_count
+    bodies = v[:6 * B].reshape(B, 6)
+    return bodies[:, :3].copy(), bodies[:, 3:].copy(), v[6 * B:].reshape(-1, 3).copy()
+
+
+def _block_diagonal(body_linear, body_angular, particle):
+    """CSR (N, N) from per-body scalars (B,), per-body 3×3 blocks (B,3,3), per-particle scalars (P,)."""
+    B, P = len(body_linear), len(particle)
+    blocks = np.zeros((B, 6, 6))
+    blocks[:, :3, :3] = body_linear[:, None, None] * np.eye(3)
+    blocks[:, 3:, 3:] = body_angular
+    rows = (6 * np.arange(B)[:, None, None] + np.arange(6)[None, :, None]).repeat(6, axis=2)
+    cols = (6 * np.arange(B)[:, None, None] + np.arange(6)[None, None, :]).repeat(6, axis=1)
+    diagonal = 6 * B + np.arange(3 * P)
+    return sp.csr_matrix(
+        (np.concatenate([blocks.ravel(), np.repeat(particle, 3)]),
+         (np.concatenate([rows.ravel(), diagonal]), np.concatenate([cols.ravel(), diagonal]))),
+        shape=(6 * B + 3 * P, 6 * B + 3 * P))
+
+
+def mass_matrix(model, body_orientation):
+    """M (N, N) CSR [kg, kg m²] at the given orientations (B, 4)."""
+    R = rotations.to_matrix(body_orientation)
+    return _block_diagonal(model.body_mass, rotations.world_inertia(R, model.body_inertia), model.particle_mass)
+
+
+def inverse_mass_matrix(model, body_orientation):
+    """M⁻¹ (N, N) CSR [1/kg, 1/(kg m²)] at the given orientations (B, 4)."""
+    R = rotations.to_matrix(body_orientation)
+    return _block_diagonal(model.body_inverse_mass, rotations.world_inertia(R, model.body_inverse_inertia),
+                           model.particle_inverse_mass)
