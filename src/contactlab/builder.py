@@ -1,4 +1,4 @@
-"""ModelBuilder: add materials, bodies, particles and obstacles, then ``finalize()``.
+"""ModelBuilder: add materials, bodies, particles, cloth and obstacles, then ``finalize()``.
 
 Values are checked as they are added; a bad one raises :class:`~contactlab.errors.InputError`
 naming the argument (the scene loader prefixes the scene-file path to it).
@@ -69,7 +69,8 @@ class ModelBuilder:
         self.gravity = _vector(gravity, "gravity")
         self._materials = []          # (name, friction, restitution)
         self._bodies = []             # dicts
-        self._particles = []          # dicts of arrays
+        self._particles = []          # dicts of arrays (a cloth's vertices are one group)
+        self._cloths = []             # dicts: name, first particle, triangles and springs (local indices)
         self._obstacles = []          # dicts
         self._hulls = []              # contactlab.hulls.Hull of the convex shapes
         self._meshes = []             # contactlab.meshes.TriangleMesh, world frame
@@ -223,6 +224,98 @@ class ModelBuilder:
         raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), "
                                f"found {array.size}")
 
+    # -- cloth -----------------------------------------------------------------------
+    def add_cloth(self, *, size=None, resolution=None, file=None, scale=1.0, position=(0, 0, 0),
+                  orientation=(1, 0, 0, 0), velocity=(0, 0, 0), mass=None, density=None,
+                  stretch_stiffness=1000.0, shear_stiffness=100.0, bend_stiffness=10.0, damping=0.0,
+                  pinned=(), thickness=0.005, material=None, name=None) -> range:
+        """Add a mass-spring cloth; returns the particle indices of its vertices (a range).
+
+        Its vertices are particles (3 DOF each) of radius ``thickness`` [m], so the particle
+        contacts keep every vertex that far from obstacles. Two ways to give its shape:
+
+        * a grid: ``size`` = (w, h) [m] and ``resolution`` = (nx, ny) vertices (each ≥ 2), in
+          the cloth's local xy plane, centred on its origin. Vertex (a, b) (a along x, b along
+          y) is particle ``start + a + nx b``, at local (−w/2 + a w/(nx−1), −h/2 + b h/(ny−1), 0).
+          Springs: stretch along the grid lines, shear along both diagonals of each cell, bend
+          between vertices two apart along x and along y. Each cell is two triangles.
+          The mass is split evenly over the vertices.
+        * a triangle mesh ``file`` (OBJ, STL or PLY, read with trimesh) times ``scale``:
+          stretch springs along the triangle edges and bend springs between the two opposite
+          corners of each pair of triangles sharing an edge; no shear springs (the triangles'
+          edges already resist shear; ``shear_stiffness`` is not used). Coincident vertices are
+          merged (the first one kept, so indices follow the file's order otherwise); the mass
+          is split by triangle areas, a third of each triangle's to each corner.
+
+        position [m] and orientation (w, x, y, z) place the local frame; velocity [m/s] is the
+        initial velocity of every free vertex. Give exactly one of mass [kg] (the whole cloth)
+        or density [kg/m²] (areal). stretch_stiffness, shear_stiffness, bend_stiffness [N/m]
+        ≥ 0 (per spring) and damping [N s/m] ≥ 0 (along every spring's axis). Every spring's
+        rest length is its length as built.
+
+        pinned: vertices held in place (zero velocity, zero inverse mass): a list of vertex
+        indices into this cloth (0-based, as above) and, for a grid, any of the names
+        "corners" (the four corners), "top_corners" (the two at y = +h/2), "top_edge" (the
+        row at y = +h/2), "bottom_edge" (y = −h/2), "left_edge" (x = −w/2), "right_edge"
+        (x = +w/2); one name or index alone is accepted too.
+        """
+        if (mass is None) == (density is None):
+            found = "neither" if mass is None else "both"
+            raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^2), found {found}")
+        position = _vector(position, "position")
+        orientation = _orientation(orientation, "orientation")
+        velocity = _vector(velocity, "velocity")
+        stiffness = {key: _number(value, key, 0.0) for key, value in (
+            ("stretch_stiffness", stretch_stiffness), ("shear_stiffness", shear_stiffness),
+            ("bend_stiffness", bend_stiffness))}
+        damping = _number(damping, "damping", 0.0)
+        thickness = _number(thickness, "thickness", 0.0)
+        if (size is None) == (file is None):
+            raise InputError("size", "a cloth needs exactly one of size and resolution (a grid) or file (a mesh)")
+        if file is not None:
+            if resolution is not None:
+                raise InputError("resolution", "a cloth from a mesh file takes no resolution")
+            local, triangles, edges, bends, named = _cloth_from_mesh(file, scale)
+            shear = np.zeros((0, 2), dtype=np.int64)
+        else:
+            local, triangles, edges, shear, bends, named = _cloth_grid(size, resolution)
+        count = len(local)
+        world = rotations.to_matrix(orientation[None])[0]
+        vertex_position = local @ world.T + position
+        area = _triangle_areas(vertex_position, triangles)
+        if area.sum() <= 0.0:
+            raise InputError("size" if file is None else "file", "the cloth has zero area")
+        if file is not None:
+            share = np.bincount(triangles.ravel(), np.repeat(area / 3.0, 3), minlength=count)
+            if (share <= 0.0).any():
+                raise InputError("file", f"vertex {int(np.argmin(share))} of the mesh is in no triangle of "
+                                         "positive area, so it gets no mass")
+            share = share / share.sum()
+        else:
+            share = np.full(count, 1.0 / count)
+        if mass is not None:
+            total = _number(mass, "mass", 0.0, strict=True)
+        else:
+            total = _number(density, "density", 0.0, strict=True) * area.sum()
+        pinned_mask = _pinned_vertices(pinned, count, named)
+        spring_groups = [(edges, stiffness["stretch_stiffness"]), (shear, stiffness["shear_stiffness"]),
+                         (bends, stiffness["bend_stiffness"])]
+        springs = np.concatenate([g for g, _ in spring_groups]).astype(np.int64).reshape(-1, 2)
+        spring_k = np.concatenate([np.full(len(g), k) for g, k in spring_groups])
+        rest = np.linalg.norm(vertex_position[springs[:, 1]] - vertex_position[springs[:, 0]], axis=1)
+        if (rest <= 0.0).any():
+            raise InputError("size" if file is None else "file", "two vertices of the cloth coincide")
+        vertex_velocity = np.where(pinned_mask[:, None], 0.0, velocity[None, :])
+        start = sum(len(p["position"]) for p in self._particles)
+        index = len(self._cloths)
+        self._particles.append(dict(position=vertex_position, velocity=vertex_velocity,
+                                    mass=total * share, radius=np.full(count, thickness),
+                                    material=self._material_index(material), cloth=index, pinned=pinned_mask))
+        self._cloths.append(dict(name=str(name) if name is not None else f"cloth{index}", start=start,
+                                 triangles=triangles, springs=springs, stiffness=spring_k, rest=rest,
+                                 damping=np.full(len(springs), damping)))
+        return range(start, start + count)
+
     # -- static obstacles ------------------------------------------------------------
     def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None, points=None,
                      file=None, scale=1.0, position=(0, 0, 0), orientation=(1, 0, 0, 0), material=None) -> int:
@@ -306,6 +399,15 @@ class ModelBuilder:
         )
         particle_material = (np.concatenate([np.full(len(p["position"]), p["material"]) for p in particles])
                              if particles else np.zeros(0, dtype=np.int64))
+        particle_cloth = (np.concatenate([np.full(len(p["position"]), p.get("cloth", -1)) for p in particles])
+                          if particles else np.zeros(0)).astype(np.int64)
+        particle_pinned = (np.concatenate([p.get("pinned", np.zeros(len(p["position"]), dtype=bool))
+                                           for p in particles]) if particles else np.zeros(0)).astype(bool)
+        cloths = self._cloths
+
+        def cloth_cat(key, shape, offset=False, dtype=float):
+            parts = [c[key] + (c["start"] if offset else 0) for c in cloths]
+            return (np.concatenate(parts) if parts else np.zeros(0)).astype(dtype).reshape(shape)
         return Model(
             gravity=self.gravity.copy(),
             material_names=tuple(m[0] for m in self._materials),
@@ -328,7 +430,134 @@ class ModelBuilder:
             hulls=hulls,
             meshes=tuple(self._meshes),
             initial=initial,
+            cloth_names=tuple(c["name"] for c in cloths),
+            triangles=cloth_cat("triangles", (-1, 3), offset=True, dtype=np.int64),
+            particle_cloth=particle_cloth,
+            particle_pinned=particle_pinned,
+            spring_particles=cloth_cat("springs", (-1, 2), offset=True, dtype=np.int64),
+            spring_rest_length=cloth_cat("rest", (-1,)),
+            spring_stiffness=cloth_cat("stiffness", (-1,)),
+            spring_damping=cloth_cat("damping", (-1,)),
         )
+
+
+PINNED_NAMES = ("corners", "top_corners", "top_edge", "bottom_edge", "left_edge", "right_edge")
+
+
+def _cloth_grid(size, resolution):
+    """A grid cloth in its local frame: (vertices (V, 3) [m], triangles (F, 3), stretch (E, 2),
+    shear (H, 2), bend (G, 2) local vertex pairs, named vertex sets {name: indices})."""
+    if resolution is None:
+        raise InputError("resolution", "a grid cloth needs resolution = [nx, ny] (vertices along x and y)")
+    width, height = (_number(v, "size", 0.0, strict=True) for v in _vector(size, "size", 2))
+    counts = _array(resolution, "resolution", "a list of 2 whole numbers")
+    if counts.shape != (2,) or not np.all(np.isfinite(counts)) or not np.all(counts == np.round(counts)):
+        raise InputError("resolution", f"expected a list of 2 whole numbers, found {resolution!r}")
+    nx, ny = (int(c) for c in counts)
+    if nx < 2 or ny < 2:
+        raise InputError("resolution", f"must be at least 2 vertices along each axis, found [{nx}, {ny}]")
+    if nx * ny > 10_000_000:
+        raise InputError("resolution", f"expected at most 10 000 000 vertices, found {nx} x {ny}")
+    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")     # (ny, nx): a along x, fastest
+    vertices = np.stack([-width / 2 + a.ravel() * width / (nx - 1), -height / 2 + b.ravel() * height / (ny - 1),
+                         np.zeros(nx * ny)], axis=1)
+    vid = a + nx * b                                                    # (ny, nx) vertex index
+
+    def pairs(first, second):
+        return np.stack([first.ravel(), second.ravel()], axis=1)
+
+    corner00, corner10, corner01, corner11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
+    triangles = np.concatenate([np.stack([corner00.ravel(), corner10.ravel(), corner11.ravel()], axis=1),
+                                np.stack([corner00.ravel(), corner11.ravel(), corner01.ravel()], axis=1)])
+    stretch = np.concatenate([pairs(vid[:, :-1], vid[:, 1:]), pairs(vid[:-1, :], vid[1:, :])])
+    shear = np.concatenate([pairs(corner00, corner11), pairs(corner10, corner01)])
+    bend = np.concatenate([pairs(vid[:, :-2], vid[:, 2:]), pairs(vid[:-2, :], vid[2:, :])])
+    top, bottom, left, right = vid[-1, :], vid[0, :], vid[:, 0], vid[:, -1]
+    named = {"corners": np.array([vid[0, 0], vid[0, -1], vid[-1, 0], vid[-1, -1]]),
+             "top_corners": np.array([vid[-1, 0], vid[-1, -1]]),
+             "top_edge": top, "bottom_edge": bottom, "left_edge": left, "right_edge": right}
+    return (vertices, triangles.astype(np.int64), stretch.astype(np.int64), shear.astype(np.int64),
+            bend.astype(np.int64), named)
+
+
+def _cloth_from_mesh(file, scale):
+    """A cloth from a mesh file: (vertices (V, 3) [m] × scale, triangles (F, 3), edges (E, 2),
+    bend pairs (G, 2), no named sets). Coincident vertices merged, the first one kept in place."""
+    import os
+    from .meshes import MESH_FORMATS
+    scale = _number(scale, "scale", 0.0, strict=True)
+    path = os.fspath(file)
+    if not os.path.isfile(path):
+        raise InputError("file", f"expected an existing file, found no file at {path}")
+    if os.path.splitext(path)[1].lower() not in MESH_FORMATS:
+        raise InputError("file", f"unsupported mesh format of {path}; expected .obj, .stl or .ply")
+    try:
+        import trimesh
+        loaded = trimesh.load(path, force="mesh", process=False)
+        vertices = np.asarray(loaded.vertices, dtype=float)
+        faces = np.asarray(loaded.faces, dtype=np.int64)
+    except Exception as error:                      # trimesh raises many types on broken files
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise InputError("file", f"could not read the mesh file {path} ({reason})") from None
+    if faces.ndim != 2 or faces.shape[1:] != (3,) or len(faces) == 0 or len(vertices) == 0:
+        raise InputError("file", f"the mesh file {path} contains no triangles")
+    if not np.all(np.isfinite(vertices)):
+        raise InputError("file", f"the mesh file {path} has non-finite vertex coordinates")
+    # merge coincident vertices, numbering the survivors in order of first appearance
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    renumber = np.empty(len(first), dtype=np.int64)
+    renumber[order] = np.arange(len(first))
+    vertices = vertices[first[order]] * scale
+    faces = renumber[inverse.reshape(-1)][faces]
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
+    if len(faces) == 0:
+        raise InputError("file", f"the mesh file {path} has only degenerate triangles")
+    # edges: each unordered pair once; bends: the two far corners of triangles sharing an edge
+    half_edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    opposite = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    keys = np.sort(half_edges, axis=1)
+    edges, edge_of = np.unique(keys, axis=0, return_inverse=True)
+    edge_of = edge_of.reshape(-1)
+    order = np.argsort(edge_of, kind="stable")
+    sorted_edges, sorted_opposite = edge_of[order], opposite[order]
+    shared = np.nonzero(sorted_edges[1:] == sorted_edges[:-1])[0]      # consecutive half-edges of one edge
+    bends = np.stack([sorted_opposite[shared], sorted_opposite[shared + 1]], axis=1)
+    bends = bends[bends[:, 0] != bends[:, 1]]
+    return vertices, faces, edges.astype(np.int64), bends.astype(np.int64), {}
+
+
+def _triangle_areas(vertices, triangles):
+    """Areas (F,) [m²] of triangles (F, 3) over vertices (V, 3)."""
+    e1 = vertices[triangles[:, 1]] - vertices[triangles[:, 0]]
+    e2 = vertices[triangles[:, 2]] - vertices[triangles[:, 0]]
+    return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+
+def _pinned_vertices(pinned, count, named):
+    """Mask (count,) of the vertices named by ``pinned``: indices and names of ``named``."""
+    if pinned is None:
+        pinned = ()
+    if isinstance(pinned, (str, int, np.integer)):
+        pinned = [pinned]
+    mask = np.zeros(count, dtype=bool)
+    try:
+        items = list(pinned)
+    except TypeError:
+        raise InputError("pinned", f"expected a list of vertex indices or names, found {pinned!r}") from None
+    for item in items:
+        if isinstance(item, str):
+            if item not in named:
+                known = ", ".join(named) if named else "none: a mesh cloth takes vertex indices only"
+                raise InputError("pinned", f"unknown vertex set {item!r} (known: {known})")
+            mask[named[item]] = True
+        elif isinstance(item, (int, np.integer)) and not isinstance(item, bool):
+            if not 0 <= item < count:
+                raise InputError("pinned", f"vertex index {item} is outside this cloth's vertices 0..{count - 1}")
+            mask[int(item)] = True
+        else:
+            raise InputError("pinned", f"expected vertex indices or names, found {item!r}")
+    return mask
 
 
 def _concatenate_packed(packs):

@@ -3,7 +3,9 @@
 A :class:`Model` is built once by :class:`contactlab.builder.ModelBuilder` and never changes;
 everything that evolves in time lives in :class:`contactlab.state.State`. Arrays are read-only.
 
-Counts: B rigid bodies, P particles, O static obstacles, M materials.
+Counts: B rigid bodies, P particles, O static obstacles, M materials, C cloths, F cloth
+triangles, S cloth springs. Cloth vertices are particles (3 DOF each): the P particles are the
+free ones and the vertices of every cloth, in the order they were added.
 """
 
 from dataclasses import dataclass, field
@@ -43,8 +45,24 @@ class Model:
     meshes: tuple = field(repr=False, default=())
     # the state at time 0
     initial: "object" = field(repr=False, default=None)
+    # cloth (see ModelBuilder.add_cloth): topology and mass-spring network over the particles
+    cloth_names: tuple = ()                                                     # (C,)
+    triangles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
+    #                                   (F, 3) int, particle indices, counter-clockwise seen from the front
+    particle_cloth: np.ndarray = field(repr=False, default=None)                # (P,) int cloth index, −1 if none
+    particle_pinned: np.ndarray = field(repr=False, default=None)               # (P,) bool, held in place
+    spring_particles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    #                                   (S, 2) int, the two particles each spring joins
+    spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))   # (S,) m
+    spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))     # (S,) N/m
+    spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))       # (S,) N s/m
 
     def __post_init__(self):
+        # models built without cloth: no particle belongs to one, none is pinned
+        if self.particle_cloth is None:
+            object.__setattr__(self, "particle_cloth", np.full(len(self.particle_mass), -1, dtype=np.int64))
+        if self.particle_pinned is None:
+            object.__setattr__(self, "particle_pinned", np.zeros(len(self.particle_mass), dtype=bool))
         for name, value in vars(self).items():
             for array in (value.values() if isinstance(value, dict) else [value]):
                 if isinstance(array, np.ndarray):
@@ -80,9 +98,17 @@ class Model:
         return 1.0 / self.body_inertia
 
     @property
+    def cloth_count(self) -> int:
+        return len(self.cloth_names)
+
+    @property
+    def spring_count(self) -> int:
+        return len(self.spring_rest_length)
+
+    @property
     def particle_inverse_mass(self) -> np.ndarray:
-        """(P,) 1/kg."""
-        return 1.0 / self.particle_mass
+        """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
+        return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)
 
     def state(self):
         """A fresh copy of the state at time 0."""
@@ -93,7 +119,11 @@ class Model:
         for k in self.body_shape:
             kinds[shapes.NAMES[int(k)]] = kinds.get(shapes.NAMES[int(k)], 0) + 1
         parts = [f"{n} {k}{'es' if k == 'box' and n > 1 else 's' if n > 1 else ''}" for k, n in kinds.items()]
-        if self.particle_count:
-            parts.append(f"{self.particle_count} particle{'s' if self.particle_count > 1 else ''}")
+        free = int(np.count_nonzero(self.particle_cloth < 0))
+        if free:
+            parts.append(f"{free} particle{'s' if free > 1 else ''}")
+        if self.cloth_count:
+            vertices = self.particle_count - free
+            parts.append(f"{self.cloth_count} cloth{'s' if self.cloth_count > 1 else ''} ({vertices} vertices)")
         parts.append(f"{self.obstacle_count} obstacle{'s' if self.obstacle_count != 1 else ''}")
         return ", ".join(parts)
