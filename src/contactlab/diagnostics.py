@@ -3,6 +3,7 @@
 import numpy as np
 
 from . import rotations
+from .dynamics.cloth import spring_energy
 
 
 def kinetic_energy(model, state) -> float:
@@ -18,9 +19,11 @@ def kinetic_energy(model, state) -> float:
 
 
 def potential_energy(model, state) -> float:
-    """Gravitational potential −m g·x [J] (zero at the origin)."""
+    """Gravitational potential −m g·x (zero at the origin) plus the elastic energy
+    Σ ½ k (l − L)² of the cloth springs [J]."""
     return float(-np.sum(model.body_mass * (state.body_position @ model.gravity))
-                 - np.sum(model.particle_mass * (state.particle_position @ model.gravity)))
+                 - np.sum(model.particle_mass * (state.particle_position @ model.gravity))
+                 + spring_energy(model, state.particle_position))
 
 
 def max_penetration(contacts) -> float:

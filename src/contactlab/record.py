@@ -48,7 +48,8 @@ class Recorder:
             self.samples[name].append(np.array(value, copy=True))
 
     def arrays(self) -> dict:
-        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,)."""
+        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,), and
+        the static cloth topology triangles (F,3) and particle_cloth (P,)."""
         model = self.model
         empty = {"body_position": (0, model.body_count, 3), "body_orientation": (0, model.body_count, 4),
                  "body_velocity": (0, model.body_count, 3), "body_angular_velocity": (0, model.body_count, 3),
@@ -60,6 +61,8 @@ class Recorder:
         out["contact_count"] = out["contact_count"].astype(np.int64)
         out["solver_iterations"] = out["solver_iterations"].astype(np.int64)
         out["body_names"] = np.array(model.body_names, dtype=str)
+        out["triangles"] = np.array(model.triangles, dtype=np.int64).reshape(-1, 3)
+        out["particle_cloth"] = np.array(model.particle_cloth, dtype=np.int64)
         return out
 
 

@@ -8,16 +8,28 @@ Two integrators, named in ``[simulation] integrator``:
 * ``explicit_euler``: x⁺ = x + h v (the old velocity), v⁺ = v + h M⁻¹ f, gyroscopic term
   explicit. Included to show why the symplectic variant is the default.
 * ``backward_euler``: v⁺ = v + h M⁻¹ f(x⁺, v⁺), x⁺ = x + h v⁺, the forces that depend on the
-  state (penalty contacts, cloth springs) linearized and solved as one sparse system by the
-  method that owns them (see contactlab.methods.penalty). Gravity does not depend on the
-  state, so for the free motion it coincides with symplectic Euler (gyroscopic term implicit).
+  state linearized and solved as one sparse system. The cloth springs are solved here (see
+  ``particle_system``); penalty contacts by the method that owns them (see
+  contactlab.methods.penalty), which may add its terms to ``particle_system``'s matrix. Gravity
+  does not depend on the state, so for bodies and free particles it coincides with symplectic
+  Euler (gyroscopic term implicit).
+
+Cloth springs (contactlab.dynamics.cloth) are internal forces of the particles: the explicit
+integrators add h M⁻¹ f_springs(x, v) to the particle velocities; backward Euler solves
+(M − h D − h² K) Δv = h (f + h K v). Pinned particles (``model.particle_pinned``) keep zero
+velocity under every integrator: gravity and springs do not move them.
 
 Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from .. import rotations
+from .cloth import spring_forces, spring_jacobians
 
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
@@ -77,19 +89,97 @@ def _gyroscopic_explicit(model, orientation, angular_velocity, dt):
     return angular_velocity - dt * np.einsum("bij,bj->bi", inv, np.cross(angular_velocity, L))
 
 
+@dataclass
+class ParticleSystem:
+    """The backward Euler system of the particles, A Δv = rhs, over all 3P particle DOFs.
+
+    matrix: A = M − h D − h² K, CSR (3P, 3P) [kg], symmetric positive definite (K with the
+    compressed springs' transverse stiffness clamped, see contactlab.dynamics.cloth). Rows and
+    columns of pinned particles are the identity, with rhs 0: their Δv is 0 and they are
+    removed from the coupling (their velocity is held at 0).
+    rhs: h (f + h K v) (3P,) [kg m/s], f = m g + spring forces + given forces at (x, v).
+    coupled: (P,) bool, the particles that need the linear solve (in a spring, not pinned);
+    for the others A is m I and Δv = h f / m directly.
+    """
+    matrix: object
+    rhs: np.ndarray
+    coupled: np.ndarray
+
+
+def particle_system(model, state, dt, particle_force=None, clamp_compressed=True) -> ParticleSystem:
+    """The backward Euler step of the particles under gravity, cloth springs and
+    ``particle_force`` (P, 3) [N], linearized at ``state`` (see ``ParticleSystem``).
+
+    Velocity form: M (v⁺ − v) = h f(x + h v⁺, v⁺), with f ≈ f + K (x⁺ − x) + D (v⁺ − v), so
+    (M − h D − h² K) Δv = h (f + h K v), Δv = v⁺ − v. A method may add its own implicit terms
+    (contact springs) to ``matrix`` and ``rhs`` and solve them together (``solve_particle_system``).
+    """
+    x, v = state.particle_position, state.particle_velocity
+    h = dt
+    P = len(x)
+    force = model.particle_mass[:, None] * model.gravity + spring_forces(model, x, v)
+    if particle_force is not None:
+        force = force + particle_force
+    K, D = spring_jacobians(model, x, v, clamp_compressed=clamp_compressed)
+    free = np.repeat(~model.particle_pinned, 3).astype(float)
+    mass = sp.diags(np.repeat(model.particle_mass, 3))
+    keep = sp.diags(free)
+    matrix = keep @ (mass - h * D - h * h * K) @ keep + sp.diags(1.0 - free)
+    rhs = free * (h * (force.ravel() + h * (K @ v.ravel())))
+    coupled = np.zeros(P, dtype=bool)
+    coupled[model.spring_particles.ravel()] = True
+    coupled &= ~model.particle_pinned
+    return ParticleSystem(matrix.tocsr(), rhs, coupled)
+
+
+def solve_particle_system(system, model, tolerance=1e-10, solver="cg"):
+    """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
+    with a Jacobi preconditioner (``solver="cg"``, relative residual ``tolerance``; a sparse
+    direct solve if it does not converge) or by a sparse direct solve (``"direct"``); the
+    others from their diagonal."""
+    A, rhs = system.matrix, system.rhs
+    delta = rhs / A.diagonal()                       # exact for the uncoupled rows (A = m I there)
+    dofs = np.nonzero(np.repeat(system.coupled, 3))[0]
+    if len(dofs):
+        sub = A[dofs][:, dofs].tocsr()
+        b = rhs[dofs]
+        solution, info = None, 1
+        if solver == "cg":
+            inverse_diagonal = 1.0 / sub.diagonal()
+            preconditioner = spla.LinearOperator(sub.shape, matvec=lambda r: r * inverse_diagonal)
+            solution, info = spla.cg(sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0,
+                                     maxiter=max(100, 2 * len(dofs)), M=preconditioner)
+        if info != 0:
+            solution = spla.spsolve(sub.tocsc(), b)
+        delta[dofs] = solution
+    return delta.reshape(-1, 3)
+
+
 def free_velocities(model, state, dt, integrator="symplectic_euler",
                     body_force=None, body_torque=None, particle_force=None):
-    """Velocities after dt under gravity and the given forces, without contacts.
+    """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
 
-    Returns (body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)).
+    body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
+    Particles: explicit and symplectic Euler add h M⁻¹ (m g + f_springs(x, v) + particle_force);
+    backward Euler solves ``particle_system`` (springs implicit). Pinned particles get zero
+    velocity. Returns (body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)).
     """
     g = model.gravity
     body_velocity = state.body_velocity + dt * g
-    particle_velocity = state.particle_velocity + dt * g
+    if model.spring_count and integrator == "backward_euler":
+        system = particle_system(model, state, dt, particle_force)
+        particle_velocity = state.particle_velocity + solve_particle_system(system, model)
+    else:
+        particle_velocity = state.particle_velocity + dt * g
+        if particle_force is not None:
+            particle_velocity += dt * particle_force * model.particle_inverse_mass[:, None]
+        if model.spring_count:
+            springs = spring_forces(model, state.particle_position, state.particle_velocity)
+            particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
+    if model.particle_pinned.any():
+        particle_velocity[model.particle_pinned] = 0.0
     if body_force is not None:
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
-    if particle_force is not None:
-        particle_velocity += dt * particle_force * model.particle_inverse_mass[:, None]
     gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
     angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
     if body_torque is not None:
