@@ -6,7 +6,8 @@ import pytest
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.contacts import jacobian
 from contactlab.dynamics.integrators import free_velocities, world_inverse_inertia
-from contactlab.methods import impulse
+from contactlab.dynamics.generalized import stack, unstack
+from contactlab.methods import impulse, sequential
 from conftest import ball_on_plane
 
 G = 9.81
@@ -148,7 +149,7 @@ def test_effective_mass_matrix_free_equals_j_minv_jt():
         k = 6 * model.body_count + 3 * j
         Minv[k:k + 3, k:k + 3] = np.eye(3) / m
     W = J @ Minv @ J.T
-    r_a, r_b = impulse.lever_arms(contacts, state.body_position)
+    r_a, r_b = sequential.lever_arms(contacts, state.body_position)
     for c in range(contacts.count):
         for row, d in enumerate((contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c])):
             k = sum(side_inverse_mass(body[c], parts[c], w[c], r[c], d, model.body_inverse_mass, inv_inertia,
@@ -364,11 +365,11 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         j_r4 = -(1 + eps) * (n @ v_rel) / denominator
         # the Jacobian form, from the rows the solver sweeps
         t1, t2 = tangent_basis(n[None])
-        index, width, jac, push, k = impulse.contact_rows(
+        index, width, jac, push, k = sequential.contact_rows(
             np.array([0]), np.array([1]), -np.ones((1, 3), np.int64), -np.ones((1, 3), np.int64),
             np.zeros((1, 3)), np.zeros((1, 3)), r_world[:1], r_world[1:], n[None], t1, t2,
             1 / mass, inverse_world, np.zeros(0))
-        u = impulse.generalized_velocity(v, w, np.zeros((0, 3)))
+        u = stack(v, w, np.zeros((0, 3)))
         J = np.zeros(12)
         J[index[0, :width[0]]] = jac[0, 0, :width[0]]
         M_inv = np.zeros((12, 12))
@@ -386,7 +387,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         tau = np.empty(1)
         impulse.resolve_collisions(index, width, jac, push, k, np.zeros(1), np.array([eps]), np.zeros(1),
                                    np.zeros(1), 1e-3, 0.0, u, 10, 10, 1e-12, tau, np.array([0]))
-        after_v, after_w, _ = impulse.split_velocity(u, 2)
+        after_v, after_w, _ = unstack(u, 2)
         for i, sign in ((0, 1.0), (1, -1.0)):
             np.testing.assert_allclose(after_v[i], v[i] + sign * j * n / mass[i], rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(after_w[i], w[i] + inverse_world[i] @ np.cross(r_world[i], sign * j * n),

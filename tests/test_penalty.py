@@ -263,8 +263,8 @@ def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(r
     c = 1
     world_force = forces[c] @ np.stack([contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c]])
     body = contacts.body_a[c]
-    linear, angular, _ = unstack(model, penalty.distribute(J[3 * c:3 * c + 3], inverse_mass_matrix(
-        model, state.body_orientation), forces[c:c + 1], 0.01))
+    linear, angular, _ = unstack(penalty.distribute(J[3 * c:3 * c + 3], inverse_mass_matrix(
+        model, state.body_orientation), forces[c:c + 1], 0.01), 3)
     np.testing.assert_allclose(linear[body], 0.01 * world_force / model.body_mass[body], atol=1e-12)
     r = contacts.point[c] - state.body_position[body]
     np.testing.assert_allclose(angular[body], 0.01 * inverse_inertia[body] @ np.cross(r, world_force), atol=1e-12)

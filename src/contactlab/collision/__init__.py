@@ -12,6 +12,7 @@ from .. import rotations, shapes
 from ..contacts import Contacts, tangent_basis
 from ..errors import InputError
 from .broad_phase import overlapping_pairs
+from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
 from .mesh_pairs import shapes_against_mesh_extended
@@ -89,7 +90,8 @@ def _bounds(kinds, params, centers, rots, margin):
     return centers - half, centers + half
 
 
-def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2) -> Contacts:
+def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2,
+            cloth_samples=0) -> Contacts:
     """All contacts of the state, including gaps down to −margin [m].
 
     granularity ("object" | "vertex" | "samples", SPEC P2a/b/c), normal ("object" | "vertex",
@@ -101,6 +103,10 @@ def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="
     step. A pair's gaps are then reported down to −(margin + sweep_a + sweep_b), so a contact
     that the step's motion could close is found before it is crossed (speculative contacts:
     this is how nothing tunnels through a thin wall, however fast it moves).
+
+    cloth_samples: besides its vertices (particles), sample every cloth triangle k × k times
+    against the static obstacles (P2c, see collision.cloth); 0: vertices only. The vertices of
+    one cloth never collide with each other here (their springs keep them apart).
     """
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
@@ -111,6 +117,10 @@ def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="
         reach[:dynamic] += sweep
     lower, upper = _bounds(kinds, params, centers, rots, reach)
     dyn_pairs = overlapping_pairs(lower[:dynamic], upper[:dynamic])
+    if len(getattr(model, "triangles", ())):                 # neighbours within one cloth: no contact
+        cloth = np.concatenate([np.full(B, -1), model.particle_cloth])
+        same = (cloth[dyn_pairs[:, 0]] >= 0) & (cloth[dyn_pairs[:, 0]] == cloth[dyn_pairs[:, 1]])
+        dyn_pairs = dyn_pairs[~same]
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
     static_pairs = []
     mesh_parts = []
@@ -141,9 +151,13 @@ def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="
                                                                      model.hull_store)
     parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
     a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
-    if len(a) == 0:
-        return Contacts.empty()
-    return _assemble(model, a, b, contact_point, contact_normal, depth, feature, dynamic + O)
+    found = Contacts.empty() if len(a) == 0 else _assemble(model, a, b, contact_point, contact_normal, depth,
+                                                           feature, dynamic + O)
+    if cloth_samples > 0 and len(getattr(model, "triangles", ())):
+        reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
+        found = Contacts.concatenate([found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth,
+                                                                   (dynamic + O) ** 2)])
+    return found
 
 
 def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):

@@ -24,9 +24,10 @@ def stack(body_velocity, body_angular_velocity, particle_velocity):
     return np.concatenate([bodies, particle_velocity.ravel()])
 
 
-def unstack(model, v):
-    """(body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)) from v (N,)."""
-    B = model.body_count
+def unstack(v, body_count):
+    """(body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)) from v (N,),
+    copies, for B = body_count."""
+    B = body_count
     bodies = v[:6 * B].reshape(B, 6)
     return bodies[:, :3].copy(), bodies[:, 3:].copy(), v[6 * B:].reshape(-1, 3).copy()
 

@@ -26,8 +26,8 @@ class StepInfo:
     energy_elastic: float = 0.0   # energy stored in contact springs [J]
 
 
-AVAILABLE = ("penalty", "impulse")
-PLANNED = ("projection", "constraints")
+AVAILABLE = ("penalty", "projection", "impulse")
+PLANNED = ("constraints",)
 
 
 def get(name):
@@ -38,6 +38,9 @@ def get(name):
     if name == "penalty":
         from . import penalty
         return penalty
+    if name == "projection":
+        from . import projection
+        return projection
     if name in PLANNED:
         raise InputError("method", f"method {name!r} is not available in this version yet; "
                          f"use one of: {', '.join(AVAILABLE)}")

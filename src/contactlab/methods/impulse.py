@@ -33,10 +33,12 @@ from numba import njit
 
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
+from .sequential import _row_velocity, _solve_contact, contact_rows, lever_arms, solve_order, solve_sequential_impulses
 
 
 @dataclass
@@ -72,139 +74,6 @@ class Options:
             raise InputError("samples", f"expected a whole number ≥ 1, found {self.samples!r}")
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
-
-
-# ---- the compiled solver: every contact as three rows of J over the generalized velocity ----
-#
-# The generalized velocity u (6B + 3P,) is the DOF layout of contactlab.contacts: body i owns
-# u[6i:6i+3] (linear, m/s) and u[6i+3:6i+6] (world angular, rad/s), particle j owns
-# u[6B+3j:6B+3j+3]. A contact touches at most ROW_WIDTH entries of u (6 per rigid-body side,
-# 3 per particle of a side). For each contact c and direction d (0: normal, 1: tangent1,
-# 2: tangent2) ``jac[c, d]`` holds that row of J (v_n = Σ jac · u[index]) and ``push[c, d]``
-# the matching column of M⁻¹ Jᵀ (an impulse λ changes u[index] by λ · push), so that
-# k[c, d] = jac · push = dᵀ J M⁻¹ Jᵀ d is the effective inverse mass of R4. Precomputing the
-# rows once per step keeps the Gauss-Seidel sweeps to two short dot products per update.
-
-ROW_WIDTH = 18
-
-
-@njit(cache=True)
-def contact_rows(body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
-                 normal, tangent1, tangent2, body_inverse_mass, body_inverse_inertia_world,
-                 particle_inverse_mass):
-    """The contacts' Jacobian rows over the generalized velocity (see above).
-
-    Shapes: C contacts; r_a, r_b (C, 3) lever arms [m]; body_inverse_inertia_world (B, 3, 3).
-    Returns index (C, ROW_WIDTH) int (entries of u), width (C,) int (how many are used),
-    jac (C, 3, ROW_WIDTH) [1 or m], push (C, 3, ROW_WIDTH) [1/kg or 1/(kg m)] and
-    k (C, 3) [1/kg]: the effective inverse mass of each row.
-    """
-    C = normal.shape[0]
-    B = body_inverse_mass.shape[0]
-    index = np.zeros((C, ROW_WIDTH), dtype=np.int64)
-    width = np.zeros(C, dtype=np.int64)
-    jac = np.zeros((C, 3, ROW_WIDTH))
-    push = np.zeros((C, 3, ROW_WIDTH))
-    k = np.zeros((C, 3))
-    direction = np.empty(3)
-    for c in range(C):
-        n = 0
-        for side in range(2):
-            sign = 1.0 if side == 0 else -1.0
-            body = body_a[c] if side == 0 else body_b[c]
-            if body >= 0:
-                r = r_a[c] if side == 0 else r_b[c]
-                inverse_inertia = body_inverse_inertia_world[body]
-                for i in range(6):
-                    index[c, n + i] = 6 * body + i
-                for d in range(3):
-                    for i in range(3):
-                        direction[i] = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
-                    a0 = r[1] * direction[2] - r[2] * direction[1]        # r × d
-                    a1 = r[2] * direction[0] - r[0] * direction[2]
-                    a2 = r[0] * direction[1] - r[1] * direction[0]
-                    for i in range(3):
-                        jac[c, d, n + i] = sign * direction[i]
-                        push[c, d, n + i] = sign * direction[i] * body_inverse_mass[body]
-                        jac[c, d, n + 3 + i] = sign * (a0 if i == 0 else (a1 if i == 1 else a2))
-                        push[c, d, n + 3 + i] = sign * (inverse_inertia[i, 0] * a0 + inverse_inertia[i, 1] * a1
-                                                        + inverse_inertia[i, 2] * a2)
-                n += 6
-            for m in range(3):
-                p = particles_a[c, m] if side == 0 else particles_b[c, m]
-                if p < 0:
-                    continue
-                w = weights_a[c, m] if side == 0 else weights_b[c, m]
-                for i in range(3):
-                    index[c, n + i] = 6 * B + 3 * p + i
-                for d in range(3):
-                    for i in range(3):
-                        value = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
-                        jac[c, d, n + i] = sign * w * value
-                        push[c, d, n + i] = sign * w * value * particle_inverse_mass[p]
-                n += 3
-        width[c] = n
-        for d in range(3):
-            total = 0.0
-            for e in range(n):
-                total += jac[c, d, e] * push[c, d, e]
-            k[c, d] = total
-    return index, width, jac, push, k
-
-
-@njit(cache=True, inline="always")
-def _row_velocity(c, d, index, width, jac, u):
-    """Row d of contact c applied to u: dᵀ(v_A − v_B) at the contact [m/s]."""
-    total = 0.0
-    for e in range(width[c]):
-        total += jac[c, d, e] * u[index[c, e]]
-    return total
-
-
-@njit(cache=True, inline="always")
-def _apply(c, d, amount, index, width, push, u):
-    """Impulse ``amount`` [N s] along row d of contact c: +amount·d on A, −amount·d on B (R1, R2)."""
-    for e in range(width[c]):
-        u[index[c, e]] += amount * push[c, d, e]
-
-
-@njit(cache=True, inline="always")
-def _friction_impulse(c, limit, impulses, index, width, jac, push, k, u):
-    """Coulomb friction (F2) on top of the accumulated tangential impulse ``impulses[c, 1:3]``.
-
-    The impulse that cancels the tangential relative velocity, with the total kept in the disk
-    of radius ``limit`` = μ λ_n [N s]: if it does not stop the sliding the maximum applies,
-    against the sliding. Updates ``impulses[c]`` and u; returns the largest velocity change [m/s].
-    """
-    old1, old2 = impulses[c, 1], impulses[c, 2]
-    new1 = old1 - _row_velocity(c, 1, index, width, jac, u) / k[c, 1]
-    new2 = old2 - _row_velocity(c, 2, index, width, jac, u) / k[c, 2]
-    magnitude = np.sqrt(new1 * new1 + new2 * new2)
-    if magnitude > limit:
-        scale = limit / magnitude
-        new1 *= scale
-        new2 *= scale
-    _apply(c, 1, new1 - old1, index, width, push, u)
-    _apply(c, 2, new2 - old2, index, width, push, u)
-    impulses[c, 1], impulses[c, 2] = new1, new2
-    return max(abs(new1 - old1) * k[c, 1], abs(new2 - old2) * k[c, 2])
-
-
-@njit(cache=True, inline="always")
-def _solve_contact(c, target, impulses, index, width, jac, push, k, friction, u):
-    """One Gauss-Seidel update of contact c (C7 on velocities): the normal impulse that brings
-    v_n to ``target`` [m/s] with the accumulated impulse kept ≥ 0 (C2), then friction kept in
-    the disk μ λ_n (F2). Updates ``impulses[c]`` [N s] and u; returns the largest velocity
-    change it made [m/s]."""
-    vn = _row_velocity(c, 0, index, width, jac, u)
-    old = impulses[c, 0]
-    impulses[c, 0] = max(0.0, old - (vn - target) / k[c, 0])
-    _apply(c, 0, impulses[c, 0] - old, index, width, push, u)
-    change = abs(impulses[c, 0] - old) * k[c, 0]
-    if friction[c] > 0.0:
-        change = max(change, _friction_impulse(c, friction[c] * impulses[c, 0], impulses, index, width, jac,
-                                               push, k, u))
-    return change
 
 
 @njit(cache=True)
@@ -264,68 +133,6 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
     return max_waves
 
 
-@njit(cache=True)
-def solve_sequential_impulses(index, width, jac, push, k, friction, target_normal_velocity, u,
-                              iterations, tolerance, initial_impulses, order):
-    """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
-
-    ``initial_impulses`` (C, 3) [N s] are applied first (warm starting: last step's impulses
-    of the same contacts), then corrected like any accumulated impulse.
-
-    For every contact c (in ``order`` (C,) int, see ``solve_order``; repeatedly): the normal impulse that brings the normal
-    relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated impulse
-    kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential impulse
-    kept in the disk μ λ_n (F2). Returns (impulses (C, 3) [N s] as (normal, t1, t2), sweeps
-    made, largest velocity change in the last sweep [m/s]).
-    """
-    C = k.shape[0]
-    impulses = initial_impulses.copy()
-    for c in range(C):
-        for d in range(3):
-            _apply(c, d, impulses[c, d], index, width, push, u)
-    sweeps = 0
-    change = 0.0
-    for sweep in range(iterations):
-        sweeps = sweep + 1
-        change = 0.0
-        for o in range(C):
-            c = order[o]
-            if k[c, 0] <= 0.0:        # static against static: nothing can move
-                continue
-            change = max(change, _solve_contact(c, target_normal_velocity[c], impulses, index, width, jac, push,
-                                                k, friction, u))
-        if change <= tolerance:
-            break
-    return impulses, sweeps, change
-
-
-def generalized_velocity(body_velocity, body_angular_velocity, particle_velocity):
-    """Pack (B, 3), (B, 3), (P, 3) velocities into u (6B + 3P,) in the contacts' DOF layout."""
-    B = len(body_velocity)
-    u = np.empty(6 * B + 3 * len(particle_velocity))
-    bodies = u[:6 * B].reshape(B, 6)
-    bodies[:, :3] = body_velocity
-    bodies[:, 3:] = body_angular_velocity
-    u[6 * B:] = particle_velocity.ravel()
-    return u
-
-
-def split_velocity(u, body_count):
-    """Unpack u (6B + 3P,) into copies of (body_velocity, body_angular_velocity, particle_velocity)."""
-    bodies = u[:6 * body_count].reshape(body_count, 6)
-    return bodies[:, :3].copy(), bodies[:, 3:].copy(), u[6 * body_count:].reshape(-1, 3).copy()
-
-
-def lever_arms(contacts, body_position):
-    """r = point − centre of mass for each side, (C, 3) each; zero for non-body sides."""
-    def arm(body):
-        r = np.zeros((contacts.count, 3))
-        has = body >= 0
-        r[has] = contacts.point[has] - body_position[body[has]]
-        return r
-    return arm(contacts.body_a), arm(contacts.body_b)
-
-
 def step(model, state, dt, options, integrator="symplectic_euler"):
     """One step of loop L3 with impulses; returns (new State, StepInfo)."""
     # 1. internal forces → free velocities v*
@@ -356,7 +163,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
                         contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
                         contacts.tangent2, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass)
-    u = generalized_velocity(v_body, w_body, v_particle)
+    u = stack(v_body, w_body, v_particle)
     order = solve_order(contacts, model.gravity)
     tau_contact = np.empty(contacts.count)
     resolve_collisions(*rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
@@ -366,7 +173,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     impulses, sweeps, change = solve_sequential_impulses(*rows, contacts.friction,
                                                          resting_target(gap_at_start, dt, options), u,
                                                          options.iterations, options.tolerance, warm, order)
-    v_body_new, w_body_new, v_particle_new = split_velocity(u, model.body_count)
+    v_body_new, w_body_new, v_particle_new = unstack(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:
         tau_contact[:] = -1.0
@@ -378,20 +185,6 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     carried = dict(state.carried, impulse_ids=contacts.feature_id, impulse_values=impulses)
     new = State.assemble(state.time + dt, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
-
-
-def solve_order(contacts, gravity):
-    """The order of the Gauss-Seidel sweeps (C,) int: highest contact point first along −g.
-
-    In a stack the top contact is solved first, and the impulse it puts on the body below is
-    passed on, contact by contact, down to the ground within the same sweep: the load path is
-    followed in one sweep instead of creeping one link per sweep. This is what keeps a heavy
-    body on a light one (mass ratio 100) from sinking with a modest iteration count. Contacts
-    at one height (the four corners of a face) keep the collision order (a stable sort);
-    without gravity the order is that of the collision detection.
-    """
-    height = contacts.point @ -np.asarray(gravity, dtype=float)
-    return np.argsort(-height, kind="stable")
 
 
 def warm_start_impulses(carried, feature_id, fraction):

@@ -380,12 +380,12 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         moved_by = v if integrator == "explicit_euler" else v_new
         # the anchors follow the point's tangential motion over the step
         elongation = elongation + h * (J @ moved_by).reshape(-1, 3)[:, 1:]
-    positions = advance_positions(*state.positions, *unstack(model, moved_by), h, h)
+    positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)
     # 5. advance dt; the anchors of pressed contacts go on, by contact id
     depth_after = contacts.depth - h * (J @ moved_by)[0::3]
     elongation[depth_after <= 0.0] = 0.0
     carried = dict(state.carried, anchor_ids=contacts.feature_id,
                    anchor_offsets=elongation[:, :1] * contacts.tangent1 + elongation[:, 1:] * contacts.tangent2)
-    new = State.assemble(state.time + dt, positions, unstack(model, v_new), carried)
+    new = State.assemble(state.time + dt, positions, unstack(v_new, model.body_count), carried)
     return new, StepInfo(contacts, solver_iterations=passes, solver_residual=residual,
                          energy_elastic=elastic_energy(springs, depth_after, elongation))

@@ -1,0 +1,141 @@
+"""The projection method (W1, L2, M3) against closed-form results."""
+
+import numpy as np
+import pytest
+
+from contactlab import ModelBuilder, collide, simulate
+from contactlab.dynamics.integrators import world_inverse_inertia
+from contactlab.errors import InputError
+from contactlab.methods import projection
+from contactlab.scene import builtin_scenes, load_scene
+from conftest import ball_on_plane
+
+G = 9.81
+HALF = 0.05
+
+
+def particles_over_obstacles(rng, count=60):
+    """Particles raining onto a floor, a sphere, a box and a tilted plane, radius 5 mm."""
+    b = ModelBuilder()
+    b.add_material("m", friction=0.4, restitution=0.0)
+    positions = rng.uniform([-0.5, -0.5, 0.05], [0.5, 0.5, 0.6], size=(count, 3))
+    b.add_particles(positions, rng.normal(scale=1.0, size=(count, 3)), mass=0.01, radius=0.005, material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    b.add_obstacle("sphere", radius=0.2, position=(0.2, 0.1, 0.05), material="m")
+    b.add_obstacle("box", half_extents=(0.1, 0.15, 0.1), position=(-0.25, -0.2, 0.1),
+                   orientation=(np.cos(0.3), 0, 0, np.sin(0.3)), material="m")
+    return b.finalize()
+
+
+def test_no_particle_stays_inside_after_a_projection(rng):
+    model = particles_over_obstacles(rng)
+    state = model.state()
+    options = projection.Options()
+    for _ in range(150):
+        state, info = projection.step(model, state, 0.004, options)
+        after = collide(model, state)                     # depth counts from each particle's radius
+        assert after.depth.max(initial=0.0) <= 1e-6
+    assert info.contacts.count > 0
+
+
+def test_projected_points_do_not_keep_approaching():
+    model = ball_on_plane(height=0.3, friction=0.0, restitution=0.9)
+    run = simulate(model, "projection", dt=0.004, duration=0.5)
+    landed = run.arrays["time"] > np.sqrt(2 * 0.3 / G) + 0.01
+    z, vz = run.arrays["body_position"][landed, 0, 2], run.arrays["body_velocity"][landed, 0, 2]
+    np.testing.assert_allclose(z, 0.1, atol=1e-9)         # on the surface: inelastic, whatever ε
+    np.testing.assert_allclose(vz, 0.0, atol=1e-9)
+
+
+def test_a_body_correction_splits_between_translation_and_rotation_by_mass_and_inertia():
+    # a tilted box, no gravity, no motion, its lowest corner 2 mm into the floor: one projection
+    from contactlab import rotations
+    half, mass, corner_depth = np.array([0.1, 0.05, 0.2]), 3.0, 0.002
+    angle = 0.4
+    orientation = np.array([np.cos(angle / 2), np.sin(angle / 2) * 0.6, np.sin(angle / 2) * 0.8, 0.0])
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+    lowest = (corners @ rotations.to_matrix(orientation[None])[0].T)[:, 2].min()
+    b = ModelBuilder(gravity=(0, 0, 0))
+    b.add_material("m", friction=0.0, restitution=0.0)
+    b.add_body("box", half_extents=half, mass=mass, position=(0, 0, -lowest - corner_depth), orientation=orientation,
+               material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    state = model.state()
+    contacts = collide(model, state)
+    assert contacts.count == 1 and contacts.depth[0] == pytest.approx(corner_depth, rel=1e-9)
+    h = 0.01
+    new, _ = projection.step(model, state, h, projection.Options(passes=1))
+    n, r = contacts.normal[0], contacts.point[0] - state.body_position[0]
+    inverse_inertia = world_inverse_inertia(model, state.body_orientation)[0]
+    lam = corner_depth / (1 / mass + np.cross(r, n) @ inverse_inertia @ np.cross(r, n))   # J M⁻¹ Jᵀ λ = δ
+    np.testing.assert_allclose(new.body_position[0] - state.body_position[0], lam * n / mass, rtol=1e-9)
+    # the rotation vector of the step, h ω (velocities follow the projected positions)
+    np.testing.assert_allclose(h * new.body_angular_velocity[0], lam * inverse_inertia @ np.cross(r, n), rtol=1e-9)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "explicit_euler"])
+def test_sliding_block_stops_at_v2_over_2_mu_g(integrator):
+    v0, mu = 3.0, 0.3
+    b = ModelBuilder()
+    b.add_material("m", friction=mu, restitution=0.0)
+    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=(0, 0, HALF), velocity=(v0, 0, 0), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    run = simulate(b.finalize(), "projection", dt=0.002, duration=1.2, integrator=integrator)
+    x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
+    stopped = np.argmax(np.abs(vx) < 1e-9)
+    np.testing.assert_allclose(run.arrays["time"][stopped], v0 / (mu * G), rtol=0.03)
+    np.testing.assert_allclose(x[-1], v0 ** 2 / (2 * mu * G), rtol=0.03)
+
+
+def tilted_cube(angle_degrees, friction):
+    theta = np.radians(angle_degrees)
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    b = ModelBuilder()
+    b.add_material("m", friction=friction, restitution=0.0)
+    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=normal * HALF,
+               orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), material="m")
+    b.add_obstacle("plane", normal=normal, material="m")
+    return b.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
+
+
+def test_block_sticks_on_an_incline_flatter_than_its_friction_angle():
+    model, _ = tilted_cube(20.0, 0.5)
+    run = simulate(model, "projection", dt=0.004, duration=2.0)
+    drift = np.linalg.norm(run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0], axis=1)
+    assert drift.max() < 0.001
+
+
+def test_block_slides_down_a_steeper_incline_at_g_sin_minus_mu_cos():
+    theta, mu = np.radians(20.0), 0.2
+    model, downhill = tilted_cube(20.0, mu)
+    run = simulate(model, "projection", dt=0.004, duration=1.5)
+    t = run.arrays["time"]
+    along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill
+    acceleration = 2 * np.polyfit(t[t > 0.2], along[t > 0.2], 2)[0]
+    np.testing.assert_allclose(acceleration, G * (np.sin(theta) - mu * np.cos(theta)), rtol=0.03)
+
+
+@pytest.mark.parametrize("name", ["box_stack", "box_pyramid", "mass_ratio_stack"])
+def test_stacks_stand(name):
+    scene = load_scene(name)
+    run = simulate(scene.model, "projection", scene.dt, 2.0)
+    moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
+    assert moved.max() < 0.01
+    assert run.summary["max_penetration"] < 0.001
+
+
+@pytest.mark.parametrize("table, field", [({"iterations": 0}, "iterations"), ({"passes": 1.5}, "passes"),
+                                          ({"cloth_samples": -1}, "cloth_samples"), ({"normal": "up"}, "normal")])
+def test_bad_options_name_the_field(table, field):
+    with pytest.raises(InputError, match=field):
+        projection.Options(**table)
+
+
+@pytest.mark.parametrize("name", [name for name, _ in builtin_scenes()])
+def test_runs_every_built_in_scene(name):
+    scene = load_scene(name)
+    run = simulate(scene.model, "projection", scene.dt, 25 * scene.dt, scene.method_options.get("projection", {}),
+                   scene.integrator)
+    assert run.state.is_finite()
+    assert run.summary["max_penetration"] < 0.01
