@@ -5,6 +5,7 @@ values; its errors name the builder argument (``mass``), and are re-raised here 
 path in front (``bodies[2].mass``). ``array`` tables are expanded here: a body is copied on a
 grid of ``count`` = [nx, ny, nz] positions ``spacing`` = [dx, dy, dz] apart, starting at its
 ``position`` (x varies fastest, then y, then z); the copies are named ``NAME_i``.
+``[[cloth]]`` entries go to ``ModelBuilder.add_cloth`` key for key (``cloth[0].resolution``).
 """
 
 from pathlib import Path
@@ -66,6 +67,8 @@ def build_model(scene, base=None):
             velocity = np.tile(np.asarray(velocity), (len(offsets), 1))
         _call(f"particles[{i}]", builder.add_particles, position=position, velocity=velocity,
               mass=particles["mass"], radius=particles["radius"], material=particles["material"])
+    for i, cloth in enumerate(scene.get("cloth", [])):
+        _call(f"cloth[{i}]", builder.add_cloth, **_resolve_files(cloth, base))
     for i, obstacle in enumerate(scene["obstacles"]):
         _call(f"obstacles[{i}]", builder.add_obstacle, **_resolve_files(obstacle, base))
     return builder.finalize()

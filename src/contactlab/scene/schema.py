@@ -1,7 +1,7 @@
 """Scene-file schema v1: which keys each table takes, their kind, unit and default.
 
 The schema is a few declarative tables (``TOP``, ``SIMULATION``, ``MATERIAL``, ``BODY``,
-``PARTICLES``, ``OBSTACLE``, ``ARRAY``) of :class:`Key` entries. :func:`validate` walks a raw
+``PARTICLES``, ``CLOTH``, ``OBSTACLE``, ``ARRAY``) of :class:`Key` entries. :func:`validate` walks a raw
 TOML dict against them and returns a normalized copy in which every key is present (``None``
 where the key was left out and the builder supplies the default).
 
@@ -150,6 +150,23 @@ class Points:
         return "[[x, y, z], ...]"
 
 
+class Pinned:
+    """Cloth vertices: a list of whole numbers ≥ 0 (vertex indices) and names, or one of them."""
+
+    def check(self, value, field, unit=""):
+        items = value if isinstance(value, list) else [value]
+        for i, item in enumerate(items):
+            ok = isinstance(item, str) or (isinstance(item, int) and not isinstance(item, bool) and item >= 0)
+            if not ok:
+                where = f"{field}[{i}]" if isinstance(value, list) else field
+                raise InputError(where, f"expected a vertex index (a whole number ≥ 0) or a vertex set name "
+                                        f"such as \"corners\", found {show(item)}")
+        return list(items)
+
+    def describe(self):
+        return "[index or name, ...]"
+
+
 class Table:
     """A table with the keys of ``keys`` (a dict name -> Key)."""
 
@@ -284,6 +301,26 @@ PARTICLES = {
     "array": Key(GridArray(ARRAY)),
 }
 
+CLOTH = {
+    "name": Key(Text()),
+    "size": Key(Vector(2), unit="m"),
+    "resolution": Key(Vector(2, whole=True)),
+    "file": Key(Text()),
+    "scale": Key(Number(positive=True), 1.0),
+    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
+    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z"),
+    "velocity": Key(Vector(3), [0.0, 0.0, 0.0], "m/s"),
+    "mass": Key(Number(), unit="kg"),
+    "density": Key(Number(), unit="kg/m^2"),
+    "stretch_stiffness": Key(Number(), 1000.0, "N/m"),
+    "shear_stiffness": Key(Number(), 100.0, "N/m"),
+    "bend_stiffness": Key(Number(), 10.0, "N/m"),
+    "damping": Key(Number(), 0.0, "N s/m"),
+    "pinned": Key(Pinned(), []),
+    "thickness": Key(Number(), 0.005, "m"),
+    "material": Key(Text()),
+}
+
 OBSTACLE = {
     "shape": Key(Choice(("plane", "sphere", "box", "convex", "mesh"), PLANNED_OBSTACLE_SHAPES,
                         what="obstacle shape"), required=True),
@@ -306,11 +343,12 @@ TOP = {
     "materials": Key(TableList(MATERIAL), []),
     "bodies": Key(TableList(BODY, shape_key="shape"), []),
     "particles": Key(TableList(PARTICLES), []),
+    "cloth": Key(TableList(CLOTH), []),
     "obstacles": Key(TableList(OBSTACLE, shape_key="shape"), []),
 }
 
 TABLES = {"top level": TOP, "[simulation]": SIMULATION, "[[materials]]": MATERIAL,
-          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[obstacles]]": OBSTACLE, "array": ARRAY}
+          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[cloth]]": CLOTH, "[[obstacles]]": OBSTACLE, "array": ARRAY}
 
 
 def validate_table(table, keys, path, shape_key=None):
