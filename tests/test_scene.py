@@ -219,7 +219,7 @@ ERROR_CASES = [
     ("plane with position", BASE + "position = [0.0, 0.0, 0.0]\n", "obstacles[0].position", "a plane takes no"),
     ("unknown method", replace("duration = 0.1", 'duration = 0.1\nmethod = "impuls"'), "simulation.method",
      "did you mean 'impulse'"),
-    ("planned method", replace("duration = 0.1", 'duration = 0.1\nmethod = "projection"'), "simulation.method",
+    ("planned method", replace("duration = 0.1", 'duration = 0.1\nmethod = "constraints"'), "simulation.method",
      "not available"),
     ("unknown method table", BASE + "[method.impuls]\niterations = 3\n", "method.impuls", "did you mean 'impulse'"),
     ("method table not a table", BASE + "[method]\nimpulse = 3\n", "method.impulse", "expected a table"),
@@ -326,7 +326,7 @@ def test_set_creates_missing_keys_and_tables(tmp_path):
 def test_set_plain_string_that_is_not_toml_selects_a_method():
     assert load_scene("bouncing_ball", ["simulation.method=penalty"]).method == "penalty"
     with pytest.raises(InputError) as info:
-        load_scene("bouncing_ball", ["simulation.method=projection"])
+        load_scene("bouncing_ball", ["simulation.method=constraints"])
     assert info.value.field == "simulation.method" and "not available" in info.value.message
 
 
@@ -459,7 +459,7 @@ def test_convex_input_errors(tmp_path, entry, field, words):
     assert "\n" not in str(error.value)
 
 
-@pytest.mark.parametrize("name", ["impulse", "penalty"])
+@pytest.mark.parametrize("name", ["impulse", "penalty", "projection"])
 def test_every_method_option_is_documented(name):
     from dataclasses import fields
     from contactlab import methods
