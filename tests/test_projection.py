@@ -139,3 +139,74 @@ def test_runs_every_built_in_scene(name):
                    scene.integrator)
     assert run.state.is_finite()
     assert run.summary["max_penetration"] < 0.01
+
+
+# ---- cloth -----------------------------------------------------------------------------------
+
+def cloth_over(obstacles, size=0.6, resolution=9, height=0.3, friction=0.4, orientation=(1, 0, 0, 0), samples=None):
+    """A light cloth (0.1 kg) at ``height`` over the given obstacles [(shape, kwargs)]."""
+    b = ModelBuilder()
+    b.add_material("m", friction=friction, restitution=0.0)
+    b.add_cloth(size=(size, size), resolution=(resolution, resolution), position=(0, 0, height),
+                orientation=orientation, mass=0.1, stretch_stiffness=500.0, shear_stiffness=50.0,
+                bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m")
+    for shape, kwargs in obstacles:
+        b.add_obstacle(shape, material="m", **kwargs)
+    return b.finalize()
+
+
+def obstacle_depths(model, state):
+    """Depths beyond the thickness of every cloth vertex against every obstacle (particle–obstacle contacts)."""
+    contacts = collide(model, state)
+    static = (contacts.body_b < 0) & (contacts.particles_b[:, 0] < 0)
+    return contacts.depth[static]
+
+
+def test_no_cloth_vertex_stays_inside_an_obstacle_after_a_projection():
+    model = cloth_over([("sphere", dict(radius=0.15, position=(0.05, 0.0, 0.0))), ("plane", dict(normal=(0, 0, 1)))],
+                       height=0.25)
+    state = model.state()
+    options = projection.Options()
+    deepest = []
+    for _ in range(120):
+        state, info = projection.step(model, state, 1 / 120, options, "backward_euler")
+        deepest.append(obstacle_depths(model, state).max(initial=-1.0))
+    assert max(deepest) <= 1e-6
+    assert max(deepest) > -0.001                      # it did land on them
+
+
+@pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
+def test_cloth_sticks_on_an_incline_only_when_tan_theta_is_below_mu(friction, sticks):
+    theta = np.radians(20.0)
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    model = cloth_over([("plane", dict(normal=normal))], size=0.2, resolution=5, friction=friction,
+                       height=0.0, orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0))
+    state = model.state()
+    state.particle_position += 0.004 * normal            # lying on the slope at its thickness
+    run = simulate(model, "projection", dt=0.004, duration=2.0, state=state, record_every=5,
+                   integrator="backward_euler")
+    centre = run.arrays["particle_position"].mean(axis=1)
+    drift = np.linalg.norm(centre - centre[0], axis=1)
+    if sticks:
+        assert drift.max() < 0.001
+    else:
+        t = run.arrays["time"]
+        downhill = -np.array([np.cos(theta), 0.0, np.sin(theta)])
+        along = (centre - centre[0]) @ downhill
+        acceleration = 2 * np.polyfit(t[t > 0.2], along[t > 0.2], 2)[0]
+        np.testing.assert_allclose(acceleration, G * (np.sin(theta) - friction * np.cos(theta)), rtol=0.03)
+
+
+@pytest.mark.parametrize("cloth_samples, pierced", [(0, True), (4, False)])
+def test_triangle_samples_stop_a_corner_poking_through_a_coarse_cloth(cloth_samples, pierced):
+    # a 2 × 2-vertex cloth (two triangles, 0.5 m) dropped centred on a 0.1 m post: its
+    # vertices never touch the post, only samples inside its triangles can (P2c)
+    post = ("box", dict(half_extents=(0.05, 0.05, 0.1), position=(0.0, 0.0, 0.1)))
+    model = cloth_over([post, ("plane", dict(normal=(0, 0, 1)))], size=0.5, resolution=2, height=0.3)
+    run = simulate(model, "projection", dt=0.004, duration=0.6, options={"cloth_samples": cloth_samples},
+                   record_every=10)
+    lowest = run.state.particle_position[:, 2].min()
+    if pierced:
+        assert lowest < 0.05                               # fell past the post to the floor
+    else:
+        assert lowest > 0.15                               # held up by the post's top (z = 0.2)

@@ -11,9 +11,10 @@ from contactlab.scene import Scene, builtin_scenes, load_scene
 from contactlab.scene import schema
 from contactlab.simulation import simulate
 
-BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "capsule_pile", "card_house", "domino_chain", "incline",
-           "mass_ratio_stack", "mesh_bowl", "newtons_cradle", "particles_box", "rod_impact", "rolling_sphere", "sliding_block",
-           "sphere_pile"]
+BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "capsule_pile", "card_house", "cloth_drape", "cloth_table",
+           "domino_chain", "incline", "mass_ratio_stack", "mesh_bowl", "newtons_cradle", "particles_bowl", "particles_box",
+           "rod_impact", "rolling_sphere", "sliding_block", "sphere_pile"]
+CLOTH_AND_POURING = {"cloth_drape": "backward_euler", "cloth_table": "backward_euler", "particles_bowl": "symplectic_euler"}
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
 
 # A small valid scene; the error cases below change one thing in it.
@@ -79,7 +80,10 @@ def test_builtin_scene_loads_and_runs(name):
     assert isinstance(scene, Scene)
     assert scene.name == name and scene.source == f"builtin:{name}"
     assert scene.description == dict(builtin_scenes())[name]
-    assert scene.method == "impulse" and scene.integrator == "symplectic_euler"
+    if name in CLOTH_AND_POURING:           # the scenes of the projection method, cloth implicit
+        assert scene.method == "projection" and scene.integrator == CLOTH_AND_POURING[name]
+    else:
+        assert scene.method == "impulse" and scene.integrator == "symplectic_euler"
     assert scene.dt > 0 and scene.duration > scene.dt
     run = simulate(scene.model, scene.method, scene.dt, 10 * scene.dt, scene.method_options.get(scene.method),
                    scene.integrator)

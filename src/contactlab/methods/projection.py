@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide
+from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
 from ..errors import InputError
@@ -63,15 +63,18 @@ class Options:
                 raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
 
 
-def project(model, state, predicted, displacement, options):
+def project(model, state, predicted, displacement, options, sweep=None):
     """Project the colliding points of the predicted state onto the surfaces.
 
     state: the positions at the start of the step; predicted: the State at x + displacement;
     displacement u (N,) the generalized displacement of the step [m, rad] (body i: entries
-    6i..6i+6 = translation and rotation vector; particle j: 6B+3j..). Returns (corrected
-    displacement (N,), the contacts, sweeps, last correction [m]).
+    6i..6i+6 = translation and rotation vector; particle j: 6B+3j..). sweep (B + P,) [m]: how
+    far each body and particle may still be pushed; gaps that small are detected too, as open
+    constraints (λ = 0 while they stay open), so that no push of one contact drives a point
+    through a surface nobody was watching. Returns (corrected displacement (N,), the
+    contacts, sweeps, last correction [m]).
     """
-    contacts = collide(model, predicted, options.contact_margin, None, options.granularity, options.normal,
+    contacts = collide(model, predicted, options.contact_margin, sweep, options.granularity, options.normal,
                        options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
         return displacement, contacts, 0, 0.0
@@ -98,10 +101,11 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     moving = stack(*state.velocities) if integrator == "explicit_euler" else v_free
     predicted_displacement = h * moving
     displacement, total_sweeps, change = predicted_displacement, 0, 0.0
+    sweep = swept_distances(model, *unstack(moving, model.body_count), h)
     for _ in range(options.passes):
         predicted = State.assemble(state.time + h, _displaced(model, state, displacement, h), state.velocities)
         # 3. collision detection at the predicted positions; 4. project the colliding points
-        displacement, contacts, sweeps, change = project(model, state, predicted, displacement, options)
+        displacement, contacts, sweeps, change = project(model, state, predicted, displacement, options, sweep)
         total_sweeps += sweeps
         if contacts.count == 0 or (sweeps <= 1 and change <= options.tolerance):
             break
