@@ -377,3 +377,34 @@ def test_runs_every_built_in_scene(name):
     run = simulate(scene.model, "penalty", scene.dt, 25 * scene.dt, options, scene.integrator)
     assert run.state.is_finite()
     assert run.summary["options"]["stiffness"] > 0
+
+
+# ---- cloth (barycentric points, implicit together with the cloth's springs) ----------------------
+
+@pytest.mark.parametrize("integrator, dt", [("symplectic_euler", 0.0005), ("backward_euler", 0.01)])
+def test_a_resting_cloth_sinks_each_vertex_m_g_over_k(integrator, dt):
+    k, thickness = 100.0, 0.004
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5, restitution=0.0)
+    b.add_cloth(size=(0.4, 0.4), resolution=(5, 5), position=(0, 0, thickness), mass=0.25, stretch_stiffness=200.0,
+                shear_stiffness=20.0, bend_stiffness=1.0, damping=0.05, thickness=thickness, material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    run = simulate(b.finalize(), "penalty", dt=dt, duration=1.0, options={"stiffness": k}, integrator=integrator,
+                   record_every=10)
+    sink = thickness - run.state.particle_position[:, 2]
+    np.testing.assert_allclose(sink, 0.01 * G / k, rtol=0.02)            # each vertex carries 10 g
+
+
+def test_cloth_corner_pinned_hangs_in_contact_without_moving_the_pin():
+    b = ModelBuilder()
+    b.add_material("m", friction=0.3, restitution=0.0)
+    b.add_cloth(size=(0.4, 0.4), resolution=(6, 6), position=(0, 0, 0.3), orientation=(np.cos(0.6), np.sin(0.6), 0, 0),
+                mass=0.1, stretch_stiffness=500.0, shear_stiffness=50.0, bend_stiffness=1.0, damping=0.05,
+                pinned=["top_edge"], thickness=0.004, material="m")
+    b.add_obstacle("sphere", radius=0.12, position=(0.0, 0.05, 0.2), material="m")
+    model = b.finalize()
+    run = simulate(model, "penalty", dt=0.01, duration=0.5, options={"stiffness": 500.0, "cloth_samples": 2},
+                   integrator="backward_euler", record_every=10)
+    pinned = model.particle_pinned
+    np.testing.assert_array_equal(run.state.particle_position[pinned], model.initial.particle_position[pinned])
+    assert run.state.is_finite() and run.arrays["contact_count"].max() > 0

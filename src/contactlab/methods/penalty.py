@@ -36,7 +36,7 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import inverse_mass_matrix, mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..dynamics.integrators import advance_positions, free_velocities, particle_system
 from ..errors import InputError, StabilityWarning
 from ..shapes import bounding_radii
 from ..state import State
@@ -57,6 +57,7 @@ class Options:
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
     normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
     samples: int = 2                      # samples per triangle edge for granularity = "samples"
+    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
     linear_solver: str = "cg"             # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
     linear_tolerance: float = 1e-10       # backward Euler with cg: relative residual to reach
     implicit_iterations: int = 8          # backward Euler: most passes to settle which springs act / slip
@@ -76,10 +77,10 @@ class Options:
                               ("linear_solver", LINEAR_SOLVERS)):
             if getattr(self, name) not in allowed:
                 raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
-        for name in ("samples", "implicit_iterations"):
+        for name, least in (("samples", 1), ("implicit_iterations", 1), ("cloth_samples", 0)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise InputError(name, f"expected a whole number ≥ 1, found {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise InputError(name, f"expected a whole number ≥ {least}, found {value!r}")
 
 
 def _stiffness(value, name):
@@ -277,8 +278,35 @@ def distribute(J, inverse_mass, forces, dt):
 
 # ---- backward Euler -----------------------------------------------------------------------
 
-def implicit_velocities(springs, J, M, v_free, depth, dt, options):
-    """Backward Euler for the contact springs: v⁺ with M (v⁺ − v*) = h Jᵀ F(x + h v⁺, v⁺).
+def implicit_base(model, state, dt, v_free):
+    """The backward Euler system without contacts, A₀ v⁺ = b₀, over all N degrees of freedom.
+
+    Bodies: M v⁺ = M v* (gravity and the gyroscopic term are already in v*). Particles: the
+    cloth's linearized springs, A_p = M − h D − h² K and A_p v⁺ = A_p v + h (f + h K v) (see
+    dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
+    with the cloth's own. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
+    a pinned vertex's do not).
+    """
+    B = model.body_count
+    M = mass_matrix(model, state.body_orientation)
+    bodies = M[:6 * B, :6 * B]
+    if model.spring_count:
+        system = particle_system(model, state, dt)
+        particles = system.matrix
+        b_particles = particles @ state.particle_velocity.ravel() + system.rhs
+    else:
+        particles = M[6 * B:, 6 * B:]
+        b_particles = particles @ v_free[6 * B:]
+    A0 = sp.block_diag([bodies, particles], format="csr")
+    free = np.concatenate([np.ones(6 * B, dtype=bool), np.repeat(~model.particle_pinned, 3)])
+    return A0, np.concatenate([bodies @ v_free[:6 * B], b_particles]), free
+
+
+def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
+    """Backward Euler for the contact springs: v⁺ with A₀ v⁺ = b₀ + h Jᵀ F(x + h v⁺, v⁺), where
+    A₀ v⁺ = b₀ is the step without contacts (``implicit_base``: M v⁺ = M v* for rigid bodies and
+    free particles, the cloth's linearized springs for cloth vertices); ``free`` (N,) bool masks
+    the DOFs that may move, v_free (N,) the velocities without contacts.
 
     The springs are linear in v⁺ along the Jacobian fixed at x: δ⁺ = δ − h J_n v⁺ and
     s⁺ = s + h J_t v⁺, so an engaged normal spring adds h (h k + c) J_nᵀ J_n to the matrix and
@@ -299,14 +327,15 @@ def implicit_velocities(springs, J, M, v_free, depth, dt, options):
     engaged = depth - h * (J @ v_free)[0::3] > 0.0
     sticks = engaged & (springs.friction > 0.0)
     slip_force = np.zeros((C, 2))
+    keep = sp.diags(free.astype(float))
     v_new, residual = v_free, 0.0
     for passes in range(1, options.implicit_iterations + 1):
         weight = np.column_stack([engaged * h * (h * k + c),
                                   np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)])
         pull = np.column_stack([engaged * k * depth,
                                 np.where(sticks[:, None], -k_t[:, None] * springs.elongation, slip_force)])
-        A = (M + J.T @ sp.diags(weight.ravel()) @ J).tocsr()
-        rhs = M @ v_free + h * (J.T @ pull.ravel())
+        A = (A0 + keep @ (J.T @ sp.diags(weight.ravel()) @ J) @ keep).tocsr()
+        rhs = b0 + free * (h * (J.T @ pull.ravel()))
         v_new = _solve(A, rhs, v_new, options)
         residual = float(np.linalg.norm(A @ v_new - rhs) / max(np.linalg.norm(rhs), 1e-300))
         # the forces at the new state say which springs act
@@ -360,7 +389,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
     contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples)
+                       options.samples, cloth_samples=options.cloth_samples)
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     inverse_mass = inverse_mass_matrix(model, state.body_orientation)
     springs = contact_springs(contacts, J, inverse_mass, state.carried, options)
@@ -372,8 +401,9 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1)
     passes, residual = 0, 0.0
     if integrator == "backward_euler":
+        A0, b0, free = implicit_base(model, state, h, v_free)
         v_new, forces, elongation, passes, residual = implicit_velocities(
-            springs, J, mass_matrix(model, state.body_orientation), v_free, contacts.depth, h, options)
+            springs, J, A0, b0, free, v_free, contacts.depth, h, options)
         moved_by = v_new
     else:
         v_new = v_free + distribute(J, inverse_mass, forces, h)
