@@ -132,11 +132,13 @@ def particle_system(model, state, dt, particle_force=None, clamp_compressed=True
     return ParticleSystem(matrix.tocsr(), rhs, coupled)
 
 
-def solve_particle_system(system, model, tolerance=1e-10, solver="cg"):
+def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
     """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
-    with a Jacobi preconditioner (``solver="cg"``, relative residual ``tolerance``; a sparse
-    direct solve if it does not converge) or by a sparse direct solve (``"direct"``); the
-    others from their diagonal."""
+    with a Jacobi preconditioner (``solver="cg"``, to the relative residual ``tolerance`` —
+    the linearization itself is only first-order accurate, so 1e-6 is plenty; a sparse direct
+    solve if it does not converge in 3P iterations) or by a sparse direct solve
+    (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
+    ``particle_system`` and not used."""
     A, rhs = system.matrix, system.rhs
     delta = rhs / A.diagonal()                       # exact for the uncoupled rows (A = m I there)
     dofs = np.nonzero(np.repeat(system.coupled, 3))[0]
@@ -148,7 +150,7 @@ def solve_particle_system(system, model, tolerance=1e-10, solver="cg"):
             inverse_diagonal = 1.0 / sub.diagonal()
             preconditioner = spla.LinearOperator(sub.shape, matvec=lambda r: r * inverse_diagonal)
             solution, info = spla.cg(sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0,
-                                     maxiter=max(100, 2 * len(dofs)), M=preconditioner)
+                                     maxiter=max(100, len(dofs)), M=preconditioner)
         if info != 0:
             solution = spla.spsolve(sub.tocsc(), b)
         delta[dofs] = solution
@@ -156,19 +158,22 @@ def solve_particle_system(system, model, tolerance=1e-10, solver="cg"):
 
 
 def free_velocities(model, state, dt, integrator="symplectic_euler",
-                    body_force=None, body_torque=None, particle_force=None):
+                    body_force=None, body_torque=None, particle_force=None, linear_solver="cg",
+                    linear_tolerance=1e-6):
     """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
 
     body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
     Particles: explicit and symplectic Euler add h M⁻¹ (m g + f_springs(x, v) + particle_force);
-    backward Euler solves ``particle_system`` (springs implicit). Pinned particles get zero
+    backward Euler solves ``particle_system`` (springs implicit) with ``solve_particle_system``
+    (``linear_solver`` "cg" or "direct", ``linear_tolerance``). Pinned particles get zero
     velocity. Returns (body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)).
     """
     g = model.gravity
     body_velocity = state.body_velocity + dt * g
     if model.spring_count and integrator == "backward_euler":
         system = particle_system(model, state, dt, particle_force)
-        particle_velocity = state.particle_velocity + solve_particle_system(system, model)
+        particle_velocity = state.particle_velocity + solve_particle_system(system, model, linear_tolerance,
+                                                                            linear_solver)
     else:
         particle_velocity = state.particle_velocity + dt * g
         if particle_force is not None:
