@@ -150,3 +150,17 @@ def test_penalty_with_backward_euler_from_the_command_line(tmp_path):
     summary = json.loads(result.stdout)
     assert summary["integrator"] == "backward_euler" and summary["solver"]["max_iterations"] >= 1
     assert summary["max_penetration"] < 0.005          # k = m g / 1 mm for the heaviest box, implicit
+
+
+def test_cloth_drape_with_projection_comes_to_rest(tmp_path):
+    result = contactlab("run", "cloth_drape", "--method", "projection", "--record-every", "10", "--json",
+                        cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    run = np.load(tmp_path / "out" / "cloth_drape-projection" / "trajectory.npz")
+    kinetic = run["energy_kinetic"]
+    assert kinetic.max() > 0.1 and kinetic[-1] < 1e-4 * kinetic.max()      # it fell, then stopped
+    assert run["triangles"].shape == (2 * 24 * 24, 3) and (run["particle_cloth"] == 0).all()
+    final = run["particle_position"][-1]
+    assert final[:, 2].min() >= 0.005 - 1e-6                                  # on the floor, at its thickness
+    to_sphere = np.linalg.norm(final - [0.0, 0.0, 0.3], axis=1)
+    assert to_sphere.min() >= 0.25 + 0.005 - 1e-6                             # and never inside the sphere
