@@ -455,7 +455,7 @@ def test_every_builtin_scene_runs_without_diverging(name):
     from contactlab.scene import load_scene
     scene = load_scene(name)
     options = scene.method_options if scene.method == "impulse" else {}
-    run = simulate(scene.model, "impulse", scene.dt, min(0.25, scene.duration), options)
+    run = simulate(scene.model, "impulse", scene.dt, min(0.25, scene.duration), options, scene.integrator)
     assert run.state.is_finite()
     assert run.summary["max_penetration"] < 0.01
     energy = run.summary["energy"]

@@ -11,6 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import rotations
+from .integrators import particle_system
 
 
 def dof_count(model) -> int:
@@ -58,3 +59,27 @@ def inverse_mass_matrix(model, body_orientation):
     R = rotations.to_matrix(body_orientation)
     return _block_diagonal(model.body_inverse_mass, rotations.world_inertia(R, model.body_inverse_inertia),
                            model.particle_inverse_mass)
+
+
+def implicit_base(model, state, dt, v_free):
+    """The backward Euler system without contacts, A₀ v⁺ = b₀, over all N degrees of freedom.
+
+    Bodies: M v⁺ = M v* (gravity and the gyroscopic term are already in v*). Particles: the
+    cloth's linearized springs, A_p = M − h D − h² K and A_p v⁺ = A_p v + h (f + h K v) (see
+    dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
+    with the cloth's own. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
+    a pinned vertex's do not).
+    """
+    B = model.body_count
+    M = mass_matrix(model, state.body_orientation)
+    bodies = M[:6 * B, :6 * B]
+    if model.spring_count:
+        system = particle_system(model, state, dt)
+        particles = system.matrix
+        b_particles = particles @ state.particle_velocity.ravel() + system.rhs
+    else:
+        particles = M[6 * B:, 6 * B:]
+        b_particles = particles @ v_free[6 * B:]
+    A0 = sp.block_diag([bodies, particles], format="csr")
+    free = np.concatenate([np.ones(6 * B, dtype=bool), np.repeat(~model.particle_pinned, 3)])
+    return A0, np.concatenate([bodies @ v_free[:6 * B], b_particles]), free

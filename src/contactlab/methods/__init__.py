@@ -26,8 +26,7 @@ class StepInfo:
     energy_elastic: float = 0.0   # energy stored in contact springs [J]
 
 
-AVAILABLE = ("penalty", "projection", "impulse")
-PLANNED = ("constraints",)
+AVAILABLE = ("penalty", "projection", "impulse", "constraints")
 
 
 def get(name):
@@ -41,10 +40,10 @@ def get(name):
     if name == "projection":
         from . import projection
         return projection
-    if name in PLANNED:
-        raise InputError("method", f"method {name!r} is not available in this version yet; "
-                         f"use one of: {', '.join(AVAILABLE)}")
-    raise InputError("method", f"unknown method {name!r}; expected one of: {', '.join(AVAILABLE + PLANNED)}")
+    if name == "constraints":
+        from . import constraints
+        return constraints
+    raise InputError("method", f"unknown method {name!r}; expected one of: {', '.join(AVAILABLE)}")
 
 
 def make_options(module, table, path):

@@ -38,6 +38,7 @@ from ..dynamics.integrators import advance_positions, free_velocities, world_inv
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
+from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
 from .sequential import _row_velocity, _solve_contact, contact_rows, lever_arms, solve_order, solve_sequential_impulses
 
 
@@ -198,46 +199,3 @@ def warm_start_impulses(carried, feature_id, fraction):
     found = ids[order[place]] == feature_id
     warm[found] = fraction * values[order[place[found]]]
     return warm
-
-
-def resting_target(gap_at_start, dt, options):
-    """The least normal relative velocity each contact may end the step with (C,) [m/s].
-
-    Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
-    be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
-    speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
-    ``stabilization`` of its depth beyond ``slop`` per step, never faster than
-    ``max_push_velocity`` (a deep overlap must not turn into a launch).
-    """
-    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
-                      options.max_push_velocity)
-    return np.where(gap_at_start >= 0.0, -gap_at_start / dt, push)
-
-
-def relative_gravity(model, contacts):
-    """g_n per contact (C,) [m/s²]: the normal component of the gravity of A relative to B.
-
-    Symplectic Euler carries velocities at the middle of the step (it is leapfrog), so the
-    velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
-    gravity acts over the rest of the step (see ``resolve_collisions``).
-    """
-    dynamic_a = (contacts.body_a >= 0) | (contacts.particles_a[:, 0] >= 0)
-    dynamic_b = (contacts.body_b >= 0) | (contacts.particles_b[:, 0] >= 0)
-    return (dynamic_a.astype(float) - dynamic_b) * (contacts.normal @ model.gravity)
-
-
-def entity_impact_fractions(model, contacts, tau):
-    """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
-    −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
-    acts over the whole step."""
-    tau_body = np.ones(model.body_count)
-    tau_particle = np.ones(model.particle_count)
-    tau = np.where(tau < 0.0, 1.0, tau)
-    for body in (contacts.body_a, contacts.body_b):
-        has = body >= 0
-        np.minimum.at(tau_body, body[has], tau[has])
-    for particles in (contacts.particles_a, contacts.particles_b):
-        for k in range(3):
-            has = particles[:, k] >= 0
-            np.minimum.at(tau_particle, particles[has, k], tau[has])
-    return np.where(tau_body == 1.0, 0.0, tau_body), np.where(tau_particle == 1.0, 0.0, tau_particle)

@@ -35,8 +35,8 @@ import scipy.sparse.linalg as spla
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
-from ..dynamics.generalized import inverse_mass_matrix, mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities, particle_system
+from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
+from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError, StabilityWarning
 from ..shapes import bounding_radii
 from ..state import State
@@ -278,33 +278,9 @@ def distribute(J, inverse_mass, forces, dt):
 
 # ---- backward Euler -----------------------------------------------------------------------
 
-def implicit_base(model, state, dt, v_free):
-    """The backward Euler system without contacts, A₀ v⁺ = b₀, over all N degrees of freedom.
-
-    Bodies: M v⁺ = M v* (gravity and the gyroscopic term are already in v*). Particles: the
-    cloth's linearized springs, A_p = M − h D − h² K and A_p v⁺ = A_p v + h (f + h K v) (see
-    dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
-    with the cloth's own. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
-    a pinned vertex's do not).
-    """
-    B = model.body_count
-    M = mass_matrix(model, state.body_orientation)
-    bodies = M[:6 * B, :6 * B]
-    if model.spring_count:
-        system = particle_system(model, state, dt)
-        particles = system.matrix
-        b_particles = particles @ state.particle_velocity.ravel() + system.rhs
-    else:
-        particles = M[6 * B:, 6 * B:]
-        b_particles = particles @ v_free[6 * B:]
-    A0 = sp.block_diag([bodies, particles], format="csr")
-    free = np.concatenate([np.ones(6 * B, dtype=bool), np.repeat(~model.particle_pinned, 3)])
-    return A0, np.concatenate([bodies @ v_free[:6 * B], b_particles]), free
-
-
 def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
     """Backward Euler for the contact springs: v⁺ with A₀ v⁺ = b₀ + h Jᵀ F(x + h v⁺, v⁺), where
-    A₀ v⁺ = b₀ is the step without contacts (``implicit_base``: M v⁺ = M v* for rigid bodies and
+    A₀ v⁺ = b₀ is the step without contacts (``dynamics.generalized.implicit_base``: M v⁺ = M v* for rigid bodies and
     free particles, the cloth's linearized springs for cloth vertices); ``free`` (N,) bool masks
     the DOFs that may move, v_free (N,) the velocities without contacts.
 

@@ -218,7 +218,7 @@ class MethodTables:
     """``[method.NAME]`` tables: NAME a method of contactlab.methods, the content kept as is
     (its keys are validated against the method's Options by the loader)."""
 
-    names = methods.AVAILABLE + methods.PLANNED
+    names = methods.AVAILABLE
 
     def check(self, value, field, unit=""):
         if not isinstance(value, dict):
@@ -257,7 +257,7 @@ SIMULATION = {
     "dt": Key(Number(positive=True), 0.004, "s"),
     "duration": Key(Number(positive=True), 2.0, "s"),
     "gravity": Key(Vector(3), [0.0, 0.0, -9.81], "m/s^2"),
-    "method": Key(Choice(methods.AVAILABLE + methods.PLANNED, what="method"), "impulse"),
+    "method": Key(Choice(methods.AVAILABLE, what="method"), "impulse"),
     "integrator": Key(Choice(INTEGRATORS, what="integrator"), "symplectic_euler"),
 }
 

@@ -1,0 +1,230 @@
+"""Hard constraints (SPEC W4, C1–C9, F4, F4a, F4b, M2, M4) in the constraint loop L3.
+
+One step, stage by stage as on the slide:
+
+1. internal forces → free velocities v*: gravity, and the cloth's springs (explicitly, or with
+   backward Euler linearized into A = M − h D − h² K, M4);
+2. integrate positions with v* (a prediction of how far everything sweeps);
+3. collision detection over the swept step (speculative contacts: gaps down to what the motion
+   could close, so nothing tunnels);
+4. formulate the constraints: each contact keeps its distance d = nᵀ(p_A − p_B) ≥ 0 (C1) with a
+   force λ n, λ ≥ 0 (C2), complementary (C3). On velocities (C5b, the default), the mixed LCP
+   A v⁺ = b + Jᵀ λ, J_n v⁺ ≥ t, λ ≥ 0, λᵀ(J_n v⁺ − t) = 0 (C4), with t the target normal
+   velocity of each contact (restitution at impact, no overlap at the end of the step, a
+   fraction of an existing overlap removed — see methods.velocity_level; the same law as the
+   impulse method, M2). Eliminating v⁺ gives the LCP (C6) B λ ≥ c with B = J A⁻¹ Jᵀ and
+   c = t − J A⁻¹ b: assembled sparse, A⁻¹ applied block by block when A = M (block diagonal)
+   and through a sparse LU factorization when cloth is implicit. With friction each contact
+   has three rows (normal, two tangents) and the problem is FCLIB's local frictional contact
+   problem u = W r + q, W = B, q = J v* − t, solved with ``contactlab.lcp``;
+5. recompute velocities v⁺ = v* + A⁻¹ Jᵀ λ and positions x = x₀ + h v⁺ (split at the moment of
+   impact as in the impulse method), so a resting body never creeps; advance time.
+
+Solvers (``solver``): "matrix_free" (default) is projected Gauss-Seidel with friction right
+after each normal (F4a) in sequential-impulse form — on v, without forming B — and warm
+started from the last step's λ by persistent contact id; "nsgs" (F4a) and "staggered" (F4b)
+solve the assembled W, q; "pgs", "redblack", "jacobi" and "lemke" solve the frictionless LCP
+B_nn λ_n ≥ c_n (friction ignored: use them to study C7–C9). The accelerations formulation
+(C5a, ``formulation = "acceleration"``, see ``acceleration_target``) keeps resting contacts
+resting but has no means to stop an impact within a step — why velocities are preferred
+when things collide.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..builder import _number
+from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..contacts import jacobian, values_by_id
+from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
+from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
+from ..errors import InputError
+from ..state import State
+from . import StepInfo
+from .sequential import contact_rows, lever_arms, solve_order, solve_sequential_impulses
+from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
+
+SOLVERS = ("matrix_free", "nsgs", "staggered", "pgs", "redblack", "jacobi", "lemke")
+FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
+FORMULATIONS = ("velocity", "acceleration")
+
+
+@dataclass
+class Options:
+    """Settings of ``[method.constraints]``."""
+    solver: str = "matrix_free"           # matrix_free | nsgs (F4a) | staggered (F4b) | pgs | redblack | jacobi | lemke
+    formulation: str = "velocity"         # velocity (C5b) | acceleration (C5a)
+    friction_model: str = "cone"          # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
+    iterations: int = 100                 # solver sweeps per step (at most)
+    tolerance: float = 1e-6               # matrix_free: m/s of the largest change; others: their residual
+    omega: float = 1.0                    # over-relaxation of pgs, redblack, jacobi
+    warm_start: float = 1.0               # fraction of last step's λ to start from (by contact id; 0 = cold)
+    restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
+    stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
+    slop: float = 0.0005                  # m of penetration left alone by the stabilization
+    max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
+    time_of_impact: bool = True           # split the step at the impact (see methods.impulse)
+    contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
+    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
+    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
+    samples: int = 2                      # samples per triangle edge for granularity = "samples"
+    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+
+    def __post_init__(self):
+        for name, allowed in (("solver", SOLVERS), ("formulation", FORMULATIONS),
+                              ("friction_model", ("cone", "pyramid")), ("granularity", GRANULARITIES),
+                              ("normal", NORMALS)):
+            if getattr(self, name) not in allowed:
+                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
+        for name, least in (("iterations", 1), ("samples", 1), ("cloth_samples", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise InputError(name, f"expected a whole number ≥ {least}, found {value!r}")
+        self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
+        self.omega = _number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
+        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
+        self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
+        self.slop = _number(self.slop, "slop", 0.0)
+        self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
+        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        if not isinstance(self.time_of_impact, bool):
+            raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
+
+
+# ---- C6: the MLCP reduced to an LCP ----------------------------------------------------------
+
+class SystemInverse:
+    """Applies A⁻¹ for the MLCP's A: M⁻¹ block by block when A = M, a sparse LU of A (with the
+    pinned degrees of freedom held) when the cloth is integrated implicitly (M4)."""
+
+    def __init__(self, inverse_mass=None, matrix=None, free=None):
+        self.inverse_mass = inverse_mass
+        self.free = free
+        self.factor = None if matrix is None else spla.splu(sp.csc_matrix(matrix))
+
+    def solve(self, rhs):
+        """A⁻¹ rhs for rhs (N,) or (N, k); pinned degrees of freedom get 0."""
+        if self.factor is None:
+            return self.inverse_mass @ rhs
+        rhs = np.asarray(rhs.todense() if sp.issparse(rhs) else rhs, dtype=float)
+        mask = self.free if rhs.ndim == 1 else self.free[:, None]
+        return np.where(mask, self.factor.solve(np.where(mask, rhs, 0.0)), 0.0)
+
+
+def lcp_matrices(J, inverse, v_free, target):
+    """B = J A⁻¹ Jᵀ (3C, 3C) and q = J v* − t (3C,) of the local problem u = B λ + q (C6).
+
+    J (3C, N) sparse; inverse: a SystemInverse; v_free v* = A⁻¹ b (N,); target t (3C,) (the
+    normal rows' targets, 0 on tangent rows). The LCP of C6 in the spec's sign, B λ ≥ c, has
+    c = t − J A⁻¹ b = −q.
+    """
+    A_inv_Jt = inverse.solve(J.T.tocsc() if inverse.factor is None else J.T)
+    B = sp.csr_matrix(J @ A_inv_Jt)
+    return B, J @ v_free - target
+
+
+def solve_assembled(J, inverse, v_free, target, friction, warm, options):
+    """λ (C, 3) of the assembled problem with the chosen solver; (λ, iterations, residual)."""
+    from ..lcp import solve_friction_contact, solve_lcp
+    B, q = lcp_matrices(J, inverse, v_free, target)
+    C = len(friction)
+    if options.solver in FRICTIONLESS_SOLVERS:
+        normal_rows = np.arange(0, 3 * C, 3)
+        result = solve_lcp(B[normal_rows][:, normal_rows], -q[normal_rows], method=options.solver,
+                           tol=options.tolerance, max_iterations=options.iterations,
+                           warm_start=warm[:, 0], omega=options.omega)
+        lam = np.zeros((C, 3))
+        lam[:, 0] = result.lam
+        return lam, result.iterations, result.residual
+    result = solve_friction_contact(B, q, friction, method=options.solver, tol=options.tolerance,
+                                    max_iterations=options.iterations, r0=warm.ravel(),
+                                    friction_model=options.friction_model)
+    return result.r.reshape(C, 3), result.iterations, result.error
+
+
+def acceleration_target(current_velocity, free_velocity, gap_at_start, dt, options):
+    """C5a: the constraints differentiated once, J_n a ≥ 0 for the contacts that touch (d ≤ slop),
+    written as a velocity target after one step of a: v_n⁺ ≥ v_n (the normal velocity they
+    have now, ``current_velocity``), plus the stabilization of an overlap. An open contact
+    has no constraint on accelerations (its target lies below its free velocity, so it never
+    binds), and a touching contact already approaching keeps approaching: accelerations
+    cannot stop an impact within a step. All (C,) [m/s, m]."""
+    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
+                      options.max_push_velocity)
+    touching = gap_at_start <= options.slop          # within the slop: in contact, d ≈ 0
+    return np.where(touching, np.minimum(current_velocity, 0.0) + push, free_velocity - 1.0)
+
+
+# ---- the step: loop L3 --------------------------------------------------------------------
+
+def step(model, state, dt, options, integrator="symplectic_euler"):
+    """One step of loop L3 with hard constraints; returns (new State, StepInfo)."""
+    h = dt
+    # 1. internal forces → free velocities v* (A v* = b)
+    free = free_velocities(model, state, h, integrator)
+    v_free = stack(*free)
+    move = state.velocities if integrator == "explicit_euler" else free
+    # 2. integrate positions (a prediction): how far each body and particle sweeps this step
+    predicted = advance_positions(*state.positions, *move, h, h)
+    sweep = swept_distances(model, move[0], free[1], move[2], h)
+    # 3. collision detection over the swept step
+    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
+                       options.samples, cloth_samples=options.cloth_samples)
+    if contacts.count == 0:
+        carried = {k: v for k, v in state.carried.items() if not k.startswith("constraint_")}
+        return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
+    # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
+    r_a, r_b = lever_arms(contacts, state.body_position)
+    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
+                        contacts.tangent2, model.body_inverse_mass,
+                        world_inverse_inertia(model, state.body_orientation), model.particle_inverse_mass)
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    normal_velocity = (J @ v_free)[0::3]
+    gap_at_start = -contacts.depth
+    threshold = options.restitution_threshold
+    if threshold < 0:
+        threshold = 2.0 * np.linalg.norm(model.gravity) * h
+    if options.formulation == "velocity":
+        target, tau = normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts),
+                                     contacts.restitution, h, threshold, options)
+    else:
+        current = (J @ stack(*state.velocities))[0::3]
+        target = acceleration_target(current, normal_velocity, gap_at_start, h, options)
+        tau = np.full(contacts.count, -1.0)
+    warm, _ = values_by_id(state.carried.get("constraint_ids"), state.carried.get("constraint_values"),
+                           contacts.feature_id, 3)
+    warm *= options.warm_start
+    implicit_cloth = integrator == "backward_euler" and model.spring_count > 0
+    if options.solver == "matrix_free" and not implicit_cloth:
+        u = v_free.copy()
+        lam, iterations, residual = solve_sequential_impulses(*rows, contacts.friction, target, u,
+                                                              options.iterations, options.tolerance, warm,
+                                                              solve_order(contacts, model.gravity))
+        v_new = u
+    else:
+        if implicit_cloth:            # M4: A = M − h D − h² K, factorized
+            A0, _, free_dofs = implicit_base(model, state, h, v_free)
+            inverse = SystemInverse(matrix=A0, free=free_dofs)
+        else:
+            inverse = SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
+        targets = np.zeros((contacts.count, 3))
+        targets[:, 0] = target
+        lam, iterations, residual = solve_assembled(J, inverse, v_free, targets.ravel(), contacts.friction, warm,
+                                                    options)
+        v_new = v_free + inverse.solve(J.T @ lam.ravel())
+    # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
+    if not options.time_of_impact:
+        tau[:] = -1.0
+    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
+    solved = unstack(v_new, model.body_count)
+    corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
+    mid = advance_positions(*state.positions, *move, tau_body * h, tau_particle * h)
+    positions = advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
+    carried = dict(state.carried, constraint_ids=contacts.feature_id, constraint_values=lam)
+    new = State.assemble(state.time + h, positions, solved, carried)
+    return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual))

@@ -1,0 +1,77 @@
+"""What the velocity-level methods share (SPEC M2: constraints on velocities are impulses).
+
+Impulses (methods.impulse) and hard constraints on velocities (methods.constraints, C5b) both
+ask each contact's normal relative velocity after the step to reach a target, and both move
+the positions with the corrected velocities, split at the moment of impact. The targets:
+
+* a contact that closes during the step with impact velocity u_n below −threshold leaves at
+  −ε u_n (restitution, I1/R3), measured at the moment of impact (``relative_gravity``);
+* any other contact must not end the step overlapping: v_n ≥ −d₀/h for a gap d₀ (speculative
+  contacts), or pushes out a fraction of an existing overlap (``resting_target``).
+"""
+
+import numpy as np
+
+
+def resting_target(gap_at_start, dt, options):
+    """The least normal relative velocity each contact may end the step with (C,) [m/s].
+
+    Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
+    be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
+    speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
+    ``stabilization`` of its depth beyond ``slop`` per step, never faster than
+    ``max_push_velocity`` (a deep overlap must not turn into a launch).
+    """
+    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
+                      options.max_push_velocity)
+    return np.where(gap_at_start >= 0.0, -gap_at_start / dt, push)
+
+
+def relative_gravity(model, contacts):
+    """g_n per contact (C,) [m/s²]: the normal component of the gravity of A relative to B.
+
+    Symplectic Euler carries velocities at the middle of the step (it is leapfrog), so the
+    velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
+    gravity acts over the rest of the step (see ``resolve_collisions``).
+    """
+    dynamic_a = (contacts.body_a >= 0) | (contacts.particles_a[:, 0] >= 0)
+    dynamic_b = (contacts.body_b >= 0) | (contacts.particles_b[:, 0] >= 0)
+    return (dynamic_a.astype(float) - dynamic_b) * (contacts.normal @ model.gravity)
+
+
+def entity_impact_fractions(model, contacts, tau):
+    """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
+    −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
+    acts over the whole step."""
+    tau_body = np.ones(model.body_count)
+    tau_particle = np.ones(model.particle_count)
+    tau = np.where(tau < 0.0, 1.0, tau)
+    for body in (contacts.body_a, contacts.body_b):
+        has = body >= 0
+        np.minimum.at(tau_body, body[has], tau[has])
+    for particles in (contacts.particles_a, contacts.particles_b):
+        for k in range(3):
+            has = particles[:, k] >= 0
+            np.minimum.at(tau_particle, particles[has, k], tau[has])
+    return np.where(tau_body == 1.0, 0.0, tau_body), np.where(tau_particle == 1.0, 0.0, tau_particle)
+
+
+def normal_targets(gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, options):
+    """Every contact's target normal velocity, all contacts at once (a simultaneous impact).
+
+    gap_at_start d₀ (C,) [m]; normal_velocity v_n* (C,) [m/s] without contact forces;
+    gravity_normal g_n (C,) [m/s²]; restitution ε (C,); threshold [m/s]. A contact that closes
+    within the step (v_n* < 0, d₀ + h v_n* ≤ 0) does so at the fraction τ = d₀ / (−h v_n*) of it,
+    with the impact velocity u = v_n* + g_n (τ − ½) h (symplectic Euler is leapfrog); if u <
+    −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
+    ``resting_target``. Returns (target (C,) [m/s], τ (C,), −1 where there was no impact).
+    """
+    h = dt
+    closing = (normal_velocity < 0.0) & (gap_at_start + h * normal_velocity <= 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = np.where(gap_at_start > 0.0, np.clip(gap_at_start / (-normal_velocity * h), 0.0, 1.0), 0.0)
+    impact = normal_velocity + gravity_normal * (tau - 0.5) * h
+    bounces = closing & (restitution > 0.0) & (impact < -threshold)
+    target = np.where(bounces, -restitution * impact + gravity_normal * (0.5 - tau) * h,
+                      resting_target(gap_at_start, dt, options))
+    return target, np.where(bounces, tau, -1.0)

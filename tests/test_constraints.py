@@ -1,0 +1,225 @@
+"""The constraints method (W4, C1–C9, F4, M2, M4) against closed-form results and against itself."""
+
+import numpy as np
+import pytest
+
+from contactlab import ModelBuilder, simulate
+from contactlab.collision import collide
+from contactlab.contacts import jacobian
+from contactlab.dynamics.generalized import inverse_mass_matrix, stack
+from contactlab.dynamics.integrators import free_velocities, world_inverse_inertia
+from contactlab.errors import InputError, SimulationDiverged
+from contactlab.methods import constraints
+from contactlab.methods.sequential import contact_rows, lever_arms, solve_order, solve_sequential_impulses
+from contactlab.scene import builtin_scenes, load_scene
+from conftest import ball_on_plane
+
+G = 9.81
+HALF = 0.05
+
+
+def apexes(height, velocity):
+    turning = np.nonzero((velocity[:-1] > 0) & (velocity[1:] <= 0))[0]
+    return np.array([height[i:i + 2].max() for i in turning])
+
+
+@pytest.mark.parametrize("restitution", [0.0, 0.5, 0.8])
+def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution):
+    model = ball_on_plane(restitution=restitution, height=1.0)
+    fall = np.sqrt(2 / G)
+    duration = fall * (1 + 2 * sum(restitution ** k for k in range(1, 5)) + restitution ** 5) + 0.1
+    run = simulate(model, "constraints", dt=0.001, duration=duration)
+    z = run.arrays["body_position"][:, 0, 2] - 0.1
+    found = apexes(z, run.arrays["body_velocity"][:, 0, 2])
+    if restitution == 0.0:
+        assert len(found) == 0
+        np.testing.assert_allclose(z[run.arrays["time"] > fall + 0.01], 0.0, atol=1e-9)
+    else:
+        np.testing.assert_allclose(found[:5], restitution ** (2 * np.arange(1, 6)), rtol=0.01)
+
+
+def test_velocities_stop_an_impact_and_accelerations_cannot():
+    # C5b versus C5a: a ball dropped 0.5 m; on velocities it stops at the floor within the step,
+    # on accelerations the floor only stops it from accelerating further into it
+    model = ball_on_plane(height=0.5, restitution=0.0)
+    on_velocities = simulate(model, "constraints", dt=0.004, duration=0.4)
+    on_accelerations = simulate(model, "constraints", dt=0.004, duration=0.4,
+                                options={"formulation": "acceleration", "stabilization": 0.0})
+    impact_speed = np.sqrt(2 * G * 0.5)
+    assert on_velocities.summary["max_penetration"] < 1e-9
+    assert on_accelerations.summary["max_penetration"] > 0.5 * impact_speed * 0.004
+
+
+def test_acceleration_formulation_holds_a_resting_box():
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5, restitution=0.0)
+    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=(0, 0, HALF), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    run = simulate(b.finalize(), "constraints", dt=0.004, duration=1.0, options={"formulation": "acceleration"})
+    np.testing.assert_allclose(run.arrays["body_position"][:, 0, 2], HALF, atol=1e-6)
+
+
+def cube(velocity=(0, 0, 0), friction=0.3, angle_degrees=0.0):
+    theta = np.radians(angle_degrees)
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    b = ModelBuilder()
+    b.add_material("m", friction=friction, restitution=0.0)
+    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=normal * HALF, velocity=velocity,
+               orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), material="m")
+    b.add_obstacle("plane", normal=normal, material="m")
+    return b.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
+
+
+@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered"])
+def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
+    v0, mu = 3.0, 0.3
+    model, _ = cube(velocity=(v0, 0, 0), friction=mu)
+    run = simulate(model, "constraints", dt=0.004, duration=1.2, options={"solver": solver})
+    x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
+    stopped = np.argmax(np.abs(vx) < 1e-6)
+    np.testing.assert_allclose(run.arrays["time"][stopped], v0 / (mu * G), rtol=0.03)
+    np.testing.assert_allclose(x[-1], v0 ** 2 / (2 * mu * G), rtol=0.03)
+
+
+@pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
+def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, sticks):
+    theta = np.radians(20.0)
+    model, downhill = cube(friction=friction, angle_degrees=20.0)
+    run = simulate(model, "constraints", dt=0.004, duration=2.0)
+    t = run.arrays["time"]
+    along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill
+    if sticks:
+        assert np.abs(along).max() < 0.001
+    else:
+        acceleration = 2 * np.polyfit(t[t > 0.2], along[t > 0.2], 2)[0]
+        np.testing.assert_allclose(acceleration, G * (np.sin(theta) - friction * np.cos(theta)), rtol=0.03)
+
+
+def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths():
+    v0, mu = 3.0, 0.3
+    model = ball_on_plane(height=0.0, friction=mu, velocity=(v0, 0, 0))
+    run = simulate(model, "constraints", dt=0.002, duration=0.6)
+    t, v = run.arrays["time"], run.arrays["body_velocity"][:, 0, 0]
+    rolling_at = 2 * v0 / (7 * mu * G)
+    np.testing.assert_allclose(v[t > rolling_at + 0.01], 5 / 7 * v0, rtol=1e-3)
+    sliding = (t > 0.02) & (t < rolling_at - 0.02)
+    np.testing.assert_allclose(np.diff(v[sliding]) / np.diff(t[sliding]), -mu * G, rtol=1e-3)
+
+
+@pytest.mark.parametrize("name", ["box_stack", "box_pyramid"])
+def test_stacks_stand_for_ten_seconds(name):
+    scene = load_scene(name)
+    run = simulate(scene.model, "constraints", scene.dt, 10.0, record_every=20)
+    moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
+    assert moved.max() < 0.01
+    assert run.summary["max_penetration"] < 0.005
+
+
+def resting_spheres(rng, friction=0.0):
+    """Spheres of mixed masses resting on a floor and on each other (every contact pressed)."""
+    b = ModelBuilder()
+    b.add_material("m", friction=friction, restitution=0.0)
+    r = 0.1
+    for i in range(4):
+        b.add_body("sphere", radius=r, mass=rng.uniform(0.5, 3.0), position=(2.5 * r * i, 0, r), material="m")
+    for i in range(3):                                   # each touches two of the row below
+        b.add_body("sphere", radius=r, mass=rng.uniform(0.5, 3.0),
+                   position=(2.5 * r * i + 1.25 * r, 0, r + np.sqrt((2 * r) ** 2 - (1.25 * r) ** 2)), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    return b.finalize()
+
+
+def contact_problem(model, dt=0.004):
+    """The contacts, Jacobian, rows, free velocity and targets of the first step of ``model``."""
+    state = model.state()
+    options = constraints.Options()
+    v_free = stack(*free_velocities(model, state, dt))
+    contacts = collide(model, state, options.contact_margin)
+    r_a, r_b = lever_arms(contacts, state.body_position)
+    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
+                        contacts.tangent2, model.body_inverse_mass,
+                        world_inverse_inertia(model, state.body_orientation), model.particle_inverse_mass)
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    target = np.zeros((contacts.count, 3))
+    target[:, 0] = np.maximum(-(-contacts.depth) / dt, 0.0)       # no overlap at the end: v_n ≥ 0 here
+    return state, contacts, rows, J, v_free, target
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.4])
+def test_matrix_free_and_assembled_give_the_same_lambda(rng, friction):
+    from contactlab.lcp import solve_friction_contact, solve_lcp
+    model = resting_spheres(rng, friction)
+    state, contacts, rows, J, v_free, target = contact_problem(model)
+    assert contacts.count == 10
+    u = v_free.copy()
+    lam_free, _, change = solve_sequential_impulses(*rows, contacts.friction, target[:, 0], u, 20000, 1e-14,
+                                                    np.zeros((contacts.count, 3)), solve_order(contacts, model.gravity))
+    inverse = constraints.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
+    B, q = constraints.lcp_matrices(J, inverse, v_free, target.ravel())
+    if friction == 0.0:
+        normal = np.arange(0, 3 * contacts.count, 3)
+        exact = solve_lcp(B[normal][:, normal], -q[normal], method="lemke")
+        assert exact.converged
+        np.testing.assert_allclose(lam_free[:, 0], exact.lam, atol=1e-8)
+        pgs = solve_lcp(B[normal][:, normal], -q[normal], method="pgs", tol=1e-13, max_iterations=20000)
+        np.testing.assert_allclose(pgs.lam, exact.lam, atol=1e-8)
+    else:
+        result = solve_friction_contact(B, q, contacts.friction, method="nsgs", tol=1e-12, max_iterations=20000)
+        np.testing.assert_allclose(lam_free.ravel(), result.r, atol=1e-8)
+    # and the matrix-free velocities are v* + M⁻¹ Jᵀ λ
+    np.testing.assert_allclose(u, v_free + inverse.solve(J.T @ lam_free.ravel()), atol=1e-10)
+
+
+@pytest.mark.parametrize("solver", ["pgs", "redblack", "jacobi", "lemke"])
+def test_frictionless_lcp_solvers_hold_a_pile(rng, solver):
+    model = resting_spheres(rng)
+    run = simulate(model, "constraints", dt=0.004, duration=0.5,
+                   options={"solver": solver, "omega": 0.7 if solver == "jacobi" else 1.0, "iterations": 500})
+    moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
+    assert moved.max() < 1e-3
+    assert run.summary["max_penetration"] < 1e-3
+
+
+def test_residual_and_iterations_are_recorded():
+    scene = load_scene("box_pyramid")
+    run = simulate(scene.model, "constraints", scene.dt, 0.2, {"solver": "nsgs", "tolerance": 1e-8})
+    assert run.arrays["solver_iterations"].shape == run.arrays["time"].shape
+    assert run.arrays["solver_iterations"][1:].min() >= 1
+    assert run.summary["solver"]["max_iterations"] == run.arrays["solver_iterations"].max()
+    assert run.summary["solver"]["max_residual"] == pytest.approx(run.arrays["solver_residual"].max())
+
+
+def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_projection_cannot():
+    # M4: 1/60 s; the symplectic cloth blows up at that step under projection
+    b = ModelBuilder()
+    b.add_material("m", friction=0.4, restitution=0.0)
+    b.add_cloth(size=(0.6, 0.6), resolution=(9, 9), position=(0, 0, 0.3), mass=0.1, stretch_stiffness=1000.0,
+                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m")
+    b.add_obstacle("sphere", radius=0.15, position=(0.0, 0.0, 0.0), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    with pytest.raises(SimulationDiverged):
+        simulate(model, "projection", dt=1 / 60, duration=1.0)
+    run = simulate(model, "constraints", dt=1 / 60, duration=1.5, integrator="backward_euler")
+    assert run.state.is_finite()
+    assert run.summary["max_penetration"] < 0.002
+    kinetic = run.arrays["energy_kinetic"]
+    assert kinetic[-1] < 0.05 * kinetic.max()                       # it landed and is settling
+
+
+@pytest.mark.parametrize("table, field", [({"solver": "gauss"}, "solver"), ({"formulation": "force"}, "formulation"),
+                                          ({"omega": 2.5}, "omega"), ({"iterations": 0}, "iterations"),
+                                          ({"friction_model": "disk"}, "friction_model")])
+def test_bad_options_name_the_field(table, field):
+    with pytest.raises(InputError, match=field):
+        constraints.Options(**table)
+
+
+@pytest.mark.parametrize("name", [name for name, _ in builtin_scenes()])
+def test_runs_every_built_in_scene(name):
+    scene = load_scene(name)
+    run = simulate(scene.model, "constraints", scene.dt, 25 * scene.dt, scene.method_options.get("constraints", {}),
+                   scene.integrator)
+    assert run.state.is_finite()
+    assert run.summary["max_penetration"] < 0.01
