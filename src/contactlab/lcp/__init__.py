@@ -1,0 +1,23 @@
+"""Solvers for contact problems with hard constraints (SPEC C6–C9, F4, F4a, F4b).
+
+* :func:`solve_lcp` — the LCP ``w = B λ − c ≥ 0, λ ≥ 0, λᵀ w = 0`` by projected Gauss-Seidel
+  (``pgs``, C7), multi-color parallel Gauss-Seidel (``redblack``, C8), projected Jacobi
+  (``jacobi``) or Lemke's pivoting (``lemke``, exact, any square B);
+* :func:`color_rows`, :func:`color_contacts` — the coloring used by ``redblack``;
+* :func:`solve_friction_contact` — the 3D Coulomb friction problem in FCLIB local form by
+  non-smooth Gauss-Seidel (``nsgs``, F4a) or normal/friction alternation (``staggered``, F4b);
+  :func:`natural_map_error` — its error measure;
+* :func:`read_problem` — FCLIB HDF5 and Siconos ``.dat`` friction problems.
+
+See ``docs/lcp.md``.
+"""
+
+from .coloring import color_contacts, color_rows, coloring_is_valid
+from .fclib import FrictionProblem, read_problem
+from .friction import FrictionResult, natural_map_error, solve_friction_contact
+from .solve import LCP_METHODS, LCPResult, solve_lcp
+
+__all__ = [
+    "LCPResult", "LCP_METHODS", "solve_lcp", "color_rows", "color_contacts", "coloring_is_valid",
+    "FrictionResult", "solve_friction_contact", "natural_map_error", "FrictionProblem", "read_problem",
+]

@@ -1,0 +1,430 @@
+"""3D Coulomb friction problems in FCLIB local form (SPEC F4, F4a, F4b).
+
+Problem ``FC(W, q, μ)``: for nc contacts, each with its local components ordered
+[N, T1, T2] (m = 3·nc unknowns), find the reactions r (m,) and relative velocities u (m,) with::
+
+    u = W r + q,     r^α ∈ K_μα = {‖r_T‖ ≤ μ_α r_N},     K*_μα ∋ û^α ⊥ r^α,
+    û^α = u^α + [μ_α ‖u^α_T‖, 0, 0]            (De Saxcé's modified velocity)
+
+(W: (m, m) Delassus operator, units of velocity per impulse; q: (m,) free relative velocity.)
+Equivalently, per contact: ``0 ≤ u_N ⊥ r_N ≥ 0`` and, given r_N, the friction r_T minimizes the
+tangential work ``½ r_Tᵀ W_TT r_T + b_Tᵀ r_T`` over the disk ``‖r_T‖ ≤ μ r_N`` (maximal
+dissipation: a sliding contact's friction opposes its slip velocity, a sticking one has u_T = 0).
+
+Solvers (all sweeps compiled with Numba, ``cache=True``):
+
+* ``nsgs`` — non-smooth Gauss-Seidel, SPEC F4a: for each contact in turn, its normal component is
+  solved exactly (others fixed) and projected on r_N ≥ 0, then right after its friction is solved
+  exactly on the 3×3 diagonal block ``W_αα`` with the new r_N: the 2-D minimization over the disk
+  (by the secular equation ``‖(W_TT + νI)⁻¹ b‖ = μ r_N``, ν ≥ 0) for ``friction_model="cone"``, or
+  over the inscribed square ``|r_Ti| ≤ μ r_N / √2`` (corners on the circle, so it never allows more
+  friction than the cone) for ``friction_model="pyramid"``, by projected coordinate steps.
+* ``staggered`` — SPEC F4b: all normal components with the frictions fixed (projected
+  Gauss-Seidel sweeps on the normal rows), then all frictions with the normals fixed (disk or box
+  solves), and the pair of phases iterated.
+
+Error (``FrictionResult.error``, the Siconos measure): the natural-map residual
+``F^α(r) = r^α − P_Kμα(r^α − û^α)``, ``‖F(r)‖₂ / max(‖q‖, ‖r‖, ‖u‖)`` (1 replaces a zero
+maximum). For ``friction_model="pyramid"`` the error is the same map with the cone replaced by the
+split box conditions ``r_N − max(0, r_N − u_N)`` and ``r_T − clip(r_T − u_T, ±μ r_N/√2)``, since
+the box model has different solutions than the cone one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+from ..errors import InputError
+from ._checks import choice, positive_float, positive_int, square_csr, vector
+
+FRICTION_METHODS = ("nsgs", "staggered")
+FRICTION_MODELS = ("cone", "pyramid")
+_SQRT_HALF = math.sqrt(0.5)
+
+
+@dataclass
+class FrictionResult:
+    """Answer of :func:`solve_friction_contact`.
+
+    Attributes
+    ----------
+    r: (3·nc,) reactions [N, T1, T2] per contact (impulses, in the units of W's columns).
+    u: (3·nc,) relative velocities ``W r + q``.
+    iterations: sweeps (nsgs) or normal/friction rounds (staggered) done.
+    converged: True when ``error <= tol``.
+    error: normalized natural-map residual (module docstring), at ``r``.
+    method: ``"nsgs"`` or ``"staggered"``.
+    friction_model: ``"cone"`` or ``"pyramid"``.
+    message: one sentence on how it ended.
+    """
+
+    r: np.ndarray
+    u: np.ndarray
+    iterations: int
+    converged: bool
+    error: float
+    method: str
+    friction_model: str = "cone"
+    message: str = ""
+
+
+# ----------------------------------------------------------------------------- compiled parts
+
+
+@njit(cache=True)
+def _row_dot(indptr, indices, data, r, i):
+    acc = 0.0
+    for k in range(indptr[i], indptr[i + 1]):
+        acc += data[k] * r[indices[k]]
+    return acc
+
+
+@njit(cache=True)
+def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
+    """Fill ``u = W r + q`` and return the normalized residual (cone natural map, or box split form)."""
+    m = q.shape[0]
+    for i in range(m):
+        u[i] = _row_dot(indptr, indices, data, r, i) + q[i]
+    total = 0.0
+    norm_r = 0.0
+    norm_u = 0.0
+    for a in range(m // 3):
+        i = 3 * a
+        rn, rt1, rt2 = r[i], r[i + 1], r[i + 2]
+        un, ut1, ut2 = u[i], u[i + 1], u[i + 2]
+        norm_r += rn * rn + rt1 * rt1 + rt2 * rt2
+        norm_u += un * un + ut1 * ut1 + ut2 * ut2
+        m_a = mu[a]
+        if pyramid:
+            fn = rn - max(0.0, rn - un)
+            bound = m_a * max(rn, 0.0) * _SQRT_HALF
+            f1 = rt1 - min(max(rt1 - ut1, -bound), bound)
+            f2 = rt2 - min(max(rt2 - ut2, -bound), bound)
+        else:
+            # z = r − û, û = u + [μ‖u_T‖, 0, 0]; F = r − P_K(z)
+            zn = rn - un - m_a * math.sqrt(ut1 * ut1 + ut2 * ut2)
+            z1 = rt1 - ut1
+            z2 = rt2 - ut2
+            zt = math.sqrt(z1 * z1 + z2 * z2)
+            if m_a * zt <= -zn:
+                pn, p1, p2 = 0.0, 0.0, 0.0
+            elif zt <= m_a * zn:
+                pn, p1, p2 = zn, z1, z2
+            else:
+                pn = (m_a * zt + zn) / (1.0 + m_a * m_a)
+                scale = m_a * pn / zt
+                p1, p2 = scale * z1, scale * z2
+            fn, f1, f2 = rn - pn, rt1 - p1, rt2 - p2
+        total += fn * fn + f1 * f1 + f2 * f2
+    scale = max(norm_q, math.sqrt(norm_r), math.sqrt(norm_u))
+    if scale <= 0.0:
+        scale = 1.0
+    return math.sqrt(total) / scale
+
+
+@njit(cache=True)
+def _disk_solve(a00, a01, a10, a11, b1, b2, radius):
+    """Minimizer of ½ xᵀ A x + bᵀ x over ‖x‖ ≤ radius (A 2×2, symmetric part PSD): returns (x1, x2).
+
+    Unconstrained if that lies in the disk, else (A + νI) x = −b with ν > 0 chosen by safeguarded
+    Newton on 1/‖x(ν)‖ − 1/radius (Moré-Sorensen)."""
+    if radius <= 0.0:
+        return 0.0, 0.0
+    norm_b = math.sqrt(b1 * b1 + b2 * b2)
+    if norm_b == 0.0:
+        return 0.0, 0.0
+    scale = abs(a00) + abs(a11) + abs(a01) + abs(a10)
+    det = a00 * a11 - a01 * a10
+    if det > 1e-13 * scale * scale:
+        x1 = -(a11 * b1 - a01 * b2) / det
+        x2 = -(-a10 * b1 + a00 * b2) / det
+        if x1 * x1 + x2 * x2 <= radius * radius:
+            return x1, x2
+    # smallest eigenvalue of the symmetric part, to bound ν from above
+    s01 = 0.5 * (a01 + a10)
+    half_tr = 0.5 * (a00 + a11)
+    low_eig = half_tr - math.sqrt(0.25 * (a00 - a11) ** 2 + s01 * s01)
+    lo = max(0.0, -low_eig)
+    hi = norm_b / radius + max(0.0, -low_eig) * 2.0 + 1e-300
+    nu = lo
+    x1 = 0.0
+    x2 = 0.0
+    for _ in range(100):
+        if nu <= lo or nu >= hi:
+            nu = 0.5 * (lo + hi)
+        m00 = a00 + nu
+        m11 = a11 + nu
+        d = m00 * m11 - a01 * a10
+        if d <= 0.0:
+            lo = nu
+            nu = 0.5 * (lo + hi)
+            continue
+        x1 = -(m11 * b1 - a01 * b2) / d
+        x2 = -(-a10 * b1 + m00 * b2) / d
+        nx = math.sqrt(x1 * x1 + x2 * x2)
+        phi = 1.0 / nx - 1.0 / radius
+        if abs(nx - radius) <= 1e-15 * radius:
+            break
+        if phi < 0.0:
+            lo = nu
+        else:
+            hi = nu
+        # dx/dν = −(A + νI)⁻¹ x
+        y1 = -(m11 * x1 - a01 * x2) / d
+        y2 = -(-a10 * x1 + m00 * x2) / d
+        dnx = (x1 * y1 + x2 * y2) / nx
+        dphi = -dnx / (nx * nx)
+        if dphi > 0.0:
+            nu = nu - phi / dphi
+        else:
+            nu = 0.5 * (lo + hi)
+        if hi - lo <= 1e-16 * max(hi, 1e-300):
+            break
+    nx = math.sqrt(x1 * x1 + x2 * x2)
+    if nx > radius and nx > 0.0:
+        x1 *= radius / nx
+        x2 *= radius / nx
+    return x1, x2
+
+
+@njit(cache=True)
+def _friction_update(blocks, a, r, i, ut1, ut2, m_a, pyramid):
+    """Solve contact a's friction exactly with its normal fixed (u_T given at the current r)."""
+    rn = r[i]
+    a00 = blocks[a, 1, 1]
+    a01 = blocks[a, 1, 2]
+    a10 = blocks[a, 2, 1]
+    a11 = blocks[a, 2, 2]
+    if pyramid:
+        bound = m_a * rn * _SQRT_HALF
+        # projected coordinate steps, exact per component; two passes couple T1 and T2
+        for _ in range(2):
+            if a00 > 0.0:
+                new = min(max(r[i + 1] - ut1 / a00, -bound), bound)
+                delta = new - r[i + 1]
+                r[i + 1] = new
+                ut1 += a00 * delta
+                ut2 += a10 * delta
+            if a11 > 0.0:
+                new = min(max(r[i + 2] - ut2 / a11, -bound), bound)
+                delta = new - r[i + 2]
+                r[i + 2] = new
+                ut1 += a01 * delta
+                ut2 += a11 * delta
+        return
+    # b = u_T − W_TT r_T: the part of u_T that does not come from this contact's own friction
+    b1 = ut1 - a00 * r[i + 1] - a01 * r[i + 2]
+    b2 = ut2 - a10 * r[i + 1] - a11 * r[i + 2]
+    x1, x2 = _disk_solve(a00, a01, a10, a11, b1, b2, m_a * rn)
+    r[i + 1] = x1
+    r[i + 2] = x2
+
+
+@njit(cache=True)
+def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid):
+    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
+    m = q.shape[0]
+    nc = m // 3
+    u = np.empty(m)
+    norm_q = math.sqrt(np.sum(q * q))
+    error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+    if error <= tol:
+        return 0, error
+    for sweep in range(1, max_iterations + 1):
+        for a in range(nc):
+            i = 3 * a
+            un = _row_dot(indptr, indices, data, r, i) + q[i]
+            ut1 = _row_dot(indptr, indices, data, r, i + 1) + q[i + 1]
+            ut2 = _row_dot(indptr, indices, data, r, i + 2) + q[i + 2]
+            wnn = blocks[a, 0, 0]
+            if wnn > 0.0:
+                new = max(0.0, r[i] - un / wnn)
+                delta = new - r[i]
+                r[i] = new
+                ut1 += blocks[a, 1, 0] * delta
+                ut2 += blocks[a, 2, 0] * delta
+            _friction_update(blocks, a, r, i, ut1, ut2, mu[a], pyramid)
+        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+        if error <= tol:
+            return sweep, error
+    return max_iterations, error
+
+
+@njit(cache=True)
+def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid, inner):
+    """Staggered normal/friction iteration (SPEC F4b) on r (m,), in place. Returns (rounds, error).
+
+    Each round: up to ``inner`` projected Gauss-Seidel sweeps over all normal rows (frictions
+    fixed), then up to ``inner`` sweeps of exact friction solves over all contacts (normals
+    fixed); a phase stops early when its largest change is below ``tol/10`` of the largest r."""
+    m = q.shape[0]
+    nc = m // 3
+    u = np.empty(m)
+    norm_q = math.sqrt(np.sum(q * q))
+    error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+    if error <= tol:
+        return 0, error
+    for rnd in range(1, max_iterations + 1):
+        for _ in range(inner):
+            change = 0.0
+            size = 0.0
+            for a in range(nc):
+                i = 3 * a
+                wnn = blocks[a, 0, 0]
+                if wnn > 0.0:
+                    un = _row_dot(indptr, indices, data, r, i) + q[i]
+                    new = max(0.0, r[i] - un / wnn)
+                    change = max(change, abs(new - r[i]))
+                    r[i] = new
+                size = max(size, abs(r[i]))
+            if change <= 0.1 * tol * size:
+                break
+        for _ in range(inner):
+            change = 0.0
+            size = 0.0
+            for a in range(nc):
+                i = 3 * a
+                old1 = r[i + 1]
+                old2 = r[i + 2]
+                ut1 = _row_dot(indptr, indices, data, r, i + 1) + q[i + 1]
+                ut2 = _row_dot(indptr, indices, data, r, i + 2) + q[i + 2]
+                _friction_update(blocks, a, r, i, ut1, ut2, mu[a], pyramid)
+                change = max(change, abs(r[i + 1] - old1), abs(r[i + 2] - old2))
+                size = max(size, abs(r[i]))
+            if change <= 0.1 * tol * size:
+                break
+        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+        if error <= tol:
+            return rnd, error
+    return max_iterations, error
+
+
+# ----------------------------------------------------------------------------- public API
+
+
+def _check_problem(W, q, mu):
+    csr = square_csr(W, "W")
+    m = csr.shape[0]
+    if m % 3 != 0:
+        raise InputError("W", f"expected a (3·nc, 3·nc) matrix for 3D contacts, got shape {csr.shape}.")
+    nc = m // 3
+    q = vector(q, m, "q")
+    if np.ndim(mu) == 0:
+        mu = np.full(nc, float(mu))
+    mu = vector(mu, nc, "mu")
+    if np.any(mu < 0.0):
+        raise InputError("mu", "friction coefficients must be non-negative.")
+    return csr, q, mu
+
+
+def _diagonal_blocks(csr, nc):
+    """The 3×3 diagonal blocks W_αα, shape (nc, 3, 3)."""
+    base = 3 * np.arange(nc)
+    rows = (base[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), dtype=np.int64)
+    cols = (base[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), dtype=np.int64)
+    if nc == 0:
+        return np.zeros((0, 3, 3))
+    values = np.asarray(csr[rows.ravel(), cols.ravel()]).ravel()
+    return values.reshape(nc, 3, 3).astype(np.float64)
+
+
+def natural_map_error(W, q, mu, r, normalization="max") -> float:
+    """Natural-map residual of the FCLIB local problem at r (FCLIB/Siconos measure).
+
+    ``F^α(r) = r^α − P_Kμα(r^α − û^α)`` with ``u = W r + q`` and ``û^α = u^α + [μ_α‖u^α_T‖, 0, 0]``.
+    Returns ``‖F(r)‖₂`` divided by: ``max(‖q‖, ‖r‖, ‖u‖)`` for ``normalization="max"`` (Siconos
+    since 2019, the default; 1 replaces a zero maximum), ``‖q‖`` for ``"q"`` (Siconos 2018),
+    ``1 + sqrt(‖q‖)`` for ``"fclib"`` (fclib_merit_local) or nothing for ``"none"``.
+    W: (3·nc, 3·nc); q, r: (3·nc,); mu: (nc,) or a scalar.
+    """
+    csr, q, mu = _check_problem(W, q, mu)
+    r = vector(r, q.shape[0], "r")
+    normalization = choice(normalization, ("max", "q", "fclib", "none"), "normalization")
+    u = csr @ r + q
+    rr, uu = r.reshape(-1, 3), u.reshape(-1, 3)
+    z = rr.copy()
+    z[:, 0] -= uu[:, 0] + mu * np.linalg.norm(uu[:, 1:], axis=1)
+    z[:, 1:] -= uu[:, 1:]
+    zn, zt = z[:, 0], np.linalg.norm(z[:, 1:], axis=1)
+    proj = z.copy()
+    dual = mu * zt <= -zn
+    proj[dual] = 0.0
+    outside = ~dual & (zt > mu * zn)
+    pn = (mu[outside] * zt[outside] + zn[outside]) / (1.0 + mu[outside] ** 2)
+    proj[outside, 0] = pn
+    proj[outside, 1:] = (mu[outside] * pn / zt[outside])[:, None] * z[outside, 1:]
+    absolute = float(np.linalg.norm(rr - proj))
+    norm_q = float(np.linalg.norm(q))
+    if normalization == "max":
+        scale = max(norm_q, float(np.linalg.norm(r)), float(np.linalg.norm(u)))
+        return absolute / scale if scale > 0 else absolute
+    if normalization == "q":
+        return absolute / norm_q if norm_q > 0 else absolute
+    if normalization == "fclib":
+        return absolute / (1.0 + np.sqrt(norm_q))
+    return absolute
+
+
+def _project_cone(r, mu):
+    rr = r.reshape(-1, 3).copy()
+    rn, rt = rr[:, 0], np.linalg.norm(rr[:, 1:], axis=1)
+    dual = mu * rt <= -rn
+    outside = ~dual & (rt > mu * rn)
+    pn = (mu[outside] * rt[outside] + rn[outside]) / (1.0 + mu[outside] ** 2)
+    rr[outside, 1:] *= (mu[outside] * pn / rt[outside])[:, None]
+    rr[outside, 0] = pn
+    rr[dual] = 0.0
+    return rr.ravel()
+
+
+def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=1000, r0=None,
+                           friction_model="cone") -> FrictionResult:
+    """Solve the 3D Coulomb friction problem ``u = W r + q``, ``r ∈ K_μ``, ``û ⊥ r`` (FCLIB local form).
+
+    Parameters
+    ----------
+    W: (3·nc, 3·nc) SciPy sparse or dense Delassus matrix, per contact [N, T1, T2].
+    q: (3·nc,) free relative velocity.
+    mu: (nc,) friction coefficients (or one scalar for all contacts), ≥ 0.
+    method: ``"nsgs"`` (SPEC F4a) or ``"staggered"`` (SPEC F4b); see the module docstring.
+    tol: tolerance on the normalized natural-map error (module docstring).
+    max_iterations: sweep limit (nsgs) or normal/friction round limit (staggered).
+    r0: (3·nc,) start reactions (projected on the cone); zero by default.
+    friction_model: ``"cone"`` (the disk ‖r_T‖ ≤ μ r_N) or ``"pyramid"`` (the inscribed square
+       |r_Ti| ≤ μ r_N / √2).
+
+    A solver that stops above tol returns ``converged=False`` with the error it reached.
+    Bad input raises :class:`contactlab.errors.InputError`.
+    """
+    method = choice(method, FRICTION_METHODS, "method")
+    friction_model = choice(friction_model, FRICTION_MODELS, "friction_model")
+    csr, q, mu = _check_problem(W, q, mu)
+    tol = positive_float(tol, "tol")
+    max_iterations = positive_int(max_iterations, "max_iterations")
+    m = q.shape[0]
+    nc = m // 3
+    r = np.zeros(m) if r0 is None else _project_cone(vector(r0, m, "r0"), mu)
+    blocks = _diagonal_blocks(csr, nc)
+    pyramid = friction_model == "pyramid"
+    indptr = csr.indptr.astype(np.int64)
+    indices = csr.indices.astype(np.int64)
+    if m == 0:
+        iterations, error = 0, 0.0
+    elif method == "nsgs":
+        iterations, error = _nsgs(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
+    else:
+        iterations, error = _staggered(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations,
+                                       pyramid, 25)
+    u = csr @ r + q
+    converged = bool(error <= tol)
+    if converged:
+        message = f"{method} reached the error {error:.3e} <= tol in {iterations} iterations."
+    else:
+        message = (f"{method} stopped after {iterations} iterations at the error {error:.3e}, above "
+                   f"tol = {tol:.1e}.")
+    return FrictionResult(r, u, int(iterations), converged, float(error), method, friction_model, message)

@@ -1,0 +1,115 @@
+"""``solve_lcp``: one entry point for the LCP of SPEC C6, ``w = B λ − c ≥ 0, λ ≥ 0, λᵀ w = 0``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from . import pgs as _kernels
+from ._checks import choice, positive_float, positive_int, square_csr, vector
+from .coloring import color_rows
+from .lemke import lemke
+
+LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
+
+
+@dataclass
+class LCPResult:
+    """Answer of :func:`solve_lcp`.
+
+    Attributes
+    ----------
+    lam: (n,) the multipliers λ ≥ 0 (for contacts: normal impulses or forces).
+    w: (n,) ``B λ − c`` at ``lam`` (for contacts: the constraint velocity / acceleration / gap).
+    iterations: sweeps (pgs, redblack, jacobi) or pivots (lemke) done.
+    residual: ``‖λ − max(0, λ − w)‖₂`` at ``lam``, absolute (units of w); 0 exactly at a solution.
+    converged: True when ``residual <= tol`` (and, for lemke, the pivoting ended on a solution).
+    method: the method used.
+    message: one sentence on how it ended (why it did not converge, when it did not).
+    colors: number of colors used (redblack only, else 0).
+    """
+
+    lam: np.ndarray
+    w: np.ndarray
+    iterations: int
+    residual: float
+    converged: bool
+    method: str
+    message: str = ""
+    colors: int = 0
+
+
+def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None, omega=1.0) -> LCPResult:
+    """Solve the LCP ``w = B λ − c ≥ 0, λ ≥ 0, λᵀ w = 0`` (SPEC C6).
+
+    Parameters
+    ----------
+    B: (n, n) SciPy sparse matrix or dense array; for contacts ``B = J A⁻¹ Jᵀ`` (SPEC C6).
+       ``pgs``, ``redblack`` and ``jacobi`` need a non-negative diagonal (rows with ``B_ii = 0``
+       are not updated) and converge for symmetric positive (semi)definite B (jacobi only for
+       diagonally dominant B); ``lemke`` accepts any B.
+    c: (n,) right-hand side; for contacts ``c = d − J A⁻¹ b``.
+    method: ``"pgs"`` (SPEC C7), ``"redblack"`` (SPEC C8), ``"jacobi"`` or ``"lemke"`` (exact).
+    tol: absolute tolerance on the residual ``‖λ − max(0, λ − w)‖₂`` (units of w).
+    max_iterations: sweep limit (iterative methods) or pivot limit (lemke).
+    warm_start: (n,) start λ for the iterative methods (negative entries are set to 0); lemke
+       ignores it.
+    omega: relaxation factor ω in (0, 2) for pgs, redblack and jacobi (1 = plain Gauss-Seidel).
+
+    Returns an :class:`LCPResult`; a method that stops before ``tol`` reports ``converged=False``
+    with the residual it reached (SPEC C9: Gauss-Seidel converges slowly with many constraints).
+    Bad input raises :class:`contactlab.errors.InputError`.
+    """
+    method = choice(method, LCP_METHODS, "method")
+    csr = square_csr(B, "B")
+    n = csr.shape[0]
+    c = vector(c, n, "c")
+    tol = positive_float(tol, "tol")
+    max_iterations = positive_int(max_iterations, "max_iterations")
+    omega = positive_float(omega, "omega")
+    if omega >= 2.0:
+        raise InputError("omega", f"expected a relaxation factor in (0, 2), got {omega!r}.")
+    lam = np.zeros(n) if warm_start is None else np.maximum(vector(warm_start, n, "warm_start"), 0.0)
+
+    if method == "lemke":
+        lam, iterations, status, message = lemke(csr.toarray(), -c, max_iterations)
+        w = csr @ lam - c
+        residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))
+        converged = status == "solved" and residual <= tol
+        if status == "solved" and not converged:
+            message = (f"Lemke's pivoting ended on a solution but round-off leaves a residual {residual:.3e} "
+                       f"above tol = {tol:.1e}.")
+        return LCPResult(lam, w, iterations, residual, converged, method, message)
+
+    diag = csr.diagonal()
+    if np.any(diag < 0.0):
+        row = int(np.flatnonzero(diag < 0.0)[0])
+        raise InputError("B", f"{method} needs a non-negative diagonal, but B[{row}, {row}] = {diag[row]:.3g}; "
+                              "use method='lemke' for such matrices.")
+    indptr = csr.indptr.astype(np.int64)
+    indices = csr.indices.astype(np.int64)
+    data = csr.data
+    ncolors = 0
+    if n == 0:
+        iterations, residual = 0, 0.0
+    elif method == "redblack":
+        colors = color_rows(csr)
+        ncolors = int(colors.max()) + 1
+        order = np.argsort(colors, kind="stable").astype(np.int64)
+        color_start = np.searchsorted(colors[order], np.arange(ncolors + 1)).astype(np.int64)
+        iterations, residual = _kernels.red_black(indptr, indices, data, diag, c, lam, omega, tol,
+                                                  max_iterations, order, color_start)
+    else:
+        iterations, residual = _kernels.gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol,
+                                                     max_iterations, method == "jacobi")
+    w = csr @ lam - c
+    residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))
+    converged = residual <= tol
+    if converged:
+        message = f"{method} reached the residual {residual:.3e} <= tol in {iterations} sweeps."
+    else:
+        message = (f"{method} stopped after {iterations} sweeps at the residual {residual:.3e}, above "
+                   f"tol = {tol:.1e} (slow convergence, SPEC C9, or an LCP this method cannot solve).")
+    return LCPResult(lam, w, int(iterations), residual, converged, method, message, ncolors)
