@@ -88,31 +88,50 @@ def gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol, max_iterations
     return max_iterations, residual
 
 
+@njit(cache=True)
+def _relax_row(indptr, indices, data, diag, c, lam, omega, i):
+    d = diag[i]
+    if d > 0.0:
+        acc = -c[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            acc += data[k] * lam[indices[k]]
+        value = lam[i] - omega * acc / d
+        lam[i] = value if value > 0.0 else 0.0
+
+
 @njit(cache=True, parallel=True)
-def red_black(indptr, indices, data, diag, c, lam, omega, tol, max_iterations, order, color_start):
+def red_black(indptr, indices, data, diag, c, lam, omega, tol, max_iterations, order, color_start, min_parallel):
     """Multi-color projected Gauss-Seidel (SPEC C8) on λ (n,), in place.
 
     ``order`` (n,) lists the rows grouped by color, ``color_start`` (ncolors + 1,) the start of
     each color's group in ``order``. Within one color the rows are independent, so they are
-    updated in parallel. Returns ``(sweeps, residual)``."""
+    updated in parallel (``prange``); a color with fewer than ``min_parallel`` rows is run on
+    one thread, since waking the thread pool costs more than such a group's work (and much more
+    when the cores are busy). Returns ``(sweeps, residual)``."""
     n = c.shape[0]
     w = np.empty(n)
     ncolors = color_start.shape[0] - 1
-    residual = lcp_residual_parallel(indptr, indices, data, c, lam, w)
+    parallel_residual = n >= min_parallel
+    if parallel_residual:
+        residual = lcp_residual_parallel(indptr, indices, data, c, lam, w)
+    else:
+        residual = lcp_residual(indptr, indices, data, c, lam, w)
     if residual <= tol:
         return 0, residual
     for sweep in range(1, max_iterations + 1):
         for color in range(ncolors):
-            for t in prange(color_start[color], color_start[color + 1]):
-                i = order[t]
-                d = diag[i]
-                if d > 0.0:
-                    acc = -c[i]
-                    for k in range(indptr[i], indptr[i + 1]):
-                        acc += data[k] * lam[indices[k]]
-                    value = lam[i] - omega * acc / d
-                    lam[i] = value if value > 0.0 else 0.0
-        residual = lcp_residual_parallel(indptr, indices, data, c, lam, w)
+            start = color_start[color]
+            stop = color_start[color + 1]
+            if stop - start >= min_parallel:
+                for t in prange(start, stop):
+                    _relax_row(indptr, indices, data, diag, c, lam, omega, order[t])
+            else:
+                for t in range(start, stop):
+                    _relax_row(indptr, indices, data, diag, c, lam, omega, order[t])
+        if parallel_residual:
+            residual = lcp_residual_parallel(indptr, indices, data, c, lam, w)
+        else:
+            residual = lcp_residual(indptr, indices, data, c, lam, w)
         if residual <= tol:
             return sweep, residual
     return max_iterations, residual

@@ -14,6 +14,10 @@ from .lemke import lemke
 
 LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
 
+#: A color group of ``redblack`` with at least this many rows is updated in parallel (``prange``);
+#: smaller groups run on one thread, where the thread-pool wake-up would cost more than the work.
+REDBLACK_MIN_PARALLEL_ROWS = 512
+
 
 @dataclass
 class LCPResult:
@@ -100,7 +104,8 @@ def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None
         order = np.argsort(colors, kind="stable").astype(np.int64)
         color_start = np.searchsorted(colors[order], np.arange(ncolors + 1)).astype(np.int64)
         iterations, residual = _kernels.red_black(indptr, indices, data, diag, c, lam, omega, tol,
-                                                  max_iterations, order, color_start)
+                                                  max_iterations, order, color_start,
+                                                  REDBLACK_MIN_PARALLEL_ROWS)
     else:
         iterations, residual = _kernels.gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol,
                                                      max_iterations, method == "jacobi")
