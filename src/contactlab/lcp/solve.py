@@ -16,7 +16,7 @@ LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
 
 #: A color group of ``redblack`` with at least this many rows is updated in parallel (``prange``);
 #: smaller groups run on one thread, where the thread-pool wake-up would cost more than the work.
-REDBLACK_MIN_PARALLEL_ROWS = 512
+REDBLACK_MIN_PARALLEL_ROWS = 1024
 
 
 @dataclass
