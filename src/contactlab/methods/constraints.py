@@ -140,7 +140,8 @@ def solve_assembled(J, inverse, v_free, target, friction, warm, options):
         lam = np.zeros((C, 3))
         lam[:, 0] = result.lam
         return lam, result.iterations, result.residual
-    result = solve_friction_contact(B, q, friction, method=options.solver, tol=options.tolerance,
+    method = "nsgs" if options.solver == "matrix_free" else options.solver     # the same F4a sweeps, on W
+    result = solve_friction_contact(B, q, friction, method=method, tol=options.tolerance,
                                     max_iterations=options.iterations, r0=warm.ravel(),
                                     friction_model=options.friction_model)
     return result.r.reshape(C, 3), result.iterations, result.error
