@@ -83,6 +83,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "steps_per_second": (steps - 1) / wall if steps > 1 and wall > 0 else 1.0 / max(first_step_seconds, 1e-9),
         "bodies": model.body_count, "particles": model.particle_count, "max_contacts": max_contacts,
         "max_penetration": float(arrays["max_penetration"].max()),
+        "final_penetration": float(arrays["max_penetration"][-1]),
         "energy": {"initial": float(energy[0]), "final": float(energy[-1]), "max": float(energy.max())},
         "solver": {"max_iterations": int(arrays["solver_iterations"].max()),
                    "max_residual": float(arrays["solver_residual"].max())},
