@@ -24,3 +24,17 @@ def random_rotations(rng, count):
     """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
     from contactlab import rotations
     return rotations.to_matrix(rotations.normalize(rng.normal(size=(count, 4))))
+
+
+def cube_on_plane(angle_degrees=0.0, friction=0.5, mass=1.0, velocity=(0, 0, 0), sink=0.0, half=0.05):
+    """A cube (half edge ``half`` [m]) resting flat on a plane tilted by ``angle`` about y, sunk
+    ``sink`` [m] into it; both of one material with restitution 0. Returns (model, the unit
+    vector down the slope)."""
+    theta = np.radians(angle_degrees)
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    builder = ModelBuilder()
+    builder.add_material("m", friction=friction, restitution=0.0)
+    builder.add_body("box", half_extents=(half, half, half), mass=mass, position=normal * (half - sink),
+                     orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), velocity=velocity, material="m")
+    builder.add_obstacle("plane", normal=normal, offset=0.0, material="m")
+    return builder.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])

@@ -7,12 +7,12 @@ from contactlab import ModelBuilder, simulate
 from contactlab.collision import collide
 from contactlab.contacts import jacobian
 from contactlab.dynamics.generalized import inverse_mass_matrix, stack
-from contactlab.dynamics.integrators import free_velocities, world_inverse_inertia
+from contactlab.dynamics.integrators import free_velocities
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import constraints
-from contactlab.methods.sequential import contact_rows, lever_arms, solve_order, solve_sequential_impulses
+from contactlab.methods.sequential import rows_of, solve_order, solve_sequential_impulses
 from contactlab.scene import builtin_scenes, load_scene
-from conftest import ball_on_plane
+from conftest import ball_on_plane, cube_on_plane
 
 G = 9.81
 HALF = 0.05
@@ -59,21 +59,10 @@ def test_acceleration_formulation_holds_a_resting_box():
     np.testing.assert_allclose(run.arrays["body_position"][:, 0, 2], HALF, atol=1e-6)
 
 
-def cube(velocity=(0, 0, 0), friction=0.3, angle_degrees=0.0):
-    theta = np.radians(angle_degrees)
-    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
-    b = ModelBuilder()
-    b.add_material("m", friction=friction, restitution=0.0)
-    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=normal * HALF, velocity=velocity,
-               orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), material="m")
-    b.add_obstacle("plane", normal=normal, material="m")
-    return b.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
-
-
 @pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered"])
 def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
     v0, mu = 3.0, 0.3
-    model, _ = cube(velocity=(v0, 0, 0), friction=mu)
+    model, _ = cube_on_plane(friction=mu, velocity=(v0, 0, 0))
     run = simulate(model, "constraints", dt=0.004, duration=1.2, options={"solver": solver})
     x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
     stopped = np.argmax(np.abs(vx) < 1e-6)
@@ -84,7 +73,7 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
 @pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
 def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, sticks):
     theta = np.radians(20.0)
-    model, downhill = cube(friction=friction, angle_degrees=20.0)
+    model, downhill = cube_on_plane(20.0, friction)
     run = simulate(model, "constraints", dt=0.004, duration=2.0)
     t = run.arrays["time"]
     along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill
@@ -135,11 +124,7 @@ def contact_problem(model, dt=0.004):
     options = constraints.Options()
     v_free = stack(*free_velocities(model, state, dt))
     contacts = collide(model, state, options.contact_margin)
-    r_a, r_b = lever_arms(contacts, state.body_position)
-    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-                        contacts.tangent2, model.body_inverse_mass,
-                        world_inverse_inertia(model, state.body_orientation), model.particle_inverse_mass)
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     target = np.zeros((contacts.count, 3))
     target[:, 0] = np.maximum(-(-contacts.depth) / dt, 0.0)       # no overlap at the end: v_n ≥ 0 here

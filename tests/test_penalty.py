@@ -12,24 +12,17 @@ from contactlab.dynamics.integrators import world_inverse_inertia
 from contactlab.errors import InputError, SimulationDiverged, StabilityWarning
 from contactlab.methods import penalty
 from contactlab.scene import builtin_scenes, load_scene
-from conftest import ball_on_plane
+from conftest import ball_on_plane, cube_on_plane
 
 G = 9.81
 HALF = 0.05          # half edge of the test cubes [m]
 
 
-def cube_on_plane(angle_degrees=0.0, friction=0.5, stiffness=1e4, mass=1.0, velocity=(0, 0, 0)):
-    """A cube resting flat on a plane tilted by ``angle`` about y, its four corners sunk to the
-    static penetration m g cosθ / (4 k). Returns (model, downhill unit vector)."""
-    theta = np.radians(angle_degrees)
-    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
-    sink = mass * G * np.cos(theta) / (4 * stiffness)
-    b = ModelBuilder()
-    b.add_material("m", friction=friction, restitution=0.0)
-    b.add_body("box", half_extents=(HALF, HALF, HALF), mass=mass, position=normal * (HALF - sink),
-               orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), velocity=velocity, material="m")
-    b.add_obstacle("plane", normal=normal, offset=0.0, material="m")
-    return b.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
+def resting_cube(angle_degrees=0.0, friction=0.5, stiffness=1e4, mass=1.0, velocity=(0, 0, 0)):
+    """A cube on a plane tilted by ``angle``, its four corners sunk to the static penetration
+    m g cosθ / (4 k) of the springs. Returns (model, downhill unit vector)."""
+    sink = mass * G * np.cos(np.radians(angle_degrees)) / (4 * stiffness)
+    return cube_on_plane(angle_degrees, friction, mass, velocity, sink, HALF)
 
 
 # ---- P1, P3: the normal spring ---------------------------------------------------------------
@@ -134,7 +127,7 @@ def test_implicit_stays_stable_where_explicit_blows_up():
 
 @pytest.mark.parametrize("solver", ["cg", "direct"])
 def test_linear_solvers_agree(solver):
-    model, _ = cube_on_plane(angle_degrees=10.0, friction=0.3, velocity=(0.5, 0.2, 0))
+    model, _ = resting_cube(angle_degrees=10.0, friction=0.3, velocity=(0.5, 0.2, 0))
     options = {"stiffness": 1e4, "linear_solver": solver, "linear_tolerance": 1e-12}
     run = simulate(model, "penalty", dt=0.002, duration=0.1, options=options, integrator="backward_euler")
     reference = simulate(model, "penalty", dt=0.002, duration=0.1, options=dict(options, linear_solver="direct"),
@@ -159,7 +152,7 @@ def test_anchor_spring_sticks_under_the_limit_and_slips_to_exactly_mu_fn():
 
 
 def test_anchors_live_in_the_state_keyed_by_contact_id():
-    model, _ = cube_on_plane(angle_degrees=20.0, friction=0.5)
+    model, _ = resting_cube(angle_degrees=20.0, friction=0.5)
     run = simulate(model, "penalty", dt=0.001, duration=0.05, options={"stiffness": 1e4})
     carried = run.state.carried
     contacts = collide(model, run.state, 0.001)
@@ -172,7 +165,7 @@ def test_anchors_live_in_the_state_keyed_by_contact_id():
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
 def test_sliding_block_stops_at_v2_over_2_mu_g(integrator):
     v0, mu = 3.0, 0.3
-    model, _ = cube_on_plane(friction=mu, velocity=(v0, 0, 0))
+    model, _ = resting_cube(friction=mu, velocity=(v0, 0, 0))
     run = simulate(model, "penalty", dt=0.001, duration=1.3, options={"stiffness": 1e4}, integrator=integrator)
     x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
     stopped = np.argmax(np.abs(vx) < 0.005 * v0)
@@ -183,7 +176,7 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(integrator):
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
 def test_block_sticks_on_an_incline_flatter_than_its_friction_angle(integrator):
-    model, _ = cube_on_plane(angle_degrees=20.0, friction=0.5)          # tan 20° = 0.36 < 0.5
+    model, _ = resting_cube(angle_degrees=20.0, friction=0.5)          # tan 20° = 0.36 < 0.5
     run = simulate(model, "penalty", dt=0.001, duration=2.0, options={"stiffness": 1e4}, integrator=integrator)
     drift = np.linalg.norm(run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0], axis=1)
     assert drift.max() < 0.001
@@ -191,7 +184,7 @@ def test_block_sticks_on_an_incline_flatter_than_its_friction_angle(integrator):
 
 def test_block_slides_down_a_steeper_incline_at_g_sin_minus_mu_cos():
     theta, mu = np.radians(20.0), 0.2                                   # tan 20° = 0.36 > 0.2
-    model, downhill = cube_on_plane(angle_degrees=20.0, friction=mu)
+    model, downhill = resting_cube(angle_degrees=20.0, friction=mu)
     run = simulate(model, "penalty", dt=0.001, duration=1.5, options={"stiffness": 1e4})
     t = run.arrays["time"]
     along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill

@@ -5,10 +5,10 @@ import pytest
 
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.dynamics.integrators import world_inverse_inertia
-from contactlab.errors import InputError
+from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import projection
 from contactlab.scene import builtin_scenes, load_scene
-from conftest import ball_on_plane
+from conftest import ball_on_plane, cube_on_plane
 
 G = 9.81
 HALF = 0.05
@@ -88,19 +88,8 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(integrator):
     np.testing.assert_allclose(x[-1], v0 ** 2 / (2 * mu * G), rtol=0.03)
 
 
-def tilted_cube(angle_degrees, friction):
-    theta = np.radians(angle_degrees)
-    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
-    b = ModelBuilder()
-    b.add_material("m", friction=friction, restitution=0.0)
-    b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=normal * HALF,
-               orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), material="m")
-    b.add_obstacle("plane", normal=normal, material="m")
-    return b.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
-
-
 def test_block_sticks_on_an_incline_flatter_than_its_friction_angle():
-    model, _ = tilted_cube(20.0, 0.5)
+    model, _ = cube_on_plane(20.0, 0.5)
     run = simulate(model, "projection", dt=0.004, duration=2.0)
     drift = np.linalg.norm(run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0], axis=1)
     assert drift.max() < 0.001
@@ -108,7 +97,7 @@ def test_block_sticks_on_an_incline_flatter_than_its_friction_angle():
 
 def test_block_slides_down_a_steeper_incline_at_g_sin_minus_mu_cos():
     theta, mu = np.radians(20.0), 0.2
-    model, downhill = tilted_cube(20.0, mu)
+    model, downhill = cube_on_plane(20.0, mu)
     run = simulate(model, "projection", dt=0.004, duration=1.5)
     t = run.arrays["time"]
     along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill
@@ -210,3 +199,12 @@ def test_triangle_samples_stop_a_corner_poking_through_a_coarse_cloth(cloth_samp
         assert lowest < 0.05                               # fell past the post to the floor
     else:
         assert lowest > 0.15                               # held up by the post's top (z = 0.2)
+
+
+def test_backward_euler_drapes_at_ten_times_a_step_symplectic_euler_cannot_take():
+    scene = load_scene("cloth_drape")                 # backward Euler at 1/120 s by default
+    with pytest.raises(SimulationDiverged):
+        simulate(scene.model, "projection", scene.dt / 10, 0.35, integrator="symplectic_euler", record_every=50)
+    run = simulate(scene.model, "projection", scene.dt, 0.35, integrator="backward_euler")
+    assert run.state.is_finite() and obstacle_depths(scene.model, run.state).max() <= 1e-6
+    assert run.arrays["contact_count"][-1] > 0        # it reached the sphere

@@ -40,11 +40,11 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
+from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
-from .sequential import contact_rows, lever_arms, solve_order, solve_sequential_impulses
+from .sequential import rows_of, solve_order, solve_sequential_impulses
 from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "pgs", "redblack", "jacobi", "lemke")
@@ -179,11 +179,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         carried = {k: v for k, v in state.carried.items() if not k.startswith("constraint_")}
         return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
-    r_a, r_b = lever_arms(contacts, state.body_position)
-    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-                        contacts.tangent2, model.body_inverse_mass,
-                        world_inverse_inertia(model, state.body_orientation), model.particle_inverse_mass)
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     normal_velocity = (J @ v_free)[0::3]
     gap_at_start = -contacts.depth

@@ -34,12 +34,12 @@ from numba import njit
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..dynamics.generalized import stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
+from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
 from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
-from .sequential import _row_velocity, _solve_contact, contact_rows, lever_arms, solve_order, solve_sequential_impulses
+from .sequential import _row_velocity, _solve_contact, rows_of, solve_order, solve_sequential_impulses
 
 
 @dataclass
@@ -155,15 +155,11 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
         return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
-    r_a, r_b = lever_arms(contacts, state.body_position)
-    inverse_inertia = world_inverse_inertia(model, state.body_orientation)
     gap_at_start = -contacts.depth                         # d₀
     threshold = options.restitution_threshold
     if threshold < 0:
         threshold = 2.0 * np.linalg.norm(model.gravity) * dt
-    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-                        contacts.tangent2, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass)
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     u = stack(v_body, w_body, v_particle)
     order = solve_order(contacts, model.gravity)
     tau_contact = np.empty(contacts.count)

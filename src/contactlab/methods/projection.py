@@ -32,11 +32,11 @@ import numpy as np
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..dynamics.generalized import stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities, world_inverse_inertia
+from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
-from .sequential import contact_rows, lever_arms, row_products, solve_order, solve_sequential_impulses
+from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
 
 
 @dataclass
@@ -78,11 +78,7 @@ def project(model, state, predicted, displacement, options, sweep=None):
                        options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
         return displacement, contacts, 0, 0.0
-    r_a, r_b = lever_arms(contacts, predicted.body_position)
-    rows = contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-                        contacts.tangent2, model.body_inverse_mass,
-                        world_inverse_inertia(model, predicted.body_orientation), model.particle_inverse_mass)
+    rows = rows_of(model, contacts, predicted.body_position, predicted.body_orientation)
     # depth after a further displacement Δu: δ − J_n Δu ≤ 0, i.e. J_n u ≥ J_n u_now + δ
     target = row_products(rows[0], rows[1], rows[2], displacement)[:, 0] + contacts.depth
     corrected = displacement.copy()

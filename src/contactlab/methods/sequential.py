@@ -184,6 +184,17 @@ def solve_sequential_impulses(index, width, jac, push, k, friction, target_norma
     return impulses, sweeps, change
 
 
+def rows_of(model, contacts, body_position, body_orientation):
+    """``contact_rows`` of a Contacts at the given body positions (B, 3) and orientations (B, 4)
+    (the state the contacts were detected at): index, width, jac, push, k."""
+    from ..dynamics.integrators import world_inverse_inertia
+    r_a, r_b = lever_arms(contacts, body_position)
+    return contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
+                        contacts.tangent2, model.body_inverse_mass, world_inverse_inertia(model, body_orientation),
+                        model.particle_inverse_mass)
+
+
 def lever_arms(contacts, body_position):
     """r = point − centre of mass for each side, (C, 3) each; zero for non-body sides."""
     def arm(body):
