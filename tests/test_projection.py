@@ -206,5 +206,5 @@ def test_backward_euler_drapes_at_ten_times_a_step_symplectic_euler_cannot_take(
     with pytest.raises(SimulationDiverged):
         simulate(scene.model, "projection", scene.dt / 10, 0.35, integrator="symplectic_euler", record_every=50)
     run = simulate(scene.model, "projection", scene.dt, 0.35, integrator="backward_euler")
-    assert run.state.is_finite() and obstacle_depths(scene.model, run.state).max() <= 1e-6
+    assert run.state.is_finite() and obstacle_depths(scene.model, run.state).max(initial=-1.0) <= 1e-6
     assert run.arrays["contact_count"][-1] > 0        # it reached the sphere

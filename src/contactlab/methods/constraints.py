@@ -44,7 +44,7 @@ from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo
-from .sequential import rows_of, solve_order, solve_sequential_impulses
+from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
 from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "pgs", "redblack", "jacobi", "lemke")
@@ -180,8 +180,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
-    normal_velocity = (J @ v_free)[0::3]
+    normal_velocity = row_products(rows[0], rows[1], rows[2], v_free)[:, 0]
     gap_at_start = -contacts.depth
     threshold = options.restitution_threshold
     if threshold < 0:
@@ -190,7 +189,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         target, tau = normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts),
                                      contacts.restitution, h, threshold, options)
     else:
-        current = (J @ stack(*state.velocities))[0::3]
+        current = row_products(rows[0], rows[1], rows[2], stack(*state.velocities))[:, 0]
         target = acceleration_target(current, normal_velocity, gap_at_start, h, options)
         tau = np.full(contacts.count, -1.0)
     warm, _ = values_by_id(state.carried.get("constraint_ids"), state.carried.get("constraint_values"),
@@ -209,6 +208,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
             inverse = SystemInverse(matrix=A0, free=free_dofs)
         else:
             inverse = SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
+        J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
         targets = np.zeros((contacts.count, 3))
         targets[:, 0] = target
         lam, iterations, residual = solve_assembled(J, inverse, v_free, targets.ravel(), contacts.friction, warm,
