@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, collide, rotations
-from contactlab.collision.broad_phase import brute_force_pairs, overlapping_pairs
+from contactlab.collision.broad_phase import brute_force_pairs, grid_pairs, overlapping_pairs, sweep_and_prune
 from contactlab.errors import InputError
 
 
@@ -131,6 +131,29 @@ def test_broad_phase_equals_brute_force(rng):
         fast = overlapping_pairs(centers - half, centers + half)
         slow = brute_force_pairs(centers - half, centers + half)
         assert sorted(map(tuple, fast)) == sorted(map(tuple, slow))
+
+
+@pytest.mark.parametrize("layout", ["pile", "mixed sizes", "one huge box", "all in one place"])
+def test_hash_grid_equals_sweep_and_prune_and_brute_force(rng, layout):
+    count = 1500
+    if layout == "pile":                  # a dense column: the case where sweep and prune tests O(n²)
+        centers = rng.uniform([-0.5, -0.5, 0.0], [0.5, 0.5, 3.0], size=(count, 3))
+        half = np.full((count, 3), 0.05)
+    elif layout == "mixed sizes":
+        centers = rng.uniform(-2, 2, size=(count, 3))
+        half = rng.uniform(0.001, 0.3, size=(count, 3))
+    elif layout == "one huge box":
+        centers = rng.uniform(-1, 1, size=(count, 3))
+        half = np.full((count, 3), 0.02)
+        half[7] = 1.5
+    else:
+        centers = rng.normal(scale=1e-3, size=(count, 3))
+        half = np.full((count, 3), 0.01)
+    lower, upper = centers - half, centers + half
+    expected = sorted(map(tuple, brute_force_pairs(lower, upper)))
+    assert sorted(map(tuple, grid_pairs(lower, upper))) == expected
+    assert sorted(map(tuple, sweep_and_prune(lower, upper))) == expected
+    assert list(map(tuple, overlapping_pairs(lower, upper))) == expected      # sorted, no duplicates
 
 
 def test_contact_ids_persist_while_the_contact_lasts():
