@@ -20,7 +20,8 @@ def test_run_bouncing_ball_json_and_trajectory(tmp_path):
     result = contactlab("run", "bouncing_ball", "--method", "impulse", "--json", "--duration", "3.5", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)                    # stdout is exactly one JSON object
-    for key in ("scene", "method", "dt", "steps", "wall_seconds", "steps_per_second", "bodies", "particles",
+    for key in ("scene", "method", "dt", "steps", "wall_seconds", "steps_per_second", "compile_seconds",
+                "recording_seconds", "first_step_seconds", "bodies", "particles",
                 "max_contacts", "max_penetration", "energy", "trajectory"):
         assert key in summary
     assert set(summary["energy"]) == {"initial", "final", "max"}
