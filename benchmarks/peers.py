@@ -1,0 +1,639 @@
+"""contactlab against pybullet and MuJoCo on the scenes of issue 8 (a measurement, not a test).
+
+    python benchmarks/peers.py            # full settings (tens of minutes on 2 cores)
+    python benchmarks/peers.py --quick    # smoke run: the same scenes, short durations
+    python benchmarks/peers.py --only pile1000 pyramid --report-only ...
+
+Every engine steps the same scene in this one process, with dt = 1/240 s and the same number
+of solver iterations (50): contactlab's ``constraints`` method (and others where asked),
+pybullet with maximal coordinates in ``p.DIRECT`` mode, MuJoCo with the CG solver. A peer that
+is not installed is skipped (``pip install -e .[bench]`` installs both and matplotlib).
+
+Measured for each run:
+
+* steps/s — the stepping loop only: a short warm-up (contactlab: a separate 3-step run that
+  compiles its kernels; the peers: 5 steps) is excluded, and so is reading the state back
+  for the measures below (the peers' clock runs around their step call only; contactlab's
+  ``summary["steps_per_second"]`` leaves out its first step, which compiles);
+* max penetration [m] — spheres: measured the same way for every engine from the sampled
+  positions (largest overlap of two spheres or of a sphere and a wall); boxes: what each
+  engine's contacts report (contactlab's ``max_penetration``, pybullet's contact distance,
+  MuJoCo's ``contact.dist``); cloth: largest overlap of a vertex (thickness 5 mm) with the
+  sphere or the floor;
+* drift [m] — the largest displacement of a body that should stay put: every box of the
+  pyramid from its start, over the whole run; for the piles, every sphere over the last
+  0.5 s (when the pile should be at rest).
+
+Threads are pinned before NumPy loads: OPENBLAS/OMP/MKL/VECLIB/NUMEXPR_NUM_THREADS = 1 (the
+peers are single-threaded), and NUMBA_NUM_THREADS = ``--numba-threads`` (default: 2, the cores
+of the benchmark machine, which the issue's parallel Gauss-Seidel target is about).
+
+Results go to ``benchmarks/results/results.json`` (merged run by run, so a partial run keeps
+what it measured), ``benchmarks/results.md`` and the PNG plots in ``benchmarks/results/``.
+"""
+
+import argparse
+import os
+import sys
+
+def _pin_threads(argv):
+    numba_threads = "2"
+    for i, arg in enumerate(argv):
+        if arg == "--numba-threads" and i + 1 < len(argv):
+            numba_threads = argv[i + 1]
+        elif arg.startswith("--numba-threads="):
+            numba_threads = arg.split("=", 1)[1]
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+                 "NUMEXPR_NUM_THREADS"):
+        os.environ[name] = "1"
+    os.environ["NUMBA_NUM_THREADS"] = numba_threads
+
+
+_pin_threads(sys.argv)
+
+import json                                   # noqa: E402  (after the thread pinning)
+import platform                               # noqa: E402
+import time                                   # noqa: E402
+from datetime import date                     # noqa: E402
+
+import numpy as np                            # noqa: E402
+from scipy.spatial import cKDTree             # noqa: E402
+
+import contactlab                             # noqa: E402
+from contactlab import ModelBuilder, simulate  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+RESULTS_DIR = os.path.join(HERE, "results")
+DT = 1.0 / 240.0
+ITERATIONS = 50
+RADIUS = 0.05
+WARMUP_STEPS = 5
+
+try:
+    import pybullet
+except ImportError:                           # the extra "bench" is not installed
+    pybullet = None
+try:
+    import mujoco
+except ImportError:
+    mujoco = None
+
+
+# ---- scene descriptions (engine-neutral) ----------------------------------------------------
+
+def pile_layout(count, grid=9, spacing=0.11, first_z=0.2):
+    """Sphere centres of the pile: layers of grid × grid, 0.11 m apart, every other layer
+    shifted by 5 mm (columns must not balance), the lowest 0.2 m up. A 9 × 9 grid fits the
+    1 m box; more spheres make the column taller. Returns (count, 3) and the box half-width."""
+    k = np.arange(count)
+    layer, rest = np.divmod(k, grid * grid)
+    i, j = np.divmod(rest, grid)
+    start = -(grid - 1) * spacing / 2
+    shift = 0.005 * (layer % 2)
+    centres = np.stack([start + shift + spacing * i, start + shift + spacing * j, first_z + spacing * layer], axis=1)
+    half_width = grid * spacing / 2 + 0.005        # 9 × 0.11 / 2 + 5 mm = 0.5 m for the 9 × 9 grid
+    return centres, half_width
+
+
+def pyramid_layout(levels=20, size=0.1, gap=0.005):
+    """Box centres of a 2D pyramid: level L (from 0) holds levels − L boxes, resting exactly on
+    the level below (the gaps are sideways)."""
+    centres = []
+    for level in range(levels):
+        n = levels - level
+        for i in range(n):
+            centres.append(((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level))
+    return np.array(centres)
+
+
+CLOTH = dict(size=1.0, mass=0.3, height=0.85, sphere_radius=0.25, sphere_z=0.3, thickness=0.005, friction=0.4)
+
+
+# ---- measures from positions -----------------------------------------------------------------
+
+def sphere_penetration(positions, half_width, radius=RADIUS):
+    """Largest overlap [m] of two spheres or of a sphere and the box (floor z = 0, walls at
+    ±half_width) in one frame of centres (B, 3)."""
+    worst = max(0.0, float(np.max(radius - positions[:, 2])))
+    worst = max(worst, float(np.max(np.abs(positions[:, :2]) + radius - half_width)))
+    pairs = cKDTree(positions).query_pairs(2 * radius, output_type="ndarray")
+    if len(pairs):
+        distance = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+        worst = max(worst, float(np.max(2 * radius - distance)))
+    return worst
+
+
+def cloth_penetration(vertices, thickness=CLOTH["thickness"]):
+    centre = np.array([0.0, 0.0, CLOTH["sphere_z"]])
+    to_sphere = np.linalg.norm(vertices - centre, axis=1) - CLOTH["sphere_radius"]
+    return max(0.0, float(np.max(thickness - to_sphere)), float(np.max(thickness - vertices[:, 2])))
+
+
+def pile_measures(frames, times, half_width):
+    """(max penetration over the frames, drift over the last 0.5 s) of a pile trajectory."""
+    penetration = max(sphere_penetration(f, half_width) for f in frames)
+    late = [f for f, t in zip(frames, times) if t >= times[-1] - 0.5 - 1e-9]
+    drift = float(np.max(np.linalg.norm(late[-1] - late[0], axis=1))) if len(late) > 1 else float("nan")
+    return penetration, drift
+
+
+def moved(frames):
+    """Per body: the largest distance [m] from its first sampled position."""
+    start = frames[0]
+    return np.max([np.linalg.norm(f - start, axis=1) for f in frames], axis=0)
+
+
+# ---- contactlab ----------------------------------------------------------------------------------
+
+def contactlab_pile(count, grid=9):
+    b = ModelBuilder()
+    b.add_material("rubber", friction=0.5, restitution=0.0)
+    centres, half_width = pile_layout(count, grid)
+    for c in centres:
+        b.add_body("sphere", radius=RADIUS, mass=1.0, position=c, material="rubber")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="rubber")
+    for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
+        b.add_obstacle("plane", normal=normal, offset=-half_width, material="rubber")
+    return b.finalize(), half_width
+
+
+def contactlab_pyramid(levels=20):
+    b = ModelBuilder()
+    b.add_material("wood", friction=0.6, restitution=0.0)
+    for c in pyramid_layout(levels):
+        b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=c, material="wood")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="wood")
+    return b.finalize()
+
+
+def contactlab_cloth(n):
+    b = ModelBuilder()
+    b.add_material("cotton", friction=CLOTH["friction"], restitution=0.0)
+    b.add_cloth(size=(CLOTH["size"], CLOTH["size"]), resolution=(n, n), position=(0, 0, CLOTH["height"]),
+                mass=CLOTH["mass"], stretch_stiffness=2000.0, shear_stiffness=200.0, bend_stiffness=2.0,
+                damping=0.02, thickness=CLOTH["thickness"], material="cotton")
+    b.add_obstacle("sphere", radius=CLOTH["sphere_radius"], position=(0, 0, CLOTH["sphere_z"]), material="cotton")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="cotton")
+    return b.finalize()
+
+
+CONTACTLAB_OPTIONS = {"constraints": {"iterations": ITERATIONS}, "impulse": {"iterations": ITERATIONS},
+                      "projection": {"iterations": ITERATIONS}, "penalty": {}}
+
+
+def run_contactlab(model, method, duration, record_every, integrator="symplectic_euler", options=None):
+    """(summary, arrays) of a timed run, after a 3-step run that compiles the kernels."""
+    options = dict(CONTACTLAB_OPTIONS[method] if options is None else options)
+    simulate(model, method, DT, 3 * DT, options, integrator)                    # warm-up: compile
+    run = simulate(model, method, DT, duration, options, integrator, record_every=record_every)
+    return run.summary, run.arrays
+
+
+# ---- pybullet ------------------------------------------------------------------------------------
+
+class Bullet:
+    """One pybullet world in DIRECT mode, maximal-coordinate bodies, 50 solver iterations."""
+
+    def __init__(self):
+        self.client = pybullet.connect(pybullet.DIRECT)
+        p = pybullet
+        p.resetSimulation(physicsClientId=self.client)
+        p.setGravity(0, 0, -9.81, physicsClientId=self.client)
+        p.setPhysicsEngineParameter(fixedTimeStep=DT, numSolverIterations=ITERATIONS, numSubSteps=0,
+                                    physicsClientId=self.client)
+        self.bodies = []
+
+    def plane(self, normal, point, friction):
+        p = pybullet
+        shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=normal, physicsClientId=self.client)
+        body = p.createMultiBody(0, shape, basePosition=point, physicsClientId=self.client)
+        p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0, physicsClientId=self.client)
+
+    def body(self, shape, position, friction):
+        p = pybullet
+        body = p.createMultiBody(1.0, shape, basePosition=list(position), useMaximalCoordinates=True,
+                                 physicsClientId=self.client)
+        p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0,
+                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.client)
+        self.bodies.append(body)
+
+    def positions(self):
+        get = pybullet.getBasePositionAndOrientation
+        return np.array([get(b, physicsClientId=self.client)[0] for b in self.bodies])
+
+    def penetration(self):
+        points = pybullet.getContactPoints(physicsClientId=self.client)
+        return max([0.0] + [-pt[8] for pt in points])
+
+    def close(self):
+        pybullet.disconnect(self.client)
+
+
+def bullet_pile(count):
+    world = Bullet()
+    centres, half_width = pile_layout(count)
+    world.plane((0, 0, 1), (0, 0, 0), 0.5)
+    for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
+        world.plane(normal, tuple(-half_width * np.array(normal)), 0.5)
+    shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=RADIUS, physicsClientId=world.client)
+    for c in centres:
+        world.body(shape, c, 0.5)
+    return world, half_width
+
+
+def bullet_pyramid(levels=20):
+    world = Bullet()
+    world.plane((0, 0, 1), (0, 0, 0), 0.6)
+    shape = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[0.05] * 3, physicsClientId=world.client)
+    for c in pyramid_layout(levels):
+        world.body(shape, c, 0.6)
+    return world
+
+
+def step_peer(step, steps, sample, sample_every):
+    """Time ``steps`` calls of step() (after WARMUP_STEPS untimed ones); sample() every
+    ``sample_every`` steps outside the clock. Returns (steps/s, samples, sample times)."""
+    for _ in range(WARMUP_STEPS):
+        step()
+    samples, times, elapsed = [sample()], [0.0], 0.0
+    for k in range(1, steps + 1):
+        t0 = time.perf_counter()
+        step()
+        elapsed += time.perf_counter() - t0
+        if k % sample_every == 0 or k == steps:
+            samples.append(sample())
+            times.append(k * DT)
+    return steps / elapsed, samples, times
+
+
+# ---- MuJoCo ----------------------------------------------------------------------------------------
+
+def _mj_header(extra=""):
+    return (f'<mujoco><option timestep="{DT!r}" solver="CG" iterations="{ITERATIONS}" gravity="0 0 -9.81"/>'
+            f'{extra}<worldbody>')
+
+
+def _mj_plane(normal, point, friction):
+    return (f'<geom type="plane" size="5 5 0.1" pos="{point[0]} {point[1]} {point[2]}" '
+            f'zaxis="{normal[0]} {normal[1]} {normal[2]}" friction="{friction} 0.005 0.0001"/>')
+
+
+def mujoco_pile(count):
+    centres, half_width = pile_layout(count)
+    parts = [_mj_header(), _mj_plane((0, 0, 1), (0, 0, 0), 0.5)]
+    for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
+        parts.append(_mj_plane(normal, -half_width * np.array(normal), 0.5))
+    for k, c in enumerate(centres):
+        parts.append(f'<body name="s{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="sphere" '
+                     f'size="{RADIUS}" mass="1" friction="0.5 0.005 0.0001"/></body>')
+    parts.append("</worldbody></mujoco>")
+    model = mujoco.MjModel.from_xml_string("".join(parts))
+    return model, mujoco.MjData(model), half_width
+
+
+def mujoco_pyramid(levels=20):
+    parts = [_mj_header(), _mj_plane((0, 0, 1), (0, 0, 0), 0.6)]
+    for k, c in enumerate(pyramid_layout(levels)):
+        parts.append(f'<body name="b{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="box" '
+                     f'size="0.05 0.05 0.05" mass="1" friction="0.6 0.005 0.0001"/></body>')
+    parts.append("</worldbody></mujoco>")
+    model = mujoco.MjModel.from_xml_string("".join(parts))
+    return model, mujoco.MjData(model)
+
+
+def mujoco_cloth(n):
+    """MuJoCo's flex cloth: a flexcomp grid of n × n vertices (1 m square, 0.3 kg), edges held
+    by equality constraints (MuJoCo's usual cloth), vertex radius = the 5 mm thickness."""
+    spacing = CLOTH["size"] / (n - 1)
+    radius = min(CLOTH["thickness"], 0.45 * spacing)   # MuJoCo needs the spacing > 2 × the vertex radius
+    f = CLOTH["friction"]
+    xml = (_mj_header() + _mj_plane((0, 0, 1), (0, 0, 0), f)
+           + f'<geom type="sphere" size="{CLOTH["sphere_radius"]}" pos="0 0 {CLOTH["sphere_z"]}" '
+             f'friction="{f} 0.005 0.0001"/>'
+           + f'<flexcomp name="cloth" type="grid" count="{n} {n} 1" spacing="{spacing} {spacing} {spacing}" '
+             f'pos="0 0 {CLOTH["height"]}" radius="{radius}" dim="2" mass="{CLOTH["mass"]}">'
+             f'<edge equality="true" damping="0.02"/><contact condim="3" friction="{f} 0.005 0.0001" '
+             f'selfcollide="none"/></flexcomp></worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    return model, mujoco.MjData(model), radius
+
+
+def mujoco_body_positions(model, data):
+    return data.xpos[1:model.nbody].copy()
+
+
+def mujoco_penetration(data):
+    return max(0.0, -float(np.min(data.contact.dist[:data.ncon]))) if data.ncon else 0.0
+
+
+def mujoco_version():
+    return mujoco.__version__ if mujoco is not None else None
+
+
+def mujoco_supports_flex():
+    return mujoco is not None and hasattr(mujoco.MjModel, "nflex") if mujoco is not None else False
+
+
+# ---- the benchmark runs ------------------------------------------------------------------------------
+
+SETTINGS = {          # durations [s] of the full run and of --quick
+    "full": dict(pile1000=3.0, pile4000=3.0, pyramid=5.0, cloth64=2.0, cloth128=0.5, scaling=0.75,
+                 scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=12),
+    "quick": dict(pile1000=0.5, pile4000=0.25, pyramid=0.5, cloth64=0.25, cloth128=0.1, scaling=0.1,
+                  scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=6),
+}
+
+
+def record(results, key, row, path):
+    results.setdefault("runs", {})[key] = row
+    print(f"  {key}: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()
+                                    if k not in ("scene",)), flush=True)
+    save(results, path)
+
+
+def pile_runs(results, count, duration, sample_every, path):
+    steps = int(round(duration / DT))
+    scene = f"pile{count}"
+    model, half_width = contactlab_pile(count)
+    summary, arrays = run_contactlab(model, "constraints", duration, sample_every)
+    frames, times = list(arrays["body_position"]), list(arrays["time"])
+    penetration, drift = pile_measures(frames, times, half_width)
+    record(results, f"{scene}/contactlab-constraints", dict(
+        scene=scene, engine="contactlab", method="constraints", bodies=count, duration=duration, steps=steps,
+        steps_per_second=summary["steps_per_second"], max_penetration=penetration, drift=drift,
+        engine_penetration=summary["max_penetration"], max_contacts=summary["max_contacts"]), path)
+    if pybullet is not None:
+        world, half_width = bullet_pile(count)
+        rate, frames, times = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
+                                        world.positions, sample_every)
+        penetration, drift = pile_measures(frames, times, half_width)
+        world.close()
+        record(results, f"{scene}/pybullet", dict(scene=scene, engine="pybullet", method="maximal, SI 50",
+                                                 bodies=count, duration=duration, steps=steps,
+                                                 steps_per_second=rate, max_penetration=penetration,
+                                                 drift=drift), path)
+    if mujoco is not None:
+        m, d, half_width = mujoco_pile(count)
+        rate, frames, times = step_peer(lambda: mujoco.mj_step(m, d), steps,
+                                        lambda: mujoco_body_positions(m, d), sample_every)
+        penetration, drift = pile_measures(frames, times, half_width)
+        record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method="CG 50", bodies=count,
+                                               duration=duration, steps=steps, steps_per_second=rate,
+                                               max_penetration=penetration, drift=drift), path)
+
+
+def pyramid_runs(results, duration, sample_every, path):
+    steps = int(round(duration / DT))
+    model = contactlab_pyramid()
+    for method in ("constraints", "impulse", "penalty", "projection"):
+        try:
+            summary, arrays = run_contactlab(model, method, duration, sample_every)
+        except Exception as error:                    # a diverging method is a result too
+            record(results, f"pyramid/contactlab-{method}", dict(scene="pyramid", engine="contactlab",
+                                                                  method=method, error=repr(error)[:200]), path)
+            continue
+        travel = moved(list(arrays["body_position"]))
+        record(results, f"pyramid/contactlab-{method}", dict(
+            scene="pyramid", engine="contactlab", method=method, bodies=model.body_count, duration=duration,
+            steps=steps, steps_per_second=summary["steps_per_second"], max_penetration=summary["max_penetration"],
+            drift=float(travel.max()), moved_over_1mm=int((travel > 1e-3).sum()),
+            moved_over_1cm=int((travel > 1e-2).sum())), path)
+    if pybullet is not None:
+        world = bullet_pyramid()
+        worst = [0.0]
+
+        def sample():
+            worst[0] = max(worst[0], world.penetration())
+            return world.positions()
+        rate, frames, _ = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
+                                    sample, sample_every)
+        world.close()
+        travel = moved(frames)
+        record(results, "pyramid/pybullet", dict(
+            scene="pyramid", engine="pybullet", method="maximal, SI 50", bodies=len(travel), duration=duration,
+            steps=steps, steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
+            moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
+    if mujoco is not None:
+        m, d = mujoco_pyramid()
+        worst = [0.0]
+
+        def sample():
+            worst[0] = max(worst[0], mujoco_penetration(d))
+            return mujoco_body_positions(m, d)
+        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, sample, sample_every)
+        travel = moved(frames)
+        record(results, "pyramid/mujoco", dict(
+            scene="pyramid", engine="mujoco", method="CG 50", bodies=len(travel), duration=duration, steps=steps,
+            steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
+            moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
+
+
+def cloth_runs(results, n, duration, sample_every, path, methods=("projection", "constraints"), peers=True):
+    steps = int(round(duration / DT))
+    scene = f"cloth{n}"
+    model = contactlab_cloth(n)
+    for method in methods:
+        try:
+            summary, arrays = run_contactlab(model, method, duration, sample_every, integrator="backward_euler")
+        except Exception as error:
+            record(results, f"{scene}/contactlab-{method}", dict(scene=scene, engine="contactlab", method=method,
+                                                                  error=repr(error)[:200]), path)
+            continue
+        penetration = max(cloth_penetration(f) for f in arrays["particle_position"])
+        record(results, f"{scene}/contactlab-{method}", dict(
+            scene=scene, engine="contactlab", method=f"{method} (backward Euler)", vertices=n * n,
+            duration=duration, steps=steps, steps_per_second=summary["steps_per_second"],
+            max_penetration=penetration, engine_penetration=summary["max_penetration"],
+            lowest_vertex=float(arrays["particle_position"][..., 2].min())), path)
+    if mujoco is not None and peers:
+        try:
+            m, d, radius = mujoco_cloth(n)
+        except Exception as error:                    # a MuJoCo without flex, or a model it refuses
+            record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method="flex",
+                                                    error=f"MuJoCo {mujoco.__version__} could not build the flex "
+                                                          f"cloth: {repr(error)[:150]}"), path)
+            return
+        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: d.flexvert_xpos.copy(),
+                                    sample_every)
+        penetration = max(cloth_penetration(f, radius) for f in frames)
+        record(results, f"{scene}/mujoco", dict(
+            scene=scene, engine="mujoco", method=f"flex (CG 50, vertex radius {1e3 * radius:.1f} mm)", vertices=n * n, duration=duration, steps=steps,
+            steps_per_second=rate, max_penetration=penetration,
+            lowest_vertex=float(min(f[:, 2].min() for f in frames))), path)
+
+
+def scaling_runs(results, sizes, duration, path):
+    """Time per step of the contactlab pile, constraints, as N grows. The box widens with N
+    (a square grid of side √(N/12.35), as the 1000-sphere pile's 12.35 layers), so every size
+    is the same pile, only wider: the work per sphere stays alike."""
+    for count in sizes:
+        grid = max(9, int(np.ceil(np.sqrt(count / (1000 / 81)))))
+        model, _ = contactlab_pile(count, grid)
+        summary, _ = run_contactlab(model, "constraints", duration, 1000)
+        record(results, f"scaling/{count}", dict(scene="scaling", engine="contactlab", method="constraints",
+                                                 bodies=count, grid=grid, duration=duration,
+                                                 steps=int(round(duration / DT)),
+                                                 steps_per_second=summary["steps_per_second"],
+                                                 ms_per_step=1e3 / summary["steps_per_second"],
+                                                 max_contacts=summary["max_contacts"]), path)
+
+
+def assembled_pile_lcp(count=4000, settle=0.5):
+    """The frictionless LCP (B_nn, c_n) that the constraints method forms for the pile after
+    ``settle`` seconds, assembled the way methods.constraints.step does (stages 1–4)."""
+    from contactlab.collision import collide, swept_distances
+    from contactlab.contacts import jacobian
+    from contactlab.dynamics.generalized import inverse_mass_matrix, stack
+    from contactlab.dynamics.integrators import free_velocities
+    from contactlab.methods import constraints as cm
+    from contactlab.methods.velocity_level import normal_targets, relative_gravity
+    model, _ = contactlab_pile(count)
+    options = cm.Options(iterations=ITERATIONS)
+    state = simulate(model, "constraints", DT, settle, {"iterations": ITERATIONS}, record_every=10_000).state
+    free = free_velocities(model, state, DT, "symplectic_euler")
+    v_free = stack(*free)
+    sweep = swept_distances(model, free[0], free[1], free[2], DT)
+    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
+                       options.samples, cloth_samples=options.cloth_samples)
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    threshold = 2.0 * np.linalg.norm(model.gravity) * DT
+    target, _ = normal_targets(-contacts.depth, (J @ v_free)[0::3], relative_gravity(model, contacts),
+                               contacts.restitution, DT, threshold, options)
+    targets = np.zeros((contacts.count, 3))
+    targets[:, 0] = target
+    inverse = cm.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
+    B, q = cm.lcp_matrices(J, inverse, v_free, targets.ravel())
+    rows = np.arange(0, 3 * contacts.count, 3)
+    return B[rows][:, rows].tocsr(), -q[rows], f"sphere pile, {count}, assembled after {settle} s"
+
+
+def random_spd_lcp(n=12000, per_row=8, seed=1):
+    rng = np.random.default_rng(seed)
+    import scipy.sparse as sp
+    A = sp.random(n, n, density=per_row / n, random_state=rng, format="csr")
+    B = (A @ A.T + sp.identity(n) * per_row).tocsr()
+    return B, rng.normal(size=n), f"random sparse SPD, n = {n}"
+
+
+def lcp_runs(results, path, quick):
+    from contactlab.lcp import solve_lcp
+    try:
+        B, c, source = assembled_pile_lcp(4000, 0.25 if quick else 0.5)
+    except Exception as error:                         # internals moved: fall back, say so
+        print(f"  (assembling the pile's LCP failed: {error!r}; using a random SPD LCP)")
+        B, c, source = random_spd_lcp()
+    timings = {}
+    answers = {}
+    for method in ("pgs", "redblack"):
+        solve_lcp(B, c, method=method, tol=1e-8, max_iterations=5)               # compile
+        best = None
+        for _ in range(3):
+            t0 = time.perf_counter()
+            result = solve_lcp(B, c, method=method, tol=1e-8, max_iterations=20000)
+            elapsed = time.perf_counter() - t0
+            best = elapsed if best is None else min(best, elapsed)
+        timings[method] = (best, result)
+        answers[method] = result.lam
+    difference = float(np.linalg.norm(answers["pgs"] - answers["redblack"]) /
+                       max(np.linalg.norm(answers["pgs"]), 1e-300))
+    for method, (seconds, result) in timings.items():
+        record(results, f"lcp/{method}", dict(scene="lcp", engine="contactlab.lcp", method=method, rows=B.shape[0],
+                                              nonzeros=int(B.nnz), source=source, seconds=seconds,
+                                              sweeps=int(result.iterations), residual=float(result.residual),
+                                              converged=bool(result.converged), colors=int(result.colors or 0),
+                                              relative_difference=difference), path)
+
+
+# ---- machine, saving, report ---------------------------------------------------------------------------
+
+def machine():
+    cpu = "unknown"
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    import numba
+    import scipy
+    info = dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(), platform=platform.platform(),
+                numpy=np.__version__, scipy=scipy.__version__, numba=numba.__version__,
+                contactlab=contactlab.__version__, numba_threads=os.environ["NUMBA_NUM_THREADS"],
+                blas_threads=os.environ["OPENBLAS_NUM_THREADS"], date=date.today().isoformat())
+    if pybullet is not None:
+        info["pybullet"] = str(pybullet.getAPIVersion())
+        try:
+            from importlib.metadata import version
+            info["pybullet"] = version("pybullet")
+        except Exception:
+            pass
+    if mujoco is not None:
+        info["mujoco"] = mujoco.__version__
+    return info
+
+
+def save(results, path):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(results, f, indent=1, sort_keys=True)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="short durations: a smoke run")
+    parser.add_argument("--only", nargs="*", default=None,
+                        choices=["pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
+                        help="run only these (default: all)")
+    parser.add_argument("--scaling-sizes", type=int, nargs="*", default=None)
+    parser.add_argument("--cloth-methods", nargs="*", default=["projection", "constraints"],
+                        help="contactlab methods of the cloth runs")
+    parser.add_argument("--no-peers", action="store_true", help="cloth: contactlab only (keep the peers' rows)")
+    parser.add_argument("--duration", nargs="*", default=[], metavar="KEY=SECONDS",
+                        help="override a scene's duration, e.g. cloth64=0.5")
+    parser.add_argument("--numba-threads", default="2", help="NUMBA_NUM_THREADS (set before numba loads)")
+    parser.add_argument("--results", default=os.path.join(RESULTS_DIR, "results.json"))
+    parser.add_argument("--fresh", action="store_true", help="start a new results.json instead of merging")
+    parser.add_argument("--report-only", action="store_true", help="rewrite results.md and the plots only")
+    args = parser.parse_args()
+    settings = dict(SETTINGS["quick" if args.quick else "full"])
+    for item in args.duration:
+        key, seconds = item.split("=")
+        settings[key] = float(seconds)
+    results = {}
+    if os.path.exists(args.results) and not args.fresh:
+        with open(args.results) as f:
+            results = json.load(f)
+    if not args.report_only:
+        results["machine"] = machine()
+        results.setdefault("settings", {})["quick" if args.quick else "full"] = {
+            k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()}
+        results["mode"] = "quick" if args.quick else "full"
+        todo = args.only or ["pile1000", "pyramid", "cloth64", "lcp", "scaling", "pile4000", "cloth128"]
+        every = settings["sample_every"]
+        for item in todo:
+            print(f"{item} ...", flush=True)
+            started = time.perf_counter()
+            if item.startswith("pile"):
+                pile_runs(results, int(item[4:]), settings[item], every, args.results)
+            elif item == "pyramid":
+                pyramid_runs(results, settings["pyramid"], every, args.results)
+            elif item.startswith("cloth"):
+                cloth_runs(results, int(item[5:]), settings[item], every, args.results, args.cloth_methods,
+                           not args.no_peers)
+            elif item == "scaling":
+                scaling_runs(results, args.scaling_sizes or settings["scaling_sizes"], settings["scaling"],
+                             args.results)
+            elif item == "lcp":
+                lcp_runs(results, args.results, args.quick)
+            print(f"{item} done in {time.perf_counter() - started:.0f} s", flush=True)
+    from report import write_report                  # benchmarks/report.py
+    out_dir = os.path.dirname(os.path.abspath(args.results))
+    md_path = os.path.join(HERE, "results.md") if out_dir == RESULTS_DIR else os.path.join(out_dir, "results.md")
+    write_report(results, md_path, out_dir)         # a --results elsewhere keeps the committed baseline
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, HERE)
+    main()
