@@ -29,6 +29,21 @@ class StepInfo:
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")
 
 
+def check_choices(options, allowed):
+    """InputError unless each option named in ``allowed`` (name -> tuple of values) is one of them."""
+    for name, values in allowed.items():
+        if getattr(options, name) not in values:
+            raise InputError(name, f"expected one of {', '.join(values)}, found {getattr(options, name)!r}")
+
+
+def check_counts(options, least):
+    """InputError unless each option named in ``least`` (name -> minimum) is a whole number ≥ it."""
+    for name, minimum in least.items():
+        value = getattr(options, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise InputError(name, f"expected a whole number ≥ {minimum}, found {value!r}")
+
+
 def get(name):
     """The method module called ``name``; InputError for an unknown or unavailable one."""
     if name == "impulse":

@@ -43,7 +43,7 @@ from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, un
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
-from . import StepInfo
+from . import StepInfo, check_choices, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
 from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
 
@@ -74,15 +74,9 @@ class Options:
     cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
-        for name, allowed in (("solver", SOLVERS), ("formulation", FORMULATIONS),
-                              ("friction_model", ("cone", "pyramid")), ("granularity", GRANULARITIES),
-                              ("normal", NORMALS)):
-            if getattr(self, name) not in allowed:
-                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
-        for name, least in (("iterations", 1), ("samples", 1), ("cloth_samples", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise InputError(name, f"expected a whole number ≥ {least}, found {value!r}")
+        check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid"),
+                             "granularity": GRANULARITIES, "normal": NORMALS})
+        check_counts(self, {"iterations": 1, "samples": 1, "cloth_samples": 0})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
         self.omega = _number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)

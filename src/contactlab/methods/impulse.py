@@ -37,7 +37,7 @@ from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
-from . import StepInfo
+from . import StepInfo, check_choices, check_counts
 from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
 from .sequential import _row_velocity, _solve_contact, rows_of, solve_order, solve_sequential_impulses
 
@@ -59,8 +59,7 @@ class Options:
     samples: int = 2                      # samples per triangle edge for granularity = "samples"
 
     def __post_init__(self):
-        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 1:
-            raise InputError("iterations", f"expected a whole number ≥ 1, found {self.iterations!r}")
+        check_counts(self, {"iterations": 1})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0)
         self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
         self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
@@ -68,11 +67,8 @@ class Options:
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        for name, allowed in (("granularity", GRANULARITIES), ("normal", NORMALS)):
-            if getattr(self, name) not in allowed:
-                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
-            raise InputError("samples", f"expected a whole number ≥ 1, found {self.samples!r}")
+        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
+        check_counts(self, {"samples": 1})
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 

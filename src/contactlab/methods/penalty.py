@@ -40,7 +40,7 @@ from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError, StabilityWarning
 from ..shapes import bounding_radii
 from ..state import State
-from . import StepInfo
+from . import StepInfo, check_choices, check_counts
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
 LINEAR_SOLVERS = ("cg", "direct")
@@ -73,14 +73,8 @@ class Options:
             self.damping_ratio = _number(self.damping_ratio, "damping_ratio", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.linear_tolerance = _number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
-        for name, allowed in (("granularity", GRANULARITIES), ("normal", NORMALS),
-                              ("linear_solver", LINEAR_SOLVERS)):
-            if getattr(self, name) not in allowed:
-                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
-        for name, least in (("samples", 1), ("implicit_iterations", 1), ("cloth_samples", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise InputError(name, f"expected a whole number ≥ {least}, found {value!r}")
+        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS, "linear_solver": LINEAR_SOLVERS})
+        check_counts(self, {"samples": 1, "implicit_iterations": 1, "cloth_samples": 0})
 
 
 def _stiffness(value, name):

@@ -33,9 +33,8 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
-from ..errors import InputError
 from ..state import State
-from . import StepInfo
+from . import StepInfo, check_choices, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
 
 
@@ -52,15 +51,10 @@ class Options:
     cloth_samples: int = 2                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
-        for name, least in (("iterations", 1), ("passes", 1), ("samples", 1), ("cloth_samples", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise InputError(name, f"expected a whole number ≥ {least}, found {value!r}")
+        check_counts(self, {"iterations": 1, "passes": 1, "samples": 1, "cloth_samples": 0})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
-        for name, allowed in (("granularity", GRANULARITIES), ("normal", NORMALS)):
-            if getattr(self, name) not in allowed:
-                raise InputError(name, f"expected one of {', '.join(allowed)}, found {getattr(self, name)!r}")
+        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
 
 
 def project(model, state, predicted, displacement, options, sweep=None):
