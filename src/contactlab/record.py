@@ -11,7 +11,7 @@ import tempfile
 
 import numpy as np
 
-from . import diagnostics
+from . import diagnostics, surfaces
 from .collision import collide
 
 SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
@@ -48,8 +48,9 @@ class Recorder:
             self.samples[name].append(np.array(value, copy=True))
 
     def arrays(self) -> dict:
-        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,), and
-        the static cloth topology triangles (F,3) and particle_cloth (P,)."""
+        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,), the
+        static cloth topology triangles (F,3) and particle_cloth (P,), and the shapes' surfaces
+        for drawing and export (contactlab.surfaces)."""
         model = self.model
         empty = {"body_position": (0, model.body_count, 3), "body_orientation": (0, model.body_count, 4),
                  "body_velocity": (0, model.body_count, 3), "body_angular_velocity": (0, model.body_count, 3),
@@ -63,6 +64,7 @@ class Recorder:
         out["body_names"] = np.array(model.body_names, dtype=str)
         out["triangles"] = np.array(model.triangles, dtype=np.int64).reshape(-1, 3)
         out["particle_cloth"] = np.array(model.particle_cloth, dtype=np.int64)
+        out.update(surfaces.surface_arrays(model))
         return out
 
 
