@@ -5,6 +5,7 @@ once, at the end, by :func:`write_outputs` (a temporary file, then a rename, so 
 run leaves no half-written file). The arrays are documented in ``docs/trajectory.md``.
 """
 
+import contextlib
 import json
 import os
 import tempfile
@@ -68,16 +69,30 @@ class Recorder:
         return out
 
 
-def _atomic_write(path, write):
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path`` (same suffix) to write to; on success it is
+    renamed to ``path``, on any failure it is removed, so ``path`` is never half-written.
+
+        with atomic_path("out/video.mp4") as temporary:
+            imageio.mimwrite(temporary, frames)
+    """
     directory = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=os.path.basename(path))
+    name = os.path.basename(path)
+    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=name)
+    os.close(handle)
     try:
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
+        yield temporary
         os.replace(temporary, path)
     except BaseException:
-        os.unlink(temporary)
+        if os.path.exists(temporary):
+            os.unlink(temporary)
         raise
+
+
+def _atomic_write(path, write):
+    with atomic_path(path) as temporary, open(temporary, "wb") as stream:
+        write(stream)
 
 
 def write_outputs(directory, arrays, summary):
