@@ -1,0 +1,80 @@
+"""The closed-form answers of the built-in scenes: the formulas against the scenes' stated
+numbers, the measurements against runs of the exact methods, and the guards that keep a changed
+scene from being checked against a formula that no longer applies."""
+
+import numpy as np
+import pytest
+
+from contactlab import closed_form
+from contactlab.closed_form import Check
+from contactlab.scene import load_scene
+from contactlab.simulation import simulate
+
+
+def _run(name, method="impulse", overrides=(), duration=None):
+    scene = load_scene(name, list(overrides) + [f"simulation.method={method}"])
+    run = simulate(scene.model, method, scene.dt, duration or scene.duration,
+                   scene.method_options.get(method, {}), scene.integrator, scene_name=name)
+    return scene, closed_form.checks(name, scene.model, run.arrays)
+
+
+def _by_quantity(found):
+    return {check.quantity: check for check in found}
+
+
+def test_check_error_and_relative_error():
+    check = Check("x", "m", 2.0, 2.5)
+    assert check.error == 0.5 and check.relative_error == 0.25
+    assert Check("y", "m", 0.0, 0.1).relative_error is None
+
+
+def test_expected_values_are_the_scenes_stated_numbers():
+    # the numbers written in the scenes' descriptions, computed independently of closed_form
+    bounce = _by_quantity(_run("bouncing_ball", duration=1.6)[1])
+    assert bounce["rebound 1 apex"].expected == pytest.approx(0.64, rel=1e-12)
+    assert bounce["rebound 2 apex"].expected == pytest.approx(0.8 ** 4, rel=1e-12)
+    slide = _by_quantity(_run("sliding_block", duration=0.1)[1])
+    assert slide["stopping distance"].expected == pytest.approx(9.0 / (2 * 0.3 * 9.81), rel=1e-3)
+    assert slide["stopping time"].expected == pytest.approx(3.0 / (0.3 * 9.81), rel=1e-3)
+    roll = _by_quantity(_run("rolling_sphere", duration=0.1)[1])
+    assert roll["rolling speed"].expected == pytest.approx(15.0 / 7.0, rel=1e-12)
+    rod = _by_quantity(_run("rod_impact", duration=0.4)[1])
+    assert rod["vertical velocity after the impact"].expected == pytest.approx(-1.599, abs=5e-4)
+    assert rod["angular velocity about y after the impact"].expected == pytest.approx(-7.621, abs=5e-4)
+    assert _by_quantity(_run("incline", duration=0.1)[1])["distance down the slope"].expected == 0.0
+
+
+@pytest.mark.parametrize("name, duration, tolerance", [
+    ("bouncing_ball", 1.6, 1e-4),       # impulses hit the apex to the step's accuracy
+    ("rod_impact", 0.4, 1e-4),          # R4 exactly: one impulse at the corner
+    ("rolling_sphere", 1.0, 0.02),      # the end of sliding is read at sample times (dt 0.002 s)
+    ("sliding_block", 1.5, 0.01),
+    ("newtons_cradle", 0.5, 1e-9),      # sequential impulses pass the velocity down the row
+])
+def test_impulses_meet_the_closed_form(name, duration, tolerance):
+    found = _run(name, duration=duration)[1]
+    assert found
+    for check in found:
+        if check.relative_error is None:
+            assert abs(check.error) < 1e-6, check
+        else:
+            assert check.relative_error < tolerance, check
+
+
+def test_a_changed_scene_is_checked_against_its_own_answer():
+    scene, found = _run("sliding_block", overrides=["bodies.0.velocity=[2,0,0]"], duration=0.1)
+    mu = np.sqrt(np.prod(scene.model.material_friction[[scene.model.body_material[0],
+                                                        scene.model.obstacle_material[0]]]))
+    assert _by_quantity(found)["stopping distance"].expected == pytest.approx(4.0 / (2 * mu * 9.81), rel=1e-12)
+    # a steeper slope than the friction angle slides at g (sin θ − μ cos θ)
+    theta = np.radians(40.0)
+    _, found = _run("incline", overrides=[f"obstacles.0.normal=[{-np.sin(theta)},0,{np.cos(theta)}]"],
+                    duration=0.3)
+    a = 9.81 * (np.sin(theta) - 0.5 * np.cos(theta))
+    assert found[0].expected == pytest.approx(0.5 * a * 0.3 ** 2, rel=1e-6)
+
+
+def test_no_check_when_the_formula_no_longer_applies():
+    assert _run("bouncing_ball", overrides=["bodies.0.velocity=[0,0,1]"], duration=0.05)[1] == []
+    assert _run("rod_impact", overrides=["materials.0.friction=0.5"], duration=0.05)[1] == []
+    assert closed_form.checks("cloth_drape", None, {}) == []
