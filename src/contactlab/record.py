@@ -81,6 +81,9 @@ def atomic_path(path):
     name = os.path.basename(path)
     handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=name)
     os.close(handle)
+    umask = os.umask(0)                 # mkstemp makes the file private: give it the usual rights
+    os.umask(umask)
+    os.chmod(temporary, 0o666 & ~umask)
     try:
         yield temporary
         os.replace(temporary, path)
