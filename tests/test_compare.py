@@ -1,0 +1,323 @@
+"""contactlab.compare: the methods side by side, its CSV, Markdown and HTML reports."""
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from urllib.parse import unquote, urlparse
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from contactlab import compare as compare_module
+from contactlab.compare import compare
+from contactlab.errors import InputError
+from contactlab.methods import AVAILABLE
+
+PYRAMID = "box_pyramid"
+
+
+@pytest.fixture(scope="module")
+def pyramid(tmp_path_factory):
+    """All four methods on the pyramid for 0.2 s (48 steps), no video: a scene with an obstacle."""
+    return compare(PYRAMID, out=str(tmp_path_factory.mktemp("pyramid")), duration=0.2, video=False)
+
+
+@pytest.fixture(scope="module")
+def ball(tmp_path_factory):
+    """The bouncing ball past its first apex; penalty made to blow up by a stiffness of 1e12 N/m."""
+    with pytest.warns(UserWarning, match="unstable"):
+        return compare("bouncing_ball", ["impulse", "penalty"], str(tmp_path_factory.mktemp("ball")),
+                       overrides=["method.penalty.stiffness=1e12"], duration=0.9, video=False)
+
+
+@pytest.fixture(scope="module")
+def cradle(tmp_path_factory):
+    """Newton's cradle: no gravity, no obstacles, so momentum must be conserved."""
+    return compare("newtons_cradle", "impulse,projection", str(tmp_path_factory.mktemp("cradle")),
+                   duration=0.3, video=False)
+
+
+def _csv_rows(result):
+    with open(result.csv, newline="", encoding="utf-8") as stream:
+        return list(csv.DictReader(stream))
+
+
+def _trajectory(result, method):
+    with np.load(os.path.join(result.out, method, "trajectory.npz")) as data:
+        return {key: data[key] for key in data.files}
+
+
+def _summary(result, method):
+    with open(os.path.join(result.out, method, "summary.json"), encoding="utf-8") as stream:
+        return json.load(stream)
+
+
+class _Links(HTMLParser):
+    """Every src, href and poster of a page, and the tags it uses."""
+
+    def __init__(self):
+        super().__init__()
+        self.links, self.tags = [], []
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.append(tag)
+        self.links += [value for name, value in attrs if name in ("src", "href", "poster")]
+
+
+def _links(path):
+    parser = _Links()
+    with open(path, encoding="utf-8") as stream:
+        parser.feed(stream.read())
+    parser.close()
+    return parser
+
+
+def _assert_links_resolve(result):
+    parser = _links(result.report_html)
+    assert parser.links
+    for link in parser.links:
+        parts = urlparse(link)
+        assert not parts.scheme and not parts.netloc and not link.startswith("/"), link
+        assert os.path.isfile(os.path.join(result.out, unquote(parts.path))), link
+    return parser
+
+
+# ---- the numbers --------------------------------------------------------------------------------
+
+def test_one_csv_row_per_method_matching_each_summary(pyramid):
+    rows = _csv_rows(pyramid)
+    assert [row["method"] for row in rows] == list(AVAILABLE)
+    assert rows == [{key: compare_module._csv_value(value) for key, value in row.items()} for row in pyramid.rows]
+    for row in rows:
+        summary = _summary(pyramid, row["method"])
+        assert row["status"] == "ok"
+        assert int(row["steps"]) == summary["steps"] == 48
+        assert float(row["steps_per_second"]) == summary["steps_per_second"]
+        assert float(row["wall_seconds"]) == summary["wall_seconds"]
+        assert float(row["max_penetration_mm"]) == pytest.approx(summary["max_penetration"] * 1000, rel=1e-12)
+        assert int(row["max_solver_iterations"]) == summary["solver"]["max_iterations"]
+        assert float(row["dt_s"]) == summary["dt"] and row["integrator"] == summary["integrator"]
+
+
+def test_energy_drift_and_mean_penetration_are_those_of_the_trajectory(pyramid):
+    for row in pyramid.rows:
+        arrays = _trajectory(pyramid, row["method"])
+        total = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
+        assert row["energy_drift_J"] == pytest.approx(total[-1] - total[0], rel=1e-12, abs=1e-15)
+        assert row["mean_penetration_mm"] == pytest.approx(arrays["max_penetration"].mean() * 1000, rel=1e-12)
+        # the scale: 15 cubes 1 kg, centres 0.1 m per level above the lowest: g (4·0.1 + 3·0.2 + 2·0.3 + 0.4)
+        assert row["energy_drift_relative"] * 9.81 * 2.0 == pytest.approx(row["energy_drift_J"], rel=0.01)
+
+
+def test_penalty_has_no_residual_and_the_solvers_do(pyramid):
+    rows = {row["method"]: row for row in pyramid.rows}
+    assert rows["penalty"]["max_solver_iterations"] == 0 and rows["penalty"]["max_solver_residual"] is None
+    assert _csv_rows(pyramid)[0]["max_solver_residual"] == ""
+    for method in ("projection", "impulse", "constraints"):
+        assert rows[method]["max_solver_iterations"] > 0
+        assert rows[method]["max_solver_residual"] == _summary(pyramid, method)["solver"]["max_residual"]
+
+
+def test_momentum_drift_is_not_reported_with_obstacles(pyramid):
+    assert all(row["momentum_drift_Ns"] == "n/a" for row in pyramid.rows)
+    assert all(row["momentum_drift_Ns"] == "n/a" for row in _csv_rows(pyramid))
+    with open(pyramid.report_md, encoding="utf-8") as stream:
+        assert "Momentum drift is n/a: the scene has static obstacles" in stream.read()
+
+
+def test_momentum_drift_without_obstacles_is_rounding_for_impulses(cradle):
+    # Impulses act in equal and opposite pairs, so P changes only by rounding: ~1e-16 of
+    # |P| = 1 kg m/s per impulse, some thousand impulses in 300 steps -> far below 1e-9 N s.
+    rows = {row["method"]: row for row in cradle.rows}
+    assert rows["impulse"]["momentum_drift_Ns"] < 1e-9
+    arrays = _trajectory(cradle, "impulse")
+    momentum = arrays["body_velocity"].sum(axis=1)                        # 1 kg balls
+    assert np.linalg.norm(momentum[-1] - momentum[0]) == pytest.approx(rows["impulse"]["momentum_drift_Ns"],
+                                                                       abs=1e-15)
+    assert isinstance(rows["projection"]["momentum_drift_Ns"], float)     # reported, whatever it is
+    with open(cradle.report_md, encoding="utf-8") as stream:
+        assert "is a conservation check" in stream.read()
+
+
+def test_closed_form_checks_become_error_columns_with_expected_and_measured_in_the_report(ball):
+    closed_form = pytest.importorskip("contactlab.closed_form")
+    arrays = _trajectory(ball, "impulse")
+    from contactlab.scene import load_scene
+    model = load_scene("bouncing_ball").model
+    checks = closed_form.checks("bouncing_ball", model, arrays)
+    assert checks
+    rows = {row["method"]: row for row in ball.rows}
+    first = checks[0]
+    column = f"{first.quantity} error ({first.unit})"
+    assert rows["impulse"][column] == pytest.approx(first.error, abs=1e-12)
+    assert abs(first.error) < 1e-3                                         # 0.64 m, to a fraction of a mm
+    assert rows["penalty"][column] is None                                 # it blew up
+    assert column in _csv_rows(ball)[0]
+    with open(ball.report_md, encoding="utf-8") as stream:
+        report = stream.read()
+    assert f"{first.quantity} ({first.unit}, expected {first.expected:.4g})" in report      # table heading
+    assert f"**{first.quantity}** ({first.unit}): expected {first.expected:.6g}" in report   # the check line
+
+
+# ---- failures -----------------------------------------------------------------------------------
+
+def test_a_method_that_blows_up_is_reported_and_the_others_go_on(ball):
+    rows = {row["method"]: row for row in ball.rows}
+    assert rows["penalty"]["status"].startswith("blew up at t = ")
+    assert float(rows["penalty"]["status"].split("= ")[1].split(" s")[0]) == pytest.approx(0.45, abs=0.02)
+    assert rows["penalty"]["max_penetration_mm"] is None and rows["impulse"]["status"] == "ok"
+    assert rows["impulse"]["steps"] == 900
+    assert not os.path.exists(os.path.join(ball.out, "penalty"))
+    assert "penalty blew up at t = " in ball.summary_text
+    for path in (ball.report_md, ball.report_html):
+        with open(path, encoding="utf-8") as stream:
+            text = stream.read()
+        assert "blew up at t = " in text and "stiffness 1e+12 N/m" in text   # the warning, as a note
+    _assert_links_resolve(ball)
+
+
+def test_unknown_method_is_an_input_error_naming_the_valid_ones(tmp_path):
+    out = tmp_path / "never"
+    with pytest.raises(InputError) as error:
+        compare("bouncing_ball", ["impulse", "teleport"], str(out), video=False)
+    assert error.value.field == "--methods"
+    assert "teleport" in error.value.message and all(name in error.value.message for name in AVAILABLE)
+    with pytest.raises(InputError):
+        compare("bouncing_ball", [], str(out), video=False)
+    assert not out.exists()
+
+
+def test_a_bad_scene_stops_everything_before_anything_is_written(tmp_path):
+    out = tmp_path / "never"
+    with pytest.raises(InputError, match="bodies"):
+        compare("bouncing_ball", out=str(out), overrides=["bodies.0.mass=-1"], video=False)
+    with pytest.raises(InputError, match="duration"):
+        compare("bouncing_ball", out=str(out), duration=-1, video=False)
+    with pytest.raises(InputError, match="unknown built-in scene"):
+        compare("no_such_scene", out=str(out), video=False)
+    assert not out.exists()
+
+
+def test_methods_rejecting_the_scene_are_left_out_unless_named(tmp_path, monkeypatch):
+    real = compare_module.simulate
+
+    def simulate(model, method, *args, **kwargs):
+        if method == "projection":
+            raise InputError("integrator", "projection cannot run this")
+        return real(model, method, *args, **kwargs)
+
+    monkeypatch.setattr(compare_module, "simulate", simulate)
+    result = compare("bouncing_ball", None, str(tmp_path / "all"), duration=0.02, video=False)
+    assert [row["method"] for row in result.rows] == ["penalty", "impulse", "constraints"]
+    assert "projection cannot run this" in result.skipped["projection"]
+    assert "projection was left out" in result.summary_text
+    with pytest.raises(InputError, match="projection cannot run this"):
+        compare("bouncing_ball", ["impulse", "projection"], str(tmp_path / "named"), duration=0.02, video=False)
+    assert not (tmp_path / "named").exists()
+
+
+def test_a_failure_while_writing_removes_what_the_comparison_wrote(tmp_path, monkeypatch):
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(compare_module, "write_comparison_plots", broken)
+    out = tmp_path / "a" / "b"
+    with pytest.raises(OSError, match="disk full"):
+        compare("bouncing_ball", ["impulse", "constraints"], str(out), duration=0.02, video=False)
+    assert not (tmp_path / "a").exists()
+
+    out.mkdir(parents=True)                          # a folder that was there before stays, with its files
+    (out / "mine.txt").write_text("keep")
+    with pytest.raises(OSError):
+        compare("bouncing_ball", ["impulse"], str(out), duration=0.02, video=False)
+    assert os.listdir(out) == ["mine.txt"]
+
+
+def test_default_output_folder_is_out_scene_compare(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = compare("bouncing_ball", "impulse", duration=0.02, video=False)
+    assert result.out == os.path.join("out", "bouncing_ball-compare")
+    assert sorted(os.listdir(result.out)) == ["comparison.csv", "impulse", "plots", "report.html", "report.md"]
+    assert sorted(os.listdir(os.path.join(result.out, "impulse"))) == ["plots", "summary.json", "trajectory.npz"]
+    assert _summary(result, "impulse")["trajectory"] == os.path.join(result.out, "impulse", "trajectory.npz")
+
+
+# ---- the reports --------------------------------------------------------------------------------
+
+def test_report_md_holds_the_table_links_and_the_summary(pyramid):
+    with open(pyramid.report_md, encoding="utf-8") as stream:
+        report = stream.read()
+    header = next(line for line in report.splitlines() if line.startswith("| method |"))
+    assert "max penetration (mm)" in header and "energy drift (J)" in header and "steps/s" in header
+    for method in AVAILABLE:
+        assert any(line.startswith(f"| {method} | ok |") for line in report.splitlines())
+        assert f"({method}/plots/energy.png)" in report and f"({method}/trajectory.npz)" in report
+    assert "(plots/energy.png)" in report
+    assert pyramid.summary_text in report
+    assert "Fastest:" in pyramid.summary_text and "Least penetration:" in pyramid.summary_text
+    assert "Energy kept best:" in pyramid.summary_text
+
+
+def test_report_html_parses_and_links_only_files_of_the_output(pyramid):
+    parser = _assert_links_resolve(pyramid)
+    assert "video" not in parser.tags and "link" not in parser.tags            # video=False; no stylesheets
+    with open(pyramid.report_html, encoding="utf-8") as stream:
+        page = stream.read()
+    assert "http://" not in page and "https://" not in page
+    assert page.count("<details>") == len(AVAILABLE) and "<table>" in page
+    assert 'data-status="pending"' in page
+
+
+def test_text_is_escaped_in_the_html(tmp_path):
+    scene = tmp_path / "odd.toml"
+    scene.write_text('description = "<b>bold</b> & \\"quoted\\""\n[simulation]\nduration = 0.02\n'
+                     '[[bodies]]\nshape = "sphere"\nradius = 0.1\nmass = 1.0\n', encoding="utf-8")
+    result = compare(str(scene), ["impulse"], str(tmp_path / "out"), video=False)
+    with open(result.report_html, encoding="utf-8") as stream:
+        page = stream.read()
+    assert "<b>bold</b>" not in page and "&lt;b&gt;bold&lt;/b&gt; &amp; &quot;quoted&quot;" in page
+    assert result.rows[0]["momentum_drift_Ns"] < 1e-12                  # free fall: P(T) − P(0) = M g T
+
+
+# ---- with videos, in a browser ------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def with_video(tmp_path_factory):
+    pytest.importorskip("contactlab.render")
+    return compare(PYRAMID, ["impulse", "penalty"], str(tmp_path_factory.mktemp("video")), duration=0.1, fps=10)
+
+
+def test_videos_are_written_and_linked(with_video):
+    for method in ("impulse", "penalty"):
+        files = with_video.files[method]
+        for name in ("mp4", "gif", "still"):
+            assert os.path.getsize(files[name]) > 0
+    parser = _assert_links_resolve(with_video)
+    assert parser.tags.count("video") == 2
+    assert "impulse/video.mp4" in parser.links and "impulse/still.png" in parser.links
+    assert "impulse/video.gif" in parser.links                                  # the fallback inside
+
+
+def _chromium():
+    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+def test_the_report_displays_in_headless_chromium(with_video, tmp_path):
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no chromium, chromium-browser or google-chrome executable on PATH")
+    url = "file://" + os.path.abspath(with_video.report_html)
+    flags = [browser, "--headless=new", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=8000",
+             f"--user-data-dir={tmp_path / 'profile'}"]
+    dom = subprocess.run([*flags, "--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
+    assert 'data-status="ok"' in dom, dom[dom.find("<body"):][:300]
+    screenshot = tmp_path / "report.png"
+    subprocess.run([*flags, f"--screenshot={screenshot}", "--window-size=1280,2000", url],
+                   capture_output=True, timeout=120)
+    image = imread(screenshot)
+    assert image.shape[:2] == (2000, 1280)
+    assert image[..., :3].std() > 0.05                                          # not a blank page
