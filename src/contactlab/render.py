@@ -1,0 +1,502 @@
+"""Headless pictures and videos of a trajectory: ``still.png``, ``video.mp4``, ``video.gif``.
+
+Input is a trajectory (the ``arrays`` of :func:`contactlab.simulate`, or ``np.load`` of
+``trajectory.npz``; see ``docs/trajectory.md``). Everything is drawn with matplotlib's Agg
+canvas (no pyplot, no display) on 3-D axes, z up:
+
+* rigid bodies: their posed surfaces, flat-shaded, one colour per body (``tab10``, cycled);
+* cloths: shaded triangle meshes, both sides lit, one colour per cloth (``Set2``);
+* free particles: dots whose size follows their radius;
+* static obstacles: light grey and semi-transparent; planes (finite squares in the
+  trajectory) are cut to a rectangle around the moving content, and drawn beneath it.
+
+The camera is fixed for the whole video: the axis limits enclose everything the trajectory
+ever reaches, with equal scales on x, y and z. Frames play in real time: frame k of a video
+at ``fps`` shows the sample nearest to ``time[0] + k / fps``. The GIF is smaller (at most
+:data:`GIF_MAX_FPS` frames per second, at most :data:`GIF_MAX_HEIGHT` pixels high) because
+GIFs get huge; the MP4 (H.264, yuv420p) uses the full ``fps`` and size. Every file is written
+through :func:`contactlab.record.atomic_path`, so none is ever left half-written.
+"""
+
+import contextlib
+import math
+import os
+from collections import Counter
+
+import imageio.v2
+import imageio.v3
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+from mpl_toolkits.mplot3d import proj3d
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+from PIL import Image
+from tqdm import tqdm
+
+from . import surfaces
+from .errors import InputError
+from .record import atomic_path
+
+FORMATS = ("mp4", "gif")
+GIF_MAX_FPS = 15            # frames per second of the GIF at most (its delay is a whole 1/100 s)
+GIF_MAX_HEIGHT = 300        # pixels; the GIF is the video scaled down to this height at most
+MIN_SIZE = 16               # pixels, smallest width or height accepted
+DPI = 100
+AMBIENT = 0.4               # share of a colour kept by a face turned away from the light
+BACKGROUND = "white"
+OBSTACLE_RGBA = (0.72, 0.72, 0.72, 0.3)
+PARTICLE_RGB = (0.15, 0.3, 0.6)
+MARGIN = 0.15               # planes reach this share of the content's size beyond it
+REQUIRED = ("time", "body_position", "body_orientation", "particle_position", "particle_radius",
+            "particle_cloth", "triangles", "body_surface_vertices", "body_surface_vertex_start",
+            "body_surface_triangles", "body_surface_triangle_start", "obstacle_vertices",
+            "obstacle_triangles")
+
+
+# -- public API -------------------------------------------------------------------------
+
+def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, azimuth=-60.0,
+           formats=("mp4", "gif"), title=None, progress=False) -> dict:
+    """Write video.mp4, video.gif (whichever `formats` names) and still.png into `directory` (created if
+    needed); return {"mp4": path, "gif": path, "still": path} for what was written.
+
+    fps [1/s] > 0: frames per second of the MP4 (the GIF uses at most ``GIF_MAX_FPS``);
+    width, height [px] ≥ 16 (the MP4's are rounded up to even numbers, the GIF is scaled down
+    to at most ``GIF_MAX_HEIGHT`` px high); elevation, azimuth [degrees]: the camera, as in
+    matplotlib's ``view_init``; title: a line above the picture (e.g. "box_pyramid — impulse");
+    progress: a tqdm bar over the frames on stderr. The still is the last sample.
+    All files appear together or not at all: on failure nothing is left behind.
+    """
+    fps = _fps(fps)
+    formats = _formats(formats)
+    picture = _Picture(arrays, width, height, elevation, azimuth, title)
+    paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
+    paths["still"] = os.path.join(directory, "still.png")
+    created = not os.path.isdir(directory)
+    os.makedirs(directory, exist_ok=True)
+    try:
+        with contextlib.ExitStack() as stack:     # renames every file at the end, or removes them all
+            temporary = {name: stack.enter_context(atomic_path(path)) for name, path in paths.items()}
+            _write_videos(picture, temporary, fps, progress)
+            imageio.v3.imwrite(temporary["still"], picture.draw(len(picture.time) - 1))
+    except BaseException:
+        if created and not os.listdir(directory):
+            os.rmdir(directory)
+        raise
+    return paths
+
+
+def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azimuth=-60.0, title=None) -> str:
+    """Write one PNG picture of trajectory sample `sample` to `path`; return the path.
+
+    sample: index into the trajectory's samples (negative counts from the end);
+    width, height [px] ≥ 16; elevation, azimuth [degrees]; title: a line above the picture.
+    """
+    picture = _Picture(arrays, width, height, elevation, azimuth, title)
+    count = len(picture.time)
+    if isinstance(sample, bool) or not isinstance(sample, (int, np.integer)) or not -count <= sample < count:
+        raise InputError("sample", f"expected a whole number from {-count} to {count - 1} "
+                                   f"(the trajectory has {count} samples), found {sample!r}")
+    image = picture.draw(int(sample) % count)
+    with atomic_path(path) as temporary:
+        imageio.v3.imwrite(temporary, image, extension=".png")
+    return os.fspath(path)
+
+
+def _write_videos(picture, paths, fps, progress):
+    """Draw the frames once and write them to ``paths["mp4"]`` and/or ``paths["gif"]``.
+
+    The MP4 gets ``fps`` frames per second; the GIF a whole number of 1/100 s per frame (at
+    most GIF_MAX_FPS frames per second), each one the MP4 frame nearest to its time when there
+    is an MP4, and is scaled down to GIF_MAX_HEIGHT pixels high at most.
+    """
+    time = picture.time
+    mp4_times = _frame_times(time, fps)
+    gif_delay = _gif_delay(fps)
+    gif_times = _frame_times(time, 100.0 / gif_delay)
+    if "mp4" in paths:
+        gif_times = mp4_times[_nearest(mp4_times, gif_times)]
+    mp4_count = Counter(_nearest(time, mp4_times).tolist() if "mp4" in paths else [])
+    gif_count = Counter(_nearest(time, gif_times).tolist() if "gif" in paths else [])
+    gif_frames = []
+    with _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4:
+        for sample in tqdm(sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False,
+                           disable=not progress):
+            image = picture.draw(sample)
+            for _ in range(mp4_count[sample]):
+                mp4.append_data(_even(image))
+            gif_frames += [_shrink(image, GIF_MAX_HEIGHT)] * gif_count[sample]
+    if gif_frames:
+        imageio.v3.imwrite(paths["gif"], np.stack(gif_frames), plugin="pillow", duration=10 * gif_delay, loop=0)
+
+
+# -- arguments ----------------------------------------------------------------------------
+
+def _number(value, name, check, expected):
+    """``value`` as a float if it is a real number passing ``check``, else InputError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(value) or not check(value):
+        raise InputError(name, f"expected {expected}, found {value!r}")
+    return float(value)
+
+
+def _fps(value):
+    return _number(value, "fps", lambda v: v > 0, "a number of frames per second > 0 (e.g. 30)")
+
+
+def _angle(value, name):
+    return _number(value, name, lambda v: True, "a finite number of degrees")
+
+
+def _size(value, name):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < MIN_SIZE:
+        raise InputError(name, f"expected a whole number of pixels ≥ {MIN_SIZE} (e.g. 640), found {value!r}")
+    return int(value)
+
+
+def _formats(formats):
+    """The video formats named in ``formats`` (one name or several), without repeats."""
+    try:
+        names = (formats,) if isinstance(formats, str) else tuple(formats)
+    except TypeError:
+        names = (formats,)
+    for name in names:
+        if name not in FORMATS:
+            raise InputError("formats", f"expected names among {', '.join(FORMATS)}, found {name!r}")
+    return tuple(dict.fromkeys(names))
+
+
+def _trajectory(arrays):
+    """The arrays drawing needs, read once (an NpzFile decompresses on every access)."""
+    missing = [key for key in REQUIRED if key not in arrays]
+    if missing:
+        raise InputError("arrays", f"not a trajectory with surfaces: missing {', '.join(missing)}; "
+                                   f"record the run again with this version of contactlab")
+    out = {key: np.asarray(arrays[key]) for key in REQUIRED}
+    if len(out["time"]) == 0:
+        raise InputError("arrays", "the trajectory has no samples")
+    return out
+
+
+# -- timing -------------------------------------------------------------------------------
+
+def _frame_times(time, rate):
+    """Times (n,) [s] of the frames of a real-time video at ``rate`` frames per second of a
+    trajectory sampled at ``time`` (T,) [s]: time[0] + k / rate for k < round(duration × rate),
+    at least one frame."""
+    count = max(1, int(round((time[-1] - time[0]) * rate)))
+    return time[0] + np.arange(count) / rate
+
+
+def _nearest(times, wanted):
+    """Index (n,) of the entry of the sorted ``times`` (T,) nearest to each of ``wanted`` (n,)."""
+    after = np.clip(np.searchsorted(times, wanted), 1, max(len(times) - 1, 1))
+    before = after - 1
+    after = np.minimum(after, len(times) - 1)
+    return np.where(wanted - times[before] <= times[after] - wanted, before, after)
+
+
+def _gif_delay(fps):
+    """GIF frame delay [1/100 s]: a whole number of hundredths (all GIF can store), fps ≤ GIF_MAX_FPS."""
+    return math.ceil(100.0 / min(fps, GIF_MAX_FPS))
+
+
+# -- images -------------------------------------------------------------------------------
+
+def _fit(image, height, width):
+    """``image`` (h, w, 3) cropped or edge-padded to exactly (height, width, 3)."""
+    image = image[:height, :width]
+    pad = ((0, height - image.shape[0]), (0, width - image.shape[1]), (0, 0))
+    return np.pad(image, pad, mode="edge") if any(p[1] for p in pad) else image
+
+
+def _even(image):
+    """``image`` edge-padded to an even height and width (what H.264 in yuv420p needs)."""
+    height, width = image.shape[:2]
+    return _fit(image, height + height % 2, width + width % 2)
+
+
+def _shrink(image, max_height):
+    """``image`` scaled down (aspect kept) to at most ``max_height`` pixels high."""
+    height, width = image.shape[:2]
+    if height <= max_height:
+        return image
+    size = (max(1, round(width * max_height / height)), max_height)
+    return np.asarray(Image.fromarray(image).resize(size, Image.Resampling.LANCZOS))
+
+
+def _mp4_writer(path, fps):
+    """An imageio writer of H.264 MP4 (yuv420p) at ``fps``; frames must have even sizes."""
+    return imageio.v2.get_writer(path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                                 pixelformat="yuv420p", macro_block_size=1, quality=8,
+                                 ffmpeg_log_level="error")
+
+
+# -- geometry -----------------------------------------------------------------------------
+
+def _normals(faces):
+    """Unit normals (N, 3) of triangles ``faces`` (N, 3, 3), right-handed (counter-clockwise)."""
+    normals = np.cross(faces[:, 1] - faces[:, 0], faces[:, 2] - faces[:, 0])
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(length > 0, length, 1.0)
+
+
+def _shade(rgba, normals, light, two_sided):
+    """Face colours (N, 4): ``rgba`` (N, 4) darkened by the angle between each face's unit
+    normal (N, 3) and the unit vector ``light`` towards the light; ``two_sided`` lights both
+    sides of a face alike."""
+    cosine = normals @ light
+    cosine = np.abs(cosine) if two_sided else np.maximum(cosine, 0.0)
+    shaded = rgba.copy()
+    shaded[:, :3] *= (AMBIENT + (1.0 - AMBIENT) * cosine)[:, None]
+    return shaded
+
+
+def _light_direction(elevation, azimuth):
+    """Unit vector towards a light above the camera and a little to its left (degrees as view_init)."""
+    elevation = np.radians(min(elevation + 30.0, 80.0))
+    azimuth = np.radians(azimuth - 15.0)
+    return np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
+                     np.sin(elevation)])
+
+
+def _obstacle_pieces(triangles):
+    """Label (M,) of the connected piece (one obstacle) each triangle belongs to.
+
+    Every obstacle owns a contiguous range of vertices, so pieces are the runs of triangles
+    whose vertex-index ranges overlap.
+    """
+    if len(triangles) == 0:
+        return np.zeros(0, dtype=np.int64)
+    low, high = triangles.min(axis=1), triangles.max(axis=1)
+    order = np.argsort(low, kind="stable")
+    reach = np.maximum.accumulate(high[order])
+    new = np.concatenate([[True], low[order][1:] > reach[:-1]])
+    labels = np.empty(len(triangles), dtype=np.int64)
+    labels[order] = np.cumsum(new) - 1
+    return labels
+
+
+def _split_obstacles(vertices, triangles):
+    """Static obstacles as (flat, solid): ``flat`` a list of the faces (n, 3, 3) [m] of every
+    flat piece (a plane's square, a flat mesh), ``solid`` the faces (m, 3, 3) [m] of all others."""
+    flat, solid = [], []
+    labels = _obstacle_pieces(triangles)
+    for label in range(labels.max(initial=-1) + 1):
+        faces = vertices[triangles[labels == label]]
+        points = faces.reshape(-1, 3)
+        spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+        (flat if spread[-1] <= 1e-9 * max(spread[0], 1e-12) else solid).append(faces)
+    return flat, np.concatenate(solid) if solid else np.zeros((0, 3, 3))
+
+
+def _clip(polygon, halfspaces):
+    """The part (k, 3) of the convex polygon (n, 3) where normal · x ≥ offset for every
+    (normal (3,), offset) of ``halfspaces`` (Sutherland–Hodgman)."""
+    for normal, offset in halfspaces:
+        if len(polygon) == 0:
+            break
+        inside = polygon @ normal - offset                  # ≥ 0 inside
+        kept = []
+        for i in range(len(polygon)):
+            j = (i + 1) % len(polygon)
+            if inside[i] >= 0:
+                kept.append(polygon[i])
+            if (inside[i] >= 0) != (inside[j] >= 0):
+                kept.append(polygon[i] + (polygon[j] - polygon[i]) * inside[i] / (inside[i] - inside[j]))
+        polygon = np.array(kept).reshape(-1, 3)
+    return polygon
+
+
+def _cut_flat(flat, lower, upper):
+    """The flat obstacles as (polygons, normals): each face cut to the rectangle of its plane
+    that covers the box ``lower``–``upper`` (3,) [m] seen along the plane's normal, and to the
+    free side of every plane (a square of 2 triangles, wound counter-clockwise seen from its
+    free side), so that walls end at the floor. polygons: list of (k, 3) [m]; normals (n, 3)."""
+    corners = np.array(np.meshgrid(*zip(lower, upper))).reshape(3, -1).T
+    normals = [_normals(faces[:1])[0] for faces in flat]
+    planes = [(i, normals[i], normals[i] @ faces[0, 0] - 1e-9) for i, faces in enumerate(flat) if len(faces) == 2]
+    polygons, polygon_normals = [], []
+    for i, (faces, normal) in enumerate(zip(flat, normals)):
+        helper = np.eye(3)[np.argmin(np.abs(normal))]       # the world axis most along the plane
+        u = helper - (helper @ normal) * normal
+        u /= np.linalg.norm(u)
+        halfspaces = [(n, o) for j, n, o in planes if j != i]
+        for direction in (u, np.cross(normal, u)):
+            extent = corners @ direction
+            halfspaces += [(direction, extent.min()), (-direction, -extent.max())]
+        for face in faces:
+            polygon = _clip(face, halfspaces)
+            if len(polygon) >= 3:
+                polygons.append(polygon)
+                polygon_normals.append(normal)
+    return polygons, np.reshape(polygon_normals, (-1, 3))
+
+
+def _content_bounds(arrays, solid_obstacles):
+    """(lower (3,), upper (3,)) [m] of everything but flat obstacles over the whole trajectory:
+    the bodies' surfaces in every sample, particles ± their radius, solid obstacles; None when
+    there is none of these."""
+    points = [solid_obstacles.reshape(-1, 3)]
+    if len(arrays["body_surface_vertices"]):
+        posed = [surfaces.posed_body_vertices(arrays, sample) for sample in range(len(arrays["time"]))]
+        points += [np.array([p.min(axis=0) for p in posed]), np.array([p.max(axis=0) for p in posed])]
+    position, radius = arrays["particle_position"], arrays["particle_radius"][:, None]
+    if position.size:
+        points += [(position - radius).min(axis=1), (position + radius).max(axis=1)]
+    points = np.concatenate(points)
+    if len(points) == 0:
+        return None
+    return points.min(axis=0), points.max(axis=0)
+
+
+def _view_box(content, flat):
+    """(lower, upper) [m] the flat obstacles are cut to: the content's box made at least half
+    as wide as its widest side in every direction, grown by MARGIN of that side."""
+    if content is None:
+        if not flat:
+            return -np.ones(3), np.ones(3)
+        points = np.concatenate([faces.reshape(-1, 3) for faces in flat])
+        return points.min(axis=0), points.max(axis=0)
+    lower, upper = content
+    centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    size = max(half.max(), 0.05)
+    half = np.maximum(half, 0.5 * size) + MARGIN * size
+    return centre - half, centre + half
+
+
+def _limits(content, flat_polygons):
+    """Axis limits (lower (3,), upper (3,)) [m] around the content and the cut flat obstacles,
+    no side shorter than 5 % of the longest (for the box aspect)."""
+    points = [np.concatenate(flat_polygons)] if flat_polygons else []
+    if content is not None:
+        points.append(np.stack(content))
+    if not points:
+        return -np.ones(3), np.ones(3)
+    points = np.concatenate(points)
+    lower, upper = points.min(axis=0), points.max(axis=0)
+    centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    half = np.maximum(half, max(0.05 * half.max(), 1e-3))
+    return centre - half, centre + half
+
+
+# -- the picture --------------------------------------------------------------------------
+
+class _Picture:
+    """One matplotlib Figure that draws any sample of one trajectory.
+
+    The static parts (axes, camera, obstacles, title) are built once; :meth:`draw` only moves
+    the bodies', cloths' and particles' collections and the time text. still() and render()
+    both draw through it.
+    """
+
+    def __init__(self, arrays, width, height, elevation, azimuth, title):
+        self.width, self.height = _size(width, "width"), _size(height, "height")
+        elevation, azimuth = _angle(elevation, "elevation"), _angle(azimuth, "azimuth")
+        self.arrays = arrays = _trajectory(arrays)
+        self.time = arrays["time"]
+        self.light = _light_direction(elevation, azimuth)
+
+        start = arrays["body_surface_triangle_start"]
+        body_of = np.repeat(np.arange(len(start) - 1), np.diff(start))
+        self.body_triangles = arrays["body_surface_triangles"]
+        self.body_rgba = colormaps["tab10"](body_of % 10)
+        cloth_of = arrays["particle_cloth"][arrays["triangles"][:, 0]]
+        self.cloth_triangles = arrays["triangles"]
+        self.cloth_rgba = colormaps["Set2"](cloth_of % 8)
+        self.free = np.flatnonzero(arrays["particle_cloth"] < 0)
+
+        flat, solid = _split_obstacles(arrays["obstacle_vertices"], arrays["obstacle_triangles"])
+        content = _content_bounds(arrays, solid)
+        lower, upper = _view_box(content, flat)
+        flat_polygons, flat_normals = _cut_flat(flat, lower, upper)
+        self.obstacle_faces = solid
+        self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), _normals(solid), self.light, True)
+
+        self.figure = Figure(figsize=(self.width / DPI, self.height / DPI), dpi=DPI, facecolor=BACKGROUND)
+        self.canvas = FigureCanvasAgg(self.figure)
+        top = 1.0 - 28.0 / self.height if title else 1.0
+        self.axes = self._axes(_limits(content, flat_polygons), elevation, azimuth, top)
+        self._add_flat(flat_polygons, flat_normals)
+        self.surfaces = None
+        if len(self.body_triangles) + len(self.cloth_triangles) + len(solid):
+            self.surfaces = self.axes.add_collection3d(Poly3DCollection(
+                np.zeros((0, 3, 3)), linewidths=0.8, zorder=2))
+        self.particles = None
+        if len(self.free):
+            self.particles = self.axes.scatter(*arrays["particle_position"][0, self.free].T,
+                                               color=PARTICLE_RGB, edgecolors="none", zorder=3)
+        if title:
+            self.figure.text(0.5, 1.0 - 6.0 / self.height, str(title), ha="center", va="top", fontsize=11)
+        self.clock = self.figure.text(0.015, 0.015, "", ha="left", va="bottom", fontsize=10, family="monospace")
+        self.canvas.draw()                  # lays out the axes: needed to size the particles
+        if self.particles is not None:
+            self.particles.set_sizes(self._particle_sizes(arrays["particle_radius"][self.free]))
+
+    def _axes(self, limits, elevation, azimuth, top):
+        """3-D axes filling the figure below ``top`` (a fraction of its height), z up, equal
+        scales, fixed limits (lower (3,), upper (3,)) [m] and camera (degrees)."""
+        axes = self.figure.add_axes((0.0, 0.0, 1.0, top), projection="3d", computed_zorder=False)
+        lower, upper = limits
+        axes.set_xlim(lower[0], upper[0])
+        axes.set_ylim(lower[1], upper[1])
+        axes.set_zlim(lower[2], upper[2])
+        axes.set_box_aspect(upper - lower, zoom=0.9)
+        axes.view_init(elev=elevation, azim=azimuth)
+        for axis, name in zip((axes.xaxis, axes.yaxis, axes.zaxis), "xyz"):
+            axis.set_major_locator(MaxNLocator(5))
+            axis.set_label_text(f"{name} [m]", fontsize=8)
+            axis.set_tick_params(labelsize=7, pad=0)
+            axis.labelpad = -2
+            axis.set_pane_color((1.0, 1.0, 1.0, 0.0))     # only obstacles are grey
+        return axes
+
+    def _add_flat(self, polygons, normals):
+        """Flat obstacles (cut planes; polygons (k, 3) [m], unit normals (n, 3)), drawn first so
+        that they never hide the scene."""
+        if not polygons:
+            return
+        rgba = _shade(np.tile(OBSTACLE_RGBA, (len(polygons), 1)), normals, self.light, True)
+        self.axes.add_collection3d(Poly3DCollection(polygons, facecolors=rgba, edgecolors="none", zorder=1))
+
+    def _particle_sizes(self, radius):
+        """Marker areas [pt²] of dots of ``radius`` (n,) [m] at the middle of the view."""
+        axes = self.axes
+        centre = np.array([np.mean(axes.get_xlim()), np.mean(axes.get_ylim()), np.mean(axes.get_zlim())])
+        length = 0.1 * np.ptp(axes.get_xlim())
+        azimuth = np.radians(axes.azim)
+        ends = np.stack([centre, centre + length * np.array([-np.sin(azimuth), np.cos(azimuth), 0.0])])
+        x, y, _ = proj3d.proj_transform(*ends.T, axes.get_proj())
+        pixels = axes.transData.transform(np.column_stack([x, y]))
+        points_per_metre = np.linalg.norm(pixels[1] - pixels[0]) / length * 72.0 / DPI
+        return np.maximum(2.0 * radius * points_per_metre, 2.0) ** 2
+
+    def _surface_faces(self, sample):
+        """Faces (N, 3, 3) [m] and colours (N, 4) of bodies, cloths and solid obstacles at ``sample``."""
+        arrays = self.arrays
+        bodies = surfaces.posed_body_vertices(arrays, sample)[self.body_triangles]
+        cloths = arrays["particle_position"][sample][self.cloth_triangles]
+        faces = np.concatenate([bodies, cloths, self.obstacle_faces])
+        rgba = np.concatenate([_shade(self.body_rgba, _normals(bodies), self.light, False),
+                               _shade(self.cloth_rgba, _normals(cloths), self.light, True), self.obstacle_rgba])
+        return faces, rgba
+
+    def draw(self, sample):
+        """The picture (height, width, 3) uint8 of trajectory sample ``sample`` (an index ≥ 0)."""
+        if self.surfaces is not None:
+            faces, rgba = self._surface_faces(sample)
+            self.surfaces.set_verts(faces)
+            self.surfaces.set_facecolor(rgba)
+            edges = rgba.copy()             # hide the seams between opaque faces only
+            edges[rgba[:, 3] < 1.0, 3] = 0.0
+            self.surfaces.set_edgecolor(edges)
+        if self.particles is not None:
+            position = self.arrays["particle_position"][sample, self.free]
+            self.particles.set_offsets(position[:, :2])
+            self.particles.set_3d_properties(position[:, 2], "z")
+        self.clock.set_text(f"t = {self.time[sample]:.3f} s")
+        self.canvas.draw()
+        image = np.asarray(self.canvas.buffer_rgba())[:, :, :3]
+        return _fit(image, self.height, self.width).copy()
