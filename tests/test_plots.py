@@ -90,6 +90,13 @@ def test_comparison_draws_one_line_per_method_in_every_plot(runs):
     assert "penalty (no solver)" in [text.get_text() for text in residual.get_legend().get_texts()]
 
 
+def test_a_method_keeps_its_colour_whichever_others_ran(runs):
+    alone = plots.build_figures({"impulse": runs["impulse"]})["penetration"].axes[0].get_lines()[0]
+    together = plots.build_figures(runs)["penetration"].axes[0].get_lines()[2]
+    assert together.get_label() == alone.get_label() == "impulse"
+    assert (together.get_color(), together.get_linestyle()) == (alone.get_color(), alone.get_linestyle())
+
+
 def test_write_comparison_plots_writes_the_four_pictures(runs, tmp_path):
     paths = plots.write_comparison_plots(runs, str(tmp_path), title="bouncing_ball")
     assert set(paths) == set(plots.PLOTS)

@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from .methods import AVAILABLE
 from .record import atomic_path
 
 PLOTS = ("energy", "penetration", "contacts", "residual")
@@ -36,8 +37,8 @@ class Line:
     time: np.ndarray
     values: np.ndarray
     color: str
-    width: float = 1.4
     style: str = "-"
+    width: float = 1.4
 
 
 def total_energy(arrays) -> np.ndarray:
@@ -48,26 +49,28 @@ def total_energy(arrays) -> np.ndarray:
 STYLES = ("-", "--", "-.", ":")      # one per run, so runs that coincide still show
 
 
-def _color(index):
-    return f"C{index % 10}"
+def _look(index, label):
+    """(colour, line style) of a run: fixed per method name, so a method looks the same in every
+    comparison (whichever others ran); by position for other labels."""
+    if label in AVAILABLE:
+        index = AVAILABLE.index(label)
+    return f"C{index % 10}", STYLES[index % len(STYLES)]
 
 
 def _series(runs, key, scale=1.0):
     """One Line per run: ``arrays[key] * scale``."""
-    return [Line(str(label), arrays["time"], np.asarray(arrays[key], dtype=float) * scale, _color(index),
-                 style=STYLES[index % len(STYLES)])
+    return [Line(str(label), arrays["time"], np.asarray(arrays[key], dtype=float) * scale, *_look(index, label))
             for index, (label, arrays) in enumerate(runs.items())]
 
 
 def _energy_lines(runs, components):
     if not components:
-        return [Line(str(label), arrays["time"], total_energy(arrays), _color(index),
-                     style=STYLES[index % len(STYLES)])
+        return [Line(str(label), arrays["time"], total_energy(arrays), *_look(index, label))
                 for index, (label, arrays) in enumerate(runs.items())]
     (arrays,) = runs.values()
-    lines = [Line(name, arrays["time"], np.asarray(arrays[key], dtype=float), _color(index))
+    lines = [Line(name, arrays["time"], np.asarray(arrays[key], dtype=float), f"C{index}")
              for index, (key, name) in enumerate(ENERGY_TERMS)]
-    return lines + [Line("total", arrays["time"], total_energy(arrays), "black", 2.0)]
+    return lines + [Line("total", arrays["time"], total_energy(arrays), "black", width=2.0)]
 
 
 def _residual_lines(runs):
