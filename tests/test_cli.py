@@ -165,3 +165,53 @@ def test_cloth_drape_with_projection_comes_to_rest(tmp_path):
     assert final[:, 2].min() >= 0.005 - 1e-6                                  # on the floor, at its thickness
     to_sphere = np.linalg.norm(final - [0.0, 0.0, 0.3], axis=1)
     assert to_sphere.min() >= 0.25 + 0.005 - 1e-6                             # and never inside the sphere
+
+
+def test_run_with_video_export_and_plots_then_render_and_export_again(tmp_path):
+    result = contactlab("run", "box_pyramid", "--duration", "0.1", "--video", "--fps", "20",
+                        "--export", "usd,ply", "--out", "run", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    out = tmp_path / "run"
+    for name in ("video.mp4", "video.gif", "still.png", "run.usd", "plots/energy.png", "plots/penetration.png",
+                 "plots/contacts.png", "plots/residual.png", "frames/frame_00000.ply"):
+        assert (out / name).is_file(), name
+        assert name.replace("00000", "*") in result.stdout     # the summary says where everything is
+    run = np.load(out / "trajectory.npz")
+    assert len(list((out / "frames").iterdir())) == len(run["time"])
+    assert not [p for p in out.rglob(".partial-*")]
+    (out / "still.png").unlink()
+    result = contactlab("render", "run", "--fps", "10", "--width", "320", "--height", "240", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    import imageio.v3 as iio
+    assert iio.imread(out / "still.png").shape[:2] == (240, 320)
+    result = contactlab("export", "run", "--format", "obj", "--every", "5", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    samples = len(run["time"])                     # every 5th sample, and the last one
+    assert len(list((out / "frames").glob("*.obj"))) == -(-(samples - 1) // 5) + 1
+
+
+@pytest.mark.parametrize("args, field", [
+    (("run", "bouncing_ball", "--export", "fbx"), "--export"),
+    (("run", "bouncing_ball", "--video", "--fps", "0"), "--fps"),
+    (("render", "nowhere"), "OUT_DIR"),
+    (("export", "nowhere"), "OUT_DIR"),
+    (("compare", "bouncing_ball", "--methods", "impulse,magic"), "--methods"),
+    (("compare", "no_such_scene"), ""),
+])
+def test_new_commands_reject_bad_input_in_one_line_and_write_nothing(tmp_path, args, field):
+    result = contactlab(*args, cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and field in lines[0]
+    assert "Traceback" not in result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_compare_from_the_command_line(tmp_path):
+    result = contactlab("compare", "bouncing_ball", "--methods", "impulse,constraints", "--duration", "0.3",
+                        "--no-video", "--out", "cmp", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    for name in ("report.html", "report.md", "comparison.csv", "impulse/trajectory.npz",
+                 "constraints/summary.json"):
+        assert (tmp_path / "cmp" / name).is_file(), name
+    assert "report.html" in result.stdout

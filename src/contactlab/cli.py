@@ -3,6 +3,9 @@
     contactlab                 run the default scene (same as ``contactlab demo``)
     contactlab scenes          list the built-in scenes
     contactlab run SCENE ...   run a built-in scene or a .toml file
+    contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
+    contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
+    contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
 """
 
 import argparse
@@ -28,20 +31,76 @@ def _parser():
     commands.add_parser("demo", help="run the default scene and say where its outputs are")
     commands.add_parser("scenes", help="list the built-in scenes")
     run = commands.add_parser("run", help="run a built-in scene or a scene file")
-    run.add_argument("scene", help="a built-in scene name (see 'contactlab scenes') or a path to a .toml file")
+    _scene_arguments(run)
     run.add_argument("--method", help="penalty | projection | impulse | constraints (default: the scene's)")
-    run.add_argument("--dt", help="time step in seconds (default: the scene's)")
-    run.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
     run.add_argument("--integrator", help="symplectic_euler | explicit_euler | backward_euler (default: the scene's)")
-    run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                     help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]")
     run.add_argument("--out", help="output folder (default: out/<scene>-<method>/)")
     run.add_argument("--record-every", type=int, default=1, metavar="K", help="record every K steps (default 1)")
     run.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
+    run.add_argument("--video", action="store_true", help="also write video.mp4, video.gif and still.png")
+    run.add_argument("--fps", type=int, default=30, help="frames per second of the video (default 30)")
+    run.add_argument("--export", default="", metavar="FORMATS",
+                     help="also export the run: a comma-separated list of usd, obj, ply")
+    run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
+
+    compare = commands.add_parser("compare", help="run a scene with several methods and write a side-by-side report")
+    _scene_arguments(compare)
+    compare.add_argument("--methods", help="comma-separated methods (default: every method that supports the scene)")
+    compare.add_argument("--out", help="output folder (default: out/<scene>-compare/)")
+    compare.add_argument("--no-video", action="store_true", help="skip the videos (faster)")
+    compare.add_argument("--fps", type=int, default=30, help="frames per second of the videos (default 30)")
+
+    render = commands.add_parser("render", help="draw a run's trajectory: video.mp4, video.gif, still.png")
+    render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.npz)")
+    render.add_argument("--fps", type=int, default=30, help="frames per second (default 30)")
+    render.add_argument("--width", type=int, default=640, help="picture width in pixels (default 640)")
+    render.add_argument("--height", type=int, default=480, help="picture height in pixels (default 480)")
+    render.add_argument("--elevation", type=float, default=25.0, help="camera elevation in degrees (default 25)")
+    render.add_argument("--azimuth", type=float, default=-60.0, help="camera azimuth in degrees (default -60)")
+
+    export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
+    export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.npz)")
+    export.add_argument("--format", default="usd", help="usd, obj or ply, or a comma-separated list (default usd)")
+    export.add_argument("--every", type=int, default=1, metavar="K", help="export every K-th sample (default 1)")
     return parser
 
 
-def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False):
+def _scene_arguments(command):
+    command.add_argument("scene", help="a built-in scene name (see 'contactlab scenes') or a path to a .toml file")
+    command.add_argument("--dt", help="time step in seconds (default: the scene's)")
+    command.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
+    command.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                         help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]")
+
+
+def _scene_overrides(args):
+    """The --set list plus the shorthands (--method, --dt, ...) as simulation.* overrides."""
+    overrides = list(args.overrides)
+    for option in ("method", "dt", "duration", "integrator"):
+        if getattr(args, option, None) is not None:
+            overrides.append(f"simulation.{option}={getattr(args, option)}")
+    return overrides
+
+
+EXPORT_FORMATS = ("usd", "obj", "ply")
+
+
+def _list_option(text, option, allowed):
+    """'a,b' → ['a', 'b'], each checked against ``allowed``."""
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    for name in names:
+        if name not in allowed:
+            raise InputError(option, f"expected a comma-separated list of {', '.join(allowed)}, found {name!r}")
+    return names
+
+
+def _whole_number(value, option):
+    if value < 1:
+        raise InputError(option, f"expected a whole number ≥ 1, found {value}")
+
+
+def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
+         exports=(), plots=True):
     from .record import write_outputs
     from .scene import load_scene
     from .simulation import simulate
@@ -53,14 +112,67 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False):
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     result.summary["trajectory"] = os.path.join(out, "trajectory.npz")
     write_outputs(out, result.arrays, result.summary)
+    written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
         print(json.dumps(result.summary))
     else:
-        print(_plain_summary(result.summary, scene))
+        print(_plain_summary(result.summary, scene, written))
     return result
 
 
-def _plain_summary(summary, scene):
+def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), every=1):
+    """Plots, video and exports of a run written into ``out``; returns the paths written."""
+    progress = sys.stderr.isatty()
+    written = []
+    if plots:
+        from .plots import write_plots
+        written += list(write_plots(arrays, os.path.join(out, "plots"), title=title).values())
+    if video:
+        from .render import render
+        written += list(render(arrays, out, fps=fps, title=title, progress=progress).values())
+    if "usd" in exports:
+        from .export import write_usd
+        written.append(write_usd(arrays, os.path.join(out, "run.usd"), every=every))
+    for file_format in ("obj", "ply"):
+        if file_format in exports:
+            from .export import write_mesh_sequence
+            frames = write_mesh_sequence(arrays, os.path.join(out, "frames"), file_format=file_format, every=every)
+            written.append(os.path.join(out, "frames", f"frame_*.{file_format} ({len(frames)} files)"))
+    return written
+
+
+def _load_run(directory):
+    """The trajectory and summary of an earlier run's output folder."""
+    import numpy as np
+    path = os.path.join(directory, "trajectory.npz")
+    if not os.path.isfile(path):
+        raise InputError("OUT_DIR", f"found no trajectory.npz in {directory}; give the folder a "
+                                    f"'contactlab run' wrote (its --out)")
+    arrays = dict(np.load(path))
+    if "body_surface_vertices" not in arrays:
+        raise InputError("OUT_DIR", f"{path} was written by an older contactlab without the shapes' "
+                                    f"surfaces; run the scene again")
+    try:
+        with open(os.path.join(directory, "summary.json")) as stream:
+            summary = json.load(stream)
+    except (OSError, ValueError):
+        summary = {}
+    return arrays, summary
+
+
+def _compare(args):
+    from .compare import compare
+    from .methods import AVAILABLE
+    methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods else None
+    _whole_number(args.fps, "--fps")
+    comparison = compare(args.scene, methods, args.out, overrides=_scene_overrides(args),
+                         video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps)
+    print(comparison.summary_text)
+    print(f"Report: {comparison.report_html} (also {os.path.basename(comparison.report_md)} and "
+          f"{os.path.basename(comparison.csv)} beside it)")
+
+
+def _plain_summary(summary, scene, written=()):
     energy = summary["energy"]
     return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
             f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
@@ -68,7 +180,8 @@ def _plain_summary(summary, scene):
             f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
             f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
             f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end.\n"
-            f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}")
+            f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
+            + "".join(f", {path}" for path in written))
 
 
 def _print_warning(message, category, filename, lineno, file=None, line=None):
@@ -86,17 +199,29 @@ def main(argv=None) -> int:
             from .scene import builtin_scenes
             for name, description in builtin_scenes():
                 print(f"{name:20s} {description}")
-        else:
-            if args.record_every < 1:
-                raise InputError("--record-every", f"expected a whole number ≥ 1, found {args.record_every}")
-            overrides = list(args.overrides)
-            for option, key in (("method", "method"), ("dt", "dt"), ("duration", "duration"),
-                                ("integrator", "integrator")):
-                if getattr(args, option) is not None:
-                    overrides.append(f"simulation.{key}={getattr(args, option)}")
-            _run(args.scene, overrides, args.out, args.record_every, args.json)
+        elif args.command == "run":
+            _whole_number(args.record_every, "--record-every")
+            _whole_number(args.fps, "--fps")
+            _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
+                 fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
+                 plots=not args.no_plots)
+        elif args.command == "compare":
+            _compare(args)
+        elif args.command == "render":
+            arrays, summary = _load_run(args.directory)
+            from .render import render
+            title = f"{summary['scene']} — {summary['method']}" if "scene" in summary else None
+            paths = render(arrays, args.directory, fps=args.fps, width=args.width, height=args.height,
+                           elevation=args.elevation, azimuth=args.azimuth, title=title,
+                           progress=sys.stderr.isatty())
+            print("Wrote " + ", ".join(paths.values()))
+        elif args.command == "export":
+            formats = _list_option(args.format, "--format", EXPORT_FORMATS)
+            _whole_number(args.every, "--every")
+            arrays, _ = _load_run(args.directory)
+            print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
-        source = getattr(args, "scene", None) or DEFAULT_SCENE
+        source = getattr(args, "scene", None) or getattr(args, "directory", None) or DEFAULT_SCENE
         print(f"error: {source}: {error}", file=sys.stderr)
         return 2
     except SimulationDiverged as error:
