@@ -25,7 +25,6 @@ import html
 import io
 import math
 import os
-import re
 import urllib.parse
 import warnings
 from dataclasses import dataclass, field
@@ -118,8 +117,7 @@ def _run(method, scene, progress):
                                    progress=progress, scene_name=scene.name)
         except SimulationDiverged as error:
             outcome.failure = str(error)
-            match = re.search(r"t = ([-+0-9.eE]+) s", outcome.failure)
-            outcome.failed_at = float(match.group(1)) if match else None
+            outcome.failed_at = error.time
     for warning in caught:
         outcome.warnings.append(str(warning.message))
         warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)

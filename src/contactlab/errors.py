@@ -22,7 +22,13 @@ class InputError(ValueError):
 
 
 class SimulationDiverged(RuntimeError):
-    """The state became non-finite: the time step is too large for the scene (or a stiffness too high)."""
+    """The state became non-finite: the time step is too large for the scene (or a stiffness too high).
+
+    Attributes: ``time``, the simulated time [s] at which it was found (None if unknown)."""
+
+    def __init__(self, message: str, time=None):
+        super().__init__(message)
+        self.time = time
 
 
 class StabilityWarning(UserWarning):

@@ -73,7 +73,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
             if not state.is_finite() or state.max_speed() > MAX_SPEED:
                 raise SimulationDiverged(
                     f"the simulation blew up at t = {state.time:.4g} s (velocities passed {MAX_SPEED:g} m/s or "
-                    f"became infinite); use a smaller dt than {dt:g} s")
+                    f"became infinite); use a smaller dt than {dt:g} s", time=state.time)
             if step_index % record_every == 0 or step_index == steps:
                 started = time.perf_counter()
                 recorder.sample(state, info)
