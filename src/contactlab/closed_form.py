@@ -58,6 +58,15 @@ def _one_body_on_plane(model, kind):
     return model.body_params[0], model.obstacle_params[0]
 
 
+def _body_on_floor(model, kind):
+    """(shape params (4,), |g|, up (3,), floor offset along up) when the scene is one body of
+    ``kind`` on one horizontal plane under gravity; else None."""
+    layout = _one_body_on_plane(model, kind)
+    g, up = _gravity(model)
+    floor = _horizontal_floor(model, up) if layout is not None else None
+    return None if floor is None else (layout[0], g, up, floor)
+
+
 def _materials(model):
     """(μ, ε) of the contact between body 0 and obstacle 0."""
     a, b = model.body_material[0], model.obstacle_material[0]
@@ -81,13 +90,12 @@ def _first_time(time, condition):
 
 def _bouncing_ball(model, arrays):
     """Dropped from rest at height h0: the n-th rebound peaks at ε^(2n) h0."""
-    layout = _one_body_on_plane(model, shapes.SPHERE)
-    g, up = _gravity(model)
-    if layout is None or _horizontal_floor(model, up) is None:
+    layout = _body_on_floor(model, shapes.SPHERE)
+    if layout is None:
         return []
-    radius = layout[0][0]
+    params, g, up, floor = layout
     _, restitution = _materials(model)
-    height = arrays["body_position"][:, 0] @ up - _horizontal_floor(model, up) - radius
+    height = arrays["body_position"][:, 0] @ up - floor - params[0]
     rise = arrays["body_velocity"][:, 0] @ up
     h0 = float(height[0])
     if np.linalg.norm(arrays["body_velocity"][0, 0]) > 0:
@@ -101,10 +109,10 @@ def _bouncing_ball(model, arrays):
 
 def _sliding_block(model, arrays):
     """A block launched at v0 on a floor stops after v0²/(2 μ g), at t = v0/(μ g)."""
-    layout = _one_body_on_plane(model, shapes.BOX)
-    g, up = _gravity(model)
-    if layout is None or _horizontal_floor(model, up) is None:
+    layout = _body_on_floor(model, shapes.BOX)
+    if layout is None:
         return []
+    _, g, up, _ = layout
     friction, _ = _materials(model)
     v0 = np.linalg.norm(arrays["body_velocity"][0, 0] - (arrays["body_velocity"][0, 0] @ up) * up)
     if friction == 0 or v0 == 0:
@@ -118,11 +126,11 @@ def _sliding_block(model, arrays):
 
 def _rolling_sphere(model, arrays):
     """A ball launched at v0 without spin slides until t = 2 v0/(7 μ g), then rolls at 5/7 v0."""
-    layout = _one_body_on_plane(model, shapes.SPHERE)
-    g, up = _gravity(model)
-    if layout is None or _horizontal_floor(model, up) is None:
+    layout = _body_on_floor(model, shapes.SPHERE)
+    if layout is None:
         return []
-    radius = layout[0][0]
+    params, g, up, _ = layout
+    radius = params[0]
     friction, _ = _materials(model)
     v = arrays["body_velocity"][:, 0]
     w = arrays["body_angular_velocity"][:, 0]
@@ -179,18 +187,18 @@ def _rod_impact(model, arrays):
     Measured when the corner has left the floor again (the first contact-free sample after the
     impact): the angular velocity as it is, the velocity along n less the gravity of the time
     since the closed-form instant of impact."""
-    layout = _one_body_on_plane(model, shapes.BOX)
-    g, up = _gravity(model)
-    if layout is None or _horizontal_floor(model, up) is None or g == 0:
+    layout = _body_on_floor(model, shapes.BOX)
+    if layout is None:
         return []
+    params, g, up, floor = layout
     friction, restitution = _materials(model)
     if (friction != 0 or np.linalg.norm(arrays["body_velocity"][0, 0]) > 0
             or np.linalg.norm(arrays["body_angular_velocity"][0, 0]) > 0):
         return []
     R = rotations.to_matrix(arrays["body_orientation"][0, :1])[0]        # unchanged while falling
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * layout[0][:3]
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * params[:3]
     r = min(corners @ R.T, key=lambda c: c @ up)            # the lowest corner, from the centre, world
-    drop = float((arrays["body_position"][0, 0] + r) @ up - _horizontal_floor(model, up))
+    drop = float((arrays["body_position"][0, 0] + r) @ up - floor)
     impact_time = arrays["time"][0] + np.sqrt(2.0 * drop / g)
     v_normal = -np.sqrt(2.0 * g * drop)
     inverse_inertia = R @ np.diag(1.0 / model.body_inertia[0]) @ R.T
