@@ -57,6 +57,7 @@ class Options:
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
     normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
     samples: int = 2                      # samples per triangle edge for granularity = "samples"
+    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
         check_counts(self, {"iterations": 1})
@@ -68,7 +69,7 @@ class Options:
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
-        check_counts(self, {"samples": 1})
+        check_counts(self, {"samples": 1, "cloth_samples": 0})
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
@@ -146,7 +147,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 3. collision detection over the swept step: contacts at the start positions, with gaps
     #    down to what the motion could close (speculative contacts: nothing tunnels)
     contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples)
+                       options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
         carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
         return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)
