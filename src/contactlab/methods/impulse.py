@@ -39,7 +39,7 @@ from ..errors import InputError
 from ..state import State
 from . import StepInfo, check_choices, check_counts
 from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
-from .sequential import _row_velocity, _solve_contact, rows_of, solve_order, solve_sequential_impulses
+from .sequential import _row_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts
 
 
 @dataclass
@@ -121,12 +121,7 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
         if count == 0:
             return wave
         for sweep in range(sweeps):
-            change = 0.0
-            for m in range(count):
-                c = members[m]
-                change = max(change, _solve_contact(c, target[c], impulses, index, width, jac, push, k,
-                                                    friction, u))
-            if change <= tolerance:
+            if sweep_contacts(members, count, target, impulses, index, width, jac, push, k, friction, u) <= tolerance:
                 break
     return max_waves
 
