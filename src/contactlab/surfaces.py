@@ -21,6 +21,8 @@ array                          shape       meaning
 Triangles are wound counter-clockwise seen from outside.
 """
 
+import functools
+
 import numpy as np
 import trimesh
 
@@ -37,15 +39,34 @@ def _hull_surface(hulls, index):
     return hulls["vertices"][v0:v1], hulls["triangles"][t0:t1]
 
 
+@functools.lru_cache(maxsize=None)
+def _unit_sphere():
+    mesh = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
+    return _read_only(mesh.vertices), _read_only(mesh.faces)
+
+
+@functools.lru_cache(maxsize=64)
+def _capsule(radius, half_length):
+    mesh = trimesh.creation.capsule(height=2.0 * half_length, radius=radius,
+                                    count=[CAPSULE_SEGMENTS, CAPSULE_SEGMENTS])
+    return _read_only(mesh.vertices), _read_only(mesh.faces)
+
+
+def _read_only(array):
+    """A read-only copy: cached surfaces are shared by every body of that size."""
+    array = np.array(array)
+    array.flags.writeable = False
+    return array
+
+
 def _solid_surface(model, kind, params):
-    """Surface of a solid shape about its own centre: (vertices (V,3) m, triangles (T,3))."""
+    """Surface of a solid shape about its own centre: (vertices (V,3) m, triangles (T,3)).
+    Spheres and capsules are tessellated once per size (a pile of a thousand is one mesh)."""
     if kind == shapes.SPHERE:
-        mesh = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=params[0])
-        return mesh.vertices, mesh.faces
+        vertices, faces = _unit_sphere()
+        return vertices * params[0], faces
     if kind == shapes.CAPSULE:
-        mesh = trimesh.creation.capsule(height=2.0 * params[1], radius=params[0],
-                                        count=[CAPSULE_SEGMENTS, CAPSULE_SEGMENTS])
-        return mesh.vertices, mesh.faces
+        return _capsule(float(params[0]), float(params[1]))
     if kind == shapes.BOX:                  # its own 8-corner hull, kept in params[3]
         return _hull_surface(model.hulls, int(params[3]))
     if kind == shapes.CONVEX:
