@@ -88,8 +88,10 @@ def gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol, max_iterations
     return max_iterations, residual
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _relax_row(indptr, indices, data, diag, c, lam, omega, i):
+    """One projected Gauss-Seidel update of row i (inlined: as a call inside ``prange`` the
+    colored sweep ran 1.4× slower than ``gauss_seidel`` on one thread)."""
     d = diag[i]
     if d > 0.0:
         acc = -c[i]

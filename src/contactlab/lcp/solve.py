@@ -16,7 +16,7 @@ LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
 
 #: A color group of ``redblack`` with at least this many rows is updated in parallel (``prange``);
 #: smaller groups run on one thread, where the thread-pool wake-up would cost more than the work.
-REDBLACK_MIN_PARALLEL_ROWS = 1024
+REDBLACK_MIN_PARALLEL_ROWS = 128
 
 
 @dataclass
@@ -103,9 +103,17 @@ def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None
         ncolors = int(colors.max()) + 1
         order = np.argsort(colors, kind="stable").astype(np.int64)
         color_start = np.searchsorted(colors[order], np.arange(ncolors + 1)).astype(np.int64)
-        iterations, residual = _kernels.red_black(indptr, indices, data, diag, c, lam, omega, tol,
-                                                  max_iterations, order, color_start,
-                                                  REDBLACK_MIN_PARALLEL_ROWS)
+        # the problem renumbered color by color (P B Pᵀ), so that each color's rows and their
+        # λ lie together in memory and a thread reads its share front to back
+        permuted = csr[order][:, order].tocsr()
+        permuted.sort_indices()
+        lam_permuted = np.ascontiguousarray(lam[order])
+        iterations, residual = _kernels.red_black(permuted.indptr.astype(np.int64),
+                                                  permuted.indices.astype(np.int64), permuted.data,
+                                                  diag[order], np.ascontiguousarray(c[order]), lam_permuted,
+                                                  omega, tol, max_iterations, np.arange(n, dtype=np.int64),
+                                                  color_start, REDBLACK_MIN_PARALLEL_ROWS)
+        lam[order] = lam_permuted
     else:
         iterations, residual = _kernels.gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol,
                                                      max_iterations, method == "jacobi")
