@@ -222,12 +222,21 @@ def solve_order(contacts, gravity):
     In a stack the top contact is solved first, and the impulse it puts on the body below is
     passed on, contact by contact, down to the ground within the same sweep: the load path is
     followed in one sweep instead of creeping one link per sweep. This is what keeps a heavy
-    body on a light one (mass ratio 100) from sinking with a modest iteration count. Contacts
-    at one height (the four corners of a face) keep the collision order (a stable sort);
-    without gravity the order is that of the collision detection.
+    body on a light one (mass ratio 100) from sinking with a modest iteration count.
+
+    Contacts at one height (the four corners of a face; heights equal to 1 nm) are taken in
+    an order scrambled by contact id — fixed from step to step, but not the collision order,
+    in which every face's corners come in the same pattern: a sweep cut short by its iteration
+    cap leaves each first-visited corner a little more impulse, and with the same pattern on
+    every level a 20-level pyramid leaned 0.55 mm sideways (1.04 mm at the top; 0.65 mm with
+    the scrambled order). Without gravity the order is that of the collision detection.
     """
-    height = contacts.point @ -np.asarray(gravity, dtype=float)
-    return np.argsort(-height, kind="stable")
+    gravity = np.asarray(gravity, dtype=float)
+    if not np.any(gravity):
+        return np.arange(contacts.count)
+    height = np.round(contacts.point @ -gravity / np.linalg.norm(gravity), 9)
+    scramble = (contacts.feature_id.astype(np.uint64) * np.uint64(2654435761)) % np.uint64(4294967291)
+    return np.lexsort((scramble, -height))
 
 
 @njit(cache=True)
