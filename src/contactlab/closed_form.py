@@ -69,9 +69,8 @@ def _body_on_floor(model, kind):
 
 def _materials(model):
     """(μ, ε) of the contact between body 0 and obstacle 0."""
-    a, b = model.body_material[0], model.obstacle_material[0]
-    return (float(np.sqrt(model.material_friction[a] * model.material_friction[b])),
-            float(max(model.material_restitution[a], model.material_restitution[b])))
+    friction, restitution = model.pair_materials(model.body_material[0], model.obstacle_material[0])
+    return float(friction), float(restitution)
 
 
 def _horizontal_floor(model, up):

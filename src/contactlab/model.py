@@ -110,6 +110,13 @@ class Model:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
         return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)
 
+    def pair_materials(self, material_a, material_b):
+        """(friction μ, restitution ε) of contacts between materials ``material_a`` and
+        ``material_b`` (indices, scalars or arrays of one shape): μ = √(μ_a μ_b), the geometric
+        mean, and ε = max(ε_a, ε_b), the larger."""
+        return (np.sqrt(self.material_friction[material_a] * self.material_friction[material_b]),
+                np.maximum(self.material_restitution[material_a], self.material_restitution[material_b]))
+
     def state(self):
         """A fresh copy of the state at time 0."""
         return self.initial.copy()

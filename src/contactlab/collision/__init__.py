@@ -186,7 +186,6 @@ def _side(model, collider):
 
 
 def _material(model, collider):
-    B, P = model.body_count, model.particle_count
     table = np.concatenate([model.body_material, model.particle_material, model.obstacle_material])
     return table[collider]
 
@@ -196,12 +195,10 @@ def _assemble(model, a, b, point, normal, depth, feature, total):
     body_b, particles_b, weights_b = _side(model, b)
     mat_a, mat_b = _material(model, a), _material(model, b)
     t1, t2 = tangent_basis(normal)
+    friction, restitution = model.pair_materials(mat_a, mat_b)
     return Contacts(
         body_a=body_a, body_b=body_b, particles_a=particles_a, particles_b=particles_b,
         weights_a=weights_a, weights_b=weights_b, point=point, normal=normal, depth=depth,
-        tangent1=t1, tangent2=t2,
-        # combination rule: friction geometric mean, restitution the larger
-        friction=np.sqrt(model.material_friction[mat_a] * model.material_friction[mat_b]),
-        restitution=np.maximum(model.material_restitution[mat_a], model.material_restitution[mat_b]),
+        tangent1=t1, tangent2=t2, friction=friction, restitution=restitution,
         feature_id=((a * total + b) << FEATURE_BITS) | feature,
     )

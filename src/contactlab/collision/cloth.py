@@ -47,12 +47,12 @@ def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -
         material_b = np.full(keep.sum(), model.obstacle_material[o])
         count = int(keep.sum())
         t1, t2 = tangent_basis(found.normal[keep])
+        friction, restitution = model.pair_materials(material_a, material_b)
         parts.append(Contacts(
             body_a=np.full(count, -1), body_b=np.full(count, -1),
             particles_a=found.vertices[keep], particles_b=np.full((count, 3), -1),
             weights_a=found.weights[keep], weights_b=np.zeros((count, 3)),
             point=found.point[keep], normal=found.normal[keep], depth=depth[keep], tangent1=t1, tangent2=t2,
-            friction=np.sqrt(model.material_friction[material_a] * model.material_friction[material_b]),
-            restitution=np.maximum(model.material_restitution[material_a], model.material_restitution[material_b]),
+            friction=friction, restitution=restitution,
             feature_id=((feature_base + triangle * model.obstacle_count + o) << 24) | (found.feature[keep] % per_triangle)))
     return Contacts.concatenate(parts)
