@@ -26,33 +26,37 @@ from numba import njit, prange
 
 
 @njit(cache=True)
-def lcp_residual(indptr, indices, data, c, lam, w):
-    """Fill ``w = B λ − c`` and return ``‖λ − max(0, λ − w)‖₂`` (sequential)."""
-    n = c.shape[0]
+def _residual_rows(indptr, indices, data, c, lam, w, start, stop):
+    """Fill ``w = B λ − c`` on rows [start, stop) and return Σ (λ_i − max(0, λ_i − w_i))² over them."""
     total = 0.0
-    for i in range(n):
+    for i in range(start, stop):
         acc = -c[i]
         for k in range(indptr[i], indptr[i + 1]):
             acc += data[k] * lam[indices[k]]
         w[i] = acc
         r = lam[i] - max(0.0, lam[i] - acc)
         total += r * r
-    return math.sqrt(total)
+    return total
+
+
+@njit(cache=True)
+def lcp_residual(indptr, indices, data, c, lam, w):
+    """Fill ``w = B λ − c`` and return ``‖λ − max(0, λ − w)‖₂`` (sequential)."""
+    return math.sqrt(_residual_rows(indptr, indices, data, c, lam, w, 0, c.shape[0]))
+
+
+RESIDUAL_CHUNKS = 8     # row blocks of the parallel residual (a few per thread, for balance)
 
 
 @njit(cache=True, parallel=True)
 def lcp_residual_parallel(indptr, indices, data, c, lam, w):
-    """Same as :func:`lcp_residual`, rows in parallel."""
+    """Same as :func:`lcp_residual`, in ``RESIDUAL_CHUNKS`` blocks of rows in parallel."""
     n = c.shape[0]
-    total = 0.0
-    for i in prange(n):
-        acc = -c[i]
-        for k in range(indptr[i], indptr[i + 1]):
-            acc += data[k] * lam[indices[k]]
-        w[i] = acc
-        r = lam[i] - max(0.0, lam[i] - acc)
-        total += r * r
-    return math.sqrt(total)
+    partial = np.zeros(RESIDUAL_CHUNKS)
+    for chunk in prange(RESIDUAL_CHUNKS):
+        partial[chunk] = _residual_rows(indptr, indices, data, c, lam, w, chunk * n // RESIDUAL_CHUNKS,
+                                        (chunk + 1) * n // RESIDUAL_CHUNKS)
+    return math.sqrt(partial.sum())
 
 
 @njit(cache=True)
