@@ -26,12 +26,24 @@ def overlapping_pairs(lower, upper):
 
 
 @njit(cache=True)
+def _append_pair(pairs, found, a, b):
+    """``pairs`` (capacity, 2) with (min(a, b), max(a, b)) written in row ``found``: the same
+    array, or a copy of twice the capacity when it was full."""
+    if found == pairs.shape[0]:
+        grown = np.empty((2 * found, 2), dtype=np.int64)
+        grown[:found] = pairs
+        pairs = grown
+    pairs[found, 0] = min(a, b)
+    pairs[found, 1] = max(a, b)
+    return pairs
+
+
+@njit(cache=True)
 def sweep_and_prune(lower, upper):
     """Pairs (i, j), i < j, whose boxes overlap, by sweeping along x (see the module)."""
     count = lower.shape[0]
     order = np.argsort(lower[:, 0])
-    capacity = max(16, 4 * count)
-    pairs = np.empty((capacity, 2), dtype=np.int64)
+    pairs = np.empty((max(16, 4 * count), 2), dtype=np.int64)
     found = 0
     for position in range(count):
         i = order[position]
@@ -42,13 +54,7 @@ def sweep_and_prune(lower, upper):
                 break
             if (lower[j, 1] <= upper[i, 1] and lower[i, 1] <= upper[j, 1]
                     and lower[j, 2] <= upper[i, 2] and lower[i, 2] <= upper[j, 2]):
-                if found == capacity:
-                    grown = np.empty((2 * capacity, 2), dtype=np.int64)
-                    grown[:capacity] = pairs
-                    pairs = grown
-                    capacity *= 2
-                pairs[found, 0] = min(i, j)
-                pairs[found, 1] = max(i, j)
+                pairs = _append_pair(pairs, found, i, j)
                 found += 1
     return pairs[:found]
 
@@ -86,8 +92,7 @@ def grid_pairs(lower, upper):
                     cells[e, 0], cells[e, 1], cells[e, 2] = x, y, z
                     e += 1
     order = np.argsort(keys, kind="mergesort")
-    capacity = max(16, 4 * n)
-    pairs = np.empty((capacity, 2), dtype=np.int64)
+    pairs = np.empty((max(16, 4 * n), 2), dtype=np.int64)
     found = 0
     start = 0
     while start < count:
@@ -113,13 +118,7 @@ def grid_pairs(lower, upper):
                         home = False
                 if not home:
                     continue
-                if found == capacity:
-                    grown = np.empty((2 * capacity, 2), dtype=np.int64)
-                    grown[:capacity] = pairs
-                    pairs = grown
-                    capacity *= 2
-                pairs[found, 0] = min(a, b)
-                pairs[found, 1] = max(a, b)
+                pairs = _append_pair(pairs, found, a, b)
                 found += 1
         start = stop
     return pairs[:found]
