@@ -104,6 +104,18 @@ def test_single_spring_force_and_energy():
     assert spring_energy(model, x) == pytest.approx(0.5 * 100 * (0.01 + (length13 - 1.0) ** 2))
 
 
+def central_differences(function, point, step=1e-6):
+    """∂function/∂point by central differences: (outputs, 3P) for a function of a (P, 3) point
+    returning an array (flattened) or a number (one row)."""
+    columns = []
+    for column in range(point.size):
+        plus, minus = point.copy().ravel(), point.copy().ravel()
+        plus[column] += step
+        minus[column] -= step
+        columns.append(np.ravel(function(plus.reshape(-1, 3)) - function(minus.reshape(-1, 3))) / (2 * step))
+    return np.stack(columns, axis=1)
+
+
 @pytest.mark.parametrize("clamp", [False, True])
 def test_jacobians_match_finite_differences(rng, clamp):
     model = sheet(n=4, k=500.0, damping=0.0, pinned=())
@@ -111,14 +123,7 @@ def test_jacobians_match_finite_differences(rng, clamp):
     # compress some springs so the clamp matters
     x = x * np.array([0.8, 0.8, 1.0])
     K, _ = spring_jacobians(model, x, v, clamp_compressed=clamp)
-    step = 1e-6
-    numeric = np.empty((x.size, x.size))
-    for column in range(x.size):
-        plus, minus = x.copy().ravel(), x.copy().ravel()
-        plus[column] += step
-        minus[column] -= step
-        numeric[:, column] = (spring_forces(model, plus.reshape(-1, 3), v)
-                              - spring_forces(model, minus.reshape(-1, 3), v)).ravel() / (2 * step)
+    numeric = central_differences(lambda y: spring_forces(model, y, v), x)
     dense = K.toarray()
     np.testing.assert_allclose(dense, dense.T, atol=1e-9)
     if clamp:
@@ -133,23 +138,10 @@ def test_damping_jacobian_and_energy_gradient(rng):
     model = sheet(n=4, damping=3.0, pinned=())
     x, v = jiggled(model, rng)
     _, D = spring_jacobians(model, x, v)
-    step = 1e-6
-    numeric = np.empty((v.size, v.size))
-    for column in range(v.size):
-        plus, minus = v.copy().ravel(), v.copy().ravel()
-        plus[column] += step
-        minus[column] -= step
-        numeric[:, column] = (spring_forces(model, x, plus.reshape(-1, 3))
-                              - spring_forces(model, x, minus.reshape(-1, 3))).ravel() / (2 * step)
+    numeric = central_differences(lambda y: spring_forces(model, x, y), v)
     np.testing.assert_allclose(D.toarray(), numeric, atol=1e-6 * np.abs(numeric).max())
     # the elastic force is minus the gradient of the energy
-    gradient = np.empty(x.size)
-    for column in range(x.size):
-        plus, minus = x.copy().ravel(), x.copy().ravel()
-        plus[column] += step
-        minus[column] -= step
-        gradient[column] = (spring_energy(model, plus.reshape(-1, 3))
-                            - spring_energy(model, minus.reshape(-1, 3))) / (2 * step)
+    gradient = central_differences(lambda y: spring_energy(model, y), x)[0]
     np.testing.assert_allclose(spring_forces(model, x).ravel(), -gradient, atol=1e-5 * np.abs(gradient).max())
 
 
