@@ -25,7 +25,7 @@ import numpy as np
 
 from . import surfaces
 from .errors import InputError
-from .record import atomic_path
+from .record import atomic_path, read_trajectory
 
 MESH_FORMATS = ("obj", "ply")
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -45,19 +45,6 @@ def _check_every(every):
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
         raise InputError("every", f"expected a whole number ≥ 1, found {every!r}")
     return int(every)
-
-
-def _read(arrays) -> dict:
-    """The arrays the exporters need, as plain NumPy arrays (an ``np.load`` archive would
-    decompress a key at every access)."""
-    missing = [key for key in _REQUIRED if key not in arrays]
-    if missing:
-        raise InputError("arrays", f"expected a trajectory with {', '.join(missing)}; found none "
-                                   "(a trajectory.npz written before contactlab had surfaces? run the scene again)")
-    data = {key: np.asarray(arrays[key]) for key in _REQUIRED}
-    if len(data["time"]) == 0:
-        raise InputError("arrays", "expected a trajectory with at least one sample, found none")
-    return data
 
 
 def frame_samples(count, every=1) -> np.ndarray:
@@ -213,7 +200,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
         raise InputError("file_format", f"expected one of {', '.join(MESH_FORMATS)}, found {file_format!r}")
     file_format = file_format.lower().lstrip(".")
     every = _check_every(every)
-    data = _read(arrays)
+    data = read_trajectory(arrays, _REQUIRED)
     samples = frame_samples(len(data["time"]), every)
     parts = _Parts(data)
     writer = _ObjWriter(_frame_objects(parts, data, 0)) if file_format == "obj" else None
@@ -305,7 +292,7 @@ def write_usd(arrays, path, *, every=1) -> str:
     if suffix not in USD_SUFFIXES:
         raise InputError("path", f"expected a file name ending in {', '.join(USD_SUFFIXES)}, found {os.fspath(path)!r}")
     every = _check_every(every)
-    data = _read(arrays)
+    data = read_trajectory(arrays, _REQUIRED)
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
     parts = _Parts(data)

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import diagnostics, surfaces
 from .collision import collide
+from .errors import InputError
 
 SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
           "particle_position", "particle_velocity", "energy_kinetic", "energy_potential",
@@ -91,6 +92,21 @@ def atomic_path(path):
         if os.path.exists(temporary):
             os.unlink(temporary)
         raise
+
+
+def read_trajectory(arrays, keys) -> dict:
+    """The trajectory arrays named in ``keys`` as plain NumPy arrays (an ``np.load`` archive
+    decompresses a key at every access), from ``simulate(...).arrays`` or an ``np.load`` of
+    trajectory.npz. InputError("arrays", ...) when a key is missing (a trajectory written before
+    contactlab recorded surfaces) or there is no sample."""
+    missing = [key for key in keys if key not in arrays]
+    if missing:
+        raise InputError("arrays", f"not a trajectory with surfaces: missing {', '.join(missing)}; "
+                                   f"record the run again with this version of contactlab")
+    out = {key: np.asarray(arrays[key]) for key in keys}
+    if "time" in out and len(out["time"]) == 0:
+        raise InputError("arrays", "the trajectory has no samples")
+    return out
 
 
 def _atomic_write(path, write):

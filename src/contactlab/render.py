@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from . import surfaces
 from .errors import InputError
-from .record import atomic_path
+from .record import atomic_path, read_trajectory
 
 FORMATS = ("mp4", "gif")
 GIF_MAX_FPS = 15            # frames per second of the GIF at most (its delay is a whole 1/100 s)
@@ -166,18 +166,6 @@ def _formats(formats):
         if name not in FORMATS:
             raise InputError("formats", f"expected names among {', '.join(FORMATS)}, found {name!r}")
     return tuple(dict.fromkeys(names))
-
-
-def _trajectory(arrays):
-    """The arrays drawing needs, read once (an NpzFile decompresses on every access)."""
-    missing = [key for key in REQUIRED if key not in arrays]
-    if missing:
-        raise InputError("arrays", f"not a trajectory with surfaces: missing {', '.join(missing)}; "
-                                   f"record the run again with this version of contactlab")
-    out = {key: np.asarray(arrays[key]) for key in REQUIRED}
-    if len(out["time"]) == 0:
-        raise InputError("arrays", "the trajectory has no samples")
-    return out
 
 
 # -- timing -------------------------------------------------------------------------------
@@ -395,7 +383,7 @@ class _Picture:
     def __init__(self, arrays, width, height, elevation, azimuth, title):
         self.width, self.height = _size(width, "width"), _size(height, "height")
         elevation, azimuth = _angle(elevation, "elevation"), _angle(azimuth, "azimuth")
-        self.arrays = arrays = _trajectory(arrays)
+        self.arrays = arrays = read_trajectory(arrays, REQUIRED)
         self.time = arrays["time"]
         self.light = _light_direction(elevation, azimuth)
 
