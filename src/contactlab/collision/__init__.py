@@ -16,7 +16,7 @@ from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
 from .mesh_pairs import shapes_against_mesh_extended
-from .narrow_phase import MAX_PER_PAIR, collide_pair, supported
+from .narrow_phase import MAX_PER_PAIR, collide_pair, collide_primitive_pair, supported
 
 
 def check_supported(model):
@@ -48,9 +48,14 @@ def _generate(pairs, kinds, params, centers, rotations_, reach, hull_store):
     count = 0
     for k in range(len(pairs)):
         a, b = pairs[k, 0], pairs[k, 1]
-        written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
-                               kinds[b], params[b], centers[b], rotations_[b],
-                               reach[a] + reach[b], hull_store, point, normal, depth, feature, count)
+        if kinds[a] == shapes.CONVEX or kinds[b] == shapes.CONVEX:
+            written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
+                                   kinds[b], params[b], centers[b], rotations_[b],
+                                   reach[a] + reach[b], hull_store, point, normal, depth, feature, count)
+        else:       # the same contacts without handing over the hull store (see collide_primitive_pair)
+            written = collide_primitive_pair(kinds[a], params[a], centers[a], rotations_[a],
+                                             kinds[b], params[b], centers[b], rotations_[b],
+                                             reach[a] + reach[b], point, normal, depth, feature, count)
         owner[count:count + written] = k
         count += written
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]

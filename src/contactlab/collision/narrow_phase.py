@@ -26,33 +26,40 @@ SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (shapes.SPHERE, shapes.BOX, shapes.
 
 @njit(cache=True)
 def sphere_plane(center, radius, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
-    """Sphere (or particle of this radius) A against the plane B = (n, offset)."""
-    normal = plane[:3]
-    distance = center[0] * normal[0] + center[1] * normal[1] + center[2] * normal[2] - plane[3]
+    """Sphere (or particle of this radius) A against the plane B = (n, offset).
+
+    Written in scalars (no temporary arrays): it runs once per sphere and wall every step."""
+    nx, ny, nz = plane[0], plane[1], plane[2]
+    distance = center[0] * nx + center[1] * ny + center[2] * nz - plane[3]
     depth = radius - distance
     if depth < -margin:
         return 0
-    point = center - normal * (0.5 * (radius + distance))
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, 0)
+    back = 0.5 * (radius + distance)            # the point midway between the two surfaces
+    write_contact(out_point, out_normal, out_depth, out_feature, slot,
+                  (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back), (nx, ny, nz), depth, 0)
     return 1
 
 
 @njit(cache=True)
 def sphere_sphere(center_a, radius_a, center_b, radius_b, margin,
                   out_point, out_normal, out_depth, out_feature, slot):
-    """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0)."""
-    d = center_a - center_b
-    distance = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
+
+    Written in scalars (no temporary arrays): a pile makes thousands of these pairs a step."""
+    dx, dy, dz = center_a[0] - center_b[0], center_a[1] - center_b[1], center_a[2] - center_b[2]
+    distance = np.sqrt(dx * dx + dy * dy + dz * dz)
     depth = radius_a + radius_b - distance
     if depth < -margin:
         return 0
     if distance > 1e-12:
-        normal = d / distance
+        nx, ny, nz = dx / distance, dy / distance, dz / distance
     else:                       # concentric: any direction separates; pick +z
-        normal = np.array([0.0, 0.0, 1.0])
-    surface_a = center_a - normal * radius_a
-    surface_b = center_b + normal * radius_b
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, 0)
+        nx, ny, nz = 0.0, 0.0, 1.0
+    # midway between the surfaces: ½ (centre_a − r_a n + centre_b + r_b n)
+    back = 0.5 * (radius_b - radius_a)
+    write_contact(out_point, out_normal, out_depth, out_feature, slot,
+                  (0.5 * (center_a[0] + center_b[0]) + back * nx, 0.5 * (center_a[1] + center_b[1]) + back * ny,
+                   0.5 * (center_a[2] + center_b[2]) + back * nz), (nx, ny, nz), depth, 0)
     return 1
 
 
@@ -150,13 +157,11 @@ def _rank(kind):
     return 9
 
 
-@njit(cache=True)
-def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                     margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
-    """The pairs in canonical order (rank of A ≤ rank of B); 0 contacts for an unknown pair.
-
-    hull_store: the model's packed hulls (Model.hull_store); convex shapes and boxes index it.
-    """
+@njit(cache=True, inline="always")
+def _primitives_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                        margin, out_point, out_normal, out_depth, out_feature, slot):
+    """The pairs without a convex hull, in canonical order (rank of A ≤ rank of B); 0 contacts
+    for an unknown pair."""
     round_a = kind_a == SPHERE or kind_a == POINT
     round_b = kind_b == SPHERE or kind_b == POINT
     if round_a and round_b:
@@ -176,11 +181,6 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
     if kind_a == CAPSULE and kind_b == BOX:
         return capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, params_b[:3],
                            margin, out_point, out_normal, out_depth, out_feature, slot)
-    if kind_a == CAPSULE and kind_b == CONVEX:
-        b = _hull(hull_store, params_b[0])
-        return capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                              b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
-                              out_point, out_normal, out_depth, out_feature, slot)
     if kind_a == CAPSULE and kind_b == PLANE:
         return capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
                              out_point, out_normal, out_depth, out_feature, slot)
@@ -190,6 +190,22 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
     if kind_a == BOX and kind_b == PLANE:
         return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
                          out_point, out_normal, out_depth, out_feature, slot)
+    return 0
+
+
+@njit(cache=True)
+def _hulls_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                   margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
+    """The pairs with a convex hull, in canonical order; 0 contacts for an unknown pair.
+
+    hull_store: the model's packed hulls (Model.hull_store); convex shapes and boxes index it.
+    """
+    round_a = kind_a == SPHERE or kind_a == POINT
+    if kind_a == CAPSULE and kind_b == CONVEX:
+        b = _hull(hull_store, params_b[0])
+        return capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
+                              b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
+                              out_point, out_normal, out_depth, out_feature, slot)
     if round_a and kind_b == CONVEX:
         b = _hull(hull_store, params_b[0])
         return sphere_convex(center_a, params_a[0], center_b, rotation_b, b[0], b[1], b[2], b[3], b[4], margin,
@@ -205,6 +221,30 @@ def _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, c
         return convex_plane(center_a, rotation_a, a[0], params_b, margin,
                             out_point, out_normal, out_depth, out_feature, slot)
     return 0
+
+
+@njit(cache=True, inline="always")
+def _flip_normals(out_normal, slot, count):
+    """Reverse the normals of rows slot … slot + count − 1 (a pair computed swapped)."""
+    for i in range(slot, slot + count):
+        for k in range(3):
+            out_normal[i, k] = -out_normal[i, k]
+
+
+@njit(cache=True, inline="always")
+def collide_primitive_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                           margin, out_point, out_normal, out_depth, out_feature, slot):
+    """``collide_pair`` for two shapes neither of which is convex (spheres, points, capsules,
+    boxes, planes): the same contacts without the hull store. Handing a tuple of ten arrays to
+    a function costs more than a sphere pair itself (~150 ns against ~15), so the per-pair loop
+    calls this for every pair that needs no hull."""
+    if _rank(kind_a) <= _rank(kind_b):
+        return _primitives_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                                   margin, out_point, out_normal, out_depth, out_feature, slot)
+    count = _primitives_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
+                                margin, out_point, out_normal, out_depth, out_feature, slot)
+    _flip_normals(out_normal, slot, count)
+    return count
 
 
 @njit(cache=True)
@@ -224,12 +264,13 @@ def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, cente
     A pair given out of canonical order is computed swapped and its normals flipped, so
     swapping the two shapes flips the normal and nothing else.
     """
+    if kind_a != CONVEX and kind_b != CONVEX:
+        return collide_primitive_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b,
+                                      rotation_b, margin, out_point, out_normal, out_depth, out_feature, slot)
     if _rank(kind_a) <= _rank(kind_b):
-        return _collide_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                                margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
-    count = _collide_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
-                             margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
-    for i in range(slot, slot + count):
-        for k in range(3):
-            out_normal[i, k] = -out_normal[i, k]
+        return _hulls_ordered(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
+                              margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
+    count = _hulls_ordered(kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
+                           margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
+    _flip_normals(out_normal, slot, count)
     return count
