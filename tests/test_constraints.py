@@ -10,7 +10,7 @@ from contactlab.dynamics.generalized import inverse_mass_matrix, stack
 from contactlab.dynamics.integrators import free_velocities
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import constraints
-from contactlab.methods.sequential import rows_of, solve_order, solve_sequential_impulses
+from contactlab.methods.sequential import rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from contactlab.scene import builtin_scenes, load_scene
 from conftest import ball_on_plane, cube_on_plane
 
@@ -138,8 +138,9 @@ def test_matrix_free_and_assembled_give_the_same_lambda(rng, friction):
     state, contacts, rows, J, v_free, target = contact_problem(model)
     assert contacts.count == 10
     u = v_free.copy()
-    lam_free, _, change = solve_sequential_impulses(*rows, contacts.friction, target[:, 0], u, 20000, 1e-14,
-                                                    np.zeros((contacts.count, 3)), solve_order(contacts, model.gravity))
+    lam_free, _, change = solve_sequential_impulses(rows, contacts.friction, target[:, 0], u, 20000, 1e-14,
+                                                    np.zeros((contacts.count, 3)),
+                                                    *sweep_groups(model, state, contacts, solve_order(contacts, model.gravity)))
     inverse = constraints.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
     B, q = constraints.lcp_matrices(J, inverse, v_free, target.ravel())
     if friction == 0.0:

@@ -125,9 +125,10 @@ def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths():
     assert (vx[before] > 5 / 7 * v0 + 1e-3).all()                            # still sliding before
 
 
-def test_effective_mass_matrix_free_equals_j_minv_jt():
-    """side_inverse_mass (matrix-free) against the assembled J M⁻¹ Jᵀ diagonal."""
-    from contactlab.contacts import side_inverse_mass
+def test_matrix_free_rows_equal_the_assembled_jacobian():
+    """The solver's matrix-free rows against the assembled J and J M⁻¹ Jᵀ: the effective masses
+    k (diagonal and normal-tangent couplings), J u, and u + M⁻¹ Jᵀ λ, for body, particle and
+    static sides."""
     b = ModelBuilder()
     b.add_body("box", half_extents=(0.3, 0.1, 0.05), mass=2.0, position=(0, 0, 0.04),
                orientation=(0.9, 0.1, 0.3, 0.2))
@@ -149,14 +150,21 @@ def test_effective_mass_matrix_free_equals_j_minv_jt():
         k = 6 * model.body_count + 3 * j
         Minv[k:k + 3, k:k + 3] = np.eye(3) / m
     W = J @ Minv @ J.T
-    r_a, r_b = sequential.lever_arms(contacts, state.body_position)
+    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    k = rows[5]
     for c in range(contacts.count):
-        for row, d in enumerate((contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c])):
-            k = sum(side_inverse_mass(body[c], parts[c], w[c], r[c], d, model.body_inverse_mass, inv_inertia,
-                                      model.particle_inverse_mass)
-                    for body, parts, w, r in ((contacts.body_a, contacts.particles_a, contacts.weights_a, r_a),
-                                              (contacts.body_b, contacts.particles_b, contacts.weights_b, r_b)))
-            assert k == pytest.approx(W[3 * c + row, 3 * c + row], rel=1e-12)
+        for d in range(3):
+            assert k[c, d] == pytest.approx(W[3 * c + d, 3 * c + d], rel=1e-12)
+        assert k[c, 3] == pytest.approx(W[3 * c + 1, 3 * c], rel=1e-12, abs=1e-14)
+        assert k[c, 4] == pytest.approx(W[3 * c + 2, 3 * c], rel=1e-12, abs=1e-14)
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=J.shape[1])
+    np.testing.assert_allclose(sequential.row_products(rows, u).ravel(), J @ u, rtol=1e-12, atol=1e-12)
+    lam = rng.normal(size=(contacts.count, 3))
+    after = u.copy()
+    for c in range(contacts.count):
+        sequential.apply_impulse(c, rows, lam[c, 0], lam[c, 1], lam[c, 2], after)
+    np.testing.assert_allclose(after, u + Minv @ J.T @ lam.ravel(), rtol=1e-12, atol=1e-12)
 
 
 def test_rod_corner_impact_matches_r4_by_hand():
@@ -363,20 +371,22 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
                        + n @ np.cross(inverse_world[0] @ np.cross(r_world[0], n), r_world[0])
                        + n @ np.cross(inverse_world[1] @ np.cross(r_world[1], n), r_world[1]))
         j_r4 = -(1 + eps) * (n @ v_rel) / denominator
-        # the Jacobian form, from the rows the solver sweeps
+        # the Jacobian form: J written out, against the rows the solver sweeps (bodies placed so
+        # that the contact point, the origin, has these lever arms)
         t1, t2 = tangent_basis(n[None])
-        index, width, jac, push, k = sequential.contact_rows(
+        rows = sequential.contact_rows(
             np.array([0]), np.array([1]), -np.ones((1, 3), np.int64), -np.ones((1, 3), np.int64),
-            np.zeros((1, 3)), np.zeros((1, 3)), r_world[:1], r_world[1:], n[None], t1, t2,
+            np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), -r_world, n[None], t1, t2,
             1 / mass, inverse_world, np.zeros(0))
+        k = rows[5]
         u = stack(v, w, np.zeros((0, 3)))
-        J = np.zeros(12)
-        J[index[0, :width[0]]] = jac[0, 0, :width[0]]
+        J = np.concatenate([n, np.cross(r_world[0], n), -n, -np.cross(r_world[1], n)])
         M_inv = np.zeros((12, 12))
         for i in range(2):
             M_inv[6 * i:6 * i + 3, 6 * i:6 * i + 3] = np.eye(3) / mass[i]
             M_inv[6 * i + 3:6 * i + 6, 6 * i + 3:6 * i + 6] = inverse_world[i]
         assert J @ u == pytest.approx(n @ v_rel, rel=1e-12, abs=1e-12)                  # v_n = J v
+        assert sequential.row_products(rows, u)[0, 0] == pytest.approx(J @ u, rel=1e-12, abs=1e-12)
         assert k[0, 0] == pytest.approx(J @ M_inv @ J, rel=1e-12)                     # J M⁻¹ Jᵀ
         assert k[0, 0] == pytest.approx(denominator, rel=1e-12)                       # = R4's denominator
         j = -(1 + eps) * (J @ u) / k[0, 0]
@@ -385,7 +395,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         if n @ v_rel >= 0:
             continue
         tau = np.empty(1)
-        impulse.resolve_collisions(index, width, jac, push, k, np.zeros(1), np.array([eps]), np.zeros(1),
+        impulse.resolve_collisions(rows, np.zeros(1), np.array([eps]), np.zeros(1),
                                    np.zeros(1), 1e-3, 0.0, u, 10, 10, 1e-12, tau, np.array([0]))
         after_v, after_w, _ = unstack(u, 2)
         for i, sign in ((0, 1.0), (1, -1.0)):

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, collide, simulate
-from contactlab.contacts import Contacts, jacobian, side_apply_impulse, tangent_basis
-from contactlab.dynamics.generalized import inverse_mass_matrix, stack, unstack
+from contactlab.contacts import Contacts, jacobian, tangent_basis
+from contactlab.dynamics.generalized import inverse_mass_matrix, unstack
 from contactlab.dynamics.integrators import world_inverse_inertia
 from contactlab.errors import InputError, SimulationDiverged, StabilityWarning
-from contactlab.methods import penalty
+from contactlab.methods import penalty, sequential
 from contactlab.scene import builtin_scenes, load_scene
 from conftest import ball_on_plane, cube_on_plane
 
@@ -241,17 +241,12 @@ def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(r
     forces = rng.normal(size=(12, 3))
     J = jacobian(contacts, state.body_position, 3, 5)
     change = penalty.distribute(J, inverse_mass_matrix(model, state.body_orientation), forces, 0.01)
-    # the same velocity change, matrix-free, one contact side at a time
-    velocities = [np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((5, 3))]
-    inverse_inertia = world_inverse_inertia(model, state.body_orientation)
+    # the same velocity change matrix-free, contact by contact, through the solver's rows
+    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    u = np.zeros(3 * 6 + 5 * 3)
     for c in range(12):
-        for body, particles, weights, sign in ((contacts.body_a[c], contacts.particles_a[c], contacts.weights_a[c], 1),
-                                               (contacts.body_b[c], contacts.particles_b[c], contacts.weights_b[c], -1)):
-            r = contacts.point[c] - state.body_position[body] if body >= 0 else np.zeros(3)
-            for d, direction in enumerate((contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c])):
-                side_apply_impulse(body, particles, weights, r, direction, sign * 0.01 * forces[c, d],
-                                   model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass, *velocities)
-    np.testing.assert_allclose(change, stack(*velocities), atol=1e-12)
+        sequential.apply_impulse(c, rows, *(0.01 * forces[c]), u)
+    np.testing.assert_allclose(change, u, atol=1e-12)
     # and by hand for one body contact: h F / m and h I⁻¹ (r × F)
     c = 1
     world_force = forces[c] @ np.stack([contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c]])
@@ -260,7 +255,7 @@ def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(r
         model, state.body_orientation), forces[c:c + 1], 0.01), 3)
     np.testing.assert_allclose(linear[body], 0.01 * world_force / model.body_mass[body], atol=1e-12)
     r = contacts.point[c] - state.body_position[body]
-    np.testing.assert_allclose(angular[body], 0.01 * inverse_inertia[body] @ np.cross(r, world_force), atol=1e-12)
+    np.testing.assert_allclose(angular[body], 0.01 * world_inverse_inertia(model, state.body_orientation)[body] @ np.cross(r, world_force), atol=1e-12)
 
 
 # ---- P4 versus P5 ------------------------------------------------------------------------------

@@ -19,7 +19,6 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
 
 @dataclass
@@ -128,70 +127,3 @@ def jacobian(contacts: Contacts, body_position, body_count: int, particle_count:
     if not rows:
         return sp.csr_matrix(shape)
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
-
-
-# ---- matrix-free application of J and Jᵀ, one contact side at a time (compiled) ------------
-
-@njit(cache=True)
-def side_point_velocity(body, particles, weights, r, direction,
-                        body_velocity, body_angular_velocity, particle_velocity):
-    """direction · (velocity of one side's contact point); r = lever arm from the body centre."""
-    result = 0.0
-    if body >= 0:
-        v = body_velocity[body]
-        w = body_angular_velocity[body]
-        # (v + w × r) · d
-        result += (v[0] * direction[0] + v[1] * direction[1] + v[2] * direction[2]
-                   + (w[1] * r[2] - w[2] * r[1]) * direction[0]
-                   + (w[2] * r[0] - w[0] * r[2]) * direction[1]
-                   + (w[0] * r[1] - w[1] * r[0]) * direction[2])
-    for k in range(3):
-        p = particles[k]
-        if p >= 0:
-            v = particle_velocity[p]
-            result += weights[k] * (v[0] * direction[0] + v[1] * direction[1] + v[2] * direction[2])
-    return result
-
-
-@njit(cache=True)
-def side_inverse_mass(body, particles, weights, r, direction,
-                      body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass):
-    """dᵀ J M⁻¹ Jᵀ d for one side: 1/m + (r×d)ᵀ I⁻¹ (r×d) for a body, Σ w² / m for particles."""
-    result = 0.0
-    if body >= 0:
-        a0 = r[1] * direction[2] - r[2] * direction[1]
-        a1 = r[2] * direction[0] - r[0] * direction[2]
-        a2 = r[0] * direction[1] - r[1] * direction[0]
-        Ii = body_inverse_inertia_world[body]
-        result += body_inverse_mass[body] + (
-            a0 * (Ii[0, 0] * a0 + Ii[0, 1] * a1 + Ii[0, 2] * a2)
-            + a1 * (Ii[1, 0] * a0 + Ii[1, 1] * a1 + Ii[1, 2] * a2)
-            + a2 * (Ii[2, 0] * a0 + Ii[2, 1] * a1 + Ii[2, 2] * a2))
-    for k in range(3):
-        p = particles[k]
-        if p >= 0:
-            result += weights[k] * weights[k] * particle_inverse_mass[p]
-    return result
-
-
-@njit(cache=True)
-def side_apply_impulse(body, particles, weights, r, direction, impulse,
-                       body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass,
-                       body_velocity, body_angular_velocity, particle_velocity):
-    """Velocity change M⁻¹ Jᵀ (impulse · d) for one side [N s]; changes the velocity arrays in place."""
-    if body >= 0:
-        scale = impulse * body_inverse_mass[body]
-        for i in range(3):
-            body_velocity[body, i] += scale * direction[i]
-        a0 = (r[1] * direction[2] - r[2] * direction[1]) * impulse
-        a1 = (r[2] * direction[0] - r[0] * direction[2]) * impulse
-        a2 = (r[0] * direction[1] - r[1] * direction[0]) * impulse
-        Ii = body_inverse_inertia_world[body]
-        for i in range(3):
-            body_angular_velocity[body, i] += Ii[i, 0] * a0 + Ii[i, 1] * a1 + Ii[i, 2] * a2
-    for k in range(3):
-        p = particles[k]
-        if p >= 0:
-            scale = impulse * weights[k] * particle_inverse_mass[p]
-            for i in range(3):
-                particle_velocity[p, i] += scale * direction[i]

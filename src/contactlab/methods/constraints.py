@@ -44,7 +44,7 @@ from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo, check_choices, check_counts
-from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
+from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "pgs", "redblack", "jacobi", "lemke")
@@ -174,7 +174,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    normal_velocity = row_products(rows[0], rows[1], rows[2], v_free)[:, 0]
+    normal_velocity = row_products(rows, v_free)[:, 0]
     gap_at_start = -contacts.depth
     threshold = options.restitution_threshold
     if threshold < 0:
@@ -183,7 +183,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         target, tau = normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts),
                                      contacts.restitution, h, threshold, options)
     else:
-        current = row_products(rows[0], rows[1], rows[2], stack(*state.velocities))[:, 0]
+        current = row_products(rows, stack(*state.velocities))[:, 0]
         target = acceleration_target(current, normal_velocity, gap_at_start, h, options)
         tau = np.full(contacts.count, -1.0)
     warm, _ = values_by_id(state.carried.get("constraint_ids"), state.carried.get("constraint_values"),
@@ -192,9 +192,10 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     implicit_cloth = integrator == "backward_euler" and model.spring_count > 0
     if options.solver == "matrix_free" and not implicit_cloth:
         u = v_free.copy()
-        lam, iterations, residual = solve_sequential_impulses(*rows, contacts.friction, target, u,
+        lam, iterations, residual = solve_sequential_impulses(rows, contacts.friction, target, u,
                                                               options.iterations, options.tolerance, warm,
-                                                              solve_order(contacts, model.gravity))
+                                                              *sweep_groups(model, state, contacts,
+                                                                            solve_order(contacts, model.gravity)))
         v_new = u
     else:
         if implicit_cloth:            # M4: A = M − h D − h² K, factorized

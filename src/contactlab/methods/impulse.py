@@ -39,7 +39,8 @@ from ..errors import InputError
 from ..state import State
 from . import StepInfo, check_choices, check_counts
 from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
-from .sequential import _row_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts
+from .sequential import (contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts,
+                         sweep_groups)
 
 
 @dataclass
@@ -75,7 +76,7 @@ class Options:
 
 
 @njit(cache=True)
-def resolve_collisions(index, width, jac, push, k, friction, restitution, gravity_normal, gap_at_start, dt,
+def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start, dt,
                        threshold, u, max_waves, sweeps, tolerance, tau, order):
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
@@ -89,11 +90,12 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
     thus one wave and stay symmetric, while an impact passed along a chain of touching
     bodies makes one wave per link (Newton's cradle: one ball in, one ball out).
 
-    Rows as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
+    ``rows`` as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
     generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
     it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
     ``solve_order``). Returns the number of waves.
     """
+    k = rows[5]
     C = k.shape[0]
     target = np.empty(C)
     closes = np.empty(C)
@@ -107,7 +109,7 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
             c = order[o]
             if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
                 continue
-            vn = _row_velocity(c, 0, index, width, jac, u)
+            vn = contact_velocity(c, rows, u)[0]
             if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:      # separating, or still open at the end
                 continue
             closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
@@ -121,7 +123,7 @@ def resolve_collisions(index, width, jac, push, k, friction, restitution, gravit
         if count == 0:
             return wave
         for sweep in range(sweeps):
-            if sweep_contacts(members, count, target, impulses, index, width, jac, push, k, friction, u) <= tolerance:
+            if sweep_contacts(members, count, target, impulses, rows, friction, u) <= tolerance:
                 break
     return max_waves
 
@@ -155,13 +157,14 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     u = stack(v_body, w_body, v_particle)
     order = solve_order(contacts, model.gravity)
     tau_contact = np.empty(contacts.count)
-    resolve_collisions(*rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
+    resolve_collisions(rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
                        gap_at_start, dt, threshold, u, options.iterations, options.iterations, options.tolerance,
                        tau_contact, order)
     warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
-    impulses, sweeps, change = solve_sequential_impulses(*rows, contacts.friction,
+    impulses, sweeps, change = solve_sequential_impulses(rows, contacts.friction,
                                                          resting_target(gap_at_start, dt, options), u,
-                                                         options.iterations, options.tolerance, warm, order)
+                                                         options.iterations, options.tolerance, warm,
+                                                         *sweep_groups(model, state, contacts, order))
     v_body_new, w_body_new, v_particle_new = unstack(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:

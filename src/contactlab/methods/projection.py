@@ -35,7 +35,7 @@ from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..state import State
 from . import StepInfo, check_choices, check_counts
-from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses
+from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
 
 @dataclass
@@ -74,11 +74,12 @@ def project(model, state, predicted, displacement, options, sweep=None):
         return displacement, contacts, 0, 0.0
     rows = rows_of(model, contacts, predicted.body_position, predicted.body_orientation)
     # depth after a further displacement Δu: δ − J_n Δu ≤ 0, i.e. J_n u ≥ J_n u_now + δ
-    target = row_products(rows[0], rows[1], rows[2], displacement)[:, 0] + contacts.depth
+    target = row_products(rows, displacement)[:, 0] + contacts.depth
     corrected = displacement.copy()
-    _, sweeps, change = solve_sequential_impulses(*rows, contacts.friction, target, corrected, options.iterations,
+    _, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
                                                   options.tolerance, np.zeros((contacts.count, 3)),
-                                                  solve_order(contacts, model.gravity))
+                                                  *sweep_groups(model, predicted, contacts,
+                                                                solve_order(contacts, model.gravity)))
     return corrected, contacts, sweeps, change
 
 

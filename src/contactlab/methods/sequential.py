@@ -14,102 +14,170 @@ Each update solves one contact's normal row for its target with the accumulated 
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 # ---- the compiled solver: every contact as three rows of J over the generalized velocity ----
 #
 # The generalized velocity u (6B + 3P,) is the DOF layout of contactlab.contacts: body i owns
 # u[6i:6i+3] (linear, m/s) and u[6i+3:6i+6] (world angular, rad/s), particle j owns
-# u[6B+3j:6B+3j+3]. A contact touches at most ROW_WIDTH entries of u (6 per rigid-body side,
-# 3 per particle of a side). For each contact c and direction d (0: normal, 1: tangent1,
-# 2: tangent2) ``jac[c, d]`` holds that row of J (v_n = Σ jac · u[index]) and ``push[c, d]``
-# the matching column of M⁻¹ Jᵀ (an impulse λ changes u[index] by λ · push), so that
-# k[c, d] = jac · push = dᵀ J M⁻¹ Jᵀ d is the effective inverse mass of R4; k[c, 3] and
-# k[c, 4] are jac[c, 1] · push[c, 0] and jac[c, 2] · push[c, 0], how much a normal impulse
-# changes the tangential velocities. Precomputing the rows once per step keeps a contact's
-# Gauss-Seidel update to one pass over its entries of u (the three row velocities together)
-# and one pass back (the three impulses together).
-
-ROW_WIDTH = 18
+# u[6B+3j:6B+3j+3]. Row d of a contact's J (d = 0 normal n, 1 tangent t1, 2 tangent t2) gives
+# dᵀ(v_A − v_B) at the contact point, where side A (sign +1) and side B (sign −1) each move as
+# a rigid body (v + ω × r, r the lever arm) or as a weighted sum of up to three particles
+# (Σ w v_p: a vertex, an edge or triangle point). An impulse P = λ_n n + λ_1 t1 + λ_2 t2 [N s]
+# changes a body side by ±(P / m, I⁻¹ (r × P)) and a particle by ±w P / m_p: this is
+# M⁻¹ Jᵀ λ without forming J.
+#
+# The rows are kept in that compact form, ``rows`` = (body (C, 2) int, particle (C, 2, 3) int,
+# weight (C, 2, 3), arm (C, 2, 3) [m], frame (C, 3, 3) (rows n, t1, t2), k (C, 5) [1/kg],
+# body_inverse_mass (B,) [1/kg], inverse_inertia (B, 3, 3) world [1/(kg m²)],
+# particle_inverse_mass (P,) [1/kg]); −1 marks "no body" or "no particle". k[c, d] =
+# dᵀ J M⁻¹ Jᵀ d is the effective inverse mass of row d (R4's denominator); k[c, 3] and
+# k[c, 4] are t1ᵀ J M⁻¹ Jᵀ n and t2ᵀ J M⁻¹ Jᵀ n, how much a normal impulse changes the
+# tangential velocities. A Gauss-Seidel update reads a contact's ~30 numbers and the few
+# bodies it touches: a sweep streams about 300 bytes per contact, a third of what storing
+# the rows as dense lines of J and M⁻¹ Jᵀ did, and runs about twice as fast.
 
 
 @njit(cache=True)
-def contact_rows(body_a, body_b, particles_a, particles_b, weights_a, weights_b, r_a, r_b,
+def contact_rows(body_a, body_b, particles_a, particles_b, weights_a, weights_b, point, body_position,
                  normal, tangent1, tangent2, body_inverse_mass, body_inverse_inertia_world,
                  particle_inverse_mass):
-    """The contacts' Jacobian rows over the generalized velocity (see above).
+    """The contacts' rows in the compact form above (``rows``).
 
-    Shapes: C contacts; r_a, r_b (C, 3) lever arms [m]; body_inverse_inertia_world (B, 3, 3).
-    Returns index (C, ROW_WIDTH) int (entries of u), width (C,) int (how many are used),
-    jac (C, 3, ROW_WIDTH) [1 or m], push (C, 3, ROW_WIDTH) [1/kg or 1/(kg m)] and
-    k (C, 5) [1/kg]: the effective inverse mass of each row, then the normal row's coupling
-    into the two tangent rows (see above).
+    Shapes: C contacts; body_a, body_b (C,) int; particles_* (C, 3) int; weights_* (C, 3);
+    point, normal, tangent1, tangent2 (C, 3) [m, 1]; body_position (B, 3) [m] (the lever arm
+    is point − centre of mass); body_inverse_inertia_world (B, 3, 3).
     """
     C = normal.shape[0]
-    B = body_inverse_mass.shape[0]
-    index = np.zeros((C, ROW_WIDTH), dtype=np.int64)
-    width = np.zeros(C, dtype=np.int64)
-    jac = np.zeros((C, 3, ROW_WIDTH))
-    push = np.zeros((C, 3, ROW_WIDTH))
-    k = np.zeros((C, 5))
-    direction = np.empty(3)
+    body = np.empty((C, 2), dtype=np.int64)
+    particle = np.empty((C, 2, 3), dtype=np.int64)
+    weight = np.zeros((C, 2, 3))
+    arm = np.zeros((C, 2, 3))
+    frame = np.empty((C, 3, 3))
+    k = np.zeros((C, 8))
     for c in range(C):
-        n = 0
+        body[c, 0], body[c, 1] = body_a[c], body_b[c]
+        particle[c] = -1
+        used_a = used_b = 0                 # a side's particles packed to the front, −1 after
+        for i in range(3):
+            if particles_a[c, i] >= 0:
+                particle[c, 0, used_a], weight[c, 0, used_a] = particles_a[c, i], weights_a[c, i]
+                used_a += 1
+            if particles_b[c, i] >= 0:
+                particle[c, 1, used_b], weight[c, 1, used_b] = particles_b[c, i], weights_b[c, i]
+                used_b += 1
+            frame[c, 0, i], frame[c, 1, i], frame[c, 2, i] = normal[c, i], tangent1[c, i], tangent2[c, i]
         for side in range(2):
-            sign = 1.0 if side == 0 else -1.0
-            body = body_a[c] if side == 0 else body_b[c]
-            if body >= 0:
-                r = r_a[c] if side == 0 else r_b[c]
-                inverse_inertia = body_inverse_inertia_world[body]
-                for i in range(6):
-                    index[c, n + i] = 6 * body + i
-                for d in range(3):
-                    for i in range(3):
-                        direction[i] = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
-                    a0 = r[1] * direction[2] - r[2] * direction[1]        # r × d
-                    a1 = r[2] * direction[0] - r[0] * direction[2]
-                    a2 = r[0] * direction[1] - r[1] * direction[0]
-                    for i in range(3):
-                        jac[c, d, n + i] = sign * direction[i]
-                        push[c, d, n + i] = sign * direction[i] * body_inverse_mass[body]
-                        jac[c, d, n + 3 + i] = sign * (a0 if i == 0 else (a1 if i == 1 else a2))
-                        push[c, d, n + 3 + i] = sign * (inverse_inertia[i, 0] * a0 + inverse_inertia[i, 1] * a1
-                                                        + inverse_inertia[i, 2] * a2)
-                n += 6
-            for m in range(3):
-                p = particles_a[c, m] if side == 0 else particles_b[c, m]
-                if p < 0:
-                    continue
-                w = weights_a[c, m] if side == 0 else weights_b[c, m]
+            if body[c, side] >= 0:
                 for i in range(3):
-                    index[c, n + i] = 6 * B + 3 * p + i
-                for d in range(3):
-                    for i in range(3):
-                        value = normal[c, i] if d == 0 else (tangent1[c, i] if d == 1 else tangent2[c, i])
-                        jac[c, d, n + i] = sign * w * value
-                        push[c, d, n + i] = sign * w * value * particle_inverse_mass[p]
-                n += 3
-        width[c] = n
+                    arm[c, side, i] = point[c, i] - body_position[body[c, side], i]
         for d in range(5):
             row, column = (d, d) if d < 3 else (d - 2, 0)
-            total = 0.0
-            for e in range(n):
-                total += jac[c, row, e] * push[c, column, e]
-            k[c, d] = total
-    return index, width, jac, push, k
+            k[c, d] = _coupling(c, frame[c, row], frame[c, column], body, particle, weight, arm,
+                                body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
+        for d in range(3):
+            k[c, 5 + d] = 1.0 / k[c, d] if k[c, d] > 0.0 else 0.0
+    return body, particle, weight, arm, frame, k, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass
 
 
 @njit(cache=True, inline="always")
-def _row_velocity(c, d, index, width, jac, u):
-    """Row d of contact c applied to u: dᵀ(v_A − v_B) at the contact [m/s]."""
+def _coupling(c, d, e, body, particle, weight, arm, inverse_mass, inverse_inertia, particle_inverse_mass):
+    """dᵀ J M⁻¹ Jᵀ e of contact c for two world directions d, e (3,): the velocity along d that a
+    unit impulse along e makes, summed over both sides [1/kg]."""
     total = 0.0
-    for e in range(width[c]):
-        total += jac[c, d, e] * u[index[c, e]]
+    dot = d[0] * e[0] + d[1] * e[1] + d[2] * e[2]
+    for side in range(2):
+        b = body[c, side]
+        if b >= 0:
+            r = arm[c, side]
+            rd = (r[1] * d[2] - r[2] * d[1], r[2] * d[0] - r[0] * d[2], r[0] * d[1] - r[1] * d[0])
+            re = (r[1] * e[2] - r[2] * e[1], r[2] * e[0] - r[0] * e[2], r[0] * e[1] - r[1] * e[0])
+            total += inverse_mass[b] * dot
+            for i in range(3):
+                for j in range(3):
+                    total += rd[i] * inverse_inertia[b, i, j] * re[j]
+        for m in range(3):
+            p = particle[c, side, m]
+            if p < 0:
+                break
+            total += weight[c, side, m] ** 2 * particle_inverse_mass[p] * dot
     return total
 
 
+@njit(cache=True, inline="always")
+def contact_velocity(c, rows, u):
+    """Contact c's three row velocities (v_n, v_t1, v_t2) = rows of J applied to u [m/s]."""
+    body, particle, weight, arm, frame = rows[0], rows[1], rows[2], rows[3], rows[4]
+    B = rows[6].shape[0]
+    vx = vy = vz = 0.0                          # v_A − v_B at the contact point
+    for side in range(2):
+        s = 1.0 - 2.0 * side
+        b = body[c, side]
+        if b >= 0:
+            o = 6 * b
+            rx, ry, rz = arm[c, side, 0], arm[c, side, 1], arm[c, side, 2]
+            wx, wy, wz = u[o + 3], u[o + 4], u[o + 5]
+            vx += s * (u[o] + wy * rz - wz * ry)
+            vy += s * (u[o + 1] + wz * rx - wx * rz)
+            vz += s * (u[o + 2] + wx * ry - wy * rx)
+        for m in range(3):
+            p = particle[c, side, m]
+            if p < 0:                       # packed: no more particles on this side
+                break
+            o = 6 * B + 3 * p
+            w = s * weight[c, side, m]
+            vx += w * u[o]
+            vy += w * u[o + 1]
+            vz += w * u[o + 2]
+    return (frame[c, 0, 0] * vx + frame[c, 0, 1] * vy + frame[c, 0, 2] * vz,
+            frame[c, 1, 0] * vx + frame[c, 1, 1] * vy + frame[c, 1, 2] * vz,
+            frame[c, 2, 0] * vx + frame[c, 2, 1] * vy + frame[c, 2, 2] * vz)
+
+
+@njit(cache=True, inline="always")
+def apply_impulse(c, rows, dn, d1, d2, u):
+    """Add contact c's impulse (dn, d1, d2) [N s] along (n, t1, t2) to u: u += M⁻¹ Jᵀ λ."""
+    body, particle, weight, arm, frame = rows[0], rows[1], rows[2], rows[3], rows[4]
+    inverse_mass, inverse_inertia, particle_inverse_mass = rows[6], rows[7], rows[8]
+    B = inverse_mass.shape[0]
+    px = dn * frame[c, 0, 0] + d1 * frame[c, 1, 0] + d2 * frame[c, 2, 0]
+    py = dn * frame[c, 0, 1] + d1 * frame[c, 1, 1] + d2 * frame[c, 2, 1]
+    pz = dn * frame[c, 0, 2] + d1 * frame[c, 1, 2] + d2 * frame[c, 2, 2]
+    for side in range(2):
+        s = 1.0 - 2.0 * side
+        b = body[c, side]
+        if b >= 0:
+            o = 6 * b
+            a = s * inverse_mass[b]
+            u[o] += a * px
+            u[o + 1] += a * py
+            u[o + 2] += a * pz
+            rx, ry, rz = arm[c, side, 0], arm[c, side, 1], arm[c, side, 2]
+            tx, ty, tz = s * (ry * pz - rz * py), s * (rz * px - rx * pz), s * (rx * py - ry * px)   # ±r × P
+            for i in range(3):
+                u[o + 3 + i] += inverse_inertia[b, i, 0] * tx + inverse_inertia[b, i, 1] * ty + inverse_inertia[b, i, 2] * tz
+        for m in range(3):
+            p = particle[c, side, m]
+            if p < 0:                       # packed: no more particles on this side
+                break
+            a = s * weight[c, side, m] * particle_inverse_mass[p]
+            if a == 0.0:                    # pinned: never written (see sweep_groups)
+                continue
+            o = 6 * B + 3 * p
+            u[o] += a * px
+            u[o + 1] += a * py
+            u[o + 2] += a * pz
+
+
 @njit(cache=True)
-def sweep_contacts(members, count, target, impulses, index, width, jac, push, k, friction, u):
+def apply_impulses(rows, impulses, u):
+    """u += M⁻¹ Jᵀ λ for every contact's impulses (C, 3) [N s] as (normal, t1, t2)."""
+    for c in range(impulses.shape[0]):
+        apply_impulse(c, rows, impulses[c, 0], impulses[c, 1], impulses[c, 2], u)
+
+
+@njit(cache=True)
+def sweep_contacts(members, count, target, impulses, rows, friction, u):
     """One Gauss-Seidel sweep (C7 on velocities) over contacts ``members[:count]`` in that order;
     returns the largest velocity change it made [m/s].
 
@@ -119,31 +187,26 @@ def sweep_contacts(members, count, target, impulses, index, width, jac, push, k,
     kept in the disk μ λ_n; if it cannot stop the sliding the maximum applies, against the
     sliding. ``impulses`` (C, 3) [N s] and u change in place.
 
-    The three row velocities are read in one pass over the contact's entries of u and the
-    three impulses written back in one: the same updates as row after row. (Written as one
-    loop on purpose: the same update as a separate inlined function ran 2.3× slower.)
+    The three row velocities are read in one pass over the contact's sides and the three
+    impulses written back in one, as one impulse P: the same updates as row after row.
     """
+    k = rows[5]
     change = 0.0
     for m in range(count):
         c = members[m]
         if k[c, 0] <= 0.0:                  # static against static: nothing can move
             continue
-        vn = v1 = v2 = 0.0
-        for e in range(width[c]):
-            value = u[index[c, e]]
-            vn += jac[c, 0, e] * value
-            v1 += jac[c, 1, e] * value
-            v2 += jac[c, 2, e] * value
+        vn, v1, v2 = contact_velocity(c, rows, u)
         old = impulses[c, 0]
-        normal = max(0.0, old - (vn - target[c]) / k[c, 0])
+        normal = max(0.0, old - (vn - target[c]) * k[c, 5])
         impulses[c, 0] = normal
         dn = normal - old
         change = max(change, abs(dn) * k[c, 0])
         d1 = d2 = 0.0
         if friction[c] > 0.0:
             old1, old2 = impulses[c, 1], impulses[c, 2]
-            new1 = old1 - (v1 + dn * k[c, 3]) / k[c, 1]
-            new2 = old2 - (v2 + dn * k[c, 4]) / k[c, 2]
+            new1 = old1 - (v1 + dn * k[c, 3]) * k[c, 6]
+            new2 = old2 - (v2 + dn * k[c, 4]) * k[c, 7]
             magnitude = np.sqrt(new1 * new1 + new2 * new2)
             limit = friction[c] * normal
             if magnitude > limit:
@@ -153,67 +216,150 @@ def sweep_contacts(members, count, target, impulses, index, width, jac, push, k,
             d1, d2 = new1 - old1, new2 - old2
             impulses[c, 1], impulses[c, 2] = new1, new2
             change = max(change, abs(d1) * k[c, 1], abs(d2) * k[c, 2])
-        for e in range(width[c]):
-            u[index[c, e]] += dn * push[c, 0, e] + d1 * push[c, 1, e] + d2 * push[c, 2, e]
+        apply_impulse(c, rows, dn, d1, d2, u)
     return change
 
 
 @njit(cache=True)
-def solve_sequential_impulses(index, width, jac, push, k, friction, target_normal_velocity, u,
-                              iterations, tolerance, initial_impulses, order):
+def rows_in_order(rows, order):
+    """``rows`` with the per-contact arrays taken in ``order`` (C,) int; the body data as is."""
+    return (rows[0][order], rows[1][order], rows[2][order], rows[3][order], rows[4][order], rows[5][order],
+            rows[6], rows[7], rows[8])
+
+
+@njit(cache=True, parallel=True)
+def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterations, tolerance,
+                              initial_impulses, order, starts):
     """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
 
-    ``initial_impulses`` (C, 3) [N s] are applied first (warm starting: last step's impulses
-    of the same contacts), then corrected like any accumulated impulse.
+    ``rows`` as from ``contact_rows``. ``initial_impulses`` (C, 3) [N s] are applied first
+    (warm starting: last step's impulses of the same contacts), then corrected like any
+    accumulated impulse.
 
-    For every contact c (in ``order`` (C,) int, see ``solve_order``; repeatedly): the normal impulse that brings the normal
-    relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated impulse
-    kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential impulse
-    kept in the disk μ λ_n (F2). Returns (impulses (C, 3) [N s] as (normal, t1, t2), sweeps
-    made, largest velocity change in the last sweep [m/s]).
+    For every contact c (in ``order`` (C,) int; repeatedly): the normal impulse that brings
+    the normal relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated
+    impulse kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential
+    impulse kept in the disk μ λ_n (F2). ``order`` and ``starts`` (G + 2,) int come from
+    ``sweep_groups``: groups 0 … G−1 of a sweep run side by side on G threads, then the last
+    group; one thread (G = 1) is the plain serial sweep in ``order``. Returns (impulses (C, 3)
+    [N s] as (normal, t1, t2), sweeps made, largest velocity change in the last sweep [m/s]).
     """
-    C = k.shape[0]
+    C = friction.shape[0]
+    groups = starts.shape[0] - 2
     impulses = initial_impulses.copy()
-    for c in range(C):
-        for e in range(width[c]):
-            u[index[c, e]] += (impulses[c, 0] * push[c, 0, e] + impulses[c, 1] * push[c, 1, e]
-                               + impulses[c, 2] * push[c, 2, e])
+    apply_impulses(rows, impulses, u)
     # the rows laid out in sweep order: each sweep then reads memory front to back (twice as
     # fast on a 4000-sphere pile as jumping through it), with the very same updates
-    index_o, width_o, jac_o, push_o = index[order], width[order], jac[order], push[order]
-    k_o, friction_o, target_o, impulses_o = k[order], friction[order], target_normal_velocity[order], impulses[order]
+    rows_o = rows_in_order(rows, order)
+    friction_o, target_o, impulses_o = friction[order], target_normal_velocity[order], impulses[order]
     members = np.arange(C)
+    changes = np.zeros(groups)
     sweeps = 0
     change = 0.0
     for sweep in range(iterations):
         sweeps = sweep + 1
-        change = sweep_contacts(members, C, target_o, impulses_o, index_o, width_o, jac_o, push_o, k_o,
-                                friction_o, u)
+        if groups == 1:
+            change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
+        else:
+            for g in prange(groups):
+                changes[g] = sweep_contacts(members[starts[g]:], starts[g + 1] - starts[g], target_o, impulses_o,
+                                            rows_o, friction_o, u)
+            last = sweep_contacts(members[starts[groups]:], C - starts[groups], target_o, impulses_o, rows_o,
+                                  friction_o, u)
+            change = max(last, changes.max())
         if change <= tolerance:
             break
     impulses[order] = impulses_o
     return impulses, sweeps, change
 
 
+# A parallel sweep needs enough contacts to pay for its fork and join (~1 µs each on idle
+# cores): below this count every sweep runs as one group. From it on the contacts are split
+# into SWEEP_GROUPS groups, whatever the machine, so that a run gives the same numbers on one
+# core as on many (the groups are swept on as many threads as there are, up to SWEEP_GROUPS).
+PARALLEL_MIN_CONTACTS = 1000
+SWEEP_GROUPS = 2
+
+
+@njit(cache=True)
+def _split_into_slabs(order, point, body_a, body_b, particles_a, particles_b, body_position, body_inverse_mass,
+                      particle_position, particle_inverse_mass, slabs):
+    """``sweep_groups``' work: (order (C,), starts (slabs + 2,)); see there."""
+    C = order.shape[0]
+    axis, extent = 0, -1.0                  # the axis along which the contacts spread most
+    for a in range(3):
+        if point[:, a].max() - point[:, a].min() > extent:
+            axis, extent = a, point[:, a].max() - point[:, a].min()
+    along = np.sort(point[:, axis])
+    cuts = np.empty(slabs - 1)              # slab boundaries at the contacts' quantiles
+    for i in range(slabs - 1):
+        cuts[i] = along[(i + 1) * C // slabs]
+    group = np.empty(C, dtype=np.int64)
+    for c in range(C):
+        g = -1                              # the slab that owns every movable entity of c
+        for side in range(2):
+            b = body_a[c] if side == 0 else body_b[c]
+            if b >= 0 and body_inverse_mass[b] > 0.0:
+                g = _joined(g, np.searchsorted(cuts, body_position[b, axis], side="right"))
+            for m in range(3):
+                p = particles_a[c, m] if side == 0 else particles_b[c, m]
+                if p >= 0 and particle_inverse_mass[p] > 0.0:
+                    g = _joined(g, np.searchsorted(cuts, particle_position[p, axis], side="right"))
+        group[c] = slabs if g < 0 else g    # spanning two slabs (or touching nothing movable): last
+    count = np.zeros(slabs + 1, dtype=np.int64)
+    for c in range(C):
+        count[group[c]] += 1
+    starts = np.zeros(slabs + 2, dtype=np.int64)
+    for g in range(slabs + 1):
+        starts[g + 1] = starts[g] + count[g]
+    fill = starts[:-1].copy()
+    grouped = np.empty(C, dtype=np.int64)
+    for i in range(C):                      # stable: each group keeps the order it had
+        c = order[i]
+        grouped[fill[group[c]]] = c
+        fill[group[c]] += 1
+    return grouped, starts
+
+
+@njit(cache=True, inline="always")
+def _joined(g, slab):
+    """The common slab of a contact so far (−1: none yet) and one more entity's slab; −2 when they differ."""
+    if g == -1 or g == slab:
+        return slab
+    return -2
+
+
+def sweep_groups(model, state, contacts, order, groups=SWEEP_GROUPS, min_contacts=PARALLEL_MIN_CONTACTS):
+    """Group the contacts so that a Gauss-Seidel sweep can run on several threads (C8) and still
+    be one serial sweep: returns (order (C,) int, starts (G + 2,) int) for
+    ``solve_sequential_impulses``.
+
+    Space is cut across the axis along which the contacts spread most into G = ``groups``
+    slabs of equal contact count (G = 1 below ``min_contacts`` contacts). A contact all of
+    whose movable bodies and particles lie in slab g joins group g (order[starts[g]:starts[g+1]]);
+    the rest — contacts that span two slabs — form the last group, swept after the others.
+    Two contacts of different slabs share nothing that moves (static sides and pinned
+    particles are never written), so the groups can be swept at once, each in ``order`` (its
+    load path kept top to bottom), and the result is, bit for bit, the serial sweep in the
+    returned order, on any number of threads.
+    """
+    C = len(order)
+    if groups < 2 or C < min_contacts:
+        return np.asarray(order), np.array([0, C, C])
+    return _split_into_slabs(np.asarray(order), contacts.point, contacts.body_a, contacts.body_b,
+                             contacts.particles_a, contacts.particles_b, state.body_position,
+                             model.body_inverse_mass, state.particle_position, model.particle_inverse_mass,
+                             groups)
+
+
 def rows_of(model, contacts, body_position, body_orientation):
     """``contact_rows`` of a Contacts at the given body positions (B, 3) and orientations (B, 4)
-    (the state the contacts were detected at): index, width, jac, push, k."""
+    (the state the contacts were detected at)."""
     from ..dynamics.integrators import world_inverse_inertia
-    r_a, r_b = lever_arms(contacts, body_position)
     return contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                        contacts.weights_a, contacts.weights_b, r_a, r_b, contacts.normal, contacts.tangent1,
-                        contacts.tangent2, model.body_inverse_mass, world_inverse_inertia(model, body_orientation),
-                        model.particle_inverse_mass)
-
-
-def lever_arms(contacts, body_position):
-    """r = point − centre of mass for each side, (C, 3) each; zero for non-body sides."""
-    def arm(body):
-        r = np.zeros((contacts.count, 3))
-        has = body >= 0
-        r[has] = contacts.point[has] - body_position[body[has]]
-        return r
-    return arm(contacts.body_a), arm(contacts.body_b)
+                        contacts.weights_a, contacts.weights_b, contacts.point, body_position, contacts.normal,
+                        contacts.tangent1, contacts.tangent2, model.body_inverse_mass,
+                        world_inverse_inertia(model, body_orientation), model.particle_inverse_mass)
 
 
 def solve_order(contacts, gravity):
@@ -240,11 +386,10 @@ def solve_order(contacts, gravity):
 
 
 @njit(cache=True)
-def row_products(index, width, jac, u):
-    """J u per contact (C, 3): each contact's normal and tangent rows applied to u."""
-    C = width.shape[0]
-    out = np.zeros((C, 3))
+def row_products(rows, u):
+    """J u per contact (C, 3): each contact's normal and tangent rows applied to u [m/s]."""
+    C = rows[5].shape[0]
+    out = np.empty((C, 3))
     for c in range(C):
-        for d in range(3):
-            out[c, d] = _row_velocity(c, d, index, width, jac, u)
+        out[c, 0], out[c, 1], out[c, 2] = contact_velocity(c, rows, u)
     return out

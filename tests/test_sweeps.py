@@ -1,0 +1,119 @@
+"""The matrix-free Gauss-Seidel sweeps (methods.sequential) split over threads (C8): the groups
+share nothing that moves, the parallel sweep is bit for bit the serial sweep in the grouped
+order, and it converges to the same velocities as the plain serial order."""
+
+import numpy as np
+import pytest
+
+from contactlab import ModelBuilder, collide
+from contactlab.dynamics.generalized import stack
+from contactlab.dynamics.integrators import free_velocities
+from contactlab.methods import sequential
+
+RADIUS = 0.05
+DT = 1 / 240
+
+
+def sphere_lattice(side=6, layers=8, overlap=1e-3, friction=0.0):
+    """side × side × layers spheres on a floor, each touching its six neighbours with ``overlap``
+    [m], and one pinned-free particle row on top so that particle sides are covered too."""
+    b = ModelBuilder()
+    b.add_material("m", friction=friction, restitution=0.0)
+    spacing = 2 * RADIUS - overlap
+    for i in range(side):
+        for j in range(side):
+            for k in range(layers):
+                b.add_body("sphere", radius=RADIUS, mass=1.0 + 0.1 * ((i + 2 * j + 3 * k) % 5),
+                           position=(i * spacing, j * spacing, RADIUS - overlap / 2 + k * spacing), material="m")
+    top = RADIUS - overlap / 2 + (layers - 1) * spacing + RADIUS + 0.01 - overlap
+    b.add_particles([[i * spacing, 0.0, top] for i in range(side)], mass=0.2, radius=0.01, material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    return b.finalize()
+
+
+def problem(model):
+    state = model.state()
+    contacts = collide(model, state, 0.002)
+    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    order = sequential.solve_order(contacts, model.gravity)
+    u = stack(*free_velocities(model, state, DT))
+    target = np.maximum(contacts.depth / DT * 0.2, 0.0)         # push a fifth of each overlap out
+    return state, contacts, rows, order, u, target
+
+
+def entities(contacts, model, c):
+    """The movable bodies and particles of contact c, as ("b", i) / ("p", j)."""
+    found = set()
+    for body, particles in ((contacts.body_a[c], contacts.particles_a[c]), (contacts.body_b[c], contacts.particles_b[c])):
+        if body >= 0:
+            found.add(("b", int(body)))
+        found.update(("p", int(p)) for p in particles if p >= 0 and model.particle_inverse_mass[p] > 0)
+    return found
+
+
+def test_groups_share_nothing_that_moves_and_keep_the_sweep_order():
+    model = sphere_lattice()
+    state, contacts, rows, order, u, target = problem(model)
+    assert contacts.count > 700
+    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    assert sorted(grouped.tolist()) == list(range(contacts.count))        # a permutation
+    assert starts[0] == 0 and starts[-1] == contacts.count and np.all(np.diff(starts) >= 0)
+    owners = {}
+    rank = np.empty(contacts.count, dtype=int)
+    rank[order] = np.arange(contacts.count)
+    for g in range(len(starts) - 1):
+        members = grouped[starts[g]:starts[g + 1]]
+        assert np.all(np.diff(rank[members]) > 0)                         # each group in sweep order
+        if g == len(starts) - 2:
+            continue                                                      # the spanning group runs alone
+        for c in members:
+            for entity in entities(contacts, model, c):
+                assert owners.setdefault(entity, g) == g                  # never in two parallel groups
+    sizes = np.diff(starts)
+    assert min(sizes[:2]) > 0.3 * contacts.count and sizes[2] < 0.2 * contacts.count   # balanced, few spanning
+
+
+def test_parallel_sweep_is_the_serial_sweep_in_the_grouped_order_bit_for_bit():
+    model = sphere_lattice(friction=0.5)
+    state, contacts, rows, order, u0, target = problem(model)
+    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    assert len(starts) == 4
+    warm = np.zeros((contacts.count, 3))
+    u_parallel, u_serial = u0.copy(), u0.copy()
+    lam_parallel, sweeps, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u_parallel, 30,
+                                                                   -1.0, warm, grouped, starts)
+    lam_serial, _, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u_serial, 30, -1.0, warm,
+                                                            grouped, np.array([0, contacts.count, contacts.count]))
+    assert sweeps == 30
+    np.testing.assert_array_equal(lam_parallel, lam_serial)
+    np.testing.assert_array_equal(u_parallel, u_serial)
+
+
+def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
+    """Frictionless, so the converged velocities are unique (a monotone LCP): the grouped
+    parallel order and the plain top-to-bottom order must agree, and meet every target."""
+    model = sphere_lattice()
+    state, contacts, rows, order, u0, target = problem(model)
+    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    results = []
+    for sweep_order, sweep_starts in ((grouped, starts), (order, np.array([0, contacts.count, contacts.count]))):
+        u = u0.copy()
+        lam, sweeps, change = sequential.solve_sequential_impulses(rows, contacts.friction, target, u, 20000, 1e-13,
+                                                                   np.zeros((contacts.count, 3)), sweep_order,
+                                                                   sweep_starts)
+        assert change <= 1e-13
+        vn = sequential.row_products(rows, u)[:, 0]
+        assert np.all(vn >= target - 1e-9)                                  # every contact meets its target
+        assert np.all(lam[:, 0] * (vn - target) <= 1e-9)                     # complementary
+        results.append(u)
+    np.testing.assert_allclose(results[0], results[1], atol=1e-8)
+
+
+@pytest.mark.parametrize("size, groups", [((3, 3), 2), ((6, 8), 1)])
+def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
+    model = sphere_lattice(*size)
+    state, contacts, rows, order, u, target = problem(model)
+    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=groups)
+    assert groups == 1 or contacts.count < sequential.PARALLEL_MIN_CONTACTS
+    np.testing.assert_array_equal(grouped, order)
+    np.testing.assert_array_equal(starts, [0, contacts.count, contacts.count])
