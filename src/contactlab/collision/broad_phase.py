@@ -22,7 +22,8 @@ def overlapping_pairs(lower, upper):
     if len(lower) < GRID_FROM:
         return sweep_and_prune(lower, upper)
     pairs = grid_pairs(lower, upper)
-    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]          # an order independent of the hashing
+    key = pairs[:, 0] * len(lower) + pairs[:, 1]                  # one sort key per pair (i < j < N)
+    return pairs[np.argsort(key)]                                 # an order independent of the hashing
 
 
 @njit(cache=True)
