@@ -207,10 +207,10 @@ def sweep_contacts(members, count, target, impulses, rows, friction, u):
             old1, old2 = impulses[c, 1], impulses[c, 2]
             new1 = old1 - (v1 + dn * k[c, 3]) * k[c, 6]
             new2 = old2 - (v2 + dn * k[c, 4]) * k[c, 7]
-            magnitude = np.sqrt(new1 * new1 + new2 * new2)
+            squared = new1 * new1 + new2 * new2
             limit = friction[c] * normal
-            if magnitude > limit:
-                scale = limit / magnitude
+            if squared > limit * limit:         # sliding (compared squared: a sticking contact takes no root)
+                scale = limit / np.sqrt(squared)
                 new1 *= scale
                 new2 *= scale
             d1, d2 = new1 - old1, new2 - old2
