@@ -19,6 +19,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 
 @dataclass
@@ -81,12 +82,29 @@ def values_by_id(previous_ids, previous_values, feature_id, width):
 
 def tangent_basis(normal):
     """Two unit tangents (C, 3) each, with (t1, t2, n) right-handed, from unit normals (C, 3)."""
-    # cross with the world axis least aligned with n: never degenerate
-    axis = np.zeros_like(normal)
-    axis[np.arange(len(normal)), np.argmin(np.abs(normal), axis=1)] = 1.0
-    t1 = np.cross(normal, axis)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(normal, t1)
+    return _tangent_basis(np.ascontiguousarray(normal, dtype=float))
+
+
+@njit(cache=True)
+def _tangent_basis(normal):
+    """``tangent_basis``, compiled: it runs on every contact of every step."""
+    C = normal.shape[0]
+    t1 = np.empty((C, 3))
+    t2 = np.empty((C, 3))
+    for c in range(C):
+        nx, ny, nz = normal[c, 0], normal[c, 1], normal[c, 2]
+        # cross with the world axis least aligned with n (the first of equals): never degenerate
+        ax, ay, az = abs(nx), abs(ny), abs(nz)
+        if ax <= ay and ax <= az:                 # n × x̂
+            ux, uy, uz = 0.0, nz, -ny
+        elif ay <= az:                            # n × ŷ
+            ux, uy, uz = -nz, 0.0, nx
+        else:                                     # n × ẑ
+            ux, uy, uz = ny, -nx, 0.0
+        length = np.sqrt(ux * ux + uy * uy + uz * uz)
+        ux, uy, uz = ux / length, uy / length, uz / length
+        t1[c, 0], t1[c, 1], t1[c, 2] = ux, uy, uz
+        t2[c, 0], t2[c, 1], t2[c, 2] = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
     return t1, t2
 
 

@@ -61,4 +61,4 @@ def integrate(q, angular_velocity, dt):
 
 def world_inertia(R, principal):
     """World-frame tensors R diag(principal) Rᵀ, shape (count, 3, 3); principal (count, 3)."""
-    return np.einsum("bij,bj,bkj->bik", R, principal, R)
+    return (R * principal[:, None, :]) @ np.swapaxes(R, -1, -2)
