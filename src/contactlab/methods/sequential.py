@@ -28,14 +28,16 @@ from numba import njit, prange
 # M⁻¹ Jᵀ λ without forming J.
 #
 # The rows are kept in that compact form, ``rows`` = (body (C, 2) int, particle (C, 2, 3) int,
-# weight (C, 2, 3), arm (C, 2, 3) [m], frame (C, 3, 3) (rows n, t1, t2), k (C, 5) [1/kg],
+# weight (C, 2, 3), arm (C, 2, 3) [m], frame (C, 3, 3) (rows n, t1, t2), k (C, 8) [1/kg; kg],
 # body_inverse_mass (B,) [1/kg], inverse_inertia (B, 3, 3) world [1/(kg m²)],
 # particle_inverse_mass (P,) [1/kg]); −1 marks "no body" or "no particle". k[c, d] =
 # dᵀ J M⁻¹ Jᵀ d is the effective inverse mass of row d (R4's denominator); k[c, 3] and
 # k[c, 4] are t1ᵀ J M⁻¹ Jᵀ n and t2ᵀ J M⁻¹ Jᵀ n, how much a normal impulse changes the
-# tangential velocities. A Gauss-Seidel update reads a contact's ~30 numbers and the few
-# bodies it touches: a sweep streams about 300 bytes per contact, a third of what storing
-# the rows as dense lines of J and M⁻¹ Jᵀ did, and runs about twice as fast.
+# tangential velocities; k[c, 5:8] are 1 / k[c, 0:3] (0 where nothing can move), so that an
+# update multiplies instead of dividing. A Gauss-Seidel update reads a contact's ~40 numbers
+# and the few bodies it touches: about 300 bytes per contact, a third of what storing the rows
+# as dense lines of J and M⁻¹ Jᵀ took. It is bound more by its chain of dependent arithmetic
+# than by memory: 45 ns per update on the 1000-sphere pile, against 54 ns before.
 
 
 @njit(cache=True)
