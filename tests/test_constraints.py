@@ -140,7 +140,7 @@ def test_matrix_free_and_assembled_give_the_same_lambda(rng, friction):
     u = v_free.copy()
     lam_free, _, change = solve_sequential_impulses(rows, contacts.friction, target[:, 0], u, 20000, 1e-14,
                                                     np.zeros((contacts.count, 3)),
-                                                    *sweep_groups(model, state, contacts, solve_order(contacts, model.gravity)))
+                                                    *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)))
     inverse = constraints.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
     B, q = constraints.lcp_matrices(J, inverse, v_free, target.ravel())
     if friction == 0.0:

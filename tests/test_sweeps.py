@@ -55,7 +55,7 @@ def test_groups_share_nothing_that_moves_and_keep_the_sweep_order():
     model = sphere_lattice()
     state, contacts, rows, order, u, target = problem(model)
     assert contacts.count > 700
-    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=2, min_contacts=0)
     assert sorted(grouped.tolist()) == list(range(contacts.count))        # a permutation
     assert starts[0] == 0 and starts[-1] == contacts.count and np.all(np.diff(starts) >= 0)
     owners = {}
@@ -76,7 +76,7 @@ def test_groups_share_nothing_that_moves_and_keep_the_sweep_order():
 def test_parallel_sweep_is_the_serial_sweep_in_the_grouped_order_bit_for_bit():
     model = sphere_lattice(friction=0.5)
     state, contacts, rows, order, u0, target = problem(model)
-    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=2, min_contacts=0)
     assert len(starts) == 4
     warm = np.zeros((contacts.count, 3))
     u_parallel, u_serial = u0.copy(), u0.copy()
@@ -94,7 +94,7 @@ def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
     parallel order and the plain top-to-bottom order must agree, and meet every target."""
     model = sphere_lattice()
     state, contacts, rows, order, u0, target = problem(model)
-    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=2, min_contacts=0)
+    grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=2, min_contacts=0)
     results = []
     for sweep_order, sweep_starts in ((grouped, starts), (order, np.array([0, contacts.count, contacts.count]))):
         u = u0.copy()
@@ -113,7 +113,7 @@ def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
 def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
     model = sphere_lattice(*size)
     state, contacts, rows, order, u, target = problem(model)
-    grouped, starts = sequential.sweep_groups(model, state, contacts, order, groups=groups)
+    grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=groups)
     assert groups == 1 or contacts.count < sequential.PARALLEL_MIN_CONTACTS
     np.testing.assert_array_equal(grouped, order)
     np.testing.assert_array_equal(starts, [0, contacts.count, contacts.count])

@@ -194,7 +194,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         u = v_free.copy()
         lam, iterations, residual = solve_sequential_impulses(rows, contacts.friction, target, u,
                                                               options.iterations, options.tolerance, warm,
-                                                              *sweep_groups(model, state, contacts,
+                                                              *sweep_groups(rows, contacts, state,
                                                                             solve_order(contacts, model.gravity)))
         v_new = u
     else:

@@ -164,7 +164,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     impulses, sweeps, change = solve_sequential_impulses(rows, contacts.friction,
                                                          resting_target(gap_at_start, dt, options), u,
                                                          options.iterations, options.tolerance, warm,
-                                                         *sweep_groups(model, state, contacts, order))
+                                                         *sweep_groups(rows, contacts, state, order))
     v_body_new, w_body_new, v_particle_new = unstack(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     if not options.time_of_impact:

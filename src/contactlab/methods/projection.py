@@ -78,7 +78,7 @@ def project(model, state, predicted, displacement, options, sweep=None):
     corrected = displacement.copy()
     _, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
                                                   options.tolerance, np.zeros((contacts.count, 3)),
-                                                  *sweep_groups(model, predicted, contacts,
+                                                  *sweep_groups(rows, contacts, predicted,
                                                                 solve_order(contacts, model.gravity)))
     return corrected, contacts, sweeps, change
 

@@ -284,14 +284,15 @@ SWEEP_GROUPS = 2
 
 
 @njit(cache=True)
-def _split_into_slabs(order, point, body_a, body_b, particles_a, particles_b, body_position, body_inverse_mass,
-                      particle_position, particle_inverse_mass, slabs):
-    """``sweep_groups``' work: (order (C,), starts (slabs + 2,)); see there."""
+def _split_into_slabs(order, point, body, particle, body_position, body_inverse_mass, particle_position,
+                      particle_inverse_mass, slabs):
+    """``sweep_groups``' work on the packed sides of ``rows``: (order (C,), starts (slabs + 2,))."""
     C = order.shape[0]
     axis, extent = 0, -1.0                  # the axis along which the contacts spread most
     for a in range(3):
-        if point[:, a].max() - point[:, a].min() > extent:
-            axis, extent = a, point[:, a].max() - point[:, a].min()
+        spread = point[:, a].max() - point[:, a].min()
+        if spread > extent:
+            axis, extent = a, spread
     along = np.sort(point[:, axis])
     cuts = np.empty(slabs - 1)              # slab boundaries at the contacts' quantiles
     for i in range(slabs - 1):
@@ -300,12 +301,14 @@ def _split_into_slabs(order, point, body_a, body_b, particles_a, particles_b, bo
     for c in range(C):
         g = -1                              # the slab that owns every movable entity of c
         for side in range(2):
-            b = body_a[c] if side == 0 else body_b[c]
+            b = body[c, side]
             if b >= 0 and body_inverse_mass[b] > 0.0:
                 g = _joined(g, np.searchsorted(cuts, body_position[b, axis], side="right"))
             for m in range(3):
-                p = particles_a[c, m] if side == 0 else particles_b[c, m]
-                if p >= 0 and particle_inverse_mass[p] > 0.0:
+                p = particle[c, side, m]
+                if p < 0:                   # packed: no more particles on this side
+                    break
+                if particle_inverse_mass[p] > 0.0:
                     g = _joined(g, np.searchsorted(cuts, particle_position[p, axis], side="right"))
         group[c] = slabs if g < 0 else g    # spanning two slabs (or touching nothing movable): last
     count = np.zeros(slabs + 1, dtype=np.int64)
@@ -331,10 +334,11 @@ def _joined(g, slab):
     return -2
 
 
-def sweep_groups(model, state, contacts, order, groups=SWEEP_GROUPS, min_contacts=PARALLEL_MIN_CONTACTS):
+def sweep_groups(rows, contacts, state, order, groups=SWEEP_GROUPS, min_contacts=PARALLEL_MIN_CONTACTS):
     """Group the contacts so that a Gauss-Seidel sweep can run on several threads (C8) and still
     be one serial sweep: returns (order (C,) int, starts (G + 2,) int) for
-    ``solve_sequential_impulses``.
+    ``solve_sequential_impulses``. ``rows`` from ``contact_rows`` of ``contacts``; ``state``
+    holds the positions the bodies and particles are sorted into slabs by.
 
     Space is cut across the axis along which the contacts spread most into G = ``groups``
     slabs of equal contact count (G = 1 below ``min_contacts`` contacts). A contact all of
@@ -348,10 +352,8 @@ def sweep_groups(model, state, contacts, order, groups=SWEEP_GROUPS, min_contact
     C = len(order)
     if groups < 2 or C < min_contacts:
         return np.asarray(order), np.array([0, C, C])
-    return _split_into_slabs(np.asarray(order), contacts.point, contacts.body_a, contacts.body_b,
-                             contacts.particles_a, contacts.particles_b, state.body_position,
-                             model.body_inverse_mass, state.particle_position, model.particle_inverse_mass,
-                             groups)
+    return _split_into_slabs(np.asarray(order), contacts.point, rows[0], rows[1], state.body_position, rows[6],
+                             state.particle_position, rows[8], groups)
 
 
 def rows_of(model, contacts, body_position, body_orientation):
