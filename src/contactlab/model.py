@@ -106,6 +106,17 @@ class Model:
         return len(self.spring_rest_length)
 
     @property
+    def spring_pattern(self):
+        """Where the springs' Jacobian blocks sit in a (3P, 3P) CSR matrix
+        (``dynamics.cloth.SpringPattern``): fixed by the topology, built on first use and kept."""
+        pattern = self.__dict__.get("_spring_pattern")
+        if pattern is None:
+            from .dynamics.cloth import spring_pattern
+            pattern = spring_pattern(self.spring_particles, self.particle_count)
+            object.__setattr__(self, "_spring_pattern", pattern)
+        return pattern
+
+    @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
         return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)

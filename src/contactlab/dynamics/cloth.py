@@ -27,6 +27,8 @@ Shapes: P particles, S springs; the DOF vector of the particles has 3P entries, 
 owns [3p, 3p + 3). Everything is vectorized over springs (no Python loop per spring).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -74,23 +76,70 @@ def spring_forces(model, particle_position, particle_velocity=None):
     return _gather(i, j, tension[:, None] * u, count)
 
 
-def _assemble(i, j, blocks, count):
-    """The (3 count × 3 count) CSR matrix with −B on (i,i) and (j,j), +B on (i,j) and (j,i)
-    for each spring's block B (S, 3, 3)."""
-    rows3 = np.arange(3)[None, :, None]
-    cols3 = np.arange(3)[None, None, :]
-    ri, rj = 3 * i[:, None, None] + rows3, 3 * j[:, None, None] + rows3
-    ci, cj = 3 * i[:, None, None] + cols3, 3 * j[:, None, None] + cols3
-    shape9 = blocks.shape
-    rows = np.concatenate([np.broadcast_to(r, shape9).ravel() for r in (ri, rj, ri, rj)])
-    cols = np.concatenate([np.broadcast_to(c, shape9).ravel() for c in (ci, cj, cj, ci)])
-    values = np.concatenate([-blocks.ravel(), -blocks.ravel(), blocks.ravel(), blocks.ravel()])
-    return sp.csr_matrix((values, (rows, cols)), shape=(3 * count, 3 * count))
+@dataclass(frozen=True)
+class SpringPattern:
+    """Where each spring's four 3×3 blocks sit in a CSR matrix (3P, 3P) that also holds the whole
+    diagonal: the sparsity of K, D and the backward Euler matrix, fixed by the cloth's topology,
+    so a step fills the values and never sorts indices. nnz entries."""
+    indptr: np.ndarray      # (3P + 1,) int64
+    indices: np.ndarray     # (nnz,) int64, column of each entry, sorted within a row
+    rows: np.ndarray        # (nnz,) int64, row of each entry
+    slots: np.ndarray       # (S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)
+    diagonal: np.ndarray    # (3P,) int64, entry of each diagonal element
+
+    def values(self, blocks):
+        """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on
+        its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); springs sharing an entry add."""
+        signed = np.stack([-blocks, -blocks, blocks, blocks], axis=1)
+        return np.bincount(self.slots.ravel(), signed.ravel(), minlength=len(self.indices))
+
+    def matrix(self, values):
+        """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
+        n = len(self.indptr) - 1
+        return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
+
+
+def spring_pattern(spring_particles, count) -> SpringPattern:
+    """The ``SpringPattern`` of springs joining ``spring_particles`` (S, 2) among ``count`` particles."""
+    n = 3 * count
+    i, j = spring_particles[:, 0], spring_particles[:, 1]
+    dof = np.arange(3)
+    first = 3 * np.stack([i, j, i, j], axis=1)[:, :, None, None] + dof[None, None, :, None]
+    second = 3 * np.stack([i, j, j, i], axis=1)[:, :, None, None] + dof[None, None, None, :]
+    keys = np.concatenate([(first * n + second).ravel(), np.arange(n) * (n + 1)])
+    unique, entry = np.unique(keys, return_inverse=True)
+    rows = unique // n
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
+    slots = entry[:keys.size - n].reshape(len(i), 4, 3, 3)
+    return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n:])
+
+
+def jacobian_blocks(model, particle_position, clamp_compressed=False):
+    """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
+    positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
+    _, _, _, length, u = _axes(model, particle_position)
+    k, rest = model.spring_stiffness, model.spring_rest_length
+    outer = u[:, :, None] * u[:, None, :]                               # (S, 3, 3) u uᵀ
+    with np.errstate(divide="ignore", invalid="ignore"):
+        transverse = np.where(length > TINY_LENGTH, 1.0 - rest / length, 0.0)
+    if clamp_compressed:
+        transverse = np.maximum(transverse, 0.0)
+    stiffness = k[:, None, None] * (outer + transverse[:, None, None] * (np.eye(3) - outer))
+    return stiffness, model.spring_damping[:, None, None] * outer
+
+
+def block_product(model, blocks, vectors):
+    """(Σ_s B_s over the springs, assembled as in ``SpringPattern.values``) applied to ``vectors``
+    (P, 3): each spring adds B_s (v_j − v_i) on i and its opposite on j; (P, 3)."""
+    i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
+    pull = np.einsum("sab,sb->sa", blocks, vectors[j] - vectors[i])
+    return _gather(i, j, pull, len(vectors))
 
 
 def spring_jacobians(model, particle_position, particle_velocity=None, clamp_compressed=False):
     """(K, D): the Jacobians ∂f/∂x [N/m] and ∂f/∂v [N s/m] of ``spring_forces``, SciPy CSR
-    matrices (3P, 3P), symmetric, with the blocks of the module docstring.
+    matrices (3P, 3P), symmetric, with the blocks of the module docstring (on the pattern of
+    ``model.spring_pattern``, whose diagonal is always stored).
 
     K leaves out the position derivative of the damping force (exact when the damping is 0 or
     the velocities are equal along each spring). ``clamp_compressed``: drop the negative
@@ -102,16 +151,9 @@ def spring_jacobians(model, particle_position, particle_velocity=None, clamp_com
     if model.spring_count == 0:
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
-    i, j, _, length, u = _axes(model, particle_position)
-    k, rest = model.spring_stiffness, model.spring_rest_length
-    outer = u[:, :, None] * u[:, None, :]                               # (S, 3, 3) u uᵀ
-    with np.errstate(divide="ignore", invalid="ignore"):
-        transverse = np.where(length > TINY_LENGTH, 1.0 - rest / length, 0.0)
-    if clamp_compressed:
-        transverse = np.maximum(transverse, 0.0)
-    stiffness_blocks = k[:, None, None] * (outer + transverse[:, None, None] * (np.eye(3) - outer))
-    damping_blocks = model.spring_damping[:, None, None] * outer
-    return _assemble(i, j, stiffness_blocks, count), _assemble(i, j, damping_blocks, count)
+    stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)
+    pattern = model.spring_pattern
+    return pattern.matrix(pattern.values(stiffness)), pattern.matrix(pattern.values(damping))
 
 
 def spring_energy(model, particle_position) -> float:

@@ -25,11 +25,10 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .. import rotations
-from .cloth import spring_forces, spring_jacobians
+from .cloth import block_product, jacobian_blocks, spring_forces
 
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
@@ -120,16 +119,18 @@ def particle_system(model, state, dt, particle_force=None, clamp_compressed=True
     force = model.particle_mass[:, None] * model.gravity + spring_forces(model, x, v)
     if particle_force is not None:
         force = force + particle_force
-    K, D = spring_jacobians(model, x, v, clamp_compressed=clamp_compressed)
-    free = np.repeat(~model.particle_pinned, 3).astype(float)
-    mass = sp.diags(np.repeat(model.particle_mass, 3))
-    keep = sp.diags(free)
-    matrix = keep @ (mass - h * D - h * h * K) @ keep + sp.diags(1.0 - free)
-    rhs = free * (h * (force.ravel() + h * (K @ v.ravel())))
+    stiffness, damping = jacobian_blocks(model, x, clamp_compressed)
+    pattern = model.spring_pattern
+    values = pattern.values(-h * damping - h * h * stiffness)          # − h D − h² K
+    values[pattern.diagonal] += np.repeat(model.particle_mass, 3)       # + M
+    free = np.repeat(~model.particle_pinned, 3)
+    values[~(free[pattern.rows] & free[pattern.indices])] = 0.0         # a pinned DOF's row and column
+    values[pattern.diagonal[~free]] = 1.0                               # hold it: 1 · Δv = 0
+    rhs = np.where(free, h * (force + h * block_product(model, stiffness, v)).ravel(), 0.0)
     coupled = np.zeros(P, dtype=bool)
     coupled[model.spring_particles.ravel()] = True
     coupled &= ~model.particle_pinned
-    return ParticleSystem(matrix.tocsr(), rhs, coupled)
+    return ParticleSystem(pattern.matrix(values), rhs, coupled)
 
 
 def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
