@@ -59,7 +59,7 @@ def test_acceleration_formulation_holds_a_resting_box():
     np.testing.assert_allclose(run.arrays["body_position"][:, 0, 2], HALF, atol=1e-6)
 
 
-@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered"])
+@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered", "apgd"])
 def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
     v0, mu = 3.0, 0.3
     model, _ = cube_on_plane(friction=mu, velocity=(v0, 0, 0))
@@ -202,6 +202,59 @@ def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_pr
     assert run.summary["max_penetration"] < 0.002
     kinetic = run.arrays["energy_kinetic"]
     assert kinetic[-1] < 0.05 * kinetic.max()                       # it landed and is settling
+
+
+def draped_cloth(n=8):
+    """An n × n cloth (0.5 m, 50 g, stiff springs) lying over a sphere and the floor, after 0.4 s
+    under constraints with backward Euler at 1/120 s: (model, state) with many vertex contacts."""
+    b = ModelBuilder()
+    b.add_material("m", friction=0.4, restitution=0.0)
+    b.add_cloth(size=(0.5, 0.5), resolution=(n, n), position=(0, 0, 0.25), mass=0.05, stretch_stiffness=1000.0,
+                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m")
+    b.add_obstacle("sphere", radius=0.1, position=(0.05, 0.0, 0.0), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    return model, simulate(model, "constraints", dt=1 / 120, duration=0.4, integrator="backward_euler").state
+
+
+def test_implicit_cloth_free_velocities_from_the_factor_equal_conjugate_gradients():
+    model, state = draped_cloth()
+    by_factor, inverse = constraints.implicit_free_velocities(model, state, 1 / 120)
+    by_cg = free_velocities(model, state, 1 / 120, "backward_euler", linear_tolerance=1e-13)
+    for a, b in zip(by_factor, by_cg):
+        np.testing.assert_allclose(a, b, atol=1e-10)
+    assert inverse.factor is not None
+
+
+def test_implicit_cloth_products_reach_the_assembled_answer():
+    # matrix_free on implicit cloth solves with products J A⁻¹ Jᵀ x (apgd); nsgs sweeps the assembled
+    # W = J A⁻¹ Jᵀ: converged, both give the step's one answer
+    model, state = draped_cloth()
+    contacts = collide(model, state, constraints.Options().contact_margin)
+    assert contacts.count > 20
+    h = 1 / 120
+    steps = {}
+    for solver in ("matrix_free", "nsgs"):
+        options = constraints.Options(solver=solver, iterations=50000, tolerance=1e-10, warm_start=0.0)
+        steps[solver] = constraints.step(model, state, h, options, "backward_euler")
+    (by_products, info), (by_rows, _) = steps["matrix_free"], steps["nsgs"]
+    assert info.solver_residual <= 1e-10
+    np.testing.assert_allclose(by_products.particle_velocity, by_rows.particle_velocity, atol=1e-6)
+    np.testing.assert_allclose(by_products.carried["constraint_values"], by_rows.carried["constraint_values"],
+                               atol=1e-6 * np.abs(by_rows.carried["constraint_values"]).max())
+
+
+def test_delassus_bound_lies_above_the_largest_eigenvalue_of_j_a_inverse_jt():
+    model, state = draped_cloth()
+    contacts = collide(model, state, constraints.Options().contact_margin)
+    _, inverse = constraints.implicit_free_velocities(model, state, 1 / 120)
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    W = constraints.delassus_operator(J, inverse)
+    dense = W.matmat(np.eye(W.shape[0]))
+    largest = np.linalg.eigvalsh(0.5 * (dense + dense.T)).max()
+    bound = constraints.delassus_bound(J, inverse_mass_matrix(model, state.body_orientation))
+    assert largest <= bound
+    assert bound < 10 * largest              # and near enough to serve as apgd's step
 
 
 @pytest.mark.parametrize("table, field", [({"solver": "gauss"}, "solver"), ({"formulation": "force"}, "formulation"),

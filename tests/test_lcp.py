@@ -5,8 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import contactlab.lcp.solve as lcp_solve
+from contactlab.lcp.friction import largest_eigenvalue
 from contactlab.errors import InputError
 from contactlab.lcp import (color_contacts, color_rows, coloring_is_valid, natural_map_error, read_problem,
                             solve_friction_contact, solve_lcp)
@@ -193,7 +195,7 @@ def test_lcp_option_errors():
 # ------------------------------------------------------------------------------- friction
 
 
-@pytest.mark.parametrize("method", ["nsgs", "staggered"])
+@pytest.mark.parametrize("method", ["nsgs", "staggered", "apgd"])
 def test_single_contact_slip_and_stick(method):
     W = np.eye(3)
     slip = solve_friction_contact(W, np.array([-1.0, 2.0, 0.0]), [0.5], method=method, tol=1e-12)
@@ -237,6 +239,74 @@ def test_staggered_on_small_fclib_problems(name):
     assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= 1e-6
 
 
+@needs_data
+@pytest.mark.parametrize("name", SMALL + ["Capsules-i125-1213.hdf5", "OneObject-i1028-138.hdf5.dat"])
+def test_apgd_on_fclib_problems(name):
+    problem = read_problem(FCLIB / name)
+    res = solve_friction_contact(problem.W, problem.q, problem.mu, method="apgd", tol=1e-6, max_iterations=3000)
+    assert res.converged, res.message
+    assert natural_map_error(problem.W, problem.q, problem.mu, res.r) == pytest.approx(res.error, rel=1e-9)
+    assert res.error <= 1e-6
+
+
+def frictional_contacts(rng, nc=40, bodies=25):
+    """A random W = J M⁻¹ Jᵀ (3 nc, 3 nc) of contacts between point masses, each contact with its
+    own frame, q pushing them together and sliding, μ in [0.2, 0.8]."""
+    J = np.zeros((3 * nc, 3 * bodies))
+    for a in range(nc):
+        i, j = rng.choice(bodies, 2, replace=False)
+        frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
+        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
+    W = J @ J.T + 1e-3 * np.eye(3 * nc)
+    q = rng.normal(size=3 * nc)
+    q[::3] = -np.abs(q[::3])
+    return W, q, rng.uniform(0.2, 0.8, nc)
+
+
+def test_apgd_needs_only_products_and_meets_the_coulomb_conditions(rng):
+    W, q, mu = frictional_contacts(rng)
+    products = []
+
+    def product(x):
+        products.append(1)
+        return W @ x
+
+    operator = spla.LinearOperator(W.shape, matvec=product, dtype=float)
+    L = np.linalg.eigvalsh(W).max()
+    by_products = solve_friction_contact(operator, q, mu, method="apgd", tol=1e-9, max_iterations=20000,
+                                         lipschitz=L)
+    assert by_products.converged, by_products.message
+    assert len(products) == by_products.iterations + 2          # one per step, one at the start, one for u
+    by_matrix = solve_friction_contact(sp.csr_matrix(W), q, mu, method="apgd", tol=1e-9, max_iterations=20000,
+                                       lipschitz=L)
+    np.testing.assert_allclose(by_products.r, by_matrix.r, atol=1e-12 * np.abs(by_matrix.r).max())
+    # the Coulomb conditions themselves, contact by contact, to ten times the tolerance in the
+    # error's own scale (max of ‖q‖, ‖r‖, ‖u‖)
+    r, u = by_products.r.reshape(-1, 3), (W @ by_products.r + q).reshape(-1, 3)
+    eps = 1e-8 * max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u))
+    assert np.all(np.linalg.norm(r[:, 1:], axis=1) <= mu * r[:, 0] + eps)
+    assert r[:, 0].min() >= -eps and u[:, 0].min() >= -eps
+    assert np.abs(np.minimum(r[:, 0], u[:, 0])).max() <= eps
+    sliding = (np.linalg.norm(u[:, 1:], axis=1) > 1e3 * eps) & (r[:, 0] > 1e3 * eps)
+    assert sliding.sum() >= 3
+    # a sliding contact's friction is at the cone's edge, opposes its slip, and it stays on the
+    # surface (u_N = 0: Coulomb's law, not the convex relaxation's u_N = μ ‖u_T‖)
+    np.testing.assert_allclose(np.linalg.norm(r[sliding, 1:], axis=1), mu[sliding] * r[sliding, 0], atol=eps)
+    slip = u[sliding, 1:] / np.linalg.norm(u[sliding, 1:], axis=1)[:, None]
+    friction = r[sliding, 1:] / np.linalg.norm(r[sliding, 1:], axis=1)[:, None]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", slip, friction), -1.0, atol=1e-6)
+    np.testing.assert_allclose(u[sliding, 0], 0.0, atol=eps)
+
+
+def test_largest_eigenvalue_by_power_iteration(rng):
+    W, _, _ = frictional_contacts(rng)
+    exact = np.linalg.eigvalsh(W).max()
+    estimate = largest_eigenvalue(lambda x: W @ x, W.shape[0], iterations=500, rtol=1e-10)
+    assert estimate == pytest.approx(exact, rel=1e-4)
+    assert largest_eigenvalue(lambda x: W @ x, W.shape[0], iterations=3) <= exact * (1 + 1e-12)
+
+
 def test_friction_input_errors():
     with pytest.raises(InputError) as info:
         solve_friction_contact(np.eye(4), np.zeros(4), [0.5])
@@ -247,6 +317,14 @@ def test_friction_input_errors():
         solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="newton")
     with pytest.raises(InputError, match="friction_model"):
         solve_friction_contact(np.eye(3), np.zeros(3), [0.5], friction_model="ellipse")
+    with pytest.raises(InputError, match="friction_model"):
+        solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="apgd", friction_model="pyramid")
+    operator = spla.aslinearoperator(np.eye(3))
+    with pytest.raises(InputError, match="only apgd") as info:
+        solve_friction_contact(operator, np.zeros(3), [0.5], method="nsgs")
+    assert info.value.field == "W"
+    with pytest.raises(InputError, match="lipschitz"):
+        solve_friction_contact(np.eye(3), -np.ones(3), [0.5], method="apgd", lipschitz=-1.0)
 
 
 # ------------------------------------------------------------------------------- reader

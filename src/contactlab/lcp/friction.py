@@ -22,6 +22,15 @@ Solvers (all sweeps compiled with Numba, ``cache=True``):
 * ``staggered`` — SPEC F4b: all normal components with the frictions fixed (projected
   Gauss-Seidel sweeps on the normal rows), then all frictions with the normals fixed (disk or box
   solves), and the pair of phases iterated.
+* ``apgd`` — accelerated projected gradient (Nesterov's method with gradient restarts, as Mazhar,
+  Heyn, Negrut and Tasora 2015 use for contact) on De Saxcé's form of the problem:
+  ``r ← P_K(y − (W y + q + [μ‖u_T‖, 0, 0]) / L)``, y extrapolated from the last two iterates, L ≥
+  the largest eigenvalue of W (estimated by power iteration unless given). The projection is
+  onto the whole cone at once, so no contact waits for another, and it needs W only as products
+  W x, one per iteration: W may be a ``scipy.sparse.linalg.LinearOperator`` (for instance
+  J A⁻¹ Jᵀ x through a factorization of A, never forming J A⁻¹ Jᵀ). Its fixed points are the
+  Coulomb solutions (the De Saxcé term makes sliding contacts keep u_N = 0, not the μ‖u_T‖ of
+  the convex relaxation); with the cone model only.
 
 Error (``FrictionResult.error``, the Siconos measure): the natural-map residual
 ``F^α(r) = r^α − P_Kμα(r^α − û^α)``, ``‖F(r)‖₂ / max(‖q‖, ‖r‖, ‖u‖)`` (1 replaces a zero
@@ -36,13 +45,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from numba import njit
 
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
 
-FRICTION_METHODS = ("nsgs", "staggered")
+FRICTION_METHODS = ("nsgs", "staggered", "apgd")
+OPERATOR_METHODS = ("apgd",)            # those that need W only as products W x
 FRICTION_MODELS = ("cone", "pyramid")
 _SQRT_HALF = math.sqrt(0.5)
 
@@ -55,10 +65,10 @@ class FrictionResult:
     ----------
     r: (3·nc,) reactions [N, T1, T2] per contact (impulses, in the units of W's columns).
     u: (3·nc,) relative velocities ``W r + q``.
-    iterations: sweeps (nsgs) or normal/friction rounds (staggered) done.
+    iterations: sweeps (nsgs), normal/friction rounds (staggered) or gradient steps (apgd) done.
     converged: True when ``error <= tol``.
     error: normalized natural-map residual (module docstring), at ``r``.
-    method: ``"nsgs"`` or ``"staggered"``.
+    method: ``"nsgs"``, ``"staggered"`` or ``"apgd"``.
     friction_model: ``"cone"`` or ``"pyramid"``.
     message: one sentence on how it ended.
     """
@@ -308,8 +318,11 @@ def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyr
 
 
 def _check_problem(W, q, mu):
-    csr = square_csr(W, "W")
+    """(W as CSR — or the LinearOperator itself —, q, mu (nc,)) checked; InputError otherwise."""
+    csr = W if isinstance(W, spla.LinearOperator) else square_csr(W, "W")
     m = csr.shape[0]
+    if csr.shape[1] != m:
+        raise InputError("W", f"expected a square operator, got shape {csr.shape}.")
     if m % 3 != 0:
         raise InputError("W", f"expected a (3·nc, 3·nc) matrix for 3D contacts, got shape {csr.shape}.")
     nc = m // 3
@@ -346,19 +359,7 @@ def natural_map_error(W, q, mu, r, normalization="max") -> float:
     r = vector(r, q.shape[0], "r")
     normalization = choice(normalization, ("max", "q", "fclib", "none"), "normalization")
     u = csr @ r + q
-    rr, uu = r.reshape(-1, 3), u.reshape(-1, 3)
-    z = rr.copy()
-    z[:, 0] -= uu[:, 0] + mu * np.linalg.norm(uu[:, 1:], axis=1)
-    z[:, 1:] -= uu[:, 1:]
-    zn, zt = z[:, 0], np.linalg.norm(z[:, 1:], axis=1)
-    proj = z.copy()
-    dual = mu * zt <= -zn
-    proj[dual] = 0.0
-    outside = ~dual & (zt > mu * zn)
-    pn = (mu[outside] * zt[outside] + zn[outside]) / (1.0 + mu[outside] ** 2)
-    proj[outside, 0] = pn
-    proj[outside, 1:] = (mu[outside] * pn / zt[outside])[:, None] * z[outside, 1:]
-    absolute = float(np.linalg.norm(rr - proj))
+    absolute = _natural_map_norm(r, u, mu)
     norm_q = float(np.linalg.norm(q))
     if normalization == "max":
         scale = max(norm_q, float(np.linalg.norm(r)), float(np.linalg.norm(u)))
@@ -370,7 +371,21 @@ def natural_map_error(W, q, mu, r, normalization="max") -> float:
     return absolute
 
 
+def _natural_map_norm(r, u, mu) -> float:
+    """‖F(r)‖₂ of the natural map at reactions r and velocities u (both (3·nc,)), unnormalized."""
+    z = r.reshape(-1, 3) - _de_saxce(u, mu).reshape(-1, 3)
+    return float(np.linalg.norm(r - _project_cone(z.ravel(), mu)))
+
+
+def _de_saxce(u, mu):
+    """û = u + [μ‖u_T‖, 0, 0] per contact, (3·nc,)."""
+    uu = u.reshape(-1, 3).copy()
+    uu[:, 0] += mu * np.linalg.norm(uu[:, 1:], axis=1)
+    return uu.ravel()
+
+
 def _project_cone(r, mu):
+    """Each contact's (r_N, r_T) (3·nc,) projected on its cone ‖r_T‖ ≤ μ r_N (Euclidean)."""
     rr = r.reshape(-1, 3).copy()
     rn, rt = rr[:, 0], np.linalg.norm(rr[:, 1:], axis=1)
     dual = mu * rt <= -rn
@@ -382,45 +397,120 @@ def _project_cone(r, mu):
     return rr.ravel()
 
 
+def largest_eigenvalue(product, size, iterations=30, rtol=1e-3, start=None) -> float:
+    """The largest eigenvalue of a symmetric positive semidefinite operator given by ``product``
+    (x (size,) → W x), by power iteration from ``start`` (or ones) until it changes by less than
+    ``rtol``; at most ``iterations`` products. It approaches from below."""
+    x = np.ones(size) if start is None or not np.any(start) else np.abs(start) + 1e-3 * np.abs(start).max()
+    x /= np.linalg.norm(x)
+    estimate = 0.0
+    for _ in range(iterations):
+        y = product(x)
+        norm = float(np.linalg.norm(y))
+        if norm == 0.0:
+            return 0.0
+        previous, estimate = estimate, float(x @ y)
+        x = y / norm
+        if abs(estimate - previous) <= rtol * estimate:
+            break
+    return max(estimate, norm)
+
+
+LIPSCHITZ_SAFETY = 1.2      # L = 1.2 × the power iteration's estimate, which approaches from below
+
+
+def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
+    """Accelerated projected gradient on De Saxcé's form of FC(W, q, μ) (module docstring), from r
+    (3·nc,) in the cone. W enters only through ``product`` (x → W x), once per iteration: W y
+    follows from W r by linearity. Returns (best r, iterations, its normalized error)."""
+    norm_q = float(np.linalg.norm(q))
+
+    def error_of(r, Wr):
+        u = Wr + q
+        scale = max(norm_q, float(np.linalg.norm(r)), float(np.linalg.norm(u)))
+        return _natural_map_norm(r, u, mu) / (scale if scale > 0 else 1.0)
+
+    Wr = product(r)
+    best, best_error = r.copy(), error_of(r, Wr)
+    if best_error <= tol or lipschitz <= 0.0:
+        return best, 0, best_error
+    step = 1.0 / lipschitz
+    y, Wy, theta = r.copy(), Wr.copy(), 1.0
+    for iteration in range(1, max_iterations + 1):
+        gradient = _de_saxce(Wy + q, mu)
+        new = _project_cone(y - step * gradient, mu)
+        W_new = product(new)
+        error = error_of(new, W_new)
+        if error < best_error:
+            best, best_error = new.copy(), error
+            if error <= tol:
+                return best, iteration, best_error
+        next_theta = 0.5 * theta * (math.sqrt(theta * theta + 4.0) - theta)
+        beta = theta * (1.0 - theta) / (theta * theta + next_theta)
+        if gradient @ (new - r) > 0.0:          # the step went uphill: restart the momentum
+            beta, next_theta = 0.0, 1.0
+        y = new + beta * (new - r)
+        Wy = W_new + beta * (W_new - Wr)
+        r, Wr, theta = new, W_new, next_theta
+    return best, max_iterations, best_error
+
+
 def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=1000, r0=None,
-                           friction_model="cone") -> FrictionResult:
+                           friction_model="cone", lipschitz=None) -> FrictionResult:
     """Solve the 3D Coulomb friction problem ``u = W r + q``, ``r ∈ K_μ``, ``û ⊥ r`` (FCLIB local form).
 
     Parameters
     ----------
-    W: (3·nc, 3·nc) SciPy sparse or dense Delassus matrix, per contact [N, T1, T2].
+    W: (3·nc, 3·nc) SciPy sparse or dense Delassus matrix, per contact [N, T1, T2]; for ``apgd``
+       also a ``scipy.sparse.linalg.LinearOperator`` (symmetric positive semidefinite).
     q: (3·nc,) free relative velocity.
     mu: (nc,) friction coefficients (or one scalar for all contacts), ≥ 0.
-    method: ``"nsgs"`` (SPEC F4a) or ``"staggered"`` (SPEC F4b); see the module docstring.
+    method: ``"nsgs"`` (SPEC F4a), ``"staggered"`` (SPEC F4b) or ``"apgd"``; see the module docstring.
     tol: tolerance on the normalized natural-map error (module docstring).
-    max_iterations: sweep limit (nsgs) or normal/friction round limit (staggered).
+    max_iterations: sweep limit (nsgs), normal/friction round limit (staggered) or step limit (apgd).
     r0: (3·nc,) start reactions (projected on the cone); zero by default.
     friction_model: ``"cone"`` (the disk ‖r_T‖ ≤ μ r_N) or ``"pyramid"`` (the inscribed square
-       |r_Ti| ≤ μ r_N / √2).
+       |r_Ti| ≤ μ r_N / √2; not with ``apgd``).
+    lipschitz: apgd's L, at least W's largest eigenvalue (its step is 1/L); by default 1.2 × a
+       power iteration's estimate.
 
-    A solver that stops above tol returns ``converged=False`` with the error it reached.
+    A solver that stops above tol returns ``converged=False`` with the error it reached (apgd:
+    the best iterate it met).
     Bad input raises :class:`contactlab.errors.InputError`.
     """
     method = choice(method, FRICTION_METHODS, "method")
     friction_model = choice(friction_model, FRICTION_MODELS, "friction_model")
+    if method == "apgd" and friction_model != "cone":
+        raise InputError("friction_model", "apgd projects on the cone; use nsgs or staggered for the pyramid.")
+    operator = isinstance(W, spla.LinearOperator)
+    if operator and method not in OPERATOR_METHODS:
+        raise InputError("W", f"{method} sweeps the rows of W, so it needs W as a matrix; "
+                              f"only {', '.join(OPERATOR_METHODS)} takes a LinearOperator.")
     csr, q, mu = _check_problem(W, q, mu)
     tol = positive_float(tol, "tol")
     max_iterations = positive_int(max_iterations, "max_iterations")
     m = q.shape[0]
     nc = m // 3
     r = np.zeros(m) if r0 is None else _project_cone(vector(r0, m, "r0"), mu)
-    blocks = _diagonal_blocks(csr, nc)
     pyramid = friction_model == "pyramid"
-    indptr = csr.indptr.astype(np.int64)
-    indices = csr.indices.astype(np.int64)
     if m == 0:
         iterations, error = 0, 0.0
-    elif method == "nsgs":
-        iterations, error = _nsgs(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
+    elif method == "apgd":
+        product = csr.matvec if operator else csr.__matmul__
+        if lipschitz is None:
+            lipschitz = LIPSCHITZ_SAFETY * largest_eigenvalue(product, m, start=r)
+        r, iterations, error = _apgd(product, q, mu, r, tol, max_iterations,
+                                     positive_float(lipschitz, "lipschitz"))
     else:
-        iterations, error = _staggered(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations,
-                                       pyramid, 25)
-    u = csr @ r + q
+        blocks = _diagonal_blocks(csr, nc)
+        indptr = csr.indptr.astype(np.int64)
+        indices = csr.indices.astype(np.int64)
+        if method == "nsgs":
+            iterations, error = _nsgs(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
+        else:
+            iterations, error = _staggered(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations,
+                                           pyramid, 25)
+    u = (csr.matvec(r) if operator else csr @ r) + q
     converged = bool(error <= tol)
     if converged:
         message = f"{method} reached the error {error:.3e} <= tol in {iterations} iterations."
