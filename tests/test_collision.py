@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, collide, rotations
-from contactlab.collision.broad_phase import brute_force_pairs, grid_pairs, overlapping_pairs, sweep_and_prune
+from contactlab.collision.broad_phase import (brute_force_pairs, grid_pairs, neighbour_cell_pairs, overlapping_pairs,
+                                             sweep_and_prune)
 from contactlab.errors import InputError
 
 
@@ -133,7 +134,7 @@ def test_broad_phase_equals_brute_force(rng):
         assert sorted(map(tuple, fast)) == sorted(map(tuple, slow))
 
 
-@pytest.mark.parametrize("layout", ["pile", "mixed sizes", "one huge box", "all in one place"])
+@pytest.mark.parametrize("layout", ["pile", "mixed sizes", "one huge box", "all in one place", "one far away"])
 def test_hash_grid_equals_sweep_and_prune_and_brute_force(rng, layout):
     count = 1500
     if layout == "pile":                  # a dense column: the case where sweep and prune tests O(n²)
@@ -146,13 +147,22 @@ def test_hash_grid_equals_sweep_and_prune_and_brute_force(rng, layout):
         centers = rng.uniform(-1, 1, size=(count, 3))
         half = np.full((count, 3), 0.02)
         half[7] = 1.5
-    else:
+    elif layout == "all in one place":
         centers = rng.normal(scale=1e-3, size=(count, 3))
         half = np.full((count, 3), 0.01)
+    else:                                 # a grid spanning 1e6 m would need 10^21 cells: hashed instead
+        centers = rng.uniform(-1, 1, size=(count, 3))
+        centers[3] = 1e6
+        half = np.full((count, 3), 0.02)
     lower, upper = centers - half, centers + half
     expected = sorted(map(tuple, brute_force_pairs(lower, upper)))
     assert sorted(map(tuple, grid_pairs(lower, upper))) == expected
     assert sorted(map(tuple, sweep_and_prune(lower, upper))) == expected
+    neighbours, done = neighbour_cell_pairs(lower, upper)
+    # a box 75x the others' size, or one 1e6 m away (10^21 cells): left to the hash grid
+    assert done == (layout not in ("one huge box", "one far away"))
+    if done:
+        assert list(map(tuple, neighbours)) == expected      # sorted as they come
     assert list(map(tuple, overlapping_pairs(lower, upper))) == expected      # sorted, no duplicates
 
 
