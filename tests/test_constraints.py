@@ -244,6 +244,19 @@ def test_implicit_cloth_products_reach_the_assembled_answer():
                                atol=1e-6 * np.abs(by_rows.carried["constraint_values"]).max())
 
 
+def test_implicit_cloth_whose_only_contact_is_a_pinned_vertex_runs():
+    # the pinned corner starts inside a sphere: its contact's row of W = J A⁻¹ Jᵀ is zero, so W = 0
+    b = ModelBuilder()
+    b.add_material("m", friction=0.4, restitution=0.0)
+    b.add_cloth(size=(0.4, 0.4), resolution=(5, 5), position=(0, 0, 0.3), mass=0.05, stretch_stiffness=1000.0,
+                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m", pinned=[0])
+    b.add_obstacle("sphere", radius=0.05, position=(-0.2, -0.2, 0.3), material="m")
+    model = b.finalize()
+    run = simulate(model, "constraints", dt=1 / 120, duration=0.05, integrator="backward_euler")
+    assert run.summary["max_contacts"] >= 1 and run.state.is_finite()
+    np.testing.assert_array_equal(run.state.particle_position[0], model.initial.particle_position[0])
+
+
 def test_delassus_bound_lies_above_the_largest_eigenvalue_of_j_a_inverse_jt():
     model, state = draped_cloth()
     contacts = collide(model, state, constraints.Options().contact_margin)

@@ -323,8 +323,17 @@ def test_friction_input_errors():
     with pytest.raises(InputError, match="only apgd") as info:
         solve_friction_contact(operator, np.zeros(3), [0.5], method="nsgs")
     assert info.value.field == "W"
-    with pytest.raises(InputError, match="lipschitz"):
-        solve_friction_contact(np.eye(3), -np.ones(3), [0.5], method="apgd", lipschitz=-1.0)
+    for bad in (-1.0, float("nan"), "big"):
+        with pytest.raises(InputError, match="lipschitz"):
+            solve_friction_contact(np.eye(3), -np.ones(3), [0.5], method="apgd", lipschitz=bad)
+
+
+def test_apgd_with_a_zero_operator_returns_no_reactions():
+    # W = 0 (every contact between immovable points): no reaction changes anything, so none is given
+    res = solve_friction_contact(np.zeros((6, 6)), np.array([1.0, 0, 0, -1.0, 0.5, 0]), [0.5, 0.5], method="apgd",
+                                 r0=np.ones(6), lipschitz=0.0)
+    assert not res.r.any() and res.iterations == 0
+    assert res.error == pytest.approx(natural_map_error(np.zeros((6, 6)), res.u, [0.5, 0.5], res.r))
 
 
 # ------------------------------------------------------------------------------- reader

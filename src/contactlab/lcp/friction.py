@@ -472,7 +472,7 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
     friction_model: ``"cone"`` (the disk ‖r_T‖ ≤ μ r_N) or ``"pyramid"`` (the inscribed square
        |r_Ti| ≤ μ r_N / √2; not with ``apgd``).
     lipschitz: apgd's L, at least W's largest eigenvalue (its step is 1/L); by default 1.2 × a
-       power iteration's estimate.
+       power iteration's estimate. 0 declares W = 0: r = 0 is returned, with its error.
 
     A solver that stops above tol returns ``converged=False`` with the error it reached (apgd:
     the best iterate it met).
@@ -499,8 +499,16 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
         product = csr.matvec if operator else csr.__matmul__
         if lipschitz is None:
             lipschitz = LIPSCHITZ_SAFETY * largest_eigenvalue(product, m, start=r)
-        r, iterations, error = _apgd(product, q, mu, r, tol, max_iterations,
-                                     positive_float(lipschitz, "lipschitz"))
+        try:
+            lipschitz = float(lipschitz)
+        except (TypeError, ValueError):
+            lipschitz = float("nan")
+        if not (np.isfinite(lipschitz) and lipschitz >= 0.0):
+            raise InputError("lipschitz", f"expected a finite number ≥ 0 (at least W's largest eigenvalue), "
+                                          f"got {lipschitz!r}.")
+        if lipschitz == 0.0:      # W = 0 (say, only pinned points touch): reactions change nothing
+            r[:] = 0.0
+        r, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, float(lipschitz))
     else:
         blocks = _diagonal_blocks(csr, nc)
         indptr = csr.indptr.astype(np.int64)
