@@ -204,6 +204,29 @@ def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_pr
     assert kinetic[-1] < 0.05 * kinetic.max()                       # it landed and is settling
 
 
+def test_carried_values_follow_their_contact_ids():
+    from contactlab.contacts import values_by_id
+    previous_ids = np.array([50, 7, 31, 12], dtype=np.int64)
+    previous = np.array([[5.0, 0.5], [0.7, 0.07], [3.1, 0.31], [1.2, 0.12]])
+    values, found = values_by_id(previous_ids, previous, np.array([12, 99, 50, 7, 0]), 2)
+    np.testing.assert_array_equal(found, [True, False, True, True, False])
+    np.testing.assert_array_equal(values, [[1.2, 0.12], [0, 0], [5.0, 0.5], [0.7, 0.07], [0, 0]])
+    empty, none = values_by_id(None, None, np.array([3, 4]), 3)
+    assert empty.shape == (2, 3) and not empty.any() and not none.any()
+
+
+def test_each_body_moves_to_its_earliest_impact_first():
+    from contactlab.methods.velocity_level import entity_impact_fractions
+    model, _ = cube_on_plane()
+    contacts = collide(model, model.state(), 0.01)
+    assert contacts.count == 4
+    tau = np.array([-1.0, 0.6, 0.25, -1.0])
+    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
+    np.testing.assert_array_equal(tau_body, [0.25])
+    assert tau_particle.shape == (0,)
+    np.testing.assert_array_equal(entity_impact_fractions(model, contacts, np.full(4, -1.0))[0], [0.0])
+
+
 def draped_cloth(n=8):
     """An n × n cloth (0.5 m, 50 g, stiff springs) lying over a sphere and the floor, after 0.4 s
     under constraints with backward Euler at 1/120 s: (model, state) with many vertex contacts."""

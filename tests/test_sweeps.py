@@ -117,3 +117,18 @@ def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
     assert groups == 1 or contacts.count < sequential.PARALLEL_MIN_CONTACTS
     np.testing.assert_array_equal(grouped, order)
     np.testing.assert_array_equal(starts, [0, contacts.count, contacts.count])
+
+
+def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):
+    # the compiled order equals NumPy's lexsort by (−height, scramble), ties of both by index
+    for count in (0, 1, 7, 500, 5000):
+        height = np.round(rng.choice(rng.uniform(-1, 3, max(1, count // 6)), count), 9)
+        scramble = rng.integers(0, 40, count)
+        order = sequential._order_ties(np.argsort(-height), height, scramble)
+        np.testing.assert_array_equal(order, np.lexsort((scramble, -height)))
+    model = sphere_lattice()
+    contacts = collide(model, model.state(), 0.002)
+    order = sequential.solve_order(contacts, model.gravity)
+    height = contacts.point[order, 2]
+    assert np.all(np.diff(height) <= 1e-9)                      # top to bottom
+    assert sorted(order.tolist()) == list(range(contacts.count))

@@ -70,13 +70,27 @@ def values_by_id(previous_ids, previous_values, feature_id, width):
     that are new, found (C,) bool).
     """
     C = len(feature_id)
-    values = np.zeros((C, width))
     if previous_ids is None or len(previous_ids) == 0 or C == 0:
-        return values, np.zeros(C, dtype=bool)
+        return np.zeros((C, width)), np.zeros(C, dtype=bool)
+    return _values_by_id(np.asarray(previous_ids, dtype=np.int64),
+                         np.asarray(previous_values, dtype=float).reshape(len(previous_ids), width),
+                         np.asarray(feature_id, dtype=np.int64))
+
+
+@njit(cache=True)
+def _values_by_id(previous_ids, previous_values, feature_id):
+    """``values_by_id``, compiled: one sort of last step's ids, one binary search per contact
+    (it runs every step; in NumPy its masks and gathers cost 0.27 ms for 3 300 contacts)."""
     order = np.argsort(previous_ids)
-    place = np.clip(np.searchsorted(previous_ids, feature_id, sorter=order), 0, len(previous_ids) - 1)
-    found = previous_ids[order[place]] == feature_id
-    values[found] = previous_values[order[place[found]]]
+    sorted_ids = previous_ids[order]
+    place = np.searchsorted(sorted_ids, feature_id)
+    values = np.zeros((feature_id.shape[0], previous_values.shape[1]))
+    found = np.zeros(feature_id.shape[0], dtype=np.bool_)
+    for c in range(feature_id.shape[0]):
+        p = place[c]
+        if p < sorted_ids.shape[0] and sorted_ids[p] == feature_id[c]:
+            found[c] = True
+            values[c, :] = previous_values[order[p]]
     return values, found
 
 
