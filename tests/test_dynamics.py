@@ -104,3 +104,31 @@ def test_compiled_orientation_step_is_the_exponential_map(rng, dt):
     np.testing.assert_allclose(rotations.integrate(q, w, h), expected, rtol=0, atol=1e-15)
     turned = rotations.integrate(np.array([[1.0, 0, 0, 0]]), np.array([[0, 0, 3.0]]), 0.1)[0]
     np.testing.assert_allclose(turned, [np.cos(0.15), 0, 0, np.sin(0.15)], atol=1e-15)
+
+
+def test_compilation_during_the_run_is_timed_apart_from_the_steps(monkeypatch):
+    # a step that "compiles" for 0.3 s (a Numba compile event, as at a first contact): the summary
+    # counts it in compile_seconds and leaves it out of steps_per_second
+    import time
+
+    from numba.core import event
+
+    from contactlab.methods import impulse
+    real_step = impulse.step
+    calls = []
+
+    def step(*args):
+        calls.append(1)
+        if len(calls) == 5:
+            with event.trigger_event("numba:compile", data={}):
+                time.sleep(0.3)
+        return real_step(*args)
+
+    monkeypatch.setattr(impulse, "step", step)
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
+    run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1)
+    assert len(calls) == 10
+    assert run.summary["compile_seconds"] >= 0.3
+    assert run.summary["steps_per_second"] > 9 / 0.3                # the 0.3 s is not in the 9 steps' time
+    assert run.summary["wall_seconds"] >= 0.3
