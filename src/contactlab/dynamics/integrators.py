@@ -25,6 +25,7 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .. import rotations
@@ -133,6 +134,16 @@ def particle_system(model, state, dt, particle_force=None, clamp_compressed=True
     return ParticleSystem(pattern.matrix(values), rhs, coupled)
 
 
+def factor_symmetric(matrix):
+    """A sparse LU (SciPy's SuperLU) of a symmetric positive definite matrix (N, N), for repeated
+    solves (``.solve(rhs)``): a fill-reducing ordering of A + Aᵀ and diagonal pivots, which keep
+    that ordering (a positive definite matrix needs no row exchanges). The default threshold
+    pivoting breaks the symmetric ordering: on a draped 64 × 64 cloth its factor was 20x denser
+    and took 30 s, against 0.17 s (and 5 ms a solve) this way."""
+    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options={"SymmetricMode": True})
+
+
 def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
     """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
     with a Jacobi preconditioner (``solver="cg"``, to the relative residual ``tolerance`` —
@@ -153,7 +164,7 @@ def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
             solution, info = spla.cg(sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0,
                                      maxiter=max(100, len(dofs)), M=preconditioner)
         if info != 0:
-            solution = spla.spsolve(sub.tocsc(), b)
+            solution = factor_symmetric(sub).solve(b)
         delta[dofs] = solution
     return delta.reshape(-1, 3)
 

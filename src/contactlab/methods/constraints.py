@@ -43,7 +43,7 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo, check_choices, check_counts
@@ -101,11 +101,8 @@ class SystemInverse:
     def __init__(self, inverse_mass=None, matrix=None, free=None):
         self.inverse_mass = inverse_mass
         self.free = free
-        # A is symmetric (the clamped spring Jacobians): a symmetric fill-reducing ordering and
-        # diagonal pivots (A is positive definite) keep that ordering: 0.17 s and 5 ms a solve on a
-        # 64 × 64 drape, where the default threshold pivoting fills 20x more and takes 30 s
-        self.factor = None if matrix is None else spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A",
-                                                             diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        # A is symmetric positive definite (clamped spring Jacobians, damping, masses)
+        self.factor = None if matrix is None else factor_symmetric(matrix)
 
     def solve(self, rhs):
         """A⁻¹ rhs for rhs (N,) or (N, k); pinned degrees of freedom get 0."""

@@ -36,7 +36,7 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
 from ..errors import InputError, StabilityWarning
 from ..shapes import bounding_radii
 from ..state import State
@@ -340,8 +340,8 @@ def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
 
 
 def _solve(A, rhs, guess, options):
-    if options.linear_solver == "direct":
-        return spla.spsolve(A.tocsc(), rhs)
+    if options.linear_solver == "direct":     # A is symmetric positive definite (conjugate gradients need it too)
+        return factor_symmetric(A).solve(rhs)
     diagonal = A.diagonal()
     preconditioner = spla.LinearOperator(A.shape, matvec=lambda x: x / diagonal)
     solution, info = spla.cg(A, rhs, x0=guess, rtol=options.linear_tolerance, maxiter=10 * A.shape[0],
