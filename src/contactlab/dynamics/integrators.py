@@ -175,13 +175,13 @@ def free_velocities(model, state, dt, integrator="symplectic_euler",
     """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
 
     body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
-    Particles: explicit and symplectic Euler add h M⁻¹ (m g + f_springs(x, v) + particle_force);
-    backward Euler solves ``particle_system`` (springs implicit) with ``solve_particle_system``
-    (``linear_solver`` "cg" or "direct", ``linear_tolerance``). Pinned particles get zero
-    velocity. Returns (body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)).
+    Bodies: see ``body_free_velocities``. Particles: explicit and symplectic Euler add
+    h M⁻¹ (m g + f_springs(x, v) + particle_force); backward Euler solves ``particle_system``
+    (springs implicit) with ``solve_particle_system`` (``linear_solver`` "cg" or "direct",
+    ``linear_tolerance``). Pinned particles get zero velocity. Returns (body_velocity (B,3),
+    body_angular_velocity (B,3), particle_velocity (P,3)).
     """
     g = model.gravity
-    body_velocity = state.body_velocity + dt * g
     if model.spring_count and integrator == "backward_euler":
         system = particle_system(model, state, dt, particle_force)
         particle_velocity = state.particle_velocity + solve_particle_system(system, model, linear_tolerance,
@@ -195,6 +195,16 @@ def free_velocities(model, state, dt, integrator="symplectic_euler",
             particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
     if model.particle_pinned.any():
         particle_velocity[model.particle_pinned] = 0.0
+    return (*body_free_velocities(model, state, dt, integrator, body_force, body_torque), particle_velocity)
+
+
+def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_force=None, body_torque=None):
+    """The rigid bodies' part of ``free_velocities``: (body_velocity (B,3) [m/s],
+    body_angular_velocity (B,3) [rad/s]) after dt under gravity and the optional body_force,
+    body_torque (B, 3) [N], [N m]. The gyroscopic term is explicit under explicit Euler and
+    implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
+    bodies move as symplectic Euler's."""
+    body_velocity = state.body_velocity + dt * model.gravity
     if body_force is not None:
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
     gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
@@ -202,7 +212,7 @@ def free_velocities(model, state, dt, integrator="symplectic_euler",
     if body_torque is not None:
         inv = world_inverse_inertia(model, state.body_orientation)
         angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
-    return body_velocity, angular, particle_velocity
+    return body_velocity, angular
 
 
 def advance_positions(body_position, body_orientation, particle_position,

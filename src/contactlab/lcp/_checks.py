@@ -48,9 +48,12 @@ def vector(values, n: int, field: str) -> np.ndarray:
     return out
 
 
-def positive_float(value, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
-        raise InputError(field, f"expected a positive finite number, got {value!r}.")
+def positive_float(value, field: str, zero: bool = False) -> float:
+    """``value`` as a finite float > 0 (≥ 0 with ``zero``); InputError naming ``field`` otherwise."""
+    if (isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value)
+            or value < 0 or (value == 0 and not zero)):
+        wanted = "a finite number ≥ 0" if zero else "a positive finite number"
+        raise InputError(field, f"expected {wanted}, got {value!r}.")
     return float(value)
 
 

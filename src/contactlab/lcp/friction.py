@@ -422,7 +422,7 @@ LIPSCHITZ_SAFETY = 1.2      # L = 1.2 × the power iteration's estimate, which a
 def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     """Accelerated projected gradient on De Saxcé's form of FC(W, q, μ) (module docstring), from r
     (3·nc,) in the cone. W enters only through ``product`` (x → W x), once per iteration: W y
-    follows from W r by linearity. Returns (best r, iterations, its normalized error)."""
+    follows from W r by linearity. Returns (best r, W times it, iterations, its normalized error)."""
     norm_q = float(np.linalg.norm(q))
 
     def error_of(r, Wr):
@@ -431,9 +431,9 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         return _natural_map_norm(r, u, mu) / (scale if scale > 0 else 1.0)
 
     Wr = product(r)
-    best, best_error = r.copy(), error_of(r, Wr)
+    best, best_W, best_error = r.copy(), Wr, error_of(r, Wr)
     if best_error <= tol or lipschitz <= 0.0:
-        return best, 0, best_error
+        return best, best_W, 0, best_error
     step = 1.0 / lipschitz
     y, Wy, theta = r.copy(), Wr.copy(), 1.0
     for iteration in range(1, max_iterations + 1):
@@ -442,9 +442,9 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         W_new = product(new)
         error = error_of(new, W_new)
         if error < best_error:
-            best, best_error = new.copy(), error
+            best, best_W, best_error = new.copy(), W_new, error
             if error <= tol:
-                return best, iteration, best_error
+                return best, best_W, iteration, best_error
         next_theta = 0.5 * theta * (math.sqrt(theta * theta + 4.0) - theta)
         beta = theta * (1.0 - theta) / (theta * theta + next_theta)
         if gradient @ (new - r) > 0.0:          # the step went uphill: restart the momentum
@@ -452,7 +452,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         y = new + beta * (new - r)
         Wy = W_new + beta * (W_new - Wr)
         r, Wr, theta = new, W_new, next_theta
-    return best, max_iterations, best_error
+    return best, best_W, max_iterations, best_error
 
 
 def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=1000, r0=None,
@@ -496,19 +496,13 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
     if m == 0:
         iterations, error = 0, 0.0
     elif method == "apgd":
-        product = csr.matvec if operator else csr.__matmul__
+        product = csr.dot                     # a sparse matrix's or a LinearOperator's W x
         if lipschitz is None:
             lipschitz = LIPSCHITZ_SAFETY * largest_eigenvalue(product, m, start=r)
-        try:
-            lipschitz = float(lipschitz)
-        except (TypeError, ValueError):
-            lipschitz = float("nan")
-        if not (np.isfinite(lipschitz) and lipschitz >= 0.0):
-            raise InputError("lipschitz", f"expected a finite number ≥ 0 (at least W's largest eigenvalue), "
-                                          f"got {lipschitz!r}.")
+        lipschitz = positive_float(lipschitz, "lipschitz", zero=True)
         if lipschitz == 0.0:      # W = 0 (say, only pinned points touch): reactions change nothing
             r[:] = 0.0
-        r, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, float(lipschitz))
+        r, Wr, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, lipschitz)
     else:
         blocks = _diagonal_blocks(csr, nc)
         indptr = csr.indptr.astype(np.int64)
@@ -518,7 +512,7 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
         else:
             iterations, error = _staggered(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations,
                                            pyramid, 25)
-    u = (csr.matvec(r) if operator else csr @ r) + q
+    u = (Wr if method == "apgd" and m else csr @ r) + q
     converged = bool(error <= tol)
     if converged:
         message = f"{method} reached the error {error:.3e} <= tol in {iterations} iterations."

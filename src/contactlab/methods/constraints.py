@@ -43,7 +43,7 @@ from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
+from ..dynamics.integrators import advance_positions, body_free_velocities, factor_symmetric, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import StepInfo, check_choices, check_counts
@@ -141,18 +141,18 @@ def delassus_bound(J, inverse_mass):
     return float(abs(J @ inverse_mass @ J.T).sum(axis=1).max())
 
 
-def solve_assembled(J, inverse, v_free, target, friction, warm, options, solver=None, lipschitz=None):
+def solve_assembled(J, inverse, inverse_mass, v_free, target, friction, warm, options, solver=None):
     """λ (C, 3) of the problem u = W λ + q with the chosen solver (``solver`` overrides
     ``options.solver``); (λ, iterations, residual). apgd takes W as the operator
-    ``delassus_operator`` and its step from ``lipschitz`` (≥ W's largest eigenvalue, e.g.
-    ``delassus_bound``); the others sweep W assembled by ``lcp_matrices``."""
+    ``delassus_operator`` and its step from ``delassus_bound`` (``inverse_mass`` M⁻¹ (N, N)
+    sparse); the others sweep W assembled by ``lcp_matrices``."""
     from ..lcp import solve_friction_contact, solve_lcp
     solver = solver or options.solver
     C = len(friction)
     if solver == "apgd":
         result = solve_friction_contact(delassus_operator(J, inverse), J @ v_free - target, friction,
                                         method="apgd", tol=options.tolerance, max_iterations=options.iterations,
-                                        r0=warm.ravel(), lipschitz=lipschitz)
+                                        r0=warm.ravel(), lipschitz=delassus_bound(J, inverse_mass))
         return result.r.reshape(C, 3), result.iterations, result.error
     B, q = lcp_matrices(J, inverse, v_free, target)
     if solver in FRICTIONLESS_SOLVERS:
@@ -191,10 +191,9 @@ def implicit_free_velocities(model, state, h):
     ``free_velocities`` returns them, the SystemInverse of A). One LU and one solve cost about
     what the conjugate gradients of ``free_velocities`` cost alone (320 iterations on a draped
     64 × 64 cloth)."""
-    # the bodies' part of backward Euler is symplectic Euler's (gravity does not depend on the
-    # state, the gyroscopic term is implicit in both); the particles' part is replaced below
-    rigid = free_velocities(model, state, h, "symplectic_euler")
-    A0, b0, free_dofs = implicit_base(model, state, h, stack(*rigid))
+    bodies = body_free_velocities(model, state, h, "backward_euler")
+    # implicit_base reads only the bodies' part of v* once there are springs
+    A0, b0, free_dofs = implicit_base(model, state, h, stack(*bodies, np.zeros((model.particle_count, 3))))
     inverse = SystemInverse(matrix=A0, free=free_dofs)
     return unstack(inverse.solve(b0), model.body_count), inverse
 
@@ -253,8 +252,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         # on implicit cloth, matrix_free means products with W = J A⁻¹ Jᵀ (apgd): sweeps would
         # need W's rows, that is A⁻¹ Jᵀ in full — dense, seconds a step on a 64 × 64 drape
         solver = "apgd" if options.solver == "matrix_free" and implicit_cloth else options.solver
-        lam, iterations, residual = solve_assembled(J, inverse, v_free, targets.ravel(), contacts.friction, warm,
-                                                    options, solver, delassus_bound(J, inverse_mass))
+        lam, iterations, residual = solve_assembled(J, inverse, inverse_mass, v_free, targets.ravel(),
+                                                    contacts.friction, warm, options, solver)
         v_new = v_free + inverse.solve(J.T @ lam.ravel())
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
     if not options.time_of_impact:
