@@ -6,7 +6,6 @@ broad phase; each dynamic collider is tested against the obstacles its bounds re
 """
 
 import numpy as np
-from numba import njit
 
 from .. import rotations, shapes
 from ..contacts import Contacts, tangent_basis
@@ -16,7 +15,8 @@ from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
 from .mesh_pairs import shapes_against_mesh_extended
-from .narrow_phase import MAX_PER_PAIR, collide_pair, collide_primitive_pair, supported
+from .manifolds import generate_reusing
+from .narrow_phase import generate_contacts, supported
 
 
 def check_supported(model):
@@ -35,37 +35,6 @@ def check_supported(model):
 
 MESH_PARTNERS = (shapes.SPHERE, shapes.POINT, shapes.BOX, shapes.CAPSULE, shapes.CONVEX)  # shapes meshes meet
 FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
-
-
-@njit(cache=True)
-def _generate(pairs, kinds, params, centers, rotations_, reach, hull_store):
-    """The narrow phase over ``pairs`` (K, 2) of global colliders: (point, normal, depth, feature,
-    owner) of every contact, owner being its pair's row. ``hull_store`` is None when no collider
-    is a convex hull: that specialization never compiles the hull routines (``collide_pair``),
-    which are most of a cold start's compile time (about 40 of 90 s for a bouncing ball)."""
-    capacity = len(pairs) * MAX_PER_PAIR
-    point = np.empty((capacity, 3))
-    normal = np.empty((capacity, 3))
-    depth = np.empty(capacity)
-    feature = np.empty(capacity, dtype=np.int64)
-    owner = np.empty(capacity, dtype=np.int64)      # which pair each contact came from
-    count = 0
-    for k in range(len(pairs)):
-        a, b = pairs[k, 0], pairs[k, 1]
-        hull = False
-        if hull_store is not None:          # pruned at compile time when there is no hull
-            if kinds[a] == shapes.CONVEX or kinds[b] == shapes.CONVEX:
-                hull = True
-                written = collide_pair(kinds[a], params[a], centers[a], rotations_[a],
-                                       kinds[b], params[b], centers[b], rotations_[b],
-                                       reach[a] + reach[b], hull_store, point, normal, depth, feature, count)
-        if not hull:    # the same contacts without handing over the hull store (see collide_primitive_pair)
-            written = collide_primitive_pair(kinds[a], params[a], centers[a], rotations_[a],
-                                             kinds[b], params[b], centers[b], rotations_[b],
-                                             reach[a] + reach[b], point, normal, depth, feature, count)
-        owner[count:count + written] = k
-        count += written
-    return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
 
 
 def swept_distances(model, body_velocity, body_angular_velocity, particle_velocity, dt):
@@ -104,7 +73,19 @@ def _bounds(kinds, params, centers, rots, margin):
 
 def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2,
             cloth_samples=0) -> Contacts:
-    """All contacts of the state, including gaps down to −margin [m].
+    """All contacts of the state, including gaps down to −margin [m]; the contacts of
+    :func:`collide_keeping` with nothing kept."""
+    return collide_keeping(model, state, None, 0.0, margin, sweep, granularity, normal, samples, cloth_samples)[0]
+
+
+def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, granularity="vertex",
+                    normal="object", samples=2, cloth_samples=0):
+    """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
+    to keep for the next step: (Contacts, Manifolds or None).
+
+    manifolds: what the last step's call returned (None: nothing kept); tolerance [m]: how far
+    a pair with a box or hull side may have moved, relative to each other, and still reuse its
+    kept contacts (collision.manifolds); 0 computes every pair afresh and keeps nothing.
 
     granularity ("object" | "vertex" | "samples", SPEC P2a/b/c), normal ("object" | "vertex",
     SPEC P4/P5) and samples (per triangle edge, for "samples") choose how boxes and convex
@@ -160,7 +141,13 @@ def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="
         mesh_parts = [tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))]
                             for column in part) for part in mesh_parts] + surface_parts
     hulls = model.hull_store if np.any(kinds == shapes.CONVEX) else None
-    contact_point, contact_normal, depth, feature, owner = _generate(pairs, kinds, params, centers, rots, reach, hulls)
+    if tolerance > 0.0:
+        contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(
+            pairs, kinds, params, centers, rots, reach, hulls, manifolds, tolerance, dynamic + O)
+    else:
+        contact_point, contact_normal, depth, feature, owner = generate_contacts(
+            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls)
+        manifolds = None
     parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
     a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
     found = Contacts.empty() if len(a) == 0 else _assemble(model, a, b, contact_point, contact_normal, depth,
@@ -169,7 +156,7 @@ def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="
         reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
         found = Contacts.concatenate([found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth,
                                                                    (dynamic + O) ** 2)])
-    return found
+    return found, manifolds
 
 
 def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):

@@ -40,7 +40,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..collision import GRANULARITIES, NORMALS, collide_keeping, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, body_free_velocities, factor_symmetric, free_velocities
@@ -71,6 +71,7 @@ class Options:
     max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see methods.impulse)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
+    manifold_tolerance: float = 1e-4      # m: box and hull pairs that moved less reuse last contacts (0 = never)
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
     normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
     samples: int = 2                      # samples per triangle edge for granularity = "samples"
@@ -88,6 +89,7 @@ class Options:
         self.slop = _number(self.slop, "slop", 0.0)
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
@@ -213,10 +215,12 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     predicted = advance_positions(*state.positions, *move, h, h)
     sweep = swept_distances(model, move[0], free[1], move[2], h)
     # 3. collision detection over the swept step
-    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples, cloth_samples=options.cloth_samples)
+    contacts, manifolds = collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
+                                          options.contact_margin, sweep, options.granularity, options.normal,
+                                          options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
         carried = {k: v for k, v in state.carried.items() if not k.startswith("constraint_")}
+        carried["manifolds"] = manifolds
         return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
@@ -263,6 +267,6 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
     mid = advance_positions(*state.positions, *move, tau_body * h, tau_particle * h)
     positions = advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
-    carried = dict(state.carried, constraint_ids=contacts.feature_id, constraint_values=lam)
+    carried = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual))

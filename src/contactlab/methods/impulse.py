@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..collision import GRANULARITIES, NORMALS, collide_keeping, swept_distances
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
@@ -54,6 +54,7 @@ class Options:
     max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see module docs)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
+    manifold_tolerance: float = 1e-4      # m: box and hull pairs that moved less reuse last contacts (0 = never)
     warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
     normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
@@ -68,6 +69,7 @@ class Options:
         self.slop = _number(self.slop, "slop", 0.0)
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
         self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"samples": 1, "cloth_samples": 0})
@@ -143,10 +145,12 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     sweep = swept_distances(model, move[0], w_body, move[2], dt)
     # 3. collision detection over the swept step: contacts at the start positions, with gaps
     #    down to what the motion could close (speculative contacts: nothing tunnels)
-    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples, cloth_samples=options.cloth_samples)
+    contacts, manifolds = collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
+                                          options.contact_margin, sweep, options.granularity, options.normal,
+                                          options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
         carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
+        carried["manifolds"] = manifolds
         return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
     gap_at_start = -contacts.depth                         # d₀
@@ -174,7 +178,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
     mid = advance_positions(*state.positions, *move, tau_body * dt, tau_particle * dt)
     positions = advance_positions(*mid, *corrected, (1 - tau_body) * dt, (1 - tau_particle) * dt)
-    carried = dict(state.carried, impulse_ids=contacts.feature_id, impulse_values=impulses)
+    carried = dict(state.carried, manifolds=manifolds, impulse_ids=contacts.feature_id, impulse_values=impulses)
     new = State.assemble(state.time + dt, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
 

@@ -1,0 +1,222 @@
+"""Contact manifolds kept across steps: a pair that has barely moved reuses its contacts.
+
+Clipping two boxes (or hulls) is the costly part of a narrow phase, and in a resting stack it
+returns the same few contacts step after step. So, as Bullet does with its persistent
+manifolds, each pair of boxes, hulls and planes (``kept_pairs``) keeps what it found: both
+colliders' poses then, and every contact as two witness points (the surface points of A and of
+B, each in its own collider's frame) and a normal in A's frame. A later step reuses the pair's
+contacts, without calling its routine, while the relative motion since then is within the
+tolerance; it refreshes each one from the witness points at the current poses, so depth and
+point are exact for those two material points:
+
+    p_A = c_A + R_A w_A,   p_B = c_B + R_B w_B,   n = R_A n_A,
+    depth = (p_B − p_A) · n,   point = (p_A + p_B) / 2.
+
+Valid means: every point of the smaller collider has moved at most ``tolerance`` [m] in the
+larger one's frame (the chord bound |Δt| + ρ ‖ΔR‖_F / √2, ρ its bounding radius), and the pair's
+reach now plus that motion stays inside the reach its contacts were computed with (so no
+contact that has come within reach can be missing). To leave room for the second condition,
+a kept pair is computed with its reach widened by the tolerance; contacts beyond the current
+reach are dropped from what the step sees. Anything else (a new pair, a moving pair, a pair
+with a sphere, capsule or particle) is computed afresh.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .. import shapes
+from .narrow_phase import MAX_PER_PAIR, generate_contacts
+
+
+@dataclass(frozen=True)
+class Manifolds:
+    """Contacts kept per collider pair. K pairs, sorted by ``keys``; S = MAX_PER_PAIR slots."""
+    keys: np.ndarray        # (K,) int64, pair (a, b) of global colliders as a · total + b
+    reach: np.ndarray       # (K,) [m] the reach the contacts were computed with
+    center: np.ndarray      # (K, 2, 3) [m] the colliders' centres then
+    rotation: np.ndarray    # (K, 2, 3, 3) their rotations then (collider → world)
+    count: np.ndarray       # (K,) int64 contacts kept (0: near, not touching)
+    witness: np.ndarray     # (K, S, 2, 3) [m] each contact's surface points of A and B, in their own frames
+    normal: np.ndarray      # (K, S, 3) unit, from B into A, in A's frame
+    feature: np.ndarray     # (K, S) int64 feature number within the pair
+
+    @classmethod
+    def empty(cls) -> "Manifolds":
+        return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2, 3)), np.zeros((0, 2, 3, 3)),
+                   np.zeros(0, np.int64), np.zeros((0, MAX_PER_PAIR, 2, 3)), np.zeros((0, MAX_PER_PAIR, 3)),
+                   np.zeros((0, MAX_PER_PAIR), np.int64))
+
+    def __len__(self):
+        return len(self.keys)
+
+
+def kept_pairs(kinds, pairs):
+    """(K,) bool: the pairs that keep manifolds: boxes and convex hulls against each other and
+    against planes. Their contacts sit at vertices, edges and faces, which move with the
+    bodies; a sphere's or a capsule's contact point rolls over its surface instead, so
+    witness points fixed in it would tilt the normal as it rolls (a lying capsule crept
+    sideways at 1.5 mm/s on kept contacts)."""
+    flat = (kinds == shapes.BOX) | (kinds == shapes.CONVEX) | (kinds == shapes.PLANE)
+    return flat[pairs[:, 0]] & flat[pairs[:, 1]]
+
+
+@njit(cache=True)
+def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, kept_keys, reach_then, center_then,
+                 rotation_then, tolerance):
+    """For each pair k (K,), the row of its kept manifold if that is still valid, else −1 (see
+    the module's docstring). ``keeps`` (K,) bool: pairs that keep manifolds; ``radius`` (N,)
+    bounding radii [m]; ``kept_keys`` sorted."""
+    K = pairs.shape[0]
+    row = np.full(K, -1, dtype=np.int64)
+    if kept_keys.shape[0] == 0:
+        return row
+    place = np.searchsorted(kept_keys, keys)
+    for k in range(K):
+        m = place[k]
+        if not keeps[k] or m >= kept_keys.shape[0] or kept_keys[m] != keys[k]:
+            continue
+        a, b = pairs[k, 0], pairs[k, 1]
+        # the frame of the larger collider (a static plane's, if there is one); the other's motion in it
+        ref, mover, ref_side = (a, b, 0) if radius[a] >= radius[b] else (b, a, 1)
+        R, R0 = rotations_[ref], rotation_then[m, ref_side]
+        Q, Q0 = rotations_[mover], rotation_then[m, 1 - ref_side]
+        shift = 0.0
+        turn = 0.0
+        for i in range(3):
+            # t = Rᵀ (c_mover − c_ref) now and then; R_rel = Rᵀ Q now and then
+            t = 0.0
+            t0 = 0.0
+            for j in range(3):
+                t += R[j, i] * (centers[mover, j] - centers[ref, j])
+                t0 += R0[j, i] * (center_then[m, 1 - ref_side, j] - center_then[m, ref_side, j])
+            shift += (t - t0) ** 2
+            for l in range(3):
+                r = 0.0
+                r0 = 0.0
+                for j in range(3):
+                    r += R[j, i] * Q[j, l]
+                    r0 += R0[j, i] * Q0[j, l]
+                turn += (r - r0) ** 2
+        motion = np.sqrt(shift) + radius[mover] * np.sqrt(0.5 * turn)
+        if motion <= tolerance and pair_reach[k] + motion <= reach_then[m]:
+            row[k] = m
+    return row
+
+
+@njit(cache=True)
+def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotations_,
+             point, normal, depth, feature, owner,
+             kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature):
+    """The step's contacts in pair order, and the manifolds to keep, sorted by key.
+
+    Pair k takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
+    ≥ 0 (the manifold itself is kept as it is), else its fresh contacts (point … owner, as
+    ``generate_contacts`` gave them, owner indexing ``pairs``), recorded as a new manifold when
+    ``keeps[k]``. Contacts deeper in the gap than ``pair_reach`` [m] are left out."""
+    K, S = pairs.shape[0], MAX_PER_PAIR
+    capacity = point.shape[0]
+    for k in range(K):
+        if row[k] >= 0:
+            capacity += kept_count[row[k]]
+    out_point = np.empty((capacity, 3))
+    out_normal = np.empty((capacity, 3))
+    out_depth = np.empty(capacity)
+    out_feature = np.empty(capacity, dtype=np.int64)
+    out_owner = np.empty(capacity, dtype=np.int64)
+    M = 0
+    for k in range(K):
+        if keeps[k]:
+            M += 1
+    new_keys = np.empty(M, dtype=np.int64)
+    new_reach = np.empty(M)
+    new_center = np.empty((M, 2, 3))
+    new_rotation = np.empty((M, 2, 3, 3))
+    new_count = np.zeros(M, dtype=np.int64)
+    new_witness = np.zeros((M, S, 2, 3))
+    new_normal = np.zeros((M, S, 3))
+    new_feature = np.zeros((M, S), dtype=np.int64)
+    c = 0           # contacts written
+    f = 0           # next fresh contact
+    r = 0           # manifolds written
+    for k in range(K):
+        a, b = pairs[k, 0], pairs[k, 1]
+        m = row[k]
+        if m >= 0:                  # reused: refreshed from the witness points
+            new_keys[r], new_reach[r], new_count[r] = keys[k], kept_reach[m], kept_count[m]
+            new_center[r], new_rotation[r] = kept_center[m], kept_rotation[m]
+            new_witness[r], new_normal[r], new_feature[r] = kept_witness[m], kept_normal[m], kept_feature[m]
+            r += 1
+            for s in range(kept_count[m]):
+                gap = 0.0
+                for i in range(3):
+                    pa = centers[a, i]
+                    pb = centers[b, i]
+                    n = 0.0
+                    for j in range(3):
+                        pa += rotations_[a, i, j] * kept_witness[m, s, 0, j]
+                        pb += rotations_[b, i, j] * kept_witness[m, s, 1, j]
+                        n += rotations_[a, i, j] * kept_normal[m, s, j]
+                    out_point[c, i] = 0.5 * (pa + pb)
+                    out_normal[c, i] = n
+                    gap += (pb - pa) * n
+                if gap >= -pair_reach[k]:
+                    out_depth[c], out_feature[c], out_owner[c] = gap, kept_feature[m, s], k
+                    c += 1
+            continue
+        if keeps[k]:                # computed afresh: kept as a new manifold
+            new_keys[r], new_reach[r] = keys[k], computed_reach[k]
+            new_center[r, 0], new_center[r, 1] = centers[a], centers[b]
+            new_rotation[r, 0], new_rotation[r, 1] = rotations_[a], rotations_[b]
+        while f < owner.shape[0] and owner[f] == k:
+            if keeps[k]:
+                s = new_count[r]
+                for i in range(3):  # surface points of A and B: midway ∓ half the depth along n, in own frames
+                    wa = 0.0
+                    wb = 0.0
+                    n = 0.0
+                    for j in range(3):
+                        sa = point[f, j] - 0.5 * depth[f] * normal[f, j]
+                        sb = point[f, j] + 0.5 * depth[f] * normal[f, j]
+                        wa += rotations_[a, j, i] * (sa - centers[a, j])
+                        wb += rotations_[b, j, i] * (sb - centers[b, j])
+                        n += rotations_[a, j, i] * normal[f, j]
+                    new_witness[r, s, 0, i], new_witness[r, s, 1, i], new_normal[r, s, i] = wa, wb, n
+                new_feature[r, s] = feature[f]
+                new_count[r] = s + 1
+            if depth[f] >= -pair_reach[k]:
+                out_point[c], out_normal[c] = point[f], normal[f]
+                out_depth[c], out_feature[c], out_owner[c] = depth[f], feature[f], k
+                c += 1
+            f += 1
+        if keeps[k]:
+            r += 1
+    order = np.argsort(new_keys)
+    return ((out_point[:c], out_normal[:c], out_depth[:c], out_feature[:c], out_owner[:c]),
+            (new_keys[order], new_reach[order], new_center[order], new_rotation[order], new_count[order],
+             new_witness[order], new_normal[order], new_feature[order]))
+
+
+def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, manifolds, tolerance, total):
+    """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
+    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
+    number of colliders (for the keys). Returns (point, normal, depth, feature, owner, the
+    manifolds to keep for the next step). Contacts come in pair order, as from
+    ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
+    gives it."""
+    kept = manifolds if manifolds is not None else Manifolds.empty()
+    first, second = pairs[:, 0], pairs[:, 1]
+    keys = first * total + second
+    pair_reach = reach[first] + reach[second]
+    keeps = kept_pairs(kinds, pairs)
+    row = _still_valid(pairs, keys, keeps, pair_reach, shapes.bounding_radii(kinds, params), centers, rots,
+                       kept.keys, kept.reach, kept.center, kept.rotation, tolerance)
+    fresh = np.nonzero(row < 0)[0]
+    widened = pair_reach + tolerance * keeps          # a kept manifold reaches a tolerance further
+    point, normal, depth, feature, owner = generate_contacts(pairs[fresh], kinds, params, centers, rots,
+                                                             widened[fresh], hull_store)
+    contacts, made = _combine(pairs, keys, keeps, pair_reach, widened, row, centers, rots,
+                              point, normal, depth, feature, fresh[owner], kept.reach, kept.center, kept.rotation,
+                              kept.count, kept.witness, kept.normal, kept.feature)
+    return (*contacts, Manifolds(*made))
