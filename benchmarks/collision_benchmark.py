@@ -7,6 +7,12 @@ as they rest (every sphere touching its neighbours and the floor), and a 100-lev
 of 0.1 m cubes (5 050 boxes, 5 mm gaps). Each is timed over several calls of
 ``collide(model, state)`` after a first call that compiles the kernels; the table gives the
 median time per call, contacts found, contacts per second, and the broad phase's share.
+
+A second table times the manifolds kept across steps (``collide_keeping``, docs/collision.md)
+on resting scenes: the pyramid, and 108 convex hulls of 40 points settled on the ground by the
+``constraints`` method: a fresh ``collide`` against a call that reuses what the previous step
+kept, after every body has moved 10 µm (within the 0.1 mm tolerance). For the hulls it also
+gives ``constraints`` steps per second over 1 s from the settled state, with and without.
 """
 
 import argparse
@@ -14,8 +20,8 @@ import time
 
 import numpy as np
 
-from contactlab import ModelBuilder, collide
-from contactlab.collision import _bounds, _colliders
+from contactlab import ModelBuilder, collide, simulate
+from contactlab.collision import _bounds, _colliders, collide_keeping
 from contactlab.collision.broad_phase import overlapping_pairs
 
 
@@ -65,6 +71,43 @@ def measure(name, model, repeat):
           f"{contacts.count / seconds:,.0f} | {np.median(broad) / seconds:.0%} |")
 
 
+def hull_stack(seed=0):
+    """108 hulls of 40 random points on a 5 cm sphere, three layers on a 6 × 6 grid, settled
+    for 1.5 s by ``constraints`` (dt 1/240, 50 sweeps): (model, settled state)."""
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(40, 3))
+    points = 0.05 * points / np.linalg.norm(points, axis=1)[:, None]
+    b = ModelBuilder()
+    b.add_material("m", friction=0.6, restitution=0.0)
+    for i in range(6):
+        for j in range(6):
+            for level in range(3):
+                b.add_body("convex", points=points.tolist(), mass=1.0, position=(0.11 * i, 0.11 * j, 0.06 + 0.1 * level),
+                           material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    return model, simulate(model, "constraints", 1 / 240, 1.5, {"iterations": 50}).state
+
+
+def measure_kept(name, model, state, repeat, tolerance=1e-4, margin=0.002):
+    """Fresh ``collide`` against ``collide_keeping`` reusing the manifolds of a call 10 µm back."""
+    _, kept = collide_keeping(model, state, None, tolerance, margin)
+    moved = state.copy()
+    moved.body_position += 1e-5
+    collide(model, moved, margin)
+    fresh, reused = [], []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        collide(model, moved, margin)
+        t1 = time.perf_counter()
+        contacts, _ = collide_keeping(model, moved, kept, tolerance, margin)
+        t2 = time.perf_counter()
+        fresh.append(t1 - t0)
+        reused.append(t2 - t1)
+    print(f"| {name} | {model.body_count} | {contacts.count} | {len(kept)} | {np.median(fresh) * 1e3:.2f} | "
+          f"{np.median(reused) * 1e3:.2f} |")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=10)
@@ -74,6 +117,19 @@ def main():
     measure("sphere pile 1k", sphere_pile(1000), args.repeat)
     measure("sphere pile 10k", sphere_pile(10000), args.repeat)
     measure("box pyramid 100 levels", box_pyramid(100), args.repeat)
+    print()
+    print("| resting scene | bodies | contacts | kept pairs | ms per collide | ms reusing kept manifolds |")
+    print("|---|---|---|---|---|---|")
+    pyramid = box_pyramid(100)
+    measure_kept("box pyramid 100 levels", pyramid, pyramid.state(), args.repeat)
+    model, settled = hull_stack()
+    measure_kept("hull stack", model, settled, args.repeat)
+    print()
+    for tolerance in (0.0, 1e-4):
+        run = simulate(model, "constraints", 1 / 240, 1.0, {"iterations": 50, "manifold_tolerance": tolerance},
+                       state=settled)
+        print(f"hull stack, constraints, manifold_tolerance {tolerance:g}: "
+              f"{run.summary['steps_per_second']:.1f} steps/s")
 
 
 if __name__ == "__main__":

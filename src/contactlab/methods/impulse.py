@@ -33,6 +33,7 @@ from numba import njit
 
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS, collide_keeping, swept_distances
+from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
@@ -184,13 +185,9 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
 
 
 def warm_start_impulses(carried, feature_id, fraction):
-    """Last step's resting-contact impulses (C, 3) for the contacts that persist, by id; 0 for new ones."""
-    warm = np.zeros((len(feature_id), 3))
-    ids, values = carried.get("impulse_ids"), carried.get("impulse_values")
-    if fraction <= 0.0 or ids is None or len(ids) == 0:
-        return warm
-    order = np.argsort(ids)
-    place = np.clip(np.searchsorted(ids, feature_id, sorter=order), 0, len(ids) - 1)
-    found = ids[order[place]] == feature_id
-    warm[found] = fraction * values[order[place[found]]]
-    return warm
+    """Last step's resting-contact impulses (C, 3) for the contacts that persist, by id, times
+    ``fraction``; 0 for new ones."""
+    if fraction <= 0.0:
+        return np.zeros((len(feature_id), 3))
+    values, _ = values_by_id(carried.get("impulse_ids"), carried.get("impulse_values"), feature_id, 3)
+    return fraction * values
