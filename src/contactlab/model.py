@@ -117,6 +117,17 @@ class Model:
         return pattern
 
     @property
+    def body_radii(self) -> np.ndarray:
+        """(B,) [m] radii of the spheres about the bodies' centres that enclose them
+        (``shapes.bounding_radii``): fixed by the shapes, computed on first use and kept."""
+        radii = self.__dict__.get("_body_radii")
+        if radii is None:
+            from .shapes import bounding_radii
+            radii = bounding_radii(self.body_shape, self.body_params)
+            object.__setattr__(self, "_body_radii", radii)
+        return radii
+
+    @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
         return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)

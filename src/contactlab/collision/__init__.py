@@ -41,7 +41,7 @@ def swept_distances(model, body_velocity, body_angular_velocity, particle_veloci
     """How far each body and particle may move in a step of dt [s] at the given velocities,
     (B + P,) [m]: h |v|, plus for a body how far its farthest point turns, h |ω| r. This is the
     ``sweep`` argument of :func:`collide`."""
-    body_reach = shapes.bounding_radii(model.body_shape, model.body_params)
+    body_reach = model.body_radii
     body = dt * (np.linalg.norm(body_velocity, axis=1) + np.linalg.norm(body_angular_velocity, axis=1) * body_reach)
     return np.concatenate([body, dt * np.linalg.norm(particle_velocity, axis=1)])
 

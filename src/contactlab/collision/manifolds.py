@@ -210,6 +210,8 @@ def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, man
     keys = first * total + second
     pair_reach = reach[first] + reach[second]
     keeps = kept_pairs(kinds, pairs)
+    if not keeps.any():             # a pile of spheres: nothing to keep, nothing to look up
+        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store), Manifolds.empty())
     row = _still_valid(pairs, keys, keeps, pair_reach, shapes.bounding_radii(kinds, params), centers, rots,
                        kept.keys, kept.reach, kept.center, kept.rotation, tolerance)
     fresh = np.nonzero(row < 0)[0]

@@ -38,7 +38,6 @@ from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
 from ..errors import InputError, StabilityWarning
-from ..shapes import bounding_radii
 from ..state import State
 from . import StepInfo, check_choices, check_counts
 
@@ -157,7 +156,7 @@ def lightest_contact_mass(model) -> float:
     1 / (1/m + R²/I_min) — a push at its farthest point R, turning it about its weakest axis."""
     masses = [np.inf]
     if model.body_count:
-        reach = bounding_radii(model.body_shape, model.body_params)
+        reach = model.body_radii
         masses.append(np.min(1.0 / (model.body_inverse_mass + reach ** 2 / model.body_inertia.min(axis=1))))
     if model.particle_count:
         masses.append(model.particle_mass.min())
