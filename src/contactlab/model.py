@@ -128,6 +128,24 @@ class Model:
         return radii
 
     @property
+    def collider_table(self):
+        """The fixed part of collision's global collider arrays (bodies, then particles, then
+        obstacles): kinds (N,) int64, params (N, 4), materials (N,) int and the obstacles'
+        rotation matrices (O, 3, 3); built on first use and kept."""
+        table = self.__dict__.get("_collider_table")
+        if table is None:
+            from . import rotations, shapes
+            particle_params = np.zeros((self.particle_count, 4))
+            particle_params[:, 0] = self.particle_radius
+            kinds = np.concatenate([self.body_shape, np.full(self.particle_count, shapes.POINT),
+                                    self.obstacle_shape]).astype(np.int64)
+            params = np.concatenate([self.body_params, particle_params, self.obstacle_params])
+            materials = np.concatenate([self.body_material, self.particle_material, self.obstacle_material])
+            table = (kinds, params, materials, rotations.to_matrix(self.obstacle_orientation))
+            object.__setattr__(self, "_collider_table", table)
+        return table
+
+    @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
         return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)

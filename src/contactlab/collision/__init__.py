@@ -6,11 +6,12 @@ broad phase; each dynamic collider is tested against the obstacles its bounds re
 """
 
 import numpy as np
+from numba import njit
 
 from .. import rotations, shapes
 from ..contacts import Contacts, tangent_basis
 from ..errors import InputError
-from .broad_phase import overlapping_pairs
+from .broad_phase import overlapping_pairs, static_pairs
 from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
@@ -48,27 +49,39 @@ def swept_distances(model, body_velocity, body_angular_velocity, particle_veloci
 
 def _colliders(model, state):
     """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
-    B, P = model.body_count, model.particle_count
-    particle_params = np.zeros((P, 4))
-    particle_params[:, 0] = model.particle_radius
-    kinds = np.concatenate([model.body_shape, np.full(P, shapes.POINT), model.obstacle_shape])
-    params = np.concatenate([model.body_params, particle_params, model.obstacle_params])
+    kinds, params, _, obstacle_rotations = model.collider_table
     centers = np.concatenate([state.body_position, state.particle_position, model.obstacle_position])
-    rots = np.concatenate([rotations.to_matrix(state.body_orientation), np.broadcast_to(np.eye(3), (P, 3, 3)),
-                           rotations.to_matrix(model.obstacle_orientation)])
-    return kinds.astype(np.int64), params, centers, np.ascontiguousarray(rots)
+    rots = np.concatenate([rotations.to_matrix(state.body_orientation),
+                           np.broadcast_to(np.eye(3), (model.particle_count, 3, 3)), obstacle_rotations])
+    return kinds, params, centers, rots
 
 
+@njit(cache=True)
 def _bounds(kinds, params, centers, rots, margin):
-    """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin (N,); planes infinite."""
-    half = np.select(
-        [kinds[:, None] == shapes.BOX, kinds[:, None] == shapes.CAPSULE, kinds[:, None] == shapes.CONVEX],
-        [np.einsum("nij,nj->ni", np.abs(rots), params[:, :3]),                # box: |R| h
-         np.abs(rots[:, :, 2]) * params[:, 1:2] + params[:, :1],              # capsule: |axis| h + r
-         np.broadcast_to(params[:, 1:2], (len(params), 3))],                  # convex: bounding sphere
-        default=params[:, :1])
-    half = np.where((kinds == shapes.PLANE)[:, None], np.inf, half) + margin[:, None]
-    return centers - half, centers + half
+    """Axis-aligned boxes (N,3) lower and upper of the colliders, grown by margin (N,) [m];
+    planes infinite. Half-widths: a box |R| h, a capsule |axis| h + r, a convex hull its
+    bounding sphere, a sphere or particle its radius."""
+    N = kinds.shape[0]
+    lower = np.empty((N, 3))
+    upper = np.empty((N, 3))
+    for n in range(N):
+        for i in range(3):
+            kind = kinds[n]
+            if kind == shapes.PLANE:
+                half = np.inf
+            elif kind == shapes.BOX:
+                half = abs(rots[n, i, 0]) * params[n, 0] + abs(rots[n, i, 1]) * params[n, 1] + \
+                    abs(rots[n, i, 2]) * params[n, 2]
+            elif kind == shapes.CAPSULE:
+                half = abs(rots[n, i, 2]) * params[n, 1] + params[n, 0]
+            elif kind == shapes.CONVEX:
+                half = params[n, 1]
+            else:
+                half = params[n, 0]
+            half += margin[n]
+            lower[n, i] = centers[n, i] - half
+            upper[n, i] = centers[n, i] + half
+    return lower, upper
 
 
 def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2,
@@ -115,23 +128,9 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
         same = (cloth[dyn_pairs[:, 0]] >= 0) & (cloth[dyn_pairs[:, 0]] == cloth[dyn_pairs[:, 1]])
         dyn_pairs = dyn_pairs[~same]
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
-    static_pairs = []
-    mesh_parts = []
-    for o in range(O):
-        g = dynamic + o
-        if kinds[g] == shapes.MESH:
-            mesh_parts.append(_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic))
-            continue
-        if kinds[g] == shapes.PLANE:
-            n, offset = params[g, :3], params[g, 3]
-            half_width = np.abs(upper[:dynamic] - lower[:dynamic]) @ np.abs(n) * 0.5
-            mid = 0.5 * (upper[:dynamic] + lower[:dynamic])
-            near = mid @ n - offset <= half_width
-        else:
-            near = ((lower[:dynamic] <= upper[g]) & (lower[g] <= upper[:dynamic])).all(axis=1)
-        hit = np.nonzero(near)[0]
-        static_pairs.append(np.stack([hit, np.full(len(hit), g)], axis=1))
-    pairs = np.concatenate([dyn_pairs] + static_pairs).astype(np.int64) if static_pairs else dyn_pairs
+    mesh_parts = [_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
+                  for g in range(dynamic, dynamic + O) if kinds[g] == shapes.MESH]
+    pairs = np.concatenate([dyn_pairs, static_pairs(lower, upper, kinds, params, dynamic)]).astype(np.int64)
     if granularity != "vertex" or normal != "object":
         reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
         surface_parts, bodies, obstacles = polytope_contacts(model, state, granularity, normal, samples,
@@ -184,15 +183,11 @@ def _side(model, collider):
     return body, particles, weights
 
 
-def _material(model, collider):
-    table = np.concatenate([model.body_material, model.particle_material, model.obstacle_material])
-    return table[collider]
-
-
 def _assemble(model, a, b, point, normal, depth, feature, total):
     body_a, particles_a, weights_a = _side(model, a)
     body_b, particles_b, weights_b = _side(model, b)
-    mat_a, mat_b = _material(model, a), _material(model, b)
+    materials = model.collider_table[2]
+    mat_a, mat_b = materials[a], materials[b]
     t1, t2 = tangent_basis(normal)
     friction, restitution = model.pair_materials(mat_a, mat_b)
     return Contacts(

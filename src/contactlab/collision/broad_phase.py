@@ -18,6 +18,8 @@ Three algorithms, one answer (``overlapping_pairs`` picks):
 import numpy as np
 from numba import njit
 
+from .. import shapes
+
 
 GRID_FROM = 1000     # boxes: from this many on, the hash grid (equal speed at 1000, 7x faster at 10000)
 
@@ -213,3 +215,36 @@ def brute_force_pairs(lower, upper):
     overlap = ((lower[:, None, :] <= upper[None, :, :]) & (lower[None, :, :] <= upper[:, None, :])).all(axis=2)
     i, j = np.nonzero(np.triu(overlap, k=1))
     return np.stack([i, j], axis=1).astype(np.int64)
+
+
+@njit(cache=True)
+def static_pairs(lower, upper, kinds, params, dynamic):
+    """Candidate pairs (K, 2) of the dynamic colliders 0 … dynamic−1 with the static ones after
+    them, obstacle by obstacle, each in collider order: against a plane (normal n, offset in
+    ``params``) when the bounds' centre lies within their half-width along n of its front,
+    against any other obstacle when the bounds overlap; meshes are left out (their pairs come
+    from their own triangle grid). ``lower``, ``upper`` (N, 3) [m]; ``kinds`` (N,) int."""
+    N = kinds.shape[0]
+    out = np.empty(((N - dynamic) * dynamic, 2), dtype=np.int64)
+    count = 0
+    for g in range(dynamic, N):
+        if kinds[g] == shapes.MESH:
+            continue
+        plane = kinds[g] == shapes.PLANE
+        for i in range(dynamic):
+            if plane:
+                half_width = 0.0
+                height = 0.0
+                for k in range(3):
+                    half_width += abs(upper[i, k] - lower[i, k]) * abs(params[g, k])
+                    height += 0.5 * (upper[i, k] + lower[i, k]) * params[g, k]
+                near = height - params[g, 3] <= half_width * 0.5
+            else:
+                near = True
+                for k in range(3):
+                    near = near and lower[i, k] <= upper[g, k] and lower[g, k] <= upper[i, k]
+            if near:
+                out[count, 0] = i
+                out[count, 1] = g
+                count += 1
+    return out[:count]
