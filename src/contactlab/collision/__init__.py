@@ -65,8 +65,8 @@ def _bounds(kinds, params, centers, rots, margin):
     lower = np.empty((N, 3))
     upper = np.empty((N, 3))
     for n in range(N):
+        kind = kinds[n]
         for i in range(3):
-            kind = kinds[n]
             if kind == shapes.PLANE:
                 half = np.inf
             elif kind == shapes.BOX:
@@ -97,8 +97,8 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
     to keep for the next step: (Contacts, Manifolds or None).
 
     manifolds: what the last step's call returned (None: nothing kept); tolerance [m]: how far
-    a pair with a box or hull side may have moved, relative to each other, and still reuse its
-    kept contacts (collision.manifolds); 0 computes every pair afresh and keeps nothing.
+    a pair of boxes, hulls or planes may have moved, relative to each other, and still reuse
+    its kept contacts (collision.manifolds); 0 computes every pair afresh and keeps nothing.
 
     granularity ("object" | "vertex" | "samples", SPEC P2a/b/c), normal ("object" | "vertex",
     SPEC P4/P5) and samples (per triangle edge, for "samples") choose how boxes and convex
