@@ -223,6 +223,17 @@ def test_fast_sphere_does_not_pass_through_another():
     np.testing.assert_allclose(run.arrays["body_velocity"][-1, :, 0], [50.0, 50.0])   # inelastic: shared
 
 
+def test_collider_rotations_are_laid_out_for_the_compiled_pair_routines():
+    """The narrow phase is compiled for C-ordered rotations; rotations.to_matrix returns other
+    strides, which would compile a second, slower specialization (Numba warns about it)."""
+    from contactlab.collision import _colliders
+    b = ModelBuilder()
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, orientation=(0.9, 0.1, 0.3, 0.2))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    assert _colliders(model, model.state())[3].flags.c_contiguous
+
+
 def test_bounds_enclose_every_shape(rng):
     """The broad phase's boxes contain every point of the shapes (sampled on their surfaces)."""
     from contactlab.collision import _bounds, _colliders

@@ -53,7 +53,7 @@ def _colliders(model, state):
     centers = np.concatenate([state.body_position, state.particle_position, model.obstacle_position])
     rots = np.concatenate([rotations.to_matrix(state.body_orientation),
                            np.broadcast_to(np.eye(3), (model.particle_count, 3, 3)), obstacle_rotations])
-    return kinds, params, centers, rots
+    return kinds, params, centers, np.ascontiguousarray(rots)     # concatenate keeps to_matrix's strides
 
 
 @njit(cache=True)
