@@ -9,10 +9,11 @@ free ones and the vertices of every cloth, in the order they were added.
 """
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from . import shapes
+from . import rotations, shapes
 
 
 @dataclass(frozen=True)
@@ -105,45 +106,31 @@ class Model:
     def spring_count(self) -> int:
         return len(self.spring_rest_length)
 
-    @property
+    @cached_property
     def spring_pattern(self):
         """Where the springs' Jacobian blocks sit in a (3P, 3P) CSR matrix
         (``dynamics.cloth.SpringPattern``): fixed by the topology, built on first use and kept."""
-        pattern = self.__dict__.get("_spring_pattern")
-        if pattern is None:
-            from .dynamics.cloth import spring_pattern
-            pattern = spring_pattern(self.spring_particles, self.particle_count)
-            object.__setattr__(self, "_spring_pattern", pattern)
-        return pattern
+        from .dynamics.cloth import spring_pattern
+        return spring_pattern(self.spring_particles, self.particle_count)
 
-    @property
+    @cached_property
     def body_radii(self) -> np.ndarray:
         """(B,) [m] radii of the spheres about the bodies' centres that enclose them
         (``shapes.bounding_radii``): fixed by the shapes, computed on first use and kept."""
-        radii = self.__dict__.get("_body_radii")
-        if radii is None:
-            from .shapes import bounding_radii
-            radii = bounding_radii(self.body_shape, self.body_params)
-            object.__setattr__(self, "_body_radii", radii)
-        return radii
+        return shapes.bounding_radii(self.body_shape, self.body_params)
 
-    @property
+    @cached_property
     def collider_table(self):
         """The fixed part of collision's global collider arrays (bodies, then particles, then
         obstacles): kinds (N,) int64, params (N, 4), materials (N,) int and the obstacles'
         rotation matrices (O, 3, 3); built on first use and kept."""
-        table = self.__dict__.get("_collider_table")
-        if table is None:
-            from . import rotations, shapes
-            particle_params = np.zeros((self.particle_count, 4))
-            particle_params[:, 0] = self.particle_radius
-            kinds = np.concatenate([self.body_shape, np.full(self.particle_count, shapes.POINT),
-                                    self.obstacle_shape]).astype(np.int64)
-            params = np.concatenate([self.body_params, particle_params, self.obstacle_params])
-            materials = np.concatenate([self.body_material, self.particle_material, self.obstacle_material])
-            table = (kinds, params, materials, rotations.to_matrix(self.obstacle_orientation))
-            object.__setattr__(self, "_collider_table", table)
-        return table
+        particle_params = np.zeros((self.particle_count, 4))
+        particle_params[:, 0] = self.particle_radius
+        kinds = np.concatenate([self.body_shape, np.full(self.particle_count, shapes.POINT),
+                                self.obstacle_shape]).astype(np.int64)
+        params = np.concatenate([self.body_params, particle_params, self.obstacle_params])
+        materials = np.concatenate([self.body_material, self.particle_material, self.obstacle_material])
+        return kinds, params, materials, rotations.to_matrix(self.obstacle_orientation)
 
     @property
     def particle_inverse_mass(self) -> np.ndarray:

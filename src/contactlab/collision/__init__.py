@@ -50,10 +50,13 @@ def swept_distances(model, body_velocity, body_angular_velocity, particle_veloci
 def _colliders(model, state):
     """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
     kinds, params, _, obstacle_rotations = model.collider_table
+    B, P = model.body_count, model.particle_count
     centers = np.concatenate([state.body_position, state.particle_position, model.obstacle_position])
-    rots = np.concatenate([rotations.to_matrix(state.body_orientation),
-                           np.broadcast_to(np.eye(3), (model.particle_count, 3, 3)), obstacle_rotations])
-    return kinds, params, centers, np.ascontiguousarray(rots)     # concatenate keeps to_matrix's strides
+    rots = np.empty((len(kinds), 3, 3))          # C order, which the compiled pair routines are built for
+    rots[:B] = rotations.to_matrix(state.body_orientation)
+    rots[B:B + P] = np.eye(3)
+    rots[B + P:] = obstacle_rotations
+    return kinds, params, centers, rots
 
 
 @njit(cache=True)

@@ -55,7 +55,7 @@ class Options:
     max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see module docs)
     contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
-    manifold_tolerance: float = 1e-4      # m: box and hull pairs that moved less reuse last contacts (0 = never)
+    manifold_tolerance: float = 1e-4      # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
     warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
     normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
