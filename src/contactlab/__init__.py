@@ -17,7 +17,8 @@ from .errors import InputError, SimulationDiverged
 from .model import Model
 from .simulation import Run, simulate
 from .state import State
+from .threads import set_threads
 
 __all__ = ["ModelBuilder", "Model", "State", "Contacts", "collide", "simulate", "Run",
-           "InputError", "SimulationDiverged"]
+           "InputError", "SimulationDiverged", "set_threads"]
 __version__ = "0.1.0"

@@ -71,6 +71,9 @@ def _scene_arguments(command):
     command.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
     command.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                          help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]")
+    command.add_argument("--threads", default="auto", metavar="N",
+                         help="threads of the compiled sweeps: a number, or auto (default: all cores, or one "
+                              "while that is faster on a busy machine); results are the same on any count")
 
 
 def _scene_overrides(args):
@@ -193,6 +196,9 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
     try:
+        if hasattr(args, "threads"):
+            from .threads import set_threads
+            set_threads(args.threads, "--threads")
         if args.command in (None, "demo"):
             _run(DEFAULT_SCENE)
         elif args.command == "scenes":

@@ -18,6 +18,7 @@ from .collision import check_supported
 from .dynamics.integrators import INTEGRATORS
 from .errors import InputError, SimulationDiverged
 from .record import Recorder
+from .threads import ThreadChooser
 
 
 MAX_SPEED = 1e6   # m/s: a point of a body or a particle moving faster has blown up (no contact scene gets near)
@@ -31,13 +32,15 @@ class Run:
 
 
 def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
-             record_every=1, state=None, progress=False, scene_name="custom") -> Run:
+             record_every=1, state=None, progress=False, scene_name="custom", threads=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options (or a dict of
     them); dt [s] > 0; record_every: sample every K steps (the first and last states are
-    always sampled). Raises InputError for bad arguments, SimulationDiverged if the state
-    stops being finite.
+    always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
+    all cores, or one while that steps faster on a busy machine) or a whole number — results are
+    bit for bit the same on any count. Raises InputError for bad arguments, SimulationDiverged
+    if the state stops being finite.
     """
     dt = _number(dt, "dt", 0.0, strict=True)
     duration = _number(duration, "duration", 0.0, strict=True)
@@ -51,6 +54,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     check_supported(model)
     if hasattr(module, "prepare"):
         options = module.prepare(model, dt, options, integrator)
+    chooser = ThreadChooser(threads)
     state = model.state() if state is None else state.copy()
     steps = max(1, int(round(duration / dt)))
     recorder = Recorder(model, record_every)
@@ -64,9 +68,10 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     run_started = time.perf_counter()
     with numba_event.install_listener("numba:compile", compiling), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
-                 desc=f"{scene_name} ({method})") as bar:
+                 desc=f"{scene_name} ({method})") as bar, chooser:
         for step_index in range(1, steps + 1):
             compiled_before = _seconds(compiling)
+            chooser.before_step()
             started = time.perf_counter()
             state, info = module.step(model, state, dt, options, integrator)
             elapsed = time.perf_counter() - started
@@ -76,6 +81,8 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
                 compiled = _seconds(compiling) - compiled_before
                 stepping_seconds += elapsed - compiled
                 later_compile_seconds += compiled
+                if compiled == 0.0:           # a step that compiled says nothing of the threads
+                    chooser.after_step(elapsed)
             max_contacts = max(max_contacts, info.contacts.count)
             if not state.is_finite() or state.max_speed() > MAX_SPEED:
                 raise SimulationDiverged(
@@ -97,6 +104,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "first_step_seconds": first_step_seconds,
         "compile_seconds": max(0.0, first_step_seconds - ordinary_step) + later_compile_seconds,
         "recording_seconds": recording_seconds,
+        "threads": chooser.summary(),
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
         "bodies": model.body_count, "particles": model.particle_count, "max_contacts": max_contacts,

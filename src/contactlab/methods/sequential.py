@@ -230,6 +230,23 @@ def rows_in_order(rows, order):
 
 
 @njit(cache=True, parallel=True)
+def sweep_groups_in_parallel(members, starts, target, impulses, rows, friction, u, changes):
+    """One sweep of groups 0 … G−1 side by side (one thread each), then of the last group
+    (``starts`` (G + 2,) from ``sweep_groups``); returns the largest velocity change [m/s].
+
+    The only parallel region of the sweeps: kept apart so that a serial solve never starts
+    (or waits on) the thread pool — every array operation inside a ``parallel=True`` function
+    becomes a parallel loop of its own."""
+    groups = starts.shape[0] - 2
+    for g in prange(groups):
+        changes[g] = sweep_contacts(members[starts[g]:], starts[g + 1] - starts[g], target, impulses, rows,
+                                    friction, u)
+    last = sweep_contacts(members[starts[groups]:], members.shape[0] - starts[groups], target, impulses, rows,
+                          friction, u)
+    return max(last, changes.max())
+
+
+@njit(cache=True)
 def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterations, tolerance,
                               initial_impulses, order, starts):
     """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
@@ -243,8 +260,9 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
     impulse kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential
     impulse kept in the disk μ λ_n (F2). ``order`` and ``starts`` (G + 2,) int come from
     ``sweep_groups``: groups 0 … G−1 of a sweep run side by side on G threads, then the last
-    group; one thread (G = 1) is the plain serial sweep in ``order``. Returns (impulses (C, 3)
-    [N s] as (normal, t1, t2), sweeps made, largest velocity change in the last sweep [m/s]).
+    group (``sweep_groups_in_parallel``); one group (G = 1) is the plain serial sweep in
+    ``order``, which never touches the thread pool. Returns (impulses (C, 3) [N s] as
+    (normal, t1, t2), sweeps made, largest velocity change in the last sweep [m/s]).
     """
     C = friction.shape[0]
     groups = starts.shape[0] - 2
@@ -263,12 +281,8 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
         if groups == 1:
             change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
         else:
-            for g in prange(groups):
-                changes[g] = sweep_contacts(members[starts[g]:], starts[g + 1] - starts[g], target_o, impulses_o,
-                                            rows_o, friction_o, u)
-            last = sweep_contacts(members[starts[groups]:], C - starts[groups], target_o, impulses_o, rows_o,
-                                  friction_o, u)
-            change = max(last, changes.max())
+            change = sweep_groups_in_parallel(members, starts, target_o, impulses_o, rows_o, friction_o, u,
+                                              changes)
         if change <= tolerance:
             break
     impulses[order] = impulses_o
