@@ -100,6 +100,10 @@ def test_one_csv_row_per_method_matching_each_summary(pyramid):
         assert float(row["wall_seconds"]) == summary["wall_seconds"]
         assert float(row["max_penetration_mm"]) == pytest.approx(summary["max_penetration"] * 1000, rel=1e-12)
         assert int(row["max_solver_iterations"]) == summary["solver"]["max_iterations"]
+        sweeps = _trajectory(pyramid, row["method"])["solver_iterations"]
+        assert len(sweeps) == summary["steps"] + 1                    # every step recorded, and the start
+        assert float(row["mean_solver_iterations"]) == summary["solver"]["mean_iterations"] == \
+            pytest.approx(sweeps[1:].mean(), rel=1e-12)
         assert float(row["dt_s"]) == summary["dt"] and row["integrator"] == summary["integrator"]
 
 

@@ -194,6 +194,7 @@ def metrics(model, arrays, summary) -> dict:
         "energy_drift_relative": drift / scale if scale > TINY_ENERGY * max(1.0, abs(energy[0])) else None,
         "momentum_drift_Ns": "n/a" if momentum is None else momentum,
         "max_solver_iterations": iterations,
+        "mean_solver_iterations": summary["solver"]["mean_iterations"],
         "max_solver_residual": summary["solver"]["max_residual"] if iterations > 0 else None,
     }
 
@@ -259,6 +260,7 @@ COLUMNS = (
     ("energy_drift_relative", "energy drift (% of scale)", lambda value: f"{value * 100:+.3g}"),
     ("momentum_drift_Ns", "momentum drift (N·s)", _number(".3g")),
     ("max_solver_iterations", "max iterations", str),
+    ("mean_solver_iterations", "sweeps per step", _number(".3g")),
     ("max_solver_residual", "max residual (method units)", _number(".3g")),
 )
 ROW_KEYS = tuple(key for key, _, _ in COLUMNS)

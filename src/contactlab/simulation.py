@@ -60,6 +60,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     recorder = Recorder(model, record_every)
     recorder.sample(state)
     max_contacts = 0
+    sweeps_made = 0                   # solver sweeps summed over every step (recorded or not)
     first_step_seconds = 0.0          # the first step, compiling the kernels on first use
     stepping_seconds = 0.0            # the later steps: step() calls only, no recording, no compiling
     later_compile_seconds = 0.0       # kernels first needed after the first step (say, at the first contact)
@@ -84,6 +85,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
                 if compiled == 0.0:           # a step that compiled says nothing of the threads
                     chooser.after_step(elapsed)
             max_contacts = max(max_contacts, info.contacts.count)
+            sweeps_made += info.solver_iterations
             if not state.is_finite() or state.max_speed() > MAX_SPEED:
                 raise SimulationDiverged(
                     f"the simulation blew up at t = {state.time:.4g} s (velocities passed {MAX_SPEED:g} m/s or "
@@ -112,6 +114,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "final_penetration": float(arrays["max_penetration"][-1]),
         "energy": {"initial": float(energy[0]), "final": float(energy[-1]), "max": float(energy.max())},
         "solver": {"max_iterations": int(arrays["solver_iterations"].max()),
+                   "mean_iterations": sweeps_made / steps,
                    "max_residual": float(arrays["solver_residual"].max())},
     }
     return Run(state, arrays, summary)
