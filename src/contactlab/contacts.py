@@ -107,14 +107,15 @@ def _tangent_basis(normal):
     t2 = np.empty((C, 3))
     for c in range(C):
         nx, ny, nz = normal[c, 0], normal[c, 1], normal[c, 2]
-        # cross with the world axis least aligned with n (the first of equals): never degenerate
-        ax, ay, az = abs(nx), abs(ny), abs(nz)
-        if ax <= ay and ax <= az:                 # n × x̂
-            ux, uy, uz = 0.0, nz, -ny
-        elif ay <= az:                            # n × ŷ
+        # t1 = n × x̂, or n × ŷ where n is closest to ±x̂. The choice changes only where |n_x|
+        # passes max(|n_y|, |n_z|), 45° from the axes: a face normal a hair off an axis keeps
+        # its basis from step to step, so last step's friction impulses, stored along (t1, t2),
+        # still point the same way when they warm-start this step's (choosing by the least
+        # aligned axis flipped t1 by 90° whenever two tiny components swapped sizes).
+        if abs(nx) >= abs(ny) and abs(nx) >= abs(nz):     # n × ŷ
             ux, uy, uz = -nz, 0.0, nx
-        else:                                     # n × ẑ
-            ux, uy, uz = ny, -nx, 0.0
+        else:                                             # n × x̂
+            ux, uy, uz = 0.0, nz, -ny
         length = np.sqrt(ux * ux + uy * uy + uz * uz)
         ux, uy, uz = ux / length, uy / length, uz / length
         t1[c, 0], t1[c, 1], t1[c, 2] = ux, uy, uz
