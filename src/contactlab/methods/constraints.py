@@ -62,7 +62,7 @@ class Options:
     formulation: str = "velocity"         # velocity (C5b) | acceleration (C5a)
     friction_model: str = "cone"          # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
     iterations: int = 100                 # solver sweeps per step (at most)
-    tolerance: float = 1e-6               # matrix_free: m/s of the largest change; others: their residual
+    tolerance: float = None               # matrix_free: m/s a sweep changes a contact's velocity (1e-7); others: their residual (1e-6)
     omega: float = 1.0                    # over-relaxation of pgs, redblack, jacobi
     warm_start: float = 1.0               # fraction of last step's λ to start from (by contact id; 0 = cold)
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
@@ -81,6 +81,8 @@ class Options:
         check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid"),
                              "granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"iterations": 1, "samples": 1, "cloth_samples": 0})
+        if self.tolerance is None:        # each solver's own measure, so each its own default
+            self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
         self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
         self.omega = _number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)

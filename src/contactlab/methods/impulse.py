@@ -48,7 +48,7 @@ from .sequential import (contact_velocity, rows_of, solve_order, solve_sequentia
 class Options:
     """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md)."""
     iterations: int = 100                 # sweeps of sequential impulses per step, and collision waves (at most)
-    tolerance: float = 1e-6               # m/s: stop sweeping when no impulse changes a velocity more
+    tolerance: float = 1e-7               # m/s: stop once a sweep changes no contact's velocity more
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
     stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
     slop: float = 0.0005                  # m of penetration left alone by the stabilization
@@ -107,7 +107,7 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
     for c in range(C):
         tau[c] = -1.0
     for wave in range(max_waves):
-        count = 0
+        count = np.int64(0)         # not a literal 0, which would compile sweep_contacts twice
         for o in range(C):
             c = order[o]
             if restitution[c] <= 0.0 or k[c, 0] <= 0.0:

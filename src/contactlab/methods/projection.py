@@ -42,7 +42,7 @@ from .sequential import row_products, rows_of, solve_order, solve_sequential_imp
 class Options:
     """Settings of ``[method.projection]``."""
     iterations: int = 100                 # Gauss-Seidel sweeps per projection (at most)
-    tolerance: float = 1e-9               # m: stop sweeping when no correction moves a point more
+    tolerance: float = 1e-9               # m: stop once a sweep moves no contact point more
     passes: int = 2                       # detect-and-project rounds per step
     contact_margin: float = 0.001         # m: gaps this small are detected too
     granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
