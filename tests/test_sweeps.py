@@ -132,3 +132,38 @@ def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):
     height = contacts.point[order, 2]
     assert np.all(np.diff(height) <= 1e-9)                      # top to bottom
     assert sorted(order.tolist()) == list(range(contacts.count))
+
+
+def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle():
+    """Ten boxes stacked, settled: each box stands on four corners, so the load's split among
+    them is not unique, and single updates keep trading impulse between corners long after the
+    velocities have stopped changing. The sweeps stop once a whole sweep changes no contact's
+    velocity by more than the tolerance, well before the cap, though one more sweep's largest
+    single update is still far above it."""
+    from contactlab import simulate
+    from contactlab.collision import collide_keeping, swept_distances
+    from contactlab.contacts import values_by_id
+    from contactlab.methods import impulse
+    from contactlab.methods.velocity_level import resting_target
+    from contactlab.scene import load_scene
+    scene = load_scene("box_stack")
+    model, dt = scene.model, scene.dt
+    state = simulate(model, "impulse", dt, 0.5).state
+    options = impulse.Options()
+    v, w, p = free_velocities(model, state, dt)
+    contacts, _ = collide_keeping(model, state, state.carried["manifolds"], options.manifold_tolerance,
+                                  options.contact_margin, swept_distances(model, v, w, p, dt), options.granularity,
+                                  options.normal, options.samples)
+    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    order = sequential.solve_order(contacts, model.gravity)
+    warm, found = values_by_id(state.carried["impulse_ids"], state.carried["impulse_values"], contacts.feature_id, 3)
+    assert found.all()                                     # every contact warm-started
+    target = resting_target(-contacts.depth, dt, options)
+    u = stack(v, w, p)
+    lam, sweeps, change = sequential.solve_sequential_impulses(rows, contacts.friction, target, u, 100, 1e-7, warm,
+                                                               order, np.array([0, contacts.count, contacts.count]))
+    assert sweeps < 50 and change <= 1e-7
+    before = u.copy()
+    largest_update = sequential.sweep_contacts(order, contacts.count, target, lam, rows, contacts.friction, u)
+    assert largest_update > 10 * 1e-7                      # the single-update rule would have gone on
+    assert sequential.largest_row_change(rows, u, before) < largest_update
