@@ -151,7 +151,7 @@ def test_matrix_free_rows_equal_the_assembled_jacobian():
         Minv[k:k + 3, k:k + 3] = np.eye(3) / m
     W = J @ Minv @ J.T
     rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
-    k = rows[5]
+    k = rows.k
     for c in range(contacts.count):
         for d in range(3):
             assert k[c, d] == pytest.approx(W[3 * c + d, 3 * c + d], rel=1e-12)
@@ -378,7 +378,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
             np.array([0]), np.array([1]), -np.ones((1, 3), np.int64), -np.ones((1, 3), np.int64),
             np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), -r_world, n[None], t1, t2,
             1 / mass, inverse_world, np.zeros(0))
-        k = rows[5]
+        k = rows.k
         u = stack(v, w, np.zeros((0, 3)))
         J = np.concatenate([n, np.cross(r_world[0], n), -n, -np.cross(r_world[1], n)])
         M_inv = np.zeros((12, 12))

@@ -98,7 +98,7 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
     it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
     ``solve_order``). Returns the number of waves.
     """
-    k = rows[5]
+    k = rows.k
     C = k.shape[0]
     target = np.empty(C)
     closes = np.empty(C)
