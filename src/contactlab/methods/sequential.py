@@ -234,12 +234,14 @@ def sweep_contacts(members, count, target, impulses, rows, friction, u):
 @njit(cache=True)
 def largest_row_change(rows, u, before):
     """max over contacts and their three rows of |J (u − before)| [m/s]: how much the
-    generalized velocity's change from ``before`` to ``u`` (N,) moved any contact."""
+    generalized velocity's change from ``before`` to ``u`` (N,) moved any contact. Takes
+    ``before`` as scratch: it is left holding u − before."""
+    for i in range(u.shape[0]):
+        before[i] = u[i] - before[i]
     change = 0.0
     for c in range(rows.k.shape[0]):
-        vn, v1, v2 = contact_velocity(c, rows, u)
-        bn, b1, b2 = contact_velocity(c, rows, before)
-        change = max(change, abs(vn - bn), abs(v1 - b1), abs(v2 - b2))
+        dn, d1, d2 = contact_velocity(c, rows, before)
+        change = max(change, abs(dn), abs(d1), abs(d2))
     return change
 
 
