@@ -1,13 +1,16 @@
-"""contactlab against pybullet and MuJoCo on the scenes of issue 8 (a measurement, not a test).
+"""contactlab against pybullet and MuJoCo on the scenes of issues 8 and 18 (a measurement, not a test).
 
     python benchmarks/peers.py            # full settings (tens of minutes on 2 cores)
     python benchmarks/peers.py --quick    # smoke run: the same scenes, short durations
     python benchmarks/peers.py --only pile1000 pyramid --report-only ...
 
-Every engine steps the same scene in this one process, with dt = 1/240 s and the same number
-of solver iterations (50): contactlab's ``constraints`` method (and others where asked),
-pybullet with maximal coordinates in ``p.DIRECT`` mode, MuJoCo with the CG solver. A peer that
-is not installed is skipped (``pip install -e .[bench]`` installs both and matplotlib).
+Every engine steps the same scene in this one process, with dt = 1/240 s, each at its own
+defaults (issue 18): contactlab's methods with their Options as shipped (``constraints``: up to
+100 sweeps, stopping at their tolerance), pybullet with maximal coordinates in ``p.DIRECT`` mode
+and its default 50 solver iterations, MuJoCo with its default Newton solver (100 iterations at
+most, pyramidal cones). ``--matched`` runs the issue-8 setting instead: 50 iterations in every
+engine, MuJoCo's CG solver. A peer that is not installed is skipped (``pip install -e .[bench]``
+installs both and matplotlib).
 
 Measured for each run:
 
@@ -65,7 +68,8 @@ from contactlab import ModelBuilder, simulate  # noqa: E402
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS_DIR = os.path.join(HERE, "results")
 DT = 1.0 / 240.0
-ITERATIONS = 50
+ITERATIONS = 50                 # --matched: every engine's iteration count; the LCP row's assembly
+MATCHED = "--matched" in sys.argv
 RADIUS = 0.05
 WARMUP_STEPS = 5
 
@@ -105,6 +109,8 @@ def pyramid_layout(levels=20, size=0.1, gap=0.005):
             centres.append(((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level))
     return np.array(centres)
 
+
+BALL = dict(radius=0.05, height=1.0, restitution=0.8)   # centre 1 m up: the first apex is r + ε² (1 − r)
 
 CLOTH = dict(size=1.0, mass=0.3, height=0.85, sphere_radius=0.25, sphere_z=0.3, thickness=0.005, friction=0.4)
 
@@ -166,6 +172,21 @@ def contactlab_pyramid(levels=20):
     return b.finalize()
 
 
+def contactlab_ball():
+    b = ModelBuilder()
+    b.add_material("rubber", friction=0.5, restitution=BALL["restitution"])
+    b.add_body("sphere", radius=BALL["radius"], mass=1.0, position=(0, 0, BALL["height"]), material="rubber")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="rubber")
+    return b.finalize()
+
+
+def first_apex(heights):
+    """The highest centre height [m] after the first bounce (the first rise) of a sampled series."""
+    heights = np.asarray(heights)
+    rising = np.nonzero(np.diff(heights) > 0)[0]
+    return float(heights[rising[0]:].max()) if len(rising) else float("nan")
+
+
 def contactlab_cloth(n):
     b = ModelBuilder()
     b.add_material("cotton", friction=CLOTH["friction"], restitution=0.0)
@@ -177,8 +198,11 @@ def contactlab_cloth(n):
     return b.finalize()
 
 
-CONTACTLAB_OPTIONS = {"constraints": {"iterations": ITERATIONS}, "impulse": {"iterations": ITERATIONS},
-                      "projection": {"iterations": ITERATIONS}, "penalty": {}}
+CONTACTLAB_OPTIONS = ({"constraints": {"iterations": ITERATIONS}, "impulse": {"iterations": ITERATIONS},
+                       "projection": {"iterations": ITERATIONS}, "penalty": {}} if MATCHED else
+                      {"constraints": {}, "impulse": {}, "projection": {}, "penalty": {}})
+BULLET_LABEL = "maximal, SI 50" if MATCHED else "maximal, defaults (SI 50)"
+MUJOCO_LABEL = "CG 50" if MATCHED else "defaults (Newton ≤ 100)"
 
 
 PILE_WARMUP = 0.25      # s: the lowest layer (0.2 m up) lands after 0.17 s
@@ -199,28 +223,29 @@ def run_contactlab(model, method, duration, record_every, integrator="symplectic
 # ---- pybullet ------------------------------------------------------------------------------------
 
 class Bullet:
-    """One pybullet world in DIRECT mode, maximal-coordinate bodies, 50 solver iterations."""
+    """One pybullet world in DIRECT mode, maximal-coordinate bodies, 50 solver iterations (its default)."""
 
     def __init__(self):
         self.client = pybullet.connect(pybullet.DIRECT)
         p = pybullet
         p.resetSimulation(physicsClientId=self.client)
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
-        p.setPhysicsEngineParameter(fixedTimeStep=DT, numSolverIterations=ITERATIONS, numSubSteps=0,
-                                    physicsClientId=self.client)
+        p.setPhysicsEngineParameter(fixedTimeStep=DT, numSubSteps=0, physicsClientId=self.client)
+        if MATCHED:
+            p.setPhysicsEngineParameter(numSolverIterations=ITERATIONS, physicsClientId=self.client)
         self.bodies = []
 
-    def plane(self, normal, point, friction):
+    def plane(self, normal, point, friction, restitution=0.0):
         p = pybullet
         shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=normal, physicsClientId=self.client)
         body = p.createMultiBody(0, shape, basePosition=point, physicsClientId=self.client)
-        p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0, physicsClientId=self.client)
+        p.changeDynamics(body, -1, lateralFriction=friction, restitution=restitution, physicsClientId=self.client)
 
-    def body(self, shape, position, friction):
+    def body(self, shape, position, friction, restitution=0.0):
         p = pybullet
         body = p.createMultiBody(1.0, shape, basePosition=list(position), useMaximalCoordinates=True,
                                  physicsClientId=self.client)
-        p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0,
+        p.changeDynamics(body, -1, lateralFriction=friction, restitution=restitution,
                          activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.client)
         self.bodies.append(body)
 
@@ -246,6 +271,14 @@ def bullet_pile(count):
     for c in centres:
         world.body(shape, c, 0.5)
     return world, half_width
+
+
+def bullet_ball():
+    world = Bullet()
+    world.plane((0, 0, 1), (0, 0, 0), 0.5, restitution=1.0)       # pybullet multiplies the two
+    shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=BALL["radius"], physicsClientId=world.client)
+    world.body(shape, (0, 0, BALL["height"]), 0.5, restitution=BALL["restitution"])
+    return world
 
 
 def bullet_pyramid(levels=20):
@@ -276,8 +309,8 @@ def step_peer(step, steps, sample, sample_every):
 # ---- MuJoCo ----------------------------------------------------------------------------------------
 
 def _mj_header(extra=""):
-    return (f'<mujoco><option timestep="{DT!r}" solver="CG" iterations="{ITERATIONS}" gravity="0 0 -9.81"/>'
-            f'{extra}<worldbody>')
+    solver = f' solver="CG" iterations="{ITERATIONS}"' if MATCHED else ""
+    return f'<mujoco><option timestep="{DT!r}"{solver} gravity="0 0 -9.81"/>{extra}<worldbody>'
 
 
 def _mj_plane(normal, point, friction):
@@ -296,6 +329,16 @@ def mujoco_pile(count):
     parts.append("</worldbody></mujoco>")
     model = mujoco.MjModel.from_xml_string("".join(parts))
     return model, mujoco.MjData(model), half_width
+
+
+def mujoco_ball():
+    """MuJoCo has no restitution coefficient: at its defaults the ball lands and stays (its
+    soft contact can be tuned to bounce, which is not its default): a speed comparison only."""
+    xml = (_mj_header() + _mj_plane((0, 0, 1), (0, 0, 0), 0.5)
+           + f'<body pos="0 0 {BALL["height"]}"><freejoint/><geom type="sphere" size="{BALL["radius"]}" '
+             f'mass="1" friction="0.5 0.005 0.0001"/></body></worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    return model, mujoco.MjData(model)
 
 
 def mujoco_pyramid(levels=20):
@@ -344,9 +387,9 @@ def mujoco_supports_flex():
 # ---- the benchmark runs ------------------------------------------------------------------------------
 
 SETTINGS = {          # durations [s] of the full run and of --quick
-    "full": dict(pile1000=3.0, pile4000=3.0, pyramid=5.0, cloth64=2.0, cloth128=0.5, scaling=0.75,
+    "full": dict(ball=3.0, pile1000=3.0, pile4000=3.0, pyramid=5.0, cloth64=2.0, cloth128=0.5, scaling=0.75,
                  scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=12),
-    "quick": dict(pile1000=0.5, pile4000=0.25, pyramid=0.5, cloth64=0.25, cloth128=0.1, scaling=0.1,
+    "quick": dict(ball=1.0, pile1000=0.5, pile4000=0.25, pyramid=0.5, cloth64=0.25, cloth128=0.1, scaling=0.1,
                   scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=6),
 }
 
@@ -368,14 +411,15 @@ def pile_runs(results, count, duration, sample_every, path):
     record(results, f"{scene}/contactlab-constraints", dict(
         scene=scene, engine="contactlab", method="constraints", bodies=count, duration=duration, steps=steps,
         steps_per_second=summary["steps_per_second"], max_penetration=penetration, drift=drift,
-        engine_penetration=summary["max_penetration"], max_contacts=summary["max_contacts"]), path)
+        engine_penetration=summary["max_penetration"], max_contacts=summary["max_contacts"],
+        sweeps_per_step=summary["solver"]["mean_iterations"], threads=summary["threads"]), path)
     if pybullet is not None:
         world, half_width = bullet_pile(count)
         rate, frames, times = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
                                         world.positions, sample_every)
         penetration, drift = pile_measures(frames, times, half_width)
         world.close()
-        record(results, f"{scene}/pybullet", dict(scene=scene, engine="pybullet", method="maximal, SI 50",
+        record(results, f"{scene}/pybullet", dict(scene=scene, engine="pybullet", method=BULLET_LABEL,
                                                  bodies=count, duration=duration, steps=steps,
                                                  steps_per_second=rate, max_penetration=penetration,
                                                  drift=drift), path)
@@ -384,9 +428,39 @@ def pile_runs(results, count, duration, sample_every, path):
         rate, frames, times = step_peer(lambda: mujoco.mj_step(m, d), steps,
                                         lambda: mujoco_body_positions(m, d), sample_every)
         penetration, drift = pile_measures(frames, times, half_width)
-        record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method="CG 50", bodies=count,
+        record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method=MUJOCO_LABEL, bodies=count,
                                                duration=duration, steps=steps, steps_per_second=rate,
                                                max_penetration=penetration, drift=drift), path)
+
+
+def ball_runs(results, duration, path):
+    """The smallest scene: one ball bouncing (ε = 0.8) under ``impulse``: what a step costs when
+    the scene costs nothing, i.e. the per-step overhead of each engine. Sampled every step for
+    the first apex (closed form r + ε² (h − r))."""
+    steps = int(round(duration / DT))
+    expected = BALL["radius"] + BALL["restitution"] ** 2 * (BALL["height"] - BALL["radius"])
+    summary, arrays = run_contactlab(contactlab_ball(), "impulse", duration, 1)
+    record(results, "ball/contactlab-impulse", dict(
+        scene="ball", engine="contactlab", method="impulse", bodies=1, duration=duration, steps=steps,
+        steps_per_second=summary["steps_per_second"], max_penetration=summary["max_penetration"],
+        first_apex=first_apex(arrays["body_position"][:, 0, 2]), expected_apex=expected,
+        sweeps_per_step=summary["solver"]["mean_iterations"], threads=summary["threads"]), path)
+    if pybullet is not None:
+        world = bullet_ball()
+        rate, frames, _ = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
+                                    world.positions, 1)
+        world.close()
+        record(results, "ball/pybullet", dict(scene="ball", engine="pybullet", method=BULLET_LABEL, bodies=1,
+                                              duration=duration, steps=steps, steps_per_second=rate,
+                                              first_apex=first_apex([f[0, 2] for f in frames]),
+                                              expected_apex=expected), path)
+    if mujoco is not None:
+        m, d = mujoco_ball()
+        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: mujoco_body_positions(m, d), 1)
+        record(results, "ball/mujoco", dict(scene="ball", engine="mujoco", method=MUJOCO_LABEL, bodies=1,
+                                            duration=duration, steps=steps, steps_per_second=rate,
+                                            first_apex=first_apex([f[0, 2] for f in frames]),
+                                            expected_apex=expected), path)
 
 
 def pyramid_runs(results, duration, sample_every, path):
@@ -404,7 +478,8 @@ def pyramid_runs(results, duration, sample_every, path):
             scene="pyramid", engine="contactlab", method=method, bodies=model.body_count, duration=duration,
             steps=steps, steps_per_second=summary["steps_per_second"], max_penetration=summary["max_penetration"],
             drift=float(travel.max()), moved_over_1mm=int((travel > 1e-3).sum()),
-            moved_over_1cm=int((travel > 1e-2).sum())), path)
+            moved_over_1cm=int((travel > 1e-2).sum()), sweeps_per_step=summary["solver"]["mean_iterations"],
+            threads=summary["threads"]), path)
     if pybullet is not None:
         world = bullet_pyramid()
         worst = [0.0]
@@ -417,7 +492,7 @@ def pyramid_runs(results, duration, sample_every, path):
         world.close()
         travel = moved(frames)
         record(results, "pyramid/pybullet", dict(
-            scene="pyramid", engine="pybullet", method="maximal, SI 50", bodies=len(travel), duration=duration,
+            scene="pyramid", engine="pybullet", method=BULLET_LABEL, bodies=len(travel), duration=duration,
             steps=steps, steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
             moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
     if mujoco is not None:
@@ -430,7 +505,7 @@ def pyramid_runs(results, duration, sample_every, path):
         rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, sample, sample_every)
         travel = moved(frames)
         record(results, "pyramid/mujoco", dict(
-            scene="pyramid", engine="mujoco", method="CG 50", bodies=len(travel), duration=duration, steps=steps,
+            scene="pyramid", engine="mujoco", method=MUJOCO_LABEL, bodies=len(travel), duration=duration, steps=steps,
             steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
             moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
 
@@ -464,7 +539,7 @@ def cloth_runs(results, n, duration, sample_every, path, methods=("projection", 
                                     sample_every)
         penetration = max(cloth_penetration(f, radius) for f in frames)
         record(results, f"{scene}/mujoco", dict(
-            scene=scene, engine="mujoco", method=f"flex (CG 50, vertex radius {1e3 * radius:.1f} mm)", vertices=n * n, duration=duration, steps=steps,
+            scene=scene, engine="mujoco", method=f"flex ({MUJOCO_LABEL}, vertex radius {1e3 * radius:.1f} mm)", vertices=n * n, duration=duration, steps=steps,
             steps_per_second=rate, max_penetration=penetration,
             lowest_vertex=float(min(f[:, 2].min() for f in frames))), path)
 
@@ -591,7 +666,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="short durations: a smoke run")
     parser.add_argument("--only", nargs="*", default=None,
-                        choices=["pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
+                        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
                         help="run only these (default: all)")
     parser.add_argument("--scaling-sizes", type=int, nargs="*", default=None)
     parser.add_argument("--cloth-methods", nargs="*", default=["projection", "constraints"],
@@ -600,6 +675,9 @@ def main():
     parser.add_argument("--duration", nargs="*", default=[], metavar="KEY=SECONDS",
                         help="override a scene's duration, e.g. cloth64=0.5")
     parser.add_argument("--numba-threads", default="2", help="NUMBA_NUM_THREADS (set before numba loads)")
+    parser.add_argument("--matched", action="store_true",
+                        help="issue 8's setting: 50 iterations in every engine, MuJoCo's CG (default: each engine's "
+                             "defaults)")
     parser.add_argument("--results", default=os.path.join(RESULTS_DIR, "results.json"))
     parser.add_argument("--fresh", action="store_true", help="start a new results.json instead of merging")
     parser.add_argument("--report-only", action="store_true", help="rewrite results.md and the plots only")
@@ -617,12 +695,15 @@ def main():
         results.setdefault("settings", {})["quick" if args.quick else "full"] = {
             k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()}
         results["mode"] = "quick" if args.quick else "full"
-        todo = args.only or ["pile1000", "pyramid", "cloth64", "lcp", "scaling", "pile4000", "cloth128"]
+        results["settings_mode"] = "matched 50 iterations" if MATCHED else "each engine's defaults"
+        todo = args.only or ["ball", "pile1000", "pyramid", "cloth64", "lcp", "scaling", "pile4000", "cloth128"]
         every = settings["sample_every"]
         for item in todo:
             print(f"{item} ...", flush=True)
             started = time.perf_counter()
-            if item.startswith("pile"):
+            if item == "ball":
+                ball_runs(results, settings["ball"], args.results)
+            elif item.startswith("pile"):
                 pile_runs(results, int(item[4:]), settings[item], every, args.results)
             elif item == "pyramid":
                 pyramid_runs(results, settings["pyramid"], every, args.results)

@@ -50,29 +50,46 @@ def targets(results):
     """Lines of (target, measured, met?) for the issue's benchmark targets."""
     out = []
     runs = results.get("runs", {})
+    ours, bullet, mj = (_rate(results, f"ball/{engine}") for engine in ("contactlab-impulse", "pybullet", "mujoco"))
+    if ours and bullet and mj:
+        out.append(("ball: impulse ≥ MuJoCo's steps/s and ≥ ½ pybullet's",
+                    f"{ours / mj:.3f}× MuJoCo, {ours / bullet:.3f}× pybullet ({ours:,.0f} vs {mj:,.0f} and "
+                    f"{bullet:,.0f} steps/s)", "met" if ours >= mj and ours >= 0.5 * bullet else "NOT met"))
+    else:
+        out.append(("ball: impulse ≥ MuJoCo and ≥ ½ pybullet", "not measured", "missing"))
     for scene in ("pile1000", "pile4000"):
         ours, bullet = _rate(results, f"{scene}/contactlab-constraints"), _rate(results, f"{scene}/pybullet")
-        pen = runs.get(f"{scene}/contactlab-constraints", {}).get("max_penetration")
-        bpen = runs.get(f"{scene}/pybullet", {}).get("max_penetration")
+        row = runs.get(f"{scene}/contactlab-constraints", {})
+        pen = row.get("max_penetration")
         if ours and bullet:
             ratio = ours / bullet
-            # both: no deeper than pybullet's, and 1 mm at most
-            ok = ratio >= 3 and pen is not None and pen <= 1e-3 and (bpen is None or pen <= bpen)
-            out.append((f"{scene}: constraints ≥ 3× pybullet steps/s, penetration ≤ pybullet's and ≤ 1 mm",
-                        f"{ratio:.2f}× ({ours:.1f} vs {bullet:.1f} steps/s); penetration {_mm(pen)} mm "
-                        f"vs {_mm(bpen)} mm", "met" if ok else "NOT met"))
+            ok = ratio >= 5 and pen is not None and pen <= 1e-3
+            out.append((f"{scene}: constraints at its defaults ≥ 5× pybullet steps/s, penetration ≤ 1 mm",
+                        f"{ratio:.2f}× ({ours:.1f} vs {bullet:.1f} steps/s, {_fmt(row.get('sweeps_per_step'))} "
+                        f"sweeps a step); penetration {_mm(pen)} mm", "met" if ok else "NOT met"))
         else:
-            out.append((f"{scene}: constraints ≥ 3× pybullet", "not measured", "missing"))
+            out.append((f"{scene}: constraints ≥ 5× pybullet", "not measured", "missing"))
     ours, bullet = _rate(results, "pyramid/contactlab-constraints"), _rate(results, "pyramid/pybullet")
     row = runs.get("pyramid/contactlab-constraints", {})
     if ours and bullet:
         drift = row.get("drift")
-        ok = ours / bullet >= 2 and drift is not None and drift < 1e-3 and row.get("duration", 0) >= 5
-        out.append(("pyramid: constraints ≥ 2× pybullet steps/s and every box < 1 mm in 5 s",
-                    f"{ours / bullet:.2f}× ({ours:.1f} vs {bullet:.1f}); largest box motion {_mm(drift)} mm "
-                    f"in {row.get('duration')} s", "met" if ok else "NOT met"))
+        ok = ours / bullet >= 5 and drift is not None and drift < 1e-3 and row.get("duration", 0) >= 5
+        out.append(("pyramid: constraints at its defaults ≥ 5× pybullet steps/s, every box < 1 mm in 5 s",
+                    f"{ours / bullet:.2f}× ({ours:.1f} vs {bullet:.1f}, {_fmt(row.get('sweeps_per_step'))} sweeps "
+                    f"a step); largest box motion {_mm(drift)} mm in {row.get('duration')} s",
+                    "met" if ok else "NOT met"))
     else:
-        out.append(("pyramid: constraints ≥ 2× pybullet", "not measured", "missing"))
+        out.append(("pyramid: constraints ≥ 5× pybullet", "not measured", "missing"))
+    threads = _threads(results)
+    if threads:
+        loaded = [row for row in threads["rows"] if row["load"] != "idle"]
+        worst = min(loaded, key=lambda row: row["auto_over_one"])
+        out.append(("threads: with a busy core, the default setting ≥ one thread on every benchmark scene",
+                    f"auto / one thread ≥ {worst['auto_over_one']:.2f} (worst: {worst['scene']}) over "
+                    f"{len(loaded)} scenes; see results/threads.md",
+                    "met" if worst["auto_over_one"] >= 0.95 else "NOT met"))
+    else:
+        out.append(("threads under load", "not measured (benchmarks/threads.py)", "missing"))
     _, fit = scaling_fit(results)
     if fit:
         sizes = [r["bodies"] for _, r in _runs(results, "scaling") if "ms_per_step" in r]
@@ -103,6 +120,15 @@ def targets(results):
     return out
 
 
+def _threads(results):
+    """benchmarks/results/threads.json (written by benchmarks/threads.py), or None."""
+    path = os.path.join(HERE, "results", "threads.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as stream:
+        return json.load(stream)
+
+
 def write_report(results, md_path, plot_dir):
     os.makedirs(plot_dir, exist_ok=True)
     m = results.get("machine", {})
@@ -112,11 +138,20 @@ def write_report(results, md_path, plot_dir):
                  f"SciPy {m.get('scipy', '?')}, Numba {m.get('numba', '?')}, contactlab {m.get('contactlab', '?')}, "
                  f"pybullet {m.get('pybullet', 'not installed')}, MuJoCo {m.get('mujoco', 'not installed')}; "
                  f"BLAS threads {m.get('blas_threads', '?')}, Numba threads {m.get('numba_threads', '?')}; "
-                 f"{m.get('date', '')}. dt = 1/240 s, 50 solver iterations everywhere.")
-    lines += ["", "## Targets of issue 8", "", "| target | measured | status |", "|---|---|---|"]
+                 f"{m.get('date', '')}. dt = 1/240 s; settings: {results.get('settings_mode', 'matched 50 iterations')}.")
+    lines += ["", "## Targets of issue 18", "", "| target | measured | status |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in targets(results)]
 
-    header = "| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm |"
+    header = ("| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm "
+              "| sweeps per step |")
+    rows = _runs(results, "ball")
+    if rows:
+        lines += ["", "## One ball bouncing (r = 5 cm, ε = 0.8, from 1 m): the per-step overhead", "",
+                  "| run | method | sim s | steps/s | µs per step | first apex m (closed form) |", "|---|---|---|---|---|---|"]
+        for key, r in rows:
+            lines.append(f"| {r['engine']} | {r['method']} | {r['duration']} | {r['steps_per_second']:,.0f} | "
+                         f"{1e6 / r['steps_per_second']:.1f} | {_fmt(r.get('first_apex'), 4)} "
+                         f"({_fmt(r.get('expected_apex'), 4)}) |")
     for scene, title in (("pile1000", "Sphere pile, 1000"), ("pile4000", "Sphere pile, 4000 (taller column)"),
                          ("pyramid", "Box pyramid, 20 levels (210 boxes)")):
         rows = _runs(results, scene)
@@ -124,15 +159,15 @@ def write_report(results, md_path, plot_dir):
             continue
         bullet, mj = _rate(results, f"{scene}/pybullet"), _rate(results, f"{scene}/mujoco")
         extra = " boxes > 1 mm | boxes > 1 cm |" if scene == "pyramid" else ""
-        lines += ["", f"## {title}", "", header + extra, "|---" * (9 + (2 if extra else 0)) + "|"]
+        lines += ["", f"## {title}", "", header + extra, "|---" * (10 + (2 if extra else 0)) + "|"]
         for key, r in rows:
             if "error" in r:
-                lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} |" + " |" * 6)
+                lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} |" + " |" * 7)
                 continue
             rate = r["steps_per_second"]
             row = (f"| {r['engine']} | {r['method']} | {r.get('bodies')} | {r.get('duration')} | {rate:.1f} | "
                    f"{_fmt(rate / bullet) if bullet else '–'} | {_fmt(rate / mj) if mj else '–'} | "
-                   f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} |")
+                   f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} | {_fmt(r.get('sweeps_per_step'))} |")
             if extra:
                 row += f" {r.get('moved_over_1mm', '–')} | {r.get('moved_over_1cm', '–')} |"
             lines.append(row)
@@ -187,7 +222,7 @@ def plots(results, plot_dir):
     runs = [(k, r) for k, r in sorted(results.get("runs", {}).items())
             if r.get("scene") not in ("scaling", "lcp") and "steps_per_second" in r]
     if runs:
-        scenes = sorted({r["scene"] for _, r in runs}, key=lambda s: ["pile1000", "pile4000", "pyramid", "cloth64",
+        scenes = sorted({r["scene"] for _, r in runs}, key=lambda s: ["ball", "pile1000", "pile4000", "pyramid", "cloth64",
                                                                        "cloth128"].index(s))
         for quantity, fname, label, scale in (("steps_per_second", "steps_per_second.png", "steps/s (log)", 1.0),
                                               ("max_penetration", "penetration.png", "max penetration [mm]", 1e3)):
