@@ -13,6 +13,8 @@ A method module provides:
 
 from dataclasses import dataclass, fields
 
+from ..builder import _number
+from ..collision import GRANULARITIES, NORMALS
 from ..contacts import Contacts
 from ..errors import InputError
 
@@ -27,6 +29,34 @@ class StepInfo:
 
 
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")
+
+
+@dataclass
+class CollisionOptions:
+    """The collision-detection settings every method's Options starts with, declared and
+    checked here once (see docs/collision.md); a method that wants another default declares
+    the field again with it."""
+    contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
+    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
+    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
+    samples: int = 2                      # samples per triangle edge for granularity = "samples"
+    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+
+    def __post_init__(self):
+        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
+        check_counts(self, {"samples": 1, "cloth_samples": 0})
+
+
+@dataclass
+class KeptManifoldOptions(CollisionOptions):
+    """CollisionOptions and the tolerance under which a pair's contacts are reused from the last
+    step (the methods that step positions once per step: impulse, constraints)."""
+    manifold_tolerance: float = 1e-4      # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
 
 
 def check_choices(options, allowed):

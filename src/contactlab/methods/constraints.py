@@ -40,13 +40,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide_keeping, swept_distances
+from ..collision import collide_keeping, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, body_free_velocities, factor_symmetric, free_velocities
 from ..errors import InputError
 from ..state import State
-from . import StepInfo, check_choices, check_counts
+from . import KeptManifoldOptions, StepInfo, check_choices, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
 
@@ -56,8 +56,8 @@ FORMULATIONS = ("velocity", "acceleration")
 
 
 @dataclass
-class Options:
-    """Settings of ``[method.constraints]``."""
+class Options(KeptManifoldOptions):
+    """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
     solver: str = "matrix_free"           # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | pgs | redblack | jacobi | lemke
     formulation: str = "velocity"         # velocity (C5b) | acceleration (C5a)
     friction_model: str = "cone"          # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
@@ -70,17 +70,11 @@ class Options:
     slop: float = 0.0005                  # m of penetration left alone by the stabilization
     max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see methods.impulse)
-    contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
-    manifold_tolerance: float = 1e-4      # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
-    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2                      # samples per triangle edge for granularity = "samples"
-    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
-        check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid"),
-                             "granularity": GRANULARITIES, "normal": NORMALS})
-        check_counts(self, {"iterations": 1, "samples": 1, "cloth_samples": 0})
+        super().__post_init__()
+        check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid")})
+        check_counts(self, {"iterations": 1})
         if self.tolerance is None:        # each solver's own measure, so each its own default
             self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
         self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
@@ -90,8 +84,6 @@ class Options:
         self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
         self.slop = _number(self.slop, "slop", 0.0)
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
-        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
-        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 

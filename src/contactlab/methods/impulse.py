@@ -32,21 +32,22 @@ import numpy as np
 from numba import njit
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide_keeping, swept_distances
+from ..collision import collide_keeping, swept_distances
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
-from . import StepInfo, check_choices, check_counts
+from . import KeptManifoldOptions, StepInfo, check_counts
 from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
 from .sequential import (contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts,
                          sweep_groups)
 
 
 @dataclass
-class Options:
-    """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md)."""
+class Options(KeptManifoldOptions):
+    """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md), after
+    the collision settings of KeptManifoldOptions."""
     iterations: int = 100                 # sweeps of sequential impulses per step, and collision waves (at most)
     tolerance: float = 1e-7               # m/s: stop once a sweep changes no contact's velocity more
     restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
@@ -54,26 +55,17 @@ class Options:
     slop: float = 0.0005                  # m of penetration left alone by the stabilization
     max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
     time_of_impact: bool = True           # split the step at the impact (see module docs)
-    contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
-    manifold_tolerance: float = 1e-4      # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
     warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
-    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2                      # samples per triangle edge for granularity = "samples"
-    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
+        super().__post_init__()
         check_counts(self, {"iterations": 1})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0)
         self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
         self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
         self.slop = _number(self.slop, "slop", 0.0)
         self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
-        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
-        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
         self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
-        check_counts(self, {"samples": 1, "cloth_samples": 0})
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 

@@ -33,35 +33,32 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..collision import collide, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
 from ..errors import InputError, StabilityWarning
 from ..state import State
-from . import StepInfo, check_choices, check_counts
+from . import CollisionOptions, StepInfo, check_choices, check_counts
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
 LINEAR_SOLVERS = ("cg", "direct")
 
 
 @dataclass
-class Options:
-    """Settings of ``[method.penalty]``."""
+class Options(CollisionOptions):
+    """Settings of ``[method.penalty]`` (after the collision settings of CollisionOptions)."""
     stiffness: object = "auto"            # N/m per contact point, or "auto" (see suggest_stiffness)
     allowed_penetration: float = 0.001    # m: what "auto" stiffness aims for under the heaviest body
     damping_ratio: object = "restitution"  # ζ of each contact spring, or "restitution": ζ from the material's ε
     friction_stiffness: object = "auto"   # N/m of the anchor springs (F3), or "auto": the normal stiffness
     contact_margin: float = 0.001         # m: gaps this small are detected (their springs are slack)
-    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2                      # samples per triangle edge for granularity = "samples"
-    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
     linear_solver: str = "cg"             # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
     linear_tolerance: float = 1e-10       # backward Euler with cg: relative residual to reach
     implicit_iterations: int = 8          # backward Euler: most passes to settle which springs act / slip
 
     def __post_init__(self):
+        super().__post_init__()
         self.stiffness = _stiffness(self.stiffness, "stiffness")
         self.friction_stiffness = _stiffness(self.friction_stiffness, "friction_stiffness")
         self.allowed_penetration = _number(self.allowed_penetration, "allowed_penetration", 0.0, strict=True)
@@ -70,10 +67,9 @@ class Options:
                 raise InputError("damping_ratio", f"expected a number ≥ 0 or \"restitution\", "
                                  f"found {self.damping_ratio!r}")
             self.damping_ratio = _number(self.damping_ratio, "damping_ratio", 0.0)
-        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
         self.linear_tolerance = _number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
-        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS, "linear_solver": LINEAR_SOLVERS})
-        check_counts(self, {"samples": 1, "implicit_iterations": 1, "cloth_samples": 0})
+        check_choices(self, {"linear_solver": LINEAR_SOLVERS})
+        check_counts(self, {"implicit_iterations": 1})
 
 
 def _stiffness(value, name):

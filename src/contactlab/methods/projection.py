@@ -30,31 +30,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..builder import _number
-from ..collision import GRANULARITIES, NORMALS, collide, swept_distances
+from ..collision import collide, swept_distances
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..state import State
-from . import StepInfo, check_choices, check_counts
+from . import CollisionOptions, StepInfo, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
 
 @dataclass
-class Options:
-    """Settings of ``[method.projection]``."""
+class Options(CollisionOptions):
+    """Settings of ``[method.projection]`` (after the collision settings of CollisionOptions)."""
     iterations: int = 100                 # Gauss-Seidel sweeps per projection (at most)
     tolerance: float = 1e-9               # m: stop once a sweep moves no contact point more
     passes: int = 2                       # detect-and-project rounds per step
     contact_margin: float = 0.001         # m: gaps this small are detected too
-    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2                      # samples per triangle edge for granularity = "samples"
     cloth_samples: int = 2                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
-        check_counts(self, {"iterations": 1, "passes": 1, "samples": 1, "cloth_samples": 0})
+        super().__post_init__()
+        check_counts(self, {"iterations": 1, "passes": 1})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0)
-        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
-        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
 
 
 def project(model, state, predicted, displacement, options, sweep=None):
