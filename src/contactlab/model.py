@@ -132,6 +132,16 @@ class Model:
         materials = np.concatenate([self.body_material, self.particle_material, self.obstacle_material])
         return kinds, params, materials, rotations.to_matrix(self.obstacle_orientation)
 
+    @cached_property
+    def pair_families(self) -> tuple:
+        """Which narrow-phase pair routines this model's colliders can need (the families tuple
+        of ``collision.narrow_phase.scene_families``): the compiled narrow phase is specialised
+        on it, so only those routines are compiled; built on first use and kept."""
+        from .collision.narrow_phase import scene_families
+        B, P = self.body_count, self.particle_count
+        kinds = self.collider_table[0]
+        return scene_families(kinds[:B + P], kinds[B + P:])
+
     @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""

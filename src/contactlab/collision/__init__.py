@@ -17,7 +17,7 @@ from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
 from .mesh_pairs import shapes_against_mesh_extended
 from .manifolds import generate_reusing
-from .narrow_phase import generate_contacts, supported
+from .narrow_phase import generate_contacts, needs_hulls, supported
 
 
 def check_supported(model):
@@ -142,13 +142,14 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
         pairs = pairs[~replaced]
         mesh_parts = [tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))]
                             for column in part) for part in mesh_parts] + surface_parts
-    hulls = model.hull_store if np.any(kinds == shapes.CONVEX) else None
+    families = model.pair_families          # only these pair routines are compiled (narrow_phase.FAMILIES)
+    hulls = model.hull_store if needs_hulls(families) else None
     if tolerance > 0.0:
         contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(
-            pairs, kinds, params, centers, rots, reach, hulls, manifolds, tolerance, dynamic + O)
+            pairs, kinds, params, centers, rots, reach, hulls, families, manifolds, tolerance, dynamic + O)
     else:
         contact_point, contact_normal, depth, feature, owner = generate_contacts(
-            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls)
+            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls, families)
         manifolds = None
     parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
     a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))

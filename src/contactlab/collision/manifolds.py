@@ -198,11 +198,11 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
              new_witness[order], new_normal[order], new_feature[order]))
 
 
-def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, manifolds, tolerance, total):
+def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, families, manifolds, tolerance, total):
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
     None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
-    number of colliders (for the keys). Returns (point, normal, depth, feature, owner, the
-    manifolds to keep for the next step). Contacts come in pair order, as from
+    number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
+    them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in pair order, as from
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
     kept = manifolds if manifolds is not None else Manifolds.empty()
@@ -211,13 +211,14 @@ def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, man
     pair_reach = reach[first] + reach[second]
     keeps = kept_pairs(kinds, pairs)
     if not keeps.any():             # a pile of spheres: nothing to keep, nothing to look up
-        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store), Manifolds.empty())
+        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
+                Manifolds.empty())
     row = _still_valid(pairs, keys, keeps, pair_reach, shapes.bounding_radii(kinds, params), centers, rots,
                        kept.keys, kept.reach, kept.center, kept.rotation, tolerance)
     fresh = np.nonzero(row < 0)[0]
     widened = pair_reach + tolerance * keeps          # a kept manifold reaches a tolerance further
     point, normal, depth, feature, owner = generate_contacts(pairs[fresh], kinds, params, centers, rots,
-                                                             widened[fresh], hull_store)
+                                                             widened[fresh], hull_store, families)
     contacts, made = _combine(pairs, keys, keeps, pair_reach, widened, row, centers, rots,
                               point, normal, depth, feature, fresh[owner], kept.reach, kept.center, kept.rotation,
                               kept.count, kept.witness, kept.normal, kept.feature)
