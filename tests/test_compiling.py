@@ -1,0 +1,207 @@
+"""Compile what a scene uses, once: the narrow phase specialised on a scene's pair families
+gives the contacts of the full dispatch, and a compilation says so on stderr."""
+
+import io
+import json
+import os
+import subprocess
+import sys
+
+import numba
+import numpy as np
+
+from contactlab import ModelBuilder, collide, simulate
+from contactlab.collision import _colliders
+from contactlab.collision.broad_phase import brute_force_pairs
+from contactlab.collision.narrow_phase import (ALL_FAMILIES, FAMILIES, collide_pair, family, generate_contacts,
+                                               needs_hulls)
+from contactlab.compiling import NOTICE, compile_notice
+
+OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) * 0.06
+TETRAHEDRON = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]) - 0.025
+
+
+def present(families):
+    return {name for name, flag in zip(FAMILIES, families) if flag is not None}
+
+
+def test_a_ball_on_the_floor_needs_sphere_plane_alone():
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 1))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    assert present(model.pair_families) == {"sphere_plane"}
+    assert not needs_hulls(model.pair_families)
+
+
+def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacles():
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 1))
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(1, 0, 1))
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(2, 0, 1))
+    b.add_particles([[3, 0, 1]], radius=0.01)
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    b.add_obstacle("convex", points=OCTAHEDRON, position=(5, 0, 0))
+    model = b.finalize()
+    # sphere and particle are both round: sphere_sphere; one sphere-like kind meets the boxes and so on
+    assert present(model.pair_families) == {"sphere_sphere", "sphere_box", "box_box", "sphere_plane", "box_plane",
+                                            "sphere_convex", "convex_convex"}
+    assert needs_hulls(model.pair_families)
+    assert family(1, 5) == family(5, 1) == "convex_convex" and family(2, 2) is None and family(0, 6) is None
+
+
+def mixed_model():
+    """Every dynamic shape twice, particles, and every static shape: every pair family."""
+    b = ModelBuilder()
+    for i in range(2):
+        z = 0.15 + 0.12 * i
+        b.add_body("sphere", radius=0.05, mass=1, position=(0.01 * i, 0, z))
+        b.add_body("box", half_extents=(0.05, 0.04, 0.03), mass=1, position=(0.07, 0.01 * i, z),
+                   orientation=(0.9, 0.1, 0.3, 0.2))
+        b.add_body("capsule", radius=0.03, half_length=0.05, mass=1, position=(0.04, 0.06, 0.18 + 0.05 * i),
+                   orientation=(0.8, 0.5, 0.2, 0.1))
+        b.add_body("convex", points=OCTAHEDRON, mass=1, position=(0.0, 0.07, z + 0.02),
+                   orientation=(0.7, 0.2, 0.6, 0.3))
+        b.add_body("convex", points=TETRAHEDRON, mass=1, position=(0.06, 0.08, z + 0.05))
+    b.add_particles([[0.03, 0.05, 0.2], [0.08, 0.06, 0.25], [0.05, 0.0, 0.12]], radius=0.02)
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.12)
+    b.add_obstacle("box", half_extents=(0.05, 0.05, 0.05), position=(0.1, 0.0, 0.1))
+    b.add_obstacle("sphere", radius=0.05, position=(-0.02, 0.06, 0.1))
+    b.add_obstacle("convex", points=OCTAHEDRON, position=(0.0, -0.03, 0.1))
+    return b.finalize()
+
+
+def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
+    model = mixed_model()
+    assert present(model.pair_families) == set(FAMILIES)
+    kinds, params, centers, rots = _colliders(model, model.state())
+    pairs = brute_force_pairs(np.full((len(kinds), 3), -1.0), np.full((len(kinds), 3), 1.0))  # every pair
+    dynamic = model.body_count + model.particle_count
+    pairs = pairs[(pairs[:, 0] < dynamic) & np.array([family(kinds[a], kinds[b]) is not None for a, b in pairs])]
+    reach = np.full(len(pairs), 0.02)
+    everything = generate_contacts(pairs, kinds, params, centers, rots, reach, model.hull_store, ALL_FAMILIES)
+    found = {name: 0 for name in FAMILIES}
+    for (a, b), count in zip(pairs, np.bincount(everything[4], minlength=len(pairs))):
+        found[family(kinds[a], kinds[b])] += count
+    assert all(found.values()), found                # every family touches somewhere in this scene
+    # each family alone, over its own pairs, and the scene's own families over all of them
+    for name in FAMILIES:
+        mine = np.array([family(kinds[a], kinds[b]) == name for a, b in pairs])
+        alone = tuple(True if other == name else None for other in FAMILIES)
+        hulls = model.hull_store if needs_hulls(alone) else None
+        got = generate_contacts(pairs[mine], kinds, params, centers, rots, reach[mine], hulls, alone)
+        rows = np.isin(everything[4], np.nonzero(mine)[0])
+        for column, expected in zip(got[:4], everything[:4]):
+            np.testing.assert_array_equal(column, expected[rows])
+    scene = generate_contacts(pairs, kinds, params, centers, rots, reach, model.hull_store, model.pair_families)
+    for column, expected in zip(scene, everything):
+        np.testing.assert_array_equal(column, expected)
+    # and pair by pair, as collide_pair computes them (either order)
+    out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
+    for k, (a, b) in enumerate(pairs):
+        count = collide_pair(kinds[a], params[a], centers[a], rots[a], kinds[b], params[b], centers[b], rots[b],
+                             reach[k], model.hull_store, *out, 0)
+        rows = everything[4] == k
+        assert count == rows.sum()
+        np.testing.assert_array_equal(out[1][:count], everything[1][rows])
+
+
+def test_a_family_left_out_is_not_compiled_in():
+    """The dispatch of a ball on the floor calls sphere_plane and no other pair routine."""
+    fresh = numba.njit(generate_contacts.py_func)          # not cached: its code is built here
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.05))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    kinds, params, centers, rots = _colliders(model, model.state())
+    pairs = np.array([[0, 1]], dtype=np.int64)
+    point, *_ = fresh(pairs, kinds, params, centers, rots, np.zeros(1), None, model.pair_families)
+    assert len(point) == 1
+    code = "".join(fresh.inspect_llvm().values())
+    assert "sphere_plane" in code
+    for other in ("box_box", "capsule_box", "sphere_box", "convex_convex", "sphere_sphere"):
+        assert other not in code
+
+
+def test_collide_gives_the_same_contacts_whatever_the_shapes_around():
+    """A sphere–box pair's contacts in a scene of spheres and boxes equal those in a scene
+    that also holds capsules and hulls far away (another families specialization)."""
+    def scene(extra):
+        b = ModelBuilder()
+        b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.19))
+        b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0.05, 0.02, 0.0),
+                   orientation=(0.95, 0.1, 0.2, 0.1))
+        if extra:
+            b.add_body("capsule", radius=0.05, half_length=0.1, mass=1, position=(10, 0, 10))
+            b.add_body("convex", points=OCTAHEDRON, mass=1, position=(20, 0, 10))
+        b.add_obstacle("plane", normal=(0, 0, 1), offset=-0.09)
+        return b.finalize()
+    plain, extended = scene(False), scene(True)
+    assert plain.pair_families != extended.pair_families
+    a, b = collide(plain, plain.state(), margin=0.01), collide(extended, extended.state(), margin=0.01)
+    assert a.count == b.count > 0
+    for name in ("point", "normal", "depth", "body_a", "body_b"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_a_compilation_prints_the_notice_once():
+    stream = io.StringIO()
+    with compile_notice(stream=stream) as listener:
+        assert not listener.said
+
+        @numba.njit                                     # a function no cache holds: it compiles here
+        def fresh(x):
+            return x + 1.0
+
+        @numba.njit
+        def another(x):
+            return fresh(x) * 2.0
+
+        assert another(1.0) == 4.0
+    assert listener.said
+    assert stream.getvalue() == NOTICE + "\n"
+    assert "first use" in NOTICE
+
+
+def test_nothing_is_printed_when_nothing_compiles(capsys):
+    @numba.njit
+    def ready(x):
+        return x * 3.0
+
+    ready(1.0)                                          # compiled before the block
+    with compile_notice() as listener:
+        assert ready(2.0) == 6.0
+    assert not listener.said
+    assert capsys.readouterr().err == ""
+
+
+def test_a_run_says_so_on_stderr_only_when_it_compiles(capsys):
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.2))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    simulate(model, "impulse", dt=0.01, duration=0.3)      # compiles or loads what it needs
+    capsys.readouterr()
+    run = simulate(model, "impulse", dt=0.01, duration=0.3)
+    captured = capsys.readouterr()
+    assert NOTICE not in captured.err and captured.out == ""
+    assert run.summary["compile_seconds"] >= 0.0 and run.summary["steps_per_second"] > 0.0
+
+
+def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_path):
+    """A short free fall (no contact yet, so only a few kernels) on an empty Numba cache:
+    the notice on stderr, the JSON alone on stdout; the second run loads it all, silently."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def run():
+        return subprocess.run([sys.executable, "-m", "contactlab", "run", "bouncing_ball", "--duration", "0.02",
+                               "--json", "--no-plots", "--out", str(tmp_path / "out")], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=600)
+    cold = run()
+    assert cold.returncode == 0, cold.stderr
+    assert NOTICE in cold.stderr.splitlines()
+    assert json.loads(cold.stdout)["compile_seconds"] > 0.0
+    warm = run()
+    assert warm.returncode == 0, warm.stderr
+    assert NOTICE not in warm.stderr
+    json.loads(warm.stdout)
