@@ -15,6 +15,7 @@ from tqdm import tqdm
 from . import methods
 from .builder import _number
 from .collision import check_supported
+from .compiling import compile_notice
 from .dynamics.integrators import INTEGRATORS
 from .errors import InputError, SimulationDiverged
 from .record import Recorder
@@ -67,7 +68,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     recording_seconds = 0.0
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     run_started = time.perf_counter()
-    with numba_event.install_listener("numba:compile", compiling), \
+    with numba_event.install_listener("numba:compile", compiling), compile_notice(), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
                  desc=f"{scene_name} ({method})") as bar, chooser:
         for step_index in range(1, steps + 1):

@@ -1,0 +1,49 @@
+"""Saying so when kernels compile.
+
+contactlab's kernels are compiled by Numba on first use and kept in its on-disk cache
+(``cache=True``, in the ``__pycache__`` folders beside the sources, or ``NUMBA_CACHE_DIR``).
+A first run on an empty cache therefore spends seconds compiling before and during its first
+steps, and a later run loads the same machine code in a fraction of a second. So that the
+first run does not look hung, :func:`compile_notice` prints one line on stderr as soon as
+anything starts compiling, and nothing at all when everything comes from the cache::
+
+    with compile_notice():
+        run_the_steps()          # "compiling contact kernels for first use…" if it compiles
+"""
+
+import sys
+from contextlib import contextmanager
+
+from numba.core import event
+
+NOTICE = "compiling contact kernels for first use… (once: later runs load them from Numba's cache)"
+
+
+class FirstCompile(event.Listener):
+    """A Numba event listener that prints ``message`` at the first compilation it sees.
+
+    ``said`` tells whether it has printed. Numba sends "numba:compile" only for a real
+    compilation (a function it has no cached machine code for), never for a cache load."""
+
+    def __init__(self, message=NOTICE, stream=None):
+        self.message = message
+        self.stream = stream
+        self.said = False
+
+    def on_start(self, event):
+        if not self.said:
+            self.said = True
+            stream = self.stream if self.stream is not None else sys.stderr
+            print(self.message, file=stream, flush=True)
+
+    def on_end(self, event):
+        pass
+
+
+@contextmanager
+def compile_notice(message=NOTICE, stream=None):
+    """Within the block, the first Numba compilation prints ``message`` as one line on
+    ``stream`` (default: ``sys.stderr`` at that moment); yields the FirstCompile listener."""
+    listener = FirstCompile(message, stream)
+    with event.install_listener("numba:compile", listener):
+        yield listener
