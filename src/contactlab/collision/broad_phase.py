@@ -30,6 +30,8 @@ NEIGHBOUR_GRID_CELLS = 8           # ... and the grid has at most 8 cells per bo
 
 def overlapping_pairs(lower, upper):
     """Pairs (i, j), i < j, whose boxes overlap, sorted; lower/upper (N, 3) [m] → int64 array (K, 2)."""
+    if len(lower) < 2:                  # one body, no pair (and nothing to compile for it)
+        return np.zeros((0, 2), dtype=np.int64)
     if len(lower) < GRID_FROM:
         return sweep_and_prune(lower, upper)
     pairs, done = neighbour_cell_pairs(lower, upper)
@@ -46,7 +48,9 @@ def _append_pair(pairs, found, a, b):
     array, or a copy of twice the capacity when it was full."""
     if found == pairs.shape[0]:
         grown = np.empty((2 * found, 2), dtype=np.int64)
-        grown[:found] = pairs
+        for row in range(found):        # not grown[:found] = pairs: a slice assignment compiles
+            grown[row, 0] = pairs[row, 0]   # Numba's shape-mismatch message, seconds on a cold cache
+            grown[row, 1] = pairs[row, 1]
         pairs = grown
     pairs[found, 0] = min(a, b)
     pairs[found, 1] = max(a, b)
@@ -59,7 +63,7 @@ def sweep_and_prune(lower, upper):
     count = lower.shape[0]
     order = np.argsort(lower[:, 0])
     pairs = np.empty((max(16, 4 * count), 2), dtype=np.int64)
-    found = 0
+    found = np.int64(0)     # not a literal 0: _append_pair would compile twice
     for position in range(count):
         i = order[position]
         upper_x = upper[i, 0]
@@ -121,7 +125,7 @@ def neighbour_cell_pairs(lower, upper):
         members[fill[cell_of[i]]] = i
         fill[cell_of[i]] += 1
     pairs = np.empty((max(16, 4 * n), 2), dtype=np.int64)
-    found = 0
+    found = np.int64(0)     # not a literal 0: _append_pair would compile twice
     for i in range(n):
         first = found
         for x in range(max(coords[i, 0] - 1, 0), min(coords[i, 0] + 2, dims[0])):
@@ -179,7 +183,7 @@ def grid_pairs(lower, upper):
                     e += 1
     order = np.argsort(keys, kind="mergesort")
     pairs = np.empty((max(16, 4 * n), 2), dtype=np.int64)
-    found = 0
+    found = np.int64(0)     # not a literal 0: _append_pair would compile twice
     start = 0
     while start < count:
         stop = start + 1
