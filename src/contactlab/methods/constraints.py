@@ -40,15 +40,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
-from ..collision import collide_keeping, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import advance_positions, body_free_velocities, factor_symmetric, free_velocities
+from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_velocities
 from ..errors import InputError
 from ..state import State
 from . import KeptManifoldOptions, StepInfo, check_choices, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
-from .velocity_level import entity_impact_fractions, normal_targets, relative_gravity
+from .velocity_level import (detect, normal_targets, positions_split_at_impact, predict, relative_gravity,
+                             restitution_threshold, step_without_contacts)
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "pgs", "redblack", "jacobi", "lemke")
 FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
@@ -194,6 +194,45 @@ def implicit_free_velocities(model, state, h):
     return unstack(inverse.solve(b0), model.body_count), inverse
 
 
+def normal_row_targets(model, state, contacts, rows, v_free, h, options):
+    """Stage 4a: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
+    none) — on velocities (C5b, ``normal_targets``) or on accelerations (C5a)."""
+    normal_velocity = row_products(rows, v_free)[:, 0]
+    gap_at_start = -contacts.depth
+    if options.formulation == "velocity":
+        return normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts), contacts.restitution,
+                              h, restitution_threshold(model, h, options), options)
+    current = row_products(rows, stack(*state.velocities))[:, 0]
+    return (acceleration_target(current, normal_velocity, gap_at_start, h, options),
+            np.full(contacts.count, -1.0))
+
+
+def solve_constraints(model, state, contacts, rows, v_free, target, warm, options, implicit_inverse=None):
+    """Stage 4b: the reactions λ (C, 3) [N s] and v⁺ = v* + A⁻¹ Jᵀ λ (N,), with the solver's sweeps
+    and residual. "matrix_free" sweeps the rows (sequential impulses on v); the other solvers,
+    and any solver on implicit cloth (``implicit_inverse``: the SystemInverse of stage 1),
+    solve the assembled problem."""
+    if options.solver == "matrix_free" and implicit_inverse is None:
+        u = v_free.copy()
+        lam, iterations, residual = solve_sequential_impulses(rows, contacts.friction, target, u, options.iterations,
+                                                              options.tolerance, warm,
+                                                              *sweep_groups(rows, contacts, state,
+                                                                            solve_order(contacts, model.gravity)))
+        return lam, u, iterations, residual
+    inverse_mass = inverse_mass_matrix(model, state.body_orientation)
+    # A = M, or with implicit cloth the A factored in stage 1
+    inverse = SystemInverse(inverse_mass=inverse_mass) if implicit_inverse is None else implicit_inverse
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    targets = np.zeros((contacts.count, 3))
+    targets[:, 0] = target
+    # on implicit cloth, matrix_free means products with W = J A⁻¹ Jᵀ (apgd): sweeps would
+    # need W's rows, that is A⁻¹ Jᵀ in full — dense, seconds a step on a 64 × 64 drape
+    solver = "apgd" if options.solver == "matrix_free" else options.solver
+    lam, iterations, residual = solve_assembled(J, inverse, inverse_mass, v_free, targets.ravel(), contacts.friction,
+                                                warm, options, solver)
+    return lam, v_free + inverse.solve(J.T @ lam.ravel()), iterations, residual
+
+
 def step(model, state, dt, options, integrator="symplectic_euler"):
     """One step of loop L3 with hard constraints; returns (new State, StepInfo)."""
     h = dt
@@ -204,63 +243,23 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     else:
         free = free_velocities(model, state, h, integrator)
     v_free = stack(*free)
-    move = state.velocities if integrator == "explicit_euler" else free
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
-    predicted = advance_positions(*state.positions, *move, h, h)
-    sweep = swept_distances(model, move[0], free[1], move[2], h)
+    move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
-    contacts, manifolds = collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
-                                          options.contact_margin, sweep, options.granularity, options.normal,
-                                          options.samples, cloth_samples=options.cloth_samples)
+    contacts, manifolds = detect(model, state, options, sweep)
     if contacts.count == 0:
-        carried = {k: v for k, v in state.carried.items() if not k.startswith("constraint_")}
-        carried["manifolds"] = manifolds
-        return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
+        return step_without_contacts(state, h, predicted, free, contacts, manifolds, "constraint_")
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    normal_velocity = row_products(rows, v_free)[:, 0]
-    gap_at_start = -contacts.depth
-    threshold = options.restitution_threshold
-    if threshold < 0:
-        threshold = 2.0 * np.linalg.norm(model.gravity) * h
-    if options.formulation == "velocity":
-        target, tau = normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts),
-                                     contacts.restitution, h, threshold, options)
-    else:
-        current = row_products(rows, stack(*state.velocities))[:, 0]
-        target = acceleration_target(current, normal_velocity, gap_at_start, h, options)
-        tau = np.full(contacts.count, -1.0)
+    target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)
     warm, _ = values_by_id(state.carried.get("constraint_ids"), state.carried.get("constraint_values"),
                            contacts.feature_id, 3)
-    warm *= options.warm_start
-    if options.solver == "matrix_free" and not implicit_cloth:
-        u = v_free.copy()
-        lam, iterations, residual = solve_sequential_impulses(rows, contacts.friction, target, u,
-                                                              options.iterations, options.tolerance, warm,
-                                                              *sweep_groups(rows, contacts, state,
-                                                                            solve_order(contacts, model.gravity)))
-        v_new = u
-    else:
-        inverse_mass = inverse_mass_matrix(model, state.body_orientation)
-        if not implicit_cloth:        # A = M (with implicit cloth, A was factored in stage 1)
-            inverse = SystemInverse(inverse_mass=inverse_mass)
-        J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
-        targets = np.zeros((contacts.count, 3))
-        targets[:, 0] = target
-        # on implicit cloth, matrix_free means products with W = J A⁻¹ Jᵀ (apgd): sweeps would
-        # need W's rows, that is A⁻¹ Jᵀ in full — dense, seconds a step on a 64 × 64 drape
-        solver = "apgd" if options.solver == "matrix_free" and implicit_cloth else options.solver
-        lam, iterations, residual = solve_assembled(J, inverse, inverse_mass, v_free, targets.ravel(),
-                                                    contacts.friction, warm, options, solver)
-        v_new = v_free + inverse.solve(J.T @ lam.ravel())
+    lam, v_new, iterations, residual = solve_constraints(model, state, contacts, rows, v_free, target,
+                                                         warm * options.warm_start, options,
+                                                         inverse if implicit_cloth else None)
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
-    if not options.time_of_impact:
-        tau[:] = -1.0
-    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
     solved = unstack(v_new, model.body_count)
-    corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
-    mid = advance_positions(*state.positions, *move, tau_body * h, tau_particle * h)
-    positions = advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
+    positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
     carried = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual))

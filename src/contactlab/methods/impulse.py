@@ -32,14 +32,14 @@ import numpy as np
 from numba import njit
 
 from ..builder import _number
-from ..collision import collide_keeping, swept_distances
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..dynamics.integrators import free_velocities
 from ..errors import InputError
 from ..state import State
 from . import KeptManifoldOptions, StepInfo, check_counts
-from .velocity_level import entity_impact_fractions, relative_gravity, resting_target
+from .velocity_level import (detect, positions_split_at_impact, predict, relative_gravity, resting_target,
+                             restitution_threshold, step_without_contacts)
 from .sequential import (contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts,
                          sweep_groups)
 
@@ -125,54 +125,34 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
     """One step of loop L3 with impulses; returns (new State, StepInfo)."""
+    h = dt
     # 1. internal forces → free velocities v*
-    v_body, w_body, v_particle = free_velocities(model, state, dt, integrator)
-    # velocities that move the positions: v* (symplectic) or the old ones (explicit Euler)
-    if integrator == "explicit_euler":
-        move = (state.body_velocity, state.body_angular_velocity, state.particle_velocity)
-    else:
-        move = (v_body, w_body, v_particle)
+    free = free_velocities(model, state, h, integrator)
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
-    free = (v_body, w_body, v_particle)
-    predicted = advance_positions(*state.positions, *move, dt, dt)
-    sweep = swept_distances(model, move[0], w_body, move[2], dt)
-    # 3. collision detection over the swept step: contacts at the start positions, with gaps
-    #    down to what the motion could close (speculative contacts: nothing tunnels)
-    contacts, manifolds = collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
-                                          options.contact_margin, sweep, options.granularity, options.normal,
-                                          options.samples, cloth_samples=options.cloth_samples)
+    move, predicted, sweep = predict(model, state, free, integrator, h)
+    # 3. collision detection over the swept step
+    contacts, manifolds = detect(model, state, options, sweep)
     if contacts.count == 0:
-        carried = {k: v for k, v in state.carried.items() if not k.startswith("impulse_")}
-        carried["manifolds"] = manifolds
-        return State.assemble(state.time + dt, predicted, free, carried), StepInfo(contacts)
+        return step_without_contacts(state, h, predicted, free, contacts, manifolds, "impulse_")
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
     gap_at_start = -contacts.depth                         # d₀
-    threshold = options.restitution_threshold
-    if threshold < 0:
-        threshold = 2.0 * np.linalg.norm(model.gravity) * dt
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    u = stack(v_body, w_body, v_particle)
+    u = stack(*free)
     order = solve_order(contacts, model.gravity)
-    tau_contact = np.empty(contacts.count)
+    tau = np.empty(contacts.count)
     resolve_collisions(rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
-                       gap_at_start, dt, threshold, u, options.iterations, options.iterations, options.tolerance,
-                       tau_contact, order)
+                       gap_at_start, h, restitution_threshold(model, h, options), u, options.iterations,
+                       options.iterations, options.tolerance, tau, order)
     warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
     impulses, sweeps, change = solve_sequential_impulses(rows, contacts.friction,
-                                                         resting_target(gap_at_start, dt, options), u,
+                                                         resting_target(gap_at_start, h, options), u,
                                                          options.iterations, options.tolerance, warm,
                                                          *sweep_groups(rows, contacts, state, order))
-    v_body_new, w_body_new, v_particle_new = unstack(u, model.body_count)
+    solved = unstack(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
-    if not options.time_of_impact:
-        tau_contact[:] = -1.0
-    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau_contact)
-    solved = (v_body_new, w_body_new, v_particle_new)
-    corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
-    mid = advance_positions(*state.positions, *move, tau_body * dt, tau_particle * dt)
-    positions = advance_positions(*mid, *corrected, (1 - tau_body) * dt, (1 - tau_particle) * dt)
+    positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
     carried = dict(state.carried, manifolds=manifolds, impulse_ids=contacts.feature_id, impulse_values=impulses)
-    new = State.assemble(state.time + dt, positions, solved, carried)
+    new = State.assemble(state.time + h, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
 
 

@@ -1,5 +1,10 @@
 """What the velocity-level methods share (SPEC M2: constraints on velocities are impulses).
 
+The stages of loop L3 both steps are made of, named as on the slide: ``predict`` (positions
+moved with the free velocities: how far everything sweeps), ``detect`` (contacts over the
+swept step), ``step_without_contacts``, and ``positions_split_at_impact`` (x = x₀ + h v⁺, the
+motion before the moment of impact taken with v*).
+
 Impulses (methods.impulse) and hard constraints on velocities (methods.constraints, C5b) both
 ask each contact's normal relative velocity after the step to reach a target, and both move
 the positions with the corrected velocities, split at the moment of impact. The targets:
@@ -12,6 +17,59 @@ the positions with the corrected velocities, split at the moment of impact. The 
 
 import numpy as np
 from numba import njit
+
+from ..collision import collide_keeping, swept_distances
+from ..dynamics.integrators import advance_positions
+from ..state import State
+from . import StepInfo
+
+
+def predict(model, state, free, integrator, h):
+    """Stage 2: positions integrated with the free velocities ``free`` (body (B, 3), angular (B, 3),
+    particle (P, 3)) over h [s] — a prediction of how far everything sweeps. Returns (the
+    velocities that move the positions: v*, or the old ones under explicit Euler; the predicted
+    positions; each collider's swept distance [m])."""
+    move = state.velocities if integrator == "explicit_euler" else free
+    predicted = advance_positions(*state.positions, *move, h, h)
+    return move, predicted, swept_distances(model, move[0], free[1], move[2], h)
+
+
+def detect(model, state, options, sweep):
+    """Stage 3: collision detection over the swept step — contacts at the start positions with
+    gaps down to what the motion could close (speculative contacts, so nothing tunnels), box,
+    hull and plane pairs that barely moved keeping last step's manifolds. Returns (Contacts,
+    the manifolds to carry)."""
+    return collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
+                           options.contact_margin, sweep, options.granularity, options.normal, options.samples,
+                           cloth_samples=options.cloth_samples)
+
+
+def step_without_contacts(state, h, predicted, free, contacts, manifolds, warm_prefix):
+    """The step when nothing touches: the prediction stands; the warm-start values carried under
+    keys starting with ``warm_prefix`` are dropped (no contact persists). Returns (State, StepInfo)."""
+    carried = {key: value for key, value in state.carried.items() if not key.startswith(warm_prefix)}
+    carried["manifolds"] = manifolds
+    return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
+
+
+def restitution_threshold(model, h, options):
+    """Approaches slower than this [m/s] get no bounce: the option, or 2 |g| h where it is < 0."""
+    if options.restitution_threshold >= 0:
+        return options.restitution_threshold
+    return 2.0 * np.linalg.norm(model.gravity) * h
+
+
+def positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, time_of_impact):
+    """Stage 5: positions x = x₀ + h v⁺, with the part of the step before each body's earliest
+    impact (τ (C,) per contact, −1 where none; see ``entity_impact_fractions``) travelled with
+    the velocities that moved the prediction (``move``) and the rest with them corrected by the
+    solve (``solved`` − ``free``). ``time_of_impact`` False: no split (τ = −1 everywhere)."""
+    if not time_of_impact:
+        tau = np.full(contacts.count, -1.0)
+    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
+    corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
+    mid = advance_positions(*state.positions, *move, tau_body * h, tau_particle * h)
+    return advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
 
 
 def resting_target(gap_at_start, dt, options):
