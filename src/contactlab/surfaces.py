@@ -24,9 +24,8 @@ Triangles are wound counter-clockwise seen from outside.
 import functools
 
 import numpy as np
-import trimesh
 
-from . import rotations, shapes
+from . import _icosphere, rotations, shapes
 
 SPHERE_SUBDIVISIONS = 1     # an icosphere of 80 triangles
 CAPSULE_SEGMENTS = 8        # around the axis
@@ -41,12 +40,15 @@ def _hull_surface(hulls, index):
 
 @functools.lru_cache(maxsize=None)
 def _unit_sphere():
-    mesh = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
-    return _read_only(mesh.vertices), _read_only(mesh.faces)
+    """(vertices (42, 3), triangles (80, 3)) of the unit icosphere of SPHERE_SUBDIVISIONS = 1:
+    trimesh.creation.icosphere's, written out in contactlab._icosphere (no trimesh import)."""
+    return _read_only(np.array(_icosphere.VERTICES, dtype=float)), _read_only(np.array(_icosphere.TRIANGLES,
+                                                                                       dtype=np.int64))
 
 
 @functools.lru_cache(maxsize=64)
 def _capsule(radius, half_length):
+    import trimesh                      # half a second to import: only scenes with capsules pay it
     mesh = trimesh.creation.capsule(height=2.0 * half_length, radius=radius,
                                     count=[CAPSULE_SEGMENTS, CAPSULE_SEGMENTS])
     return _read_only(mesh.vertices), _read_only(mesh.faces)
