@@ -18,7 +18,6 @@ Forces distribute as F_x = Jᵀ F_p (D1). Shapes: C contacts.
 from dataclasses import dataclass, fields
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 
 
@@ -156,6 +155,7 @@ def jacobian(contacts: Contacts, body_position, body_count: int, particle_count:
                 col0 = 6 * body_count + 3 * particles[c, k]
                 cols.append((col0[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1).ravel())
                 vals.append(block.ravel())
+    import scipy.sparse as sp               # here, not at the top: it is a tenth of `import contactlab`
     shape = (3 * C, 6 * body_count + 3 * particle_count)
     if not rows:
         return sp.csr_matrix(shape)

@@ -30,7 +30,6 @@ owns [3p, 3p + 3). Everything is vectorized over springs (no Python loop per spr
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 TINY_LENGTH = 1e-12     # m: a spring shorter than this has no direction; its axis is taken as zero
 
@@ -95,6 +94,7 @@ class SpringPattern:
 
     def matrix(self, values):
         """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
+        import scipy.sparse as sp           # SciPy on first use: it is a tenth of `import contactlab`
         n = len(self.indptr) - 1
         return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
 
@@ -149,6 +149,7 @@ def spring_jacobians(model, particle_position, particle_velocity=None, clamp_com
     """
     count = len(particle_position)
     if model.spring_count == 0:
+        import scipy.sparse as sp
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
     stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)

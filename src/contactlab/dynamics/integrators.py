@@ -25,8 +25,6 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .. import rotations
 from .cloth import block_product, jacobian_blocks, spring_forces
@@ -140,6 +138,8 @@ def factor_symmetric(matrix):
     that ordering (a positive definite matrix needs no row exchanges). The default threshold
     pivoting breaks the symmetric ordering: on a draped 64 × 64 cloth its factor was 20x denser
     and took 30 s, against 0.17 s (and 5 ms a solve) this way."""
+    import scipy.sparse as sp               # SciPy on first use: it is a tenth of `import contactlab`
+    import scipy.sparse.linalg as spla
     return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                      options={"SymmetricMode": True})
 
@@ -159,6 +159,7 @@ def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
         b = rhs[dofs]
         solution, info = None, 1
         if solver == "cg":
+            import scipy.sparse.linalg as spla
             inverse_diagonal = 1.0 / sub.diagonal()
             preconditioner = spla.LinearOperator(sub.shape, matvec=lambda r: r * inverse_diagonal)
             solution, info = spla.cg(sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0,
