@@ -14,18 +14,29 @@ def normalize(q):
 
 
 def to_matrix(q):
-    """Rotation matrices R (count, 3, 3) with x_world = R x_body, from unit q (count, 4)."""
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    """Rotation matrices R (count, 3, 3) with x_world = R x_body, from unit q (count, 4) (or any
+    leading shape (..., 4) → (..., 3, 3)). Compiled: it runs several times a step, and its
+    NumPy form cost 24 µs for a single body."""
+    q = np.asarray(q, dtype=float)
+    flat = np.ascontiguousarray(q.reshape(-1, 4))
+    return _to_matrix(flat).reshape(q.shape[:-1] + (3, 3))
+
+
+@njit(cache=True)
+def _to_matrix(q):
+    """``to_matrix`` on q (count, 4), the same arithmetic in the same order as element by element."""
+    R = np.empty((q.shape[0], 3, 3))
+    for i in range(q.shape[0]):
+        w, x, y, z = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        R[i, 0, 0] = 1 - 2 * (y * y + z * z)
+        R[i, 0, 1] = 2 * (x * y - w * z)
+        R[i, 0, 2] = 2 * (x * z + w * y)
+        R[i, 1, 0] = 2 * (x * y + w * z)
+        R[i, 1, 1] = 1 - 2 * (x * x + z * z)
+        R[i, 1, 2] = 2 * (y * z - w * x)
+        R[i, 2, 0] = 2 * (x * z - w * y)
+        R[i, 2, 1] = 2 * (y * z + w * x)
+        R[i, 2, 2] = 1 - 2 * (x * x + y * y)
     return R
 
 
