@@ -224,132 +224,141 @@ def _hull(hull_store, index):
                      face_vertex_index, edge_start, edge_vertex, edge_face, np.int64(index))
 
 
-def _ordered(families, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-             margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
-    """The pair routines in canonical order (rank of A ≤ rank of B): the contacts of the pair
-    written from ``slot`` on, their count returned; 0 for an unknown pair or one whose family
-    is ``None`` in ``families``. Compiled code only (see the overload below)."""
+def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
+               out_point, out_normal, out_depth, out_feature, out_owner, slot):
+    """The contacts of every pair k of ``pairs`` (K, 2), reaching gaps down to ``reach[k]``,
+    written from row ``slot`` on in pair order, with ``out_owner`` = k; returns how many were
+    written. Each pair is taken in canonical order (rank of A ≤ rank of B; computed swapped and
+    its normals flipped otherwise). A pair whose family is ``None`` in ``families`` (see
+    FAMILIES), or that has no routine, gets none. Compiled code only (the overload below)."""
     raise NotImplementedError("compiled code only")
 
 
-@overload(_ordered)
-def _ordered_for(families, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                 margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
-    """The dispatch for one families type: its ``None`` entries are constant False here, so
-    Numba prunes their branches before typing and never compiles those routines."""
+@overload(_pairs_loop)
+def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
+                    out_point, out_normal, out_depth, out_feature, out_owner, slot):
+    """The loop for one families type. Its ``None`` entries are the constant False here, so
+    Numba drops those routines' branches before typing and never compiles them. The loop and
+    the dispatch are one function: a call per pair that handed over the arrays (and the hull
+    store's ten) would cost more than a sphere pair itself."""
     if not isinstance(families, types.BaseTuple) or len(families) != len(FAMILIES):
         raise TypingError(f"families: expected a tuple of {len(FAMILIES)} True or None, found {families}")
     (has_sphere_sphere, has_sphere_capsule, has_sphere_box, has_sphere_plane, has_capsule_capsule,
      has_capsule_box, has_capsule_plane, has_box_box, has_box_plane, has_sphere_convex, has_capsule_convex,
      has_convex_convex, has_convex_plane) = (not isinstance(t, types.NoneType) for t in families.types)
 
-    def ordered(families, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
-        round_a = kind_a == SPHERE or kind_a == POINT
-        round_b = kind_b == SPHERE or kind_b == POINT
-        if has_sphere_sphere:
-            if round_a and round_b:
-                return sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin,
-                                     out_point, out_normal, out_depth, out_feature, slot)
-        if has_sphere_capsule:
-            if round_a and kind_b == CAPSULE:
-                return sphere_capsule(center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1],
-                                      margin, out_point, out_normal, out_depth, out_feature, slot)
-        if has_sphere_box:
-            if round_a and kind_b == BOX:
-                return sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
-                                  out_point, out_normal, out_depth, out_feature, slot)
-        if has_sphere_plane:
-            if round_a and kind_b == PLANE:
-                return sphere_plane(center_a, params_a[0], params_b, margin,
-                                    out_point, out_normal, out_depth, out_feature, slot)
-        if has_capsule_capsule:
-            if kind_a == CAPSULE and kind_b == CAPSULE:
-                return capsule_capsule(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                       params_b[0], params_b[1], margin,
-                                       out_point, out_normal, out_depth, out_feature, slot)
-        if has_capsule_box:
-            if kind_a == CAPSULE and kind_b == BOX:
-                return capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                   params_b[:3], margin, out_point, out_normal, out_depth, out_feature, slot)
-        if has_capsule_plane:
-            if kind_a == CAPSULE and kind_b == PLANE:
-                return capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
-                                     out_point, out_normal, out_depth, out_feature, slot)
-        if has_box_box:
-            if kind_a == BOX and kind_b == BOX:
-                return box_box(center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3], margin,
-                               out_point, out_normal, out_depth, out_feature, slot)
-        if has_box_plane:
-            if kind_a == BOX and kind_b == PLANE:
-                return box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
-                                 out_point, out_normal, out_depth, out_feature, slot)
-        if has_sphere_convex:
-            if round_a and kind_b == CONVEX:
-                b = _hull(hull_store, params_b[0])
-                return sphere_convex(center_a, params_a[0], center_b, rotation_b, b[0], b[1], b[2], b[3], b[4],
-                                     margin, out_point, out_normal, out_depth, out_feature, slot)
-        if has_capsule_convex:
-            if kind_a == CAPSULE and kind_b == CONVEX:
-                b = _hull(hull_store, params_b[0])
-                return capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                      b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
-                                      out_point, out_normal, out_depth, out_feature, slot)
-        if has_convex_convex:
-            if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
-                a = _hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
-                b = _hull(hull_store, params_b[0])
-                return convex_convex(center_a, rotation_a, a[0], a[1], a[2], a[3], a[4], a[5], a[6],
-                                     center_b, rotation_b, b[0], b[1], b[2], b[3], b[4], b[5], b[6], margin,
-                                     out_point, out_normal, out_depth, out_feature, slot)
-        if has_convex_plane:
-            if kind_a == CONVEX and kind_b == PLANE:
-                a = _hull(hull_store, params_a[0])
-                return convex_plane(center_a, rotation_a, a[0], params_b, margin,
-                                    out_point, out_normal, out_depth, out_feature, slot)
-        return 0
+    def loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
+             out_point, out_normal, out_depth, out_feature, out_owner, slot):
+        count = slot
+        for k in range(pairs.shape[0]):
+            a, b = pairs[k, 0], pairs[k, 1]
+            swapped = _rank(kinds[a]) > _rank(kinds[b])
+            if swapped:
+                a, b = b, a
+            kind_a, kind_b = kinds[a], kinds[b]
+            params_a, center_a, rotation_a = params[a], centers[a], rotations_[a]
+            params_b, center_b, rotation_b = params[b], centers[b], rotations_[b]
+            margin = reach[k]
+            round_a = kind_a == SPHERE or kind_a == POINT
+            round_b = kind_b == SPHERE or kind_b == POINT
+            written = 0
+            if has_sphere_sphere:
+                if round_a and round_b:
+                    written = sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin,
+                                            out_point, out_normal, out_depth, out_feature, count)
+            if has_sphere_capsule:
+                if round_a and kind_b == CAPSULE:
+                    written = sphere_capsule(center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1],
+                                             margin, out_point, out_normal, out_depth, out_feature, count)
+            if has_sphere_box:
+                if round_a and kind_b == BOX:
+                    written = sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
+                                         out_point, out_normal, out_depth, out_feature, count)
+            if has_sphere_plane:
+                if round_a and kind_b == PLANE:
+                    written = sphere_plane(center_a, params_a[0], params_b, margin,
+                                           out_point, out_normal, out_depth, out_feature, count)
+            if has_capsule_capsule:
+                if kind_a == CAPSULE and kind_b == CAPSULE:
+                    written = capsule_capsule(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
+                                              params_b[0], params_b[1], margin,
+                                              out_point, out_normal, out_depth, out_feature, count)
+            if has_capsule_box:
+                if kind_a == CAPSULE and kind_b == BOX:
+                    written = capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
+                                          params_b[:3], margin, out_point, out_normal, out_depth, out_feature, count)
+            if has_capsule_plane:
+                if kind_a == CAPSULE and kind_b == PLANE:
+                    written = capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
+                                            out_point, out_normal, out_depth, out_feature, count)
+            if has_box_box:
+                if kind_a == BOX and kind_b == BOX:
+                    written = box_box(center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3],
+                                      margin, out_point, out_normal, out_depth, out_feature, count)
+            if has_box_plane:
+                if kind_a == BOX and kind_b == PLANE:
+                    written = box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
+                                        out_point, out_normal, out_depth, out_feature, count)
+            if has_sphere_convex:
+                if round_a and kind_b == CONVEX:
+                    hb = _hull(hull_store, params_b[0])
+                    written = sphere_convex(center_a, params_a[0], center_b, rotation_b, hb[0], hb[1], hb[2], hb[3],
+                                            hb[4], margin, out_point, out_normal, out_depth, out_feature, count)
+            if has_capsule_convex:
+                if kind_a == CAPSULE and kind_b == CONVEX:
+                    hb = _hull(hull_store, params_b[0])
+                    written = capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
+                                             hb[0], hb[1], hb[2], hb[3], hb[4], hb[5], hb[6], margin,
+                                             out_point, out_normal, out_depth, out_feature, count)
+            if has_convex_convex:
+                if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
+                    ha = _hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
+                    hb = _hull(hull_store, params_b[0])
+                    written = convex_convex(center_a, rotation_a, ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], ha[6],
+                                            center_b, rotation_b, hb[0], hb[1], hb[2], hb[3], hb[4], hb[5], hb[6],
+                                            margin, out_point, out_normal, out_depth, out_feature, count)
+            if has_convex_plane:
+                if kind_a == CONVEX and kind_b == PLANE:
+                    ha = _hull(hull_store, params_a[0])
+                    written = convex_plane(center_a, rotation_a, ha[0], params_b, margin,
+                                           out_point, out_normal, out_depth, out_feature, count)
+            for c in range(count, count + written):
+                if swapped:                 # normals from B into A of the pair as given
+                    for i in range(3):
+                        out_normal[c, i] = -out_normal[c, i]
+                out_owner[c] = k
+            count += written
+        return count - slot
 
-    return ordered
-
-
-@njit(cache=True, inline="always")
-def _flip_normals(out_normal, slot, count):
-    """Reverse the normals of rows slot … slot + count − 1 (a pair computed swapped)."""
-    for i in range(slot, slot + count):
-        for k in range(3):
-            out_normal[i, k] = -out_normal[i, k]
-
-
-@njit(cache=True, inline="always")
-def collide_families(families, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                     margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
-    """``collide_pair`` with only the routines of ``families`` (see FAMILIES): a pair of another
-    family gets 0 contacts. ``hull_store`` may be None when no hull family is in ``families``.
-
-    A pair given out of canonical order is computed swapped and its normals flipped, so
-    swapping the two shapes flips the normal and nothing else."""
-    if _rank(kind_a) <= _rank(kind_b):
-        return _ordered(families, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                        margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
-    count = _ordered(families, kind_b, params_b, center_b, rotation_b, kind_a, params_a, center_a, rotation_a,
-                     margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
-    _flip_normals(out_normal, slot, count)
-    return count
+    return loop
 
 
 @njit(cache=True)
 def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
                  margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
     """Contacts of shape A against shape B written from ``slot`` on; returns their count
-    (at most MAX_PER_PAIR). Every routine is compiled in: the scene-wide narrow phase
-    (``generate_contacts``) compiles only the families it is given.
+    (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and nothing else. Every
+    routine is compiled in: the scene-wide narrow phase (``generate_contacts``) compiles only
+    the families it is given.
 
     kind, params (4,), centre (3,) [m] and rotation (3, 3) (body → world) of each shape;
     margin [m]: contacts with gaps down to −margin are kept; hull_store: the model's packed
     hulls (Model.hull_store, or ``empty_hull_store()``); out_point, out_normal (n, 3),
     out_depth (n,) [m], out_feature (n,) int64: the rows written from ``slot`` on."""
-    return collide_families(ALL_FAMILIES, kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b,
-                            rotation_b, margin, hull_store, out_point, out_normal, out_depth, out_feature, slot)
+    kinds = np.array([kind_a, kind_b], dtype=np.int64)
+    params = np.empty((2, 4))
+    centers = np.empty((2, 3))
+    rotations_ = np.empty((2, 3, 3))
+    for i in range(4):
+        params[0, i], params[1, i] = params_a[i], params_b[i]
+    for i in range(3):
+        centers[0, i], centers[1, i] = center_a[i], center_b[i]
+        for j in range(3):
+            rotations_[0, i, j], rotations_[1, i, j] = rotation_a[i, j], rotation_b[i, j]
+    owner = np.empty(out_depth.shape[0], dtype=np.int64)
+    return _pairs_loop(ALL_FAMILIES, np.array([[0, 1]], dtype=np.int64), kinds, params, centers, rotations_,
+                       np.full(1, margin), hull_store, out_point, out_normal, out_depth, out_feature, owner,
+                       np.int64(slot))
 
 
 @njit(cache=True)
@@ -368,15 +377,8 @@ def generate_contacts(pairs, kinds, params, centers, rotations_, reach, hull_sto
     depth = np.empty(capacity)
     feature = np.empty(capacity, dtype=np.int64)
     owner = np.empty(capacity, dtype=np.int64)      # which pair each contact came from
-    # an int64 from the start: a literal 0 would have Numba type every routine for slot = 0 first
-    # and compile each of them twice
-    count = np.int64(0)
-    for k in range(len(pairs)):
-        a, b = pairs[k, 0], pairs[k, 1]
-        written = collide_families(families, kinds[a], params[a], centers[a], rotations_[a],
-                                   kinds[b], params[b], centers[b], rotations_[b],
-                                   reach[k], hull_store, point, normal, depth, feature, count)
-        for c in range(count, count + written):
-            owner[c] = k
-        count += written
+    # the slot as an int64, not a literal 0: Numba would type every routine for slot = 0
+    # first and compile each of them twice
+    count = _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
+                        point, normal, depth, feature, owner, np.int64(0))
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]
