@@ -89,7 +89,8 @@ def _values_by_id(previous_ids, previous_values, feature_id):
         p = place[c]
         if p < sorted_ids.shape[0] and sorted_ids[p] == feature_id[c]:
             found[c] = True
-            values[c, :] = previous_values[order[p]]
+            for j in range(previous_values.shape[1]):     # not values[c, :] = …: a slice assignment
+                values[c, j] = previous_values[order[p], j]   # compiles Numba's shape-mismatch message
     return values, found
 
 

@@ -105,6 +105,31 @@ def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, ke
     return row
 
 
+# Row copies written as loops (``_copy1(a[r], b[m])`` for ``a[r] = b[m]``): Numba compiles an
+# array assignment together with its shape-mismatch message, seconds of string formatting on
+# a cold cache. Same shape on both sides; 1, 2 or 3 dimensions.
+
+@njit(cache=True, inline="always")
+def _copy1(destination, source):
+    for i in range(destination.shape[0]):
+        destination[i] = source[i]
+
+
+@njit(cache=True, inline="always")
+def _copy2(destination, source):
+    for i in range(destination.shape[0]):
+        for j in range(destination.shape[1]):
+            destination[i, j] = source[i, j]
+
+
+@njit(cache=True, inline="always")
+def _copy3(destination, source):
+    for i in range(destination.shape[0]):
+        for j in range(destination.shape[1]):
+            for k in range(destination.shape[2]):
+                destination[i, j, k] = source[i, j, k]
+
+
 @njit(cache=True)
 def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotations_,
              point, normal, depth, feature, owner,
@@ -145,8 +170,11 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
         m = row[k]
         if m >= 0:                  # reused: refreshed from the witness points
             new_keys[r], new_reach[r], new_count[r] = keys[k], kept_reach[m], kept_count[m]
-            new_center[r], new_rotation[r] = kept_center[m], kept_rotation[m]
-            new_witness[r], new_normal[r], new_feature[r] = kept_witness[m], kept_normal[m], kept_feature[m]
+            _copy2(new_center[r], kept_center[m])
+            _copy3(new_rotation[r], kept_rotation[m])
+            _copy3(new_witness[r], kept_witness[m])
+            _copy2(new_normal[r], kept_normal[m])
+            _copy1(new_feature[r], kept_feature[m])
             r += 1
             for s in range(kept_count[m]):
                 gap = 0.0
@@ -167,8 +195,10 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
             continue
         if keeps[k]:                # computed afresh: kept as a new manifold
             new_keys[r], new_reach[r] = keys[k], computed_reach[k]
-            new_center[r, 0], new_center[r, 1] = centers[a], centers[b]
-            new_rotation[r, 0], new_rotation[r, 1] = rotations_[a], rotations_[b]
+            _copy1(new_center[r, 0], centers[a])
+            _copy1(new_center[r, 1], centers[b])
+            _copy2(new_rotation[r, 0], rotations_[a])
+            _copy2(new_rotation[r, 1], rotations_[b])
         while f < owner.shape[0] and owner[f] == k:
             if keeps[k]:
                 s = new_count[r]
@@ -186,7 +216,8 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
                 new_feature[r, s] = feature[f]
                 new_count[r] = s + 1
             if depth[f] >= -pair_reach[k]:
-                out_point[c], out_normal[c] = point[f], normal[f]
+                _copy1(out_point[c], point[f])
+                _copy1(out_normal[c], normal[f])
                 out_depth[c], out_feature[c], out_owner[c] = depth[f], feature[f], k
                 c += 1
             f += 1
