@@ -19,6 +19,8 @@ def to_matrix(q):
     NumPy form cost 24 µs for a single body."""
     q = np.asarray(q, dtype=float)
     flat = np.ascontiguousarray(q.reshape(-1, 4))
+    if not flat.flags.writeable:        # a Model's arrays: Numba would compile a read-only twin
+        flat = flat.copy()
     return _to_matrix(flat).reshape(q.shape[:-1] + (3, 3))
 
 
@@ -71,8 +73,10 @@ def integrate(q, angular_velocity, dt):
     dt a scalar, (count,) or (count, 1) [s].
     """
     q = np.ascontiguousarray(q, dtype=float)
-    step = np.broadcast_to(np.ravel(np.asarray(dt, dtype=float)), (len(q),))
-    return _integrate(q, np.ascontiguousarray(angular_velocity, dtype=float), np.ascontiguousarray(step))
+    # a writable copy: the broadcast view is read-only, and for one body no copy would be made,
+    # so Numba compiled a read-only twin of _integrate
+    step = np.broadcast_to(np.ravel(np.asarray(dt, dtype=float)), (len(q),)).copy()
+    return _integrate(q, np.ascontiguousarray(angular_velocity, dtype=float), step)
 
 
 @njit(cache=True)
