@@ -15,7 +15,7 @@ from contactlab.collision import _colliders
 from contactlab.collision.broad_phase import brute_force_pairs
 from contactlab.collision.narrow_phase import (ALL_FAMILIES, FAMILIES, collide_pair, family, generate_contacts,
                                                needs_hulls)
-from contactlab.compiling import NOTICE, compile_notice
+from contactlab.compiling import NOTICE, FirstCompile, compile_notice
 
 OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) * 0.06
 TETRAHEDRON = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]) - 0.025
@@ -146,7 +146,7 @@ def test_collide_gives_the_same_contacts_whatever_the_shapes_around():
 
 def test_a_compilation_prints_the_notice_once():
     stream = io.StringIO()
-    with compile_notice(stream=stream) as listener:
+    with compile_notice(FirstCompile(stream=stream)) as listener:
         assert not listener.said
 
         @numba.njit                                     # a function no cache holds: it compiles here
@@ -159,6 +159,13 @@ def test_a_compilation_prints_the_notice_once():
 
         assert another(1.0) == 4.0
     assert listener.said
+    with compile_notice(listener):                      # a run's later block: no second line
+
+        @numba.njit
+        def third(x):
+            return x - 1.0
+
+        assert third(1.0) == 0.0
     assert stream.getvalue() == NOTICE + "\n"
     assert "first use" in NOTICE
 
@@ -205,3 +212,37 @@ def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_
     assert warm.returncode == 0, warm.stderr
     assert NOTICE not in warm.stderr
     json.loads(warm.stdout)
+
+
+def test_compiling_before_the_first_step_is_said_and_counted_once(monkeypatch, capsys):
+    """The first sample's collide() compiles the collision kernels before the first step: the
+    notice comes then, not again when a step compiles, and compile_seconds counts both."""
+    import time
+
+    from numba.core import event
+
+    from contactlab import record
+    from contactlab.methods import impulse
+    real_sample, real_step = record.Recorder.sample, impulse.step
+    calls = []
+
+    def sample(self, *args):
+        if not calls:
+            with event.trigger_event("numba:compile", data={}):
+                time.sleep(0.2)
+        return real_sample(self, *args)
+
+    def step(*args):
+        calls.append(1)
+        if len(calls) == 3:
+            with event.trigger_event("numba:compile", data={}):
+                time.sleep(0.2)
+        return real_step(*args)
+
+    monkeypatch.setattr(record.Recorder, "sample", sample)
+    monkeypatch.setattr(impulse, "step", step)
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
+    run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1)
+    assert capsys.readouterr().err.count(NOTICE) == 1
+    assert run.summary["compile_seconds"] >= 0.4

@@ -41,9 +41,10 @@ class FirstCompile(event.Listener):
 
 
 @contextmanager
-def compile_notice(message=NOTICE, stream=None):
-    """Within the block, the first Numba compilation prints ``message`` as one line on
-    ``stream`` (default: ``sys.stderr`` at that moment); yields the FirstCompile listener."""
-    listener = FirstCompile(message, stream)
+def compile_notice(listener=None):
+    """Within the block, the first Numba compilation prints ``NOTICE`` as one line on
+    ``sys.stderr``; yields the FirstCompile listener. Hand the same ``listener`` to several
+    blocks (one run's set-up and its steps) for one line at most over all of them."""
+    listener = FirstCompile() if listener is None else listener
     with event.install_listener("numba:compile", listener):
         yield listener
