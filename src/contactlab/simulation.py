@@ -61,6 +61,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     recorder = Recorder(model, record_every)
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     notice = FirstCompile()                        # one line on stderr at the first compilation
+    run_started = time.perf_counter()              # the run: its first sample, the steps, the other samples
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         recorder.sample(state)                     # its collide() compiles the collision kernels first
     setup_compile_seconds = _seconds(compiling)
@@ -70,7 +71,6 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     stepping_seconds = 0.0            # the later steps: step() calls only, no recording, no compiling
     later_compile_seconds = 0.0       # kernels first needed after the first step (say, at the first contact)
     recording_seconds = 0.0
-    run_started = time.perf_counter()
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
                  desc=f"{scene_name} ({method})") as bar, chooser:
