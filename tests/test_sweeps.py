@@ -116,7 +116,13 @@ def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
     grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=groups)
     assert groups == 1 or contacts.count < sequential.PARALLEL_MIN_CONTACTS
     np.testing.assert_array_equal(grouped, order)
-    np.testing.assert_array_equal(starts, [0, contacts.count, contacts.count])
+    assert starts is None                                   # one group: the serial sweep, nothing parallel compiled
+    lam, sweeps, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u.copy(), 20, -1.0,
+                                                          np.zeros((contacts.count, 3)), grouped, starts)
+    lam_array, _, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u.copy(), 20, -1.0,
+                                                           np.zeros((contacts.count, 3)), grouped,
+                                                           np.array([0, contacts.count, contacts.count]))
+    np.testing.assert_array_equal(lam, lam_array)           # the same sweep as one group given explicitly
 
 
 def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):

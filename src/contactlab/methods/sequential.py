@@ -284,7 +284,7 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
     impulse kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential
     impulse kept in the disk μ λ_n (F2). ``order`` and ``starts`` (G + 2,) int come from
     ``sweep_groups``: groups 0 … G−1 of a sweep run side by side on G threads, then the last
-    group (``sweep_groups_in_parallel``); one group (G = 1) is the plain serial sweep in
+    group (``sweep_groups_in_parallel``); ``starts`` None, or one group (G = 1), is the plain serial sweep in
     ``order``, which never touches the thread pool.
 
     The sweeps stop once a whole sweep changes no contact's relative velocity (normal or
@@ -296,7 +296,9 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
     t2), sweeps made, that largest velocity change over the last sweep [m/s]).
     """
     C = friction.shape[0]
-    groups = starts.shape[0] - 2
+    groups = 1
+    if starts is not None:          # None (one group): the parallel sweep is pruned, never compiled
+        groups = starts.shape[0] - 2
     impulses = initial_impulses.copy()
     apply_impulses(rows, impulses, u)
     # the rows laid out in sweep order: each sweep then reads memory front to back (twice as
@@ -310,8 +312,11 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
     change = 0.0
     for sweep in range(iterations):
         sweeps = sweep + 1
-        before[:] = u
-        if groups == 1:
+        for i in range(u.shape[0]):     # loops, not slice assignments: those compile an error message
+            before[i] = u[i]
+        if starts is None:
+            change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
+        elif groups == 1:
             change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
         else:
             change = sweep_groups_in_parallel(members, starts, target_o, impulses_o, rows_o, friction_o, u,
@@ -319,7 +324,9 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
         change = largest_row_change(rows_o, u, before)
         if change <= tolerance:
             break
-    impulses[order] = impulses_o
+    for i in range(C):
+        for d in range(3):
+            impulses[order[i], d] = impulses_o[i, d]
     return impulses, sweeps, change
 
 
@@ -384,8 +391,9 @@ def _joined(g, slab):
 
 def sweep_groups(rows, contacts, state, order, groups=SWEEP_GROUPS, min_contacts=PARALLEL_MIN_CONTACTS):
     """Group the contacts so that a Gauss-Seidel sweep can run on several threads (C8) and still
-    be one serial sweep: returns (order (C,) int, starts (G + 2,) int) for
-    ``solve_sequential_impulses``. ``rows`` from ``contact_rows`` of ``contacts``; ``state``
+    be one serial sweep: returns (order (C,) int, starts (G + 2,) int, or None for one group —
+    so that ``solve_sequential_impulses`` compiles no parallel sweep for a scene that never
+    needs one, 2–3 s of a cold start). ``rows`` from ``contact_rows`` of ``contacts``; ``state``
     holds the positions the bodies and particles are sorted into slabs by.
 
     Space is cut across the axis along which the contacts spread most into G = ``groups``
@@ -399,7 +407,7 @@ def sweep_groups(rows, contacts, state, order, groups=SWEEP_GROUPS, min_contacts
     """
     C = len(order)
     if groups < 2 or C < min_contacts:
-        return np.asarray(order), np.array([0, C, C])
+        return np.asarray(order), None
     return _split_into_slabs(np.asarray(order), contacts.point, rows.body, rows.particle, state.body_position,
                              rows.body_inverse_mass, state.particle_position, rows.particle_inverse_mass, groups)
 
