@@ -128,7 +128,7 @@ def test_auto_falls_back_to_one_thread_on_a_busy_machine_and_gives_up_a_hopeless
 
 def test_auto_follows_the_load_and_holds_a_repeated_verdict_longer(fake):
     chooser = threads.ThreadChooser("auto", trial_steps=2, hold_steps=4, longest_hold=16)
-    busy, idle = {1: 0.03, 2: 0.05}, {1: 0.03, 2: 0.02}
+    busy, idle = {1: 0.03, 2: 0.04}, {1: 0.03, 2: 0.02}     # 0.04: slower, but not enough to give up
     drive(chooser, fake, busy, 4)                              # trial (2 + 2): one thread wins
     assert chooser.hold == 4
     drive(chooser, fake, busy, 4 + 4)                          # hold, trial again: same verdict

@@ -88,7 +88,7 @@ class ThreadChooser:
     loop) the hold is at its longest. ``counts`` tallies the steps run at each count.
     """
 
-    def __init__(self, threads=AUTO, trial_steps=6, hold_steps=200, longest_hold=3200, give_up=3.0,
+    def __init__(self, threads=AUTO, trial_steps=6, hold_steps=200, longest_hold=3200, give_up=1.5,
                  too_short_to_matter=2e-4):
         self.mode = check_threads(threads)
         self.most = available_threads()
