@@ -675,6 +675,9 @@ def main():
     parser.add_argument("--duration", nargs="*", default=[], metavar="KEY=SECONDS",
                         help="override a scene's duration, e.g. cloth64=0.5")
     parser.add_argument("--numba-threads", default="2", help="NUMBA_NUM_THREADS (set before numba loads)")
+    parser.add_argument("--no-mujoco", action="store_true",
+                        help="leave MuJoCo out (at its default Newton solver a 1000-sphere pile takes it over ten "
+                             "minutes here); its rows of the scenes run are dropped, not kept from another setting")
     parser.add_argument("--matched", action="store_true",
                         help="issue 8's setting: 50 iterations in every engine, MuJoCo's CG (default: each engine's "
                              "defaults)")
@@ -696,10 +699,15 @@ def main():
             k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()}
         results["mode"] = "quick" if args.quick else "full"
         results["settings_mode"] = "matched 50 iterations" if MATCHED else "each engine's defaults"
+        global mujoco
+        if args.no_mujoco:
+            mujoco = None
         todo = args.only or ["ball", "pile1000", "pyramid", "cloth64", "lcp", "scaling", "pile4000", "cloth128"]
         every = settings["sample_every"]
         for item in todo:
             print(f"{item} ...", flush=True)
+            if args.no_mujoco:
+                results.get("runs", {}).pop(f"{item}/mujoco", None)
             started = time.perf_counter()
             if item == "ball":
                 ball_runs(results, settings["ball"], args.results)
