@@ -254,20 +254,18 @@ def rows_in_order(rows, order):
 
 
 @njit(cache=True, parallel=True)
-def sweep_groups_in_parallel(members, starts, target, impulses, rows, friction, u, changes):
+def sweep_groups_in_parallel(members, starts, target, impulses, rows, friction, u):
     """One sweep of groups 0 … G−1 side by side (one thread each), then of the last group
-    (``starts`` (G + 2,) from ``sweep_groups``); returns the largest velocity change [m/s].
+    (``starts`` (G + 2,) from ``sweep_groups``). Its largest single update is not returned:
+    the solve stops on the sweep's net change (``largest_row_change``).
 
     The only parallel region of the sweeps: kept apart so that a serial solve never starts
     (or waits on) the thread pool — every array operation inside a ``parallel=True`` function
     becomes a parallel loop of its own."""
     groups = starts.shape[0] - 2
     for g in prange(groups):
-        changes[g] = sweep_contacts(members[starts[g]:], starts[g + 1] - starts[g], target, impulses, rows,
-                                    friction, u)
-    last = sweep_contacts(members[starts[groups]:], members.shape[0] - starts[groups], target, impulses, rows,
-                          friction, u)
-    return max(last, changes.max())
+        sweep_contacts(members[starts[g]:], starts[g + 1] - starts[g], target, impulses, rows, friction, u)
+    sweep_contacts(members[starts[groups]:], members.shape[0] - starts[groups], target, impulses, rows, friction, u)
 
 
 @njit(cache=True)
@@ -306,7 +304,6 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
     rows_o = rows_in_order(rows, order)
     friction_o, target_o, impulses_o = friction[order], target_normal_velocity[order], impulses[order]
     members = np.arange(C)
-    changes = np.zeros(groups)
     before = np.empty_like(u)
     sweeps = 0
     change = 0.0
@@ -314,13 +311,10 @@ def solve_sequential_impulses(rows, friction, target_normal_velocity, u, iterati
         sweeps = sweep + 1
         for i in range(u.shape[0]):     # loops, not slice assignments: those compile an error message
             before[i] = u[i]
-        if starts is None:
-            change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
-        elif groups == 1:
-            change = sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
+        if starts is None or groups == 1:
+            sweep_contacts(members, C, target_o, impulses_o, rows_o, friction_o, u)
         else:
-            change = sweep_groups_in_parallel(members, starts, target_o, impulses_o, rows_o, friction_o, u,
-                                              changes)
+            sweep_groups_in_parallel(members, starts, target_o, impulses_o, rows_o, friction_o, u)
         change = largest_row_change(rows_o, u, before)
         if change <= tolerance:
             break
