@@ -15,6 +15,7 @@ particle j owns [6B + 3j, 6B + 3j + 3). The velocity of the contact point is J v
 Forces distribute as F_x = Jᵀ F_p (D1). Shapes: C contacts.
 """
 
+from collections import namedtuple
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -43,6 +44,11 @@ class Contacts:
         return len(self.depth)
 
     @classmethod
+    def from_arrays(cls, arrays) -> "Contacts":
+        """The Contacts of a ``ContactArrays`` (what compiled code builds)."""
+        return cls(*arrays)
+
+    @classmethod
     def empty(cls) -> "Contacts":
         return cls.concatenate([])
 
@@ -61,6 +67,10 @@ class Contacts:
         return cls(**out)
 
 
+ContactArrays = namedtuple("ContactArrays", [f.name for f in fields(Contacts)])
+ContactArrays.__doc__ = """The fields of a Contacts, in order, as a named tuple: the form compiled code builds and reads."""
+
+
 def values_by_id(previous_ids, previous_values, feature_id, width):
     """What a method carried for each contact from the last step, matched by persistent id.
 
@@ -71,15 +81,16 @@ def values_by_id(previous_ids, previous_values, feature_id, width):
     C = len(feature_id)
     if previous_ids is None or len(previous_ids) == 0 or C == 0:
         return np.zeros((C, width)), np.zeros(C, dtype=bool)
-    return _values_by_id(np.asarray(previous_ids, dtype=np.int64),
+    return values_carried(np.asarray(previous_ids, dtype=np.int64),
                          np.asarray(previous_values, dtype=float).reshape(len(previous_ids), width),
                          np.asarray(feature_id, dtype=np.int64))
 
 
 @njit(cache=True)
-def _values_by_id(previous_ids, previous_values, feature_id):
+def values_carried(previous_ids, previous_values, feature_id):
     """``values_by_id``, compiled: one sort of last step's ids, one binary search per contact
-    (it runs every step; in NumPy its masks and gathers cost 0.27 ms for 3 300 contacts)."""
+    (it runs every step; in NumPy its masks and gathers cost 0.27 ms for 3 300 contacts).
+    previous_ids (K,) int64 (K may be 0), previous_values (K, width); feature_id (C,) int64."""
     order = np.argsort(previous_ids)
     sorted_ids = previous_ids[order]
     place = np.searchsorted(sorted_ids, feature_id)
@@ -96,11 +107,11 @@ def _values_by_id(previous_ids, previous_values, feature_id):
 
 def tangent_basis(normal):
     """Two unit tangents (C, 3) each, with (t1, t2, n) right-handed, from unit normals (C, 3)."""
-    return _tangent_basis(np.ascontiguousarray(normal, dtype=float))
+    return tangent_frames(np.ascontiguousarray(normal, dtype=float))
 
 
 @njit(cache=True)
-def _tangent_basis(normal):
+def tangent_frames(normal):
     """``tangent_basis``, compiled: it runs on every contact of every step."""
     C = normal.shape[0]
     t1 = np.empty((C, 3))

@@ -1,6 +1,7 @@
 """Quantities that judge a run: energies, penetration, momentum. Pure functions of a state."""
 
 import numpy as np
+from numba import njit
 
 from . import rotations
 from .dynamics.cloth import spring_energy
@@ -8,22 +9,46 @@ from .dynamics.cloth import spring_energy
 
 def kinetic_energy(model, state) -> float:
     """½ m v² + ½ ωᵀ I ω over bodies, ½ m v² over particles [J]."""
-    energy = 0.5 * np.sum(model.body_mass * np.einsum("bi,bi->b", state.body_velocity, state.body_velocity))
-    if model.body_count:
-        R = rotations.to_matrix(state.body_orientation)
-        w_body = np.einsum("bji,bj->bi", R, state.body_angular_velocity)
-        energy += 0.5 * np.sum(model.body_inertia * w_body * w_body)
-    energy += 0.5 * np.sum(model.particle_mass * np.einsum("pi,pi->p", state.particle_velocity,
-                                                            state.particle_velocity))
-    return float(energy)
+    return float(kinetic(model.body_mass, model.body_inertia, rotations.to_matrix(state.body_orientation),
+                         state.body_velocity, state.body_angular_velocity, model.particle_mass,
+                         state.particle_velocity))
+
+
+@njit(cache=True)
+def kinetic(body_mass, body_inertia, body_rotation, body_velocity, body_angular_velocity, particle_mass,
+            particle_velocity):
+    """``kinetic_energy`` from the arrays [J]: masses (B,), (P,) [kg], principal inertia (B, 3)
+    [kg m²], rotations (B, 3, 3), velocities (B, 3), (B, 3) world, (P, 3)."""
+    energy = 0.0
+    for b in range(body_mass.shape[0]):
+        v, w, R = body_velocity[b], body_angular_velocity[b], body_rotation[b]
+        energy += 0.5 * body_mass[b] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        for i in range(3):
+            spin = R[0, i] * w[0] + R[1, i] * w[1] + R[2, i] * w[2]          # body frame: Rᵀ ω
+            energy += 0.5 * body_inertia[b, i] * spin * spin
+    for p in range(particle_mass.shape[0]):
+        v = particle_velocity[p]
+        energy += 0.5 * particle_mass[p] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return energy
 
 
 def potential_energy(model, state) -> float:
     """Gravitational potential −m g·x (zero at the origin) plus the elastic energy
     Σ ½ k (l − L)² of the cloth springs [J]."""
-    return float(-np.sum(model.body_mass * (state.body_position @ model.gravity))
-                 - np.sum(model.particle_mass * (state.particle_position @ model.gravity))
+    return float(gravitational(model.body_mass, state.body_position, model.particle_mass, state.particle_position,
+                               np.asarray(model.gravity, dtype=float))
                  + spring_energy(model, state.particle_position))
+
+
+@njit(cache=True)
+def gravitational(body_mass, body_position, particle_mass, particle_position, gravity):
+    """The gravitational part of ``potential_energy``, Σ −m g·x over bodies and particles [J]."""
+    energy = 0.0
+    for masses, positions in ((body_mass, body_position), (particle_mass, particle_position)):
+        for n in range(masses.shape[0]):
+            x = positions[n]
+            energy -= masses[n] * (x[0] * gravity[0] + x[1] * gravity[1] + x[2] * gravity[2])
+    return energy
 
 
 def max_penetration(contacts) -> float:

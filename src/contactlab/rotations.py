@@ -21,11 +21,11 @@ def to_matrix(q):
     flat = np.ascontiguousarray(q.reshape(-1, 4))
     if not flat.flags.writeable:        # a Model's arrays: Numba would compile a read-only twin
         flat = flat.copy()
-    return _to_matrix(flat).reshape(q.shape[:-1] + (3, 3))
+    return matrices(flat).reshape(q.shape[:-1] + (3, 3))
 
 
 @njit(cache=True)
-def _to_matrix(q):
+def matrices(q):
     """``to_matrix`` on q (count, 4), the same arithmetic in the same order as element by element."""
     R = np.empty((q.shape[0], 3, 3))
     for i in range(q.shape[0]):
@@ -74,14 +74,14 @@ def integrate(q, angular_velocity, dt):
     """
     q = np.ascontiguousarray(q, dtype=float)
     # a writable copy: the broadcast view is read-only, and for one body no copy would be made,
-    # so Numba compiled a read-only twin of _integrate
+    # so Numba compiled a read-only twin of integrate_compiled
     step = np.broadcast_to(np.ravel(np.asarray(dt, dtype=float)), (len(q),)).copy()
-    return _integrate(q, np.ascontiguousarray(angular_velocity, dtype=float), step)
+    return integrate_compiled(q, np.ascontiguousarray(angular_velocity, dtype=float), step)
 
 
 @njit(cache=True)
-def _integrate(q, angular_velocity, dt):
-    """``integrate`` body by body; dt (count,) [s]."""
+def integrate_compiled(q, angular_velocity, dt):
+    """``integrate`` body by body, compiled; dt (count,) [s]."""
     out = np.empty_like(q)
     for i in range(q.shape[0]):
         px, py, pz = angular_velocity[i, 0] * dt[i], angular_velocity[i, 1] * dt[i], angular_velocity[i, 2] * dt[i]
@@ -101,4 +101,17 @@ def _integrate(q, angular_velocity, dt):
 
 def world_inertia(R, principal):
     """World-frame tensors R diag(principal) Rᵀ, shape (count, 3, 3); principal (count, 3)."""
-    return (R * principal[:, None, :]) @ np.swapaxes(R, -1, -2)
+    return world_tensors(np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(principal, dtype=float))
+
+
+@njit(cache=True)
+def world_tensors(R, principal):
+    """``world_inertia``, compiled, entry by entry as Σ_k R_ik p_k R_jk (the stepping loop and the
+    methods' steps take the same numbers from it)."""
+    out = np.empty_like(R)
+    for b in range(R.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                out[b, i, j] = (R[b, i, 0] * principal[b, 0] * R[b, j, 0] + R[b, i, 1] * principal[b, 1] * R[b, j, 1]
+                                + R[b, i, 2] * principal[b, 2] * R[b, j, 2])
+    return out

@@ -9,9 +9,9 @@ import numpy as np
 from numba import njit
 
 from .. import rotations, shapes
-from ..contacts import Contacts, tangent_basis
+from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
-from .broad_phase import overlapping_pairs, static_pairs
+from .broad_phase import boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
@@ -50,13 +50,34 @@ def swept_distances(model, body_velocity, body_angular_velocity, particle_veloci
 def _colliders(model, state):
     """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
     kinds, params, _, obstacle_rotations = model.collider_table
-    B, P = model.body_count, model.particle_count
-    centers = np.concatenate([state.body_position, state.particle_position, model.obstacle_position])
-    rots = np.empty((len(kinds), 3, 3))          # C order, which the compiled pair routines are built for
-    rots[:B] = rotations.to_matrix(state.body_orientation)
-    rots[B:B + P] = np.eye(3)
-    rots[B + P:] = obstacle_rotations
+    centers, rots = collider_poses(state.body_position, rotations.to_matrix(state.body_orientation),
+                                   state.particle_position, model.obstacle_position, obstacle_rotations)
     return kinds, params, centers, rots
+
+
+@njit(cache=True)
+def collider_poses(body_position, body_rotation, particle_position, obstacle_position, obstacle_rotation):
+    """Centres (N, 3) [m] and rotations (N, 3, 3) (collider → world, C order, which the
+    compiled pair routines are built for) of every collider: bodies (B, 3) and (B, 3, 3),
+    particles (P, 3) (unrotated), obstacles (O, 3) and (O, 3, 3)."""
+    B, P, O = body_position.shape[0], particle_position.shape[0], obstacle_position.shape[0]
+    centers = np.empty((B + P + O, 3))
+    rots = np.zeros((B + P + O, 3, 3))
+    for n in range(B + P + O):
+        for i in range(3):
+            if n < B:
+                centers[n, i] = body_position[n, i]
+            elif n < B + P:
+                centers[n, i] = particle_position[n - B, i]
+                rots[n, i, i] = 1.0
+            else:
+                centers[n, i] = obstacle_position[n - B - P, i]
+            for j in range(3):
+                if n < B:
+                    rots[n, i, j] = body_rotation[n, i, j]
+                elif n >= B + P:
+                    rots[n, i, j] = obstacle_rotation[n - B - P, i, j]
+    return centers, rots
 
 
 @njit(cache=True)
@@ -85,6 +106,30 @@ def _bounds(kinds, params, centers, rots, margin):
             lower[n, i] = centers[n, i] - half
             upper[n, i] = centers[n, i] + half
     return lower, upper
+
+
+@njit(cache=True)
+def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of):
+    """The broad phase: (lower, upper) bounds (N, 3) [m] of the colliders grown by ``reach``
+    (N,) [m], and the candidate pairs (K, 2) int64 — the dynamic pairs (colliders 0 … dynamic−1)
+    whose bounds overlap, sorted, then each dynamic collider against the static obstacles
+    (``static_pairs``; meshes apart). ``cloth_of`` (dynamic,) int: the cloth of each dynamic
+    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart)."""
+    lower, upper = _bounds(kinds, params, centers, rots, reach)
+    dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic])
+    statics = static_pairs(lower, upper, kinds, params, dynamic)
+    pairs = np.empty((dynamic_pairs.shape[0] + statics.shape[0], 2), dtype=np.int64)
+    count = 0
+    for k in range(dynamic_pairs.shape[0]):
+        a, b = dynamic_pairs[k, 0], dynamic_pairs[k, 1]
+        if cloth_of[a] >= 0 and cloth_of[a] == cloth_of[b]:
+            continue
+        pairs[count, 0], pairs[count, 1] = a, b
+        count += 1
+    for k in range(statics.shape[0]):
+        pairs[count, 0], pairs[count, 1] = statics[k, 0], statics[k, 1]
+        count += 1
+    return lower, upper, pairs[:count]
 
 
 def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2,
@@ -124,16 +169,11 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
     reach = np.full(dynamic + O, 0.5 * float(margin))
     if sweep is not None:
         reach[:dynamic] += sweep
-    lower, upper = _bounds(kinds, params, centers, rots, reach)
-    dyn_pairs = overlapping_pairs(lower[:dynamic], upper[:dynamic])
-    if len(getattr(model, "triangles", ())):                 # neighbours within one cloth: no contact
-        cloth = np.concatenate([np.full(B, -1), model.particle_cloth])
-        same = (cloth[dyn_pairs[:, 0]] >= 0) & (cloth[dyn_pairs[:, 0]] == cloth[dyn_pairs[:, 1]])
-        dyn_pairs = dyn_pairs[~same]
+    cloth_of = np.concatenate([np.full(B, -1), model.particle_cloth])    # neighbours within one cloth: no contact
+    lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
     mesh_parts = [_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
                   for g in range(dynamic, dynamic + O) if kinds[g] == shapes.MESH]
-    pairs = np.concatenate([dyn_pairs, static_pairs(lower, upper, kinds, params, dynamic)]).astype(np.int64)
     if granularity != "vertex" or normal != "object":
         reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
         surface_parts, bodies, obstacles = polytope_contacts(model, state, granularity, normal, samples,
@@ -175,28 +215,41 @@ def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, d
     return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
 
 
-def _side(model, collider):
-    """Body index, particle indices (C,3) and weights (C,3) of each collider's side."""
-    B, P = model.body_count, model.particle_count
-    body = np.where(collider < B, collider, -1)
-    particles = np.full((len(collider), 3), -1, dtype=np.int64)
-    weights = np.zeros((len(collider), 3))
-    is_particle = (collider >= B) & (collider < B + P)
-    particles[is_particle, 0] = collider[is_particle] - B
-    weights[is_particle, 0] = 1.0
-    return body, particles, weights
-
-
 def _assemble(model, a, b, point, normal, depth, feature, total):
-    body_a, particles_a, weights_a = _side(model, a)
-    body_b, particles_b, weights_b = _side(model, b)
     materials = model.collider_table[2]
-    mat_a, mat_b = materials[a], materials[b]
-    t1, t2 = tangent_basis(normal)
-    friction, restitution = model.pair_materials(mat_a, mat_b)
-    return Contacts(
-        body_a=body_a, body_b=body_b, particles_a=particles_a, particles_b=particles_b,
-        weights_a=weights_a, weights_b=weights_b, point=point, normal=normal, depth=depth,
-        tangent1=t1, tangent2=t2, friction=friction, restitution=restitution,
-        feature_id=((a * total + b) << FEATURE_BITS) | feature,
-    )
+    return Contacts.from_arrays(assemble_contacts(a, b, point, normal, depth, feature, model.body_count,
+                                                  model.particle_count, materials, model.material_friction,
+                                                  model.material_restitution, total))
+
+
+@njit(cache=True)
+def assemble_contacts(a, b, point, normal, depth, feature, body_count, particle_count, materials,
+                      material_friction, material_restitution, total):
+    """The ContactArrays of contacts found between global colliders a and b (C,) int64, with
+    point, normal (C, 3), depth (C,) [m] and feature (C,) int64 from the narrow phase: each side
+    a body (index < B), a particle (weight 1) or static; the tangents (``tangent_basis``); the
+    pair's materials combined as ``Model.pair_materials`` does (μ = √(μ_a μ_b), ε the larger);
+    the persistent id (collider pair a · total + b) << FEATURE_BITS | feature."""
+    C = a.shape[0]
+    body = np.full((2, C), -1, dtype=np.int64)
+    particles = np.full((2, C, 3), -1, dtype=np.int64)
+    weights = np.zeros((2, C, 3))
+    friction = np.empty(C)
+    restitution = np.empty(C)
+    feature_id = np.empty(C, dtype=np.int64)
+    for c in range(C):
+        for side in range(2):
+            collider = a[c] if side == 0 else b[c]
+            if collider < body_count:
+                body[side, c] = collider
+            elif collider < body_count + particle_count:
+                particles[side, c, 0] = collider - body_count
+                weights[side, c, 0] = 1.0
+        mat_a, mat_b = materials[a[c]], materials[b[c]]
+        friction[c] = np.sqrt(material_friction[mat_a] * material_friction[mat_b])
+        restitution[c] = max(material_restitution[mat_a], material_restitution[mat_b])
+        feature_id[c] = ((a[c] * total + b[c]) << FEATURE_BITS) | feature[c]
+    unit = np.ascontiguousarray(normal)
+    t1, t2 = tangent_frames(unit)
+    return ContactArrays(body[0], body[1], particles[0], particles[1], weights[0], weights[1], point, unit, depth,
+                         t1, t2, friction, restitution, feature_id)

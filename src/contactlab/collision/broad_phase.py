@@ -32,13 +32,22 @@ def overlapping_pairs(lower, upper):
     """Pairs (i, j), i < j, whose boxes overlap, sorted; lower/upper (N, 3) [m] → int64 array (K, 2)."""
     if len(lower) < 2:                  # one body, no pair (and nothing to compile for it)
         return np.zeros((0, 2), dtype=np.int64)
-    if len(lower) < GRID_FROM:
+    return boxes_overlapping(lower, upper)
+
+
+@njit(cache=True)
+def boxes_overlapping(lower, upper):
+    """``overlapping_pairs``, compiled (the stepping loops call it): the sweep below GRID_FROM
+    boxes, else the neighbour-cell grid where the boxes suit it, else the hash grid."""
+    if lower.shape[0] < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    if lower.shape[0] < GRID_FROM:
         return sweep_and_prune(lower, upper)
     pairs, done = neighbour_cell_pairs(lower, upper)
     if done:
         return pairs                                              # already sorted by (i, j)
     pairs = grid_pairs(lower, upper)
-    key = pairs[:, 0] * len(lower) + pairs[:, 1]                  # one sort key per pair (i < j < N)
+    key = pairs[:, 0] * lower.shape[0] + pairs[:, 1]              # one sort key per pair (i < j < N)
     return pairs[np.argsort(key)]                                 # an order independent of the hashing
 
 

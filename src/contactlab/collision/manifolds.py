@@ -52,6 +52,7 @@ class Manifolds:
         return len(self.keys)
 
 
+@njit(cache=True)
 def kept_pairs(kinds, pairs):
     """(K,) bool: the pairs that keep manifolds: boxes and convex hulls against each other and
     against planes. Their contacts sit at vertices, edges and faces, which move with the
@@ -237,20 +238,35 @@ def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, fam
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
     kept = manifolds if manifolds is not None else Manifolds.empty()
+    contacts, made = reuse_or_generate(pairs, kinds, params, centers, rots, reach,
+                                       shapes.bounding_radii(kinds, params), hull_store, families,
+                                       (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness,
+                                        kept.normal, kept.feature), tolerance, total)
+    return (*contacts, Manifolds(*made))
+
+
+@njit(cache=True)
+def reuse_or_generate(pairs, kinds, params, centers, rots, reach, radius, hull_store, families, kept, tolerance,
+                      total):
+    """``generate_reusing``, compiled (the stepping loops of contactlab.methods.velocity_loop call
+    it): ``radius`` (N,) the colliders' bounding radii [m]; ``kept`` the last manifolds as the
+    tuple of Manifolds' eight fields. Returns ((point, normal, depth, feature, owner), the
+    eight fields of the manifolds to keep)."""
+    kept_keys, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
     first, second = pairs[:, 0], pairs[:, 1]
     keys = first * total + second
     pair_reach = reach[first] + reach[second]
     keeps = kept_pairs(kinds, pairs)
     if not keeps.any():             # a pile of spheres: nothing to keep, nothing to look up
-        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
-                Manifolds.empty())
-    row = _still_valid(pairs, keys, keeps, pair_reach, shapes.bounding_radii(kinds, params), centers, rots,
-                       kept.keys, kept.reach, kept.center, kept.rotation, tolerance)
+        empty = (kept_keys[:0], kept_reach[:0], kept_center[:0], kept_rotation[:0], kept_count[:0],
+                 kept_witness[:0], kept_normal[:0], kept_feature[:0])
+        return generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families), empty
+    row = _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rots, kept_keys, kept_reach, kept_center,
+                       kept_rotation, tolerance)
     fresh = np.nonzero(row < 0)[0]
     widened = pair_reach + tolerance * keeps          # a kept manifold reaches a tolerance further
     point, normal, depth, feature, owner = generate_contacts(pairs[fresh], kinds, params, centers, rots,
                                                              widened[fresh], hull_store, families)
-    contacts, made = _combine(pairs, keys, keeps, pair_reach, widened, row, centers, rots,
-                              point, normal, depth, feature, fresh[owner], kept.reach, kept.center, kept.rotation,
-                              kept.count, kept.witness, kept.normal, kept.feature)
-    return (*contacts, Manifolds(*made))
+    return _combine(pairs, keys, keeps, pair_reach, widened, row, centers, rots, point, normal, depth, feature,
+                    fresh[owner], kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal,
+                    kept_feature)

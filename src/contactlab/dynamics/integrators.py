@@ -25,6 +25,7 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .. import rotations
 from .cloth import block_product, jacobian_blocks, spring_forces
@@ -35,14 +36,6 @@ INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 def world_inverse_inertia(model, orientation):
     """I⁻¹ in world frame, (B, 3, 3), for orientations (B, 4)."""
     return rotations.world_inertia(rotations.to_matrix(orientation), model.body_inverse_inertia)
-
-
-def _skew(a):
-    """Cross-product matrices [a]× (count, 3, 3) of vectors a (count, 3)."""
-    S = np.zeros(a.shape + (3,))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
-    return S
 
 
 def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=4):
@@ -59,21 +52,74 @@ def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=
     inertia_all = model.body_inertia
     spinning = np.abs(inertia_all - inertia_all.mean(axis=1, keepdims=True)).max(axis=1) > 0.0
     spinning &= np.any(angular_velocity != 0.0, axis=1)
-    result = angular_velocity.copy()
     if not spinning.any():
-        return result
-    R = rotations.to_matrix(orientation[spinning])
-    inertia = inertia_all[spinning]                                  # (b,3) principal
-    w1 = np.einsum("bji,bj->bi", R, angular_velocity[spinning])       # body frame
-    w2 = w1.copy()
-    for _ in range(newton_steps):
-        mid = 0.5 * (w1 + w2)
-        residual = inertia * (w2 - w1) + dt * np.cross(mid, inertia * mid)
-        jacobian = (np.eye(3)[None] * inertia[:, None, :]
-                    + 0.5 * dt * (_skew(mid) * inertia[:, None, :] - _skew(inertia * mid)))
-        w2 = w2 - np.linalg.solve(jacobian, residual[..., None])[..., 0]
-    result[spinning] = np.einsum("bij,bj->bi", R, w2)
+        return angular_velocity.copy()
+    return gyroscopic_midpoint(rotations.to_matrix(orientation), np.ascontiguousarray(inertia_all, dtype=float),
+                               np.ascontiguousarray(angular_velocity, dtype=float), float(dt), newton_steps)
+
+
+@njit(cache=True)
+def gyroscopic_midpoint(rotation, inertia, angular_velocity, dt, newton_steps):
+    """``_gyroscopic_implicit``, compiled, body by body: rotation (B, 3, 3) body → world,
+    inertia (B, 3) principal [kg m²], angular_velocity (B, 3) world [rad/s]. A body with an
+    isotropic inertia, or at rest, keeps its ω (it has no gyroscopic torque); the others take
+    ``newton_steps`` Newton steps on I(ω₂ − ω₁) + h ω̄ × Iω̄ = 0 in the body frame."""
+    result = angular_velocity.copy()
+    jacobian = np.empty((3, 3))
+    residual = np.empty(3)
+    for b in range(rotation.shape[0]):
+        mean = (inertia[b, 0] + inertia[b, 1] + inertia[b, 2]) / 3.0
+        spread = max(abs(inertia[b, 0] - mean), abs(inertia[b, 1] - mean), abs(inertia[b, 2] - mean))
+        if not spread > 0.0 or (angular_velocity[b, 0] == 0.0 and angular_velocity[b, 1] == 0.0
+                                and angular_velocity[b, 2] == 0.0):
+            continue
+        R, I = rotation[b], inertia[b]
+        w1 = np.empty(3)
+        for i in range(3):          # body frame: Rᵀ ω
+            w1[i] = R[0, i] * angular_velocity[b, 0] + R[1, i] * angular_velocity[b, 1] + R[2, i] * angular_velocity[b, 2]
+        w2 = w1.copy()
+        for _ in range(newton_steps):
+            m0, m1, m2 = 0.5 * (w1[0] + w2[0]), 0.5 * (w1[1] + w2[1]), 0.5 * (w1[2] + w2[2])
+            l0, l1, l2 = I[0] * m0, I[1] * m1, I[2] * m2                  # I ω̄
+            residual[0] = I[0] * (w2[0] - w1[0]) + dt * (m1 * l2 - m2 * l1)
+            residual[1] = I[1] * (w2[1] - w1[1]) + dt * (m2 * l0 - m0 * l2)
+            residual[2] = I[2] * (w2[2] - w1[2]) + dt * (m0 * l1 - m1 * l0)
+            # ∂/∂ω₂ = I + ½ h ([ω̄]× I − [I ω̄]×)
+            jacobian[0, 0], jacobian[0, 1], jacobian[0, 2] = I[0], 0.5 * dt * (-m2 * I[1] + l2), 0.5 * dt * (m1 * I[2] - l1)
+            jacobian[1, 0], jacobian[1, 1], jacobian[1, 2] = 0.5 * dt * (m2 * I[0] - l2), I[1], 0.5 * dt * (-m0 * I[2] + l0)
+            jacobian[2, 0], jacobian[2, 1], jacobian[2, 2] = 0.5 * dt * (-m1 * I[0] + l1), 0.5 * dt * (m0 * I[1] - l0), I[2]
+            step = _solve3(jacobian, residual)
+            for i in range(3):
+                w2[i] -= step[i]
+        for i in range(3):
+            result[b, i] = R[i, 0] * w2[0] + R[i, 1] * w2[1] + R[i, 2] * w2[2]
     return result
+
+
+@njit(cache=True)
+def _solve3(A, b):
+    """x (3,) with A x = b for a 3 × 3 A, by Gaussian elimination with partial pivoting."""
+    M = A.copy()
+    x = b.copy()
+    for k in range(3):
+        pivot = k
+        for i in range(k + 1, 3):
+            if abs(M[i, k]) > abs(M[pivot, k]):
+                pivot = i
+        if pivot != k:
+            for j in range(3):
+                M[k, j], M[pivot, j] = M[pivot, j], M[k, j]
+            x[k], x[pivot] = x[pivot], x[k]
+        for i in range(k + 1, 3):
+            factor = M[i, k] / M[k, k]
+            for j in range(k, 3):
+                M[i, j] -= factor * M[k, j]
+            x[i] -= factor * x[k]
+    for k in range(2, -1, -1):
+        for j in range(k + 1, 3):
+            x[k] -= M[k, j] * x[j]
+        x[k] /= M[k, k]
+    return x
 
 
 def _gyroscopic_explicit(model, orientation, angular_velocity, dt):
@@ -224,11 +270,24 @@ def advance_positions(body_position, body_orientation, particle_position,
     time-of-impact update of the impulse method). Returns (body_position (B,3),
     body_orientation (B,4), particle_position (P,3)).
     """
-    body_dt = np.asarray(body_dt, dtype=float)
-    particle_dt = np.asarray(particle_dt, dtype=float)
-    body_dt = body_dt[:, None] if body_dt.ndim else body_dt
-    particle_dt = particle_dt[:, None] if particle_dt.ndim else particle_dt
-    new_orientation = (rotations.integrate(body_orientation, body_angular_velocity, body_dt)
-                       if len(body_orientation) else body_orientation.copy())
-    return (body_position + body_dt * body_velocity, new_orientation,
-            particle_position + particle_dt * particle_velocity)
+    body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(body_position),)).copy()
+    particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(particle_position),)).copy()
+    return moved(*(np.ascontiguousarray(a, dtype=float) for a in (
+        body_position, body_orientation, particle_position, body_velocity, body_angular_velocity,
+        particle_velocity)), body_dt, particle_dt)
+
+
+@njit(cache=True)
+def moved(body_position, body_orientation, particle_position, body_velocity, body_angular_velocity,
+          particle_velocity, body_dt, particle_dt):
+    """``advance_positions``, compiled, with body_dt (B,) and particle_dt (P,) [s]: x + Δt v, and
+    the orientations turned by Δt ω (``rotations.integrate``)."""
+    position = np.empty_like(body_position)
+    for b in range(body_position.shape[0]):
+        for i in range(3):
+            position[b, i] = body_position[b, i] + body_dt[b] * body_velocity[b, i]
+    particles = np.empty_like(particle_position)
+    for p in range(particle_position.shape[0]):
+        for i in range(3):
+            particles[p, i] = particle_position[p, i] + particle_dt[p] * particle_velocity[p, i]
+    return position, rotations.integrate_compiled(body_orientation, body_angular_velocity, body_dt), particles

@@ -81,9 +81,25 @@ def resting_target(gap_at_start, dt, options):
     ``stabilization`` of its depth beyond ``slop`` per step, never faster than
     ``max_push_velocity`` (a deep overlap must not turn into a launch).
     """
-    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
-                      options.max_push_velocity)
-    return np.where(gap_at_start >= 0.0, -gap_at_start / dt, push)
+    return resting_targets(np.asarray(gap_at_start, dtype=float), dt, options.stabilization, options.slop,
+                           options.max_push_velocity)
+
+
+@njit(cache=True)
+def resting_targets(gap_at_start, dt, stabilization, slop, max_push_velocity):
+    """``resting_target``, compiled, with the options' three numbers [1, m, m/s]."""
+    target = np.empty_like(gap_at_start)
+    for c in range(gap_at_start.shape[0]):
+        target[c] = _resting(gap_at_start[c], dt, stabilization, slop, max_push_velocity)
+    return target
+
+
+@njit(cache=True, inline="always")
+def _resting(gap, dt, stabilization, slop, max_push_velocity):
+    """One contact's ``resting_target`` [m/s]."""
+    if gap >= 0.0:
+        return -gap / dt
+    return min(stabilization * max(-gap - slop, 0.0) / dt, max_push_velocity)
 
 
 def relative_gravity(model, contacts):
@@ -93,21 +109,33 @@ def relative_gravity(model, contacts):
     velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
     gravity acts over the rest of the step (see ``resolve_collisions``).
     """
-    dynamic_a = (contacts.body_a >= 0) | (contacts.particles_a[:, 0] >= 0)
-    dynamic_b = (contacts.body_b >= 0) | (contacts.particles_b[:, 0] >= 0)
-    return (dynamic_a.astype(float) - dynamic_b) * (contacts.normal @ model.gravity)
+    return gravity_along_normals(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                                 np.ascontiguousarray(contacts.normal, dtype=float),
+                                 np.asarray(model.gravity, dtype=float))
+
+
+@njit(cache=True)
+def gravity_along_normals(body_a, body_b, particles_a, particles_b, normal, gravity):
+    """``relative_gravity``, compiled: (dynamic A − dynamic B) n · g per contact (C,) [m/s²]."""
+    out = np.empty(normal.shape[0])
+    for c in range(normal.shape[0]):
+        dynamic_a = 1.0 if body_a[c] >= 0 or particles_a[c, 0] >= 0 else 0.0
+        dynamic_b = 1.0 if body_b[c] >= 0 or particles_b[c, 0] >= 0 else 0.0
+        out[c] = (dynamic_a - dynamic_b) * (normal[c, 0] * gravity[0] + normal[c, 1] * gravity[1]
+                                            + normal[c, 2] * gravity[2])
+    return out
 
 
 def entity_impact_fractions(model, contacts, tau):
     """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
     −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
     acts over the whole step."""
-    return _earliest_impacts(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+    return earliest_impacts(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
                              np.asarray(tau, dtype=float), model.body_count, model.particle_count)
 
 
 @njit(cache=True)
-def _earliest_impacts(body_a, body_b, particles_a, particles_b, tau, body_count, particle_count):
+def earliest_impacts(body_a, body_b, particles_a, particles_b, tau, body_count, particle_count):
     """``entity_impact_fractions``, compiled (one pass over the contacts' sides)."""
     tau_body = np.ones(body_count)
     tau_particle = np.ones(particle_count)
@@ -139,12 +167,28 @@ def normal_targets(gap_at_start, normal_velocity, gravity_normal, restitution, d
     −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
     ``resting_target``. Returns (target (C,) [m/s], τ (C,), −1 where there was no impact).
     """
+    return impact_targets(*(np.asarray(a, dtype=float) for a in (gap_at_start, normal_velocity, gravity_normal,
+                                                                  restitution)),
+                          dt, threshold, options.stabilization, options.slop, options.max_push_velocity)
+
+
+@njit(cache=True)
+def impact_targets(gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, stabilization, slop,
+                   max_push_velocity):
+    """``normal_targets``, compiled, with the options' stabilization, slop and max push velocity."""
     h = dt
-    closing = (normal_velocity < 0.0) & (gap_at_start + h * normal_velocity <= 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tau = np.where(gap_at_start > 0.0, np.clip(gap_at_start / (-normal_velocity * h), 0.0, 1.0), 0.0)
-    impact = normal_velocity + gravity_normal * (tau - 0.5) * h
-    bounces = closing & (restitution > 0.0) & (impact < -threshold)
-    target = np.where(bounces, -restitution * impact + gravity_normal * (0.5 - tau) * h,
-                      resting_target(gap_at_start, dt, options))
-    return target, np.where(bounces, tau, -1.0)
+    C = gap_at_start.shape[0]
+    target = np.empty(C)
+    tau = np.empty(C)
+    for c in range(C):
+        gap, vn = gap_at_start[c], normal_velocity[c]
+        closing = vn < 0.0 and gap + h * vn <= 0.0
+        closes = min(gap / (-vn * h), 1.0) if gap > 0.0 and closing else 0.0
+        impact = vn + gravity_normal[c] * (closes - 0.5) * h
+        if closing and restitution[c] > 0.0 and impact < -threshold:
+            target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes) * h
+            tau[c] = closes
+        else:
+            target[c] = _resting(gap, dt, stabilization, slop, max_push_velocity)
+            tau[c] = -1.0
+    return target, tau
