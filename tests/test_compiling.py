@@ -9,6 +9,7 @@ import sys
 
 import numba
 import numpy as np
+import pytest
 
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.collision import _colliders
@@ -214,16 +215,18 @@ def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_
     json.loads(warm.stdout)
 
 
-def test_compiling_before_the_first_step_is_said_and_counted_once(monkeypatch, capsys):
+@pytest.mark.parametrize("path", ["loop", "stitched"])
+def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypatch, capsys):
     """The first sample's collide() compiles the collision kernels before the first step: the
-    notice comes then, not again when a step compiles, and compile_seconds counts both."""
+    notice comes then, not again when a later step compiles, and compile_seconds counts both —
+    stepping in the compiled loop (a later chunk of steps compiles) or stitched (a later step)."""
     import time
 
     from numba.core import event
 
     from contactlab import record
-    from contactlab.methods import impulse
-    real_sample, real_step = record.Recorder.sample, impulse.step
+    from contactlab.methods import impulse, velocity_loop
+    real_sample = record.Recorder.sample
     calls = []
 
     def sample(self, *args):
@@ -232,17 +235,24 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(monkeypatch, c
                 time.sleep(0.2)
         return real_sample(self, *args)
 
-    def step(*args):
-        calls.append(1)
-        if len(calls) == 3:
-            with event.trigger_event("numba:compile", data={}):
-                time.sleep(0.2)
-        return real_step(*args)
+    def compiling_on_the_third_call(real):
+        def call(*args):
+            calls.append(1)
+            if len(calls) == 3:
+                with event.trigger_event("numba:compile", data={}):
+                    time.sleep(0.2)
+            return real(*args)
+        return call
 
     monkeypatch.setattr(record.Recorder, "sample", sample)
-    monkeypatch.setattr(impulse, "step", step)
+    if path == "loop":
+        monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_the_third_call(velocity_loop.Stepper.advance))
+    else:
+        monkeypatch.setattr(velocity_loop, "applies", lambda *arguments: False)
+        monkeypatch.setattr(impulse, "step", compiling_on_the_third_call(impulse.step))
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
     run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1)
+    assert len(calls) >= 3
     assert capsys.readouterr().err.count(NOTICE) == 1
     assert run.summary["compile_seconds"] >= 0.4

@@ -142,6 +142,13 @@ class Model:
         kinds = self.collider_table[0]
         return scene_families(kinds[:B + P], kinds[B + P:])
 
+    @cached_property
+    def stepping_arrays(self):
+        """The arrays the compiled stepping loop reads (``methods.velocity_loop.LoopModel``):
+        built on first use and kept."""
+        from .methods.velocity_loop import loop_model
+        return loop_model(self)
+
     @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""

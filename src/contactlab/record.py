@@ -49,6 +49,12 @@ class Recorder:
         for name, value in values.items():
             self.samples[name].append(np.array(value, copy=True))
 
+    def extend(self, samples):
+        """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
+        to an array with one row per sample."""
+        for name in SERIES:
+            self.samples[name].extend(np.array(samples[name], copy=True))
+
     def arrays(self) -> dict:
         """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,), the
         static cloth topology triangles (F,3) and particle_cloth (P,), and the shapes' surfaces

@@ -13,6 +13,7 @@ from numba.core import event as numba_event
 from tqdm import tqdm
 
 from . import methods
+from .methods import velocity_loop
 from .builder import _number
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
@@ -65,41 +66,18 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         recorder.sample(state)                     # its collide() compiles the collision kernels first
     setup_compile_seconds = _seconds(compiling)
-    max_contacts = 0
-    sweeps_made = 0                   # solver sweeps summed over every step (recorded or not)
-    first_step_seconds = 0.0          # the first step, compiling the kernels on first use
-    stepping_seconds = 0.0            # the later steps: step() calls only, no recording, no compiling
-    later_compile_seconds = 0.0       # kernels first needed after the first step (say, at the first contact)
-    recording_seconds = 0.0
+    tally = Tally()
+    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
                  desc=f"{scene_name} ({method})") as bar, chooser:
-        for step_index in range(1, steps + 1):
-            compiled_before = _seconds(compiling)
-            chooser.before_step()
-            started = time.perf_counter()
-            state, info = module.step(model, state, dt, options, integrator)
-            elapsed = time.perf_counter() - started
-            if step_index == 1:
-                first_step_seconds = elapsed
-            else:
-                compiled = _seconds(compiling) - compiled_before
-                stepping_seconds += elapsed - compiled
-                later_compile_seconds += compiled
-                if compiled == 0.0:           # a step that compiled says nothing of the threads
-                    chooser.after_step(elapsed)
-            max_contacts = max(max_contacts, info.contacts.count)
-            sweeps_made += info.solver_iterations
-            if not state.is_finite() or state.max_speed() > MAX_SPEED:
-                raise SimulationDiverged(
-                    f"the simulation blew up at t = {state.time:.4g} s (velocities passed {MAX_SPEED:g} m/s or "
-                    f"became infinite); use a smaller dt than {dt:g} s", time=state.time)
-            if step_index % record_every == 0 or step_index == steps:
-                started = time.perf_counter()
-                recorder.sample(state, info)
-                recording_seconds += time.perf_counter() - started
-            bar.update(1)
+        if stepper is None:
+            state = _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser,
+                                    compiling, tally, bar)
+        else:
+            state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, dt)
     wall = time.perf_counter() - run_started
+    first_step_seconds, stepping_seconds = tally.first_step_seconds, tally.stepping_seconds
     ordinary_step = stepping_seconds / (steps - 1) if steps > 1 else 0.0
     arrays = recorder.arrays()
     energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
@@ -109,20 +87,96 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "wall_seconds": wall,
         "first_step_seconds": first_step_seconds,
         "compile_seconds": (setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step)
-                            + later_compile_seconds),
-        "recording_seconds": recording_seconds,
+                            + tally.later_compile_seconds),
+        "recording_seconds": tally.recording_seconds,
         "threads": chooser.summary(),
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
-        "bodies": model.body_count, "particles": model.particle_count, "max_contacts": max_contacts,
+        "bodies": model.body_count, "particles": model.particle_count, "max_contacts": tally.max_contacts,
         "max_penetration": float(arrays["max_penetration"].max()),
         "final_penetration": float(arrays["max_penetration"][-1]),
         "energy": {"initial": float(energy[0]), "final": float(energy[-1]), "max": float(energy.max())},
         "solver": {"max_iterations": int(arrays["solver_iterations"].max()),
-                   "mean_iterations": sweeps_made / steps,
+                   "mean_iterations": tally.sweeps_made / steps,
                    "max_residual": float(arrays["solver_residual"].max())},
     }
     return Run(state, arrays, summary)
+
+
+@dataclass
+class Tally:
+    """What the stepping measured, whichever path stepped."""
+    first_step_seconds: float = 0.0      # the first step, compiling the kernels on first use
+    stepping_seconds: float = 0.0        # the later steps: stepping only, no Python recording, no compiling
+    later_compile_seconds: float = 0.0   # kernels first needed after the first step (say, at the first contact)
+    recording_seconds: float = 0.0
+    max_contacts: int = 0
+    sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
+
+    def timed(self, step_index, count, elapsed, compiled):
+        """Book ``count`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
+        it compiling; returns whether they say anything of the thread count (nothing compiled)."""
+        if step_index == 1:
+            self.first_step_seconds = elapsed
+            return False
+        self.stepping_seconds += elapsed - compiled
+        self.later_compile_seconds += compiled
+        return compiled == 0.0
+
+
+def _diverged(state_time, dt):
+    return SimulationDiverged(f"the simulation blew up at t = {state_time:.4g} s (velocities passed {MAX_SPEED:g} "
+                              f"m/s or became infinite); use a smaller dt than {dt:g} s", time=state_time)
+
+
+def _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar):
+    """Step with the method's ``step``, one Python call a step (cloth, meshes, penalty, projection…)."""
+    record_every = recorder.record_every
+    for step_index in range(1, steps + 1):
+        compiled_before = _seconds(compiling)
+        chooser.before_step()
+        started = time.perf_counter()
+        state, info = module.step(model, state, dt, options, integrator)
+        elapsed = time.perf_counter() - started
+        if tally.timed(step_index, 1, elapsed, _seconds(compiling) - compiled_before):
+            chooser.after_step(elapsed)
+        tally.max_contacts = max(tally.max_contacts, info.contacts.count)
+        tally.sweeps_made += info.solver_iterations
+        if not state.is_finite() or state.max_speed() > MAX_SPEED:
+            raise _diverged(state.time, dt)
+        if step_index % record_every == 0 or step_index == steps:
+            started = time.perf_counter()
+            recorder.sample(state, info)
+            tally.recording_seconds += time.perf_counter() - started
+        bar.update(1)
+    return state
+
+
+CHUNK_SECONDS = 0.1     # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
+
+
+def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, dt):
+    """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
+    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside."""
+    step_index, chunk = 1, 1
+    while step_index <= steps:
+        count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps)
+        compiled_before = _seconds(compiling)
+        chooser.before_step(count)
+        started = time.perf_counter()
+        made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, MAX_SPEED)
+        elapsed = time.perf_counter() - started
+        if tally.timed(step_index, made, elapsed, _seconds(compiling) - compiled_before):
+            chooser.after_steps(made, elapsed)
+        recorder.extend(samples)
+        if diverged:
+            raise _diverged(stepper.time, dt)
+        if step_index > 1:          # the next chunk: about CHUNK_SECONDS of steps at this pace
+            chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
+        step_index += made
+        bar.update(made)
+    tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+    return stepper.state()
 
 
 def _seconds(listener):

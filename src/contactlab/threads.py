@@ -112,12 +112,32 @@ class ThreadChooser:
         self._plan = [1] * self.trial_steps + [self.most] * self.trial_steps
         self._timed = {self.most: [], 1: []}
 
-    def before_step(self):
-        """Set the thread count for the next step."""
+    def before_step(self, count=1):
+        """Set the thread count for the next step (or the next ``count`` steps, at most
+        ``steps_at_this_count()``)."""
         if self._plan:
             self._current = self._plan[0]
         numba.set_num_threads(self._current)
-        self.counts[self._current] = self.counts.get(self._current, 0) + 1
+        self.counts[self._current] = self.counts.get(self._current, 0) + count
+
+    def steps_at_this_count(self):
+        """How many steps may run before the next report is due: 1 during a trial, the rest of
+        the hold in "auto" mode, else any number (None)."""
+        if self._plan:
+            return 1
+        if self.mode == AUTO and self.most > 1:
+            return max(1, self._held)
+        return None
+
+    def after_steps(self, count, seconds):
+        """Report ``count`` steps just made in ``seconds`` [s] of stepping (one during a trial)."""
+        if self._plan or count == 1:
+            self.after_step(seconds / count)
+            return
+        if self.mode == AUTO and self.most > 1:
+            self._held -= count
+            if self._held <= 0:
+                self._start_trial()
 
     def after_step(self, seconds):
         """Report the step just made: ``seconds`` [s] of stepping."""

@@ -1,0 +1,463 @@
+"""The compiled stepping loop of the velocity-level methods: impulse and constraints (L3).
+
+``simulate`` hands this loop the model's and the state's arrays and a number of steps; every
+stage of every step — free motion, prediction, broad and narrow phase with kept manifolds,
+contact rows, the collision waves or the impact targets, the warm-started sweeps, the split
+at the time of impact — and the recording of samples run in compiled code, with no Python
+between steps. The stages are the ones :mod:`contactlab.methods.impulse` and
+:mod:`contactlab.methods.constraints` name, and the same compiled functions serve both paths,
+so the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
+
+It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
+convex shapes against planes and convex obstacles, the default contact granularity and normal
+(vertex, object), symplectic or backward Euler (the same motion without cloth), and for
+constraints the matrix-free solver on velocities. A scene with cloth or meshes, another
+granularity, explicit Euler, or an assembled solver steps through the methods' ``step``.
+
+Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
+colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
+contactlab.contacts.
+"""
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .. import rotations, shapes
+from ..collision import assemble_contacts, candidate_pairs, collider_poses
+from ..collision.manifolds import Manifolds, reuse_or_generate
+from ..collision.narrow_phase import generate_contacts, needs_hulls
+from ..contacts import Contacts, values_carried
+from ..diagnostics import gravitational, kinetic
+from ..dynamics.integrators import gyroscopic_midpoint, moved
+from ..state import State
+from .impulse import resolve_collisions
+from .sequential import (PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, split_into_slabs, contact_order, contact_rows,
+                         row_products, solve_sequential_impulses)
+from .velocity_level import (earliest_impacts, gravity_along_normals, impact_targets, restitution_threshold,
+                             resting_targets)
+
+IMPULSE, CONSTRAINTS = 0, 1
+
+LoopModel = namedtuple("LoopModel", (
+    "gravity",                  # (3,) m/s²
+    "body_inverse_mass",        # (B,) 1/kg
+    "body_inertia",             # (B, 3) principal moments, kg m²
+    "body_inverse_inertia",     # (B, 3) 1/(kg m²)
+    "body_mass",                # (B,) kg
+    "particle_mass",            # (P,) kg
+    "particle_inverse_mass",    # (P,) 1/kg, 0 pinned
+    "particle_pinned",          # (P,) bool
+    "kinds", "params",          # (N,) int64, (N, 4): the colliders (Model.collider_table)
+    "radius",                   # (N,) bounding radii [m]
+    "materials",                # (N,) int
+    "obstacle_position",        # (O, 3) m
+    "obstacle_rotation",        # (O, 3, 3)
+    "material_friction",        # (M,)
+    "material_restitution",     # (M,)
+    "cloth_of",                 # (B + P,) int, −1: no cloth (always, here)
+))
+LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
+
+LoopSettings = namedtuple("LoopSettings", (
+    "method", "dt", "iterations", "tolerance", "threshold", "stabilization", "slop", "max_push_velocity",
+    "time_of_impact", "warm_start", "margin", "manifold_tolerance"))
+LoopSettings.__doc__ = """A method's Options as plain numbers: method IMPULSE or CONSTRAINTS, dt [s], sweeps, tolerance
+[m/s], restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s], time of impact (bool),
+warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept)."""
+
+Motion = namedtuple("Motion", ("body_position", "body_orientation", "body_velocity", "body_angular_velocity",
+                               "particle_position", "particle_velocity"))
+Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
+
+Samples = namedtuple("Samples", ("time", "body_position", "body_orientation", "body_velocity",
+                                 "body_angular_velocity", "particle_position", "particle_velocity", "energy_kinetic",
+                                 "energy_potential", "energy_elastic", "max_penetration", "contact_count",
+                                 "solver_iterations", "solver_residual"))
+Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
+
+
+def applies(model, method, options, integrator):
+    """Whether this loop can step ``model`` under ``method`` ("impulse" or "constraints") with
+    these Options and integrator (see the module docstring for what it serves)."""
+    if method not in ("impulse", "constraints") or integrator not in ("symplectic_euler", "backward_euler"):
+        return False
+    if model.spring_count or len(model.triangles) or (model.obstacle_shape == shapes.MESH).any():
+        return False
+    if options.granularity != "vertex" or options.normal != "object":
+        return False
+    return method == "impulse" or (options.solver == "matrix_free" and options.formulation == "velocity")
+
+
+# ---- the stages of one step (loop L3) ------------------------------------------------------
+
+@njit(cache=True)
+def free_motion(model, motion, rotation, h):
+    """Stage 1: velocities after h [s] under gravity alone, v* = v + h g (the gyroscopic term by the
+    midpoint rule; pinned particles held): (body (B, 3), angular (B, 3), particle (P, 3))."""
+    body = motion.body_velocity + h * model.gravity
+    angular = gyroscopic_midpoint(rotation, model.body_inertia, motion.body_angular_velocity, h, 4)
+    particle = motion.particle_velocity + h * model.gravity
+    for p in range(particle.shape[0]):
+        if model.particle_pinned[p]:
+            particle[p, 0] = particle[p, 1] = particle[p, 2] = 0.0
+    return body, angular, particle
+
+
+@njit(cache=True)
+def swept_reach(model, body_velocity, angular_velocity, particle_velocity, h, margin):
+    """Stage 2: how far each collider reaches this step (N,) [m]: half the contact margin, plus
+    for a dynamic one the distance it sweeps, h |v| (+ h |ω| r for a body's farthest point)."""
+    B, P = body_velocity.shape[0], particle_velocity.shape[0]
+    reach = np.full(model.kinds.shape[0], 0.5 * margin)
+    for b in range(B):
+        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * model.radius[b])
+    for p in range(P):
+        reach[B + p] += h * _norm(particle_velocity[p])
+    return reach
+
+
+@njit(cache=True, inline="always")
+def _norm(v):
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@njit(cache=True)
+def detect(model, families, hull_store, motion, rotation, reach, kept, tolerance):
+    """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
+    hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
+    when ``tolerance`` [m] > 0. Returns (ContactArrays, the manifolds to keep)."""
+    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
+    centers, rots = collider_poses(motion.body_position, rotation, motion.particle_position,
+                                   model.obstacle_position, model.obstacle_rotation)
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of)
+    total = model.kinds.shape[0]
+    if tolerance > 0.0:
+        found, made = reuse_or_generate(pairs, model.kinds, model.params, centers, rots, reach, model.radius,
+                                        hull_store, families, kept, tolerance, total)
+    else:
+        found = generate_contacts(pairs, model.kinds, model.params, centers, rots,
+                                  reach[pairs[:, 0]] + reach[pairs[:, 1]], hull_store, families)
+        made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0],
+                kept[7][:0])
+    point, normal, depth, feature, owner = found
+    contacts = assemble_contacts(pairs[owner, 0], pairs[owner, 1], point, normal, depth, feature, B, P,
+                                 model.materials, model.material_friction, model.material_restitution, total)
+    return contacts, made
+
+
+@njit(cache=True)
+def build_rows(model, contacts, motion, rotation):
+    """Stage 4a: the contacts' rows of J (a ContactRows) at the step's start."""
+    inverse_inertia = rotations.world_tensors(rotation, model.body_inverse_inertia)
+    return contact_rows(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                        contacts.weights_a, contacts.weights_b, contacts.point, motion.body_position,
+                        contacts.normal, contacts.tangent1, contacts.tangent2, model.body_inverse_mass,
+                        inverse_inertia, model.particle_inverse_mass)
+
+
+@njit(cache=True)
+def solve(settings, parallel, rows, contacts, motion, u, target, warm, order):
+    """Stage 4c: the warm-started sweeps of sequential impulses on u (changed in place), the
+    contacts grouped for threads as ``sequential.sweep_groups`` does; ``parallel`` None
+    compiles no parallel sweep (the groups are then swept one after the other: the same
+    numbers). Returns (impulses (C, 3) [N s], sweeps, last change [m/s])."""
+    C = order.shape[0]
+    grouped, starts = order, np.array([0, C, C])
+    if C >= PARALLEL_MIN_CONTACTS:
+        grouped, starts = split_into_slabs(order, contacts.point, rows.body, rows.particle, motion.body_position,
+                                            rows.body_inverse_mass, motion.particle_position,
+                                            rows.particle_inverse_mass, SWEEP_GROUPS)
+    if parallel is None:
+        return solve_sequential_impulses(rows, contacts.friction, target, u, settings.iterations,
+                                         settings.tolerance, warm, grouped, None)
+    return solve_sequential_impulses(rows, contacts.friction, target, u, settings.iterations, settings.tolerance,
+                                     warm, grouped, starts)
+
+
+@njit(cache=True)
+def split_at_impact(model, contacts, motion, tau, move, solved, h, time_of_impact):
+    """Stage 5: positions x₀ + h(τ v* + (1 − τ) v⁺) per body and particle, τ its earliest
+    impact (``velocity_level.positions_split_at_impact``; no split unless ``time_of_impact``)."""
+    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
+    if not time_of_impact:
+        tau = np.full(tau.shape[0], -1.0)
+    tau_body, tau_particle = earliest_impacts(contacts.body_a, contacts.body_b, contacts.particles_a,
+                                               contacts.particles_b, tau, B, P)
+    after = (solved[:6 * B].reshape(B, 6), solved[6 * B:].reshape(P, 3))
+    corrected_body = move[0] + (after[0][:, :3] - move[0])
+    corrected_angular = move[1] + (after[0][:, 3:] - move[1])
+    corrected_particle = move[2] + (after[1] - move[2])
+    mid = moved(motion.body_position, motion.body_orientation, motion.particle_position, move[0], move[1], move[2],
+                tau_body * h, tau_particle * h)
+    return moved(mid[0], mid[1], mid[2], corrected_body, corrected_angular, corrected_particle,
+                 (1 - tau_body) * h, (1 - tau_particle) * h)
+
+
+@njit(cache=True)
+def targets(model, settings, contacts, rows, u, order):
+    """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
+    none). Impulse: the collision waves (``impulse.resolve_collisions``) change u, then every
+    contact rests (``resting_target``); constraints: all impacts at once (``normal_targets``)."""
+    h = settings.dt
+    gap_at_start = -contacts.depth
+    gravity_normal = gravity_along_normals(contacts.body_a, contacts.body_b, contacts.particles_a,
+                                           contacts.particles_b, contacts.normal, model.gravity)
+    if settings.method == IMPULSE:
+        tau = np.empty(gap_at_start.shape[0])
+        resolve_collisions(rows, contacts.friction, contacts.restitution, gravity_normal, gap_at_start, h,
+                           settings.threshold, u, settings.iterations, settings.iterations, settings.tolerance,
+                           tau, order)
+        return resting_targets(gap_at_start, h, settings.stabilization, settings.slop,
+                               settings.max_push_velocity), tau
+    normal_velocity = row_products(rows, u)[:, 0]
+    return impact_targets(gap_at_start, normal_velocity, gravity_normal, contacts.restitution, h, settings.threshold,
+                          settings.stabilization, settings.slop, settings.max_push_velocity)
+
+
+@njit(cache=True)
+def velocity_step(model, settings, families, hull_store, parallel, motion, carried):
+    """One step of loop L3 with impulses or hard constraints on velocities.
+
+    ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
+    (K, 3)). Returns (positions, velocities — the state's six arrays, new —, the carried triple
+    for the next step, the ContactArrays, sweeps made, the sweeps' last change [m/s])."""
+    h = settings.dt
+    rotation = rotations.matrices(motion.body_orientation)
+    # 1. internal forces → free velocities v*
+    free = free_motion(model, motion, rotation, h)
+    # 2. predict: how far each body and particle sweeps this step
+    reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
+    # 3. collision detection over the swept step
+    contacts, manifolds = detect(model, families, hull_store, motion, rotation, reach, carried[0],
+                                 settings.manifold_tolerance)
+    if contacts.depth.shape[0] == 0:
+        positions = moved(motion.body_position, motion.body_orientation, motion.particle_position, free[0],
+                          free[1], free[2], np.full(free[0].shape[0], h), np.full(free[2].shape[0], h))
+        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0
+    # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
+    rows = build_rows(model, contacts, motion, rotation)
+    u = np.concatenate((np.concatenate((free[0], free[1]), axis=1).ravel(), free[2].ravel()))
+    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
+    target, tau = targets(model, settings, contacts, rows, u, order)
+    warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
+    impulses, sweeps, change = solve(settings, parallel, rows, contacts, motion, u, target, warm, order)
+    # 5. recompute positions from the corrected velocities, split at the time of impact
+    positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
+    B = free[0].shape[0]
+    bodies = u[:6 * B].reshape(B, 6)
+    velocities = (bodies[:, :3].copy(), bodies[:, 3:].copy(), u[6 * B:].reshape(-1, 3).copy())
+    return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change
+
+
+@njit(cache=True)
+def run(model, settings, families, hull_store, parallel, motion, carried, time, steps, first_index, last_index,
+        record_every, samples, max_speed):
+    """``steps`` steps of ``velocity_step`` from the state ``motion`` at ``time`` [s] (changed in
+    place), numbered from ``first_index``; after step i, a sample into ``samples`` (row after
+    row) where i is a multiple of ``record_every`` or ``last_index``. Stops early after a step
+    that leaves a non-finite value or a speed above ``max_speed`` [m/s]. Returns (steps made,
+    whether it stopped so, carried, time, samples written, most contacts, sweeps made)."""
+    written = 0
+    most = 0
+    sweeps_made = 0
+    for s in range(steps):
+        index = first_index + s
+        positions, velocities, carried, contacts, sweeps, change = velocity_step(model, settings, families,
+                                                                                 hull_store, parallel, motion,
+                                                                                 carried)
+        _store(motion, positions, velocities)
+        time += settings.dt
+        count = contacts.depth.shape[0]
+        most = max(most, count)
+        sweeps_made += sweeps
+        if not _healthy(motion, max_speed):
+            return s + 1, True, carried, time, written, most, sweeps_made
+        if index % record_every == 0 or index == last_index:
+            record(samples, written, model, families, hull_store, motion, time, count, sweeps, change)
+            written += 1
+    return steps, False, carried, time, written, most, sweeps_made
+
+
+@njit(cache=True)
+def _store(motion, positions, velocities):
+    """Copy a step's new positions and velocities into the state's arrays."""
+    for target, source in ((motion.body_position, positions[0]), (motion.body_velocity, velocities[0]),
+                           (motion.body_angular_velocity, velocities[1]), (motion.particle_position, positions[2]),
+                           (motion.particle_velocity, velocities[2])):
+        for n in range(target.shape[0]):
+            for i in range(3):
+                target[n, i] = source[n, i]
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            motion.body_orientation[b, i] = positions[1][b, i]
+
+
+@njit(cache=True)
+def _healthy(motion, max_speed):
+    """Every value finite and no body centre or particle faster than max_speed [m/s]."""
+    for array in (motion.body_position, motion.body_velocity, motion.body_angular_velocity,
+                  motion.particle_position, motion.particle_velocity):
+        for n in range(array.shape[0]):
+            for i in range(3):
+                if not np.isfinite(array[n, i]):
+                    return False
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            if not np.isfinite(motion.body_orientation[b, i]):
+                return False
+    for velocity in (motion.body_velocity, motion.particle_velocity):
+        for n in range(velocity.shape[0]):
+            if _norm(velocity[n]) > max_speed:
+                return False
+    return True
+
+
+@njit(cache=True)
+def record(samples, row, model, families, hull_store, motion, time, contact_count, sweeps, change):
+    """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
+    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does)."""
+    samples.time[row] = time
+    for target, source in ((samples.body_position, motion.body_position), (samples.body_velocity, motion.body_velocity),
+                           (samples.body_angular_velocity, motion.body_angular_velocity),
+                           (samples.particle_position, motion.particle_position),
+                           (samples.particle_velocity, motion.particle_velocity)):
+        for n in range(source.shape[0]):
+            for i in range(3):
+                target[row, n, i] = source[n, i]
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            samples.body_orientation[row, b, i] = motion.body_orientation[b, i]
+    rotation = rotations.matrices(motion.body_orientation)
+    samples.energy_kinetic[row] = kinetic(model.body_mass, model.body_inertia, rotation, motion.body_velocity,
+                                          motion.body_angular_velocity, model.particle_mass, motion.particle_velocity)
+    samples.energy_potential[row] = gravitational(model.body_mass, motion.body_position, model.particle_mass,
+                                                  motion.particle_position, model.gravity)
+    samples.energy_elastic[row] = 0.0
+    centers, rots = collider_poses(motion.body_position, rotation, motion.particle_position,
+                                   model.obstacle_position, model.obstacle_rotation)
+    touching = np.zeros(model.kinds.shape[0])
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, touching,
+                                  motion.body_position.shape[0] + motion.particle_position.shape[0], model.cloth_of)
+    depth = generate_contacts(pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]),
+                              hull_store, families)[2]
+    samples.max_penetration[row] = max(0.0, depth.max()) if depth.shape[0] else 0.0
+    samples.contact_count[row] = contact_count
+    samples.solver_iterations[row] = sweeps
+    samples.solver_residual[row] = change
+
+
+# ---- from Python: the model, the settings and the state in the loop's form, and back --------
+
+PARALLEL_MIN_COLLIDERS = 100    # fewer bodies and particles: no parallel sweep is compiled in
+
+
+def loop_model(model):
+    """The LoopModel of a Model (writable copies of its arrays; see Model.stepping_arrays)."""
+    kinds, params, materials, obstacle_rotation = model.collider_table
+    B, P = model.body_count, model.particle_count
+    copy = np.array                     # np.array copies: a writable, contiguous array
+    return LoopModel(
+        copy(model.gravity, dtype=float), copy(model.body_inverse_mass, dtype=float),
+        copy(model.body_inertia, dtype=float), copy(model.body_inverse_inertia, dtype=float),
+        copy(model.body_mass, dtype=float), copy(model.particle_mass, dtype=float),
+        copy(model.particle_inverse_mass, dtype=float), copy(model.particle_pinned, dtype=np.bool_),
+        copy(kinds, dtype=np.int64), copy(params, dtype=float),
+        copy(shapes.bounding_radii(kinds, params), dtype=float), copy(materials, dtype=np.int64),
+        copy(model.obstacle_position, dtype=float), copy(obstacle_rotation, dtype=float),
+        copy(model.material_friction, dtype=float), copy(model.material_restitution, dtype=float),
+        np.full(B + P, -1, dtype=np.int64))
+
+
+class Stepper:
+    """Steps one run of ``method`` on ``model`` through the compiled loop.
+
+    ``advance(steps, first_index, last_index, record_every)`` makes that many steps from the
+    state given at construction and returns the samples it recorded; ``state()`` is the State
+    reached, with the warm-start data carried under the same keys as the method's ``step``
+    (so a run may go on through either path)."""
+
+    def __init__(self, model, method, options, integrator, dt, state, threshold):
+        self.model = model
+        self.prefix = "impulse_" if method == "impulse" else "constraint_"
+        self.keep_manifolds = options.manifold_tolerance > 0.0
+        self.settings = LoopSettings(IMPULSE if method == "impulse" else CONSTRAINTS, float(dt),
+                                     int(options.iterations), float(options.tolerance), float(threshold),
+                                     float(options.stabilization), float(options.slop),
+                                     float(options.max_push_velocity), bool(options.time_of_impact),
+                                     float(options.warm_start), float(options.contact_margin),
+                                     float(options.manifold_tolerance))
+        self.families = model.pair_families
+        self.hull_store = model.hull_store if needs_hulls(self.families) else None
+        from ..threads import available_threads
+        self.parallel = (True if available_threads() > 1
+                         and model.body_count + model.particle_count >= PARALLEL_MIN_COLLIDERS else None)
+        self.time = float(state.time)
+        self.motion = Motion(*(np.array(a, dtype=float) for a in (
+            state.body_position, state.body_orientation, state.body_velocity, state.body_angular_velocity,
+            state.particle_position, state.particle_velocity)))
+        kept = state.carried.get("manifolds") or Manifolds.empty()
+        ids = state.carried.get(self.prefix + "ids")
+        values = state.carried.get(self.prefix + "values")
+        self.carried = ((kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal,
+                         kept.feature),
+                        np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
+                        np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3))
+        self.other = {k: v for k, v in state.carried.items()
+                      if k != "manifolds" and not k.startswith(self.prefix)}
+        self.max_contacts = 0
+        self.sweeps_made = 0
+        self.last_contacts = 0
+
+    def samples_for(self, count):
+        """Empty Samples for ``count`` samples."""
+        B, P = self.model.body_count, self.model.particle_count
+        return Samples(np.empty(count), np.empty((count, B, 3)), np.empty((count, B, 4)), np.empty((count, B, 3)),
+                       np.empty((count, B, 3)), np.empty((count, P, 3)), np.empty((count, P, 3)), np.empty(count),
+                       np.empty(count), np.empty(count), np.empty(count), np.empty(count, dtype=np.int64),
+                       np.empty(count, dtype=np.int64), np.empty(count))
+
+    def advance(self, steps, first_index, last_index, record_every, max_speed):
+        """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
+        state blew up — see ``run`` —, the Samples recorded as a dict of the series)."""
+        indices = np.arange(first_index, first_index + steps)
+        count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
+        samples = self.samples_for(count)
+        made, diverged, self.carried, self.time, written, most, sweeps = run(
+            self.model.stepping_arrays, self.settings, self.families, self.hull_store, self.parallel, self.motion,
+            self.carried, self.time, steps, first_index, last_index, record_every, samples, max_speed)
+        self.max_contacts = max(self.max_contacts, most)
+        self.sweeps_made += sweeps
+        return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
+
+    def state(self):
+        """The State reached (copies), with the carried data under the method's keys."""
+        made, ids, values = self.carried
+        carried = dict(self.other)
+        carried["manifolds"] = Manifolds(*made) if self.keep_manifolds else None
+        if len(ids):
+            carried[self.prefix + "ids"], carried[self.prefix + "values"] = ids, values
+        m = self.motion
+        return State(self.time, m.body_position.copy(), m.body_orientation.copy(), m.body_velocity.copy(),
+                     m.body_angular_velocity.copy(), m.particle_position.copy(), m.particle_velocity.copy(), carried)
+
+
+def stepper_for(model, method, options, integrator, dt, state):
+    """A Stepper for this run, or None where the loop does not serve it (``applies``)."""
+    if not applies(model, method, options, integrator):
+        return None
+    return Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
+
+
+def step(model, state, dt, options, integrator, method):
+    """One step through the compiled loop, as the methods' ``step`` returns it: (State, StepInfo)."""
+    from . import StepInfo
+    stepper = Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
+    positions, velocities, stepper.carried, contacts, sweeps, change = velocity_step(
+        model.stepping_arrays, stepper.settings, stepper.families, stepper.hull_store, stepper.parallel,
+        stepper.motion, stepper.carried)
+    _store(stepper.motion, positions, velocities)
+    stepper.time += dt
+    return stepper.state(), StepInfo(Contacts.from_arrays(contacts), solver_iterations=int(sweeps),
+                                     solver_residual=float(change))

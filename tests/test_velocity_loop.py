@@ -1,0 +1,107 @@
+"""Issue 18, deliverable 1: the compiled stepping loop of impulse and constraints
+(contactlab.methods.velocity_loop) against the independent path that calls the same stages one
+by one from Python (``stitched_step``): on every built-in scene the loop serves, the two give
+bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
+
+import numpy as np
+import pytest
+
+from conftest import ball_on_plane
+from contactlab import SimulationDiverged, simulate
+from contactlab.methods import constraints, impulse, velocity_loop
+from contactlab.record import SERIES
+from contactlab.scene import builtin_scenes, load_scene
+
+STEPS = 60
+
+
+def _served(name, method):
+    scene = load_scene(name)
+    module = impulse if method == "impulse" else constraints
+    options = module.Options(**scene.method_options.get(method, {}))
+    return scene, velocity_loop.applies(scene.model, method, options, scene.integrator)
+
+
+CASES = [(name, method) for name, _ in builtin_scenes() for method in ("impulse", "constraints")
+         if _served(name, method)[1]]
+
+
+def _stitched(monkeypatch):
+    """Make every step go through ``stitched_step`` (the loop serves nothing)."""
+    monkeypatch.setattr(velocity_loop, "applies", lambda *arguments: False)
+
+
+def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes():
+    served = {name for name, _ in CASES}
+    assert {"bouncing_ball", "box_pyramid", "box_stack", "sphere_pile", "newtons_cradle", "capsule_pile"} <= served
+    assert not served & {"cloth_drape", "cloth_table", "mesh_bowl"}
+
+
+@pytest.mark.parametrize("name,method", CASES)
+def test_the_loop_gives_the_stitched_steps_numbers(name, method, monkeypatch):
+    scene, _ = _served(name, method)
+    options = scene.method_options.get(method, {})
+    steps = min(STEPS, max(1, int(round(scene.duration / scene.dt))))
+    looped = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7)
+    with monkeypatch.context() as patch:
+        _stitched(patch)
+        stitched = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator,
+                            record_every=7)
+    for series in SERIES:
+        assert np.array_equal(looped.arrays[series], stitched.arrays[series]), series
+    for key in ("max_contacts", "max_penetration"):
+        assert looped.summary[key] == stitched.summary[key], key
+    assert looped.summary["solver"] == stitched.summary["solver"]
+    # what the run carries on: the same manifolds and warm-start impulses under the same keys
+    assert set(looped.state.carried) == set(stitched.state.carried)
+    for key, value in looped.state.carried.items():
+        other = stitched.state.carried[key]
+        if value is None or other is None:
+            assert value is other, key
+            continue
+        for field in (vars(value) if hasattr(value, "__dataclass_fields__") else {key: value}):
+            left = getattr(value, field) if hasattr(value, "__dataclass_fields__") else value
+            right = getattr(other, field) if hasattr(other, "__dataclass_fields__") else other
+            assert np.array_equal(left, right), (key, field)
+
+
+def test_a_run_goes_on_from_its_state_through_either_path(monkeypatch):
+    """Ten steps and ten more from the state reached are the twenty steps of one run, whether the
+    second half steps in the loop or stitched: the carried warm start and manifolds pass over."""
+    scene = load_scene("box_stack")
+    whole = simulate(scene.model, "impulse", scene.dt, 20 * scene.dt)
+    half = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt)
+    with monkeypatch.context() as patch:
+        _stitched(patch)
+        rest = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, state=half.state)
+    assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
+    assert np.array_equal(rest.arrays["body_velocity"][-1], whole.arrays["body_velocity"][-1])
+    assert rest.state.time == whole.state.time
+
+
+def test_recording_every_k_steps_samples_the_same_states():
+    scene = load_scene("box_stack")
+    every = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=1).arrays
+    sparse = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=4).arrays
+    steps = np.r_[0, np.arange(4, 31, 4), 30]
+    assert np.array_equal(sparse["time"], every["time"][steps])
+    assert np.array_equal(sparse["body_position"], every["body_position"][steps])
+    assert np.array_equal(sparse["max_penetration"], every["max_penetration"][steps])
+
+
+def test_a_ball_dropped_in_the_loop_bounces_to_the_closed_form_apex():
+    """h₁ = r + ε² (h₀ − r) for a ball dropped from h₀ (the time-of-impact split, in the loop)."""
+    model = ball_on_plane(restitution=0.8, friction=0.0, height=0.95, radius=0.05)
+    run = simulate(model, "impulse", 1 / 240, 1.2)
+    assert run.summary["threads"]["setting"] == "auto"
+    height = run.arrays["body_position"][:, 0, 2]
+    bounced = np.argmax(np.diff(height) > 0)                       # the first step that rises
+    apex = height[bounced:].max()
+    expected = 0.05 + 0.8 ** 2 * (1.0 - 0.05)
+    assert abs(apex - expected) < 2e-3 * expected
+
+
+def test_a_blow_up_in_the_loop_stops_the_run_with_its_time():
+    model = ball_on_plane(height=100.0, velocity=(0.0, 0.0, 2e6))
+    with pytest.raises(SimulationDiverged, match="t = 0.004"):
+        simulate(model, "impulse", 0.004, 1.0)
