@@ -63,11 +63,14 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     notice = FirstCompile()                        # one line on stderr at the first compilation
     run_started = time.perf_counter()              # the run: its first sample, the steps, the other samples
+    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
-        recorder.sample(state)                     # its collide() compiles the collision kernels first
+        if stepper is None:
+            recorder.sample(state)                 # its collide() compiles the collision kernels first
+        else:
+            recorder.extend(stepper.sample())      # the loop's own recording, which the steps use too
     setup_compile_seconds = _seconds(compiling)
     tally = Tally()
-    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
                  desc=f"{scene_name} ({method})") as bar, chooser:

@@ -11,7 +11,7 @@ from numba import njit
 from .. import rotations, shapes
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
-from .broad_phase import boxes_overlapping, static_pairs
+from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
 from .mesh import MAX_PER_SHAPE
@@ -109,14 +109,15 @@ def _bounds(kinds, params, centers, rots, margin):
 
 
 @njit(cache=True)
-def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of):
+def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large):
     """The broad phase: (lower, upper) bounds (N, 3) [m] of the colliders grown by ``reach``
     (N,) [m], and the candidate pairs (K, 2) int64 — the dynamic pairs (colliders 0 … dynamic−1)
     whose bounds overlap, sorted, then each dynamic collider against the static obstacles
     (``static_pairs``; meshes apart). ``cloth_of`` (dynamic,) int: the cloth of each dynamic
-    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart)."""
+    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart).
+    ``large``: as ``broad_phase.boxes_overlapping`` takes it."""
     lower, upper = _bounds(kinds, params, centers, rots, reach)
-    dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic])
+    dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic], large)
     statics = static_pairs(lower, upper, kinds, params, dynamic)
     pairs = np.empty((dynamic_pairs.shape[0] + statics.shape[0], 2), dtype=np.int64)
     count = 0
@@ -170,7 +171,8 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
     if sweep is not None:
         reach[:dynamic] += sweep
     cloth_of = np.concatenate([np.full(B, -1), model.particle_cloth])    # neighbours within one cloth: no contact
-    lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of)
+    large = True if dynamic >= GRID_FROM else None          # None: the grids are never needed, nor compiled
+    lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
     mesh_parts = [_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
                   for g in range(dynamic, dynamic + O) if kinds[g] == shapes.MESH]

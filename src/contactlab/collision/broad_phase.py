@@ -32,15 +32,19 @@ def overlapping_pairs(lower, upper):
     """Pairs (i, j), i < j, whose boxes overlap, sorted; lower/upper (N, 3) [m] → int64 array (K, 2)."""
     if len(lower) < 2:                  # one body, no pair (and nothing to compile for it)
         return np.zeros((0, 2), dtype=np.int64)
-    return boxes_overlapping(lower, upper)
+    return boxes_overlapping(lower, upper, True)
 
 
 @njit(cache=True)
-def boxes_overlapping(lower, upper):
+def boxes_overlapping(lower, upper, large):
     """``overlapping_pairs``, compiled (the stepping loops call it): the sweep below GRID_FROM
-    boxes, else the neighbour-cell grid where the boxes suit it, else the hash grid."""
+    boxes, else the neighbour-cell grid where the boxes suit it, else the hash grid. ``large``
+    None says there are always fewer than GRID_FROM boxes: the grids are then not compiled
+    (True: they may be needed)."""
     if lower.shape[0] < 2:
         return np.zeros((0, 2), dtype=np.int64)
+    if large is None:               # a branch on a None argument: Numba drops the other before typing
+        return sweep_and_prune(lower, upper)
     if lower.shape[0] < GRID_FROM:
         return sweep_and_prune(lower, upper)
     pairs, done = neighbour_cell_pairs(lower, upper)

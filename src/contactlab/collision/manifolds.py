@@ -238,6 +238,10 @@ def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, fam
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
     kept = manifolds if manifolds is not None else Manifolds.empty()
+    if not kept_pairs(kinds, pairs).any():     # a pile of spheres: no reuse (and its code never compiled)
+        pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]
+        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
+                Manifolds.empty())
     contacts, made = reuse_or_generate(pairs, kinds, params, centers, rots, reach,
                                        shapes.bounding_radii(kinds, params), hull_store, families,
                                        (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness,

@@ -27,7 +27,8 @@ from numba import njit
 from .. import rotations, shapes
 from ..collision import assemble_contacts, candidate_pairs, collider_poses
 from ..collision.manifolds import Manifolds, reuse_or_generate
-from ..collision.narrow_phase import generate_contacts, needs_hulls
+from ..collision.broad_phase import GRID_FROM
+from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
 from ..contacts import Contacts, values_carried
 from ..diagnostics import gravitational, kinetic
 from ..dynamics.integrators import gyroscopic_midpoint, moved
@@ -37,8 +38,6 @@ from .sequential import (PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, split_into_slabs, 
                          row_products, solve_sequential_impulses)
 from .velocity_level import (earliest_impacts, gravity_along_normals, impact_targets, restitution_threshold,
                              resting_targets)
-
-IMPULSE, CONSTRAINTS = 0, 1
 
 LoopModel = namedtuple("LoopModel", (
     "gravity",                  # (3,) m/s²
@@ -61,9 +60,9 @@ LoopModel = namedtuple("LoopModel", (
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
 
 LoopSettings = namedtuple("LoopSettings", (
-    "method", "dt", "iterations", "tolerance", "threshold", "stabilization", "slop", "max_push_velocity",
+    "dt", "iterations", "tolerance", "threshold", "stabilization", "slop", "max_push_velocity",
     "time_of_impact", "warm_start", "margin", "manifold_tolerance"))
-LoopSettings.__doc__ = """A method's Options as plain numbers: method IMPULSE or CONSTRAINTS, dt [s], sweeps, tolerance
+LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
 [m/s], restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s], time of impact (bool),
 warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept)."""
 
@@ -124,23 +123,28 @@ def _norm(v):
 
 
 @njit(cache=True)
-def detect(model, families, hull_store, motion, rotation, reach, kept, tolerance):
+def detect(model, plan, large, keeping, motion, rotation, reach, kept, tolerance):
     """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
     hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
-    when ``tolerance`` [m] > 0. Returns (ContactArrays, the manifolds to keep)."""
+    when ``tolerance`` [m] > 0. ``plan`` = (families, hull store) of the narrow phase; ``large``
+    and ``keeping`` None: never a grid broad phase, never a kept manifold (see ``Stepper``).
+    Returns (ContactArrays, the manifolds to keep)."""
+    families, hull_store = plan
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
     centers, rots = collider_poses(motion.body_position, rotation, motion.particle_position,
                                    model.obstacle_position, model.obstacle_rotation)
-    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of)
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
     total = model.kinds.shape[0]
-    if tolerance > 0.0:
+    made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
+    if keeping is None:             # no pair keeps a manifold (reuse_or_generate would find none)
+        found = generate_contacts(pairs, model.kinds, model.params, centers, rots,
+                                  reach[pairs[:, 0]] + reach[pairs[:, 1]], hull_store, families)
+    elif tolerance > 0.0:
         found, made = reuse_or_generate(pairs, model.kinds, model.params, centers, rots, reach, model.radius,
                                         hull_store, families, kept, tolerance, total)
     else:
         found = generate_contacts(pairs, model.kinds, model.params, centers, rots,
                                   reach[pairs[:, 0]] + reach[pairs[:, 1]], hull_store, families)
-        made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0],
-                kept[7][:0])
     point, normal, depth, feature, owner = found
     contacts = assemble_contacts(pairs[owner, 0], pairs[owner, 1], point, normal, depth, feature, B, P,
                                  model.materials, model.material_friction, model.material_restitution, total)
@@ -158,13 +162,17 @@ def build_rows(model, contacts, motion, rotation):
 
 
 @njit(cache=True)
-def solve(settings, parallel, rows, contacts, motion, u, target, warm, order):
+def solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order):
     """Stage 4c: the warm-started sweeps of sequential impulses on u (changed in place), the
-    contacts grouped for threads as ``sequential.sweep_groups`` does; ``parallel`` None
-    compiles no parallel sweep (the groups are then swept one after the other: the same
-    numbers). Returns (impulses (C, 3) [N s], sweeps, last change [m/s])."""
+    contacts grouped for threads as ``sequential.sweep_groups`` does (``slabs`` None: never
+    PARALLEL_MIN_CONTACTS contacts, never grouped); ``parallel`` None compiles no parallel sweep
+    (the groups are then swept one after the other: the same numbers). Returns (impulses (C, 3)
+    [N s], sweeps, last change [m/s])."""
     C = order.shape[0]
     grouped, starts = order, np.array([0, C, C])
+    if slabs is None:
+        return solve_sequential_impulses(rows, contacts.friction, target, u, settings.iterations,
+                                         settings.tolerance, warm, grouped, None)
     if C >= PARALLEL_MIN_CONTACTS:
         grouped, starts = split_into_slabs(order, contacts.point, rows.body, rows.particle, motion.body_position,
                                             rows.body_inverse_mass, motion.particle_position,
@@ -196,15 +204,16 @@ def split_at_impact(model, contacts, motion, tau, move, solved, h, time_of_impac
 
 
 @njit(cache=True)
-def targets(model, settings, contacts, rows, u, order):
+def targets(model, settings, impulse, contacts, rows, u, order):
     """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
     none). Impulse: the collision waves (``impulse.resolve_collisions``) change u, then every
-    contact rests (``resting_target``); constraints: all impacts at once (``normal_targets``)."""
+    contact rests (``resting_target``); constraints: all impacts at once (``normal_targets``).
+    ``impulse``: True for the impulse method, None for constraints (the other is not compiled)."""
     h = settings.dt
     gap_at_start = -contacts.depth
     gravity_normal = gravity_along_normals(contacts.body_a, contacts.body_b, contacts.particles_a,
                                            contacts.particles_b, contacts.normal, model.gravity)
-    if settings.method == IMPULSE:
+    if impulse is not None:
         tau = np.empty(gap_at_start.shape[0])
         resolve_collisions(rows, contacts.friction, contacts.restitution, gravity_normal, gap_at_start, h,
                            settings.threshold, u, settings.iterations, settings.iterations, settings.tolerance,
@@ -217,11 +226,12 @@ def targets(model, settings, contacts, rows, u, order):
 
 
 @njit(cache=True)
-def velocity_step(model, settings, families, hull_store, parallel, motion, carried):
+def velocity_step(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried):
     """One step of loop L3 with impulses or hard constraints on velocities.
 
     ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
-    (K, 3)). Returns (positions, velocities — the state's six arrays, new —, the carried triple
+    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``slabs`` and ``parallel`` (True,
+    or None to leave a stage's branch uncompiled) as ``Stepper`` sets them. Returns (positions, velocities — the state's six arrays, new —, the carried triple
     for the next step, the ContactArrays, sweeps made, the sweeps' last change [m/s])."""
     h = settings.dt
     rotation = rotations.matrices(motion.body_orientation)
@@ -230,7 +240,7 @@ def velocity_step(model, settings, families, hull_store, parallel, motion, carri
     # 2. predict: how far each body and particle sweeps this step
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
-    contacts, manifolds = detect(model, families, hull_store, motion, rotation, reach, carried[0],
+    contacts, manifolds = detect(model, plan, large, keeping, motion, rotation, reach, carried[0],
                                  settings.manifold_tolerance)
     if contacts.depth.shape[0] == 0:
         positions = moved(motion.body_position, motion.body_orientation, motion.particle_position, free[0],
@@ -240,9 +250,9 @@ def velocity_step(model, settings, families, hull_store, parallel, motion, carri
     rows = build_rows(model, contacts, motion, rotation)
     u = np.concatenate((np.concatenate((free[0], free[1]), axis=1).ravel(), free[2].ravel()))
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    target, tau = targets(model, settings, contacts, rows, u, order)
+    target, tau = targets(model, settings, impulse, contacts, rows, u, order)
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
-    impulses, sweeps, change = solve(settings, parallel, rows, contacts, motion, u, target, warm, order)
+    impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
     B = free[0].shape[0]
@@ -252,8 +262,8 @@ def velocity_step(model, settings, families, hull_store, parallel, motion, carri
 
 
 @njit(cache=True)
-def run(model, settings, families, hull_store, parallel, motion, carried, time, steps, first_index, last_index,
-        record_every, samples, max_speed):
+def run(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried, time, steps, first_index,
+        last_index, record_every, samples, max_speed):
     """``steps`` steps of ``velocity_step`` from the state ``motion`` at ``time`` [s] (changed in
     place), numbered from ``first_index``; after step i, a sample into ``samples`` (row after
     row) where i is a multiple of ``record_every`` or ``last_index``. Stops early after a step
@@ -264,9 +274,8 @@ def run(model, settings, families, hull_store, parallel, motion, carried, time, 
     sweeps_made = 0
     for s in range(steps):
         index = first_index + s
-        positions, velocities, carried, contacts, sweeps, change = velocity_step(model, settings, families,
-                                                                                 hull_store, parallel, motion,
-                                                                                 carried)
+        positions, velocities, carried, contacts, sweeps, change = velocity_step(
+            model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
         _store(motion, positions, velocities)
         time += settings.dt
         count = contacts.depth.shape[0]
@@ -275,7 +284,7 @@ def run(model, settings, families, hull_store, parallel, motion, carried, time, 
         if not _healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, model, families, hull_store, motion, time, count, sweeps, change)
+            record(samples, written, model, plan, large, motion, time, count, sweeps, change)
             written += 1
     return steps, False, carried, time, written, most, sweeps_made
 
@@ -315,9 +324,10 @@ def _healthy(motion, max_speed):
 
 
 @njit(cache=True)
-def record(samples, row, model, families, hull_store, motion, time, contact_count, sweeps, change):
+def record(samples, row, model, plan, large, motion, time, contact_count, sweeps, change):
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
-    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does)."""
+    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does); the
+    step's ``contact_count``, or where it is −1 (no step) that of the fresh pass."""
     samples.time[row] = time
     for target, source in ((samples.body_position, motion.body_position), (samples.body_velocity, motion.body_velocity),
                            (samples.body_angular_velocity, motion.body_angular_velocity),
@@ -339,11 +349,12 @@ def record(samples, row, model, families, hull_store, motion, time, contact_coun
                                    model.obstacle_position, model.obstacle_rotation)
     touching = np.zeros(model.kinds.shape[0])
     _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, touching,
-                                  motion.body_position.shape[0] + motion.particle_position.shape[0], model.cloth_of)
+                                  motion.body_position.shape[0] + motion.particle_position.shape[0], model.cloth_of,
+                                  large)
     depth = generate_contacts(pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]),
-                              hull_store, families)[2]
+                              plan[1], plan[0])[2]
     samples.max_penetration[row] = max(0.0, depth.max()) if depth.shape[0] else 0.0
-    samples.contact_count[row] = contact_count
+    samples.contact_count[row] = depth.shape[0] if contact_count < 0 else contact_count
     samples.solver_iterations[row] = sweeps
     samples.solver_residual[row] = change
 
@@ -351,6 +362,26 @@ def record(samples, row, model, families, hull_store, motion, time, contact_coun
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
 
 PARALLEL_MIN_COLLIDERS = 100    # fewer bodies and particles: no parallel sweep is compiled in
+KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")   # pairs that keep manifolds
+
+
+def compile_flags(model, method, options):
+    """(large, keeping, impulse, slabs, parallel): True, or None where the scene can never need
+    that branch of the loop, which Numba then leaves uncompiled (a first run compiles a fraction
+    of the loop: a ball on the floor needs neither the grid broad phase, nor kept manifolds,
+    nor the slab split) — the numbers are the same either way. large: at least GRID_FROM bodies
+    and particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
+    impulse: the method; slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per
+    pair); parallel: several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
+    from ..threads import available_threads
+    dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
+    present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
+    most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
+    return (True if dynamic >= GRID_FROM else None,
+            True if options.manifold_tolerance > 0.0 and present & set(KEPT_FAMILIES) else None,
+            True if method == "impulse" else None,
+            True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
+            True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None)
 
 
 def loop_model(model):
@@ -382,17 +413,14 @@ class Stepper:
         self.model = model
         self.prefix = "impulse_" if method == "impulse" else "constraint_"
         self.keep_manifolds = options.manifold_tolerance > 0.0
-        self.settings = LoopSettings(IMPULSE if method == "impulse" else CONSTRAINTS, float(dt),
-                                     int(options.iterations), float(options.tolerance), float(threshold),
+        self.settings = LoopSettings(float(dt), int(options.iterations), float(options.tolerance), float(threshold),
                                      float(options.stabilization), float(options.slop),
                                      float(options.max_push_velocity), bool(options.time_of_impact),
                                      float(options.warm_start), float(options.contact_margin),
                                      float(options.manifold_tolerance))
-        self.families = model.pair_families
-        self.hull_store = model.hull_store if needs_hulls(self.families) else None
-        from ..threads import available_threads
-        self.parallel = (True if available_threads() > 1
-                         and model.body_count + model.particle_count >= PARALLEL_MIN_COLLIDERS else None)
+        families = model.pair_families
+        self.plan = (families, model.hull_store if needs_hulls(families) else None)
+        self.flags = compile_flags(model, method, options)
         self.time = float(state.time)
         self.motion = Motion(*(np.array(a, dtype=float) for a in (
             state.body_position, state.body_orientation, state.body_velocity, state.body_angular_velocity,
@@ -418,6 +446,14 @@ class Stepper:
                        np.empty(count), np.empty(count), np.empty(count), np.empty(count, dtype=np.int64),
                        np.empty(count, dtype=np.int64), np.empty(count))
 
+    def sample(self):
+        """The sample of the state as it stands (no step made: its contacts those of the fresh
+        collision pass, 0 sweeps), as a dict of
+        the series, recorded by the loop's ``record``: what ``Recorder.sample`` records."""
+        samples = self.samples_for(1)
+        record(samples, 0, self.model.stepping_arrays, self.plan, self.flags[0], self.motion, self.time, -1, 0, 0.0)
+        return samples._asdict()
+
     def advance(self, steps, first_index, last_index, record_every, max_speed):
         """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
         state blew up — see ``run`` —, the Samples recorded as a dict of the series)."""
@@ -425,8 +461,7 @@ class Stepper:
         count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
         samples = self.samples_for(count)
         made, diverged, self.carried, self.time, written, most, sweeps = run(
-            self.model.stepping_arrays, self.settings, self.families, self.hull_store, self.parallel, self.motion,
-            self.carried, self.time, steps, first_index, last_index, record_every, samples, max_speed)
+            self.model.stepping_arrays, self.settings, self.plan, *self.flags, self.motion, self.carried, self.time, steps, first_index, last_index, record_every, samples, max_speed)
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
@@ -455,8 +490,7 @@ def step(model, state, dt, options, integrator, method):
     from . import StepInfo
     stepper = Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
     positions, velocities, stepper.carried, contacts, sweeps, change = velocity_step(
-        model.stepping_arrays, stepper.settings, stepper.families, stepper.hull_store, stepper.parallel,
-        stepper.motion, stepper.carried)
+        model.stepping_arrays, stepper.settings, stepper.plan, *stepper.flags, stepper.motion, stepper.carried)
     _store(stepper.motion, positions, velocities)
     stepper.time += dt
     return stepper.state(), StepInfo(Contacts.from_arrays(contacts), solver_iterations=int(sweeps),
