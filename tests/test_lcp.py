@@ -195,7 +195,7 @@ def test_lcp_option_errors():
 # ------------------------------------------------------------------------------- friction
 
 
-@pytest.mark.parametrize("method", ["nsgs", "staggered", "apgd"])
+@pytest.mark.parametrize("method", ["nsgs", "staggered", "apgd", "newton"])
 def test_single_contact_slip_and_stick(method):
     W = np.eye(3)
     slip = solve_friction_contact(W, np.array([-1.0, 2.0, 0.0]), [0.5], method=method, tol=1e-12)
@@ -247,6 +247,19 @@ def test_apgd_on_fclib_problems(name):
     assert res.converged, res.message
     assert natural_map_error(problem.W, problem.q, problem.mu, res.r) == pytest.approx(res.error, rel=1e-9)
     assert res.error <= 1e-6
+
+
+@needs_data
+@pytest.mark.parametrize("name, tol, cap", [("Capsules-i100-1090.dat", 1e-6, 3000),
+                                            ("Capsules-i101-404.dat", 1e-6, 3000),
+                                            ("Capsules-i101-404.dat", 1e-8, 3000)])
+def test_apgd_restart_solves_the_capsules_problems(name, tol, cap):
+    # Before the function restart (issue 19) apgd stalled here: 4.3e-5 and 3.9e-6 after 3000 (and
+    # 10 000) steps. With it: 413, 348 and 1224 steps (docs/lcp.md).
+    problem = read_problem(FCLIB / name)
+    res = solve_friction_contact(problem.W, problem.q, problem.mu, method="apgd", tol=tol, max_iterations=cap)
+    assert res.converged, res.message
+    assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= tol
 
 
 def frictional_contacts(rng, nc=40, bodies=25):
@@ -314,7 +327,7 @@ def test_friction_input_errors():
     with pytest.raises(InputError, match="mu"):
         solve_friction_contact(np.eye(3), np.zeros(3), [-0.5])
     with pytest.raises(InputError, match="method"):
-        solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="newton")
+        solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="lemke")   # an LCP method, not these
     with pytest.raises(InputError, match="friction_model"):
         solve_friction_contact(np.eye(3), np.zeros(3), [0.5], friction_model="ellipse")
     with pytest.raises(InputError, match="friction_model"):

@@ -5,7 +5,9 @@
   (``jacobi``) or Lemke's pivoting (``lemke``, exact, any square B);
 * :func:`color_rows`, :func:`color_contacts` — the coloring used by ``redblack``;
 * :func:`solve_friction_contact` — the 3D Coulomb friction problem in FCLIB local form by
-  non-smooth Gauss-Seidel (``nsgs``, F4a) or normal/friction alternation (``staggered``, F4b);
+  non-smooth Gauss-Seidel (``nsgs``, F4a), normal/friction alternation (``staggered``, F4b),
+  accelerated projected gradient (``apgd``) or semi-smooth Newton on the Alart–Curnier function
+  (``newton``, :mod:`contactlab.lcp.newton`);
   :func:`natural_map_error` — its error measure;
 * :func:`read_problem` — FCLIB HDF5 and Siconos ``.dat`` friction problems.
 

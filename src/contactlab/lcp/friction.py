@@ -23,7 +23,8 @@ Solvers (all sweeps compiled with Numba, ``cache=True``):
   Gauss-Seidel sweeps on the normal rows), then all frictions with the normals fixed (disk or box
   solves), and the pair of phases iterated.
 * ``apgd`` — accelerated projected gradient (Nesterov's method with gradient restarts, as Mazhar,
-  Heyn, Negrut and Tasora 2015 use for contact) on De Saxcé's form of the problem:
+  Heyn, Negrut and Tasora 2015 use for contact, and a function restart on the residual, see
+  :func:`_apgd`) on De Saxcé's form of the problem:
   ``r ← P_K(y − (W y + q + [μ‖u_T‖, 0, 0]) / L)``, y extrapolated from the last two iterates, L ≥
   the largest eigenvalue of W (estimated by power iteration unless given). The projection is
   onto the whole cone at once, so no contact waits for another, and it needs W only as products
@@ -31,6 +32,8 @@ Solvers (all sweeps compiled with Numba, ``cache=True``):
   J A⁻¹ Jᵀ x through a factorization of A, never forming J A⁻¹ Jᵀ). Its fixed points are the
   Coulomb solutions (the De Saxcé term makes sliding contacts keep u_N = 0, not the μ‖u_T‖ of
   the convex relaxation); with the cone model only.
+* ``newton`` — semi-smooth Newton on the Alart–Curnier function, sparse LU, non-monotone line
+  search, proximal regularization and a watchdog: :mod:`contactlab.lcp.newton`. Cone model only.
 
 Error (``FrictionResult.error``, the Siconos measure): the natural-map residual
 ``F^α(r) = r^α − P_Kμα(r^α − û^α)``, ``‖F(r)‖₂ / max(‖q‖, ‖r‖, ‖u‖)`` (1 replaces a zero
@@ -42,6 +45,7 @@ the box model has different solutions than the cone one.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +55,7 @@ from numba import njit
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
 
-FRICTION_METHODS = ("nsgs", "staggered", "apgd")
+FRICTION_METHODS = ("nsgs", "staggered", "apgd", "newton")
 OPERATOR_METHODS = ("apgd",)            # those that need W only as products W x
 FRICTION_MODELS = ("cone", "pyramid")
 _SQRT_HALF = math.sqrt(0.5)
@@ -65,10 +69,11 @@ class FrictionResult:
     ----------
     r: (3·nc,) reactions [N, T1, T2] per contact (impulses, in the units of W's columns).
     u: (3·nc,) relative velocities ``W r + q``.
-    iterations: sweeps (nsgs), normal/friction rounds (staggered) or gradient steps (apgd) done.
+    iterations: sweeps (nsgs), normal/friction rounds (staggered), gradient steps (apgd) or Newton
+       steps (newton; sweeps it ran besides are not counted) done.
     converged: True when ``error <= tol``.
     error: normalized natural-map residual (module docstring), at ``r``.
-    method: ``"nsgs"``, ``"staggered"`` or ``"apgd"``.
+    method: ``"nsgs"``, ``"staggered"``, ``"apgd"`` or ``"newton"``.
     friction_model: ``"cone"`` or ``"pyramid"``.
     message: one sentence on how it ended.
     """
@@ -417,12 +422,25 @@ def largest_eigenvalue(product, size, iterations=30, rtol=1e-3, start=None) -> f
 
 
 LIPSCHITZ_SAFETY = 1.2      # L = 1.2 × the power iteration's estimate, which approaches from below
+RESTART_RISE = 2.0          # apgd restarts its momentum when the error exceeds this × the phase's lowest
 
 
 def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     """Accelerated projected gradient on De Saxcé's form of FC(W, q, μ) (module docstring), from r
     (3·nc,) in the cone. W enters only through ``product`` (x → W x), once per iteration: W y
-    follows from W r by linearity. Returns (best r, W times it, iterations, its normalized error)."""
+    follows from W r by linearity. Returns (best r, W times it, iterations, its normalized error).
+
+    Momentum restarts (θ ← 1, no extrapolation), after O'Donoghue & Candès (2015), on either test:
+
+    * gradient: ``g(y)ᵀ (r_new − r) > 0``, the step went uphill;
+    * function: the normalized natural-map error rose above ``RESTART_RISE`` (2) × the lowest error
+      met since the last restart. The De Saxcé problem has no objective to watch (the μ‖u_T‖ term
+      is not a gradient), so the residual stands in for it; it is not monotone even without
+      momentum, hence the factor 2 rather than "any increase" (which restarts at nearly every
+      step and loses the acceleration: Capsules-i125 then stops at 3.5e-7 after 10 000 steps).
+      Without this test apgd oscillates for ever between 4.3e-5 and about 5e-4 on Capsules-i100,
+      and stalls at 3.9e-6 on Capsules-i101; with it both reach 1e-8 (docs/lcp.md).
+    """
     norm_q = float(np.linalg.norm(q))
 
     def error_of(r, Wr):
@@ -436,6 +454,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         return best, best_W, 0, best_error
     step = 1.0 / lipschitz
     y, Wy, theta = r.copy(), Wr.copy(), 1.0
+    phase_lowest = math.inf                     # lowest error since the last restart
     for iteration in range(1, max_iterations + 1):
         gradient = _de_saxce(Wy + q, mu)
         new = _project_cone(y - step * gradient, mu)
@@ -445,10 +464,12 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
             best, best_W, best_error = new.copy(), W_new, error
             if error <= tol:
                 return best, best_W, iteration, best_error
+        phase_lowest = min(phase_lowest, error)
         next_theta = 0.5 * theta * (math.sqrt(theta * theta + 4.0) - theta)
         beta = theta * (1.0 - theta) / (theta * theta + next_theta)
-        if gradient @ (new - r) > 0.0:          # the step went uphill: restart the momentum
-            beta, next_theta = 0.0, 1.0
+        if gradient @ (new - r) > 0.0 or error > RESTART_RISE * phase_lowest:
+            beta, next_theta = 0.0, 1.0         # restart the momentum
+            phase_lowest = error
         y = new + beta * (new - r)
         Wy = W_new + beta * (W_new - Wr)
         r, Wr, theta = new, W_new, next_theta
@@ -456,7 +477,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
 
 
 def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=1000, r0=None,
-                           friction_model="cone", lipschitz=None) -> FrictionResult:
+                           friction_model="cone", lipschitz=None, warm_sweeps=0) -> FrictionResult:
     """Solve the 3D Coulomb friction problem ``u = W r + q``, ``r ∈ K_μ``, ``û ⊥ r`` (FCLIB local form).
 
     Parameters
@@ -465,23 +486,29 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
        also a ``scipy.sparse.linalg.LinearOperator`` (symmetric positive semidefinite).
     q: (3·nc,) free relative velocity.
     mu: (nc,) friction coefficients (or one scalar for all contacts), ≥ 0.
-    method: ``"nsgs"`` (SPEC F4a), ``"staggered"`` (SPEC F4b) or ``"apgd"``; see the module docstring.
+    method: ``"nsgs"`` (SPEC F4a), ``"staggered"`` (SPEC F4b), ``"apgd"`` (module docstring) or
+       ``"newton"``: semi-smooth Newton on the Alart–Curnier function with a non-monotone line
+       search and sparse LU (:mod:`contactlab.lcp.newton`), for problems the sweeps leave unsolved
+       and for tight tolerances (every FCLIB file here to 1e-8 in at most a few dozen steps).
     tol: tolerance on the normalized natural-map error (module docstring).
-    max_iterations: sweep limit (nsgs), normal/friction round limit (staggered) or step limit (apgd).
+    max_iterations: sweep limit (nsgs), normal/friction round limit (staggered), step limit (apgd)
+       or Newton-step limit (newton; each step is one sparse LU of a matrix shaped like W).
     r0: (3·nc,) start reactions (projected on the cone); zero by default.
     friction_model: ``"cone"`` (the disk ‖r_T‖ ≤ μ r_N) or ``"pyramid"`` (the inscribed square
        |r_Ti| ≤ μ r_N / √2; not with ``apgd``).
     lipschitz: apgd's L, at least W's largest eigenvalue (its step is 1/L); by default 1.2 × a
        power iteration's estimate. 0 declares W = 0: r = 0 is returned, with its error.
+    warm_sweeps: newton only: nsgs sweeps from r0 before the first Newton step (0 by default; see
+       :mod:`contactlab.lcp.newton` for where they help and where they hurt).
 
-    A solver that stops above tol returns ``converged=False`` with the error it reached (apgd:
-    the best iterate it met).
+    A solver that stops above tol returns ``converged=False`` with the error it reached (apgd and
+    newton: the best iterate they met).
     Bad input raises :class:`contactlab.errors.InputError`.
     """
     method = choice(method, FRICTION_METHODS, "method")
     friction_model = choice(friction_model, FRICTION_MODELS, "friction_model")
-    if method == "apgd" and friction_model != "cone":
-        raise InputError("friction_model", "apgd projects on the cone; use nsgs or staggered for the pyramid.")
+    if method in ("apgd", "newton") and friction_model != "cone":
+        raise InputError("friction_model", f"{method} solves the cone model; use nsgs or staggered for the pyramid.")
     operator = isinstance(W, spla.LinearOperator)
     if operator and method not in OPERATOR_METHODS:
         raise InputError("W", f"{method} sweeps the rows of W, so it needs W as a matrix; "
@@ -489,6 +516,8 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
     csr, q, mu = _check_problem(W, q, mu)
     tol = positive_float(tol, "tol")
     max_iterations = positive_int(max_iterations, "max_iterations")
+    if isinstance(warm_sweeps, bool) or not isinstance(warm_sweeps, numbers.Integral) or warm_sweeps < 0:
+        raise InputError("warm_sweeps", f"expected a non-negative integer, got {warm_sweeps!r}.")
     m = q.shape[0]
     nc = m // 3
     r = np.zeros(m) if r0 is None else _project_cone(vector(r0, m, "r0"), mu)
@@ -503,6 +532,9 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
         if lipschitz == 0.0:      # W = 0 (say, only pinned points touch): reactions change nothing
             r[:] = 0.0
         r, Wr, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, lipschitz)
+    elif method == "newton":
+        from .newton import solve_newton    # here, not at the top: newton.py builds on this module
+        r, iterations, error, restarts = solve_newton(csr, q, mu, r, tol, max_iterations, int(warm_sweeps))
     else:
         blocks = _diagonal_blocks(csr, nc)
         indptr = csr.indptr.astype(np.int64)
@@ -519,4 +551,6 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
     else:
         message = (f"{method} stopped after {iterations} iterations at the error {error:.3e}, above "
                    f"tol = {tol:.1e}.")
+    if method == "newton" and m and restarts:
+        message = message[:-1] + f" (the watchdog restarted it {restarts} times)."
     return FrictionResult(r, u, int(iterations), converged, float(error), method, friction_model, message)

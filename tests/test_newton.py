@@ -1,0 +1,185 @@
+"""contactlab.lcp.newton: semi-smooth Newton on the Alart–Curnier function (issue 19, deliverable 4).
+
+Every FCLIB file to 1e-8; closed forms for one contact (a block pushed below and above μ times its
+weight); frictionless problems against Lemke; a property test of the Coulomb conditions on random
+small positive-definite W."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from contactlab.errors import InputError
+from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
+
+FCLIB = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
+FCLIB_FILES = sorted(p.name for p in FCLIB.iterdir() if p.suffix in (".dat", ".hdf5")) if FCLIB.is_dir() else []
+needs_data = pytest.mark.skipif(not FCLIB.is_dir(), reason=f"FCLIB test data folder {FCLIB} is absent")
+
+
+def norm(x):
+    """‖x‖₂ without underflow (Hypothesis draws entries down to 1e-300)."""
+    largest = np.abs(x).max() if x.size else 0.0
+    return largest * np.linalg.norm(x / largest) if largest > 0 else 0.0
+
+
+def coulomb_violations(W, q, mu, r):
+    """The largest violation of each Coulomb condition at r, in units of r or u, and the error's
+    scale max(‖q‖, ‖r‖, ‖u‖): cone, r_N ≥ 0, De Saxcé's û in the dual cone, r ⊥ û per contact."""
+    u = W @ r + q
+    R, U = r.reshape(-1, 3), u.reshape(-1, 3)
+    slip = np.array([norm(t) for t in U[:, 1:]])
+    u_hat_n = U[:, 0] + mu * slip                      # û = u + [μ‖u_T‖, 0, 0]
+    scale = max(norm(q), norm(r), norm(u))
+    if scale == 0.0:                                   # q = 0: r = 0 is the answer
+        return {"r": float(np.abs(r).max())}, 1.0
+    return {
+        "cone": float(np.max(np.array([norm(t) for t in R[:, 1:]]) - mu * R[:, 0])),
+        "r_n >= 0": float(np.max(-R[:, 0])),
+        "dual cone": float(np.max(mu * slip - u_hat_n)),          # μ ‖û_T‖ ≤ û_N, i.e. u_N ≥ 0
+        "r . u_hat": float(np.max(np.abs(np.einsum("ij,ij->i", R / scale, np.column_stack([u_hat_n, U[:, 1:]]))))),
+    }, scale
+
+
+# ------------------------------------------------------------------------------- FCLIB
+
+
+@needs_data
+@pytest.mark.parametrize("name", FCLIB_FILES)
+def test_newton_solves_fclib_problem_to_1e_8(name):
+    problem = read_problem(FCLIB / name)
+    res = solve_friction_contact(problem.W, problem.q, problem.mu, method="newton", tol=1e-8, max_iterations=300)
+    assert res.converged, res.message
+    assert res.method == "newton" and res.iterations <= 300
+    error = natural_map_error(problem.W, problem.q, problem.mu, res.r)
+    assert error <= 1e-8
+    assert res.error == pytest.approx(error, rel=1e-8)
+    np.testing.assert_allclose(res.u, problem.W @ res.r + problem.q, rtol=0, atol=1e-12 * max(1, np.abs(res.u).max()))
+    # at least as good as nsgs with the same tolerance and 3000 sweeps (it leaves two unsolved)
+    nsgs = solve_friction_contact(problem.W, problem.q, problem.mu, method="nsgs", tol=1e-8, max_iterations=3000)
+    assert res.error <= max(1e-8, nsgs.error)
+
+
+# ------------------------------------------------------------------------------- closed forms
+
+
+@pytest.mark.parametrize("load", [0.0, 0.4, 0.98, 1.0, 1.02, 1.6, 6.0])
+@pytest.mark.parametrize("angle", [0.0, 0.7, 2.5])
+def test_block_pushed_below_and_above_the_friction_limit(load, angle):
+    # A 2 kg block at rest on the ground for one step h = 0.01 s, under gravity and a horizontal
+    # push of `load` × μ m g [N] at `angle` in the tangent plane (μ = 0.5): at most 1 it sticks.
+    mass, h, g, mu = 2.0, 0.01, 9.81, 0.5
+    force = load * mu * mass * g
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    W = np.eye(3) / mass                                   # a point mass: u = v_free + r / m
+    q = h * np.concatenate([[-g], force / mass * direction])
+    res = solve_friction_contact(W, q, [mu], method="newton", tol=1e-12)
+    assert res.converged, res.message
+    normal = mass * g * h                                  # the impulse that stops the fall
+    if load <= 1.0:                                        # sticks: friction cancels the push
+        expected = np.concatenate([[normal], -force * h * direction])
+        np.testing.assert_allclose(res.u, 0.0, atol=1e-12)
+    else:                                                  # slides: friction μ r_N against the slip
+        expected = np.concatenate([[normal], -mu * normal * direction])
+        slip = h * (force / mass - mu * g)
+        np.testing.assert_allclose(res.u, np.concatenate([[0.0], slip * direction]), atol=1e-12)
+    np.testing.assert_allclose(res.r, expected, atol=1e-12 * normal / h)
+
+
+def test_single_contact_with_coupled_block_sticks_at_minus_w_inverse_q():
+    # W with normal-tangent coupling; a q inside the stick region: r = −W⁻¹ q lies in the cone
+    W = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.1], [-0.2, 0.1, 1.0]])
+    r_stick = np.array([1.0, 0.2, -0.3])                   # ‖r_T‖ = 0.36 < μ r_N = 0.8
+    q = -W @ r_stick
+    res = solve_friction_contact(W, q, [0.8], method="newton", tol=1e-13)
+    np.testing.assert_allclose(res.r, r_stick, atol=1e-12)
+    np.testing.assert_allclose(res.u, 0.0, atol=1e-12)
+
+
+def test_separating_contacts_get_no_reaction():
+    res = solve_friction_contact(np.eye(6), np.array([1.0, 2.0, 0.0, 0.5, -1.0, 3.0]), 0.5, method="newton",
+                                 r0=np.ones(6))
+    assert res.converged and not res.r.any() and res.iterations <= 2
+
+
+def frictional_contacts(rng, nc, bodies, regularization):
+    """W = J M⁻¹ Jᵀ (+ regularization I) of contacts between point masses (each contact in its own
+    frame), and q pushing them together while sliding; the same construction as test_lcp.py's."""
+    J = np.zeros((3 * nc, 3 * bodies))
+    for a in range(nc):
+        i, j = rng.choice(bodies, 2, replace=False)
+        frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
+        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
+    W = J @ J.T + regularization * np.eye(3 * nc)
+    q = rng.normal(size=3 * nc)
+    q[::3] = -np.abs(q[::3])
+    return W, q
+
+
+@pytest.mark.parametrize("nc, bodies", [(1, 2), (10, 8), (40, 25), (120, 60)])
+def test_frictionless_problems_match_lemke(rng, nc, bodies):
+    W, q = frictional_contacts(rng, nc, bodies, 1e-2)
+    res = solve_friction_contact(sp.csr_matrix(W), q, 0.0, method="newton", tol=1e-12)
+    assert res.converged, res.message
+    assert not res.r.reshape(-1, 3)[:, 1:].any()           # μ = 0: no friction at all
+    normal = slice(0, None, 3)
+    # the normal LCP u_N = W_NN r_N + q_N ≥ 0 ⊥ r_N ≥ 0, in solve_lcp's form w = B λ − c
+    exact = solve_lcp(W[normal, normal], -q[normal], method="lemke")
+    assert exact.converged, exact.message
+    np.testing.assert_allclose(res.r[normal], exact.lam, atol=1e-9 * max(1.0, exact.lam.max()))
+
+
+def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
+    W, q = frictional_contacts(rng, 40, 25, 1e-3)
+    mu = rng.uniform(0.2, 0.8, 40)
+    res = solve_friction_contact(sp.csr_matrix(W), q, mu, method="newton", tol=1e-10)
+    assert res.converged, res.message
+    violations, scale = coulomb_violations(W, q, mu, res.r)
+    assert max(violations.values()) <= 1e-8 * scale, violations
+    r, u = res.r.reshape(-1, 3), res.u.reshape(-1, 3)
+    sliding = (np.linalg.norm(u[:, 1:], axis=1) > 1e-6 * scale) & (r[:, 0] > 1e-6 * scale)
+    assert sliding.sum() >= 3
+    slip = u[sliding, 1:] / np.linalg.norm(u[sliding, 1:], axis=1)[:, None]
+    friction = r[sliding, 1:] / np.linalg.norm(r[sliding, 1:], axis=1)[:, None]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", slip, friction), -1.0, atol=1e-6)
+    np.testing.assert_allclose(u[sliding, 0], 0.0, atol=1e-8 * scale)   # Coulomb: u_N = 0, not μ‖u_T‖
+
+
+# ------------------------------------------------------------------------------- property
+
+
+@settings(max_examples=150, deadline=None)
+@given(nc=st.integers(1, 4), data=st.data(), shift=st.floats(1e-3, 1.0), q_scale=st.floats(1e-3, 1e3))
+def test_random_positive_definite_problems_meet_cone_and_complementarity(nc, data, shift, q_scale):
+    m = 3 * nc
+    entries = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+    G = data.draw(hnp.arrays(np.float64, (m, m), elements=entries), label="G")
+    q = q_scale * data.draw(hnp.arrays(np.float64, m, elements=entries), label="q")
+    mu = data.draw(hnp.arrays(np.float64, nc, elements=st.floats(0.0, 2.0)), label="mu")
+    W = G @ G.T + shift * np.eye(m)                         # positive definite: eigenvalues ≥ shift
+    res = solve_friction_contact(W, q, mu, method="newton", tol=1e-10, max_iterations=500)
+    assert res.converged, res.message
+    violations, scale = coulomb_violations(W, q, mu, res.r)
+    assert max(violations.values()) <= 1e-8 * scale, violations
+
+
+# ------------------------------------------------------------------------------- options
+
+
+def test_warm_sweeps_and_input_errors():
+    W, q = np.eye(3), np.array([-1.0, 2.0, 0.0])
+    warm = solve_friction_contact(W, q, [0.5], method="newton", tol=1e-12, warm_sweeps=5)
+    np.testing.assert_allclose(warm.r, [1.0, -0.5, 0.0], atol=1e-12)
+    assert warm.iterations == 0                            # one nsgs sweep solves one contact exactly
+    for bad in (-1, 1.5, True):
+        with pytest.raises(InputError, match="warm_sweeps"):
+            solve_friction_contact(W, q, [0.5], method="newton", warm_sweeps=bad)
+    with pytest.raises(InputError, match="friction_model"):
+        solve_friction_contact(W, q, [0.5], method="newton", friction_model="pyramid")
+    empty = solve_friction_contact(np.zeros((0, 0)), np.zeros(0), np.zeros(0), method="newton")
+    assert empty.converged and empty.r.shape == (0,)
