@@ -26,20 +26,9 @@ import os
 import sys
 
 
-def _pin_threads(argv):
-    numba_threads = "2"
-    for i, arg in enumerate(argv):
-        if arg == "--numba-threads" and i + 1 < len(argv):
-            numba_threads = argv[i + 1]
-        elif arg.startswith("--numba-threads="):
-            numba_threads = arg.split("=", 1)[1]
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
-                 "NUMEXPR_NUM_THREADS"):
-        os.environ[name] = "1"
-    os.environ["NUMBA_NUM_THREADS"] = numba_threads
+from pinning import pin_threads                # the script's own folder is on sys.path
 
-
-_pin_threads(sys.argv)
+pin_threads(sys.argv)
 
 import argparse                               # noqa: E402  (after the thread pinning)
 import platform                               # noqa: E402

@@ -38,3 +38,19 @@ def cube_on_plane(angle_degrees=0.0, friction=0.5, mass=1.0, velocity=(0, 0, 0),
                      orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), velocity=velocity, material="m")
     builder.add_obstacle("plane", normal=normal, offset=0.0, material="m")
     return builder.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
+
+
+def frictional_contacts(rng, nc=40, bodies=25, regularization=1e-3):
+    """A random W = J M⁻¹ Jᵀ (3 nc, 3 nc) of contacts between point masses, each contact with its
+    own frame, plus ``regularization`` I; q pushing them together and sliding, μ in [0.2, 0.8]
+    (drawn after W and q: a test that ignores μ sees the same W and q)."""
+    J = np.zeros((3 * nc, 3 * bodies))
+    for a in range(nc):
+        i, j = rng.choice(bodies, 2, replace=False)
+        frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
+        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
+    W = J @ J.T + regularization * np.eye(3 * nc)
+    q = rng.normal(size=3 * nc)
+    q[::3] = -np.abs(q[::3])
+    return W, q, rng.uniform(0.2, 0.8, nc)

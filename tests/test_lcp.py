@@ -8,6 +8,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import contactlab.lcp.solve as lcp_solve
+from conftest import frictional_contacts
 from contactlab.lcp.friction import largest_eigenvalue
 from contactlab.errors import InputError
 from contactlab.lcp import (color_contacts, color_rows, coloring_is_valid, natural_map_error, read_problem,
@@ -260,21 +261,6 @@ def test_apgd_restart_solves_the_capsules_problems(name, tol, cap):
     res = solve_friction_contact(problem.W, problem.q, problem.mu, method="apgd", tol=tol, max_iterations=cap)
     assert res.converged, res.message
     assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= tol
-
-
-def frictional_contacts(rng, nc=40, bodies=25):
-    """A random W = J M⁻¹ Jᵀ (3 nc, 3 nc) of contacts between point masses, each contact with its
-    own frame, q pushing them together and sliding, μ in [0.2, 0.8]."""
-    J = np.zeros((3 * nc, 3 * bodies))
-    for a in range(nc):
-        i, j = rng.choice(bodies, 2, replace=False)
-        frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
-        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
-    W = J @ J.T + 1e-3 * np.eye(3 * nc)
-    q = rng.normal(size=3 * nc)
-    q[::3] = -np.abs(q[::3])
-    return W, q, rng.uniform(0.2, 0.8, nc)
 
 
 def test_apgd_needs_only_products_and_meets_the_coulomb_conditions(rng):

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from conftest import frictional_contacts
 from contactlab.errors import InputError
 from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
 
@@ -106,24 +107,9 @@ def test_separating_contacts_get_no_reaction():
     assert res.converged and not res.r.any() and res.iterations <= 2
 
 
-def frictional_contacts(rng, nc, bodies, regularization):
-    """W = J M⁻¹ Jᵀ (+ regularization I) of contacts between point masses (each contact in its own
-    frame), and q pushing them together while sliding; the same construction as test_lcp.py's."""
-    J = np.zeros((3 * nc, 3 * bodies))
-    for a in range(nc):
-        i, j = rng.choice(bodies, 2, replace=False)
-        frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
-        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
-    W = J @ J.T + regularization * np.eye(3 * nc)
-    q = rng.normal(size=3 * nc)
-    q[::3] = -np.abs(q[::3])
-    return W, q
-
-
 @pytest.mark.parametrize("nc, bodies", [(1, 2), (10, 8), (40, 25), (120, 60)])
 def test_frictionless_problems_match_lemke(rng, nc, bodies):
-    W, q = frictional_contacts(rng, nc, bodies, 1e-2)
+    W, q, _ = frictional_contacts(rng, nc, bodies, 1e-2)
     res = solve_friction_contact(sp.csr_matrix(W), q, 0.0, method="newton", tol=1e-12)
     assert res.converged, res.message
     assert not res.r.reshape(-1, 3)[:, 1:].any()           # μ = 0: no friction at all
@@ -135,8 +121,7 @@ def test_frictionless_problems_match_lemke(rng, nc, bodies):
 
 
 def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
-    W, q = frictional_contacts(rng, 40, 25, 1e-3)
-    mu = rng.uniform(0.2, 0.8, 40)
+    W, q, mu = frictional_contacts(rng, 40, 25, 1e-3)
     res = solve_friction_contact(sp.csr_matrix(W), q, mu, method="newton", tol=1e-10)
     assert res.converged, res.message
     violations, scale = coulomb_violations(W, q, mu, res.r)
