@@ -226,14 +226,16 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
 
     from contactlab import record
     from contactlab.methods import impulse, velocity_loop
-    real_sample = record.Recorder.sample
     calls = []
 
-    def sample(self, *args):
-        if not calls:
-            with event.trigger_event("numba:compile", data={}):
-                time.sleep(0.2)
-        return real_sample(self, *args)
+    def compiling_first(real):
+        """The first sample (the loop's own, or Recorder.sample's when stitched) compiles."""
+        def sample(self, *args):
+            if not calls:
+                with event.trigger_event("numba:compile", data={}):
+                    time.sleep(0.2)
+            return real(self, *args)
+        return sample
 
     def compiling_on_the_third_call(real):
         def call(*args):
@@ -244,10 +246,11 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
             return real(*args)
         return call
 
-    monkeypatch.setattr(record.Recorder, "sample", sample)
     if path == "loop":
+        monkeypatch.setattr(velocity_loop.Stepper, "sample", compiling_first(velocity_loop.Stepper.sample))
         monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_the_third_call(velocity_loop.Stepper.advance))
     else:
+        monkeypatch.setattr(record.Recorder, "sample", compiling_first(record.Recorder.sample))
         monkeypatch.setattr(velocity_loop, "applies", lambda *arguments: False)
         monkeypatch.setattr(impulse, "step", compiling_on_the_third_call(impulse.step))
     b = ModelBuilder()

@@ -116,8 +116,8 @@ class Tally:
     max_contacts: int = 0
     sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
 
-    def timed(self, step_index, count, elapsed, compiled):
-        """Book ``count`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
+    def timed(self, step_index, elapsed, compiled):
+        """Book the steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
         it compiling; returns whether they say anything of the thread count (nothing compiled)."""
         if step_index == 1:
             self.first_step_seconds = elapsed
@@ -141,7 +141,7 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
         started = time.perf_counter()
         state, info = module.step(model, state, dt, options, integrator)
         elapsed = time.perf_counter() - started
-        if tally.timed(step_index, 1, elapsed, _seconds(compiling) - compiled_before):
+        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before):
             chooser.after_step(elapsed)
         tally.max_contacts = max(tally.max_contacts, info.contacts.count)
         tally.sweeps_made += info.solver_iterations
@@ -169,7 +169,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, dt)
         started = time.perf_counter()
         made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, MAX_SPEED)
         elapsed = time.perf_counter() - started
-        if tally.timed(step_index, made, elapsed, _seconds(compiling) - compiled_before):
+        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before):
             chooser.after_steps(made, elapsed)
         recorder.extend(samples)
         if diverged:
