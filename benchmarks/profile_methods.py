@@ -7,7 +7,7 @@ Each run is warmed up (kernels compiled and cached) and then profiled for a fixe
 steps; the functions with the largest own time are written to benchmarks/profiles.md.
 
 Impulse and constraints step these scenes in one compiled loop (methods/velocity_loop.py),
-which cProfile cannot look into: their table is that of ``stitched_step``, the same compiled
+which cProfile cannot look into: their table is that of the methods' ``step``, the same compiled
 stages called one by one from Python (bit-identical results), and the line above it gives the
 loop's own time per step beside the stitched one — the difference is the Python between stages.
 """
@@ -23,7 +23,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from contactlab import simulate                                    # noqa: E402
-from contactlab.methods import velocity_loop                       # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from peers import contactlab_pile, contactlab_pyramid              # noqa: E402
 
@@ -37,29 +36,22 @@ def looped(model, method, settle_steps, steps):
     it does not serve the method)."""
     if method not in ("impulse", "constraints"):
         return None
-    warm = simulate(model, method, DT, settle_steps * DT, METHODS[method], record_every=settle_steps)
+    warm = simulate(model, method, DT, settle_steps * DT, METHODS[method], record_every=settle_steps,
+                    compiled_loop=True)
     started = time.perf_counter()
-    simulate(model, method, DT, steps * DT, METHODS[method], state=warm.state, record_every=steps)
+    simulate(model, method, DT, steps * DT, METHODS[method], state=warm.state, record_every=steps, compiled_loop=True)
     return (time.perf_counter() - started) / steps
 
 
 def profile(model, method, settle_steps, steps):
     """Own-time table (function, calls, seconds, share) of ``steps`` steps after ``settle_steps``,
-    stepped stitched (see the module)."""
-    applies = velocity_loop.applies
-    velocity_loop.applies = lambda *arguments: False
-    try:
-        return _profile(model, method, settle_steps, steps)
-    finally:
-        velocity_loop.applies = applies
-
-
-def _profile(model, method, settle_steps, steps):
-    warm = simulate(model, method, DT, settle_steps * DT, METHODS[method], record_every=settle_steps)
+    stepped by the methods' ``step`` (see the module)."""
+    warm = simulate(model, method, DT, settle_steps * DT, METHODS[method], record_every=settle_steps,
+                    compiled_loop=False)
     profiler = cProfile.Profile()
     started = time.perf_counter()
     profiler.enable()
-    simulate(model, method, DT, steps * DT, METHODS[method], state=warm.state, record_every=steps)
+    simulate(model, method, DT, steps * DT, METHODS[method], state=warm.state, record_every=steps, compiled_loop=False)
     profiler.disable()
     total = time.perf_counter() - started
     stats = pstats.Stats(profiler, stream=io.StringIO())

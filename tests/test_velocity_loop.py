@@ -1,6 +1,6 @@
 """Issue 18, deliverable 1: the compiled stepping loop of impulse and constraints
 (contactlab.methods.velocity_loop) against the independent path that calls the same stages one
-by one from Python (``stitched_step``): on every built-in scene the loop serves, the two give
+by one from Python (the methods' ``step``): on every built-in scene the loop serves, the two give
 bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
 
 import numpy as np
@@ -26,11 +26,6 @@ CASES = [(name, method) for name, _ in builtin_scenes() for method in ("impulse"
          if _served(name, method)[1]]
 
 
-def _stitched(monkeypatch):
-    """Make every step go through ``stitched_step`` (the loop serves nothing)."""
-    monkeypatch.setattr(velocity_loop, "applies", lambda *arguments: False)
-
-
 def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes():
     served = {name for name, _ in CASES}
     assert {"bouncing_ball", "box_pyramid", "box_stack", "sphere_pile", "newtons_cradle", "capsule_pile"} <= served
@@ -38,15 +33,15 @@ def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes():
 
 
 @pytest.mark.parametrize("name,method", CASES)
-def test_the_loop_gives_the_stitched_steps_numbers(name, method, monkeypatch):
+def test_the_loop_gives_the_stitched_steps_numbers(name, method):
     scene, _ = _served(name, method)
     options = scene.method_options.get(method, {})
     steps = min(STEPS, max(1, int(round(scene.duration / scene.dt))))
-    looped = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7)
-    with monkeypatch.context() as patch:
-        _stitched(patch)
-        stitched = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator,
-                            record_every=7)
+    looped = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7,
+                      compiled_loop=True)
+    stitched = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7,
+                        compiled_loop=False)
+    assert looped.summary["compiled_loop"] and not stitched.summary["compiled_loop"]
     for series in SERIES:
         assert np.array_equal(looped.arrays[series], stitched.arrays[series]), series
     for key in ("max_contacts", "max_penetration"):
@@ -65,15 +60,13 @@ def test_the_loop_gives_the_stitched_steps_numbers(name, method, monkeypatch):
             assert np.array_equal(left, right), (key, field)
 
 
-def test_a_run_goes_on_from_its_state_through_either_path(monkeypatch):
+def test_a_run_goes_on_from_its_state_through_either_path():
     """Ten steps and ten more from the state reached are the twenty steps of one run, whether the
     second half steps in the loop or stitched: the carried warm start and manifolds pass over."""
     scene = load_scene("box_stack")
-    whole = simulate(scene.model, "impulse", scene.dt, 20 * scene.dt)
-    half = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt)
-    with monkeypatch.context() as patch:
-        _stitched(patch)
-        rest = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, state=half.state)
+    whole = simulate(scene.model, "impulse", scene.dt, 20 * scene.dt, compiled_loop=True)
+    half = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, compiled_loop=True)
+    rest = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, state=half.state, compiled_loop=False)
     assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
     assert np.array_equal(rest.arrays["body_velocity"][-1], whole.arrays["body_velocity"][-1])
     assert rest.state.time == whole.state.time
@@ -81,8 +74,8 @@ def test_a_run_goes_on_from_its_state_through_either_path(monkeypatch):
 
 def test_recording_every_k_steps_samples_the_same_states():
     scene = load_scene("box_stack")
-    every = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=1).arrays
-    sparse = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=4).arrays
+    every = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=1, compiled_loop=True).arrays
+    sparse = simulate(scene.model, "constraints", scene.dt, 30 * scene.dt, record_every=4, compiled_loop=True).arrays
     steps = np.r_[0, np.arange(4, 31, 4), 30]
     assert np.array_equal(sparse["time"], every["time"][steps])
     assert np.array_equal(sparse["body_position"], every["body_position"][steps])
@@ -92,7 +85,7 @@ def test_recording_every_k_steps_samples_the_same_states():
 def test_a_ball_dropped_in_the_loop_bounces_to_the_closed_form_apex():
     """h₁ = r + ε² (h₀ − r) for a ball dropped from h₀ (the time-of-impact split, in the loop)."""
     model = ball_on_plane(restitution=0.8, friction=0.0, height=0.95, radius=0.05)
-    run = simulate(model, "impulse", 1 / 240, 1.2)
+    run = simulate(model, "impulse", 1 / 240, 1.2, compiled_loop=True)
     assert run.summary["threads"]["setting"] == "auto"
     height = run.arrays["body_position"][:, 0, 2]
     bounced = np.argmax(np.diff(height) > 0)                       # the first step that rises
@@ -104,4 +97,32 @@ def test_a_ball_dropped_in_the_loop_bounces_to_the_closed_form_apex():
 def test_a_blow_up_in_the_loop_stops_the_run_with_its_time():
     model = ball_on_plane(height=100.0, velocity=(0.0, 0.0, 2e6))
     with pytest.raises(SimulationDiverged, match="t = 0.004"):
-        simulate(model, "impulse", 0.004, 1.0)
+        simulate(model, "impulse", 0.004, 1.0, compiled_loop=True)
+
+
+def test_a_short_first_run_steps_from_python_and_a_long_one_compiles_the_loop(monkeypatch):
+    """compiled_loop=None: the loop where its machine code exists (a first short run on an empty
+    cache would spend more compiling it than it saves), or where the run repays compiling it."""
+    scene = load_scene("bouncing_ball")
+    model, options = scene.model, impulse.Options()
+
+    def chosen(steps, compiled_loop=None):
+        return velocity_loop.stepper_for(model, "impulse", options, scene.integrator, scene.dt, model.state(), steps,
+                                         compiled_loop)
+    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    assert chosen(4000) is None                                  # 4000 steps save < 1 s of Python
+    assert velocity_loop.repays_compiling(model, 10 ** 6)        # a million save about 100 s
+    assert isinstance(chosen(10 ** 6), velocity_loop.Stepper)
+    assert isinstance(chosen(10, compiled_loop=True), velocity_loop.Stepper)
+    assert chosen(10 ** 6, compiled_loop=False) is None
+    monkeypatch.undo()
+    assert simulate(model, "impulse", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
+    assert chosen(10).compiled_already()                         # compiled now (or cached before)
+    assert simulate(model, "impulse", scene.dt, 10 * scene.dt).summary["compiled_loop"]
+    assert isinstance(chosen(10), velocity_loop.Stepper)
+
+
+def test_compiled_loop_must_be_a_yes_or_no():
+    from contactlab import InputError
+    with pytest.raises(InputError, match="compiled_loop"):
+        simulate(load_scene("bouncing_ball").model, "impulse", 0.01, 0.1, compiled_loop="yes")

@@ -34,14 +34,19 @@ class Run:
 
 
 def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
-             record_every=1, state=None, progress=False, scene_name="custom", threads=None) -> Run:
+             record_every=1, state=None, progress=False, scene_name="custom", threads=None,
+             compiled_loop=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options (or a dict of
     them); dt [s] > 0; record_every: sample every K steps (the first and last states are
     always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
     all cores, or one while that steps faster on a busy machine) or a whole number — results are
-    bit for bit the same on any count. Raises InputError for bad arguments, SimulationDiverged
+    bit for bit the same on any count; compiled_loop: for impulse and constraints on the scenes
+    the compiled stepping loop serves, None (the default) takes it when it is compiled or cached
+    already or the run is long enough to repay compiling it, True always, False never
+    (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit
+    either way. Raises InputError for bad arguments, SimulationDiverged
     if the state stops being finite.
     """
     dt = _number(dt, "dt", 0.0, strict=True)
@@ -63,7 +68,9 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     notice = FirstCompile()                        # one line on stderr at the first compilation
     run_started = time.perf_counter()              # the run: its first sample, the steps, the other samples
-    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state)
+    if compiled_loop not in (None, True, False):
+        raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         if stepper is None:
             recorder.sample(state)                 # its collide() compiles the collision kernels first
@@ -92,6 +99,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "compile_seconds": (setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step)
                             + tally.later_compile_seconds),
         "recording_seconds": tally.recording_seconds,
+        "compiled_loop": stepper is not None,
         "threads": chooser.summary(),
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),

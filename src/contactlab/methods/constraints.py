@@ -234,18 +234,9 @@ def solve_constraints(model, state, contacts, rows, v_free, target, warm, option
 
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
-    """One step of loop L3 with hard constraints; returns (new State, StepInfo): through the compiled loop
-    (methods.velocity_loop) where it serves the scene, else ``stitched_step``."""
-    from . import velocity_loop      # here: the loop imports this module's stages
-    if velocity_loop.applies(model, "constraints", options, integrator):
-        return velocity_loop.step(model, state, dt, options, integrator, "constraints")
-    return stitched_step(model, state, dt, options, integrator)
-
-
-def stitched_step(model, state, dt, options, integrator="symplectic_euler"):
-    """One step of loop L3 with hard constraints, its compiled stages called one by one from Python: the
-    path for cloth, meshes, the other granularities, explicit Euler, the assembled solvers. Gives, where both serve, the
-    very numbers of the compiled loop."""
+    """One step of loop L3 with hard constraints; returns (new State, StepInfo). Its compiled
+    stages are called one by one from Python; ``simulate`` steps the scenes the compiled loop
+    serves (methods.velocity_loop) through that loop instead, which gives the very same numbers."""
     h = dt
     # 1. internal forces → free velocities v* (A v* = b)
     implicit_cloth = integrator == "backward_euler" and model.spring_count > 0

@@ -124,18 +124,9 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
 
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
-    """One step of loop L3 with impulses; returns (new State, StepInfo): through the compiled loop
-    (methods.velocity_loop) where it serves the scene, else ``stitched_step``."""
-    from . import velocity_loop      # here: the loop imports this module's stages
-    if velocity_loop.applies(model, "impulse", options, integrator):
-        return velocity_loop.step(model, state, dt, options, integrator, "impulse")
-    return stitched_step(model, state, dt, options, integrator)
-
-
-def stitched_step(model, state, dt, options, integrator="symplectic_euler"):
-    """One step of loop L3 with impulses, its compiled stages called one by one from Python: the
-    path for cloth, meshes, the other granularities, explicit Euler. Gives, where both serve, the
-    very numbers of the compiled loop."""
+    """One step of loop L3 with impulses; returns (new State, StepInfo). Its compiled stages are
+    called one by one from Python; ``simulate`` steps the scenes the compiled loop serves
+    (methods.velocity_loop) through that loop instead, which gives the very same numbers."""
     h = dt
     # 1. internal forces → free velocities v*
     free = free_velocities(model, state, h, integrator)

@@ -29,7 +29,7 @@ from ..collision import assemble_contacts, candidate_pairs, collider_poses
 from ..collision.manifolds import Manifolds, reuse_or_generate
 from ..collision.broad_phase import GRID_FROM
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
-from ..contacts import Contacts, values_carried
+from ..contacts import values_carried
 from ..diagnostics import gravitational, kinetic
 from ..dynamics.integrators import gyroscopic_midpoint, moved
 from ..state import State
@@ -461,10 +461,26 @@ class Stepper:
         count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
         samples = self.samples_for(count)
         made, diverged, self.carried, self.time, written, most, sweeps = run(
-            self.model.stepping_arrays, self.settings, self.plan, *self.flags, self.motion, self.carried, self.time, steps, first_index, last_index, record_every, samples, max_speed)
+            *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed))
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
+
+    def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
+        return (self.model.stepping_arrays, self.settings, self.plan, *self.flags, self.motion, self.carried,
+                self.time, steps, first_index, last_index, record_every, samples, max_speed)
+
+    def compiled_already(self):
+        """Whether ``run`` has machine code for this run's argument types, in memory or in Numba's
+        disk cache: stepping through the loop then costs no compilation (see ``stepper_for``)."""
+        types = tuple(run.typeof_pyval(a) for a in self._run_arguments(1, 1, 1, 1, self.samples_for(1), 1.0))
+        if types in run.overloads:
+            return True
+        try:        # Numba's cache index, as Dispatcher.compile consults it (internal API: any change → no)
+            key = run._cache._index_key(types, run.targetctx.codegen())
+            return key in run._cache._cache_file._load_index()
+        except Exception:       # noqa: BLE001 — a Numba without this internal layout: assume not cached
+            return False
 
     def state(self):
         """The State reached (copies), with the carried data under the method's keys."""
@@ -478,20 +494,30 @@ class Stepper:
                      m.body_angular_velocity.copy(), m.particle_position.copy(), m.particle_velocity.copy(), carried)
 
 
-def stepper_for(model, method, options, integrator, dt, state):
-    """A Stepper for this run, or None where the loop does not serve it (``applies``)."""
-    if not applies(model, method, options, integrator):
+LOOP_COMPILE_SECONDS = 30.0     # s: about what compiling ``run`` costs on an empty cache (2-core machine)
+GLUE_SECONDS = (1e-4, 8e-6)     # s a step, and s a body or particle a step: the Python the loop saves
+
+
+def repays_compiling(model, steps):
+    """Whether ``steps`` steps of ``model`` through ``stitched_step`` would spend more time in
+    Python glue between kernels (measured: about 0.1 ms a step plus 8 µs a body, see
+    benchmarks/profile_methods.py) than compiling the loop costs on an empty cache."""
+    per_step = GLUE_SECONDS[0] + GLUE_SECONDS[1] * (model.body_count + model.particle_count)
+    return steps * per_step > LOOP_COMPILE_SECONDS
+
+
+def stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop=None):
+    """A Stepper for this run of ``steps`` steps, or None to step through the methods' ``step``.
+
+    None where the loop does not serve the scene (``applies``) or ``compiled_loop`` is False.
+    Where ``compiled_loop`` is None (the default), the loop is taken when its machine code is
+    already compiled or cached for this scene's types, or when the run is long enough to repay
+    compiling it (``repays_compiling``): a first, short run on an empty cache compiles only the
+    kernels (seconds) and steps them from Python; both paths give the same numbers bit for bit.
+    True: the loop wherever it serves, compiling it if need be."""
+    if compiled_loop is False or not applies(model, method, options, integrator):
         return None
-    return Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
-
-
-def step(model, state, dt, options, integrator, method):
-    """One step through the compiled loop, as the methods' ``step`` returns it: (State, StepInfo)."""
-    from . import StepInfo
     stepper = Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
-    positions, velocities, stepper.carried, contacts, sweeps, change = velocity_step(
-        model.stepping_arrays, stepper.settings, stepper.plan, *stepper.flags, stepper.motion, stepper.carried)
-    _store(stepper.motion, positions, velocities)
-    stepper.time += dt
-    return stepper.state(), StepInfo(Contacts.from_arrays(contacts), solver_iterations=int(sweeps),
-                                     solver_residual=float(change))
+    if compiled_loop or repays_compiling(model, steps) or stepper.compiled_already():
+        return stepper
+    return None
