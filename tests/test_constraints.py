@@ -59,7 +59,7 @@ def test_acceleration_formulation_holds_a_resting_box():
     np.testing.assert_allclose(run.arrays["body_position"][:, 0, 2], HALF, atol=1e-6)
 
 
-@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered", "apgd"])
+@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered", "apgd", "newton"])
 def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
     v0, mu = 3.0, 0.3
     model, _ = cube_on_plane(friction=mu, velocity=(v0, 0, 0))
@@ -175,6 +175,30 @@ def test_frictionless_lcp_solvers_hold_a_column(rng, solver):
     moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
     assert moved.max() < 1e-3
     assert run.summary["max_penetration"] < 1e-3
+
+
+def test_newton_holds_the_stack_with_the_reactions_of_converged_sweeps():
+    """solver = "newton" in a run: the box stack stands, each step solved to its tolerance in a
+    few Newton steps, and one step's reactions are those of nsgs converged far (an independent
+    method on the same W, q)."""
+    scene = load_scene("box_stack")
+    run = simulate(scene.model, "constraints", scene.dt, 1.0, {"solver": "newton", "tolerance": 1e-10})
+    moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
+    assert moved.max() < 1e-3
+    assert run.summary["solver"]["max_residual"] <= 1e-10
+    assert run.summary["solver"]["max_iterations"] < 30
+    state = run.state
+    newton = constraints.step(scene.model, state, scene.dt, constraints.Options(solver="newton", tolerance=1e-12))
+    sweeps = constraints.step(scene.model, state, scene.dt,
+                              constraints.Options(solver="nsgs", tolerance=1e-12, iterations=20000))
+    np.testing.assert_allclose(newton[0].body_velocity, sweeps[0].body_velocity, atol=1e-7)
+    np.testing.assert_allclose(newton[0].body_position, sweeps[0].body_position, atol=1e-9)
+
+
+def test_newton_and_apgd_refuse_the_friction_pyramid():
+    for solver in ("newton", "apgd"):
+        with pytest.raises(InputError, match="friction_model"):
+            constraints.Options(solver=solver, friction_model="pyramid")
 
 
 def test_residual_and_iterations_are_recorded():

@@ -26,7 +26,9 @@ started from the last step's λ by persistent contact id; on implicit cloth, whe
 would need A⁻¹ Jᵀ in full (dense), it is "apgd": accelerated projected gradient needing only
 products B x = J (A⁻¹ (Jᵀ x)), one back-solve each with the step's LU of A, which also gives v*
 (``implicit_free_velocities``). "nsgs" (F4a) and "staggered" (F4b)
-solve the assembled W, q; "pgs", "redblack", "jacobi" and "lemke" solve the frictionless LCP
+solve the assembled W, q, and "newton" solves it by semi-smooth Newton steps on the
+Alart–Curnier function (``contactlab.lcp.newton``: a sparse LU a step, for stiff problems the
+sweeps leave unconverged); "pgs", "redblack", "jacobi" and "lemke" solve the frictionless LCP
 B_nn λ_n ≥ c_n (friction ignored: use them to study C7–C9). The accelerations formulation
 (C5a, ``formulation = "acceleration"``, see ``acceleration_target``) keeps resting contacts
 resting but has no means to stop an impact within a step — why velocities are preferred
@@ -50,7 +52,8 @@ from .sequential import row_products, rows_of, solve_order, solve_sequential_imp
 from .velocity_level import (detect, normal_targets, positions_split_at_impact, predict, relative_gravity,
                              restitution_threshold, step_without_contacts)
 
-SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "pgs", "redblack", "jacobi", "lemke")
+SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "newton", "pgs", "redblack", "jacobi", "lemke")
+CONE_ONLY_SOLVERS = ("apgd", "newton")      # they solve the Coulomb cone, not its pyramid
 FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
 FORMULATIONS = ("velocity", "acceleration")
 
@@ -58,10 +61,10 @@ FORMULATIONS = ("velocity", "acceleration")
 @dataclass
 class Options(KeptManifoldOptions):
     """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
-    solver: str = "matrix_free"           # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | pgs | redblack | jacobi | lemke
+    solver: str = "matrix_free"           # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
     formulation: str = "velocity"         # velocity (C5b) | acceleration (C5a)
     friction_model: str = "cone"          # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
-    iterations: int = 100                 # solver sweeps per step (at most)
+    iterations: int = 100                 # solver sweeps per step (at most; newton: Newton steps)
     tolerance: float = None               # matrix_free: m/s a sweep changes a contact's velocity (1e-7); others: their residual (1e-6)
     omega: float = 1.0                    # over-relaxation of pgs, redblack, jacobi
     warm_start: float = 1.0               # fraction of last step's λ to start from (by contact id; 0 = cold)
@@ -75,6 +78,9 @@ class Options(KeptManifoldOptions):
         super().__post_init__()
         check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid")})
         check_counts(self, {"iterations": 1})
+        if self.solver in CONE_ONLY_SOLVERS and self.friction_model != "cone":
+            raise InputError("friction_model", f"solver {self.solver!r} solves the Coulomb cone only; use "
+                             f"friction_model = \"cone\", or solver \"nsgs\" or \"staggered\" for the pyramid")
         if self.tolerance is None:        # each solver's own measure, so each its own default
             self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
         self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
