@@ -54,3 +54,30 @@ def frictional_contacts(rng, nc=40, bodies=25, regularization=1e-3):
     q = rng.normal(size=3 * nc)
     q[::3] = -np.abs(q[::3])
     return W, q, rng.uniform(0.2, 0.8, nc)
+
+
+def box_pyramid(levels=20, size=0.1, gap=0.005, friction=0.6):
+    """The benchmark's 2D pyramid (benchmarks/peers.py): level L (from 0) holds levels − L cubes
+    of ``size`` [m], 1 kg, each resting exactly on the level below, ``gap`` [m] apart sideways."""
+    from contactlab import ModelBuilder
+    b = ModelBuilder()
+    b.add_material("wood", friction=friction, restitution=0.0)
+    for level in range(levels):
+        n = levels - level
+        for i in range(n):
+            b.add_body("box", half_extents=(size / 2,) * 3, mass=1.0,
+                       position=((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level), material="wood")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
+    return b.finalize()
+
+
+def box_column(count=8, size=0.1, friction=0.6):
+    """``count`` cubes of ``size`` [m], 1 kg, stacked on the floor."""
+    from contactlab import ModelBuilder
+    b = ModelBuilder()
+    b.add_material("wood", friction=friction, restitution=0.0)
+    for i in range(count):
+        b.add_body("box", half_extents=(size / 2,) * 3, mass=1.0, position=(0.0, 0.0, size / 2 + size * i),
+                   material="wood")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
+    return b.finalize()

@@ -361,3 +361,46 @@ def test_vertex_and_sample_contacts_hold_a_box_flat_one_contact_per_object_does_
     assert drift["object"] > 10 * drift["vertex"]
     with pytest.raises(InputError):
         simulate(b.finalize(), "impulse", 1 / 240, 0.1, {"granularity": "faces"})
+
+
+# ---- no method tunnels (issue 19): a small, fast body against a thin plate --------------------
+
+PLATE_HALF = 0.005        # m: a 1 cm plate
+SMALL = 0.01              # m: the thrown sphere's, particle's and cloth vertices' radius
+
+
+def _thrown_at_a_plate(kind, speed):
+    """A plate 1 cm thick at z = 0 and, 0.3 m above it, a 1 cm sphere, particle or small cloth
+    thrown down at ``speed`` [m/s] (at 1/240 s, 200 m/s is 83 cm a step: 40 of its diameters)."""
+    b = ModelBuilder()
+    b.add_material("m", friction=0.0, restitution=0.0)
+    b.add_obstacle("box", half_extents=(0.5, 0.5, PLATE_HALF), position=(0, 0, 0), material="m")
+    if kind == "sphere":
+        b.add_body("sphere", radius=SMALL, mass=0.01, position=(0, 0, 0.3), velocity=(0, 0, -speed), material="m")
+    elif kind == "particle":
+        b.add_particles([[0, 0, 0.3]], [[0, 0, -speed]], mass=0.01, radius=SMALL, material="m")
+    else:
+        b.add_cloth(size=(0.1, 0.1), resolution=(3, 3), position=(0, 0, 0.3), velocity=(0, 0, -speed), mass=0.05,
+                    thickness=SMALL, material="m")
+    return b.finalize()
+
+
+@pytest.mark.parametrize("method", ["impulse", "constraints", "penalty", "projection"])
+@pytest.mark.parametrize("kind", ["sphere", "particle", "cloth"])
+@pytest.mark.parametrize("speed", [5.0, 200.0])
+def test_nothing_fast_tunnels_through_a_thin_box(method, kind, speed):
+    """Under every method: no centre or vertex ever crosses the plate's middle, and all come to
+    rest on it, above its top face but for a penalty spring's overlap (at most half the
+    pass-through depth, PLATE_HALF + SMALL, by penalty's guard)."""
+    import warnings
+
+    from contactlab import simulate
+    from contactlab.errors import StabilityWarning
+    model = _thrown_at_a_plate(kind, speed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StabilityWarning)     # the auto stiffness of a 10 g sphere, at 1/240 s
+        run = simulate(model, method, dt=1 / 240, duration=0.4)
+    z = run.arrays["body_position" if kind == "sphere" else "particle_position"][..., 2]
+    deepest = 0.5 * (PLATE_HALF + SMALL) if method == "penalty" else 1e-6
+    assert z.min() >= PLATE_HALF + SMALL - deepest - 1e-9
+    assert np.all(z[-1] > PLATE_HALF)                         # resting on top, not below

@@ -133,6 +133,23 @@ class Model:
         return kinds, params, materials, rotations.to_matrix(self.obstacle_orientation)
 
     @cached_property
+    def collider_half_thickness(self) -> np.ndarray:
+        """(N,) [m] per collider (bodies, particles, obstacles): how deep another shape's surface
+        may sink into it before reaching its middle — a sphere's, capsule's or particle's radius,
+        a box's smallest half extent, a hull's inradius about its origin, a mesh's ``max_depth``
+        (how far below its surface a point is still found), a plane's ∞. Built on first use."""
+        kinds, params = self.collider_table[0], self.collider_table[1]
+        thickness = np.select([kinds == shapes.BOX, kinds == shapes.PLANE], [params[:, :3].min(axis=1), np.inf],
+                              default=params[:, 0])
+        for g in np.nonzero(kinds == shapes.CONVEX)[0]:
+            h = int(params[g, 0])
+            start, end = self.hulls["face_start"][h], self.hulls["face_start"][h + 1]
+            thickness[g] = max(0.0, float(self.hulls["face_offset"][start:end].min()))
+        for g in np.nonzero(kinds == shapes.MESH)[0]:
+            thickness[g] = self.meshes[int(params[g, 0])].max_depth
+        return thickness
+
+    @cached_property
     def pair_families(self) -> tuple:
         """Which narrow-phase pair routines this model's colliders can need (the families tuple
         of ``collision.narrow_phase.scene_families``): the compiled narrow phase is specialised

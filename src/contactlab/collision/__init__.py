@@ -204,6 +204,25 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
     return found, manifolds
 
 
+def pass_through_depths(model, contacts) -> np.ndarray:
+    """(C,) [m]: for each contact, the overlap at which one side would reach the other's middle
+    — the sum of the two colliders' half thicknesses (``Model.collider_half_thickness``). Deeper
+    than that the contact's normal no longer says which way is out: a force along it may push
+    a body on through. The colliders are read from the contact ids (collider pair a · N + b;
+    cloth samples: N² + triangle · O + obstacle, see collision.cloth)."""
+    B, P, O = model.body_count, model.particle_count, model.obstacle_count
+    total = B + P + O
+    thickness = model.collider_half_thickness
+    pair = np.asarray(contacts.feature_id, dtype=np.int64) >> FEATURE_BITS
+    sampled = pair >= total * total
+    a = np.where(sampled, 0, pair // total)
+    b = np.where(sampled, B + P + (pair - total * total) % max(O, 1), pair % total)
+    side_a = thickness[a]
+    if sampled.any():           # a point on a cloth triangle: the cloth's thickness (its vertices' radius)
+        side_a[sampled] = model.particle_radius[contacts.particles_a[sampled, 0]]
+    return side_a + thickness[b]
+
+
 def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):
     """Contacts of the dynamic colliders near mesh obstacle ``g`` (global index) with it."""
     mesh = model.meshes[int(params[g, 0])]

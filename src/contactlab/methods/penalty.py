@@ -33,13 +33,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
-from ..collision import collide, swept_distances
+from ..collision import collide, pass_through_depths, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
 from ..errors import InputError, StabilityWarning
 from ..state import State
 from . import CollisionOptions, StepInfo, check_choices, check_counts
+from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
 LINEAR_SOLVERS = ("cg", "direct")
@@ -265,6 +266,31 @@ def distribute(J, inverse_mass, forces, dt):
     return dt * (inverse_mass @ (J.T @ forces.ravel()))
 
 
+# ---- the swept step: nothing passes through ----------------------------------------------
+
+PASS_THROUGH_FRACTION = 0.5   # of a contact's pass-through depth: the deepest overlap a step may carry it to
+GUARD_SWEEPS, GUARD_TOLERANCE = 100, 1e-6      # sweeps, m/s of the guard's solve
+
+
+def hold_back(model, state, contacts, velocity, h):
+    """The generalized velocity (N,) with which the step moves, held back where it would carry a
+    contact past half its pass-through depth D (``collision.pass_through_depths``): every contact
+    found over the swept step, open or closed, keeps v_n ≥ −(D/2 − δ) / h, δ its depth now [m].
+    A gap may close and a spring engage as deep as it likes short of that; a fast or small body
+    that no spring of this stiffness could stop in time stops on the surface instead of passing
+    through (normal impulses only, by sequential sweeps). ``velocity`` itself where nothing would."""
+    limit = PASS_THROUGH_FRACTION * pass_through_depths(model, contacts)
+    slowest = -(limit - contacts.depth) / h
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
+    if not (row_products(rows, velocity)[:, 0] < slowest).any():
+        return velocity
+    held = velocity.copy()
+    solve_sequential_impulses(rows, np.zeros(contacts.count), slowest, held, GUARD_SWEEPS, GUARD_TOLERANCE,
+                              np.zeros((contacts.count, 3)), *sweep_groups(rows, contacts, state,
+                                                                           solve_order(contacts, model.gravity)))
+    return held
+
+
 # ---- backward Euler -----------------------------------------------------------------------
 
 def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
@@ -373,6 +399,12 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     else:
         v_new = v_free + distribute(J, inverse_mass, forces, h)
         moved_by = v if integrator == "explicit_euler" else v_new
+    # 4b. over the swept step: no contact carried past half its pass-through depth
+    held = hold_back(model, state, contacts, moved_by, h) if contacts.count else moved_by
+    if held is not moved_by:
+        v_new = v_new + (held - moved_by) if integrator == "explicit_euler" else held
+        moved_by = held
+    if integrator != "backward_euler":
         # the anchors follow the point's tangential motion over the step
         elongation = elongation + h * (J @ moved_by).reshape(-1, 3)[:, 1:]
     positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)

@@ -4,8 +4,10 @@ One step is loop L2, stage by stage as on the slide:
 
 1. internal forces: gravity (and cloth springs) → free velocities v*;
 2. integrate velocities and positions: the predicted positions x̃ = x + h v*;
-3. collision detection at x̃ (a particle, or a cloth vertex, keeps its radius — the cloth's
-   thickness — from every surface);
+3. collision detection over the swept step: at the start positions x, every gap the step's
+   motion could close (speculative contacts, box and hull manifolds kept), so a point may
+   close a gap but never cross it, at any speed; then at the projected positions (a particle,
+   or a cloth vertex, keeps its radius — the cloth's thickness — from every surface);
 4. project the positions of the colliding points onto the surfaces: the generalized
    displacement of the step, u = h v* at first, is corrected by M⁻¹ Jᵀ λ so that every
    contact's depth δ − J_n (u − h v*) is at most 0 (λ_n ≥ 0: a projection only pushes out).
@@ -22,7 +24,9 @@ One step is loop L2, stage by stage as on the slide:
 Projection is inelastic: a projected point loses its approach speed, whatever the material's
 restitution ε (use impulses for bounces, G2). ``passes`` repeats detection and projection on the
 projected positions, for curved surfaces and rotations, where one linear projection leaves a
-second-order overlap.
+second-order overlap. An overlap up to ``slop`` is kept from growing but not pushed out (pushed
+out, round-off overlaps become velocity and set stacks rocking); each step starts from the last
+step's λ by contact id (``warm_start``).
 """
 
 from dataclasses import dataclass
@@ -31,52 +35,69 @@ import numpy as np
 
 from ..builder import _number
 from ..collision import collide, swept_distances
+from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
 from ..state import State
-from . import CollisionOptions, StepInfo, check_counts
+from . import KeptManifoldOptions, StepInfo, check_counts
+from .velocity_level import detect
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
 
 @dataclass
-class Options(CollisionOptions):
-    """Settings of ``[method.projection]`` (after the collision settings of CollisionOptions)."""
+class Options(KeptManifoldOptions):
+    """Settings of ``[method.projection]`` (after the collision settings of KeptManifoldOptions:
+    the first pass of a step detects at the step's start, keeping box and hull manifolds)."""
     iterations: int = 100                 # Gauss-Seidel sweeps per projection (at most)
-    tolerance: float = 1e-9               # m: stop once a sweep moves no contact point more
+    tolerance: float = 1e-10              # m: stop once a sweep moves no contact point more
     passes: int = 2                       # detect-and-project rounds per step
     contact_margin: float = 0.001         # m: gaps this small are detected too
     cloth_samples: int = 2                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+    slop: float = 0.0005                  # m of penetration left alone (the rest is projected out)
+    warm_start: float = 1.0               # fraction of last step's projection λ to start from (by contact id; 0 = cold)
 
     def __post_init__(self):
         super().__post_init__()
         check_counts(self, {"iterations": 1, "passes": 1})
         self.tolerance = _number(self.tolerance, "tolerance", 0.0)
+        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        self.slop = _number(self.slop, "slop", 0.0)
 
 
-def project(model, state, predicted, displacement, options, sweep=None):
-    """Project the colliding points of the predicted state onto the surfaces.
+def project(model, at, offset, displacement, options, sweep=None, carried=None, contacts=None):
+    """Project the colliding points of the state ``at`` onto the surfaces.
 
-    state: the positions at the start of the step; predicted: the State at x + displacement;
-    displacement u (N,) the generalized displacement of the step [m, rad] (body i: entries
-    6i..6i+6 = translation and rotation vector; particle j: 6B+3j..). sweep (B + P,) [m]: how
-    far each body and particle may still be pushed; gaps that small are detected too, as open
-    constraints (λ = 0 while they stay open), so that no push of one contact drives a point
-    through a surface nobody was watching. Returns (corrected displacement (N,), the
-    contacts, sweeps, last correction [m]).
+    at: the State where contacts are detected, reached from the step's start by the
+    generalized displacement ``offset`` (N,) [m, rad] (0: the start itself); displacement u
+    (N,): the step's displacement to correct (body i: entries 6i..6i+6 = translation and
+    rotation vector; particle j: 6B+3j..). sweep (B + P,) [m]: how far each body and particle
+    may move; gaps that small are detected too, as open constraints (λ = 0 while they stay
+    open), so no push drives a point through a surface nobody was watching. A contact of depth
+    δ at ``at`` is kept from going deeper than 0: δ − J_n (u − offset) ≤ 0. carried: a State's
+    ``carried`` to warm start from (the λ of last step's first pass, by contact id, times
+    ``options.warm_start``); None starts from λ = 0. contacts: those of ``at``, when detected
+    already (else ``collide`` finds them). Returns (corrected displacement (N,), the
+    contacts, λ (C, 3) [kg m], sweeps, last correction [m]).
     """
-    contacts = collide(model, predicted, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples, cloth_samples=options.cloth_samples)
+    if contacts is None:
+        contacts = collide(model, at, options.contact_margin, sweep, options.granularity, options.normal,
+                           options.samples, cloth_samples=options.cloth_samples)
     if contacts.count == 0:
-        return displacement, contacts, 0, 0.0
-    rows = rows_of(model, contacts, predicted.body_position, predicted.body_orientation)
-    # depth after a further displacement Δu: δ − J_n Δu ≤ 0, i.e. J_n u ≥ J_n u_now + δ
-    target = row_products(rows, displacement)[:, 0] + contacts.depth
+        return displacement, contacts, np.zeros((0, 3)), 0, 0.0
+    warm = np.zeros((contacts.count, 3))
+    if carried is not None and options.warm_start > 0.0:
+        warm = options.warm_start * values_by_id(carried.get("projection_ids"), carried.get("projection_values"),
+                                                 contacts.feature_id, 3)[0]
+    rows = rows_of(model, contacts, at.body_position, at.body_orientation)
+    # J_n u ≥ J_n offset + δ
+    depth = contacts.depth
+    depth = np.where(depth > 0.0, np.maximum(depth - options.slop, 0.0), depth)      # slop: left alone
+    target = row_products(rows, offset)[:, 0] + depth
     corrected = displacement.copy()
-    _, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
-                                                  options.tolerance, np.zeros((contacts.count, 3)),
-                                                  *sweep_groups(rows, contacts, predicted,
-                                                                solve_order(contacts, model.gravity)))
-    return corrected, contacts, sweeps, change
+    lam, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
+                                                    options.tolerance, warm,
+                                                    *sweep_groups(rows, contacts, at, solve_order(contacts, model.gravity)))
+    return corrected, contacts, lam, sweeps, change
 
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
@@ -87,19 +108,28 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 2. integrate velocities and positions: x̃ = x + h v* (explicit Euler: the old velocities)
     moving = stack(*state.velocities) if integrator == "explicit_euler" else v_free
     predicted_displacement = h * moving
-    displacement, total_sweeps, change = predicted_displacement, 0, 0.0
     sweep = swept_distances(model, *unstack(moving, model.body_count), h)
-    for _ in range(options.passes):
-        predicted = State.assemble(state.time + h, _displaced(model, state, displacement, h), state.velocities)
-        # 3. collision detection at the predicted positions; 4. project the colliding points
-        displacement, contacts, sweeps, change = project(model, state, predicted, displacement, options, sweep)
+    # 3–4, over the swept step: the contacts at the start within reach of the step's motion
+    # (speculative: a gap may close, never be crossed), projected — nothing passes through
+    # anything, however fast; then at the projected positions, for what the linearization missed
+    contacts, manifolds = detect(model, state, options, sweep)
+    displacement, contacts, lam, total_sweeps, change = project(model, state, np.zeros_like(predicted_displacement),
+                                                                 predicted_displacement, options, sweep, state.carried,
+                                                                 contacts)
+    carried = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
+    for _ in range(options.passes - 1):
+        if contacts.count == 0:
+            break
+        projected = State.assemble(state.time + h, _displaced(model, state, displacement, h), state.velocities)
+        displacement, contacts, _, sweeps, change = project(model, projected, displacement, displacement, options,
+                                                            sweep)
         total_sweeps += sweeps
-        if contacts.count == 0 or (sweeps <= 1 and change <= options.tolerance):
+        if sweeps <= 1 and change <= options.tolerance:
             break
     # 5. advance dt, velocities from the projected positions
     velocity = v_free + (displacement - predicted_displacement) / h
     positions = _displaced(model, state, displacement, h)
-    new = State.assemble(state.time + h, positions, unstack(velocity, model.body_count), state.carried)
+    new = State.assemble(state.time + h, positions, unstack(velocity, model.body_count), carried)
     return new, StepInfo(contacts, solver_iterations=total_sweeps, solver_residual=change)
 
 
