@@ -136,13 +136,26 @@ def test_a_failed_write_leaves_no_folder_and_no_partial_file(tmp_path):
 
 def test_penalty_stiffness_too_high_for_dt_warns_in_one_line_and_still_runs(tmp_path):
     result = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
-                        "--duration", "0.02", "--json", cwd=tmp_path)
+                        "--set", "method.penalty.implicit_springs=never", "--duration", "0.02", "--json",
+                        cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     lines = [line for line in result.stderr.strip().splitlines() if line != NOTICE]   # NOTICE: on a cold cache
     assert len(lines) == 1 and lines[0].startswith("warning: penalty stiffness 1e+06 N/m")
     assert "backward_euler" in lines[0] and "Traceback" not in result.stderr
     summary = json.loads(result.stdout)
     assert summary["method"] == "penalty" and summary["options"]["stiffness"] == 1e6
+    assert summary["implicit_spring_steps"] == 0
+
+
+def test_penalty_springs_too_stiff_for_dt_go_implicit_and_the_summary_says_so(tmp_path):
+    result = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
+                        "--duration", "0.02", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert [line for line in result.stderr.strip().splitlines() if line != NOTICE] == []
+    assert "too stiff for symplectic_euler at this dt in 5 steps: those stepped them by backward Euler" \
+        in result.stdout
+    with open(tmp_path / "out" / "incline-penalty" / "summary.json", encoding="utf-8") as stream:
+        assert json.load(stream)["implicit_spring_steps"] == 5
 
 
 def test_penalty_with_backward_euler_from_the_command_line(tmp_path):

@@ -28,10 +28,12 @@ def pyramid(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def ball(tmp_path_factory):
-    """The bouncing ball past its first apex; penalty made to blow up by a stiffness of 1e12 N/m."""
+    """The bouncing ball past its first apex; penalty made to blow up by a stiffness of 1e12 N/m
+    kept explicit."""
     with pytest.warns(UserWarning, match="unstable"):
         return compare("bouncing_ball", ["impulse", "penalty"], str(tmp_path_factory.mktemp("ball")),
-                       overrides=["method.penalty.stiffness=1e12"], duration=0.9, video=False)
+                       overrides=["method.penalty.stiffness=1e12", "method.penalty.implicit_springs=never"],
+                       duration=0.9, video=False)
 
 
 @pytest.fixture(scope="module")
@@ -117,13 +119,20 @@ def test_energy_drift_and_mean_penetration_are_those_of_the_trajectory(pyramid):
         assert row["energy_drift_relative"] * 9.81 * 2.0 == pytest.approx(row["energy_drift_J"], rel=0.01)
 
 
-def test_penalty_has_no_residual_and_the_solvers_do(pyramid):
+def test_every_method_reports_its_solver_and_penalty_its_implicit_springs(pyramid):
+    """The pyramid's loads make penalty's springs too stiff for the explicit step: it steps them by
+    backward Euler (passes of the active set, relative linear residual), and the row says so."""
     rows = {row["method"]: row for row in pyramid.rows}
-    assert rows["penalty"]["max_solver_iterations"] == 0 and rows["penalty"]["max_solver_residual"] is None
-    assert _csv_rows(pyramid)[0]["max_solver_residual"] == ""
-    for method in ("projection", "impulse", "constraints"):
+    assert _summary(pyramid, "penalty")["implicit_spring_steps"] > 0
+    for method in ("penalty", "projection", "impulse", "constraints"):
         assert rows[method]["max_solver_iterations"] > 0
         assert rows[method]["max_solver_residual"] == _summary(pyramid, method)["solver"]["max_residual"]
+
+
+def test_a_run_without_a_solver_reports_no_residual(tmp_path):
+    result = compare("bouncing_ball", ["penalty"], str(tmp_path / "ball"), duration=0.2, video=False)
+    assert result.rows[0]["max_solver_iterations"] == 0 and result.rows[0]["max_solver_residual"] is None
+    assert _csv_rows(result)[0]["max_solver_residual"] == ""
 
 
 def test_momentum_drift_is_not_reported_with_obstacles(pyramid):

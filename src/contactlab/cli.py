@@ -182,7 +182,10 @@ def _plain_summary(summary, scene, written=()):
             f"({summary['steps_per_second']:.0f} steps/s after a first step of {summary['first_step_seconds']:.2f} s); "
             f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
             f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
-            f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end.\n"
+            f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end."
+            + (f" The contact springs were too stiff for {summary['integrator']} at this dt in "
+               f"{summary['implicit_spring_steps']} steps: those stepped them by backward Euler."
+               if summary.get("implicit_spring_steps") else "") + "\n"
             f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
             + "".join(f", {path}" for path in written))
 

@@ -100,6 +100,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
                             + tally.later_compile_seconds),
         "recording_seconds": tally.recording_seconds,
         "compiled_loop": stepper is not None,
+        "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
@@ -123,6 +124,7 @@ class Tally:
     recording_seconds: float = 0.0
     max_contacts: int = 0
     sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
+    implicit_spring_steps: int = 0       # penalty: steps whose contact springs went implicit (explicit unstable)
 
     def timed(self, step_index, elapsed, compiled):
         """Book the steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
@@ -153,6 +155,7 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
             chooser.after_step(elapsed)
         tally.max_contacts = max(tally.max_contacts, info.contacts.count)
         tally.sweeps_made += info.solver_iterations
+        tally.implicit_spring_steps += info.implicit_springs
         if not state.is_finite() or state.max_speed() > MAX_SPEED:
             raise _diverged(state.time, dt)
         if step_index % record_every == 0 or step_index == steps:

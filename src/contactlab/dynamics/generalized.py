@@ -61,19 +61,20 @@ def inverse_mass_matrix(model, body_orientation):
                            model.particle_inverse_mass)
 
 
-def implicit_base(model, state, dt, v_free):
+def implicit_base(model, state, dt, v_free, cloth_implicit=True):
     """The backward Euler system without contacts, A₀ v⁺ = b₀, over all N degrees of freedom.
 
     Bodies: M v⁺ = M v* (gravity and the gyroscopic term are already in v*). Particles: the
     cloth's linearized springs, A_p = M − h D − h² K and A_p v⁺ = A_p v + h (f + h K v) (see
     dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
-    with the cloth's own. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
+    with the cloth's own; with ``cloth_implicit`` False (the cloth stepped explicitly, its
+    springs already in v*) M v⁺ = M v* for particles too. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
     a pinned vertex's do not).
     """
     B = model.body_count
     M = mass_matrix(model, state.body_orientation)
     bodies = M[:6 * B, :6 * B]
-    if model.spring_count:
+    if model.spring_count and cloth_implicit:
         system = particle_system(model, state, dt)
         particles = system.matrix
         b_particles = particles @ state.particle_velocity.ravel() + system.rhs

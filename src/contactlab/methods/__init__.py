@@ -26,6 +26,7 @@ class StepInfo:
     solver_iterations: int = 0    # sweeps the solver made (0 where there is none)
     solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
     energy_elastic: float = 0.0   # energy stored in contact springs [J]
+    implicit_springs: bool = False  # penalty: contact springs stepped by backward Euler, the explicit step being unstable
 
 
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")

@@ -26,10 +26,11 @@ the point, h v_t, so s measures how far the point slid since it stuck (``anchor_
 """
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 import scipy.sparse.linalg as spla
 
 from ..builder import _number
@@ -44,19 +45,21 @@ from .sequential import row_products, rows_of, solve_order, solve_sequential_imp
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
 LINEAR_SOLVERS = ("cg", "direct")
+IMPLICIT_SPRINGS = ("auto", "always", "never")
 
 
 @dataclass
 class Options(CollisionOptions):
     """Settings of ``[method.penalty]`` (after the collision settings of CollisionOptions)."""
-    stiffness: object = "auto"            # N/m per contact point, or "auto" (see suggest_stiffness)
-    allowed_penetration: float = 0.001    # m: what "auto" stiffness aims for under the heaviest body
+    stiffness: object = "auto"            # N/m per contact point, or "auto": each contact's load over allowed_penetration
+    allowed_penetration: float = 0.0003   # m: how deep "auto" stiffness lets each contact sink under the load it carries
     damping_ratio: object = "restitution"  # ζ of each contact spring, or "restitution": ζ from the material's ε
     friction_stiffness: object = "auto"   # N/m of the anchor springs (F3), or "auto": the normal stiffness
     contact_margin: float = 0.001         # m: gaps this small are detected (their springs are slack)
     linear_solver: str = "cg"             # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
     linear_tolerance: float = 1e-10       # backward Euler with cg: relative residual to reach
     implicit_iterations: int = 8          # backward Euler: most passes to settle which springs act / slip
+    implicit_springs: str = "auto"        # auto: contact springs by backward Euler in the steps where the explicit step is unstable | always | never
 
     def __post_init__(self):
         super().__post_init__()
@@ -69,7 +72,7 @@ class Options(CollisionOptions):
                                  f"found {self.damping_ratio!r}")
             self.damping_ratio = _number(self.damping_ratio, "damping_ratio", 0.0)
         self.linear_tolerance = _number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
-        check_choices(self, {"linear_solver": LINEAR_SOLVERS})
+        check_choices(self, {"linear_solver": LINEAR_SOLVERS, "implicit_springs": IMPLICIT_SPRINGS})
         check_counts(self, {"implicit_iterations": 1})
 
 
@@ -161,32 +164,110 @@ def lightest_contact_mass(model) -> float:
 
 
 def prepare(model, dt, options, integrator):
-    """Resolve the "auto" settings for this model and time step, and warn (StabilityWarning)
-    when the stiffness cannot be integrated explicitly at dt. Returns the resolved Options."""
-    gravity = float(np.linalg.norm(model.gravity)) or 9.81      # standard gravity when the scene has none
-    heaviest = float(max(model.body_mass.max(initial=0.0), model.particle_mass.max(initial=0.0)))
+    """Check a given stiffness against the time step: a StabilityWarning when the explicit step
+    cannot follow it for the lightest contact mass and ``implicit_springs = "never"`` keeps it
+    explicit ("auto" steps such springs by backward Euler instead, and says so in the summary).
+    "auto" stiffness is chosen contact by contact, each step (``contact_springs``). Returns the
+    Options."""
     light = lightest_contact_mass(model)
-    stiffness = options.stiffness
-    if stiffness == "auto":
-        stiffness = suggest_stiffness(heaviest, dt, options.allowed_penetration, gravity, 1, light,
-                                      integrator).stiffness
-    friction_stiffness = stiffness if options.friction_stiffness == "auto" else options.friction_stiffness
-    resolved = replace(options, stiffness=float(stiffness), friction_stiffness=float(friction_stiffness))
-    if integrator != "backward_euler" and np.isfinite(light):
-        ratios = ([options.damping_ratio] if options.damping_ratio != "restitution"
-                  else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist())
-        for k in (resolved.stiffness, resolved.friction_stiffness):
-            worst = max(amplification(integrator, dt, k, light, 2.0 * z * np.sqrt(k * light)) for z in ratios)
-            if worst > 1.0 + 1e-12:
-                limit = 2.0 * np.sqrt(light / k)
-                advice = (f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
-                          if integrator == "symplectic_euler" else "use damping, ")
-                warnings.warn(StabilityWarning(
-                    f"penalty stiffness {k:.4g} N/m with dt = {dt:g} s is unstable under {integrator} for "
-                    f"a contact moving {light:.3g} kg (each step multiplies its oscillation by {worst:.3g}); "
-                    f"{advice}or integrator = \"backward_euler\""), stacklevel=2)
-                break
-    return resolved
+    if integrator == "backward_euler" or options.implicit_springs != "never" or not np.isfinite(light):
+        return options
+    ratios = ([options.damping_ratio] if options.damping_ratio != "restitution"
+              else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist())
+    for k in (options.stiffness, options.friction_stiffness):
+        if k == "auto":
+            continue
+        worst = max(amplification(integrator, dt, k, light, 2.0 * z * np.sqrt(k * light)) for z in ratios)
+        if worst > 1.0 + 1e-12:
+            limit = 2.0 * np.sqrt(light / k)
+            advice = (f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
+                      if integrator == "symplectic_euler" else "use damping, ")
+            warnings.warn(StabilityWarning(
+                f"penalty stiffness {k:.4g} N/m with dt = {dt:g} s is unstable under {integrator} for "
+                f"a contact moving {light:.3g} kg (each step multiplies its oscillation by {worst:.3g}); "
+                f"{advice}implicit_springs = \"auto\" or integrator = \"backward_euler\""), stacklevel=2)
+            break
+    return options
+
+
+# ---- the load each contact carries ----------------------------------------------------------
+
+SUPPORT_COSINE = 0.3      # a contact whose normal is within 72° of "up" (against gravity) supports its upper side
+
+
+@njit(cache=True)
+def supported_loads(body_a, body_b, particles_a, particles_b, normal, body_position, particle_position,
+                    body_mass, particle_mass, gravity):
+    """The weight each contact carries [N] (C,): every body and free particle, from the highest
+    down, hands its own weight and what rests on it to the contacts it rests on (normals within
+    72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
+    or particle below; a static side takes it out. Contacts that support nothing carry the
+    lighter side's weight per supporting contact. Sides: body index, or a particle
+    (``particles_*[c, 0]``; a point on a cloth triangle counts as its first vertex).
+    Arrays (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
+    C, B, P = body_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
+    g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
+    loads = np.zeros(C)
+    if g == 0.0 or C == 0:
+        return loads
+    up = -gravity / g
+    upper = np.full(C, -1)                # the supported side's entity (bodies, then particles), −1: none
+    lower = np.full(C, -1)
+    supports = np.zeros(B + P, dtype=np.int64)
+    for c in range(C):
+        a, b = _entity(body_a[c], particles_a[c, 0], B), _entity(body_b[c], particles_b[c, 0], B)
+        along = normal[c, 0] * up[0] + normal[c, 1] * up[1] + normal[c, 2] * up[2]     # normal: from B into A
+        if along > SUPPORT_COSINE and a >= 0:
+            upper[c], lower[c] = a, b
+        elif along < -SUPPORT_COSINE and b >= 0:
+            upper[c], lower[c] = b, a
+        if upper[c] >= 0:
+            supports[upper[c]] += 1
+    weight = np.empty(B + P)
+    height = np.empty(B + P)
+    for e in range(B + P):
+        position = body_position[e] if e < B else particle_position[e - B]
+        weight[e] = g * (body_mass[e] if e < B else particle_mass[e - B])
+        height[e] = position[0] * up[0] + position[1] * up[1] + position[2] * up[2]
+    own_share = weight / np.maximum(supports, 1)
+    carried = weight.copy()               # own weight plus everything handed down so far
+    start = np.zeros(B + P + 1, dtype=np.int64)     # the contacts each entity rests on, grouped
+    for c in range(C):
+        if upper[c] >= 0:
+            start[upper[c] + 1] += 1
+    for e in range(B + P):
+        start[e + 1] += start[e]
+    filled = start[:-1].copy()
+    resting_on = np.empty(start[-1], dtype=np.int64)
+    for c in range(C):
+        if upper[c] >= 0:
+            resting_on[filled[upper[c]]] = c
+            filled[upper[c]] += 1
+    for e in np.argsort(-height):
+        if supports[e] == 0:
+            continue
+        share = carried[e] / supports[e]
+        for i in range(start[e], start[e + 1]):
+            c = resting_on[i]
+            loads[c] = share
+            if lower[c] >= 0:
+                carried[lower[c]] += share
+    for c in range(C):
+        if upper[c] < 0:                  # a side contact: the lighter dynamic side's share
+            least = np.inf
+            for e in (_entity(body_a[c], particles_a[c, 0], B), _entity(body_b[c], particles_b[c, 0], B)):
+                if e >= 0:
+                    least = min(least, own_share[e])
+            loads[c] = least if least < np.inf else 0.0
+    return loads
+
+
+@njit(cache=True, inline="always")
+def _entity(body, first_particle, B):
+    """A contact side as one entity: its body, else its (first) particle after the B bodies, else −1."""
+    if body >= 0:
+        return body
+    return B + first_particle if first_particle >= 0 else -1
 
 
 # ---- the contact springs ------------------------------------------------------------------
@@ -200,12 +281,28 @@ class ContactSprings:
     friction_damping: np.ndarray     # (C,) c_t [N s/m]
     friction: np.ndarray             # (C,) μ
     elongation: np.ndarray           # (C, 2) s = point − anchor in (t1, t2) components [m]
+    inverse_effective_mass: np.ndarray = None   # (C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg]
 
 
-def contact_springs(contacts, J, inverse_mass, carried, options):
-    """The springs of the contacts: stiffness from options, damping c = 2 ζ √(k m_eff) with
-    each contact's effective mass m_eff = 1 / (J M⁻¹ Jᵀ) along its normal (and tangent), and
-    the anchor elongations carried from the last step (turned into the current tangent plane)."""
+def contact_stiffness(model, state, contacts, options):
+    """k (C,) [N/m] of each contact's normal spring: the option's number, or for "auto" the load
+    the contact carries (``supported_loads``) over ``allowed_penetration``, so every contact of
+    a stack sinks about that far however much rests on it."""
+    if options.stiffness != "auto":
+        return np.full(contacts.count, float(options.stiffness))
+    loads = supported_loads(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                            contacts.normal, state.body_position, state.particle_position,
+                            np.asarray(model.body_mass, dtype=float), np.asarray(model.particle_mass, dtype=float),
+                            np.asarray(model.gravity, dtype=float))
+    return loads / options.allowed_penetration
+
+
+def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None):
+    """The springs of the contacts: stiffness ``stiffness`` (C,) [N/m] (``contact_stiffness``;
+    None: the option's number), damping c = 2 ζ √(k m_eff) with each contact's effective mass
+    m_eff = 1 / (J M⁻¹ Jᵀ) along its normal (and tangent), friction stiffness the normal one
+    where "auto", and the anchor elongations carried from the last step (turned into the
+    current tangent plane)."""
     C = contacts.count
     inverse_effective = np.asarray((J @ inverse_mass).multiply(J).sum(axis=1)).ravel().reshape(C, 3)
     if options.damping_ratio == "restitution":
@@ -217,8 +314,8 @@ def contact_springs(contacts, J, inverse_mass, carried, options):
         with np.errstate(divide="ignore"):
             return np.where(inverse_mass_along > 0.0, 2.0 * zeta * np.sqrt(k / inverse_mass_along), 0.0)
 
-    k = np.full(C, options.stiffness)
-    k_t = np.full(C, options.friction_stiffness)
+    k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
+    k_t = k.copy() if options.friction_stiffness == "auto" else np.full(C, float(options.friction_stiffness))
     offsets, _ = values_by_id(carried.get("anchor_ids"), carried.get("anchor_offsets"), contacts.feature_id, 3)
     # the anchor's offset in the current tangent plane, its length kept (the plane may have turned)
     elongation = np.stack([np.einsum("ci,ci->c", offsets, contacts.tangent1),
@@ -226,7 +323,24 @@ def contact_springs(contacts, J, inverse_mass, carried, options):
     length, projected = np.linalg.norm(offsets, axis=1), np.linalg.norm(elongation, axis=1)
     elongation *= np.where(projected > 0.0, length / np.maximum(projected, 1e-300), 0.0)[:, None]
     return ContactSprings(k, damping(k, inverse_effective[:, 0]), k_t, damping(k_t, inverse_effective[:, 1]),
-                          contacts.friction, elongation)
+                          contacts.friction, elongation, inverse_effective)
+
+
+def explicit_unstable(springs, dt, integrator):
+    """Whether any contact spring, on its own effective mass, grows under the explicit
+    ``integrator`` at dt [s] (``amplification`` > 1: symplectic Euler needs h ω < 2 undamped,
+    less with damping)."""
+    moving = (springs.inverse_effective_mass[:, 0] > 0.0) & (springs.stiffness > 0.0)
+    for k, c, inverse in ((springs.stiffness, springs.damping, springs.inverse_effective_mass[:, 0]),
+                          (springs.friction_stiffness, springs.friction_damping,
+                           springs.inverse_effective_mass[:, 1])):
+        if not moving.any():
+            return False
+        mass = 1.0 / inverse[moving]
+        worst = np.argmax(k[moving] * inverse[moving])            # the stiffest spring on the lightest mass
+        if amplification(integrator, dt, k[moving][worst], mass[worst], c[moving][worst]) > 1.0 + 1e-12:
+            return True
+    return False
 
 
 def spring_forces(springs, depth, velocity):
@@ -374,8 +488,6 @@ def _solve(A, rhs, guess, options):
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
     """One step of loop L1 with penalty forces; returns (new State, StepInfo)."""
-    if options.stiffness == "auto" or options.friction_stiffness == "auto":
-        options = prepare(model, dt, options, integrator)
     h = dt
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
@@ -383,16 +495,21 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
                        options.samples, cloth_samples=options.cloth_samples)
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     inverse_mass = inverse_mass_matrix(model, state.body_orientation)
-    springs = contact_springs(contacts, J, inverse_mass, state.carried, options)
+    springs = contact_springs(contacts, J, inverse_mass, state.carried, options,
+                              contact_stiffness(model, state, contacts, options))
     v = stack(*state.velocities)
     # 2. collision forces F = k δ n and anchor springs (P1, F3), at the current state
     forces, elongation = spring_forces(springs, contacts.depth, (J @ v).reshape(-1, 3))
     # 3. internal forces (gravity) → free velocities v* = v + h M⁻¹ f
     v_free = stack(*free_velocities(model, state, h, integrator))
-    # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1)
+    # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1); the
+    # springs by backward Euler (M1) under that integrator, or where an explicit step would grow
     passes, residual = 0, 0.0
-    if integrator == "backward_euler":
-        A0, b0, free = implicit_base(model, state, h, v_free)
+    implicit = integrator == "backward_euler" or (contacts.count > 0 and (
+        options.implicit_springs == "always"
+        or (options.implicit_springs == "auto" and explicit_unstable(springs, h, integrator))))
+    if implicit:
+        A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
         v_new, forces, elongation, passes, residual = implicit_velocities(
             springs, J, A0, b0, free, v_free, contacts.depth, h, options)
         moved_by = v_new
@@ -402,9 +519,9 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 4b. over the swept step: no contact carried past half its pass-through depth
     held = hold_back(model, state, contacts, moved_by, h) if contacts.count else moved_by
     if held is not moved_by:
-        v_new = v_new + (held - moved_by) if integrator == "explicit_euler" else held
+        v_new = v_new + (held - moved_by) if integrator == "explicit_euler" and not implicit else held
         moved_by = held
-    if integrator != "backward_euler":
+    if not implicit:
         # the anchors follow the point's tangential motion over the step
         elongation = elongation + h * (J @ moved_by).reshape(-1, 3)[:, 1:]
     positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)
@@ -415,4 +532,5 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
                    anchor_offsets=elongation[:, :1] * contacts.tangent1 + elongation[:, 1:] * contacts.tangent2)
     new = State.assemble(state.time + dt, positions, unstack(v_new, model.body_count), carried)
     return new, StepInfo(contacts, solver_iterations=passes, solver_residual=residual,
-                         energy_elastic=elastic_energy(springs, depth_after, elongation))
+                         energy_elastic=elastic_energy(springs, depth_after, elongation),
+                         implicit_springs=implicit and integrator != "backward_euler")
