@@ -134,17 +134,29 @@ def test_a_failed_write_leaves_no_folder_and_no_partial_file(tmp_path):
     assert os.listdir(existing) == []
 
 
-def test_penalty_stiffness_too_high_for_dt_warns_in_one_line_and_still_runs(tmp_path):
+def test_penalty_stiffness_too_high_for_dt_stops_in_one_line_keeping_the_run(tmp_path):
+    """Kept explicit, a spring that grows 105× a step: the health check stops the run (exit 3)
+    with one line naming the check, the time and the fix, and the run up to then is written,
+    its summary marked diverged."""
     result = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
-                        "--set", "method.penalty.implicit_springs=never", "--duration", "0.02", "--json",
-                        cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
+                        "--set", "method.penalty.implicit_springs=never", "--duration", "0.2", cwd=tmp_path)
+    assert result.returncode == 3, result.stderr
     lines = [line for line in result.stderr.strip().splitlines() if line != NOTICE]   # NOTICE: on a cold cache
-    assert len(lines) == 1 and lines[0].startswith("warning: penalty stiffness 1e+06 N/m")
-    assert "backward_euler" in lines[0] and "Traceback" not in result.stderr
-    summary = json.loads(result.stdout)
-    assert summary["method"] == "penalty" and summary["options"]["stiffness"] == 1e6
-    assert summary["implicit_spring_steps"] == 0
+    assert len(lines) == 1 and lines[0].startswith("error: the run went wrong at t = ")
+    assert "too long for penalty stiffness 1e+06 N/m" in lines[0] and "backward_euler" in lines[0]
+    assert "Traceback" not in result.stderr and "out/incline-penalty" in lines[0]
+    with open(tmp_path / "out" / "incline-penalty" / "summary.json", encoding="utf-8") as stream:
+        summary = json.load(stream)
+    assert summary["diverged"]["check"] in ("energy", "speed", "depth", "finite")
+    trajectory = np.load(tmp_path / "out" / "incline-penalty" / "trajectory.npz")
+    assert trajectory["time"][-1] == pytest.approx(summary["diverged"]["time"])
+    assert summary["options"]["stiffness"] == 1e6 and summary["implicit_spring_steps"] == 0
+    allowed = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
+                         "--set", "method.penalty.implicit_springs=never", "--duration", "0.02",
+                         "--allow-divergence", "--json", "--no-plots", cwd=tmp_path)
+    assert allowed.returncode in (0, 3), allowed.stderr         # allowed: on until the state is not finite
+    if allowed.returncode == 0:
+        assert json.loads(allowed.stdout)["health"]["violations"]
 
 
 def test_penalty_springs_too_stiff_for_dt_go_implicit_and_the_summary_says_so(tmp_path):

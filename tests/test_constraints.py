@@ -43,11 +43,18 @@ def test_velocities_stop_an_impact_and_accelerations_cannot():
     # on accelerations the floor only stops it from accelerating further into it
     model = ball_on_plane(height=0.5, restitution=0.0)
     on_velocities = simulate(model, "constraints", dt=0.004, duration=0.4)
-    on_accelerations = simulate(model, "constraints", dt=0.004, duration=0.4,
-                                options={"formulation": "acceleration", "stabilization": 0.0})
+    options = {"formulation": "acceleration", "stabilization": 0.0}
+    on_accelerations = simulate(model, "constraints", dt=0.004, duration=0.4, options=options,
+                                allow_divergence=True)           # it sinks on through the floor
     impact_speed = np.sqrt(2 * G * 0.5)
     assert on_velocities.summary["max_penetration"] < 1e-9
     assert on_accelerations.summary["max_penetration"] > 0.5 * impact_speed * 0.004
+    assert [v["check"] for v in on_accelerations.summary["health"]["violations"]] == ["depth"]
+    # unless allowed, the health check stops the run once the ball's centre is behind the floor
+    with pytest.raises(SimulationDiverged, match="behind a static plane: it went through") as stopped:
+        simulate(model, "constraints", dt=0.004, duration=0.4, options=options)
+    z = stopped.value.run.arrays["body_position"][:, 0, 2]
+    assert z[-1] < -0.1 <= z[-2]              # the first sample with the centre a radius behind the floor
 
 
 def test_acceleration_formulation_holds_a_resting_box():

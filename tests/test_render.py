@@ -1,5 +1,6 @@
 """contactlab.render: real-time MP4/GIF videos and PNG stills of a trajectory, drawn headless."""
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import pytest
 from PIL import Image
 
 from contactlab import InputError, ModelBuilder, render, simulate
+from contactlab.record import Recorder
 from contactlab.scene import load_scene
 
 SMALL = dict(width=160, height=120)
@@ -90,8 +92,19 @@ def test_frames_show_the_sample_nearest_to_their_time():
     assert render._nearest(np.array([2.5]), np.array([2.5])).tolist() == [0]
 
 
+def empty_trajectory(duration):
+    """Two samples, 0 and ``duration`` s, of a scene with nothing in it (which simulate refuses:
+    nothing to simulate), recorded as a run records them."""
+    model = ModelBuilder().finalize()
+    recorder = Recorder(model)
+    start = model.state()
+    recorder.sample(start)
+    recorder.sample(dataclasses.replace(start, time=duration))
+    return recorder.arrays()
+
+
 def test_one_sample_and_an_empty_scene_still_make_videos(tmp_path):
-    empty = simulate(ModelBuilder().finalize(), "impulse", 0.01, 0.2).arrays
+    empty = empty_trajectory(0.2)
     paths = render.render(empty, tmp_path / "empty", fps=10, **SMALL)
     assert mp4_frames(paths["mp4"])[0] == 2
     assert not coloured(imageio.v3.imread(paths["still"])).any()

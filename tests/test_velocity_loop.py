@@ -94,10 +94,22 @@ def test_a_ball_dropped_in_the_loop_bounces_to_the_closed_form_apex():
     assert abs(apex - expected) < 2e-3 * expected
 
 
-def test_a_blow_up_in_the_loop_stops_the_run_with_its_time():
-    model = ball_on_plane(height=100.0, velocity=(0.0, 0.0, 2e6))
-    with pytest.raises(SimulationDiverged, match="t = 0.004"):
-        simulate(model, "impulse", 0.004, 1.0, compiled_loop=True)
+def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
+    """The loop checks the health's speed limit after every step: with the limit at a tenth of
+    the scene's speed scale (√(2 g h) for a ball h = 5 m up), a falling ball stops the run at
+    the first step faster than that, v = g t, with the run up to then kept."""
+    from contactlab import health
+    monkeypatch.setattr(health, "SPEED_FACTOR", 0.1)
+    model = ball_on_plane(height=5.0, radius=0.05, friction=0.0)
+    dt, g = 0.004, 9.81
+    limit = 0.1 * np.sqrt(2 * g * 5.0)
+    with pytest.raises(SimulationDiverged, match="reached .* m/s") as stopped:
+        simulate(model, "impulse", dt, 1.0, compiled_loop=True)
+    steps = int(np.floor(limit / (g * dt))) + 1                   # the first with g n dt > limit
+    run = stopped.value.run
+    assert run.summary["compiled_loop"] and run.summary["diverged"]["check"] == "speed"
+    assert stopped.value.time == pytest.approx(steps * dt)
+    assert run.arrays["time"][-1] == pytest.approx(steps * dt)
 
 
 def test_a_short_first_run_steps_from_python_and_a_long_one_compiles_the_loop(monkeypatch):

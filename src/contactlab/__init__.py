@@ -10,15 +10,27 @@ Build a model, step it with a method of the lecture, record it::
     run = simulate(builder.finalize(), method="impulse", dt=0.001, duration=2.0)
 """
 
-from .builder import ModelBuilder
-from .collision import collide
-from .contacts import Contacts
+from importlib import import_module
+
 from .errors import InputError, SimulationDiverged
-from .model import Model
-from .simulation import Run, simulate
-from .state import State
-from .threads import set_threads
+
+# the rest is imported on first use (PEP 562), so that ``python -m contactlab`` and the
+# ``contactlab`` command install their signal handlers before Numba and NumPy load
+_LAZY = {"ModelBuilder": "builder", "collide": "collision", "Contacts": "contacts", "Model": "model",
+         "Run": "simulation", "simulate": "simulation", "State": "state", "set_threads": "threads"}
 
 __all__ = ["ModelBuilder", "Model", "State", "Contacts", "collide", "simulate", "Run",
            "InputError", "SimulationDiverged", "set_threads"]
 __version__ = "0.1.0"
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'contactlab' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

@@ -1,7 +1,11 @@
 """ModelBuilder: add materials, bodies, particles, cloth and obstacles, then ``finalize()``.
 
 Values are checked as they are added; a bad one raises :class:`~contactlab.errors.InputError`
-naming the argument (the scene loader prefixes the scene-file path to it).
+naming the argument (the scene loader prefixes the scene-file path to it): its type, its
+range (positive masses and sizes, restitution in [0, 1], ...), its magnitude against the
+generous limits of :data:`LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
+NaN energies), and that each shape is given only the arguments it takes
+(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`).
 
 Example::
 
@@ -13,6 +17,8 @@ Example::
     state = model.state()
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import rotations, shapes
@@ -23,27 +29,87 @@ from .state import State
 DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
 
 
+# -- the magnitudes accepted ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Quantity:
+    """The magnitudes accepted for one kind of value: at most ``largest`` [unit] in absolute
+    value and, for a value that must be positive, at least ``smallest``. The bounds are far
+    beyond any scene contactlab is for; past them the squares and products the dynamics forms
+    (m r², m v², 1/m) overflow or lose every digit, and a run would report NaN energies."""
+    what: str
+    unit: str
+    largest: float
+    smallest: float = 0.0
+
+    def check(self, values, name, positive=False):
+        """InputError naming ``name`` unless every one of ``values`` (a number or an array of
+        finite numbers) is within the bounds (``smallest`` only where ``positive``)."""
+        magnitudes = np.abs(np.asarray(values, dtype=float))
+        if magnitudes.size and magnitudes.max() > self.largest:
+            raise InputError(name, f"expected a {self.what} of at most {self.largest:g}{self._unit}, found "
+                                   f"{magnitudes.max():g}{self._unit} (see Limits in docs/scene-format.md)")
+        if positive and magnitudes.size and magnitudes.min() < self.smallest:
+            raise InputError(name, f"expected a {self.what} of at least {self.smallest:g}{self._unit}, found "
+                                   f"{magnitudes.min():g}{self._unit} (see Limits in docs/scene-format.md)")
+
+    @property
+    def _unit(self):
+        return f" {self.unit}" if self.unit else ""
+
+
+LENGTH = Quantity("length", "m", 1e6, 1e-6)                 # positions, sizes, offsets: 1000 km; sizes ≥ 1 µm
+MASS = Quantity("mass", "kg", 1e12, 1e-12)                 # given or from a density: a nanogram to a mountain
+DENSITY = Quantity("density", "kg/m^3", 1e6)               # osmium is 22,590 kg/m³
+AREAL_DENSITY = Quantity("areal density", "kg/m^2", 1e6)   # of cloth; canvas is about 0.3 kg/m²
+SPEED = Quantity("speed", "m/s", 1e5)                      # a rifle bullet is 1e3 m/s
+ANGULAR_SPEED = Quantity("angular speed", "rad/s", 1e6)
+ACCELERATION = Quantity("gravity", "m/s^2", 1e4)           # a thousand g
+STIFFNESS = Quantity("stiffness", "N/m", 1e12)
+DAMPING = Quantity("damping", "N s/m", 1e12)
+FRICTION = Quantity("friction coefficient", "", 1e3)       # rubber on rubber is about 1
+FACTOR = Quantity("scale factor", "", 1e6, 1e-6)
+DIRECTION = Quantity("direction component", "", 1e6)       # normals and quaternions, normalized after
+TIME = Quantity("time", "s", 1e9, 1e-9)                    # dt and duration (contactlab.simulate)
+LIMITS = (LENGTH, MASS, DENSITY, AREAL_DENSITY, SPEED, ANGULAR_SPEED, ACCELERATION, STIFFNESS, DAMPING,
+          FRICTION, FACTOR, DIRECTION, TIME)
+WHOLE_NUMBERS = (-2 ** 63, 2 ** 63 - 1)     # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
+
+
 def _array(value, name, what):
-    """value as a float array, or InputError naming the field (strings, ragged lists)."""
+    """value as a float array, or InputError naming the field (strings, ragged lists, ints
+    beyond the float range)."""
     try:
         return np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(name, f"expected {what}, found {value!r}") from None
 
 
-def _vector(value, name, size=3):
+def _vector(value, name, size=3, quantity=None, positive=False):
+    """``value`` as a float array (size,) of finite numbers, each within ``quantity``'s
+    magnitudes when one is given, and greater than 0 where ``positive``."""
     array = _array(value, name, f"a list of {size} numbers")
     if array.shape != (size,):
         raise InputError(name, f"expected a list of {size} numbers, found {value!r}")
     if not np.isfinite(array).all():
         raise InputError(name, f"expected finite numbers, found {value!r}")
+    if positive and (array <= 0).any():
+        raise InputError(name, f"every component must be positive (greater than 0), found {array.tolist()}")
+    if quantity is not None:
+        quantity.check(array, name, positive)
     return array
 
 
-def _number(value, name, minimum=None, strict=False, maximum=None):
+def _number(value, name, minimum=None, strict=False, maximum=None, quantity=None):
+    """``value`` as a finite float, at least ``minimum`` (greater than it where ``strict``),
+    at most ``maximum``, and within ``quantity``'s magnitudes when one is given (its smallest
+    where ``strict``: a value that must be positive)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InputError(name, f"expected a number, found {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:                       # a Python int beyond the float range
+        value = float("inf")
     if not np.isfinite(value):
         raise InputError(name, f"expected a finite number, found {value!r}")
     if minimum is not None and (value <= minimum if strict else value < minimum):
@@ -51,11 +117,67 @@ def _number(value, name, minimum=None, strict=False, maximum=None):
         raise InputError(name, f"must be {bound} {minimum:g}, found {value:g}")
     if maximum is not None and value > maximum:
         raise InputError(name, f"must be at most {maximum:g}, found {value:g}")
+    if quantity is not None:
+        quantity.check(value, name, strict)
     return value
 
 
+# -- which shape takes which arguments ------------------------------------------------------
+
+# The shape-specific arguments of add_body and add_obstacle that each shape takes; any other of
+# them given (not None) is an InputError. The scene schema (contactlab.scene.schema) reads its
+# shape-specific keys from these too.
+BODY_SHAPE_ARGUMENTS = {
+    "sphere": ("radius",),
+    "box": ("half_extents",),
+    "capsule": ("radius", "half_length"),
+    "convex": ("points", "file", "scale"),
+}
+OBSTACLE_SHAPE_ARGUMENTS = {
+    "plane": ("normal", "offset"),
+    "sphere": ("radius", "position"),
+    "box": ("half_extents", "position", "orientation"),
+    "convex": ("points", "file", "scale", "position", "orientation"),
+    "mesh": ("file", "scale", "position", "orientation"),
+}
+
+
+def check_shape_arguments(shape, table, given):
+    """InputError naming the first of ``given`` (names of shape-specific arguments) that
+    ``shape`` takes not, by ``table`` (BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
+    takes = table[shape]
+    for name in given:
+        if name not in takes:
+            raise InputError(name, f"a {shape} takes no {name} (a {shape} takes: {', '.join(takes)})")
+
+
+def _shape(shape, table, given):
+    """``shape`` checked: one of ``table``'s names, given only its own arguments (``given``:
+    name -> value of every shape-specific argument, None where left out)."""
+    if not isinstance(shape, str) or shape not in table:
+        raise InputError("shape", f"expected one of {', '.join(table)}, found {shape!r}")
+    check_shape_arguments(shape, table, [name for name, value in given.items() if value is not None])
+    return shape
+
+
+def _file(file):
+    """``file`` as a path string: InputError("file", ...) unless it is a str or os.PathLike."""
+    import os
+    if not isinstance(file, (str, os.PathLike)):
+        raise InputError("file", f"expected the path of a mesh file (OBJ, STL or PLY), found {file!r}")
+    return os.fspath(file)
+
+
+def _derived_mass(mass, name):
+    """InputError naming ``name`` (the density it came from) unless ``mass`` [kg] is within
+    the bounds of MASS."""
+    if not MASS.smallest <= mass <= MASS.largest:
+        raise InputError(name, f"gives a mass of {mass:g} kg, outside the {MASS.smallest:g} to {MASS.largest:g} kg "
+                               f"accepted (see Limits in docs/scene-format.md)")
+
+
 def _orientation(value, name):
-    q = _vector(value, name, 4)
+    q = _vector(value, name, 4, quantity=DIRECTION)
     norm = np.linalg.norm(q)
     if norm < 1e-12:
         raise InputError(name, "a zero quaternion is no rotation; use [1, 0, 0, 0] for none")
@@ -66,7 +188,7 @@ class ModelBuilder:
     """Collects a scene and freezes it into a :class:`~contactlab.model.Model`."""
 
     def __init__(self, gravity=(0.0, 0.0, -9.81)):
-        self.gravity = _vector(gravity, "gravity")
+        self.gravity = _vector(gravity, "gravity", quantity=ACCELERATION)
         self._materials = []          # (name, friction, restitution)
         self._bodies = []             # dicts
         self._particles = []          # dicts of arrays (a cloth's vertices are one group)
@@ -82,7 +204,7 @@ class ModelBuilder:
             raise InputError("name", f"expected a non-empty string, found {name!r}")
         if any(m[0] == name for m in self._materials):
             raise InputError("name", f"material {name!r} is defined twice; give each a distinct name")
-        self._materials.append((name, _number(friction, "friction", 0.0),
+        self._materials.append((name, _number(friction, "friction", 0.0, quantity=FRICTION),
                                 _number(restitution, "restitution", 0.0, maximum=1.0)))
         return len(self._materials) - 1
 
@@ -97,6 +219,8 @@ class ModelBuilder:
             if 0 <= material < len(self._materials):
                 return int(material)
             raise InputError("material", f"no material with index {material}")
+        if not isinstance(material, str):
+            raise InputError("material", f"expected a material name or index, found {material!r}")
         names = [m[0] for m in self._materials]
         if material in names:
             return names.index(material)
@@ -105,43 +229,53 @@ class ModelBuilder:
 
     # -- rigid bodies ----------------------------------------------------------------
     def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, points=None, file=None,
-                 scale=1.0, mass=None, density=None, position=(0, 0, 0), orientation=(1, 0, 0, 0),
+                 scale=None, mass=None, density=None, position=(0, 0, 0), orientation=(1, 0, 0, 0),
                  velocity=(0, 0, 0), angular_velocity=(0, 0, 0), material=None, name=None) -> int:
         """Add a rigid body; returns its index.
 
         shape: "sphere" (needs radius [m]), "box" (needs half_extents [m], 3 numbers),
         "capsule" (needs radius and half_length [m]: the segment along the body z axis) or
         "convex" (the hull of ``points`` (n, 3) [m], or of the vertices of a mesh ``file``
-        (OBJ/STL/PLY), times ``scale``; the points must be convex). Give exactly one of mass [kg]
-        or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid.
+        (OBJ/STL/PLY), times ``scale`` (default 1); the points must be convex); a shape given an
+        argument of another (a sphere's half_extents) is an InputError. Give exactly one of mass
+        [kg] or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid.
         position and orientation place the body's frame (for a convex shape, the frame its points
         are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
+        Magnitudes are checked against :data:`LIMITS` (the mass a density gives too).
         """
+        shape = _shape(shape, BODY_SHAPE_ARGUMENTS, dict(radius=radius, half_extents=half_extents,
+                                                         half_length=half_length, points=points, file=file,
+                                                         scale=scale))
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
-        position = _vector(position, "position")
+        if mass is not None:
+            mass = _number(mass, "mass", 0.0, strict=True, quantity=MASS)
+        else:
+            density = _number(density, "density", 0.0, strict=True, quantity=DENSITY)
+        position = _vector(position, "position", quantity=LENGTH)
         orientation = _orientation(orientation, "orientation")
         if shape == "convex":
             hull = self._hull(points, file, scale, mass=mass, density=density)
             kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
-            self._hulls.append(hull)
             mass, inertia = hull.mass, hull.inertia
             position, orientation = hull.body_pose(position, orientation)
         else:
             kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
-            if mass is not None:
-                mass = _number(mass, "mass", 0.0, strict=True)
-            else:
-                mass = _number(density, "density", 0.0, strict=True) * shapes.volume(kind, params)
+            if density is not None:
+                mass = density * shapes.volume(kind, params)
             inertia = shapes.principal_inertia(kind, params, mass)
+        if density is not None:
+            _derived_mass(mass, "density")
+        if shape == "convex":
+            self._hulls.append(hull)
         index = len(self._bodies)
         self._bodies.append(dict(
             name=str(name) if name is not None else f"body{index}",
             kind=kind, params=params, mass=mass, inertia=inertia,
             position=position, orientation=orientation,
-            velocity=_vector(velocity, "velocity"),
-            angular_velocity=_vector(angular_velocity, "angular_velocity"),
+            velocity=_vector(velocity, "velocity", quantity=SPEED),
+            angular_velocity=_vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
             material=self._material_index(material)))
         return index
 
@@ -151,36 +285,35 @@ class ModelBuilder:
         from .hulls import build_hull, load_hull_points
         if (points is None) == (file is None):
             raise InputError("points", "a convex shape needs exactly one of points = [[x, y, z], ...] or file")
-        scale = _number(scale, "scale", 0.0, strict=True)
+        scale = _number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
         if file is not None:
-            points, field = load_hull_points(file, scale, field="file"), "file"
+            points, field = load_hull_points(_file(file), scale, field="file"), "file"
         else:
             points, field = _array(points, "points", "a list of [x, y, z] points") * scale, "points"
+        if np.isfinite(points).all():              # (non-finite points: build_hull's error)
+            LENGTH.check(points, field)
         if mass is None and density is None:
             mass = 1.0                   # static geometry: the mass is not used
         return build_hull(points, field, mass=mass, density=density, require_convex=True)
 
     @staticmethod
-    def _solid_shape(shape, radius, half_extents, allowed, half_length=None):
-        if shape not in allowed:
-            raise InputError("shape", f"expected one of {', '.join(allowed)}, found {shape!r}")
-        kind = allowed[shape]
+    def _solid_shape(shape, radius, half_extents, kinds, half_length=None):
+        """(kind, params) of a sphere, box or capsule (``shape`` already checked) by ``kinds``
+        (shapes.BODY_SHAPES or shapes.OBSTACLE_SHAPES)."""
+        kind = kinds[shape]
         params = np.zeros(4)
         if kind in (shapes.SPHERE, shapes.CAPSULE):
             if radius is None:
                 raise InputError("radius", f"a {shape} needs a radius (m)")
-            params[0] = _number(radius, "radius", 0.0, strict=True)
+            params[0] = _number(radius, "radius", 0.0, strict=True, quantity=LENGTH)
         if kind == shapes.CAPSULE:
             if half_length is None:
                 raise InputError("half_length", "a capsule needs a half_length (m): half its segment's length")
-            params[1] = _number(half_length, "half_length", 0.0)
+            params[1] = _number(half_length, "half_length", 0.0, quantity=LENGTH)
         elif kind == shapes.BOX:
             if half_extents is None:
                 raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")
-            he = _vector(half_extents, "half_extents")
-            if (he <= 0).any():
-                raise InputError("half_extents", f"every half extent must be positive, found {he.tolist()}")
-            params[:3] = he
+            params[:3] = _vector(half_extents, "half_extents", quantity=LENGTH, positive=True)
         return kind, params
 
     # -- particles -------------------------------------------------------------------
@@ -197,6 +330,7 @@ class ModelBuilder:
             raise InputError("position", "expected a non-empty list of [x, y, z] points")
         if not np.isfinite(position).all():
             raise InputError("position", "expected finite numbers")
+        LENGTH.check(position, "position")
         count = len(position)
         if velocity is None:
             velocity = np.zeros_like(position)
@@ -205,12 +339,15 @@ class ModelBuilder:
             raise InputError("velocity", f"expected {count} velocities, one per position")
         if not np.isfinite(velocity).all():
             raise InputError("velocity", "expected finite numbers")
+        SPEED.check(velocity, "velocity")
         masses = self._per_particle(mass, "mass", count)
         if (masses <= 0).any() or not np.isfinite(masses).all():
             raise InputError("mass", f"must be greater than 0 (kg) for every particle, found {masses.min():g}")
+        MASS.check(masses, "mass", positive=True)
         radii = self._per_particle(radius, "radius", count)
         if (radii < 0).any() or not np.isfinite(radii).all():
             raise InputError("radius", f"must be at least 0 (m) for every particle, found {radii.min():g}")
+        LENGTH.check(radii, "radius")
         start = sum(len(p["position"]) for p in self._particles)
         self._particles.append(dict(position=position, velocity=velocity, mass=masses,
                                     radius=radii, material=self._material_index(material)))
@@ -262,14 +399,14 @@ class ModelBuilder:
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^2), found {found}")
-        position = _vector(position, "position")
+        position = _vector(position, "position", quantity=LENGTH)
         orientation = _orientation(orientation, "orientation")
-        velocity = _vector(velocity, "velocity")
-        stiffness = {key: _number(value, key, 0.0) for key, value in (
+        velocity = _vector(velocity, "velocity", quantity=SPEED)
+        stiffness = {key: _number(value, key, 0.0, quantity=STIFFNESS) for key, value in (
             ("stretch_stiffness", stretch_stiffness), ("shear_stiffness", shear_stiffness),
             ("bend_stiffness", bend_stiffness))}
-        damping = _number(damping, "damping", 0.0)
-        thickness = _number(thickness, "thickness", 0.0)
+        damping = _number(damping, "damping", 0.0, quantity=DAMPING)
+        thickness = _number(thickness, "thickness", 0.0, quantity=LENGTH)
         if (size is None) == (file is None):
             raise InputError("size", "a cloth needs exactly one of size and resolution (a grid) or file (a mesh)")
         if file is not None:
@@ -294,9 +431,10 @@ class ModelBuilder:
         else:
             share = np.full(count, 1.0 / count)
         if mass is not None:
-            total = _number(mass, "mass", 0.0, strict=True)
+            total = _number(mass, "mass", 0.0, strict=True, quantity=MASS)
         else:
-            total = _number(density, "density", 0.0, strict=True) * area.sum()
+            total = _number(density, "density", 0.0, strict=True, quantity=AREAL_DENSITY) * area.sum()
+            _derived_mass(total, "density")
         pinned_mask = _pinned_vertices(pinned, count, named)
         spring_groups = [(edges, stiffness["stretch_stiffness"]), (shear, stiffness["shear_stiffness"]),
                          (bends, stiffness["bend_stiffness"])]
@@ -317,8 +455,8 @@ class ModelBuilder:
         return range(start, start + count)
 
     # -- static obstacles ------------------------------------------------------------
-    def add_obstacle(self, shape, *, normal=None, offset=0.0, radius=None, half_extents=None, points=None,
-                     file=None, scale=1.0, position=(0, 0, 0), orientation=(1, 0, 0, 0), material=None) -> int:
+    def add_obstacle(self, shape, *, normal=None, offset=None, radius=None, half_extents=None, points=None,
+                     file=None, scale=None, position=None, orientation=None, material=None) -> int:
         """Add static geometry; returns its index.
 
         "plane": the half-space normal · x ≤ offset is solid (normal need not be unit).
@@ -326,24 +464,32 @@ class ModelBuilder:
         "convex": points or file (and scale), placed by position and orientation.
         "mesh": a triangle mesh file (OBJ/STL/PLY) times scale, placed by position and
         orientation; its triangles' winding makes their front side the outside.
+        Defaults: offset 0 [m], scale 1, position the origin, orientation none; a shape given an
+        argument it does not take (a plane's position) is an InputError.
         """
-        position = _vector(position, "position")
-        orientation = _orientation(orientation, "orientation")
+        shape = _shape(shape, OBSTACLE_SHAPE_ARGUMENTS, dict(
+            normal=normal, offset=offset, radius=radius, half_extents=half_extents, points=points, file=file,
+            scale=scale, position=position, orientation=orientation))
+        position = _vector((0, 0, 0) if position is None else position, "position", quantity=LENGTH)
+        orientation = _orientation((1, 0, 0, 0) if orientation is None else orientation, "orientation")
         if shape == "plane":
             if normal is None:
                 raise InputError("normal", "a plane needs a normal = [nx, ny, nz]")
-            n = _vector(normal, "normal")
+            n = _vector(normal, "normal", quantity=DIRECTION)
             length = np.linalg.norm(n)
             if length < 1e-12:
                 raise InputError("normal", "the normal must not be zero")
-            params = np.concatenate([n / length, [_number(offset, "offset") / length]])
+            offset = _number(0.0 if offset is None else offset, "offset", quantity=LENGTH)
+            params = np.concatenate([n / length, [offset / length]])
             kind = shapes.PLANE
         elif shape == "mesh":
             from .meshes import load_mesh
             if file is None:
                 raise InputError("file", "a mesh obstacle needs a file (OBJ, STL or PLY)")
-            scale = _number(scale, "scale", 0.0, strict=True)
-            mesh = load_mesh(file, scale, field="file").transformed(position, orientation)
+            scale = _number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
+            mesh = load_mesh(_file(file), scale, field="file")
+            LENGTH.check(mesh.vertices, "file")
+            mesh = mesh.transformed(position, orientation)
             kind, params = shapes.MESH, np.array([len(self._meshes), 0.0, 0.0, 0.0])
             self._meshes.append(mesh)
         elif shape == "convex":
@@ -449,7 +595,7 @@ def _cloth_grid(size, resolution):
     shear (H, 2), bend (G, 2) local vertex pairs, named vertex sets {name: indices})."""
     if resolution is None:
         raise InputError("resolution", "a grid cloth needs resolution = [nx, ny] (vertices along x and y)")
-    width, height = (_number(v, "size", 0.0, strict=True) for v in _vector(size, "size", 2))
+    width, height = _vector(size, "size", 2, quantity=LENGTH, positive=True)
     counts = _array(resolution, "resolution", "a list of 2 whole numbers")
     if counts.shape != (2,) or not np.all(np.isfinite(counts)) or not np.all(counts == np.round(counts)):
         raise InputError("resolution", f"expected a list of 2 whole numbers, found {resolution!r}")
@@ -485,8 +631,8 @@ def _cloth_from_mesh(file, scale):
     bend pairs (G, 2), no named sets). Coincident vertices merged, the first one kept in place."""
     import os
     from .meshes import MESH_FORMATS
-    scale = _number(scale, "scale", 0.0, strict=True)
-    path = os.fspath(file)
+    scale = _number(scale, "scale", 0.0, strict=True, quantity=FACTOR)
+    path = _file(file)
     if not os.path.isfile(path):
         raise InputError("file", f"expected an existing file, found no file at {path}")
     if os.path.splitext(path)[1].lower() not in MESH_FORMATS:
@@ -509,6 +655,7 @@ def _cloth_from_mesh(file, scale):
     renumber = np.empty(len(first), dtype=np.int64)
     renumber[order] = np.arange(len(first))
     vertices = vertices[first[order]] * scale
+    LENGTH.check(vertices, "file")
     faces = renumber[inverse.reshape(-1)][faces]
     faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
     if len(faces) == 0:

@@ -11,17 +11,20 @@
 import argparse
 import json
 import os
+import signal
 import sys
 import warnings
 
-from .errors import InputError, SimulationDiverged
+from .errors import InputError, SimulationDiverged, shorten
+from . import interrupts
+from .interrupts import EXIT_CODES, Interrupted, handled, tracking_written, written_paths
 
 DEFAULT_SCENE = "bouncing_ball"
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):           # one line, exit code 2, no usage dump
-        self.exit(2, f"error: {message} (see '{self.prog} --help')\n")
+    def error(self, message):           # one line, exit code 2, no usage dump; long values cut
+        self.exit(2, f"error: {shorten(message)} (see '{self.prog} --help')\n")
 
 
 def _parser():
@@ -42,6 +45,9 @@ def _parser():
     run.add_argument("--export", default="", metavar="FORMATS",
                      help="also export the run: a comma-separated list of usd, obj, ply")
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
+    run.add_argument("--allow-divergence", action="store_true",
+                     help="go on when a health check fails (energy from nowhere, a speed beyond the scene's "
+                          "scale, a contact deep enough to pass through), noting it in the summary")
 
     compare = commands.add_parser("compare", help="run a scene with several methods and write a side-by-side report")
     _scene_arguments(compare)
@@ -49,6 +55,7 @@ def _parser():
     compare.add_argument("--out", help="output folder (default: out/<scene>-compare/)")
     compare.add_argument("--no-video", action="store_true", help="skip the videos (faster)")
     compare.add_argument("--fps", type=int, default=30, help="frames per second of the videos (default 30)")
+    compare.add_argument("--allow-divergence", action="store_true", help="as for run: go on past failed health checks")
 
     render = commands.add_parser("render", help="draw a run's trajectory: video.mp4, video.gif, still.png")
     render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.npz)")
@@ -103,16 +110,27 @@ def _whole_number(value, option):
 
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True):
+         exports=(), plots=True, allow_divergence=False):
     from .record import write_outputs
     from .scene import load_scene
     from .simulation import simulate
 
+    if video:                                     # a bad --fps fails before the run, not after it
+        from .render import check_settings
+        check_settings(fps)
     scene = load_scene(scene_source, overrides)
     options = scene.method_options.get(scene.method, {})
-    result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
-                      record_every, progress=sys.stderr.isatty(), scene_name=scene.name)
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
+    try:
+        result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
+                          record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
+                          allow_divergence=allow_divergence)
+    except SimulationDiverged as error:      # the run up to then is kept, its summary marked
+        if error.run is not None:
+            error.run.summary["trajectory"] = os.path.join(out, "trajectory.npz")
+            write_outputs(out, error.run.arrays, error.run.summary)
+            error.written = out
+        raise
     result.summary["trajectory"] = os.path.join(out, "trajectory.npz")
     write_outputs(out, result.arrays, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
@@ -127,6 +145,11 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     """Plots, video and exports of a run written into ``out``; returns the paths written."""
     progress = sys.stderr.isatty()
     written = []
+    with interrupts.deferred():         # a signal stops them between files and frames, not inside a library
+        return _write_extras(arrays, out, title, plots, video, fps, exports, every, progress, written)
+
+
+def _write_extras(arrays, out, title, plots, video, fps, exports, every, progress, written):
     if plots:
         from .plots import write_plots
         written += list(write_plots(arrays, os.path.join(out, "plots"), title=title).values())
@@ -145,22 +168,29 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
 
 
 def _load_run(directory):
-    """The trajectory and summary of an earlier run's output folder."""
-    import numpy as np
+    """The trajectory and summary of an earlier run's output folder. The trajectory is read
+    without unpickling anything (contactlab.trajectory.load_npz; render and export check its
+    arrays); the summary is {} unless summary.json is a regular file holding a JSON object
+    that names the scene and the method."""
+    from .trajectory import load_npz
     path = os.path.join(directory, "trajectory.npz")
     if not os.path.isfile(path):
         raise InputError("OUT_DIR", f"found no trajectory.npz in {directory}; give the folder a "
                                     f"'contactlab run' wrote (its --out)")
-    arrays = dict(np.load(path))
+    arrays = load_npz(path, "OUT_DIR")
     if "body_surface_vertices" not in arrays:
         raise InputError("OUT_DIR", f"{path} was written by an older contactlab without the shapes' "
                                     f"surfaces; run the scene again")
-    try:
-        with open(os.path.join(directory, "summary.json")) as stream:
-            summary = json.load(stream)
-    except (OSError, ValueError):
-        summary = {}
-    return arrays, summary
+    summary_path = os.path.join(directory, "summary.json")
+    summary = {}
+    if os.path.isfile(summary_path):               # never open a FIFO or a device of that name
+        try:
+            with open(summary_path, encoding="utf-8") as stream:
+                summary = json.load(stream)
+        except (OSError, ValueError, RecursionError):
+            summary = {}
+    named = isinstance(summary, dict) and all(isinstance(summary.get(key), str) for key in ("scene", "method"))
+    return arrays, summary if named else {}
 
 
 def _compare(args):
@@ -169,7 +199,8 @@ def _compare(args):
     methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods else None
     _whole_number(args.fps, "--fps")
     comparison = compare(args.scene, methods, args.out, overrides=_scene_overrides(args),
-                         video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps)
+                         video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps,
+                         allow_divergence=args.allow_divergence)
     print(comparison.summary_text)
     print(f"Report: {comparison.report_html} (also {os.path.basename(comparison.report_md)} and "
           f"{os.path.basename(comparison.csv)} beside it)")
@@ -196,6 +227,17 @@ def _print_warning(message, category, filename, lineno, file=None, line=None):
 
 
 def main(argv=None) -> int:
+    """The command (``argv`` None: the program's own arguments, as the ``contactlab`` command and
+    ``python -m contactlab`` call it; then a signal after the work is done, while the
+    interpreter shuts down, is ignored: there is nothing left to stop)."""
+    with handled(restore=argv is not None), tracking_written():
+        code = _main(argv)
+        if argv is None:
+            interrupts.ignore_signals()
+        return code
+
+
+def _main(argv):
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
     try:
@@ -213,7 +255,7 @@ def main(argv=None) -> int:
             _whole_number(args.fps, "--fps")
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
-                 plots=not args.no_plots)
+                 plots=not args.no_plots, allow_divergence=args.allow_divergence)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "render":
@@ -231,18 +273,27 @@ def main(argv=None) -> int:
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
         source = getattr(args, "scene", None) or getattr(args, "directory", None) or DEFAULT_SCENE
-        print(f"error: {source}: {error}", file=sys.stderr)
+        print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
         return 2
     except SimulationDiverged as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+        written = getattr(error, "written", None)
+        kept = f" (the run up to then is in {written})" if written else ""
+        print(f"error: {error}{kept}", file=sys.stderr)
+        return 3
     except OSError as error:
         print(f"error: cannot write the outputs: {error.strerror or error} ({error.filename})", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("interrupted; no output written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as error:
+        signum = error.signum if isinstance(error, Interrupted) else signal.SIGINT
+        print(f"interrupted ({signal.Signals(signum).name}); {_written_text()}", file=sys.stderr)
+        return EXIT_CODES.get(signum, 130)
     return 0
+
+
+def _written_text():
+    """What an interrupted command had written completely (interrupts.written_paths), as a clause."""
+    paths = written_paths()
+    return "written before it: " + ", ".join(paths) if paths else "no output written"
 
 
 if __name__ == "__main__":

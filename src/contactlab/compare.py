@@ -105,16 +105,16 @@ def supports(method, scene) -> bool:
     return True
 
 
-def _run(method, scene, progress):
+def _run(method, scene, progress, allow_divergence=False):
     """Simulate ``scene`` (loaded for ``method``); a divergence becomes the outcome's failure.
-    Warnings (e.g. StabilityWarning) are kept for the report and passed on."""
+    Warnings are kept for the report and passed on."""
     outcome = _Outcome(method, scene)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             outcome.run = simulate(scene.model, method, scene.dt, scene.duration,
                                    scene.method_options.get(method, {}), scene.integrator,
-                                   progress=progress, scene_name=scene.name)
+                                   progress=progress, scene_name=scene.name, allow_divergence=allow_divergence)
         except SimulationDiverged as error:
             outcome.failure = str(error)
             outcome.failed_at = error.time
@@ -124,7 +124,7 @@ def _run(method, scene, progress):
     return outcome
 
 
-def _run_all(scene_source, names, named, overrides, progress):
+def _run_all(scene_source, names, named, overrides, progress, allow_divergence=False):
     """Load and run the scene with every method; (outcomes, skipped {method: why})."""
     scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
     outcomes, skipped, first_error = [], {}, None
@@ -135,7 +135,7 @@ def _run_all(scene_source, names, named, overrides, progress):
             skipped[name] = "not supported"
             continue
         try:
-            outcomes.append(_run(name, scene, progress))
+            outcomes.append(_run(name, scene, progress, allow_divergence))
         except InputError as error:
             if named:
                 raise
@@ -643,8 +643,10 @@ class _Created:
                 pass
 
 
-def _renderer():
-    from .render import render
+def _renderer(fps):
+    """contactlab.render.render, with ``fps`` checked by it (InputError) before any run."""
+    from .render import check_settings, render
+    check_settings(fps)
     return render
 
 
@@ -670,7 +672,7 @@ def _write_method(outcome, out, created, render, fps, progress):
 
 
 def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None, video=True,
-            progress=False, fps=30) -> Comparison:
+            progress=False, fps=30, allow_divergence=False) -> Comparison:
     """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
     the comparison into ``out`` (default ``out/<scene>-compare/``).
 
@@ -678,13 +680,14 @@ def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None
     contactlab.methods.AVAILABLE that supports the scene. overrides: "dotted.key=value"
     strings as the command line's --set; duration [s]: overrides simulation.duration;
     video: render each run (contactlab.render) at ``fps`` frames per second; progress: tqdm
-    bars on stderr. Raises InputError for a bad scene, an unknown method or bad options,
-    before anything is written. A method that blows up is reported, not raised.
+    bars on stderr; allow_divergence: each run's (see ``simulate``). Raises InputError for a bad
+    scene, an unknown method or bad options, before anything is written. A method that blows up
+    (a failed health check) is reported, not raised.
     """
     names, named = _method_names(methods)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
-    render = _renderer() if video else None          # a missing renderer fails before the runs
-    outcomes, skipped = _run_all(scene_source, names, named, overrides, progress)
+    render = _renderer(fps) if video else None       # a missing renderer or a bad fps fails before the runs
+    outcomes, skipped = _run_all(scene_source, names, named, overrides, progress, allow_divergence)
     scene = outcomes[0].scene
     out = os.fspath(out) if out is not None else os.path.join("out", f"{scene.name}-compare")
     _fill_rows(outcomes)

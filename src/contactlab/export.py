@@ -23,9 +23,10 @@ import re
 
 import numpy as np
 
-from . import surfaces
+from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, read_trajectory
+from .record import atomic_path, read_trajectory, undo_written
+from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -51,7 +52,7 @@ def frame_samples(count, every=1) -> np.ndarray:
     """Indices of the samples exported from a trajectory of ``count`` samples: every
     ``every``-th one, starting with the first and always including the last."""
     every = _check_every(every)
-    samples = np.arange(0, count, every)
+    samples = np.arange(0, count, min(every, max(count, 1)))    # beyond the count: the first and the last
     if count and samples[-1] != count - 1:
         samples = np.append(samples, count - 1)
     return samples
@@ -201,6 +202,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     file_format = file_format.lower().lstrip(".")
     every = _check_every(every)
     data = read_trajectory(arrays, _REQUIRED)
+    check_arrays(data)
     samples = frame_samples(len(data["time"]), every)
     parts = _Parts(data)
     writer = _ObjWriter(_frame_objects(parts, data, 0)) if file_format == "obj" else None
@@ -211,6 +213,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     written = []
     try:
         for j, sample in enumerate(samples):
+            interrupts.check()                    # Ctrl-C or SIGTERM: between frames
             path = os.path.join(directory, f"frame_{j:05d}.{file_format}")
             objects = _frame_objects(parts, data, sample)
             with atomic_path(path) as temporary:
@@ -222,11 +225,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
                     _write_ply(temporary, objects)
             written.append(path)
     except BaseException:
-        for path in written:
-            if os.path.exists(path):
-                os.unlink(path)
-        if created and not os.listdir(directory):
-            os.rmdir(directory)
+        undo_written(written, directory, created)
         raise
     pattern = re.compile(r"frame_(\d{5,})\." + file_format + "$")
     for name in os.listdir(directory):          # stale frames of a longer, earlier export
@@ -293,6 +292,7 @@ def write_usd(arrays, path, *, every=1) -> str:
         raise InputError("path", f"expected a file name ending in {', '.join(USD_SUFFIXES)}, found {os.fspath(path)!r}")
     every = _check_every(every)
     data = read_trajectory(arrays, _REQUIRED)
+    check_arrays(data)
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
     parts = _Parts(data)

@@ -18,8 +18,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from . import interrupts
 from .methods import AVAILABLE
-from .record import atomic_path
+from .record import atomic_path, undo_written
 
 PLOTS = ("energy", "penetration", "contacts", "residual")
 DPI = 100
@@ -154,16 +155,13 @@ def _save(figures, directory) -> dict:
     written = {}
     try:
         for name, figure in figures.items():
+            interrupts.check()                    # Ctrl-C or SIGTERM: between pictures
             path = os.path.join(directory, f"{name}.png")
             with atomic_path(path) as temporary:
                 figure.savefig(temporary, format="png", dpi=DPI)
             written[name] = path
     except BaseException:
-        for path in written.values():
-            if os.path.exists(path):
-                os.unlink(path)
-        if created and not os.listdir(directory):
-            os.rmdir(directory)
+        undo_written(written.values(), directory, created)
         raise
     return written
 

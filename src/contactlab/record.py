@@ -12,7 +12,7 @@ import tempfile
 
 import numpy as np
 
-from . import diagnostics, surfaces
+from . import diagnostics, interrupts, surfaces
 from .collision import collide
 from .errors import InputError
 
@@ -30,7 +30,8 @@ class Recorder:
         self.samples = {name: [] for name in SERIES}
 
     def sample(self, state, info=None):
-        """Record ``state``; penetration is measured on its own positions (collision pass)."""
+        """Record ``state``; penetration is measured on its own positions (collision pass), whose
+        Contacts it returns."""
         model = self.model
         contacts = collide(model, state)
         values = dict(
@@ -48,6 +49,11 @@ class Recorder:
         )
         for name, value in values.items():
             self.samples[name].append(np.array(value, copy=True))
+        return contacts
+
+    def latest(self) -> dict:
+        """The last sample, as the series' arrays of one row."""
+        return {name: np.array(values[-1:]) for name, values in self.samples.items()}
 
     def extend(self, samples):
         """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
@@ -86,18 +92,34 @@ def atomic_path(path):
     """
     directory = os.path.dirname(os.path.abspath(path))
     name = os.path.basename(path)
-    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=name)
-    os.close(handle)
-    umask = os.umask(0)                 # mkstemp makes the file private: give it the usual rights
-    os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
+    temporary = None
     try:
+        with interrupts.deferred():     # a signal waits until the temporary file is known, to be removed
+            handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=name)
+            os.close(handle)
+            umask = os.umask(0)         # mkstemp makes the file private: give it the usual rights
+            os.umask(umask)
+            os.chmod(temporary, 0o666 & ~umask)
         yield temporary
-        os.replace(temporary, path)
+        with interrupts.deferred():     # renamed and noted as written, or neither
+            os.replace(temporary, path)
+            interrupts.note_written(path)
     except BaseException:
-        if os.path.exists(temporary):
+        if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
         raise
+
+
+def undo_written(paths, directory, created):
+    """After a failed or interrupted write of several files: remove ``paths`` (those this call
+    completed), un-note them (``interrupts.note_written``), and remove ``directory`` if this
+    call ``created`` it and it is empty again, so nothing of the call remains."""
+    for path in paths:
+        if os.path.exists(path):
+            os.unlink(path)
+        interrupts.note_written(path, removed=True)
+    if created and os.path.isdir(directory) and not os.listdir(directory):
+        os.rmdir(directory)
 
 
 def read_trajectory(arrays, keys) -> dict:
@@ -133,8 +155,6 @@ def write_outputs(directory, arrays, summary):
                       lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
     except BaseException:
         if created:
-            for name in ("trajectory.npz", "summary.json"):
-                if os.path.exists(os.path.join(directory, name)):
-                    os.unlink(os.path.join(directory, name))
-            os.rmdir(directory)
+            undo_written([os.path.join(directory, name) for name in ("trajectory.npz", "summary.json")],
+                         directory, created)
         raise

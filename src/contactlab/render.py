@@ -35,14 +35,17 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from PIL import Image
 from tqdm import tqdm
 
-from . import surfaces
+from . import interrupts, surfaces
 from .errors import InputError
 from .record import atomic_path, read_trajectory
+from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
 GIF_MAX_FPS = 15            # frames per second of the GIF at most (its delay is a whole 1/100 s)
 GIF_MAX_HEIGHT = 300        # pixels; the GIF is the video scaled down to this height at most
 MIN_SIZE = 16               # pixels, smallest width or height accepted
+MAX_SIZE = 8192            # pixels, largest width or height accepted (8K video is 7680 x 4320)
+MAX_FPS = 240              # frames per second at most (the video plays in real time)
 DPI = 100
 AMBIENT = 0.4               # share of a colour kept by a face turned away from the light
 BACKGROUND = "white"
@@ -62,14 +65,14 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     """Write video.mp4, video.gif (whichever `formats` names) and still.png into `directory` (created if
     needed); return {"mp4": path, "gif": path, "still": path} for what was written.
 
-    fps [1/s] > 0: frames per second of the MP4 (the GIF uses at most ``GIF_MAX_FPS``);
-    width, height [px] ≥ 16 (the MP4's are rounded up to even numbers, the GIF is scaled down
+    fps [1/s] in (0, MAX_FPS]: frames per second of the MP4 (the GIF uses at most ``GIF_MAX_FPS``);
+    width, height [px] from MIN_SIZE to MAX_SIZE (the MP4's are rounded up to even numbers, the GIF is scaled down
     to at most ``GIF_MAX_HEIGHT`` px high); elevation, azimuth [degrees]: the camera, as in
     matplotlib's ``view_init``; title: a line above the picture (e.g. "box_pyramid — impulse");
     progress: a tqdm bar over the frames on stderr. The still is the last sample.
     All files appear together or not at all: on failure nothing is left behind.
     """
-    fps = _fps(fps)
+    fps = check_settings(fps, width, height, elevation, azimuth)[0]
     formats = _formats(formats)
     picture = _Picture(arrays, width, height, elevation, azimuth, title)
     paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
@@ -92,7 +95,7 @@ def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azi
     """Write one PNG picture of trajectory sample `sample` to `path`; return the path.
 
     sample: index into the trajectory's samples (negative counts from the end);
-    width, height [px] ≥ 16; elevation, azimuth [degrees]; title: a line above the picture.
+    width, height [px] from MIN_SIZE to MAX_SIZE; elevation, azimuth [degrees]; title: a line above the picture.
     """
     picture = _Picture(arrays, width, height, elevation, azimuth, title)
     count = len(picture.time)
@@ -124,6 +127,7 @@ def _write_videos(picture, paths, fps, progress):
     with _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4:
         for sample in tqdm(sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False,
                            disable=not progress):
+            interrupts.check()                    # Ctrl-C or SIGTERM: between frames
             image = picture.draw(sample)
             for _ in range(mp4_count[sample]):
                 mp4.append_data(_even(image))
@@ -134,6 +138,15 @@ def _write_videos(picture, paths, fps, progress):
 
 # -- arguments ----------------------------------------------------------------------------
 
+def check_settings(fps=30, width=640, height=480, elevation=25.0, azimuth=-60.0):
+    """The drawing settings checked, an InputError naming the first bad one: fps [1/s] in
+    (0, MAX_FPS], width and height [px] whole numbers from MIN_SIZE to MAX_SIZE, elevation and
+    azimuth finite [degrees]. Returns them as (fps, width, height, elevation, azimuth). A
+    caller that renders after a long run (``contactlab run --video``, compare) calls it first."""
+    return (_fps(fps), _size(width, "width"), _size(height, "height"), _angle(elevation, "elevation"),
+            _angle(azimuth, "azimuth"))
+
+
 def _number(value, name, check, expected):
     """``value`` as a float if it is a real number passing ``check``, else InputError."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
@@ -143,7 +156,8 @@ def _number(value, name, check, expected):
 
 
 def _fps(value):
-    return _number(value, "fps", lambda v: v > 0, "a number of frames per second > 0 (e.g. 30)")
+    return _number(value, "fps", lambda v: 0 < v <= MAX_FPS, f"a number of frames per second from above 0 to "
+                                                            f"{MAX_FPS} (e.g. 30)")
 
 
 def _angle(value, name):
@@ -151,8 +165,9 @@ def _angle(value, name):
 
 
 def _size(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < MIN_SIZE:
-        raise InputError(name, f"expected a whole number of pixels ≥ {MIN_SIZE} (e.g. 640), found {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not MIN_SIZE <= value <= MAX_SIZE:
+        raise InputError(name, f"expected a whole number of pixels from {MIN_SIZE} to {MAX_SIZE} (e.g. 640), "
+                               f"found {value!r}")
     return int(value)
 
 
@@ -381,9 +396,9 @@ class _Picture:
     """
 
     def __init__(self, arrays, width, height, elevation, azimuth, title):
-        self.width, self.height = _size(width, "width"), _size(height, "height")
-        elevation, azimuth = _angle(elevation, "elevation"), _angle(azimuth, "azimuth")
+        _, self.width, self.height, elevation, azimuth = check_settings(30, width, height, elevation, azimuth)
         self.arrays = arrays = read_trajectory(arrays, REQUIRED)
+        check_arrays(arrays)
         self.time = arrays["time"]
         self.light = _light_direction(elevation, azimuth)
 

@@ -14,16 +14,19 @@ from tqdm import tqdm
 
 from . import methods
 from .methods import velocity_loop
-from .builder import _number
+from .builder import TIME, WHOLE_NUMBERS, _number
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
+from . import interrupts
 from .errors import InputError, SimulationDiverged
+from .health import HARD_SPEED, Health
+from .model import Model
 from .record import Recorder
+from .state import State
 from .threads import ThreadChooser
 
 
-MAX_SPEED = 1e6   # m/s: a point of a body or a particle moving faster has blown up (no contact scene gets near)
 
 
 @dataclass
@@ -33,37 +36,110 @@ class Run:
     summary: dict        # the JSON summary (see docs/cli.md)
 
 
+MAX_STEPS = 10 ** 9     # steps of one run at most (duration / dt); record_every at most too
+
+
+def _checked_arguments(model, method, dt, duration, options, integrator, record_every, state, scene_name):
+    """simulate()'s arguments checked, an InputError naming the first bad one; returns (the
+    method's module, its Options, dt [s], duration [s]). dt and duration are times of
+    contactlab.builder.TIME, dt no longer than the duration and at most MAX_STEPS steps; the
+    model has something to move; a given state has this model's shapes."""
+    if not isinstance(model, Model):
+        raise InputError("model", f"expected a contactlab Model (ModelBuilder(...).finalize() or "
+                                  f"load_scene(...).model), found {_kind(model)}")
+    if model.body_count + model.particle_count == 0:
+        raise InputError("model", "has no bodies and no particles (nor cloth): there is nothing to simulate; "
+                                  "add a body, particles or a cloth")
+    dt = _number(dt, "dt", 0.0, strict=True, quantity=TIME)
+    duration = _number(duration, "duration", 0.0, strict=True, quantity=TIME)
+    if dt > duration:
+        raise InputError("", f"dt = {dt:g} s is longer than duration = {duration:g} s, so the run would make one "
+                             f"whole step of {dt:g} s; give a dt no longer than the duration")
+    if duration / dt > MAX_STEPS + 0.5:
+        raise InputError("dt", f"duration / dt = {duration / dt:.3g} steps, more than the {MAX_STEPS:.0e} a run "
+                               f"may make")
+    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) \
+            or not 1 <= record_every <= MAX_STEPS:
+        raise InputError("record_every", f"expected a whole number from 1 to {MAX_STEPS:.0e}, found {record_every!r}")
+    if not isinstance(integrator, str) or integrator not in INTEGRATORS:
+        raise InputError("integrator", f"expected one of {', '.join(INTEGRATORS)}, found {integrator!r}")
+    if not isinstance(method, str):
+        raise InputError("method", f"expected a method name ({', '.join(methods.AVAILABLE)}), found {_kind(method)}")
+    module = methods.get(method)
+    if options is None or isinstance(options, dict):
+        strange = [key for key in options or {} if not isinstance(key, str)]
+        if strange:
+            raise InputError("options", f"expected option names (strings) as keys, found {strange[0]!r}")
+        options = methods.make_options(module, options or {}, f"method.{method}")
+    elif not isinstance(options, module.Options):
+        raise InputError("options", f"expected None, a dict or a contactlab.methods.{method}.Options for the "
+                                    f"{method} method, found {_kind(options)}")
+    for name, value in asdict(options).items():          # the compiled kernels take 64-bit whole numbers
+        if isinstance(value, int) and not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]:
+            raise InputError(f"method.{method}.{name}", f"expected a whole number of at most 64 bits, found "
+                                                        f"one of {len(str(abs(value)))} digits")
+    if state is not None:
+        _check_state(model, state)
+    if not isinstance(scene_name, str):
+        raise InputError("scene_name", f"expected a string, found {_kind(scene_name)}")
+    return module, options, dt, duration
+
+
+def _check_state(model, state):
+    """InputError("state", ...) unless ``state`` is a State of ``model``'s shapes, finite."""
+    if not isinstance(state, State):
+        raise InputError("state", f"expected a contactlab State (model.state(), or the state of a run), "
+                                  f"found {_kind(state)}")
+    B, P = model.body_count, model.particle_count
+    shapes = {"body_position": (B, 3), "body_orientation": (B, 4), "body_velocity": (B, 3),
+              "body_angular_velocity": (B, 3), "particle_position": (P, 3), "particle_velocity": (P, 3)}
+    for name, shape in shapes.items():
+        value = getattr(state, name)
+        found = getattr(value, "shape", None)
+        if not isinstance(value, np.ndarray) or value.shape != shape or value.dtype != np.float64:
+            raise InputError("state", f"its {name} is {_kind(value)} of shape {found}, where this model's "
+                                      f"is an array of floats of shape {shape}: a state of another model?")
+    if not state.is_finite() or not isinstance(state.time, (int, float, np.number)) \
+            or not np.isfinite(state.time):
+        raise InputError("state", "has a time, position or velocity that is not a finite number")
+
+
+def _kind(value):
+    """What ``value`` is, for a message: its type's qualified name."""
+    kind = type(value)
+    name = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__qualname__}"
+    return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
+
+
 def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
              record_every=1, state=None, progress=False, scene_name="custom", threads=None,
-             compiled_loop=None) -> Run:
+             compiled_loop=None, allow_divergence=False) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options (or a dict of
-    them); dt [s] > 0; record_every: sample every K steps (the first and last states are
+    them); dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps); the model must hold
+    a body or particle; record_every: sample every K steps (the first and last states are
     always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
     all cores, or one while that steps faster on a busy machine) or a whole number — results are
     bit for bit the same on any count; compiled_loop: for impulse and constraints on the scenes
     the compiled stepping loop serves, None (the default) takes it when it is compiled or cached
     already or the run is long enough to repay compiling it, True always, False never
     (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit
-    either way. Raises InputError for bad arguments, SimulationDiverged
-    if the state stops being finite.
+    either way; allow_divergence: keep going when a health check fails (:mod:`contactlab.health`),
+    recording it in the summary, instead of stopping. Raises InputError for bad arguments, and
+    SimulationDiverged (with the run up to then in its ``run``) when a health check fails: the
+    state stops being finite, a speed beyond the scene's scale, an energy gain nothing explains,
+    a contact deep enough to pass through. Ctrl-C (or SIGTERM) stops the run between steps with
+    :class:`contactlab.interrupts.Interrupted`, a KeyboardInterrupt.
     """
-    dt = _number(dt, "dt", 0.0, strict=True)
-    duration = _number(duration, "duration", 0.0, strict=True)
-    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
-        raise InputError("record_every", f"expected a whole number ≥ 1, found {record_every!r}")
-    if integrator not in INTEGRATORS:
-        raise InputError("integrator", f"expected one of {', '.join(INTEGRATORS)}, found {integrator!r}")
-    module = methods.get(method)
-    if options is None or isinstance(options, dict):
-        options = methods.make_options(module, options or {}, f"method.{method}")
+    module, options, dt, duration = _checked_arguments(model, method, dt, duration, options, integrator,
+                                                       record_every, state, scene_name)
     check_supported(model)
-    if hasattr(module, "prepare"):
-        options = module.prepare(model, dt, options, integrator)
     chooser = ThreadChooser(threads)
     state = model.state() if state is None else state.copy()
     steps = max(1, int(round(duration / dt)))
+    advice = getattr(module, "divergence_advice", None)
+    health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
     recorder = Recorder(model, record_every)
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     notice = FirstCompile()                        # one line on stderr at the first compilation
@@ -77,20 +153,27 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         else:
             recorder.extend(stepper.sample())      # the loop's own recording, which the steps use too
     setup_compile_seconds = _seconds(compiling)
+    health.check_samples(recorder.latest(), 0)     # the energy to hold the run to
+    health.start(state)                            # and how deep it starts
     tally = Tally()
+    stopped = None
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
-                 desc=f"{scene_name} ({method})") as bar, chooser:
-        if stepper is None:
-            state = _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser,
-                                    compiling, tally, bar)
-        else:
-            state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, dt)
+                 desc=f"{scene_name} ({method})") as bar, chooser, interrupts.deferred():
+        try:
+            if stepper is None:
+                state = _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser,
+                                        compiling, tally, bar, health)
+            else:
+                state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health)
+        except _Stopped as stop:
+            stopped, state = stop.violation, stop.state
     wall = time.perf_counter() - run_started
     first_step_seconds, stepping_seconds = tally.first_step_seconds, tally.stepping_seconds
     ordinary_step = stepping_seconds / (steps - 1) if steps > 1 else 0.0
     arrays = recorder.arrays()
     energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
+    finite = np.isfinite(energy)
     summary = {
         "scene": scene_name, "method": method, "integrator": integrator, "dt": dt, "steps": steps,
         "options": asdict(options),
@@ -105,14 +188,30 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
         "bodies": model.body_count, "particles": model.particle_count, "max_contacts": tally.max_contacts,
-        "max_penetration": float(arrays["max_penetration"].max()),
+        "max_penetration": float(np.nanmax(arrays["max_penetration"], initial=0.0)),
         "final_penetration": float(arrays["max_penetration"][-1]),
-        "energy": {"initial": float(energy[0]), "final": float(energy[-1]), "max": float(energy.max())},
+        "energy": {"initial": float(energy[0]), "final": float(energy[-1]),
+                   "max": float(energy[finite].max(initial=energy[0]))},
         "solver": {"max_iterations": int(arrays["solver_iterations"].max()),
                    "mean_iterations": tally.sweeps_made / steps,
                    "max_residual": float(arrays["solver_residual"].max())},
+        "health": health.summary(),
+        "diverged": None,
     }
+    if stopped is not None:
+        message = health.message(stopped)
+        summary["diverged"] = {"check": stopped.check, "time": stopped.time, "message": message,
+                               "steps_made": int(round((state.time - arrays["time"][0]) / dt))}
+        raise SimulationDiverged(message, time=stopped.time, run=Run(state, arrays, summary))
     return Run(state, arrays, summary)
+
+
+class _Stopped(Exception):
+    """A health check stopped the run: ``violation`` (health.Violation), at ``state``."""
+
+    def __init__(self, violation, state):
+        super().__init__(violation.what)
+        self.violation, self.state = violation, state
 
 
 @dataclass
@@ -137,15 +236,13 @@ class Tally:
         return compiled == 0.0
 
 
-def _diverged(state_time, dt):
-    return SimulationDiverged(f"the simulation blew up at t = {state_time:.4g} s (velocities passed {MAX_SPEED:g} "
-                              f"m/s or became infinite); use a smaller dt than {dt:g} s", time=state_time)
-
-
-def _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar):
-    """Step with the method's ``step``, one Python call a step (cloth, meshes, penalty, projection…)."""
+def _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar,
+                    health):
+    """Step with the method's ``step``, one Python call a step (cloth, meshes, penalty, projection…),
+    checking the run's health after every step and at every sample."""
     record_every = recorder.record_every
     for step_index in range(1, steps + 1):
+        interrupts.check()
         compiled_before = _seconds(compiling)
         chooser.before_step()
         started = time.perf_counter()
@@ -156,12 +253,16 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
         tally.max_contacts = max(tally.max_contacts, info.contacts.count)
         tally.sweeps_made += info.solver_iterations
         tally.implicit_spring_steps += info.implicit_springs
-        if not state.is_finite() or state.max_speed() > MAX_SPEED:
-            raise _diverged(state.time, dt)
-        if step_index % record_every == 0 or step_index == steps:
+        violation = health.check_state(state)
+        if violation is None and (step_index % record_every == 0 or step_index == steps):
             started = time.perf_counter()
-            recorder.sample(state, info)
+            contacts = recorder.sample(state, info)
             tally.recording_seconds += time.perf_counter() - started
+            violation = (health.check_samples(recorder.latest(), 0) or health.check_contacts(state, contacts))
+        if violation is not None:
+            if step_index % record_every and step_index != steps:
+                recorder.sample(state, info)       # the state that went wrong ends the trajectory
+            raise _Stopped(violation, state)
         bar.update(1)
     return state
 
@@ -169,22 +270,33 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
 CHUNK_SECONDS = 0.1     # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 
 
-def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, dt):
+def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health):
     """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
-    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside."""
+    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside; the
+    loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
+    from .collision import collide
+    speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
     step_index, chunk = 1, 1
     while step_index <= steps:
+        interrupts.check()
         count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps)
         compiled_before = _seconds(compiling)
         chooser.before_step(count)
         started = time.perf_counter()
-        made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, MAX_SPEED)
+        made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, speed_limit)
         elapsed = time.perf_counter() - started
         if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before):
             chooser.after_steps(made, elapsed)
         recorder.extend(samples)
-        if diverged:
-            raise _diverged(stepper.time, dt)
+        state = stepper.state()
+        violation = health.check_state(state) if diverged else None
+        violation = (violation or health.check_samples(samples, 0)
+                     or health.check_contacts(state, collide(stepper.model, state)))
+        if violation is not None:
+            tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+            if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
+                recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
+            raise _Stopped(violation, state)
         if step_index > 1:          # the next chunk: about CHUNK_SECONDS of steps at this pace
             chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         step_index += made

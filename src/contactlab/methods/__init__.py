@@ -6,9 +6,9 @@ A method module provides:
   every field with a default and a docstring line;
 * ``step(model, state, dt, options, integrator) -> (State, StepInfo)``: one time step that
   follows the method's loop (L1, L2 or L3) in named stages;
-* optionally ``prepare(model, dt, options, integrator) -> Options``: called once before the
-  first step to resolve settings that depend on the scene (e.g. an "auto" stiffness) and to
-  warn about ones that cannot work (``StabilityWarning``).
+* optionally ``divergence_advice(model, dt, options, integrator) -> str``: the likely fix, one
+  clause, that ``contactlab.health`` gives when a run of this method goes wrong (penalty: the
+  time step or stiffness an explicit step could follow).
 """
 
 from dataclasses import dataclass, fields

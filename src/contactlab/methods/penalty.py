@@ -25,7 +25,6 @@ the point, h v_t, so s measures how far the point slid since it stuck (``anchor_
 ``State.carried``, keyed by ``anchor_ids``).
 """
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +37,7 @@ from ..collision import collide, pass_through_depths, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
-from ..errors import InputError, StabilityWarning
+from ..errors import InputError
 from ..state import State
 from . import CollisionOptions, StepInfo, check_choices, check_counts
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
@@ -163,31 +162,27 @@ def lightest_contact_mass(model) -> float:
     return float(min(masses))
 
 
-def prepare(model, dt, options, integrator):
-    """Check a given stiffness against the time step: a StabilityWarning when the explicit step
-    cannot follow it for the lightest contact mass and ``implicit_springs = "never"`` keeps it
-    explicit ("auto" steps such springs by backward Euler instead, and says so in the summary).
-    "auto" stiffness is chosen contact by contact, each step (``contact_springs``). Returns the
-    Options."""
+def divergence_advice(model, dt, options, integrator):
+    """The likely fix, one clause, when a penalty run goes wrong (``contactlab.health``): for a
+    given stiffness that the explicit step cannot follow on the lightest contact mass (with
+    ``implicit_springs = "never"``), the time step or stiffness that would do and the switches
+    that step such springs implicitly; else a smaller dt."""
     light = lightest_contact_mass(model)
-    if integrator == "backward_euler" or options.implicit_springs != "never" or not np.isfinite(light):
-        return options
-    ratios = ([options.damping_ratio] if options.damping_ratio != "restitution"
-              else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist())
-    for k in (options.stiffness, options.friction_stiffness):
-        if k == "auto":
-            continue
-        worst = max(amplification(integrator, dt, k, light, 2.0 * z * np.sqrt(k * light)) for z in ratios)
-        if worst > 1.0 + 1e-12:
-            limit = 2.0 * np.sqrt(light / k)
-            advice = (f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
-                      if integrator == "symplectic_euler" else "use damping, ")
-            warnings.warn(StabilityWarning(
-                f"penalty stiffness {k:.4g} N/m with dt = {dt:g} s is unstable under {integrator} for "
-                f"a contact moving {light:.3g} kg (each step multiplies its oscillation by {worst:.3g}); "
-                f"{advice}implicit_springs = \"auto\" or integrator = \"backward_euler\""), stacklevel=2)
-            break
-    return options
+    if integrator != "backward_euler" and options.implicit_springs == "never" and np.isfinite(light):
+        ratios = ([options.damping_ratio] if options.damping_ratio != "restitution"
+                  else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist())
+        for k in (options.stiffness, options.friction_stiffness):
+            if k == "auto":
+                continue
+            worst = max(amplification(integrator, dt, k, light, 2.0 * z * np.sqrt(k * light)) for z in ratios)
+            if worst > 1.0 + 1e-12:
+                limit = 2.0 * np.sqrt(light / k)
+                instead = (f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
+                           if integrator == "symplectic_euler" else "use damping, ")
+                return (f"dt = {dt:g} s is too long for penalty stiffness {k:.4g} N/m under {integrator} (a "
+                        f"contact moving {light:.3g} kg grows {worst:.3g}× a step): {instead}implicit_springs = "
+                        f"\"auto\" or integrator = \"backward_euler\"")
+    return f"use a smaller dt than {dt:g} s, or integrator = \"backward_euler\""
 
 
 # ---- the load each contact carries ----------------------------------------------------------
@@ -326,21 +321,29 @@ def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None)
                           contacts.friction, elongation, inverse_effective)
 
 
-def explicit_unstable(springs, dt, integrator):
-    """Whether any contact spring, on its own effective mass, grows under the explicit
-    ``integrator`` at dt [s] (``amplification`` > 1: symplectic Euler needs h ω < 2 undamped,
-    less with damping)."""
-    moving = (springs.inverse_effective_mass[:, 0] > 0.0) & (springs.stiffness > 0.0)
-    for k, c, inverse in ((springs.stiffness, springs.damping, springs.inverse_effective_mass[:, 0]),
-                          (springs.friction_stiffness, springs.friction_damping,
-                           springs.inverse_effective_mass[:, 1])):
-        if not moving.any():
-            return False
-        mass = 1.0 / inverse[moving]
-        worst = np.argmax(k[moving] * inverse[moving])            # the stiffest spring on the lightest mass
-        if amplification(integrator, dt, k[moving][worst], mass[worst], c[moving][worst]) > 1.0 + 1e-12:
-            return True
-    return False
+def explicit_unstable(springs, contacts, dt, integrator, model):
+    """Whether the explicit ``integrator`` at dt [s] would amplify the contact springs' motion
+    (``amplification`` > 1). Each body or particle rings at most at ω² = Σ k J M⁻¹ Jᵀ over the
+    rows of the springs that hold it (a Gershgorin bound: a box on four corners, each with a
+    normal and two anchor springs, rings √12 times faster than one spring alone), damped at the
+    largest damping ratio among the contacts."""
+    if contacts.count == 0:
+        return False
+    inverse = springs.inverse_effective_mass
+    rows = springs.stiffness * inverse[:, 0] + springs.friction_stiffness * (inverse[:, 1] + inverse[:, 2])
+    body_count = model.body_count
+    entities = np.zeros(body_count + model.particle_count)
+    for body, particle in ((contacts.body_a, contacts.particles_a[:, 0]), (contacts.body_b, contacts.particles_b[:, 0])):
+        entity = np.where(body >= 0, body, np.where(particle >= 0, body_count + particle, -1))
+        np.add.at(entities, entity[entity >= 0], rows[entity >= 0])
+    omega_squared = float(entities.max(initial=0.0))
+    if omega_squared <= 0.0:
+        return False
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zeta = np.where(springs.stiffness > 0.0,
+                        springs.damping * np.sqrt(inverse[:, 0]) / (2.0 * np.sqrt(springs.stiffness)), 0.0)
+    omega = np.sqrt(omega_squared)
+    return amplification(integrator, dt, omega_squared, 1.0, 2.0 * float(np.nanmax(zeta)) * omega) > 1.0 + 1e-12
 
 
 def spring_forces(springs, depth, velocity):
@@ -507,7 +510,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     passes, residual = 0, 0.0
     implicit = integrator == "backward_euler" or (contacts.count > 0 and (
         options.implicit_springs == "always"
-        or (options.implicit_springs == "auto" and explicit_unstable(springs, h, integrator))))
+        or (options.implicit_springs == "auto"
+            and explicit_unstable(springs, contacts, h, integrator, model))))
     if implicit:
         A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
         v_new, forces, elongation, passes, residual = implicit_velocities(

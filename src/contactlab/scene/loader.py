@@ -11,6 +11,7 @@ selected method is available → build the Model. Every mistake is an InputError
 
 import difflib
 import os
+import stat
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -24,6 +25,7 @@ from .schema import show, validate
 from .toml import parse_toml
 
 BUILTIN_PACKAGE = __package__          # scene files live in <this package>/builtin/*.toml
+MAX_SCENE_BYTES = 16 * 2 ** 20         # bytes: a larger scene file is refused unread (built-in ones are under 2 kB)
 
 
 @dataclass(frozen=True)
@@ -63,15 +65,37 @@ def builtin_scenes():
     return result
 
 
+def _not_a_file(mode):
+    """What a non-regular file is, in words (from its ``os.stat`` mode)."""
+    kinds = ((stat.S_ISDIR, "the directory"), (stat.S_ISCHR, "the character device"),
+             (stat.S_ISBLK, "the block device"), (stat.S_ISFIFO, "the FIFO (named pipe)"),
+             (stat.S_ISSOCK, "the socket"))
+    return next((words for test, words in kinds if test(mode)), "the special file")
+
+
 def _read_file(path):
+    """The UTF-8 text of the scene file ``path``: a regular file of at most MAX_SCENE_BYTES,
+    looked at with ``os.stat`` before it is opened (a FIFO or /dev/zero is never read)."""
+    shown = repr(str(path))
     try:
-        data = Path(path).read_bytes()
+        status = os.stat(path)
     except FileNotFoundError:
-        raise InputError("", f"no such file {repr(str(path))}") from None
-    except IsADirectoryError:
-        raise InputError("", f"expected a .toml file, found the directory {repr(str(path))}") from None
+        raise InputError("", f"no such file {shown}") from None
+    except (OSError, ValueError) as error:           # ValueError: a NUL character in the path
+        raise InputError("", f"cannot read {shown} ({getattr(error, 'strerror', None) or error})") from None
+    if not stat.S_ISREG(status.st_mode):
+        raise InputError("", f"expected a .toml file, found {_not_a_file(status.st_mode)} {shown}")
+    if status.st_size > MAX_SCENE_BYTES:
+        raise InputError("", f"the scene file {shown} is {status.st_size / 2 ** 20:.1f} MiB, more than the "
+                             f"{MAX_SCENE_BYTES // 2 ** 20} MiB a scene file may be")
+    try:
+        with open(path, "rb") as stream:
+            data = stream.read(MAX_SCENE_BYTES + 1)
     except OSError as error:
-        raise InputError("", f"cannot read {repr(str(path))} ({error.strerror or error})") from None
+        raise InputError("", f"cannot read {shown} ({error.strerror or error})") from None
+    if len(data) > MAX_SCENE_BYTES:                  # it grew since the stat
+        raise InputError("", f"the scene file {shown} is more than the {MAX_SCENE_BYTES // 2 ** 20} MiB "
+                             f"a scene file may be")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as error:

@@ -10,15 +10,15 @@ the end of a list is an error.
 
 from ..errors import InputError
 from .schema import path_join, show
-from .toml import TOMLDecodeError, tomllib
+from .toml import TOMLDecodeError, loads
 
 FIELD = "--set"
 
 
 def parse_value(text):
-    """A TOML value, or the text itself where it is not one."""
+    """A TOML value, or the text itself where it is not one (InputError for one nested too deep)."""
     try:
-        return tomllib.loads("value = " + text)["value"]
+        return loads("value = " + text, FIELD)["value"]
     except TOMLDecodeError:
         return text
 

@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 from .. import methods
+from ..builder import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, check_shape_arguments
 from ..dynamics.integrators import INTEGRATORS
 from ..errors import InputError
 
@@ -168,15 +169,17 @@ class Pinned:
 
 
 class Table:
-    """A table with the keys of ``keys`` (a dict name -> Key)."""
+    """A table with the keys of ``keys`` (a dict name -> Key); ``shapes``: for a table whose
+    ``shape`` key picks a shape, the builder's table of which shape takes which key
+    (contactlab.builder.BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
 
-    def __init__(self, keys, shape_key=None):
-        self.keys, self.shape_key = keys, shape_key
+    def __init__(self, keys, shapes=None):
+        self.keys, self.shapes = keys, shapes
 
     def check(self, value, field, unit=""):
         if not isinstance(value, dict):
             raise InputError(field, f"expected a table, found {show(value)}")
-        return validate_table(value, self.keys, field, self.shape_key)
+        return validate_table(value, self.keys, field, self.shapes)
 
     def describe(self):
         return "table"
@@ -201,8 +204,8 @@ class GridArray(Table):
 class TableList:
     """An array of tables (``[[name]]`` in TOML), each checked as ``Table``."""
 
-    def __init__(self, keys, shape_key=None):
-        self.table = Table(keys, shape_key)
+    def __init__(self, keys, shapes=None):
+        self.table = Table(keys, shapes)
 
     def check(self, value, field, unit=""):
         if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
@@ -245,6 +248,12 @@ class Key:
     shapes: tuple = ()            # non-empty: only these shapes take the key
 
 
+def taking(name, table):
+    """The shapes of ``table`` (contactlab.builder's BODY_ or OBSTACLE_SHAPE_ARGUMENTS) that
+    take the argument ``name``: the builder says which shape takes which key, once."""
+    return tuple(shape for shape, names in table.items() if name in names)
+
+
 def _did_you_mean(word, known):
     close = difflib.get_close_matches(str(word), list(known), n=1)
     if close:
@@ -276,12 +285,12 @@ BODY = {
     "name": Key(Text()),
     "shape": Key(Choice(("sphere", "box", "capsule", "convex"), PLANNED_BODY_SHAPES, what="body shape"),
                  required=True),
-    "radius": Key(Number(), unit="m", shapes=("sphere", "capsule")),
-    "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
-    "half_length": Key(Number(), unit="m", shapes=("capsule",)),
-    "points": Key(Points(), unit="m", shapes=("convex",)),
-    "file": Key(Text(), shapes=("convex",)),
-    "scale": Key(Number(positive=True), 1.0, shapes=("convex",)),
+    "radius": Key(Number(), unit="m", shapes=taking("radius", BODY_SHAPE_ARGUMENTS)),
+    "half_extents": Key(Vector(3), unit="m", shapes=taking("half_extents", BODY_SHAPE_ARGUMENTS)),
+    "half_length": Key(Number(), unit="m", shapes=taking("half_length", BODY_SHAPE_ARGUMENTS)),
+    "points": Key(Points(), unit="m", shapes=taking("points", BODY_SHAPE_ARGUMENTS)),
+    "file": Key(Text(), shapes=taking("file", BODY_SHAPE_ARGUMENTS)),
+    "scale": Key(Number(positive=True), 1.0, shapes=taking("scale", BODY_SHAPE_ARGUMENTS)),
     "mass": Key(Number(), unit="kg"),
     "density": Key(Number(), unit="kg/m^3"),
     "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
@@ -324,15 +333,16 @@ CLOTH = {
 OBSTACLE = {
     "shape": Key(Choice(("plane", "sphere", "box", "convex", "mesh"), PLANNED_OBSTACLE_SHAPES,
                         what="obstacle shape"), required=True),
-    "normal": Key(Vector(3), shapes=("plane",)),
-    "offset": Key(Number(), 0.0, "m", shapes=("plane",)),
-    "radius": Key(Number(), unit="m", shapes=("sphere",)),
-    "half_extents": Key(Vector(3), unit="m", shapes=("box",)),
-    "points": Key(Points(), unit="m", shapes=("convex",)),
-    "file": Key(Text(), shapes=("convex", "mesh")),
-    "scale": Key(Number(positive=True), 1.0, shapes=("convex", "mesh")),
-    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=("sphere", "box", "convex", "mesh")),
-    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z", shapes=("box", "convex", "mesh")),
+    "normal": Key(Vector(3), shapes=taking("normal", OBSTACLE_SHAPE_ARGUMENTS)),
+    "offset": Key(Number(), 0.0, "m", shapes=taking("offset", OBSTACLE_SHAPE_ARGUMENTS)),
+    "radius": Key(Number(), unit="m", shapes=taking("radius", OBSTACLE_SHAPE_ARGUMENTS)),
+    "half_extents": Key(Vector(3), unit="m", shapes=taking("half_extents", OBSTACLE_SHAPE_ARGUMENTS)),
+    "points": Key(Points(), unit="m", shapes=taking("points", OBSTACLE_SHAPE_ARGUMENTS)),
+    "file": Key(Text(), shapes=taking("file", OBSTACLE_SHAPE_ARGUMENTS)),
+    "scale": Key(Number(positive=True), 1.0, shapes=taking("scale", OBSTACLE_SHAPE_ARGUMENTS)),
+    "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=taking("position", OBSTACLE_SHAPE_ARGUMENTS)),
+    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z",
+                       shapes=taking("orientation", OBSTACLE_SHAPE_ARGUMENTS)),
     "material": Key(Text()),
 }
 
@@ -341,18 +351,20 @@ TOP = {
     "simulation": Key(Table(SIMULATION), {}),
     "method": Key(MethodTables(), {}),
     "materials": Key(TableList(MATERIAL), []),
-    "bodies": Key(TableList(BODY, shape_key="shape"), []),
+    "bodies": Key(TableList(BODY, BODY_SHAPE_ARGUMENTS), []),
     "particles": Key(TableList(PARTICLES), []),
     "cloth": Key(TableList(CLOTH), []),
-    "obstacles": Key(TableList(OBSTACLE, shape_key="shape"), []),
+    "obstacles": Key(TableList(OBSTACLE, OBSTACLE_SHAPE_ARGUMENTS), []),
 }
 
 TABLES = {"top level": TOP, "[simulation]": SIMULATION, "[[materials]]": MATERIAL,
           "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[cloth]]": CLOTH, "[[obstacles]]": OBSTACLE, "array": ARRAY}
 
 
-def validate_table(table, keys, path, shape_key=None):
-    """Check ``table`` against ``keys``; a normalized dict with every key (None where absent)."""
+def validate_table(table, keys, path, shapes=None):
+    """Check ``table`` against ``keys``; a normalized dict with every key (None where absent).
+    ``shapes`` (see Table): the table's ``shape`` key picks which shape-specific keys it takes."""
+    shape_key = "shape" if shapes is not None else None
     for name in table:
         if name not in keys:
             raise InputError(path_join(path, name), f"unknown key{_did_you_mean(name, keys)}")
@@ -374,8 +386,10 @@ def validate_table(table, keys, path, shape_key=None):
             result[name] = list(default) if isinstance(default, list) else default
             continue
         if key.shapes and shape not in key.shapes:
-            takes = ", ".join(k for k, v in keys.items() if shape in v.shapes)
-            raise InputError(path_join(path, name), f"a {shape} takes no {name} (a {shape} takes: {takes})")
+            try:
+                check_shape_arguments(shape, shapes, [name])
+            except InputError as error:
+                raise InputError(path_join(path, name), error.message) from None
         result[name] = key.kind.check(table[name], path_join(path, name), key.unit)
     return result
 

@@ -1,0 +1,200 @@
+"""The health of a run: what ``simulate`` checks about its own physics as it goes.
+
+A run that goes wrong numerically seldom fails by itself: a ball thrown 184 km up by a spring
+too stiff for the step, boxes 24 m under the floor, a pile whose energy grew 7,300-fold all
+end with finite numbers. So every run checks, at every recorded sample and after every chunk
+of steps of the compiled loop:
+
+- **finite**: every position, orientation and velocity is a finite number;
+- **speed**: no body centre or particle moves faster than ``SPEED_FACTOR`` times the scene's
+  speed scale — its fastest initial speed, or the fall speed √(2 g L) over the scene's size L,
+  whichever is larger (at least 1 m/s);
+- **energy**: the total energy (kinetic + gravitational + elastic) never exceeds its start by
+  more than ``ENERGY_GAIN`` times the scene's energy scale, its initial kinetic energy plus
+  Σ m g L (nothing outside the scene does work on it: gravity is in the potential). Not on
+  scenes with cloth: the recorded total leaves out the cloth springs' own energy;
+- **depth**: no contact is deeper than ``DEPTH_FRACTION`` of its pass-through depth (the two
+  sides' half thicknesses, ``collision.pass_through_depths``: deeper, one side has reached the
+  other's middle), and no body or particle centre lies behind a static plane by more than its
+  own half thickness (it went through the floor).
+
+A violation stops the run with :class:`contactlab.errors.SimulationDiverged`: one sentence
+naming the check, the time and the likely fix, with the run up to that point in its ``run``
+attribute (its summary marked ``"diverged"``). ``allow_divergence=True`` (``--allow-divergence``)
+keeps the physics checks to the summary's ``health`` list and goes on, for studies of
+blow-ups; a non-finite state always stops the run, having nothing left to step.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import shapes
+from .collision import pass_through_depths
+
+SPEED_FACTOR = 10.0       # × the scene's speed scale
+ENERGY_GAIN = 0.5         # × the scene's energy scale
+DEPTH_FRACTION = 0.75     # × a contact's pass-through depth
+HARD_SPEED = 1e6          # m/s: beyond this (or non-finite) the state is unusable, whatever is allowed
+
+
+@dataclass
+class Violation:
+    """What a check found: ``check`` (finite | speed | energy | depth), at ``time`` [s], in one
+    sentence ``what`` (no fix: see ``Health.message``)."""
+    check: str
+    time: float
+    what: str
+
+
+class Health:
+    """The checks of one run of ``model`` from ``state`` at time step ``dt`` [s].
+
+    ``advice``: one clause, the likely fix when the run goes wrong (the method's
+    ``divergence_advice``, else a smaller dt); ``allow_divergence``: record physics
+    violations instead of stopping on them (see the module docstring)."""
+
+    def __init__(self, model, state, dt, advice=None, allow_divergence=False):
+        self.model = model
+        self.dt = dt
+        self.allow_divergence = allow_divergence
+        self.advice = advice or f"use a smaller dt than {dt:g} s"
+        self.violations = []
+        g = float(np.linalg.norm(model.gravity))
+        size = max(_scene_size(model, state), 0.1)
+        speeds = np.linalg.norm(np.concatenate([state.body_velocity, state.particle_velocity]), axis=1)
+        self.speed_limit = SPEED_FACTOR * float(max(1.0, speeds.max(initial=0.0), np.sqrt(2.0 * g * size)))
+        mass = float(np.sum(model.body_mass) + np.sum(model.particle_mass))
+        self.initial_energy = None
+        self.energy_scale = _kinetic(model, state) + mass * g * size
+        kinds = model.collider_table[0]
+        dynamic = model.body_count + model.particle_count
+        self.planes = np.nonzero(kinds[dynamic:] == shapes.PLANE)[0]
+        self.initial_depth_ratio = 0.0      # see start()
+
+    # ---- the checks --------------------------------------------------------------------------
+
+    def check_state(self, state):
+        """Finite and speed, on a State; stops the run (returns the Violation) or records it."""
+        if not state.is_finite() or state.max_speed() > HARD_SPEED:
+            return self._found(Violation("finite", state.time, f"the state stopped being finite (or passed "
+                                                                f"{HARD_SPEED:g} m/s)"), always=True)
+        speed = state.max_speed()
+        if speed > self.speed_limit:
+            return self._found(Violation("speed", state.time, f"a body or particle reached {speed:.3g} m/s, "
+                                                              f"{SPEED_FACTOR:g}× the scene's speed scale "
+                                                              f"({self.speed_limit / SPEED_FACTOR:.3g} m/s)"))
+        return None
+
+    def check_samples(self, arrays, first=0):
+        """Energy, speed and finite on recorded samples ``arrays`` (the trajectory's series,
+        rows from ``first`` on). Returns the first Violation that stops the run, or None."""
+        energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
+        if self.model.spring_count:          # the total leaves the cloth's springs out: finite only
+            energy = np.where(np.isfinite(energy), 0.0, energy)
+        if self.initial_energy is None and len(energy):
+            self.initial_energy = float(energy[0])
+        for row in range(first, len(energy)):
+            time = float(arrays["time"][row])
+            if not np.isfinite(energy[row]):
+                return self._found(Violation("finite", time, "the energy stopped being finite"), always=True)
+            gain = float(energy[row]) - self.initial_energy
+            if gain > ENERGY_GAIN * self.energy_scale + 1e-9:
+                found = self._found(Violation(
+                    "energy", time, f"the total energy rose {gain:.3g} J above its start ({self.initial_energy:.4g} "
+                                    f"J), more than {ENERGY_GAIN:g}× the scene's energy scale "
+                                    f"({self.energy_scale:.3g} J) and with no outside work to explain it"))
+                if found:
+                    return found
+        return None
+
+    def start(self, state):
+        """Note how deep the run starts (a scene may begin overlapping, or with a pinned vertex
+        inside an obstacle): the depth check then trips only past that."""
+        from .collision import collide
+        ratio = self._depth_ratios(collide(self.model, state))
+        self.initial_depth_ratio = float(ratio.max(initial=0.0))
+
+    def _depth_ratios(self, contacts):
+        """Each contact's depth over DEPTH_FRACTION of its pass-through depth (C,); 0 where
+        neither side can move (static, or pinned cloth vertices)."""
+        if contacts.count == 0:
+            return np.zeros(0)
+        ratio = contacts.depth / (DEPTH_FRACTION * pass_through_depths(self.model, contacts))
+        free = np.r_[~np.asarray(self.model.particle_pinned, dtype=bool), False]     # index −1: no particle
+        movable = (contacts.body_a >= 0) | (contacts.body_b >= 0)
+        for side in (contacts.particles_a, contacts.particles_b):
+            movable |= free[side].any(axis=1)
+        return np.where(movable, ratio, 0.0)
+
+    def check_contacts(self, state, contacts):
+        """Depth, on a State and the contacts of its own positions (a collision pass)."""
+        if contacts.count:
+            ratio = self._depth_ratios(contacts)
+            limit = DEPTH_FRACTION * pass_through_depths(self.model, contacts)
+            worst = int(np.argmax(ratio))
+            if ratio[worst] > max(1.0, 1.1 * self.initial_depth_ratio):
+                return self._found(Violation("depth", state.time, f"a contact is {contacts.depth[worst] * 1000:.3g} mm "
+                                                                  f"deep, past {DEPTH_FRACTION:g} of the depth at which "
+                                                                  f"one side reaches the other's middle "
+                                                                  f"({limit[worst] / DEPTH_FRACTION * 1000:.3g} mm)"))
+        return self._behind_planes(state)
+
+    def _behind_planes(self, state):
+        if not len(self.planes):
+            return None
+        model = self.model
+        kinds, params = model.collider_table[0], model.collider_table[1]
+        dynamic = model.body_count + model.particle_count
+        centres = np.concatenate([state.body_position, state.particle_position])
+        half = model.collider_half_thickness[:dynamic] + np.r_[np.zeros(model.body_count),
+                                                              np.where(model.particle_pinned, np.inf, 0.0)]
+        for o in self.planes:
+            normal, offset = params[dynamic + o, :3], params[dynamic + o, 3]
+            length = np.linalg.norm(normal)
+            behind = offset / length - centres @ (normal / length)        # how far behind the surface
+            worst = int(np.argmax(behind - half)) if dynamic else 0
+            if dynamic and behind[worst] > half[worst] + 1e-9:
+                return self._found(Violation("depth", state.time, f"a body or particle centre is {behind[worst]:.3g} m "
+                                                                  f"behind a static plane: it went through"))
+        return None
+
+    # ---- what is done with a violation ---------------------------------------------------------
+
+    def _found(self, violation, always=False):
+        """The violation that stops the run, or None where divergence is allowed (kept in
+        ``violations`` once per check)."""
+        if always or not self.allow_divergence:
+            return violation
+        if all(v.check != violation.check for v in self.violations):
+            self.violations.append(violation)
+        return None
+
+    def message(self, violation):
+        """The one sentence a stopped run reports."""
+        return f"the run went wrong at t = {violation.time:.4g} s: {violation.what}; {self.advice}"
+
+    def summary(self):
+        """The summary's ``health`` entry: the checks' limits and what was let pass."""
+        return {"speed_limit": self.speed_limit, "energy_scale": self.energy_scale, "energy_gain": ENERGY_GAIN,
+                "depth_fraction": DEPTH_FRACTION, "allow_divergence": self.allow_divergence,
+                "violations": [{"check": v.check, "time": v.time, "what": v.what} for v in self.violations]}
+
+
+def _scene_size(model, state):
+    """L [m]: the largest extent of the dynamic centres and the finite obstacles together, or
+    the greatest height of a dynamic centre above a static plane, whichever is larger."""
+    dynamic = model.body_count + model.particle_count
+    kinds, params = model.collider_table[0][dynamic:], model.collider_table[1][dynamic:]
+    centres = np.concatenate([state.body_position, state.particle_position])
+    points = np.concatenate([centres, np.asarray(model.obstacle_position)[kinds != shapes.PLANE]])
+    size = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
+    for normal, offset in zip(params[kinds == shapes.PLANE, :3], params[kinds == shapes.PLANE, 3]):
+        if len(centres):
+            size = max(size, float((centres @ normal - offset).max() / np.linalg.norm(normal)))
+    return size
+
+
+def _kinetic(model, state):
+    from .diagnostics import kinetic_energy
+    return float(kinetic_energy(model, state))

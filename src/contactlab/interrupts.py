@@ -1,0 +1,132 @@
+"""Ctrl-C and SIGTERM, between steps: a run stops cleanly, never inside compiled code.
+
+Python's own Ctrl-C raises KeyboardInterrupt wherever the interpreter happens to be; inside a
+call into Numba-compiled code that can surface as ``SystemError: CPUDispatcher(...) returned a
+result with an exception set``, and SIGTERM kills the process without cleaning up at all. So
+``simulate`` steps inside :func:`deferred`: a signal that arrives then is noted, and
+:func:`check` raises :class:`Interrupted` at the next step or chunk boundary. Outside it (the
+command line installs :func:`handled` for its whole run) a signal raises at once, as Ctrl-C
+always does, so writing files, plotting and rendering stop promptly; their temporary files are
+removed on the way out (``record.atomic_path``).
+"""
+
+import contextlib
+import signal
+import threading
+
+EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}     # 128 + the signal's number
+
+
+class Interrupted(KeyboardInterrupt):
+    """The run was stopped by a signal: ``signum`` (SIGINT or SIGTERM) and its ``name``."""
+
+    def __init__(self, signum):
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(self.name)
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES.get(self.signum, 130)
+
+
+_deferring = 0           # how many deferred() blocks are open (the main thread's)
+_pending = None          # the signal noted while deferring
+
+
+def _handler(signum, frame):
+    global _pending
+    if _deferring:
+        _pending = signum
+    else:
+        raise Interrupted(signum)
+
+
+def _main_thread():
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextlib.contextmanager
+def handled(restore=True):
+    """SIGINT and SIGTERM raise :class:`Interrupted` while this is open (main thread only);
+    the previous handlers come back at the end unless ``restore`` is False."""
+    if not _main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, _handler) for s in EXIT_CODES}
+    try:
+        yield
+    finally:
+        if restore:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+
+
+def ignore_signals():
+    """Ignore SIGINT and SIGTERM from now on (a finished command, exiting)."""
+    if _main_thread():
+        for s in EXIT_CODES:
+            signal.signal(s, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def deferred():
+    """Signals wait for :func:`check` (or the end of the block) while this is open. Installs the
+    handler for SIGINT where Python's default one is in place (a library caller), and leaves a
+    caller's own handlers alone."""
+    global _deferring, _pending
+    if not _main_thread():
+        yield
+        return
+    installed = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    if installed:
+        signal.signal(signal.SIGINT, _handler)
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+        if installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+    if _deferring == 0:
+        check()
+
+
+def check():
+    """Raise :class:`Interrupted` if a signal arrived while deferred (and forget it)."""
+    global _pending
+    if _pending is not None:
+        signum, _pending = _pending, None
+        raise Interrupted(signum)
+
+
+# ---- what an interrupted command wrote ------------------------------------------------------
+
+_written = None          # the files completed inside tracking_written(), or None
+
+
+@contextlib.contextmanager
+def tracking_written():
+    """Note every file ``note_written`` reports while this is open (``written_paths``): what an
+    interrupted command can truthfully say it wrote (``record.atomic_path`` reports each)."""
+    global _written
+    previous, _written = _written, []
+    try:
+        yield
+    finally:
+        _written = previous
+
+
+def note_written(path, removed=False):
+    """``path`` was completed (or, ``removed``, taken away again), if tracking."""
+    if _written is not None:
+        if removed:
+            if path in _written:
+                _written.remove(path)
+        else:
+            _written.append(path)
+
+
+def written_paths():
+    """The files completed so far inside ``tracking_written`` (empty outside it)."""
+    return list(_written or ())

@@ -1,0 +1,153 @@
+"""Issue 20: a run that goes wrong says so (contactlab.health), stops cleanly on a signal
+(contactlab.interrupts), and keeps what it computed."""
+
+import glob
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import ball_on_plane
+from contactlab import ModelBuilder, SimulationDiverged, simulate
+from contactlab import health
+from contactlab.scene import builtin_scenes, load_scene
+
+
+def _mass_ratio_stack(ratio):
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5, restitution=0.0)
+    b.add_body("box", half_extents=(0.05,) * 3, mass=1.0, position=(0, 0, 0.05), material="m")
+    b.add_body("box", half_extents=(0.05,) * 3, mass=ratio, position=(0, 0, 0.15), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    return b.finalize()
+
+
+def test_a_spring_too_stiff_for_explicit_euler_stops_the_run_with_the_fix():
+    """The report's ball thrown 184 km up (k = 1e9 N/m, explicit Euler, dt = 0.01 s) now stops
+    at its first impact, naming the check, the time and the time step that would work."""
+    model = ball_on_plane(height=0.4, restitution=0.5, friction=0.0)
+    with pytest.raises(SimulationDiverged) as stopped:
+        simulate(model, "penalty", 0.01, 2.0, {"stiffness": 1e9, "implicit_springs": "never"}, "explicit_euler")
+    message = str(stopped.value)
+    assert message.startswith("the run went wrong at t = ") and "total energy rose" in message
+    assert "too long for penalty stiffness 1e+09 N/m under explicit_euler" in message
+    run = stopped.value.run
+    impact = np.sqrt(2 * 0.4 / 9.81)                         # the ball's surface reaches the floor
+    assert impact < stopped.value.time < impact + 0.05
+    assert run.arrays["time"][-1] == pytest.approx(stopped.value.time)
+    assert run.summary["diverged"]["check"] == "energy"
+    assert run.summary["diverged"]["time"] == stopped.value.time
+
+
+def test_a_heavy_box_on_a_light_one_gaining_energy_is_caught():
+    """1:10,000 under impulses: the light box is crushed out sideways and energy appears — the
+    report's +48 % — instead of an exit 0 with normal-looking numbers."""
+    with pytest.raises(SimulationDiverged, match="total energy rose"):
+        simulate(_mass_ratio_stack(1e4), "impulse", 1 / 240, 5.0)
+
+
+def test_a_pile_stepped_too_coarsely_is_caught():
+    scene = load_scene("sphere_pile")
+    with pytest.raises(SimulationDiverged, match="went wrong"):
+        simulate(scene.model, "penalty", 0.1, scene.duration)
+
+
+def test_allow_divergence_records_the_violations_and_goes_on():
+    model = ball_on_plane(height=0.4, restitution=0.5, friction=0.0)
+    run = simulate(model, "penalty", 0.01, 0.5, {"stiffness": 1e9, "implicit_springs": "never"},
+                   "explicit_euler", allow_divergence=True)
+    found = {v["check"] for v in run.summary["health"]["violations"]}
+    assert "energy" in found and run.summary["diverged"] is None
+    assert run.summary["health"]["allow_divergence"] is True
+
+
+def test_the_limits_scale_with_the_scene():
+    """Speed scale √(2 g L) with L the centre's height above the floor (10.1 m: 14 m/s), or the
+    fastest initial speed; energy scale the initial kinetic energy plus Σ m g L."""
+    model = ball_on_plane(height=10.0, friction=0.0)              # radius 0.1 m
+    checks = health.Health(model, model.state(), 0.01)
+    np.testing.assert_allclose(checks.speed_limit, health.SPEED_FACTOR * np.sqrt(2 * 9.81 * 10.1), rtol=1e-12)
+    np.testing.assert_allclose(checks.energy_scale, 1.0 * 9.81 * 10.1, rtol=1e-12)
+    thrown = ball_on_plane(height=10.0, velocity=(0.0, 0.0, 300.0), friction=0.0)
+    assert health.Health(thrown, thrown.state(), 0.01).speed_limit == pytest.approx(health.SPEED_FACTOR * 300.0)
+
+
+@pytest.mark.parametrize("name", [name for name, _ in builtin_scenes()])
+def test_no_built_in_scene_trips_a_check_at_its_defaults(name):
+    """No false alarms: every built-in scene with its own method for a second (its start, where
+    the impacts are) passes every check."""
+    scene = load_scene(name)
+    run = simulate(scene.model, scene.method, scene.dt, min(scene.duration, 1.0),
+                   scene.method_options.get(scene.method, {}), scene.integrator, record_every=5)
+    assert run.summary["diverged"] is None and run.summary["health"]["violations"] == []
+
+
+# ---- signals ------------------------------------------------------------------------------------
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _interrupted_run(tmp_path, delay, signum, method):
+    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "src"))
+    process = subprocess.Popen([sys.executable, "-m", "contactlab", "run", "box_pyramid", "--duration", "2",
+                                "--method", method], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=300)
+    return process.returncode, stderr
+
+
+def test_a_run_interrupted_at_random_moments_ends_cleanly_every_time(tmp_path):
+    """SIGINT exits 130 and SIGTERM 143 with one line and no traceback, wherever the signal lands
+    (imports, compiled steps, writing, plotting); no .partial file remains, and every file the
+    line says was written exists. (A run that finished before the signal exits 0.)"""
+    chooser = random.Random(20)
+    for attempt in range(8):
+        signum = chooser.choice([signal.SIGINT, signal.SIGTERM])
+        code, stderr = _interrupted_run(tmp_path, chooser.uniform(0.3, 2.5), signum, chooser.choice(
+            ["impulse", "penalty"]))
+        assert "Traceback" not in stderr, stderr
+        assert glob.glob(str(tmp_path / "out" / "**" / ".partial-*"), recursive=True) == []
+        if code == 0:
+            continue
+        lines = [line for line in stderr.strip().splitlines() if not line.startswith("compiling contact kernels")]
+        assert code == {signal.SIGINT: 130, signal.SIGTERM: 143}[signum], stderr
+        assert len(lines) == 1 and lines[0].startswith(f"interrupted ({signal.Signals(signum).name}); ")
+        if "written before it: " in lines[0]:
+            for path in lines[0].split("written before it: ")[1].split(", "):
+                assert os.path.isfile(tmp_path / path), path
+        else:
+            assert lines[0].endswith("no output written")
+
+
+def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
+    """Python API: a SIGINT while compiled code steps is held to the next step boundary and
+    raised there as KeyboardInterrupt (contactlab.interrupts.Interrupted), never as a
+    SystemError from inside the compiled call."""
+    from contactlab.interrupts import Interrupted
+    scene = load_scene("box_pyramid")
+    simulate(scene.model, "penalty", scene.dt, 2 * scene.dt)             # compiled before the clock starts
+    calls = []
+    from contactlab.methods import penalty
+    real = penalty.step
+
+    def step(*arguments):
+        calls.append(1)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGINT)       # lands while this step runs
+        return real(*arguments)
+    penalty.step = step
+    try:
+        with pytest.raises(Interrupted) as interrupted:
+            simulate(scene.model, "penalty", scene.dt, 1.0)
+    finally:
+        penalty.step = real
+    assert isinstance(interrupted.value, KeyboardInterrupt) and interrupted.value.exit_code == 130
+    assert len(calls) == 3                           # the third step finished; no fourth began
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
