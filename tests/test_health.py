@@ -151,3 +151,35 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
     assert isinstance(interrupted.value, KeyboardInterrupt) and interrupted.value.exit_code == 130
     assert len(calls) == 3                           # the third step finished; no fourth began
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+# ---- limits before work (contactlab.budget) ----------------------------------------------------------
+
+def test_a_run_that_cannot_fit_is_refused_before_it_starts_with_the_estimate():
+    """The trajectory of 10⁶ samples of one ball, 2 × 10⁶ × (13 + 8) × 8 bytes ≈ 320 MiB, against
+    a 100 MB limit: refused at once, naming record_every and the sampling that fits."""
+    from contactlab import InputError, budget
+    model = ball_on_plane(friction=0.0)
+    needed = budget.estimate(model, 10 ** 6, 1)
+    assert needed["trajectory"] == 2 * (10 ** 6 + 2) * 8 * (13 + 8)
+    started = time.perf_counter()
+    with pytest.raises(InputError, match=r"record_every: the run would hold 320 MB: 1,000,002 samples") as refused:
+        simulate(model, "impulse", 0.001, 1000.0, memory_limit=100 * 2 ** 20)
+    assert time.perf_counter() - started < 1.0
+    every = int(refused.value.message.split("record every ")[1].split(" steps")[0].replace(",", ""))
+    assert budget.estimate(model, 10 ** 6, every)["total"] <= 100 * 2 ** 20 < budget.estimate(model, 10 ** 6, every - 1)["total"]
+    simulate(model, "impulse", 0.001, 0.01, memory_limit=float("inf"))      # no limit
+
+
+def test_a_model_too_large_is_refused_before_it_is_built(tmp_path):
+    from contactlab import InputError
+    from contactlab.builder import MAX_DYNAMIC
+    scene = tmp_path / "million.toml"
+    scene.write_text('[[bodies]]\nshape = "sphere"\nradius = 0.01\nmass = 1.0\nposition = [0, 0, 1]\n'
+                     'array = { count = [1000, 1000, 1], spacing = [0.03, 0.03, 1] }\n')
+    started = time.perf_counter()
+    with pytest.raises(InputError, match="array.count: an array of 1000 x 1000 x 1 copies would make 1,000,000"):
+        load_scene(str(scene))
+    assert time.perf_counter() - started < 1.0 and MAX_DYNAMIC == 200_000
+    with pytest.raises(InputError, match="resolution: a cloth of 3000 x 3000 vertices"):
+        ModelBuilder().add_cloth(size=(1, 1), resolution=(3000, 3000), mass=1.0)

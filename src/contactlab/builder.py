@@ -73,6 +73,7 @@ DIRECTION = Quantity("direction component", "", 1e6)       # normals and quatern
 TIME = Quantity("time", "s", 1e9, 1e-9)                    # dt and duration (contactlab.simulate)
 LIMITS = (LENGTH, MASS, DENSITY, AREAL_DENSITY, SPEED, ANGULAR_SPEED, ACCELERATION, STIFFNESS, DAMPING,
           FRICTION, FACTOR, DIRECTION, TIME)
+MAX_DYNAMIC = 200_000     # bodies, particles and cloth vertices in one model: seconds and gigabytes a step past it
 WHOLE_NUMBERS = (-2 ** 63, 2 ** 63 - 1)     # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
 
 
@@ -269,6 +270,7 @@ class ModelBuilder:
             _derived_mass(mass, "density")
         if shape == "convex":
             self._hulls.append(hull)
+        check_dynamic_count(1, "shape", "another body", self._dynamic_count())
         index = len(self._bodies)
         self._bodies.append(dict(
             name=str(name) if name is not None else f"body{index}",
@@ -316,6 +318,10 @@ class ModelBuilder:
             params[:3] = _vector(half_extents, "half_extents", quantity=LENGTH, positive=True)
         return kind, params
 
+    def _dynamic_count(self):
+        """Bodies, particles and cloth vertices added so far."""
+        return len(self._bodies) + sum(len(group["position"]) for group in self._particles)
+
     # -- particles -------------------------------------------------------------------
     def add_particles(self, position, velocity=None, *, mass=1.0, radius=0.0, material=None):
         """Add particles; returns their indices (range).
@@ -332,6 +338,7 @@ class ModelBuilder:
             raise InputError("position", "expected finite numbers")
         LENGTH.check(position, "position")
         count = len(position)
+        check_dynamic_count(count, "position", f"{count:,} more particles", self._dynamic_count())
         if velocity is None:
             velocity = np.zeros_like(position)
         velocity = _array(velocity, "velocity", "a list of [vx, vy, vz] velocities")
@@ -444,6 +451,8 @@ class ModelBuilder:
         if (rest <= 0.0).any():
             raise InputError("size" if file is None else "file", "two vertices of the cloth coincide")
         vertex_velocity = np.where(pinned_mask[:, None], 0.0, velocity[None, :])
+        check_dynamic_count(count, "resolution" if file is None else "file", f"a cloth of {count:,} vertices",
+                            self._dynamic_count())
         start = sum(len(p["position"]) for p in self._particles)
         index = len(self._cloths)
         self._particles.append(dict(position=vertex_position, velocity=vertex_velocity,
@@ -590,6 +599,14 @@ class ModelBuilder:
 PINNED_NAMES = ("corners", "top_corners", "top_edge", "bottom_edge", "left_edge", "right_edge")
 
 
+def check_dynamic_count(count, field, what, already=0):
+    """InputError naming ``field`` when ``what`` (``count`` more bodies, particles or cloth
+    vertices, after ``already``) would take a model past MAX_DYNAMIC, before anything is built."""
+    if already + count > MAX_DYNAMIC:
+        raise InputError(field, f"{what} would make {already + count:,} bodies, particles and cloth vertices, more "
+                                f"than the {MAX_DYNAMIC:,} a model may hold (each costs kilobytes of memory a step)")
+
+
 def _cloth_grid(size, resolution):
     """A grid cloth in its local frame: (vertices (V, 3) [m], triangles (F, 3), stretch (E, 2),
     shear (H, 2), bend (G, 2) local vertex pairs, named vertex sets {name: indices})."""
@@ -602,8 +619,7 @@ def _cloth_grid(size, resolution):
     nx, ny = (int(c) for c in counts)
     if nx < 2 or ny < 2:
         raise InputError("resolution", f"must be at least 2 vertices along each axis, found [{nx}, {ny}]")
-    if nx * ny > 10_000_000:
-        raise InputError("resolution", f"expected at most 10 000 000 vertices, found {nx} x {ny}")
+    check_dynamic_count(nx * ny, "resolution", f"a cloth of {nx} x {ny} vertices")
     a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")     # (ny, nx): a along x, fastest
     vertices = np.stack([-width / 2 + a.ravel() * width / (nx - 1), -height / 2 + b.ravel() * height / (ny - 1),
                          np.zeros(nx * ny)], axis=1)

@@ -45,6 +45,8 @@ def _parser():
     run.add_argument("--export", default="", metavar="FORMATS",
                      help="also export the run: a comma-separated list of usd, obj, ply")
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
+    run.add_argument("--memory-limit", metavar="GB", help="the most memory the run may need by its estimate "
+                                                          "(default: half this machine's; 'none': no limit)")
     run.add_argument("--allow-divergence", action="store_true",
                      help="go on when a health check fails (energy from nowhere, a speed beyond the scene's "
                           "scale, a contact deep enough to pass through), noting it in the summary")
@@ -109,8 +111,23 @@ def _whole_number(value, option):
         raise InputError(option, f"expected a whole number ≥ 1, found {value}")
 
 
+def _memory_limit(text):
+    """--memory-limit GB as bytes (None: the default; "none": no limit)."""
+    if text is None:
+        return None
+    if text.strip().lower() == "none":
+        return float("inf")
+    try:
+        gigabytes = float(text)
+    except ValueError:
+        gigabytes = float("nan")
+    if not gigabytes > 0 or gigabytes == float("inf"):
+        raise InputError("--memory-limit", f"expected a number of GB > 0 or 'none', found {text!r}")
+    return gigabytes * 2 ** 30
+
+
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True, allow_divergence=False):
+         exports=(), plots=True, allow_divergence=False, memory_limit=None):
     from .record import write_outputs
     from .scene import load_scene
     from .simulation import simulate
@@ -124,7 +141,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     try:
         result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
                           record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
-                          allow_divergence=allow_divergence)
+                          allow_divergence=allow_divergence, memory_limit=memory_limit)
     except SimulationDiverged as error:      # the run up to then is kept, its summary marked
         if error.run is not None:
             error.run.summary["trajectory"] = os.path.join(out, "trajectory.npz")
@@ -255,7 +272,8 @@ def _main(argv):
             _whole_number(args.fps, "--fps")
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
-                 plots=not args.no_plots, allow_divergence=args.allow_divergence)
+                 plots=not args.no_plots, allow_divergence=args.allow_divergence,
+                 memory_limit=_memory_limit(args.memory_limit))
         elif args.command == "compare":
             _compare(args)
         elif args.command == "render":

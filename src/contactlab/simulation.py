@@ -18,7 +18,7 @@ from .builder import TIME, WHOLE_NUMBERS, _number
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
-from . import interrupts
+from . import budget, interrupts
 from .errors import InputError, SimulationDiverged
 from .health import HARD_SPEED, Health
 from .model import Model
@@ -113,7 +113,7 @@ def _kind(value):
 
 def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
              record_every=1, state=None, progress=False, scene_name="custom", threads=None,
-             compiled_loop=None, allow_divergence=False) -> Run:
+             compiled_loop=None, allow_divergence=False, memory_limit=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options (or a dict of
@@ -126,7 +126,9 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     already or the run is long enough to repay compiling it, True always, False never
     (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit
     either way; allow_divergence: keep going when a health check fails (:mod:`contactlab.health`),
-    recording it in the summary, instead of stopping. Raises InputError for bad arguments, and
+    recording it in the summary, instead of stopping; memory_limit [bytes]: the most the run may
+    need by its estimate (:mod:`contactlab.budget`; None: half this machine's memory, ``math.inf``
+    none). Raises InputError for bad arguments or a run that cannot fit, and
     SimulationDiverged (with the run up to then in its ``run``) when a health check fails: the
     state stops being finite, a speed beyond the scene's scale, an energy gain nothing explains,
     a contact deep enough to pass through. Ctrl-C (or SIGTERM) stops the run between steps with
@@ -138,6 +140,10 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     chooser = ThreadChooser(threads)
     state = model.state() if state is None else state.copy()
     steps = max(1, int(round(duration / dt)))
+    if memory_limit is not None and (isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float))
+                                     or not memory_limit > 0):
+        raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
+    budget.check(model, steps, record_every, memory_limit)
     advice = getattr(module, "divergence_advice", None)
     health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
     recorder = Recorder(model, record_every)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..builder import ModelBuilder
+from ..builder import ModelBuilder, check_dynamic_count
 from ..errors import InputError
 
 
@@ -30,6 +30,7 @@ def grid_offsets(array):
     if array is None:
         return np.zeros((1, 3))
     (nx, ny, nz), spacing = array["count"], np.asarray(array["spacing"])
+    check_dynamic_count(nx * ny * nz, "array.count", f"an array of {nx} x {ny} x {nz} copies")
     iz, iy, ix = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     return np.stack([ix.ravel(), iy.ravel(), iz.ravel()], axis=1) * spacing
 
