@@ -36,6 +36,7 @@ SPEED_FACTOR = 10.0       # × the scene's speed scale
 ENERGY_GAIN = 0.5         # × the scene's energy scale
 DEPTH_FRACTION = 0.75     # × a contact's pass-through depth
 HARD_SPEED = 1e6          # m/s: beyond this (or non-finite) the state is unusable, whatever is allowed
+ENERGY_SERIES = ("time", "energy_kinetic", "energy_potential", "energy_elastic")   # what check_samples reads
 
 
 @dataclass
@@ -69,17 +70,23 @@ class Health:
         self.energy_scale = _kinetic(model, state) + mass * g * size
         kinds = model.collider_table[0]
         dynamic = model.body_count + model.particle_count
-        self.planes = np.nonzero(kinds[dynamic:] == shapes.PLANE)[0]
+        params = model.collider_table[1][dynamic:][kinds[dynamic:] == shapes.PLANE]
+        length = np.linalg.norm(params[:, :3], axis=1)
+        self.plane_normals = params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3))   # (Pl, 3)
+        self.plane_offsets = params[:, 3] / length if len(params) else np.zeros(0)
+        self.half_thickness = model.collider_half_thickness[:dynamic] + np.r_[
+            np.zeros(model.body_count), np.where(model.particle_pinned, np.inf, 0.0)]      # pinned: never checked
         self.initial_depth_ratio = 0.0      # see start()
 
     # ---- the checks --------------------------------------------------------------------------
 
-    def check_state(self, state):
-        """Finite and speed, on a State; stops the run (returns the Violation) or records it."""
-        if not state.is_finite() or state.max_speed() > HARD_SPEED:
+    def check_state(self, state, full=True):
+        """Finite and speed, on a State; stops the run (returns the Violation) or records it.
+        ``full`` False (between samples): the speeds alone, which a non-finite velocity makes NaN."""
+        speed = state.max_speed()
+        if not (speed <= HARD_SPEED and (not full or state.is_finite())):
             return self._found(Violation("finite", state.time, f"the state stopped being finite (or passed "
                                                                 f"{HARD_SPEED:g} m/s)"), always=True)
-        speed = state.max_speed()
         if speed > self.speed_limit:
             return self._found(Violation("speed", state.time, f"a body or particle reached {speed:.3g} m/s, "
                                                               f"{SPEED_FACTOR:g}× the scene's speed scale "
@@ -141,22 +148,15 @@ class Health:
         return self._behind_planes(state)
 
     def _behind_planes(self, state):
-        if not len(self.planes):
+        if not len(self.plane_offsets) or not len(self.half_thickness):
             return None
-        model = self.model
-        kinds, params = model.collider_table[0], model.collider_table[1]
-        dynamic = model.body_count + model.particle_count
         centres = np.concatenate([state.body_position, state.particle_position])
-        half = model.collider_half_thickness[:dynamic] + np.r_[np.zeros(model.body_count),
-                                                              np.where(model.particle_pinned, np.inf, 0.0)]
-        for o in self.planes:
-            normal, offset = params[dynamic + o, :3], params[dynamic + o, 3]
-            length = np.linalg.norm(normal)
-            behind = offset / length - centres @ (normal / length)        # how far behind the surface
-            worst = int(np.argmax(behind - half)) if dynamic else 0
-            if dynamic and behind[worst] > half[worst] + 1e-9:
-                return self._found(Violation("depth", state.time, f"a body or particle centre is {behind[worst]:.3g} m "
-                                                                  f"behind a static plane: it went through"))
+        behind = self.plane_offsets[None, :] - centres @ self.plane_normals.T - self.half_thickness[:, None]
+        worst = np.unravel_index(np.argmax(behind), behind.shape)
+        if behind[worst] > 1e-9:
+            return self._found(Violation("depth", state.time, f"a body or particle centre is "
+                                                              f"{behind[worst] + self.half_thickness[worst[0]]:.3g} m "
+                                                              f"behind a static plane: it went through"))
         return None
 
     # ---- what is done with a violation ---------------------------------------------------------

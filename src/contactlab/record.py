@@ -51,9 +51,9 @@ class Recorder:
             self.samples[name].append(np.array(value, copy=True))
         return contacts
 
-    def latest(self) -> dict:
-        """The last sample, as the series' arrays of one row."""
-        return {name: np.array(values[-1:]) for name, values in self.samples.items()}
+    def latest(self, names=SERIES) -> dict:
+        """The last sample of the series ``names``, as arrays of one row."""
+        return {name: np.array(self.samples[name][-1:]) for name in names}
 
     def extend(self, samples):
         """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
