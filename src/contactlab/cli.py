@@ -162,11 +162,6 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     """Plots, video and exports of a run written into ``out``; returns the paths written."""
     progress = sys.stderr.isatty()
     written = []
-    with interrupts.deferred():         # a signal stops them between files and frames, not inside a library
-        return _write_extras(arrays, out, title, plots, video, fps, exports, every, progress, written)
-
-
-def _write_extras(arrays, out, title, plots, video, fps, exports, every, progress, written):
     if plots:
         from .plots import write_plots
         written += list(write_plots(arrays, os.path.join(out, "plots"), title=title).values())
@@ -248,7 +243,11 @@ def main(argv=None) -> int:
     ``python -m contactlab`` call it; then a signal after the work is done, while the
     interpreter shuts down, is ignored: there is nothing left to stop)."""
     with handled(restore=argv is not None), tracking_written():
-        code = _main(argv)
+        try:        # signals take effect between steps, files and frames (interrupts.check), never inside a
+            with interrupts.deferred():         # library call: Numba compiling, matplotlib drawing
+                code = _main(argv)
+        except Interrupted:         # it came after the last step, file and frame: the command had finished
+            pass
         if argv is None:
             interrupts.ignore_signals()
         return code

@@ -134,6 +134,13 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     a contact deep enough to pass through. Ctrl-C (or SIGTERM) stops the run between steps with
     :class:`contactlab.interrupts.Interrupted`, a KeyboardInterrupt.
     """
+    with interrupts.deferred():         # compiling or stepping, a signal waits for a step boundary
+        return _simulate(model, method, dt, duration, options, integrator, record_every, state, progress,
+                         scene_name, threads, compiled_loop, allow_divergence, memory_limit)
+
+
+def _simulate(model, method, dt, duration, options, integrator, record_every, state, progress, scene_name,
+              threads, compiled_loop, allow_divergence, memory_limit):
     module, options, dt, duration = _checked_arguments(model, method, dt, duration, options, integrator,
                                                        record_every, state, scene_name)
     check_supported(model)
@@ -165,7 +172,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     stopped = None
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
-                 desc=f"{scene_name} ({method})") as bar, chooser, interrupts.deferred():
+                 desc=f"{scene_name} ({method})") as bar, chooser:
         try:
             if stepper is None:
                 state = _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser,
