@@ -131,6 +131,9 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
     raised there as KeyboardInterrupt (contactlab.interrupts.Interrupted), never as a
     SystemError from inside the compiled call."""
     from contactlab.interrupts import Interrupted
+    # Python's own Ctrl-C handler, as in an interactive session (a shell starts background jobs,
+    # and so perhaps this test run, with SIGINT ignored)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = load_scene("box_pyramid")
     simulate(scene.model, "penalty", scene.dt, 2 * scene.dt)             # compiled before the clock starts
     calls = []
@@ -148,9 +151,11 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
             simulate(scene.model, "penalty", scene.dt, 1.0)
     finally:
         penalty.step = real
+        restored = signal.getsignal(signal.SIGINT)
+        signal.signal(signal.SIGINT, previous)
     assert isinstance(interrupted.value, KeyboardInterrupt) and interrupted.value.exit_code == 130
     assert len(calls) == 3                           # the third step finished; no fourth began
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert restored is signal.default_int_handler
 
 
 # ---- limits before work (contactlab.budget) ----------------------------------------------------------

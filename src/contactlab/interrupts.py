@@ -48,12 +48,13 @@ def _main_thread():
 
 @contextlib.contextmanager
 def handled(restore=True):
-    """SIGINT and SIGTERM raise :class:`Interrupted` while this is open (main thread only);
-    the previous handlers come back at the end unless ``restore`` is False."""
+    """SIGINT and SIGTERM raise :class:`Interrupted` while this is open (main thread only; a
+    signal the process was started ignoring, as a shell does for background jobs, stays
+    ignored); the previous handlers come back at the end unless ``restore`` is False."""
     if not _main_thread():
         yield
         return
-    previous = {s: signal.signal(s, _handler) for s in EXIT_CODES}
+    previous = {s: signal.signal(s, _handler) for s in EXIT_CODES if signal.getsignal(s) is not signal.SIG_IGN}
     try:
         yield
     finally:
