@@ -21,6 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from conftest import ball_on_plane
 from contactlab import cli, render
 from contactlab.builder import (BODY_SHAPE_ARGUMENTS, LIMITS, OBSTACLE_SHAPE_ARGUMENTS, LENGTH, MASS,
                                 ModelBuilder)
@@ -54,13 +55,6 @@ position = [0.0, 0.0, 0.5]
 shape = "plane"
 normal = [0.0, 0.0, 1.0]
 """
-
-
-def ball_model():
-    builder = ModelBuilder()
-    builder.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 0.5))
-    builder.add_obstacle("plane", normal=(0, 0, 1))
-    return builder.finalize()
 
 
 def write(directory, text, name="scene.toml"):
@@ -336,7 +330,7 @@ def test_drawing_non_finite_positions_is_one_input_error(ball_run, tmp_path):
 ])
 def test_bad_simulate_arguments_are_input_errors_naming_them(arguments, field):
     arguments = {"dt": 0.01, "duration": 0.02, **arguments}
-    assert refused(simulate, ball_model(), **arguments).field == field
+    assert refused(simulate, ball_on_plane(height=0.4), **arguments).field == field
 
 
 def test_simulate_a_non_model_or_a_state_of_another_model():
@@ -344,13 +338,13 @@ def test_simulate_a_non_model_or_a_state_of_another_model():
     other = ModelBuilder()
     for x in (0.0, 1.0):
         other.add_body("sphere", radius=0.1, mass=1.0, position=(x, 0, 1))
-    error = refused(simulate, ball_model(), dt=0.01, duration=0.02, state=other.finalize().state())
+    error = refused(simulate, ball_on_plane(height=0.4), dt=0.01, duration=0.02, state=other.finalize().state())
     assert error.field == "state" and "another model" in error.message
-    state = ball_model().state()
+    state = ball_on_plane(height=0.4).state()
     state.body_velocity[0, 0] = np.inf
-    assert refused(simulate, ball_model(), dt=0.01, duration=0.02, state=state).field == "state"
-    state = ball_model().state()
-    simulate(ball_model(), dt=0.01, duration=0.02, state=state)       # its own state runs
+    assert refused(simulate, ball_on_plane(height=0.4), dt=0.01, duration=0.02, state=state).field == "state"
+    state = ball_on_plane(height=0.4).state()
+    simulate(ball_on_plane(height=0.4), dt=0.01, duration=0.02, state=state)       # its own state runs
 
 
 @pytest.mark.parametrize("call, field", [
@@ -394,9 +388,9 @@ def test_the_scene_schema_and_the_builder_agree_on_shapes():
 # =============================================================================================
 
 def test_a_dt_longer_than_the_duration_is_refused(tmp_path):
-    error = refused(simulate, ball_model(), dt=1.0, duration=0.01)
+    error = refused(simulate, ball_on_plane(height=0.4), dt=1.0, duration=0.01)
     assert "dt = 1 s is longer than duration = 0.01 s" in error.message
-    simulate(ball_model(), dt=0.01, duration=0.01)                    # one step of exactly the duration
+    simulate(ball_on_plane(height=0.4), dt=0.01, duration=0.01)                    # one step of exactly the duration
 
 
 # =============================================================================================
@@ -728,7 +722,7 @@ def keywords_of(function, arguments):
        scene_name=sometimes(st.text(max_size=4)), threads=st.one_of(st.none(), st.sampled_from(["auto", 1, 0, "x"])))
 def test_simulate_with_any_arguments_runs_or_fails_with_one_input_error(method, dt, duration, options, integrator,
                                                                        record_every, state, scene_name, threads):
-    model = ball_model()
+    model = ball_on_plane(height=0.4)
     other = ModelBuilder()
     other.add_particles([[0, 0, 1], [0, 0, 2]])
     given_state = {"none": None, "own": model.state(), "other": other.finalize().state(), "junk": [1, 2]}[state]

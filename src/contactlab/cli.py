@@ -246,10 +246,10 @@ def main(argv=None) -> int:
         try:        # signals take effect between steps, files and frames (interrupts.check), never inside a
             with interrupts.deferred():         # library call: Numba compiling, matplotlib drawing
                 code = _main(argv)
+                if argv is None:                # exiting: from here on a signal has nothing to stop
+                    interrupts.ignore_signals()
         except Interrupted:         # it came after the last step, file and frame: the command had finished
             pass
-        if argv is None:
-            interrupts.ignore_signals()
         return code
 
 

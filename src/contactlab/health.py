@@ -119,32 +119,31 @@ class Health:
         """Note how deep the run starts (a scene may begin overlapping, or with a pinned vertex
         inside an obstacle): the depth check then trips only past that."""
         from .collision import collide
-        ratio = self._depth_ratios(collide(self.model, state))
+        ratio, _ = self._depth_ratios(collide(self.model, state))
         self.initial_depth_ratio = float(ratio.max(initial=0.0))
 
     def _depth_ratios(self, contacts):
-        """Each contact's depth over DEPTH_FRACTION of its pass-through depth (C,); 0 where
-        neither side can move (static, or pinned cloth vertices)."""
+        """(each contact's depth over DEPTH_FRACTION of its pass-through depth (C,), 0 where
+        neither side can move (static, or pinned cloth vertices); the pass-through depths (C,) [m])."""
         if contacts.count == 0:
-            return np.zeros(0)
-        ratio = contacts.depth / (DEPTH_FRACTION * pass_through_depths(self.model, contacts))
+            return np.zeros(0), np.zeros(0)
+        through = pass_through_depths(self.model, contacts)
         free = np.r_[~np.asarray(self.model.particle_pinned, dtype=bool), False]     # index −1: no particle
         movable = (contacts.body_a >= 0) | (contacts.body_b >= 0)
         for side in (contacts.particles_a, contacts.particles_b):
             movable |= free[side].any(axis=1)
-        return np.where(movable, ratio, 0.0)
+        return np.where(movable, contacts.depth / (DEPTH_FRACTION * through), 0.0), through
 
     def check_contacts(self, state, contacts):
         """Depth, on a State and the contacts of its own positions (a collision pass)."""
         if contacts.count:
-            ratio = self._depth_ratios(contacts)
-            limit = DEPTH_FRACTION * pass_through_depths(self.model, contacts)
+            ratio, through = self._depth_ratios(contacts)
             worst = int(np.argmax(ratio))
             if ratio[worst] > max(1.0, 1.1 * self.initial_depth_ratio):
                 return self._found(Violation("depth", state.time, f"a contact is {contacts.depth[worst] * 1000:.3g} mm "
                                                                   f"deep, past {DEPTH_FRACTION:g} of the depth at which "
                                                                   f"one side reaches the other's middle "
-                                                                  f"({limit[worst] / DEPTH_FRACTION * 1000:.3g} mm)"))
+                                                                  f"({through[worst] * 1000:.3g} mm)"))
         return self._behind_planes(state)
 
     def _behind_planes(self, state):

@@ -3,11 +3,12 @@
 Python's own Ctrl-C raises KeyboardInterrupt wherever the interpreter happens to be; inside a
 call into Numba-compiled code that can surface as ``SystemError: CPUDispatcher(...) returned a
 result with an exception set``, and SIGTERM kills the process without cleaning up at all. So
-``simulate`` steps inside :func:`deferred`: a signal that arrives then is noted, and
-:func:`check` raises :class:`Interrupted` at the next step or chunk boundary. Outside it (the
-command line installs :func:`handled` for its whole run) a signal raises at once, as Ctrl-C
-always does, so writing files, plotting and rendering stop promptly; their temporary files are
-removed on the way out (``record.atomic_path``).
+``simulate`` runs inside :func:`deferred`: a signal that arrives then is noted, and
+:func:`check` raises :class:`Interrupted` at the next step or chunk boundary. The command line
+installs :func:`handled` and runs the whole command deferred, so a signal also waits for the
+end of the current picture, video or export frame, or file (the places that call ``check``),
+and their temporary files are removed on the way out (``record.atomic_path``). Outside any
+deferred block, with :func:`handled` installed, a signal raises at once.
 """
 
 import contextlib

@@ -268,14 +268,15 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
         tally.implicit_spring_steps += info.implicit_springs
         sampled = step_index % record_every == 0 or step_index == steps
         violation = health.check_state(state, full=sampled)
-        if violation is None and sampled:
+        recorded = violation is None and sampled
+        if recorded:
             started = time.perf_counter()
             contacts = recorder.sample(state, info)
             tally.recording_seconds += time.perf_counter() - started
             violation = (health.check_samples(recorder.latest(ENERGY_SERIES), 0)
                          or health.check_contacts(state, contacts))
         if violation is not None:
-            if step_index % record_every and step_index != steps:
+            if not recorded:
                 recorder.sample(state, info)       # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
         bar.update(1)

@@ -40,7 +40,7 @@ from ..dynamics.integrators import advance_positions, factor_symmetric, free_vel
 from ..errors import InputError
 from ..state import State
 from . import CollisionOptions, StepInfo, check_choices, check_counts
-from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from .sequential import rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
 LINEAR_SOLVERS = ("cg", "direct")
@@ -190,17 +190,24 @@ def divergence_advice(model, dt, options, integrator):
 SUPPORT_COSINE = 0.3      # a contact whose normal is within 72° of "up" (against gravity) supports its upper side
 
 
+def contact_entities(contacts, body_count):
+    """Each contact's two sides as entities (bodies 0..B−1, then particles B..B+P−1; a point on
+    a cloth triangle counts as its first vertex; −1 a static side): (side A (C,), side B (C,))."""
+    return tuple(np.where(body >= 0, body, np.where(particles[:, 0] >= 0, body_count + particles[:, 0], -1))
+                 for body, particles in ((contacts.body_a, contacts.particles_a),
+                                         (contacts.body_b, contacts.particles_b)))
+
+
 @njit(cache=True)
-def supported_loads(body_a, body_b, particles_a, particles_b, normal, body_position, particle_position,
-                    body_mass, particle_mass, gravity):
+def supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass,
+                    gravity):
     """The weight each contact carries [N] (C,): every body and free particle, from the highest
     down, hands its own weight and what rests on it to the contacts it rests on (normals within
     72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
     or particle below; a static side takes it out. Contacts that support nothing carry the
-    lighter side's weight per supporting contact. Sides: body index, or a particle
-    (``particles_*[c, 0]``; a point on a cloth triangle counts as its first vertex).
-    Arrays (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
-    C, B, P = body_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
+    lighter side's weight per supporting contact. Sides as ``contact_entities`` gives them.
+    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
+    C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     loads = np.zeros(C)
     if g == 0.0 or C == 0:
@@ -210,7 +217,7 @@ def supported_loads(body_a, body_b, particles_a, particles_b, normal, body_posit
     lower = np.full(C, -1)
     supports = np.zeros(B + P, dtype=np.int64)
     for c in range(C):
-        a, b = _entity(body_a[c], particles_a[c, 0], B), _entity(body_b[c], particles_b[c, 0], B)
+        a, b = entity_a[c], entity_b[c]
         along = normal[c, 0] * up[0] + normal[c, 1] * up[1] + normal[c, 2] * up[2]     # normal: from B into A
         if along > SUPPORT_COSINE and a >= 0:
             upper[c], lower[c] = a, b
@@ -250,19 +257,13 @@ def supported_loads(body_a, body_b, particles_a, particles_b, normal, body_posit
     for c in range(C):
         if upper[c] < 0:                  # a side contact: the lighter dynamic side's share
             least = np.inf
-            for e in (_entity(body_a[c], particles_a[c, 0], B), _entity(body_b[c], particles_b[c, 0], B)):
+            for e in (entity_a[c], entity_b[c]):
                 if e >= 0:
                     least = min(least, own_share[e])
             loads[c] = least if least < np.inf else 0.0
     return loads
 
 
-@njit(cache=True, inline="always")
-def _entity(body, first_particle, B):
-    """A contact side as one entity: its body, else its (first) particle after the B bodies, else −1."""
-    if body >= 0:
-        return body
-    return B + first_particle if first_particle >= 0 else -1
 
 
 # ---- the contact springs ------------------------------------------------------------------
@@ -285,8 +286,8 @@ def contact_stiffness(model, state, contacts, options):
     a stack sinks about that far however much rests on it."""
     if options.stiffness != "auto":
         return np.full(contacts.count, float(options.stiffness))
-    loads = supported_loads(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                            contacts.normal, state.body_position, state.particle_position,
+    loads = supported_loads(*contact_entities(contacts, model.body_count), contacts.normal,
+                            state.body_position, state.particle_position,
                             np.asarray(model.body_mass, dtype=float), np.asarray(model.particle_mass, dtype=float),
                             np.asarray(model.gravity, dtype=float))
     return loads / options.allowed_penetration
@@ -331,10 +332,8 @@ def explicit_unstable(springs, contacts, dt, integrator, model):
         return False
     inverse = springs.inverse_effective_mass
     rows = springs.stiffness * inverse[:, 0] + springs.friction_stiffness * (inverse[:, 1] + inverse[:, 2])
-    body_count = model.body_count
-    entities = np.zeros(body_count + model.particle_count)
-    for body, particle in ((contacts.body_a, contacts.particles_a[:, 0]), (contacts.body_b, contacts.particles_b[:, 0])):
-        entity = np.where(body >= 0, body, np.where(particle >= 0, body_count + particle, -1))
+    entities = np.zeros(model.body_count + model.particle_count)
+    for entity in contact_entities(contacts, model.body_count):
         np.add.at(entities, entity[entity >= 0], rows[entity >= 0])
     omega_squared = float(entities.max(initial=0.0))
     if omega_squared <= 0.0:
@@ -389,18 +388,19 @@ PASS_THROUGH_FRACTION = 0.5   # of a contact's pass-through depth: the deepest o
 GUARD_SWEEPS, GUARD_TOLERANCE = 100, 1e-6      # sweeps, m/s of the guard's solve
 
 
-def hold_back(model, state, contacts, velocity, h):
+def hold_back(model, state, contacts, J, velocity, h):
     """The generalized velocity (N,) with which the step moves, held back where it would carry a
     contact past half its pass-through depth D (``collision.pass_through_depths``): every contact
     found over the swept step, open or closed, keeps v_n ≥ −(D/2 − δ) / h, δ its depth now [m].
     A gap may close and a spring engage as deep as it likes short of that; a fast or small body
     that no spring of this stiffness could stop in time stops on the surface instead of passing
-    through (normal impulses only, by sequential sweeps). ``velocity`` itself where nothing would."""
+    through (normal impulses only, by sequential sweeps). ``velocity`` itself where nothing would;
+    J (3C, N): the step's Jacobian, which tells that without the sweeps' rows."""
     limit = PASS_THROUGH_FRACTION * pass_through_depths(model, contacts)
     slowest = -(limit - contacts.depth) / h
-    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    if not (row_products(rows, velocity)[:, 0] < slowest).any():
+    if not ((J @ velocity)[0::3] < slowest).any():
         return velocity
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     held = velocity.copy()
     solve_sequential_impulses(rows, np.zeros(contacts.count), slowest, held, GUARD_SWEEPS, GUARD_TOLERANCE,
                               np.zeros((contacts.count, 3)), *sweep_groups(rows, contacts, state,
@@ -521,7 +521,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         v_new = v_free + distribute(J, inverse_mass, forces, h)
         moved_by = v if integrator == "explicit_euler" else v_new
     # 4b. over the swept step: no contact carried past half its pass-through depth
-    held = hold_back(model, state, contacts, moved_by, h) if contacts.count else moved_by
+    held = hold_back(model, state, contacts, J, moved_by, h) if contacts.count else moved_by
     if held is not moved_by:
         v_new = v_new + (held - moved_by) if integrator == "explicit_euler" and not implicit else held
         moved_by = held

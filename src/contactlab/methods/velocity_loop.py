@@ -499,7 +499,7 @@ GLUE_SECONDS = (1e-4, 8e-6)     # s a step, and s a body or particle a step: the
 
 
 def repays_compiling(model, steps):
-    """Whether ``steps`` steps of ``model`` through ``stitched_step`` would spend more time in
+    """Whether ``steps`` steps of ``model`` through the methods' ``step`` would spend more time in
     Python glue between kernels (measured: about 0.1 ms a step plus 8 µs a body, see
     benchmarks/profile_methods.py) than compiling the loop costs on an empty cache."""
     per_step = GLUE_SECONDS[0] + GLUE_SECONDS[1] * (model.body_count + model.particle_count)
