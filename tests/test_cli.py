@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+from contactlab.store import open_trajectory
 import pytest
 
 from contactlab.compiling import NOTICE
@@ -29,14 +30,14 @@ def test_run_bouncing_ball_json_and_trajectory(tmp_path):
     assert summary["scene"] == "bouncing_ball" and summary["method"] == "impulse"
     out = tmp_path / "out" / "bouncing_ball-impulse"
     assert json.loads((out / "summary.json").read_text()) == summary
-    run = np.load(out / "trajectory.npz")
+    run = open_trajectory(out / "trajectory.h5")
     T = len(run["time"])
     assert T == summary["steps"] + 1
     assert run["body_position"].shape == (T, 1, 3) and run["body_orientation"].shape == (T, 1, 4)
     assert run["particle_position"].shape == (T, 0, 3)        # empty, not missing
     for name in ("body_velocity", "body_angular_velocity", "particle_velocity", "energy_kinetic",
                  "energy_potential", "energy_elastic", "max_penetration", "contact_count"):
-        assert name in run.files
+        assert name in run
     assert list(run["body_names"]) == ["ball"] or len(run["body_names"]) == 1
     # the rebound apexes follow h0 eps^(2n) (the scene: 1 m drop, eps = 0.8, r = 0.1)
     z = run["body_position"][:, 0, 2] - 0.1
@@ -50,7 +51,7 @@ def test_record_every_and_out(tmp_path):
     result = contactlab("run", "sliding_block", "--record-every", "10", "--duration", "0.2", "--out", "here",
                         "--json", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    run = np.load(tmp_path / "here" / "trajectory.npz")
+    run = open_trajectory(tmp_path / "here" / "trajectory.h5")
     steps = json.loads(result.stdout)["steps"]
     assert len(run["time"]) == steps // 10 + 1
 
@@ -59,15 +60,15 @@ def test_set_overrides_a_field_by_path(tmp_path):
     result = contactlab("run", "sliding_block", "--set", "bodies.0.velocity=[1,0,0]", "--duration", "0.01",
                         "--json", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    run = np.load(tmp_path / "out" / "sliding_block-impulse" / "trajectory.npz")
+    run = open_trajectory(tmp_path / "out" / "sliding_block-impulse" / "trajectory.h5")
     assert run["body_velocity"][0, 0, 0] == 1.0
 
 
 def test_demo_runs_the_default_scene_and_says_where(tmp_path):
     result = contactlab(cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    assert "out/bouncing_ball-impulse/trajectory.npz" in result.stdout
-    assert (tmp_path / "out" / "bouncing_ball-impulse" / "trajectory.npz").exists()
+    assert "out/bouncing_ball-impulse/trajectory.h5" in result.stdout
+    assert (tmp_path / "out" / "bouncing_ball-impulse" / "trajectory.h5").exists()
 
 
 def test_scenes_lists_one_line_each(tmp_path):
@@ -148,7 +149,7 @@ def test_penalty_stiffness_too_high_for_dt_stops_in_one_line_keeping_the_run(tmp
     with open(tmp_path / "out" / "incline-penalty" / "summary.json", encoding="utf-8") as stream:
         summary = json.load(stream)
     assert summary["diverged"]["check"] in ("energy", "speed", "depth", "finite")
-    trajectory = np.load(tmp_path / "out" / "incline-penalty" / "trajectory.npz")
+    trajectory = open_trajectory(tmp_path / "out" / "incline-penalty" / "trajectory.h5")
     assert trajectory["time"][-1] == pytest.approx(summary["diverged"]["time"])
     assert summary["options"]["stiffness"] == 1e6 and summary["implicit_spring_steps"] == 0
     allowed = contactlab("run", "incline", "--method", "penalty", "--set", "method.penalty.stiffness=1e6",
@@ -183,7 +184,7 @@ def test_cloth_drape_with_projection_comes_to_rest(tmp_path):
     result = contactlab("run", "cloth_drape", "--method", "projection", "--record-every", "10", "--json",
                         cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    run = np.load(tmp_path / "out" / "cloth_drape-projection" / "trajectory.npz")
+    run = open_trajectory(tmp_path / "out" / "cloth_drape-projection" / "trajectory.h5")
     kinetic = run["energy_kinetic"]
     assert kinetic.max() > 0.1 and kinetic[-1] < 1e-4 * kinetic.max()      # it fell, then stopped
     assert run["triangles"].shape == (2 * 24 * 24, 3) and (run["particle_cloth"] == 0).all()
@@ -202,7 +203,7 @@ def test_run_with_video_export_and_plots_then_render_and_export_again(tmp_path):
                  "plots/contacts.png", "plots/residual.png", "frames/frame_00000.ply"):
         assert (out / name).is_file(), name
         assert name.replace("00000", "*") in result.stdout     # the summary says where everything is
-    run = np.load(out / "trajectory.npz")
+    run = open_trajectory(out / "trajectory.h5")
     assert len(list((out / "frames").iterdir())) == len(run["time"])
     assert not [p for p in out.rglob(".partial-*")]
     (out / "still.png").unlink()
@@ -237,7 +238,7 @@ def test_compare_from_the_command_line(tmp_path):
     result = contactlab("compare", "bouncing_ball", "--methods", "impulse,constraints", "--duration", "0.3",
                         "--no-video", "--out", "cmp", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    for name in ("report.html", "report.md", "comparison.csv", "impulse/trajectory.npz",
+    for name in ("report.html", "report.md", "comparison.csv", "impulse/trajectory.h5",
                  "constraints/summary.json"):
         assert (tmp_path / "cmp" / name).is_file(), name
     assert "report.html" in result.stdout

@@ -16,6 +16,7 @@ from contactlab import compare as compare_module
 from contactlab.compare import compare
 from contactlab.errors import InputError
 from contactlab.methods import AVAILABLE
+from contactlab.store import open_trajectory
 
 PYRAMID = "box_pyramid"
 
@@ -48,8 +49,9 @@ def _csv_rows(result):
 
 
 def _trajectory(result, method):
-    with np.load(os.path.join(result.out, method, "trajectory.npz")) as data:
-        return {key: data[key] for key in data.files}
+    data = open_trajectory(os.path.join(result.out, method, "trajectory.h5"))
+    assert data.status == "complete"
+    return {key: data[key] for key in data}
 
 
 def _summary(result, method):
@@ -183,7 +185,10 @@ def test_a_method_that_blows_up_is_reported_and_the_others_go_on(ball):
     assert float(rows["penalty"]["status"].split("= ")[1].split(" s")[0]) == pytest.approx(0.45, abs=0.02)
     assert rows["penalty"]["max_penetration_mm"] is None and rows["impulse"]["status"] == "ok"
     assert rows["impulse"]["steps"] == 900
-    assert not os.path.exists(os.path.join(ball.out, "penalty"))
+    # the run up to the blow-up is kept, marked diverged; no plots or video of it
+    assert sorted(os.listdir(os.path.join(ball.out, "penalty"))) == ["summary.json", "trajectory.h5"]
+    assert open_trajectory(os.path.join(ball.out, "penalty", "trajectory.h5")).status == "diverged"
+    assert _summary(ball, "penalty")["diverged"]["check"] in ("energy", "speed", "depth", "finite")
     assert "penalty blew up at t = " in ball.summary_text
     for path in (ball.report_md, ball.report_html):
         with open(path, encoding="utf-8") as stream:
@@ -254,8 +259,8 @@ def test_default_output_folder_is_out_scene_compare(tmp_path, monkeypatch):
     result = compare("bouncing_ball", "impulse", duration=0.02, video=False)
     assert result.out == os.path.join("out", "bouncing_ball-compare")
     assert sorted(os.listdir(result.out)) == ["comparison.csv", "impulse", "plots", "report.html", "report.md"]
-    assert sorted(os.listdir(os.path.join(result.out, "impulse"))) == ["plots", "summary.json", "trajectory.npz"]
-    assert _summary(result, "impulse")["trajectory"] == os.path.join(result.out, "impulse", "trajectory.npz")
+    assert sorted(os.listdir(os.path.join(result.out, "impulse"))) == ["plots", "summary.json", "trajectory.h5"]
+    assert _summary(result, "impulse")["trajectory"] == os.path.join(result.out, "impulse", "trajectory.h5")
 
 
 # ---- the reports --------------------------------------------------------------------------------
@@ -267,7 +272,7 @@ def test_report_md_holds_the_table_links_and_the_summary(pyramid):
     assert "max penetration (mm)" in header and "energy drift (J)" in header and "steps/s" in header
     for method in AVAILABLE:
         assert any(line.startswith(f"| {method} | ok |") for line in report.splitlines())
-        assert f"({method}/plots/energy.png)" in report and f"({method}/trajectory.npz)" in report
+        assert f"({method}/plots/energy.png)" in report and f"({method}/trajectory.h5)" in report
     assert "(plots/energy.png)" in report
     assert pyramid.summary_text in report
     assert "Fastest:" in pyramid.summary_text and "Least penetration:" in pyramid.summary_text

@@ -9,8 +9,9 @@ import trimesh
 from pxr import Sdf, Usd, UsdGeom
 
 from contactlab import InputError, ModelBuilder, rotations, simulate
-from contactlab import export
+from contactlab import export, store
 from contactlab.export import frame_samples, write_mesh_sequence, write_usd
+from contactlab.record import SERIES
 from contactlab.scene import load_scene
 from contactlab.surfaces import posed_body_vertices
 
@@ -248,10 +249,9 @@ def test_ply_sequence_is_one_mesh_per_frame(arrays, tmp_path):
 
 
 def test_a_trajectory_file_exports_like_its_arrays(arrays, tmp_path):
-    np.savez_compressed(tmp_path / "trajectory.npz", **arrays)
-    with np.load(tmp_path / "trajectory.npz") as loaded:
-        paths = write_mesh_sequence(loaded, tmp_path / "frames", every=5)
-        write_usd(loaded, tmp_path / "run.usd", every=5)
+    loaded = store.open_trajectory(store.write(tmp_path / "trajectory.h5", arrays, series=SERIES))
+    paths = write_mesh_sequence(loaded, tmp_path / "frames", every=5)
+    write_usd(loaded, tmp_path / "run.usd", every=5)
     _check_obj(arrays, paths, every=5)
     _check_usd(arrays, tmp_path / "run.usd", every=5)
 

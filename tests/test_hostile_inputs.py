@@ -15,14 +15,16 @@ import os
 import subprocess
 import sys
 import warnings
+import zipfile
 
+import h5py
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import ball_on_plane
-from contactlab import cli, render
+from contactlab import cli, render, store
 from contactlab.builder import (BODY_SHAPE_ARGUMENTS, LIMITS, OBSTACLE_SHAPE_ARGUMENTS, LENGTH, MASS,
                                 ModelBuilder)
 from contactlab.errors import LONGEST_MESSAGE, InputError, SimulationDiverged
@@ -168,12 +170,12 @@ def test_compare_of_an_empty_scene_says_so_and_writes_nothing(tmp_path, monkeypa
 
 @pytest.fixture(scope="module")
 def ball_run(tmp_path_factory):
-    """A short run's output folder (trajectory.npz, summary.json) and its arrays."""
+    """A short run's output folder (trajectory.h5, summary.json) and its arrays."""
     out = tmp_path_factory.mktemp("ball")
     code = cli.main(["run", str(write(out, BALL)), "--out", str(out / "run"), "--no-plots", "--json"])
     assert code == 0
-    with np.load(out / "run" / "trajectory.npz") as archive:
-        return out / "run", {name: archive[name] for name in archive.files}
+    trajectory = store.open_trajectory(out / "run" / "trajectory.h5")
+    return out / "run", {name: trajectory[name] for name in trajectory}
 
 
 def damaged(arrays, **changes):
@@ -182,8 +184,71 @@ def damaged(arrays, **changes):
     return result
 
 
-def corruptions(arrays, data):
-    """name -> bytes of a damaged trajectory.npz."""
+def content_damage(arrays):
+    """name -> arrays whose values are wrong though the file holding them is sound."""
+    return {
+        "missing arrays": {"body_surface_vertices": arrays["body_surface_vertices"]},
+        "wrong shape": damaged(arrays, body_position=arrays["body_position"][:2]),
+        "strings for numbers": damaged(arrays, body_position=np.array(["a", "b"])),
+        "nan positions": damaged(arrays, body_position=arrays["body_position"] * np.nan),
+        "huge positions": damaged(arrays, body_position=arrays["body_position"] + 1e200),
+        "indices out of range": damaged(arrays, body_surface_triangles=arrays["body_surface_triangles"] + 999),
+        "time backwards": damaged(arrays, time=arrays["time"][::-1].copy()),
+        "bad starts": damaged(arrays, body_surface_vertex_start=np.array([0, 5])),
+    }
+
+
+def byte_damage(data, flip):
+    """name -> bytes of a file that is not sound: ``data`` (a good file) cut short, or with its
+    byte ``flip`` (one the file's meaning depends on) changed."""
+    middle = len(data) // 2
+    return {
+        "random bytes": np.random.default_rng(1).bytes(4000),
+        "empty file": b"",
+        "truncated": data[:middle],
+        "a flipped byte": data[:flip] + bytes([data[flip] ^ 0xFF]) + data[flip + 1:],
+    }
+
+
+def h5_bytes(tmp_path, arrays, **attributes):
+    """The bytes of an HDF5 file holding ``arrays`` as datasets, with ``attributes`` (by default
+    those of a contactlab trajectory)."""
+    path = tmp_path / "made.h5"
+    with h5py.File(path, "w") as file:
+        file.attrs.update({"format": store.FORMAT, "version": store.VERSION, **attributes})
+        for name, value in arrays.items():
+            value = np.asarray(value)
+            file.create_dataset(name, data=value.astype(h5py.string_dtype()) if value.dtype.kind == "U" else value)
+    data = path.read_bytes()
+    path.unlink()
+    return data
+
+
+def h5_corruptions(arrays, path, tmp_path):
+    """name -> bytes of a damaged trajectory.h5 (``path``: a sound one); its flipped byte is
+    one of the positions (a checksum catches it: the rest of the file is mostly padding)."""
+    with h5py.File(path, "r") as file:
+        flip = file["body_position"].id.get_chunk_info(0).byte_offset + 5
+    with h5py.File(tmp_path / "ragged.h5", "w") as file:       # a type contactlab never writes
+        file.attrs.update(format=store.FORMAT, version=store.VERSION)
+        file.create_dataset("time", (2,), dtype=h5py.vlen_dtype(np.float64))
+    ragged = (tmp_path / "ragged.h5").read_bytes()
+    (tmp_path / "ragged.h5").unlink()
+    return {
+        **byte_damage(path.read_bytes(), flip),
+        "another HDF5 file": h5_bytes(tmp_path, arrays, format="something else"),
+        "a newer format": h5_bytes(tmp_path, arrays, version=store.VERSION + 1),
+        "ragged arrays": ragged,
+        **{name: h5_bytes(tmp_path, contents) for name, contents in content_damage(arrays).items()},
+    }
+
+
+def npz_corruptions(arrays, data):
+    """name -> bytes of a damaged trajectory.npz (what an older contactlab wrote, still read);
+    its flipped byte is one of the compressed positions (the zip's CRC catches it)."""
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        member = archive.getinfo("body_position.npy")
+    flip = member.header_offset + 30 + len(member.filename.encode()) + len(member.extra) + member.compress_size // 2
     def npz(contents):
         stream = io.BytesIO()
         np.savez(stream, **contents)
@@ -193,35 +258,32 @@ def corruptions(arrays, data):
     bare = io.BytesIO()
     np.save(bare, arrays["time"])
     return {
-        "random bytes": np.random.default_rng(1).bytes(4000),
-        "empty file": b"",
-        "truncated zip": data[:len(data) // 2],
-        "a flipped byte": data[:len(data) // 2] + bytes([data[len(data) // 2] ^ 0xFF]) + data[len(data) // 2 + 1:],
-        "missing arrays": npz({"body_surface_vertices": arrays["body_surface_vertices"]}),
+        **byte_damage(data, flip),
         "object array": npz(objects),
         "a bare .npy": bare.getvalue(),
-        "wrong shape": npz(damaged(arrays, body_position=arrays["body_position"][:2])),
-        "strings for numbers": npz(damaged(arrays, body_position=np.array(["a", "b"]))),
-        "nan positions": npz(damaged(arrays, body_position=arrays["body_position"] * np.nan)),
-        "huge positions": npz(damaged(arrays, body_position=arrays["body_position"] + 1e200)),
-        "indices out of range": npz(damaged(arrays, body_surface_triangles=arrays["body_surface_triangles"] + 999)),
-        "time backwards": npz(damaged(arrays, time=arrays["time"][::-1].copy())),
-        "bad starts": npz(damaged(arrays, body_surface_vertex_start=np.array([0, 5]))),
+        **{name: npz(contents) for name, contents in content_damage(arrays).items()},
     }
 
 
+@pytest.mark.parametrize("kind", ["trajectory.h5", "trajectory.npz"])
 @pytest.mark.parametrize("command", ["render", "export"])
-def test_a_corrupt_trajectory_is_one_line_and_nothing_written(ball_run, tmp_path, monkeypatch, capsys, command):
+def test_a_corrupt_trajectory_is_one_line_and_nothing_written(ball_run, tmp_path, monkeypatch, capsys, command,
+                                                              kind):
     directory, arrays = ball_run
-    data = (directory / "trajectory.npz").read_bytes()
-    for name, content in corruptions(arrays, data).items():
+    if kind == "trajectory.h5":
+        damages = h5_corruptions(arrays, directory / kind, tmp_path)
+    else:
+        stream = io.BytesIO()
+        np.savez_compressed(stream, **arrays)
+        damages = npz_corruptions(arrays, stream.getvalue())
+    for name, content in damages.items():
         folder = tmp_path / f"{command}-{name.replace(' ', '_')}"
         folder.mkdir()
-        (folder / "trajectory.npz").write_bytes(content)
+        (folder / kind).write_bytes(content)
         options = ("--width", 32) if command == "render" else ("--format", "obj")
         code, err = run_main(monkeypatch, capsys, command, folder, *options)
         assert code == 2 and len(err) == 1, (name, err)
-        assert sorted(os.listdir(folder)) == ["trajectory.npz"], name
+        assert sorted(os.listdir(folder)) == [kind], name
 
 
 def test_an_object_array_is_never_unpickled(tmp_path, ball_run):
@@ -243,7 +305,7 @@ def test_a_summary_that_is_not_an_object_or_a_fifo_is_ignored(ball_run, tmp_path
     for summary in ("[1, 2]", '{"scene": "x"}', "[" * 100_000, "fifo"):
         folder = tmp_path / f"s{len(os.listdir(tmp_path))}"
         folder.mkdir()
-        (folder / "trajectory.npz").write_bytes((directory / "trajectory.npz").read_bytes())
+        (folder / "trajectory.h5").write_bytes((directory / "trajectory.h5").read_bytes())
         if summary == "fifo":
             os.mkfifo(folder / "summary.json")
         else:
@@ -301,8 +363,8 @@ def test_drawing_non_finite_positions_is_one_input_error(ball_run, tmp_path):
     blown = dict(arrays)
     blown["body_position"] = arrays["body_position"].copy()
     blown["body_position"][2:] = np.nan                          # from the third sample on
-    error = refused(render.render, blown, tmp_path / "video", width=32, height=32)
-    assert f"from t = {arrays['time'][2]:.4g} s on" in error.message
+    error = refused(render.render, blown, tmp_path / "video", fps=100, formats="mp4", width=32, height=32)
+    assert f"at t = {arrays['time'][2]:.4g} s (the first sample used" in error.message    # 100 fps: every sample
     assert not (tmp_path / "video").exists()
     refused(render.still, blown, tmp_path / "still.png", width=32, height=32)
 
@@ -482,12 +544,13 @@ def test_the_command_line_says_one_line_and_writes_nothing(tmp_path, args, text)
     assert os.listdir(tmp_path) == ["scene.toml"]
 
 
-def test_rendering_random_bytes_from_the_command_line(tmp_path):
+@pytest.mark.parametrize("kind, start", [("trajectory.h5", b"\x89HDF\r\n\x1a\n"), ("trajectory.npz", b"PK\x03\x04")])
+def test_rendering_random_bytes_from_the_command_line(tmp_path, kind, start):
     (tmp_path / "run").mkdir()
-    (tmp_path / "run" / "trajectory.npz").write_bytes(b"PK\x03\x04" + os.urandom(3000))
+    (tmp_path / "run" / kind).write_bytes(start + os.urandom(3000))
     result = contactlab("render", "run", cwd=tmp_path)
     assert_one_line_exit_2(result, tmp_path, "not a trajectory")
-    assert os.listdir(tmp_path / "run") == ["trajectory.npz"]
+    assert os.listdir(tmp_path / "run") == [kind]
 
 
 # =============================================================================================

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from contactlab import InputError, ModelBuilder, render, simulate
-from contactlab.record import Recorder
+from contactlab import InputError, ModelBuilder, render, simulate, store
+from contactlab.record import SERIES, Recorder
 from contactlab.scene import load_scene
 
 SMALL = dict(width=160, height=120)
@@ -54,10 +54,9 @@ def coloured(image, threshold=20):
 # -- files --------------------------------------------------------------------------------
 
 def test_video_and_still_read_back_with_real_time_frame_counts(box_run, tmp_path):
-    trajectory = tmp_path / "trajectory.npz"
-    np.savez(trajectory, **box_run)                     # an NpzFile works like the dict
-    with np.load(trajectory) as arrays:
-        paths = render.render(arrays, tmp_path / "video", fps=20, title="falling box", **SMALL)
+    trajectory = store.write(tmp_path / "trajectory.h5", box_run, series=SERIES)
+    arrays = store.open_trajectory(trajectory)          # a trajectory file works like the dict
+    paths = render.render(arrays, tmp_path / "video", fps=20, title="falling box", **SMALL)
     assert set(paths) == {"mp4", "gif", "still"}
     assert sorted(os.listdir(tmp_path / "video")) == ["still.png", "video.gif", "video.mp4"]
 

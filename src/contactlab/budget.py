@@ -4,14 +4,18 @@
 memory limit — by default ``MEMORY_SHARE`` of this machine's physical memory — instead of
 running until the machine runs out (a million bodies, a 3000 × 3000 cloth, a long run recorded
 every step). The estimate is the recorded trajectory (held in memory until the run ends, twice
-while it is turned into arrays) plus a step's working arrays, about ``WORKING_BYTES`` per body,
+while it is turned into arrays — or, for a run that streams it to a file, two chunks of it,
+``2 × store.CHUNK_BYTES``) plus a step's working arrays, about ``WORKING_BYTES`` per body,
 particle or cloth vertex (contacts, their rows, the broad phase: about 11 KB measured on the
 4000-sphere pile). ``simulate(..., memory_limit=…)`` (``--memory-limit`` on the command line)
-sets another limit in bytes; ``math.inf`` none.
+sets another limit in bytes; ``math.inf`` none. A streamed trajectory must also fit on its
+disk: a run whose file would outgrow the free space there is refused the same way.
 """
 
 import os
+import shutil
 
+from . import record, store
 from .errors import InputError
 
 MEMORY_SHARE = 0.5            # of the physical memory, for one run
@@ -27,34 +31,54 @@ def physical_memory() -> int:
         return FALLBACK_MEMORY
 
 
-def estimate(model, steps, record_every) -> dict:
+def estimate(model, steps, record_every, streamed=False) -> dict:
     """Bytes a run of ``steps`` steps recorded every ``record_every`` will hold at most:
-    ``trajectory`` (twice: the samples and their arrays), ``working`` and ``total``."""
+    ``file`` (the trajectory's size), ``trajectory`` (in memory: twice the file, the samples and
+    their arrays; two chunks when ``streamed``), ``working`` and ``total``."""
     samples = steps // record_every + 2
-    per_sample = 8 * (13 * model.body_count + 6 * model.particle_count + 8)
-    trajectory = 2 * samples * per_sample
+    per_sample = record.sample_bytes(model)
+    file = samples * per_sample
+    trajectory = min(2 * file, 2 * max(store.CHUNK_BYTES, per_sample)) if streamed else 2 * file
     working = WORKING_BYTES * (model.body_count + model.particle_count)
-    return {"samples": samples, "trajectory": trajectory, "working": working, "total": trajectory + working}
+    return {"samples": samples, "per_sample": per_sample, "file": file, "trajectory": trajectory,
+            "working": working, "total": trajectory + working}
 
 
-def check(model, steps, record_every, memory_limit=None):
-    """InputError, one sentence with the estimate and the limit, when the run cannot fit."""
+def check(model, steps, record_every, memory_limit=None, trajectory=None):
+    """InputError, one sentence with the estimate and the limit, when the run cannot fit: in
+    memory, and for a run streaming to the file ``trajectory``, on that file's disk."""
     limit = MEMORY_SHARE * physical_memory() if memory_limit is None else memory_limit
-    needed = estimate(model, steps, record_every)
+    needed = estimate(model, steps, record_every, streamed=trajectory is not None)
+    dynamic = model.body_count + model.particle_count
+    per_sample = needed["per_sample"]
+    if trajectory is not None:
+        free = _free_disk(trajectory)
+        if free is not None and needed["file"] > free:
+            fewer = max(record_every + 1, -(-steps // max(1, free // per_sample - 2)))
+            raise InputError("record_every", f"the trajectory would take {_size(needed['file'])}: "
+                                             f"{needed['samples']:,} samples of {dynamic:,} bodies and particles, "
+                                             f"more than the {_size(free)} free on the disk of {trajectory}; "
+                                             f"record every {fewer:,} steps or more, or run shorter")
     if needed["total"] <= limit:
         return needed
-    dynamic = model.body_count + model.particle_count
-    per_sample = needed["trajectory"] / needed["samples"]
-    affordable = int((limit - needed["working"]) / per_sample) - 2        # samples that would fit
-    if affordable >= 1:             # the trajectory is what does not fit: record less often
+    affordable = int((limit - needed["working"]) / (2 * per_sample)) - 2        # samples that would fit
+    if trajectory is None and affordable >= 1:    # the trajectory is what does not fit: record less often
         fewer = max(record_every + 1, -(-steps // affordable))
         raise InputError("record_every", f"the run would hold {_size(needed['total'])}: {needed['samples']:,} samples "
                                          f"of {dynamic:,} bodies and particles, over its limit of {_size(limit)}; "
-                                         f"record every {fewer:,} steps or more, run shorter, or raise memory_limit "
-                                         f"(--memory-limit)")
-    raise InputError("model", f"the run would need about {_size(needed['working'] + 3 * per_sample)} for "
+                                         f"record every {fewer:,} steps or more, run shorter, stream the "
+                                         f"trajectory to a file (trajectory=…), or raise memory_limit (--memory-limit)")
+    raise InputError("model", f"the run would need about {_size(needed['working'] + 6 * per_sample)} for "
                               f"{dynamic:,} bodies, particles and cloth vertices at the fewest samples, over its "
                               f"limit of {_size(limit)}; simulate fewer, or raise memory_limit (--memory-limit)")
+
+
+def _free_disk(path):
+    """Bytes free on the disk that holds ``path``'s folder (None where it cannot be told)."""
+    try:
+        return shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+    except OSError:
+        return None
 
 
 def _size(count):

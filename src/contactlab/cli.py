@@ -60,7 +60,7 @@ def _parser():
     compare.add_argument("--allow-divergence", action="store_true", help="as for run: go on past failed health checks")
 
     render = commands.add_parser("render", help="draw a run's trajectory: video.mp4, video.gif, still.png")
-    render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.npz)")
+    render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
     render.add_argument("--fps", type=int, default=30, help="frames per second (default 30)")
     render.add_argument("--width", type=int, default=640, help="picture width in pixels (default 640)")
     render.add_argument("--height", type=int, default=480, help="picture height in pixels (default 480)")
@@ -68,7 +68,7 @@ def _parser():
     render.add_argument("--azimuth", type=float, default=-60.0, help="camera azimuth in degrees (default -60)")
 
     export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
-    export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.npz)")
+    export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
     export.add_argument("--format", default="usd", help="usd, obj or ply, or a comma-separated list (default usd)")
     export.add_argument("--every", type=int, default=1, metavar="K", help="export every K-th sample (default 1)")
     return parser
@@ -128,7 +128,7 @@ def _memory_limit(text):
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
          exports=(), plots=True, allow_divergence=False, memory_limit=None):
-    from .record import write_outputs
+    from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
     from .simulation import simulate
 
@@ -138,18 +138,25 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     scene = load_scene(scene_source, overrides)
     options = scene.method_options.get(scene.method, {})
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
-    try:
+    trajectory = os.path.join(out, TRAJECTORY)
+    made = make_folders(out)
+    try:                                          # the samples stream into trajectory.h5 as the run goes
         result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
                           record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
-                          allow_divergence=allow_divergence, memory_limit=memory_limit)
-    except SimulationDiverged as error:      # the run up to then is kept, its summary marked
-        if error.run is not None:
-            error.run.summary["trajectory"] = os.path.join(out, "trajectory.npz")
-            write_outputs(out, error.run.arrays, error.run.summary)
+                          allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
+    except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
+        if getattr(error, "run", None) is not None:
+            error.run.summary["trajectory"] = trajectory
+            write_summary(out, error.run.summary)
             error.written = out
+        else:
+            remove_empty(made)
         raise
-    result.summary["trajectory"] = os.path.join(out, "trajectory.npz")
-    write_outputs(out, result.arrays, result.summary)
+    except BaseException:                         # an input error before the run: nothing written, no folder
+        remove_empty(made)
+        raise
+    result.summary["trajectory"] = trajectory
+    write_summary(out, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
         print(json.dumps(result.summary))
@@ -180,16 +187,22 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
 
 
 def _load_run(directory):
-    """The trajectory and summary of an earlier run's output folder. The trajectory is read
-    without unpickling anything (contactlab.trajectory.load_npz; render and export check its
-    arrays); the summary is {} unless summary.json is a regular file holding a JSON object
-    that names the scene and the method."""
+    """The trajectory and summary of an earlier run's output folder. The trajectory is
+    trajectory.h5 read back lazily (contactlab.store), or the trajectory.npz of an older
+    contactlab read without unpickling anything (contactlab.trajectory.load_npz); render and
+    export check its arrays. The summary is {} unless summary.json is a regular file holding
+    a JSON object that names the scene and the method."""
+    from .record import TRAJECTORY
+    from .store import open_trajectory
     from .trajectory import load_npz
-    path = os.path.join(directory, "trajectory.npz")
-    if not os.path.isfile(path):
-        raise InputError("OUT_DIR", f"found no trajectory.npz in {directory}; give the folder a "
+    path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
+    if os.path.isfile(path):
+        arrays = open_trajectory(path, "OUT_DIR")
+    elif os.path.isfile(older):
+        arrays, path = load_npz(older, "OUT_DIR"), older
+    else:
+        raise InputError("OUT_DIR", f"found no {TRAJECTORY} in {directory}; give the folder a "
                                     f"'contactlab run' wrote (its --out)")
-    arrays = load_npz(path, "OUT_DIR")
     if "body_surface_vertices" not in arrays:
         raise InputError("OUT_DIR", f"{path} was written by an older contactlab without the shapes' "
                                     f"surfaces; run the scene again")

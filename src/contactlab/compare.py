@@ -5,11 +5,13 @@
     result.report_html                            # open it in a browser (no network needed)
 
 Every method runs the same scene (with ``simulation.method`` set to it, so the scene's
-``[method.NAME]`` options apply) before anything is written: a bad scene stops the comparison
-with an InputError and no output. A method that blows up (SimulationDiverged) is reported as
-such and the others go on. Into ``out`` (default ``out/<scene>-compare/``):
+``[method.NAME]`` options apply); the scene is loaded for every method before anything is
+written, so a bad scene stops the comparison with an InputError and no output. Each run streams
+its trajectory to disk as it goes (contactlab.store) and the metrics, plots and videos read it
+back. A method that blows up (SimulationDiverged) is reported as such, its trajectory up to then
+kept, and the others go on. Into ``out`` (default ``out/<scene>-compare/``):
 
-    <method>/trajectory.npz, summary.json     as `contactlab run` writes them
+    <method>/trajectory.h5, summary.json      as `contactlab run` writes them
     <method>/plots/*.png                       contactlab.plots.write_plots
     <method>/video.mp4, video.gif, still.png   contactlab.render.render (video=True)
     plots/*.png                                one line per method (write_comparison_plots)
@@ -34,7 +36,7 @@ import numpy as np
 from .errors import InputError, SimulationDiverged
 from .methods import AVAILABLE
 from .plots import PLOTS, total_energy, write_comparison_plots, write_plots
-from .record import atomic_path, write_outputs
+from .record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
 from .scene import load_scene
 from .simulation import simulate
 
@@ -71,6 +73,7 @@ class _Outcome:
     scene: object
     run: object = None
     failure: str = None
+    failed_run: object = None    # the Run up to the blow-up (its trajectory streamed to disk)
     failed_at: float = None      # s, simulated time of the blow-up when the message says it
     warnings: list = field(default_factory=list)
     checks: list = field(default_factory=list)
@@ -105,28 +108,34 @@ def supports(method, scene) -> bool:
     return True
 
 
-def _run(method, scene, progress, allow_divergence=False):
-    """Simulate ``scene`` (loaded for ``method``); a divergence becomes the outcome's failure.
-    Warnings are kept for the report and passed on."""
+def _run(method, scene, progress, allow_divergence, trajectory):
+    """Simulate ``scene`` (loaded for ``method``), streaming its trajectory to the file
+    ``trajectory``; a divergence becomes the outcome's failure. Warnings are kept for the
+    report and passed on."""
     outcome = _Outcome(method, scene)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             outcome.run = simulate(scene.model, method, scene.dt, scene.duration,
                                    scene.method_options.get(method, {}), scene.integrator,
-                                   progress=progress, scene_name=scene.name, allow_divergence=allow_divergence)
+                                   progress=progress, scene_name=scene.name, allow_divergence=allow_divergence,
+                                   trajectory=trajectory)
         except SimulationDiverged as error:
             outcome.failure = str(error)
             outcome.failed_at = error.time
+            outcome.failed_run = error.run
     for warning in caught:
         outcome.warnings.append(str(warning.message))
         warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     return outcome
 
 
-def _run_all(scene_source, names, named, overrides, progress, allow_divergence=False):
-    """Load and run the scene with every method; (outcomes, skipped {method: why})."""
+def _run_all(scene_source, names, named, overrides, progress, allow_divergence, out, created):
+    """Load the scene for every method, then run it with each, streaming each trajectory to
+    out/<method>/trajectory.h5 (out: None for the default, folders and files noted in
+    ``created``); (outcomes, skipped {method: why}, out)."""
     scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
+    out = os.fspath(out) if out is not None else os.path.join("out", f"{next(iter(scenes.values())).name}-compare")
     outcomes, skipped, first_error = [], {}, None
     for name, scene in scenes.items():
         if not supports(name, scene):
@@ -134,16 +143,21 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence=F
                 raise InputError("--methods", f"{name} does not support the scene {scene.name}")
             skipped[name] = "not supported"
             continue
+        created.folder(os.path.join(out, name))
+        trajectory = os.path.join(out, name, TRAJECTORY)
         try:
-            outcomes.append(_run(name, scene, progress, allow_divergence))
+            outcomes.append(_run(name, scene, progress, allow_divergence, trajectory))
         except InputError as error:
             if named:
                 raise
             skipped[name] = str(error)
             first_error = first_error or error
+            remove_empty([os.path.join(out, name)])     # its folder, empty: the method left nothing
+            continue
+        created.add(trajectory)
     if not outcomes:
         raise first_error or InputError("--methods", "no method supports this scene")
-    return outcomes, skipped
+    return outcomes, skipped, out
 
 
 # ---- metrics -----------------------------------------------------------------------------------
@@ -614,13 +628,7 @@ class _Created:
         self.files, self.folders = [], []
 
     def folder(self, path):
-        missing = []
-        while path and not os.path.isdir(path):
-            missing.append(path)
-            path = os.path.dirname(path)
-        for folder in reversed(missing):
-            os.makedirs(folder, exist_ok=True)
-            self.folders.append(folder)
+        self.folders += make_folders(path)
 
     def add(self, *paths):
         self.files += paths
@@ -633,14 +641,8 @@ class _Created:
         return path
 
     def remove(self):
-        for path in self.files:
-            if os.path.isfile(path):
-                os.unlink(path)
-        for folder in reversed(self.folders):
-            try:
-                os.rmdir(folder)
-            except OSError:
-                pass
+        undo_written(self.files, None, created=False)        # an interrupted compare says it wrote nothing
+        remove_empty(self.folders)
 
 
 def _renderer(fps):
@@ -651,23 +653,25 @@ def _renderer(fps):
 
 
 def _write_method(outcome, out, created, render, fps, progress):
-    """trajectory.npz, summary.json, plots and (with a ``render`` function) the video of one run
-    into out/<method>."""
+    """summary.json, plots and (with a ``render`` function) the video of one run into
+    out/<method>, beside the trajectory it streamed; a run that blew up gets its summary only."""
     directory = os.path.join(out, outcome.method)
-    run = outcome.run
-    created.folder(os.path.join(directory, "plots"))
-    run.summary["trajectory"] = os.path.join(directory, "trajectory.npz")
-    write_outputs(directory, run.arrays, run.summary)
-    files = {"trajectory": run.summary["trajectory"], "summary": os.path.join(directory, "summary.json")}
-    created.add(*files.values())
-    title = f"{outcome.scene.name} — {outcome.method}"
-    plots = write_plots(run.arrays, os.path.join(directory, "plots"), title=title)
-    created.add(*plots.values())
-    files.update({f"plot {name}": path for name, path in plots.items()})
-    if render:
-        media = render(run.arrays, directory, fps=fps, title=title, progress=progress)
-        created.add(*media.values())
-        files = {**media, **files}
+    run = outcome.run or outcome.failed_run
+    if run is None:
+        return
+    run.summary["trajectory"] = os.path.join(directory, TRAJECTORY)
+    files = {"trajectory": run.summary["trajectory"], "summary": write_summary(directory, run.summary)}
+    created.add(files["summary"])
+    if outcome.run is not None:
+        created.folder(os.path.join(directory, "plots"))
+        title = f"{outcome.scene.name} — {outcome.method}"
+        plots = write_plots(run.arrays, os.path.join(directory, "plots"), title=title)
+        created.add(*plots.values())
+        files.update({f"plot {name}": path for name, path in plots.items()})
+        if render:
+            media = render(run.arrays, directory, fps=fps, title=title, progress=progress)
+            created.add(*media.values())
+            files = {**media, **files}
     outcome.files = files
 
 
@@ -687,17 +691,15 @@ def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None
     names, named = _method_names(methods)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
     render = _renderer(fps) if video else None       # a missing renderer or a bad fps fails before the runs
-    outcomes, skipped = _run_all(scene_source, names, named, overrides, progress, allow_divergence)
-    scene = outcomes[0].scene
-    out = os.fspath(out) if out is not None else os.path.join("out", f"{scene.name}-compare")
-    _fill_rows(outcomes)
-    summary_text = _summary_text(scene, outcomes, skipped)
     created = _Created()
     try:
-        created.folder(out)
+        outcomes, skipped, out = _run_all(scene_source, names, named, overrides, progress, allow_divergence,
+                                          out, created)
+        scene = outcomes[0].scene
+        _fill_rows(outcomes)
+        summary_text = _summary_text(scene, outcomes, skipped)
         for outcome in outcomes:
-            if outcome.run:
-                _write_method(outcome, out, created, render, fps, progress)
+            _write_method(outcome, out, created, render, fps, progress)
         ran = {outcome.method: outcome.run.arrays for outcome in outcomes if outcome.run}
         plot_paths = {}
         if ran:

@@ -1,8 +1,9 @@
 """Exporters: a recorded run as a mesh sequence (OBJ or PLY, one file per sample) or as one
 animated USD stage, for Blender, Houdini, usdview and friends (see ``docs/export.md``).
 
-Both read only a trajectory: the dict ``simulate(...).arrays`` or ``np.load("trajectory.npz")``
-(the arrays of ``docs/trajectory.md``, surfaces from :mod:`contactlab.surfaces`). What a
+Both read only a trajectory: the dict ``simulate(...).arrays`` or a run's ``trajectory.h5``
+(:func:`contactlab.store.open_trajectory`; the arrays of ``docs/trajectory.md``, surfaces from
+:mod:`contactlab.surfaces`), and of it only the samples they export. What a
 frame holds, in world coordinates [m], z up:
 
 * every rigid body's surface, posed at the sample;
@@ -25,7 +26,7 @@ import numpy as np
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, read_trajectory, undo_written
+from .record import atomic_path, read_trajectory, sample_count, undo_written
 from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
@@ -201,9 +202,9 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
         raise InputError("file_format", f"expected one of {', '.join(MESH_FORMATS)}, found {file_format!r}")
     file_format = file_format.lower().lstrip(".")
     every = _check_every(every)
-    data = read_trajectory(arrays, _REQUIRED)
+    samples = frame_samples(sample_count(arrays), every)
+    data = read_trajectory(arrays, _REQUIRED, samples)      # only the samples exported are read
     check_arrays(data)
-    samples = frame_samples(len(data["time"]), every)
     parts = _Parts(data)
     writer = _ObjWriter(_frame_objects(parts, data, 0)) if file_format == "obj" else None
 
@@ -215,10 +216,10 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
         for j, sample in enumerate(samples):
             interrupts.check()                    # Ctrl-C or SIGTERM: between frames
             path = os.path.join(directory, f"frame_{j:05d}.{file_format}")
-            objects = _frame_objects(parts, data, sample)
+            objects = _frame_objects(parts, data, j)
             with atomic_path(path) as temporary:
                 if file_format == "obj":
-                    header = (f"contactlab frame {j}: sample {sample}, t = {float(data['time'][sample]):.9g} s; "
+                    header = (f"contactlab frame {j}: sample {sample}, t = {float(data['time'][j]):.9g} s; "
                               "metres, z up")
                     writer.write(temporary, objects, header)
                 else:
@@ -291,13 +292,14 @@ def write_usd(arrays, path, *, every=1) -> str:
     if suffix not in USD_SUFFIXES:
         raise InputError("path", f"expected a file name ending in {', '.join(USD_SUFFIXES)}, found {os.fspath(path)!r}")
     every = _check_every(every)
-    data = read_trajectory(arrays, _REQUIRED)
+    time = read_trajectory(arrays, ("time",))["time"].astype(float)
+    samples = frame_samples(len(time), every)
+    data = read_trajectory(arrays, _REQUIRED, samples)      # only the samples exported are read
+    check_arrays({"time": time})
     check_arrays(data)
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
     parts = _Parts(data)
-    time = data["time"].astype(float)
-    samples = frame_samples(len(time), every)
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -323,8 +325,8 @@ def write_usd(arrays, path, *, every=1) -> str:
     if parts.body_count:
         UsdGeom.Xform.Define(stage, "/World/Bodies")
         names = _unique_names([Tf.MakeValidIdentifier(name) if name else "body" for name in parts.body_names])
-        position = data["body_position"][samples].astype(float)
-        orientation = _continuous(data["body_orientation"][samples].astype(float))
+        position = data["body_position"].astype(float)
+        orientation = _continuous(data["body_orientation"].astype(float))
         for b, name in enumerate(names):
             body = UsdGeom.Xform.Define(stage, f"/World/Bodies/{name}")
             if name != parts.body_names[b] and hasattr(Usd.Prim, "SetDisplayName"):   # USD ≥ 23.11
@@ -339,7 +341,7 @@ def write_usd(arrays, path, *, every=1) -> str:
             v0, v1 = parts.body_vertices[b]
             _define_mesh(stage, f"/World/Bodies/{name}/surface", parts.body_local[v0:v1], parts.body_triangles[b])
 
-    positions = data["particle_position"][samples].astype(float)
+    positions = data["particle_position"].astype(float)
     if parts.cloths:
         UsdGeom.Xform.Define(stage, "/World/Cloth")
         for c, ids, tri in parts.cloths:

@@ -19,10 +19,12 @@ EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}     # 128 + the signal's 
 
 
 class Interrupted(KeyboardInterrupt):
-    """The run was stopped by a signal: ``signum`` (SIGINT or SIGTERM) and its ``name``."""
+    """The run was stopped by a signal: ``signum`` (SIGINT or SIGTERM) and its ``name``;
+    ``run``, set by ``simulate``, the run up to then (a contactlab.simulation.Run) or None."""
 
     def __init__(self, signum):
         self.signum = signum
+        self.run = None
         self.name = signal.Signals(signum).name
         super().__init__(self.name)
 

@@ -1,33 +1,113 @@
-"""Recorder: samples states and diagnostics every K steps; writes the trajectory atomically.
+"""Recorder: samples states and diagnostics every K steps, in memory or streamed to disk.
 
-The simulation never does I/O: it hands states to :meth:`Recorder.sample`; files are written
-once, at the end, by :func:`write_outputs` (a temporary file, then a rename, so an interrupted
-run leaves no half-written file). The arrays are documented in ``docs/trajectory.md``.
+The simulation never does I/O itself: it hands states to :meth:`Recorder.sample` (or the
+compiled loop's samples to :meth:`Recorder.extend`). The Recorder gathers them in chunks of
+about ``store.CHUNK_BYTES``; each chunk is kept in memory (``simulate(...).arrays``) or, when
+the run streams (``simulate(..., trajectory=path)``), handed to a ``store.TrajectoryWriter`` and
+forgotten, so a long run's memory stays flat. Either way :class:`Totals` keeps what the summary
+needs (energies, depths, solver figures) as the chunks pass. Other files are written whole,
+through :func:`atomic_path` (a temporary file, then a rename, so an interrupted run leaves no
+half-written file). The arrays are documented in ``docs/trajectory.md``.
 """
 
 import contextlib
 import json
+import math
 import os
-import tempfile
+from dataclasses import dataclass
 
 import numpy as np
 
-from . import diagnostics, interrupts, surfaces
+from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
 from .errors import InputError
+from .trajectory import check_shapes
 
 SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
           "particle_position", "particle_velocity", "energy_kinetic", "energy_potential",
           "energy_elastic", "max_penetration", "contact_count", "solver_iterations", "solver_residual")
+WHOLE_SERIES = ("contact_count", "solver_iterations")        # 64-bit whole numbers; the rest are floats
+TRAJECTORY = "trajectory.h5"    # the file name of a run's trajectory in its output folder
+
+
+def series_rows(model) -> dict:
+    """name -> (shape of one sample, dtype) of every series of a run of ``model``."""
+    B, P = model.body_count, model.particle_count
+    shapes = {"body_position": (B, 3), "body_orientation": (B, 4), "body_velocity": (B, 3),
+              "body_angular_velocity": (B, 3), "particle_position": (P, 3), "particle_velocity": (P, 3)}
+    return {name: (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64) for name in SERIES}
+
+
+def sample_bytes(model) -> int:
+    """Bytes one sample of a run of ``model`` takes (every series of :func:`series_rows`)."""
+    return sum(int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+               for shape, dtype in series_rows(model).values())
+
+
+def static_arrays(model) -> dict:
+    """What does not change during a run of ``model``: body_names (B,), the cloth topology
+    triangles (F, 3) and particle_cloth (P,), and the shapes' surfaces for drawing and export
+    (contactlab.surfaces)."""
+    return {"body_names": np.array(model.body_names, dtype=str),
+            "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
+            "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
+            **surfaces.surface_arrays(model)}
+
+
+@dataclass
+class Totals:
+    """What a run's summary says of all its samples, gathered chunk by chunk."""
+    count: int = 0                      # samples
+    first_time: float = math.nan        # s
+    last_time: float = math.nan         # s
+    energy_initial: float = math.nan    # J, kinetic + potential + elastic
+    energy_final: float = math.nan      # J
+    energy_max: float = -math.inf       # J, the largest finite one (the initial one if none is)
+    max_penetration: float = 0.0        # m, NaNs skipped
+    final_penetration: float = math.nan  # m
+    max_iterations: int = 0
+    max_residual: float = 0.0
+
+    def add(self, chunk):
+        """Take in the samples of ``chunk`` (name -> array of n rows)."""
+        n = len(chunk["time"])
+        if n == 0:
+            return
+        energy = chunk["energy_kinetic"] + chunk["energy_potential"] + chunk["energy_elastic"]
+        if self.count == 0:
+            self.first_time, self.energy_initial = float(chunk["time"][0]), float(energy[0])
+        self.count += n
+        self.last_time, self.energy_final = float(chunk["time"][-1]), float(energy[-1])
+        finite = energy[np.isfinite(energy)]
+        self.energy_max = max(self.energy_max, float(finite.max()) if finite.size else -math.inf)
+        self.max_penetration = float(np.nanmax(np.append(chunk["max_penetration"], self.max_penetration)))
+        self.final_penetration = float(chunk["max_penetration"][-1])
+        self.max_iterations = max(self.max_iterations, int(np.max(chunk["solver_iterations"])))
+        self.max_residual = float(max(self.max_residual, np.max(chunk["solver_residual"])))
+
+    def energy(self) -> dict:
+        """The summary's energy: {initial, final, max} [J]."""
+        return {"initial": self.energy_initial, "final": self.energy_final,
+                "max": self.energy_max if self.energy_max > -math.inf else self.energy_initial}
 
 
 class Recorder:
-    """Collects samples (T of them) of a run of ``model``."""
+    """Collects the samples (T of them) of a run of ``model``, every ``record_every`` steps;
+    with a ``sink`` (store.TrajectoryWriter) they go to it in chunks instead of staying in memory.
+    ``samples``: about how many there will be (a buffer no longer than that)."""
 
-    def __init__(self, model, record_every=1):
+    def __init__(self, model, record_every=1, sink=None, samples=None):
         self.model = model
         self.record_every = record_every
-        self.samples = {name: [] for name in SERIES}
+        self.sink = sink
+        self.rows = series_rows(model)
+        self.chunk_samples = max(1, min(store.CHUNK_BYTES // max(1, sample_bytes(model)), samples or math.inf))
+        self.buffer = {name: np.empty((self.chunk_samples, *shape), dtype=dtype)    # the chunk being filled
+                       for name, (shape, dtype) in self.rows.items()}
+        self.filled = 0             # samples in the buffer
+        self.kept = []              # without a sink: the chunks passed on, in order
+        self.last = None            # name -> the last sample passed on (one row)
+        self.totals = Totals()
 
     def sample(self, state, info=None):
         """Record ``state``; penetration is measured on its own positions (collision pass), whose
@@ -48,38 +128,60 @@ class Recorder:
             solver_residual=info.solver_residual if info else 0.0,
         )
         for name, value in values.items():
-            self.samples[name].append(np.array(value, copy=True))
+            self.buffer[name][self.filled] = value
+        self.filled += 1
+        if self.filled == self.chunk_samples:
+            self.flush()
         return contacts
-
-    def latest(self, names=SERIES) -> dict:
-        """The last sample of the series ``names``, as arrays of one row."""
-        return {name: np.array(self.samples[name][-1:]) for name in names}
 
     def extend(self, samples):
         """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
         to an array with one row per sample."""
-        for name in SERIES:
-            self.samples[name].extend(np.array(samples[name], copy=True))
+        count, done = len(samples["time"]), 0
+        while done < count:
+            take = min(count - done, self.chunk_samples - self.filled)
+            for name in SERIES:
+                self.buffer[name][self.filled:self.filled + take] = samples[name][done:done + take]
+            self.filled += take
+            done += take
+            if self.filled == self.chunk_samples:
+                self.flush()
+
+    def latest(self, names=SERIES) -> dict:
+        """The last sample of the series ``names``, as arrays of one row."""
+        if self.filled:
+            return {name: self.buffer[name][self.filled - 1:self.filled].copy() for name in names}
+        return {name: self.last[name].copy() for name in names}
+
+    def flush(self):
+        """Pass the samples in the buffer on: to the sink, or to the chunks kept in memory."""
+        if not self.filled:
+            return
+        chunk = {name: values[:self.filled] for name, values in self.buffer.items()}
+        self.totals.add(chunk)
+        self.last = {name: values[-1:].copy() for name, values in chunk.items()}
+        if self.sink is not None:
+            self.sink.append(chunk)         # written at once: the buffer can be filled again
+        else:
+            self.kept.append({name: values.copy() for name, values in chunk.items()})
+        self.filled = 0
 
     def arrays(self) -> dict:
-        """The trajectory as arrays: time (T,), body_position (T,B,3), …, body_names (B,), the
-        static cloth topology triangles (F,3) and particle_cloth (P,), and the shapes' surfaces
-        for drawing and export (contactlab.surfaces)."""
-        model = self.model
-        empty = {"body_position": (0, model.body_count, 3), "body_orientation": (0, model.body_count, 4),
-                 "body_velocity": (0, model.body_count, 3), "body_angular_velocity": (0, model.body_count, 3),
-                 "particle_position": (0, model.particle_count, 3),
-                 "particle_velocity": (0, model.particle_count, 3)}
-        out = {}
-        for name, values in self.samples.items():
-            out[name] = np.array(values) if values else np.zeros(empty.get(name, (0,)))
-        out["contact_count"] = out["contact_count"].astype(np.int64)
-        out["solver_iterations"] = out["solver_iterations"].astype(np.int64)
-        out["body_names"] = np.array(model.body_names, dtype=str)
-        out["triangles"] = np.array(model.triangles, dtype=np.int64).reshape(-1, 3)
-        out["particle_cloth"] = np.array(model.particle_cloth, dtype=np.int64)
-        out.update(surfaces.surface_arrays(model))
+        """The trajectory held in memory, as arrays: time (T,), body_position (T,B,3), … and
+        the static arrays (:func:`static_arrays`)."""
+        self.flush()
+        out = {name: (np.concatenate([chunk[name] for chunk in self.kept]) if self.kept
+                      else np.zeros((0, *shape), dtype=dtype))
+               for name, (shape, dtype) in self.rows.items()}
+        out.update(static_arrays(self.model))
         return out
+
+
+def streaming_recorder(model, record_every, path, samples) -> Recorder:
+    """A Recorder whose samples (about ``samples`` of them) stream into the trajectory file
+    ``path`` (store.TrajectoryWriter); its ``sink.finish(status)`` or ``sink.discard()`` ends the file."""
+    writer = store.TrajectoryWriter(path, static_arrays(model), series_rows(model), record_every, expected=samples)
+    return Recorder(model, record_every, writer, samples)
 
 
 @contextlib.contextmanager
@@ -90,16 +192,10 @@ def atomic_path(path):
         with atomic_path("out/video.mp4") as temporary:
             imageio.mimwrite(temporary, frames)
     """
-    directory = os.path.dirname(os.path.abspath(path))
-    name = os.path.basename(path)
     temporary = None
     try:
         with interrupts.deferred():     # a signal waits until the temporary file is known, to be removed
-            handle, temporary = tempfile.mkstemp(dir=directory, prefix=".partial-", suffix=name)
-            os.close(handle)
-            umask = os.umask(0)         # mkstemp makes the file private: give it the usual rights
-            os.umask(umask)
-            os.chmod(temporary, 0o666 & ~umask)
+            temporary = store.temporary_beside(path)
         yield temporary
         with interrupts.deferred():     # renamed and noted as written, or neither
             os.replace(temporary, path)
@@ -108,6 +204,26 @@ def atomic_path(path):
         if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
         raise
+
+
+def make_folders(path) -> list:
+    """Create the folder ``path`` and whichever of its parents are missing; returns the folders
+    created, outermost first (for :func:`remove_empty`)."""
+    missing = []
+    while path and not os.path.isdir(path):
+        missing.append(path)
+        path = os.path.dirname(path)
+    missing.reverse()
+    for folder in missing:
+        os.makedirs(folder, exist_ok=True)
+    return missing
+
+
+def remove_empty(folders):
+    """Remove those of ``folders`` (as :func:`make_folders` returns them) that are empty, innermost first."""
+    for folder in reversed(folders):
+        with contextlib.suppress(OSError):
+            os.rmdir(folder)
 
 
 def undo_written(paths, directory, created):
@@ -122,19 +238,36 @@ def undo_written(paths, directory, created):
         os.rmdir(directory)
 
 
-def read_trajectory(arrays, keys) -> dict:
-    """The trajectory arrays named in ``keys`` as plain NumPy arrays (an ``np.load`` archive
-    decompresses a key at every access), from ``simulate(...).arrays`` or an ``np.load`` of
-    trajectory.npz. InputError("arrays", ...) when a key is missing (a trajectory written before
-    contactlab recorded surfaces) or there is no sample."""
+def read_trajectory(arrays, keys, samples=None) -> dict:
+    """The trajectory arrays named in ``keys`` as plain NumPy arrays, from
+    ``simulate(...).arrays``, a trajectory file read back (``store.TrajectoryFile``) or the
+    dict of an older trajectory.npz; with ``samples`` (a slice, or sample indices in
+    increasing order) only those samples of the series (the static arrays whole), read from a
+    file without reading the rest. InputError("arrays", ...) when a key is missing (a
+    trajectory written before contactlab recorded surfaces) or there is no sample."""
     missing = [key for key in keys if key not in arrays]
     if missing:
         raise InputError("arrays", f"not a trajectory with surfaces: missing {', '.join(missing)}; "
                                    f"record the run again with this version of contactlab")
-    out = {key: np.asarray(arrays[key]) for key in keys}
+    if samples is None:
+        out = {key: np.asarray(arrays[key]) for key in keys}
+    else:
+        shapes = getattr(arrays, "shapes", None) or {key: np.shape(arrays[key]) for key in keys}
+        check_shapes({key: shapes[key] for key in keys}, "arrays")     # no read beyond the samples there are
+        rows = getattr(arrays, "rows", lambda key, chosen: np.asarray(arrays[key])[chosen])
+        out = {key: rows(key, samples) if key in SERIES else np.asarray(arrays[key]) for key in keys}
     if "time" in out and len(out["time"]) == 0:
         raise InputError("arrays", "the trajectory has no samples")
     return out
+
+
+def sample_count(arrays) -> int:
+    """T, the samples of a trajectory (a dict of arrays or a store.TrajectoryFile), read
+    without reading the series; InputError when it has no time."""
+    if "time" not in arrays:
+        raise InputError("arrays", "not a trajectory: it has no time")
+    shapes = getattr(arrays, "shapes", None)
+    return shapes["time"][0] if shapes is not None else len(np.asarray(arrays["time"]))
 
 
 def _atomic_write(path, write):
@@ -142,19 +275,25 @@ def _atomic_write(path, write):
         write(stream)
 
 
+def write_summary(directory, summary):
+    """Write ``summary.json`` into ``directory`` (atomically); returns its path."""
+    path = os.path.join(directory, "summary.json")
+    _atomic_write(path, lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
+    return path
+
+
 def write_outputs(directory, arrays, summary):
-    """Write ``trajectory.npz`` and ``summary.json`` into ``directory`` (created if needed).
+    """Write a trajectory held in memory (``arrays``) as ``trajectory.h5`` and ``summary`` as
+    ``summary.json`` into ``directory`` (created if needed).
 
     On failure nothing is left behind: no partial file, and no folder this call created.
     """
     created = not os.path.isdir(directory)
     os.makedirs(directory, exist_ok=True)
     try:
-        _atomic_write(os.path.join(directory, "trajectory.npz"), lambda s: np.savez_compressed(s, **arrays))
-        _atomic_write(os.path.join(directory, "summary.json"),
-                      lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
+        store.write(os.path.join(directory, TRAJECTORY), arrays, series=[name for name in SERIES if name in arrays])
+        write_summary(directory, summary)
     except BaseException:
-        if created:
-            undo_written([os.path.join(directory, name) for name in ("trajectory.npz", "summary.json")],
-                         directory, created)
+        undo_written([os.path.join(directory, name) for name in (TRAJECTORY, "summary.json")] if created else [],
+                     directory, created)
         raise

@@ -1,7 +1,10 @@
 """Headless pictures and videos of a trajectory: ``still.png``, ``video.mp4``, ``video.gif``.
 
-Input is a trajectory (the ``arrays`` of :func:`contactlab.simulate`, or ``np.load`` of
-``trajectory.npz``; see ``docs/trajectory.md``). Everything is drawn with matplotlib's Agg
+Input is a trajectory (the ``arrays`` of :func:`contactlab.simulate`, or a run's
+``trajectory.h5`` read back by :func:`contactlab.store.open_trajectory`; see
+``docs/trajectory.md``). Only the samples a video draws are read (for a still, at most
+:data:`STILL_SAMPLES` spread over the run frame the camera), so a long run is drawn without
+holding it in memory. Everything is drawn with matplotlib's Agg
 canvas (no pyplot, no display) on 3-D axes, z up:
 
 * rigid bodies: their posed surfaces, flat-shaded, one colour per body (``tab10``, cycled);
@@ -10,8 +13,8 @@ canvas (no pyplot, no display) on 3-D axes, z up:
 * static obstacles: light grey and semi-transparent; planes (finite squares in the
   trajectory) are cut to a rectangle around the moving content, and drawn beneath it.
 
-The camera is fixed for the whole video: the axis limits enclose everything the trajectory
-ever reaches, with equal scales on x, y and z. Frames play in real time: frame k of a video
+The camera is fixed for the whole video: the axis limits enclose everything the drawn samples
+reach, with equal scales on x, y and z. Frames play in real time: frame k of a video
 at ``fps`` shows the sample nearest to ``time[0] + k / fps``. The GIF is smaller (at most
 :data:`GIF_MAX_FPS` frames per second, at most :data:`GIF_MAX_HEIGHT` pixels high) because
 GIFs get huge; the MP4 (H.264, yuv420p) uses the full ``fps`` and size. Every file is written
@@ -51,6 +54,7 @@ AMBIENT = 0.4               # share of a colour kept by a face turned away from 
 BACKGROUND = "white"
 OBSTACLE_RGBA = (0.72, 0.72, 0.72, 0.3)
 PARTICLE_RGB = (0.15, 0.3, 0.6)
+STILL_SAMPLES = 600         # samples a still reads at most to frame its camera
 MARGIN = 0.15               # planes reach this share of the content's size beyond it
 REQUIRED = ("time", "body_position", "body_orientation", "particle_position", "particle_radius",
             "particle_cloth", "triangles", "body_surface_vertices", "body_surface_vertex_start",
@@ -74,7 +78,11 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     """
     fps = check_settings(fps, width, height, elevation, azimuth)[0]
     formats = _formats(formats)
-    picture = _Picture(arrays, width, height, elevation, azimuth, title)
+    time = _times(arrays)
+    mp4_times, gif_times, _ = _video_times(time, fps, formats)
+    drawn = {len(time) - 1} | {int(k) for times in (mp4_times, gif_times) if times is not None
+                               for k in _nearest(time, times)}
+    picture = _Picture(arrays, width, height, elevation, azimuth, title, np.array(sorted(drawn)))
     paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
     paths["still"] = os.path.join(directory, "still.png")
     created = not os.path.isdir(directory)
@@ -97,12 +105,14 @@ def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azi
     sample: index into the trajectory's samples (negative counts from the end);
     width, height [px] from MIN_SIZE to MAX_SIZE; elevation, azimuth [degrees]; title: a line above the picture.
     """
-    picture = _Picture(arrays, width, height, elevation, azimuth, title)
-    count = len(picture.time)
+    count = len(_times(arrays))
     if isinstance(sample, bool) or not isinstance(sample, (int, np.integer)) or not -count <= sample < count:
         raise InputError("sample", f"expected a whole number from {-count} to {count - 1} "
                                    f"(the trajectory has {count} samples), found {sample!r}")
-    image = picture.draw(int(sample) % count)
+    sample = int(sample) % count
+    framing = np.union1d(np.linspace(0, count - 1, min(count, STILL_SAMPLES)).astype(int), [sample])
+    picture = _Picture(arrays, width, height, elevation, azimuth, title, framing)
+    image = picture.draw(int(np.searchsorted(framing, sample)))
     with atomic_path(path) as temporary:
         imageio.v3.imwrite(temporary, image, extension=".png")
     return os.fspath(path)
@@ -116,11 +126,7 @@ def _write_videos(picture, paths, fps, progress):
     is an MP4, and is scaled down to GIF_MAX_HEIGHT pixels high at most.
     """
     time = picture.time
-    mp4_times = _frame_times(time, fps)
-    gif_delay = _gif_delay(fps)
-    gif_times = _frame_times(time, 100.0 / gif_delay)
-    if "mp4" in paths:
-        gif_times = mp4_times[_nearest(mp4_times, gif_times)]
+    mp4_times, gif_times, gif_delay = _video_times(time, fps, paths)
     mp4_count = Counter(_nearest(time, mp4_times).tolist() if "mp4" in paths else [])
     gif_count = Counter(_nearest(time, gif_times).tolist() if "gif" in paths else [])
     gif_frames = []
@@ -184,6 +190,26 @@ def _formats(formats):
 
 
 # -- timing -------------------------------------------------------------------------------
+
+def _times(arrays):
+    """The trajectory's time (T,) [s], checked (finite, in order, at least one sample)."""
+    time = read_trajectory(arrays, ("time",))["time"]
+    check_arrays({"time": time})
+    return time
+
+
+def _video_times(time, fps, formats):
+    """(MP4 frame times, GIF frame times, GIF delay [1/100 s]) of a trajectory sampled at
+    ``time`` (T,) [s]: the MP4 at ``fps``, the GIF at a whole number of 1/100 s per frame (at
+    most GIF_MAX_FPS), each GIF frame the MP4 frame nearest to its time when there is an MP4;
+    None for a format not in ``formats``. They depend only on time[0] and time[-1]."""
+    mp4_times = _frame_times(time, fps)
+    gif_delay = _gif_delay(fps)
+    gif_times = _frame_times(time, 100.0 / gif_delay)
+    if "mp4" in formats:
+        gif_times = mp4_times[_nearest(mp4_times, gif_times)]
+    return (mp4_times if "mp4" in formats else None, gif_times if "gif" in formats else None, gif_delay)
+
 
 def _frame_times(time, rate):
     """Times (n,) [s] of the frames of a real-time video at ``rate`` frames per second of a
@@ -395,9 +421,11 @@ class _Picture:
     both draw through it.
     """
 
-    def __init__(self, arrays, width, height, elevation, azimuth, title):
+    def __init__(self, arrays, width, height, elevation, azimuth, title, samples=None):
+        """``samples``: the samples (indices in increasing order) it may draw, the only ones read
+        (None: all); draw(i) draws the i-th of them."""
         _, self.width, self.height, elevation, azimuth = check_settings(30, width, height, elevation, azimuth)
-        self.arrays = arrays = read_trajectory(arrays, REQUIRED)
+        self.arrays = arrays = read_trajectory(arrays, REQUIRED, samples)
         check_arrays(arrays)
         self.time = arrays["time"]
         self.light = _light_direction(elevation, azimuth)

@@ -5,6 +5,7 @@
     run.summary["max_penetration"]   # m
 """
 
+import os
 import time
 from dataclasses import asdict, dataclass
 
@@ -22,8 +23,9 @@ from . import budget, interrupts
 from .errors import InputError, SimulationDiverged
 from .health import ENERGY_SERIES, HARD_SPEED, Health
 from .model import Model
-from .record import Recorder
+from .record import Recorder, streaming_recorder
 from .state import State
+from .store import TrajectoryFile
 from .threads import ThreadChooser
 
 
@@ -113,7 +115,7 @@ def _kind(value):
 
 def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
              record_every=1, state=None, progress=False, scene_name="custom", threads=None,
-             compiled_loop=None, allow_divergence=False, memory_limit=None) -> Run:
+             compiled_loop=None, allow_divergence=False, memory_limit=None, trajectory=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options (or a dict of
@@ -128,19 +130,24 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     either way; allow_divergence: keep going when a health check fails (:mod:`contactlab.health`),
     recording it in the summary, instead of stopping; memory_limit [bytes]: the most the run may
     need by its estimate (:mod:`contactlab.budget`; None: half this machine's memory, ``math.inf``
-    none). Raises InputError for bad arguments or a run that cannot fit, and
-    SimulationDiverged (with the run up to then in its ``run``) when a health check fails: the
-    state stops being finite, a speed beyond the scene's scale, an energy gain nothing explains,
-    a contact deep enough to pass through. Ctrl-C (or SIGTERM) stops the run between steps with
-    :class:`contactlab.interrupts.Interrupted`, a KeyboardInterrupt.
+    none); trajectory: None (the default) keeps the samples in memory, in ``run.arrays``; a path
+    (``"out/trajectory.h5"``, its folder existing) streams them into that HDF5 file as the run goes
+    (:mod:`contactlab.store`), so memory stays flat however long the run, and ``run.arrays`` is
+    the file read back (a :class:`contactlab.store.TrajectoryFile`). Raises InputError for bad
+    arguments or a run that cannot fit, and SimulationDiverged (with the run up to then in its
+    ``run``) when a health check fails: the state stops being finite, a speed beyond the scene's
+    scale, an energy gain nothing explains, a contact deep enough to pass through. Ctrl-C (or
+    SIGTERM) stops the run between steps with :class:`contactlab.interrupts.Interrupted`, a
+    KeyboardInterrupt, whose ``run`` is the run up to then (its summary's ``interrupted`` says
+    when); a streamed trajectory is kept either way, its ``status`` saying how the run ended.
     """
     with interrupts.deferred():         # compiling or stepping, a signal waits for a step boundary
         return _simulate(model, method, dt, duration, options, integrator, record_every, state, progress,
-                         scene_name, threads, compiled_loop, allow_divergence, memory_limit)
+                         scene_name, threads, compiled_loop, allow_divergence, memory_limit, trajectory)
 
 
 def _simulate(model, method, dt, duration, options, integrator, record_every, state, progress, scene_name,
-              threads, compiled_loop, allow_divergence, memory_limit):
+              threads, compiled_loop, allow_divergence, memory_limit, trajectory):
     module, options, dt, duration = _checked_arguments(model, method, dt, duration, options, integrator,
                                                        record_every, state, scene_name)
     check_supported(model)
@@ -150,15 +157,31 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
     if memory_limit is not None and (isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float))
                                      or not memory_limit > 0):
         raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
-    budget.check(model, steps, record_every, memory_limit)
+    if compiled_loop not in (None, True, False):
+        raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+    if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
+        raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
+    budget.check(model, steps, record_every, memory_limit, trajectory)
     advice = getattr(module, "divergence_advice", None)
     health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
-    recorder = Recorder(model, record_every)
+    recorder = (Recorder(model, record_every) if trajectory is None
+                else streaming_recorder(model, record_every, trajectory, steps // record_every + 2))
+    try:
+        return _record_run(model, module, method, dt, steps, options, integrator, recorder, state, progress,
+                           scene_name, chooser, compiled_loop, health)
+    except BaseException:
+        if recorder.sink is not None:       # not a run to keep (a bug, a full disk): nothing of it remains
+            recorder.sink.discard()
+        raise
+
+
+def _record_run(model, module, method, dt, steps, options, integrator, recorder, state, progress, scene_name,
+                chooser, compiled_loop, health):
+    """Step and record the run; the Run, or SimulationDiverged or Interrupted carrying it
+    (``error.run``), the trajectory up to then included."""
     compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
     notice = FirstCompile()                        # one line on stderr at the first compilation
     run_started = time.perf_counter()              # the run: its first sample, the steps, the other samples
-    if compiled_loop not in (None, True, False):
-        raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
     stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         if stepper is None:
@@ -169,7 +192,7 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
     health.check_samples(recorder.latest(ENERGY_SERIES), 0)     # the energy to hold the run to
     health.start(state)                            # and how deep it starts
     tally = Tally()
-    stopped = None
+    stopped = interrupted = None
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
             tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
                  desc=f"{scene_name} ({method})") as bar, chooser:
@@ -181,12 +204,18 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
                 state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health)
         except _Stopped as stop:
             stopped, state = stop.violation, stop.state
+        except interrupts.Interrupted as signal_stop:
+            interrupted = signal_stop
+            state = stepper.state() if stepper is not None else tally.state or state
+            if stepper is not None:
+                tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
     wall = time.perf_counter() - run_started
+    recorder.flush()
+    totals = recorder.totals
+    status = "diverged" if stopped is not None else "interrupted" if interrupted is not None else "complete"
+    arrays = recorder.arrays() if recorder.sink is None else TrajectoryFile(recorder.sink.finish(status))
     first_step_seconds, stepping_seconds = tally.first_step_seconds, tally.stepping_seconds
     ordinary_step = stepping_seconds / (steps - 1) if steps > 1 else 0.0
-    arrays = recorder.arrays()
-    energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
-    finite = np.isfinite(energy)
     summary = {
         "scene": scene_name, "method": method, "integrator": integrator, "dt": dt, "steps": steps,
         "options": asdict(options),
@@ -201,21 +230,27 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
         "bodies": model.body_count, "particles": model.particle_count, "max_contacts": tally.max_contacts,
-        "max_penetration": float(np.nanmax(arrays["max_penetration"], initial=0.0)),
-        "final_penetration": float(arrays["max_penetration"][-1]),
-        "energy": {"initial": float(energy[0]), "final": float(energy[-1]),
-                   "max": float(energy[finite].max(initial=energy[0]))},
-        "solver": {"max_iterations": int(arrays["solver_iterations"].max()),
+        "max_penetration": totals.max_penetration,
+        "final_penetration": totals.final_penetration,
+        "energy": totals.energy(),
+        "solver": {"max_iterations": totals.max_iterations,
                    "mean_iterations": tally.sweeps_made / steps,
-                   "max_residual": float(arrays["solver_residual"].max())},
+                   "max_residual": totals.max_residual},
+        "samples": totals.count,
         "health": health.summary(),
         "diverged": None,
+        "interrupted": None,
     }
+    steps_made = int(round((state.time - totals.first_time) / dt))
     if stopped is not None:
         message = health.message(stopped)
         summary["diverged"] = {"check": stopped.check, "time": stopped.time, "message": message,
-                               "steps_made": int(round((state.time - arrays["time"][0]) / dt))}
+                               "steps_made": steps_made}
         raise SimulationDiverged(message, time=stopped.time, run=Run(state, arrays, summary))
+    if interrupted is not None:
+        summary["interrupted"] = {"signal": interrupted.name, "time": totals.last_time, "steps_made": steps_made}
+        interrupted.run = Run(state, arrays, summary)
+        raise interrupted
     return Run(state, arrays, summary)
 
 
@@ -237,6 +272,7 @@ class Tally:
     max_contacts: int = 0
     sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
     implicit_spring_steps: int = 0       # penalty: steps whose contact springs went implicit (explicit unstable)
+    state: object = None                 # the latest State the Python path made
 
     def timed(self, step_index, elapsed, compiled):
         """Book the steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
@@ -266,6 +302,7 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
         tally.max_contacts = max(tally.max_contacts, info.contacts.count)
         tally.sweeps_made += info.solver_iterations
         tally.implicit_spring_steps += info.implicit_springs
+        tally.state = state
         sampled = step_index % record_every == 0 or step_index == steps
         violation = health.check_state(state, full=sampled)
         recorded = violation is None and sampled

@@ -84,11 +84,10 @@ def check_arrays(arrays, field="arrays"):
     """InputError naming ``field`` unless the arrays of ``arrays`` named in SHAPES (those
     present) have their documented kinds and shapes, agree on the counts, index within range,
     and hold finite coordinates within MAX_COORDINATE and times in order."""
-    sizes = {}
-    for name, (kind, shape) in SHAPES.items():
+    for name, (kind, _) in SHAPES.items():
         if name in arrays:
             _check_kind(np.asarray(arrays[name]), name, kind, field)
-            _check_shape(np.asarray(arrays[name]), name, shape, sizes, field)
+    check_shapes({name: np.shape(arrays[name]) for name in SHAPES if name in arrays}, field)
     for name in FINITE:
         if name in arrays:
             _check_finite(np.asarray(arrays[name], dtype=float), name, arrays, field)
@@ -118,12 +117,22 @@ def _check_kind(array, name, kind, field):
                                 f"this trajectory is damaged")
 
 
-def _check_shape(array, name, shape, sizes, field):
-    """The shape of ``array`` against ``shape``; ``sizes`` collects the counts (T, B, ...) met so far."""
-    if array.ndim != len(shape):
-        raise InputError(field, f"{name} has {array.ndim} dimensions where it should have {len(shape)} "
+def check_shapes(shapes, field="arrays"):
+    """InputError naming ``field`` unless the shapes ``shapes`` (name -> tuple, of the arrays
+    of SHAPES present) have their documented dimensions and agree on the counts T, B, P, ...
+    (checked before a file's samples are read, so that no read goes beyond them)."""
+    sizes = {}          # the counts (T, B, ...) met so far
+    for name, (_, shape) in SHAPES.items():
+        if name in shapes:
+            _check_shape(tuple(shapes[name]), name, shape, sizes, field)
+
+
+def _check_shape(found, name, shape, sizes, field):
+    """The shape ``found`` of the array ``name`` against ``shape``."""
+    if len(found) != len(shape):
+        raise InputError(field, f"{name} has {len(found)} dimensions where it should have {len(shape)} "
                                 f"({', '.join(map(str, shape))}): this trajectory is damaged")
-    for axis, (symbol, size) in enumerate(zip(shape, array.shape)):
+    for axis, (symbol, size) in enumerate(zip(shape, found)):
         if isinstance(symbol, int):
             expected, counted = symbol, None
         else:
@@ -139,13 +148,13 @@ def _check_shape(array, name, shape, sizes, field):
 
 def _check_finite(values, name, arrays, field):
     """InputError unless ``values`` are finite and within MAX_COORDINATE; for a series (T, n, k),
-    the message says from which sample's time on they are not."""
+    the message says the time of the first sample (of those given) that is not."""
     bad = ~np.isfinite(values) | (np.abs(values) > MAX_COORDINATE)
     if bad.any():
         where = ""
         if values.ndim == 3 and "time" in arrays:                          # (T, n, k): say from when
             first = int(np.argmax(bad.reshape(len(values), -1).any(axis=1)))
-            where = f" from t = {float(np.asarray(arrays['time'])[first]):.4g} s on"
+            where = f" at t = {float(np.asarray(arrays['time'])[first]):.4g} s (the first sample used that is)"
         raise InputError(field, f"{name} holds numbers that are not finite or beyond {MAX_COORDINATE:g}{where} "
                                 f"(a run that blew up, or a damaged file): nothing to draw or export")
 
