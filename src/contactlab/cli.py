@@ -6,6 +6,8 @@
     contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
     contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
     contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
+    contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
+    contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
 
 import argparse
@@ -67,11 +69,34 @@ def _parser():
     render.add_argument("--elevation", type=float, default=25.0, help="camera elevation in degrees (default 25)")
     render.add_argument("--azimuth", type=float, default=-60.0, help="camera azimuth in degrees (default -60)")
 
+    sweep = commands.add_parser("sweep", help="run every cell of a study file on a Dask cluster; a table and a report")
+    sweep.add_argument("study", metavar="STUDY", help="a study file (.toml): scenes, methods, axes (docs/sweep.md)")
+    sweep.add_argument("--out", help="output folder (default: out/<study>-sweep/)")
+    _cluster_arguments(sweep)
+
+    fclib = commands.add_parser("fclib", help="FCLIB frictional-contact problems")
+    fclib_commands = fclib.add_subparsers(dest="fclib_command", parser_class=_Parser, required=True)
+    bench = fclib_commands.add_parser("bench", help="solve every problem of a folder with every solver on a Dask "
+                                                    "cluster; a table and performance profiles")
+    bench.add_argument("directory", metavar="DIR", help="a folder of FCLIB .hdf5 / Siconos .dat problems")
+    bench.add_argument("--solvers", help="comma-separated: nsgs, staggered, apgd, newton (default: all)")
+    bench.add_argument("--out", help="output folder (default: out/fclib-bench/)")
+    bench.add_argument("--tol", type=float, default=1e-8, help="tolerance on the natural-map error (default 1e-8)")
+    bench.add_argument("--repeats", type=int, default=3, help="timed solves per problem and solver (default 3)")
+    _cluster_arguments(bench)
+
     export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
     export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
     export.add_argument("--format", default="usd", help="usd, obj or ply, or a comma-separated list (default usd)")
     export.add_argument("--every", type=int, default=1, metavar="K", help="export every K-th sample (default 1)")
     return parser
+
+
+def _cluster_arguments(command, workers="one per idle core"):
+    command.add_argument("--scheduler", metavar="ADDRESS",
+                         help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    command.add_argument("--workers", type=int, metavar="N",
+                         help=f"worker processes of the local cluster (default: {workers})")
 
 
 def _scene_arguments(command):
@@ -231,6 +256,18 @@ def _compare(args):
           f"{os.path.basename(comparison.csv)} beside it)")
 
 
+def _sweep(args):
+    from . import sweep
+    from .study import load_study
+    study = load_study(args.study)
+    out = args.out or os.path.join("out", f"{study.name}-sweep")
+    table = sweep.run(study, out, scheduler=args.scheduler, workers=args.workers, progress=sys.stderr.isatty(),
+                      log=lambda line: print(line, file=sys.stderr))
+    counts = ", ".join(f"{count} {status}" for status, count in table["status"].value_counts().items())
+    print(f"{study.name}: {len(table)} cells ({counts}).")
+    print(f"Table: {os.path.join(out, 'results.parquet')} (and results.csv); report: {os.path.join(out, 'report.html')}")
+
+
 def _plain_summary(summary, scene, written=()):
     energy = summary["energy"]
     return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
@@ -288,6 +325,17 @@ def _main(argv):
                  memory_limit=_memory_limit(args.memory_limit))
         elif args.command == "compare":
             _compare(args)
+        elif args.command == "sweep":
+            _sweep(args)
+        elif args.command == "fclib":
+            from .fclib_bench import bench
+            result = bench(args.directory, args.solvers, args.out, scheduler=args.scheduler, workers=args.workers,
+                           tol=args.tol, repeats=args.repeats, progress=sys.stderr.isatty())
+            solved = result.table.groupby("solver", sort=False)["converged"].sum()
+            problems = result.table["problem"].nunique()
+            print(f"{problems} problems: " + ", ".join(f"{solver} solved {int(count)}" for solver, count in
+                                                       solved.items()))
+            print(f"Table: {result.csv} (and {result.markdown.name}); performance profile: {result.profile_png}")
         elif args.command == "render":
             arrays, summary = _load_run(args.directory)
             from .render import render
@@ -302,7 +350,8 @@ def _main(argv):
             arrays, _ = _load_run(args.directory)
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
-        source = getattr(args, "scene", None) or getattr(args, "directory", None) or DEFAULT_SCENE
+        source = (getattr(args, "scene", None) or getattr(args, "directory", None) or getattr(args, "study", None)
+                  or DEFAULT_SCENE)
         print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
         return 2
     except SimulationDiverged as error:

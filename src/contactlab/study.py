@@ -1,0 +1,219 @@
+"""A study file: which runs a sweep makes (``contactlab sweep STUDY.toml``; docs/sweep.md).
+
+A study names scenes, methods and axes over any setting, as a full grid, as explicit cells,
+or both::
+
+    [study]
+    name = "ball_dt"                 # default: the file's name
+    record = "summary"               # or "trajectory": each cell also keeps its trajectory.h5
+
+    [grid]
+    scenes = ["bouncing_ball", "my_scene.toml"]      # built-in names, or files beside the study
+    methods = ["impulse", "penalty"]                 # default: all four
+    [grid.set]                                       # axes: a --set path -> its values
+    "simulation.dt" = [0.01, 0.005, 0.0025]
+    "materials.0.friction" = [0.2, 0.5]
+
+    [[cells]]                                        # cells given one by one
+    scene = "box_pyramid"
+    method = "constraints"
+    set = { "method.constraints.iterations" = 20 }
+
+Any setting a scene file holds is an axis, by the path ``contactlab run --set`` takes
+(``simulation.dt``, ``method.impulse.iterations``, ``materials.0.restitution``,
+``bodies.0.array.count`` for the size of a pile). :func:`load_study` reads and checks the
+file — every cell's scene is loaded with its settings, so a wrong path or value fails before
+anything runs, with the field path of the mistake — and returns a :class:`Study`, whose
+:class:`Cell` s each carry a key: a hash of the scene's text, the method, the settings, what
+is recorded and the contactlab version, which is how a rerun knows a cell is done.
+"""
+
+import hashlib
+import itertools
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import __version__
+from .errors import InputError
+from .methods import AVAILABLE
+from .scene import load_scene
+from .scene.loader import read_source
+from .scene.schema import _did_you_mean, show
+from .scene.toml import parse_toml
+
+RECORD = ("summary", "trajectory")
+MAX_CELLS = 100_000           # cells a study may have
+KEYS = {"study": ("name", "record", "description"), "grid": ("scenes", "methods", "set"),
+        "cells": ("scene", "method", "set")}
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of a study: ``scene`` (a built-in name or a path), ``method``, ``settings``
+    (``--set`` path -> value, in the order given) and ``key`` (hex digest naming it)."""
+    scene: str
+    method: str
+    settings: tuple           # ((path, value), ...)
+    record: str
+    key: str
+
+    def overrides(self) -> list:
+        """The settings as ``--set`` strings, the method last: ``["simulation.dt=0.01", ...]``."""
+        return [f"{path}={toml_value(value)}" for path, value in self.settings] + [f"simulation.method={self.method}"]
+
+
+@dataclass
+class Study:
+    """A study read from ``path``: ``name``, ``record``, ``cells`` and the ``axes`` (the
+    setting paths any cell sets, in order of first appearance)."""
+    name: str
+    path: str
+    record: str
+    cells: list
+    axes: list = field(default_factory=list)
+    description: str = ""
+
+
+def toml_value(value) -> str:
+    """``value`` spelt as TOML (what ``--set`` reads back to the same value)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") if math.isinf(value) else repr(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(item) for item in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{json.dumps(str(k))} = {toml_value(v)}" for k, v in value.items()) + "}"
+    raise InputError("set", f"a value of a kind TOML has no spelling for: {show(value)}")
+
+
+def load_study(path) -> Study:
+    """Read, check and expand the study file ``path``; InputError with the field path of any mistake."""
+    name, text, origin = read_source(path)
+    raw = parse_toml(text)
+    _check_keys(raw, ("study", "grid", "cells"), "")
+    head = _table(raw.get("study", {}), "study")
+    _check_keys(head, KEYS["study"], "study")
+    record = head.get("record", "summary")
+    if record not in RECORD:
+        raise InputError("study.record", f"expected one of {', '.join(RECORD)}, found {show(record)}")
+    study_name = head.get("name", name)
+    if not isinstance(study_name, str) or not study_name or os.sep in study_name or "/" in study_name:
+        raise InputError("study.name", f"expected a name usable as a folder name, found {show(study_name)}")
+    base = Path(origin).parent
+    specs = []                                   # (field, scene, method, settings)
+    if "grid" in raw:
+        specs += _grid_cells(_table(raw["grid"], "grid"))
+    cells = raw.get("cells", [])
+    if not isinstance(cells, list):
+        raise InputError("cells", f"expected [[cells]] tables, found {show(cells)}")
+    for index, cell in enumerate(cells):
+        where = f"cells[{index}]"
+        cell = _table(cell, where)
+        _check_keys(cell, KEYS["cells"], where)
+        for key in ("scene", "method"):
+            if key not in cell:
+                raise InputError(f"{where}.{key}", f"a cell needs a {key}")
+        specs.append((where, cell["scene"], cell["method"], _settings(cell.get("set", {}), f"{where}.set")))
+    if not specs:
+        raise InputError("", "the study has no cells: give a [grid] with scenes, or [[cells]]")
+    if len(specs) > MAX_CELLS:
+        raise InputError("grid", f"the study has {len(specs):,} cells, more than the {MAX_CELLS:,} a study may "
+                                 f"have; split it")
+    return Study(study_name, origin, record, _checked_cells(specs, base, record),
+                 axes=list(dict.fromkeys(path for *_, settings in specs for path, _ in settings)),
+                 description=head.get("description", ""))
+
+
+def _grid_cells(grid):
+    _check_keys(grid, KEYS["grid"], "grid")
+    scenes = _list(grid.get("scenes"), "grid.scenes")
+    methods = _list(grid.get("methods", list(AVAILABLE)), "grid.methods")
+    axes = _table(grid.get("set", {}), "grid.set")
+    values = []
+    for path, options in axes.items():
+        options = _list(options, f"grid.set.{toml_value(path)}")
+        values.append([(path, value) for value in options])
+    return [("grid", scene, method, tuple(chosen))
+            for scene in scenes for method in methods for chosen in itertools.product(*values)]
+
+
+def _field(where, key):
+    """Where a cell's ``key`` ("scene", "method" or "set") is written in the study file."""
+    return {"scene": "grid.scenes", "method": "grid.methods", "set": "grid.set"}[key] if where == "grid" \
+        else f"{where}.{key}"
+
+
+def _checked_cells(specs, base, record):
+    """The Cells of ``specs``, each scene loaded once with each cell's settings (the check)."""
+    cells, seen, texts = [], set(), {}
+    for where, scene, method, settings in specs:
+        if not isinstance(scene, str) or not scene:
+            raise InputError(_field(where, "scene"), f"expected a built-in scene name or a .toml file, "
+                                                     f"found {show(scene)}")
+        if not isinstance(method, str) or method not in AVAILABLE:
+            raise InputError(_field(where, "method"), f"unknown method {show(method)}"
+                                                      f"{_did_you_mean(method, AVAILABLE)}")
+        source = scene if not scene.endswith(".toml") or os.path.isabs(scene) else str(base / scene)
+        if source not in texts:
+            try:
+                texts[source] = read_source(source)[1]
+            except InputError as error:
+                raise InputError(_field(where, "scene"), error.message) from None
+        cell = Cell(source, method, settings, record, _key(texts[source], method, settings, record))
+        try:
+            load_scene(source, cell.overrides())
+        except InputError as error:        # named by the setting it came from, where it did
+            paths = {path.replace("[", ".").replace("]", ""): path for path, _ in settings}
+            setting = paths.get((error.field or "").replace("[", ".").replace("]", ""))
+            place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
+            inner = f"{error.field}: " if error.field and not setting else ""
+            raise InputError(place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}") from None
+        if cell.key not in seen:                 # the same cell twice (grid and list) runs once
+            seen.add(cell.key)
+            cells.append(cell)
+    return cells
+
+
+def _key(scene_text, method, settings, record):
+    identity = {"scene": hashlib.sha256(scene_text.encode()).hexdigest(), "method": method,
+                "settings": [[path, toml_value(value)] for path, value in settings], "record": record,
+                "contactlab": __version__}
+    return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def _described(settings):
+    return "(" + ", ".join(f"{path} = {show(value)}" for path, value in settings) + ")" if settings else "(defaults)"
+
+
+def _settings(table, where):
+    table = _table(table, where)
+    return tuple((str(path), value) for path, value in table.items())
+
+
+def _table(value, where):
+    if not isinstance(value, dict):
+        raise InputError(where, f"expected a table, found {show(value)}")
+    return value
+
+
+def _list(value, where):
+    if value is None:
+        raise InputError(where, "missing: give a list")
+    if not isinstance(value, list) or not value:
+        raise InputError(where, f"expected a list of at least one value, found {show(value)}")
+    return value
+
+
+def _check_keys(table, known, where):
+    for key in table:
+        if key not in known:
+            place = f"{where}.{key}" if where else key
+            raise InputError(place, f"unknown key{_did_you_mean(key, known)}")

@@ -1,0 +1,180 @@
+"""Sweeps: every cell of a study (contactlab.study) run on a Dask cluster, one row per cell.
+
+    from contactlab import sweep
+    table = sweep.run("examples/studies/ball_dt.toml")          # a local cluster, one worker per core
+    table = sweep.run(study, scheduler="tcp://10.0.0.5:8786")    # an existing one
+
+Cells go to the cluster through :mod:`contactlab.cluster`; each runs in a worker process on
+one thread (``simulate(..., threads=1)``: the cluster's parallelism is the cells). As each
+cell finishes, its row is written to ``OUT/cells/<key>.parquet`` (atomically), so an
+interrupted sweep keeps every cell it finished and a rerun of the study skips them: the key
+hashes the cell's scene text, method, settings, what it records and the contactlab version
+(a changed scene file or a new contactlab runs again). A cell that diverges or raises is
+recorded with its status and one line of message, and the sweep goes on; a cell whose
+worker dies is run again by another worker (Dask's doing). At the end the rows of the study's
+cells, in the study's order, are written to ``OUT/results.parquet`` and ``OUT/results.csv``,
+and ``OUT/report.html`` with its plots (contactlab.sweep_report). A cell gives the same
+numbers wherever it runs, bar its timings and its worker. The columns are in docs/sweep.md.
+"""
+
+import json
+import math
+import os
+import time
+
+from . import __version__, cluster
+from .errors import InputError, SimulationDiverged
+from .record import atomic_path, make_folders, remove_empty
+from .study import Study, load_study, toml_value
+
+TIMING_COLUMNS = ("wall_seconds", "cell_seconds", "steps_per_second", "worker")   # differ run to run
+
+
+def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=False, log=None):
+    """Run every cell of ``study`` (a Study or the path of a study file) not done already in
+    ``out`` (default ``out/<study name>-sweep``) on ``client``, or on a cluster from
+    :func:`contactlab.cluster.connect` (``scheduler``: an address; ``workers``: local worker
+    processes); returns the table (pandas.DataFrame, one row per cell, in the study's order).
+    ``log``: a function given one line of news (the dashboard's address, cells skipped)."""
+    import pandas as pd
+
+    study = study if isinstance(study, Study) else load_study(study)
+    out = os.fspath(out) if out is not None else os.path.join("out", f"{study.name}-sweep")
+    cells_folder = os.path.join(out, "cells")
+    made = make_folders(cells_folder)
+    try:
+        if study.record == "trajectory":
+            made += make_folders(os.path.join(out, "trajectories"))
+        done = {name[:-len(".parquet")] for name in os.listdir(cells_folder) if name.endswith(".parquet")}
+        todo = [cell for cell in study.cells if cell.key not in done]
+        say = log or (lambda line: None)
+        say(f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run")
+        if todo:
+            jobs = [(cell.key, _job(cell, study, out)) for cell in todo]
+            if client is not None:
+                _run_jobs(client, jobs, cells_folder, progress, say)
+            else:
+                with cluster.connect(scheduler, workers) as connected:
+                    _run_jobs(connected, jobs, cells_folder, progress, say)
+    except BaseException:
+        remove_empty(made)                      # nothing finished: no folder left (finished cells stay)
+        raise
+    table = pd.DataFrame([_read_row(cells_folder, cell.key) for cell in study.cells])
+    table = table.reindex(columns=_columns(study, table))
+    _write_table(table, out)
+    from .sweep_report import write_report
+    write_report(study, table, out)
+    return table
+
+
+def _job(cell, study, out):
+    """What a worker needs to run ``cell``: plain data, so it pickles anywhere."""
+    return {"key": cell.key, "scene": cell.scene, "method": cell.method, "overrides": cell.overrides(),
+            "settings": [[path, _column_value(value)] for path, value in cell.settings],
+            "trajectory": (os.path.abspath(os.path.join(out, "trajectories", f"{cell.key}.h5"))
+                           if study.record == "trajectory" else None)}
+
+
+def _run_jobs(client, jobs, cells_folder, progress, say):
+    say(f"Dask dashboard: {cluster.dashboard(client)}")
+    settings = {key: job for key, job in jobs}
+    for key, row in cluster.run_tasks(client, run_cell, jobs, progress=progress, description="cells"):
+        if isinstance(row, BaseException):       # the cell's workers kept dying, or a bug escaped
+            row = _failed_row(settings[key], "error", f"{type(row).__name__}: {_one_line(row)}")
+        _write_row(cells_folder, key, row)
+
+
+def run_cell(job) -> dict:
+    """One cell, on a worker: load its scene with its settings, simulate, measure. Returns its
+    row; never raises for the run's own failure (status "diverged" or "error")."""
+    from .closed_form import checks as closed_form_checks
+    from .compare import metrics
+    from .scene import load_scene
+    from .simulation import simulate
+
+    started = time.perf_counter()
+    try:
+        scene = load_scene(job["scene"], job["overrides"])
+        run = simulate(scene.model, scene.method, scene.dt, scene.duration,
+                       scene.method_options.get(scene.method, {}), scene.integrator, scene_name=scene.name,
+                       threads=1, trajectory=job["trajectory"])
+    except SimulationDiverged as error:
+        return _failed_row(job, "diverged", str(error), started, diverged_at=error.time)
+    except Exception as error:                   # InputError included: a study checked cannot fail that way
+        return _failed_row(job, "error", f"{type(error).__name__}: {_one_line(error)}", started)
+    row = _identity(job)
+    row.update(status="ok", message="", integrator=scene.integrator, dt_s=scene.dt, duration_s=scene.duration)
+    measured = metrics(scene.model, run.arrays, run.summary)
+    if measured["momentum_drift_Ns"] == "n/a":
+        measured["momentum_drift_Ns"] = None     # one type per column
+    row.update(measured)
+    found = closed_form_checks(scene.name, scene.model, run.arrays)
+    relative = [check.relative_error for check in found if check.relative_error is not None]
+    reached = [error for error in relative if not math.isnan(error)]     # nan: the run never got there
+    row["closed_form_error"] = max(reached) if reached else (math.inf if relative else None)
+    row["closed_form_unreached"] = len(relative) - len(reached) if relative else None
+
+    row["closed_form_checks"] = json.dumps([{"quantity": c.quantity, "unit": c.unit, "expected": c.expected,
+                                             "measured": c.measured} for c in found]) if found else None
+    row["diverged_at_s"] = None
+    row["trajectory"] = job["trajectory"]
+    row["cell_seconds"] = time.perf_counter() - started
+    return row
+
+
+def _identity(job):
+    row = {"key": job["key"], "scene": os.path.splitext(os.path.basename(job["scene"]))[0], "method": job["method"]}
+    row.update({path: value for path, value in job["settings"]})
+    row.update(worker=cluster.worker_address(), contactlab_version=__version__)
+    return row
+
+
+def _failed_row(job, status, message, started=None, diverged_at=None):
+    row = _identity(job)
+    row.update(status=status, message=message, diverged_at_s=diverged_at,
+               cell_seconds=time.perf_counter() - started if started is not None else None)
+    return row
+
+
+def _column_value(value):
+    """A setting as a table cell: numbers, booleans and text as they are, lists and tables as TOML."""
+    return value if isinstance(value, (bool, int, float, str)) else toml_value(value)
+
+
+def _one_line(error):
+    text = " ".join(str(error).split())
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+# ---- the table on disk -----------------------------------------------------------------------------
+
+def _write_row(folder, key, row):
+    import pandas as pd
+    path = os.path.join(folder, f"{key}.parquet")
+    with atomic_path(path) as temporary:
+        pd.DataFrame([row]).to_parquet(temporary, index=False)
+
+
+def _read_row(folder, key) -> dict:
+    import pandas as pd
+    path = os.path.join(folder, f"{key}.parquet")
+    try:
+        return pd.read_parquet(path).iloc[0].to_dict()
+    except Exception as error:                   # a file damaged since: that cell runs again next time
+        os.unlink(path)
+        raise InputError("OUT", f"{path} could not be read ({_one_line(error)}); it was removed, so run the "
+                                f"study again to redo that cell") from None
+
+
+def _columns(study, table):
+    """Identity, the study's axes, then the rest in the order the rows give them."""
+    first = ["key", "scene", "method", *study.axes, "status", "message"]
+    return [*first, *[column for column in table.columns if column not in first]]
+
+
+def _write_table(table, out):
+    with atomic_path(os.path.join(out, "results.parquet")) as temporary:
+        table.to_parquet(temporary, index=False)
+    with atomic_path(os.path.join(out, "results.csv")) as temporary:
+        table.to_csv(temporary, index=False)
+
