@@ -338,3 +338,21 @@ def test_the_report_displays_in_headless_chromium(with_video, tmp_path):
     image = imread(screenshot)
     assert image.shape[:2] == (2000, 1280)
     assert image[..., :3].std() > 0.05                                          # not a blank page
+
+
+def test_the_methods_run_on_a_dask_cluster_give_the_numbers_they_give_one_after_another(tmp_path):
+    """workers=2: each method's run and video are a job of a real local cluster (two worker
+    processes); every number but the timings is the one the runs in this process give."""
+    serial = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "here"), duration=0.5, video=False,
+                     workers=1)
+    spread = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "cluster"), duration=0.5, fps=10,
+                     workers=2)
+    timings = {"steps_per_second", "wall_seconds"}
+    for here, there in zip(serial.rows, spread.rows):        # NaN where a rebound was not reached: equal too
+        np.testing.assert_equal({k: v for k, v in here.items() if k not in timings},
+                                {k: v for k, v in there.items() if k not in timings})
+    for method in ("impulse", "penalty"):
+        files = spread.files[method]
+        assert {"mp4", "gif", "still"} <= set(files) and all(os.path.isfile(files[name]) for name in files)
+        assert open_trajectory(files["trajectory"]).status == "complete"
+    assert not any(name.startswith(".partial-") for _, _, names in os.walk(tmp_path) for name in names)

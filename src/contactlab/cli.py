@@ -60,6 +60,8 @@ def _parser():
     compare.add_argument("--no-video", action="store_true", help="skip the videos (faster)")
     compare.add_argument("--fps", type=int, default=30, help="frames per second of the videos (default 30)")
     compare.add_argument("--allow-divergence", action="store_true", help="as for run: go on past failed health checks")
+    _cluster_arguments(compare, "one per idle core when there are videos or long runs, else the runs one after "
+                                "another; 1: one after another")
 
     render = commands.add_parser("render", help="draw a run's trajectory: video.mp4, video.gif, still.png")
     render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
@@ -250,7 +252,7 @@ def _compare(args):
     _whole_number(args.fps, "--fps")
     comparison = compare(args.scene, methods, args.out, overrides=_scene_overrides(args),
                          video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps,
-                         allow_divergence=args.allow_divergence)
+                         allow_divergence=args.allow_divergence, workers=args.workers, scheduler=args.scheduler)
     print(comparison.summary_text)
     print(f"Report: {comparison.report_html} (also {os.path.basename(comparison.report_md)} and "
           f"{os.path.basename(comparison.csv)} beside it)")

@@ -7,8 +7,10 @@
 Every method runs the same scene (with ``simulation.method`` set to it, so the scene's
 ``[method.NAME]`` options apply); the scene is loaded for every method before anything is
 written, so a bad scene stops the comparison with an InputError and no output. Each run streams
-its trajectory to disk as it goes (contactlab.store) and the metrics, plots and videos read it
-back. A method that blows up (SimulationDiverged) is reported as such, its trajectory up to then
+its trajectory to disk as it goes (contactlab.store), and its video is drawn from it; the runs
+go one after another, or, where it pays, to a Dask cluster through contactlab.cluster, the path
+of contactlab.sweep (:func:`run_method` is one job). The metrics and plots read the
+trajectories back. A method that blows up (SimulationDiverged) is reported as such, its trajectory up to then
 kept, and the others go on. Into ``out`` (default ``out/<scene>-compare/``):
 
     <method>/trajectory.h5, summary.json      as `contactlab run` writes them
@@ -33,13 +35,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import cluster
 from .errors import InputError, SimulationDiverged
 from .methods import AVAILABLE
 from .plots import PLOTS, total_energy, write_comparison_plots, write_plots
 from .record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
 from .scene import load_scene
-from .simulation import simulate
+from .simulation import Run, simulate
+from .store import open_trajectory
 
+PARALLEL_WORK = 200_000     # steps × (bodies + particles) of all runs from which they go to a local cluster
 TINY_ENERGY = 1e-9          # J: an energy scale below this (times max(1, |E(0)|)) gives no relative drift
 
 
@@ -76,6 +81,7 @@ class _Outcome:
     failed_run: object = None    # the Run up to the blow-up (its trajectory streamed to disk)
     failed_at: float = None      # s, simulated time of the blow-up when the message says it
     warnings: list = field(default_factory=list)
+    media: dict = field(default_factory=dict)        # the video, GIF and still drawn of it
     checks: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
     row: dict = field(default_factory=dict)
@@ -108,35 +114,59 @@ def supports(method, scene) -> bool:
     return True
 
 
-def _run(method, scene, progress, allow_divergence, trajectory):
-    """Simulate ``scene`` (loaded for ``method``), streaming its trajectory to the file
-    ``trajectory``; a divergence becomes the outcome's failure. Warnings are kept for the
-    report and passed on."""
-    outcome = _Outcome(method, scene)
+def run_method(job) -> dict:
+    """One method's run, here or on a Dask worker: load the scene for the method, simulate it
+    streaming its trajectory to ``job["trajectory"]``, and (``job["video"]``: fps) render it
+    beside that. Returns plain data: ``summary``, ``warnings`` [(category, message)], and
+    ``failure``, ``failed_at`` [s] for a run a health check stopped, or ``media`` (name -> path)
+    for a rendered one; ``input_error`` [field, message] for a scene the method refuses."""
+    from .render import render
+    result = {"warnings": []}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            outcome.run = simulate(scene.model, method, scene.dt, scene.duration,
-                                   scene.method_options.get(method, {}), scene.integrator,
-                                   progress=progress, scene_name=scene.name, allow_divergence=allow_divergence,
-                                   trajectory=trajectory)
+            scene = load_scene(job["scene"], job["overrides"])
+            run = simulate(scene.model, scene.method, scene.dt, scene.duration,
+                           scene.method_options.get(scene.method, {}), scene.integrator,
+                           progress=job["progress"], scene_name=scene.name, allow_divergence=job["allow_divergence"],
+                           trajectory=job["trajectory"])
+            result["summary"] = run.summary
         except SimulationDiverged as error:
-            outcome.failure = str(error)
-            outcome.failed_at = error.time
-            outcome.failed_run = error.run
-    for warning in caught:
-        outcome.warnings.append(str(warning.message))
-        warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
-    return outcome
+            result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
+        except InputError as error:
+            return {"input_error": [error.field, error.message], "warnings": []}
+    result["warnings"] = [(warning.category, str(warning.message)) for warning in caught]
+    if job["video"] is not None and "failure" not in result:
+        result["media"] = render(open_trajectory(job["trajectory"]), os.path.dirname(job["trajectory"]),
+                                 fps=job["video"], title=f"{scene.name} — {scene.method}", progress=job["progress"])
+    return result
 
 
-def _run_all(scene_source, names, named, overrides, progress, allow_divergence, out, created):
+def _parallel(workers, scheduler, scenes, video) -> bool:
+    """Whether the methods' runs go to a Dask cluster (contactlab.cluster): on an existing one
+    (``scheduler``) always; on a local one when ``workers`` asks for more than one, or, left to
+    choose (None), when the machine has an idle core for a second run and the work is worth
+    starting a cluster — videos to draw, or at least PARALLEL_WORK steps × bodies and particles."""
+    if scheduler is not None:
+        return True
+    if workers is not None:
+        return workers > 1
+    if len(scenes) < 2:
+        return False
+    work = sum(max(1, round(scene.duration / scene.dt)) * (scene.model.body_count + scene.model.particle_count)
+               for scene in scenes.values())
+    return (video or work >= PARALLEL_WORK) and cluster.default_workers() > 1
+
+
+def _run_all(scene_source, names, named, overrides, progress, allow_divergence, out, created, video,
+             workers=None, scheduler=None):
     """Load the scene for every method, then run it with each, streaming each trajectory to
-    out/<method>/trajectory.h5 (out: None for the default, folders and files noted in
-    ``created``); (outcomes, skipped {method: why}, out)."""
+    out/<method>/trajectory.h5 and rendering it (``video``: fps, or None), one after another
+    or on a Dask cluster (:func:`_parallel`); folders and files noted in ``created``.
+    Returns (outcomes, skipped {method: why}, out)."""
     scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
     out = os.fspath(out) if out is not None else os.path.join("out", f"{next(iter(scenes.values())).name}-compare")
-    outcomes, skipped, first_error = [], {}, None
+    skipped, jobs = {}, []
     for name, scene in scenes.items():
         if not supports(name, scene):
             if named:
@@ -144,17 +174,43 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence, 
             skipped[name] = "not supported"
             continue
         created.folder(os.path.join(out, name))
-        trajectory = os.path.join(out, name, TRAJECTORY)
-        try:
-            outcomes.append(_run(name, scene, progress, allow_divergence, trajectory))
-        except InputError as error:
+        source = os.path.abspath(scene_source) if scene.source and not scene.source.startswith("builtin:") \
+            else scene_source
+        jobs.append((name, {"scene": source, "overrides": [*overrides, f"simulation.method={name}"],
+                            "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)), "video": video,
+                            "allow_divergence": allow_divergence, "progress": progress}))
+    if _parallel(workers, scheduler, scenes, video is not None):
+        with cluster.connect(scheduler, workers) as client:
+            for job in jobs:
+                job[1]["progress"] = False               # the bar is over the methods
+            results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
+    else:
+        results = {name: run_method(job) for name, job in jobs}
+    outcomes, first_error = [], None
+    for name, job in jobs:
+        result = results[name]
+        if isinstance(result, BaseException):
+            raise result
+        for category, message in result["warnings"]:
+            warnings.warn(message, category, stacklevel=2)
+        if "input_error" in result:
+            error = InputError(*result["input_error"])
             if named:
-                raise
+                raise error
             skipped[name] = str(error)
             first_error = first_error or error
             remove_empty([os.path.join(out, name)])     # its folder, empty: the method left nothing
             continue
-        created.add(trajectory)
+        trajectory = os.path.join(out, name, TRAJECTORY)
+        created.add(trajectory, *result.get("media", {}).values())
+        run = Run(None, open_trajectory(trajectory), result["summary"])
+        outcome = _Outcome(name, scenes[name], warnings=[message for _, message in result["warnings"]],
+                           media=result.get("media", {}))
+        if "failure" in result:
+            outcome.failure, outcome.failed_at, outcome.failed_run = result["failure"], result["failed_at"], run
+        else:
+            outcome.run = run
+        outcomes.append(outcome)
     if not outcomes:
         raise first_error or InputError("--methods", "no method supports this scene")
     return outcomes, skipped, out
@@ -642,19 +698,24 @@ class _Created:
 
     def remove(self):
         undo_written(self.files, None, created=False)        # an interrupted compare says it wrote nothing
+        for folder in self.folders:                           # what a stopped worker was writing
+            for name in os.listdir(folder) if os.path.isdir(folder) else ():
+                if name.startswith(".partial-"):
+                    os.unlink(os.path.join(folder, name))
         remove_empty(self.folders)
 
 
-def _renderer(fps):
-    """contactlab.render.render, with ``fps`` checked by it (InputError) before any run."""
-    from .render import check_settings, render
-    check_settings(fps)
-    return render
+def _video_fps(video, fps):
+    """``fps`` checked (contactlab.render: InputError) before any run when ``video``, else None."""
+    if not video:
+        return None
+    from .render import check_settings
+    return check_settings(fps)[0]
 
 
-def _write_method(outcome, out, created, render, fps, progress):
-    """summary.json, plots and (with a ``render`` function) the video of one run into
-    out/<method>, beside the trajectory it streamed; a run that blew up gets its summary only."""
+def _write_method(outcome, out, created):
+    """summary.json and plots of one run into out/<method>, beside the trajectory it streamed
+    and the video drawn of it; a run that blew up gets its summary only."""
     directory = os.path.join(out, outcome.method)
     run = outcome.run or outcome.failed_run
     if run is None:
@@ -668,15 +729,12 @@ def _write_method(outcome, out, created, render, fps, progress):
         plots = write_plots(run.arrays, os.path.join(directory, "plots"), title=title)
         created.add(*plots.values())
         files.update({f"plot {name}": path for name, path in plots.items()})
-        if render:
-            media = render(run.arrays, directory, fps=fps, title=title, progress=progress)
-            created.add(*media.values())
-            files = {**media, **files}
+        files = {**outcome.media, **files}
     outcome.files = files
 
 
 def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None, video=True,
-            progress=False, fps=30, allow_divergence=False) -> Comparison:
+            progress=False, fps=30, allow_divergence=False, workers=None, scheduler=None) -> Comparison:
     """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
     the comparison into ``out`` (default ``out/<scene>-compare/``).
 
@@ -684,22 +742,25 @@ def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None
     contactlab.methods.AVAILABLE that supports the scene. overrides: "dotted.key=value"
     strings as the command line's --set; duration [s]: overrides simulation.duration;
     video: render each run (contactlab.render) at ``fps`` frames per second; progress: tqdm
-    bars on stderr; allow_divergence: each run's (see ``simulate``). Raises InputError for a bad
+    bars on stderr; allow_divergence: each run's (see ``simulate``); workers, scheduler: where the
+    runs go — one after another here, or on a Dask cluster, local (``workers`` processes) or at
+    the address ``scheduler`` (contactlab.cluster); None: a local cluster when it pays (see
+    docs/compare.md). Raises InputError for a bad
     scene, an unknown method or bad options, before anything is written. A method that blows up
     (a failed health check) is reported, not raised.
     """
     names, named = _method_names(methods)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
-    render = _renderer(fps) if video else None       # a missing renderer or a bad fps fails before the runs
+    video = _video_fps(video, fps)                   # a missing renderer or a bad fps fails before the runs
     created = _Created()
     try:
         outcomes, skipped, out = _run_all(scene_source, names, named, overrides, progress, allow_divergence,
-                                          out, created)
+                                          out, created, video, workers, scheduler)
         scene = outcomes[0].scene
         _fill_rows(outcomes)
         summary_text = _summary_text(scene, outcomes, skipped)
         for outcome in outcomes:
-            _write_method(outcome, out, created, render, fps, progress)
+            _write_method(outcome, out, created)
         ran = {outcome.method: outcome.run.arrays for outcome in outcomes if outcome.run}
         plot_paths = {}
         if ran:
