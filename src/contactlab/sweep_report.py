@@ -76,8 +76,11 @@ def _pareto_figure(scene, rows):
     cost = rows["wall_seconds"].astype(float).to_numpy()
     figure, (ax,) = _figure(f"{scene}: error against cost")
     for method, group in rows.groupby("method", sort=False):
-        ax.scatter(*_finite(group["wall_seconds"], error[group.index]), label=method, s=24,
-                   color=METHOD_COLOURS.get(method), marker=METHOD_MARKERS.get(method, "o"))
+        points = _finite(group["wall_seconds"], error[group.index])
+        unmeasured = len(group) - len(points[0])          # no finite error: a check never reached
+        shown = f"{method} ({unmeasured} of {len(group)} cells without a finite error)" if unmeasured else method
+        ax.scatter(*points, label=shown, s=24, color=METHOD_COLOURS.get(method),
+                   marker=METHOD_MARKERS.get(method, "o"))
     front = pareto_front(cost, error.to_numpy())
     if front:
         ax.plot(cost[front], error.to_numpy()[front], color="black", drawstyle="steps-post", lw=1,
