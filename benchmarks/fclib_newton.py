@@ -43,9 +43,10 @@ import scipy                                  # noqa: E402
 import contactlab                             # noqa: E402
 from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact   # noqa: E402
 
+from contactlab.fclib_bench import MAX_ITERATIONS as CAPS, PROBLEM_SUFFIXES  # noqa: E402  (one table of caps)
+
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parent.parent / "shared" / "data" / "fclib"
-CAPS = {"newton": 1000, "nsgs": 10000, "apgd": 10000}
 
 
 def machine():
@@ -136,7 +137,7 @@ def main():
     args = parser.parse_args()
     if not args.data.is_dir():
         sys.exit(f"no FCLIB data folder at {args.data}")
-    files = sorted(p for p in args.data.iterdir() if p.suffix in (".dat", ".hdf5"))
+    files = sorted(p for p in args.data.iterdir() if p.suffix.lower() in PROBLEM_SUFFIXES)
     problems = [read_problem(p) for p in files]
     before = os.getloadavg()[0]
     rows = measure(problems, args.methods, args.tol, args.repeats)
