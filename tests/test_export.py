@@ -270,7 +270,7 @@ def test_a_shorter_export_replaces_the_whole_sequence(arrays, tmp_path):
 @pytest.mark.parametrize("file_format", ["obj", "ply"])
 @pytest.mark.parametrize("existing", [False, True])
 def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_format, existing):
-    directory = tmp_path / "frames"
+    directory = tmp_path / "frames" if existing else tmp_path / "new" / "frames"    # parents made go too
     if existing:
         directory.mkdir()
         (directory / "notes.txt").write_text("mine")
@@ -297,7 +297,7 @@ def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_fo
     if existing:
         assert os.listdir(directory) == ["notes.txt"]           # no frame, no .partial- file
     else:
-        assert not directory.exists()                           # the folder it created is gone
+        assert not directory.exists()                           # the folders it created are gone
     assert os.listdir(tmp_path) == (["frames"] if existing else [])
 
 

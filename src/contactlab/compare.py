@@ -697,7 +697,7 @@ class _Created:
         return path
 
     def remove(self):
-        undo_written(self.files, None, created=False)        # an interrupted compare says it wrote nothing
+        undo_written(self.files)                              # an interrupted compare says it wrote nothing
         for folder in self.folders:                           # what a stopped worker was writing
             for name in os.listdir(folder) if os.path.isdir(folder) else ():
                 if name.startswith(".partial-"):

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, read_trajectory, sample_count, undo_written
+from .record import atomic_path, make_folders, read_trajectory, remove_empty, sample_count, undo_written
 from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
@@ -194,7 +194,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     obstacles (``o obstacles``) and the free particles (``o particles``: vertices only); a PLY
     file (binary) holds the same vertices and faces concatenated into one mesh, so object
     names are lost there. Each file is written atomically; if a frame fails, the frames this
-    call wrote are removed (and the directory, when this call created it) and the error is
+    call wrote are removed (and the folders this call created) and the error is
     raised. After success, older ``frame_NNNNN`` files of the same format beyond the new
     sequence are removed, so the directory holds one sequence.
     """
@@ -209,9 +209,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     writer = _ObjWriter(_frame_objects(parts, data, 0)) if file_format == "obj" else None
 
     directory = os.fspath(directory)
-    created = not os.path.isdir(directory)
-    os.makedirs(directory, exist_ok=True)
-    written = []
+    made, written = make_folders(directory), []
     try:
         for j, sample in enumerate(samples):
             interrupts.check()                    # Ctrl-C or SIGTERM: between frames
@@ -226,7 +224,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
                     _write_ply(temporary, objects)
             written.append(path)
     except BaseException:
-        undo_written(written, directory, created)
+        undo_written(written, made)
         raise
     pattern = re.compile(r"frame_(\d{5,})\." + file_format + "$")
     for name in os.listdir(directory):          # stale frames of a longer, earlier export
@@ -368,15 +366,12 @@ def write_usd(arrays, path, *, every=1) -> str:
 
     # pxr picks the file format (text or crate) from the suffix, which the temporary keeps
     path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    created = not os.path.isdir(directory)
-    os.makedirs(directory, exist_ok=True)
+    made = make_folders(os.path.dirname(os.path.abspath(path)))
     try:
         with atomic_path(path) as temporary:
             if not stage.GetRootLayer().Export(temporary):
                 raise OSError(f"USD could not write {temporary}")
     except BaseException:
-        if created and not os.listdir(directory):
-            os.rmdir(directory)
+        remove_empty(made)
         raise
     return path

@@ -32,7 +32,7 @@ from . import cluster
 from .errors import InputError, shorten
 from .lcp import natural_map_error, read_problem, solve_friction_contact
 from .plots import DPI, STYLES, _figure
-from .record import atomic_path, undo_written
+from .record import atomic_path, make_folders, undo_written
 from .threads import available_threads
 
 SOLVERS = ("nsgs", "staggered", "apgd", "newton")
@@ -266,9 +266,8 @@ def bench(directory, solvers=None, out=None, *, scheduler=None, workers=None, to
 
 def _write(table, solvers, out, settings, machine) -> Bench:
     """results.csv, results.md and profile.png of ``table`` into ``out``; on failure the files
-    this call wrote are removed (and ``out``, if it created it)."""
-    created = not out.is_dir()
-    out.mkdir(parents=True, exist_ok=True)
+    this call wrote are removed (and the folders it created)."""
+    made = make_folders(str(out))
     paths = Bench(table, out / "results.csv", out / "results.md", out / "profile.png", out)
     written = []
     try:
@@ -286,7 +285,7 @@ def _write(table, solvers, out, settings, machine) -> Bench:
             figure.savefig(temporary, format="png", dpi=DPI)
         written.append(str(paths.profile_png))
     except BaseException:
-        undo_written(written, str(out), created)
+        undo_written(written, made)
         raise
     return paths
 

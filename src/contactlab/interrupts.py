@@ -78,7 +78,7 @@ def deferred():
     """Signals wait for :func:`check` (or the end of the block) while this is open. Installs the
     handler for SIGINT where Python's default one is in place (a library caller), and leaves a
     caller's own handlers alone."""
-    global _deferring, _pending
+    global _deferring
     if not _main_thread():
         yield
         return

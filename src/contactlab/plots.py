@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 
 from . import interrupts
 from .methods import AVAILABLE
-from .record import atomic_path, undo_written
+from .record import atomic_path, make_folders, undo_written
 
 PLOTS = ("energy", "penetration", "contacts", "residual")
 DPI = 100
@@ -149,10 +149,8 @@ def build_figures(runs, *, components=False, title=None) -> dict:
 
 def _save(figures, directory) -> dict:
     """Write each Figure as ``directory/<name>.png``; on failure remove what this call wrote
-    (and the folder, if it created it)."""
-    created = not os.path.isdir(directory)
-    os.makedirs(directory, exist_ok=True)
-    written = {}
+    (and the folders it created)."""
+    made, written = make_folders(os.fspath(directory)), {}
     try:
         for name, figure in figures.items():
             interrupts.check()                    # Ctrl-C or SIGTERM: between pictures
@@ -161,7 +159,7 @@ def _save(figures, directory) -> dict:
                 figure.savefig(temporary, format="png", dpi=DPI)
             written[name] = path
     except BaseException:
-        undo_written(written.values(), directory, created)
+        undo_written(written.values(), made)
         raise
     return written
 

@@ -226,16 +226,15 @@ def remove_empty(folders):
             os.rmdir(folder)
 
 
-def undo_written(paths, directory, created):
+def undo_written(paths, folders=()):
     """After a failed or interrupted write of several files: remove ``paths`` (those this call
-    completed), un-note them (``interrupts.note_written``), and remove ``directory`` if this
-    call ``created`` it and it is empty again, so nothing of the call remains."""
+    completed), un-note them (``interrupts.note_written``), and remove the ``folders`` this call
+    created (:func:`make_folders`) that are empty again, so nothing of the call remains."""
     for path in paths:
         if os.path.exists(path):
             os.unlink(path)
         interrupts.note_written(path, removed=True)
-    if created and os.path.isdir(directory) and not os.listdir(directory):
-        os.rmdir(directory)
+    remove_empty(folders)
 
 
 def read_trajectory(arrays, keys, samples=None) -> dict:
@@ -288,12 +287,11 @@ def write_outputs(directory, arrays, summary):
 
     On failure nothing is left behind: no partial file, and no folder this call created.
     """
-    created = not os.path.isdir(directory)
-    os.makedirs(directory, exist_ok=True)
+    made, written = make_folders(directory), []
     try:
-        store.write(os.path.join(directory, TRAJECTORY), arrays, series=[name for name in SERIES if name in arrays])
-        write_summary(directory, summary)
+        written.append(store.write(os.path.join(directory, TRAJECTORY), arrays,
+                                   series=[name for name in SERIES if name in arrays]))
+        written.append(write_summary(directory, summary))
     except BaseException:
-        undo_written([os.path.join(directory, name) for name in (TRAJECTORY, "summary.json")] if created else [],
-                     directory, created)
+        undo_written(written, made)
         raise

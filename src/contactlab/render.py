@@ -40,7 +40,7 @@ from tqdm import tqdm
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, read_trajectory
+from .record import atomic_path, make_folders, read_trajectory, remove_empty
 from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
@@ -85,16 +85,14 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     picture = _Picture(arrays, width, height, elevation, azimuth, title, np.array(sorted(drawn)))
     paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
     paths["still"] = os.path.join(directory, "still.png")
-    created = not os.path.isdir(directory)
-    os.makedirs(directory, exist_ok=True)
+    made = make_folders(os.fspath(directory))
     try:
         with contextlib.ExitStack() as stack:     # renames every file at the end, or removes them all
             temporary = {name: stack.enter_context(atomic_path(path)) for name, path in paths.items()}
             _write_videos(picture, temporary, fps, progress)
             imageio.v3.imwrite(temporary["still"], picture.draw(len(picture.time) - 1))
     except BaseException:
-        if created and not os.listdir(directory):
-            os.rmdir(directory)
+        remove_empty(made)
         raise
     return paths
 
