@@ -87,3 +87,28 @@ def test_capsule_mass_properties_against_voxels():
     Ixx = dm * np.sum((y ** 2 + z ** 2)[inside])
     Izz = dm * np.sum((x ** 2 + y ** 2)[inside])
     np.testing.assert_allclose(model.body_inertia[0], [Ixx, Ixx, Izz], rtol=5e-3)
+
+
+def test_an_unknown_material_names_the_materials_there_are_default_included():
+    with pytest.raises(InputError) as error:
+        ModelBuilder().add_body("sphere", radius=0.1, mass=1.0, material="steel")
+    assert "unknown material 'steel': the materials are 'default', contactlab's own (friction 0.5" in str(error.value)
+    b = ModelBuilder()
+    b.add_material("rubber", friction=0.9, restitution=0.8)
+    with pytest.raises(InputError) as error:
+        b.add_body("sphere", radius=0.1, mass=1.0, material="steel")
+    assert "the materials are 'rubber' and 'default'" in str(error.value)
+    assert "define 'steel' first" in str(error.value)
+
+
+def test_state_model_and_run_print_in_one_short_line():
+    from contactlab import simulate
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1))
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, position=(1, 0, 1))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    model = b.finalize()
+    run = simulate(model, "impulse", 0.01, 0.02, scene_name="two")
+    assert repr(model) == "Model(1 sphere, 1 box, 1 obstacle)"
+    assert repr(run.state) == "State(t = 0.02 s, 2 bodies, 0 particles)"
+    assert repr(run) == f"Run('two' with impulse: 2 steps of 0.01 s, 3 samples, final {run.state!r})"

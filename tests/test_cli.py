@@ -242,3 +242,10 @@ def test_compare_from_the_command_line(tmp_path):
                  "constraints/summary.json"):
         assert (tmp_path / "cmp" / name).is_file(), name
     assert "report.html" in result.stdout
+
+
+def test_version_prints_the_installed_version(capsys):
+    from contactlab import __version__, cli
+    with pytest.raises(SystemExit) as done:
+        cli.main(["--version"])
+    assert done.value.code == 0 and capsys.readouterr().out == f"contactlab {__version__}\n"

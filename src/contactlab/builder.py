@@ -225,8 +225,12 @@ class ModelBuilder:
         names = [m[0] for m in self._materials]
         if material in names:
             return names.index(material)
-        known = ", ".join(repr(n) for n in names) or "none defined"
-        raise InputError("material", f"unknown material {material!r} (known: {known})")
+        known = ", ".join(repr(n) for n in names)
+        builtin = (f"{DEFAULT_MATERIAL[0]!r}, contactlab's own (friction {DEFAULT_MATERIAL[1]}, restitution "
+                   f"{DEFAULT_MATERIAL[2]}), what a body without a material gets")
+        raise InputError("material", f"unknown material {material!r}: the materials are "
+                                     f"{known + ' and ' if known else ''}{builtin}; define {material!r} "
+                                     f"first (add_material, or [[materials]] in a scene file)")
 
     # -- rigid bodies ----------------------------------------------------------------
     def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, points=None, file=None,

@@ -32,6 +32,8 @@ class _Parser(argparse.ArgumentParser):
 def _parser():
     parser = _Parser(prog="contactlab", description="Contact resolution: penalty, projection, impulses, "
                                                     "constraints on the same scenes.")
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"contactlab {__version__}")
     commands = parser.add_subparsers(dest="command", parser_class=_Parser)
     commands.add_parser("demo", help="run the default scene and say where its outputs are")
     commands.add_parser("scenes", help="list the built-in scenes")

@@ -182,6 +182,9 @@ class Model:
         """A fresh copy of the state at time 0."""
         return self.initial.copy()
 
+    def __repr__(self):
+        return f"Model({self.describe()})"
+
     def describe(self) -> str:
         kinds = {}
         for k in self.body_shape:

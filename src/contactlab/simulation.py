@@ -37,6 +37,11 @@ class Run:
     arrays: dict         # the trajectory (see docs/trajectory.md)
     summary: dict        # the JSON summary (see docs/cli.md)
 
+    def __repr__(self):
+        s = self.summary
+        return (f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
+                f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})")
+
 
 MAX_STEPS = 10 ** 9     # steps of one run at most (duration / dt); record_every at most too
 

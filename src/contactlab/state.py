@@ -20,6 +20,11 @@ class State:
     particle_velocity: np.ndarray        # (P, 3) m/s
     carried: dict = field(default_factory=dict)
 
+    def __repr__(self):
+        bodies, particles = len(self.body_position), len(self.particle_position)
+        return (f"State(t = {self.time:.6g} s, {bodies} bod{'y' if bodies == 1 else 'ies'}, "
+                f"{particles} particle{'' if particles == 1 else 's'})")
+
     @classmethod
     def assemble(cls, time, positions, velocities, carried=None) -> "State":
         """A state from (body_position, body_orientation, particle_position) and
