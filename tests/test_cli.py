@@ -249,3 +249,13 @@ def test_version_prints_the_installed_version(capsys):
     with pytest.raises(SystemExit) as done:
         cli.main(["--version"])
     assert done.value.code == 0 and capsys.readouterr().out == f"contactlab {__version__}\n"
+
+
+def test_the_summary_line_says_where_the_time_went():
+    """A first run's 20 s were compiling, not stepping at 190 steps/s (issue 22's "4000 steps in
+    37.02 s (1137 steps/s)" hid that)."""
+    from contactlab.cli import _where_time_went
+    first = {"compile_seconds": 20.0, "recording_seconds": 0.4, "steps_per_second": 6003.2}
+    assert _where_time_went(first) == "20.00 s compiling or loading kernels, 0.40 s recording, 6003 steps/s stepping"
+    cached = {"compile_seconds": 0.02, "recording_seconds": 0.01, "steps_per_second": 6003.2}
+    assert _where_time_went(cached) == "6003 steps/s stepping"

@@ -272,11 +272,23 @@ def _sweep(args):
     print(f"Table: {os.path.join(out, 'results.parquet')} (and results.csv); report: {os.path.join(out, 'report.html')}")
 
 
+def _where_time_went(summary):
+    """Where the run's wall time went: compiling kernels or loading them from the cache, and
+    recording (each when it took a tenth of a second or more), and the stepping's speed."""
+    parts = []
+    if summary["compile_seconds"] >= 0.1:
+        parts.append(f"{summary['compile_seconds']:.2f} s compiling or loading kernels")
+    if summary["recording_seconds"] >= 0.1:
+        parts.append(f"{summary['recording_seconds']:.2f} s recording")
+    parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping")
+    return ", ".join(parts)
+
+
 def _plain_summary(summary, scene, written=()):
     energy = summary["energy"]
     return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
             f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
-            f"({summary['steps_per_second']:.0f} steps/s after a first step of {summary['first_step_seconds']:.2f} s); "
+            f"({_where_time_went(summary)}); "
             f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
             f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
             f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end."
