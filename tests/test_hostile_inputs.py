@@ -29,6 +29,7 @@ from contactlab.builder import (BODY_SHAPE_ARGUMENTS, LIMITS, OBSTACLE_SHAPE_ARG
                                 ModelBuilder)
 from contactlab.errors import LONGEST_MESSAGE, InputError, SimulationDiverged
 from contactlab.methods import AVAILABLE, penalty
+from contactlab.plausibility import PlausibilityWarning
 from contactlab.scene import load_scene, loader
 from contactlab.scene.toml import MAX_NESTING
 from contactlab.shapes import BODY_SHAPES, OBSTACLE_SHAPES
@@ -512,7 +513,8 @@ def test_the_limits_are_generous(tmp_path):
     builder.add_body("sphere", radius=1e-3, mass=1e-5, position=(5000.0, 0, 1.0), velocity=(10.0, 0, 0))
     builder.add_particles([[1e5, 0, 1e5]], mass=1e-9, radius=0.0)
     builder.add_obstacle("plane", normal=(0, 0, 1))
-    simulate(builder.finalize(), "impulse", 1e-4, 3e-4)
+    with pytest.warns(PlausibilityWarning, match="1e\\+06× the other body's 0.001 m"):   # valid, and it says so
+        simulate(builder.finalize(), "impulse", 1e-4, 3e-4)
     assert LENGTH.largest == 1e6 and MASS.largest == 1e12 and all(q.largest > q.smallest for q in LIMITS)
 
 

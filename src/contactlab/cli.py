@@ -51,6 +51,8 @@ def _parser():
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
     run.add_argument("--memory-limit", metavar="GB", help="the most memory the run may need by its estimate "
                                                           "(default: half this machine's; 'none': no limit)")
+    run.add_argument("--yes", action="store_true", help="run even a run of more than 500,000 steps (a duration "
+                                                        "or dt in the wrong unit?)")
     run.add_argument("--allow-divergence", action="store_true",
                      help="go on when a health check fails (energy from nowhere, a speed beyond the scene's "
                           "scale, a contact deep enough to pass through), noting it in the summary")
@@ -156,7 +158,8 @@ def _memory_limit(text):
 
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True, allow_divergence=False, memory_limit=None):
+         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False):
+    from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
     from .simulation import simulate
@@ -165,6 +168,10 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         from .render import check_settings
         check_settings(fps)
     scene = load_scene(scene_source, overrides)
+    steps = max(1, round(scene.duration / scene.dt))
+    if steps > MANY_STEPS and not yes:
+        raise InputError("--yes", f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
+                                  f"{scene.dt:g} s): times are in seconds; add --yes to run it")
     options = scene.method_options.get(scene.method, {})
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
@@ -338,7 +345,7 @@ def _main(argv):
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
                  plots=not args.no_plots, allow_divergence=args.allow_divergence,
-                 memory_limit=_memory_limit(args.memory_limit))
+                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":

@@ -7,6 +7,7 @@
 
 import os
 import time
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -19,7 +20,7 @@ from .builder import TIME, WHOLE_NUMBERS, _number
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
-from . import budget, interrupts
+from . import budget, interrupts, plausibility
 from .errors import InputError, SimulationDiverged
 from .health import ENERGY_SERIES, HARD_SPEED, Health
 from .model import Model
@@ -167,6 +168,8 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
     if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
         raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
     budget.check(model, steps, record_every, memory_limit, trajectory)
+    for line in plausibility.warnings_for(model, state, dt, steps):     # a unit slip? one line each
+        warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=3)
     advice = getattr(module, "divergence_advice", None)
     health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
     recorder = (Recorder(model, record_every) if trajectory is None
