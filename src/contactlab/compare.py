@@ -70,6 +70,10 @@ class Comparison:
     checks: dict = field(default_factory=dict)
     files: dict = field(default_factory=dict)
 
+    def _repr_html_(self):              # Jupyter (contactlab.notebook): the table and the report's link
+        from .notebook import comparison_html
+        return comparison_html(self)
+
 
 @dataclass
 class _Outcome:

@@ -43,6 +43,10 @@ class Run:
         return (f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
                 f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})")
 
+    def _repr_html_(self):              # Jupyter (contactlab.notebook): the summary and the last sample drawn
+        from .notebook import run_html
+        return run_html(self)
+
 
 MAX_STEPS = 10 ** 9     # steps of one run at most (duration / dt); record_every at most too
 
