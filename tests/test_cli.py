@@ -259,3 +259,33 @@ def test_the_summary_line_says_where_the_time_went():
     assert _where_time_went(first) == "20.00 s compiling or loading kernels, 0.40 s recording, 6003 steps/s stepping"
     cached = {"compile_seconds": 0.02, "recording_seconds": 0.01, "steps_per_second": 6003.2}
     assert _where_time_went(cached) == "6003 steps/s stepping"
+
+
+@pytest.mark.parametrize("compiled_loop", [True, False])
+def test_the_progress_bar_starts_its_clock_after_the_first_step(monkeypatch, compiled_loop):
+    """The first step compiles (or loads) the kernels; the bar's rate and time left must be the
+    stepping's, so it is reset after that step and before any other progress (issue 22)."""
+    from contactlab import simulation
+    from conftest import ball_on_plane
+    events = []
+
+    class Bar:
+        def __init__(self, **keywords):
+            events.append(("total", keywords["total"]))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exception):
+            return False
+
+        def reset(self):
+            events.append(("reset",))
+
+        def update(self, count):
+            events.append(("update", count))
+
+    monkeypatch.setattr(simulation, "tqdm", Bar)
+    simulation.simulate(ball_on_plane(), "impulse", 0.01, 0.5, progress=True, compiled_loop=compiled_loop)
+    assert events[:3] == [("total", 50), ("reset",), ("update", 1)]
+    assert events.count(("reset",)) == 1 and sum(event[1] for event in events if event[0] == "update") == 50

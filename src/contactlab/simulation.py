@@ -328,8 +328,16 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
             if not recorded:
                 recorder.sample(state, info)       # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
-        bar.update(1)
+        _advance(bar, step_index, 1)
     return state
+
+
+def _advance(bar, step_index, made):
+    """Move the progress bar by ``made`` steps; after the first step, which compiled the kernels
+    (or loaded them), its clock starts again, so its rate and time left are the stepping's."""
+    if step_index == 1:
+        bar.reset()
+    bar.update(made)
 
 
 CHUNK_SECONDS = 0.1     # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
@@ -364,8 +372,8 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
             raise _Stopped(violation, state)
         if step_index > 1:          # the next chunk: about CHUNK_SECONDS of steps at this pace
             chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
+        _advance(bar, step_index, made)
         step_index += made
-        bar.update(made)
     tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
     return stepper.state()
 
