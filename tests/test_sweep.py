@@ -309,3 +309,21 @@ def test_a_local_cluster_takes_one_worker_per_idle_core():
         for spinner in spinners:
             if spinner.pid is not None:
                 spinner.join()
+
+
+def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rerun(tmp_path):
+    write(tmp_path, BALL_STUDY.replace('name = "ball"', 'name = "stopped"'))
+    process = subprocess.Popen([sys.executable, "-m", "contactlab", "sweep", "study.toml", "--workers", "1"],
+                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    cells = tmp_path / "out" / "stopped-sweep" / "cells"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not (cells.is_dir() and len(os.listdir(cells)) >= 2):
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=300)
+    kept = len(os.listdir(cells))
+    assert process.returncode == 130 and "Traceback" not in stderr and 2 <= kept < 8
+    assert stderr.splitlines()[-1] == f"interrupted (SIGINT); written before it: {os.path.join('out', 'stopped-sweep', 'cells')}"
+    assert not any(name.startswith(".partial-") for name in os.listdir(cells))
+    again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
+    assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr

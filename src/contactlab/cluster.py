@@ -22,6 +22,7 @@ dying) comes back from :func:`run_tasks` as the exception, in place of a result.
 """
 
 import contextlib
+import logging
 import os
 import time
 import uuid
@@ -85,7 +86,8 @@ def connect(scheduler=None, workers=None, field="--scheduler"):
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
             raise InputError("--workers", f"expected a whole number of worker processes ≥ 1, found {workers!r}")
         cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address="127.0.0.1:0")
+                               host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                               silence_logs=logging.ERROR)     # a cancelled task's warning is no news
         try:
             with Client(cluster) as client:
                 yield client

@@ -22,7 +22,7 @@ import math
 import os
 import time
 
-from . import __version__, cluster
+from . import __version__, cluster, interrupts
 from .errors import InputError, SimulationDiverged
 from .record import atomic_path, make_folders, remove_empty
 from .study import Study, load_study, toml_value
@@ -153,6 +153,9 @@ def _write_row(folder, key, row):
     path = os.path.join(folder, f"{key}.parquet")
     with atomic_path(path) as temporary:
         pd.DataFrame([row]).to_parquet(temporary, index=False)
+    interrupts.note_written(path, removed=True)     # an interrupted sweep names the folder of the cells
+    if folder not in interrupts.written_paths():    # it kept, not every cell's file
+        interrupts.note_written(folder)
 
 
 def _read_row(folder, key) -> dict:
