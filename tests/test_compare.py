@@ -356,3 +356,20 @@ def test_the_methods_run_on_a_dask_cluster_give_the_numbers_they_give_one_after_
         assert {"mp4", "gif", "still"} <= set(files) and all(os.path.isfile(files[name]) for name in files)
         assert open_trajectory(files["trajectory"]).status == "complete"
     assert not any(name.startswith(".partial-") for _, _, names in os.walk(tmp_path) for name in names)
+
+
+def test_methods_that_computed_the_same_trajectory_are_said_to_be_one_result(tmp_path):
+    """On one bouncing ball, impulses and constraints solve the same one-contact problem the same
+    way (their positions differ by rounding only): the report says their numbers are one result;
+    penalty's differ and it is not named."""
+    result = compare("bouncing_ball", "impulse,constraints,penalty", str(tmp_path / "out"), duration=0.6,
+                     video=False, workers=1)
+    with open(result.report_md, encoding="utf-8") as stream:
+        report = stream.read()
+    impulse = open_trajectory(os.path.join(result.out, "impulse", "trajectory.h5"))
+    constraints = open_trajectory(os.path.join(result.out, "constraints", "trajectory.h5"))
+    apart = float(np.max(np.abs(impulse["body_position"] - constraints["body_position"])))
+    assert apart < 1e-12
+    assert (f"- impulse and constraints computed the same trajectory to within rounding (positions apart by "
+            f"{apart:.2g} m at most)") in report
+    assert "penalty computed the same" not in report and "and penalty computed" not in report

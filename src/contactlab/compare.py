@@ -477,9 +477,42 @@ def _notes(outcomes):
     else:
         notes.append("Momentum drift ‖P(T) − P(0) − M g T‖ is a conservation check: no obstacles act on "
                      "this scene, so anything but rounding is an error of the method.")
+    for group, largest in same_computation(outcomes):
+        notes.append(f"{_names(group)} computed the same trajectory to within rounding (positions apart by "
+                     f"{largest:.2g} m at most): at these settings they solve the same problem the same way, "
+                     f"so their numbers are one result, not {len(group)} that agree (their speeds still differ).")
     for outcome in outcomes:
         notes += [f"{outcome.method}: warning: {text}" for text in outcome.warnings]
     return notes
+
+
+SAME_WITHIN = 1e-9          # m (and unit quaternion components): trajectories this close are one computation
+
+
+def same_computation(outcomes) -> list:
+    """(method names, largest difference [m]) of each group of runs whose positions,
+    orientations and particles agree within SAME_WITHIN at every sample: rounding, not physics."""
+    ran = [outcome for outcome in outcomes if outcome.run is not None]
+    series = {outcome.method: [np.asarray(outcome.run.arrays[name]) for name in
+                               ("body_position", "body_orientation", "particle_position")] for outcome in ran}
+    groups, placed = [], set()
+    for index, outcome in enumerate(ran):
+        if outcome.method in placed:
+            continue
+        group, largest = [outcome.method], 0.0
+        for other in ran[index + 1:]:
+            if other.method in placed:
+                continue
+            mine, theirs = series[outcome.method], series[other.method]
+            if all(a.shape == b.shape for a, b in zip(mine, theirs)):
+                apart = [float(np.max(np.abs(a - b))) if a.size else 0.0 for a, b in zip(mine, theirs)]
+                if max(apart) <= SAME_WITHIN:
+                    group.append(other.method)
+                    largest = max(largest, apart[0], apart[2])       # positions [m]
+        if len(group) > 1:
+            placed.update(group)
+            groups.append((group, largest))
+    return groups
 
 
 # ---- the reports ------------------------------------------------------------------------------
