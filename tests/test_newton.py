@@ -142,7 +142,9 @@ def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
 @given(nc=st.integers(1, 4), data=st.data(), shift=st.floats(1e-3, 1.0), q_scale=st.floats(1e-3, 1e3))
 def test_random_positive_definite_problems_meet_cone_and_complementarity(nc, data, shift, q_scale):
     m = 3 * nc
-    entries = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+    # no subnormal numbers: below 2.2e-308 a float has fewer than 53 bits, so no relative
+    # tolerance can hold (Hypothesis found q = −5e-324: a "violation" of 5e-324, one unit there)
+    entries = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False, allow_subnormal=False)
     G = data.draw(hnp.arrays(np.float64, (m, m), elements=entries), label="G")
     q = q_scale * data.draw(hnp.arrays(np.float64, m, elements=entries), label="q")
     mu = data.draw(hnp.arrays(np.float64, nc, elements=st.floats(0.0, 2.0)), label="mu")
