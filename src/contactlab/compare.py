@@ -467,7 +467,9 @@ def _summary_text(scene, outcomes, skipped):
 def _notes(outcomes):
     """Caveats worth printing under the table, as plain sentences."""
     notes = ["Energy drift is the total energy (kinetic + potential + elastic) at the end minus at "
-             "the start; its % is of the energy scale defined in docs/compare.md.",
+             "the start; its % is of the run's energy scale: the larger of the most energy it held above "
+             "the lowest potential energy it reached, and the initial potential energy above the lowest "
+             "mass.",
              "Solver residuals are in each method's own unit (impulse, constraints: m/s of the last "
              "sweep; projection: m; penalty with backward Euler: relative linear residual), so compare "
              "them within a method, not across."]
