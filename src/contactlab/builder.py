@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rotations, shapes
-from .errors import InputError
+from .errors import InputError, first_line
 from .model import Model
 from .state import State
 
@@ -663,8 +663,7 @@ def _cloth_from_mesh(file, scale):
         vertices = np.asarray(loaded.vertices, dtype=float)
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as error:                      # trimesh raises many types on broken files
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise InputError("file", f"could not read the mesh file {path} ({reason})") from None
+        raise InputError("file", f"could not read the mesh file {path} ({first_line(error)})") from None
     if faces.ndim != 2 or faces.shape[1:] != (3,) or len(faces) == 0 or len(vertices) == 0:
         raise InputError("file", f"the mesh file {path} contains no triangles")
     if not np.all(np.isfinite(vertices)):

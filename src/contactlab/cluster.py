@@ -28,7 +28,7 @@ import time
 import uuid
 
 from . import interrupts
-from .errors import InputError
+from .errors import InputError, first_line
 
 CONNECT_TIMEOUT = 10.0          # s: how long connecting to a scheduler may take
 POLL_SECONDS = 0.5              # s: how often the wait for results looks for a signal
@@ -102,7 +102,7 @@ def connect(scheduler=None, workers=None, field="--scheduler"):
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as error:
-        raise InputError(field, f"could not reach a Dask scheduler at {scheduler} ({_first_line(error)}); "
+        raise InputError(field, f"could not reach a Dask scheduler at {scheduler} ({first_line(error)}); "
                                 f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'") from None
     with client:
         yield client
@@ -165,8 +165,3 @@ def worker_address() -> str:
         return get_worker().address
     except (ImportError, ValueError):
         return "local"
-
-
-def _first_line(error):
-    text = str(error).strip()
-    return text.splitlines()[0] if text else type(error).__name__

@@ -37,6 +37,13 @@ def shorten(text) -> str:
     return _cut(text, LONGEST_MESSAGE)
 
 
+def first_line(error) -> str:
+    """The first line of an exception's message, or its type's name when it has none: what a
+    one-line error says of a library's failure."""
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
+
+
 class InputError(ValueError):
     """Bad user input, described in one sentence.
 

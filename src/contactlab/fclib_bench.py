@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from . import cluster
-from .errors import InputError, shorten
+from .errors import InputError, first_line, shorten
 from .lcp import natural_map_error, read_problem, solve_friction_contact
 from .plots import DPI, STYLES, _figure
 from .record import atomic_path, make_folders, undo_written
@@ -109,9 +109,9 @@ def _failed_row(job, failure, worker=""):
 
 def _status(failure) -> str:
     """"error: <type>: <first line>" of an exception, one short line."""
-    text = str(failure).strip()
-    first = text.splitlines()[0] if text else ""
-    return shorten(f"error: {type(failure).__name__}: {first}" if first else f"error: {type(failure).__name__}")
+    first = first_line(failure)
+    name = type(failure).__name__
+    return shorten(f"error: {name}: {first}" if first != name else f"error: {name}")
 
 
 def _machine() -> dict:

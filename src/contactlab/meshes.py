@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from . import rotations
-from .errors import InputError
+from .errors import InputError, first_line
 
 LEAF_SIZE = 4
 MESH_FORMATS = (".obj", ".stl", ".ply")
@@ -384,8 +384,7 @@ def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) ->
         vertices = np.asarray(loaded.vertices, dtype=float)
         faces = np.asarray(loaded.faces)
     except Exception as error:                               # trimesh raises many types on broken files
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise InputError(field, f"could not read the mesh file {path} ({reason})") from None
+        raise InputError(field, f"could not read the mesh file {path} ({first_line(error)})") from None
     if faces.ndim != 2 or len(faces) == 0 or vertices.ndim != 2 or len(vertices) == 0:
         raise InputError(field, f"the mesh file {path} contains no triangles")
     if faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):

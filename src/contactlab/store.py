@@ -30,7 +30,7 @@ import h5py
 import numpy as np
 
 from . import interrupts
-from .errors import InputError
+from .errors import InputError, first_line
 
 FORMAT = "contactlab trajectory"
 VERSION = 1
@@ -178,7 +178,7 @@ class TrajectoryFile(Mapping):
             return h5py.File(self.path, "r")
         except (OSError, ValueError) as error:
             raise InputError(self.field, f"{self.path} is not a trajectory contactlab can read "
-                                         f"({str(error).splitlines()[0] if str(error) else type(error).__name__}); "
+                                         f"({first_line(error)}); "
                                          f"run the scene again") from None
 
     def __getitem__(self, name):

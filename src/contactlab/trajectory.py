@@ -22,7 +22,7 @@ import zlib
 import numpy as np
 from numpy.lib.npyio import NpzFile
 
-from .errors import InputError
+from .errors import InputError, first_line
 
 MAX_COORDINATE = 1e12      # m: positions and surface vertices beyond this are corrupt (scenes are ≤ 1e6 m)
 
@@ -74,7 +74,7 @@ def load_npz(path, field="OUT_DIR") -> dict:
 
 
 def _reason(error):
-    text = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+    text = first_line(error)
     if "pickle" in text:
         return "it holds Python objects, which contactlab never unpickles, or is not a NumPy file at all"
     return text
