@@ -26,7 +26,8 @@ import numpy as np
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, make_folders, read_trajectory, remove_empty, sample_count, undo_written
+from .record import (atomic_path, checked_times, make_folders, read_trajectory, remove_empty, sample_count,
+                     undo_written)
 from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
@@ -290,10 +291,9 @@ def write_usd(arrays, path, *, every=1) -> str:
     if suffix not in USD_SUFFIXES:
         raise InputError("path", f"expected a file name ending in {', '.join(USD_SUFFIXES)}, found {os.fspath(path)!r}")
     every = _check_every(every)
-    time = read_trajectory(arrays, ("time",))["time"].astype(float)
+    time = checked_times(arrays).astype(float)
     samples = frame_samples(len(time), every)
     data = read_trajectory(arrays, _REQUIRED, samples)      # only the samples exported are read
-    check_arrays({"time": time})
     check_arrays(data)
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 

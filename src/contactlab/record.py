@@ -21,7 +21,7 @@ import numpy as np
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
 from .errors import InputError
-from .trajectory import check_shapes
+from .trajectory import check_arrays, check_shapes
 
 SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
           "particle_position", "particle_velocity", "energy_kinetic", "energy_potential",
@@ -258,6 +258,14 @@ def read_trajectory(arrays, keys, samples=None) -> dict:
     if "time" in out and len(out["time"]) == 0:
         raise InputError("arrays", "the trajectory has no samples")
     return out
+
+
+def checked_times(arrays):
+    """The trajectory's time (T,) [s], read whole and checked (finite, in order, at least one
+    sample): what a reader needs to choose the samples it will read."""
+    time = read_trajectory(arrays, ("time",))["time"]
+    check_arrays({"time": time})
+    return time
 
 
 def sample_count(arrays) -> int:

@@ -40,7 +40,7 @@ from tqdm import tqdm
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, make_folders, read_trajectory, remove_empty
+from .record import atomic_path, checked_times, make_folders, read_trajectory, remove_empty
 from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
@@ -78,7 +78,7 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     """
     fps = check_settings(fps, width, height, elevation, azimuth)[0]
     formats = _formats(formats)
-    time = _times(arrays)
+    time = checked_times(arrays)
     mp4_times, gif_times, _ = _video_times(time, fps, formats)
     drawn = {len(time) - 1} | {int(k) for times in (mp4_times, gif_times) if times is not None
                                for k in _nearest(time, times)}
@@ -103,7 +103,7 @@ def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azi
     sample: index into the trajectory's samples (negative counts from the end);
     width, height [px] from MIN_SIZE to MAX_SIZE; elevation, azimuth [degrees]; title: a line above the picture.
     """
-    count = len(_times(arrays))
+    count = len(checked_times(arrays))
     if isinstance(sample, bool) or not isinstance(sample, (int, np.integer)) or not -count <= sample < count:
         raise InputError("sample", f"expected a whole number from {-count} to {count - 1} "
                                    f"(the trajectory has {count} samples), found {sample!r}")
@@ -188,13 +188,6 @@ def _formats(formats):
 
 
 # -- timing -------------------------------------------------------------------------------
-
-def _times(arrays):
-    """The trajectory's time (T,) [s], checked (finite, in order, at least one sample)."""
-    time = read_trajectory(arrays, ("time",))["time"]
-    check_arrays({"time": time})
-    return time
-
 
 def _video_times(time, fps, formats):
     """(MP4 frame times, GIF frame times, GIF delay [1/100 s]) of a trajectory sampled at

@@ -171,13 +171,13 @@ def _simulate(model, method, dt, duration, options, integrator, record_every, st
         raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
     if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
         raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
-    budget.check(model, steps, record_every, memory_limit, trajectory)
+    samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
     for line in plausibility.warnings_for(model, state, dt, steps):     # a unit slip? one line each
         warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=3)
     advice = getattr(module, "divergence_advice", None)
     health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
-    recorder = (Recorder(model, record_every) if trajectory is None
-                else streaming_recorder(model, record_every, trajectory, steps // record_every + 2))
+    recorder = (Recorder(model, record_every, samples=samples) if trajectory is None
+                else streaming_recorder(model, record_every, trajectory, samples))
     try:
         return _record_run(model, module, method, dt, steps, options, integrator, recorder, state, progress,
                            scene_name, chooser, compiled_loop, health)
