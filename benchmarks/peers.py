@@ -43,7 +43,9 @@ from pinning import pin_threads                # the script's own folder is on s
 
 pin_threads(sys.argv)
 
-import json                                   # noqa: E402  (after the thread pinning)
+import contextlib                             # noqa: E402  (after the thread pinning)
+import json                                   # noqa: E402
+import multiprocessing                        # noqa: E402
 import platform                               # noqa: E402
 import time                                   # noqa: E402
 from datetime import date                     # noqa: E402
@@ -645,6 +647,36 @@ def machine():
     if mujoco is not None:
         info["mujoco"] = mujoco.__version__
     return info
+
+
+def _spin():
+    while True:
+        pass
+
+
+@contextlib.contextmanager
+def busy_core(active=True):
+    """While the block runs (and ``active``), a second process keeps one core at 100 %: the
+    'another process keeps a core busy' of every benchmark that measures under load."""
+    if not active:
+        yield
+        return
+    spinner = multiprocessing.Process(target=_spin, daemon=True)
+    spinner.start()
+    time.sleep(0.5)                 # running before anything is measured
+    try:
+        yield
+    finally:
+        spinner.terminate()
+        spinner.join()
+
+
+def write_lines(path, lines):
+    """Write the Markdown ``lines`` to ``path`` (its folder made if needed) and say so."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as stream:
+        stream.write("\n".join(lines) + "\n")
+    print(f"wrote {path}")
 
 
 def save(results, path):

@@ -22,7 +22,7 @@ from contactlab import SimulationDiverged, simulate
 from contactlab.methods import AVAILABLE
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import DT, contactlab_pyramid, machine                       # noqa: E402
+from peers import DT, contactlab_pyramid, machine, write_lines                       # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -79,10 +79,7 @@ def main():
         lines.append(f"| {row['method']} | {row['verdict']} | {row['steps']:,} | {row['energy_rise']:.3g} | "
                      f"{row['energy_final']:.3g} | {row['moved'] * 1000:.3g} | {row['steps_per_second']:.0f} | "
                      f"{row['sweeps']:.1f} | {row['threads']['setting']} {row['threads']['steps_at']} |")
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w", encoding="utf-8") as stream:
-        stream.write("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_lines(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ benchmarks/results/sweep_speedup.md with the machine, the thread counts and the 
 """
 
 import argparse
-import multiprocessing
 import os
 import shutil
 import sys
@@ -27,7 +26,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import machine                                               # noqa: E402
+from peers import busy_core, machine, write_lines                        # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 STUDY = """
@@ -40,11 +39,6 @@ methods = ["penalty", "projection", "impulse", "constraints"]
 "simulation.dt" = [0.002, 0.001]
 "materials.0.friction" = [0.6, 0.3]
 """
-
-
-def _spin(stop):
-    while not stop.is_set():
-        pass
 
 
 def _nothing(job):
@@ -102,20 +96,10 @@ def main():
              "speed-up | engine overhead per cell (ms) | Σ cell time on workers (s) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for busy in ([False, True] if args.busy else [False]):
-        stop = multiprocessing.Event()
-        spinner = multiprocessing.Process(target=_spin, args=(stop,)) if busy else None
-        if spinner:
-            spinner.start()
-            time.sleep(1.0)
-        load = os.getloadavg()[0]
-        workers = args.workers or default_workers()         # as sweep.run chooses them, load and all
-        try:
-            with tempfile.TemporaryDirectory() as folder:
-                result = measure(workers, folder)
-        finally:
-            if spinner:
-                stop.set()
-                spinner.join()
+        with busy_core(busy), tempfile.TemporaryDirectory() as folder:
+            load = os.getloadavg()[0]
+            workers = args.workers or default_workers()     # as sweep.run chooses them, load and all
+            result = measure(workers, folder)
         what = f"one core busy (load {load:.2f} at start)" if busy else f"idle (load {load:.2f} at start)"
         row = (f"| {what} | {workers} | {result['series']:.1f} | {result['cells_only']:.1f} | "
                f"{result['series'] / result['cells_only']:.2f}× | {result['whole']:.1f} | "
@@ -123,10 +107,7 @@ def main():
                f"{result['cell_seconds']:.1f} |")
         print(row, flush=True)
         lines.append(row)
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w", encoding="utf-8") as stream:
-        stream.write("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_lines(args.out, lines)
 
 
 if __name__ == "__main__":

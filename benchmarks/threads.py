@@ -15,7 +15,6 @@ with the machine, Numba's threading layer, the thread counts and the load averag
 
 import argparse
 import json
-import multiprocessing
 import os
 import sys
 import time
@@ -43,14 +42,6 @@ def scenes():
     }
 
 
-def _spin(seconds):
-    """The busy process: one core at 100 % for ``seconds`` (then it stops by itself)."""
-    end = time.monotonic() + seconds
-    count = 0
-    while time.monotonic() < end:
-        count += 1
-
-
 def measure(model, method, dt, state, seconds, setting):
     run = simulate(model, method, dt, seconds, state=state, threads=setting)
     return {"steps_per_second": run.summary["steps_per_second"], "steps_at": run.summary["threads"]["steps_at"],
@@ -62,12 +53,7 @@ def scene_rows(key, make, seconds, repeats):
     settled = simulate(model, method, dt, settle, compiled_loop=True).state   # also compiles every kernel
     rows = []
     for load in ("idle", "one busy core"):
-        busy = None
-        if load != "idle":
-            busy = multiprocessing.Process(target=_spin, args=(600.0,), daemon=True)
-            busy.start()
-            time.sleep(0.5)
-        try:
+        with peers.busy_core(load != "idle"):
             best = {}
             for _ in range(repeats):
                 for setting in SETTINGS:
@@ -75,10 +61,6 @@ def scene_rows(key, make, seconds, repeats):
                     if setting not in best or result["steps_per_second"] > best[setting]["steps_per_second"]:
                         best[setting] = result
             load_average = os.getloadavg()[0]
-        finally:
-            if busy is not None:
-                busy.terminate()
-                busy.join()
         auto, one = best["auto"]["steps_per_second"], best[1]["steps_per_second"]
         rows.append({"scene": key, "method": method, "load": load, "load_average_1min": load_average,
                      "settings": {str(setting): best[setting] for setting in SETTINGS},
