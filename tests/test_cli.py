@@ -45,6 +45,21 @@ def test_run_bouncing_ball_json_and_trajectory(tmp_path):
     turning = np.nonzero((vz[:-1] > 0) & (vz[1:] <= 0))[0]
     apexes = np.array([z[i:i + 2].max() for i in turning])[:3]
     np.testing.assert_allclose(apexes, 0.8 ** (2 * np.arange(1, 4)), rtol=0.02)
+    # the scene's stated expectation, checked: the first two apexes, each with its verdict
+    checks = {check["quantity"]: check for check in summary["checks"]}
+    assert set(checks) == {"rebound 1 apex", "rebound 2 apex"}
+    assert checks["rebound 1 apex"]["measured"] == pytest.approx(apexes[0], abs=1e-3)
+    assert all(check["passed"] for check in checks.values())
+
+
+def test_run_prints_each_expectation_with_its_number_and_verdict(tmp_path):
+    result = contactlab("run", "bouncing_ball", "--method", "projection", "--duration", "1.0", "--no-plots",
+                        cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = [line for line in result.stdout.splitlines() if line.startswith("Expectation: ")]
+    # projection is inelastic: the ball lands and stays, so no apex is ever reached
+    assert lines == ["Expectation: rebound 1 apex: not reached (expected 0.64 ± 0.014): FAIL",
+                     "Expectation: rebound 2 apex: not reached (expected 0.4096 ± 0.0092): FAIL"]
 
 
 def test_record_every_and_out(tmp_path):

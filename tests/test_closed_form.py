@@ -78,3 +78,53 @@ def test_no_check_when_the_formula_no_longer_applies():
     assert _run("bouncing_ball", overrides=["bodies.0.velocity=[0,0,1]"], duration=0.05)[1] == []
     assert _run("rod_impact", overrides=["materials.0.friction=0.5"], duration=0.05)[1] == []
     assert closed_form.checks("cloth_drape", None, {}) == []
+
+
+# ---- verdicts: each scene's stated expectation as a check with a tolerance ---------------------
+
+def test_a_check_passes_within_its_tolerance_and_fails_outside_or_unreached():
+    assert Check("x", "m", 1.0, 1.015, 0.02).passed is True
+    assert Check("x", "m", 1.0, 1.03, 0.02).passed is False
+    assert Check("x", "m", 1.0, float("nan"), 0.02).passed is False           # never reached
+    assert Check("x", "m", 1.0, 1.0).passed is None                           # no tolerance, no verdict
+    assert Check("x", "m", 1.0, 1.03, 0.02).verdict() == "x: 1.03 m (expected 1 ± 0.02): FAIL"
+    assert Check("x", "m", 1.0, 1.03, 0.02).as_record() == {
+        "quantity": "x", "unit": "m", "expected": 1.0, "measured": 1.03, "tolerance": 0.02, "passed": False}
+
+
+def test_every_built_in_check_carries_the_tolerance_the_module_sets():
+    # bouncing ball: 2 % of the apex plus 1 mm; sliding block's time: 2 % plus one sample interval
+    bounce = _by_quantity(_run("bouncing_ball", duration=1.6)[1])
+    assert bounce["rebound 1 apex"].tolerance == pytest.approx(0.02 * 0.64 + 1e-3, rel=1e-12)
+    scene, found = _run("sliding_block", duration=0.1)
+    assert _by_quantity(found)["stopping time"].tolerance == pytest.approx(0.02 * 3.0 / (0.3 * 9.81) + scene.dt,
+                                                                            rel=1e-9)
+    stack = _by_quantity(_run("box_stack", duration=0.05)[1])
+    assert stack["largest body displacement"].tolerance == 0.01 and stack["deepest overlap"].tolerance == 0.005
+
+
+@pytest.mark.parametrize("name, duration", [("bouncing_ball", 1.6), ("rod_impact", 0.4), ("sliding_block", 1.5),
+                                            ("newtons_cradle", 0.5), ("box_stack", 1.0), ("card_house", 0.5),
+                                            ("incline", 0.5), ("particles_box", 1.0), ("domino_chain", 3.0)])
+def test_impulses_meet_every_stated_expectation(name, duration):
+    found = _run(name, duration=duration)[1]
+    assert found and all(check.passed for check in found), [check.verdict() for check in found]
+
+
+def test_a_method_that_misses_an_expectation_fails_it_with_the_number():
+    # projection is inelastic: the ball never rebounds, so the apexes are never reached
+    bounce = _by_quantity(_run("bouncing_ball", method="projection", duration=1.0)[1])
+    assert bounce["rebound 1 apex"].passed is False and "not reached" in bounce["rebound 1 apex"].verdict()
+    # a stack launched sideways at 1 m/s does not stand: it slides far beyond 1 cm
+    stack = _by_quantity(_run("box_stack", overrides=["bodies.0.velocity=[1,0,0]"], duration=0.3)[1])
+    displacement = stack["largest body displacement"]
+    assert displacement.measured > 0.1 and displacement.passed is False
+
+
+def test_nothing_inside_an_obstacle_is_measured_from_the_centres():
+    # a particle put 2 cm behind the floor of particles_box: its centre is 2 cm inside the floor's half-space
+    from contactlab.closed_form import _centres_inside_obstacles
+    scene = load_scene("particles_box")
+    positions = np.array([[[0.0, 0.0, 0.3], [0.1, 0.0, -0.02]]])
+    assert _centres_inside_obstacles(scene.model, positions) == pytest.approx(0.02, abs=1e-12)
+    assert _centres_inside_obstacles(scene.model, positions[:, :1]) == 0.0

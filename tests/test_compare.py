@@ -177,6 +177,51 @@ def test_closed_form_checks_become_error_columns_with_expected_and_measured_in_t
     assert f"**{first.quantity}** ({first.unit}): expected {first.expected:.6g}" in report   # the check line
 
 
+def test_the_verdicts_match_the_checks_and_the_paragraph_names_what_was_missed(cradle):
+    # Newton's cradle: impulses pass the velocity down the row; projection (inelastic) does not
+    rows = {row["method"]: row for row in cradle.rows}
+    assert rows["impulse"]["expectations"] == "pass (2 of 2)"
+    checks = {check.quantity: check for check in cradle.checks["projection"]}
+    failed = [check for check in checks.values() if check.passed is False]
+    assert failed and rows["projection"]["expectations"] == f"FAIL ({2 - len(failed)} of 2)"
+    assert "The scene's stated expectations: met by impulse; missed by projection (" in cradle.summary_text
+    quantity = failed[0].quantity
+    assert f"{quantity} {failed[0].measured:.3g} m/s, expected {failed[0].expected:.3g} ± " in cradle.summary_text
+    with open(cradle.report_md, encoding="utf-8") as stream:
+        report = stream.read()
+    assert "FAIL" in report and "What the columns mean:" in report and "**expectations met**" in report
+
+
+def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
+    from contactlab.compare import _Outcome, _speed_sentence
+
+    def outcome(name, median, low, high):
+        made = _Outcome(name, None)
+        made.row = {"steps_per_second": median, "steps_per_second_median": median, "steps_per_second_low": low,
+                    "steps_per_second_high": high}
+        return made
+    fast, close, slow = outcome("a", 1000, 950, 1050), outcome("b", 980, 900, 990), outcome("c", 500, 480, 520)
+    assert _speed_sentence([close, slow, fast]) == ("Fastest: a (1,000 steps/s, median); b within noise of it; "
+                                                    "slowest: c (500 steps/s).")
+    assert _speed_sentence([fast, close]) == ("Fastest: a (1,000 steps/s, median); b within noise of it "
+                                              "(their middle halves overlap).")
+
+
+def test_a_run_measures_its_rate_in_windows_and_gives_median_and_quartiles(cradle):
+    from contactlab.simulation import Tally, WINDOW_SECONDS
+    tally = Tally()
+    tally.timed(1, 5.0, 4.0)                           # the first step: compiling, never a measurement
+    for steps in (10, 20, 30, 40):                     # four windows of WINDOW_SECONDS: 100 to 400 steps/s
+        tally.timed(2, WINDOW_SECONDS, 0.0, steps / (0.1 / WINDOW_SECONDS))
+    tally.timed(3, 1.0, 0.5, 1000)                     # steps that compiled something: not a measurement
+    assert tally.window_rates == pytest.approx([100.0, 200.0, 300.0, 400.0])
+    assert tally.rate_spread() == pytest.approx({"median": 250.0, "low": 175.0, "high": 325.0, "windows": 4})
+    summary = _summary(cradle, "impulse")["steps_per_second_spread"]
+    assert summary["low"] <= summary["median"] <= summary["high"] and summary["windows"] >= 1
+    row = {row["method"]: row for row in cradle.rows}["impulse"]
+    assert row["steps_per_second_median"] == summary["median"]
+
+
 # ---- failures -----------------------------------------------------------------------------------
 
 def test_a_method_that_blows_up_is_reported_and_the_others_go_on(ball):
@@ -347,7 +392,7 @@ def test_the_methods_run_on_a_dask_cluster_give_the_numbers_they_give_one_after_
                      workers=1)
     spread = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "cluster"), duration=0.5, fps=10,
                      workers=2)
-    timings = {"steps_per_second", "wall_seconds"}
+    timings = set(compare_module.TIMINGS)
     for here, there in zip(serial.rows, spread.rows):        # NaN where a rebound was not reached: equal too
         np.testing.assert_equal({k: v for k, v in here.items() if k not in timings},
                                 {k: v for k, v in there.items() if k not in timings})

@@ -159,6 +159,7 @@ def _memory_limit(text):
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
          exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False):
+    from .closed_form import checks
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
@@ -192,12 +193,14 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         remove_empty(made)
         raise
     result.summary["trajectory"] = trajectory
+    found = checks(scene.name, scene.model, result.arrays)        # the scene's stated expectations
+    result.summary["checks"] = [check.as_record() for check in found]
     write_summary(out, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
         print(json.dumps(result.summary))
     else:
-        print(_plain_summary(result.summary, scene, written))
+        print(_plain_summary(result.summary, scene, written, found))
     return result
 
 
@@ -291,7 +294,7 @@ def _where_time_went(summary):
     return ", ".join(parts)
 
 
-def _plain_summary(summary, scene, written=()):
+def _plain_summary(summary, scene, written=(), found=()):
     energy = summary["energy"]
     return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
             f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
@@ -302,7 +305,8 @@ def _plain_summary(summary, scene, written=()):
             + (f" The contact springs were too stiff for {summary['integrator']} at this dt in "
                f"{summary['implicit_spring_steps']} steps: those stepped them by backward Euler."
                if summary.get("implicit_spring_steps") else "") + "\n"
-            f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
+            + "".join(f"Expectation: {check.verdict()}\n" for check in found)
+            + f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
             + "".join(f", {path}" for path in written))
 
 

@@ -8,6 +8,21 @@ initial state), so a scene changed with ``--set`` is still checked against its o
 scene changed so far that the formula no longer applies (another shape, a second body) gets no
 check rather than a wrong one. Measurements read the recorded trajectory (docs/trajectory.md).
 Friction and restitution combine as in contact generation: μ = √(μ_a μ_b), ε = max(ε_a, ε_b).
+
+Each check also carries the scene's verdict: ``tolerance``, the largest |measured − expected|
+its stated expectation allows, and ``passed``. How the tolerances are set, once for all scenes:
+
+* a closed-form value must be met to ``RELATIVE`` (2 %) of itself — close enough that the
+  physics is unmistakably the lecture's (a bounce that loses 4 % too little energy, a block
+  that stops 2 % early, fail) and loose enough for a first-order step of the scene's own size;
+* plus a floor in the quantity's kind, for values that are 0 or read at sample times: one
+  sample interval for a time, ``LENGTH_FLOOR`` for a length, ``SPEED_FLOOR`` of the scene's
+  own speed for a velocity;
+* a structure that must stand: every body within ``STANDING`` (1 cm) of its start at every
+  sample, the bound the scenes' descriptions state (and ``SINKING``, 5 mm of overlap, where
+  they say nothing may sink);
+* G1 for piles, particles and cloth: no centre of a body or particle ever inside a static
+  obstacle (tolerance 0), and no overlap deeper than ``OVERLAP_SHARE`` of the smallest radius.
 """
 
 from dataclasses import dataclass
@@ -16,6 +31,13 @@ import numpy as np
 
 from . import rotations, shapes
 
+RELATIVE = 0.02         # share of a closed-form value its measurement may miss it by
+LENGTH_FLOOR = 1e-3     # m: a length's tolerance besides RELATIVE (expected values of 0)
+SPEED_FLOOR = 0.01      # share of the scene's initial speed a velocity's tolerance has besides RELATIVE
+STANDING = 0.01         # m: how far a body of a structure that must stand may move (the scenes say < 1 cm)
+SINKING = 0.005         # m: the deepest overlap of a stack that must not sink (box_stack says 5 mm)
+OVERLAP_SHARE = 0.1     # of the smallest radius: the deepest overlap of a pile that must not sink into itself
+
 
 @dataclass(frozen=True)
 class Check:
@@ -23,6 +45,29 @@ class Check:
     unit: str            # of expected and measured, e.g. "m"
     expected: float      # the closed-form value
     measured: float      # what the run gave (nan when the run never reached it)
+    tolerance: float = None   # the largest |measured − expected| the scene's expectation allows, in ``unit``
+
+    @property
+    def passed(self):
+        """The verdict: True when the measurement is within ``tolerance`` of the expected value,
+        False when it is not (or was never reached), None for a check without a tolerance."""
+        if self.tolerance is None:
+            return None
+        return bool(np.isfinite(self.measured) and abs(self.error) <= self.tolerance)
+
+    def as_record(self) -> dict:
+        """The check as plain data (summary.json's ``checks``, a sweep's ``closed_form_checks``):
+        quantity, unit, expected, measured (None: not reached), tolerance, passed."""
+        return {"quantity": self.quantity, "unit": self.unit, "expected": float(self.expected),
+                "measured": float(self.measured) if np.isfinite(self.measured) else None,
+                "tolerance": self.tolerance, "passed": self.passed}
+
+    def verdict(self) -> str:
+        """One line: "<quantity>: <measured> <unit> (expected <e> ± <tolerance>): pass|FAIL"."""
+        measured = f"{self.measured:.4g} {self.unit}" if np.isfinite(self.measured) else "not reached"
+        allowed = f" ± {self.tolerance:.2g}" if self.tolerance is not None else ""
+        word = {True: "pass", False: "FAIL", None: "no verdict"}[self.passed]
+        return f"{self.quantity}: {measured} (expected {self.expected:.4g}{allowed}): {word}"
 
     @property
     def error(self) -> float:
@@ -39,7 +84,18 @@ def checks(scene_name, model, arrays) -> list:
     """The closed-form checks of built-in scene ``scene_name`` on a run's ``arrays``; [] when the
     scene has none or no longer has the layout its formula needs."""
     check = _CHECKS.get(scene_name)
-    return check(model, arrays) if check else []
+    return check(model, arrays) if check and model is not None else []
+
+
+def _relative(expected, floor):
+    """The tolerance of a closed-form value: RELATIVE of it, plus ``floor`` (its kind's)."""
+    return RELATIVE * abs(float(expected)) + floor
+
+
+def _sample_interval(arrays):
+    """The largest time between two samples [s] (0 with one sample)."""
+    time = np.asarray(arrays["time"])
+    return float(np.diff(time).max()) if len(time) > 1 else 0.0
 
 
 # ---- what the formulas need of a scene ---------------------------------------------------------
@@ -103,7 +159,8 @@ def _bouncing_ball(model, arrays):
     turning = np.flatnonzero((rise[:-1] > 0) & (rise[1:] <= 0))
     apexes = [float(height[i:i + 2].max()) for i in turning]
     return [Check(f"rebound {n} apex", "m", restitution ** (2 * n) * h0,
-                  apexes[n - 1] if len(apexes) >= n else float("nan")) for n in (1, 2)]
+                  apexes[n - 1] if len(apexes) >= n else float("nan"),
+                  _relative(restitution ** (2 * n) * h0, LENGTH_FLOOR)) for n in (1, 2)]
 
 
 def _sliding_block(model, arrays):
@@ -119,8 +176,11 @@ def _sliding_block(model, arrays):
     moved = arrays["body_position"][:, 0] - arrays["body_position"][0, 0]
     moved -= np.outer(moved @ up, up)
     speed = np.linalg.norm(arrays["body_velocity"][:, 0], axis=1)
-    return [Check("stopping distance", "m", v0 ** 2 / (2 * friction * g), float(np.linalg.norm(moved[-1]))),
-            Check("stopping time", "s", v0 / (friction * g), _first_time(arrays["time"], speed < 1e-3 * v0))]
+    distance, stop = v0 ** 2 / (2 * friction * g), v0 / (friction * g)
+    return [Check("stopping distance", "m", distance, float(np.linalg.norm(moved[-1])),
+                  _relative(distance, LENGTH_FLOOR)),
+            Check("stopping time", "s", stop, _first_time(arrays["time"], speed < 1e-3 * v0),
+                  _relative(stop, _sample_interval(arrays)))]
 
 
 def _rolling_sphere(model, arrays):
@@ -137,9 +197,12 @@ def _rolling_sphere(model, arrays):
     if friction == 0 or v0 == 0 or np.linalg.norm(w[0]) > 0:
         return []
     slip = np.linalg.norm(v + np.cross(w, -radius * up), axis=1)     # velocity of the touching point
-    return [Check("rolling speed", "m/s", 5.0 / 7.0 * v0, float(np.linalg.norm(v[-1]))),
-            Check("end of sliding", "s", 2.0 * v0 / (7.0 * friction * g),
-                  _first_time(arrays["time"], slip < 0.01 * v0))]
+    sliding = 2.0 * v0 / (7.0 * friction * g)
+    # the slip falls linearly to 0, so it crosses the 1 % read here 1 % of the time early
+    return [Check("rolling speed", "m/s", 5.0 / 7.0 * v0, float(np.linalg.norm(v[-1])),
+                  _relative(5.0 / 7.0 * v0, SPEED_FLOOR * v0)),
+            Check("end of sliding", "s", sliding, _first_time(arrays["time"], slip < 0.01 * v0),
+                  _relative(sliding, 0.01 * sliding + _sample_interval(arrays)))]
 
 
 def _incline(model, arrays):
@@ -159,7 +222,8 @@ def _incline(model, arrays):
     acceleration = max(0.0, g * (sin_theta - friction * cos_theta))
     elapsed = float(arrays["time"][-1] - arrays["time"][0])
     moved = float((arrays["body_position"][-1, 0] - arrays["body_position"][0, 0]) @ downhill)
-    return [Check("distance down the slope", "m", 0.5 * acceleration * elapsed ** 2, moved)]
+    expected = 0.5 * acceleration * elapsed ** 2
+    return [Check("distance down the slope", "m", expected, moved, _relative(expected, LENGTH_FLOOR))]
 
 
 def _newtons_cradle(model, arrays):
@@ -172,10 +236,12 @@ def _newtons_cradle(model, arrays):
     v0 = v[0, 0]
     if np.linalg.norm(v0) == 0 or np.any(np.linalg.norm(v[0, 1:], axis=1) > 0):
         return []
-    direction = v0 / np.linalg.norm(v0)
-    return [Check("last ball velocity", "m/s", float(np.linalg.norm(v0)), float(v[-1, -1] @ direction)),
+    speed = float(np.linalg.norm(v0))
+    direction = v0 / speed
+    return [Check("last ball velocity", "m/s", speed, float(v[-1, -1] @ direction),
+                  _relative(speed, SPEED_FLOOR * speed)),
             Check("largest speed of the other balls", "m/s", 0.0,
-                  float(np.linalg.norm(v[-1, :-1], axis=1).max()))]
+                  float(np.linalg.norm(v[-1, :-1], axis=1).max()), SPEED_FLOOR * speed)]
 
 
 def _rod_impact(model, arrays):
@@ -215,17 +281,100 @@ def _rod_impact(model, arrays):
         measured_w = float(arrays["body_angular_velocity"][k, 0, axis])
     else:
         measured_v = measured_w = float("nan")
-    return [Check("vertical velocity after the impact", "m/s", float(v_after), measured_v),
+    return [Check("vertical velocity after the impact", "m/s", float(v_after), measured_v,
+                  _relative(v_after, SPEED_FLOOR * abs(v_normal))),
             Check(f"angular velocity about {'xyz'[axis]} after the impact", "rad/s", float(w_after[axis]),
-                  measured_w)]
+                  measured_w, _relative(w_after[axis], 0.0))]
 
 
 def _standing(model, arrays):
-    """A structure in static equilibrium must not move: the largest displacement is 0."""
+    """A structure in static equilibrium must not move: every body within STANDING of its start
+    at every sample (the largest displacement of any body over the run)."""
     if model.body_count == 0:
         return []
-    moved = np.linalg.norm(arrays["body_position"][-1] - arrays["body_position"][0], axis=1)
-    return [Check("largest body displacement", "m", 0.0, float(moved.max()))]
+    positions = np.asarray(arrays["body_position"])
+    moved = np.linalg.norm(positions - positions[:1], axis=2)
+    return [Check("largest body displacement", "m", 0.0, float(moved.max()), STANDING)]
+
+
+def _standing_unsunk(model, arrays):
+    """A stack must stand and nothing may sink: :func:`_standing`, and no overlap deeper than SINKING."""
+    found = _standing(model, arrays)
+    return found + [Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])), SINKING)] if found else []
+
+
+def _centres_inside_obstacles(model, positions):
+    """The deepest any centre (positions (T, K, 3)) gets inside a static plane, sphere or box
+    obstacle [m], 0 when none ever does (meshes are two-sided: they have no inside)."""
+    from .collision.mesh import points_against_shape
+    points = np.ascontiguousarray(positions.reshape(-1, 3), dtype=float)
+    deepest = 0.0
+    for index in range(model.obstacle_count):
+        kind = int(model.obstacle_shape[index])
+        if kind not in (shapes.PLANE, shapes.SPHERE, shapes.BOX) or not len(points):
+            continue
+        rotation = rotations.to_matrix(np.asarray(model.obstacle_orientation[index], dtype=float)[None])[0]
+        signed = points_against_shape(points, kind, np.asarray(model.obstacle_params[index], dtype=float),
+                                      np.asarray(model.obstacle_position[index], dtype=float), rotation)[0]
+        deepest = max(deepest, float(-signed.min()))
+    return deepest
+
+
+def _kept_out(model, arrays):
+    """G1 for a pile, particles or cloth: no centre of a body or particle (cloth vertex) ever
+    inside a static obstacle, and no overlap deeper than OVERLAP_SHARE of the smallest radius."""
+    if model.body_count + model.particle_count == 0 or model.obstacle_count == 0:
+        return []
+    positions = np.concatenate([np.asarray(arrays["body_position"]), np.asarray(arrays["particle_position"])],
+                               axis=1)
+    radius = _smallest_radius(model)
+    found = [Check("deepest centre inside an obstacle", "m", 0.0, _centres_inside_obstacles(model, positions), 0.0)]
+    if np.isfinite(radius):
+        found.append(Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])),
+                           OVERLAP_SHARE * radius))
+    return found
+
+
+def _smallest_radius(model):
+    """The smallest radius [m] of a sphere, capsule or particle of the scene (inf with none)."""
+    radii = [np.asarray(model.particle_radius, dtype=float)]
+    for kind in (shapes.SPHERE, shapes.CAPSULE):
+        radii.append(np.asarray(model.body_params, dtype=float)[np.asarray(model.body_shape) == kind, 0])
+    every = np.concatenate(radii)
+    return float(every.min()) if every.size else float("inf")
+
+
+def _in_the_bowl(model, arrays):
+    """Everything dropped into a mesh bowl ends inside it: the largest distance of an end
+    position outside the bowl's bounds [m] (its vertices' box), 0 when all are in."""
+    meshes = [int(model.obstacle_params[i, 0]) for i in range(model.obstacle_count)
+              if model.obstacle_shape[i] == shapes.MESH]
+    if len(meshes) != 1 or model.body_count + model.particle_count == 0:
+        return []
+    vertices = np.asarray(model.meshes[meshes[0]].vertices, dtype=float)
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    ends = np.concatenate([np.asarray(arrays["body_position"][-1]), np.asarray(arrays["particle_position"][-1])])
+    outside = np.maximum(np.maximum(low - ends, ends - high), 0.0)
+    outside[:, 2] = np.maximum(low[2] - ends[:, 2], 0.0)            # open at the top: only below counts
+    return [Check("largest distance of an end position outside the bowl", "m", 0.0,
+                  float(np.linalg.norm(outside, axis=1).max()), 0.0)]
+
+
+def _domino_chain(model, arrays):
+    """The fall runs down the whole chain: the last domino ends tipped over, its long axis
+    turned 90° from upright (within 45°: past its tipping angle, lying or leaning)."""
+    if model.body_count < 2 or np.any(model.body_shape != shapes.BOX):
+        return []
+    g, up = _gravity(model)
+    if up is None:
+        return []
+    long_axis = int(np.argmax(model.body_params[-1, :3]))
+    start = rotations.to_matrix(np.asarray(arrays["body_orientation"][0, -1:], dtype=float))[0][:, long_axis]
+    end = rotations.to_matrix(np.asarray(arrays["body_orientation"][-1, -1:], dtype=float))[0][:, long_axis]
+    if abs(start @ up) < 0.99:                  # the last domino does not start upright
+        return []
+    tilt = float(np.degrees(np.arccos(np.clip(abs(end @ up), 0.0, 1.0))))
+    return [Check("tilt of the last domino", "deg", 90.0, tilt, 45.0)]
 
 
 _CHECKS = {
@@ -235,8 +384,15 @@ _CHECKS = {
     "incline": _incline,
     "newtons_cradle": _newtons_cradle,
     "rod_impact": _rod_impact,
-    "box_stack": _standing,
+    "box_stack": _standing_unsunk,
     "box_pyramid": _standing,
-    "mass_ratio_stack": _standing,
+    "mass_ratio_stack": _standing_unsunk,
     "card_house": _standing,
+    "sphere_pile": _kept_out,
+    "capsule_pile": _kept_out,
+    "particles_box": _kept_out,
+    "cloth_drape": _kept_out,
+    "mesh_bowl": _in_the_bowl,
+    "particles_bowl": _in_the_bowl,
+    "domino_chain": _domino_chain,
 }

@@ -45,6 +45,8 @@ from .simulation import Run, simulate
 from .store import open_trajectory
 
 PARALLEL_WORK = 200_000     # steps × (bodies + particles) of all runs from which they go to a local cluster
+TIMINGS = ("steps_per_second", "steps_per_second_median", "steps_per_second_low", "steps_per_second_high",
+           "wall_seconds")     # the row's keys that differ from one run of the same computation to the next
 TINY_ENERGY = 1e-9          # J: an energy scale below this (times max(1, |E(0)|)) gives no relative drift
 
 
@@ -250,6 +252,18 @@ def momentum_drift(model, arrays):
     return float(np.linalg.norm(momentum[-1] - momentum[0] - mass * np.asarray(model.gravity) * elapsed))
 
 
+def _rates(summary):
+    """steps/s: the whole run's, and as repeated measurements the median over its ~0.1 s
+    windows of stepping and their quartiles (summary.json's ``steps_per_second_spread``; None
+    for a run too short to time)."""
+    spread = summary.get("steps_per_second_spread")
+    if not spread:
+        return {"steps_per_second": summary["steps_per_second"], "steps_per_second_median": None,
+                "steps_per_second_low": None, "steps_per_second_high": None}
+    return {"steps_per_second": summary["steps_per_second"], "steps_per_second_median": spread["median"],
+            "steps_per_second_low": spread["low"], "steps_per_second_high": spread["high"]}
+
+
 def metrics(model, arrays, summary) -> dict:
     """The numbers of one run (keys as in comparison.csv; units in docs/compare.md)."""
     energy = total_energy(arrays)
@@ -259,7 +273,7 @@ def metrics(model, arrays, summary) -> dict:
     iterations = summary["solver"]["max_iterations"]
     return {
         "steps": summary["steps"],
-        "steps_per_second": summary["steps_per_second"],
+        **_rates(summary),
         "wall_seconds": summary["wall_seconds"],
         "max_contacts": summary["max_contacts"],
         "max_penetration_mm": summary["max_penetration"] * 1000.0,
@@ -283,6 +297,15 @@ def _closed_form_checks(scene_name, model, arrays):
     return closed_form.checks(scene_name, model, arrays)
 
 
+def expectation_verdict(checks) -> str:
+    """The scene's stated expectations on one run, in a word and a count: "pass (2 of 2)",
+    "FAIL (1 of 2)" — met of those with a verdict —, or "n/a" when the scene states none."""
+    judged = [check.passed for check in checks if check.passed is not None]
+    if not judged:
+        return "n/a"
+    return f"{'pass' if all(judged) else 'FAIL'} ({sum(judged)} of {len(judged)})"
+
+
 def _check_column(check):
     return f"{check.quantity} error ({check.unit})"
 
@@ -297,6 +320,7 @@ def _fill_rows(outcomes):
         if outcome.run:
             row.update(metrics(scene.model, outcome.run.arrays, outcome.run.summary))
             outcome.checks = _closed_form_checks(scene.name, scene.model, outcome.run.arrays)
+            row["expectations"] = expectation_verdict(outcome.checks)
         outcome.row = row
     check_columns = []
     for outcome in outcomes:
@@ -322,10 +346,14 @@ def _number(format_spec):
 COLUMNS = (
     ("method", "method", str),
     ("status", "status", str),
+    ("expectations", "expectations met", str),
     ("integrator", "integrator", str),
     ("dt_s", "dt (ms)", lambda value: f"{value * 1000:.4g}"),
     ("steps", "steps", str),
     ("steps_per_second", "steps/s", _number(",.0f")),
+    ("steps_per_second_median", "steps/s (median)", _number(",.0f")),
+    ("steps_per_second_low", "steps/s, 1st quartile", _number(",.0f")),
+    ("steps_per_second_high", "steps/s, 3rd quartile", _number(",.0f")),
     ("wall_seconds", "wall (s)", _number(".3g")),
     ("max_contacts", "max contacts", str),
     ("max_penetration_mm", "max penetration (mm)", _number(".3g")),
@@ -339,6 +367,42 @@ COLUMNS = (
 )
 ROW_KEYS = tuple(key for key, _, _ in COLUMNS)
 
+# what each column means, printed in the report itself so it reads without docs/compare.md
+MEANINGS = {
+    "status": "ok, or blew up at t = … s (a health check stopped the run)",
+    "expectations": "how many of the scene's stated expectations (the checks below the table: a closed form, "
+                    "a structure that must stand, nothing inside an obstacle) the run met; n/a: it states none",
+    "dt_s": "the time step",
+    "steps_per_second": "the stepping rate over the whole run (compiling and the first step left out)",
+    "steps_per_second_median": "the same rate measured over every ~0.1 s window of the run: the median window, "
+                               "then the middle half of the windows (1st to 3rd quartile); two methods whose "
+                               "middle halves overlap are equally fast within the machine's noise",
+    "wall_seconds": "the whole run: stepping, compiling and recording",
+    "max_contacts": "the most contacts in one step",
+    "max_penetration_mm": "the deepest overlap of any two things at any sample",
+    "mean_penetration_mm": "the mean over the samples of each sample's deepest overlap",
+    "energy_drift_J": "total energy (kinetic + potential + elastic in contact springs) at the end minus at the start",
+    "energy_drift_relative": "that drift as a share of the run's energy scale (see the notes)",
+    "momentum_drift_Ns": "‖P(T) − P(0) − M g T‖: a conservation check where nothing static acts (n/a otherwise)",
+    "max_solver_iterations": "the most sweeps the contact solver made in one step (0: it has none)",
+    "mean_solver_iterations": "the solver's sweeps per step, over every step: what the run paid",
+    "max_solver_residual": "the solver's largest last change, in the method's own unit (see the notes)",
+}
+
+
+def _meanings():
+    """(heading, meaning) of each column the report's table has a meaning for, in table order."""
+    headings = {key: heading for key, heading, _ in COLUMNS}
+    shown = []
+    for key, meaning in MEANINGS.items():
+        if key == "steps_per_second_median":
+            shown.append(("steps/s (median), 1st and 3rd quartile", meaning))
+        else:
+            shown.append((headings[key], meaning))
+    shown.append(("<check> (unit, expected …), within ± …",
+                  "a closed-form or stated expectation: measured (measured − expected) and pass or FAIL"))
+    return shown
+
 
 def _show(value, show):
     """A value as the report shows it: "–" when missing or not finite, "n/a" as it is."""
@@ -350,15 +414,19 @@ def _show(value, show):
 def _check_heading(quantity, unit, checks):
     expected = {check.expected for check in checks}
     shown = f", expected {next(iter(expected)):.4g}" if len(expected) == 1 else ""
-    return f"{quantity} ({unit}{shown})"
+    tolerances = {check.tolerance for check in checks}
+    allowed = (f", within ± {next(iter(tolerances)):.2g}" if len(tolerances) == 1 and None not in tolerances
+               else "")
+    return f"{quantity} ({unit}{shown}){allowed}"
 
 
 def _check_cell(check):
     if check is None:
         return "–"
+    word = {True: " pass", False: " FAIL", None: ""}[check.passed]
     if not math.isfinite(check.measured):
-        return "not reached"
-    return f"{check.measured:.4g} ({check.error:+.2g})"
+        return "not reached" + word
+    return f"{check.measured:.4g} ({check.error:+.2g}){word}"
 
 
 def _table(outcomes):
@@ -429,6 +497,60 @@ def _ranking(ran, labels, value, lowest, show):
     return f"{labels[0]}: {_names(best)} ({show(best_value)}){tail}."
 
 
+def _alike(one, other):
+    """Whether two runs' speeds are within noise: their middle halves (the quartiles of their
+    ~0.1 s windows) overlap. Without a spread (a run too short to time) nothing is said."""
+    lows = [o.row.get("steps_per_second_low") for o in (one, other)]
+    highs = [o.row.get("steps_per_second_high") for o in (one, other)]
+    if None in lows or None in highs:
+        return False
+    return lows[0] <= highs[1] and lows[1] <= highs[0]
+
+
+def _speed_sentence(ran):
+    """Who stepped fastest and slowest by the median rate, naming the methods whose speed is
+    within noise of the fastest (their middle halves overlap), so a reordering between two
+    runs of the same comparison is not read as a result."""
+    def rate(outcome):
+        median = outcome.row.get("steps_per_second_median")
+        return outcome.row["steps_per_second"] if median is None else median
+    ordered = sorted(ran, key=rate, reverse=True)
+    fastest = ordered[0]
+    noise = [o.method for o in ordered[1:] if _alike(fastest, o)]
+    text = f"Fastest: {fastest.method} ({rate(fastest):,.0f} steps/s, median)"
+    if noise and len(noise) == len(ordered) - 1:
+        return text + f"; {_names(noise)} within noise of it (their middle halves overlap)."
+    if noise:
+        text += f"; {_names(noise)} within noise of it"
+    slowest = ordered[-1]
+    if len(ordered) > 1 and slowest.method not in noise:
+        text += f"; slowest: {slowest.method} ({rate(slowest):,.0f} steps/s)"
+    return text + "."
+
+
+def _expectation_sentence(ran):
+    """Which methods met the scene's stated expectations, and what each one that did not
+    missed, with the number; empty when the scene states none."""
+    judged = [o for o in ran if any(check.passed is not None for check in o.checks)]
+    if not judged:
+        return ""
+    met = [o.method for o in judged if all(check.passed is not False for check in o.checks)]
+    missed = []
+    for outcome in judged:
+        failed = [check for check in outcome.checks if check.passed is False]
+        if failed:
+            missed.append(f"{outcome.method} (" + "; ".join(
+                (f"{check.quantity} {check.measured:.3g} {check.unit}" if math.isfinite(check.measured)
+                 else f"{check.quantity} not reached")
+                + f", expected {check.expected:.3g} ± {check.tolerance:.2g}" for check in failed) + ")")
+    parts = []
+    if met:
+        parts.append(f"met by {_names(met)}")
+    if missed:
+        parts.append(f"missed by {_names(missed)}")
+    return "The scene's stated expectations: " + "; ".join(parts) + "."
+
+
 def _dissipative(model):
     """Whether the scene's contacts lose energy by design (restitution < 1 or friction > 0)."""
     used = np.concatenate([model.body_material, model.particle_material, model.obstacle_material]).astype(int)
@@ -444,8 +566,7 @@ def _summary_text(scene, outcomes, skipped):
         duration = ran[0].run.arrays["time"][-1]
         sentences.append(f"{len(outcomes)} method{'s' if len(outcomes) > 1 else ''} on {scene.name} "
                          f"for {duration:.3g} s of simulated time.")
-        sentences.append(_ranking(ran, ("Fastest", "slowest"), lambda o: o.row["steps_per_second"], False,
-                                  lambda v: f"{v:,.0f} steps/s"))
+        sentences.append(_speed_sentence(ran))
         sentences.append(_ranking(ran, ("Least penetration", "deepest"), lambda o: o.row["max_penetration_mm"], True,
                                   lambda v: f"{v:.3g} mm"))
         sentences.append(_ranking(ran, ("Energy kept best", "worst"), lambda o: abs(o.row["energy_drift_J"]), True,
@@ -453,6 +574,7 @@ def _summary_text(scene, outcomes, skipped):
         if _dissipative(scene.model):
             sentences.append("Restitution below 1 or friction makes this scene lose energy by design, "
                              "so part of every energy change is physical.")
+        sentences.append(_expectation_sentence(ran))
     else:
         sentences.append(f"No method finished {scene.name}.")
     for outcome in outcomes:
@@ -461,7 +583,7 @@ def _summary_text(scene, outcomes, skipped):
                              f"dt = {outcome.scene.dt:g} s): it needs a smaller dt or a softer setting.")
     for name, why in skipped.items():
         sentences.append(f"{name} was left out: {why}.")
-    return " ".join(sentences)
+    return " ".join(sentence for sentence in sentences if sentence)
 
 
 def _notes(outcomes):
@@ -538,8 +660,11 @@ def _check_lines(outcomes):
             share = f", {relative * 100:.3g} %" if relative is not None and math.isfinite(relative) else ""
             measured = (f"{check.measured:.6g} (error {check.error:+.3g}{share})"
                         if math.isfinite(check.measured) else "not reached")
-            parts.append(f"{method} {measured}")
-        lines.append((quantity, unit, f"expected {entries[0][1].expected:.6g} — " + "; ".join(parts)))
+            word = {True: ": pass", False: ": FAIL", None: ""}[check.passed]
+            parts.append(f"{method} {measured}{word}")
+        first = entries[0][1]
+        allowed = f" ± {first.tolerance:.3g}" if first.tolerance is not None else ""
+        lines.append((quantity, unit, f"expected {first.expected:.6g}{allowed} — " + "; ".join(parts)))
     return lines
 
 
@@ -554,9 +679,10 @@ def _markdown(scene, outcomes, skipped, summary_text, table, plot_paths, out):
     checks = [f"- **{quantity}** ({unit}): {text}" for quantity, unit, text in _check_lines(outcomes)]
     text = [f"# {scene.name}: the methods compared", "",
             scene.description, "", summary_text, "",
-            "## Numbers", "", _markdown_table(*table), ""]
+            "## Numbers", "", _markdown_table(*table), "",
+            "What the columns mean:", "", *(f"- **{heading}**: {meaning}" for heading, meaning in _meanings()), ""]
     if checks:
-        text += ["## Closed-form checks", "", *checks, ""]
+        text += ["## Expectations and closed-form checks", "", *checks, ""]
     text += ["## Files", "", *files_lines, "",
              "## Comparison plots", "",
              *(f"![{name}]({_link(out, path)})" for name, path in plot_paths.items()), "",
@@ -645,8 +771,8 @@ SCRIPT = """
 
 
 def _key_numbers(row):
-    return (f"{row['steps_per_second']:,.0f} steps/s · max penetration {row['max_penetration_mm']:.3g} mm · "
-            f"energy drift {row['energy_drift_J']:+.3g} J")
+    return (f"expectations {row['expectations']} · {row['steps_per_second']:,.0f} steps/s · "
+            f"max penetration {row['max_penetration_mm']:.3g} mm · energy drift {row['energy_drift_J']:+.3g} J")
 
 
 def _media(outcome, out):
@@ -703,9 +829,12 @@ def _html(scene, outcomes, skipped, summary_text, table, plot_paths, out):
         f'<p class="summary">{html.escape(summary_text)}</p>',
         '<section class="videos">' + "".join(_card(outcome, out) for outcome in outcomes) + "</section>",
         "<h2>Numbers</h2>", f'<div class="scroll">{_html_table(*table)}</div>',
+        '<details class="notes"><summary>What the columns mean</summary><dl>'
+        + "".join(f"<dt>{html.escape(heading)}</dt><dd>{html.escape(meaning)}</dd>" for heading, meaning in _meanings())
+        + "</dl></details>",
     ]
     if check_items:
-        parts += ["<h2>Closed-form checks</h2>", f"<ul>{check_items}</ul>"]
+        parts += ["<h2>Expectations and closed-form checks</h2>", f"<ul>{check_items}</ul>"]
     parts += ["<h2>Comparison plots</h2>", f'<div class="plots">{_images(plot_paths, out)}</div>',
               "<h2>Each method</h2>", *(_method_details(outcome, out) for outcome in outcomes),
               '<h2>Notes</h2><ul class="notes">'

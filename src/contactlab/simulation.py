@@ -8,7 +8,7 @@
 import os
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from numba.core import event as numba_event
@@ -241,6 +241,7 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
         "threads": chooser.summary(),
         "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
                              else 1.0 / max(first_step_seconds, 1e-9)),
+        "steps_per_second_spread": tally.rate_spread(),
         "bodies": model.body_count, "particles": model.particle_count, "max_contacts": tally.max_contacts,
         "max_penetration": totals.max_penetration,
         "final_penetration": totals.final_penetration,
@@ -285,16 +286,36 @@ class Tally:
     sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
     implicit_spring_steps: int = 0       # penalty: steps whose contact springs went implicit (explicit unstable)
     state: object = None                 # the latest State the Python path made
+    window_rates: list = field(default_factory=list)   # steps/s of each WINDOW_SECONDS of stepping
+    window: list = field(default_factory=lambda: [0, 0.0])   # the window being filled: steps, seconds
 
-    def timed(self, step_index, elapsed, compiled):
-        """Book the steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
-        it compiling; returns whether they say anything of the thread count (nothing compiled)."""
+    def timed(self, step_index, elapsed, compiled, steps=1):
+        """Book the ``steps`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled``
+        [s] of it compiling; returns whether they say anything of the thread count (nothing compiled)."""
         if step_index == 1:
             self.first_step_seconds = elapsed
             return False
         self.stepping_seconds += elapsed - compiled
         self.later_compile_seconds += compiled
+        if compiled == 0.0:             # a window of plain stepping: one measurement of the rate
+            self.window[0] += steps
+            self.window[1] += elapsed
+            if self.window[1] >= WINDOW_SECONDS:
+                self.window_rates.append(self.window[0] / self.window[1])
+                self.window = [0, 0.0]
         return compiled == 0.0
+
+    def rate_spread(self):
+        """The stepping rate as repeated measurements: {"median", "low", "high" (the quartiles)
+        [steps/s], "windows": how many WINDOW_SECONDS windows} — a short run's last, partial
+        window counts when fewer than three are full; None when nothing was timed."""
+        rates = list(self.window_rates)
+        if len(rates) < 3 and self.window[1] > 0:
+            rates.append(self.window[0] / self.window[1])
+        if not rates:
+            return None
+        low, median, high = np.percentile(rates, [25, 50, 75])
+        return {"median": float(median), "low": float(low), "high": float(high), "windows": len(rates)}
 
 
 def _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar,
@@ -341,6 +362,7 @@ def _advance(bar, step_index, made):
 
 
 CHUNK_SECONDS = 0.1     # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
+WINDOW_SECONDS = 0.1    # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
 def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health):
@@ -358,7 +380,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
         started = time.perf_counter()
         made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, speed_limit)
         elapsed = time.perf_counter() - started
-        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before):
+        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before, made):
             chooser.after_steps(made, elapsed)
         recorder.extend(samples)
         state = stepper.state()

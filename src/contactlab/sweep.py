@@ -23,11 +23,12 @@ import os
 import time
 
 from . import __version__, cluster, interrupts
+from .compare import TIMINGS
 from .errors import InputError, SimulationDiverged
 from .record import atomic_path, make_folders, remove_empty
 from .study import Study, load_study, toml_value
 
-TIMING_COLUMNS = ("wall_seconds", "cell_seconds", "steps_per_second", "worker")   # differ run to run
+TIMING_COLUMNS = (*TIMINGS, "cell_seconds", "worker")   # what differs from one run of a cell to the next
 
 
 def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=False, log=None):
@@ -114,8 +115,7 @@ def run_cell(job) -> dict:
     row["closed_form_error"] = max(reached) if reached else (math.inf if relative else None)
     row["closed_form_unreached"] = len(relative) - len(reached) if relative else None
 
-    row["closed_form_checks"] = json.dumps([{"quantity": c.quantity, "unit": c.unit, "expected": c.expected,
-                                             "measured": c.measured} for c in found]) if found else None
+    row["closed_form_checks"] = json.dumps([check.as_record() for check in found]) if found else None
     row["diverged_at_s"] = None
     row["trajectory"] = job["trajectory"]
     row["cell_seconds"] = time.perf_counter() - started
