@@ -3,8 +3,9 @@
 blocks ("record::" before an indented example). Markdown knows neither, so at build time each
 role becomes a cross-reference to the object's page when the site documents it (plain code
 otherwise), and "::" ending a paragraph becomes ":". Dataclass fields and constants are
-documented by a comment on their line (``iterations: int = 100  # sweeps per step``): that
-comment becomes the attribute's docstring. The sources are left as they are.
+documented by comments (``iterations: int = 100  # sweeps per step``): the comment on an
+attribute's line, or else the lines continuing it below (``#      (F, 3) int, ...``) or the
+comment lines just above it, becomes the attribute's docstring. The sources are left as they are.
 """
 
 import io
@@ -60,12 +61,27 @@ class SphinxRoles(griffe.Extension):
 
 
 def trailing_comment(attribute):
-    """The comment at the end of the attribute's first source line, without its "#"."""
+    """The comment that documents an attribute, without its "#": the one ending its first
+    source line; else the comment lines continuing it below (a "#" followed by a run of
+    spaces, aligned under the line's comment column), or those directly above it."""
     try:
         tokens = list(tokenize.generate_tokens(io.StringIO(attribute.source).readline))
     except (tokenize.TokenError, IndentationError, SyntaxError, OSError, ValueError):
-        return ""
+        tokens = []
     for token in tokens:
         if token.type == tokenize.COMMENT and token.start[0] == 1:
             return token.string.lstrip("#").strip()
-    return ""
+    lines, first, last = attribute.module.lines, attribute.lineno - 1, (attribute.endlineno or attribute.lineno) - 1
+    below = []
+    for line in lines[last + 1:]:
+        if not re.match(r"\s*#\s{2,}\S", line):
+            break
+        below.append(line.strip().lstrip("#").strip())
+    if below:
+        return " ".join(below)
+    above = []
+    for line in reversed(lines[:first]):
+        if not line.strip().startswith("#"):
+            break
+        above.insert(0, line.strip().lstrip("#").strip())
+    return " ".join(above)
