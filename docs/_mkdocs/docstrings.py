@@ -18,7 +18,7 @@ ROLE = re.compile(r":(?:func|meth|class|mod|data|attr|obj|exc):`(~?)([\w.]+?)(\(
 LITERAL = re.compile(r"(\S)::$", re.MULTILINE)
 
 
-class SphinxRoles(griffe.Extension):
+class ProseDocstrings(griffe.Extension):
     def on_package(self, *, pkg, loader, **kwargs):
         self.loader = loader
         self._walk(pkg)
