@@ -34,9 +34,15 @@ from .threads import ThreadChooser
 
 @dataclass
 class Run:
+    """What :func:`simulate` returns: the final state, the recorded samples and the summary.
+
+    ``arrays`` holds the arrays of a trajectory file, in memory or, when the run streamed to a
+    path, that file read back (a :class:`contactlab.store.TrajectoryFile`); ``summary`` holds
+    what a run's ``summary.json`` does; docs/trajectory.md describes both. In Jupyter a Run
+    shows itself as a compact HTML summary with a picture of its last sample."""
     state: object        # the final State
     arrays: dict         # the trajectory (see docs/trajectory.md)
-    summary: dict        # the JSON summary (see docs/cli.md)
+    summary: dict        # the JSON summary (see docs/trajectory.md)
 
     def __repr__(self):
         s = self.summary
