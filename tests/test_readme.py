@@ -37,3 +37,74 @@ def test_the_figures_script_regenerates_every_picture_the_docs_show(tmp_path):
     assert shown, "no page shows a figure"
     for figure in shown:
         assert (tmp_path / figure).is_file(), f"the script does not make {figure}"
+
+
+def _cells(line):
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def _spec_table_rows():
+    """(SPEC items, where, proved by) of each row of the README's table from SPEC items to code."""
+    text = (Path(__file__).parent.parent / "README.md").read_text()
+    table = text.split("## Features by specification item", 1)[1].split("\n\n", 2)[1]
+    lines = [line for line in table.splitlines() if line.startswith("|")][2:]
+    return [_cells(line) for line in lines]
+
+
+def _defined(path, name):
+    """Whether the Python file ``path`` defines ``name`` (a function, class or module-level name);
+    a trailing * matches any name with that prefix."""
+    source = path.read_text()
+    pattern = re.escape(name[:-1]) + r"\w*" if name.endswith("*") else re.escape(name) + r"\b"
+    return re.search(rf"^(?:@njit[^\n]*\n)?\s*(?:def|class)\s+{pattern}|^{pattern}\s*=", source, re.M) is not None
+
+
+def test_every_code_name_in_the_readme_spec_table_exists():
+    """The table's "where" column names files of src/contactlab/ and, in parentheses, what they
+    define; scene-file option tables ([method.NAME]) and their options; its "proved by"
+    column names tests (file.py::test, later tests of the same file by name alone)."""
+    from dataclasses import fields
+
+    from contactlab import methods
+    root = Path(__file__).parent.parent
+    package, tests = root / "src" / "contactlab", root / "tests"
+    rows = _spec_table_rows()
+    assert len(rows) > 20
+    missing = []
+    for item, where, proved in rows:
+        module, options = None, None
+        for part in re.findall(r"\(([^)]*)\)|`([^`]+)`", where):
+            names, token = part
+            if names:                                   # names the last file defines
+                for name in re.findall(r"`([^`]+)`", names):
+                    if module is None or not _defined(module, name):
+                        missing.append(f"{item}: {name} in {module}")
+                continue
+            if token.endswith(".py") or token.endswith("/"):
+                module, options = package / token, None
+                if not module.exists():
+                    missing.append(f"{item}: {token}")
+                module = module if token.endswith(".py") else None
+            elif token.startswith("[method."):
+                options = {f.name for f in fields(methods.get(token[len("[method."):].split("]")[0]).Options)}
+                option = token.split("]", 1)[1].strip()
+                if option and option not in options:
+                    missing.append(f"{item}: {token}")
+            elif options is not None:
+                if token not in options:
+                    missing.append(f"{item}: option {token}")
+            else:
+                missing.append(f"{item}: {token} (not a file, name or option)")
+        test_file = None
+        for token in re.findall(r"`([^`]+)`", proved):
+            file_name, _, name = token.partition("::")
+            if file_name.endswith(".py"):
+                test_file = tests / file_name
+                if not test_file.exists():
+                    missing.append(f"{item}: {file_name}")
+                    continue
+            else:
+                name = token
+            if name and (test_file is None or not _defined(test_file, name)):
+                missing.append(f"{item}: {name} in {test_file}")
+    assert not missing, missing
