@@ -18,6 +18,7 @@ def test_the_quickstart_notebook_runs_and_shows_html(tmp_path):
     assert len(html) == 3
     assert "contactlab Model" in html[0] and "1 sphere, 1 obstacle" in html[0]
     assert "contactlab Run" in html[1] and "data:image/png;base64," in html[1] and "completed" in html[1]
+    assert "<video controls" in html[1] and "data:video/mp4;base64," in html[1]      # the inline player
     assert "contactlab comparison of bouncing_ball" in html[2] and "report.html" in html[2]
     printed = "".join(output.get("text", "") for output in outputs[2])
     assert printed.startswith("first rebound apex 0.64")
@@ -27,7 +28,7 @@ def test_the_quickstart_notebook_runs_and_shows_html(tmp_path):
 def test_a_run_that_blew_up_says_so_and_a_trajectory_gone_nan_has_no_picture():
     from conftest import ball_on_plane
     from contactlab import SimulationDiverged, simulate
-    from contactlab.notebook import _still, run_html
+    from contactlab.notebook import _player, _still, run_html
     with pytest.raises(SimulationDiverged) as stopped:
         simulate(ball_on_plane(height=0.4, restitution=0.5, friction=0.0), "penalty", 0.01, 2.0,
                  {"stiffness": 1e9, "implicit_springs": "never"}, "explicit_euler")
@@ -35,4 +36,4 @@ def test_a_run_that_blew_up_says_so_and_a_trajectory_gone_nan_has_no_picture():
     assert "diverged: the run went wrong at t = " in run_html(run, picture=False)
     blown = dict(run.arrays)
     blown["body_position"] = blown["body_position"] * float("nan")
-    assert _still(blown) == ""
+    assert _still(blown) == "" and _player(blown, _still(blown)) == ""

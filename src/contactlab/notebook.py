@@ -2,15 +2,21 @@
 
 In a notebook, a cell ending in ``model``, ``run`` or ``compare(...)`` shows a compact HTML
 summary instead of a dump of arrays: a model its parts; a run what it did (steps, where the time
-went, penetration, energy, how it ended) beside a picture of its last sample (contactlab.render,
-320 × 240, drawn when shown); a comparison its table, with a link to its report. Everything is
-escaped; pictures are inline PNGs, so the notebook needs no file beside it.
+went, penetration, energy, how it ended) beside an inline player of the run (contactlab.render:
+an MP4 of 320 × 240 at up to PLAYER_FPS frames per second and at most PLAYER_FRAMES frames,
+drawn when shown, in real time, with the browser's play, pause and scrub controls; the last
+sample as a still where no video can be drawn); a comparison its table, with a link to its
+report. Everything is escaped; videos and pictures are inline, so the notebook needs no file
+beside it. For an interactive 3D view, ``run.show()`` opens the viewer.
 """
 
 import base64
 import html
 import os
 import tempfile
+
+PLAYER_FPS = 12         # frames per second of the inline player at most
+PLAYER_FRAMES = 120     # frames of it at most (a long run plays at fewer frames per second)
 
 
 def _table(rows) -> str:
@@ -27,7 +33,8 @@ def model_html(model) -> str:
 
 
 def run_html(run, picture=True) -> str:
-    """A Run: its summary's main numbers and (``picture``) its last sample drawn."""
+    """A Run: its summary's main numbers and (``picture``) an inline player of it (its last sample
+    drawn, where no video can be)."""
     s = run.summary
     ended = ("diverged: " + s["diverged"]["message"] if s.get("diverged") else
              f"interrupted ({s['interrupted']['signal']})" if s.get("interrupted") else "completed")
@@ -39,7 +46,7 @@ def run_html(run, picture=True) -> str:
             ("deepest penetration", f"{s['max_penetration'] * 1000:.3g} mm (at the end {s['final_penetration'] * 1000:.3g} mm)"),
             ("total energy", f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end"),
             ("ended", ended)]
-    image = _still(run.arrays) if picture else ""
+    image = _player(run.arrays, _still(run.arrays)) if picture else ""
     return (f"<div style='display:flex;gap:1em;align-items:flex-start'>{image}"
             f"<div><b>contactlab Run</b>{_table(rows)}</div></div>")
 
@@ -61,6 +68,31 @@ def _shown(value):
     if isinstance(value, float):
         return f"{value:.4g}"
     return "–" if value is None else str(value)
+
+
+def _player(arrays, still) -> str:
+    """The run as an inline <video> with controls (MP4, 320 × 240, real time), the ``still``
+    (an inline <img> of its last sample, or "") its poster; the still alone when no video can be
+    drawn (a single sample, no video encoder), "" when neither can (a run gone NaN)."""
+    if not still:
+        return ""
+    from .errors import InputError
+    from .render import render
+    time = arrays["time"]
+    duration = float(time[-1] - time[0]) if len(time) > 1 else 0.0
+    if duration <= 0.0:
+        return still
+    fps = min(PLAYER_FPS, PLAYER_FRAMES / duration)
+    with tempfile.TemporaryDirectory() as folder:
+        try:
+            paths = render(arrays, folder, fps=fps, width=320, height=240, formats=("mp4",))
+        except (InputError, OSError, RuntimeError):     # nothing finite to draw, or no encoder here
+            return still
+        with open(paths["mp4"], "rb") as stream:
+            data = base64.b64encode(stream.read()).decode("ascii")
+    poster = still.split("src='", 1)[1].split("'", 1)[0]
+    return ("<video controls loop muted playsinline width='320' height='240' "
+            f"poster='{poster}' src='data:video/mp4;base64,{data}'>{still}</video>")
 
 
 def _still(arrays) -> str:
