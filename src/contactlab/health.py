@@ -12,7 +12,8 @@ of steps of the compiled loop:
 - **energy**: the total energy (kinetic + gravitational + elastic) never exceeds its start by
   more than ``ENERGY_GAIN`` times the scene's energy scale, its initial kinetic energy plus
   Σ m g L (nothing outside the scene does work on it: gravity is in the potential). Not on
-  scenes with cloth: the recorded total leaves out the cloth springs' own energy;
+  scenes with cloth: the recorded total leaves out the cloth springs' own energy; nor on driven
+  scenes (contactlab.driving): external forces and kinematic bodies do outside work;
 - **depth**: no contact is deeper than ``DEPTH_FRACTION`` of its pass-through depth (the two
   sides' half thicknesses, ``collision.pass_through_depths``: deeper, one side has reached the
   other's middle), and no body or particle centre lies behind a static plane by more than its
@@ -97,7 +98,8 @@ class Health:
         """Energy, speed and finite on recorded samples ``arrays`` (the trajectory's series,
         rows from ``first`` on). Returns the first Violation that stops the run, or None."""
         energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
-        if self.model.spring_count:          # the total leaves the cloth's springs out: finite only
+        if self.model.spring_count or self.model.drive is not None:
+            # the total leaves the cloth's springs out, or outside work goes in: finite only
             energy = np.where(np.isfinite(energy), 0.0, energy)
         if self.initial_energy is None and len(energy):
             self.initial_energy = float(energy[0])
