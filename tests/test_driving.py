@@ -243,3 +243,16 @@ torque = [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
     drive = load_scene(path).model.drive
     force, torque = drive.loads(0.5)
     assert np.allclose(force[0], [2, 0, 0]) and np.allclose(torque[0], [0, 0, 0.5])
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_path_through_the_floor_is_kept_and_not_called_a_divergence(method):
+    """Two immovable sides (a kinematic box, the static floor) overlap: no contact can act, the
+    path is kept, and the depth check leaves them alone (neither side can move)."""
+    builder = ModelBuilder()
+    builder.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, name="ram")
+    builder.add_path("ram", positions=[[0, 0, 0.3], [0, 0, -0.3]], times=[0.0, 0.2])
+    builder.add_obstacle("plane", normal=(0, 0, 1))
+    run = simulate(builder.finalize(), method=method, dt=0.01, duration=0.3)
+    assert np.allclose(run.state.body_position[0], [0, 0, -0.3], atol=1e-12)
+    assert run.summary["health"]["violations"] == []

@@ -201,47 +201,40 @@ class Drive:
 
 
 def called_load(function, t):
-    """(force (3,), torque (3,)) of a force callable at time t, checked: InputError("force")
-    unless it returns two lists of 3 finite numbers."""
-    result = _call(function, t, "force")
-    try:
-        force, torque = (np.asarray(part, dtype=float) for part in result)
-    except (TypeError, ValueError):
-        raise InputError("force", f"the force function returned {result!r} at t = {t:g} s; expected "
-                                  f"(force [N] (3,), torque [N m] (3,))") from None
-    if force.shape != (3,) or torque.shape != (3,) or not (np.isfinite(force).all() and np.isfinite(torque).all()):
-        raise InputError("force", f"the force function returned ({force.tolist()}, {torque.tolist()}) at "
-                                  f"t = {t:g} s; expected two lists of 3 finite numbers (N, N m)")
-    return force, torque
+    """(force (3,) [N], torque (3,) [N m]) of a force callable at time t [s], checked."""
+    return called_pair(function, t, "force", (3, 3), "(force [N] (3,), torque [N m] (3,))")
 
 
 def called_pose(function, t):
-    """(position (3,), unit orientation (4,)) of a path callable at time t, checked:
-    InputError("positions") unless it returns a finite position and a non-zero quaternion."""
-    result = _call(function, t, "positions")
-    try:
-        position, orientation = (np.asarray(part, dtype=float) for part in result)
-    except (TypeError, ValueError):
-        raise InputError("positions", f"the path function returned {result!r} at t = {t:g} s; expected "
-                                      f"(position [m] (3,), orientation quaternion (4,))") from None
-    norm = np.linalg.norm(orientation) if orientation.shape == (4,) else 0.0
-    if (position.shape != (3,) or not np.isfinite(position).all() or not np.isfinite(norm) or norm < 1e-12):
-        raise InputError("positions", f"the path function returned ({position.tolist()}, {orientation.tolist()}) "
-                                      f"at t = {t:g} s; expected a position of 3 finite numbers (m) and a "
-                                      f"non-zero quaternion (w, x, y, z)")
+    """(position (3,) [m], unit orientation (4,)) of a path callable at time t [s], checked:
+    InputError("positions") for a zero quaternion too."""
+    position, orientation = called_pair(function, t, "positions", (3, 4),
+                                        "(position [m] (3,), orientation quaternion (w, x, y, z) (4,))")
+    norm = np.linalg.norm(orientation)
+    if not norm >= 1e-12:
+        raise InputError("positions", f"the path function returned the zero quaternion at t = {t:g} s; use "
+                                      f"[1, 0, 0, 0] for no rotation")
     return position, orientation / norm
 
 
-def _call(function, t, name):
+def called_pair(function, t, name, sizes, expected):
+    """The two float arrays of ``sizes`` that ``function(t)`` returns, finite; else
+    InputError(``name``) saying what it returned at t [s] and the ``expected`` pair."""
     try:
         result = function(float(t))
     except InputError:
         raise
     except Exception as error:
         raise InputError(name, f"the function raised {type(error).__name__} at t = {t:g} s: {error}") from None
-    if not isinstance(result, (tuple, list)) or len(result) != 2:
-        raise InputError(name, f"the function returned {result!r} at t = {t:g} s; expected a pair of arrays")
-    return result
+    try:
+        first, second = (np.asarray(part, dtype=float) for part in result)
+    except (TypeError, ValueError):
+        first = second = None
+    if (first is None or (first.shape, second.shape) != ((sizes[0],), (sizes[1],))
+            or not (np.isfinite(first).all() and np.isfinite(second).all())):
+        raise InputError(name, f"the function returned {result!r} at t = {t:g} s; expected {expected}, "
+                               f"finite numbers")
+    return first, second
 
 
 def pack(body_count, forces, paths):

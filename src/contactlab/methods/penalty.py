@@ -308,7 +308,7 @@ def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None)
         zeta = np.full(C, options.damping_ratio)
 
     def damping(k, inverse_mass_along):
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):     # 0/0: two immovable sides
             return np.where(inverse_mass_along > 0.0, 2.0 * zeta * np.sqrt(k / inverse_mass_along), 0.0)
 
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
