@@ -208,4 +208,8 @@ class Model:
             vertices = self.particle_count - free
             parts.append(f"{self.cloth_count} cloth{'s' if self.cloth_count > 1 else ''} ({vertices} vertices)")
         parts.append(f"{self.obstacle_count} obstacle{'s' if self.obstacle_count != 1 else ''}")
+        if self.drive is not None:      # driven: which bodies follow a path, whether forces push
+            paths = int(self.body_kinematic.sum())
+            parts.append(", ".join(([f"{paths} on a path"] if paths else [])
+                                   + (["external forces"] if self.drive.has_loads else [])))
         return ", ".join(parts)
