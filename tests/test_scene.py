@@ -11,7 +11,7 @@ from contactlab.scene import Scene, builtin_scenes, load_scene
 from contactlab.scene import schema
 from contactlab.simulation import simulate
 
-BUILTIN = ["bouncing_ball", "box_pyramid", "box_stack", "capsule_pile", "card_house", "cloth_drape", "cloth_table",
+BUILTIN = ["bouncing_ball", "box_pushed", "box_pyramid", "box_stack", "capsule_pile", "card_house", "cloth_drape", "cloth_table",
            "domino_chain", "incline", "mass_ratio_stack", "mesh_bowl", "newtons_cradle", "particles_bowl", "particles_box",
            "rod_impact", "rolling_sphere", "sliding_block", "sphere_pile"]
 CLOTH_AND_POURING = {"cloth_drape": "backward_euler", "cloth_table": "backward_euler", "particles_bowl": "symplectic_euler"}

@@ -71,8 +71,10 @@ FRICTION = Quantity("friction coefficient", "", 1e3)       # rubber on rubber is
 FACTOR = Quantity("scale factor", "", 1e6, 1e-6)
 DIRECTION = Quantity("direction component", "", 1e6)       # normals and quaternions, normalized after
 TIME = Quantity("time", "s", 1e9, 1e-9)                    # dt and duration (contactlab.simulate)
+FORCE = Quantity("force", "N", 1e12)                       # external forces (add_force)
+TORQUE = Quantity("torque", "N m", 1e12)
 LIMITS = (LENGTH, MASS, DENSITY, AREAL_DENSITY, SPEED, ANGULAR_SPEED, ACCELERATION, STIFFNESS, DAMPING,
-          FRICTION, FACTOR, DIRECTION, TIME)
+          FRICTION, FACTOR, DIRECTION, TIME, FORCE, TORQUE)
 MAX_DYNAMIC = 200_000     # bodies, particles and cloth vertices in one model: seconds and gigabytes a step past it
 WHOLE_NUMBERS = (-2 ** 63, 2 ** 63 - 1)     # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
 
@@ -197,6 +199,8 @@ class ModelBuilder:
         self._obstacles = []          # dicts
         self._hulls = []              # contactlab.hulls.Hull of the convex shapes
         self._meshes = []             # contactlab.meshes.TriangleMesh, world frame
+        self._forces = []             # dicts: body, force, torque, times, function (see add_force)
+        self._paths = []              # dicts: body, times, positions, orientations, function (see add_path)
 
     # -- materials -------------------------------------------------------------------
     def add_material(self, name, friction=0.5, restitution=0.0) -> int:
@@ -284,6 +288,102 @@ class ModelBuilder:
             angular_velocity=_vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
             material=self._material_index(material)))
         return index
+
+    # -- driving: external forces, kinematic paths (contactlab.driving) ----------------------
+    def _body_index(self, body) -> int:
+        """The index of ``body``, given by index or name; InputError("body") if there is none."""
+        names = [b["name"] for b in self._bodies]
+        if isinstance(body, (int, np.integer)) and not isinstance(body, bool):
+            if 0 <= body < len(names):
+                return int(body)
+            raise InputError("body", f"no body with index {body} (there are {len(names)})")
+        if isinstance(body, str) and body in names:
+            return names.index(body)
+        import difflib
+        close = difflib.get_close_matches(str(body), names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else f" (the bodies: {', '.join(map(repr, names)) or 'none'})"
+        raise InputError("body", f"no body named {body!r}{hint}")
+
+    def add_force(self, body, force=None, torque=None, times=None):
+        """Push ``body`` (index or name) with an external force at its centre of mass and a torque
+        about it, world frame, added to gravity in every method's free velocities.
+
+        - constant: ``force`` (3,) [N], ``torque`` (3,) [N m] (either may be left out: zero);
+        - piecewise linear: ``times`` (T,) [s], strictly increasing, and ``force``, ``torque``
+          (T, 3) one row per time (either may be left out: zero); before the first time the first
+          value, after the last the last;
+        - a function of time: ``force`` a callable ``t [s] -> (force (3,) [N], torque (3,) [N m])``,
+          called once a step with the step's start time (``torque`` and ``times`` left out).
+
+        Several forces on one body add up. A model with forces steps through the methods' ``step``
+        (not the compiled loop of impulse and constraints)."""
+        index = self._body_index(body)
+        if callable(force):
+            if torque is not None or times is not None:
+                raise InputError("torque" if torque is not None else "times",
+                                 "a force function returns the torque itself; give no torque or times with it")
+            self._forces.append(dict(body=index, force=None, torque=None, times=None, function=force))
+            return
+        from .driving import keyframe_times, keyframe_values
+        if times is None:
+            force, torque = (np.zeros(3) if value is None else _vector(value, name, quantity=quantity)
+                             for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE)))
+        else:
+            times = keyframe_times(times)
+            force, torque = (np.zeros((len(times), 3)) if value is None else
+                             keyframe_values(value, name, len(times), 3, unit, quantity)
+                             for value, name, unit, quantity in ((force, "force", "N", FORCE),
+                                                                 (torque, "torque", "N m", TORQUE)))
+        self._forces.append(dict(body=index, force=force, torque=torque, times=times, function=None))
+
+    def add_path(self, body, positions, orientations=None, times=None):
+        """Make ``body`` (index or name) kinematic: its pose follows a path instead of its forces.
+
+        - keyframes: ``times`` (T,) [s], strictly increasing, ``positions`` (T, 3) [m] of its
+          centre of mass, ``orientations`` (T, 4) unit quaternions (w, x, y, z) (default: the
+          orientation it was added with, throughout); positions interpolated linearly,
+          orientations by slerp, the first pose held before the first time and the last after;
+        - a fixed pose: ``positions`` (3,) and ``orientations`` (4,) or None, no times;
+        - a function of time: ``positions`` a callable ``t [s] -> (position (3,) [m], orientation
+          (4,))``, ``orientations`` and ``times`` left out.
+
+        A kinematic body has infinite mass (inverse mass and inertia 0): contacts push on it and
+        it is not pushed back. At each step its velocity is the one that carries it onto the path
+        over that step, which contacts and friction see; its pose at time 0 is the path's there
+        (its position and orientation from ``add_body`` are replaced). Its mass, still needed by
+        ``add_body``, only enters the energy and momentum diagnostics. The explicit_euler
+        integrator, which moves positions by the old velocities, cannot follow a path and is
+        refused for such models."""
+        index = self._body_index(body)
+        if any(p["body"] == index for p in self._paths):
+            raise InputError("body", f"body {self._bodies[index]['name']!r} already has a path; give it one only")
+        if callable(positions):
+            if orientations is not None or times is not None:
+                raise InputError("orientations" if orientations is not None else "times",
+                                 "a path function returns the orientation itself; give no orientations or times "
+                                 "with it")
+            self._paths.append(dict(body=index, times=None, positions=None, orientations=None, function=positions))
+            return
+        from .driving import keyframe_times, keyframe_values
+        if times is None:
+            times = np.zeros(1)
+            positions = _vector(positions, "positions", quantity=LENGTH)[None]
+            orientations = None if orientations is None else _orientation(orientations, "orientations")[None]
+        else:
+            times = keyframe_times(times)
+            positions = keyframe_values(positions, "positions", len(times), 3, "m", LENGTH)
+            if orientations is not None:
+                orientations = keyframe_values(orientations, "orientations", len(times), 4, "quaternions w, x, y, z",
+                                               DIRECTION)
+                norms = np.linalg.norm(orientations, axis=1)
+                if (norms < 1e-12).any():
+                    raise InputError("orientations", f"keyframe {int(np.argmin(norms))} is a zero quaternion, no "
+                                                      f"rotation; use [1, 0, 0, 0] for none")
+                orientations = orientations / norms[:, None]
+        if orientations is None:
+            orientations = np.repeat(self._bodies[index]["orientation"][None], len(times), axis=0)
+        self._paths.append(dict(body=index, times=times, positions=positions, orientations=orientations,
+                                function=None))
 
     @staticmethod
     def _hull(points, file, scale, mass=None, density=None):
@@ -567,7 +667,11 @@ class ModelBuilder:
         def cloth_cat(key, shape, offset=False, dtype=float):
             parts = [c[key] + (c["start"] if offset else 0) for c in cloths]
             return (np.concatenate(parts) if parts else np.zeros(0)).astype(dtype).reshape(shape)
+        from .driving import pack, start_on_paths
+        drive = pack(len(bodies), self._forces, self._paths)
+        start_on_paths(drive, initial)
         return Model(
+            drive=drive,
             gravity=self.gravity.copy(),
             material_names=tuple(m[0] for m in self._materials),
             material_friction=np.array([m[1] for m in self._materials]),

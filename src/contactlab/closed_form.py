@@ -287,6 +287,52 @@ def _rod_impact(model, arrays):
                   measured_w, _relative(w_after[axis], 0.0))]
 
 
+def _box_pushed(model, arrays):
+    """A box on the floor pushed by a kinematic paddle at constant velocity v_p until the path's
+    last keyframe, then released.
+
+    Pushed, the box moves with the paddle: its mean speed over the second half of the push,
+    measured from its displacement, is |v_p| (the paddle–box overlap changes by less than the
+    run's deepest contact over that window, which bounds the error by it over the window's
+    length). The push then balances the floor's sliding friction μ m g; the paddle is infinitely
+    heavy, so its push is not observed directly, but the friction it balances is: released, the
+    box slides on the same contact, and m Δv / Δt over the samples from 0.9 |v_p| down to
+    0.2 |v_p| equals μ (m g + m Δv_z / Δt) (the floor's normal impulse is m (g Δt + Δv_z)), so it
+    differs from μ m g by μ m |Δv_z| / Δt at most, Δv_z the box's vertical velocity change."""
+    drive = model.drive
+    g, up = _gravity(model)
+    if (drive is None or model.body_count != 2 or model.particle_count or model.obstacle_count != 1
+            or up is None or _horizontal_floor(model, up) is None or model.body_shape[0] != shapes.BOX
+            or list(np.flatnonzero(drive.kinematic)) != [1] or list(drive.path_body) != [1] or drive.has_loads
+            or len(drive.path_times[0]) != 2):
+        return []
+    start, end = drive.path_times[0]
+    velocity = (drive.path_positions[0, 1] - drive.path_positions[0, 0]) / (end - start)
+    speed = float(np.linalg.norm(velocity))
+    if speed == 0 or abs(velocity @ up) > 1e-12 * speed:
+        return []
+    direction = velocity / speed
+    mass = float(model.body_mass[0])
+    friction = float(model.pair_materials(model.body_material[0], model.obstacle_material[0])[0])
+    time = arrays["time"]
+    along = arrays["body_velocity"][:, 0] @ direction
+    moved = (arrays["body_position"][:, 0] - arrays["body_position"][0, 0]) @ direction
+    first = _first_time(time, along > 0.5 * speed)            # the first contact
+    window = (time >= first + 0.5 * (end - first)) & (time <= end)
+    mean_speed = float("nan")
+    if np.isfinite(first) and window.sum() >= 2:
+        a, b = np.flatnonzero(window)[[0, -1]]
+        mean_speed = float((moved[b] - moved[a]) / (time[b] - time[a]))
+    sliding = np.flatnonzero((time > end) & (along <= 0.9 * speed) & (along >= 0.2 * speed))
+    force = float("nan")
+    if len(sliding) >= 2:
+        a, b = sliding[0], sliding[-1]
+        force = float(mass * (along[a] - along[b]) / (time[b] - time[a]))
+    return [Check("box speed while pushed", "m/s", speed, mean_speed, _relative(speed, SPEED_FLOOR * speed)),
+            Check("push force: the sliding friction it balances", "N", friction * mass * g, force,
+                  _relative(friction * mass * g, 0.0))]
+
+
 def _standing(model, arrays):
     """A structure in static equilibrium must not move: every body within STANDING of its start
     at every sample (the largest displacement of any body over the run)."""
@@ -388,6 +434,7 @@ _CHECKS = {
     "box_pyramid": _standing,
     "mass_ratio_stack": _standing_unsunk,
     "card_house": _standing,
+    "box_pushed": _box_pushed,
     "sphere_pile": _kept_out,
     "capsule_pile": _kept_out,
     "particles_box": _kept_out,

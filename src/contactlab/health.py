@@ -12,7 +12,8 @@ of steps of the compiled loop:
 - **energy**: the total energy (kinetic + gravitational + elastic) never exceeds its start by
   more than ``ENERGY_GAIN`` times the scene's energy scale, its initial kinetic energy plus
   Σ m g L (nothing outside the scene does work on it: gravity is in the potential). Not on
-  scenes with cloth: the recorded total leaves out the cloth springs' own energy;
+  scenes with cloth: the recorded total leaves out the cloth springs' own energy; nor on driven
+  scenes (contactlab.driving): external forces and kinematic bodies do outside work;
 - **depth**: no contact is deeper than ``DEPTH_FRACTION`` of its pass-through depth (the two
   sides' half thicknesses, ``collision.pass_through_depths``: deeper, one side has reached the
   other's middle), and no body or particle centre lies behind a static plane by more than its
@@ -74,8 +75,8 @@ class Health:
         length = np.linalg.norm(params[:, :3], axis=1)
         self.plane_normals = params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3))   # (Pl, 3)
         self.plane_offsets = params[:, 3] / length if len(params) else np.zeros(0)
-        self.half_thickness = model.collider_half_thickness[:dynamic] + np.r_[
-            np.zeros(model.body_count), np.where(model.particle_pinned, np.inf, 0.0)]      # pinned: never checked
+        self.half_thickness = model.collider_half_thickness[:dynamic] + np.r_[     # pinned, kinematic: never checked
+            np.where(model.body_kinematic, np.inf, 0.0), np.where(model.particle_pinned, np.inf, 0.0)]
         self.initial_depth_ratio = 0.0      # see start()
 
     # ---- the checks --------------------------------------------------------------------------
@@ -97,7 +98,8 @@ class Health:
         """Energy, speed and finite on recorded samples ``arrays`` (the trajectory's series,
         rows from ``first`` on). Returns the first Violation that stops the run, or None."""
         energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
-        if self.model.spring_count:          # the total leaves the cloth's springs out: finite only
+        if self.model.spring_count or self.model.drive is not None:
+            # the total leaves the cloth's springs out, or outside work goes in: finite only
             energy = np.where(np.isfinite(energy), 0.0, energy)
         if self.initial_energy is None and len(energy):
             self.initial_energy = float(energy[0])
@@ -124,12 +126,14 @@ class Health:
 
     def _depth_ratios(self, contacts):
         """(each contact's depth over DEPTH_FRACTION of its pass-through depth (C,), 0 where
-        neither side can move (static, or pinned cloth vertices); the pass-through depths (C,) [m])."""
+        neither side can move (static, kinematic bodies or pinned cloth vertices); the
+        pass-through depths (C,) [m])."""
         if contacts.count == 0:
             return np.zeros(0), np.zeros(0)
         through = pass_through_depths(self.model, contacts)
         free = np.r_[~np.asarray(self.model.particle_pinned, dtype=bool), False]     # index −1: no particle
-        movable = (contacts.body_a >= 0) | (contacts.body_b >= 0)
+        moves = np.r_[~self.model.body_kinematic, False]                               # index −1: no body
+        movable = moves[contacts.body_a] | moves[contacts.body_b]
         for side in (contacts.particles_a, contacts.particles_b):
             movable |= free[side].any(axis=1)
         return np.where(movable, contacts.depth / (DEPTH_FRACTION * through), 0.0), through

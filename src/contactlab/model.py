@@ -57,6 +57,8 @@ class Model:
     spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))   # (S,) m
     spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))     # (S,) N/m
     spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))       # (S,) N s/m
+    # external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene
+    drive: "object" = field(repr=False, default=None)
 
     def __post_init__(self):
         # models built without cloth: no particle belongs to one, none is pinned
@@ -89,14 +91,19 @@ class Model:
         return len(self.obstacle_shape)
 
     @property
+    def body_kinematic(self) -> np.ndarray:
+        """(B,) bool: the bodies that follow a path (``ModelBuilder.add_path``), of infinite mass."""
+        return self.drive.kinematic if self.drive is not None else np.zeros(self.body_count, dtype=bool)
+
+    @property
     def body_inverse_mass(self) -> np.ndarray:
-        """(B,) 1/kg."""
-        return 1.0 / self.body_mass
+        """(B,) 1/kg; 0 for kinematic bodies, so no contact moves them."""
+        return np.where(self.body_kinematic, 0.0, 1.0 / self.body_mass)
 
     @property
     def body_inverse_inertia(self) -> np.ndarray:
-        """(B, 3) inverse principal moments, 1/(kg m²)."""
-        return 1.0 / self.body_inertia
+        """(B, 3) inverse principal moments, 1/(kg m²); 0 for kinematic bodies."""
+        return np.where(self.body_kinematic[:, None], 0.0, 1.0 / self.body_inertia)
 
     @property
     def cloth_count(self) -> int:
@@ -201,4 +208,8 @@ class Model:
             vertices = self.particle_count - free
             parts.append(f"{self.cloth_count} cloth{'s' if self.cloth_count > 1 else ''} ({vertices} vertices)")
         parts.append(f"{self.obstacle_count} obstacle{'s' if self.obstacle_count != 1 else ''}")
+        if self.drive is not None:      # driven: which bodies follow a path, whether forces push
+            paths = int(self.body_kinematic.sum())
+            parts.append(", ".join(([f"{paths} on a path"] if paths else [])
+                                   + (["external forces"] if self.drive.has_loads else [])))
         return ", ".join(parts)

@@ -81,6 +81,10 @@ def _checked_arguments(model, method, dt, duration, options, integrator, record_
         raise InputError("record_every", f"expected a whole number from 1 to {MAX_STEPS:.0e}, found {record_every!r}")
     if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise InputError("integrator", f"expected one of {', '.join(INTEGRATORS)}, found {integrator!r}")
+    if integrator == "explicit_euler" and model.body_kinematic.any():
+        raise InputError("integrator", "explicit_euler moves positions by the velocities before the step, which "
+                                       "cannot follow a kinematic body's path; use symplectic_euler or "
+                                       "backward_euler")
     if not isinstance(method, str):
         raise InputError("method", f"expected a method name ({', '.join(methods.AVAILABLE)}), found {_kind(method)}")
     module = methods.get(method)

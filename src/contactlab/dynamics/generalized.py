@@ -69,7 +69,7 @@ def implicit_base(model, state, dt, v_free, cloth_implicit=True):
     dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
     with the cloth's own; with ``cloth_implicit`` False (the cloth stepped explicitly, its
     springs already in v*) M v⁺ = M v* for particles too. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
-    a pinned vertex's do not).
+    a pinned vertex's and a kinematic body's do not).
     """
     B = model.body_count
     M = mass_matrix(model, state.body_orientation)
@@ -82,5 +82,5 @@ def implicit_base(model, state, dt, v_free, cloth_implicit=True):
         particles = M[6 * B:, 6 * B:]
         b_particles = particles @ v_free[6 * B:]
     A0 = sp.block_diag([bodies, particles], format="csr")
-    free = np.concatenate([np.ones(6 * B, dtype=bool), np.repeat(~model.particle_pinned, 3)])
+    free = np.concatenate([np.repeat(~model.body_kinematic, 6), np.repeat(~model.particle_pinned, 3)])
     return A0, np.concatenate([bodies @ v_free[:6 * B], b_particles]), free

@@ -250,7 +250,17 @@ def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_f
     body_angular_velocity (B,3) [rad/s]) after dt under gravity and the optional body_force,
     body_torque (B, 3) [N], [N m]. The gyroscopic term is explicit under explicit Euler and
     implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
-    bodies move as symplectic Euler's."""
+    bodies move as symplectic Euler's.
+
+    A driven model (``model.drive``, contactlab.driving) adds its external forces and torques at
+    the step's start time ``state.time`` to the given ones, and gives each kinematic body the
+    velocity that carries it onto its path over the step (their inverse mass is 0: gravity and
+    forces do not move them)."""
+    drive = model.drive
+    if drive is not None and drive.has_loads:
+        force, torque = drive.loads(state.time)
+        body_force = force if body_force is None else body_force + force
+        body_torque = torque if body_torque is None else body_torque + torque
     body_velocity = state.body_velocity + dt * model.gravity
     if body_force is not None:
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
@@ -259,6 +269,9 @@ def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_f
     if body_torque is not None:
         inv = world_inverse_inertia(model, state.body_orientation)
         angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
+    if drive is not None and drive.kinematic.any():
+        bodies, body_velocity[bodies], angular[bodies] = drive.path_velocities(state.body_position,
+                                                                              state.body_orientation, state.time, dt)
     return body_velocity, angular
 
 

@@ -205,7 +205,8 @@ def supported_loads(entity_a, entity_b, normal, body_position, particle_position
     down, hands its own weight and what rests on it to the contacts it rests on (normals within
     72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
     or particle below; a static side takes it out. Contacts that support nothing carry the
-    lighter side's weight per supporting contact. Sides as ``contact_entities`` gives them.
+    lighter side's weight per supporting contact. A kinematic body is given weight 0: it hands
+    nothing down and, like a static side, does not count as the lighter side. Sides as ``contact_entities`` gives them.
     Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
     C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
@@ -258,7 +259,7 @@ def supported_loads(entity_a, entity_b, normal, body_position, particle_position
         if upper[c] < 0:                  # a side contact: the lighter dynamic side's share
             least = np.inf
             for e in (entity_a[c], entity_b[c]):
-                if e >= 0:
+                if e >= 0 and own_share[e] > 0.0:       # weightless: a kinematic body, a driven side
                     least = min(least, own_share[e])
             loads[c] = least if least < np.inf else 0.0
     return loads
@@ -288,7 +289,7 @@ def contact_stiffness(model, state, contacts, options):
         return np.full(contacts.count, float(options.stiffness))
     loads = supported_loads(*contact_entities(contacts, model.body_count), contacts.normal,
                             state.body_position, state.particle_position,
-                            np.asarray(model.body_mass, dtype=float), np.asarray(model.particle_mass, dtype=float),
+                            np.where(model.body_kinematic, 0.0, model.body_mass), np.asarray(model.particle_mass, dtype=float),
                             np.asarray(model.gravity, dtype=float))
     return loads / options.allowed_penetration
 
@@ -307,7 +308,7 @@ def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None)
         zeta = np.full(C, options.damping_ratio)
 
     def damping(k, inverse_mass_along):
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):     # 0/0: two immovable sides
             return np.where(inverse_mass_along > 0.0, 2.0 * zeta * np.sqrt(k / inverse_mass_along), 0.0)
 
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)

@@ -12,7 +12,9 @@ It serves the scenes it can (``applies``): rigid bodies and free particles of th
 convex shapes against planes and convex obstacles, the default contact granularity and normal
 (vertex, object), symplectic or backward Euler (the same motion without cloth), and for
 constraints the matrix-free solver on velocities. A scene with cloth or meshes, another
-granularity, explicit Euler, or an assembled solver steps through the methods' ``step``.
+granularity, explicit Euler, or an assembled solver steps through the methods' ``step``, and
+so does a driven scene (external forces or kinematic bodies, contactlab.driving): a force or path
+given as a Python function cannot run in compiled code.
 
 Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
 colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
@@ -83,6 +85,8 @@ def applies(model, method, options, integrator):
     if method not in ("impulse", "constraints") or integrator not in ("symplectic_euler", "backward_euler"):
         return False
     if model.spring_count or len(model.triangles) or (model.obstacle_shape == shapes.MESH).any():
+        return False
+    if model.drive is not None:         # external forces or kinematic paths: the methods' step applies them
         return False
     if options.granularity != "vertex" or options.normal != "object":
         return False

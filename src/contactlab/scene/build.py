@@ -5,7 +5,9 @@ values; its errors name the builder argument (``mass``), and are re-raised here 
 path in front (``bodies[2].mass``). ``array`` tables are expanded here: a body is copied on a
 grid of ``count`` = [nx, ny, nz] positions ``spacing`` = [dx, dy, dz] apart, starting at its
 ``position`` (x varies fastest, then y, then z); the copies are named ``NAME_i``.
-``[[cloth]]`` entries go to ``ModelBuilder.add_cloth`` key for key (``cloth[0].resolution``).
+``[[cloth]]`` entries go to ``ModelBuilder.add_cloth`` key for key (``cloth[0].resolution``), a
+body's ``path`` table to ``ModelBuilder.add_path`` (``bodies[1].path.times``) and ``[[forces]]``
+entries to ``ModelBuilder.add_force`` (``forces[0].force``).
 """
 
 from pathlib import Path
@@ -48,13 +50,16 @@ def build_model(scene, base=None):
     for i, material in enumerate(scene["materials"]):
         _call(f"materials[{i}]", builder.add_material, **material)
     for i, body in enumerate(scene["bodies"]):
-        arguments = {key: value for key, value in _resolve_files(body, base).items() if key != "array"}
+        arguments = {key: value for key, value in _resolve_files(body, base).items() if key not in ("array", "path")}
         offsets = grid_offsets(body["array"])
         for copy, offset in enumerate(offsets):
             if body["array"] is not None:
                 arguments["position"] = (np.asarray(body["position"]) + offset).tolist()
                 arguments["name"] = f"{body['name']}_{copy}" if body["name"] is not None else None
-            _call(f"bodies[{i}]", builder.add_body, **arguments)
+            index = _call(f"bodies[{i}]", builder.add_body, **arguments)
+            if body["path"] is not None:          # each copy moves along the path, shifted by its offset
+                path = dict(body["path"], positions=(np.asarray(body["path"]["positions"]) + offset).tolist())
+                _call(f"bodies[{i}].path", builder.add_path, body=index, **path)
     for i, particles in enumerate(scene["particles"]):
         offsets = grid_offsets(particles["array"])
         position = np.asarray(particles["position"])
@@ -72,4 +77,6 @@ def build_model(scene, base=None):
         _call(f"cloth[{i}]", builder.add_cloth, **_resolve_files(cloth, base))
     for i, obstacle in enumerate(scene["obstacles"]):
         _call(f"obstacles[{i}]", builder.add_obstacle, **_resolve_files(obstacle, base))
+    for i, force in enumerate(scene.get("forces", [])):
+        _call(f"forces[{i}]", builder.add_force, **force)
     return builder.finalize()

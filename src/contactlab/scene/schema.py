@@ -151,6 +151,53 @@ class Points:
         return "[[x, y, z], ...]"
 
 
+class Times:
+    """Keyframe times: a non-empty list of finite numbers, strictly increasing."""
+
+    number = Number()
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, list) or not value:
+            raise InputError(field, f"expected a non-empty list of times{_unit(unit)}, found {show(value)}")
+        times = [self.number.check(t, f"{field}[{i}]", unit) for i, t in enumerate(value)]
+        for i in range(1, len(times)):
+            if times[i] <= times[i - 1]:
+                raise InputError(f"{field}[{i}]", f"times must increase strictly, found {show(value[i])} after "
+                                                  f"{show(value[i - 1])}{_unit(unit)}")
+        return times
+
+    def describe(self):
+        return "[t0, t1, ...]"
+
+
+class Quaternions(Points):
+    """A non-empty list of [w, x, y, z] quaternions."""
+
+    point = Vector(4)
+
+    def check(self, value, field, unit=""):
+        if not isinstance(value, list) or not value:
+            raise InputError(field, f"expected a non-empty list of [w, x, y, z] quaternions, found {show(value)}")
+        return [self.point.check(q, f"{field}[{i}]", unit) for i, q in enumerate(value)]
+
+    def describe(self):
+        return "[[w, x, y, z], ...]"
+
+
+class VectorOrKeyframes:
+    """A force or torque: [x, y, z] (constant) or a list of them, one per keyframe time."""
+
+    vector, points = Vector(3), Points()
+
+    def check(self, value, field, unit=""):
+        if isinstance(value, list) and value and all(isinstance(item, list) for item in value):
+            return self.points.check(value, field, unit)
+        return self.vector.check(value, field, unit)
+
+    def describe(self):
+        return "[x, y, z] or [[x, y, z], ...]"
+
+
 class Pinned:
     """Cloth vertices: a list of whole numbers ≥ 0 (vertex indices) and names, or one of them."""
 
@@ -281,6 +328,12 @@ ARRAY = {
     "spacing": Key(Vector(3), required=True, unit="m"),
 }
 
+PATH = {
+    "times": Key(Times(), required=True, unit="s"),
+    "positions": Key(Points(), required=True, unit="m"),
+    "orientations": Key(Quaternions(), unit="quaternion w, x, y, z"),
+}
+
 BODY = {
     "name": Key(Text()),
     "shape": Key(Choice(("sphere", "box", "capsule", "convex"), PLANNED_BODY_SHAPES, what="body shape"),
@@ -299,6 +352,14 @@ BODY = {
     "angular_velocity": Key(Vector(3), [0.0, 0.0, 0.0], "rad/s"),
     "material": Key(Text()),
     "array": Key(GridArray(ARRAY)),
+    "path": Key(Table(PATH)),
+}
+
+FORCE = {
+    "body": Key(Text(), required=True),
+    "force": Key(VectorOrKeyframes(), unit="N"),
+    "torque": Key(VectorOrKeyframes(), unit="N m"),
+    "times": Key(Times(), unit="s"),
 }
 
 PARTICLES = {
@@ -355,10 +416,12 @@ TOP = {
     "particles": Key(TableList(PARTICLES), []),
     "cloth": Key(TableList(CLOTH), []),
     "obstacles": Key(TableList(OBSTACLE, OBSTACLE_SHAPE_ARGUMENTS), []),
+    "forces": Key(TableList(FORCE), []),
 }
 
 TABLES = {"top level": TOP, "[simulation]": SIMULATION, "[[materials]]": MATERIAL,
-          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[cloth]]": CLOTH, "[[obstacles]]": OBSTACLE, "array": ARRAY}
+          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[cloth]]": CLOTH, "[[obstacles]]": OBSTACLE, "array": ARRAY,
+          "path": PATH, "[[forces]]": FORCE}
 
 
 def validate_table(table, keys, path, shapes=None):
