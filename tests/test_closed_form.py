@@ -111,6 +111,12 @@ def test_impulses_meet_every_stated_expectation(name, duration):
     assert found and all(check.passed for check in found), [check.verdict() for check in found]
 
 
+@pytest.mark.parametrize("method", ["penalty", "projection", "impulse", "constraints"])
+def test_every_method_pushes_the_box_at_the_paddles_speed_against_sliding_friction(method):
+    found = _run("box_pushed", method=method)[1]
+    assert len(found) == 2 and all(check.passed for check in found), [check.verdict() for check in found]
+
+
 def test_a_method_that_misses_an_expectation_fails_it_with_the_number():
     # projection is inelastic: the ball never rebounds, so the apexes are never reached
     bounce = _by_quantity(_run("bouncing_ball", method="projection", duration=1.0)[1])
