@@ -182,7 +182,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
                           allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
     except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
         if getattr(error, "run", None) is not None:
-            error.run.summary["trajectory"] = trajectory
+            error.run.summary.update(trajectory=trajectory, source=scene.origin(overrides))
             write_summary(out, error.run.summary)
             error.written = out
         else:
@@ -192,6 +192,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         remove_empty(made)
         raise
     result.summary["trajectory"] = trajectory
+    result.summary["source"] = scene.origin(overrides)      # how to load the scene again (the viewer's contacts)
     write_summary(out, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
@@ -220,38 +221,6 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
             frames = write_mesh_sequence(arrays, os.path.join(out, "frames"), file_format=file_format, every=every)
             written.append(os.path.join(out, "frames", f"frame_*.{file_format} ({len(frames)} files)"))
     return written
-
-
-def _load_run(directory):
-    """The trajectory and summary of an earlier run's output folder. The trajectory is
-    trajectory.h5 read back lazily (contactlab.store), or the trajectory.npz of an older
-    contactlab read without unpickling anything (contactlab.trajectory.load_npz); render and
-    export check its arrays. The summary is {} unless summary.json is a regular file holding
-    a JSON object that names the scene and the method."""
-    from .record import TRAJECTORY
-    from .store import open_trajectory
-    from .trajectory import load_npz
-    path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
-    if os.path.isfile(path):
-        arrays = open_trajectory(path, "OUT_DIR")
-    elif os.path.isfile(older):
-        arrays, path = load_npz(older, "OUT_DIR"), older
-    else:
-        raise InputError("OUT_DIR", f"found no {TRAJECTORY} in {directory}; give the folder a "
-                                    f"'contactlab run' wrote (its --out)")
-    if "body_surface_vertices" not in arrays:
-        raise InputError("OUT_DIR", f"{path} was written by an older contactlab without the shapes' "
-                                    f"surfaces; run the scene again")
-    summary_path = os.path.join(directory, "summary.json")
-    summary = {}
-    if os.path.isfile(summary_path):               # never open a FIFO or a device of that name
-        try:
-            with open(summary_path, encoding="utf-8") as stream:
-                summary = json.load(stream)
-        except (OSError, ValueError, RecursionError):
-            summary = {}
-    named = isinstance(summary, dict) and all(isinstance(summary.get(key), str) for key in ("scene", "method"))
-    return arrays, summary if named else {}
 
 
 def _compare(args):
@@ -360,7 +329,8 @@ def _main(argv):
                                                        solved.items()))
             print(f"Table: {result.csv} (and {result.markdown.name}); performance profile: {result.profile_png}")
         elif args.command == "render":
-            arrays, summary = _load_run(args.directory)
+            from .record import load_run
+            arrays, summary = load_run(args.directory)
             from .render import render
             title = f"{summary['scene']} — {summary['method']}" if "scene" in summary else None
             paths = render(arrays, args.directory, fps=args.fps, width=args.width, height=args.height,
@@ -370,7 +340,8 @@ def _main(argv):
         elif args.command == "export":
             formats = _list_option(args.format, "--format", EXPORT_FORMATS)
             _whole_number(args.every, "--every")
-            arrays, _ = _load_run(args.directory)
+            from .record import load_run
+            arrays, _ = load_run(args.directory)
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
         source = (getattr(args, "scene", None) or getattr(args, "directory", None) or getattr(args, "study", None)
