@@ -137,10 +137,9 @@ def run_method(job) -> dict:
             result["summary"] = run.summary
         except SimulationDiverged as error:
             result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
-        if "summary" in result:              # how to load the scene again (the viewer's contacts)
-            result["summary"]["source"] = scene.origin(job["overrides"])
         except InputError as error:
             return {"input_error": [error.field, error.message], "warnings": []}
+    result["summary"]["source"] = scene.origin(job["overrides"])     # how to load the scene again (the viewer)
     result["warnings"] = [(warning.category, str(warning.message)) for warning in caught]
     if job["video"] is not None and "failure" not in result:
         result["media"] = render(open_trajectory(job["trajectory"]), os.path.dirname(job["trajectory"]),
