@@ -6,6 +6,7 @@
     contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
     contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
     contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
+    contactlab view RUN_DIR... the runs in an interactive 3-D viewer in the web browser
     contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
     contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
@@ -49,6 +50,9 @@ def _parser():
     run.add_argument("--export", default="", metavar="FORMATS",
                      help="also export the run: a comma-separated list of usd, obj, ply")
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
+    run.add_argument("--view", action="store_true", help="open the run in the interactive viewer afterwards "
+                                                         "(served on 127.0.0.1 until Ctrl-C)")
+    run.add_argument("--port", type=int, help="the viewer's port with --view (default: a free one)")
     run.add_argument("--memory-limit", metavar="GB", help="the most memory the run may need by its estimate "
                                                           "(default: half this machine's; 'none': no limit)")
     run.add_argument("--yes", action="store_true", help="run even a run of more than 500,000 steps (a duration "
@@ -90,6 +94,11 @@ def _parser():
     bench.add_argument("--tol", type=float, default=1e-8, help="tolerance on the natural-map error (default 1e-8)")
     bench.add_argument("--repeats", type=int, default=3, help="timed solves per problem and solver (default 3)")
     _cluster_arguments(bench)
+
+    view = commands.add_parser("view", help="look around runs in an interactive 3-D viewer in the web browser")
+    view.add_argument("directories", nargs="+", metavar="RUN_DIR",
+                      help="a run's output folder, or a compare folder (all its methods side by side)")
+    view.add_argument("--port", type=int, help="port on 127.0.0.1 to serve on (default: a free one)")
 
     export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
     export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
@@ -158,7 +167,7 @@ def _memory_limit(text):
 
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False):
+         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False, view=False, port=None):
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
@@ -167,6 +176,9 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     if video:                                     # a bad --fps fails before the run, not after it
         from .render import check_settings
         check_settings(fps)
+    if view:                                      # and so does a bad or busy --port
+        from .viewer import check_port
+        check_port(port)
     scene = load_scene(scene_source, overrides)
     steps = max(1, round(scene.duration / scene.dt))
     if steps > MANY_STEPS and not yes:
@@ -199,6 +211,8 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         print(json.dumps(result.summary))
     else:
         print(_plain_summary(result.summary, scene, written))
+    if view:
+        _view([out], port)
     return result
 
 
@@ -221,6 +235,14 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
             frames = write_mesh_sequence(arrays, os.path.join(out, "frames"), file_format=file_format, every=every)
             written.append(os.path.join(out, "frames", f"frame_*.{file_format} ({len(frames)} files)"))
     return written
+
+
+def _view(sources, port=None):
+    """Serve the viewer of ``sources`` (run or compare folders) until Ctrl-C."""
+    from .viewer import view
+    viewer = view(*sources, port=port)
+    print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", flush=True)
+    viewer.wait()
 
 
 def _compare(args):
@@ -314,7 +336,8 @@ def _main(argv):
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
                  plots=not args.no_plots, allow_divergence=args.allow_divergence,
-                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes)
+                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes,
+                 view=args.view, port=args.port)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":
@@ -337,6 +360,8 @@ def _main(argv):
                            elevation=args.elevation, azimuth=args.azimuth, title=title,
                            progress=sys.stderr.isatty())
             print("Wrote " + ", ".join(paths.values()))
+        elif args.command == "view":
+            _view(args.directories, args.port)
         elif args.command == "export":
             formats = _list_option(args.format, "--format", EXPORT_FORMATS)
             _whole_number(args.every, "--every")
@@ -346,7 +371,10 @@ def _main(argv):
     except InputError as error:
         source = (getattr(args, "scene", None) or getattr(args, "directory", None) or getattr(args, "study", None)
                   or DEFAULT_SCENE)
-        print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
+        if args.command == "view" or error.field == "--port":     # the message names the folder or port itself
+            print(f"error: {error}", file=sys.stderr)
+        else:
+            print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
         return 2
     except SimulationDiverged as error:
         written = getattr(error, "written", None)
