@@ -46,7 +46,7 @@ from .trajectory import check_arrays
 
 HOST = "127.0.0.1"          # the viewer listens on loopback only
 FRAME_SECONDS = 1.0 / 30.0  # s: how often the clock moves while playing
-GAP = 0.3                   # share of the widest run left empty between runs side by side
+GAP = 0.3                   # runs side by side are this share of the widest (or tallest) apart
 SPEEDS = ("0.1×", "0.25×", "0.5×", "1×", "2×", "4×")
 COLOURINGS = ("each body its colour", "penetration", "speed")
 FORCE_SHARE = 0.25          # the heaviest body's weight draws as an arrow of this share of the scene's size
@@ -56,6 +56,7 @@ POINT_RGB = (220, 30, 30)
 NORMAL_RGB = (30, 90, 220)
 FORCE_RGB = (255, 140, 0)
 SPEED_MAP, PENETRATION_MAP = "viridis", "YlOrRd"
+BODY_SEEN_THROUGH = 0.55    # bodies' opacity while contacts are shown (their arrows are inside them)
 
 
 # -- opening runs -------------------------------------------------------------------------
@@ -199,6 +200,20 @@ def _segments(starts, vectors):
     return np.stack([starts, starts + vectors], axis=1)
 
 
+def _arrows(starts, vectors, head=0.25):
+    """Arrows as line segments (3N, 2, 3): a shaft from each of ``starts`` (N, 3) along
+    ``vectors`` (N, 3), and two barbs at its tip, ``head`` of its length long."""
+    tips = starts + vectors
+    across = np.cross(vectors, np.where(np.abs(vectors[:, 2:3]) < 0.9 * np.linalg.norm(vectors, axis=1,
+                                                                                        keepdims=True),
+                                        [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]))
+    across *= 0.5 * head * np.linalg.norm(vectors, axis=1, keepdims=True) / np.maximum(
+        np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+    back = tips - head * vectors
+    return np.concatenate([_segments(starts, vectors), np.stack([tips, back + across], axis=1),
+                           np.stack([tips, back - across], axis=1)])
+
+
 def _rgb255(rgb):
     return np.clip(np.round(np.asarray(rgb, dtype=float)[..., :3] * 255.0), 0, 255).astype(np.uint8)
 
@@ -272,11 +287,9 @@ class Viewer:
         scene = self.server.scene
         scene.set_up_direction("+z")
         frames = [self._framing(run) for run in self.runs]
-        widest = max(upper[0] - lower[0] for lower, upper, _ in frames)
-        x = 0.0
+        slot = (1.0 + GAP) * max(max(upper[0] - lower[0], upper[2] - lower[2]) for lower, upper, _ in frames)
         for index, (run, (lower, upper, obstacles)) in enumerate(zip(self.runs, frames)):
-            run.offset = np.array([x - lower[0], 0.0, 0.0])
-            x += upper[0] - lower[0] + GAP * widest
+            run.offset = np.array([index * slot - 0.5 * (lower[0] + upper[0]), 0.0, 0.0])
             self._add_run(index, run, lower, upper, obstacles)
         lower = np.min([f[0] + r.offset for f, r in zip(frames, self.runs)], axis=0)
         upper = np.max([f[1] + r.offset for f, r in zip(frames, self.runs)], axis=0)
@@ -444,7 +457,7 @@ class Viewer:
         drawn = set()
         if contacts is not None and self.gui["points"].value and len(contacts.points):
             scene.add_point_cloud(f"{root}/contacts/points", contacts.points, colors=POINT_RGB,
-                                  point_size=0.015 * self.size, point_shape="circle")
+                                  point_size=0.01 * self.size, point_shape="circle")
             drawn.add("points")
         if contacts is not None and self.gui["normals"].value and len(contacts.points):
             scene.add_line_segments(f"{root}/contacts/normals",
@@ -454,7 +467,7 @@ class Viewer:
         if contacts is not None and self.gui["forces"].value and len(contacts.forces):
             scale = float(self.gui["force_scale"].value)
             scene.add_line_segments(f"{root}/contacts/forces",
-                                    _segments(contacts.force_points, contacts.forces / max(scale, 1e-12)),
+                                    _arrows(contacts.force_points, contacts.forces / max(scale, 1e-12)),
                                     colors=FORCE_RGB, thickness=1.5 * thickness)
             drawn.add("forces")
         for name in {"points", "normals", "forces"} - drawn:
@@ -469,8 +482,14 @@ class Viewer:
             rgb = _rgb255(colormaps[PENETRATION_MAP](contacts.body_depth / run.depth_range))
         else:
             rgb = run.body_rgb
+        opacity = BODY_SEEN_THROUGH if contacts is not None else None     # arrows inside bodies show
         for handle, value in zip(run.bodies, rgb):
             handle.color = tuple(int(v) for v in value)
+            handle.opacity = opacity
+
+    def nodes(self):
+        """The names of the scene's nodes (``/run0/bodies/3``, …), sorted."""
+        return sorted(self.server.scene._handle_from_node_name)
 
     # -- serving ---------------------------------------------------------------------------
 
