@@ -1,20 +1,15 @@
 """The interactive viewer (contactlab.viewer, issue 22): served on loopback, its scene graph,
 its clock, compare folders side by side, its errors, and the page drawn in headless Chromium."""
 
-import base64
-import json
 import os
-import shutil
 import socket
-import subprocess
 import time
 import urllib.request
 
 import numpy as np
 import pytest
-from matplotlib.image import imread
 
-from contactlab import ModelBuilder, cli, simulate
+from contactlab import ModelBuilder, browser, cli, simulate
 from contactlab.compare import compare
 from contactlab.errors import InputError
 from contactlab.record import load_run
@@ -155,85 +150,20 @@ def test_a_port_in_use_is_refused(pyramid, capsys):
 
 # -- a real browser -----------------------------------------------------------------------
 
-def _chromium():
-    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
-
-
-class _Page:
-    """One headless Chromium page driven over the DevTools protocol on 127.0.0.1."""
-
-    def __init__(self, browser, url, profile):
-        from websockets.sync.client import connect
-        self.process = subprocess.Popen(
-            [browser, "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-             "--hide-scrollbars", "--window-size=1000,700", "--remote-debugging-address=127.0.0.1",
-             "--remote-debugging-port=0", f"--user-data-dir={profile}", "--no-first-run", url],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        port_file = os.path.join(profile, "DevToolsActivePort")
-        deadline = time.monotonic() + 30
-        while not (os.path.isfile(port_file) and open(port_file).read().count("\n") >= 1):
-            assert time.monotonic() < deadline, "Chromium did not start its DevTools server"
-            time.sleep(0.1)
-        port = int(open(port_file).read().split()[0])
-        while True:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as listing:
-                pages = [target for target in json.load(listing) if target["type"] == "page"]
-            if pages:
-                break
-            time.sleep(0.1)
-        self.socket = connect(pages[0]["webSocketDebuggerUrl"], max_size=None)
-        self.calls = 0
-
-    def screenshot(self, path):
-        """A PNG of the page written to ``path``; the picture (h, w, 3) in [0, 1]."""
-        self.calls += 1
-        self.socket.send(json.dumps({"id": self.calls, "method": "Page.captureScreenshot",
-                                     "params": {"format": "png"}}))
-        while True:
-            reply = json.loads(self.socket.recv(timeout=30))
-            if reply.get("id") == self.calls:
-                break
-        with open(path, "wb") as stream:
-            stream.write(base64.b64decode(reply["result"]["data"]))
-        return imread(path)[..., :3]
-
-    def close(self):
-        self.socket.close()
-        self.process.terminate()
-        self.process.wait(timeout=10)
-
-
-def _scene_part(picture):
-    """The 3-D view's pixels left of viser's control panel (which covers the right 35 %)."""
-    return picture[:, : int(0.62 * picture.shape[1])]
-
-
-def _coloured(picture):
-    """Share of the pixels that are clearly coloured (the bodies; the page is white and grey)."""
-    return float(np.mean(picture.max(axis=-1) - picture.min(axis=-1) > 0.25))
-
-
 def test_the_page_draws_the_scene_and_follows_the_clock_in_headless_chromium(compared, tmp_path):
     """The compare folder's two falling balls: drawn, then lower once the clock moves on."""
-    browser = _chromium()
-    if browser is None:
+    if browser.chromium() is None:
         pytest.skip("no chromium, chromium-browser or google-chrome executable on PATH")
     shown = view(compared)
-    page = _Page(browser, shown.url, str(tmp_path / "profile"))
     try:
-        deadline, first = time.monotonic() + 40, None
-        while first is None or _coloured(_scene_part(first)) < 0.005:     # WebGL in software: a few seconds
-            assert time.monotonic() < deadline, "the canvas never drew the bodies"
-            time.sleep(0.5)
-            first = page.screenshot(tmp_path / "first.png")
-        assert shown.server.get_clients(), "the server never saw the page connect"
-        shown.show_time(shown.end)                                         # the clock moves on
-        deadline, later = time.monotonic() + 20, first
-        while np.abs(_scene_part(later) - _scene_part(first)).max() < 0.2:
-            assert time.monotonic() < deadline, "the page did not follow the clock"
-            time.sleep(0.3)
-            later = page.screenshot(tmp_path / "later.png")
-        assert _coloured(_scene_part(later)) > 0.005                       # the balls are still drawn
+        with browser.Page(shown.url) as page:
+            first = page.wait_for(tmp_path / "first.png", lambda p: browser.coloured(browser.scene_part(p)) > 0.005,
+                                  what="the bodies drawn")           # WebGL in software: a few seconds
+            assert shown.server.get_clients(), "the server never saw the page connect"
+            shown.show_time(shown.end)                                 # the clock moves on
+            later = page.wait_for(tmp_path / "later.png", lambda p: np.abs(browser.scene_part(p)
+                                                                           - browser.scene_part(first)).max() > 0.2,
+                                  seconds=20, what="the page following the clock")
+            assert browser.coloured(browser.scene_part(later)) > 0.005  # the balls are still drawn
     finally:
-        page.close()
         shown.stop()
