@@ -20,14 +20,15 @@ What it shows (docs/viewer.md):
 * on request, for the shown samples: contact points ``/runI/contacts/points``, normals
   ``/runI/contacts/normals`` and force arrows ``/runI/contacts/forces``. Contacts are not stored
   in a trajectory: the points, normals and depths come from :func:`contactlab.collision.collide`
-  on the recorded state, and the forces from one step of the run's method from that state
-  (:attr:`contactlab.methods.StepInfo.impulses` over the step's dt). Both need the run's Model,
+  on the recorded state, and the forces from a step of the run's method from that state
+  (:attr:`contactlab.methods.StepInfo.impulses` over the step's dt), warm started by one step before it. Both need the run's Model,
   rebuilt from its summary's ``source`` (or its built-in scene's name); they are computed only
   while a toggle needs them, so scrubbing stays smooth;
 * bodies coloured each its own colour, or by penetration (their deepest contact) or by speed.
 """
 
 import contextlib
+import dataclasses
 import io
 import os
 import socket
@@ -149,7 +150,8 @@ def open_runs(sources, field="RUN_DIR"):
 class ContactView:
     """What the viewer draws of one sample's contacts. points (C, 3) [m], normals (C, 3) unit
     (from B into A), depth (C,) [m] (> 0 overlapping), from collide() on the recorded state;
-    force_points (K, 3) [m] and forces (K, 3) [N] on side A, from one step of the method;
+    force_points (K, 3) [m] and forces (K, 3) [N] from one step of the method: the force on side A,
+    or on side B where A is static geometry (what a moving thing feels);
     body_depth (B,) [m] the deepest overlap of each body (0 when it touches nothing)."""
     points: np.ndarray
     normals: np.ndarray
@@ -185,11 +187,16 @@ def contacts_at(model, summary, state):
             options = methods.make_options(module, summary.get("options") or {}, f"method.{summary['method']}")
         except InputError:
             options = module.Options()
-        _, info = module.step(model, state, summary["dt"], options, summary.get("integrator", "symplectic_euler"))
+        step = lambda start: module.step(model, start, summary["dt"], options,
+                                         summary.get("integrator", "symplectic_euler"))
+        warm = step(state)[0].carried        # a first step finds what to warm start from, as the run had
+        _, info = step(dataclasses.replace(state, carried=warm))
         if info.impulses is not None and info.contacts.count:
             c = info.contacts
             push = (info.impulses[:, :1] * c.normal + info.impulses[:, 1:2] * c.tangent1
                     + info.impulses[:, 2:3] * c.tangent2) / summary["dt"]
+            static_a = (c.body_a < 0) & (c.particles_a[:, 0] < 0)       # the floor's side: show what B feels
+            push[static_a] *= -1.0
             acting = np.linalg.norm(push, axis=1) > 0.0
             force_points, forces = c.point[acting], push[acting]
     return ContactView(found.point, found.normal, found.depth, force_points, forces, body_depth)
@@ -296,7 +303,7 @@ class Viewer:
         self.size = float(max(np.max(upper - lower), 1e-3))
         centre = 0.5 * (lower + upper)
         self.server.initial_camera.look_at = tuple(centre)
-        self.server.initial_camera.position = tuple(centre + self.size * np.array([0.35, -1.1, 0.6]))
+        self.server.initial_camera.position = tuple(centre + self.size * np.array([0.3, -0.9, 0.5]))
         self._add_gui()
 
     def _framing(self, run):
@@ -380,7 +387,7 @@ class Viewer:
     def _legends(self):
         scale = float(self.gui["force_scale"].value)
         self.gui["legend"].content = (f"Red dots: contact points; blue: normals (from B into A); orange arrows: "
-                                      f"the force on side A. **Arrow scale: 10 cm = {0.1 * scale:.3g} N.**")
+                                      f"the force on a moving side (on A where both move). **Arrow scale: 10 cm = {0.1 * scale:.3g} N.**")
         colour = self.gui["colour"].value
         ranges = {"speed": ("speed", "m/s", "range", SPEED_MAP, "dark blue 0 → yellow"),
                   "penetration": ("deepest contact", "mm", "range", PENETRATION_MAP, "pale yellow 0 → dark red")}
