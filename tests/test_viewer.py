@@ -165,5 +165,8 @@ def test_the_page_draws_the_scene_and_follows_the_clock_in_headless_chromium(com
                                                                            - browser.scene_part(first)).max() > 0.2,
                                   seconds=20, what="the page following the clock")
             assert browser.coloured(browser.scene_part(later)) > 0.005  # the balls are still drawn
+            local = (shown.url, f"ws://{HOST}:{shown.port}", "data:", "blob:")
+            assert page.requests and not [address[:100] for address in page.requests
+                                          if not address.startswith(local)]   # nothing fetched from the network
     finally:
         shown.stop()

@@ -33,7 +33,9 @@ def chromium():
 
 class Page:
     """Chromium showing ``url`` in a ``width`` × ``height`` [px] window, until :meth:`close`
-    (or the end of a ``with`` block). RuntimeError when no Chromium starts."""
+    (or the end of a ``with`` block). RuntimeError when no Chromium starts. ``requests``: the
+    address of every request the page has made (its loads, scripts, websockets), as far as
+    the replies read so far tell."""
 
     def __init__(self, url, width=1000, height=700):
         from websockets.sync.client import connect
@@ -42,14 +44,38 @@ class Page:
             raise RuntimeError("no chromium, chromium-browser or google-chrome on PATH (apt-get install chromium)")
         self.profile = tempfile.TemporaryDirectory(prefix="contactlab-chromium-")
         self.process = subprocess.Popen([browser, *FLAGS, f"--window-size={width},{height}",
-                                         f"--user-data-dir={self.profile.name}", url],
+                                         f"--user-data-dir={self.profile.name}", "about:blank"],
                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             self.socket = connect(self._page_socket(), max_size=None)
         except BaseException:
             self._end_process()
             raise
-        self.calls = 0
+        self.calls, self.requests = 0, []
+        self.call("Network.enable")                  # every request from here on is seen
+        self.call("Page.enable")
+        self.call("Page.navigate", url=url)
+        self._read_until("Page.loadEventFired")
+
+    def call(self, method, **params):
+        """Call DevTools' ``method`` with ``params``; returns its result (dict). Network events
+        read on the way are noted in ``requests``."""
+        self.calls += 1
+        self.socket.send(json.dumps({"id": self.calls, "method": method, "params": params}))
+        reply = self._read_until(None)
+        if "error" in reply:
+            raise RuntimeError(f"DevTools {method}: {reply['error'].get('message')}")
+        return reply.get("result", {})
+
+    def _read_until(self, event):
+        """Read DevTools messages, noting requests, until ``event`` (a method name) or, for None,
+        the reply to the last call; returns that message."""
+        while True:
+            message = json.loads(self.socket.recv(timeout=30))
+            if message.get("method") in ("Network.requestWillBeSent", "Network.webSocketCreated"):
+                self.requests.append(message["params"].get("request", message["params"]).get("url", ""))
+            if (event is None and message.get("id") == self.calls) or (event and message.get("method") == event):
+                return message
 
     def _page_socket(self):
         """The DevTools websocket address of the page, once Chromium has written its port."""
@@ -68,15 +94,9 @@ class Page:
 
     def screenshot(self, path):
         """Write the page as a PNG to ``path``; returns the picture (h, w, 3) in [0, 1]."""
-        self.calls += 1
-        self.socket.send(json.dumps({"id": self.calls, "method": "Page.captureScreenshot",
-                                     "params": {"format": "png"}}))
-        while True:
-            reply = json.loads(self.socket.recv(timeout=30))
-            if reply.get("id") == self.calls:
-                break
+        data = self.call("Page.captureScreenshot", format="png")["data"]
         with open(path, "wb") as stream:
-            stream.write(base64.b64decode(reply["result"]["data"]))
+            stream.write(base64.b64decode(data))
         return imread(path)[..., :3]
 
     def wait_for(self, path, ready, seconds=40.0, what="the page"):

@@ -21,9 +21,9 @@ What it shows (docs/viewer.md):
   ``/runI/contacts/normals`` and force arrows ``/runI/contacts/forces``. Contacts are not stored
   in a trajectory: the points, normals and depths come from :func:`contactlab.collision.collide`
   on the recorded state, and the forces from a step of the run's method from that state
-  (:attr:`contactlab.methods.StepInfo.impulses` over the step's dt), warm started by one step before it. Both need the run's Model,
-  rebuilt from its summary's ``source`` (or its built-in scene's name); they are computed only
-  while a toggle needs them, so scrubbing stays smooth;
+  (:attr:`contactlab.methods.StepInfo.impulses` over the step's dt), warm started by one step
+  before it. Both need the run's Model, rebuilt from its summary's ``source`` (or its built-in
+  scene's name); they are computed only while a toggle needs them, so scrubbing stays smooth;
 * bodies coloured each its own colour, or by penetration (their deepest contact) or by speed.
 """
 
@@ -62,7 +62,7 @@ BODY_SEEN_THROUGH = 0.55    # bodies' opacity while contacts are shown (their ar
 
 # -- opening runs -------------------------------------------------------------------------
 
-@dataclass
+@dataclass(eq=False)
 class Shown:
     """One run in the viewer: ``label`` ("scene — method"), ``arrays`` (a trajectory: a
     :class:`contactlab.store.TrajectoryFile` or the dict of a Run), ``summary`` (the run's
@@ -293,7 +293,7 @@ class Viewer:
     def _build(self):
         scene = self.server.scene
         scene.set_up_direction("+z")
-        frames = [self._framing(run) for run in self.runs]
+        frames = [self._framing(run, len(times)) for run, times in zip(self.runs, self.time)]
         slot = (1.0 + GAP) * max(max(upper[0] - lower[0], upper[2] - lower[2]) for lower, upper, _ in frames)
         for index, (run, (lower, upper, obstacles)) in enumerate(zip(self.runs, frames)):
             run.offset = np.array([index * slot - 0.5 * (lower[0] + upper[0]), 0.0, 0.0])
@@ -306,10 +306,11 @@ class Viewer:
         self.server.initial_camera.position = tuple(centre + self.size * np.array([0.3, -0.9, 0.5]))
         self._add_gui()
 
-    def _framing(self, run):
-        """(lower (3,), upper (3,)) [m] of a run's content over its samples, and its obstacles
-        as (vertices (W, 3) [m], triangles (M, 3)), planes cut around the content."""
-        arrays = read_trajectory(run.arrays, REQUIRED, spread_samples(len(self.time[self.runs.index(run)])))
+    @staticmethod
+    def _framing(run, count):
+        """(lower (3,), upper (3,)) [m] of a run's content over its ``count`` samples, and its
+        obstacles as (vertices (W, 3) [m], triangles (M, 3)), planes cut around the content."""
+        arrays = read_trajectory(run.arrays, REQUIRED, spread_samples(count))
         check_arrays(arrays)
         content, flat, _, solid = scenery(arrays)
         pieces = [face for face in solid] + flat
@@ -344,8 +345,8 @@ class Viewer:
         run.free = np.flatnonzero(arrays["particle_cloth"] < 0)
         run.point_size = float(2.0 * np.mean(arrays["particle_radius"][run.free])) if len(run.free) else 0.0
         centre = 0.5 * (lower + upper)
-        scene.add_label(f"{root}/label", run.label, position=(centre[0], centre[1], upper[2] + 0.08 * (upper - lower).max()),
-                        anchor="bottom-center")
+        above = upper[2] + 0.08 * (upper - lower).max()
+        scene.add_label(f"{root}/label", run.label, position=(centre[0], centre[1], above), anchor="bottom-center")
         series = read_trajectory(run.arrays, ("body_velocity", "max_penetration"),
                                  spread_samples(len(self.time[index])))
         speeds = np.linalg.norm(series["body_velocity"], axis=-1)
@@ -387,12 +388,13 @@ class Viewer:
     def _legends(self):
         scale = float(self.gui["force_scale"].value)
         self.gui["legend"].content = (f"Red dots: contact points; blue: normals (from B into A); orange arrows: "
-                                      f"the force on a moving side (on A where both move). **Arrow scale: 10 cm = {0.1 * scale:.3g} N.**")
+                                      f"the force on a moving side (on A where both move). "
+                                      f"**Arrow scale: 10 cm = {0.1 * scale:.3g} N.**")
         colour = self.gui["colour"].value
-        ranges = {"speed": ("speed", "m/s", "range", SPEED_MAP, "dark blue 0 → yellow"),
-                  "penetration": ("deepest contact", "mm", "range", PENETRATION_MAP, "pale yellow 0 → dark red")}
+        ranges = {"speed": ("speed", "m/s", "dark blue 0 → yellow"),
+                  "penetration": ("deepest contact", "mm", "pale yellow 0 → dark red")}
         if colour in ranges:
-            what, unit, _, _, words = ranges[colour]
+            what, unit, words = ranges[colour]
             top = max(run.speed_range if colour == "speed" else 1000.0 * run.depth_range for run in self.runs)
             self.gui["colour_legend"].content = f"{what}: {words} {top:.3g} {unit} (the run's largest)"
         else:
@@ -446,7 +448,7 @@ class Viewer:
                 handle.wxyz = row["body_orientation"][0, body]
             if len(run.cloth_triangles):
                 scene.add_mesh_simple(f"{root}/cloth", row["particle_position"][0], run.cloth_triangles,
-                                      color=(102, 194, 165), side="double", flat_shading=True)
+                                      color=tuple(_rgb255(colormaps["Set2"](0))), side="double", flat_shading=True)
             if len(run.free):
                 scene.add_point_cloud(f"{root}/particles", row["particle_position"][0, run.free],
                                       colors=tuple(_rgb255(PARTICLE_RGB)), point_size=run.point_size,
