@@ -187,8 +187,10 @@ def contacts_at(model, summary, state):
             options = methods.make_options(module, summary.get("options") or {}, f"method.{summary['method']}")
         except InputError:
             options = module.Options()
-        step = lambda start: module.step(model, start, summary["dt"], options,
-                                         summary.get("integrator", "symplectic_euler"))
+
+        def step(start):
+            return module.step(model, start, summary["dt"], options, summary.get("integrator", "symplectic_euler"))
+
         warm = step(state)[0].carried        # a first step finds what to warm start from, as the run had
         _, info = step(dataclasses.replace(state, carried=warm))
         if info.impulses is not None and info.contacts.count:
@@ -313,13 +315,12 @@ class Viewer:
         arrays = read_trajectory(run.arrays, REQUIRED, spread_samples(count))
         check_arrays(arrays)
         content, flat, _, solid = scenery(arrays)
-        pieces = [face for face in solid] + flat
-        vertices = np.concatenate(pieces) if pieces else np.zeros((0, 3))
-        counts = np.array([len(piece) for piece in pieces], dtype=np.int64)
-        first = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        vertices = np.concatenate([solid.reshape(-1, 3), *flat])
+        counts = np.array([len(polygon) for polygon in flat], dtype=np.int64)
+        first = len(solid) * 3 + np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         fans = [np.column_stack([np.full(n - 2, f), f + np.arange(1, n - 1), f + np.arange(2, n)])
-                for f, n in zip(first, counts)]
-        triangles = np.concatenate(fans) if fans else np.zeros((0, 3), dtype=np.int64)
+                for f, n in zip(first, counts)]          # each flat polygon (convex) as a fan of triangles
+        triangles = np.concatenate([np.arange(3 * len(solid)).reshape(-1, 3), *fans]).astype(np.int64)
         points = [vertices] + ([np.stack(content)] if content is not None else [])
         points = np.concatenate(points)
         lower, upper = (points.min(axis=0), points.max(axis=0)) if len(points) else (-np.ones(3), np.ones(3))
