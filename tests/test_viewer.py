@@ -13,7 +13,8 @@ from contactlab import ModelBuilder, browser, cli, simulate
 from contactlab.compare import compare
 from contactlab.errors import InputError
 from contactlab.record import load_run
-from contactlab.viewer import HOST, Viewer, view
+from contactlab.methods import AVAILABLE
+from contactlab.viewer import HOST, Viewer, contacts_at, view
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +119,20 @@ def test_run_show_returns_a_server_with_stop_and_forces_from_the_method():
     finally:
         shown.stop()
     assert _refused(shown.port)
+
+
+@pytest.mark.parametrize("method", AVAILABLE)
+def test_every_method_gives_the_forces_that_hold_a_resting_box(method):
+    """StepInfo.impulses of each method, as the viewer draws them: a 2 kg box resting on the
+    floor is held up by its weight, 19.62 N, spread over its four corners."""
+    builder = ModelBuilder(gravity=(0, 0, -9.81))
+    builder.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=2.0, position=(0, 0, 0.1))
+    builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
+    model = builder.finalize()
+    run = simulate(model, method=method, dt=0.002, duration=0.5)
+    contacts = contacts_at(model, run.summary, run.state)
+    assert len(contacts.forces) == 4
+    np.testing.assert_allclose(contacts.forces.sum(axis=0), [0.0, 0.0, 2.0 * 9.81], atol=1e-3)
 
 
 def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
