@@ -1,6 +1,7 @@
 """The interactive viewer (contactlab.viewer, issue 22): served on loopback, its scene graph,
 its clock, compare folders side by side, its errors, and the page drawn in headless Chromium."""
 
+import json
 import os
 import socket
 import time
@@ -111,6 +112,7 @@ def test_run_show_returns_a_server_with_stop_and_forces_from_the_method():
     builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
     run = simulate(builder.finalize(), method="impulse", dt=0.002, duration=0.2)
     shown = run.show()
+    assert shown.url in shown._repr_html_()
     try:
         shown.gui["forces"].value = True
         shown.show_time(0.2)
@@ -140,6 +142,9 @@ def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
     out = str(tmp_path / "ball")
     assert cli.main(["run", "bouncing_ball", "--duration", "0.05", "--out", out, "--no-plots", "--view"]) == 0
     assert "Viewer: http://127.0.0.1:" in capsys.readouterr().out
+    assert cli.main(["run", "bouncing_ball", "--duration", "0.05", "--out", out, "--no-plots", "--view", "--json"]) == 0
+    printed = capsys.readouterr()
+    assert json.loads(printed.out)["scene"] == "bouncing_ball" and "Viewer: http://127.0.0.1:" in printed.err
 
 
 def test_a_folder_that_is_not_a_run_is_one_line_and_exit_code_2(tmp_path, capsys):

@@ -211,8 +211,8 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         print(json.dumps(result.summary))
     else:
         print(_plain_summary(result.summary, scene, written))
-    if view:
-        _view([out], port)
+    if view:                                      # with --json, standard output holds the JSON alone
+        _view([out], port, sys.stderr if as_json else sys.stdout)
     return result
 
 
@@ -237,11 +237,12 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     return written
 
 
-def _view(sources, port=None):
-    """Serve the viewer of ``sources`` (run or compare folders) until Ctrl-C."""
+def _view(sources, port=None, stream=None):
+    """Serve the viewer of ``sources`` (run or compare folders) until Ctrl-C, its address
+    printed on ``stream`` (standard output unless given)."""
     from .viewer import view
     viewer = view(*sources, port=port)
-    print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", flush=True)
+    print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", file=stream or sys.stdout, flush=True)
     viewer.wait()
 
 

@@ -29,6 +29,7 @@ What it shows (docs/viewer.md):
 
 import contextlib
 import dataclasses
+import html
 import io
 import os
 import socket
@@ -524,6 +525,11 @@ class Viewer:
             pass
         finally:
             self.stop()
+
+    def _repr_html_(self):          # Jupyter: a link to open it
+        address = html.escape(self.url)
+        return (f"<div>contactlab viewer of {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}: "
+                f"<a href='{address}' target='_blank'>{address}</a> (<code>.stop()</code> ends it)</div>")
 
     def __repr__(self):
         return f"Viewer({self.url}, {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}; .stop() ends it)"
