@@ -85,6 +85,23 @@ def test_the_timeline_moves_the_bodies_to_the_recorded_positions(viewer, pyramid
             np.testing.assert_allclose(handle.wxyz, orientation[sample, body], atol=1e-6)
 
 
+def test_bodies_are_coloured_by_speed_and_by_penetration(compared):
+    shown = view(compared)
+    try:
+        shown.show_time(0.2)                                      # the balls fall at about 2 m/s
+        own = [tuple(run.bodies[0].color) for run in shown.runs]
+        shown.gui["colour"].value = "speed"
+        shown.redraw()
+        assert [tuple(run.bodies[0].color) for run in shown.runs] != own
+        assert "m/s" in shown.gui["colour_legend"].content
+        shown.gui["colour"].value = "penetration"
+        shown.redraw()
+        assert all(contacts is not None for contacts in shown.contacts)    # computed for the colours
+        assert "mm" in shown.gui["colour_legend"].content
+    finally:
+        shown.stop()
+
+
 def test_playing_moves_the_clock_at_the_chosen_speed(viewer):
     viewer.gui["speed"].value = "0.5×"
     viewer.set_playing(True)
@@ -185,6 +202,12 @@ def test_the_page_draws_the_scene_and_follows_the_clock_in_headless_chromium(com
                                                                            - browser.scene_part(first)).max() > 0.2,
                                   seconds=20, what="the page following the clock")
             assert browser.coloured(browser.scene_part(later)) > 0.005  # the balls are still drawn
+            shown.show_time(shown.start)
+            assert page.click("Play")                                  # a user presses Play: the clock runs
+            deadline = time.monotonic() + 10
+            while not (shown.playing and shown.gui["time"].value > shown.start):
+                assert time.monotonic() < deadline, "pressing Play in the page did not start the clock"
+                time.sleep(0.1)
             local = (shown.url, f"ws://{HOST}:{shown.port}", "data:", "blob:")
             assert page.requests and not [address[:100] for address in page.requests
                                           if not address.startswith(local)]   # nothing fetched from the network

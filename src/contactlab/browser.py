@@ -92,6 +92,13 @@ class Page:
                     return pages[0]["webSocketDebuggerUrl"]
             time.sleep(0.1)
 
+    def click(self, text):
+        """Click the page's button that reads ``text``; returns whether there was one."""
+        found = self.call("Runtime.evaluate", expression=(
+            f"(() => {{ const b = [...document.querySelectorAll('button')].find(b => b.textContent.trim() === "
+            f"{json.dumps(text)}); if (b) b.click(); return !!b; }})()"), returnByValue=True)
+        return bool(found.get("result", {}).get("value"))
+
     def screenshot(self, path):
         """Write the page as a PNG to ``path``; returns the picture (h, w, 3) in [0, 1]."""
         data = self.call("Page.captureScreenshot", format="png")["data"]
