@@ -68,7 +68,8 @@ class Shown:
     """One run in the viewer: ``label`` ("scene — method"), ``arrays`` (a trajectory: a
     :class:`contactlab.store.TrajectoryFile` or the dict of a Run), ``summary`` (the run's
     summary.json, {} unknown), ``model`` (its Model, None when it cannot be rebuilt: no contacts
-    then), ``offset`` (3,) [m] where its origin sits in the viewer."""
+    then), ``offset`` (3,) [m] where its origin sits in the viewer. The Viewer adds its drawing
+    state to it: the bodies' scene handles and colours, the colour scales' ranges."""
     label: str
     arrays: object
     summary: dict
@@ -494,6 +495,9 @@ class Viewer:
         else:
             rgb = run.body_rgb
         opacity = BODY_SEEN_THROUGH if contacts is not None else None     # arrows inside bodies show
+        if getattr(run, "painted", None) == (rgb.tobytes(), opacity):      # unchanged: nothing to send
+            return
+        run.painted = (rgb.tobytes(), opacity)
         for handle, value in zip(run.bodies, rgb):
             handle.color = tuple(int(v) for v in value)
             handle.opacity = opacity
