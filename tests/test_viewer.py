@@ -3,6 +3,7 @@ its clock, compare folders side by side, its errors, and the page drawn in headl
 
 import json
 import os
+import shutil
 import socket
 import time
 import urllib.request
@@ -162,6 +163,21 @@ def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
     assert cli.main(["run", "bouncing_ball", "--duration", "0.05", "--out", out, "--no-plots", "--view", "--json"]) == 0
     printed = capsys.readouterr()
     assert json.loads(printed.out)["scene"] == "bouncing_ball" and "Viewer: http://127.0.0.1:" in printed.err
+
+
+def test_a_run_whose_scene_cannot_be_loaded_is_shown_without_contacts(pyramid, tmp_path):
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    shutil.copy(os.path.join(pyramid, "trajectory.h5"), lone)            # no summary.json: no scene to load
+    shown = view(str(lone), pyramid)
+    try:
+        assert [run.model is None for run in shown.runs] == [True, False]
+        shown.gui["points"].value = True
+        shown.redraw()
+        assert shown.contacts[0] is None and len(shown.contacts[1].points) > 0
+        assert "/run0/contacts/points" not in shown.nodes() and "/run1/contacts/points" in shown.nodes()
+    finally:
+        shown.stop()
 
 
 def test_a_folder_that_is_not_a_run_is_one_line_and_exit_code_2(tmp_path, capsys):

@@ -367,7 +367,7 @@ class Viewer:
             self.gui["play"] = gui.add_button("Play", icon=None)
             self.gui["speed"] = gui.add_dropdown("speed", SPEEDS, initial_value="1×")
         with gui.add_folder("Contacts"):
-            have_model = all(run.model is not None for run in self.runs)
+            have_model = any(run.model is not None for run in self.runs)
             self.gui["points"] = gui.add_checkbox("contact points", False, disabled=not have_model)
             self.gui["normals"] = gui.add_checkbox("normals", False, disabled=not have_model)
             self.gui["forces"] = gui.add_checkbox("force arrows", False, disabled=not have_model)
@@ -378,9 +378,10 @@ class Viewer:
         with gui.add_folder("Colours"):
             self.gui["colour"] = gui.add_dropdown("bodies", COLOURINGS, initial_value=COLOURINGS[0])
             self.gui["colour_legend"] = gui.add_markdown("")
-        if not all(run.model is not None for run in self.runs):
-            gui.add_markdown("*Contacts need the run's scene, which could not be loaded again "
-                             "(a scene file moved or changed since the run).*")
+        missing = [run.label for run in self.runs if run.model is None]
+        if missing:
+            gui.add_markdown(f"*No contacts for {', '.join(missing)}: they need the run's scene, which could not "
+                             f"be loaded again (a scene file moved or changed since the run).*")
         self.gui["time"].on_update(lambda _: self.show_time(self.gui["time"].value, from_slider=True))
         self.gui["play"].on_click(lambda _: self.set_playing(not self.playing))
         self.gui["speed"].on_update(lambda _: setattr(self, "speed", float(self.gui["speed"].value.rstrip("×"))))
