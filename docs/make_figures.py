@@ -3,7 +3,7 @@
     python3 docs/make_figures.py            # writes docs/figures/ (a few minutes)
     python3 docs/make_figures.py --quick --out /tmp/figures   # short runs, to check the script
 
-Every picture in README.md and docs/methods/*.md comes from here: each is drawn from a run of
+Every picture in README.md, docs/methods/*.md and docs/viewer.md comes from here: each is drawn from a run of
 a built-in scene with the settings below, so running this again after a change to a method
 shows its effect in the documentation.
 """
@@ -112,6 +112,38 @@ def penalty_sinking(out, scale):
     print(f"penalty sinking against k → {path}")
 
 
+# the viewer's picture (docs/viewer.md): the pyramid under hard constraints, contacts and forces shown
+VIEWER_SCENE, VIEWER_METHOD, VIEWER_SECONDS = "box_pyramid", "constraints", 1.0
+NOTICE_WIDTH = 320          # px: the left strip of the page where the browser's "software WebGL" notice sits
+
+
+def viewer_picture(out, scale):
+    """docs/figures/viewer.png: the viewer in headless Chromium (contactlab.browser), its
+    contact points and force arrows on, at the end of the run; skipped without Chromium."""
+    from contactlab import browser
+    from contactlab.viewer import view
+    if browser.chromium() is None:
+        print("viewer picture skipped: no Chromium on PATH (apt-get install chromium)")
+        return
+    scene = load_scene(VIEWER_SCENE, [f"simulation.method={VIEWER_METHOD}"])
+    result = simulate(scene.model, VIEWER_METHOD, scene.dt, VIEWER_SECONDS * scale,
+                      scene.method_options.get(VIEWER_METHOD, {}), scene.integrator, scene_name=VIEWER_SCENE)
+    shown = view(result)
+    try:
+        for toggle in ("points", "forces"):
+            shown.gui[toggle].value = True
+        shown.show_time(shown.end)
+        path = os.path.join(out, "viewer.png")
+        with browser.Page(shown.url, width=1100, height=760) as page:
+            page.wait_for(path, lambda p: (browser.coloured(browser.scene_part(p)) > 0.02)
+                          & ((p[..., 0] > 0.7) & (p[..., 1] < 0.3) & (p[..., 2] < 0.3)).any(), what="the viewer")
+    finally:
+        shown.stop()
+    picture = Image.open(path).convert("RGB")      # the page's viewport: the window less its frame
+    picture.crop((NOTICE_WIDTH, 0, *picture.size)).save(path)
+    print(f"viewer picture → {path}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures"))
@@ -122,6 +154,7 @@ def main():
     readme_picture(args.out, scale)
     guide_figures(args.out, scale)
     penalty_sinking(args.out, scale)
+    viewer_picture(args.out, scale)
 
 
 if __name__ == "__main__":

@@ -86,9 +86,9 @@ def test_frames_show_the_sample_nearest_to_their_time():
     time = np.array([0.0, 0.04, 0.1, 0.19, 0.3, 0.42])
     frames = render._frame_times(time, 10.0)
     assert np.allclose(frames, [0.0, 0.1, 0.2, 0.3])   # round(0.42 s × 10) frames
-    assert render._nearest(time, frames).tolist() == [0, 2, 3, 4]
+    assert render.nearest(time, frames).tolist() == [0, 2, 3, 4]
     assert render._frame_times(np.array([2.5]), 30.0).tolist() == [2.5]    # one sample: one frame
-    assert render._nearest(np.array([2.5]), np.array([2.5])).tolist() == [0]
+    assert render.nearest(np.array([2.5]), np.array([2.5])).tolist() == [0]
 
 
 def empty_trajectory(duration):

@@ -6,6 +6,7 @@
     contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
     contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
     contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
+    contactlab view RUN_DIR... the runs in an interactive 3-D viewer in the web browser
     contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
     contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
@@ -49,6 +50,9 @@ def _parser():
     run.add_argument("--export", default="", metavar="FORMATS",
                      help="also export the run: a comma-separated list of usd, obj, ply")
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
+    run.add_argument("--view", action="store_true", help="open the run in the interactive viewer afterwards "
+                                                         "(served on 127.0.0.1 until Ctrl-C)")
+    run.add_argument("--port", type=int, help="the viewer's port with --view (default: a free one)")
     run.add_argument("--memory-limit", metavar="GB", help="the most memory the run may need by its estimate "
                                                           "(default: half this machine's; 'none': no limit)")
     run.add_argument("--yes", action="store_true", help="run even a run of more than 500,000 steps (a duration "
@@ -90,6 +94,11 @@ def _parser():
     bench.add_argument("--tol", type=float, default=1e-8, help="tolerance on the natural-map error (default 1e-8)")
     bench.add_argument("--repeats", type=int, default=3, help="timed solves per problem and solver (default 3)")
     _cluster_arguments(bench)
+
+    view = commands.add_parser("view", help="look around runs in an interactive 3-D viewer in the web browser")
+    view.add_argument("directories", nargs="+", metavar="RUN_DIR",
+                      help="a run's output folder, or a compare folder (all its methods side by side)")
+    view.add_argument("--port", type=int, help="port on 127.0.0.1 to serve on (default: a free one)")
 
     export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
     export.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
@@ -158,7 +167,7 @@ def _memory_limit(text):
 
 
 def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False):
+         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False, view=False, port=None):
     from .closed_form import checks
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
@@ -168,6 +177,9 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     if video:                                     # a bad --fps fails before the run, not after it
         from .render import check_settings
         check_settings(fps)
+    if view:                                      # and so does a bad or busy --port
+        from .viewer import check_port
+        check_port(port)
     scene = load_scene(scene_source, overrides)
     steps = max(1, round(scene.duration / scene.dt))
     if steps > MANY_STEPS and not yes:
@@ -183,7 +195,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
                           allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
     except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
         if getattr(error, "run", None) is not None:
-            error.run.summary["trajectory"] = trajectory
+            error.run.summary.update(trajectory=trajectory, source=scene.origin(overrides))
             write_summary(out, error.run.summary)
             error.written = out
         else:
@@ -195,12 +207,15 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     result.summary["trajectory"] = trajectory
     found = checks(scene.name, scene.model, result.arrays)        # the scene's stated expectations
     result.summary["checks"] = [check.as_record() for check in found]
+    result.summary["source"] = scene.origin(overrides)      # how to load the scene again (the viewer's contacts)
     write_summary(out, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
         print(json.dumps(result.summary))
     else:
         print(_plain_summary(result.summary, scene, written, found))
+    if view:                                      # with --json, standard output holds the JSON alone
+        _view([out], port, sys.stderr if as_json else sys.stdout)
     return result
 
 
@@ -225,36 +240,13 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     return written
 
 
-def _load_run(directory):
-    """The trajectory and summary of an earlier run's output folder. The trajectory is
-    trajectory.h5 read back lazily (contactlab.store), or the trajectory.npz of an older
-    contactlab read without unpickling anything (contactlab.trajectory.load_npz); render and
-    export check its arrays. The summary is {} unless summary.json is a regular file holding
-    a JSON object that names the scene and the method."""
-    from .record import TRAJECTORY
-    from .store import open_trajectory
-    from .trajectory import load_npz
-    path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
-    if os.path.isfile(path):
-        arrays = open_trajectory(path, "OUT_DIR")
-    elif os.path.isfile(older):
-        arrays, path = load_npz(older, "OUT_DIR"), older
-    else:
-        raise InputError("OUT_DIR", f"found no {TRAJECTORY} in {directory}; give the folder a "
-                                    f"'contactlab run' wrote (its --out)")
-    if "body_surface_vertices" not in arrays:
-        raise InputError("OUT_DIR", f"{path} was written by an older contactlab without the shapes' "
-                                    f"surfaces; run the scene again")
-    summary_path = os.path.join(directory, "summary.json")
-    summary = {}
-    if os.path.isfile(summary_path):               # never open a FIFO or a device of that name
-        try:
-            with open(summary_path, encoding="utf-8") as stream:
-                summary = json.load(stream)
-        except (OSError, ValueError, RecursionError):
-            summary = {}
-    named = isinstance(summary, dict) and all(isinstance(summary.get(key), str) for key in ("scene", "method"))
-    return arrays, summary if named else {}
+def _view(sources, port=None, stream=None):
+    """Serve the viewer of ``sources`` (run or compare folders) until Ctrl-C, its address
+    printed on ``stream`` (standard output unless given)."""
+    from .viewer import view
+    viewer = view(*sources, port=port)
+    print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", file=stream or sys.stdout, flush=True)
+    viewer.wait()
 
 
 def _compare(args):
@@ -349,7 +341,8 @@ def _main(argv):
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
                  plots=not args.no_plots, allow_divergence=args.allow_divergence,
-                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes)
+                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes,
+                 view=args.view, port=args.port)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":
@@ -364,22 +357,29 @@ def _main(argv):
                                                        solved.items()))
             print(f"Table: {result.csv} (and {result.markdown.name}); performance profile: {result.profile_png}")
         elif args.command == "render":
-            arrays, summary = _load_run(args.directory)
+            from .record import load_run
+            arrays, summary = load_run(args.directory)
             from .render import render
             title = f"{summary['scene']} — {summary['method']}" if "scene" in summary else None
             paths = render(arrays, args.directory, fps=args.fps, width=args.width, height=args.height,
                            elevation=args.elevation, azimuth=args.azimuth, title=title,
                            progress=sys.stderr.isatty())
             print("Wrote " + ", ".join(paths.values()))
+        elif args.command == "view":
+            _view(args.directories, args.port)
         elif args.command == "export":
             formats = _list_option(args.format, "--format", EXPORT_FORMATS)
             _whole_number(args.every, "--every")
-            arrays, _ = _load_run(args.directory)
+            from .record import load_run
+            arrays, _ = load_run(args.directory)
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
         source = (getattr(args, "scene", None) or getattr(args, "directory", None) or getattr(args, "study", None)
                   or DEFAULT_SCENE)
-        print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
+        if args.command == "view" or error.field == "--port":     # the message names the folder or port itself
+            print(f"error: {error}", file=sys.stderr)
+        else:
+            print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)
         return 2
     except SimulationDiverged as error:
         written = getattr(error, "written", None)

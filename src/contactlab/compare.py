@@ -141,6 +141,7 @@ def run_method(job) -> dict:
             result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
         except InputError as error:
             return {"input_error": [error.field, error.message], "warnings": []}
+    result["summary"]["source"] = scene.origin(job["overrides"])     # how to load the scene again (the viewer)
     result["warnings"] = [(warning.category, str(warning.message)) for warning in caught]
     if job["video"] is not None and "failure" not in result:
         result["media"] = render(open_trajectory(job["trajectory"]), os.path.dirname(job["trajectory"]),
@@ -180,9 +181,7 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence, 
             skipped[name] = "not supported"
             continue
         created.folder(os.path.join(out, name))
-        source = os.path.abspath(scene_source) if scene.source and not scene.source.startswith("builtin:") \
-            else scene_source
-        jobs.append((name, {"scene": source, "overrides": [*overrides, f"simulation.method={name}"],
+        jobs.append((name, {**scene.origin([*overrides, f"simulation.method={name}"]),
                             "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)), "video": video,
                             "allow_divergence": allow_divergence, "progress": progress}))
     if _parallel(workers, scheduler, scenes, video is not None):

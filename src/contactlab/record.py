@@ -289,6 +289,37 @@ def write_summary(directory, summary):
     return path
 
 
+def load_run(directory, field="OUT_DIR"):
+    """(trajectory, summary) of an earlier run's output folder ``directory``. The trajectory is
+    trajectory.h5 read back lazily (contactlab.store), or the trajectory.npz of an older
+    contactlab read without unpickling anything (contactlab.trajectory.load_npz); render, export
+    and the viewer check its arrays. The summary is {} unless summary.json is a regular file
+    holding a JSON object that names the scene and the method. A folder that is not a run is an
+    InputError on ``field`` (the option or argument that named it)."""
+    from .trajectory import load_npz
+    path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
+    if os.path.isfile(path):
+        arrays = store.open_trajectory(path, field)
+    elif os.path.isfile(older):
+        arrays, path = load_npz(older, field), older
+    else:
+        raise InputError(field, f"found no {TRAJECTORY} in {directory}; give the folder a "
+                                f"'contactlab run' wrote (its --out)")
+    if "body_surface_vertices" not in arrays:
+        raise InputError(field, f"{path} was written by an older contactlab without the shapes' "
+                                f"surfaces; run the scene again")
+    summary_path = os.path.join(directory, "summary.json")
+    summary = {}
+    if os.path.isfile(summary_path):               # never open a FIFO or a device of that name
+        try:
+            with open(summary_path, encoding="utf-8") as stream:
+                summary = json.load(stream)
+        except (OSError, ValueError, RecursionError):
+            summary = {}
+    named = isinstance(summary, dict) and all(isinstance(summary.get(key), str) for key in ("scene", "method"))
+    return arrays, summary if named else {}
+
+
 def write_outputs(directory, arrays, summary):
     """Write a trajectory held in memory (``arrays``) as ``trajectory.h5`` and ``summary`` as
     ``summary.json`` into ``directory`` (created if needed).

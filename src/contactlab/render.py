@@ -81,7 +81,7 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     time = checked_times(arrays)
     mp4_times, gif_times, _ = _video_times(time, fps, formats)
     drawn = {len(time) - 1} | {int(k) for times in (mp4_times, gif_times) if times is not None
-                               for k in _nearest(time, times)}
+                               for k in nearest(time, times)}
     picture = _Picture(arrays, width, height, elevation, azimuth, title, np.array(sorted(drawn)))
     paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
     paths["still"] = os.path.join(directory, "still.png")
@@ -108,7 +108,7 @@ def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azi
         raise InputError("sample", f"expected a whole number from {-count} to {count - 1} "
                                    f"(the trajectory has {count} samples), found {sample!r}")
     sample = int(sample) % count
-    framing = np.union1d(np.linspace(0, count - 1, min(count, STILL_SAMPLES)).astype(int), [sample])
+    framing = np.union1d(spread_samples(count), [sample])
     picture = _Picture(arrays, width, height, elevation, azimuth, title, framing)
     image = picture.draw(int(np.searchsorted(framing, sample)))
     with atomic_path(path) as temporary:
@@ -125,8 +125,8 @@ def _write_videos(picture, paths, fps, progress):
     """
     time = picture.time
     mp4_times, gif_times, gif_delay = _video_times(time, fps, paths)
-    mp4_count = Counter(_nearest(time, mp4_times).tolist() if "mp4" in paths else [])
-    gif_count = Counter(_nearest(time, gif_times).tolist() if "gif" in paths else [])
+    mp4_count = Counter(nearest(time, mp4_times).tolist() if "mp4" in paths else [])
+    gif_count = Counter(nearest(time, gif_times).tolist() if "gif" in paths else [])
     gif_frames = []
     with _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4:
         for sample in tqdm(sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False,
@@ -198,7 +198,7 @@ def _video_times(time, fps, formats):
     gif_delay = _gif_delay(fps)
     gif_times = _frame_times(time, 100.0 / gif_delay)
     if "mp4" in formats:
-        gif_times = mp4_times[_nearest(mp4_times, gif_times)]
+        gif_times = mp4_times[nearest(mp4_times, gif_times)]
     return (mp4_times if "mp4" in formats else None, gif_times if "gif" in formats else None, gif_delay)
 
 
@@ -210,7 +210,13 @@ def _frame_times(time, rate):
     return time[0] + np.arange(count) / rate
 
 
-def _nearest(times, wanted):
+def spread_samples(count, most=STILL_SAMPLES):
+    """At most ``most`` sample indices (n,) spread evenly over ``count`` samples, first and last
+    included: those that frame a camera without reading a whole long run."""
+    return np.unique(np.linspace(0, count - 1, min(count, most)).astype(int))
+
+
+def nearest(times, wanted):
     """Index (n,) of the entry of the sorted ``times`` (T,) nearest to each of ``wanted`` (n,)."""
     after = np.clip(np.searchsorted(times, wanted), 1, max(len(times) - 1, 1))
     before = after - 1
@@ -402,6 +408,19 @@ def _limits(content, flat_polygons):
     return centre - half, centre + half
 
 
+def scenery(arrays):
+    """The static obstacles framed around what moves in the trajectory ``arrays`` (its samples
+    all read: pass the few that frame it), as still(), render() and the viewer draw them:
+    (content: (lower (3,), upper (3,)) [m] of the bodies, particles and solid obstacles over
+    the samples, or None; flat: the plane squares and flat meshes cut to a rectangle around the
+    content, a list of convex polygons (k, 3) [m]; their unit normals (n, 3); solid: the faces
+    (m, 3, 3) [m] of the other obstacles)."""
+    flat, solid = _split_obstacles(arrays["obstacle_vertices"], arrays["obstacle_triangles"])
+    content = _content_bounds(arrays, solid)
+    flat_polygons, flat_normals = _cut_flat(flat, *_view_box(content, flat))
+    return content, flat_polygons, flat_normals, solid
+
+
 # -- the picture --------------------------------------------------------------------------
 
 class _Picture:
@@ -430,10 +449,7 @@ class _Picture:
         self.cloth_rgba = colormaps["Set2"](cloth_of % 8)
         self.free = np.flatnonzero(arrays["particle_cloth"] < 0)
 
-        flat, solid = _split_obstacles(arrays["obstacle_vertices"], arrays["obstacle_triangles"])
-        content = _content_bounds(arrays, solid)
-        lower, upper = _view_box(content, flat)
-        flat_polygons, flat_normals = _cut_flat(flat, lower, upper)
+        content, flat_polygons, flat_normals, solid = scenery(arrays)
         self.obstacle_faces = solid
         self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), _normals(solid), self.light, True)
 

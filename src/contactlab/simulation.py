@@ -43,11 +43,20 @@ class Run:
     state: object        # the final State
     arrays: dict         # the trajectory (see docs/trajectory.md)
     summary: dict        # the JSON summary (see docs/trajectory.md)
+    model: object = None  # the Model it ran (None for a run read back from a folder)
 
     def __repr__(self):
         s = self.summary
         return (f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
                 f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})")
+
+    def show(self, port=None):
+        """Open this run in the interactive viewer (contactlab.viewer, docs/viewer.md), served on
+        127.0.0.1 in the background, a free port unless ``port``: returns the Viewer (its ``url``;
+        ``.stop()`` ends it), so a notebook goes on. Its trajectory is shown where it is, in memory
+        or in its trajectory.h5; contacts and forces use the run's Model."""
+        from .viewer import view
+        return view(self, port=port)
 
     def _repr_html_(self):              # Jupyter (contactlab.notebook): the summary and the last sample drawn
         from .notebook import run_html
@@ -269,12 +278,12 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
         message = health.message(stopped)
         summary["diverged"] = {"check": stopped.check, "time": stopped.time, "message": message,
                                "steps_made": steps_made}
-        raise SimulationDiverged(message, time=stopped.time, run=Run(state, arrays, summary))
+        raise SimulationDiverged(message, time=stopped.time, run=Run(state, arrays, summary, model))
     if interrupted is not None:
         summary["interrupted"] = {"signal": interrupted.name, "time": totals.last_time, "steps_made": steps_made}
-        interrupted.run = Run(state, arrays, summary)
+        interrupted.run = Run(state, arrays, summary, model)
         raise interrupted
-    return Run(state, arrays, summary)
+    return Run(state, arrays, summary, model)
 
 
 class _Stopped(Exception):

@@ -13,6 +13,8 @@ A method module provides:
 
 from dataclasses import dataclass, fields
 
+import numpy as np
+
 from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS
 from ..contacts import Contacts
@@ -27,6 +29,8 @@ class StepInfo:
     solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
     energy_elastic: float = 0.0   # energy stored in contact springs [J]
     implicit_springs: bool = False  # penalty: contact springs stepped by backward Euler, the explicit step being unstable
+    impulses: np.ndarray = None   # (C, 3) [N s] each contact's push on side A over the step, along (normal,
+    #                               tangent1, tangent2) of ``contacts``; None: no contacts (the viewer's arrows)
 
 
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")

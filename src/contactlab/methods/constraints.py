@@ -270,4 +270,5 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
     carried = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, solved, carried)
-    return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual))
+    return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual),
+                          impulses=lam)

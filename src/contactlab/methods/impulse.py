@@ -155,7 +155,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
     carried = dict(state.carried, manifolds=manifolds, impulse_ids=contacts.feature_id, impulse_values=impulses)
     new = State.assemble(state.time + h, positions, solved, carried)
-    return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change)
+    return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change, impulses=impulses)
 
 
 def warm_start_impulses(carried, feature_id, fraction):

@@ -538,4 +538,4 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     new = State.assemble(state.time + dt, positions, unstack(v_new, model.body_count), carried)
     return new, StepInfo(contacts, solver_iterations=passes, solver_residual=residual,
                          energy_elastic=elastic_energy(springs, depth_after, elongation),
-                         implicit_springs=implicit and integrator != "backward_euler")
+                         implicit_springs=implicit and integrator != "backward_euler", impulses=h * forces)

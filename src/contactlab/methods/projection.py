@@ -117,12 +117,15 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
                                                                  predicted_displacement, options, sweep, state.carried,
                                                                  contacts)
     carried = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
+    pushed = lam                    # [kg m] each contact's λ summed over the passes, by contact id
     for _ in range(options.passes - 1):
         if contacts.count == 0:
             break
         projected = State.assemble(state.time + h, _displaced(model, state, displacement, h), state.velocities)
-        displacement, contacts, _, sweeps, change = project(model, projected, displacement, displacement, options,
-                                                            sweep)
+        ids = contacts.feature_id
+        displacement, contacts, more, sweeps, change = project(model, projected, displacement, displacement, options,
+                                                               sweep)
+        pushed = values_by_id(ids, pushed, contacts.feature_id, 3)[0] + more
         total_sweeps += sweeps
         if sweeps <= 1 and change <= options.tolerance:
             break
@@ -130,7 +133,8 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     velocity = v_free + (displacement - predicted_displacement) / h
     positions = _displaced(model, state, displacement, h)
     new = State.assemble(state.time + h, positions, unstack(velocity, model.body_count), carried)
-    return new, StepInfo(contacts, solver_iterations=total_sweeps, solver_residual=change)
+    return new, StepInfo(contacts, solver_iterations=total_sweeps, solver_residual=change,
+                         impulses=pushed / h)    # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
 
 
 def _displaced(model, state, displacement, h):

@@ -46,6 +46,14 @@ class Scene:
     description: str = ""
     source: str = ""
 
+    def origin(self, overrides=()) -> dict:
+        """How to load this scene again from any folder, as a run's summary records it (its
+        ``source``): ``{"scene": the built-in name or the file's absolute path, "overrides":
+        the --set strings it was loaded with}``."""
+        builtin = self.source.startswith("builtin:")
+        return {"scene": self.source[len("builtin:"):] if builtin else os.path.abspath(self.source),
+                "overrides": [str(line) for line in overrides]}
+
 
 def _builtin_dir():
     return resources.files(BUILTIN_PACKAGE).joinpath("builtin")
