@@ -147,8 +147,8 @@ def test_compiled_loop_must_be_a_yes_or_no():
 
 def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_its_own_step(monkeypatch):
     """simulate(method="projection") chooses its path as the velocity methods do; the loop is
-    told the method by two flags, of which the other methods' is None (their stages then stay
-    uncompiled), and takes the projection's passes."""
+    told the method by flags that are None for the steps it does not take (Numba then leaves
+    them uncompiled), and takes the projection's passes."""
     scene = load_scene("box_stack")
     model, options = scene.model, get("projection").Options(passes=3)
 
@@ -159,10 +159,9 @@ def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_i
     assert chosen(4000) is None
     stepper = chosen(10 ** 6)
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
-    large, keeping, impulse_flag, projection_flag, slabs, parallel = stepper.flags
-    assert (impulse_flag, projection_flag) == (None, True)
-    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:4] == (True, None)
-    assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:4] == (None, None)
+    assert stepper.flags[2:5] == (None, None, True)               # (velocity, impulse, projection)
+    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (True, True, None)
+    assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
     monkeypatch.undo()
     assert simulate(model, "projection", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
     assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]     # compiled now

@@ -265,7 +265,8 @@ def velocity_step(model, settings, plan, large, keeping, impulse, slabs, paralle
     impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
-    return positions, unstacked(u, free[0].shape[0]), (manifolds, contacts.feature_id, impulses), contacts, sweeps, change
+    velocities = unstacked(u, free[0].shape[0])
+    return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
@@ -354,26 +355,27 @@ def projection_step(model, settings, plan, large, keeping, slabs, parallel, moti
 
 
 @njit(cache=True)
-def run(model, settings, plan, large, keeping, impulse, projection, slabs, parallel, motion, carried, time, steps,
-        first_index, last_index, record_every, samples, max_speed):
-    """``steps`` steps of ``velocity_step`` (``projection`` None) or ``projection_step``
-    (``projection`` True: the other is then not compiled, nor is this one for the velocity
-    methods) from the state ``motion`` at ``time`` [s] (changed in place), numbered from
-    ``first_index``; after step i, a sample into ``samples`` (row after row) where i is a
-    multiple of ``record_every`` or ``last_index``. Stops early after a step that leaves a
-    non-finite value or a speed above ``max_speed`` [m/s]. Returns (steps made, whether it
-    stopped so, carried, time, samples written, most contacts, sweeps made)."""
+def run(model, settings, plan, large, keeping, velocity, impulse, projection, slabs, parallel, motion, carried, time,
+        steps, first_index, last_index, record_every, samples, max_speed):
+    """``steps`` steps of ``velocity_step`` (``velocity`` True, ``projection`` None) or of
+    ``projection_step`` (the other way round: the step whose flag is None is not compiled) from
+    the state ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after
+    step i, a sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
+    ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
+    ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
+    written, most contacts, sweeps made)."""
     written = 0
     most = 0
     sweeps_made = 0
     for s in range(steps):
         index = first_index + s
+        # two ifs, not if-else: Numba drops a branch only where its flag is None (as an argument
+        # typed None), and exactly one of the two flags is True (compile_flags)
         if projection is not None:
-            positions, velocities, carried, contacts, sweeps, change = projection_step(
-                model, settings, plan, large, keeping, slabs, parallel, motion, carried)
-        else:
-            positions, velocities, carried, contacts, sweeps, change = velocity_step(
-                model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
+            stepped = projection_step(model, settings, plan, large, keeping, slabs, parallel, motion, carried)
+        if velocity is not None:
+            stepped = velocity_step(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
+        positions, velocities, carried, contacts, sweeps, change = stepped
         _store(motion, positions, velocities)
         time += settings.dt
         count = contacts.depth.shape[0]
@@ -464,20 +466,22 @@ KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")   # pa
 
 
 def compile_flags(model, method, options):
-    """(large, keeping, impulse, projection, slabs, parallel): True, or None where the scene can
-    never need that branch of the loop, which Numba then leaves uncompiled (a first run compiles
-    a fraction of the loop: a ball on the floor needs neither the grid broad phase, nor kept
-    manifolds, nor the slab split; a method, not the others' stages) — the numbers are the same
-    either way. large: at least GRID_FROM bodies and particles; keeping: a pair family that
-    keeps manifolds and a manifold tolerance > 0; impulse, projection: the method (neither:
-    constraints); slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair);
-    parallel: several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
+    """(large, keeping, velocity, impulse, projection, slabs, parallel): True, or None where the
+    scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
+    run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
+    nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
+    projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
+    particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
+    velocity, impulse, projection: the method is impulse or constraints, impulse, projection;
+    slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
+    several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
     from ..threads import available_threads
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
     present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
     return (True if dynamic >= GRID_FROM else None,
             True if options.manifold_tolerance > 0.0 and present & set(KEPT_FAMILIES) else None,
+            True if method != "projection" else None,
             True if method == "impulse" else None,
             True if method == "projection" else None,
             True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
