@@ -204,8 +204,8 @@ def run_contactlab(model, method, duration, record_every, integrator="symplectic
     """(summary, arrays) of a timed run, after an untimed run of ``warmup`` seconds that compiles
     the kernels (long enough to reach the first contacts: a pile starts in the air, and a
     3-step warm-up would leave the contact kernels to compile inside the timed run when the
-    compiled-code cache is cold). The warm-up compiles the stepping loop of impulse and
-    constraints too, as a user's first long run does, so the timed run takes it at its default
+    compiled-code cache is cold). The warm-up compiles the stepping loop of projection,
+    impulse and constraints too, as a user's first long run does, so the timed run takes it at its default
     (``compiled_loop=None``: the loop once it is compiled)."""
     options = dict(CONTACTLAB_OPTIONS[method] if options is None else options)
     simulate(model, method, DT, max(warmup, 3 * DT), options, integrator, compiled_loop=True)    # warm-up: compile

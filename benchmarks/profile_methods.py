@@ -6,8 +6,8 @@
 Each run is warmed up (kernels compiled and cached) and then profiled for a fixed number of
 steps; the functions with the largest own time are written to benchmarks/profiles.md.
 
-Impulse and constraints step these scenes in one compiled loop (methods/velocity_loop.py),
-which cProfile cannot look into: their table is that of the methods' ``step``, the same compiled
+Projection, impulse and constraints step these scenes in one compiled loop
+(methods/velocity_loop.py), which cProfile cannot look into: their table is that of the methods' ``step``, the same compiled
 stages called one by one from Python (bit-identical results), and the line above it gives the
 loop's own time per step beside the stitched one — the difference is the Python between stages.
 """
@@ -23,6 +23,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from contactlab import simulate                                    # noqa: E402
+from contactlab.methods import velocity_loop                        # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from peers import contactlab_pile, contactlab_pyramid              # noqa: E402
 
@@ -34,7 +35,7 @@ TOP = 8
 def looped(model, method, settle_steps, steps):
     """Seconds per step of ``steps`` steps after ``settle_steps`` in the compiled loop (None where
     it does not serve the method)."""
-    if method not in ("impulse", "constraints"):
+    if method not in velocity_loop.METHODS:
         return None
     warm = simulate(model, method, DT, settle_steps * DT, METHODS[method], record_every=settle_steps,
                     compiled_loop=True)

@@ -1,4 +1,4 @@
-"""Issue 18, deliverable 1: the compiled stepping loop of impulse and constraints
+"""Issue 18, deliverable 1: the compiled stepping loop of projection, impulse and constraints
 (contactlab.methods.velocity_loop) against the independent path that calls the same stages one
 by one from Python (the methods' ``step``): on every built-in scene the loop serves, the two give
 bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
@@ -8,7 +8,7 @@ import pytest
 
 from conftest import ball_on_plane
 from contactlab import SimulationDiverged, simulate
-from contactlab.methods import constraints, impulse, velocity_loop
+from contactlab.methods import get, impulse, velocity_loop
 from contactlab.record import SERIES
 from contactlab.scene import builtin_scenes, load_scene
 
@@ -17,25 +17,29 @@ STEPS = 60
 
 def _served(name, method):
     scene = load_scene(name)
-    module = impulse if method == "impulse" else constraints
-    options = module.Options(**scene.method_options.get(method, {}))
+    options = get(method).Options(**scene.method_options.get(method, {}))
     return scene, velocity_loop.applies(scene.model, method, options, scene.integrator)
 
 
-CASES = [(name, method) for name, _ in builtin_scenes() for method in ("impulse", "constraints")
+CASES = [(name, method) for name, _ in builtin_scenes() for method in velocity_loop.METHODS
          if _served(name, method)[1]]
 
 
-def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes():
-    served = {name for name, _ in CASES}
-    assert {"bouncing_ball", "box_pyramid", "box_stack", "sphere_pile", "newtons_cradle", "capsule_pile"} <= served
+@pytest.mark.parametrize("method", velocity_loop.METHODS)
+def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes(method):
+    served = {name for name, each in CASES if each == method}
+    assert {"bouncing_ball", "box_pyramid", "box_stack", "sphere_pile", "newtons_cradle", "capsule_pile",
+            "particles_box"} <= served
     assert not served & {"cloth_drape", "cloth_table", "mesh_bowl"}
 
 
-@pytest.mark.parametrize("name,method", CASES)
-def test_the_loop_gives_the_stitched_steps_numbers(name, method):
+@pytest.mark.parametrize("name,method,options", [(name, method, None) for name, method in CASES] + [
+    # projection with more passes, half the warm start and no slop: every pass and the warm start count
+    ("box_stack", "projection", {"passes": 3, "warm_start": 0.5, "slop": 0.0}),
+    ("capsule_pile", "projection", {"passes": 4, "tolerance": 1e-6})])
+def test_the_loop_gives_the_stitched_steps_numbers(name, method, options):
     scene, _ = _served(name, method)
-    options = scene.method_options.get(method, {})
+    options = scene.method_options.get(method, {}) if options is None else options
     steps = min(STEPS, max(1, int(round(scene.duration / scene.dt))))
     looped = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7,
                       compiled_loop=True)
@@ -60,13 +64,14 @@ def test_the_loop_gives_the_stitched_steps_numbers(name, method):
             assert np.array_equal(left, right), (key, field)
 
 
-def test_a_run_goes_on_from_its_state_through_either_path():
+@pytest.mark.parametrize("method", ["impulse", "projection"])
+def test_a_run_goes_on_from_its_state_through_either_path(method):
     """Ten steps and ten more from the state reached are the twenty steps of one run, whether the
     second half steps in the loop or stitched: the carried warm start and manifolds pass over."""
     scene = load_scene("box_stack")
-    whole = simulate(scene.model, "impulse", scene.dt, 20 * scene.dt, compiled_loop=True)
-    half = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, compiled_loop=True)
-    rest = simulate(scene.model, "impulse", scene.dt, 10 * scene.dt, state=half.state, compiled_loop=False)
+    whole = simulate(scene.model, method, scene.dt, 20 * scene.dt, compiled_loop=True)
+    half = simulate(scene.model, method, scene.dt, 10 * scene.dt, compiled_loop=True)
+    rest = simulate(scene.model, method, scene.dt, 10 * scene.dt, state=half.state, compiled_loop=False)
     assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
     assert np.array_equal(rest.arrays["body_velocity"][-1], whole.arrays["body_velocity"][-1])
     assert rest.state.time == whole.state.time
@@ -138,3 +143,25 @@ def test_compiled_loop_must_be_a_yes_or_no():
     from contactlab import InputError
     with pytest.raises(InputError, match="compiled_loop"):
         simulate(load_scene("bouncing_ball").model, "impulse", 0.01, 0.1, compiled_loop="yes")
+
+
+def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_its_own_step(monkeypatch):
+    """simulate(method="projection") chooses its path as the velocity methods do; the loop is
+    told the method by flags that are None for the steps it does not take (Numba then leaves
+    them uncompiled), and takes the projection's passes."""
+    scene = load_scene("box_stack")
+    model, options = scene.model, get("projection").Options(passes=3)
+
+    def chosen(steps, compiled_loop=None):
+        return velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state(),
+                                         steps, compiled_loop)
+    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    assert chosen(4000) is None
+    stepper = chosen(10 ** 6)
+    assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
+    assert stepper.flags[2:5] == (None, None, True)               # (velocity, impulse, projection)
+    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (True, True, None)
+    assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
+    monkeypatch.undo()
+    assert simulate(model, "projection", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
+    assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]     # compiled now

@@ -152,7 +152,7 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     a body or particle; record_every: sample every K steps (the first and last states are
     always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
     all cores, or one while that steps faster on a busy machine) or a whole number — results are
-    bit for bit the same on any count; compiled_loop: for impulse and constraints on the scenes
+    bit for bit the same on any count; compiled_loop: for projection, impulse and constraints on the scenes
     the compiled stepping loop serves, None (the default) takes it when it is compiled or cached
     already or the run is long enough to repay compiling it, True always, False never
     (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit

@@ -9,6 +9,7 @@ degrees of freedom as f = Jᵀ F_p and changes their velocities by h M⁻¹ Jᵀ
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from .. import rotations
 from .integrators import particle_system
@@ -21,13 +22,27 @@ def dof_count(model) -> int:
 
 def stack(body_velocity, body_angular_velocity, particle_velocity):
     """v (N,) from body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)."""
-    bodies = np.concatenate([body_velocity, body_angular_velocity], axis=1).ravel()
-    return np.concatenate([bodies, particle_velocity.ravel()])
+    return stacked(*(np.ascontiguousarray(a, dtype=float) for a in (body_velocity, body_angular_velocity,
+                                                                    particle_velocity)))
 
 
 def unstack(v, body_count):
     """(body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)) from v (N,),
     copies, for B = body_count."""
+    return unstacked(np.ascontiguousarray(v, dtype=float), body_count)
+
+
+@njit(cache=True)
+def stacked(body_velocity, body_angular_velocity, particle_velocity):
+    """``stack``, compiled (the compiled steps call it too): v (N,) from (B, 3), (B, 3), (P, 3)."""
+    bodies = np.concatenate((body_velocity, body_angular_velocity), axis=1).ravel()
+    return np.concatenate((bodies, particle_velocity.ravel()))
+
+
+@njit(cache=True)
+def unstacked(v, body_count):
+    """``unstack``, compiled (the compiled steps call it too): copies (B, 3), (B, 3), (P, 3) of a
+    C-contiguous v (N,)."""
     B = body_count
     bodies = v[:6 * B].reshape(B, 6)
     return bodies[:, :3].copy(), bodies[:, 3:].copy(), v[6 * B:].reshape(-1, 3).copy()

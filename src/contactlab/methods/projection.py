@@ -32,12 +32,13 @@ step's λ by contact id (``warm_start``).
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..builder import _number
 from ..collision import collide, swept_distances
 from ..contacts import values_by_id
-from ..dynamics.generalized import stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..dynamics.generalized import stack, unstack, unstacked
+from ..dynamics.integrators import free_velocities, moved
 from ..state import State
 from . import KeptManifoldOptions, StepInfo, check_counts
 from .velocity_level import detect
@@ -89,10 +90,7 @@ def project(model, at, offset, displacement, options, sweep=None, carried=None, 
         warm = options.warm_start * values_by_id(carried.get("projection_ids"), carried.get("projection_values"),
                                                  contacts.feature_id, 3)[0]
     rows = rows_of(model, contacts, at.body_position, at.body_orientation)
-    # J_n u ≥ J_n offset + δ
-    depth = contacts.depth
-    depth = np.where(depth > 0.0, np.maximum(depth - options.slop, 0.0), depth)      # slop: left alone
-    target = row_products(rows, offset)[:, 0] + depth
+    target = projection_targets(rows, offset, contacts.depth, options.slop)         # J_n u ≥ J_n offset + δ
     corrected = displacement.copy()
     lam, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
                                                     options.tolerance, warm,
@@ -121,7 +119,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     for _ in range(options.passes - 1):
         if contacts.count == 0:
             break
-        projected = State.assemble(state.time + h, _displaced(model, state, displacement, h), state.velocities)
+        projected = State.assemble(state.time + h, displaced(*_positions(state), displacement, h), state.velocities)
         ids = contacts.feature_id
         displacement, contacts, more, sweeps, change = project(model, projected, displacement, displacement, options,
                                                                sweep)
@@ -130,14 +128,50 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         if sweeps <= 1 and change <= options.tolerance:
             break
     # 5. advance dt, velocities from the projected positions
-    velocity = v_free + (displacement - predicted_displacement) / h
-    positions = _displaced(model, state, displacement, h)
-    new = State.assemble(state.time + h, positions, unstack(velocity, model.body_count), carried)
+    positions, velocities = advance(*_positions(state), v_free, displacement, predicted_displacement, h)
+    new = State.assemble(state.time + h, positions, velocities, carried)
     return new, StepInfo(contacts, solver_iterations=total_sweeps, solver_residual=change,
                          impulses=pushed / h)    # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
 
 
-def _displaced(model, state, displacement, h):
-    """Positions (body_position, body_orientation, particle_position) moved by a generalized
-    displacement (N,): translations added, rotation vectors applied by the exponential map."""
-    return advance_positions(*state.positions, *unstack(displacement / h, model.body_count), h, h)
+def _positions(state):
+    """A State's positions as the compiled stages take them (C-contiguous float arrays)."""
+    return tuple(np.ascontiguousarray(a, dtype=float) for a in state.positions)
+
+
+# ---- the compiled stages the Python step and the compiled loop (methods.velocity_loop) share ----
+
+@njit(cache=True)
+def projection_targets(rows, offset, depth, slop):
+    """The least normal displacement each contact must reach, (C,) [m]: J_n u ≥ J_n offset + δ,
+    for contacts of depth δ (C,) [m] (> 0: overlapping) detected at positions the displacement
+    ``offset`` (N,) [m, rad] reached from the step's start (``rows``, a ContactRows, built
+    there). Of an overlap, the ``slop`` [m] is left alone (pushed out, round-off overlaps become
+    velocity and set stacks rocking), but it is never let grow; a gap (δ ≤ 0) may close."""
+    reached = row_products(rows, offset)
+    target = np.empty(depth.shape[0])
+    for c in range(depth.shape[0]):
+        kept = max(depth[c] - slop, 0.0) if depth[c] > 0.0 else depth[c]
+        target[c] = reached[c, 0] + kept
+    return target
+
+
+@njit(cache=True)
+def displaced(body_position, body_orientation, particle_position, displacement, h):
+    """Positions (B, 3), orientations (B, 4) and particle positions (P, 3) moved over h [s] by a
+    generalized displacement (N,) [m, rad]: translations added, rotation vectors applied by the
+    exponential map (as velocities displacement / h for h, ``integrators.moved``)."""
+    rate = unstacked(displacement / h, body_position.shape[0])
+    return moved(body_position, body_orientation, particle_position, rate[0], rate[1], rate[2],
+                 np.full(body_position.shape[0], h), np.full(particle_position.shape[0], h))
+
+
+@njit(cache=True)
+def advance(body_position, body_orientation, particle_position, free, displacement, predicted, h):
+    """Stage 5: the step's end from its start positions ((B, 3), (B, 4), (P, 3)): positions moved by
+    the projected displacement (N,) [m, rad], velocities v = v* + (u − h v*) / h from the free ones
+    ``free`` (N,) and the ``predicted`` displacement h v* (N,). Returns (positions, velocities
+    ((B, 3), (B, 3), (P, 3)) [m/s, rad/s])."""
+    velocity = free + (displacement - predicted) / h
+    positions = displaced(body_position, body_orientation, particle_position, displacement, h)
+    return positions, unstacked(velocity, body_position.shape[0])

@@ -1,12 +1,16 @@
-"""The compiled stepping loop of the velocity-level methods: impulse and constraints (L3).
+"""The compiled stepping loop of the velocity-level methods, impulse and constraints (L3), and
+of projection (L2).
 
 ``simulate`` hands this loop the model's and the state's arrays and a number of steps; every
 stage of every step — free motion, prediction, broad and narrow phase with kept manifolds,
 contact rows, the collision waves or the impact targets, the warm-started sweeps, the split
-at the time of impact — and the recording of samples run in compiled code, with no Python
-between steps. The stages are the ones :mod:`contactlab.methods.impulse` and
-:mod:`contactlab.methods.constraints` name, and the same compiled functions serve both paths,
-so the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
+at the time of impact; for projection the sweeps on displacements and the further
+detect-and-project passes at the projected positions — and the recording of samples run in
+compiled code, with no Python between steps. The stages are the ones
+:mod:`contactlab.methods.impulse`, :mod:`contactlab.methods.constraints` and
+:mod:`contactlab.methods.projection` name, and the same compiled functions serve both paths, so
+the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
+A method's step is compiled only for the runs of that method (``compile_flags``).
 
 It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
 convex shapes against planes and convex obstacles, the default contact granularity and normal
@@ -33,9 +37,11 @@ from ..collision.broad_phase import GRID_FROM
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
 from ..contacts import values_carried
 from ..diagnostics import gravitational, kinetic
+from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import gyroscopic_midpoint, moved
 from ..state import State
 from .impulse import resolve_collisions
+from .projection import advance, displaced, projection_targets
 from .sequential import (PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, split_into_slabs, contact_order, contact_rows,
                          row_products, solve_sequential_impulses)
 from .velocity_level import (earliest_impacts, gravity_along_normals, impact_targets, restitution_threshold,
@@ -63,10 +69,11 @@ LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba t
 
 LoopSettings = namedtuple("LoopSettings", (
     "dt", "iterations", "tolerance", "threshold", "stabilization", "slop", "max_push_velocity",
-    "time_of_impact", "warm_start", "margin", "manifold_tolerance"))
+    "time_of_impact", "warm_start", "margin", "manifold_tolerance", "passes"))
 LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
-[m/s], restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s], time of impact (bool),
-warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept)."""
+([m/s]; projection: [m]), restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s],
+time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
+detect-and-project passes. What a method's Options lack is 0 (False, 1 pass): see ``loop_settings``."""
 
 Motion = namedtuple("Motion", ("body_position", "body_orientation", "body_velocity", "body_angular_velocity",
                                "particle_position", "particle_velocity"))
@@ -79,10 +86,13 @@ Samples = namedtuple("Samples", ("time", "body_position", "body_orientation", "b
 Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
 
 
+METHODS = ("projection", "impulse", "constraints")     # the methods the loop steps
+
+
 def applies(model, method, options, integrator):
-    """Whether this loop can step ``model`` under ``method`` ("impulse" or "constraints") with
-    these Options and integrator (see the module docstring for what it serves)."""
-    if method not in ("impulse", "constraints") or integrator not in ("symplectic_euler", "backward_euler"):
+    """Whether this loop can step ``model`` under ``method`` ("projection", "impulse" or
+    "constraints") with these Options and integrator (see the module docstring for what it serves)."""
+    if method not in METHODS or integrator not in ("symplectic_euler", "backward_euler"):
         return False
     if model.spring_count or len(model.triangles) or (model.obstacle_shape == shapes.MESH).any():
         return False
@@ -90,7 +100,7 @@ def applies(model, method, options, integrator):
         return False
     if options.granularity != "vertex" or options.normal != "object":
         return False
-    return method == "impulse" or (options.solver == "matrix_free" and options.formulation == "velocity")
+    return method != "constraints" or (options.solver == "matrix_free" and options.formulation == "velocity")
 
 
 # ---- the stages of one step (loop L3) ------------------------------------------------------
@@ -252,34 +262,124 @@ def velocity_step(model, settings, plan, large, keeping, impulse, slabs, paralle
         return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0
     # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
     rows = build_rows(model, contacts, motion, rotation)
-    u = np.concatenate((np.concatenate((free[0], free[1]), axis=1).ravel(), free[2].ravel()))
+    u = stacked(free[0], free[1], free[2])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
     target, tau = targets(model, settings, impulse, contacts, rows, u, order)
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
     impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
-    B = free[0].shape[0]
-    bodies = u[:6 * B].reshape(B, 6)
-    velocities = (bodies[:, :3].copy(), bodies[:, 3:].copy(), u[6 * B:].reshape(-1, 3).copy())
+    velocities = unstacked(u, free[0].shape[0])
     return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change
 
 
+# ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
+
 @njit(cache=True)
-def run(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried, time, steps, first_index,
-        last_index, record_every, samples, max_speed):
-    """``steps`` steps of ``velocity_step`` from the state ``motion`` at ``time`` [s] (changed in
-    place), numbered from ``first_index``; after step i, a sample into ``samples`` (row after
-    row) where i is a multiple of ``record_every`` or ``last_index``. Stops early after a step
-    that leaves a non-finite value or a speed above ``max_speed`` [m/s]. Returns (steps made,
-    whether it stopped so, carried, time, samples written, most contacts, sweeps made)."""
+def project(model, settings, slabs, parallel, contacts, at, rotation, offset, displacement, warm):
+    """Stage 4 of loop L2 (``projection.project``): the step's displacement (N,) [m, rad]
+    corrected, a copy, so that no contact detected at the positions ``at`` (a Motion, with
+    rotation (B, 3, 3)), which the displacement ``offset`` (N,) reached from the step's start,
+    ends deeper than its slop: J_n u ≥ J_n offset + δ (``projection_targets``), by the sweeps of
+    ``solve`` on displacements from the warm start ``warm`` (C, 3) [kg m]. Returns (the corrected
+    displacement, λ (C, 3) [kg m], sweeps, last correction [m]); no contact, no sweep."""
+    if contacts.depth.shape[0] == 0:
+        return displacement, np.zeros((0, 3)), 0, 0.0
+    rows = build_rows(model, contacts, at, rotation)
+    target = projection_targets(rows, offset, contacts.depth, settings.slop)
+    corrected = displacement.copy()
+    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
+    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order)
+    return corrected, lam, sweeps, change
+
+
+@njit(cache=True)
+def displaced_motion(motion, displacement, h):
+    """The Motion at the positions a generalized displacement (N,) [m, rad] reaches from
+    ``motion``'s over h [s] (``projection.displaced``; its velocities are ``motion``'s)."""
+    position, orientation, particle = displaced(motion.body_position, motion.body_orientation,
+                                                motion.particle_position, displacement, h)
+    return Motion(position, orientation, motion.body_velocity, motion.body_angular_velocity, particle,
+                  motion.particle_velocity)
+
+
+@njit(cache=True)
+def passes(model, settings, plan, large, keeping, slabs, parallel, motion, reach, kept, contacts, displacement,
+           sweeps, change):
+    """Stages 3–4 again, ``settings.passes`` − 1 times at most: contacts detected afresh (nothing
+    kept, the same ``reach`` (N,) [m]) at the positions the projected ``displacement`` (N,)
+    reaches from ``motion``, and projected, cold, for what one linear projection left (curved
+    surfaces, rotations); done once there is no contact, or a pass makes one sweep that moves
+    nothing more than the tolerance. Returns (displacement, the last pass's contacts, the sweeps
+    of every pass summed, the last pass's last correction [m])."""
+    for _ in range(settings.passes - 1):
+        if contacts.depth.shape[0] == 0:
+            break
+        at = displaced_motion(motion, displacement, settings.dt)
+        rotation = rotations.matrices(at.body_orientation)
+        contacts, _ = detect(model, plan, large, keeping, at, rotation, reach, kept, 0.0)
+        displacement, _, more, change = project(model, settings, slabs, parallel, contacts, at, rotation,
+                                                displacement, displacement, np.zeros((contacts.depth.shape[0], 3)))
+        sweeps += more
+        if more <= 1 and change <= settings.tolerance:
+            break
+    return displacement, contacts, sweeps, change
+
+
+@njit(cache=True)
+def projection_step(model, settings, plan, large, keeping, slabs, parallel, motion, carried):
+    """One step of loop L2 with projection (``projection.step``, stage for stage).
+
+    ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values: last step's
+    first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six arrays, new —,
+    the carried triple for the next step, the last pass's ContactArrays, sweeps made in every
+    pass, the last pass's last correction [m])."""
+    h = settings.dt
+    rotation = rotations.matrices(motion.body_orientation)
+    # 1. internal forces → free velocities v*
+    free = free_motion(model, motion, rotation, h)
+    # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
+    v_free = stacked(free[0], free[1], free[2])
+    predicted = h * v_free
+    reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
+    # 3. collision detection over the swept step, at its start
+    contacts, manifolds = detect(model, plan, large, keeping, motion, rotation, reach, carried[0],
+                                 settings.manifold_tolerance)
+    # 4. project the colliding points onto the surfaces, warm started by contact id
+    warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
+    displacement, lam, sweeps, change = project(model, settings, slabs, parallel, contacts, motion, rotation,
+                                                np.zeros_like(predicted), predicted, warm)
+    #    and again at the projected positions
+    displacement, last, sweeps, change = passes(model, settings, plan, large, keeping, slabs, parallel, motion,
+                                                reach, carried[0], contacts, displacement, sweeps, change)
+    # 5. advance dt, velocities from the projected positions
+    positions, velocities = advance(motion.body_position, motion.body_orientation, motion.particle_position,
+                                    v_free, displacement, predicted, h)
+    return positions, velocities, (manifolds, contacts.feature_id, lam), last, sweeps, change
+
+
+@njit(cache=True)
+def run(model, settings, plan, large, keeping, velocity, impulse, projection, slabs, parallel, motion, carried, time,
+        steps, first_index, last_index, record_every, samples, max_speed):
+    """``steps`` steps of ``velocity_step`` (``velocity`` True, ``projection`` None) or of
+    ``projection_step`` (the other way round: the step whose flag is None is not compiled) from
+    the state ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after
+    step i, a sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
+    ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
+    ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
+    written, most contacts, sweeps made)."""
     written = 0
     most = 0
     sweeps_made = 0
     for s in range(steps):
         index = first_index + s
-        positions, velocities, carried, contacts, sweeps, change = velocity_step(
-            model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
+        # two ifs, not if-else: Numba drops a branch only where its flag is None (as an argument
+        # typed None), and exactly one of the two flags is True (compile_flags)
+        if projection is not None:
+            stepped = projection_step(model, settings, plan, large, keeping, slabs, parallel, motion, carried)
+        if velocity is not None:
+            stepped = velocity_step(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
+        positions, velocities, carried, contacts, sweeps, change = stepped
         _store(motion, positions, velocities)
         time += settings.dt
         count = contacts.depth.shape[0]
@@ -370,20 +470,24 @@ KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")   # pa
 
 
 def compile_flags(model, method, options):
-    """(large, keeping, impulse, slabs, parallel): True, or None where the scene can never need
-    that branch of the loop, which Numba then leaves uncompiled (a first run compiles a fraction
-    of the loop: a ball on the floor needs neither the grid broad phase, nor kept manifolds,
-    nor the slab split) — the numbers are the same either way. large: at least GRID_FROM bodies
-    and particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
-    impulse: the method; slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per
-    pair); parallel: several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
+    """(large, keeping, velocity, impulse, projection, slabs, parallel): True, or None where the
+    scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
+    run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
+    nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
+    projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
+    particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
+    velocity, impulse, projection: the method is impulse or constraints, impulse, projection;
+    slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
+    several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
     from ..threads import available_threads
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
     present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
     return (True if dynamic >= GRID_FROM else None,
             True if options.manifold_tolerance > 0.0 and present & set(KEPT_FAMILIES) else None,
+            True if method != "projection" else None,
             True if method == "impulse" else None,
+            True if method == "projection" else None,
             True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
             True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None)
 
@@ -405,6 +509,20 @@ def loop_model(model):
         np.full(B + P, -1, dtype=np.int64))
 
 
+def loop_settings(model, method, options, dt):
+    """The LoopSettings of ``method``'s Options for steps of dt [s], the restitution threshold
+    resolved (``restitution_threshold``). Projection has no threshold, stabilization, push limit
+    or time of impact (0, False there); the velocity methods make 1 pass."""
+    velocity = method != "projection"
+    return LoopSettings(float(dt), int(options.iterations), float(options.tolerance),
+                        float(restitution_threshold(model, dt, options)) if velocity else 0.0,
+                        float(options.stabilization) if velocity else 0.0, float(options.slop),
+                        float(options.max_push_velocity) if velocity else 0.0,
+                        bool(options.time_of_impact) if velocity else False, float(options.warm_start),
+                        float(options.contact_margin), float(options.manifold_tolerance),
+                        1 if velocity else int(options.passes))
+
+
 class Stepper:
     """Steps one run of ``method`` on ``model`` through the compiled loop.
 
@@ -413,15 +531,13 @@ class Stepper:
     reached, with the warm-start data carried under the same keys as the method's ``step``
     (so a run may go on through either path)."""
 
-    def __init__(self, model, method, options, integrator, dt, state, threshold):
+    def __init__(self, model, method, options, integrator, dt, state):
         self.model = model
-        self.prefix = "impulse_" if method == "impulse" else "constraint_"
+        self.prefix = {"impulse": "impulse_", "constraints": "constraint_", "projection": "projection_"}[method]
+        # projection.step carries its λ every step, none included; the velocity methods drop theirs then
+        self.carries_empty = method == "projection"
         self.keep_manifolds = options.manifold_tolerance > 0.0
-        self.settings = LoopSettings(float(dt), int(options.iterations), float(options.tolerance), float(threshold),
-                                     float(options.stabilization), float(options.slop),
-                                     float(options.max_push_velocity), bool(options.time_of_impact),
-                                     float(options.warm_start), float(options.contact_margin),
-                                     float(options.manifold_tolerance))
+        self.settings = loop_settings(model, method, options, dt)
         families = model.pair_families
         self.plan = (families, model.hull_store if needs_hulls(families) else None)
         self.flags = compile_flags(model, method, options)
@@ -491,7 +607,7 @@ class Stepper:
         made, ids, values = self.carried
         carried = dict(self.other)
         carried["manifolds"] = Manifolds(*made) if self.keep_manifolds else None
-        if len(ids):
+        if len(ids) or self.carries_empty:
             carried[self.prefix + "ids"], carried[self.prefix + "values"] = ids, values
         m = self.motion
         return State(self.time, m.body_position.copy(), m.body_orientation.copy(), m.body_velocity.copy(),
@@ -521,7 +637,7 @@ def stepper_for(model, method, options, integrator, dt, state, steps, compiled_l
     True: the loop wherever it serves, compiling it if need be."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return None
-    stepper = Stepper(model, method, options, integrator, dt, state, restitution_threshold(model, dt, options))
+    stepper = Stepper(model, method, options, integrator, dt, state)
     if compiled_loop or repays_compiling(model, steps) or stepper.compiled_already():
         return stepper
     return None
