@@ -220,7 +220,7 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
             interrupted = signal_stop
             state = stepper.state() if stepper is not None else tally.state or state
             if stepper is not None:
-                tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+                tally.take(stepper)
     wall = time.perf_counter() - run_started
     recorder.flush()
     totals = recorder.totals
@@ -285,6 +285,11 @@ class Tally:
     sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
     implicit_spring_steps: int = 0       # penalty: steps whose contact springs went implicit (explicit unstable)
     state: object = None                 # the latest State the Python path made
+
+    def take(self, stepper):
+        """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
+        self.max_contacts, self.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+        self.implicit_spring_steps = stepper.implicit_spring_steps
 
     def timed(self, step_index, elapsed, compiled):
         """Book the steps from ``step_index`` on that took ``elapsed`` [s], ``compiled`` [s] of
@@ -366,7 +371,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
         violation = (violation or health.check_samples(samples, 0)
                      or health.check_contacts(state, collide(stepper.model, state)))
         if violation is not None:
-            tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+            tally.take(stepper)
             if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
                 recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
@@ -374,7 +379,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
             chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         _advance(bar, step_index, made)
         step_index += made
-    tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+    tally.take(stepper)
     return stepper.state()
 
 
