@@ -43,7 +43,7 @@ from ..rotations import world_tensors
 from ..errors import InputError
 from ..state import State
 from . import CollisionOptions, StepInfo, check_choices, check_counts
-from .sequential import (apply_impulses, contact_velocity, row_products, rows_of, solve_order,
+from .sequential import (along_rows, apply_impulses, contact_velocity, row_products, rows_of, solve_order,
                          solve_sequential_impulses, sweep_groups)
 
 ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
@@ -576,11 +576,10 @@ def free_dofs(particle_pinned, body_count):
 
 
 @njit(cache=True)
-def mass_product(mass, x):
-    """M x (N,) for M's blocks ``mass`` (``mass_blocks``) and x (N,)."""
+def mass_product(mass, x, out):
+    """out = M x (N,) for M's blocks ``mass`` (``mass_blocks``) and x (N,); returns out."""
     body_mass, inertia, particle_mass = mass
     B = body_mass.shape[0]
-    out = np.empty_like(x)
     for b in range(B):
         o = 6 * b
         for i in range(3):
@@ -594,36 +593,28 @@ def mass_product(mass, x):
 
 @njit(cache=True)
 def transpose_product(rows, values, out):
-    """out += Jᵀ λ (N,) for each contact's row values λ (C, 3) (normal, t1, t2): a force along the
-    rows [N] gives the generalized force; a body side ±(P, r × P), a particle ±w P."""
-    B = rows.body_inverse_mass.shape[0]
+    """out += Jᵀ λ (N,) for each contact's row values λ (C, 3) (normal, t1, t2); returns out."""
     for c in range(values.shape[0]):
-        P = values[c, 0] * rows.frame[c, 0] + values[c, 1] * rows.frame[c, 1] + values[c, 2] * rows.frame[c, 2]
-        for side in range(2):
-            s = 1.0 - 2.0 * side
-            b = rows.body[c, side]
-            if b >= 0:
-                r = rows.arm[c, side]
-                torque = (r[1] * P[2] - r[2] * P[1], r[2] * P[0] - r[0] * P[2], r[0] * P[1] - r[1] * P[0])
-                for i in range(3):
-                    out[6 * b + i] += s * P[i]
-                    out[6 * b + 3 + i] += s * torque[i]
-            for m in range(3):
-                p = rows.particle[c, side, m]
-                if p < 0:
-                    break
-                for i in range(3):
-                    out[6 * B + 3 * p + i] += s * rows.weight[c, side, m] * P[i]
+        along_rows(c, rows, values[c, 0], values[c, 1], values[c, 2], out, False)
     return out
 
 
 @njit(cache=True)
-def system_product(rows, weight, mass, free, x):
-    """A x (N,) with A = M + F Jᵀ W J F: the springs' weights W (C, 3) on J's rows, F = diag(free)
-    (N,) (1 for a DOF that moves, 0 for a pinned particle's)."""
-    kept = free * x
-    along = row_products(rows, kept) * weight
-    return mass_product(mass, x) + free * transpose_product(rows, along, np.zeros(x.shape[0]))
+def system_product(rows, weight, mass, free, x, kept, out):
+    """out = A x (N,) with A = M + F Jᵀ W J F: the springs' weights W (C, 3) on J's rows,
+    F = diag(free) (N,) (1 for a DOF that moves, 0 for a pinned particle's); ``kept`` (N,) is
+    scratch. Allocates nothing: the conjugate gradients call it every iteration. Returns out."""
+    N = x.shape[0]
+    for i in range(N):
+        kept[i] = free[i] * x[i]
+        out[i] = 0.0
+    for c in range(weight.shape[0]):
+        vn, v1, v2 = contact_velocity(c, rows, kept)
+        along_rows(c, rows, weight[c, 0] * vn, weight[c, 1] * v1, weight[c, 2] * v2, out, False)
+    mass_product(mass, x, kept)
+    for i in range(N):
+        out[i] = kept[i] + free[i] * out[i]
+    return out
 
 
 @njit(cache=True)
@@ -631,7 +622,7 @@ def system_diagonal(rows, weight, mass, free):
     """The diagonal of A (``system_product``) (N,): M's and Σ W (J_row,i)² over the rows."""
     body_mass, inertia, particle_mass = mass
     B = body_mass.shape[0]
-    diagonal = mass_product(mass, np.zeros(free.shape[0]))
+    diagonal = np.empty(free.shape[0])
     for b in range(B):
         for i in range(3):
             diagonal[6 * b + i], diagonal[6 * b + 3 + i] = body_mass[b], inertia[b, i, i]
@@ -666,30 +657,37 @@ def system_diagonal(rows, weight, mass, free):
 def conjugate_gradients(rows, weight, mass, free, rhs, guess, tolerance, most):
     """A v = rhs (``system_product``) by conjugate gradients with the Jacobi preconditioner
     diag(A), from ``guess`` (N,), until |r| ≤ tolerance |rhs| or ``most`` iterations. Returns
-    (v (N,), |A v − rhs| / |rhs|)."""
+    (v (N,), |A v − rhs| / |rhs|, iterations)."""
+    N = rhs.shape[0]
     diagonal = system_diagonal(rows, weight, mass, free)
-    for i in range(diagonal.shape[0]):
+    x, r, z, p, Ap, kept = guess.copy(), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
+    system_product(rows, weight, mass, free, x, kept, Ap)
+    for i in range(N):
         if diagonal[i] == 0.0:          # a DOF with no mass and no spring: left as it is
             diagonal[i] = 1.0
-    x = guess.copy()
-    r = rhs - system_product(rows, weight, mass, free, x)
+        r[i] = rhs[i] - Ap[i]
+        z[i] = r[i] / diagonal[i]
+        p[i] = z[i]
     scale = max(np.sqrt(np.dot(rhs, rhs)), 1e-300)
-    z = r / diagonal
-    p = z.copy()
     rz = np.dot(r, z)
-    for _ in range(most):
-        if np.sqrt(np.dot(r, r)) <= tolerance * scale or rz == 0.0:
-            break
-        Ap = system_product(rows, weight, mass, free, p)
+    iterations = 0
+    while iterations < most and np.sqrt(np.dot(r, r)) > tolerance * scale and rz != 0.0:
+        system_product(rows, weight, mass, free, p, kept, Ap)
         alpha = rz / np.dot(p, Ap)
-        x += alpha * p
-        r -= alpha * Ap
-        z = r / diagonal
+        for i in range(N):
+            x[i] += alpha * p[i]
+            r[i] -= alpha * Ap[i]
+            z[i] = r[i] / diagonal[i]
         following = np.dot(r, z)
-        p = z + (following / rz) * p
+        beta = following / rz
+        for i in range(N):
+            p[i] = z[i] + beta * p[i]
         rz = following
-    residual = system_product(rows, weight, mass, free, x) - rhs
-    return x, np.sqrt(np.dot(residual, residual)) / scale
+        iterations += 1
+    system_product(rows, weight, mass, free, x, kept, Ap)
+    for i in range(N):
+        Ap[i] -= rhs[i]
+    return x, np.sqrt(np.dot(Ap, Ap)) / scale, iterations
 
 
 @njit(cache=True)
@@ -723,7 +721,7 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
     slip_force, slip_direction = np.zeros((C, 2)), np.zeros((C, 2))
     weight, pull = np.empty((C, 3)), np.empty((C, 3))
     normal, trial, elongation = np.zeros(C), np.zeros((C, 2)), np.zeros((C, 2))
-    base = mass_product(mass, v_free)
+    base = mass_product(mass, v_free, np.empty(v_free.shape[0]))
     v_new, residual, passes = v_free, 0.0, 0
     for passes in range(1, settings.implicit_iterations + 1):
         for c in range(C):
@@ -733,8 +731,8 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
             for d in range(2):
                 pull[c, 1 + d] = -k_t[c] * springs.elongation[c, d] if sticks[c] else slip_force[c, d]
         rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
-        v_new, residual = conjugate_gradients(rows, weight, mass, free, rhs, v_new, settings.linear_tolerance,
-                                              10 * v_free.shape[0])
+        v_new, residual, _ = conjugate_gradients(rows, weight, mass, free, rhs, v_new, settings.linear_tolerance,
+                                                 10 * v_free.shape[0])
         # the forces at the new state say which springs act
         velocity = row_products(rows, v_new)
         settled = True
