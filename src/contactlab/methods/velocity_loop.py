@@ -1,4 +1,4 @@
-"""The compiled stepping loop of the velocity-level methods: impulse and constraints (L3).
+"""The compiled stepping loop: impulse and constraints (L3), and penalty (L1).
 
 ``simulate`` hands this loop the model's and the state's arrays and a number of steps; every
 stage of every step — free motion, prediction, broad and narrow phase with kept manifolds,
@@ -8,11 +8,21 @@ between steps. The stages are the ones :mod:`contactlab.methods.impulse` and
 :mod:`contactlab.methods.constraints` name, and the same compiled functions serve both paths,
 so the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 
+Penalty (``penalty_step``, loop L1) runs in the same loop behind ``run``'s ``penalty`` flag:
+detection at the step's start with the gaps its motion could close, the contact springs (the
+stiffness of each contact from the load it carries, anchors carried by contact id), their
+forces, the free velocities, the springs integrated explicitly (h M⁻¹ Jᵀ F through the rows)
+or by backward Euler (matrix-free conjugate gradients on the rows), the guard that holds a
+contact short of passing through, and the anchors moved on — the compiled stages of
+:mod:`contactlab.methods.penalty`, which its ``step`` calls one by one. ``penalty`` None leaves
+that branch uncompiled, and a penalty run compiles no velocity-level step.
+
 It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
 convex shapes against planes and convex obstacles, the default contact granularity and normal
-(vertex, object), symplectic or backward Euler (the same motion without cloth), and for
-constraints the matrix-free solver on velocities. A scene with cloth or meshes, another
-granularity, explicit Euler, or an assembled solver steps through the methods' ``step``.
+(vertex, object), symplectic or backward Euler (the same motion without cloth), for
+constraints the matrix-free solver on velocities and for penalty the "cg" linear solver. A
+scene with cloth or meshes, another granularity, explicit Euler, or an assembled solver steps
+through the methods' ``step``.
 
 Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
 colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
