@@ -135,7 +135,7 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
     # and so perhaps this test run, with SIGINT ignored)
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = load_scene("box_pyramid")
-    simulate(scene.model, "penalty", scene.dt, 2 * scene.dt)             # compiled before the clock starts
+    simulate(scene.model, "penalty", scene.dt, 2 * scene.dt, compiled_loop=False)   # compiled before the clock starts
     calls = []
     from contactlab.methods import penalty
     real = penalty.step
@@ -147,8 +147,8 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
         return real(*arguments)
     penalty.step = step
     try:
-        with pytest.raises(Interrupted) as interrupted:
-            simulate(scene.model, "penalty", scene.dt, 1.0)
+        with pytest.raises(Interrupted) as interrupted:     # the Python path, one call a step (not the loop)
+            simulate(scene.model, "penalty", scene.dt, 1.0, compiled_loop=False)
     finally:
         penalty.step = real
         restored = signal.getsignal(signal.SIGINT)

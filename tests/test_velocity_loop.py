@@ -1,4 +1,4 @@
-"""Issue 18, deliverable 1: the compiled stepping loop of projection, impulse and constraints
+"""Issue 18, deliverable 1: the compiled stepping loop of projection, impulse, constraints and penalty
 (contactlab.methods.velocity_loop) against the independent path that calls the same stages one
 by one from Python (the methods' ``step``): on every built-in scene the loop serves, the two give
 bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
@@ -51,6 +51,7 @@ def test_the_loop_gives_the_stitched_steps_numbers(name, method, options):
     for key in ("max_contacts", "max_penetration"):
         assert looped.summary[key] == stitched.summary[key], key
     assert looped.summary["solver"] == stitched.summary["solver"]
+    assert looped.summary["implicit_spring_steps"] == stitched.summary["implicit_spring_steps"]
     # what the run carries on: the same manifolds and warm-start impulses under the same keys
     assert set(looped.state.carried) == set(stitched.state.carried)
     for key, value in looped.state.carried.items():
@@ -75,6 +76,18 @@ def test_a_run_goes_on_from_its_state_through_either_path(method):
     assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
     assert np.array_equal(rest.arrays["body_velocity"][-1], whole.arrays["body_velocity"][-1])
     assert rest.state.time == whole.state.time
+
+
+def test_a_penalty_run_goes_on_from_its_state_through_either_path():
+    """Penalty's anchors pass from the loop to the stitched step by contact id: ten steps and ten
+    more are the twenty steps of one run (a box sliding to rest on the stack's floor)."""
+    scene = load_scene("box_stack")
+    whole = simulate(scene.model, "penalty", scene.dt, 20 * scene.dt, compiled_loop=True)
+    half = simulate(scene.model, "penalty", scene.dt, 10 * scene.dt, compiled_loop=True)
+    assert set(half.state.carried) == {"anchor_ids", "anchor_offsets"}
+    rest = simulate(scene.model, "penalty", scene.dt, 10 * scene.dt, state=half.state, compiled_loop=False)
+    assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
+    assert np.array_equal(rest.state.carried["anchor_offsets"], whole.state.carried["anchor_offsets"])
 
 
 def test_recording_every_k_steps_samples_the_same_states():

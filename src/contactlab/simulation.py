@@ -239,7 +239,7 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
             interrupted = signal_stop
             state = stepper.state() if stepper is not None else tally.state or state
             if stepper is not None:
-                tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+                tally.take(stepper)
     wall = time.perf_counter() - run_started
     recorder.flush()
     totals = recorder.totals
@@ -307,6 +307,11 @@ class Tally:
     state: object = None                 # the latest State the Python path made
     window_rates: list = field(default_factory=list)   # steps/s of each WINDOW_SECONDS of stepping
     window: list = field(default_factory=lambda: [0, 0.0])   # the window being filled: steps, seconds
+
+    def take(self, stepper):
+        """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
+        self.max_contacts, self.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+        self.implicit_spring_steps = stepper.implicit_spring_steps
 
     def timed(self, step_index, elapsed, compiled, steps=1):
         """Book the ``steps`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled``
@@ -407,7 +412,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
         violation = (violation or health.check_samples(samples, 0)
                      or health.check_contacts(state, collide(stepper.model, state)))
         if violation is not None:
-            tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+            tally.take(stepper)
             if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
                 recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
@@ -415,7 +420,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
             chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         _advance(bar, step_index, made)
         step_index += made
-    tally.max_contacts, tally.sweeps_made = stepper.max_contacts, stepper.sweeps_made
+    tally.take(stepper)
     return stepper.state()
 
 

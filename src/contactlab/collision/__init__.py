@@ -208,19 +208,30 @@ def pass_through_depths(model, contacts) -> np.ndarray:
     """(C,) [m]: for each contact, the overlap at which one side would reach the other's middle
     — the sum of the two colliders' half thicknesses (``Model.collider_half_thickness``). Deeper
     than that the contact's normal no longer says which way is out: a force along it may push
-    a body on through. The colliders are read from the contact ids (collider pair a · N + b;
-    cloth samples: N² + triangle · O + obstacle, see collision.cloth)."""
-    B, P, O = model.body_count, model.particle_count, model.obstacle_count
-    total = B + P + O
-    thickness = model.collider_half_thickness
-    pair = np.asarray(contacts.feature_id, dtype=np.int64) >> FEATURE_BITS
-    sampled = pair >= total * total
-    a = np.where(sampled, 0, pair // total)
-    b = np.where(sampled, B + P + (pair - total * total) % max(O, 1), pair % total)
-    side_a = thickness[a]
-    if sampled.any():           # a point on a cloth triangle: the cloth's thickness (its vertices' radius)
-        side_a[sampled] = model.particle_radius[contacts.particles_a[sampled, 0]]
-    return side_a + thickness[b]
+    a body on through. See ``half_thickness_sums``."""
+    return half_thickness_sums(np.asarray(contacts.feature_id, dtype=np.int64),
+                               np.asarray(contacts.particles_a, dtype=np.int64),
+                               np.asarray(model.collider_half_thickness, dtype=float),
+                               np.asarray(model.particle_radius, dtype=float), model.body_count + model.particle_count)
+
+
+@njit(cache=True)
+def half_thickness_sums(feature_id, particles_a, thickness, particle_radius, dynamic):
+    """``pass_through_depths``, compiled (the penalty step and its compiled loop take it): the
+    colliders are read from the contact ids (collider pair a · N + b; cloth samples: N² +
+    triangle · O + obstacle, see collision.cloth, side A then the cloth's thickness, its first
+    vertex's radius). feature_id (C,) int64, particles_a (C, 3), thickness (N,) [m],
+    particle_radius (P,) [m], ``dynamic`` = B + P. Returns (C,) [m]."""
+    total = thickness.shape[0]
+    obstacles = max(total - dynamic, 1)
+    out = np.empty(feature_id.shape[0])
+    for c in range(feature_id.shape[0]):
+        pair = feature_id[c] >> FEATURE_BITS
+        if pair >= total * total:
+            out[c] = particle_radius[particles_a[c, 0]] + thickness[dynamic + (pair - total * total) % obstacles]
+        else:
+            out[c] = thickness[pair // total] + thickness[pair % total]
+    return out
 
 
 def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):

@@ -147,10 +147,19 @@ def contact_velocity(c, rows, u):
 @njit(cache=True, inline="always")
 def apply_impulse(c, rows, dn, d1, d2, u):
     """Add contact c's impulse (dn, d1, d2) [N s] along (n, t1, t2) to u: u += M⁻¹ Jᵀ λ."""
+    along_rows(c, rows, dn, d1, d2, u, True)
+
+
+@njit(cache=True, inline="always")
+def along_rows(c, rows, dn, d1, d2, u, inverse_mass):
+    """u += M⁻¹ Jᵀ λ for contact c's λ = (dn, d1, d2) along (n, t1, t2) where ``inverse_mass``
+    (a velocity change from an impulse [N s]), else u += Jᵀ λ (a generalized force from a force
+    [N]): the world vector P = dn n + d1 t1 + d2 t2 on each side, ±(P, r × P) for a body (times
+    1/m and I⁻¹), ±w P for a particle (times 1/m_p; a pinned one never written)."""
     body, particle, weight, arm, frame = rows.body, rows.particle, rows.weight, rows.arm, rows.frame
-    inverse_mass, inverse_inertia, particle_inverse_mass = rows.body_inverse_mass, rows.inverse_inertia, \
+    inverse, inverse_inertia, particle_inverse_mass = rows.body_inverse_mass, rows.inverse_inertia, \
         rows.particle_inverse_mass
-    B = inverse_mass.shape[0]
+    B = inverse.shape[0]
     px = dn * frame[c, 0, 0] + d1 * frame[c, 1, 0] + d2 * frame[c, 2, 0]
     py = dn * frame[c, 0, 1] + d1 * frame[c, 1, 1] + d2 * frame[c, 2, 1]
     pz = dn * frame[c, 0, 2] + d1 * frame[c, 1, 2] + d2 * frame[c, 2, 2]
@@ -159,19 +168,24 @@ def apply_impulse(c, rows, dn, d1, d2, u):
         b = body[c, side]
         if b >= 0:
             o = 6 * b
-            a = s * inverse_mass[b]
+            a = s * inverse[b] if inverse_mass else s
             u[o] += a * px
             u[o + 1] += a * py
             u[o + 2] += a * pz
             rx, ry, rz = arm[c, side, 0], arm[c, side, 1], arm[c, side, 2]
             tx, ty, tz = s * (ry * pz - rz * py), s * (rz * px - rx * pz), s * (rx * py - ry * px)   # ±r × P
-            for i in range(3):
-                u[o + 3 + i] += inverse_inertia[b, i, 0] * tx + inverse_inertia[b, i, 1] * ty + inverse_inertia[b, i, 2] * tz
+            if inverse_mass:
+                for i in range(3):
+                    u[o + 3 + i] += inverse_inertia[b, i, 0] * tx + inverse_inertia[b, i, 1] * ty + inverse_inertia[b, i, 2] * tz
+            else:
+                u[o + 3] += tx
+                u[o + 4] += ty
+                u[o + 5] += tz
         for m in range(3):
             p = particle[c, side, m]
             if p < 0:                       # packed: no more particles on this side
                 break
-            a = s * weight[c, side, m] * particle_inverse_mass[p]
+            a = s * weight[c, side, m] * particle_inverse_mass[p] if inverse_mass else s * weight[c, side, m]
             if a == 0.0:                    # pinned: never written (see sweep_groups)
                 continue
             o = 6 * B + 3 * p

@@ -1,5 +1,4 @@
-"""The compiled stepping loop of the velocity-level methods, impulse and constraints (L3), and
-of projection (L2).
+"""The compiled stepping loop: impulse and constraints (L3), projection (L2) and penalty (L1).
 
 ``simulate`` hands this loop the model's and the state's arrays and a number of steps; every
 stage of every step — free motion, prediction, broad and narrow phase with kept manifolds,
@@ -12,10 +11,19 @@ compiled code, with no Python between steps. The stages are the ones
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 A method's step is compiled only for the runs of that method (``compile_flags``).
 
+Penalty (``penalty_step``, loop L1) runs in the same loop behind ``run``'s ``penalty`` flag:
+detection at the step's start with the gaps its motion could close, the contact springs (the
+stiffness of each contact from the load it carries, anchors carried by contact id), their
+forces, the free velocities, the springs integrated explicitly (h M⁻¹ Jᵀ F through the rows)
+or by backward Euler (matrix-free conjugate gradients on the rows), the guard that holds a
+contact short of passing through, and the anchors moved on — the compiled stages of
+:mod:`contactlab.methods.penalty`, which its ``step`` calls one by one.
+
 It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
 convex shapes against planes and convex obstacles, the default contact granularity and normal
-(vertex, object), symplectic or backward Euler (the same motion without cloth), and for
-constraints the matrix-free solver on velocities. A scene with cloth or meshes, another
+(vertex, object), symplectic or backward Euler (the same motion without cloth), for
+constraints the matrix-free solver on velocities and for penalty the "cg" linear solver. A scene
+with cloth or meshes, another
 granularity, explicit Euler, or an assembled solver steps through the methods' ``step``, and
 so does a driven scene (external forces or kinematic bodies, contactlab.driving): a force or path
 given as a Python function cannot run in compiled code.
@@ -35,12 +43,16 @@ from ..collision import assemble_contacts, candidate_pairs, collider_poses
 from ..collision.manifolds import Manifolds, reuse_or_generate
 from ..collision.broad_phase import GRID_FROM
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
-from ..contacts import values_carried
+from ..collision import half_thickness_sums
+from ..contacts import ContactArrays, values_carried
 from ..diagnostics import gravitational, kinetic
 from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import gyroscopic_midpoint, moved
 from ..state import State
 from .impulse import resolve_collisions
+from .penalty import (GUARD_SWEEPS, GUARD_TOLERANCE, anchors_after, entities_of, explicit_velocities, free_dofs,
+                      implicit_spring_velocities, mass_blocks, normal_stiffness, slowest_approach, spring_forces,
+                      spring_settings, springs_implicit, springs_of)
 from .projection import advance, displaced, projection_targets
 from .sequential import (PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, split_into_slabs, contact_order, contact_rows,
                          row_products, solve_sequential_impulses)
@@ -86,7 +98,7 @@ Samples = namedtuple("Samples", ("time", "body_position", "body_orientation", "b
 Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
 
 
-METHODS = ("projection", "impulse", "constraints")     # the methods the loop steps
+METHODS = ("projection", "impulse", "constraints", "penalty")     # the methods the loop steps
 
 
 def applies(model, method, options, integrator):
@@ -100,6 +112,8 @@ def applies(model, method, options, integrator):
         return False
     if options.granularity != "vertex" or options.normal != "object":
         return False
+    if method == "penalty":
+        return options.linear_solver == "cg"
     return method != "constraints" or (options.solver == "matrix_free" and options.formulation == "velocity")
 
 
@@ -359,38 +373,47 @@ def projection_step(model, settings, plan, large, keeping, slabs, parallel, moti
 
 
 @njit(cache=True)
-def run(model, settings, plan, large, keeping, velocity, impulse, projection, slabs, parallel, motion, carried, time,
-        steps, first_index, last_index, record_every, samples, max_speed):
-    """``steps`` steps of ``velocity_step`` (``velocity`` True, ``projection`` None) or of
-    ``projection_step`` (the other way round: the step whose flag is None is not compiled) from
-    the state ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after
-    step i, a sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
+def run(model, settings, plan, large, keeping, velocity, impulse, projection, slabs, parallel, penalty, motion, carried,
+        time, steps, first_index, last_index, record_every, samples, max_speed):
+    """``steps`` steps of ``velocity_step`` (``velocity`` True), ``projection_step``
+    (``projection`` True) or ``penalty_step`` (``penalty`` a PenaltyLoop) — exactly one of the
+    three flags is not None, and the steps whose flag is None are not compiled — from the state
+    ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after step i, a
+    sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
     ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
     ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
-    written, most contacts, sweeps made)."""
+    written, most contacts, sweeps made, steps whose contact springs went implicit)."""
     written = 0
     most = 0
     sweeps_made = 0
+    implicit_steps = 0
     for s in range(steps):
         index = first_index + s
-        # two ifs, not if-else: Numba drops a branch only where its flag is None (as an argument
-        # typed None), and exactly one of the two flags is True (compile_flags)
+        elastic, implicit = 0.0, False
+        # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
+        # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
-            stepped = projection_step(model, settings, plan, large, keeping, slabs, parallel, motion, carried)
+            positions, velocities, carried, contacts, sweeps, change = projection_step(
+                model, settings, plan, large, keeping, slabs, parallel, motion, carried)
         if velocity is not None:
-            stepped = velocity_step(model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
-        positions, velocities, carried, contacts, sweeps, change = stepped
+            positions, velocities, carried, contacts, sweeps, change = velocity_step(
+                model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried)
+        if penalty is not None:
+            positions, velocities, carried, contacts, sweeps, change, elastic, implicit = penalty_step(
+                model, settings, plan, large, slabs, parallel, penalty, motion, carried)
         _store(motion, positions, velocities)
         time += settings.dt
         count = contacts.depth.shape[0]
         most = max(most, count)
         sweeps_made += sweeps
+        implicit_steps += implicit
         if not _healthy(motion, max_speed):
-            return s + 1, True, carried, time, written, most, sweeps_made
+            return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps
         if index % record_every == 0 or index == last_index:
             record(samples, written, model, plan, large, motion, time, count, sweeps, change)
+            samples.energy_elastic[written] = elastic
             written += 1
-    return steps, False, carried, time, written, most, sweeps_made
+    return steps, False, carried, time, written, most, sweeps_made, implicit_steps
 
 
 @njit(cache=True)
@@ -465,6 +488,102 @@ def record(samples, row, model, plan, large, motion, time, contact_count, sweeps
 
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
 
+# ---- penalty (loop L1): the stages of methods.penalty, compiled into the loop -------------
+
+PenaltyLoop = namedtuple("PenaltyLoop", (
+    "springs",                  # methods.penalty.SpringSettings
+    "thickness",                # (N,) [m] Model.collider_half_thickness
+    "particle_radius",          # (P,) [m]
+    "guard",                    # LoopSettings of hold_back's sweeps (GUARD_SWEEPS, GUARD_TOLERANCE)
+))
+PenaltyLoop.__doc__ = "What a penalty run adds to LoopModel and LoopSettings (``run``'s ``penalty`` flag)."
+
+
+@njit(cache=True)
+def penalty_step(model, settings, plan, large, slabs, parallel, penalty, motion, carried):
+    """One step of loop L1 with penalty forces (``methods.penalty.step``, stage for stage).
+
+    ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
+    (K, 3) [m]); flags as ``velocity_step``'s. Returns (positions, velocities — the state's six
+    arrays, new —, the carried triple, the ContactArrays, active-set passes, the last linear
+    solve's relative residual, the elastic energy at the step's end [J], whether the springs
+    went implicit under an explicit integrator)."""
+    h, B = settings.dt, motion.body_position.shape[0]
+    rotation = rotations.matrices(motion.body_orientation)
+    # 1. collision detection, with the gaps this step's motion could close
+    reach = swept_reach(model, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h,
+                        settings.margin)
+    contacts, manifolds = detect(model, plan, large, None, motion, rotation, reach, carried[0], 0.0)
+    rows = build_rows(model, contacts, motion, rotation)
+    v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
+    # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
+    springs, sides = contact_springs(model, penalty, contacts, rows, motion, carried)
+    forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
+    # 3. internal forces (gravity) → free velocities v*
+    free = free_motion(model, motion, rotation, h)
+    v_free = stacked(free[0], free[1], free[2])
+    # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
+    implicit = springs_implicit(penalty.springs, springs, sides[0], sides[1], sides[2], h)
+    passes, residual = 0, 0.0
+    if implicit:
+        mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
+        v_new, forces, elongation, passes, residual = implicit_spring_velocities(
+            penalty.springs, springs, rows, contacts.depth, v_free, mass, free_dofs(model.particle_pinned, B), h)
+    else:
+        v_new = explicit_velocities(rows, forces, v_free, h)
+    # 4b. over the swept step: no contact carried past half its pass-through depth
+    v_new = hold_back(model, penalty, slabs, parallel, contacts, rows, motion, v_new, h)
+    bodies = v_new[:6 * B].reshape(B, 6)
+    velocities = (bodies[:, :3].copy(), bodies[:, 3:].copy(), v_new[6 * B:].reshape(-1, 3).copy())
+    positions = moved(motion.body_position, motion.body_orientation, motion.particle_position, velocities[0],
+                      velocities[1], velocities[2], np.full(B, h), np.full(velocities[2].shape[0], h))
+    # 5. advance the anchors of pressed contacts, by contact id
+    elongation, offsets, energy = anchors_after(springs, rows, contacts.depth, v_new, elongation, not implicit,
+                                                contacts.tangent1, contacts.tangent2, h)
+    return (positions, velocities, (manifolds, contacts.feature_id, offsets), contacts, passes, residual, energy,
+            implicit and penalty.springs.implicit != 3)
+
+
+@njit(cache=True)
+def contact_springs(model, penalty, contacts, rows, motion, carried):
+    """Stage 2a: the contacts' springs (``methods.penalty.springs_of``): stiffness by the option
+    or by the load each carries, the anchors of last step's contacts by id. Returns (ContactSprings,
+    (side A (C,), side B (C,), B + P) as ``penalty.contact_entities``)."""
+    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
+    side_a = entities_of(contacts.body_a, contacts.particles_a, B)
+    side_b = entities_of(contacts.body_b, contacts.particles_b, B)
+    stiffness = normal_stiffness(penalty.springs, side_a, side_b, contacts.normal, motion.body_position,
+                                 motion.particle_position, model.body_mass, model.particle_mass, model.gravity)
+    offsets = values_carried(carried[1], carried[2], contacts.feature_id)[0]
+    springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts.restitution, contacts.friction, offsets,
+                         contacts.tangent1, contacts.tangent2)
+    return springs, (side_a, side_b, B + P)
+
+
+@njit(cache=True)
+def hold_back(model, penalty, slabs, parallel, contacts, rows, motion, velocity, h):
+    """Stage 4b (``methods.penalty.hold_back``): ``velocity`` (N,), or where it would carry a
+    contact past half its pass-through depth, a copy held back by frictionless sweeps
+    (``solve`` with the guard's settings) to v_n ≥ −(D/2 − δ) / h."""
+    C = contacts.depth.shape[0]
+    pass_through = half_thickness_sums(contacts.feature_id, contacts.particles_a, penalty.thickness,
+                                       penalty.particle_radius, motion.body_position.shape[0]
+                                       + motion.particle_position.shape[0])
+    slowest, below = slowest_approach(rows, velocity, contacts.depth, pass_through, h)
+    if not below:
+        return velocity
+    held = velocity.copy()
+    frictionless = ContactArrays(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
+                                 contacts.weights_a, contacts.weights_b, contacts.point, contacts.normal,
+                                 contacts.depth, contacts.tangent1, contacts.tangent2, np.zeros(C),
+                                 contacts.restitution, contacts.feature_id)
+    solve(penalty.guard, slabs, parallel, rows, frictionless, motion, held, slowest, np.zeros((C, 3)),
+          contact_order(contacts.point, contacts.feature_id, model.gravity))
+    return held
+
+
+# ---- from Python: the model, the settings and the state in the loop's form, and back --------
+
 PARALLEL_MIN_COLLIDERS = 100    # fewer bodies and particles: no parallel sweep is compiled in
 KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")   # pairs that keep manifolds
 
@@ -476,7 +595,8 @@ def compile_flags(model, method, options):
     nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
     projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
     particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
-    velocity, impulse, projection: the method is impulse or constraints, impulse, projection;
+    velocity, impulse, projection: the method is impulse or constraints, impulse, projection
+    (penalty: all three None, its PenaltyLoop the flag after these);
     slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
     several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
     from ..threads import available_threads
@@ -484,8 +604,8 @@ def compile_flags(model, method, options):
     present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
     return (True if dynamic >= GRID_FROM else None,
-            True if options.manifold_tolerance > 0.0 and present & set(KEPT_FAMILIES) else None,
-            True if method != "projection" else None,
+            True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
+            True if method in ("impulse", "constraints") else None,
             True if method == "impulse" else None,
             True if method == "projection" else None,
             True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
@@ -532,19 +652,13 @@ class Stepper:
     (so a run may go on through either path)."""
 
     def __init__(self, model, method, options, integrator, dt, state):
-        self.model = model
+        self._start(model, state)
         self.prefix = {"impulse": "impulse_", "constraints": "constraint_", "projection": "projection_"}[method]
         # projection.step carries its λ every step, none included; the velocity methods drop theirs then
         self.carries_empty = method == "projection"
         self.keep_manifolds = options.manifold_tolerance > 0.0
         self.settings = loop_settings(model, method, options, dt)
-        families = model.pair_families
-        self.plan = (families, model.hull_store if needs_hulls(families) else None)
-        self.flags = compile_flags(model, method, options)
-        self.time = float(state.time)
-        self.motion = Motion(*(np.array(a, dtype=float) for a in (
-            state.body_position, state.body_orientation, state.body_velocity, state.body_angular_velocity,
-            state.particle_position, state.particle_velocity)))
+        self.flags = compile_flags(model, method, options) + (None,)      # penalty: None (PenaltyStepper)
         kept = state.carried.get("manifolds") or Manifolds.empty()
         ids = state.carried.get(self.prefix + "ids")
         values = state.carried.get(self.prefix + "values")
@@ -554,9 +668,21 @@ class Stepper:
                         np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3))
         self.other = {k: v for k, v in state.carried.items()
                       if k != "manifolds" and not k.startswith(self.prefix)}
+
+    def _start(self, model, state):
+        """What every Stepper holds: the model, the narrow phase's plan, the state's time and
+        arrays (copies), the tallies."""
+        self.model = model
+        families = model.pair_families
+        self.plan = (families, model.hull_store if needs_hulls(families) else None)
+        self.time = float(state.time)
+        self.motion = Motion(*(np.array(a, dtype=float) for a in (
+            state.body_position, state.body_orientation, state.body_velocity, state.body_angular_velocity,
+            state.particle_position, state.particle_velocity)))
         self.max_contacts = 0
         self.sweeps_made = 0
         self.last_contacts = 0
+        self.implicit_spring_steps = 0
 
     def samples_for(self, count):
         """Empty Samples for ``count`` samples."""
@@ -580,10 +706,11 @@ class Stepper:
         indices = np.arange(first_index, first_index + steps)
         count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
         samples = self.samples_for(count)
-        made, diverged, self.carried, self.time, written, most, sweeps = run(
+        made, diverged, self.carried, self.time, written, most, sweeps, implicit = run(
             *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed))
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
+        self.implicit_spring_steps += implicit
         return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
@@ -614,6 +741,37 @@ class Stepper:
                      m.body_angular_velocity.copy(), m.particle_position.copy(), m.particle_velocity.copy(), carried)
 
 
+class PenaltyStepper(Stepper):
+    """A Stepper of a penalty run (``penalty_step``): its anchors carried under ``penalty.step``'s
+    keys (anchor_ids, anchor_offsets), no manifolds kept."""
+
+    def __init__(self, model, options, integrator, dt, state):
+        self._start(model, state)
+        self.settings = LoopSettings(float(dt), GUARD_SWEEPS, GUARD_TOLERANCE, 0.0, 0.0, 0.0, 0.0, False, 0.0,
+                                     float(options.contact_margin), 0.0, 1)      # hold_back's sweeps
+        self.flags = compile_flags(model, "penalty", options) + (PenaltyLoop(
+            spring_settings(options, integrator), np.array(model.collider_half_thickness, dtype=float),
+            np.array(model.particle_radius, dtype=float), self.settings),)
+        ids, offsets = state.carried.get("anchor_ids"), state.carried.get("anchor_offsets")
+        self.carried = (_no_manifolds(), np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, np.int64),
+                        np.zeros((0, 3)) if offsets is None else np.asarray(offsets, dtype=float).reshape(-1, 3))
+        self.other = {k: v for k, v in state.carried.items() if k not in ("anchor_ids", "anchor_offsets")}
+
+    def state(self):
+        """The State reached (copies), its anchors under the keys ``penalty.step`` carries them by."""
+        _, ids, offsets = self.carried
+        m = self.motion
+        return State(self.time, m.body_position.copy(), m.body_orientation.copy(), m.body_velocity.copy(),
+                     m.body_angular_velocity.copy(), m.particle_position.copy(), m.particle_velocity.copy(),
+                     dict(self.other, anchor_ids=ids, anchor_offsets=offsets))
+
+
+def _no_manifolds():
+    """The eight fields of no kept manifold (Manifolds.empty()), the form ``run`` carries them in."""
+    kept = Manifolds.empty()
+    return (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature)
+
+
 LOOP_COMPILE_SECONDS = 30.0     # s: about what compiling ``run`` costs on an empty cache (2-core machine)
 GLUE_SECONDS = (1e-4, 8e-6)     # s a step, and s a body or particle a step: the Python the loop saves
 
@@ -637,7 +795,8 @@ def stepper_for(model, method, options, integrator, dt, state, steps, compiled_l
     True: the loop wherever it serves, compiling it if need be."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return None
-    stepper = Stepper(model, method, options, integrator, dt, state)
+    stepper = (PenaltyStepper(model, options, integrator, dt, state) if method == "penalty" else
+               Stepper(model, method, options, integrator, dt, state))
     if compiled_loop or repays_compiling(model, steps) or stepper.compiled_already():
         return stepper
     return None
