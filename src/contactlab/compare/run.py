@@ -58,7 +58,8 @@ class Comparison:
 
 @dataclass
 class _Outcome:
-    """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message)."""
+    """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message),
+    set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
     method: str
     scene: object
     run: object = None
