@@ -13,7 +13,7 @@ import pytest
 from matplotlib.image import imread
 
 from contactlab import compare as compare_module
-from contactlab.compare import compare
+from contactlab.compare import compare, report, run
 from contactlab.errors import InputError
 from contactlab.methods import AVAILABLE
 from contactlab.store import open_trajectory
@@ -94,7 +94,7 @@ def _assert_links_resolve(result):
 def test_one_csv_row_per_method_matching_each_summary(pyramid):
     rows = _csv_rows(pyramid)
     assert [row["method"] for row in rows] == list(AVAILABLE)
-    assert rows == [{key: compare_module._csv_value(value) for key, value in row.items()} for row in pyramid.rows]
+    assert rows == [{key: report._csv_value(value) for key, value in row.items()} for row in pyramid.rows]
     for row in rows:
         summary = _summary(pyramid, row["method"])
         assert row["status"] == "ok"
@@ -193,7 +193,8 @@ def test_the_verdicts_match_the_checks_and_the_paragraph_names_what_was_missed(c
 
 
 def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
-    from contactlab.compare import _Outcome, _speed_sentence
+    from contactlab.compare.report import _speed_sentence
+    from contactlab.compare.run import _Outcome
 
     def outcome(name, median, low, high):
         made = _Outcome(name, None)
@@ -265,14 +266,14 @@ def test_a_bad_scene_stops_everything_before_anything_is_written(tmp_path):
 
 
 def test_methods_rejecting_the_scene_are_left_out_unless_named(tmp_path, monkeypatch):
-    real = compare_module.simulate
+    real = run.simulate
 
     def simulate(model, method, *args, **kwargs):
         if method == "projection":
             raise InputError("integrator", "projection cannot run this")
         return real(model, method, *args, **kwargs)
 
-    monkeypatch.setattr(compare_module, "simulate", simulate)
+    monkeypatch.setattr(run, "simulate", simulate)
     result = compare("bouncing_ball", None, str(tmp_path / "all"), duration=0.02, video=False)
     assert [row["method"] for row in result.rows] == ["penalty", "impulse", "constraints"]
     assert "projection cannot run this" in result.skipped["projection"]
@@ -286,7 +287,7 @@ def test_a_failure_while_writing_removes_what_the_comparison_wrote(tmp_path, mon
     def broken(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(compare_module, "write_comparison_plots", broken)
+    monkeypatch.setattr(run, "write_comparison_plots", broken)
     out = tmp_path / "a" / "b"
     with pytest.raises(OSError, match="disk full"):
         compare("bouncing_ball", ["impulse", "constraints"], str(out), duration=0.02, video=False)

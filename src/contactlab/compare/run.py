@@ -1,0 +1,309 @@
+"""Choosing and running the methods on one scene, and :func:`compare`, which runs them and
+writes what contactlab.compare.measures measures of them and contactlab.compare.report says.
+
+The scene is loaded for every method before anything is written, so a bad scene stops the
+comparison with an InputError and no output. Each run streams its trajectory to disk as it goes
+(contactlab.store), and its video is drawn from it; the runs go one after another, or, where it
+pays, to a Dask cluster through contactlab.cluster, the path of contactlab.sweep
+(:func:`run_method` is one job). A method that blows up (SimulationDiverged) is reported as
+such, its trajectory up to then kept, and the others go on. Every file is written atomically,
+and if the comparison fails (other than a method's own divergence) the files and folders it
+created are removed again.
+"""
+
+import os
+import warnings
+from dataclasses import dataclass, field
+
+from .. import cluster
+from ..errors import InputError, SimulationDiverged
+from ..methods import AVAILABLE
+from ..plots import write_comparison_plots, write_plots
+from ..record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
+from ..scene import load_scene
+from ..simulation import Run, simulate
+from ..store import open_trajectory
+from . import report
+from .measures import fill_rows
+
+PARALLEL_WORK = 200_000     # steps × (bodies + particles) of all runs from which they go to a local cluster
+
+
+@dataclass
+class Comparison:
+    """What :func:`compare` produced.
+
+    rows: one dict per method, keys as the header of comparison.csv (units in the names, see
+    docs/compare.md; None where a value is missing, "n/a" where it does not apply);
+    out: the output folder; report_html, report_md, csv: paths of the three reports;
+    summary_text: the plain-words paragraph of the report; skipped: methods left out because
+    they do not support the scene (name → why); checks: method → its closed-form checks
+    (contactlab.closed_form.Check); files: method → {name: path} of what it wrote.
+    """
+    rows: list
+    out: str
+    report_html: str
+    report_md: str
+    csv: str
+    summary_text: str
+    scene: str = ""
+    skipped: dict = field(default_factory=dict)
+    checks: dict = field(default_factory=dict)
+    files: dict = field(default_factory=dict)
+
+    def _repr_html_(self):              # Jupyter (contactlab.notebook): the table and the report's link
+        from ..notebook import comparison_html
+        return comparison_html(self)
+
+
+@dataclass
+class _Outcome:
+    """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message),
+    set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
+    method: str
+    scene: object
+    run: object = None
+    failure: str = None
+    failed_run: object = None    # the Run up to the blow-up (its trajectory streamed to disk)
+    failed_at: float = None      # s, simulated time of the blow-up when the message says it
+    warnings: list = field(default_factory=list)
+    media: dict = field(default_factory=dict)        # the video, GIF and still drawn of it
+    checks: list = field(default_factory=list)
+    files: dict = field(default_factory=dict)
+    row: dict = field(default_factory=dict)
+
+
+# ---- choosing and running the methods ----------------------------------------------------------
+
+def _method_names(methods):
+    """(names, named): the methods to compare, and whether the caller named them."""
+    if methods is None:
+        return list(AVAILABLE), False
+    if isinstance(methods, str):
+        methods = methods.split(",")
+    names = []
+    for name in methods:
+        name = str(name).strip()
+        if name not in AVAILABLE:
+            raise InputError("--methods", f"unknown method {name!r}; expected some of: {', '.join(AVAILABLE)}")
+        if name not in names:
+            names.append(name)
+    if not names:
+        raise InputError("--methods", f"expected at least one of: {', '.join(AVAILABLE)}")
+    return names, True
+
+
+def supports(method, scene) -> bool:
+    """Whether ``method`` is meant to run ``scene``: every method supports every scene today.
+    The hook for a method that cannot (besides this, a method whose set-up rejects the scene
+    with an InputError is left out when the methods were not named)."""
+    return True
+
+
+def run_method(job) -> dict:
+    """One method's run, here or on a Dask worker: load the scene for the method, simulate it
+    streaming its trajectory to ``job["trajectory"]``, and (``job["video"]``: fps) render it
+    beside that. Returns plain data: ``summary``, ``warnings`` [(category, message)], and
+    ``failure``, ``failed_at`` [s] for a run a health check stopped, or ``media`` (name -> path)
+    for a rendered one; ``input_error`` [field, message] for a scene the method refuses."""
+    from ..render import render
+    result = {"warnings": []}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            scene = load_scene(job["scene"], job["overrides"])
+            run = simulate(scene.model, scene.method, scene.dt, scene.duration,
+                           scene.method_options.get(scene.method, {}), scene.integrator,
+                           progress=job["progress"], scene_name=scene.name, allow_divergence=job["allow_divergence"],
+                           trajectory=job["trajectory"])
+            result["summary"] = run.summary
+        except SimulationDiverged as error:
+            result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
+        except InputError as error:
+            return {"input_error": [error.field, error.message], "warnings": []}
+    result["summary"]["source"] = scene.origin(job["overrides"])     # how to load the scene again (the viewer)
+    result["warnings"] = [(warning.category, str(warning.message)) for warning in caught]
+    if job["video"] is not None and "failure" not in result:
+        result["media"] = render(open_trajectory(job["trajectory"]), os.path.dirname(job["trajectory"]),
+                                 fps=job["video"], title=f"{scene.name} — {scene.method}", progress=job["progress"])
+    return result
+
+
+def _parallel(workers, scheduler, scenes, video) -> bool:
+    """Whether the methods' runs go to a Dask cluster (contactlab.cluster): on an existing one
+    (``scheduler``) always; on a local one when ``workers`` asks for more than one, or, left to
+    choose (None), when the machine has an idle core for a second run and the work is worth
+    starting a cluster — videos to draw, or at least PARALLEL_WORK steps × bodies and particles."""
+    if scheduler is not None:
+        return True
+    if workers is not None:
+        return workers > 1
+    if len(scenes) < 2:
+        return False
+    work = sum(max(1, round(scene.duration / scene.dt)) * (scene.model.body_count + scene.model.particle_count)
+               for scene in scenes.values())
+    return (video or work >= PARALLEL_WORK) and cluster.default_workers() > 1
+
+
+def _run_all(scene_source, names, named, overrides, progress, allow_divergence, out, created, video,
+             workers=None, scheduler=None):
+    """Load the scene for every method, then run it with each, streaming each trajectory to
+    out/<method>/trajectory.h5 and rendering it (``video``: fps, or None), one after another
+    or on a Dask cluster (:func:`_parallel`); folders and files noted in ``created``.
+    Returns (outcomes, skipped {method: why}, out)."""
+    scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
+    out = os.fspath(out) if out is not None else os.path.join("out", f"{next(iter(scenes.values())).name}-compare")
+    skipped, jobs = {}, []
+    for name, scene in scenes.items():
+        if not supports(name, scene):
+            if named:
+                raise InputError("--methods", f"{name} does not support the scene {scene.name}")
+            skipped[name] = "not supported"
+            continue
+        created.folder(os.path.join(out, name))
+        jobs.append((name, {**scene.origin([*overrides, f"simulation.method={name}"]),
+                            "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)), "video": video,
+                            "allow_divergence": allow_divergence, "progress": progress}))
+    if _parallel(workers, scheduler, scenes, video is not None):
+        with cluster.connect(scheduler, workers) as client:
+            for job in jobs:
+                job[1]["progress"] = False               # the bar is over the methods
+            results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
+    else:
+        results = {name: run_method(job) for name, job in jobs}
+    outcomes, first_error = [], None
+    for name, _ in jobs:
+        result = results[name]
+        if isinstance(result, BaseException):
+            raise result
+        for category, message in result["warnings"]:
+            warnings.warn(message, category, stacklevel=2)
+        if "input_error" in result:
+            error = InputError(*result["input_error"])
+            if named:
+                raise error
+            skipped[name] = str(error)
+            first_error = first_error or error
+            remove_empty([os.path.join(out, name)])     # its folder, empty: the method left nothing
+            continue
+        trajectory = os.path.join(out, name, TRAJECTORY)
+        created.add(trajectory, *result.get("media", {}).values())
+        run = Run(None, open_trajectory(trajectory), result["summary"])
+        outcome = _Outcome(name, scenes[name], warnings=[message for _, message in result["warnings"]],
+                           media=result.get("media", {}))
+        if "failure" in result:
+            outcome.failure, outcome.failed_at, outcome.failed_run = result["failure"], result["failed_at"], run
+        else:
+            outcome.run = run
+        outcomes.append(outcome)
+    if not outcomes:
+        raise first_error or InputError("--methods", "no method supports this scene")
+    return outcomes, skipped, out
+
+
+# ---- writing ----------------------------------------------------------------------------------
+
+class _Created:
+    """Files and folders one compare() call wrote, so a failure can remove them again."""
+
+    def __init__(self):
+        self.files, self.folders = [], []
+
+    def folder(self, path):
+        self.folders += make_folders(path)
+
+    def add(self, *paths):
+        self.files += paths
+
+    def text(self, path, text):
+        with atomic_path(path) as temporary:
+            with open(temporary, "w", encoding="utf-8", newline="") as stream:
+                stream.write(text)
+        self.add(path)
+        return path
+
+    def remove(self):
+        undo_written(self.files)                              # an interrupted compare says it wrote nothing
+        for folder in self.folders:                           # what a stopped worker was writing
+            for name in os.listdir(folder) if os.path.isdir(folder) else ():
+                if name.startswith(".partial-"):
+                    os.unlink(os.path.join(folder, name))
+        remove_empty(self.folders)
+
+
+def _video_fps(video, fps):
+    """``fps`` checked (contactlab.render: InputError) before any run when ``video``, else None."""
+    if not video:
+        return None
+    from ..render import check_settings
+    return check_settings(fps)[0]
+
+
+def _write_method(outcome, out, created):
+    """summary.json and plots of one run into out/<method>, beside the trajectory it streamed
+    and the video drawn of it; a run that blew up gets its summary only."""
+    directory = os.path.join(out, outcome.method)
+    run = outcome.run or outcome.failed_run
+    if run is None:
+        return
+    run.summary["trajectory"] = os.path.join(directory, TRAJECTORY)
+    files = {"trajectory": run.summary["trajectory"], "summary": write_summary(directory, run.summary)}
+    created.add(files["summary"])
+    if outcome.run is not None:
+        created.folder(os.path.join(directory, "plots"))
+        title = f"{outcome.scene.name} — {outcome.method}"
+        plots = write_plots(run.arrays, os.path.join(directory, "plots"), title=title)
+        created.add(*plots.values())
+        files.update({f"plot {name}": path for name, path in plots.items()})
+        files = {**outcome.media, **files}
+    outcome.files = files
+
+
+def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None, video=True,
+            progress=False, fps=30, allow_divergence=False, workers=None, scheduler=None) -> Comparison:
+    """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
+    the comparison into ``out`` (default ``out/<scene>-compare/``).
+
+    methods: names (a list, or one comma-separated string); None: every method of
+    contactlab.methods.AVAILABLE that supports the scene. overrides: "dotted.key=value"
+    strings as the command line's --set; duration [s]: overrides simulation.duration;
+    video: render each run (contactlab.render) at ``fps`` frames per second; progress: tqdm
+    bars on stderr; allow_divergence: each run's (see ``simulate``); workers, scheduler: where the
+    runs go — one after another here, or on a Dask cluster, local (``workers`` processes) or at
+    the address ``scheduler`` (contactlab.cluster); None: a local cluster when it pays (see
+    docs/compare.md). Raises InputError for a bad
+    scene, an unknown method or bad options, before anything is written. A method that blows up
+    (a failed health check) is reported, not raised.
+    """
+    names, named = _method_names(methods)
+    overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
+    video = _video_fps(video, fps)                   # a missing renderer or a bad fps fails before the runs
+    created = _Created()
+    try:
+        outcomes, skipped, out = _run_all(scene_source, names, named, overrides, progress, allow_divergence,
+                                          out, created, video, workers, scheduler)
+        scene = outcomes[0].scene
+        fill_rows(outcomes)
+        summary_text = report.paragraph(scene, outcomes, skipped)
+        for outcome in outcomes:
+            _write_method(outcome, out, created)
+        ran = {outcome.method: outcome.run.arrays for outcome in outcomes if outcome.run}
+        plot_paths = {}
+        if ran:
+            created.folder(os.path.join(out, "plots"))
+            plot_paths = write_comparison_plots(ran, os.path.join(out, "plots"), title=scene.name)
+            created.add(*plot_paths.values())
+        rows = [outcome.row for outcome in outcomes]
+        table = report.table_cells(outcomes)
+        csv_path = created.text(os.path.join(out, "comparison.csv"), report.csv_text(rows))
+        md_path = created.text(os.path.join(out, "report.md"),
+                               report.markdown_text(scene, outcomes, summary_text, table, plot_paths, out))
+        html_path = created.text(os.path.join(out, "report.html"),
+                                 report.html_text(scene, outcomes, summary_text, table, plot_paths, out))
+    except BaseException:
+        created.remove()
+        raise
+    return Comparison(rows=rows, out=out, report_html=html_path, report_md=md_path, csv=csv_path,
+                      summary_text=summary_text, scene=scene.name, skipped=skipped,
+                      checks={outcome.method: outcome.checks for outcome in outcomes},
+                      files={outcome.method: outcome.files for outcome in outcomes})
