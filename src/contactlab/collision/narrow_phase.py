@@ -173,7 +173,7 @@ _ROUTINE = {("sphere", "sphere"): "sphere_sphere", ("sphere", "capsule"): "spher
 
 def family(kind_a, kind_b):
     """The name in FAMILIES of the routine for a pair of shape kinds, in either order; None for
-    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_pairs)."""
+    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_contacts)."""
     a, b = _CLASS.get(int(kind_a)), _CLASS.get(int(kind_b))
     return _ROUTINE.get((a, b)) or _ROUTINE.get((b, a))
 
