@@ -11,7 +11,7 @@ within one sample spacing of the best sample).
 import numpy as np
 import pytest
 
-from contactlab.collision.convex import box_as_hull
+from contactlab.hulls import box_as_hull
 from contactlab.collision.mesh_contacts import capsule_mesh, convex_mesh, shapes_against_mesh
 from contactlab.meshes import TriangleMesh, builtin_mesh_path, load_mesh
 from contactlab import shapes

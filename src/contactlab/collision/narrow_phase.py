@@ -18,7 +18,8 @@ from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_convex import capsule_convex
-from .convex import convex_convex, convex_plane, hull_view, sphere_convex
+from .convex import convex_plane, hull_view, sphere_convex
+from .convex_convex import convex_convex
 
 MAX_PER_PAIR = 8
 
