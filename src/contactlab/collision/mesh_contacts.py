@@ -56,37 +56,6 @@ Box against a mesh — :func:`box_mesh`
     farthest from those chosen. A box resting on a flat mesh floor gets its 4 bottom
     corners. Limitation: box edges crossing triangle edges away from any corner or vertex
 
-Capsule against a mesh — :func:`capsule_mesh`
-    The capsule is the segment ``center + s · axis``, ``|s| ≤ half_length`` (axis = the third
-    column of the rotation), swept by a sphere of ``radius``. For every triangle near the
-    capsule (BVH query with its bounds grown by radius + margin, + ``max_depth`` for a
-    one-sided mesh) two kinds of candidate contacts are made, each a *sphere of the capsule's
-    radius at one point x(s) of the segment* judged as :func:`sphere_mesh` judges a
-    sphere (the closest feature of the triangle to x(s), its region, signed distance by the
-    pseudo-normal, the normal of the face exactly or the direction q → x):
-
-    * **end contacts** (local index 7: the −z end, 8: the +z end): a segment end that lies
-      over the triangle's face (its closest point is the FACE region). A capsule lying flat on
-      a face therefore gets its two ends (it does not rock), and — like ``capsule_plane`` — a
-      slightly tilted one keeps both while the upper end is within the margin.
-    * **the closest contact** (local index = the region: 0 face, 1–3 edges, 4–6 vertices):
-      the closest pair between the segment and the triangle (the minimum of: each end against
-      the triangle, the segment against each of the 3 edges, the segment crossing the
-      triangle; ties go to an end), unless it is an end over the face (already an end contact).
-
-    Duplicates and ghosts are removed with the sphere rules, applied at each contact's own
-    segment point x: (1) an edge or vertex point q is dropped when another candidate triangle
-    that contains q is nearer x (by more than the tolerance): q is not a local minimum; a FACE
-    contact in the interior of the segment (the end of a parallel patch on a triangle's
-    boundary) is dropped when a coplanar neighbour contains q: the support goes on there
-    (a flat capsule across the shared diagonal of a floor gets its 2 ends only); (2) contacts
-    at the same segment point and the same mesh point are one: face before edge before vertex,
-    then the lowest triangle; (3) a point x behind its feature (the far side of a thin solid)
-    gives a contact only if that feature is the nearest to x of all candidates (x inside the
-    mesh: out through the nearest feature, depth = radius + distance, as for a sphere).
-    If more than ``max_contacts`` remain: the deepest, then repeatedly the one farthest from
-    those chosen (as :func:`box_mesh`).
-
 Convex hull against a mesh — :func:`convex_mesh`
     As :func:`box_mesh`: each hull vertex is a point (a sphere of radius 0) against
     the mesh with the sphere rules (at most ``CORNER_CONTACTS`` each; local index
@@ -95,6 +64,9 @@ Convex hull against a mesh — :func:`convex_mesh`
     face of least penetration among those whose contact normal leaves the mesh (local index
     13 + k, k the vertex's local index in its triangle); reduced as box_mesh does. Features of
     hull vertices v and v + 13 on the same triangle coincide (hulls of more than 13 vertices).
+
+Capsule against a mesh: :mod:`.capsule_mesh` (a sphere of the capsule's radius at points of
+its segment, with the same rules).
 
 Batch — :func:`shapes_against_mesh`: every dynamic shape against one mesh, by kind.
 
@@ -107,87 +79,52 @@ from numba import njit
 
 from .. import shapes
 from ..meshes import mesh_triangles_near
-from .contact_output import write_contact
+from .capsule_mesh import capsule_mesh
 from .convex import hull_view
-from .mesh_features import (EDGE2, FACE, FEATURES_PER_TRIANGLE, closest_feature, closest_point_on_triangle,
-                            distance_to_triangle, features_near, nearest_feature, segment_triangle_closest,
-                            signed_normal)
+from .mesh_features import (EDGE2, FACE, FEATURES_PER_TRIANGLE, closest_point_on_triangle, features_near,
+                            candidate_rows, keep_deepest, keep_spread, nearest_feature, signed_normal,
+                            write_kept)
 
 MAX_PER_SHAPE = 8         # the usual cap of contacts per shape against one mesh (as MAX_PER_PAIR)
 CORNER_CONTACTS = 4       # box–mesh contacts kept per box corner (the deepest local minima)
-END_FEATURE = 7            # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
 HULL_VERTEX_FEATURES = 13  # hull vertex v: 16 t + v mod 13; mesh vertex k inside the hull: 16 t + 13 + k
-COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this are coplanar
 
 SPHERE, BOX, POINT, CAPSULE, CONVEX = shapes.SPHERE, shapes.BOX, shapes.POINT, shapes.CAPSULE, shapes.CONVEX
 MESH_PARTNERS = (SPHERE, POINT, BOX, CAPSULE, CONVEX)   # the dynamic shapes with a routine against a mesh
 
 
-# ---------------------------------------------------------------------------------------------
-# choosing among candidate contacts
-# ---------------------------------------------------------------------------------------------
-
 @njit(cache=True)
-def _deepest(depth, limit):
-    """Mask (C,) of the ``limit`` deepest of the contacts with ``depth`` (C,) (ties: the earliest)."""
-    count = depth.shape[0]
-    taken = np.zeros(count, dtype=np.bool_)
-    for _ in range(min(count, limit)):
-        best = -1
-        for k in range(count):
-            if not taken[k] and (best < 0 or depth[k] > depth[best]):
-                best = k
-        taken[best] = True
-    return taken
-
-
-@njit(cache=True)
-def _spread(points, depth, limit, tolerance):
-    """Mask (C,) of at most ``limit`` of the contacts at ``points`` (C, 3) with ``depth`` (C,): the
-    deepest (the first within ``tolerance``), then repeatedly the one farthest from those
-    chosen (ties: the earliest)."""
-    count = depth.shape[0]
-    chosen = np.ones(count, dtype=np.bool_)
-    if count <= limit:
-        return chosen
-    deepest = -np.inf
-    for k in range(count):
-        chosen[k] = False
-        deepest = max(deepest, depth[k])
-    last = 0
-    while depth[last] < deepest - tolerance:
-        last += 1
-    chosen[last] = True
-    nearest = np.empty(count)
-    for k in range(count):
-        nearest[k] = np.inf
-    for _ in range(limit - 1):
-        best, best_k = -1.0, -1
-        for k in range(count):
-            if chosen[k]:
+def _mesh_vertices_near(mesh, candidates, center, rotation):
+    """The vertices of the candidate triangles, each once (by its owner triangle), seen from a
+    shape at ``center`` (3,) [m] with ``rotation`` (3, 3) body → world: vertex (n,), owner
+    triangle (n,), the vertex's local index in that triangle (n,), its body-frame position
+    (n, 3) [m], and side (n,): −1 where a two-sided mesh's vertex pseudo-normal points away
+    from the centre (a contact must leave the mesh towards the centre's side), else +1."""
+    capacity = 3 * candidates.shape[0]
+    vertex = np.empty(capacity, dtype=np.int64)
+    owner = np.empty(capacity, dtype=np.int64)
+    index = np.empty(capacity, dtype=np.int64)
+    local = np.empty((capacity, 3))
+    side = np.empty(capacity)
+    n = 0
+    for c in range(candidates.shape[0]):
+        t = candidates[c]
+        for k in range(3):
+            v = mesh.triangles[t, k]
+            if mesh.vertex_owner[v] != t:
                 continue
-            dx = points[k, 0] - points[last, 0]
-            dy = points[k, 1] - points[last, 1]
-            dz = points[k, 2] - points[last, 2]
-            nearest[k] = min(nearest[k], dx * dx + dy * dy + dz * dz)
-            if nearest[k] > best * (1.0 + 1e-9) + 1e-300:
-                best, best_k = nearest[k], k
-        chosen[best_k] = True
-        last = best_k
-    return chosen
-
-
-@njit(cache=True)
-def _write_chosen(chosen, point, normal, depth, feature, out_point, out_normal, out_depth, out_feature, slot):
-    """Write the candidates marked in ``chosen`` (C,) — rows of point (C, 3), normal (C, 3),
-    depth (C,) [m], feature (C,) — from ``slot`` on, in their order; returns how many."""
-    written = 0
-    for i in range(chosen.shape[0]):
-        if chosen[i]:
-            write_contact(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i],
-                          depth[i], feature[i])
-            written += 1
-    return written
+            p = mesh.vertices[v]
+            for a in range(3):
+                local[n, a] = (rotation[0, a] * (p[0] - center[0]) + rotation[1, a] * (p[1] - center[1])
+                               + rotation[2, a] * (p[2] - center[2]))
+            psi = mesh.vertex_pseudo_normals[v]
+            side[n] = 1.0
+            if mesh.two_sided and ((center[0] - p[0]) * psi[0] + (center[1] - p[1]) * psi[1]
+                                   + (center[2] - p[2]) * psi[2]) < 0.0:
+                side[n] = -1.0
+            vertex[n], owner[n], index[n] = v, t, k
+            n += 1
+    return vertex[:n], owner[:n], index[:n], local[:n], side[:n]
 
 
 @njit(cache=True)
@@ -292,10 +229,7 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
                 break
     # 3. normal, signed distance, depth; features the centre is behind (the far side of a
     #    thin solid) are dropped: the centre is outside
-    point = np.empty((n, 3))
-    normal = np.empty((n, 3))
-    depth = np.empty(n)
-    feature = np.empty(n, dtype=np.int64)
+    point, normal, depth, feature = candidate_rows(n)
     count = 0
     for i in range(n):
         if not keep[i]:
@@ -315,7 +249,7 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
         feature[count] = FEATURES_PER_TRIANGLE * t + region[i]
         count += 1
     # 4. the deepest max_contacts
-    return _write_chosen(_deepest(depth[:count], max_contacts), point, normal, depth, feature, out_point,
+    return write_kept(keep_deepest(depth[:count], max_contacts), point, normal, depth, feature, out_point,
                          out_normal, out_depth, out_feature, slot)
 
 
@@ -344,10 +278,7 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
     # all candidate contacts: corners (at most CORNER_CONTACTS each), then mesh vertices
     capacity = 8 * CORNER_CONTACTS + 3 * candidates.shape[0]
-    point = np.empty((capacity, 3))
-    normal = np.empty((capacity, 3))
-    depth = np.empty(capacity)
-    feature = np.empty(capacity, dtype=np.int64)
+    point, normal, depth, feature = candidate_rows(capacity)
     corners = np.empty((8, 3))
     for corner in range(8):                             # local index: the corner, numbered as in box_plane
         sx = half_extents[0] if corner & 1 else -half_extents[0]
@@ -357,197 +288,35 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
             corners[corner, i] = center[i] + rotation[i, 0] * sx + rotation[i, 1] * sy + rotation[i, 2] * sz
     count = _corners_against_mesh(corners, np.arange(8), mesh, margin, point, normal, depth, feature, slot * 0)
     # mesh vertices inside the box (grown by the margin), each once: by its owner triangle
-    local = np.empty(3)
-    for c in range(candidates.shape[0]):
-        t = candidates[c]
-        tri = mesh.triangles[t]
-        for k in range(3):
-            vertex = tri[k]
-            if mesh.vertex_owner[vertex] != t:
-                continue
-            v = mesh.vertices[vertex]
-            inside = True
-            for a in range(3):
-                local[a] = (rotation[0, a] * (v[0] - center[0]) + rotation[1, a] * (v[1] - center[1])
-                            + rotation[2, a] * (v[2] - center[2]))
-                if abs(local[a]) > half_extents[a] + margin:
-                    inside = False
-            if not inside:
-                continue
-            psi = mesh.vertex_pseudo_normals[vertex]
-            psi_sign = 1.0
-            if mesh.two_sided and ((center[0] - v[0]) * psi[0] + (center[1] - v[1]) * psi[1]
-                                   + (center[2] - v[2]) * psi[2]) < 0.0:
-                psi_sign = -1.0
-            best_gap, best_axis, best_sign = np.inf, -1, 1.0
-            for a in range(3):
-                sign = 1.0 if local[a] >= 0.0 else -1.0
-                # contact normal = −(outward face normal) = −sign · R[:, a]; must leave the mesh
-                along = -sign * (rotation[0, a] * psi[0] + rotation[1, a] * psi[1] + rotation[2, a] * psi[2])
-                gap = half_extents[a] - abs(local[a])
-                if psi_sign * along > 0.0 and gap < best_gap:
-                    best_gap, best_axis, best_sign = gap, a, sign
-            if best_axis < 0 or best_gap < -margin:
-                continue
-            for i in range(3):
-                face = best_sign * rotation[i, best_axis]
-                normal[count, i] = -face
-                point[count, i] = v[i] + 0.5 * best_gap * face
-            depth[count] = best_gap
-            feature[count] = FEATURES_PER_TRIANGLE * t + 8 + k
-            count += 1
-    return _write_chosen(_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
-                         feature, out_point, out_normal, out_depth, out_feature, slot)
-
-# ---------------------------------------------------------------------------------------------
-# capsule against a mesh
-# ---------------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def capsule_mesh(center, rotation, radius, half_length, mesh, margin, out_point, out_normal, out_depth,
-                 out_feature, slot, max_contacts):
-    """Capsule A (centre (3,) [m], rotation (3, 3) body → world, the segment along its third
-    column, ``radius``, ``half_length`` [m]) against the static mesh B (module docstring).
-
-    Writes at most ``max_contacts`` contacts from ``slot`` on and returns how many;
-    ``feature = 16 · triangle + local`` (local: region 0–6 of the closest contact, 7 / 8 the
-    −z / +z end over the face).
-    """
-    tol = mesh.tolerance
-    reach = radius + margin
-    deep = 0.0 if mesh.two_sided else mesh.max_depth
-    axis = np.empty(3)
-    lower = np.empty(3)
-    upper = np.empty(3)
-    for i in range(3):
-        axis[i] = rotation[i, 2]
-        extent = abs(axis[i]) * half_length + reach + deep
-        lower[i] = center[i] - extent
-        upper[i] = center[i] + extent
-    candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
-    n = candidates.shape[0]
-    # candidate records: segment parameter, triangle, closest point, region, distance, local index
-    capacity = 3 * n
-    rec_s = np.empty(capacity)
-    rec_triangle = np.empty(capacity, dtype=np.int64)
-    rec_q = np.empty((capacity, 3))
-    rec_region = np.empty(capacity, dtype=np.int64)
-    rec_distance = np.empty(capacity)
-    rec_local = np.empty(capacity, dtype=np.int64)
-    count = 0
-    x = np.empty(3)
-    ends = 2 if half_length > 0.0 else 1
-    for c in range(n):
-        t = candidates[c]
-        nt = mesh.triangle_normals[t]
-        if nt[0] == 0.0 and nt[1] == 0.0 and nt[2] == 0.0:
+    vertex, owner, index, local, side = _mesh_vertices_near(mesh, candidates, center, rotation)
+    for n in range(vertex.shape[0]):
+        inside = True
+        for a in range(3):
+            if abs(local[n, a]) > half_extents[a] + margin:
+                inside = False
+        if not inside:
             continue
-        # end contacts: an end over the face
-        for end in range(ends):
-            s = -half_length if end == 0 else half_length
-            for i in range(3):
-                x[i] = center[i] + s * axis[i]
-            qx, qy, qz, region, d = closest_feature(mesh, t, x, tol)
-            if region == FACE and d <= reach + deep:
-                rec_s[count], rec_triangle[count], rec_region[count], rec_distance[count] = s, t, region, d
-                rec_q[count, 0], rec_q[count, 1], rec_q[count, 2] = qx, qy, qz
-                rec_local[count] = END_FEATURE + end
-                count += 1
-        # the closest pair of segment and triangle
-        s, d_pair = segment_triangle_closest(center, axis, half_length, mesh, t, tol)
-        if d_pair > reach + deep:
+        v = mesh.vertices[vertex[n]]
+        psi = mesh.vertex_pseudo_normals[vertex[n]]
+        best_gap, best_axis, best_sign = np.inf, -1, 1.0
+        for a in range(3):
+            sign = 1.0 if local[n, a] >= 0.0 else -1.0
+            # contact normal = −(outward face normal) = −sign · R[:, a]; must leave the mesh
+            along = -sign * (rotation[0, a] * psi[0] + rotation[1, a] * psi[1] + rotation[2, a] * psi[2])
+            gap = half_extents[a] - abs(local[n, a])
+            if side[n] * along > 0.0 and gap < best_gap:
+                best_gap, best_axis, best_sign = gap, a, sign
+        if best_axis < 0 or best_gap < -margin:
             continue
         for i in range(3):
-            x[i] = center[i] + s * axis[i]
-        qx, qy, qz, region, d = closest_feature(mesh, t, x, tol)
-        at_end = abs(s - half_length) <= tol or abs(s + half_length) <= tol
-        if region == FACE and at_end:
-            continue                                   # an end over the face: an end contact already
-        rec_s[count], rec_triangle[count], rec_region[count], rec_distance[count] = s, t, region, d
-        rec_q[count, 0], rec_q[count, 1], rec_q[count, 2] = qx, qy, qz
-        rec_local[count] = region
+            face = best_sign * rotation[i, best_axis]
+            normal[count, i] = -face
+            point[count, i] = v[i] + 0.5 * best_gap * face
+        depth[count] = best_gap
+        feature[count] = FEATURES_PER_TRIANGLE * owner[n] + 8 + index[n]
         count += 1
-    keep = np.ones(count, dtype=np.bool_)
-    other_distance = np.empty(n)
-    other_region = np.zeros(n, dtype=np.int64)
-    point = np.empty((count, 3))
-    normal = np.empty((count, 3))
-    depth = np.empty(count)
-    feature = np.empty(count, dtype=np.int64)
-    found = 0
-    for r in range(count):
-        s = rec_s[r]
-        t = rec_triangle[r]
-        for i in range(3):
-            x[i] = center[i] + s * axis[i]
-        q = rec_q[r]
-        # the sphere at x: the distances of all candidates from x
-        nt = mesh.triangle_normals[t]
-        for c in range(n):
-            other_distance[c] = distance_to_triangle(mesh, candidates[c], x)
-            other_region[c] = FACE
-        interior = abs(s - half_length) > tol and abs(s + half_length) > tol
-        # (1) not a local minimum
-        for c in range(n):
-            j = candidates[c]
-            if j == t or other_distance[c] == np.inf:
-                continue
-            other = mesh.triangles[j]
-            px, py, pz, _ = closest_point_on_triangle(q, mesh.vertices[other[0]], mesh.vertices[other[1]],
-                                                      mesh.vertices[other[2]])
-            contains = (px - q[0]) ** 2 + (py - q[1]) ** 2 + (pz - q[2]) ** 2 <= tol * tol
-            if not contains:
-                continue
-            if rec_region[r] != FACE and other_distance[c] < rec_distance[r] - tol:
-                keep[r] = False
-                break
-            if rec_region[r] == FACE and interior:
-                nj = mesh.triangle_normals[j]
-                if nj[0] * nt[0] + nj[1] * nt[1] + nj[2] * nt[2] >= COPLANAR_COS:
-                    keep[r] = False
-                    break
-        if not keep[r]:
-            continue
-        # (2) one contact per (segment point, mesh point)
-        rank_r = 0 if rec_region[r] == FACE else (1 if rec_region[r] <= EDGE2 else 2)
-        for k in range(count):
-            if k == r or not keep[k] or abs(rec_s[k] - s) > tol:
-                continue
-            rank_k = 0 if rec_region[k] == FACE else (1 if rec_region[k] <= EDGE2 else 2)
-            if rank_k > rank_r or (rank_k == rank_r and rec_triangle[k] > t):
-                continue
-            if rank_k == rank_r and rec_triangle[k] == t and k > r:
-                continue
-            ex, ey, ez = rec_q[k, 0] - q[0], rec_q[k, 1] - q[1], rec_q[k, 2] - q[2]
-            if ex * ex + ey * ey + ez * ez <= tol * tol:
-                keep[r] = False
-                break
-        if not keep[r]:
-            continue
-        # (3) sign, normal, depth
-        signed, nx, ny, nz = signed_normal(mesh, t, rec_region[r], x, q[0], q[1], q[2], rec_distance[r])
-        if signed < 0.0:
-            nearest = nearest_feature(candidates, other_distance, other_region)
-            if nearest < 0 or candidates[nearest] != t or other_distance[nearest] < rec_distance[r] - tol:
-                keep[r] = False
-                continue
-        elif rec_distance[r] > reach:
-            keep[r] = False
-            continue
-        this_depth = radius - signed
-        if this_depth < -margin:
-            keep[r] = False
-            continue
-        normal[found, 0], normal[found, 1], normal[found, 2] = nx, ny, nz
-        depth[found] = this_depth
-        point[found, 0] = 0.5 * (x[0] - radius * nx + q[0])
-        point[found, 1] = 0.5 * (x[1] - radius * ny + q[1])
-        point[found, 2] = 0.5 * (x[2] - radius * nz + q[2])
-        feature[found] = FEATURES_PER_TRIANGLE * t + rec_local[r]
-        found += 1
-    return _write_chosen(_spread(point[:found], depth[:found], max_contacts, tol), point, normal, depth, feature,
-                         out_point, out_normal, out_depth, out_feature, slot)
-
+    return write_kept(keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
+                         feature, out_point, out_normal, out_depth, out_feature, slot)
 
 # ---------------------------------------------------------------------------------------------
 # convex hull against a mesh
@@ -579,60 +348,44 @@ def convex_mesh(center, rotation, vertices, face_normal, face_offset, face_verte
         upper[i] += margin
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
     capacity = vertex_count * CORNER_CONTACTS + 3 * candidates.shape[0]
-    point = np.empty((capacity, 3))
-    normal = np.empty((capacity, 3))
-    depth = np.empty(capacity)
-    feature = np.empty(capacity, dtype=np.int64)
+    point, normal, depth, feature = candidate_rows(capacity)
     count = _corners_against_mesh(world, np.arange(vertex_count) % HULL_VERTEX_FEATURES, mesh, margin, point, normal,
                                   depth, feature, slot * 0)
     # mesh vertices inside the hull (its face planes moved out by the margin), each once
-    local = np.empty(3)
-    for c in range(candidates.shape[0]):
-        t = candidates[c]
-        tri = mesh.triangles[t]
-        for k in range(3):
-            vertex = tri[k]
-            if mesh.vertex_owner[vertex] != t:
-                continue
-            p = mesh.vertices[vertex]
-            for a in range(3):
-                local[a] = (rotation[0, a] * (p[0] - center[0]) + rotation[1, a] * (p[1] - center[1])
-                            + rotation[2, a] * (p[2] - center[2]))
-            inside = True
-            for f in range(face_count):
-                if (face_normal[f, 0] * local[0] + face_normal[f, 1] * local[1] + face_normal[f, 2] * local[2]
-                        - face_offset[f]) > margin:
-                    inside = False
-                    break
-            if not inside:
-                continue
-            psi = mesh.vertex_pseudo_normals[vertex]
-            psi_sign = 1.0
-            if mesh.two_sided and ((center[0] - p[0]) * psi[0] + (center[1] - p[1]) * psi[1]
-                                   + (center[2] - p[2]) * psi[2]) < 0.0:
-                psi_sign = -1.0
-            best_gap, best_face = np.inf, -1
-            for f in range(face_count):
-                wx = rotation[0, 0] * face_normal[f, 0] + rotation[0, 1] * face_normal[f, 1] + rotation[0, 2] * face_normal[f, 2]
-                wy = rotation[1, 0] * face_normal[f, 0] + rotation[1, 1] * face_normal[f, 1] + rotation[1, 2] * face_normal[f, 2]
-                wz = rotation[2, 0] * face_normal[f, 0] + rotation[2, 1] * face_normal[f, 1] + rotation[2, 2] * face_normal[f, 2]
-                # contact normal = −(outward face normal); it must leave the mesh
-                along = -(wx * psi[0] + wy * psi[1] + wz * psi[2])
-                gap = face_offset[f] - (face_normal[f, 0] * local[0] + face_normal[f, 1] * local[1]
-                                        + face_normal[f, 2] * local[2])
-                if psi_sign * along > 0.0 and gap < best_gap:
-                    best_gap, best_face = gap, f
-            if best_face < 0 or best_gap < -margin:
-                continue
-            for i in range(3):
-                face = (rotation[i, 0] * face_normal[best_face, 0] + rotation[i, 1] * face_normal[best_face, 1]
-                        + rotation[i, 2] * face_normal[best_face, 2])
-                normal[count, i] = -face
-                point[count, i] = p[i] + 0.5 * best_gap * face
-            depth[count] = best_gap
-            feature[count] = FEATURES_PER_TRIANGLE * t + HULL_VERTEX_FEATURES + k
-            count += 1
-    return _write_chosen(_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
+    vertex, owner, index, local, side = _mesh_vertices_near(mesh, candidates, center, rotation)
+    for n in range(vertex.shape[0]):
+        inside = True
+        for f in range(face_count):
+            if (face_normal[f, 0] * local[n, 0] + face_normal[f, 1] * local[n, 1] + face_normal[f, 2] * local[n, 2]
+                    - face_offset[f]) > margin:
+                inside = False
+                break
+        if not inside:
+            continue
+        p = mesh.vertices[vertex[n]]
+        psi = mesh.vertex_pseudo_normals[vertex[n]]
+        best_gap, best_face = np.inf, -1
+        for f in range(face_count):
+            wx = rotation[0, 0] * face_normal[f, 0] + rotation[0, 1] * face_normal[f, 1] + rotation[0, 2] * face_normal[f, 2]
+            wy = rotation[1, 0] * face_normal[f, 0] + rotation[1, 1] * face_normal[f, 1] + rotation[1, 2] * face_normal[f, 2]
+            wz = rotation[2, 0] * face_normal[f, 0] + rotation[2, 1] * face_normal[f, 1] + rotation[2, 2] * face_normal[f, 2]
+            # contact normal = −(outward face normal); it must leave the mesh
+            along = -(wx * psi[0] + wy * psi[1] + wz * psi[2])
+            gap = face_offset[f] - (face_normal[f, 0] * local[n, 0] + face_normal[f, 1] * local[n, 1]
+                                    + face_normal[f, 2] * local[n, 2])
+            if side[n] * along > 0.0 and gap < best_gap:
+                best_gap, best_face = gap, f
+        if best_face < 0 or best_gap < -margin:
+            continue
+        for i in range(3):
+            face = (rotation[i, 0] * face_normal[best_face, 0] + rotation[i, 1] * face_normal[best_face, 1]
+                    + rotation[i, 2] * face_normal[best_face, 2])
+            normal[count, i] = -face
+            point[count, i] = p[i] + 0.5 * best_gap * face
+        depth[count] = best_gap
+        feature[count] = FEATURES_PER_TRIANGLE * owner[n] + HULL_VERTEX_FEATURES + index[n]
+        count += 1
+    return write_kept(keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
                          feature, out_point, out_normal, out_depth, out_feature, slot)
 
 
@@ -654,10 +407,7 @@ def shapes_against_mesh(kinds, params, centers, rotations_, margins, mesh, max_p
     """
     count_shapes = kinds.shape[0]
     capacity = max(1, count_shapes * max_per_shape)
-    point = np.empty((capacity, 3))
-    normal = np.empty((capacity, 3))
-    depth = np.empty(capacity)
-    feature = np.empty(capacity, dtype=np.int64)
+    point, normal, depth, feature = candidate_rows(capacity)
     owner = np.empty(capacity, dtype=np.int64)
     count = np.int64(capacity) * 0          # (not the literal 0: that would compile the callees twice)
     for s in range(count_shapes):

@@ -1,10 +1,13 @@
-"""Closest features of static triangle meshes: the geometry every mesh query is built on.
+"""Closest features of static triangle meshes, and the choice among a shape's candidate contacts:
+what every mesh routine is built on.
 
 A point's closest point on a triangle comes with its Voronoi region (the face, one of the
 3 edges, one of the 3 vertices); the region's *pseudo-normal* (Bærentzen–Aanæs: exact for a
 closed mesh) tells whether the point is inside a one-sided mesh. The contact routines
 (:mod:`.mesh_contacts`), the static signed distances (:mod:`.signed_distance`) and the swept
 test (:mod:`.mesh_sweep`) all judge a point by these rules, so they agree on what is inside.
+A shape's candidate contacts (:func:`candidate_rows`) are chosen by :func:`keep_deepest` or
+:func:`keep_spread` when there are more than it may keep, and written by :func:`write_kept`.
 Meshes are :class:`~contactlab.meshes.MeshGeometry` tuples (``TriangleMesh.geometry``).
 
 Everything is compiled (``@njit(cache=True)``), float64, no fastmath; scalar arithmetic, no
@@ -15,7 +18,8 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .capsule import segment_closest_parameters
+from .contact_output import write_contact
+from .geometry import segment_closest_parameters
 
 FACE, EDGE0, EDGE1, EDGE2, VERTEX0, VERTEX1, VERTEX2 = 0, 1, 2, 3, 4, 5, 6   # Voronoi regions of a triangle
 FEATURES_PER_TRIANGLE = 16    # contact feature = 16 · triangle + local index (local index < 16)
@@ -35,6 +39,8 @@ def closest_point_on_triangle(p, a, b, c):
     d2 = acx * apx + acy * apy + acz * apz
     if d1 <= 0.0 and d2 <= 0.0:
         return a[0], a[1], a[2], VERTEX0
+    # each vertex region is tested alike, written out in Ericson's scalar form (a deliberate
+    # repetition: a loop over the corners would allocate and index in the innermost query)
     bpx, bpy, bpz = p[0] - b[0], p[1] - b[1], p[2] - b[2]
     d3 = abx * bpx + aby * bpy + abz * bpz
     d4 = acx * bpx + acy * bpy + acz * bpz
@@ -238,3 +244,76 @@ def segment_triangle_closest(center, axis, half_length, mesh, triangle, tol):
             best_s, best_d = s, d
     return best_s, best_d
 
+
+# ---------------------------------------------------------------------------------------------
+# choosing among a shape's candidate contacts against a mesh
+# ---------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def candidate_rows(capacity):
+    """Empty candidate contacts for a shape against a mesh: point (capacity, 3) [m], normal
+    (capacity, 3), depth (capacity,) [m], feature (capacity,) int64."""
+    return np.empty((capacity, 3)), np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, dtype=np.int64)
+
+
+@njit(cache=True)
+def keep_deepest(depth, limit):
+    """Mask (C,) of the ``limit`` deepest of the contacts with ``depth`` (C,) (ties: the earliest)."""
+    count = depth.shape[0]
+    taken = np.zeros(count, dtype=np.bool_)
+    for _ in range(min(count, limit)):
+        best = -1
+        for k in range(count):
+            if not taken[k] and (best < 0 or depth[k] > depth[best]):
+                best = k
+        taken[best] = True
+    return taken
+
+
+@njit(cache=True)
+def keep_spread(points, depth, limit, tolerance):
+    """Mask (C,) of at most ``limit`` of the contacts at ``points`` (C, 3) with ``depth`` (C,): the
+    deepest (the first within ``tolerance``), then repeatedly the one farthest from those
+    chosen (ties: the earliest)."""
+    count = depth.shape[0]
+    chosen = np.ones(count, dtype=np.bool_)
+    if count <= limit:
+        return chosen
+    deepest = -np.inf
+    for k in range(count):
+        chosen[k] = False
+        deepest = max(deepest, depth[k])
+    last = 0
+    while depth[last] < deepest - tolerance:
+        last += 1
+    chosen[last] = True
+    nearest = np.empty(count)
+    for k in range(count):
+        nearest[k] = np.inf
+    for _ in range(limit - 1):
+        best, best_k = -1.0, -1
+        for k in range(count):
+            if chosen[k]:
+                continue
+            dx = points[k, 0] - points[last, 0]
+            dy = points[k, 1] - points[last, 1]
+            dz = points[k, 2] - points[last, 2]
+            nearest[k] = min(nearest[k], dx * dx + dy * dy + dz * dz)
+            if nearest[k] > best * (1.0 + 1e-9) + 1e-300:
+                best, best_k = nearest[k], k
+        chosen[best_k] = True
+        last = best_k
+    return chosen
+
+
+@njit(cache=True)
+def write_kept(chosen, point, normal, depth, feature, out_point, out_normal, out_depth, out_feature, slot):
+    """Write the candidates marked in ``chosen`` (C,) — rows of point (C, 3), normal (C, 3),
+    depth (C,) [m], feature (C,) — from ``slot`` on, in their order; returns how many."""
+    written = 0
+    for i in range(chosen.shape[0]):
+        if chosen[i]:
+            write_contact(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i],
+                          depth[i], feature[i])
+            written += 1
+    return written
