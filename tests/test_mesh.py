@@ -270,7 +270,7 @@ def test_box_on_a_mesh_peak_gets_vertex_contact():
     mesh = TriangleMesh(V, T)
     P, N, D, F = buffers()
     k = box_mesh(np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3), np.array([0.3, 0.3, 0.2]),
-                    mesh.geometry, 0.0, P, N, D, F, 0, 8)
+                 mesh.geometry, 0.0, P, N, D, F, 0, 8)
     assert k == 1 and F[0] % 16 >= 8
     np.testing.assert_allclose(N[0], [0.0, 0.0, 1.0])
     assert D[0] == pytest.approx(0.01)
@@ -283,7 +283,7 @@ def test_shapes_against_mesh_batch():
     centers = np.array([[0.5, 0.5, 0.09], [0.2, -0.3, -0.001], [-1.0, -1.0, 0.2], [0.0, 0.0, 3.0]])
     rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (4, 3, 3)))
     point, normal, depth, feature, owner = shapes_against_mesh(kinds, params, centers, rots,
-                                                                  np.zeros(4), mesh.geometry, 8)
+                                                               np.zeros(4), mesh.geometry, 8)
     assert owner.tolist() == [0, 1, 2, 2, 2, 2]
     np.testing.assert_allclose(depth, [0.01, 0.001, 0, 0, 0, 0], atol=1e-12)
 

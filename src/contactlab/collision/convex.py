@@ -49,6 +49,7 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 import numpy as np
 from numba import njit
 
+from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four
 
 MAX_CONTACTS = MAX_POINTS # contacts written per pair, at most
