@@ -18,7 +18,7 @@ from scipy.spatial import ConvexHull
 
 from contactlab.collision.capsule import capsule_box
 from contactlab.collision.capsule_convex import CAPSULE_CONVEX_CROSS_FEATURE, capsule_convex
-from contactlab.collision.convex import box_as_hull
+from contactlab.hulls import box_as_hull
 from contactlab.hulls import build_hull, hull_arrays, pack_hulls
 
 I3 = np.eye(3)

@@ -20,6 +20,8 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from contactlab.collision import convex as cx
+from contactlab.collision import convex_convex as cc
+from contactlab.hulls import box_as_hull
 from contactlab.errors import InputError
 from contactlab.hulls import Hull, build_hull, hull_arrays, load_hull_points, pack_hulls
 from conftest import random_rotations
@@ -78,7 +80,7 @@ def _unpack(out, slot, count):
 def hull_hull(arr_a, R_a, c_a, arr_b, R_b, c_b, margin=0.0, slot=3):
     """convex_convex into fresh buffers, written from ``slot`` (to check the offset)."""
     out = buffers(slot)
-    count = cx.convex_convex(np.asarray(c_a, float), np.ascontiguousarray(R_a, dtype=float), *arr_a,
+    count = cc.convex_convex(np.asarray(c_a, float), np.ascontiguousarray(R_a, dtype=float), *arr_a,
                              np.asarray(c_b, float), np.ascontiguousarray(R_b, dtype=float), *arr_b,
                              float(margin), *out, slot)
     return _unpack(out, slot, count)
@@ -104,7 +106,7 @@ def sat_depth(arr_a, R_a, c_a, arr_b, R_b, c_b):
     axis = np.zeros(3)
     va, na, oa, _, _, eva, efa = arr_a
     vb, nb, ob, _, _, evb, efb = arr_b
-    cx.convex_convex_sat(np.asarray(c_a, float), np.ascontiguousarray(R_a), va, na, oa, eva, efa,
+    cc.convex_convex_sat(np.asarray(c_a, float), np.ascontiguousarray(R_a), va, na, oa, eva, efa,
                          np.asarray(c_b, float), np.ascontiguousarray(R_b), vb, nb, ob, evb, efb, np.inf, result, axis)
     return result[7]
 
@@ -299,7 +301,7 @@ def test_pack_and_slice():
 
 def test_box_as_hull_matches_the_built_box():
     half = np.array([0.2, 0.4, 0.7])
-    box = cx.box_as_hull(half)
+    box = box_as_hull(half)
     hull = build_hull(CUBE * 2 * half)
     assert np.allclose(box["vertices"][:, 0] > 0, [i & 1 for i in range(8)])     # corner bits as box_plane
     assert np.allclose(box["vertices"][:, 2] > 0, [bool(i & 4) for i in range(8)])
@@ -395,7 +397,7 @@ def test_cube_resting_on_plane_gives_four_corners():
     assert len(set(feature.tolist())) == 4 and feature.min() >= 0 and feature.max() <= 255
     # a box as a hull numbers its corners like box_plane
     from contactlab.collision.narrow_phase import box_plane
-    box = cx.box_as_hull([0.5, 0.5, 0.5])
+    box = box_as_hull([0.5, 0.5, 0.5])
     R = rot_x(0.3) @ rot_z(0.2)
     c = np.array([0.0, 0.0, 0.6])                                  # all 8 corners within the margin
     _, _, hull_depth, hull_feature = hull_plane(hull_arrays(box, 0), R, c, [0, 0, 1, 0], margin=2.0)
@@ -483,7 +485,7 @@ def test_tetrahedron_vertex_pokes_a_face():
     assert np.allclose(tip / np.linalg.norm(tip), [0, 0, -1])
     d = 0.01
     c_tet = np.array([0.1, 0.2, 0.5 + np.linalg.norm(tip) - d])          # tip at height 0.5 − d
-    slab = cx.box_as_hull([2.0, 2.0, 0.5])
+    slab = box_as_hull([2.0, 2.0, 0.5])
     point, normal, depth, feature = hull_hull(arrays(tet), R, c_tet, hull_arrays(slab, 0), I3, np.zeros(3))
     assert len(depth) == 1
     assert depth[0] == pytest.approx(d) and np.allclose(normal[0], [0, 0, 1])
@@ -511,10 +513,10 @@ def test_edge_against_edge():
 
 def test_resting_face_is_preferred_to_a_slightly_better_edge():
     # a box on a wide slab, tilted by 0.5°: faces win over the edge axis within the tolerance
-    slab = hull_arrays(cx.box_as_hull([3.0, 3.0, 0.5]), 0)
-    box = hull_arrays(cx.box_as_hull([0.5, 0.5, 0.5]), 0)
+    slab = hull_arrays(box_as_hull([3.0, 3.0, 0.5]), 0)
+    box = hull_arrays(box_as_hull([0.5, 0.5, 0.5]), 0)
     R = rot_x(np.radians(0.5))
-    lowest = (cx.box_as_hull([0.5, 0.5, 0.5])["vertices"] @ R.T)[:, 2].min()
+    lowest = (box_as_hull([0.5, 0.5, 0.5])["vertices"] @ R.T)[:, 2].min()
     point, normal, depth, feature = hull_hull(box, R, [0, 0, 0.5 - lowest - 0.001], slab, I3, np.zeros(3), margin=0.02)
     assert len(depth) == 4 and np.allclose(normal, [0, 0, 1])
     assert depth.max() == pytest.approx(0.001)
@@ -603,13 +605,13 @@ def test_random_hull_pairs_against_brute_force_and_fcl(random_hulls):
             assert 1 <= len(depth) <= 4
             # the axis used overlaps at least the minimum, and at most the face-bias tolerance more
             along = overlap_along(world_a, world_b, normal[0])
-            assert truth - 1e-12 * scale <= along <= truth * (1 + cx.FACE_REL_TOL) + cx.FACE_ABS_TOL * scale + 1e-12
+            assert truth - 1e-12 * scale <= along <= truth * (1 + cc.FACE_REL_TOL) + cc.FACE_ABS_TOL * scale + 1e-12
             # no contact deeper than that; the deepest has all of it when the exact axis is used
             assert depth.max() <= along + 1e-12 * scale
             if along <= truth + 1e-12 * scale:
                 exact_axis += 1
                 worst["max_depth_exact"] = max(worst["max_depth_exact"], abs(depth.max() - truth) / truth)
-                assert depth.max() == pytest.approx(truth, rel=1e-6, abs=cx.DEPTH_TOL * scale)
+                assert depth.max() == pytest.approx(truth, rel=1e-6, abs=cc.DEPTH_TOL * scale)
             # both surface points (point ∓ depth/2 · normal) on their hulls' surfaces
             on_a = signed_distance(world_a, point - 0.5 * depth[:, None] * normal)
             on_b = signed_distance(world_b, point + 0.5 * depth[:, None] * normal)

@@ -8,7 +8,11 @@ python-fcl's GJK distance.
 import numpy as np
 import pytest
 
-from contactlab.collision import mesh as cm
+from contactlab.collision.granularity import surface_contacts, triangle_samples
+from contactlab.collision.mesh_contacts import box_mesh, shapes_against_mesh, sphere_mesh
+from contactlab.collision.mesh_sweep import sweep_sphere_mesh
+from contactlab.collision.signed_distance import box_obstacle, plane_obstacle, sphere_obstacle
+from contactlab.shapes import BOX, POINT, SPHERE
 from contactlab.errors import InputError
 from contactlab.meshes import TriangleMesh, builtin_mesh_path, load_mesh, triangles_near, vertex_normals
 
@@ -44,7 +48,7 @@ def buffers(size=64):
 
 def sphere_contacts(mesh, center, radius, margin=0.0, max_contacts=8):
     P, N, D, F = buffers()
-    k = cm.sphere_mesh(np.asarray(center, float), radius, mesh.geometry, margin, P, N, D, F, 0, max_contacts)
+    k = sphere_mesh(np.asarray(center, float), radius, mesh.geometry, margin, P, N, D, F, 0, max_contacts)
     return P[:k], N[:k], D[:k], F[:k]
 
 
@@ -240,7 +244,7 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
         c, s = np.cos(yaw), np.sin(yaw)
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         for sink in (0.0, 0.002):
-            k = cm.box_mesh(np.array([0.1, -0.05, 0.2 - sink]), R, half, mesh.geometry, 0.01, P, N, D, F, 0, 8)
+            k = box_mesh(np.array([0.1, -0.05, 0.2 - sink]), R, half, mesh.geometry, 0.01, P, N, D, F, 0, 8)
             assert k == 4, (yaw, sink, F[:k])
             np.testing.assert_allclose(N[:k], np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
             np.testing.assert_allclose(D[:k], sink, atol=1e-12)
@@ -249,14 +253,14 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
     # a finely meshed floor: mesh vertices under the box add contacts, reduced to at most 8
     V, T = grid(11)
     fine = TriangleMesh(V, T)
-    k = cm.box_mesh(np.array([0.05, 0.03, 0.199]), np.eye(3), half, fine.geometry, 0.01, P, N, D, F, 0, 8)
+    k = box_mesh(np.array([0.05, 0.03, 0.199]), np.eye(3), half, fine.geometry, 0.01, P, N, D, F, 0, 8)
     assert 4 <= k <= 8
     np.testing.assert_allclose(N[:k], np.tile([0.0, 0.0, 1.0], (k, 1)), atol=1e-12)
     np.testing.assert_allclose(D[:k], 0.001, atol=1e-12)
     corners_xy = {(round(x, 9), round(y, 9)) for x in (-0.25, 0.35) for y in (-0.27, 0.33)}
     assert corners_xy <= {(round(x, 9), round(y, 9)) for x, y in P[:k, :2]}
     # a box hovering beyond the margin: nothing
-    assert cm.box_mesh(np.array([0.0, 0.0, 0.25]), np.eye(3), half, mesh.geometry, 0.01, P, N, D, F, 0, 8) == 0
+    assert box_mesh(np.array([0.0, 0.0, 0.25]), np.eye(3), half, mesh.geometry, 0.01, P, N, D, F, 0, 8) == 0
 
 
 def test_box_on_a_mesh_peak_gets_vertex_contact():
@@ -265,8 +269,8 @@ def test_box_on_a_mesh_peak_gets_vertex_contact():
     T = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
     mesh = TriangleMesh(V, T)
     P, N, D, F = buffers()
-    k = cm.box_mesh(np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3), np.array([0.3, 0.3, 0.2]),
-                    mesh.geometry, 0.0, P, N, D, F, 0, 8)
+    k = box_mesh(np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3), np.array([0.3, 0.3, 0.2]),
+                 mesh.geometry, 0.0, P, N, D, F, 0, 8)
     assert k == 1 and F[0] % 16 >= 8
     np.testing.assert_allclose(N[0], [0.0, 0.0, 1.0])
     assert D[0] == pytest.approx(0.01)
@@ -274,12 +278,12 @@ def test_box_on_a_mesh_peak_gets_vertex_contact():
 
 def test_shapes_against_mesh_batch():
     mesh = square(half=2.0)
-    kinds = np.array([cm.SPHERE, cm.POINT, cm.BOX, cm.SPHERE], dtype=np.int64)
+    kinds = np.array([SPHERE, POINT, BOX, SPHERE], dtype=np.int64)
     params = np.array([[0.1, 0, 0, 0], [0.0, 0, 0, 0], [0.3, 0.3, 0.2, 0], [0.1, 0, 0, 0]])
     centers = np.array([[0.5, 0.5, 0.09], [0.2, -0.3, -0.001], [-1.0, -1.0, 0.2], [0.0, 0.0, 3.0]])
     rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (4, 3, 3)))
-    point, normal, depth, feature, owner = cm.shapes_against_mesh(kinds, params, centers, rots,
-                                                                  np.zeros(4), mesh.geometry, 8)
+    point, normal, depth, feature, owner = shapes_against_mesh(kinds, params, centers, rots,
+                                                               np.zeros(4), mesh.geometry, 8)
     assert owner.tolist() == [0, 1, 2, 2, 2, 2]
     np.testing.assert_allclose(depth, [0.01, 0.001, 0, 0, 0, 0], atol=1e-12)
 
@@ -375,22 +379,22 @@ def cloth_pushed_into_plane():
 @pytest.mark.parametrize("samples", [1, 2, 3])
 def test_p2_granularities_on_a_plane(samples):
     V, T = cloth_pushed_into_plane()
-    plane = cm.plane_obstacle((0.0, 0.0, 2.0), 0.0)             # z = 0, normal normalized
+    plane = plane_obstacle((0.0, 0.0, 2.0), 0.0)             # z = 0, normal normalized
     below = -V[:, 2]
-    whole = cm.surface_contacts(V, T, plane, granularity="object")
+    whole = surface_contacts(V, T, plane, granularity="object")
     assert len(whole.depth) == 1
     assert whole.depth[0] == pytest.approx(below.max())
     assert whole.vertices[0, 0] == np.argmax(below) and np.all(whole.vertices[0, 1:] == -1)
-    per_vertex = cm.surface_contacts(V, T, plane, granularity="vertex")
+    per_vertex = surface_contacts(V, T, plane, granularity="vertex")
     assert len(per_vertex.depth) == np.count_nonzero(below >= 0.0)
     np.testing.assert_allclose(per_vertex.depth, below[per_vertex.vertices[:, 0]])
     np.testing.assert_allclose(per_vertex.normal, np.tile([0.0, 0.0, 1.0], (len(per_vertex.depth), 1)))
     # samples: k × k per triangle; weights sum to 1 and reproduce the sample point
-    pattern = cm.triangle_samples(samples)
+    pattern = triangle_samples(samples)
     assert pattern.shape == (samples * samples, 3) and np.all(pattern > 0.0)
     np.testing.assert_allclose(pattern.mean(axis=0), 1.0 / 3.0)
     sample_z = np.einsum("sk,tk->ts", pattern, V[T][:, :, 2])
-    sampled = cm.surface_contacts(V, T, plane, granularity="sample", samples=samples)
+    sampled = surface_contacts(V, T, plane, granularity="samples", samples=samples)
     assert len(sampled.depth) == np.count_nonzero(sample_z <= 0.0)
     np.testing.assert_allclose(sampled.weights.sum(axis=1), 1.0)
     x = np.einsum("ck,ckd->cd", sampled.weights, V[sampled.vertices])
@@ -398,28 +402,28 @@ def test_p2_granularities_on_a_plane(samples):
     np.testing.assert_allclose(sampled.point, x + 0.5 * sampled.depth[:, None] * [0.0, 0.0, 1.0], atol=1e-15)
     assert np.all(sampled.vertices == T[sampled.feature // (samples * samples)])
     # margin: gaps down to −margin are included
-    with_margin = cm.surface_contacts(V, T, plane, granularity="vertex", margin=0.05)
+    with_margin = surface_contacts(V, T, plane, granularity="vertex", margin=0.05)
     assert len(with_margin.depth) == np.count_nonzero(below >= -0.05)
-    for bad in (dict(granularity="triangle"), dict(normal="average"), dict(granularity="sample", samples=0)):
+    for bad in (dict(granularity="triangle"), dict(normal="average"), dict(granularity="samples", samples=0)):
         with pytest.raises(InputError):
-            cm.surface_contacts(V, T, plane, **bad)
+            surface_contacts(V, T, plane, **bad)
 
 
 def test_p2b_against_sphere_and_mesh_obstacles():
     V, T = cloth_pushed_into_plane()
     # a mesh floor gives the same vertices and depths as the plane
     floor = square(half=3.0)
-    plane = cm.plane_obstacle((0.0, 0.0, 1.0), 0.0)
-    on_plane = cm.surface_contacts(V, T, plane, granularity="vertex")
-    on_mesh = cm.surface_contacts(V, T, floor, granularity="vertex", max_depth=0.5)
+    plane = plane_obstacle((0.0, 0.0, 1.0), 0.0)
+    on_plane = surface_contacts(V, T, plane, granularity="vertex")
+    on_mesh = surface_contacts(V, T, floor, granularity="vertex", max_depth=0.5)
     np.testing.assert_array_equal(on_mesh.vertices, on_plane.vertices)
     np.testing.assert_allclose(on_mesh.depth, on_plane.depth, atol=1e-14)
     np.testing.assert_allclose(on_mesh.normal, on_plane.normal, atol=1e-15)
-    sampled = cm.surface_contacts(V, T, floor, granularity="sample", samples=2, max_depth=0.5)
-    assert len(sampled.depth) == len(cm.surface_contacts(V, T, plane, granularity="sample", samples=2).depth)
+    sampled = surface_contacts(V, T, floor, granularity="samples", samples=2, max_depth=0.5)
+    assert len(sampled.depth) == len(surface_contacts(V, T, plane, granularity="samples", samples=2).depth)
     # a sphere obstacle of radius 0.5 at (0, 0, −0.45): vertices within it
-    ball = cm.sphere_obstacle((0.0, 0.0, -0.45), 0.5)
-    contacts = cm.surface_contacts(V, T, ball, granularity="vertex")
+    ball = sphere_obstacle((0.0, 0.0, -0.45), 0.5)
+    contacts = surface_contacts(V, T, ball, granularity="vertex")
     gaps = np.linalg.norm(V - [0.0, 0.0, -0.45], axis=1) - 0.5
     assert len(contacts.depth) == np.count_nonzero(gaps <= 0.0) > 0
     np.testing.assert_allclose(contacts.depth, -gaps[contacts.vertices[:, 0]])
@@ -428,7 +432,7 @@ def test_p2b_against_sphere_and_mesh_obstacles():
 
 
 def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
-    box = cm.box_obstacle((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    box = box_obstacle((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
     # a small closed tetrahedron whose lowest vertex 0 dips into the box near its +x/+z edge
     base = np.array([[0.0, 0.0, 0.0], [0.3, 0.1, 0.4], [-0.1, 0.3, 0.4], [-0.1, -0.3, 0.4]])
     T = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 3], [1, 2, 3]])
@@ -440,7 +444,7 @@ def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
     for x in np.linspace(0.85, 0.95, 201):
         V = base + [x, 0.0, 0.9]
         for choice in ("object", "vertex"):
-            c = cm.surface_contacts(V, T, box, granularity="vertex", normal=choice)
+            c = surface_contacts(V, T, box, granularity="vertex", normal=choice)
             row = np.nonzero(c.vertices[:, 0] == 0)[0]
             assert len(row) == 1
             assert c.depth[row[0]] == pytest.approx(min(1.0 - x, 0.1))       # depth continuous
@@ -465,27 +469,27 @@ def test_fast_particle_is_caught_by_a_single_triangle_sheet():
     # the static test at the end position sees the particle on the far side: it would tunnel
     P, N, D, F = sphere_contacts(sheet, end, radius)
     assert len(D) == 0
-    hit, toi, triangle, normal = cm.sweep_sphere_mesh(start, end, radius, sheet.geometry)
+    hit, toi, triangle, normal = sweep_sphere_mesh(start, end, radius, sheet.geometry)
     assert hit and triangle == 0
     assert toi == pytest.approx(0.2)                          # the centre is one radius above the sheet
     np.testing.assert_allclose(normal, [0.0, 0.0, 1.0])
     # from below, the normal faces down; a point particle (radius 0) hits at the plane itself
-    hit, toi, _, normal = cm.sweep_sphere_mesh(-start, -end, radius, sheet.geometry)
+    hit, toi, _, normal = sweep_sphere_mesh(-start, -end, radius, sheet.geometry)
     assert hit and toi == pytest.approx(0.2) and normal[2] == pytest.approx(-1.0)
-    hit, toi, _, _ = cm.sweep_sphere_mesh(start, end, 0.0, sheet.geometry)
+    hit, toi, _, _ = sweep_sphere_mesh(start, end, 0.0, sheet.geometry)
     assert hit and toi == pytest.approx(0.3)
     # starting in contact (centre half a radius above), the centre's own crossing still counts
-    hit, toi, _, _ = cm.sweep_sphere_mesh(np.array([0.1, 0.0, 0.5 * radius]), end, radius, sheet.geometry)
+    hit, toi, _, _ = sweep_sphere_mesh(np.array([0.1, 0.0, 0.5 * radius]), end, radius, sheet.geometry)
     assert hit and toi == pytest.approx(0.5 * radius / (7.5 * radius))
     # moving away, or passing beside the sheet: no hit
-    assert not cm.sweep_sphere_mesh(end, end - [0, 0, 1.0], radius, sheet.geometry)[0]
-    assert not cm.sweep_sphere_mesh(start + [2.0, 0, 0], end + [2.0, 0, 0], radius, sheet.geometry)[0]
+    assert not sweep_sphere_mesh(end, end - [0, 0, 1.0], radius, sheet.geometry)[0]
+    assert not sweep_sphere_mesh(start + [2.0, 0, 0], end + [2.0, 0, 0], radius, sheet.geometry)[0]
     # a run of steps: the particle stops on the sheet instead of passing through
     z = 0.5
     for _ in range(100):
         position = np.array([0.1, 0.0, z])
         target = position - [0.0, 0.0, 10.0 * radius]
-        hit, toi, _, _ = cm.sweep_sphere_mesh(position, target, radius, sheet.geometry)
+        hit, toi, _, _ = sweep_sphere_mesh(position, target, radius, sheet.geometry)
         z = (position + toi * (target - position))[2] if hit else target[2]
     assert z == pytest.approx(radius)
 
@@ -504,7 +508,7 @@ def test_swept_time_of_impact_matches_dense_sampling():
         end = np.array([*rng.uniform(-1.0, 1.0, 2), rng.uniform(-0.8, 0.0)])
         if reference_distance(start, V, T)[0] <= radius:
             continue
-        hit, toi, triangle, normal = cm.sweep_sphere_mesh(start, end, radius, mesh.geometry)
+        hit, toi, triangle, normal = sweep_sphere_mesh(start, end, radius, mesh.geometry)
         path = start + times[:, None] * (end - start)
         distance = reference_distance(path, V, T)
         touching = np.nonzero(distance <= radius)[0]

@@ -1,4 +1,4 @@
-"""Capsules and convex hulls against static triangle meshes (contactlab.collision.mesh_pairs).
+"""Capsules and convex hulls against static triangle meshes (contactlab.collision.mesh_contacts).
 
 The reference for the randomized check is written here in plain NumPy, independently of the
 compiled code: the exact point–triangle distance by projection on the plane (barycentric
@@ -11,8 +11,8 @@ within one sample spacing of the best sample).
 import numpy as np
 import pytest
 
-from contactlab.collision.convex import box_as_hull
-from contactlab.collision.mesh_pairs import capsule_mesh, convex_mesh, shapes_against_mesh_extended
+from contactlab.hulls import box_as_hull
+from contactlab.collision.mesh_contacts import capsule_mesh, convex_mesh, shapes_against_mesh
 from contactlab.meshes import TriangleMesh, builtin_mesh_path, load_mesh
 from contactlab import shapes
 
@@ -98,8 +98,8 @@ def test_cube_hull_on_a_mesh_floor_gets_its_four_bottom_corners():
     params = np.array([[0, 0.17, 0, 0], [0.1, 0.4, 0, 0], [0.1, 0, 0, 0], [0.1, 0.1, 0.1, 0]], dtype=float)
     centers = np.array([[0.05, 0.02, 0.097], [0.3, -0.4, 0.098], [-0.5, 0.5, 0.099], [0.5, 0.5, 0.0995]])
     rotations = np.array([np.eye(3), LYING, np.eye(3), np.eye(3)])
-    point, normal, depth, feature, owner = shapes_against_mesh_extended(
-        kinds, params, centers, rotations, np.full(4, 0.01), store, mesh.geometry, 8)
+    point, normal, depth, feature, owner = shapes_against_mesh(
+        kinds, params, centers, rotations, np.full(4, 0.01), mesh.geometry, 8, store)
     assert np.bincount(owner, minlength=4).tolist() == [4, 2, 1, 4]
     np.testing.assert_allclose(depth[owner == 0], 0.003, atol=1e-12)
     np.testing.assert_allclose(depth[owner == 1], 0.002, atol=1e-12)

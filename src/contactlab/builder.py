@@ -618,8 +618,7 @@ class ModelBuilder:
 
     def _pack_hulls(self, shapes_with_params):
         """Pack the convex hulls, then one 8-corner hull per box (its index stored in params[3])."""
-        from .collision.convex import box_as_hull
-        from .hulls import pack_hulls
+        from .hulls import box_as_hull, pack_hulls
         packs = [pack_hulls(self._hulls)]
         count = len(self._hulls)
         for item in shapes_with_params:

@@ -352,7 +352,7 @@ def _standing_unsunk(model, arrays):
 def _centres_inside_obstacles(model, positions):
     """The deepest any centre (positions (T, K, 3)) gets inside a static plane, sphere or box
     obstacle [m], 0 when none ever does (meshes are two-sided: they have no inside)."""
-    from .collision.mesh import points_against_shape
+    from .collision.signed_distance import points_against_shape
     points = np.ascontiguousarray(positions.reshape(-1, 3), dtype=float)
     deepest = 0.0
     for index in range(model.obstacle_count):

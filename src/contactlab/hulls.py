@@ -44,7 +44,8 @@ array                  shape        meaning
 =====================  ===========  ============================================================
 
 :func:`hull_arrays` slices one hull out of a packed dict, in the argument order of the
-compiled routines of :mod:`contactlab.collision.convex`.
+compiled routines of :mod:`contactlab.collision.convex`; :func:`box_as_hull` packs a box the same
+way (the builder gives every box body such a hull, for the hull routines to meet it).
 """
 
 from dataclasses import dataclass, field as dataclass_field
@@ -570,6 +571,48 @@ def pack_hulls(hulls) -> dict:
         "edge_vertex": cat([h.edge_vertex for h in hulls], (2,), np.int64),
         "edge_face": cat([h.edge_face for h in hulls], (2,), np.int64),
         "radius": np.array([h.radius for h in hulls], dtype=float),
+    }
+
+
+def box_as_hull(half_extents) -> dict:
+    """The packed arrays (as :func:`pack_hulls` makes them, H = 1) of a box
+    with ``half_extents`` (3,) [m], centred on its body origin along its body axes.
+
+    Vertex ``i`` is the corner (±hx, ±hy, ±hz) with bit 0 of ``i`` the sign of x, bit 1 of y,
+    bit 2 of z (set: +), as in :func:`contactlab.collision.narrow_phase.box_plane`; faces ``2k`` and ``2k+1`` are
+    −axis k and +axis k.
+    """
+    half = np.asarray(half_extents, dtype=float).reshape(3)
+    if not (np.isfinite(half).all() and (half > 0.0).all()):
+        raise ValueError(f"half extents must be positive and finite, found {half}")
+    signs = np.array([[1.0 if i & 1 else -1.0, 1.0 if i & 2 else -1.0, 1.0 if i & 4 else -1.0] for i in range(8)])
+    vertices = signs * half
+    normals, offsets, polygons = [], [], []
+    for k in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[k] = sign
+            ids = np.nonzero(signs[:, k] == sign)[0]
+            u = np.zeros(3)
+            u[(k + 1) % 3] = 1.0
+            v = np.cross(n, u)                 # u × v = n
+            angle = np.arctan2(signs[ids] @ v, signs[ids] @ u)
+            polygons.append(ids[np.argsort(angle)])
+            normals.append(n)
+            offsets.append(half[k])
+    edges, edge_faces = _edges(polygons, "half_extents")
+    return {
+        "vertex_start": np.array([0, 8], dtype=np.int64),
+        "vertices": np.ascontiguousarray(vertices),
+        "face_start": np.array([0, 6], dtype=np.int64),
+        "face_normal": np.array(normals),
+        "face_offset": np.array(offsets),
+        "face_vertex_start": np.arange(0, 25, 4, dtype=np.int64),
+        "face_vertex_index": np.concatenate(polygons).astype(np.int64),
+        "edge_start": np.array([0, len(edges)], dtype=np.int64),
+        "edge_vertex": edges,
+        "edge_face": edge_faces,
+        "radius": np.array([float(np.linalg.norm(half))]),
     }
 
 

@@ -14,8 +14,7 @@ from ..errors import InputError
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
 from .granularity import GRANULARITIES, NORMALS, polytope_contacts
-from .mesh import MAX_PER_SHAPE
-from .mesh_pairs import shapes_against_mesh_extended
+from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
 from .manifolds import generate_reusing
 from .narrow_phase import generate_contacts, needs_hulls, supported
 
@@ -34,7 +33,6 @@ def check_supported(model):
                                  "is not supported yet; change the shape of one of them")
 
 
-MESH_PARTNERS = (shapes.SPHERE, shapes.POINT, shapes.BOX, shapes.CAPSULE, shapes.CONVEX)  # shapes meshes meet
 FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
@@ -241,9 +239,9 @@ def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, d
     near = ((lower[:dynamic] <= mesh.bounds[1] + grow) & (mesh.bounds[0] - grow <= upper[:dynamic])).all(axis=1)
     near &= np.isin(kinds[:dynamic], MESH_PARTNERS)
     chosen = np.nonzero(near)[0]
-    point, normal, depth, feature, owner = shapes_against_mesh_extended(
-        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], model.hull_store,
-        mesh.geometry, MAX_PER_SHAPE)
+    point, normal, depth, feature, owner = shapes_against_mesh(
+        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], mesh.geometry,
+        MAX_PER_SHAPE, model.hull_store)
     return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
 
 

@@ -65,17 +65,17 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 import numpy as np
 from numba import njit
 
-from .clipping import clip_polygon
+from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 
 FACE_REL_TOL = 0.05       # relative tolerance favouring the reference face's box, and faces over edges
 FACE_ABS_TOL = 1e-5       # absolute part of that tolerance, × the largest half extent of the pair [-]
 PARALLEL_SIN2 = 1e-12     # |a_i × b_j|² below this (edges within 1e-6 rad of parallel): no edge axis
-MAX_CONTACTS = 4          # contacts written per box pair, at most
+MAX_CONTACTS = MAX_POINTS # contacts written per box pair, at most
 EDGE_FEATURE = 0          # feature of the single edge–edge contact
 COLLINEAR_TOL = 1e-4      # clipped corners this close (× the smaller face's half width) to a straight line are dropped
-REDUCE_TIE = 1e-6         # relative tolerance of a tie in the reduction to 4 points (depths: × largest half extent)
 
 _NO_AXIS = -1
+_UP = np.array([0.0, 0.0, 1.0])     # the reference face's normal in its own (u, v, h) frame
 
 
 @njit(cache=True)
@@ -144,142 +144,26 @@ def _clip(source, source_label, count, coordinate, sign, limit, target, target_l
 
 
 @njit(cache=True)
-def _drop_collinear(points, labels, count, tolerance):
-    """Remove corners of the clipped polygon lying within ``tolerance`` [m] of the chord of their
-    two neighbours (in the reference plane), compacting ``points`` and ``labels`` in place.
-
-    Such corners are near-duplicates, or crossings of an incident edge with a side plane that
-    it nearly touches all along — as with equal boxes stacked flush, where round-off or solver
-    jitter would otherwise put a contact anywhere along that edge instead of at the corner.
-    Stops at 2 points. Returns the new count.
-    """
-    removed = True
-    while removed and count > 2:
-        removed = False
-        for k in range(count):
-            prev = (k + count - 1) % count
-            nxt = (k + 1) % count
-            cu = points[nxt, 0] - points[prev, 0]
-            cv = points[nxt, 1] - points[prev, 1]
-            ku = points[k, 0] - points[prev, 0]
-            kv = points[k, 1] - points[prev, 1]
-            chord2 = cu * cu + cv * cv
-            if chord2 > tolerance * tolerance:
-                distance = abs(cu * kv - cv * ku) / np.sqrt(chord2)
-            else:
-                distance = np.sqrt(ku * ku + kv * kv)
-            if distance <= tolerance:
-                for r in range(k, count - 1):
-                    for c in range(3):
-                        points[r, c] = points[r + 1, c]
-                    labels[r] = labels[r + 1]
-                count -= 1
-                removed = True
-                break
-    return count
-
-
-@njit(cache=True)
-def _reduce(points, keep, count, depth_tolerance, score, flags):
-    """Choose at most 4 of the ``count`` candidate rows of ``points`` (u, v, h) listed in ``keep``.
-
-    The deepest (lowest h), the farthest from it, the one making the largest triangle with
-    those two, and the one adding most area to that triangle. Near-ties (depths within
-    ``depth_tolerance`` [m], distances and areas within a relative ``REDUCE_TIE``) go to the
-    earliest point in polygon order, so that round-off cannot switch between equivalent
-    choices (the two squares of a regular octagon, say). Writes the chosen positions in
-    ``keep`` back in their original (polygon) order and returns how many were chosen (≤ 4).
-    ``score`` (float) and ``flags`` (int) are scratch arrays of at least ``count`` entries.
-    """
-    if count <= MAX_CONTACTS:
-        return count
-    lowest = np.inf
-    for k in range(count):
-        lowest = min(lowest, points[keep[k], 2])
-    first = 0
-    while points[keep[first], 2] > lowest + depth_tolerance:
-        first += 1
-    p0u, p0v = points[keep[first], 0], points[keep[first], 1]
-    # the farthest from the deepest
-    for k in range(count):
-        du = points[keep[k], 0] - p0u
-        dv = points[keep[k], 1] - p0v
-        score[k] = du * du + dv * dv
-    score[first] = -1.0
-    second = _first_near_best(score, count)
-    # the largest triangle with those two
-    eu = points[keep[second], 0] - p0u
-    ev = points[keep[second], 1] - p0v
-    for k in range(count):
-        score[k] = abs(eu * (points[keep[k], 1] - p0v) - ev * (points[keep[k], 0] - p0u))
-    score[first] = -1.0
-    score[second] = -1.0
-    third = _first_near_best(score, count)
-    area = eu * (points[keep[third], 1] - p0v) - ev * (points[keep[third], 0] - p0u)
-    orientation = 1.0 if area >= 0.0 else -1.0
-    chosen = (first, second, third)
-    # the fourth: the point farthest outside an edge of the triangle (oriented counter-clockwise)
-    for k in range(count):
-        pu, pv = points[keep[k], 0], points[keep[k], 1]
-        outside = 0.0
-        for e in range(3):
-            su, sv = points[keep[chosen[e]], 0], points[keep[chosen[e]], 1]
-            tu, tv = points[keep[chosen[(e + 1) % 3]], 0], points[keep[chosen[(e + 1) % 3]], 1]
-            outside = max(outside, -orientation * ((tu - su) * (pv - sv) - (tv - sv) * (pu - su)))
-        score[k] = outside
-    score[first] = -1.0
-    score[second] = -1.0
-    score[third] = -1.0
-    fourth = _first_near_best(score, count)
-    for k in range(count):
-        flags[k] = 0
-    flags[first] = 1
-    flags[second] = 1
-    flags[third] = 1
-    n = 3
-    if score[fourth] > 0.0:
-        flags[fourth] = 1
-        n = 4
-    out = 0
-    for k in range(count):
-        if flags[k] == 1:
-            keep[out] = keep[k]
-            out += 1
-    return n
-
-
-@njit(cache=True)
-def _first_near_best(score, count):
-    """Index of the first score within a relative REDUCE_TIE of the largest one."""
-    best = score[0]
-    for k in range(1, count):
-        best = max(best, score[k])
-    threshold = best - REDUCE_TIE * abs(best)
-    for k in range(count):
-        if score[k] >= threshold:
-            return k
-    return 0
-
-
-@njit(cache=True)
 def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
                    center_inc, rotation_inc, half_inc, owner, contact_normal, margin, scale,
                    real, whole, out_point, out_normal, out_depth, out_feature, slot):
     """Clip the incident box's face against face ``axis`` of the reference box, whose outward
-    normal is ``outward_sign · contact_normal``. ``real`` (≥ 68 floats) and ``whole`` (≥ 40
+    normal is ``outward_sign · contact_normal``. ``real`` (≥ 100 floats) and ``whole`` (≥ 48
     integers) are scratch."""
     m0 = outward_sign * contact_normal[0]
     m1 = outward_sign * contact_normal[1]
     m2 = outward_sign * contact_normal[2]
     # scratch: floats (clip buffers, reduction scores, face centre, frame) and integers
-    # (corner labels, kept positions, reduction flags, final labels)
+    # (corner labels, kept positions, surviving rows, final labels)
     polygon = real[:48].reshape((2, 8, 3))
     score = real[48:56]
     fc = real[56:59]
     local = real[59:68].reshape((3, 3))
+    flat = real[68:92].reshape((8, 3))      # the polygon's (u, v, 0): its shadow on the reference face
+    height = real[92:100]
     labels = whole[:16].reshape((2, 8))
     keep = whole[16:24]
-    flags = whole[24:32]
+    rows = whole[24:32]
     label_of = whole[32:36]
     used = whole[36:40]
     # reference face: centre, in-plane axes U, V with half widths hu, hv
@@ -339,14 +223,25 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
     points = polygon[0]
     # the polygon lies inside both faces: its size sets the tolerance for straight corners
     tolerance = COLLINEAR_TOL * min(min(hu, hv), min(half_inc[ku], half_inc[kv]))
-    count = _drop_collinear(points, labels[0], count, tolerance)
+    # straightness is judged in the reference plane, on the polygon's shadow (u, v, 0)
+    for k in range(count):
+        flat[k, 0] = points[k, 0]
+        flat[k, 1] = points[k, 1]
+        flat[k, 2] = 0.0
+        rows[k] = k
+    count = drop_collinear(flat, rows, count, tolerance, _UP, np.inf)
+    for k in range(count):              # rows[k] ≥ k: compacting in place is safe
+        for c in range(3):
+            points[k, c] = points[rows[k], c]
+        labels[0, k] = labels[0, rows[k]]
+        height[k] = points[k, 2]
     # keep the points below the reference face, or above it by at most the margin
     kept = count - count                # 0, typed like count (see above)
     for k in range(count):
         if points[k, 2] <= margin:
             keep[kept] = k
             kept += 1
-    kept = _reduce(points, keep, kept, REDUCE_TIE * scale, score, flags)
+    kept = reduce_to_four(flat, height, keep, kept, _UP, REDUCE_TIE * scale, score)
     # labels: own corner's label when free, else the smallest free one (polygon order both times)
     for k in range(4):
         used[k] = 0
@@ -433,7 +328,7 @@ def box_box(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin,
     margin on some separating axis.
     """
     # scratch for the whole call, in two allocations (each small allocation costs ~50 ns)
-    work = np.empty(15 * 4 + 68)
+    work = np.empty(15 * 4 + 100)
     overlap = work[:15]
     normal = work[15:60].reshape((15, 3))
     sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, overlap, normal)
@@ -480,10 +375,10 @@ def box_box(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin,
         # reference face on B: its outward normal is the contact normal; incident box A
         return _face_contacts(center_b, rotation_b, half_b, face - 3, 1.0,
                               center_a, rotation_a, half_a, owner, contact_normal, margin, scale,
-                              work[60:], np.empty(40, dtype=np.int64),
+                              work[60:], np.empty(48, dtype=np.int64),
                               out_point, out_normal, out_depth, out_feature, slot)
     # reference face on A: its outward normal points from A towards B; incident box B
     return _face_contacts(center_a, rotation_a, half_a, face, -1.0,
                           center_b, rotation_b, half_b, owner, contact_normal, margin, scale,
-                          work[60:], np.empty(40, dtype=np.int64),
+                          work[60:], np.empty(48, dtype=np.int64),
                           out_point, out_normal, out_depth, out_feature, slot)

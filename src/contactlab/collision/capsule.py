@@ -44,12 +44,13 @@ small temporary arrays.
 import numpy as np
 from numba import njit
 
-from .contact_output import write_contact
+from .contact_output import write_contact, write_local_contact
+from .geometry import (axpy, clamp, column, cross, dot, midpoint, norm, rotate, scaled, segment_closest_parameters,
+                       unit_axis, unrotate)
 
 MAX_CONTACTS = 2            # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3         # capsule axes with |sin angle| below this are "parallel" (2-point contact)
 OVERLAP_REL = 1e-6          # a parallel overlap shorter than this × (sum of half lengths and radii) is a point
-LINE_SIN2 = 1e-20           # |a × b|² below this: lines treated as exactly parallel in closest points
 NORMAL_EPS = 1e-12          # distances [m] below this give no direction; a fallback normal is used
 BOX_REL_EPS = 1e-9          # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
 CROSS_AXIS_EPS = 1e-8       # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
@@ -57,113 +58,6 @@ CROSS_AXIS_EPS = 1e-8       # |axis × box edge| below this: no SAT axis of its 
 CAPSULE_BOX_EDGE_FEATURE = 12     # capsule–box contacts alongside a box edge: 12 + 2 · edge + end (12..35)
 CAPSULE_BOX_CROSS_FEATURE = 36    # the capsule–box contact of a segment inside the box, across an edge
 CAPSULE_CAPSULE_SINGLE_FEATURE = 0
-
-
-@njit(cache=True)
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-@njit(cache=True)
-def _norm(a):
-    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-
-
-@njit(cache=True)
-def _clamp(x, lo, hi):
-    return lo if x < lo else (hi if x > hi else x)
-
-
-@njit(cache=True)
-def _column(rotation, k):
-    """Column ``k`` of a 3×3 matrix, as a fresh contiguous (3,) array (the body axis k in world)."""
-    return np.array([rotation[0, k], rotation[1, k], rotation[2, k]])
-
-
-@njit(cache=True)
-def _rotate(rotation, v):
-    """rotation @ v for a 3×3 matrix, written out (cheaper to compile than the BLAS product)."""
-    return np.array([rotation[0, 0] * v[0] + rotation[0, 1] * v[1] + rotation[0, 2] * v[2],
-                     rotation[1, 0] * v[0] + rotation[1, 1] * v[1] + rotation[1, 2] * v[2],
-                     rotation[2, 0] * v[0] + rotation[2, 1] * v[1] + rotation[2, 2] * v[2]])
-
-
-@njit(cache=True)
-def _unrotate(rotation, v):
-    """rotation.T @ v for a 3×3 matrix, written out."""
-    return np.array([rotation[0, 0] * v[0] + rotation[1, 0] * v[1] + rotation[2, 0] * v[2],
-                     rotation[0, 1] * v[0] + rotation[1, 1] * v[1] + rotation[2, 1] * v[2],
-                     rotation[0, 2] * v[0] + rotation[1, 2] * v[1] + rotation[2, 2] * v[2]])
-
-
-@njit(cache=True)
-def _axpy(x, scale, y):
-    """x + scale · y for (3,) arrays, as a new array (written out: quick to compile, no temporaries)."""
-    return np.array([x[0] + scale * y[0], x[1] + scale * y[1], x[2] + scale * y[2]])
-
-
-@njit(cache=True)
-def _midpoint(a, b):
-    """(a + b) / 2 for (3,) arrays."""
-    return np.array([0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])])
-
-
-@njit(cache=True)
-def _scaled(scale, a):
-    """scale · a for a (3,) array."""
-    return np.array([scale * a[0], scale * a[1], scale * a[2]])
-
-
-@njit(cache=True)
-def _unit_axis(k, sign):
-    """sign · e_k, (3,)."""
-    e = np.zeros(3)
-    e[k] = sign
-    return e
-
-
-@njit(cache=True)
-def segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b):
-    """Closest points of two segments ``center + s · axis``, ``|s| ≤ half`` (unit axes).
-
-    Returns ``(s, t)``: the parameters [m] of the closest points on segment A and segment B.
-    Robust for zero-length segments (``half = 0``), parallel segments (then the point of A
-    nearest to B's centre is chosen, clamped, so the answer is unique) and crossing segments.
-    The line–line parameter is computed from cross products (``s = ((b × r)·(a × b)) /
-    |a × b|²``, ``r = c_A − c_B``), which keeps its accuracy for nearly parallel axes; then
-    it is clamped to A, B's parameter follows and is clamped, and A's is recomputed if B's
-    was clamped (Ericson, Real-Time Collision Detection, 5.1.9).
-    """
-    r0 = center_a[0] - center_b[0]
-    r1 = center_a[1] - center_b[1]
-    r2 = center_a[2] - center_b[2]
-    b = axis_a[0] * axis_b[0] + axis_a[1] * axis_b[1] + axis_a[2] * axis_b[2]
-    c = axis_a[0] * r0 + axis_a[1] * r1 + axis_a[2] * r2
-    f = axis_b[0] * r0 + axis_b[1] * r1 + axis_b[2] * r2
-    n0 = axis_a[1] * axis_b[2] - axis_a[2] * axis_b[1]
-    n1 = axis_a[2] * axis_b[0] - axis_a[0] * axis_b[2]
-    n2 = axis_a[0] * axis_b[1] - axis_a[1] * axis_b[0]
-    sin2 = n0 * n0 + n1 * n1 + n2 * n2
-    if sin2 > LINE_SIN2:
-        m0 = axis_b[1] * r2 - axis_b[2] * r1          # m = axis_b × r
-        m1 = axis_b[2] * r0 - axis_b[0] * r2
-        m2 = axis_b[0] * r1 - axis_b[1] * r0
-        s = _clamp((m0 * n0 + m1 * n1 + m2 * n2) / sin2, -half_a, half_a)
-    else:
-        s = _clamp(-c, -half_a, half_a)               # parallel: A's point nearest B's centre
-    t = b * s + f
-    if t < -half_b:
-        t = -half_b
-        s = _clamp(b * t - c, -half_a, half_a)
-    elif t > half_b:
-        t = half_b
-        s = _clamp(b * t - c, -half_a, half_a)
-    return s, t
 
 
 # ---------------------------------------------------------------------------------------------
@@ -185,16 +79,16 @@ def capsule_plane(center, rotation, radius, half_length, plane, margin,
     zero half length has only the end 0.
     """
     normal = plane[:3]
-    axis = _column(rotation, 2)
+    axis = column(rotation, 2)
     count = 0
     ends = 2 if half_length > 0.0 else 1
     for end in range(ends):
         s = -half_length if end == 0 else half_length
-        x = _axpy(center, s, axis)
+        x = axpy(center, s, axis)
         distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
         depth = radius - distance
         if depth >= -margin:
-            point = _axpy(x, -0.5 * (radius + distance), normal)
+            point = axpy(x, -0.5 * (radius + distance), normal)
             write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth, end)
             count += 1
     return count
@@ -216,19 +110,19 @@ def sphere_capsule(center_a, radius_a, center_b, rotation_b, radius_b, half_leng
 
     Features: 0 (the one contact; it keeps its number as it slides from the side to a cap).
     """
-    axis = _column(rotation_b, 2)
-    s = _clamp(_dot(_axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
-    closest = _axpy(center_b, s, axis)
-    d = _axpy(center_a, -1.0, closest)
-    distance = _norm(d)
+    axis = column(rotation_b, 2)
+    s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
+    closest = axpy(center_b, s, axis)
+    d = axpy(center_a, -1.0, closest)
+    distance = norm(d)
     depth = radius_a + radius_b - distance
     if depth < -margin:
         return 0
     if distance > NORMAL_EPS:
-        normal = _scaled(1.0 / distance, d)
+        normal = scaled(1.0 / distance, d)
     else:
-        normal = _column(rotation_b, 0)
-    point = _midpoint(_axpy(center_a, -radius_a, normal), _axpy(closest, radius_b, normal))
+        normal = column(rotation_b, 0)
+    point = midpoint(axpy(center_a, -radius_a, normal), axpy(closest, radius_b, normal))
     write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, np.int64(0))
     return 1
 
@@ -264,53 +158,55 @@ def capsule_capsule(center_a, rotation_a, radius_a, half_a, center_b, rotation_b
     Features: 0 = the single closest-point contact; 1 = the parallel contact at ``s_lo`` (the
     end of the overlap toward A's −z end), 2 = the one at ``s_hi``.
     """
-    axis_a = _column(rotation_a, 2)
-    axis_b = _column(rotation_b, 2)
+    axis_a = column(rotation_a, 2)
+    axis_b = column(rotation_b, 2)
     s, t = segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b)
-    point_a = _axpy(center_a, s, axis_a)
-    point_b = _axpy(center_b, t, axis_b)
-    d = _axpy(point_a, -1.0, point_b)
-    distance = _norm(d)
+    # closest points, distance and depth as in sphere_capsule (deliberately kept apart from it:
+    # two segments can lie parallel and get a 2-point patch, a sphere cannot)
+    point_a = axpy(center_a, s, axis_a)
+    point_b = axpy(center_b, t, axis_b)
+    d = axpy(point_a, -1.0, point_b)
+    distance = norm(d)
     depth = radius_a + radius_b - distance
     if depth < -margin:
         return 0
-    cross = _cross(axis_a, axis_b)
-    sin_angle = _norm(cross)
+    axes_cross = cross(axis_a, axis_b)
+    sin_angle = norm(axes_cross)
     if distance > NORMAL_EPS:
-        normal = _scaled(1.0 / distance, d)
+        normal = scaled(1.0 / distance, d)
     elif sin_angle > NORMAL_EPS:
         # the segments cross: their common normal, pointing from B's centre toward A's
-        normal = _scaled(1.0 / sin_angle, cross)
-        if _dot(normal, _axpy(center_a, -1.0, center_b)) < 0.0:
-            normal = _scaled(-1.0, normal)
+        normal = scaled(1.0 / sin_angle, axes_cross)
+        if dot(normal, axpy(center_a, -1.0, center_b)) < 0.0:
+            normal = scaled(-1.0, normal)
     else:
         # collinear and touching: any direction perpendicular to the axes separates
-        normal = _column(rotation_a, 0)
+        normal = column(rotation_a, 0)
 
     if sin_angle < PARALLEL_SIN and half_a > 0.0 and half_b > 0.0:
         # B's projection onto A's axis, intersected with A
-        b_cos = _dot(axis_a, axis_b)
-        middle = -_dot(_axpy(center_a, -1.0, center_b), axis_a)
+        b_cos = dot(axis_a, axis_b)
+        middle = -dot(axpy(center_a, -1.0, center_b), axis_a)
         reach = abs(b_cos) * half_b
         lo = max(-half_a, middle - reach)
         hi = min(half_a, middle + reach)
         size = half_a + half_b + radius_a + radius_b
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
-            slope = _dot(normal, axis_a)
+            slope = dot(normal, axis_a)
             count = 0
             for end in range(2):
                 s_end = lo if end == 0 else hi
                 depth_end = depth - slope * (s_end - s)
                 if depth_end >= -margin:
-                    surface_a = _axpy(_axpy(center_a, s_end, axis_a), -radius_a, normal)
-                    point = _axpy(surface_a, 0.5 * depth_end, normal)
+                    surface_a = axpy(axpy(center_a, s_end, axis_a), -radius_a, normal)
+                    point = axpy(surface_a, 0.5 * depth_end, normal)
                     write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end,
                            1 + end)
                     count += 1
             return count
 
-    point = _midpoint(_axpy(point_a, -radius_a, normal), _axpy(point_b, radius_b, normal))
+    point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
     write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth,
            np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))
     return 1
@@ -381,7 +277,7 @@ def segment_box_closest(origin, direction, half_length, half_extents):
             denominator += direction[k] * direction[k]
         s = s1
         if denominator > 0.0:
-            s = _clamp(-numerator / denominator, s0, s1)
+            s = clamp(-numerator / denominator, s0, s1)
         value = _box_distance2(origin, direction, s, half_extents)
         if value < best:
             best = value
@@ -420,14 +316,14 @@ def _face_contact(origin, direction, s, radius, half_extents, face_axis, face_si
     face_sign · h``: normal the face's, depth ``radius − height above the face`` (exact over the
     face: the distance to a face is linear along the segment). Returns 1 if written (depth ≥
     −margin), else 0."""
-    x = _axpy(origin, s, direction)
+    x = axpy(origin, s, direction)
     height = face_sign * x[face_axis] - half_extents[face_axis]
     depth = radius - height
     if depth < -margin:
         return 0
-    normal_local = _unit_axis(face_axis, face_sign)
-    point = _axpy(box_center, 1.0, _rotate(box_rotation, _axpy(x, -0.5 * (radius + height), normal_local)))
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, _rotate(box_rotation, normal_local), depth,
+    normal_local = unit_axis(face_axis, face_sign)
+    point = axpy(box_center, 1.0, rotate(box_rotation, axpy(x, -0.5 * (radius + height), normal_local)))
+    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, rotate(box_rotation, normal_local), depth,
            feature)
     return 1
 
@@ -446,7 +342,7 @@ def _face_patch(origin, direction, half_length, radius, half_extents, face_axis,
         lo = min(lo, s_keep)
         hi = max(hi, s_keep)
     if lo > hi:                                 # grazing a side of the face within round-off
-        lo = _clamp(0.5 * (lo + hi), -half_length, half_length)
+        lo = clamp(0.5 * (lo + hi), -half_length, half_length)
         hi = lo
     face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
     if hi - lo > tol:
@@ -465,12 +361,25 @@ def _face_patch(origin, direction, half_length, radius, half_extents, face_axis,
 
 
 @njit(cache=True)
-def _write_local(point_local, normal_local, depth, feature, box_center, box_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot):
-    """Write a contact given in the box frame."""
-    write_contact(out_point, out_normal, out_depth, out_feature, slot,
-           _axpy(box_center, 1.0, _rotate(box_rotation, point_local)),
-           _rotate(box_rotation, normal_local), depth, feature)
+def write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin, feature,
+                     center, rotation, out_point, out_normal, out_depth, out_feature, slot):
+    """The two ends s = lo, hi [m] of the part of capsule A's segment ``origin + s · direction``
+    (in the frame of B, at ``center`` (3,) [m] with ``rotation`` (3, 3)) that lies alongside an
+    edge of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end −
+    s)`` [m] from the depth at the closest point s, ends shallower than −margin left out;
+    features ``feature`` and ``feature + 1``. Shared by capsule–box and capsule–hull.
+    Returns how many it wrote from ``slot`` on."""
+    count = 0
+    for end in range(2):
+        s_end = lo if end == 0 else hi
+        depth_end = depth - slope * (s_end - s)
+        if depth_end >= -margin:
+            surface_a = axpy(axpy(origin, s_end, direction), -radius_a, normal_local)
+            write_local_contact(axpy(surface_a, 0.5 * depth_end, normal_local), normal_local, depth_end,
+                                feature + end, center, rotation, out_point, out_normal, out_depth, out_feature,
+                                slot + count)
+            count += 1
+    return count
 
 
 @njit(cache=True)
@@ -522,8 +431,8 @@ def capsule_box(center_a, rotation_a, radius_a, half_length_a, box_center, box_r
     Where two faces are exactly equally far (a capsule end right over a box edge, along the
     diagonal) the dominant face, hence the feature, follows round-off.
     """
-    origin = _unrotate(box_rotation, _axpy(center_a, -1.0, box_center))
-    direction = _unrotate(box_rotation, _column(rotation_a, 2))
+    origin = unrotate(box_rotation, axpy(center_a, -1.0, box_center))
+    direction = unrotate(box_rotation, column(rotation_a, 2))
     size = half_length_a + radius_a + half_extents[0] + half_extents[1] + half_extents[2]
     tol = BOX_REL_EPS * size
     s, distance2 = segment_box_closest(origin, direction, half_length_a, half_extents)
@@ -545,13 +454,13 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
     """Case 1 of :func:`capsule_box` (box frame): the segment is outside the box; ``s`` is its
     closest point's parameter, ``distance`` > 0 the segment–box distance."""
     depth = radius_a - distance
-    p = _axpy(origin, s, direction)
+    p = axpy(origin, s, direction)
     q = np.empty(3)
     outside = 0
     face_axis = np.int64(0)         # np.int64, not 0: callees are compiled once, not also for Literal[int](0)
     largest = -1e300
     for k in range(3):
-        q[k] = _clamp(p[k], -half_extents[k], half_extents[k])
+        q[k] = clamp(p[k], -half_extents[k], half_extents[k])
         excess = abs(p[k]) - half_extents[k]
         if excess > tol:
             outside += 1
@@ -563,9 +472,9 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
         return _face_patch(origin, direction, half_length_a, radius_a, half_extents, face_axis, face_sign, s,
                            margin, tol, box_center, box_rotation,
                            out_point, out_normal, out_depth, out_feature, slot)
-    normal_local = _scaled(1.0 / distance, _axpy(p, -1.0, q))
-    point_local = _midpoint(_axpy(p, -radius_a, normal_local), q)
-    slope = _dot(normal_local, direction)
+    normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
+    point_local = midpoint(axpy(p, -radius_a, normal_local), q)
+    slope = dot(normal_local, direction)
 
     if outside == 2:
         edge_axis = np.int64(0)
@@ -585,17 +494,9 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
                 if i > j:
                     i, j = j, i
                 edge = 4 * edge_axis + 2 * (1 if p[i] > 0.0 else 0) + (1 if p[j] > 0.0 else 0)
-                count = 0
-                for end in range(2):
-                    s_end = lo if end == 0 else hi
-                    depth_end = depth - slope * (s_end - s)
-                    if depth_end >= -margin:
-                        surface_a = _axpy(_axpy(origin, s_end, direction), -radius_a, normal_local)
-                        _write_local(_axpy(surface_a, 0.5 * depth_end, normal_local), normal_local, depth_end,
-                                     CAPSULE_BOX_EDGE_FEATURE + 2 * edge + end, box_center, box_rotation,
-                                     out_point, out_normal, out_depth, out_feature, slot + count)
-                        count += 1
-                return count
+                return write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin,
+                                        CAPSULE_BOX_EDGE_FEATURE + 2 * edge, box_center, box_rotation,
+                                        out_point, out_normal, out_depth, out_feature, slot)
 
     # an edge crossed at an angle, or a corner: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
@@ -605,8 +506,8 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
         end = 1 if s > 0.5 * (lo + hi) else 0
     else:
         end = 1 if s > 0.0 else 0
-    _write_local(point_local, normal_local, depth, 2 * face + end, box_center, box_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(point_local, normal_local, depth, 2 * face + end, box_center, box_rotation,
+                        out_point, out_normal, out_depth, out_feature, slot)
     count = 1
     if hi - lo > tol:
         other = lo if end == 1 else hi
@@ -635,13 +536,13 @@ def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, ma
         axis = np.zeros(3)
         axis[(k + 1) % 3] = direction[(k + 2) % 3]       # direction × e_k
         axis[(k + 2) % 3] = -direction[(k + 1) % 3]
-        length = _norm(axis)
+        length = norm(axis)
         if length < CROSS_AXIS_EPS:
             continue
-        axis = _scaled(1.0 / length, axis)
+        axis = scaled(1.0 / length, axis)
         # the segment is perpendicular to this axis: its projection is one number
         overlap = (half_extents[0] * abs(axis[0]) + half_extents[1] * abs(axis[1])
-                   + half_extents[2] * abs(axis[2]) - abs(_dot(origin, axis)))
+                   + half_extents[2] * abs(axis[2]) - abs(dot(origin, axis)))
         if overlap < best_edge_overlap:
             best_edge_overlap = overlap
             best_edge = k
@@ -655,18 +556,18 @@ def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, ma
     depth = radius_a + best_edge_overlap
     if depth < -margin:
         return 0
-    normal_local = _scaled(1.0 if _dot(origin, best_edge_axis) >= 0.0 else -1.0, best_edge_axis)
+    normal_local = scaled(1.0 if dot(origin, best_edge_axis) >= 0.0 else -1.0, best_edge_axis)
     # the box edge parallel to e_k that supports the box along the normal
     edge_center = np.zeros(3)
     for j in range(3):
         if j != best_edge:
             edge_center[j] = half_extents[j] if normal_local[j] >= 0.0 else -half_extents[j]
-    edge_direction = _unit_axis(best_edge, 1.0)
+    edge_direction = unit_axis(best_edge, 1.0)
     s, t = segment_closest_parameters(origin, direction, half_length_a, edge_center, edge_direction,
                                       half_extents[best_edge])
-    p = _axpy(origin, s, direction)
-    q = _axpy(edge_center, t, edge_direction)
-    _write_local(_midpoint(_axpy(p, -radius_a, normal_local), q), normal_local, depth,
-                 np.int64(CAPSULE_BOX_CROSS_FEATURE), box_center, box_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot)
+    p = axpy(origin, s, direction)
+    q = axpy(edge_center, t, edge_direction)
+    write_local_contact(midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth,
+                        np.int64(CAPSULE_BOX_CROSS_FEATURE), box_center, box_rotation,
+                        out_point, out_normal, out_depth, out_feature, slot)
     return 1

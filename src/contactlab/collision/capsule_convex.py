@@ -11,11 +11,11 @@ point midway between the two surfaces.
 
 The routine mirrors :func:`contactlab.collision.capsule.capsule_box` feature by feature, with
 the box's 6 faces, 12 edges and 8 corners replaced by the hull's; on a hull that is a box
-(:func:`contactlab.collision.convex.box_as_hull`) it gives the same deepest contact.
+(:func:`contactlab.hulls.box_as_hull`) it gives the same deepest contact.
 
 1. **Segment apart from the hull** (distance > ``BOX_REL_EPS`` × size): the exact segment–hull
    distance is the minimum over (each segment end, each face polygon it projects into) and
-   (the segment, each hull edge) (:func:`capsule.segment_closest_parameters`); the closest
+   (the segment, each hull edge) (:func:`geometry.segment_closest_parameters`); the closest
    points ``p`` (segment) and ``q`` (hull) give the normal ``(p − q)/|p − q|`` and the depth
    ``radius − |p − q|``. By the hull feature ``q`` lies on (a face interior wins ties within
    the tolerance):
@@ -60,21 +60,23 @@ Everything is compiled (``@njit(cache=True)``), float64, no fastmath.
 import numpy as np
 from numba import njit
 
-from .capsule import (BOX_REL_EPS, CROSS_AXIS_EPS, PARALLEL_SIN, _axpy, _clamp, _column, _dot, _midpoint,
-                      _rotate, _scaled, _unrotate, segment_closest_parameters)
-from .contact_output import write_contact
+from .capsule import BOX_REL_EPS, CROSS_AXIS_EPS, PARALLEL_SIN, write_patch_ends
+from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
+from .contact_output import write_local_contact
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255
 
 
 @njit(cache=True)
-def _write_local(point_local, normal_local, depth, feature, hull_center, hull_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot):
-    """Write a contact given in the hull frame."""
-    write_contact(out_point, out_normal, out_depth, out_feature, slot,
-                  _axpy(hull_center, 1.0, _rotate(hull_rotation, point_local)),
-                  _rotate(hull_rotation, normal_local), depth, np.int64(feature))
+def _side_normal(vertices, face_vertex_index, start, stop, i, n):
+    """Edge i of a face polygon (its corners ``face_vertex_index[start:stop]``, counter-clockwise
+    seen from outside, face normal ``n`` (3,)): its first corner a (3,) [m] and its outward side
+    normal e × n, not normalized (three floats)."""
+    a = vertices[face_vertex_index[i]]
+    b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
+    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    return a, e1 * n[2] - e2 * n[1], e2 * n[0] - e0 * n[2], e0 * n[1] - e1 * n[0]
 
 
 @njit(cache=True)
@@ -89,13 +91,7 @@ def _face_interval(origin, direction, half_length, vertices, face_normal, face_v
     lo = -half_length
     hi = half_length
     for i in range(start, stop):
-        a = vertices[face_vertex_index[i]]
-        b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
-        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-        # outward side normal e × n (corners counter-clockwise seen from outside)
-        m0 = e1 * n[2] - e2 * n[1]
-        m1 = e2 * n[0] - e0 * n[2]
-        m2 = e0 * n[1] - e1 * n[0]
+        a, m0, m1, m2 = _side_normal(vertices, face_vertex_index, start, stop, i, n)
         length = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
         if length == 0.0:
             continue
@@ -123,12 +119,7 @@ def _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_ind
     stop = face_vertex_start[face + 1] - base
     n = face_normal[face]
     for i in range(start, stop):
-        a = vertices[face_vertex_index[i]]
-        b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
-        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-        m0 = e1 * n[2] - e2 * n[1]
-        m1 = e2 * n[0] - e0 * n[2]
-        m2 = e0 * n[1] - e1 * n[0]
+        a, m0, m1, m2 = _side_normal(vertices, face_vertex_index, start, stop, i, n)
         if m0 * (x[0] - a[0]) + m1 * (x[1] - a[1]) + m2 * (x[2] - a[2]) > 0.0:
             return False
     return True
@@ -139,13 +130,13 @@ def _face_contact(origin, direction, s, radius, normal, offset, feature, margin,
                   hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot):
     """One contact of the segment point ``s`` (hull frame) against a face plane (normal, offset):
     depth ``radius − height``; written if ≥ −margin. Returns 1 if written, else 0."""
-    x = _axpy(origin, s, direction)
-    height = _dot(normal, x) - offset
+    x = axpy(origin, s, direction)
+    height = dot(normal, x) - offset
     depth = radius - height
     if depth < -margin:
         return 0
-    _write_local(_axpy(x, -0.5 * (radius + height), normal), normal, depth, feature, hull_center, hull_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(axpy(x, -0.5 * (radius + height), normal), normal, depth, feature, hull_center,
+                        hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
     return 1
 
 
@@ -162,7 +153,7 @@ def _face_patch(origin, direction, half_length, radius, vertices, face_normal, f
         lo = min(lo, s_keep)
         hi = max(hi, s_keep)
     if lo > hi:
-        lo = _clamp(0.5 * (lo + hi), -half_length, half_length)
+        lo = clamp(0.5 * (lo + hi), -half_length, half_length)
         hi = lo
     normal = face_normal[face]
     offset = face_offset[face]
@@ -172,7 +163,7 @@ def _face_patch(origin, direction, half_length, radius, vertices, face_normal, f
         count += _face_contact(origin, direction, hi, radius, normal, offset, (2 * face + 1) & 255, margin,
                                hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot + count)
         return count
-    if _dot(normal, direction) * (hi - lo) < 0.0:
+    if dot(normal, direction) * (hi - lo) < 0.0:
         lo = hi
     end = 1 if lo > 0.0 else 0
     return _face_contact(origin, direction, lo, radius, normal, offset, (2 * face + end) & 255, margin,
@@ -190,8 +181,8 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
     arrays (module docstring); margin [m]. Returns the number of contacts written (0..2).
     Algorithm and features: module docstring.
     """
-    origin = _unrotate(rotation_b, _axpy(center_a, -1.0, center_b))
-    direction = _unrotate(rotation_b, _column(rotation_a, 2))
+    origin = unrotate(rotation_b, axpy(center_a, -1.0, center_b))
+    direction = unrotate(rotation_b, column(rotation_a, 2))
     face_count = face_offset.shape[0]
     extent = 0.0
     for v in range(vertices.shape[0]):
@@ -205,7 +196,7 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
     best_face_overlap = np.inf
     for f in range(face_count):
         n = face_normal[f]
-        overlap = face_offset[f] - _dot(n, origin) + half_length_a * abs(_dot(n, direction))
+        overlap = face_offset[f] - dot(n, origin) + half_length_a * abs(dot(n, direction))
         if overlap < -reach:
             return 0                            # separated by more than radius + margin
         if overlap < best_face_overlap:
@@ -218,8 +209,8 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
     for e in range(edge_vertex.shape[0]):
         n0 = face_normal[edge_face[e, 0]]
         n1 = face_normal[edge_face[e, 1]]
-        c0 = _dot(n0, direction)
-        c1 = _dot(n1, direction)
+        c0 = dot(n0, direction)
+        c1 = dot(n1, direction)
         if c0 * c1 > 0.0 or (c0 == 0.0 and c1 == 0.0):
             continue
         a = vertices[edge_vertex[e, 0]]
@@ -256,8 +247,8 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
             n = face_normal[f]
             for end in range(ends):
                 s = -half_length_a if end == 0 else half_length_a
-                x = _axpy(origin, s, direction)
-                height = _dot(n, x) - face_offset[f]
+                x = axpy(origin, s, direction)
+                height = dot(n, x) - face_offset[f]
                 if height > 0.0 and height < face_distance:
                     if _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_index, f):
                         face_distance = height
@@ -271,17 +262,17 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
         for e in range(edge_vertex.shape[0]):
             a = vertices[edge_vertex[e, 0]]
             b = vertices[edge_vertex[e, 1]]
-            middle = _midpoint(a, b)
-            span = _axpy(b, -1.0, a)
-            half = 0.5 * np.sqrt(_dot(span, span))
+            middle = midpoint(a, b)
+            span = axpy(b, -1.0, a)
+            half = 0.5 * np.sqrt(dot(span, span))
             if half == 0.0:
                 continue
-            unit = _scaled(0.5 / half, span)
+            unit = scaled(0.5 / half, span)
             s, t = segment_closest_parameters(origin, direction, half_length_a, middle, unit, half)
-            p = _axpy(origin, s, direction)
-            q = _axpy(middle, t, unit)
-            d = _axpy(p, -1.0, q)
-            distance = np.sqrt(_dot(d, d))
+            p = axpy(origin, s, direction)
+            q = axpy(middle, t, unit)
+            d = axpy(p, -1.0, q)
+            distance = np.sqrt(dot(d, d))
             if distance < edge_distance:
                 edge_distance = distance
                 edge_s = s
@@ -308,12 +299,12 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
         # the patch is clipped to the face; should that cut off the segment's deepest end
         # (which has the exact depth radius + overlap), the patch is stretched to keep it
         s_keep = np.nan
-        slope = _dot(face_normal[best_face], direction)
+        slope = dot(face_normal[best_face], direction)
         if slope != 0.0 and half_length_a > 0.0:
             s_deep = -half_length_a if slope > 0.0 else half_length_a
             lo, hi = _face_interval(origin, direction, half_length_a, vertices, face_normal, face_vertex_start,
                                     face_vertex_index, best_face, tol)
-            if lo > hi or -slope * (s_deep - _clamp(s_deep, lo, hi)) > tol:
+            if lo > hi or -slope * (s_deep - clamp(s_deep, lo, hi)) > tol:
                 s_keep = s_deep
         return _face_patch(origin, direction, half_length_a, radius_a, vertices, face_normal, face_offset,
                            face_vertex_start, face_vertex_index, best_face, s_keep, margin, tol,
@@ -324,14 +315,15 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
     normal_local = best_edge_axis
     a = vertices[edge_vertex[best_edge, 0]]
     b = vertices[edge_vertex[best_edge, 1]]
-    span = _axpy(b, -1.0, a)
-    half = 0.5 * np.sqrt(_dot(span, span))
-    s, t = segment_closest_parameters(origin, direction, half_length_a, _midpoint(a, b), _scaled(0.5 / half, span),
+    span = axpy(b, -1.0, a)
+    half = 0.5 * np.sqrt(dot(span, span))
+    s, t = segment_closest_parameters(origin, direction, half_length_a, midpoint(a, b), scaled(0.5 / half, span),
                                       half)
-    p = _axpy(origin, s, direction)
-    q = _axpy(_midpoint(a, b), t, _scaled(0.5 / half, span))
-    _write_local(_midpoint(_axpy(p, -radius_a, normal_local), q), normal_local, depth, CAPSULE_CONVEX_CROSS_FEATURE,
-                 center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
+    p = axpy(origin, s, direction)
+    q = axpy(midpoint(a, b), t, scaled(0.5 / half, span))
+    write_local_contact(midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth,
+                        CAPSULE_CONVEX_CROSS_FEATURE, center_b, rotation_b, out_point, out_normal, out_depth,
+                        out_feature, slot)
     return 1
 
 
@@ -342,42 +334,35 @@ def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, ha
     """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
     (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter."""
     depth = radius_a - distance
-    p = _axpy(origin, s, direction)
-    normal_local = _scaled(1.0 / distance, _axpy(p, -1.0, q))
-    slope = _dot(normal_local, direction)
+    p = axpy(origin, s, direction)
+    normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
+    slope = dot(normal_local, direction)
     face_count = face_offset.shape[0]
     if not at_vertex:
         a = vertices[edge_vertex[edge, 0]]
         b = vertices[edge_vertex[edge, 1]]
-        span = _axpy(b, -1.0, a)
-        length = np.sqrt(_dot(span, span))
-        unit = _scaled(1.0 / length, span)
-        along = _dot(unit, direction)
+        span = axpy(b, -1.0, a)
+        length = np.sqrt(dot(span, span))
+        unit = scaled(1.0 / length, span)
+        along = dot(unit, direction)
         across = np.sqrt(max(0.0, 1.0 - along * along))
         if across < PARALLEL_SIN and abs(along) > 0.0:
             # parallel to the edge: the part of the segment alongside it
-            t0 = (_dot(unit, a) - _dot(unit, origin)) / along
-            t1 = (_dot(unit, b) - _dot(unit, origin)) / along
+            t0 = (dot(unit, a) - dot(unit, origin)) / along
+            t1 = (dot(unit, b) - dot(unit, origin)) / along
             lo = max(-half_length_a, min(t0, t1))
             hi = min(half_length_a, max(t0, t1))
             if hi - lo > tol and lo - tol <= s <= hi + tol:
-                count = 0
-                for end in range(2):
-                    s_end = lo if end == 0 else hi
-                    depth_end = depth - slope * (s_end - s)
-                    if depth_end >= -margin:
-                        surface_a = _axpy(_axpy(origin, s_end, direction), -radius_a, normal_local)
-                        _write_local(_axpy(surface_a, 0.5 * depth_end, normal_local), normal_local, depth_end,
-                                     (2 * (face_count + edge) + end) & 255, hull_center, hull_rotation,
-                                     out_point, out_normal, out_depth, out_feature, slot + count)
-                        count += 1
-                return count
+                # (2 (F + edge)) mod 256 is even: adding the end (0, 1) commutes with the mod
+                return write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin,
+                                        (2 * (face_count + edge)) & 255, hull_center, hull_rotation,
+                                        out_point, out_normal, out_depth, out_feature, slot)
     # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
     face = 0
     highest = -np.inf
     for f in range(face_count):
-        height = _dot(face_normal[f], p) - face_offset[f]
+        height = dot(face_normal[f], p) - face_offset[f]
         if height > highest:
             highest = height
             face = f
@@ -387,9 +372,9 @@ def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, ha
         end = 1 if s > 0.5 * (lo + hi) else 0
     else:
         end = 1 if s > 0.0 else 0
-    point_local = _midpoint(_axpy(p, -radius_a, normal_local), q)
-    _write_local(point_local, normal_local, depth, (2 * face + end) & 255, hull_center, hull_rotation,
-                 out_point, out_normal, out_depth, out_feature, slot)
+    point_local = midpoint(axpy(p, -radius_a, normal_local), q)
+    write_local_contact(point_local, normal_local, depth, (2 * face + end) & 255, hull_center, hull_rotation,
+                        out_point, out_normal, out_depth, out_feature, slot)
     count = 1
     if hi - lo > tol:
         other = lo if end == 1 else hi

@@ -4,7 +4,7 @@ A cloth's vertices are particles, so collision detection already keeps each of t
 (the cloth's thickness) from every surface (P2b). A coarse cloth can still be pierced between
 its vertices — a table's corner poking up through the middle of a triangle. Here every cloth
 triangle is also sampled, ``samples × samples`` points per triangle (the centroids of its
-k-subdivision, see ``collision.mesh.surface_contacts``), and each sample closer to an obstacle
+k-subdivision, see ``collision.granularity.surface_contacts``), and each sample closer to an obstacle
 than the thickness is a contact whose side A is the triangle's three particles with the
 sample's barycentric weights: a response at the sample moves vertex i by its share w_i (D1).
 """
@@ -13,8 +13,8 @@ import numpy as np
 
 from .. import shapes
 from ..contacts import Contacts, tangent_basis
-from .granularity import SURFACES
-from .mesh import model_obstacle, surface_contacts
+from .granularity import SURFACES, surface_contacts
+from .signed_distance import model_obstacle
 
 
 def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -> Contacts:
@@ -37,7 +37,7 @@ def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -
     for o in obstacles:
         surface = (model.meshes[int(model.obstacle_params[o, 0])] if model.obstacle_shape[o] == shapes.MESH
                    else model_obstacle(model, o))
-        found = surface_contacts(state.particle_position, triangles, surface, "sample", normal, reach, samples)
+        found = surface_contacts(state.particle_position, triangles, surface, "samples", normal, reach, samples)
         depth = found.depth + np.einsum("ck,ck->c", found.weights, thickness[found.vertices])
         keep = depth >= -margin
         if not keep.any():

@@ -4,7 +4,10 @@ out_point (N, 3) [m], out_normal (N, 3) unit from B into A, out_depth (N,) [m] (
 overlapping), out_feature (N,) int64 (stable id of the contact within its pair).
 """
 
+import numpy as np
 from numba import njit
+
+from .geometry import axpy, rotate
 
 
 @njit(cache=True)
@@ -15,3 +18,13 @@ def write_contact(out_point, out_normal, out_depth, out_feature, slot, point, no
         out_normal[slot, i] = normal[i]
     out_depth[slot] = depth
     out_feature[slot] = feature
+
+
+@njit(cache=True)
+def write_local_contact(point_local, normal_local, depth, feature, center, rotation,
+                        out_point, out_normal, out_depth, out_feature, slot):
+    """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal
+    (3,) there, the collider at ``center`` (3,) [m] with ``rotation`` (3, 3) body → world."""
+    write_contact(out_point, out_normal, out_depth, out_feature, slot,
+                  axpy(center, 1.0, rotate(rotation, point_local)), rotate(rotation, normal_local), depth,
+                  np.int64(feature))

@@ -1,5 +1,18 @@
-"""Contacts of rigid polytopes (boxes, convex hulls) against static surfaces at a chosen SPEC
-P2 granularity and P4/P5 normal.
+"""Contacts of mesh-like objects against static surfaces at a chosen SPEC P2 granularity and P4/P5 normal.
+
+:func:`surface_contacts` is the general form: an object A given as its own triangle mesh
+(vertices (V, 3) world, triangles (T, 3)) against a plane, sphere or box obstacle or a static
+mesh (their signed distances: :mod:`.signed_distance`). Granularity P2a ``"object"``: one
+contact, at the deepest vertex; P2b ``"vertex"``: one per penetrating vertex; P2c ``"samples"``:
+one per penetrating sample, ``k × k`` per triangle (the centroids of the k² sub-triangles of a
+k-subdivision), each carrying the triangle's 3 vertex indices and the 3 barycentric weights
+(they sum to 1 and reproduce the sample point), so a force is distributed ``w_i F`` to vertex i
+(D1). Normal P4 ``"object"``: the obstacle's normal at the closest point (a box's face normal:
+discontinuous across its medial axis); P5 ``"vertex"``: the negated normal of A's own surface
+at the point (area-weighted vertex normals, interpolated for samples): continuous, but not
+guaranteed to point out of the obstacle. Cloth (:mod:`.cloth`) and rigid polytopes use it.
+
+Rigid polytopes (boxes, convex hulls), :func:`polytope_contacts`:
 
 The default contacts of a box or hull are its penetrating corners (P2b) with the surface's
 normal (P4). ``collide(..., granularity=, normal=)`` replaces them, for every polytope body
@@ -18,15 +31,117 @@ All bodies go through in one vectorized batch per surface: their hulls' fan tria
 once with the model) are placed in the world as one triangle soup.
 """
 
+from collections import namedtuple
+
 import numpy as np
 
 from .. import rotations, shapes
-from .mesh import model_obstacle, surface_contacts
+from ..errors import InputError
+from ..meshes import TriangleMesh, vertex_normals
+from .signed_distance import ShapeObstacle, model_obstacle, points_against_mesh, points_against_shape
 
-GRANULARITIES = ("object", "vertex", "samples")
-NORMALS = ("object", "vertex")
+GRANULARITIES = ("object", "vertex", "samples")     # P2a, P2b, P2c
+NORMALS = ("object", "vertex")                      # P4, P5
 SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)    # static kinds handled here
 POLYTOPES = (shapes.BOX, shapes.CONVEX)
+
+
+SurfaceContacts = namedtuple("SurfaceContacts", ["point", "normal", "depth", "vertices", "weights", "feature"])
+SurfaceContacts.__doc__ = """Contacts of a mesh-like object A against a static surface B (C contacts).
+
+point (C, 3) [m] midway between A's point and B's surface; normal (C, 3) unit, from B into A;
+depth (C,) [m], > 0 penetrating; vertices (C, 3) int64 indices of A's vertices carrying the
+contact (−1 unused); weights (C, 3) their barycentric weights (sum 1; 0 where unused), so the
+contact point of A is Σ w_i x_i and a force F is distributed as w_i F to vertex i (D1);
+feature (C,) int64: 0 (P2a), the vertex (P2b), or triangle · k² + sample (P2c)."""
+
+def triangle_samples(samples_per_edge):
+    """Barycentric weights (k², 3) of k × k samples on a triangle: the centroids of the k²
+    congruent sub-triangles of its k-subdivision (every weight > 0, the samples even)."""
+    k = int(samples_per_edge)
+    rows = []
+    for a in range(k):
+        for b in range(k - a):
+            rows.append((a + 1.0 / 3.0, b + 1.0 / 3.0))          # upward sub-triangle
+            if a + b <= k - 2:
+                rows.append((a + 2.0 / 3.0, b + 2.0 / 3.0))      # downward sub-triangle
+    ab = np.array(rows) / k
+    return np.column_stack([1.0 - ab[:, 0] - ab[:, 1], ab[:, 0], ab[:, 1]])
+
+
+def surface_contacts(vertices, triangles, obstacle, granularity="vertex", normal="object", margin=0.0,
+                     samples=2, max_depth=None, object_vertex_normals=None) -> SurfaceContacts:
+    """Contacts of object A (its triangle mesh) against a static surface B, at a SPEC P2 granularity.
+
+    vertices: (V, 3) world positions of A [m]; triangles: (T, 3) int, wound outward.
+    obstacle: a :class:`ShapeObstacle` (:func:`plane_obstacle`, :func:`sphere_obstacle`,
+    :func:`box_obstacle`) or a static :class:`~contactlab.meshes.TriangleMesh`.
+    granularity: ``"object"`` (P2a: one contact, at the deepest vertex), ``"vertex"`` (P2b: one
+    per vertex with depth ≥ −margin) or ``"samples"`` (P2c: one per sample with depth ≥ −margin,
+    ``samples × samples`` per triangle). normal: ``"object"`` (P4: B's normal at its closest
+    point) or ``"vertex"`` (P5: −(A's own area-weighted normal at the point), interpolated
+    with the weights for samples). margin [m]: gaps down to this are kept. max_depth [m]:
+    against a mesh, how deep a penetration is looked for (default: the mesh's ``max_depth``).
+    object_vertex_normals: (V, 3) to reuse, else computed from A.
+    """
+    if granularity not in GRANULARITIES:
+        raise InputError("granularity", f"expected one of {', '.join(GRANULARITIES)}, found {granularity!r}")
+    if normal not in NORMALS:
+        raise InputError("normal", f"expected one of {', '.join(NORMALS)}, found {normal!r}")
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise InputError("margin", f"the margin must be a finite number ≥ 0, found {margin}")
+    vertices = np.ascontiguousarray(vertices, dtype=float)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    k = int(samples)
+    if granularity == "samples" and k < 1:
+        raise InputError("samples", f"the samples per triangle edge must be ≥ 1, found {samples}")
+    if granularity == "samples":
+        weights_pattern = triangle_samples(k)                                   # (S, 3)
+        S = len(weights_pattern)
+        corner_positions = vertices[triangles]                                  # (T, 3, 3)
+        points = np.einsum("sk,tkd->tsd", weights_pattern, corner_positions).reshape(-1, 3)
+        carriers = np.repeat(triangles, S, axis=0)                              # (T·S, 3)
+        weights = np.tile(weights_pattern, (len(triangles), 1))
+        features = np.arange(len(points), dtype=np.int64)                       # t · k² + s
+    else:
+        points = vertices
+        carriers = np.full((len(vertices), 3), -1, dtype=np.int64)
+        carriers[:, 0] = np.arange(len(vertices))
+        weights = np.zeros((len(vertices), 3))
+        weights[:, 0] = 1.0
+        features = np.arange(len(vertices), dtype=np.int64)
+    if isinstance(obstacle, TriangleMesh):
+        if max_depth is None:
+            max_depth = obstacle.max_depth
+        signed, obstacle_normal, closest, _ = points_against_mesh(points, obstacle.geometry,
+                                                                  float(margin + max_depth))
+    elif isinstance(obstacle, ShapeObstacle):
+        signed, obstacle_normal, closest = points_against_shape(
+            points, int(obstacle.kind), np.asarray(obstacle.params, dtype=float),
+            np.asarray(obstacle.position, dtype=float), np.ascontiguousarray(obstacle.rotation, dtype=float))
+    else:
+        raise InputError("obstacle", f"expected a ShapeObstacle or a TriangleMesh, found {type(obstacle).__name__}")
+    depth = -signed
+    if granularity == "object":
+        chosen = np.array([int(np.argmax(depth))]) if len(depth) and depth.max() >= -margin else np.zeros(0, int)
+    else:
+        chosen = np.nonzero(depth >= -margin)[0]
+    if normal == "object":
+        normals = obstacle_normal[chosen]
+    else:
+        own = vertex_normals(vertices, triangles) if object_vertex_normals is None else np.asarray(
+            object_vertex_normals, dtype=float)
+        blended = np.einsum("ck,ckd->cd", weights[chosen], own[np.maximum(carriers[chosen], 0)])
+        length = np.linalg.norm(blended, axis=1, keepdims=True)
+        normals = -blended / np.where(length > 0.0, length, 1.0)
+    return SurfaceContacts(
+        point=0.5 * (points[chosen] + closest[chosen]),
+        normal=normals,
+        depth=depth[chosen],
+        vertices=carriers[chosen],
+        weights=weights[chosen],
+        feature=np.zeros(len(chosen), dtype=np.int64) if granularity == "object" else features[chosen],
+    )
 
 
 def _soup(model, state, bodies):
@@ -86,7 +201,7 @@ def polytope_contacts(model, state, granularity, normal, samples, margin, total)
     for o in obstacles:
         surface = (model.meshes[int(model.obstacle_params[o, 0])] if model.obstacle_shape[o] == shapes.MESH
                    else model_obstacle(model, o))
-        found = surface_contacts(world, triangles, surface, "sample" if granularity == "samples" else "vertex",
+        found = surface_contacts(world, triangles, surface, "vertex" if granularity == "object" else granularity,
                                  normal, margin, samples, object_vertex_normals=own_normals)
         if granularity == "samples":
             triangle = found.feature // samples_per_triangle

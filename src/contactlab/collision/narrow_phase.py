@@ -18,7 +18,8 @@ from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_convex import capsule_convex
-from .convex import convex_convex, convex_plane, hull_view, sphere_convex
+from .convex import convex_plane, hull_view, sphere_convex
+from .convex_convex import convex_convex
 
 MAX_PER_PAIR = 8
 
@@ -173,7 +174,7 @@ _ROUTINE = {("sphere", "sphere"): "sphere_sphere", ("sphere", "capsule"): "spher
 
 def family(kind_a, kind_b):
     """The name in FAMILIES of the routine for a pair of shape kinds, in either order; None for
-    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_pairs)."""
+    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_contacts)."""
     a, b = _CLASS.get(int(kind_a)), _CLASS.get(int(kind_b))
     return _ROUTINE.get((a, b)) or _ROUTINE.get((b, a))
 

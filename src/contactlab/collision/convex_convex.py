@@ -1,0 +1,494 @@
+"""Contact manifolds of two convex polytopes (hulls): the separating axis test and face clipping.
+
+Conventions and the hull arrays as in :mod:`.convex`: shape A first, the normal a unit
+vector from B into A, ``depth`` > 0 when overlapping, contacts kept down to
+``depth = −margin``, each ``point`` midway between the surfaces, at most ``MAX_CONTACTS`` = 4
+written from ``slot`` on.
+
+Algorithm
+---------
+``convex_convex``: the separating axis test over the face normals of A, of B, and the
+edge pairs that form a face of the Minkowski difference (the Gauss-map arc test of
+D. Gregorius, GDC 2013: only those edge pairs can give the minimum, so the others are
+skipped without projecting anything). The smallest overlap is the exact penetration depth
+when the hulls overlap; when they are apart the largest separation is a lower bound of the
+distance (exact when the closest features are a face and something), so speculative
+contacts are conservative. Faces are favoured over edges, and the larger face among two
+nearly equal faces is the reference (A's when equal), with the tolerances of
+:mod:`.box_box` (``FACE_REL_TOL`` relative, ``FACE_ABS_TOL`` × the larger hull radius),
+so a resting hull does not flip between face and edge contacts (the axis used never
+overlaps more than the minimum plus that tolerance). A face axis gives a manifold: the
+*incident* face — of the faces around the other hull's deepest vertex, the one most
+anti-parallel to the reference normal — is clipped against the side planes of the
+reference face (Sutherland–Hodgman); the clipped points at most ``margin`` above the
+reference plane are the contacts, each moved halfway to the reference plane, its depth its
+own distance below that plane. Since the deepest vertex is on the incident face, the
+deepest contact has the full overlap on the axis whenever that vertex lies over the
+reference face. If clipping leaves nothing (a deep or grazing contact on a favoured,
+non-minimal axis), the exact minimum axis is used instead; if that face clips to nothing
+too, the incident hull's deepest vertex is the one contact (its projection lies on the
+reference face, since that face is the minimum). An edge axis gives one contact midway
+between the closest points of the two edges, with the axis overlap as its depth.
+The clipped polygon's nearly straight corners are dropped and it is reduced to 4 points as
+box–box does it (:mod:`.contact_polygon`).
+
+Feature numbers (0..255)
+------------------------
+Face contact: ``fold(FNV-1a(reference face, incident face, label))``
+where ``label`` is an incident-hull vertex: the incident vertex the point is, or, for a point
+where clipping cut the incident polygon, the vertex that was cut off there (so a corner cut
+by a hair keeps its label, as in :mod:`.box_box`; a reference-face corner inherits the label
+the same way). Edge–edge contact: ``fold(FNV-1a(−1 − min(a, b), −1, max(a, b)))`` for edges
+``a``, ``b`` of the two hulls. ``FNV-1a`` is the 32-bit Fowler–Noll–Vo hash over these
+integers and ``fold(h) = (h ⊕ h≫8 ⊕ h≫16 ⊕ h≫24) mod 256``; a feature already taken in the
+pair moves to the next free number (polygon order). So a contact keeps its feature while
+its reference face, incident face and clipping topology persist, including through
+round-off jitter of faces stacked flush (nearly straight corners of the clipped polygon,
+within ``COLLINEAR_TOL`` × the shorter face's shortest edge of the chord of their
+neighbours, are dropped first, unless deeper than both neighbours by more than
+``DEPTH_TOL`` × size); tipping onto another face gives
+new features. Which hull is A does not enter: swapping A and B gives the same features.
+
+Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
+"""
+
+import numpy as np
+from numba import njit
+
+from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear, reduce_to_four
+
+MAX_CONTACTS = MAX_POINTS # contacts written per pair, at most
+FACE_REL_TOL = 0.05       # relative tolerance favouring faces over edges, and the larger reference face
+FACE_ABS_TOL = 1e-5       # absolute part of that tolerance, × the larger hull radius [-]
+PARALLEL_SIN2 = 1e-12     # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
+DEPTH_TOL = 1e-9          # a nearly straight clipped corner deeper than its neighbours by this × size is kept
+COLLINEAR_TOL = 1e-4      # clipped corners this close to straight (× the shorter face's shortest edge) are dropped
+
+_FNV_OFFSET = 2166136261
+_FNV_PRIME = 16777619
+
+
+@njit(cache=True)
+def _mix(h, value):
+    """One FNV-1a step over a 32-bit integer (h and the result in 0..2³²−1)."""
+    return ((h ^ (value & 0xFFFFFFFF)) * _FNV_PRIME) & 0xFFFFFFFF
+
+
+@njit(cache=True)
+def _feature_of(ref_face, inc_face, vertex):
+    """0..255 from (reference face, incident face, vertex) by FNV-1a, folded to 8 bits."""
+    h = _mix(_mix(_mix(_FNV_OFFSET, ref_face), inc_face), vertex)
+    return (h ^ (h >> 8) ^ (h >> 16) ^ (h >> 24)) & 255
+
+
+@njit(cache=True)
+def _clip_side(source, label, count, plane_point, plane_normal, distance, target, target_label):
+    """Clip polygon ``source`` (rows, 3) to plane_normal · (x − plane_point) ≤ 0 (one side plane of
+    the reference face); ``distance`` is scratch space. Returns the new count (see
+    contact_polygon.clip_polygon)."""
+    for k in range(count):
+        distance[k] = (plane_normal[0] * (source[k, 0] - plane_point[0])
+                       + plane_normal[1] * (source[k, 1] - plane_point[1])
+                       + plane_normal[2] * (source[k, 2] - plane_point[2]))
+    return clip_polygon(source, label, count, distance, target, target_label)
+
+
+@njit(cache=True)
+def _shortest_edge(points, fvs, fvi, f):
+    """Length [m] of the shortest edge of face f."""
+    base = fvs[0]
+    start = fvs[f] - base
+    corners = fvs[f + 1] - fvs[f]
+    shortest = np.inf
+    for k in range(corners):
+        a = points[fvi[start + k]]
+        b = points[fvi[start + (k + 1) % corners]]
+        shortest = min(shortest, (b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
+    return np.sqrt(shortest)
+
+
+@njit(cache=True)
+def _face_area(points, face_vertex_start, face_vertex_index, f, normal):
+    """Area [m²] of face f (corners ``points`` rows), about its unit ``normal``."""
+    base = face_vertex_start[0]
+    start = face_vertex_start[f] - base
+    stop = face_vertex_start[f + 1] - base
+    a = points[face_vertex_index[start]]
+    total = 0.0
+    for k in range(start + 1, stop - 1):
+        b = points[face_vertex_index[k]]
+        c = points[face_vertex_index[k + 1]]
+        u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        total += (u1 * v2 - u2 * v1) * normal[0] + (u2 * v0 - u0 * v2) * normal[1] + (u0 * v1 - u1 * v0) * normal[2]
+    return 0.5 * abs(total)
+
+
+@njit(cache=True)
+def _face_contacts(ref_points, ref_normal, ref_offset, ref_fvs, ref_fvi, ref_face, inc_points, inc_normal,
+                   inc_fvs, inc_fvi, sign, margin, scale, fallback, center_a, rotation_a,
+                   out_point, out_normal, out_depth, out_feature, slot):
+    """Clip the incident face against reference face ``ref_face``; everything in A's frame.
+
+    ``ref_points``/``inc_points`` (·, 3): the two hulls' vertices in A's frame; ``ref_normal``
+    (3,) outward of the reference face, ``ref_offset`` its plane offset; ``inc_normal`` (·, 3)
+    the incident hull's face normals in A's frame; ``sign`` = +1 when the reference face is on B
+    (contact normal = ref_normal), −1 when on A. If clipping leaves nothing within the margin,
+    the incident hull's deepest vertex is the one contact when ``fallback``, else nothing.
+    Writes world contacts; returns their count.
+    """
+    m0, m1, m2 = ref_normal[0], ref_normal[1], ref_normal[2]
+    # the incident hull's deepest vertex (its support point along −ref_normal) ...
+    deepest = 0
+    lowest = np.inf
+    for v in range(inc_points.shape[0]):
+        h = m0 * inc_points[v, 0] + m1 * inc_points[v, 1] + m2 * inc_points[v, 2]
+        if h < lowest:
+            lowest = h
+            deepest = v
+    # ... and the incident face: of the faces around that vertex, the most anti-parallel to the
+    # reference normal (so the deepest point is always on it and survives clipping when it lies
+    # over the reference face)
+    inc_base = inc_fvs[0]
+    inc_face = 0
+    best = np.inf
+    for g in range(inc_normal.shape[0]):
+        around = False
+        for k in range(inc_fvs[g] - inc_base, inc_fvs[g + 1] - inc_base):
+            if inc_fvi[k] == deepest:
+                around = True
+                break
+        if around:
+            d = inc_normal[g, 0] * m0 + inc_normal[g, 1] * m1 + inc_normal[g, 2] * m2
+            if d < best:
+                best = d
+                inc_face = g
+    ref_base = ref_fvs[0]
+    ref_start = ref_fvs[ref_face] - ref_base
+    ref_corners = ref_fvs[ref_face + 1] - ref_fvs[ref_face]
+    inc_start = inc_fvs[inc_face] - inc_base
+    inc_corners = inc_fvs[inc_face + 1] - inc_fvs[inc_face]
+    capacity = inc_corners + ref_corners + 1
+    polygon = np.empty((2, capacity, 3))
+    labels = np.empty((2, capacity), dtype=np.int64)
+    distance = np.empty(capacity)
+    for k in range(inc_corners):
+        v = inc_fvi[inc_start + k]
+        for c in range(3):
+            polygon[0, k, c] = inc_points[v, c]
+        labels[0, k] = v
+    count = inc_corners
+    side_normal = np.empty(3)
+    source = 0
+    for side in range(ref_corners):
+        a = ref_points[ref_fvi[ref_start + side]]
+        b = ref_points[ref_fvi[ref_start + (side + 1) % ref_corners]]
+        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        side_normal[0] = e1 * m2 - e2 * m1                # e × m: outward in the face plane
+        side_normal[1] = e2 * m0 - e0 * m2
+        side_normal[2] = e0 * m1 - e1 * m0
+        count = _clip_side(polygon[source], labels[source], count, a, side_normal, distance,
+                           polygon[1 - source], labels[1 - source])
+        source = 1 - source
+        if count == 0:
+            break
+    points = polygon[source]
+    point_labels = labels[source]
+    # drop nearly straight corners, at a tolerance set by the smaller face
+    if count > 2:
+        tolerance = COLLINEAR_TOL * min(_shortest_edge(ref_points, ref_fvs, ref_fvi, ref_face),
+                                        _shortest_edge(inc_points, inc_fvs, inc_fvi, inc_face))
+        count = drop_collinear(points, point_labels, count, tolerance, ref_normal, DEPTH_TOL * scale)
+    height = distance                                     # reuse: height above the reference plane
+    keep = np.empty(max(capacity, 1), dtype=np.int64)
+    kept = 0
+    for k in range(count):
+        h = m0 * points[k, 0] + m1 * points[k, 1] + m2 * points[k, 2] - ref_offset
+        height[k] = h
+        if h <= margin:
+            keep[kept] = k
+            kept += 1
+    if kept == 0:
+        if not fallback:
+            return 0
+        # grazing, or deep: the incident hull's deepest vertex is the one contact
+        lowest -= ref_offset
+        if lowest > margin:
+            return 0
+        for c in range(3):
+            points[0, c] = inc_points[deepest, c]
+        height[0] = lowest
+        point_labels[0] = deepest
+        keep[0] = 0
+        kept = 1
+    kept = reduce_to_four(points, height, keep, kept, ref_normal, REDUCE_TIE * scale, np.empty(kept))
+    used = np.zeros(256, dtype=np.bool_)
+    for k in range(kept):
+        p = keep[k]
+        h = height[p]
+        row = slot + k
+        # the incident point moved halfway to the reference plane (A's frame), then to the world
+        l0 = points[p, 0] - 0.5 * h * m0
+        l1 = points[p, 1] - 0.5 * h * m1
+        l2 = points[p, 2] - 0.5 * h * m2
+        for c in range(3):
+            out_point[row, c] = center_a[c] + rotation_a[c, 0] * l0 + rotation_a[c, 1] * l1 + rotation_a[c, 2] * l2
+            out_normal[row, c] = sign * (rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2)
+        out_depth[row] = -h
+        out_feature[row] = claim_feature(_feature_of(ref_face, inc_face, point_labels[p]), used)
+    return kept
+
+
+@njit(cache=True)
+def _segment_closest(p1, q1, p2, q2, out_1, out_2):
+    """Closest points of segments p1 q1 and p2 q2 (3,), into out_1, out_2 (Ericson, 5.1.9)."""
+    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    c = d10 * r0 + d11 * r1 + d12 * r2
+    b = d10 * d20 + d11 * d21 + d12 * d22
+    denominator = a * e - b * b
+    s = 0.0
+    if denominator > 0.0:
+        s = min(max((b * f - c * e) / denominator, 0.0), 1.0)
+    t = (b * s + f) / e if e > 0.0 else 0.0
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-c / a, 0.0), 1.0) if a > 0.0 else 0.0
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((b - c) / a, 0.0), 1.0) if a > 0.0 else 0.0
+    out_1[0], out_1[1], out_1[2] = p1[0] + s * d10, p1[1] + s * d11, p1[2] + s * d12
+    out_2[0], out_2[1], out_2[2] = p2[0] + t * d20, p2[1] + t * d21, p2[2] + t * d22
+
+
+@njit(cache=True)
+def _least_face_overlap(normal, offset, faces, points, count, margin, result, at):
+    """The face axes of one hull against the other hull's ``points[:count]`` (both in one frame):
+    each face's overlap is its offset − the least n · x over the points. Keeps the least overlap
+    and its face in ``result[at]``, ``result[at + 1]`` (earliest on a tie); returns False as
+    soon as a face separates the hulls by more than ``margin`` [m]."""
+    for f in range(faces):
+        n0, n1, n2 = normal[f, 0], normal[f, 1], normal[f, 2]
+        lowest = np.inf
+        for j in range(count):
+            lowest = min(lowest, n0 * points[j, 0] + n1 * points[j, 1] + n2 * points[j, 2])
+        overlap = offset[f] - lowest
+        if overlap < -margin:
+            return False
+        if overlap < result[at]:
+            result[at] = overlap
+            result[at + 1] = f
+    return True
+
+
+@njit(cache=True)
+def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a, edge_vertex_a, edge_face_a,
+                      center_b, rotation_b, vertices_b, face_normal_b, face_offset_b, edge_vertex_b, edge_face_b,
+                      margin, result, axis):
+    """Separating axis test of hull A against hull B, in A's body frame.
+
+    Arguments as for :func:`convex_convex` (without the face corner lists). Fills ``result``
+    (8,) float: [0] the smallest overlap [m] over A's face normals, [1] that face, [2] the
+    smallest over B's faces, [3] that face, [4] the smallest over the Minkowski-face edge pairs
+    (+inf when none), [5] that edge of A, [6] that edge of B, [7] the minimum of the three:
+    the penetration depth when ≥ 0; when < 0, minus a lower bound of the distance. ``axis``
+    (3,): the unit edge axis, A's frame, from A towards B.
+
+    Returns (close, vb, nb, ob): ``close`` False as soon as some axis separates the hulls by
+    more than ``margin`` (``result`` then incomplete); B's vertices (Vb, 3), face normals
+    (Fb, 3) and offsets (Fb,) in A's frame.
+    """
+    Rab = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            Rab[i, j] = (rotation_a[0, i] * rotation_b[0, j] + rotation_a[1, i] * rotation_b[1, j]
+                         + rotation_a[2, i] * rotation_b[2, j])
+    t = np.empty(3)
+    for i in range(3):
+        t[i] = (rotation_a[0, i] * (center_b[0] - center_a[0]) + rotation_a[1, i] * (center_b[1] - center_a[1])
+                + rotation_a[2, i] * (center_b[2] - center_a[2]))
+    count_b = vertices_b.shape[0]
+    vb = np.empty((count_b, 3))
+    for j in range(count_b):
+        for i in range(3):
+            vb[j, i] = Rab[i, 0] * vertices_b[j, 0] + Rab[i, 1] * vertices_b[j, 1] + Rab[i, 2] * vertices_b[j, 2] + t[i]
+    faces_b = face_offset_b.shape[0]
+    nb = np.empty((faces_b, 3))
+    ob = np.empty(faces_b)
+    for g in range(faces_b):
+        for i in range(3):
+            nb[g, i] = (Rab[i, 0] * face_normal_b[g, 0] + Rab[i, 1] * face_normal_b[g, 1]
+                        + Rab[i, 2] * face_normal_b[g, 2])
+        ob[g] = face_offset_b[g] + nb[g, 0] * t[0] + nb[g, 1] * t[1] + nb[g, 2] * t[2]
+    for k in range(8):
+        result[k] = np.inf
+    result[5] = -1.0
+    result[6] = -1.0
+    # faces of A, then of B
+    if not _least_face_overlap(face_normal_a, face_offset_a, face_offset_a.shape[0], vb, count_b, margin, result, 0):
+        return False, vb, nb, ob
+    count_a = vertices_a.shape[0]
+    if not _least_face_overlap(nb, ob, faces_b, vertices_a, count_a, margin, result, 2):
+        return False, vb, nb, ob
+    # edge pairs that form a face of the Minkowski difference A − B (Gauss-map arcs cross).
+    # Per edge of B, once: the negated normals c, d of its two faces and d × c (rows of ``arcs``)
+    edges_b = edge_vertex_b.shape[0]
+    arcs = np.empty((edges_b, 9))
+    for eb in range(edges_b):
+        fb0 = edge_face_b[eb, 0]
+        fb1 = edge_face_b[eb, 1]
+        c0, c1, c2 = -nb[fb0, 0], -nb[fb0, 1], -nb[fb0, 2]
+        d0, d1, d2 = -nb[fb1, 0], -nb[fb1, 1], -nb[fb1, 2]
+        arcs[eb, 0], arcs[eb, 1], arcs[eb, 2] = c0, c1, c2
+        arcs[eb, 3], arcs[eb, 4], arcs[eb, 5] = d0, d1, d2
+        arcs[eb, 6] = d1 * c2 - d2 * c1
+        arcs[eb, 7] = d2 * c0 - d0 * c2
+        arcs[eb, 8] = d0 * c1 - d1 * c0
+    for ea in range(edge_vertex_a.shape[0]):
+        fa0 = edge_face_a[ea, 0]
+        fa1 = edge_face_a[ea, 1]
+        a0, a1, a2 = face_normal_a[fa0, 0], face_normal_a[fa0, 1], face_normal_a[fa0, 2]
+        b0, b1, b2 = face_normal_a[fa1, 0], face_normal_a[fa1, 1], face_normal_a[fa1, 2]
+        bxa0 = b1 * a2 - b2 * a1
+        bxa1 = b2 * a0 - b0 * a2
+        bxa2 = b0 * a1 - b1 * a0
+        pa = vertices_a[edge_vertex_a[ea, 0]]
+        qa = vertices_a[edge_vertex_a[ea, 1]]
+        E0, E1, E2 = qa[0] - pa[0], qa[1] - pa[1], qa[2] - pa[2]
+        length_a2 = E0 * E0 + E1 * E1 + E2 * E2
+        for eb in range(edges_b):
+            arc = arcs[eb]
+            cba = arc[0] * bxa0 + arc[1] * bxa1 + arc[2] * bxa2
+            dba = arc[3] * bxa0 + arc[4] * bxa1 + arc[5] * bxa2
+            if cba * dba >= 0.0:
+                continue
+            adc = a0 * arc[6] + a1 * arc[7] + a2 * arc[8]
+            bdc = b0 * arc[6] + b1 * arc[7] + b2 * arc[8]
+            if adc * bdc >= 0.0 or cba * bdc <= 0.0:
+                continue
+            pb = vb[edge_vertex_b[eb, 0]]
+            qb = vb[edge_vertex_b[eb, 1]]
+            F0, F1, F2 = qb[0] - pb[0], qb[1] - pb[1], qb[2] - pb[2]
+            L0 = E1 * F2 - E2 * F1
+            L1 = E2 * F0 - E0 * F2
+            L2 = E0 * F1 - E1 * F0
+            length2 = L0 * L0 + L1 * L1 + L2 * L2
+            if length2 < PARALLEL_SIN2 * length_a2 * (F0 * F0 + F1 * F1 + F2 * F2):
+                continue
+            length = np.sqrt(length2)
+            L0, L1, L2 = L0 / length, L1 / length, L2 / length
+            if L0 * pa[0] + L1 * pa[1] + L2 * pa[2] < 0.0:      # orient from A (origin inside) towards B
+                L0, L1, L2 = -L0, -L1, -L2
+            overlap = -(L0 * (pb[0] - pa[0]) + L1 * (pb[1] - pa[1]) + L2 * (pb[2] - pa[2]))
+            if overlap < -margin:
+                return False, vb, nb, ob
+            if overlap < result[4]:
+                result[4] = overlap
+                result[5] = ea
+                result[6] = eb
+                axis[0], axis[1], axis[2] = L0, L1, L2
+    result[7] = min(result[0], min(result[2], result[4]))
+    return True, vb, nb, ob
+
+
+@njit(cache=True)
+def convex_convex(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a, face_vertex_start_a,
+                  face_vertex_index_a, edge_vertex_a, edge_face_a,
+                  center_b, rotation_b, vertices_b, face_normal_b, face_offset_b, face_vertex_start_b,
+                  face_vertex_index_b, edge_vertex_b, edge_face_b,
+                  margin, out_point, out_normal, out_depth, out_feature, slot):
+    """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
+
+    Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays (module
+    docstring). ``margin`` [m]: contacts kept down to depth −margin. Outputs as in the module
+    docstring; 0 when some axis separates the hulls by more than the margin.
+    """
+    result = np.empty(8)
+    axis = np.zeros(3)
+    close, vb, nb, ob = convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a,
+                                          edge_vertex_a, edge_face_a, center_b, rotation_b, vertices_b,
+                                          face_normal_b, face_offset_b, edge_vertex_b, edge_face_b, margin,
+                                          result, axis)
+    if not close:
+        return 0
+    scale = 0.0
+    for i in range(vertices_a.shape[0]):
+        scale = max(scale, vertices_a[i, 0] ** 2 + vertices_a[i, 1] ** 2 + vertices_a[i, 2] ** 2)
+    for j in range(vertices_b.shape[0]):
+        scale = max(scale, vertices_b[j, 0] ** 2 + vertices_b[j, 1] ** 2 + vertices_b[j, 2] ** 2)
+    scale = np.sqrt(scale)
+    absolute = FACE_ABS_TOL * scale
+    over_a = result[0]
+    over_b = result[2]
+    face_a = int(result[1])
+    face_b = int(result[3])
+    lower = min(over_a, over_b)
+    if max(over_a, over_b) <= lower + FACE_REL_TOL * abs(lower) + absolute:
+        # a tie: the larger face is the reference (A's when equal), for stability in time
+        area_a = _face_area(vertices_a, face_vertex_start_a, face_vertex_index_a, face_a, face_normal_a[face_a])
+        area_b = _face_area(vertices_b, face_vertex_start_b, face_vertex_index_b, face_b, face_normal_b[face_b])
+        use_b = area_b > area_a * (1.0 + 1e-9)
+    else:
+        use_b = over_b < over_a
+    face_overlap = over_b if use_b else over_a
+    over_e = result[4]
+    chosen = 1 if use_b else 0                 # 0: face of A, 1: face of B, 2: edge pair
+    if over_e < np.inf and face_overlap > over_e + FACE_REL_TOL * abs(over_e) + absolute:
+        chosen = 2                             # the edge axis is clearly better than any face
+    # the exact minimum (first of A's face, B's face, edge on ties)
+    exact = 0
+    if over_b < over_a:
+        exact = 1
+    if over_e < min(over_a, over_b):
+        exact = 2
+    # the favoured axis first; should its face clip to nothing (deep or grazing contact), the
+    # exact minimum, whose witness points are sure to lie on both surfaces
+    for attempt in range(2):
+        kind = chosen if attempt == 0 else exact
+        if attempt == 1 and exact == chosen:
+            break
+        fallback = kind == exact
+        if kind == 2:
+            return _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, int(result[5]), int(result[6]),
+                                 axis, over_e, center_a, rotation_a, out_point, out_normal, out_depth, out_feature,
+                                 slot)
+        if kind == 1:
+            # reference face on B (its outward normal is the contact normal); incident hull A
+            count = _face_contacts(vb, nb[face_b], ob[face_b], face_vertex_start_b, face_vertex_index_b, face_b,
+                                   vertices_a, face_normal_a, face_vertex_start_a, face_vertex_index_a, 1.0, margin,
+                                   scale, fallback, center_a, rotation_a, out_point, out_normal, out_depth,
+                                   out_feature, slot)
+        else:
+            # reference face on A (its outward normal points from A to B); incident hull B
+            count = _face_contacts(vertices_a, face_normal_a[face_a], face_offset_a[face_a], face_vertex_start_a,
+                                   face_vertex_index_a, face_a, vb, nb, face_vertex_start_b, face_vertex_index_b, -1.0,
+                                   margin, scale, fallback, center_a, rotation_a, out_point, out_normal, out_depth,
+                                   out_feature, slot)
+        if count > 0:
+            return count
+    return 0
+
+
+@njit(cache=True)
+def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, ea, eb, axis, overlap, center_a, rotation_a,
+                  out_point, out_normal, out_depth, out_feature, slot):
+    """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B (all in
+    A's frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it)."""
+    pa = np.empty(3)
+    pb = np.empty(3)
+    _segment_closest(vertices_a[edge_vertex_a[ea, 0]], vertices_a[edge_vertex_a[ea, 1]],
+                     vb[edge_vertex_b[eb, 0]], vb[edge_vertex_b[eb, 1]], pa, pb)
+    m0 = 0.5 * (pa[0] + pb[0])
+    m1 = 0.5 * (pa[1] + pb[1])
+    m2 = 0.5 * (pa[2] + pb[2])
+    for c in range(3):
+        out_point[slot, c] = center_a[c] + rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2
+        # the axis points from A towards B; the contact normal from B into A is its opposite
+        out_normal[slot, c] = -(rotation_a[c, 0] * axis[0] + rotation_a[c, 1] * axis[1] + rotation_a[c, 2] * axis[2])
+    out_depth[slot] = overlap
+    out_feature[slot] = _feature_of(-1 - min(ea, eb), -1, max(ea, eb))   # symmetric: swapping A, B keeps it
+    return 1
