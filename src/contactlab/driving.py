@@ -51,7 +51,7 @@ def keyframe_times(times, name="times"):
 
 def keyframe_values(values, name, count, size, what, quantity=None):
     """``values`` as a float array (count, size) of finite numbers (one row per keyframe), each
-    within ``quantity``'s magnitudes (a contactlab.builder.Quantity) when one is given."""
+    within ``quantity``'s magnitudes (a contactlab.validation.Quantity) when one is given."""
     try:
         array = np.asarray(values, dtype=float)
     except (TypeError, ValueError, OverflowError):
