@@ -1,11 +1,13 @@
 """ModelBuilder: add materials, bodies, particles, cloth and obstacles, then ``finalize()``.
 
-Values are checked as they are added; a bad one raises :class:`~contactlab.errors.InputError`
-naming the argument (the scene loader prefixes the scene-file path to it): its type, its
-range (positive masses and sizes, restitution in [0, 1], ...), its magnitude against the
-generous limits of :data:`contactlab.validation.LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
+Values are checked as they are added (by :mod:`contactlab.validation`); a bad one raises
+:class:`~contactlab.errors.InputError` naming the argument (the scene loader prefixes the
+scene-file path to it): its type, its range (positive masses and sizes, restitution in
+[0, 1], ...), its magnitude against the generous limits of
+:data:`contactlab.validation.LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
 NaN energies), and that each shape is given only the arguments it takes
-(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`).
+(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`). A cloth's mesh and springs
+are laid out by :mod:`contactlab.cloth_mesh`.
 
 Example::
 
@@ -20,12 +22,13 @@ Example::
 import numpy as np
 
 from . import cloth_mesh, shapes
+from .driving import force_record, pack, path_record, start_on_paths
 from .errors import InputError
 from .model import Model
 from .state import State
-from .validation import (ACCELERATION, ANGULAR_SPEED, DAMPING, DENSITY, DIRECTION, FACTOR, FORCE, FRICTION, LENGTH,
-                         MASS, SPEED, STIFFNESS, TORQUE, as_array, check_dynamic_count, derived_mass, file_path,
-                         number, one_of, unit_quaternion, vector)
+from .validation import (ACCELERATION, ANGULAR_SPEED, DAMPING, DENSITY, DIRECTION, FACTOR, FRICTION, LENGTH, MASS,
+                         SPEED, STIFFNESS, as_array, check_dynamic_count, derived_mass, file_path, number, one_of,
+                         unit_quaternion, vector)
 
 DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
 
@@ -197,24 +200,7 @@ class ModelBuilder:
 
         Several forces on one body add up. A model with forces steps through the methods' ``step``
         (not the compiled loop of impulse and constraints)."""
-        index = self._body_index(body)
-        if callable(force):
-            if torque is not None or times is not None:
-                raise InputError("torque" if torque is not None else "times",
-                                 "a force function returns the torque itself; give no torque or times with it")
-            self._forces.append(dict(body=index, force=None, torque=None, times=None, function=force))
-            return
-        from .driving import keyframe_times, keyframe_values
-        if times is None:
-            force, torque = (np.zeros(3) if value is None else vector(value, name, quantity=quantity)
-                             for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE)))
-        else:
-            times = keyframe_times(times)
-            force, torque = (np.zeros((len(times), 3)) if value is None else
-                             keyframe_values(value, name, len(times), 3, unit, quantity)
-                             for value, name, unit, quantity in ((force, "force", "N", FORCE),
-                                                                 (torque, "torque", "N m", TORQUE)))
-        self._forces.append(dict(body=index, force=force, torque=torque, times=times, function=None))
+        self._forces.append(force_record(self._body_index(body), force, torque, times))
 
     def add_path(self, body, positions, orientations=None, times=None):
         """Make ``body`` (index or name) kinematic: its pose follows a path instead of its forces.
@@ -237,33 +223,7 @@ class ModelBuilder:
         index = self._body_index(body)
         if any(p["body"] == index for p in self._paths):
             raise InputError("body", f"body {self._bodies[index]['name']!r} already has a path; give it one only")
-        if callable(positions):
-            if orientations is not None or times is not None:
-                raise InputError("orientations" if orientations is not None else "times",
-                                 "a path function returns the orientation itself; give no orientations or times "
-                                 "with it")
-            self._paths.append(dict(body=index, times=None, positions=None, orientations=None, function=positions))
-            return
-        from .driving import keyframe_times, keyframe_values
-        if times is None:
-            times = np.zeros(1)
-            positions = vector(positions, "positions", quantity=LENGTH)[None]
-            orientations = None if orientations is None else unit_quaternion(orientations, "orientations")[None]
-        else:
-            times = keyframe_times(times)
-            positions = keyframe_values(positions, "positions", len(times), 3, "m", LENGTH)
-            if orientations is not None:
-                orientations = keyframe_values(orientations, "orientations", len(times), 4, "quaternions w, x, y, z",
-                                               DIRECTION)
-                norms = np.linalg.norm(orientations, axis=1)
-                if (norms < 1e-12).any():
-                    raise InputError("orientations", f"keyframe {int(np.argmin(norms))} is a zero quaternion, no "
-                                                      f"rotation; use [1, 0, 0, 0] for none")
-                orientations = orientations / norms[:, None]
-        if orientations is None:
-            orientations = np.repeat(self._bodies[index]["orientation"][None], len(times), axis=0)
-        self._paths.append(dict(body=index, times=times, positions=positions, orientations=orientations,
-                                function=None))
+        self._paths.append(path_record(index, positions, orientations, times, self._bodies[index]["orientation"]))
 
     @staticmethod
     def _hull(points, file, scale, mass=None, density=None):
@@ -519,7 +479,6 @@ class ModelBuilder:
         def cloth_cat(key, shape, offset=False, dtype=float):
             parts = [c[key] + (c["start"] if offset else 0) for c in cloths]
             return (np.concatenate(parts) if parts else np.zeros(0)).astype(dtype).reshape(shape)
-        from .driving import pack, start_on_paths
         drive = pack(len(bodies), self._forces, self._paths)
         start_on_paths(drive, initial)
         return Model(
@@ -564,12 +523,12 @@ def _concatenate_packed(packs):
               "face_vertex_start": "face_vertex_index"}
     out = {key: [] for key in packs[0]}
     base = {key: 0 for key in starts}
-    for k, pack in enumerate(packs):
-        for key, values in pack.items():
+    for k, hull_pack in enumerate(packs):
+        for key, values in hull_pack.items():
             if key in starts:
                 shifted = values + base[key]
                 out[key].append(shifted if k == 0 else shifted[1:])
-                base[key] += len(pack[starts[key]])
+                base[key] += len(hull_pack[starts[key]])
             else:
                 out[key].append(values)
     return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}
