@@ -168,6 +168,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
     from .simulation import simulate
+    from .validation import run_length
 
     if video:                                     # a bad --fps fails before the run, not after it
         from .render import check_settings
@@ -176,17 +177,16 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         from .viewer import check_port
         check_port(port)
     scene = load_scene(scene_source, overrides)
-    steps = max(1, round(scene.duration / scene.dt))
+    steps = run_length(scene.dt, scene.duration)[2]
     if steps > MANY_STEPS and not yes:
         raise InputError("--yes", f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
                                   f"{scene.dt:g} s): times are in seconds; add --yes to run it")
-    options = scene.method_options.get(scene.method, {})
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
     try:                                          # the samples stream into trajectory.h5 as the run goes
-        result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
-                          record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
+        result = simulate(scene.model, scene.method, scene.dt, scene.duration, scene.options[scene.method],
+                          scene.integrator, record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
                           allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
     except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
         if getattr(error, "run", None) is not None:

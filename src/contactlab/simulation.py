@@ -132,28 +132,30 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
              compiled_loop=None, allow_divergence=False, memory_limit=None, trajectory=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
-    method: a name from contactlab.methods; options: that method's Options (or a dict of
-    them); dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps); the model must hold
-    a body or particle; record_every: sample every K steps (the first and last states are
-    always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
-    all cores, or one while that steps faster on a busy machine) or a whole number — results are
-    bit for bit the same on any count; compiled_loop: for impulse and constraints on the scenes
-    the compiled stepping loop serves, None (the default) takes it when it is compiled or cached
-    already or the run is long enough to repay compiling it, True always, False never
-    (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit
-    either way; allow_divergence: keep going when a health check fails (:mod:`contactlab.health`),
-    recording it in the summary, instead of stopping; memory_limit [bytes]: the most the run may
-    need by its estimate (:mod:`contactlab.budget`; None: half this machine's memory, ``math.inf``
-    none); trajectory: None (the default) keeps the samples in memory, in ``run.arrays``; a path
-    (``"out/trajectory.h5"``, its folder existing) streams them into that HDF5 file as the run goes
-    (:mod:`contactlab.store`), so memory stays flat however long the run, and ``run.arrays`` is
-    the file read back (a :class:`contactlab.store.TrajectoryFile`). Raises InputError for bad
-    arguments or a run that cannot fit, and SimulationDiverged (with the run up to then in its
-    ``run``) when a health check fails: the state stops being finite, a speed beyond the scene's
-    scale, an energy gain nothing explains, a contact deep enough to pass through. Ctrl-C (or
-    SIGTERM) stops the run between steps with :class:`contactlab.interrupts.Interrupted`, a
-    KeyboardInterrupt, whose ``run`` is the run up to then (its summary's ``interrupted`` says
-    when); a streamed trajectory is kept either way, its ``status`` saying how the run ended.
+    method: a name from contactlab.methods; options: that method's Options, taken as they are (they
+    were checked when built, as ``load_scene`` builds ``scene.options``), or a dict or None, built
+    into them here; dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps,
+    :func:`contactlab.validation.run_length`); the model must hold a body or particle; record_every:
+    sample every K steps (the first and last states are always sampled); threads: "auto" (the
+    default, see :func:`contactlab.threads.set_threads`: all cores, or one while that steps faster
+    on a busy machine) or a whole number — results are bit for bit the same on any count;
+    compiled_loop: for impulse and constraints on the scenes the compiled stepping loop serves, None
+    (the default) takes it when it is compiled or cached already or the run is long enough to repay
+    compiling it, True always, False never (:func:`contactlab.methods.velocity_loop.stepper_for`) —
+    the numbers are the same bit for bit either way; allow_divergence: keep going when a health
+    check fails (:mod:`contactlab.health`), recording it in the summary, instead of stopping;
+    memory_limit [bytes]: the most the run may need by its estimate (:mod:`contactlab.budget`; None:
+    half this machine's memory, ``math.inf`` none); trajectory: None (the default) keeps the samples
+    in memory, in ``run.arrays``; a path (``"out/trajectory.h5"``, its folder existing) streams them
+    into that HDF5 file as the run goes (:mod:`contactlab.store`), so memory stays flat however long
+    the run, and ``run.arrays`` is the file read back (a :class:`contactlab.store.TrajectoryFile`).
+    Raises InputError for bad arguments or a run that cannot fit, and SimulationDiverged (with the
+    run up to then in its ``run``) when a health check fails: the state stops being finite, a speed
+    beyond the scene's scale, an energy gain nothing explains, a contact deep enough to pass
+    through. Ctrl-C (or SIGTERM) stops the run between steps with
+    :class:`contactlab.interrupts.Interrupted`, a KeyboardInterrupt, whose ``run`` is the run up to
+    then (its summary's ``interrupted`` says when); a streamed trajectory is kept either way, its
+    ``status`` saying how the run ended.
     """
     with interrupts.deferred():         # compiling or stepping, a signal waits for a step boundary
         return _simulate(model, method, dt, duration, options, integrator, record_every, state, progress,
