@@ -67,17 +67,13 @@ def keyframe_values(values, name, count, size, what, quantity=None):
     return array
 
 
-# ---- evaluating padded keyframes, all at once -------------------------------------------------
-
 def force_record(body, force=None, torque=None, times=None):
     """The record :func:`pack` takes of one ``ModelBuilder.add_force`` (see it for the three
     ways to give a force), its arguments checked: dict(body, force, torque, times, function),
     force and torque (3,) [N], [N m], or (T, 3) with times (T,) [s]. InputError naming the
     argument."""
     if callable(force):
-        if torque is not None or times is not None:
-            raise InputError("torque" if torque is not None else "times",
-                             "a force function returns the torque itself; give no torque or times with it")
+        _given_alone("force", "torque", {"torque": torque, "times": times})
         return dict(body=body, force=None, torque=None, times=None, function=force)
     if times is None:
         force, torque = (np.zeros(3) if value is None else vector(value, name, quantity=quantity)
@@ -97,9 +93,7 @@ def path_record(body, positions, orientations, times, orientation):
     orientations (T, 4) unit quaternions, function); a path without orientations keeps the
     body's ``orientation`` (4,) throughout. InputError naming the argument."""
     if callable(positions):
-        if orientations is not None or times is not None:
-            raise InputError("orientations" if orientations is not None else "times",
-                             "a path function returns the orientation itself; give no orientations or times with it")
+        _given_alone("path", "orientation", {"orientations": orientations, "times": times})
         return dict(body=body, times=None, positions=None, orientations=None, function=positions)
     if times is None:
         times = np.zeros(1)
@@ -120,6 +114,17 @@ def path_record(body, positions, orientations, times, orientation):
         orientations = np.repeat(orientation[None], len(times), axis=0)
     return dict(body=body, times=times, positions=positions, orientations=orientations, function=None)
 
+
+def _given_alone(kind, returns, others):
+    """InputError naming the first of ``others`` (argument name -> value) given, not None, with
+    a ``kind`` function, which returns the ``returns`` itself."""
+    for name, value in others.items():
+        if value is not None:
+            raise InputError(name, f"a {kind} function returns the {returns} itself; give no "
+                                   f"{' or '.join(others)} with it")
+
+
+# ---- evaluating padded keyframes, all at once -------------------------------------------------
 
 def pad_keyframes(times_list, values_list, size):
     """Keyframe lists of different lengths as padded arrays: times (K, T) and values (K, T, size),
