@@ -17,8 +17,18 @@ import numpy as np
 
 from . import rotations
 from .errors import InputError, first_line
-from .validation import (AREAL_DENSITY, FACTOR, LENGTH, MASS, as_array, check_dynamic_count, derived_mass, file_path,
-                         number, vector)
+from .validation import (
+    AREAL_DENSITY,
+    FACTOR,
+    LENGTH,
+    MASS,
+    as_array,
+    check_dynamic_count,
+    derived_mass,
+    file_path,
+    number,
+    vector,
+)
 
 PINNED_NAMES = ("corners", "top_corners", "top_edge", "bottom_edge", "left_edge", "right_edge")
 

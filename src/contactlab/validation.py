@@ -17,7 +17,6 @@ import numpy as np
 
 from .errors import InputError
 
-
 # -- the magnitudes accepted ------------------------------------------------------------
 
 @dataclass(frozen=True)
