@@ -35,7 +35,7 @@ README_METHODS = ("projection", "constraints")
 
 def run(scene_name, method, seconds):
     scene = load_scene(scene_name, [f"simulation.method={method}"])
-    return simulate(scene.model, method, scene.dt, seconds, scene.method_options.get(method, {}),
+    return simulate(scene.model, method, scene.dt, seconds, scene.options.get(method),
                     scene.integrator, record_every=4, scene_name=scene_name)
 
 
@@ -127,7 +127,7 @@ def viewer_picture(out, scale):
         return
     scene = load_scene(VIEWER_SCENE, [f"simulation.method={VIEWER_METHOD}"])
     result = simulate(scene.model, VIEWER_METHOD, scene.dt, VIEWER_SECONDS * scale,
-                      scene.method_options.get(VIEWER_METHOD, {}), scene.integrator, scene_name=VIEWER_SCENE)
+                      scene.options.get(VIEWER_METHOD), scene.integrator, scene_name=VIEWER_SCENE)
     shown = view(result)
     try:
         for toggle in ("points", "forces"):

@@ -21,7 +21,7 @@ from contactlab.simulation import simulate
 
 def main(out="out/example-cloth"):
     scene = load_scene("cloth_drape")
-    run = simulate(scene.model, scene.method, scene.dt, 0.5, scene.method_options.get(scene.method, {}),
+    run = simulate(scene.model, scene.method, scene.dt, 0.5, scene.options[scene.method],
                    scene.integrator, record_every=6, scene_name=scene.name)
     write_outputs(out, run.arrays, run.summary)
     stage_path = write_usd(run.arrays, os.path.join(out, "run.usd"))

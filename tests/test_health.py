@@ -178,7 +178,7 @@ def test_a_run_that_cannot_fit_is_refused_before_it_starts_with_the_estimate():
 
 def test_a_model_too_large_is_refused_before_it_is_built(tmp_path):
     from contactlab import InputError
-    from contactlab.builder import MAX_DYNAMIC
+    from contactlab.validation import MAX_DYNAMIC
     scene = tmp_path / "million.toml"
     scene.write_text('[[bodies]]\nshape = "sphere"\nradius = 0.01\nmass = 1.0\nposition = [0, 0, 1]\n'
                      'array = { count = [1000, 1000, 1], spacing = [0.03, 0.03, 1] }\n')

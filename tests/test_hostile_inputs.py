@@ -25,8 +25,7 @@ from hypothesis import strategies as st
 
 from conftest import ball_on_plane
 from contactlab import cli, render, store
-from contactlab.builder import (BODY_SHAPE_ARGUMENTS, LIMITS, OBSTACLE_SHAPE_ARGUMENTS, LENGTH, MASS,
-                                ModelBuilder)
+from contactlab.builder import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, ModelBuilder
 from contactlab.errors import LONGEST_MESSAGE, InputError, SimulationDiverged
 from contactlab.methods import AVAILABLE, penalty
 from contactlab.plausibility import PlausibilityWarning
@@ -34,6 +33,7 @@ from contactlab.scene import load_scene, loader
 from contactlab.scene.toml import MAX_NESTING
 from contactlab.shapes import BODY_SHAPES, OBSTACLE_SHAPES
 from contactlab.simulation import simulate
+from contactlab.validation import LENGTH, LIMITS, MASS
 
 
 def fuzz(examples):

@@ -1,11 +1,13 @@
 """ModelBuilder: add materials, bodies, particles, cloth and obstacles, then ``finalize()``.
 
-Values are checked as they are added; a bad one raises :class:`~contactlab.errors.InputError`
-naming the argument (the scene loader prefixes the scene-file path to it): its type, its
-range (positive masses and sizes, restitution in [0, 1], ...), its magnitude against the
-generous limits of :data:`LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
+Values are checked as they are added (by :mod:`contactlab.validation`); a bad one raises
+:class:`~contactlab.errors.InputError` naming the argument (the scene loader prefixes the
+scene-file path to it): its type, its range (positive masses and sizes, restitution in
+[0, 1], ...), its magnitude against the generous limits of
+:data:`contactlab.validation.LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
 NaN energies), and that each shape is given only the arguments it takes
-(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`).
+(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`). A cloth's mesh and springs
+are laid out by :mod:`contactlab.cloth_mesh`.
 
 Example::
 
@@ -17,112 +19,18 @@ Example::
     state = model.state()
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from . import rotations, shapes
-from .errors import InputError, first_line
+from . import cloth_mesh, shapes
+from .driving import force_record, pack, path_record, start_on_paths
+from .errors import InputError
 from .model import Model
 from .state import State
+from .validation import (ACCELERATION, ANGULAR_SPEED, DAMPING, DENSITY, DIRECTION, FACTOR, FRICTION, LENGTH, MASS,
+                         SPEED, STIFFNESS, as_array, check_dynamic_count, derived_mass, file_path, number, one_of,
+                         unit_quaternion, vector)
 
 DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
-
-
-# -- the magnitudes accepted ------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Quantity:
-    """The magnitudes accepted for one kind of value: at most ``largest`` [unit] in absolute
-    value and, for a value that must be positive, at least ``smallest``. The bounds are far
-    beyond any scene contactlab is for; past them the squares and products the dynamics forms
-    (m r², m v², 1/m) overflow or lose every digit, and a run would report NaN energies."""
-    what: str
-    unit: str
-    largest: float
-    smallest: float = 0.0
-
-    def check(self, values, name, positive=False):
-        """InputError naming ``name`` unless every one of ``values`` (a number or an array of
-        finite numbers) is within the bounds (``smallest`` only where ``positive``)."""
-        magnitudes = np.abs(np.asarray(values, dtype=float))
-        if magnitudes.size and magnitudes.max() > self.largest:
-            raise InputError(name, f"expected a {self.what} of at most {self.largest:g}{self._unit}, found "
-                                   f"{magnitudes.max():g}{self._unit} (see Limits in docs/scene-format.md)")
-        if positive and magnitudes.size and magnitudes.min() < self.smallest:
-            raise InputError(name, f"expected a {self.what} of at least {self.smallest:g}{self._unit}, found "
-                                   f"{magnitudes.min():g}{self._unit} (see Limits in docs/scene-format.md)")
-
-    @property
-    def _unit(self):
-        return f" {self.unit}" if self.unit else ""
-
-
-LENGTH = Quantity("length", "m", 1e6, 1e-6)                 # positions, sizes, offsets: 1000 km; sizes ≥ 1 µm
-MASS = Quantity("mass", "kg", 1e12, 1e-12)                 # given or from a density: a nanogram to a mountain
-DENSITY = Quantity("density", "kg/m^3", 1e6)               # osmium is 22,590 kg/m³
-AREAL_DENSITY = Quantity("areal density", "kg/m^2", 1e6)   # of cloth; canvas is about 0.3 kg/m²
-SPEED = Quantity("speed", "m/s", 1e5)                      # a rifle bullet is 1e3 m/s
-ANGULAR_SPEED = Quantity("angular speed", "rad/s", 1e6)
-ACCELERATION = Quantity("gravity", "m/s^2", 1e4)           # a thousand g
-STIFFNESS = Quantity("stiffness", "N/m", 1e12)
-DAMPING = Quantity("damping", "N s/m", 1e12)
-FRICTION = Quantity("friction coefficient", "", 1e3)       # rubber on rubber is about 1
-FACTOR = Quantity("scale factor", "", 1e6, 1e-6)
-DIRECTION = Quantity("direction component", "", 1e6)       # normals and quaternions, normalized after
-TIME = Quantity("time", "s", 1e9, 1e-9)                    # dt and duration (contactlab.simulate)
-FORCE = Quantity("force", "N", 1e12)                       # external forces (add_force)
-TORQUE = Quantity("torque", "N m", 1e12)
-LIMITS = (LENGTH, MASS, DENSITY, AREAL_DENSITY, SPEED, ANGULAR_SPEED, ACCELERATION, STIFFNESS, DAMPING,
-          FRICTION, FACTOR, DIRECTION, TIME, FORCE, TORQUE)
-MAX_DYNAMIC = 200_000     # bodies, particles and cloth vertices in one model: seconds and gigabytes a step past it
-WHOLE_NUMBERS = (-2 ** 63, 2 ** 63 - 1)     # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
-
-
-def _array(value, name, what):
-    """value as a float array, or InputError naming the field (strings, ragged lists, ints
-    beyond the float range)."""
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(name, f"expected {what}, found {value!r}") from None
-
-
-def _vector(value, name, size=3, quantity=None, positive=False):
-    """``value`` as a float array (size,) of finite numbers, each within ``quantity``'s
-    magnitudes when one is given, and greater than 0 where ``positive``."""
-    array = _array(value, name, f"a list of {size} numbers")
-    if array.shape != (size,):
-        raise InputError(name, f"expected a list of {size} numbers, found {value!r}")
-    if not np.isfinite(array).all():
-        raise InputError(name, f"expected finite numbers, found {value!r}")
-    if positive and (array <= 0).any():
-        raise InputError(name, f"every component must be positive (greater than 0), found {array.tolist()}")
-    if quantity is not None:
-        quantity.check(array, name, positive)
-    return array
-
-
-def _number(value, name, minimum=None, strict=False, maximum=None, quantity=None):
-    """``value`` as a finite float, at least ``minimum`` (greater than it where ``strict``),
-    at most ``maximum``, and within ``quantity``'s magnitudes when one is given (its smallest
-    where ``strict``: a value that must be positive)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InputError(name, f"expected a number, found {value!r}")
-    try:
-        value = float(value)
-    except OverflowError:                       # a Python int beyond the float range
-        value = float("inf")
-    if not np.isfinite(value):
-        raise InputError(name, f"expected a finite number, found {value!r}")
-    if minimum is not None and (value <= minimum if strict else value < minimum):
-        bound = "greater than" if strict else "at least"
-        raise InputError(name, f"must be {bound} {minimum:g}, found {value:g}")
-    if maximum is not None and value > maximum:
-        raise InputError(name, f"must be at most {maximum:g}, found {value:g}")
-    if quantity is not None:
-        quantity.check(value, name, strict)
-    return value
 
 
 # -- which shape takes which arguments ------------------------------------------------------
@@ -157,41 +65,16 @@ def check_shape_arguments(shape, table, given):
 def _shape(shape, table, given):
     """``shape`` checked: one of ``table``'s names, given only its own arguments (``given``:
     name -> value of every shape-specific argument, None where left out)."""
-    if not isinstance(shape, str) or shape not in table:
-        raise InputError("shape", f"expected one of {', '.join(table)}, found {shape!r}")
+    one_of(shape, "shape", table)
     check_shape_arguments(shape, table, [name for name, value in given.items() if value is not None])
     return shape
-
-
-def _file(file):
-    """``file`` as a path string: InputError("file", ...) unless it is a str or os.PathLike."""
-    import os
-    if not isinstance(file, (str, os.PathLike)):
-        raise InputError("file", f"expected the path of a mesh file (OBJ, STL or PLY), found {file!r}")
-    return os.fspath(file)
-
-
-def _derived_mass(mass, name):
-    """InputError naming ``name`` (the density it came from) unless ``mass`` [kg] is within
-    the bounds of MASS."""
-    if not MASS.smallest <= mass <= MASS.largest:
-        raise InputError(name, f"gives a mass of {mass:g} kg, outside the {MASS.smallest:g} to {MASS.largest:g} kg "
-                               f"accepted (see Limits in docs/scene-format.md)")
-
-
-def _orientation(value, name):
-    q = _vector(value, name, 4, quantity=DIRECTION)
-    norm = np.linalg.norm(q)
-    if norm < 1e-12:
-        raise InputError(name, "a zero quaternion is no rotation; use [1, 0, 0, 0] for none")
-    return q / norm
 
 
 class ModelBuilder:
     """Collects a scene and freezes it into a :class:`~contactlab.model.Model`."""
 
     def __init__(self, gravity=(0.0, 0.0, -9.81)):
-        self.gravity = _vector(gravity, "gravity", quantity=ACCELERATION)
+        self.gravity = vector(gravity, "gravity", quantity=ACCELERATION)
         self._materials = []          # (name, friction, restitution)
         self._bodies = []             # dicts
         self._particles = []          # dicts of arrays (a cloth's vertices are one group)
@@ -209,8 +92,8 @@ class ModelBuilder:
             raise InputError("name", f"expected a non-empty string, found {name!r}")
         if any(m[0] == name for m in self._materials):
             raise InputError("name", f"material {name!r} is defined twice; give each a distinct name")
-        self._materials.append((name, _number(friction, "friction", 0.0, quantity=FRICTION),
-                                _number(restitution, "restitution", 0.0, maximum=1.0)))
+        self._materials.append((name, number(friction, "friction", 0.0, quantity=FRICTION),
+                                number(restitution, "restitution", 0.0, maximum=1.0)))
         return len(self._materials) - 1
 
     def _material_index(self, material) -> int:
@@ -250,7 +133,7 @@ class ModelBuilder:
         [kg] or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid.
         position and orientation place the body's frame (for a convex shape, the frame its points
         are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
-        Magnitudes are checked against :data:`LIMITS` (the mass a density gives too).
+        Magnitudes are checked against :data:`~contactlab.validation.LIMITS` (the mass a density gives too).
         """
         shape = _shape(shape, BODY_SHAPE_ARGUMENTS, dict(radius=radius, half_extents=half_extents,
                                                          half_length=half_length, points=points, file=file,
@@ -259,11 +142,11 @@ class ModelBuilder:
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
         if mass is not None:
-            mass = _number(mass, "mass", 0.0, strict=True, quantity=MASS)
+            mass = number(mass, "mass", 0.0, strict=True, quantity=MASS)
         else:
-            density = _number(density, "density", 0.0, strict=True, quantity=DENSITY)
-        position = _vector(position, "position", quantity=LENGTH)
-        orientation = _orientation(orientation, "orientation")
+            density = number(density, "density", 0.0, strict=True, quantity=DENSITY)
+        position = vector(position, "position", quantity=LENGTH)
+        orientation = unit_quaternion(orientation, "orientation")
         if shape == "convex":
             hull = self._hull(points, file, scale, mass=mass, density=density)
             kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
@@ -275,7 +158,7 @@ class ModelBuilder:
                 mass = density * shapes.volume(kind, params)
             inertia = shapes.principal_inertia(kind, params, mass)
         if density is not None:
-            _derived_mass(mass, "density")
+            derived_mass(mass, "density")
         if shape == "convex":
             self._hulls.append(hull)
         check_dynamic_count(1, "shape", "another body", self._dynamic_count())
@@ -284,8 +167,8 @@ class ModelBuilder:
             name=str(name) if name is not None else f"body{index}",
             kind=kind, params=params, mass=mass, inertia=inertia,
             position=position, orientation=orientation,
-            velocity=_vector(velocity, "velocity", quantity=SPEED),
-            angular_velocity=_vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
+            velocity=vector(velocity, "velocity", quantity=SPEED),
+            angular_velocity=vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
             material=self._material_index(material)))
         return index
 
@@ -317,24 +200,7 @@ class ModelBuilder:
 
         Several forces on one body add up. A model with forces steps through the methods' ``step``
         (not the compiled loop of impulse and constraints)."""
-        index = self._body_index(body)
-        if callable(force):
-            if torque is not None or times is not None:
-                raise InputError("torque" if torque is not None else "times",
-                                 "a force function returns the torque itself; give no torque or times with it")
-            self._forces.append(dict(body=index, force=None, torque=None, times=None, function=force))
-            return
-        from .driving import keyframe_times, keyframe_values
-        if times is None:
-            force, torque = (np.zeros(3) if value is None else _vector(value, name, quantity=quantity)
-                             for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE)))
-        else:
-            times = keyframe_times(times)
-            force, torque = (np.zeros((len(times), 3)) if value is None else
-                             keyframe_values(value, name, len(times), 3, unit, quantity)
-                             for value, name, unit, quantity in ((force, "force", "N", FORCE),
-                                                                 (torque, "torque", "N m", TORQUE)))
-        self._forces.append(dict(body=index, force=force, torque=torque, times=times, function=None))
+        self._forces.append(force_record(self._body_index(body), force, torque, times))
 
     def add_path(self, body, positions, orientations=None, times=None):
         """Make ``body`` (index or name) kinematic: its pose follows a path instead of its forces.
@@ -357,33 +223,7 @@ class ModelBuilder:
         index = self._body_index(body)
         if any(p["body"] == index for p in self._paths):
             raise InputError("body", f"body {self._bodies[index]['name']!r} already has a path; give it one only")
-        if callable(positions):
-            if orientations is not None or times is not None:
-                raise InputError("orientations" if orientations is not None else "times",
-                                 "a path function returns the orientation itself; give no orientations or times "
-                                 "with it")
-            self._paths.append(dict(body=index, times=None, positions=None, orientations=None, function=positions))
-            return
-        from .driving import keyframe_times, keyframe_values
-        if times is None:
-            times = np.zeros(1)
-            positions = _vector(positions, "positions", quantity=LENGTH)[None]
-            orientations = None if orientations is None else _orientation(orientations, "orientations")[None]
-        else:
-            times = keyframe_times(times)
-            positions = keyframe_values(positions, "positions", len(times), 3, "m", LENGTH)
-            if orientations is not None:
-                orientations = keyframe_values(orientations, "orientations", len(times), 4, "quaternions w, x, y, z",
-                                               DIRECTION)
-                norms = np.linalg.norm(orientations, axis=1)
-                if (norms < 1e-12).any():
-                    raise InputError("orientations", f"keyframe {int(np.argmin(norms))} is a zero quaternion, no "
-                                                      f"rotation; use [1, 0, 0, 0] for none")
-                orientations = orientations / norms[:, None]
-        if orientations is None:
-            orientations = np.repeat(self._bodies[index]["orientation"][None], len(times), axis=0)
-        self._paths.append(dict(body=index, times=times, positions=positions, orientations=orientations,
-                                function=None))
+        self._paths.append(path_record(index, positions, orientations, times, self._bodies[index]["orientation"]))
 
     @staticmethod
     def _hull(points, file, scale, mass=None, density=None):
@@ -391,11 +231,11 @@ class ModelBuilder:
         from .hulls import build_hull, load_hull_points
         if (points is None) == (file is None):
             raise InputError("points", "a convex shape needs exactly one of points = [[x, y, z], ...] or file")
-        scale = _number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
+        scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
         if file is not None:
-            points, field = load_hull_points(_file(file), scale, field="file"), "file"
+            points, field = load_hull_points(file_path(file), scale, field="file"), "file"
         else:
-            points, field = _array(points, "points", "a list of [x, y, z] points") * scale, "points"
+            points, field = as_array(points, "points", "a list of [x, y, z] points") * scale, "points"
         if np.isfinite(points).all():              # (non-finite points: build_hull's error)
             LENGTH.check(points, field)
         if mass is None and density is None:
@@ -411,15 +251,15 @@ class ModelBuilder:
         if kind in (shapes.SPHERE, shapes.CAPSULE):
             if radius is None:
                 raise InputError("radius", f"a {shape} needs a radius (m)")
-            params[0] = _number(radius, "radius", 0.0, strict=True, quantity=LENGTH)
+            params[0] = number(radius, "radius", 0.0, strict=True, quantity=LENGTH)
         if kind == shapes.CAPSULE:
             if half_length is None:
                 raise InputError("half_length", "a capsule needs a half_length (m): half its segment's length")
-            params[1] = _number(half_length, "half_length", 0.0, quantity=LENGTH)
+            params[1] = number(half_length, "half_length", 0.0, quantity=LENGTH)
         elif kind == shapes.BOX:
             if half_extents is None:
                 raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")
-            params[:3] = _vector(half_extents, "half_extents", quantity=LENGTH, positive=True)
+            params[:3] = vector(half_extents, "half_extents", quantity=LENGTH, positive=True)
         return kind, params
 
     def _dynamic_count(self):
@@ -433,7 +273,7 @@ class ModelBuilder:
         position, velocity: (count, 3) [m], [m/s]; mass [kg] and radius [m] are per particle
         (one number for all, or one per particle). A radius of 0 makes a point.
         """
-        position = _array(position, "position", "a list of [x, y, z] points")
+        position = as_array(position, "position", "a list of [x, y, z] points")
         if position.ndim == 1 and position.shape == (3,):
             position = position[None]
         if position.ndim != 2 or position.shape[1] != 3 or len(position) == 0:
@@ -445,7 +285,7 @@ class ModelBuilder:
         check_dynamic_count(count, "position", f"{count:,} more particles", self._dynamic_count())
         if velocity is None:
             velocity = np.zeros_like(position)
-        velocity = _array(velocity, "velocity", "a list of [vx, vy, vz] velocities")
+        velocity = as_array(velocity, "velocity", "a list of [vx, vy, vz] velocities")
         if velocity.shape != position.shape:
             raise InputError("velocity", f"expected {count} velocities, one per position")
         if not np.isfinite(velocity).all():
@@ -466,7 +306,7 @@ class ModelBuilder:
 
     @staticmethod
     def _per_particle(value, name, count):
-        array = _array(value, name, f"a number or a list of {count} numbers")
+        array = as_array(value, name, f"a number or a list of {count} numbers")
         if array.ndim == 0 or array.shape == (count,):
             return np.broadcast_to(array, (count,)).copy()
         raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), "
@@ -510,61 +350,33 @@ class ModelBuilder:
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^2), found {found}")
-        position = _vector(position, "position", quantity=LENGTH)
-        orientation = _orientation(orientation, "orientation")
-        velocity = _vector(velocity, "velocity", quantity=SPEED)
-        stiffness = {key: _number(value, key, 0.0, quantity=STIFFNESS) for key, value in (
+        position = vector(position, "position", quantity=LENGTH)
+        orientation = unit_quaternion(orientation, "orientation")
+        velocity = vector(velocity, "velocity", quantity=SPEED)
+        stiffness = {key: number(value, key, 0.0, quantity=STIFFNESS) for key, value in (
             ("stretch_stiffness", stretch_stiffness), ("shear_stiffness", shear_stiffness),
             ("bend_stiffness", bend_stiffness))}
-        damping = _number(damping, "damping", 0.0, quantity=DAMPING)
-        thickness = _number(thickness, "thickness", 0.0, quantity=LENGTH)
+        damping = number(damping, "damping", 0.0, quantity=DAMPING)
+        thickness = number(thickness, "thickness", 0.0, quantity=LENGTH)
         if (size is None) == (file is None):
             raise InputError("size", "a cloth needs exactly one of size and resolution (a grid) or file (a mesh)")
-        if file is not None:
-            if resolution is not None:
-                raise InputError("resolution", "a cloth from a mesh file takes no resolution")
-            local, triangles, edges, bends, named = _cloth_from_mesh(file, scale)
-            shear = np.zeros((0, 2), dtype=np.int64)
-        else:
-            local, triangles, edges, shear, bends, named = _cloth_grid(size, resolution)
-        count = len(local)
-        world = rotations.to_matrix(orientation[None])[0]
-        vertex_position = local @ world.T + position
-        area = _triangle_areas(vertex_position, triangles)
-        if area.sum() <= 0.0:
-            raise InputError("size" if file is None else "file", "the cloth has zero area")
-        if file is not None:
-            share = np.bincount(triangles.ravel(), np.repeat(area / 3.0, 3), minlength=count)
-            if (share <= 0.0).any():
-                raise InputError("file", f"vertex {int(np.argmin(share))} of the mesh is in no triangle of "
-                                         "positive area, so it gets no mass")
-            share = share / share.sum()
-        else:
-            share = np.full(count, 1.0 / count)
-        if mass is not None:
-            total = _number(mass, "mass", 0.0, strict=True, quantity=MASS)
-        else:
-            total = _number(density, "density", 0.0, strict=True, quantity=AREAL_DENSITY) * area.sum()
-            _derived_mass(total, "density")
-        pinned_mask = _pinned_vertices(pinned, count, named)
-        spring_groups = [(edges, stiffness["stretch_stiffness"]), (shear, stiffness["shear_stiffness"]),
-                         (bends, stiffness["bend_stiffness"])]
-        springs = np.concatenate([g for g, _ in spring_groups]).astype(np.int64).reshape(-1, 2)
-        spring_k = np.concatenate([np.full(len(g), k) for g, k in spring_groups])
-        rest = np.linalg.norm(vertex_position[springs[:, 1]] - vertex_position[springs[:, 0]], axis=1)
-        if (rest <= 0.0).any():
-            raise InputError("size" if file is None else "file", "two vertices of the cloth coincide")
-        vertex_velocity = np.where(pinned_mask[:, None], 0.0, velocity[None, :])
+        if file is not None and resolution is not None:
+            raise InputError("resolution", "a cloth from a mesh file takes no resolution")
+        mesh = cloth_mesh.grid(size, resolution) if file is None else cloth_mesh.from_file(file, scale)
+        cloth = cloth_mesh.lay_out(mesh, file is not None, position, orientation, mass, density,
+                                   tuple(stiffness.values()), pinned)
+        count = len(cloth.position)
+        vertex_velocity = np.where(cloth.pinned[:, None], 0.0, velocity[None, :])
         check_dynamic_count(count, "resolution" if file is None else "file", f"a cloth of {count:,} vertices",
                             self._dynamic_count())
         start = sum(len(p["position"]) for p in self._particles)
         index = len(self._cloths)
-        self._particles.append(dict(position=vertex_position, velocity=vertex_velocity,
-                                    mass=total * share, radius=np.full(count, thickness),
-                                    material=self._material_index(material), cloth=index, pinned=pinned_mask))
+        self._particles.append(dict(position=cloth.position, velocity=vertex_velocity, mass=cloth.mass,
+                                    radius=np.full(count, thickness), material=self._material_index(material),
+                                    cloth=index, pinned=cloth.pinned))
         self._cloths.append(dict(name=str(name) if name is not None else f"cloth{index}", start=start,
-                                 triangles=triangles, springs=springs, stiffness=spring_k, rest=rest,
-                                 damping=np.full(len(springs), damping)))
+                                 triangles=cloth.triangles, springs=cloth.springs, stiffness=cloth.stiffness,
+                                 rest=cloth.rest, damping=np.full(len(cloth.springs), damping)))
         return range(start, start + count)
 
     # -- static obstacles ------------------------------------------------------------
@@ -583,24 +395,24 @@ class ModelBuilder:
         shape = _shape(shape, OBSTACLE_SHAPE_ARGUMENTS, dict(
             normal=normal, offset=offset, radius=radius, half_extents=half_extents, points=points, file=file,
             scale=scale, position=position, orientation=orientation))
-        position = _vector((0, 0, 0) if position is None else position, "position", quantity=LENGTH)
-        orientation = _orientation((1, 0, 0, 0) if orientation is None else orientation, "orientation")
+        position = vector((0, 0, 0) if position is None else position, "position", quantity=LENGTH)
+        orientation = unit_quaternion((1, 0, 0, 0) if orientation is None else orientation, "orientation")
         if shape == "plane":
             if normal is None:
                 raise InputError("normal", "a plane needs a normal = [nx, ny, nz]")
-            n = _vector(normal, "normal", quantity=DIRECTION)
+            n = vector(normal, "normal", quantity=DIRECTION)
             length = np.linalg.norm(n)
             if length < 1e-12:
                 raise InputError("normal", "the normal must not be zero")
-            offset = _number(0.0 if offset is None else offset, "offset", quantity=LENGTH)
+            offset = number(0.0 if offset is None else offset, "offset", quantity=LENGTH)
             params = np.concatenate([n / length, [offset / length]])
             kind = shapes.PLANE
         elif shape == "mesh":
             from .meshes import load_mesh
             if file is None:
                 raise InputError("file", "a mesh obstacle needs a file (OBJ, STL or PLY)")
-            scale = _number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
-            mesh = load_mesh(_file(file), scale, field="file")
+            scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
+            mesh = load_mesh(file_path(file), scale, field="file")
             LENGTH.check(mesh.vertices, "file")
             mesh = mesh.transformed(position, orientation)
             kind, params = shapes.MESH, np.array([len(self._meshes), 0.0, 0.0, 0.0])
@@ -666,7 +478,6 @@ class ModelBuilder:
         def cloth_cat(key, shape, offset=False, dtype=float):
             parts = [c[key] + (c["start"] if offset else 0) for c in cloths]
             return (np.concatenate(parts) if parts else np.zeros(0)).astype(dtype).reshape(shape)
-        from .driving import pack, start_on_paths
         drive = pack(len(bodies), self._forces, self._paths)
         start_on_paths(drive, initial)
         return Model(
@@ -703,130 +514,6 @@ class ModelBuilder:
         )
 
 
-PINNED_NAMES = ("corners", "top_corners", "top_edge", "bottom_edge", "left_edge", "right_edge")
-
-
-def check_dynamic_count(count, field, what, already=0):
-    """InputError naming ``field`` when ``what`` (``count`` more bodies, particles or cloth
-    vertices, after ``already``) would take a model past MAX_DYNAMIC, before anything is built."""
-    if already + count > MAX_DYNAMIC:
-        raise InputError(field, f"{what} would make {already + count:,} bodies, particles and cloth vertices, more "
-                                f"than the {MAX_DYNAMIC:,} a model may hold (each costs kilobytes of memory a step)")
-
-
-def _cloth_grid(size, resolution):
-    """A grid cloth in its local frame: (vertices (V, 3) [m], triangles (F, 3), stretch (E, 2),
-    shear (H, 2), bend (G, 2) local vertex pairs, named vertex sets {name: indices})."""
-    if resolution is None:
-        raise InputError("resolution", "a grid cloth needs resolution = [nx, ny] (vertices along x and y)")
-    width, height = _vector(size, "size", 2, quantity=LENGTH, positive=True)
-    counts = _array(resolution, "resolution", "a list of 2 whole numbers")
-    if counts.shape != (2,) or not np.all(np.isfinite(counts)) or not np.all(counts == np.round(counts)):
-        raise InputError("resolution", f"expected a list of 2 whole numbers, found {resolution!r}")
-    nx, ny = (int(c) for c in counts)
-    if nx < 2 or ny < 2:
-        raise InputError("resolution", f"must be at least 2 vertices along each axis, found [{nx}, {ny}]")
-    check_dynamic_count(nx * ny, "resolution", f"a cloth of {nx} x {ny} vertices")
-    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")     # (ny, nx): a along x, fastest
-    vertices = np.stack([-width / 2 + a.ravel() * width / (nx - 1), -height / 2 + b.ravel() * height / (ny - 1),
-                         np.zeros(nx * ny)], axis=1)
-    vid = a + nx * b                                                    # (ny, nx) vertex index
-
-    def pairs(first, second):
-        return np.stack([first.ravel(), second.ravel()], axis=1)
-
-    corner00, corner10, corner01, corner11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
-    triangles = np.concatenate([np.stack([corner00.ravel(), corner10.ravel(), corner11.ravel()], axis=1),
-                                np.stack([corner00.ravel(), corner11.ravel(), corner01.ravel()], axis=1)])
-    stretch = np.concatenate([pairs(vid[:, :-1], vid[:, 1:]), pairs(vid[:-1, :], vid[1:, :])])
-    shear = np.concatenate([pairs(corner00, corner11), pairs(corner10, corner01)])
-    bend = np.concatenate([pairs(vid[:, :-2], vid[:, 2:]), pairs(vid[:-2, :], vid[2:, :])])
-    top, bottom, left, right = vid[-1, :], vid[0, :], vid[:, 0], vid[:, -1]
-    named = {"corners": np.array([vid[0, 0], vid[0, -1], vid[-1, 0], vid[-1, -1]]),
-             "top_corners": np.array([vid[-1, 0], vid[-1, -1]]),
-             "top_edge": top, "bottom_edge": bottom, "left_edge": left, "right_edge": right}
-    return (vertices, triangles.astype(np.int64), stretch.astype(np.int64), shear.astype(np.int64),
-            bend.astype(np.int64), named)
-
-
-def _cloth_from_mesh(file, scale):
-    """A cloth from a mesh file: (vertices (V, 3) [m] × scale, triangles (F, 3), edges (E, 2),
-    bend pairs (G, 2), no named sets). Coincident vertices merged, the first one kept in place."""
-    import os
-    from .meshes import MESH_FORMATS
-    scale = _number(scale, "scale", 0.0, strict=True, quantity=FACTOR)
-    path = _file(file)
-    if not os.path.isfile(path):
-        raise InputError("file", f"expected an existing file, found no file at {path}")
-    if os.path.splitext(path)[1].lower() not in MESH_FORMATS:
-        raise InputError("file", f"unsupported mesh format of {path}; expected .obj, .stl or .ply")
-    try:
-        import trimesh
-        loaded = trimesh.load(path, force="mesh", process=False)
-        vertices = np.asarray(loaded.vertices, dtype=float)
-        faces = np.asarray(loaded.faces, dtype=np.int64)
-    except Exception as error:                      # trimesh raises many types on broken files
-        raise InputError("file", f"could not read the mesh file {path} ({first_line(error)})") from None
-    if faces.ndim != 2 or faces.shape[1:] != (3,) or len(faces) == 0 or len(vertices) == 0:
-        raise InputError("file", f"the mesh file {path} contains no triangles")
-    if not np.all(np.isfinite(vertices)):
-        raise InputError("file", f"the mesh file {path} has non-finite vertex coordinates")
-    # merge coincident vertices, numbering the survivors in order of first appearance
-    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first)
-    renumber = np.empty(len(first), dtype=np.int64)
-    renumber[order] = np.arange(len(first))
-    vertices = vertices[first[order]] * scale
-    LENGTH.check(vertices, "file")
-    faces = renumber[inverse.reshape(-1)][faces]
-    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
-    if len(faces) == 0:
-        raise InputError("file", f"the mesh file {path} has only degenerate triangles")
-    # edges: each unordered pair once; bends: the two far corners of triangles sharing an edge
-    half_edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    opposite = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
-    keys = np.sort(half_edges, axis=1)
-    edges, edge_of = np.unique(keys, axis=0, return_inverse=True)
-    edge_of = edge_of.reshape(-1)
-    order = np.argsort(edge_of, kind="stable")
-    sorted_edges, sorted_opposite = edge_of[order], opposite[order]
-    shared = np.nonzero(sorted_edges[1:] == sorted_edges[:-1])[0]      # consecutive half-edges of one edge
-    bends = np.stack([sorted_opposite[shared], sorted_opposite[shared + 1]], axis=1)
-    bends = bends[bends[:, 0] != bends[:, 1]]
-    return vertices, faces, edges.astype(np.int64), bends.astype(np.int64), {}
-
-
-def _triangle_areas(vertices, triangles):
-    """Areas (F,) [m²] of triangles (F, 3) over vertices (V, 3)."""
-    e1 = vertices[triangles[:, 1]] - vertices[triangles[:, 0]]
-    e2 = vertices[triangles[:, 2]] - vertices[triangles[:, 0]]
-    return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-
-
-def _pinned_vertices(pinned, count, named):
-    """Mask (count,) of the vertices named by ``pinned``: indices and names of ``named``."""
-    if pinned is None:
-        pinned = ()
-    if isinstance(pinned, (str, int, np.integer)):
-        pinned = [pinned]
-    mask = np.zeros(count, dtype=bool)
-    try:
-        items = list(pinned)
-    except TypeError:
-        raise InputError("pinned", f"expected a list of vertex indices or names, found {pinned!r}") from None
-    for item in items:
-        if isinstance(item, str):
-            if item not in named:
-                known = ", ".join(named) if named else "none: a mesh cloth takes vertex indices only"
-                raise InputError("pinned", f"unknown vertex set {item!r} (known: {known})")
-            mask[named[item]] = True
-        elif isinstance(item, (int, np.integer)) and not isinstance(item, bool):
-            if not 0 <= item < count:
-                raise InputError("pinned", f"vertex index {item} is outside this cloth's vertices 0..{count - 1}")
-            mask[int(item)] = True
-        else:
-            raise InputError("pinned", f"expected vertex indices or names, found {item!r}")
-    return mask
 
 
 def _concatenate_packed(packs):
@@ -835,12 +522,12 @@ def _concatenate_packed(packs):
               "face_vertex_start": "face_vertex_index"}
     out = {key: [] for key in packs[0]}
     base = {key: 0 for key in starts}
-    for number, pack in enumerate(packs):
-        for key, values in pack.items():
+    for k, hull_pack in enumerate(packs):
+        for key, values in hull_pack.items():
             if key in starts:
                 shifted = values + base[key]
-                out[key].append(shifted if number == 0 else shifted[1:])
-                base[key] += len(pack[starts[key]])
+                out[key].append(shifted if k == 0 else shifted[1:])
+                base[key] += len(hull_pack[starts[key]])
             else:
                 out[key].append(values)
     return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}

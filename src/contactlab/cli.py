@@ -146,11 +146,6 @@ def _list_option(text, option, allowed):
     return names
 
 
-def _whole_number(value, option):
-    if value < 1:
-        raise InputError(option, f"expected a whole number ≥ 1, found {value}")
-
-
 def _memory_limit(text):
     """--memory-limit GB as bytes (None: the default; "none": no limit)."""
     if text is None:
@@ -173,6 +168,7 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
     from .simulation import simulate
+    from .validation import run_length
 
     if video:                                     # a bad --fps fails before the run, not after it
         from .render import check_settings
@@ -181,17 +177,16 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         from .viewer import check_port
         check_port(port)
     scene = load_scene(scene_source, overrides)
-    steps = max(1, round(scene.duration / scene.dt))
+    steps = run_length(scene.dt, scene.duration)[2]
     if steps > MANY_STEPS and not yes:
         raise InputError("--yes", f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
                                   f"{scene.dt:g} s): times are in seconds; add --yes to run it")
-    options = scene.method_options.get(scene.method, {})
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
     try:                                          # the samples stream into trajectory.h5 as the run goes
-        result = simulate(scene.model, scene.method, scene.dt, scene.duration, options, scene.integrator,
-                          record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
+        result = simulate(scene.model, scene.method, scene.dt, scene.duration, scene.options[scene.method],
+                          scene.integrator, record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
                           allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
     except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
         if getattr(error, "run", None) is not None:
@@ -252,8 +247,9 @@ def _view(sources, port=None, stream=None):
 def _compare(args):
     from .compare import compare
     from .methods import AVAILABLE
+    from .validation import whole_number
     methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods else None
-    _whole_number(args.fps, "--fps")
+    whole_number(args.fps, "--fps", 1)
     comparison = compare(args.scene, methods, args.out, overrides=_scene_overrides(args),
                          video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps,
                          allow_divergence=args.allow_divergence, workers=args.workers, scheduler=args.scheduler)
@@ -336,8 +332,9 @@ def _main(argv):
             for name, description in builtin_scenes():
                 print(f"{name:20s} {description}")
         elif args.command == "run":
-            _whole_number(args.record_every, "--record-every")
-            _whole_number(args.fps, "--fps")
+            from .validation import whole_number
+            whole_number(args.record_every, "--record-every", 1)
+            whole_number(args.fps, "--fps", 1)
             _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
                  fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
                  plots=not args.no_plots, allow_divergence=args.allow_divergence,
@@ -369,7 +366,8 @@ def _main(argv):
             _view(args.directories, args.port)
         elif args.command == "export":
             formats = _list_option(args.format, "--format", EXPORT_FORMATS)
-            _whole_number(args.every, "--every")
+            from .validation import whole_number
+            whole_number(args.every, "--every", 1)
             from .record import load_run
             arrays, _ = load_run(args.directory)
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))

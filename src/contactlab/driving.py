@@ -25,6 +25,7 @@ import numpy as np
 
 from . import rotations
 from .errors import InputError
+from .validation import DIRECTION, FORCE, LENGTH, TORQUE, unit_quaternion, vector
 
 PATH_VELOCITY_STEP = 1e-6       # s: the forward difference giving a kinematic body's velocity at time 0
 
@@ -51,7 +52,7 @@ def keyframe_times(times, name="times"):
 
 def keyframe_values(values, name, count, size, what, quantity=None):
     """``values`` as a float array (count, size) of finite numbers (one row per keyframe), each
-    within ``quantity``'s magnitudes (a contactlab.builder.Quantity) when one is given."""
+    within ``quantity``'s magnitudes (a contactlab.validation.Quantity) when one is given."""
     try:
         array = np.asarray(values, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -64,6 +65,63 @@ def keyframe_values(values, name, count, size, what, quantity=None):
     if quantity is not None:
         quantity.check(array, name)
     return array
+
+
+def force_record(body, force=None, torque=None, times=None):
+    """The record :func:`pack` takes of one ``ModelBuilder.add_force`` (see it for the three
+    ways to give a force), its arguments checked: dict(body, force, torque, times, function),
+    force and torque (3,) [N], [N m], or (T, 3) with times (T,) [s]. InputError naming the
+    argument."""
+    if callable(force):
+        _given_alone("force", "torque", {"torque": torque, "times": times})
+        return dict(body=body, force=None, torque=None, times=None, function=force)
+    if times is None:
+        force, torque = (np.zeros(3) if value is None else vector(value, name, quantity=quantity)
+                         for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE)))
+    else:
+        times = keyframe_times(times)
+        force, torque = (np.zeros((len(times), 3)) if value is None else
+                         keyframe_values(value, name, len(times), 3, unit, quantity)
+                         for value, name, unit, quantity in ((force, "force", "N", FORCE),
+                                                             (torque, "torque", "N m", TORQUE)))
+    return dict(body=body, force=force, torque=torque, times=times, function=None)
+
+
+def path_record(body, positions, orientations, times, orientation):
+    """The record :func:`pack` takes of one ``ModelBuilder.add_path`` (see it for the three ways
+    to give a path), its arguments checked: dict(body, times (T,) [s], positions (T, 3) [m],
+    orientations (T, 4) unit quaternions, function); a path without orientations keeps the
+    body's ``orientation`` (4,) throughout. InputError naming the argument."""
+    if callable(positions):
+        _given_alone("path", "orientation", {"orientations": orientations, "times": times})
+        return dict(body=body, times=None, positions=None, orientations=None, function=positions)
+    if times is None:
+        times = np.zeros(1)
+        positions = vector(positions, "positions", quantity=LENGTH)[None]
+        orientations = None if orientations is None else unit_quaternion(orientations, "orientations")[None]
+    else:
+        times = keyframe_times(times)
+        positions = keyframe_values(positions, "positions", len(times), 3, "m", LENGTH)
+        if orientations is not None:
+            orientations = keyframe_values(orientations, "orientations", len(times), 4, "quaternions w, x, y, z",
+                                           DIRECTION)
+            norms = np.linalg.norm(orientations, axis=1)
+            if (norms < 1e-12).any():
+                raise InputError("orientations", f"keyframe {int(np.argmin(norms))} is a zero quaternion, no "
+                                                  f"rotation; use [1, 0, 0, 0] for none")
+            orientations = orientations / norms[:, None]
+    if orientations is None:
+        orientations = np.repeat(orientation[None], len(times), axis=0)
+    return dict(body=body, times=times, positions=positions, orientations=orientations, function=None)
+
+
+def _given_alone(kind, returns, others):
+    """InputError naming the first of ``others`` (argument name -> value) given, not None, with
+    a ``kind`` function, which returns the ``returns`` itself."""
+    for name, value in others.items():
+        if value is not None:
+            raise InputError(name, f"a {kind} function returns the {returns} itself; give no "
+                                   f"{' or '.join(others)} with it")
 
 
 # ---- evaluating padded keyframes, all at once -------------------------------------------------

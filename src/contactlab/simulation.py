@@ -16,7 +16,6 @@ from tqdm import tqdm
 
 from . import methods
 from .methods import velocity_loop
-from .builder import TIME, WHOLE_NUMBERS, _number
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
@@ -28,7 +27,7 @@ from .record import Recorder, streaming_recorder
 from .state import State
 from .store import TrajectoryFile
 from .threads import ThreadChooser
-
+from .validation import MAX_STEPS, one_of, run_length
 
 
 
@@ -63,33 +62,23 @@ class Run:
         return run_html(self)
 
 
-MAX_STEPS = 10 ** 9     # steps of one run at most (duration / dt); record_every at most too
-
-
 def _checked_arguments(model, method, dt, duration, options, integrator, record_every, state, scene_name):
     """simulate()'s arguments checked, an InputError naming the first bad one; returns (the
-    method's module, its Options, dt [s], duration [s]). dt and duration are times of
-    contactlab.builder.TIME, dt no longer than the duration and at most MAX_STEPS steps; the
-    model has something to move; a given state has this model's shapes."""
+    method's module, its Options, dt [s], duration [s], steps). dt and duration by
+    contactlab.validation.run_length; options, a dict or None, built into the method's Options
+    (checked there), an Options of the method taken as it is; the model has something to move;
+    a given state has this model's shapes."""
     if not isinstance(model, Model):
         raise InputError("model", f"expected a contactlab Model (ModelBuilder(...).finalize() or "
                                   f"load_scene(...).model), found {_kind(model)}")
     if model.body_count + model.particle_count == 0:
         raise InputError("model", "has no bodies and no particles (nor cloth): there is nothing to simulate; "
                                   "add a body, particles or a cloth")
-    dt = _number(dt, "dt", 0.0, strict=True, quantity=TIME)
-    duration = _number(duration, "duration", 0.0, strict=True, quantity=TIME)
-    if dt > duration:
-        raise InputError("", f"dt = {dt:g} s is longer than duration = {duration:g} s, so the run would make one "
-                             f"whole step of {dt:g} s; give a dt no longer than the duration")
-    if duration / dt > MAX_STEPS + 0.5:
-        raise InputError("dt", f"duration / dt = {duration / dt:.3g} steps, more than the {MAX_STEPS:.0e} a run "
-                               f"may make")
+    dt, duration, steps = run_length(dt, duration)
     if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) \
             or not 1 <= record_every <= MAX_STEPS:
         raise InputError("record_every", f"expected a whole number from 1 to {MAX_STEPS:.0e}, found {record_every!r}")
-    if not isinstance(integrator, str) or integrator not in INTEGRATORS:
-        raise InputError("integrator", f"expected one of {', '.join(INTEGRATORS)}, found {integrator!r}")
+    one_of(integrator, "integrator", INTEGRATORS)
     if integrator == "explicit_euler" and model.body_kinematic.any():
         raise InputError("integrator", "explicit_euler moves positions by the velocities before the step, which "
                                        "cannot follow a kinematic body's path; use symplectic_euler or "
@@ -105,15 +94,11 @@ def _checked_arguments(model, method, dt, duration, options, integrator, record_
     elif not isinstance(options, module.Options):
         raise InputError("options", f"expected None, a dict or a contactlab.methods.{method}.Options for the "
                                     f"{method} method, found {_kind(options)}")
-    for name, value in asdict(options).items():          # the compiled kernels take 64-bit whole numbers
-        if isinstance(value, int) and not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]:
-            raise InputError(f"method.{method}.{name}", f"expected a whole number of at most 64 bits, found "
-                                                        f"one of {len(str(abs(value)))} digits")
     if state is not None:
         _check_state(model, state)
     if not isinstance(scene_name, str):
         raise InputError("scene_name", f"expected a string, found {_kind(scene_name)}")
-    return module, options, dt, duration
+    return module, options, dt, duration, steps
 
 
 def _check_state(model, state):
@@ -147,28 +132,30 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
              compiled_loop=None, allow_divergence=False, memory_limit=None, trajectory=None) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
-    method: a name from contactlab.methods; options: that method's Options (or a dict of
-    them); dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps); the model must hold
-    a body or particle; record_every: sample every K steps (the first and last states are
-    always sampled); threads: "auto" (the default, see :func:`contactlab.threads.set_threads`:
-    all cores, or one while that steps faster on a busy machine) or a whole number — results are
-    bit for bit the same on any count; compiled_loop: for projection, impulse and constraints on the scenes
-    the compiled stepping loop serves, None (the default) takes it when it is compiled or cached
-    already or the run is long enough to repay compiling it, True always, False never
-    (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are the same bit for bit
-    either way; allow_divergence: keep going when a health check fails (:mod:`contactlab.health`),
-    recording it in the summary, instead of stopping; memory_limit [bytes]: the most the run may
-    need by its estimate (:mod:`contactlab.budget`; None: half this machine's memory, ``math.inf``
-    none); trajectory: None (the default) keeps the samples in memory, in ``run.arrays``; a path
-    (``"out/trajectory.h5"``, its folder existing) streams them into that HDF5 file as the run goes
-    (:mod:`contactlab.store`), so memory stays flat however long the run, and ``run.arrays`` is
-    the file read back (a :class:`contactlab.store.TrajectoryFile`). Raises InputError for bad
-    arguments or a run that cannot fit, and SimulationDiverged (with the run up to then in its
-    ``run``) when a health check fails: the state stops being finite, a speed beyond the scene's
-    scale, an energy gain nothing explains, a contact deep enough to pass through. Ctrl-C (or
-    SIGTERM) stops the run between steps with :class:`contactlab.interrupts.Interrupted`, a
-    KeyboardInterrupt, whose ``run`` is the run up to then (its summary's ``interrupted`` says
-    when); a streamed trajectory is kept either way, its ``status`` saying how the run ended.
+    method: a name from contactlab.methods; options: that method's Options, taken as they are (they
+    were checked when built, as ``load_scene`` builds ``scene.options``), or a dict or None, built
+    into them here; dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps,
+    :func:`contactlab.validation.run_length`); the model must hold a body or particle; record_every:
+    sample every K steps (the first and last states are always sampled); threads: "auto" (the
+    default, see :func:`contactlab.threads.set_threads`: all cores, or one while that steps faster
+    on a busy machine) or a whole number — results are bit for bit the same on any count;
+    compiled_loop: for every method on the scenes the compiled stepping loop serves, None
+    (the default) takes it when it is compiled or cached already or the run is long enough to repay
+    compiling it, True always, False never (:func:`contactlab.methods.velocity_loop.stepper_for`) —
+    the numbers are the same bit for bit either way; allow_divergence: keep going when a health
+    check fails (:mod:`contactlab.health`), recording it in the summary, instead of stopping;
+    memory_limit [bytes]: the most the run may need by its estimate (:mod:`contactlab.budget`; None:
+    half this machine's memory, ``math.inf`` none); trajectory: None (the default) keeps the samples
+    in memory, in ``run.arrays``; a path (``"out/trajectory.h5"``, its folder existing) streams them
+    into that HDF5 file as the run goes (:mod:`contactlab.store`), so memory stays flat however long
+    the run, and ``run.arrays`` is the file read back (a :class:`contactlab.store.TrajectoryFile`).
+    Raises InputError for bad arguments or a run that cannot fit, and SimulationDiverged (with the
+    run up to then in its ``run``) when a health check fails: the state stops being finite, a speed
+    beyond the scene's scale, an energy gain nothing explains, a contact deep enough to pass
+    through. Ctrl-C (or SIGTERM) stops the run between steps with
+    :class:`contactlab.interrupts.Interrupted`, a KeyboardInterrupt, whose ``run`` is the run up to
+    then (its summary's ``interrupted`` says when); a streamed trajectory is kept either way, its
+    ``status`` saying how the run ended.
     """
     with interrupts.deferred():         # compiling or stepping, a signal waits for a step boundary
         return _simulate(model, method, dt, duration, options, integrator, record_every, state, progress,
@@ -177,12 +164,11 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
 
 def _simulate(model, method, dt, duration, options, integrator, record_every, state, progress, scene_name,
               threads, compiled_loop, allow_divergence, memory_limit, trajectory):
-    module, options, dt, duration = _checked_arguments(model, method, dt, duration, options, integrator,
-                                                       record_every, state, scene_name)
+    module, options, dt, duration, steps = _checked_arguments(model, method, dt, duration, options, integrator,
+                                                              record_every, state, scene_name)
     check_supported(model)
     chooser = ThreadChooser(threads)
     state = model.state() if state is None else state.copy()
-    steps = max(1, int(round(duration / dt)))
     if memory_limit is not None and (isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float))
                                      or not memory_limit > 0):
         raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")

@@ -97,7 +97,7 @@ def run_cell(job) -> dict:
     try:
         scene = load_scene(job["scene"], job["overrides"])
         run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                       scene.method_options.get(scene.method, {}), scene.integrator, scene_name=scene.name,
+                       scene.options[scene.method], scene.integrator, scene_name=scene.name,
                        threads=1, trajectory=job["trajectory"])
     except SimulationDiverged as error:
         return _failed_row(job, "diverged", str(error), started, diverged_at=error.time)

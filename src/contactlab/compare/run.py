@@ -113,7 +113,7 @@ def run_method(job) -> dict:
         try:
             scene = load_scene(job["scene"], job["overrides"])
             run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                           scene.method_options.get(scene.method, {}), scene.integrator,
+                           scene.options[scene.method], scene.integrator,
                            progress=job["progress"], scene_name=scene.name, allow_divergence=job["allow_divergence"],
                            trajectory=job["trajectory"])
             result["summary"] = run.summary

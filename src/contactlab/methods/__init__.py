@@ -15,10 +15,10 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..builder import _number
 from ..collision import GRANULARITIES, NORMALS
 from ..contacts import Contacts
 from ..errors import InputError
+from ..validation import check_choices, check_counts, number
 
 
 @dataclass
@@ -48,7 +48,7 @@ class CollisionOptions:
     cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
-        self.contact_margin = _number(self.contact_margin, "contact_margin", 0.0)
+        self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"samples": 1, "cloth_samples": 0})
 
@@ -61,22 +61,7 @@ class KeptManifoldOptions(CollisionOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        self.manifold_tolerance = _number(self.manifold_tolerance, "manifold_tolerance", 0.0)
-
-
-def check_choices(options, allowed):
-    """InputError unless each option named in ``allowed`` (name -> tuple of values) is one of them."""
-    for name, values in allowed.items():
-        if getattr(options, name) not in values:
-            raise InputError(name, f"expected one of {', '.join(values)}, found {getattr(options, name)!r}")
-
-
-def check_counts(options, least):
-    """InputError unless each option named in ``least`` (name -> minimum) is a whole number ≥ it."""
-    for name, minimum in least.items():
-        value = getattr(options, name)
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise InputError(name, f"expected a whole number ≥ {minimum}, found {value!r}")
+        self.manifold_tolerance = number(self.manifold_tolerance, "manifold_tolerance", 0.0)
 
 
 def get(name):

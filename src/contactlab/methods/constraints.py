@@ -41,13 +41,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..builder import _number
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_velocities
 from ..errors import InputError
 from ..state import State
-from . import KeptManifoldOptions, StepInfo, check_choices, check_counts
+from ..validation import check_choices, check_counts, number
+from . import KeptManifoldOptions, StepInfo
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import (detect, normal_targets, positions_split_at_impact, predict, relative_gravity,
                              restitution_threshold, step_without_contacts)
@@ -83,13 +83,13 @@ class Options(KeptManifoldOptions):
                              f"friction_model = \"cone\", or solver \"nsgs\" or \"staggered\" for the pyramid")
         if self.tolerance is None:        # each solver's own measure, so each its own default
             self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
-        self.tolerance = _number(self.tolerance, "tolerance", 0.0, strict=True)
-        self.omega = _number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
-        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
-        self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
-        self.slop = _number(self.slop, "slop", 0.0)
-        self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
+        self.tolerance = number(self.tolerance, "tolerance", 0.0, strict=True)
+        self.omega = number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
+        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")
+        self.stabilization = number(self.stabilization, "stabilization", 0.0, maximum=1.0)
+        self.slop = number(self.slop, "slop", 0.0)
+        self.max_push_velocity = number(self.max_push_velocity, "max_push_velocity", 0.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 

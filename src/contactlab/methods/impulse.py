@@ -31,13 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..builder import _number
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import free_velocities
 from ..errors import InputError
 from ..state import State
-from . import KeptManifoldOptions, StepInfo, check_counts
+from ..validation import check_counts, number
+from . import KeptManifoldOptions, StepInfo
 from .velocity_level import (detect, positions_split_at_impact, predict, relative_gravity, resting_target,
                              restitution_threshold, step_without_contacts)
 from .sequential import (contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts,
@@ -60,12 +60,12 @@ class Options(KeptManifoldOptions):
     def __post_init__(self):
         super().__post_init__()
         check_counts(self, {"iterations": 1})
-        self.tolerance = _number(self.tolerance, "tolerance", 0.0)
-        self.restitution_threshold = _number(self.restitution_threshold, "restitution_threshold")
-        self.stabilization = _number(self.stabilization, "stabilization", 0.0, maximum=1.0)
-        self.slop = _number(self.slop, "slop", 0.0)
-        self.max_push_velocity = _number(self.max_push_velocity, "max_push_velocity", 0.0)
-        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        self.tolerance = number(self.tolerance, "tolerance", 0.0)
+        self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")
+        self.stabilization = number(self.stabilization, "stabilization", 0.0, maximum=1.0)
+        self.slop = number(self.slop, "slop", 0.0)
+        self.max_push_velocity = number(self.max_push_velocity, "max_push_velocity", 0.0)
+        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 

@@ -34,7 +34,6 @@ from numba import njit
 import scipy.sparse.linalg as spla
 
 from .. import rotations
-from ..builder import _number
 from ..collision import collide, pass_through_depths, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, stack, unstack
@@ -42,7 +41,8 @@ from ..dynamics.integrators import advance_positions, factor_symmetric, free_vel
 from ..rotations import world_tensors
 from ..errors import InputError
 from ..state import State
-from . import CollisionOptions, StepInfo, check_choices, check_counts
+from ..validation import check_choices, check_counts, number, time_step
+from . import CollisionOptions, StepInfo
 from .sequential import (along_rows, apply_impulses, contact_velocity, row_products, rows_of, solve_order,
                          solve_sequential_impulses, sweep_groups)
 
@@ -68,13 +68,13 @@ class Options(CollisionOptions):
         super().__post_init__()
         self.stiffness = _stiffness(self.stiffness, "stiffness")
         self.friction_stiffness = _stiffness(self.friction_stiffness, "friction_stiffness")
-        self.allowed_penetration = _number(self.allowed_penetration, "allowed_penetration", 0.0, strict=True)
+        self.allowed_penetration = number(self.allowed_penetration, "allowed_penetration", 0.0, strict=True)
         if self.damping_ratio != "restitution":
             if isinstance(self.damping_ratio, str):
                 raise InputError("damping_ratio", f"expected a number ≥ 0 or \"restitution\", "
                                  f"found {self.damping_ratio!r}")
-            self.damping_ratio = _number(self.damping_ratio, "damping_ratio", 0.0)
-        self.linear_tolerance = _number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
+            self.damping_ratio = number(self.damping_ratio, "damping_ratio", 0.0)
+        self.linear_tolerance = number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
         check_choices(self, {"linear_solver": LINEAR_SOLVERS, "implicit_springs": IMPLICIT_SPRINGS})
         check_counts(self, {"implicit_iterations": 1})
 
@@ -84,7 +84,7 @@ def _stiffness(value, name):
         return value
     if isinstance(value, str):
         raise InputError(name, f"expected a stiffness in N/m or \"auto\", found {value!r}")
-    return _number(value, name, 0.0, strict=True)
+    return number(value, name, 0.0, strict=True)
 
 
 # ---- guidance for k -----------------------------------------------------------------------
@@ -112,8 +112,8 @@ def suggest_stiffness(mass, dt, allowed_penetration, gravity=9.81, contacts=1, c
     integrator the proposal is capped at the accurate limit — the reason then says what time
     step would allow the needed stiffness; backward Euler is stable at any k and gets it.
     """
-    dt = _number(dt, "dt", 0.0, strict=True)
-    allowed_penetration = _number(allowed_penetration, "allowed_penetration", 0.0, strict=True)
+    dt = time_step(dt)
+    allowed_penetration = number(allowed_penetration, "allowed_penetration", 0.0, strict=True)
     contact_mass = mass if contact_mass is None else contact_mass
     needed = mass * gravity / (contacts * allowed_penetration)
     stable = contact_mass * (2.0 / dt) ** 2

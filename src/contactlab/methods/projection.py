@@ -34,13 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..builder import _number
 from ..collision import collide, swept_distances
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
 from ..state import State
-from . import KeptManifoldOptions, StepInfo, check_counts
+from ..validation import check_counts, number
+from . import KeptManifoldOptions, StepInfo
 from .velocity_level import detect
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 
@@ -60,9 +60,9 @@ class Options(KeptManifoldOptions):
     def __post_init__(self):
         super().__post_init__()
         check_counts(self, {"iterations": 1, "passes": 1})
-        self.tolerance = _number(self.tolerance, "tolerance", 0.0)
-        self.warm_start = _number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        self.slop = _number(self.slop, "slop", 0.0)
+        self.tolerance = number(self.tolerance, "tolerance", 0.0)
+        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
+        self.slop = number(self.slop, "slop", 0.0)
 
 
 def project(model, at, offset, displacement, options, sweep=None, carried=None, contacts=None):

@@ -2,7 +2,7 @@
 
     from contactlab.scene import load_scene, builtin_scenes
     scene = load_scene("bouncing_ball", overrides=["simulation.dt=0.0005"])
-    scene.model, scene.method, scene.dt, scene.duration, scene.integrator, scene.method_options
+    scene.model, scene.method, scene.dt, scene.duration, scene.integrator, scene.options
 
 The format is described in ``docs/scene-format.md``. Modules, one concern each:
 

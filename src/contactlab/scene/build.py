@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..builder import ModelBuilder, check_dynamic_count
+from ..builder import ModelBuilder
 from ..errors import InputError
+from ..validation import check_dynamic_count
 
 
 def _call(prefix, function, **arguments):

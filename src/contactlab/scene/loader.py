@@ -2,11 +2,12 @@
 
     scene = load_scene("bouncing_ball", overrides=["simulation.dt=0.0005"])
     run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                   scene.method_options.get(scene.method), scene.integrator)
+                   scene.options[scene.method], scene.integrator)
 
 Order: read the text → parse TOML → apply ``--set`` overrides to the raw dict → validate
-against the schema → check the ``[method.NAME]`` tables of available methods → check that the
-selected method is available → build the Model. Every mistake is an InputError.
+against the schema → build each ``[method.NAME]`` table into that method's Options (checked
+there, once: ``simulate`` takes them as they are) → check that the selected method is
+available → build the Model. Every mistake is an InputError.
 """
 
 import difflib
@@ -33,8 +34,11 @@ class Scene:
     """A loaded scene: the Model plus how to simulate it.
 
     name: built-in name or file stem; dt, duration [s]; method and integrator names;
-    method_options: method name -> the raw ``[method.NAME]`` table (a dict);
-    description: one line; source: the file path, or ``builtin:NAME``.
+    method_options: method name -> the raw ``[method.NAME]`` table (a dict), as written;
+    description: one line; source: the file path, or ``builtin:NAME``; options: method name ->
+    its ``Options`` (``contactlab.methods.NAME.Options``), built and checked once from its table,
+    for every method with a table and the selected one (its defaults where it has none): what
+    to pass to ``simulate``.
     """
     name: str
     model: Model
@@ -45,6 +49,7 @@ class Scene:
     method_options: dict = field(default_factory=dict)
     description: str = ""
     source: str = ""
+    options: dict = field(default_factory=dict)
 
     def origin(self, overrides=()) -> dict:
         """How to load this scene again from any folder, as a run's summary records it (its
@@ -130,15 +135,20 @@ def read_source(source):
     return text_source, text, f"builtin:{text_source}"
 
 
-def _check_methods(scene):
-    """Options tables of available methods against their Options; the selected method exists."""
-    for name, table in scene["method"].items():
-        if name in methods.AVAILABLE:
-            methods.make_options(methods.get(name), table, f"method.{name}")
+def _method_options(scene):
+    """Method name -> its Options, built from the ``[method.NAME]`` table of every available
+    method that has one, and for the selected method (from no table: its defaults); InputError
+    naming the table's key, or "simulation.method" for an unavailable selected method."""
+    built = {name: methods.make_options(methods.get(name), table, f"method.{name}")
+             for name, table in scene["method"].items() if name in methods.AVAILABLE}
+    selected = scene["simulation"]["method"]
     try:
-        methods.get(scene["simulation"]["method"])
+        module = methods.get(selected)
     except InputError as error:
         raise InputError("simulation.method", error.message) from None
+    if selected not in built:
+        built[selected] = module.Options()
+    return built
 
 
 def load_scene(source, overrides=()) -> Scene:
@@ -150,7 +160,7 @@ def load_scene(source, overrides=()) -> Scene:
     name, text, origin = read_source(source)
     raw = apply_overrides(parse_toml(text), overrides)
     scene = validate(raw)
-    _check_methods(scene)
+    options = _method_options(scene)
     simulation = scene["simulation"]
     base = _builtin_dir() if origin.startswith("builtin:") else Path(origin).parent
     return Scene(
@@ -163,4 +173,5 @@ def load_scene(source, overrides=()) -> Scene:
         method_options=scene["method"],
         description=scene["description"],
         source=origin,
+        options=options,
     )

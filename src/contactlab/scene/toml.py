@@ -10,8 +10,8 @@ size, and a thousand-digit ``mass`` cannot become a float).
 import re
 import sys
 
-from ..builder import WHOLE_NUMBERS
 from ..errors import InputError
+from ..validation import WHOLE_NUMBERS
 
 if sys.version_info >= (3, 11):
     import tomllib
