@@ -28,8 +28,8 @@ from contactlab.collision.broad_phase import overlapping_pairs
 def sphere_pile(count, radius=0.05):
     """Spheres on a square grid of layers, touching: a settled pile in a box of width ~ sqrt(count/layers)."""
     b = ModelBuilder()
-    side = int(np.ceil(np.sqrt(count / 10)))          # 10 layers
-    spacing = 2 * radius * 0.999                        # 0.1 % overlap: every neighbour touches
+    side = int(np.ceil(np.sqrt(count / 10)))  # 10 layers
+    spacing = 2 * radius * 0.999  # 0.1 % overlap: every neighbour touches
     for k in range(count):
         layer, rest = divmod(k, side * side)
         i, j = divmod(rest, side)
@@ -46,29 +46,35 @@ def box_pyramid(levels, half=0.05, gap=0.005):
     for level in range(levels):
         n = levels - level
         for i in range(n):
-            b.add_body("box", half_extents=(half, half, half), mass=1.0,
-                       position=((i - (n - 1) / 2) * (2 * half + gap), 0, half * 0.999 + 2 * half * 0.999 * level))
+            b.add_body(
+                "box",
+                half_extents=(half, half, half),
+                mass=1.0,
+                position=((i - (n - 1) / 2) * (2 * half + gap), 0, half * 0.999 + 2 * half * 0.999 * level),
+            )
     b.add_obstacle("plane", normal=(0, 0, 1))
     return b.finalize()
 
 
 def measure(name, model, repeat):
     state = model.state()
-    contacts = collide(model, state)                    # compiles on first use
+    contacts = collide(model, state)  # compiles on first use
     times, broad = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
         kinds, params, centers, rots = _colliders(model, state)
         lower, upper = _bounds(kinds, params, centers, rots, np.zeros(len(kinds)))
-        overlapping_pairs(lower[:model.body_count], upper[:model.body_count])
+        overlapping_pairs(lower[: model.body_count], upper[: model.body_count])
         t1 = time.perf_counter()
         contacts = collide(model, state)
         t2 = time.perf_counter()
         broad.append(t1 - t0)
         times.append(t2 - t1)
     seconds = float(np.median(times))
-    print(f"| {name} | {model.body_count} | {contacts.count} | {seconds * 1e3:.2f} | "
-          f"{contacts.count / seconds:,.0f} | {np.median(broad) / seconds:.0%} |")
+    print(
+        f"| {name} | {model.body_count} | {contacts.count} | {seconds * 1e3:.2f} | "
+        f"{contacts.count / seconds:,.0f} | {np.median(broad) / seconds:.0%} |"
+    )
 
 
 def hull_stack(seed=0):
@@ -82,8 +88,13 @@ def hull_stack(seed=0):
     for i in range(6):
         for j in range(6):
             for level in range(3):
-                b.add_body("convex", points=points.tolist(), mass=1.0, position=(0.11 * i, 0.11 * j, 0.06 + 0.1 * level),
-                           material="m")
+                b.add_body(
+                    "convex",
+                    points=points.tolist(),
+                    mass=1.0,
+                    position=(0.11 * i, 0.11 * j, 0.06 + 0.1 * level),
+                    material="m",
+                )
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
     model = b.finalize()
     return model, simulate(model, "constraints", 1 / 240, 1.5, {"iterations": 50}).state
@@ -104,8 +115,10 @@ def measure_kept(name, model, state, repeat, tolerance=1e-4, margin=0.002):
         t2 = time.perf_counter()
         fresh.append(t1 - t0)
         reused.append(t2 - t1)
-    print(f"| {name} | {model.body_count} | {contacts.count} | {len(kept)} | {np.median(fresh) * 1e3:.2f} | "
-          f"{np.median(reused) * 1e3:.2f} |")
+    print(
+        f"| {name} | {model.body_count} | {contacts.count} | {len(kept)} | {np.median(fresh) * 1e3:.2f} | "
+        f"{np.median(reused) * 1e3:.2f} |"
+    )
 
 
 def main():
@@ -126,10 +139,12 @@ def main():
     measure_kept("hull stack", model, settled, args.repeat)
     print()
     for tolerance in (0.0, 1e-4):
-        run = simulate(model, "constraints", 1 / 240, 1.0, {"iterations": 50, "manifold_tolerance": tolerance},
-                       state=settled)
-        print(f"hull stack, constraints, manifold_tolerance {tolerance:g}: "
-              f"{run.summary['steps_per_second']:.1f} steps/s")
+        run = simulate(
+            model, "constraints", 1 / 240, 1.0, {"iterations": 50, "manifold_tolerance": tolerance}, state=settled
+        )
+        print(
+            f"hull stack, constraints, manifold_tolerance {tolerance:g}: {run.summary['steps_per_second']:.1f} steps/s"
+        )
 
 
 if __name__ == "__main__":

@@ -26,22 +26,22 @@ import os
 import sys
 
 
-from pinning import pin_threads                # the script's own folder is on sys.path
+from pinning import pin_threads  # the script's own folder is on sys.path
 
 pin_threads(sys.argv)
 
-import argparse                               # noqa: E402  (after the thread pinning)
-import platform                               # noqa: E402
-import time                                   # noqa: E402
-from datetime import date                     # noqa: E402
-from pathlib import Path                      # noqa: E402
+import argparse  # noqa: E402  (after the thread pinning)
+import platform  # noqa: E402
+import time  # noqa: E402
+from datetime import date  # noqa: E402
+from pathlib import Path  # noqa: E402
 
-import numba                                  # noqa: E402
-import numpy as np                            # noqa: E402
-import scipy                                  # noqa: E402
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
 
-import contactlab                             # noqa: E402
-from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact   # noqa: E402
+import contactlab  # noqa: E402
+from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact  # noqa: E402
 
 from contactlab.fclib_bench import MAX_ITERATIONS as CAPS, PROBLEM_SUFFIXES  # noqa: E402  (one table of caps)
 
@@ -59,21 +59,30 @@ def machine():
                     break
     except OSError:
         pass
-    return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(), numpy=np.__version__,
-                scipy=scipy.__version__, numba=numba.__version__, contactlab=contactlab.__version__,
-                numba_threads=os.environ["NUMBA_NUM_THREADS"], blas_threads=os.environ["OPENBLAS_NUM_THREADS"],
-                date=date.today().isoformat())
+    return dict(
+        cpu=cpu,
+        cores=os.cpu_count(),
+        python=platform.python_version(),
+        numpy=np.__version__,
+        scipy=scipy.__version__,
+        numba=numba.__version__,
+        contactlab=contactlab.__version__,
+        numba_threads=os.environ["NUMBA_NUM_THREADS"],
+        blas_threads=os.environ["OPENBLAS_NUM_THREADS"],
+        date=date.today().isoformat(),
+    )
 
 
 def solve(problem, method, tol):
     start = time.perf_counter()
-    result = solve_friction_contact(problem.W, problem.q, problem.mu, method=method, tol=tol,
-                                    max_iterations=CAPS[method])
+    result = solve_friction_contact(
+        problem.W, problem.q, problem.mu, method=method, tol=tol, max_iterations=CAPS[method]
+    )
     return result, time.perf_counter() - start
 
 
 def measure(problems, methods, tol, repeats):
-    for problem in problems:                  # untimed: compiles, or loads the Numba cache
+    for problem in problems:  # untimed: compiles, or loads the Numba cache
         for method in methods:
             solve(problem, method, tol)
     rows = []
@@ -85,11 +94,13 @@ def measure(problems, methods, tol, repeats):
                 result, seconds = solve(problem, method, tol)
                 best = seconds if best is None else min(best, seconds)
             error = natural_map_error(problem.W, problem.q, problem.mu, result.r)
-            row[method] = dict(iterations=result.iterations, error=error, converged=bool(error <= tol),
-                               seconds=best)
+            row[method] = dict(iterations=result.iterations, error=error, converged=bool(error <= tol), seconds=best)
         rows.append(row)
-        print(problem.name, {m: (row[m]["iterations"], f"{row[m]['error']:.1e}", f"{1e3 * row[m]['seconds']:.1f} ms")
-                             for m in methods}, flush=True)
+        print(
+            problem.name,
+            {m: (row[m]["iterations"], f"{row[m]['error']:.1e}", f"{1e3 * row[m]['seconds']:.1f} ms") for m in methods},
+            flush=True,
+        )
     return rows
 
 
@@ -109,7 +120,8 @@ def write_markdown(path, rows, methods, tol, repeats, info, load):
         f"{load[1]:.2f} after.",
         "",
         f"Each problem from r = 0 to tol = {tol:g} on the normalized natural-map error "
-        f"(`natural_map_error`, recomputed from r); caps: " + ", ".join(f"{m} {CAPS[m]}" for m in methods)
+        f"(`natural_map_error`, recomputed from r); caps: "
+        + ", ".join(f"{m} {CAPS[m]}" for m in methods)
         + f". Time: the best of {repeats} solves [ms], after an untimed solve of every problem (Numba "
         "compile or cache load). Iterations: Newton steps (one sparse LU each), nsgs sweeps, apgd steps.",
         "",
@@ -119,9 +131,11 @@ def write_markdown(path, rows, methods, tol, repeats, info, load):
     for row in rows:
         lines.append(f"| {row['name']} | {row['nc']} | " + " | ".join(cell(row[m]) for m in methods) + " |")
     solved = {m: sum(row[m]["converged"] for row in rows) for m in methods}
-    lines += ["", "Solved to tol: " + ", ".join(f"{m} {solved[m]} of {len(rows)}" for m in methods) + ".",
-              "Total time: " + ", ".join(f"{m} {1e3 * sum(row[m]['seconds'] for row in rows):.0f} ms"
-                                         for m in methods) + "."]
+    lines += [
+        "",
+        "Solved to tol: " + ", ".join(f"{m} {solved[m]} of {len(rows)}" for m in methods) + ".",
+        "Total time: " + ", ".join(f"{m} {1e3 * sum(row[m]['seconds'] for row in rows):.0f} ms" for m in methods) + ".",
+    ]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
 

@@ -39,34 +39,34 @@ import argparse
 import os
 import sys
 
-from pinning import pin_threads                # the script's own folder is on sys.path
+from pinning import pin_threads  # the script's own folder is on sys.path
 
 pin_threads(sys.argv)
 
-import contextlib                             # noqa: E402  (after the thread pinning)
-import json                                   # noqa: E402
-import multiprocessing                        # noqa: E402
-import platform                               # noqa: E402
-import time                                   # noqa: E402
-from datetime import date                     # noqa: E402
+import contextlib  # noqa: E402  (after the thread pinning)
+import json  # noqa: E402
+import multiprocessing  # noqa: E402
+import platform  # noqa: E402
+import time  # noqa: E402
+from datetime import date  # noqa: E402
 
-import numpy as np                            # noqa: E402
-from scipy.spatial import cKDTree             # noqa: E402
+import numpy as np  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
 
-import contactlab                             # noqa: E402
+import contactlab  # noqa: E402
 from contactlab import ModelBuilder, simulate  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS_DIR = os.path.join(HERE, "results")
 DT = 1.0 / 240.0
-ITERATIONS = 50                 # --matched: every engine's iteration count; the LCP row's assembly
+ITERATIONS = 50  # --matched: every engine's iteration count; the LCP row's assembly
 MATCHED = "--matched" in sys.argv
 RADIUS = 0.05
 WARMUP_STEPS = 5
 
 try:
     import pybullet
-except ImportError:                           # the extra "bench" is not installed
+except ImportError:  # the extra "bench" is not installed
     pybullet = None
 try:
     import mujoco
@@ -75,6 +75,7 @@ except ImportError:
 
 
 # ---- scene descriptions (engine-neutral) ----------------------------------------------------
+
 
 def pile_layout(count, grid=9, spacing=0.11, first_z=0.2):
     """Sphere centres of the pile: layers of grid × grid, 0.11 m apart, every other layer
@@ -86,7 +87,7 @@ def pile_layout(count, grid=9, spacing=0.11, first_z=0.2):
     start = -(grid - 1) * spacing / 2
     shift = 0.005 * (layer % 2)
     centres = np.stack([start + shift + spacing * i, start + shift + spacing * j, first_z + spacing * layer], axis=1)
-    half_width = grid * spacing / 2 + 0.005        # 9 × 0.11 / 2 + 5 mm = 0.5 m for the 9 × 9 grid
+    half_width = grid * spacing / 2 + 0.005  # 9 × 0.11 / 2 + 5 mm = 0.5 m for the 9 × 9 grid
     return centres, half_width
 
 
@@ -101,12 +102,13 @@ def pyramid_layout(levels=20, size=0.1, gap=0.005):
     return np.array(centres)
 
 
-BALL = dict(radius=0.05, height=1.0, restitution=0.8)   # centre 1 m up: the first apex is r + ε² (1 − r)
+BALL = dict(radius=0.05, height=1.0, restitution=0.8)  # centre 1 m up: the first apex is r + ε² (1 − r)
 
 CLOTH = dict(size=1.0, mass=0.3, height=0.85, sphere_radius=0.25, sphere_z=0.3, thickness=0.005, friction=0.4)
 
 
 # ---- measures from positions -----------------------------------------------------------------
+
 
 def sphere_penetration(positions, half_width, radius=RADIUS):
     """Largest overlap [m] of two spheres or of a sphere and the box (floor z = 0, walls at
@@ -142,6 +144,7 @@ def moved(frames):
 
 # ---- contactlab ----------------------------------------------------------------------------------
 
+
 def contactlab_pile(count, grid=9):
     b = ModelBuilder()
     b.add_material("rubber", friction=0.5, restitution=0.0)
@@ -175,32 +178,47 @@ def first_apex(heights):
     """The highest centre height [m] after the first bounce (the first rise) of a sampled series."""
     heights = np.asarray(heights)
     rising = np.nonzero(np.diff(heights) > 0)[0]
-    return float(heights[rising[0]:].max()) if len(rising) else float("nan")
+    return float(heights[rising[0] :].max()) if len(rising) else float("nan")
 
 
 def contactlab_cloth(n):
     b = ModelBuilder()
     b.add_material("cotton", friction=CLOTH["friction"], restitution=0.0)
-    b.add_cloth(size=(CLOTH["size"], CLOTH["size"]), resolution=(n, n), position=(0, 0, CLOTH["height"]),
-                mass=CLOTH["mass"], stretch_stiffness=2000.0, shear_stiffness=200.0, bend_stiffness=2.0,
-                damping=0.02, thickness=CLOTH["thickness"], material="cotton")
+    b.add_cloth(
+        size=(CLOTH["size"], CLOTH["size"]),
+        resolution=(n, n),
+        position=(0, 0, CLOTH["height"]),
+        mass=CLOTH["mass"],
+        stretch_stiffness=2000.0,
+        shear_stiffness=200.0,
+        bend_stiffness=2.0,
+        damping=0.02,
+        thickness=CLOTH["thickness"],
+        material="cotton",
+    )
     b.add_obstacle("sphere", radius=CLOTH["sphere_radius"], position=(0, 0, CLOTH["sphere_z"]), material="cotton")
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="cotton")
     return b.finalize()
 
 
-CONTACTLAB_OPTIONS = ({"constraints": {"iterations": ITERATIONS}, "impulse": {"iterations": ITERATIONS},
-                       "projection": {"iterations": ITERATIONS}, "penalty": {}} if MATCHED else
-                      {"constraints": {}, "impulse": {}, "projection": {}, "penalty": {}})
+CONTACTLAB_OPTIONS = (
+    {
+        "constraints": {"iterations": ITERATIONS},
+        "impulse": {"iterations": ITERATIONS},
+        "projection": {"iterations": ITERATIONS},
+        "penalty": {},
+    }
+    if MATCHED
+    else {"constraints": {}, "impulse": {}, "projection": {}, "penalty": {}}
+)
 BULLET_LABEL = "maximal, SI 50" if MATCHED else "maximal, defaults (SI 50)"
 MUJOCO_LABEL = "CG 50" if MATCHED else "defaults (Newton ≤ 100)"
 
 
-PILE_WARMUP = 0.25      # s: the lowest layer (0.2 m up) lands after 0.17 s
+PILE_WARMUP = 0.25  # s: the lowest layer (0.2 m up) lands after 0.17 s
 
 
-def run_contactlab(model, method, duration, record_every, integrator="symplectic_euler", options=None,
-                   warmup=3 * DT):
+def run_contactlab(model, method, duration, record_every, integrator="symplectic_euler", options=None, warmup=3 * DT):
     """(summary, arrays) of a timed run, after an untimed run of ``warmup`` seconds that compiles
     the kernels (long enough to reach the first contacts: a pile starts in the air, and a
     3-step warm-up would leave the contact kernels to compile inside the timed run when the
@@ -208,12 +226,13 @@ def run_contactlab(model, method, duration, record_every, integrator="symplectic
     impulse and constraints too, as a user's first long run does, so the timed run takes it at its default
     (``compiled_loop=None``: the loop once it is compiled)."""
     options = dict(CONTACTLAB_OPTIONS[method] if options is None else options)
-    simulate(model, method, DT, max(warmup, 3 * DT), options, integrator, compiled_loop=True)    # warm-up: compile
+    simulate(model, method, DT, max(warmup, 3 * DT), options, integrator, compiled_loop=True)  # warm-up: compile
     run = simulate(model, method, DT, duration, options, integrator, record_every=record_every)
     return run.summary, run.arrays
 
 
 # ---- pybullet ------------------------------------------------------------------------------------
+
 
 class Bullet:
     """One pybullet world in DIRECT mode, maximal-coordinate bodies, 50 solver iterations (its default)."""
@@ -236,10 +255,17 @@ class Bullet:
 
     def body(self, shape, position, friction, restitution=0.0):
         p = pybullet
-        body = p.createMultiBody(1.0, shape, basePosition=list(position), useMaximalCoordinates=True,
-                                 physicsClientId=self.client)
-        p.changeDynamics(body, -1, lateralFriction=friction, restitution=restitution,
-                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.client)
+        body = p.createMultiBody(
+            1.0, shape, basePosition=list(position), useMaximalCoordinates=True, physicsClientId=self.client
+        )
+        p.changeDynamics(
+            body,
+            -1,
+            lateralFriction=friction,
+            restitution=restitution,
+            activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING,
+            physicsClientId=self.client,
+        )
         self.bodies.append(body)
 
     def positions(self):
@@ -268,7 +294,7 @@ def bullet_pile(count):
 
 def bullet_ball():
     world = Bullet()
-    world.plane((0, 0, 1), (0, 0, 0), 0.5, restitution=1.0)       # pybullet multiplies the two
+    world.plane((0, 0, 1), (0, 0, 0), 0.5, restitution=1.0)  # pybullet multiplies the two
     shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=BALL["radius"], physicsClientId=world.client)
     world.body(shape, (0, 0, BALL["height"]), 0.5, restitution=BALL["restitution"])
     return world
@@ -301,14 +327,17 @@ def step_peer(step, steps, sample, sample_every):
 
 # ---- MuJoCo ----------------------------------------------------------------------------------------
 
+
 def _mj_header(extra=""):
     solver = f' solver="CG" iterations="{ITERATIONS}"' if MATCHED else ""
     return f'<mujoco><option timestep="{DT!r}"{solver} gravity="0 0 -9.81"/>{extra}<worldbody>'
 
 
 def _mj_plane(normal, point, friction):
-    return (f'<geom type="plane" size="5 5 0.1" pos="{point[0]} {point[1]} {point[2]}" '
-            f'zaxis="{normal[0]} {normal[1]} {normal[2]}" friction="{friction} 0.005 0.0001"/>')
+    return (
+        f'<geom type="plane" size="5 5 0.1" pos="{point[0]} {point[1]} {point[2]}" '
+        f'zaxis="{normal[0]} {normal[1]} {normal[2]}" friction="{friction} 0.005 0.0001"/>'
+    )
 
 
 def mujoco_pile(count):
@@ -317,8 +346,10 @@ def mujoco_pile(count):
     for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
         parts.append(_mj_plane(normal, -half_width * np.array(normal), 0.5))
     for k, c in enumerate(centres):
-        parts.append(f'<body name="s{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="sphere" '
-                     f'size="{RADIUS}" mass="1" friction="0.5 0.005 0.0001"/></body>')
+        parts.append(
+            f'<body name="s{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="sphere" '
+            f'size="{RADIUS}" mass="1" friction="0.5 0.005 0.0001"/></body>'
+        )
     parts.append("</worldbody></mujoco>")
     model = mujoco.MjModel.from_xml_string("".join(parts))
     return model, mujoco.MjData(model), half_width
@@ -327,9 +358,12 @@ def mujoco_pile(count):
 def mujoco_ball():
     """MuJoCo has no restitution coefficient: at its defaults the ball lands and stays (its
     soft contact can be tuned to bounce, which is not its default): a speed comparison only."""
-    xml = (_mj_header() + _mj_plane((0, 0, 1), (0, 0, 0), 0.5)
-           + f'<body pos="0 0 {BALL["height"]}"><freejoint/><geom type="sphere" size="{BALL["radius"]}" '
-             f'mass="1" friction="0.5 0.005 0.0001"/></body></worldbody></mujoco>')
+    xml = (
+        _mj_header()
+        + _mj_plane((0, 0, 1), (0, 0, 0), 0.5)
+        + f'<body pos="0 0 {BALL["height"]}"><freejoint/><geom type="sphere" size="{BALL["radius"]}" '
+        f'mass="1" friction="0.5 0.005 0.0001"/></body></worldbody></mujoco>'
+    )
     model = mujoco.MjModel.from_xml_string(xml)
     return model, mujoco.MjData(model)
 
@@ -337,8 +371,10 @@ def mujoco_ball():
 def mujoco_pyramid(levels=20):
     parts = [_mj_header(), _mj_plane((0, 0, 1), (0, 0, 0), 0.6)]
     for k, c in enumerate(pyramid_layout(levels)):
-        parts.append(f'<body name="b{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="box" '
-                     f'size="0.05 0.05 0.05" mass="1" friction="0.6 0.005 0.0001"/></body>')
+        parts.append(
+            f'<body name="b{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="box" '
+            f'size="0.05 0.05 0.05" mass="1" friction="0.6 0.005 0.0001"/></body>'
+        )
     parts.append("</worldbody></mujoco>")
     model = mujoco.MjModel.from_xml_string("".join(parts))
     return model, mujoco.MjData(model)
@@ -348,25 +384,28 @@ def mujoco_cloth(n):
     """MuJoCo's flex cloth: a flexcomp grid of n × n vertices (1 m square, 0.3 kg), edges held
     by equality constraints (MuJoCo's usual cloth), vertex radius = the 5 mm thickness."""
     spacing = CLOTH["size"] / (n - 1)
-    radius = min(CLOTH["thickness"], 0.45 * spacing)   # MuJoCo needs the spacing > 2 × the vertex radius
+    radius = min(CLOTH["thickness"], 0.45 * spacing)  # MuJoCo needs the spacing > 2 × the vertex radius
     f = CLOTH["friction"]
-    xml = (_mj_header() + _mj_plane((0, 0, 1), (0, 0, 0), f)
-           + f'<geom type="sphere" size="{CLOTH["sphere_radius"]}" pos="0 0 {CLOTH["sphere_z"]}" '
-             f'friction="{f} 0.005 0.0001"/>'
-           + f'<flexcomp name="cloth" type="grid" count="{n} {n} 1" spacing="{spacing} {spacing} {spacing}" '
-             f'pos="0 0 {CLOTH["height"]}" radius="{radius}" dim="2" mass="{CLOTH["mass"]}">'
-             f'<edge equality="true" damping="0.02"/><contact condim="3" friction="{f} 0.005 0.0001" '
-             f'selfcollide="none"/></flexcomp></worldbody></mujoco>')
+    xml = (
+        _mj_header()
+        + _mj_plane((0, 0, 1), (0, 0, 0), f)
+        + f'<geom type="sphere" size="{CLOTH["sphere_radius"]}" pos="0 0 {CLOTH["sphere_z"]}" '
+        f'friction="{f} 0.005 0.0001"/>'
+        + f'<flexcomp name="cloth" type="grid" count="{n} {n} 1" spacing="{spacing} {spacing} {spacing}" '
+        f'pos="0 0 {CLOTH["height"]}" radius="{radius}" dim="2" mass="{CLOTH["mass"]}">'
+        f'<edge equality="true" damping="0.02"/><contact condim="3" friction="{f} 0.005 0.0001" '
+        f'selfcollide="none"/></flexcomp></worldbody></mujoco>'
+    )
     model = mujoco.MjModel.from_xml_string(xml)
     return model, mujoco.MjData(model), radius
 
 
 def mujoco_body_positions(model, data):
-    return data.xpos[1:model.nbody].copy()
+    return data.xpos[1 : model.nbody].copy()
 
 
 def mujoco_penetration(data):
-    return max(0.0, -float(np.min(data.contact.dist[:data.ncon]))) if data.ncon else 0.0
+    return max(0.0, -float(np.min(data.contact.dist[: data.ncon]))) if data.ncon else 0.0
 
 
 def mujoco_version():
@@ -379,18 +418,41 @@ def mujoco_supports_flex():
 
 # ---- the benchmark runs ------------------------------------------------------------------------------
 
-SETTINGS = {          # durations [s] of the full run and of --quick
-    "full": dict(ball=3.0, pile1000=3.0, pile4000=3.0, pyramid=5.0, cloth64=2.0, cloth128=0.5, scaling=0.75,
-                 scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=12),
-    "quick": dict(ball=1.0, pile1000=0.5, pile4000=0.25, pyramid=0.5, cloth64=0.25, cloth128=0.1, scaling=0.1,
-                  scaling_sizes=(1000, 2000, 4000, 7000, 10000), sample_every=6),
+SETTINGS = {  # durations [s] of the full run and of --quick
+    "full": dict(
+        ball=3.0,
+        pile1000=3.0,
+        pile4000=3.0,
+        pyramid=5.0,
+        cloth64=2.0,
+        cloth128=0.5,
+        scaling=0.75,
+        scaling_sizes=(1000, 2000, 4000, 7000, 10000),
+        sample_every=12,
+    ),
+    "quick": dict(
+        ball=1.0,
+        pile1000=0.5,
+        pile4000=0.25,
+        pyramid=0.5,
+        cloth64=0.25,
+        cloth128=0.1,
+        scaling=0.1,
+        scaling_sizes=(1000, 2000, 4000, 7000, 10000),
+        sample_every=6,
+    ),
 }
 
 
 def record(results, key, row, path):
     results.setdefault("runs", {})[key] = row
-    print(f"  {key}: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()
-                                    if k not in ("scene",)), flush=True)
+    print(
+        f"  {key}: "
+        + ", ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items() if k not in ("scene",)
+        ),
+        flush=True,
+    )
     save(results, path)
 
 
@@ -401,29 +463,71 @@ def pile_runs(results, count, duration, sample_every, path):
     summary, arrays = run_contactlab(model, "constraints", duration, sample_every, warmup=PILE_WARMUP)
     frames, times = list(arrays["body_position"]), list(arrays["time"])
     penetration, drift = pile_measures(frames, times, half_width)
-    record(results, f"{scene}/contactlab-constraints", dict(
-        scene=scene, engine="contactlab", method="constraints", bodies=count, duration=duration, steps=steps,
-        steps_per_second=summary["steps_per_second"], max_penetration=penetration, drift=drift,
-        engine_penetration=summary["max_penetration"], max_contacts=summary["max_contacts"],
-        sweeps_per_step=summary["solver"]["mean_iterations"], threads=summary["threads"]), path)
+    record(
+        results,
+        f"{scene}/contactlab-constraints",
+        dict(
+            scene=scene,
+            engine="contactlab",
+            method="constraints",
+            bodies=count,
+            duration=duration,
+            steps=steps,
+            steps_per_second=summary["steps_per_second"],
+            max_penetration=penetration,
+            drift=drift,
+            engine_penetration=summary["max_penetration"],
+            max_contacts=summary["max_contacts"],
+            sweeps_per_step=summary["solver"]["mean_iterations"],
+            threads=summary["threads"],
+        ),
+        path,
+    )
     if pybullet is not None:
         world, half_width = bullet_pile(count)
-        rate, frames, times = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
-                                        world.positions, sample_every)
+        rate, frames, times = step_peer(
+            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, world.positions, sample_every
+        )
         penetration, drift = pile_measures(frames, times, half_width)
         world.close()
-        record(results, f"{scene}/pybullet", dict(scene=scene, engine="pybullet", method=BULLET_LABEL,
-                                                 bodies=count, duration=duration, steps=steps,
-                                                 steps_per_second=rate, max_penetration=penetration,
-                                                 drift=drift), path)
+        record(
+            results,
+            f"{scene}/pybullet",
+            dict(
+                scene=scene,
+                engine="pybullet",
+                method=BULLET_LABEL,
+                bodies=count,
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                max_penetration=penetration,
+                drift=drift,
+            ),
+            path,
+        )
     if mujoco is not None:
         m, d, half_width = mujoco_pile(count)
-        rate, frames, times = step_peer(lambda: mujoco.mj_step(m, d), steps,
-                                        lambda: mujoco_body_positions(m, d), sample_every)
+        rate, frames, times = step_peer(
+            lambda: mujoco.mj_step(m, d), steps, lambda: mujoco_body_positions(m, d), sample_every
+        )
         penetration, drift = pile_measures(frames, times, half_width)
-        record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method=MUJOCO_LABEL, bodies=count,
-                                               duration=duration, steps=steps, steps_per_second=rate,
-                                               max_penetration=penetration, drift=drift), path)
+        record(
+            results,
+            f"{scene}/mujoco",
+            dict(
+                scene=scene,
+                engine="mujoco",
+                method=MUJOCO_LABEL,
+                bodies=count,
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                max_penetration=penetration,
+                drift=drift,
+            ),
+            path,
+        )
 
 
 def ball_runs(results, duration, path):
@@ -433,27 +537,66 @@ def ball_runs(results, duration, path):
     steps = int(round(duration / DT))
     expected = BALL["radius"] + BALL["restitution"] ** 2 * (BALL["height"] - BALL["radius"])
     summary, arrays = run_contactlab(contactlab_ball(), "impulse", duration, 1)
-    record(results, "ball/contactlab-impulse", dict(
-        scene="ball", engine="contactlab", method="impulse", bodies=1, duration=duration, steps=steps,
-        steps_per_second=summary["steps_per_second"], max_penetration=summary["max_penetration"],
-        first_apex=first_apex(arrays["body_position"][:, 0, 2]), expected_apex=expected,
-        sweeps_per_step=summary["solver"]["mean_iterations"], threads=summary["threads"]), path)
+    record(
+        results,
+        "ball/contactlab-impulse",
+        dict(
+            scene="ball",
+            engine="contactlab",
+            method="impulse",
+            bodies=1,
+            duration=duration,
+            steps=steps,
+            steps_per_second=summary["steps_per_second"],
+            max_penetration=summary["max_penetration"],
+            first_apex=first_apex(arrays["body_position"][:, 0, 2]),
+            expected_apex=expected,
+            sweeps_per_step=summary["solver"]["mean_iterations"],
+            threads=summary["threads"],
+        ),
+        path,
+    )
     if pybullet is not None:
         world = bullet_ball()
-        rate, frames, _ = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
-                                    world.positions, 1)
+        rate, frames, _ = step_peer(
+            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, world.positions, 1
+        )
         world.close()
-        record(results, "ball/pybullet", dict(scene="ball", engine="pybullet", method=BULLET_LABEL, bodies=1,
-                                              duration=duration, steps=steps, steps_per_second=rate,
-                                              first_apex=first_apex([f[0, 2] for f in frames]),
-                                              expected_apex=expected), path)
+        record(
+            results,
+            "ball/pybullet",
+            dict(
+                scene="ball",
+                engine="pybullet",
+                method=BULLET_LABEL,
+                bodies=1,
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                first_apex=first_apex([f[0, 2] for f in frames]),
+                expected_apex=expected,
+            ),
+            path,
+        )
     if mujoco is not None:
         m, d = mujoco_ball()
         rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: mujoco_body_positions(m, d), 1)
-        record(results, "ball/mujoco", dict(scene="ball", engine="mujoco", method=MUJOCO_LABEL, bodies=1,
-                                            duration=duration, steps=steps, steps_per_second=rate,
-                                            first_apex=first_apex([f[0, 2] for f in frames]),
-                                            expected_apex=expected), path)
+        record(
+            results,
+            "ball/mujoco",
+            dict(
+                scene="ball",
+                engine="mujoco",
+                method=MUJOCO_LABEL,
+                bodies=1,
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                first_apex=first_apex([f[0, 2] for f in frames]),
+                expected_apex=expected,
+            ),
+            path,
+        )
 
 
 def pyramid_runs(results, duration, sample_every, path):
@@ -462,17 +605,35 @@ def pyramid_runs(results, duration, sample_every, path):
     for method in ("constraints", "impulse", "penalty", "projection"):
         try:
             summary, arrays = run_contactlab(model, method, duration, sample_every)
-        except Exception as error:                    # a diverging method is a result too
-            record(results, f"pyramid/contactlab-{method}", dict(scene="pyramid", engine="contactlab",
-                                                                  method=method, error=repr(error)[:200]), path)
+        except Exception as error:  # a diverging method is a result too
+            record(
+                results,
+                f"pyramid/contactlab-{method}",
+                dict(scene="pyramid", engine="contactlab", method=method, error=repr(error)[:200]),
+                path,
+            )
             continue
         travel = moved(list(arrays["body_position"]))
-        record(results, f"pyramid/contactlab-{method}", dict(
-            scene="pyramid", engine="contactlab", method=method, bodies=model.body_count, duration=duration,
-            steps=steps, steps_per_second=summary["steps_per_second"], max_penetration=summary["max_penetration"],
-            drift=float(travel.max()), moved_over_1mm=int((travel > 1e-3).sum()),
-            moved_over_1cm=int((travel > 1e-2).sum()), sweeps_per_step=summary["solver"]["mean_iterations"],
-            threads=summary["threads"]), path)
+        record(
+            results,
+            f"pyramid/contactlab-{method}",
+            dict(
+                scene="pyramid",
+                engine="contactlab",
+                method=method,
+                bodies=model.body_count,
+                duration=duration,
+                steps=steps,
+                steps_per_second=summary["steps_per_second"],
+                max_penetration=summary["max_penetration"],
+                drift=float(travel.max()),
+                moved_over_1mm=int((travel > 1e-3).sum()),
+                moved_over_1cm=int((travel > 1e-2).sum()),
+                sweeps_per_step=summary["solver"]["mean_iterations"],
+                threads=summary["threads"],
+            ),
+            path,
+        )
     if pybullet is not None:
         world = bullet_pyramid()
         worst = [0.0]
@@ -480,14 +641,30 @@ def pyramid_runs(results, duration, sample_every, path):
         def sample():
             worst[0] = max(worst[0], world.penetration())
             return world.positions()
-        rate, frames, _ = step_peer(lambda: pybullet.stepSimulation(physicsClientId=world.client), steps,
-                                    sample, sample_every)
+
+        rate, frames, _ = step_peer(
+            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, sample, sample_every
+        )
         world.close()
         travel = moved(frames)
-        record(results, "pyramid/pybullet", dict(
-            scene="pyramid", engine="pybullet", method=BULLET_LABEL, bodies=len(travel), duration=duration,
-            steps=steps, steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
-            moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
+        record(
+            results,
+            "pyramid/pybullet",
+            dict(
+                scene="pyramid",
+                engine="pybullet",
+                method=BULLET_LABEL,
+                bodies=len(travel),
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                max_penetration=worst[0],
+                drift=float(travel.max()),
+                moved_over_1mm=int((travel > 1e-3).sum()),
+                moved_over_1cm=int((travel > 1e-2).sum()),
+            ),
+            path,
+        )
     if mujoco is not None:
         m, d = mujoco_pyramid()
         worst = [0.0]
@@ -495,12 +672,27 @@ def pyramid_runs(results, duration, sample_every, path):
         def sample():
             worst[0] = max(worst[0], mujoco_penetration(d))
             return mujoco_body_positions(m, d)
+
         rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, sample, sample_every)
         travel = moved(frames)
-        record(results, "pyramid/mujoco", dict(
-            scene="pyramid", engine="mujoco", method=MUJOCO_LABEL, bodies=len(travel), duration=duration, steps=steps,
-            steps_per_second=rate, max_penetration=worst[0], drift=float(travel.max()),
-            moved_over_1mm=int((travel > 1e-3).sum()), moved_over_1cm=int((travel > 1e-2).sum())), path)
+        record(
+            results,
+            "pyramid/mujoco",
+            dict(
+                scene="pyramid",
+                engine="mujoco",
+                method=MUJOCO_LABEL,
+                bodies=len(travel),
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                max_penetration=worst[0],
+                drift=float(travel.max()),
+                moved_over_1mm=int((travel > 1e-3).sum()),
+                moved_over_1cm=int((travel > 1e-2).sum()),
+            ),
+            path,
+        )
 
 
 def cloth_runs(results, n, duration, sample_every, path, methods=("projection", "constraints"), peers=True):
@@ -511,30 +703,65 @@ def cloth_runs(results, n, duration, sample_every, path, methods=("projection", 
         try:
             summary, arrays = run_contactlab(model, method, duration, sample_every, integrator="backward_euler")
         except Exception as error:
-            record(results, f"{scene}/contactlab-{method}", dict(scene=scene, engine="contactlab", method=method,
-                                                                  error=repr(error)[:200]), path)
+            record(
+                results,
+                f"{scene}/contactlab-{method}",
+                dict(scene=scene, engine="contactlab", method=method, error=repr(error)[:200]),
+                path,
+            )
             continue
         penetration = max(cloth_penetration(f) for f in arrays["particle_position"])
-        record(results, f"{scene}/contactlab-{method}", dict(
-            scene=scene, engine="contactlab", method=f"{method} (backward Euler)", vertices=n * n,
-            duration=duration, steps=steps, steps_per_second=summary["steps_per_second"],
-            max_penetration=penetration, engine_penetration=summary["max_penetration"],
-            lowest_vertex=float(arrays["particle_position"][..., 2].min())), path)
+        record(
+            results,
+            f"{scene}/contactlab-{method}",
+            dict(
+                scene=scene,
+                engine="contactlab",
+                method=f"{method} (backward Euler)",
+                vertices=n * n,
+                duration=duration,
+                steps=steps,
+                steps_per_second=summary["steps_per_second"],
+                max_penetration=penetration,
+                engine_penetration=summary["max_penetration"],
+                lowest_vertex=float(arrays["particle_position"][..., 2].min()),
+            ),
+            path,
+        )
     if mujoco is not None and peers:
         try:
             m, d, radius = mujoco_cloth(n)
-        except Exception as error:                    # a MuJoCo without flex, or a model it refuses
-            record(results, f"{scene}/mujoco", dict(scene=scene, engine="mujoco", method="flex",
-                                                    error=f"MuJoCo {mujoco.__version__} could not build the flex "
-                                                          f"cloth: {repr(error)[:150]}"), path)
+        except Exception as error:  # a MuJoCo without flex, or a model it refuses
+            record(
+                results,
+                f"{scene}/mujoco",
+                dict(
+                    scene=scene,
+                    engine="mujoco",
+                    method="flex",
+                    error=f"MuJoCo {mujoco.__version__} could not build the flex cloth: {repr(error)[:150]}",
+                ),
+                path,
+            )
             return
-        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: d.flexvert_xpos.copy(),
-                                    sample_every)
+        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: d.flexvert_xpos.copy(), sample_every)
         penetration = max(cloth_penetration(f, radius) for f in frames)
-        record(results, f"{scene}/mujoco", dict(
-            scene=scene, engine="mujoco", method=f"flex ({MUJOCO_LABEL}, vertex radius {1e3 * radius:.1f} mm)", vertices=n * n, duration=duration, steps=steps,
-            steps_per_second=rate, max_penetration=penetration,
-            lowest_vertex=float(min(f[:, 2].min() for f in frames))), path)
+        record(
+            results,
+            f"{scene}/mujoco",
+            dict(
+                scene=scene,
+                engine="mujoco",
+                method=f"flex ({MUJOCO_LABEL}, vertex radius {1e3 * radius:.1f} mm)",
+                vertices=n * n,
+                duration=duration,
+                steps=steps,
+                steps_per_second=rate,
+                max_penetration=penetration,
+                lowest_vertex=float(min(f[:, 2].min() for f in frames)),
+            ),
+            path,
+        )
 
 
 def scaling_runs(results, sizes, duration, path):
@@ -545,12 +772,23 @@ def scaling_runs(results, sizes, duration, path):
         grid = max(9, int(np.ceil(np.sqrt(count / (1000 / 81)))))
         model, _ = contactlab_pile(count, grid)
         summary, _ = run_contactlab(model, "constraints", duration, 1000, warmup=PILE_WARMUP)
-        record(results, f"scaling/{count}", dict(scene="scaling", engine="contactlab", method="constraints",
-                                                 bodies=count, grid=grid, duration=duration,
-                                                 steps=int(round(duration / DT)),
-                                                 steps_per_second=summary["steps_per_second"],
-                                                 ms_per_step=1e3 / summary["steps_per_second"],
-                                                 max_contacts=summary["max_contacts"]), path)
+        record(
+            results,
+            f"scaling/{count}",
+            dict(
+                scene="scaling",
+                engine="contactlab",
+                method="constraints",
+                bodies=count,
+                grid=grid,
+                duration=duration,
+                steps=int(round(duration / DT)),
+                steps_per_second=summary["steps_per_second"],
+                ms_per_step=1e3 / summary["steps_per_second"],
+                max_contacts=summary["max_contacts"],
+            ),
+            path,
+        )
 
 
 def assembled_pile_lcp(count=4000, settle=0.5):
@@ -562,18 +800,34 @@ def assembled_pile_lcp(count=4000, settle=0.5):
     from contactlab.dynamics.integrators import free_velocities
     from contactlab.methods import constraints as cm
     from contactlab.methods.velocity_level import normal_targets, relative_gravity
+
     model, _ = contactlab_pile(count)
     options = cm.Options(iterations=ITERATIONS)
     state = simulate(model, "constraints", DT, settle, {"iterations": ITERATIONS}, record_every=10_000).state
     free = free_velocities(model, state, DT, "symplectic_euler")
     v_free = stack(*free)
     sweep = swept_distances(model, free[0], free[1], free[2], DT)
-    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples, cloth_samples=options.cloth_samples)
+    contacts = collide(
+        model,
+        state,
+        options.contact_margin,
+        sweep,
+        options.granularity,
+        options.normal,
+        options.samples,
+        cloth_samples=options.cloth_samples,
+    )
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     threshold = 2.0 * np.linalg.norm(model.gravity) * DT
-    target, _ = normal_targets(-contacts.depth, (J @ v_free)[0::3], relative_gravity(model, contacts),
-                               contacts.restitution, DT, threshold, options)
+    target, _ = normal_targets(
+        -contacts.depth,
+        (J @ v_free)[0::3],
+        relative_gravity(model, contacts),
+        contacts.restitution,
+        DT,
+        threshold,
+        options,
+    )
     targets = np.zeros((contacts.count, 3))
     targets[:, 0] = target
     inverse = cm.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
@@ -585,6 +839,7 @@ def assembled_pile_lcp(count=4000, settle=0.5):
 def random_spd_lcp(n=12000, per_row=8, seed=1):
     rng = np.random.default_rng(seed)
     import scipy.sparse as sp
+
     A = sp.random(n, n, density=per_row / n, random_state=rng, format="csr")
     B = (A @ A.T + sp.identity(n) * per_row).tocsr()
     return B, rng.normal(size=n), f"random sparse SPD, n = {n}"
@@ -592,15 +847,16 @@ def random_spd_lcp(n=12000, per_row=8, seed=1):
 
 def lcp_runs(results, path, quick):
     from contactlab.lcp import solve_lcp
+
     try:
         B, c, source = assembled_pile_lcp(4000, 0.25 if quick else 0.5)
-    except Exception as error:                         # internals moved: fall back, say so
+    except Exception as error:  # internals moved: fall back, say so
         print(f"  (assembling the pile's LCP failed: {error!r}; using a random SPD LCP)")
         B, c, source = random_spd_lcp()
     timings = {}
     answers = {}
     for method in ("pgs", "redblack"):
-        solve_lcp(B, c, method=method, tol=1e-8, max_iterations=5)               # compile
+        solve_lcp(B, c, method=method, tol=1e-8, max_iterations=5)  # compile
         best = None
         for _ in range(3):
             t0 = time.perf_counter()
@@ -609,17 +865,33 @@ def lcp_runs(results, path, quick):
             best = elapsed if best is None else min(best, elapsed)
         timings[method] = (best, result)
         answers[method] = result.lam
-    difference = float(np.linalg.norm(answers["pgs"] - answers["redblack"]) /
-                       max(np.linalg.norm(answers["pgs"]), 1e-300))
+    difference = float(
+        np.linalg.norm(answers["pgs"] - answers["redblack"]) / max(np.linalg.norm(answers["pgs"]), 1e-300)
+    )
     for method, (seconds, result) in timings.items():
-        record(results, f"lcp/{method}", dict(scene="lcp", engine="contactlab.lcp", method=method, rows=B.shape[0],
-                                              nonzeros=int(B.nnz), source=source, seconds=seconds,
-                                              sweeps=int(result.iterations), residual=float(result.residual),
-                                              converged=bool(result.converged), colors=int(result.colors or 0),
-                                              relative_difference=difference), path)
+        record(
+            results,
+            f"lcp/{method}",
+            dict(
+                scene="lcp",
+                engine="contactlab.lcp",
+                method=method,
+                rows=B.shape[0],
+                nonzeros=int(B.nnz),
+                source=source,
+                seconds=seconds,
+                sweeps=int(result.iterations),
+                residual=float(result.residual),
+                converged=bool(result.converged),
+                colors=int(result.colors or 0),
+                relative_difference=difference,
+            ),
+            path,
+        )
 
 
 # ---- machine, saving, report ---------------------------------------------------------------------------
+
 
 def machine():
     cpu = "unknown"
@@ -633,14 +905,25 @@ def machine():
         pass
     import numba
     import scipy
-    info = dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(), platform=platform.platform(),
-                numpy=np.__version__, scipy=scipy.__version__, numba=numba.__version__,
-                contactlab=contactlab.__version__, numba_threads=os.environ["NUMBA_NUM_THREADS"],
-                blas_threads=os.environ["OPENBLAS_NUM_THREADS"], date=date.today().isoformat())
+
+    info = dict(
+        cpu=cpu,
+        cores=os.cpu_count(),
+        python=platform.python_version(),
+        platform=platform.platform(),
+        numpy=np.__version__,
+        scipy=scipy.__version__,
+        numba=numba.__version__,
+        contactlab=contactlab.__version__,
+        numba_threads=os.environ["NUMBA_NUM_THREADS"],
+        blas_threads=os.environ["OPENBLAS_NUM_THREADS"],
+        date=date.today().isoformat(),
+    )
     if pybullet is not None:
         info["pybullet"] = str(pybullet.getAPIVersion())
         try:
             from importlib.metadata import version
+
             info["pybullet"] = version("pybullet")
         except Exception:
             pass
@@ -663,7 +946,7 @@ def busy_core(active=True):
         return
     spinner = multiprocessing.Process(target=_spin, daemon=True)
     spinner.start()
-    time.sleep(0.5)                 # running before anything is measured
+    time.sleep(0.5)  # running before anything is measured
     try:
         yield
     finally:
@@ -688,22 +971,33 @@ def save(results, path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="short durations: a smoke run")
-    parser.add_argument("--only", nargs="*", default=None,
-                        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
-                        help="run only these (default: all)")
+    parser.add_argument(
+        "--only",
+        nargs="*",
+        default=None,
+        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
+        help="run only these (default: all)",
+    )
     parser.add_argument("--scaling-sizes", type=int, nargs="*", default=None)
-    parser.add_argument("--cloth-methods", nargs="*", default=["projection", "constraints"],
-                        help="contactlab methods of the cloth runs")
+    parser.add_argument(
+        "--cloth-methods", nargs="*", default=["projection", "constraints"], help="contactlab methods of the cloth runs"
+    )
     parser.add_argument("--no-peers", action="store_true", help="cloth: contactlab only (keep the peers' rows)")
-    parser.add_argument("--duration", nargs="*", default=[], metavar="KEY=SECONDS",
-                        help="override a scene's duration, e.g. cloth64=0.5")
+    parser.add_argument(
+        "--duration", nargs="*", default=[], metavar="KEY=SECONDS", help="override a scene's duration, e.g. cloth64=0.5"
+    )
     parser.add_argument("--numba-threads", default="2", help="NUMBA_NUM_THREADS (set before numba loads)")
-    parser.add_argument("--no-mujoco", action="store_true",
-                        help="leave MuJoCo out (at its default Newton solver a 1000-sphere pile takes it over ten "
-                             "minutes here); its rows of the scenes run are dropped, not kept from another setting")
-    parser.add_argument("--matched", action="store_true",
-                        help="issue 8's setting: 50 iterations in every engine, MuJoCo's CG (default: each engine's "
-                             "defaults)")
+    parser.add_argument(
+        "--no-mujoco",
+        action="store_true",
+        help="leave MuJoCo out (at its default Newton solver a 1000-sphere pile takes it over ten "
+        "minutes here); its rows of the scenes run are dropped, not kept from another setting",
+    )
+    parser.add_argument(
+        "--matched",
+        action="store_true",
+        help="issue 8's setting: 50 iterations in every engine, MuJoCo's CG (default: each engine's defaults)",
+    )
     parser.add_argument("--results", default=os.path.join(RESULTS_DIR, "results.json"))
     parser.add_argument("--fresh", action="store_true", help="start a new results.json instead of merging")
     parser.add_argument("--report-only", action="store_true", help="rewrite results.md and the plots only")
@@ -719,7 +1013,8 @@ def main():
     if not args.report_only:
         results["machine"] = machine()
         results.setdefault("settings", {})["quick" if args.quick else "full"] = {
-            k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()}
+            k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()
+        }
         results["mode"] = "quick" if args.quick else "full"
         results["settings_mode"] = "matched 50 iterations" if MATCHED else "each engine's defaults"
         global mujoco
@@ -739,18 +1034,21 @@ def main():
             elif item == "pyramid":
                 pyramid_runs(results, settings["pyramid"], every, args.results)
             elif item.startswith("cloth"):
-                cloth_runs(results, int(item[5:]), settings[item], every, args.results, args.cloth_methods,
-                           not args.no_peers)
+                cloth_runs(
+                    results, int(item[5:]), settings[item], every, args.results, args.cloth_methods, not args.no_peers
+                )
             elif item == "scaling":
-                scaling_runs(results, args.scaling_sizes or settings["scaling_sizes"], settings["scaling"],
-                             args.results)
+                scaling_runs(
+                    results, args.scaling_sizes or settings["scaling_sizes"], settings["scaling"], args.results
+                )
             elif item == "lcp":
                 lcp_runs(results, args.results, args.quick)
             print(f"{item} done in {time.perf_counter() - started:.0f} s", flush=True)
-    from report import write_report                  # benchmarks/report.py
+    from report import write_report  # benchmarks/report.py
+
     out_dir = os.path.dirname(os.path.abspath(args.results))
     md_path = os.path.join(HERE, "results.md") if out_dir == RESULTS_DIR else os.path.join(out_dir, "results.md")
-    write_report(results, md_path, out_dir)         # a --results elsewhere keeps the committed baseline
+    write_report(results, md_path, out_dir)  # a --results elsewhere keeps the committed baseline
 
 
 if __name__ == "__main__":

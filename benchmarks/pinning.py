@@ -16,7 +16,12 @@ def pin_threads(argv):
             numba_threads = argv[i + 1]
         elif arg.startswith("--numba-threads="):
             numba_threads = arg.split("=", 1)[1]
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
-                 "NUMEXPR_NUM_THREADS"):
+    for name in (
+        "OPENBLAS_NUM_THREADS",
+        "OMP_NUM_THREADS",
+        "MKL_NUM_THREADS",
+        "VECLIB_MAXIMUM_THREADS",
+        "NUMEXPR_NUM_THREADS",
+    ):
         os.environ[name] = "1"
     os.environ["NUMBA_NUM_THREADS"] = numba_threads

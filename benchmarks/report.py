@@ -1,6 +1,6 @@
 """Turn benchmarks/results/results.json into benchmarks/results.md and PNG plots.
 
-    python benchmarks/report.py        # or: python benchmarks/peers.py --report-only
+python benchmarks/report.py        # or: python benchmarks/peers.py --report-only
 """
 
 import json
@@ -52,9 +52,14 @@ def targets(results):
     runs = results.get("runs", {})
     ours, bullet, mj = (_rate(results, f"ball/{engine}") for engine in ("contactlab-impulse", "pybullet", "mujoco"))
     if ours and bullet and mj:
-        out.append(("ball: impulse ≥ MuJoCo's steps/s and ≥ ½ pybullet's",
-                    f"{ours / mj:.3f}× MuJoCo, {ours / bullet:.3f}× pybullet ({ours:,.0f} vs {mj:,.0f} and "
-                    f"{bullet:,.0f} steps/s)", "met" if ours >= mj and ours >= 0.5 * bullet else "NOT met"))
+        out.append(
+            (
+                "ball: impulse ≥ MuJoCo's steps/s and ≥ ½ pybullet's",
+                f"{ours / mj:.3f}× MuJoCo, {ours / bullet:.3f}× pybullet ({ours:,.0f} vs {mj:,.0f} and "
+                f"{bullet:,.0f} steps/s)",
+                "met" if ours >= mj and ours >= 0.5 * bullet else "NOT met",
+            )
+        )
     else:
         out.append(("ball: impulse ≥ MuJoCo and ≥ ½ pybullet", "not measured", "missing"))
     for scene in ("pile1000", "pile4000"):
@@ -64,9 +69,14 @@ def targets(results):
         if ours and bullet:
             ratio = ours / bullet
             ok = ratio >= 5 and pen is not None and pen <= 1e-3
-            out.append((f"{scene}: constraints at its defaults ≥ 5× pybullet steps/s, penetration ≤ 1 mm",
-                        f"{ratio:.2f}× ({ours:.1f} vs {bullet:.1f} steps/s, {_fmt(row.get('sweeps_per_step'))} "
-                        f"sweeps a step); penetration {_mm(pen)} mm", "met" if ok else "NOT met"))
+            out.append(
+                (
+                    f"{scene}: constraints at its defaults ≥ 5× pybullet steps/s, penetration ≤ 1 mm",
+                    f"{ratio:.2f}× ({ours:.1f} vs {bullet:.1f} steps/s, {_fmt(row.get('sweeps_per_step'))} "
+                    f"sweeps a step); penetration {_mm(pen)} mm",
+                    "met" if ok else "NOT met",
+                )
+            )
         else:
             out.append((f"{scene}: constraints ≥ 5× pybullet", "not measured", "missing"))
     ours, bullet = _rate(results, "pyramid/contactlab-constraints"), _rate(results, "pyramid/pybullet")
@@ -74,47 +84,68 @@ def targets(results):
     if ours and bullet:
         drift = row.get("drift")
         ok = ours / bullet >= 5 and drift is not None and drift < 1e-3 and row.get("duration", 0) >= 5
-        out.append(("pyramid: constraints at its defaults ≥ 5× pybullet steps/s, every box < 1 mm in 5 s",
-                    f"{ours / bullet:.2f}× ({ours:.1f} vs {bullet:.1f}, {_fmt(row.get('sweeps_per_step'))} sweeps "
-                    f"a step); largest box motion {_mm(drift)} mm in {row.get('duration')} s",
-                    "met" if ok else "NOT met"))
+        out.append(
+            (
+                "pyramid: constraints at its defaults ≥ 5× pybullet steps/s, every box < 1 mm in 5 s",
+                f"{ours / bullet:.2f}× ({ours:.1f} vs {bullet:.1f}, {_fmt(row.get('sweeps_per_step'))} sweeps "
+                f"a step); largest box motion {_mm(drift)} mm in {row.get('duration')} s",
+                "met" if ok else "NOT met",
+            )
+        )
     else:
         out.append(("pyramid: constraints ≥ 5× pybullet", "not measured", "missing"))
     threads = _threads(results)
     if threads:
         loaded = [row for row in threads["rows"] if row["load"] != "idle"]
         worst = min(loaded, key=lambda row: row["auto_over_one"])
-        out.append(("threads: with a busy core, the default setting ≥ one thread on every benchmark scene",
-                    f"auto / one thread ≥ {worst['auto_over_one']:.2f} (worst: {worst['scene']}) over "
-                    f"{len(loaded)} scenes; see results/threads.md",
-                    "met" if worst["auto_over_one"] >= 0.95 else "NOT met"))
+        out.append(
+            (
+                "threads: with a busy core, the default setting ≥ one thread on every benchmark scene",
+                f"auto / one thread ≥ {worst['auto_over_one']:.2f} (worst: {worst['scene']}) over "
+                f"{len(loaded)} scenes; see results/threads.md",
+                "met" if worst["auto_over_one"] >= 0.95 else "NOT met",
+            )
+        )
     else:
         out.append(("threads under load", "not measured (benchmarks/threads.py)", "missing"))
     _, fit = scaling_fit(results)
     if fit:
         sizes = [r["bodies"] for _, r in _runs(results, "scaling") if "ms_per_step" in r]
-        out.append(("scaling 1000–10000 spheres: time per step ≤ N^1.1",
-                    f"N^{fit[0]:.2f} over N = {min(sizes)}–{max(sizes)} ({len(sizes)} sizes)",
-                    "met" if fit[0] <= 1.1 and max(sizes) >= 10000 else "NOT met"))
+        out.append(
+            (
+                "scaling 1000–10000 spheres: time per step ≤ N^1.1",
+                f"N^{fit[0]:.2f} over N = {min(sizes)}–{max(sizes)} ({len(sizes)} sizes)",
+                "met" if fit[0] <= 1.1 and max(sizes) >= 10000 else "NOT met",
+            )
+        )
     else:
         out.append(("scaling ≤ N^1.1", "not measured", "missing"))
     pgs, rb = runs.get("lcp/pgs"), runs.get("lcp/redblack")
     if pgs and rb:
         speedup = pgs["seconds"] / rb["seconds"]
         same = pgs["converged"] and rb["converged"] and rb["relative_difference"] < 1e-4
-        out.append(("redblack ≥ 1.6× serial pgs on 2 cores, same converged answer",
-                    f"{speedup:.2f}× ({pgs['seconds'] * 1e3:.0f} vs {rb['seconds'] * 1e3:.0f} ms, "
-                    f"{pgs['sweeps']} vs {rb['sweeps']} sweeps); relative λ difference "
-                    f"{rb['relative_difference']:.1e}", "met" if speedup >= 1.6 and same else "NOT met"))
+        out.append(
+            (
+                "redblack ≥ 1.6× serial pgs on 2 cores, same converged answer",
+                f"{speedup:.2f}× ({pgs['seconds'] * 1e3:.0f} vs {rb['seconds'] * 1e3:.0f} ms, "
+                f"{pgs['sweeps']} vs {rb['sweeps']} sweeps); relative λ difference "
+                f"{rb['relative_difference']:.1e}",
+                "met" if speedup >= 1.6 and same else "NOT met",
+            )
+        )
     else:
         out.append(("redblack ≥ 1.6× pgs", "not measured", "missing"))
     for n in (64, 128):
         mine = [_rate(results, f"cloth{n}/contactlab-{m}") for m in ("projection", "constraints")]
         peer = _rate(results, f"cloth{n}/mujoco")
         if any(mine) and peer:
-            out.append((f"cloth {n}×{n}: report steps/s against MuJoCo flex",
-                        f"projection {_fmt(mine[0])}, constraints {_fmt(mine[1])} vs MuJoCo {peer:.1f} steps/s",
-                        "reported"))
+            out.append(
+                (
+                    f"cloth {n}×{n}: report steps/s against MuJoCo flex",
+                    f"projection {_fmt(mine[0])}, constraints {_fmt(mine[1])} vs MuJoCo {peer:.1f} steps/s",
+                    "reported",
+                )
+            )
         else:
             out.append((f"cloth {n}×{n}", "not measured", "missing"))
     return out
@@ -133,27 +164,41 @@ def write_report(results, md_path, plot_dir):
     os.makedirs(plot_dir, exist_ok=True)
     m = results.get("machine", {})
     lines = ["# Benchmark results (generated by `benchmarks/peers.py`; do not edit by hand)", ""]
-    lines.append(f"Mode: **{results.get('mode', '?')}** (durations in the tables). Machine: {m.get('cpu', '?')}, "
-                 f"{m.get('cores', '?')} cores; Python {m.get('python', '?')}, NumPy {m.get('numpy', '?')}, "
-                 f"SciPy {m.get('scipy', '?')}, Numba {m.get('numba', '?')}, contactlab {m.get('contactlab', '?')}, "
-                 f"pybullet {m.get('pybullet', 'not installed')}, MuJoCo {m.get('mujoco', 'not installed')}; "
-                 f"BLAS threads {m.get('blas_threads', '?')}, Numba threads {m.get('numba_threads', '?')}; "
-                 f"{m.get('date', '')}. dt = 1/240 s; settings: {results.get('settings_mode', 'matched 50 iterations')}.")
+    lines.append(
+        f"Mode: **{results.get('mode', '?')}** (durations in the tables). Machine: {m.get('cpu', '?')}, "
+        f"{m.get('cores', '?')} cores; Python {m.get('python', '?')}, NumPy {m.get('numpy', '?')}, "
+        f"SciPy {m.get('scipy', '?')}, Numba {m.get('numba', '?')}, contactlab {m.get('contactlab', '?')}, "
+        f"pybullet {m.get('pybullet', 'not installed')}, MuJoCo {m.get('mujoco', 'not installed')}; "
+        f"BLAS threads {m.get('blas_threads', '?')}, Numba threads {m.get('numba_threads', '?')}; "
+        f"{m.get('date', '')}. dt = 1/240 s; settings: {results.get('settings_mode', 'matched 50 iterations')}."
+    )
     lines += ["", "## Targets of issue 18", "", "| target | measured | status |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in targets(results)]
 
-    header = ("| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm "
-              "| sweeps per step |")
+    header = (
+        "| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm "
+        "| sweeps per step |"
+    )
     rows = _runs(results, "ball")
     if rows:
-        lines += ["", "## One ball bouncing (r = 5 cm, ε = 0.8, from 1 m): the per-step overhead", "",
-                  "| run | method | sim s | steps/s | µs per step | first apex m (closed form) |", "|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## One ball bouncing (r = 5 cm, ε = 0.8, from 1 m): the per-step overhead",
+            "",
+            "| run | method | sim s | steps/s | µs per step | first apex m (closed form) |",
+            "|---|---|---|---|---|---|",
+        ]
         for key, r in rows:
-            lines.append(f"| {r['engine']} | {r['method']} | {r['duration']} | {r['steps_per_second']:,.0f} | "
-                         f"{1e6 / r['steps_per_second']:.1f} | {_fmt(r.get('first_apex'), 4)} "
-                         f"({_fmt(r.get('expected_apex'), 4)}) |")
-    for scene, title in (("pile1000", "Sphere pile, 1000"), ("pile4000", "Sphere pile, 4000 (taller column)"),
-                         ("pyramid", "Box pyramid, 20 levels (210 boxes)")):
+            lines.append(
+                f"| {r['engine']} | {r['method']} | {r['duration']} | {r['steps_per_second']:,.0f} | "
+                f"{1e6 / r['steps_per_second']:.1f} | {_fmt(r.get('first_apex'), 4)} "
+                f"({_fmt(r.get('expected_apex'), 4)}) |"
+            )
+    for scene, title in (
+        ("pile1000", "Sphere pile, 1000"),
+        ("pile4000", "Sphere pile, 4000 (taller column)"),
+        ("pyramid", "Box pyramid, 20 levels (210 boxes)"),
+    ):
         rows = _runs(results, scene)
         if not rows:
             continue
@@ -165,9 +210,11 @@ def write_report(results, md_path, plot_dir):
                 lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} |" + " |" * 7)
                 continue
             rate = r["steps_per_second"]
-            row = (f"| {r['engine']} | {r['method']} | {r.get('bodies')} | {r.get('duration')} | {rate:.1f} | "
-                   f"{_fmt(rate / bullet) if bullet else '–'} | {_fmt(rate / mj) if mj else '–'} | "
-                   f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} | {_fmt(r.get('sweeps_per_step'))} |")
+            row = (
+                f"| {r['engine']} | {r['method']} | {r.get('bodies')} | {r.get('duration')} | {rate:.1f} | "
+                f"{_fmt(rate / bullet) if bullet else '–'} | {_fmt(rate / mj) if mj else '–'} | "
+                f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} | {_fmt(r.get('sweeps_per_step'))} |"
+            )
             if extra:
                 row += f" {r.get('moved_over_1mm', '–')} | {r.get('moved_over_1cm', '–')} |"
             lines.append(row)
@@ -176,34 +223,54 @@ def write_report(results, md_path, plot_dir):
         if not rows:
             continue
         mj = _rate(results, f"cloth{n}/mujoco")
-        lines += ["", f"## Cloth drape, {n} × {n} vertices", "",
-                  "| run | method | sim s | steps/s | × MuJoCo | max penetration mm | lowest vertex z mm |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"## Cloth drape, {n} × {n} vertices",
+            "",
+            "| run | method | sim s | steps/s | × MuJoCo | max penetration mm | lowest vertex z mm |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for key, r in rows:
             if "error" in r:
                 lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} | | | | |")
                 continue
             rate = r["steps_per_second"]
-            lines.append(f"| {r['engine']} | {r['method']} | {r['duration']} | {rate:.1f} | "
-                         f"{_fmt(rate / mj) if mj else '–'} | {_mm(r['max_penetration'])} | "
-                         f"{_mm(r.get('lowest_vertex'))} |")
+            lines.append(
+                f"| {r['engine']} | {r['method']} | {r['duration']} | {rate:.1f} | "
+                f"{_fmt(rate / mj) if mj else '–'} | {_mm(r['max_penetration'])} | "
+                f"{_mm(r.get('lowest_vertex'))} |"
+            )
     rows, fit = scaling_fit(results)
     if rows:
-        lines += ["", "## Scaling: contactlab `constraints`, sphere pile widened with N", "",
-                  "| N | grid | sim s | steps/s | ms per step | max contacts |", "|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## Scaling: contactlab `constraints`, sphere pile widened with N",
+            "",
+            "| N | grid | sim s | steps/s | ms per step | max contacts |",
+            "|---|---|---|---|---|---|",
+        ]
         for r in rows:
-            lines.append(f"| {r['bodies']} | {r['grid']}×{r['grid']} | {r['duration']} | "
-                         f"{r['steps_per_second']:.1f} | {r['ms_per_step']:.2f} | {r['max_contacts']} |")
+            lines.append(
+                f"| {r['bodies']} | {r['grid']}×{r['grid']} | {r['duration']} | "
+                f"{r['steps_per_second']:.1f} | {r['ms_per_step']:.2f} | {r['max_contacts']} |"
+            )
         if fit:
             lines.append(f"\nLog-log fit: time per step ∝ N^{fit[0]:.2f}.")
     pgs, rb = results.get("runs", {}).get("lcp/pgs"), results.get("runs", {}).get("lcp/redblack")
     if pgs and rb:
-        lines += ["", f"## Serial pgs vs redblack on one LCP ({pgs['source']}; {pgs['rows']} rows, "
-                      f"{pgs['nonzeros']} non-zeros, tol 1e-8, best of 3)", "",
-                  "| method | seconds | sweeps | residual | converged | colors |", "|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"## Serial pgs vs redblack on one LCP ({pgs['source']}; {pgs['rows']} rows, "
+            f"{pgs['nonzeros']} non-zeros, tol 1e-8, best of 3)",
+            "",
+            "| method | seconds | sweeps | residual | converged | colors |",
+            "|---|---|---|---|---|---|",
+        ]
         for r in (pgs, rb):
-            lines.append(f"| {r['method']} | {r['seconds']:.4f} | {r['sweeps']} | {r['residual']:.2e} | "
-                         f"{r['converged']} | {r['colors']} |")
+            lines.append(
+                f"| {r['method']} | {r['seconds']:.4f} | {r['sweeps']} | {r['residual']:.2e} | "
+                f"{r['converged']} | {r['colors']} |"
+            )
         lines.append(f"\nRelative difference of the two λ: {rb['relative_difference']:.2e}.")
     lines += ["", "Plots: `results/steps_per_second.png`, `results/penetration.png`, `results/scaling.png`.", ""]
     with open(md_path, "w") as f:
@@ -214,26 +281,39 @@ def write_report(results, md_path, plot_dir):
 def plots(results, plot_dir):
     try:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
         print("matplotlib is not installed: no plots")
         return
-    runs = [(k, r) for k, r in sorted(results.get("runs", {}).items())
-            if r.get("scene") not in ("scaling", "lcp") and "steps_per_second" in r]
+    runs = [
+        (k, r)
+        for k, r in sorted(results.get("runs", {}).items())
+        if r.get("scene") not in ("scaling", "lcp") and "steps_per_second" in r
+    ]
     if runs:
-        scenes = sorted({r["scene"] for _, r in runs}, key=lambda s: ["ball", "pile1000", "pile4000", "pyramid", "cloth64",
-                                                                       "cloth128"].index(s))
-        for quantity, fname, label, scale in (("steps_per_second", "steps_per_second.png", "steps/s (log)", 1.0),
-                                              ("max_penetration", "penetration.png", "max penetration [mm]", 1e3)):
+        scenes = sorted(
+            {r["scene"] for _, r in runs},
+            key=lambda s: ["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128"].index(s),
+        )
+        for quantity, fname, label, scale in (
+            ("steps_per_second", "steps_per_second.png", "steps/s (log)", 1.0),
+            ("max_penetration", "penetration.png", "max penetration [mm]", 1e3),
+        ):
             fig, axes = plt.subplots(1, len(scenes), figsize=(3.6 * len(scenes), 4.2), squeeze=False)
             for ax, scene in zip(axes[0], scenes):
-                rows = [(r["engine"] + ("\n" + r["method"] if r["engine"] == "contactlab" else ""), r)
-                        for _, r in runs if r["scene"] == scene]
+                rows = [
+                    (r["engine"] + ("\n" + r["method"] if r["engine"] == "contactlab" else ""), r)
+                    for _, r in runs
+                    if r["scene"] == scene
+                ]
                 names = [n for n, _ in rows]
                 values = [r.get(quantity, 0.0) * scale for _, r in rows]
-                colors = ["C0" if r["engine"] == "contactlab" else "C1" if r["engine"] == "pybullet" else "C2"
-                          for _, r in rows]
+                colors = [
+                    "C0" if r["engine"] == "contactlab" else "C1" if r["engine"] == "pybullet" else "C2"
+                    for _, r in rows
+                ]
                 ax.bar(range(len(values)), values, color=colors)
                 ax.set_xticks(range(len(values)))
                 ax.set_xticklabels(names, rotation=60, ha="right", fontsize=7)

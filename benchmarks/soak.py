@@ -22,7 +22,7 @@ from contactlab import SimulationDiverged, simulate
 from contactlab.methods import AVAILABLE
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import DT, contactlab_pyramid, machine, write_lines                       # noqa: E402
+from peers import DT, contactlab_pyramid, machine, write_lines  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -39,17 +39,25 @@ def soak(method, levels, steps, record_every):
     arrays = run.arrays
     energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
     positions = arrays["body_position"]
-    return {"method": method, "verdict": verdict, "steps": int(round(arrays["time"][-1] / DT)),
-            "energy_rise": float(energy.max() - energy[0]), "energy_final": float(energy[-1] - energy[0]),
-            "moved": float(np.linalg.norm(positions - positions[0], axis=2).max()),
-            "steps_per_second": run.summary["steps_per_second"],
-            "sweeps": run.summary["solver"]["mean_iterations"], "threads": run.summary["threads"],
-            "wall": time.perf_counter() - started}
+    return {
+        "method": method,
+        "verdict": verdict,
+        "steps": int(round(arrays["time"][-1] / DT)),
+        "energy_rise": float(energy.max() - energy[0]),
+        "energy_final": float(energy[-1] - energy[0]),
+        "moved": float(np.linalg.norm(positions - positions[0], axis=2).max()),
+        "steps_per_second": run.summary["steps_per_second"],
+        "sweeps": run.summary["solver"]["mean_iterations"],
+        "threads": run.summary["threads"],
+        "wall": time.perf_counter() - started,
+    }
 
 
 def _described(info):
-    return (f"{info['cpu']}, {info['cores']} cores; Python {info['python']}, NumPy {info['numpy']}, Numba "
-            f"{info['numba']}, contactlab {info['contactlab']}; Numba threads {info['numba_threads']}")
+    return (
+        f"{info['cpu']}, {info['cores']} cores; Python {info['python']}, NumPy {info['numpy']}, Numba "
+        f"{info['numba']}, contactlab {info['contactlab']}; Numba threads {info['numba_threads']}"
+    )
 
 
 def main():
@@ -65,20 +73,29 @@ def main():
     for method in args.methods:
         row = soak(method, args.levels, args.steps, record_every)
         rows.append(row)
-        print(f"{method}: {row['verdict']}, energy rise {row['energy_rise']:.3g} J, moved {row['moved'] * 1000:.3g} "
-              f"mm, {row['steps_per_second']:.0f} steps/s", flush=True)
+        print(
+            f"{method}: {row['verdict']}, energy rise {row['energy_rise']:.3g} J, moved {row['moved'] * 1000:.3g} "
+            f"mm, {row['steps_per_second']:.0f} steps/s",
+            flush=True,
+        )
     load_after = os.getloadavg()[0]
-    lines = [f"# Soak: {args.steps:,} steps of the {args.levels}-level pyramid, every method at its defaults", "",
-             f"Written by `python benchmarks/soak.py` on {time.strftime('%Y-%m-%d')}: {_described(machine())}. "
-             f"Load average (1 min) {load_before:.2f} before, {load_after:.2f} after. dt = 1/240 s, sampled every "
-             f"{record_every} steps; health checks on.", "",
-             "| method | verdict | steps | energy rise above the start (J) | energy at the end − start (J) | "
-             "largest box motion (mm) | steps/s | sweeps per step | threads (steps at each count) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# Soak: {args.steps:,} steps of the {args.levels}-level pyramid, every method at its defaults",
+        "",
+        f"Written by `python benchmarks/soak.py` on {time.strftime('%Y-%m-%d')}: {_described(machine())}. "
+        f"Load average (1 min) {load_before:.2f} before, {load_after:.2f} after. dt = 1/240 s, sampled every "
+        f"{record_every} steps; health checks on.",
+        "",
+        "| method | verdict | steps | energy rise above the start (J) | energy at the end − start (J) | "
+        "largest box motion (mm) | steps/s | sweeps per step | threads (steps at each count) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for row in rows:
-        lines.append(f"| {row['method']} | {row['verdict']} | {row['steps']:,} | {row['energy_rise']:.3g} | "
-                     f"{row['energy_final']:.3g} | {row['moved'] * 1000:.3g} | {row['steps_per_second']:.0f} | "
-                     f"{row['sweeps']:.1f} | {row['threads']['setting']} {row['threads']['steps_at']} |")
+        lines.append(
+            f"| {row['method']} | {row['verdict']} | {row['steps']:,} | {row['energy_rise']:.3g} | "
+            f"{row['energy_final']:.3g} | {row['moved'] * 1000:.3g} | {row['steps_per_second']:.0f} | "
+            f"{row['sweeps']:.1f} | {row['threads']['setting']} {row['threads']['steps_at']} |"
+        )
     write_lines(args.out, lines)
 
 

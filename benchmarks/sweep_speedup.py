@@ -26,7 +26,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import busy_core, machine, write_lines                        # noqa: E402
+from peers import busy_core, machine, write_lines  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 STUDY = """
@@ -55,7 +55,7 @@ def measure(workers, folder):
     study = load_study(path)
     assert len(study.cells) == 16, len(study.cells)
     jobs = [sweep._job(cell, study, folder) for cell in study.cells]
-    sweep.run_cell(jobs[0])                                 # untimed: the compile cache is loaded
+    sweep.run_cell(jobs[0])  # untimed: the compile cache is loaded
     started = time.perf_counter()
     rows = [sweep.run_cell(job) for job in jobs]
     series = time.perf_counter() - started
@@ -64,7 +64,7 @@ def measure(workers, folder):
     out = os.path.join(folder, "out")
     with cluster.connect(workers=workers) as client:
         client.wait_for_workers(workers)
-        client.run(sweep.run_cell, jobs[0])            # every worker warm: imports and compile cache loaded
+        client.run(sweep.run_cell, jobs[0])  # every worker warm: imports and compile cache loaded
         started = time.perf_counter()
         table = sweep.run(study, out, client=client)
         cells_only = time.perf_counter() - started
@@ -75,10 +75,15 @@ def measure(workers, folder):
         overhead = (time.perf_counter() - started) / 200
     shutil.rmtree(out)
     started = time.perf_counter()
-    sweep.run(study, out, workers=workers)                  # a fresh cluster, counted
+    sweep.run(study, out, workers=workers)  # a fresh cluster, counted
     whole = time.perf_counter() - started
-    return {"series": series, "cells_only": cells_only, "whole": whole, "overhead": overhead,
-            "cell_seconds": float(table["cell_seconds"].sum())}
+    return {
+        "series": series,
+        "cells_only": cells_only,
+        "whole": whole,
+        "overhead": overhead,
+        "cell_seconds": float(table["cell_seconds"].sum()),
+    }
 
 
 def main():
@@ -88,23 +93,30 @@ def main():
     parser.add_argument("--out", default=os.path.join(HERE, "results", "sweep_speedup.md"))
     args = parser.parse_args()
     from contactlab.cluster import default_workers
-    lines = ["# A 16-cell study: a local Dask cluster against the cells in series", "",
-             f"Written by `python benchmarks/sweep_speedup.py` on {time.strftime('%Y-%m-%d')}: "
-             f"{machine()['cpu']}, {machine()['cores']} cores; each cell on one thread (simulate(threads=1)), "
-             f"one thread per worker.", "",
-             "| load | workers | in series (s) | sweep, cells only (s) | speed-up | sweep with cluster start and report (s) | "
-             "speed-up | engine overhead per cell (ms) | Σ cell time on workers (s) |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for busy in ([False, True] if args.busy else [False]):
+
+    lines = [
+        "# A 16-cell study: a local Dask cluster against the cells in series",
+        "",
+        f"Written by `python benchmarks/sweep_speedup.py` on {time.strftime('%Y-%m-%d')}: "
+        f"{machine()['cpu']}, {machine()['cores']} cores; each cell on one thread (simulate(threads=1)), "
+        f"one thread per worker.",
+        "",
+        "| load | workers | in series (s) | sweep, cells only (s) | speed-up | sweep with cluster start and report (s) | "
+        "speed-up | engine overhead per cell (ms) | Σ cell time on workers (s) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for busy in [False, True] if args.busy else [False]:
         with busy_core(busy), tempfile.TemporaryDirectory() as folder:
             load = os.getloadavg()[0]
-            workers = args.workers or default_workers()     # as sweep.run chooses them, load and all
+            workers = args.workers or default_workers()  # as sweep.run chooses them, load and all
             result = measure(workers, folder)
         what = f"one core busy (load {load:.2f} at start)" if busy else f"idle (load {load:.2f} at start)"
-        row = (f"| {what} | {workers} | {result['series']:.1f} | {result['cells_only']:.1f} | "
-               f"{result['series'] / result['cells_only']:.2f}× | {result['whole']:.1f} | "
-               f"{result['series'] / result['whole']:.2f}× | {result['overhead'] * 1000:.1f} | "
-               f"{result['cell_seconds']:.1f} |")
+        row = (
+            f"| {what} | {workers} | {result['series']:.1f} | {result['cells_only']:.1f} | "
+            f"{result['series'] / result['cells_only']:.2f}× | {result['whole']:.1f} | "
+            f"{result['series'] / result['whole']:.2f}× | {result['overhead'] * 1000:.1f} | "
+            f"{result['cell_seconds']:.1f} |"
+        )
         print(row, flush=True)
         lines.append(row)
     write_lines(args.out, lines)

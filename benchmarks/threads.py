@@ -22,10 +22,10 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-import peers                                   # noqa: E402  (the scenes; pins BLAS threads before NumPy loads)
-import numba                                   # noqa: E402
-from contactlab import simulate                # noqa: E402
-from contactlab.scene import load_scene        # noqa: E402
+import peers  # noqa: E402  (the scenes; pins BLAS threads before NumPy loads)
+import numba  # noqa: E402
+from contactlab import simulate  # noqa: E402
+from contactlab.scene import load_scene  # noqa: E402
 
 SETTINGS = ("auto", 1, numba.config.NUMBA_NUM_THREADS)
 
@@ -44,13 +44,16 @@ def scenes():
 
 def measure(model, method, dt, state, seconds, setting):
     run = simulate(model, method, dt, seconds, state=state, threads=setting)
-    return {"steps_per_second": run.summary["steps_per_second"], "steps_at": run.summary["threads"]["steps_at"],
-            "mean_sweeps": run.summary["solver"]["mean_iterations"]}
+    return {
+        "steps_per_second": run.summary["steps_per_second"],
+        "steps_at": run.summary["threads"]["steps_at"],
+        "mean_sweeps": run.summary["solver"]["mean_iterations"],
+    }
 
 
 def scene_rows(key, make, seconds, repeats):
     model, method, dt, settle = make()
-    settled = simulate(model, method, dt, settle, compiled_loop=True).state   # also compiles every kernel
+    settled = simulate(model, method, dt, settle, compiled_loop=True).state  # also compiles every kernel
     rows = []
     for load in ("idle", "one busy core"):
         with peers.busy_core(load != "idle"):
@@ -62,39 +65,59 @@ def scene_rows(key, make, seconds, repeats):
                         best[setting] = result
             load_average = os.getloadavg()[0]
         auto, one = best["auto"]["steps_per_second"], best[1]["steps_per_second"]
-        rows.append({"scene": key, "method": method, "load": load, "load_average_1min": load_average,
-                     "settings": {str(setting): best[setting] for setting in SETTINGS},
-                     "auto_over_one": auto / one})
-        print(f"{key:12s} {load:14s} " + "  ".join(
-            f"{setting}: {best[setting]['steps_per_second']:8.1f}" for setting in SETTINGS)
-              + f"  auto/1 = {auto / one:.2f}", flush=True)
+        rows.append(
+            {
+                "scene": key,
+                "method": method,
+                "load": load,
+                "load_average_1min": load_average,
+                "settings": {str(setting): best[setting] for setting in SETTINGS},
+                "auto_over_one": auto / one,
+            }
+        )
+        print(
+            f"{key:12s} {load:14s} "
+            + "  ".join(f"{setting}: {best[setting]['steps_per_second']:8.1f}" for setting in SETTINGS)
+            + f"  auto/1 = {auto / one:.2f}",
+            flush=True,
+        )
     return rows
 
 
 def write_markdown(results, path):
     threads_all = results["machine"]["numba_threads"]
-    lines = ["# Threads on an idle and on a busy machine", "",
-             f"Written by `python benchmarks/threads.py` on {results['date']}: {results['machine']['cpu']}, "
-             f"{results['machine']['cores']} cores, Numba {results['machine']['numba']} "
-             f"(threading layer `{results['machine']['threading_layer']}`, NUMBA_NUM_THREADS = {threads_all}, "
-             f"GOMP_SPINCOUNT = {results['machine']['gomp_spincount']}). Each figure is the better of "
-             f"{results['repeats']} runs of {results['seconds']} s of simulated time from the same settled "
-             "state; 'one busy core' is a second process spinning on one core for the whole row. "
-             "steps/s counts the stepping only.", "",
-             f"| scene | method | load | load avg (1 min) | auto | 1 thread | {threads_all} threads | auto / 1 "
-             "| steps of auto on 1 / all | sweeps per step |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Threads on an idle and on a busy machine",
+        "",
+        f"Written by `python benchmarks/threads.py` on {results['date']}: {results['machine']['cpu']}, "
+        f"{results['machine']['cores']} cores, Numba {results['machine']['numba']} "
+        f"(threading layer `{results['machine']['threading_layer']}`, NUMBA_NUM_THREADS = {threads_all}, "
+        f"GOMP_SPINCOUNT = {results['machine']['gomp_spincount']}). Each figure is the better of "
+        f"{results['repeats']} runs of {results['seconds']} s of simulated time from the same settled "
+        "state; 'one busy core' is a second process spinning on one core for the whole row. "
+        "steps/s counts the stepping only.",
+        "",
+        f"| scene | method | load | load avg (1 min) | auto | 1 thread | {threads_all} threads | auto / 1 "
+        "| steps of auto on 1 / all | sweeps per step |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for row in results["rows"]:
         settings = row["settings"]
         steps_at = settings["auto"]["steps_at"]
-        lines.append(f"| {row['scene']} | {row['method']} | {row['load']} | {row['load_average_1min']:.2f} | "
-                     f"{settings['auto']['steps_per_second']:.1f} | {settings['1']['steps_per_second']:.1f} | "
-                     f"{settings[str(threads_all)]['steps_per_second']:.1f} | {row['auto_over_one']:.2f} | "
-                     f"{steps_at.get('1', 0)} / {steps_at.get(str(threads_all), 0)} | "
-                     f"{settings['auto']['mean_sweeps']:.1f} |")
+        lines.append(
+            f"| {row['scene']} | {row['method']} | {row['load']} | {row['load_average_1min']:.2f} | "
+            f"{settings['auto']['steps_per_second']:.1f} | {settings['1']['steps_per_second']:.1f} | "
+            f"{settings[str(threads_all)]['steps_per_second']:.1f} | {row['auto_over_one']:.2f} | "
+            f"{steps_at.get('1', 0)} / {steps_at.get(str(threads_all), 0)} | "
+            f"{settings['auto']['mean_sweeps']:.1f} |"
+        )
     met = all(row["auto_over_one"] >= 0.95 for row in results["rows"] if row["load"] != "idle")
-    lines += ["", f"Target (auto at least as fast as one thread with a busy core, within 5 % of noise): "
-                  f"**{'met' if met else 'not met'}**.", ""]
+    lines += [
+        "",
+        f"Target (auto at least as fast as one thread with a busy core, within 5 % of noise): "
+        f"**{'met' if met else 'not met'}**.",
+        "",
+    ]
     with open(path, "w") as stream:
         stream.write("\n".join(lines))
 
@@ -111,10 +134,19 @@ def main():
     for key, make in chosen.items():
         rows += scene_rows(key, make, args.seconds, args.repeats)
     machine = peers.machine()
-    machine.update(numba=numba.__version__, numba_threads=numba.config.NUMBA_NUM_THREADS,
-                   threading_layer=numba.threading_layer(), gomp_spincount=os.environ.get("GOMP_SPINCOUNT"))
-    results = {"date": time.strftime("%Y-%m-%d"), "machine": machine, "seconds": args.seconds,
-               "repeats": args.repeats, "rows": rows}
+    machine.update(
+        numba=numba.__version__,
+        numba_threads=numba.config.NUMBA_NUM_THREADS,
+        threading_layer=numba.threading_layer(),
+        gomp_spincount=os.environ.get("GOMP_SPINCOUNT"),
+    )
+    results = {
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine,
+        "seconds": args.seconds,
+        "repeats": args.repeats,
+        "rows": rows,
+    }
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "threads.json"), "w") as stream:
         json.dump(results, stream, indent=1)

@@ -35,8 +35,16 @@ README_METHODS = ("projection", "constraints")
 
 def run(scene_name, method, seconds):
     scene = load_scene(scene_name, [f"simulation.method={method}"])
-    return simulate(scene.model, method, scene.dt, seconds, scene.options.get(method),
-                    scene.integrator, record_every=4, scene_name=scene_name)
+    return simulate(
+        scene.model,
+        method,
+        scene.dt,
+        seconds,
+        scene.options.get(method),
+        scene.integrator,
+        record_every=4,
+        scene_name=scene_name,
+    )
 
 
 def guide_figures(out, scale):
@@ -44,7 +52,7 @@ def guide_figures(out, scale):
         result = run(scene, method, seconds * scale)
         folder = os.path.join(out, method)
         paths = write_plots(result.arrays, folder, title=f"{scene} with {method}")
-        for name, path in paths.items():          # keep only what the guide shows
+        for name, path in paths.items():  # keep only what the guide shows
             if name not in shown:
                 os.unlink(path)
         still(result.arrays, os.path.join(folder, "still.png"), title=f"{scene} — {method}")
@@ -64,7 +72,7 @@ def readme_picture(out, scale):
 
 
 # penalty's price: how far the top of an 8-box stack sinks against the contact stiffness k
-SINKING_STIFFNESSES = (3e3, 1e4, 3e4, 1e5, 3e5, 1e6)    # N/m
+SINKING_STIFFNESSES = (3e3, 1e4, 3e4, 1e5, 3e5, 1e6)  # N/m
 SINKING_BOXES, SINKING_DT, SINKING_SECONDS = 8, 1 / 240, 3.0
 
 
@@ -72,6 +80,7 @@ def penalty_sinking(out, scale):
     """docs/figures/penalty/sinking.png: the top box's sinking once settled, for each k and for
     "auto", against the closed form Σ_i (i m g / 4) / k of four springs under each of 8 levels."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -85,11 +94,11 @@ def penalty_sinking(out, scale):
         b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
         return b.finalize()
 
-    def sunk(options):          # the mean over the last third: a soft, explicit stack still rocks
+    def sunk(options):  # the mean over the last third: a soft, explicit stack still rocks
         model = stack()
         result = simulate(model, "penalty", SINKING_DT, SINKING_SECONDS * scale, options, record_every=6)
         top = result.arrays["body_position"][:, -1, 2]
-        return model.state().body_position[-1, 2] - top[2 * len(top) // 3:].mean()
+        return model.state().body_position[-1, 2] - top[2 * len(top) // 3 :].mean()
 
     g = 9.81
     measured = [sunk({"stiffness": k}) for k in SINKING_STIFFNESSES]
@@ -99,11 +108,17 @@ def penalty_sinking(out, scale):
     levels = SINKING_BOXES * (SINKING_BOXES + 1) / 2
     axes.loglog(ks, 1000 * levels * g / (4 * ks), color="0.6", label="closed form Σ i m g / (4 k)")
     axes.loglog(SINKING_STIFFNESSES, 1000 * np.array(measured), "o", label="penalty, stiffness = k")
-    axes.axhline(1000 * auto, color="C1", linestyle="--",
-                 label=f"stiffness = \"auto\" (each contact's load / 0.3 mm): {1000 * auto:.2g} mm")
+    axes.axhline(
+        1000 * auto,
+        color="C1",
+        linestyle="--",
+        label=f'stiffness = "auto" (each contact\'s load / 0.3 mm): {1000 * auto:.2g} mm',
+    )
     axes.set_xlabel("contact stiffness k [N/m]")
     axes.set_ylabel("top box sunk [mm]")
-    axes.set_title(f"{SINKING_BOXES}-box stack, 1 kg boxes, dt = 1/240 s, mean over the last third of {SINKING_SECONDS * scale:g} s")
+    axes.set_title(
+        f"{SINKING_BOXES}-box stack, 1 kg boxes, dt = 1/240 s, mean over the last third of {SINKING_SECONDS * scale:g} s"
+    )
     axes.legend()
     path = os.path.join(out, "penalty", "sinking.png")
     os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -114,7 +129,7 @@ def penalty_sinking(out, scale):
 
 # the viewer's picture (docs/viewer.md): the pyramid under hard constraints, contacts and forces shown
 VIEWER_SCENE, VIEWER_METHOD, VIEWER_SECONDS = "box_pyramid", "constraints", 1.0
-NOTICE_WIDTH = 320          # px: the left strip of the page where the browser's "software WebGL" notice sits
+NOTICE_WIDTH = 320  # px: the left strip of the page where the browser's "software WebGL" notice sits
 
 
 def viewer_picture(out, scale):
@@ -122,12 +137,20 @@ def viewer_picture(out, scale):
     contact points and force arrows on, at the end of the run; skipped without Chromium."""
     from contactlab import browser
     from contactlab.viewer import view
+
     if browser.chromium() is None:
         print("viewer picture skipped: no Chromium on PATH (apt-get install chromium)")
         return
     scene = load_scene(VIEWER_SCENE, [f"simulation.method={VIEWER_METHOD}"])
-    result = simulate(scene.model, VIEWER_METHOD, scene.dt, VIEWER_SECONDS * scale,
-                      scene.options.get(VIEWER_METHOD), scene.integrator, scene_name=VIEWER_SCENE)
+    result = simulate(
+        scene.model,
+        VIEWER_METHOD,
+        scene.dt,
+        VIEWER_SECONDS * scale,
+        scene.options.get(VIEWER_METHOD),
+        scene.integrator,
+        scene_name=VIEWER_SCENE,
+    )
     shown = view(result)
     try:
         for toggle in ("points", "forces"):
@@ -135,11 +158,17 @@ def viewer_picture(out, scale):
         shown.show_time(shown.end)
         path = os.path.join(out, "viewer.png")
         with browser.Page(shown.url, width=1100, height=760) as page:
-            page.wait_for(path, lambda p: (browser.coloured(browser.scene_part(p)) > 0.02)
-                          & ((p[..., 0] > 0.7) & (p[..., 1] < 0.3) & (p[..., 2] < 0.3)).any(), what="the viewer")
+            page.wait_for(
+                path,
+                lambda p: (
+                    (browser.coloured(browser.scene_part(p)) > 0.02)
+                    & ((p[..., 0] > 0.7) & (p[..., 1] < 0.3) & (p[..., 2] < 0.3)).any()
+                ),
+                what="the viewer",
+            )
     finally:
         shown.stop()
-    picture = Image.open(path).convert("RGB")      # the page's viewport: the window less its frame
+    picture = Image.open(path).convert("RGB")  # the page's viewport: the window less its frame
     picture.crop((NOTICE_WIDTH, 0, *picture.size)).save(path)
     print(f"viewer picture → {path}")
 

@@ -17,10 +17,10 @@ import numpy as np
 from contactlab import ModelBuilder, simulate
 from contactlab.methods import AVAILABLE
 
-DROP = 1.0          # m, from the ball's bottom to the floor
-RADIUS = 0.1        # m
+DROP = 1.0  # m, from the ball's bottom to the floor
+RADIUS = 0.1  # m
 RESTITUTION = 0.8
-DT = 1 / 4000       # s
+DT = 1 / 4000  # s
 
 
 def build():
@@ -37,12 +37,12 @@ def rebound_apexes(run):
     height = run.arrays["body_position"][:, 0, 2] - RADIUS
     rising = run.arrays["body_velocity"][:, 0, 2]
     turning = np.flatnonzero((rising[:-1] > 0) & (rising[1:] <= 0))
-    return [h for h in (height[i:i + 2].max() for i in turning) if h > 1e-3]
+    return [h for h in (height[i : i + 2].max() for i in turning) if h > 1e-3]
 
 
 def main():
     model = build()
-    exact = [RESTITUTION ** 2 * DROP, RESTITUTION ** 4 * DROP]
+    exact = [RESTITUTION**2 * DROP, RESTITUTION**4 * DROP]
     print(f"exact rebounds: {exact[0]:.4f} m, {exact[1]:.4f} m")
     for method in AVAILABLE:
         run = simulate(model, method, dt=DT, duration=2.2)

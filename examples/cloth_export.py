@@ -21,18 +21,30 @@ from contactlab.simulation import simulate
 
 def main(out="out/example-cloth"):
     scene = load_scene("cloth_drape")
-    run = simulate(scene.model, scene.method, scene.dt, 0.5, scene.options[scene.method],
-                   scene.integrator, record_every=6, scene_name=scene.name)
+    run = simulate(
+        scene.model,
+        scene.method,
+        scene.dt,
+        0.5,
+        scene.options[scene.method],
+        scene.integrator,
+        record_every=6,
+        scene_name=scene.name,
+    )
     write_outputs(out, run.arrays, run.summary)
     stage_path = write_usd(run.arrays, os.path.join(out, "run.usd"))
     frames = write_mesh_sequence(run.arrays, os.path.join(out, "frames"), file_format="obj")
     stage = Usd.Stage.Open(stage_path)
-    cloth = next(UsdGeom.Mesh(prim) for prim in stage.Traverse() if prim.GetPath().pathString.startswith("/World/Cloth/"))
+    cloth = next(
+        UsdGeom.Mesh(prim) for prim in stage.Traverse() if prim.GetPath().pathString.startswith("/World/Cloth/")
+    )
     last = stage.GetEndTimeCode()
     points = np.array(cloth.GetPointsAttr().Get(Usd.TimeCode(last)))
     gap = np.abs(points - run.arrays["particle_position"][-1]).max()
-    print(f"wrote {stage_path} and {len(frames)} OBJ frames; the stage's last cloth frame is "
-          f"{gap * 1000:.2g} mm from the trajectory")
+    print(
+        f"wrote {stage_path} and {len(frames)} OBJ frames; the stage's last cloth frame is "
+        f"{gap * 1000:.2g} mm from the trajectory"
+    )
 
 
 if __name__ == "__main__":

@@ -13,17 +13,17 @@ import scipy.sparse as sp
 
 from contactlab.lcp import solve_lcp
 
-N = 10              # masses in the column
-MASS = 1.0          # kg
-G, H = 9.81, 0.01   # m/s², s
+N = 10  # masses in the column
+MASS = 1.0  # kg
+G, H = 9.81, 0.01  # m/s², s
 
 
 def column_lcp():
     """B (N, N) sparse and c (N,): contact 0 is floor–mass 0, contact k is mass k−1 – mass k."""
-    J = sp.diags([np.ones(N), -np.ones(N - 1)], [0, -1]).tocsr()       # gap rate of contact k
+    J = sp.diags([np.ones(N), -np.ones(N - 1)], [0, -1]).tocsr()  # gap rate of contact k
     B = (J @ J.T / MASS).tocsr()
-    free_velocity = np.full(N, -G * H)                                  # gravity over one step
-    c = -(J @ free_velocity)                                            # cancel the approach speed
+    free_velocity = np.full(N, -G * H)  # gravity over one step
+    c = -(J @ free_velocity)  # cancel the approach speed
     return B, c
 
 
@@ -33,8 +33,10 @@ def main():
     for method in ("pgs", "redblack", "lemke"):
         result = solve_lcp(B, c, method=method, tol=1e-12, max_iterations=20000)
         error = np.max(np.abs(result.lam - exact))
-        print(f"{method:9s} converged={result.converged} after {result.iterations} "
-              f"{'pivots' if method == 'lemke' else 'sweeps'}; largest error {error:.2e} N s")
+        print(
+            f"{method:9s} converged={result.converged} after {result.iterations} "
+            f"{'pivots' if method == 'lemke' else 'sweeps'}; largest error {error:.2e} N s"
+        )
 
 
 if __name__ == "__main__":

@@ -9,13 +9,21 @@ def rng():
     return np.random.default_rng(12345)
 
 
-def ball_on_plane(restitution=0.0, friction=0.5, height=1.0, radius=0.1, mass=1.0, velocity=(0, 0, 0),
-                  angular_velocity=(0, 0, 0)):
+def ball_on_plane(
+    restitution=0.0, friction=0.5, height=1.0, radius=0.1, mass=1.0, velocity=(0, 0, 0), angular_velocity=(0, 0, 0)
+):
     """A sphere whose bottom is ``height`` above the plane z = 0, both of one material."""
     builder = ModelBuilder()
     builder.add_material("m", friction=friction, restitution=restitution)
-    builder.add_body("sphere", radius=radius, mass=mass, position=(0, 0, radius + height), velocity=velocity,
-                     angular_velocity=angular_velocity, material="m")
+    builder.add_body(
+        "sphere",
+        radius=radius,
+        mass=mass,
+        position=(0, 0, radius + height),
+        velocity=velocity,
+        angular_velocity=angular_velocity,
+        material="m",
+    )
     builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="m")
     return builder.finalize()
 
@@ -23,6 +31,7 @@ def ball_on_plane(restitution=0.0, friction=0.5, height=1.0, radius=0.1, mass=1.
 def random_rotations(rng, count):
     """Uniformly distributed rotation matrices (count, 3, 3), from unit quaternions."""
     from contactlab import rotations
+
     return rotations.to_matrix(rotations.normalize(rng.normal(size=(count, 4))))
 
 
@@ -34,8 +43,15 @@ def cube_on_plane(angle_degrees=0.0, friction=0.5, mass=1.0, velocity=(0, 0, 0),
     normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
     builder = ModelBuilder()
     builder.add_material("m", friction=friction, restitution=0.0)
-    builder.add_body("box", half_extents=(half, half, half), mass=mass, position=normal * (half - sink),
-                     orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0), velocity=velocity, material="m")
+    builder.add_body(
+        "box",
+        half_extents=(half, half, half),
+        mass=mass,
+        position=normal * (half - sink),
+        orientation=(np.cos(theta / 2), 0.0, -np.sin(theta / 2), 0.0),
+        velocity=velocity,
+        material="m",
+    )
     builder.add_obstacle("plane", normal=normal, offset=0.0, material="m")
     return builder.finalize(), -np.array([np.cos(theta), 0.0, np.sin(theta)])
 
@@ -48,8 +64,8 @@ def frictional_contacts(rng, nc=40, bodies=25, regularization=1e-3):
     for a in range(nc):
         i, j = rng.choice(bodies, 2, replace=False)
         frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-        J[3 * a:3 * a + 3, 3 * i:3 * i + 3] = frame.T
-        J[3 * a:3 * a + 3, 3 * j:3 * j + 3] = -frame.T
+        J[3 * a : 3 * a + 3, 3 * i : 3 * i + 3] = frame.T
+        J[3 * a : 3 * a + 3, 3 * j : 3 * j + 3] = -frame.T
     W = J @ J.T + regularization * np.eye(3 * nc)
     q = rng.normal(size=3 * nc)
     q[::3] = -np.abs(q[::3])
@@ -60,13 +76,19 @@ def box_pyramid(levels=20, size=0.1, gap=0.005, friction=0.6):
     """The benchmark's 2D pyramid (benchmarks/peers.py): level L (from 0) holds levels − L cubes
     of ``size`` [m], 1 kg, each resting exactly on the level below, ``gap`` [m] apart sideways."""
     from contactlab import ModelBuilder
+
     b = ModelBuilder()
     b.add_material("wood", friction=friction, restitution=0.0)
     for level in range(levels):
         n = levels - level
         for i in range(n):
-            b.add_body("box", half_extents=(size / 2,) * 3, mass=1.0,
-                       position=((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level), material="wood")
+            b.add_body(
+                "box",
+                half_extents=(size / 2,) * 3,
+                mass=1.0,
+                position=((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level),
+                material="wood",
+            )
     b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
     return b.finalize()
 
@@ -74,10 +96,12 @@ def box_pyramid(levels=20, size=0.1, gap=0.005, friction=0.6):
 def box_column(count=8, size=0.1, friction=0.6):
     """``count`` cubes of ``size`` [m], 1 kg, stacked on the floor."""
     from contactlab import ModelBuilder
+
     b = ModelBuilder()
     b.add_material("wood", friction=friction, restitution=0.0)
     for i in range(count):
-        b.add_body("box", half_extents=(size / 2,) * 3, mass=1.0, position=(0.0, 0.0, size / 2 + size * i),
-                   material="wood")
+        b.add_body(
+            "box", half_extents=(size / 2,) * 3, mass=1.0, position=(0.0, 0.0, size / 2 + size * i), material="wood"
+        )
     b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
     return b.finalize()

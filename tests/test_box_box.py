@@ -9,10 +9,9 @@ import itertools
 
 import numpy as np
 import pytest
-
-from contactlab.collision.box_box import (EDGE_FEATURE, FACE_ABS_TOL, FACE_REL_TOL, box_box,
-                                          sat_overlaps)
 from conftest import random_rotations
+
+from contactlab.collision.box_box import EDGE_FEATURE, FACE_ABS_TOL, FACE_REL_TOL, box_box, sat_overlaps
 
 HALF = np.array([0.5, 0.5, 0.5])
 I3 = np.eye(3)
@@ -33,7 +32,6 @@ def rot_y(angle):
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-
 def contacts(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin=0.0):
     """Run box_box into fresh buffers (written from slot 3, to check the slot offset)."""
     slot = 3
@@ -41,11 +39,22 @@ def contacts(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin=
     normal = np.full((slot + 8, 3), np.nan)
     depth = np.full(slot + 8, np.nan)
     feature = np.full(slot + 8, -1, dtype=np.int64)
-    count = box_box(np.asarray(center_a, float), np.asarray(rotation_a, float), np.asarray(half_a, float),
-                    np.asarray(center_b, float), np.asarray(rotation_b, float), np.asarray(half_b, float),
-                    float(margin), point, normal, depth, feature, slot)
+    count = box_box(
+        np.asarray(center_a, float),
+        np.asarray(rotation_a, float),
+        np.asarray(half_a, float),
+        np.asarray(center_b, float),
+        np.asarray(rotation_b, float),
+        np.asarray(half_b, float),
+        float(margin),
+        point,
+        normal,
+        depth,
+        feature,
+        slot,
+    )
     assert 0 <= count <= 4
-    assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count:]).all()   # nothing outside
+    assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count :]).all()  # nothing outside
     s = slice(slot, slot + count)
     return point[s], normal[s], depth[s], feature[s]
 
@@ -70,8 +79,10 @@ def oriented_overlap(verts_a, verts_b, n):
 
 def sat_axes_from_corners(verts_a, verts_b):
     """The 15 SAT axes rebuilt from the corners (edges as corner differences), unit rows."""
-    def edge_directions(v):        # corners in itertools.product order: bit 2 → x, bit 1 → y, bit 0 → z
+
+    def edge_directions(v):  # corners in itertools.product order: bit 2 → x, bit 1 → y, bit 0 → z
         return np.array([v[4] - v[0], v[2] - v[0], v[1] - v[0]])
+
     ea, eb = edge_directions(verts_a), edge_directions(verts_b)
     axes = [e for e in ea] + [e for e in eb] + [np.cross(x, y) for x in ea for y in eb]
     axes = np.array(axes)
@@ -84,7 +95,7 @@ def fibonacci_sphere(count):
     k = np.arange(count) + 0.5
     z = 1 - 2 * k / count
     r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * k
+    phi = np.pi * (1 + 5**0.5) * k
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
@@ -136,10 +147,10 @@ def assert_features_valid(feature):
 def test_cube_resting_on_cube_gives_the_four_corners():
     point, normal, depth, feature = contacts([0, 0, 0.999], I3, HALF, [0, 0, 0], I3, HALF)
     assert len(depth) == 4
-    np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-15)   # B (below) into A
+    np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-15)  # B (below) into A
     np.testing.assert_allclose(depth, 0.001, rtol=1e-9)
     expected = np.array([[x, y, 0.4995] for x in (-0.5, 0.5) for y in (-0.5, 0.5)])
-    assert same_point_sets(point, expected, atol=1e-12)       # the overlap square's corners, halfway
+    assert same_point_sets(point, expected, atol=1e-12)  # the overlap square's corners, halfway
     assert_features_valid(feature)
 
 
@@ -157,7 +168,7 @@ def test_small_box_on_large_box_keeps_its_corners_with_corner_labels():
         expected = corners(np.array(top), rot_z(angle), half_small)
         expected = expected[expected[:, 2] < top[2]] + [0, 0, 0.001]
         assert same_point_sets(point, expected, atol=1e-12)
-        assert (feature >= 4).all()                          # reference face on B (the bigger box)
+        assert (feature >= 4).all()  # reference face on B (the bigger box)
         local = (point - [shift, -shift, 0]) @ rot_z(angle)
         by_corner = {tuple(np.round(p, 9)): f for p, f in zip(local, feature)}
         if first is None:
@@ -165,15 +176,17 @@ def test_small_box_on_large_box_keeps_its_corners_with_corner_labels():
         assert by_corner.keys() == first.keys() and by_corner == first
 
 
-@pytest.mark.parametrize("half_top, half_bottom, height", [(HALF, HALF, 0.999),
-                                                         (np.array([0.2, 0.3, 0.1]), np.array([1.0, 1.0, 0.5]), 0.599)])
+@pytest.mark.parametrize(
+    "half_top, half_bottom, height",
+    [(HALF, HALF, 0.999), (np.array([0.2, 0.3, 0.1]), np.array([1.0, 1.0, 0.5]), 0.599)],
+)
 def test_features_and_points_persist_under_jitter(half_top, half_bottom, height):
     """A resting box jittered by 10 µm and 10 µrad, as a solver leaves it from step to step:
     the contacts stay at the same 4 corners with the same features. For equal boxes stacked
     flush this needs the removal of nearly straight clipped corners."""
     rng = np.random.default_rng(11)
     reference = None
-    for step in range(200):
+    for _step in range(200):
         angle = rng.normal(scale=1e-5, size=3)
         R = rot_x(angle[0]) @ rot_y(angle[1]) @ rot_z(angle[2])
         center = np.array([0.0, 0.0, height]) + rng.normal(scale=1e-5, size=3)
@@ -181,7 +194,7 @@ def test_features_and_points_persist_under_jitter(half_top, half_bottom, height)
         assert len(depth) == 4
         if reference is None:
             reference = point, feature
-            expected = corners(np.zeros(3), I3, half_top)[::2, :2]         # the 4 corners (x, y)
+            expected = corners(np.zeros(3), I3, half_top)[::2, :2]  # the 4 corners (x, y)
             assert same_point_sets(point[:, :2], expected, atol=1e-4)
             continue
         distance = np.linalg.norm(point[:, None] - reference[0][None], axis=2)
@@ -199,11 +212,13 @@ def test_cube_turned_45_degrees_gives_the_largest_quadrilateral_of_the_octagon()
     np.testing.assert_allclose(depth, 0.001, rtol=1e-9)
     np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-15)
     np.testing.assert_allclose(point[:, 2], 0.4995, atol=1e-12)
-    t = np.sqrt(0.5) - 0.5                                # where the turned square crosses the sides
-    octagon = np.array([[sx * 0.5, sy * t] for sx in (-1, 1) for sy in (-1, 1)]
-                       + [[sx * t, sy * 0.5] for sx in (-1, 1) for sy in (-1, 1)])
+    t = np.sqrt(0.5) - 0.5  # where the turned square crosses the sides
+    octagon = np.array(
+        [[sx * 0.5, sy * t] for sx in (-1, 1) for sy in (-1, 1)]
+        + [[sx * t, sy * 0.5] for sx in (-1, 1) for sy in (-1, 1)]
+    )
     distance = np.linalg.norm(point[:, None, :2] - octagon[None], axis=2)
-    assert (distance.min(axis=1) < 1e-12).all()           # every contact is a corner of the octagon
+    assert (distance.min(axis=1) < 1e-12).all()  # every contact is a corner of the octagon
     best = max(polygon_area(octagon[list(s)]) for s in itertools.combinations(range(8), 4))
     assert polygon_area(point[:, :2]) == pytest.approx(best, rel=1e-12)
     assert_features_valid(feature)
@@ -218,7 +233,7 @@ def test_reduction_keeps_the_deepest_point():
     point, normal, depth, feature = contacts(center, R, half_top, [0, 0, 0], I3, half_bottom)
     assert len(depth) == 4
     np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-15)
-    assert (feature >= 4).all()                      # the larger face (B's) is the reference
+    assert (feature >= 4).all()  # the larger face (B's) is the reference
     # independent: the bottom face's edges crossing the sides of the square |x|, |y| ≤ 0.35
     face = [center + R @ (np.array([sx, sy, -1.0]) * half_top) for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
     inside = [c for c in face if (np.abs(c[:2]) <= 0.35).all()]
@@ -235,7 +250,7 @@ def test_reduction_keeps_the_deepest_point():
     assert len(crossings) == 8
     expected_depth = 0.5 - crossings[:, 2]
     assert depth.max() == pytest.approx(expected_depth.max(), rel=1e-12)
-    for p, d in zip(point, depth):                   # each contact is one of the crossings, halfway up
+    for p, d in zip(point, depth):  # each contact is one of the crossings, halfway up
         k = np.argmin(np.linalg.norm(crossings[:, :2] - p[:2], axis=1))
         np.testing.assert_allclose(p, crossings[k] + [0, 0, 0.5 * d], atol=1e-12)
         assert d == pytest.approx(expected_depth[k], rel=1e-12)
@@ -275,9 +290,11 @@ def test_crossed_edges_off_centre():
 @pytest.mark.parametrize("case", ["resting", "turned", "edges"])
 def test_results_follow_a_rigid_motion_of_the_scene(case):
     rng = np.random.default_rng(7)
-    scene = {"resting": ([0, 0, 0.999], I3, HALF, [0, 0, 0], I3, HALF),
-             "turned": ([0, 0, 0.999], rot_z(np.pi / 4), HALF, [0, 0, 0], I3, HALF),
-             "edges": crossed_edges()}[case]
+    scene = {
+        "resting": ([0, 0, 0.999], I3, HALF, [0, 0, 0], I3, HALF),
+        "turned": ([0, 0, 0.999], rot_z(np.pi / 4), HALF, [0, 0, 0], I3, HALF),
+        "edges": crossed_edges(),
+    }[case]
     ca, Ra, ha, cb, Rb, hb = scene
     base = contacts(*scene)
     for Q in random_rotations(rng, 5):
@@ -315,15 +332,19 @@ def assert_swap_symmetric(scene, margin=0.0, candidates=None):
 
 @pytest.mark.parametrize("case", ["resting", "turned", "edges", "near"])
 def test_swapping_boxes_flips_the_normal_only(case):
-    scene = {"resting": ([0, 0, 0.999], I3, HALF, [0, 0, 0], I3, HALF),
-             "turned": ([0, 0, 0.999], rot_z(np.pi / 4), HALF, [0, 0, 0], I3, HALF),
-             "edges": crossed_edges(),
-             "near": ([0.1, 0.2, 1.003], rot_z(0.3), HALF, [0, 0, 0], I3, HALF)}[case]
+    scene = {
+        "resting": ([0, 0, 0.999], I3, HALF, [0, 0, 0], I3, HALF),
+        "turned": ([0, 0, 0.999], rot_z(np.pi / 4), HALF, [0, 0, 0], I3, HALF),
+        "edges": crossed_edges(),
+        "near": ([0.1, 0.2, 1.003], rot_z(0.3), HALF, [0, 0, 0], I3, HALF),
+    }[case]
     octagon = None
     if case == "turned":
         t = np.sqrt(0.5) - 0.5
-        octagon = np.array([[sx * 0.5, sy * t, 0.4995] for sx in (-1, 1) for sy in (-1, 1)]
-                           + [[sx * t, sy * 0.5, 0.4995] for sx in (-1, 1) for sy in (-1, 1)])
+        octagon = np.array(
+            [[sx * 0.5, sy * t, 0.4995] for sx in (-1, 1) for sy in (-1, 1)]
+            + [[sx * t, sy * 0.5, 0.4995] for sx in (-1, 1) for sy in (-1, 1)]
+        )
     assert_swap_symmetric(scene, margin=0.01, candidates=octagon)
 
 
@@ -349,7 +370,7 @@ def test_gap_within_margin_gives_negative_depths():
     point, normal, depth, feature = contacts([0, 0, 1.002], I3, HALF, [0, 0, 0], I3, HALF, margin=0.005)
     assert len(depth) == 4
     np.testing.assert_allclose(depth, -0.002, rtol=1e-9)
-    np.testing.assert_allclose(point[:, 2], 0.501, atol=1e-12)            # still midway
+    np.testing.assert_allclose(point[:, 2], 0.501, atol=1e-12)  # still midway
     np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-15)
     assert len(contacts([0, 0, 1.002], I3, HALF, [0, 0, 0], I3, HALF, margin=0.001)[2]) == 0
     point, normal, depth, feature = contacts(*crossed_edges(overlap=-0.003), margin=0.005)
@@ -359,7 +380,7 @@ def test_gap_within_margin_gives_negative_depths():
 
 def test_tilted_box_keeps_only_corners_within_the_margin():
     """A box tilted about x rests on one edge: two corners touch, the other two are 2 cm up."""
-    angle = np.arcsin(0.02 / 1.0)                       # raises the far edge by 2 cm over 1 m
+    angle = np.arcsin(0.02 / 1.0)  # raises the far edge by 2 cm over 1 m
     R = rot_x(angle)
     lowest = corners(np.zeros(3), R, HALF)[:, 2].min()
     center = np.array([0, 0, 0.5 - lowest - 0.001])
@@ -393,11 +414,11 @@ def test_sat_depth_matches_brute_force_support_functions(random_scenes):
     va_all = np.array([corners(*(x[k] for x in random_scenes[:3])) for k in range(RANDOM_PAIRS)])
     vb_all = np.array([corners(*(x[k] for x in random_scenes[3:])) for k in range(RANDOM_PAIRS)])
     sampled = np.empty(RANDOM_PAIRS)
-    for start in range(0, RANDOM_PAIRS, 32):                 # the corners on every direction, in chunks
-        pa = va_all[start:start + 32] @ directions.T             # (chunk, 8, directions)
-        pb = vb_all[start:start + 32] @ directions.T
+    for start in range(0, RANDOM_PAIRS, 32):  # the corners on every direction, in chunks
+        pa = va_all[start : start + 32] @ directions.T  # (chunk, 8, directions)
+        pb = vb_all[start : start + 32] @ directions.T
         overlap = np.minimum(pa.max(axis=1) - pb.min(axis=1), pb.max(axis=1) - pa.min(axis=1))
-        sampled[start:start + 32] = overlap.min(axis=1)
+        sampled[start : start + 32] = overlap.min(axis=1)
     checked = 0
     for k in range(RANDOM_PAIRS):
         ca, Ra, ha, cb, Rb, hb = (x[k] for x in random_scenes)
@@ -435,7 +456,7 @@ def test_manifold_invariants_on_random_pairs(random_scenes):
             assert len(depth) == 0
             continue
         if sat > tol:
-            assert len(depth) >= 1                     # overlapping boxes always get a contact
+            assert len(depth) >= 1  # overlapping boxes always get a contact
         if len(depth) == 0:
             continue
         assert_features_valid(feature)
@@ -450,13 +471,13 @@ def test_manifold_invariants_on_random_pairs(random_scenes):
         assert seen <= sat + FACE_REL_TOL * abs(sat) + FACE_ABS_TOL * scale + tol
         assert depth.max() <= seen + tol
         if max(np.abs(Ra.T @ n).max(), np.abs(Rb.T @ n).max()) < 1 - 1e-9:
-            assert len(depth) == 1 and feature[0] == EDGE_FEATURE     # an edge–edge contact ...
-            assert depth[0] == pytest.approx(seen, abs=tol)             # ... as deep as the axis overlap
+            assert len(depth) == 1 and feature[0] == EDGE_FEATURE  # an edge–edge contact ...
+            assert depth[0] == pytest.approx(seen, abs=tol)  # ... as deep as the axis overlap
         for p, d in zip(point, depth):
             for center, rotation, half, surface in ((ca, Ra, ha, p - 0.5 * d * n), (cb, Rb, hb, p + 0.5 * d * n)):
                 local = rotation.T @ (surface - center)
-                assert (np.abs(local) <= half + tol).all()            # inside the closed box ...
-                assert (half - np.abs(local)).min() <= tol            # ... and on its surface
+                assert (np.abs(local) <= half + tol).all()  # inside the closed box ...
+                assert (half - np.abs(local)).min() <= tol  # ... and on its surface
     assert counts[0] > 0 and counts[1] > 0 and counts[4] > 0
 
 
@@ -469,7 +490,7 @@ def test_agrees_with_fcl(random_scenes):
         sat, _, _ = sat_minimum(ca, Ra, ha, cb, Rb, hb)
         scale = max(ha.max(), hb.max())
         if abs(sat) < 1e-9 * scale:
-            continue                                         # touching: either answer is right
+            continue  # touching: either answer is right
         point, normal, depth, feature = contacts(ca, Ra, ha, cb, Rb, hb)
         a = fcl.CollisionObject(fcl.Box(*(2 * ha)), fcl.Transform(Ra, ca))
         b = fcl.CollisionObject(fcl.Box(*(2 * hb)), fcl.Transform(Rb, cb))
@@ -480,7 +501,7 @@ def test_agrees_with_fcl(random_scenes):
         if not hit:
             continue
         colliding += 1
-        fcl_normal = -result.contacts[0].normal                  # FCL's normal points from A into B
+        fcl_normal = -result.contacts[0].normal  # FCL's normal points from A into B
         fcl_depth = np.array([c.penetration_depth for c in result.contacts])
         fcl_point = np.array([c.pos for c in result.contacts])
         va, vb = corners(ca, Ra, ha), corners(cb, Rb, hb)
@@ -494,7 +515,7 @@ def test_agrees_with_fcl(random_scenes):
             # a different choice among near-equal axes: both within the face-favouring tolerance
             band = sat + FACE_REL_TOL * abs(sat) + FACE_ABS_TOL * scale + 1e-9 * scale
             assert oriented_overlap(va, vb, normal[0]) <= band
-            assert oriented_overlap(va, vb, fcl_normal) <= 1.06 * sat + 1e-9 * scale   # ODE: 5 % for edges
+            assert oriented_overlap(va, vb, fcl_normal) <= 1.06 * sat + 1e-9 * scale  # ODE: 5 % for edges
     assert colliding > RANDOM_PAIRS // 3
     assert same_normal >= 0.95 * colliding
 
@@ -510,7 +531,9 @@ def test_dispatcher_and_collide_use_box_box():
     assert supported(BOX, BOX)
     params = np.array([0.5, 0.5, 0.5, 0.0])
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
-    count = collide_pair(BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), *out, 0)
+    count = collide_pair(
+        BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), *out, 0
+    )
     assert count == 4
     np.testing.assert_allclose(out[1][:4], np.tile([0.0, 0.0, 1.0], (4, 1)))
 
@@ -521,6 +544,6 @@ def test_dispatcher_and_collide_use_box_box():
     c = collide(model, model.state())
     assert c.count == 4
     assert (c.body_a == 0).all() and (c.body_b == 1).all()
-    np.testing.assert_allclose(c.normal, np.tile([0.0, 0.0, -1.0], (4, 1)), atol=1e-15)   # B (on top) into A
+    np.testing.assert_allclose(c.normal, np.tile([0.0, 0.0, -1.0], (4, 1)), atol=1e-15)  # B (on top) into A
     np.testing.assert_allclose(c.depth, 0.001, rtol=1e-9)
     assert len(set(c.feature_id.tolist())) == 4

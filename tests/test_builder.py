@@ -37,28 +37,31 @@ def test_empty_groups_give_empty_arrays():
     assert model.state().particle_velocity.shape == (0, 3)
 
 
-@pytest.mark.parametrize("call, field", [
-    (lambda b: b.add_body("sphere", radius=-1.0, mass=1.0), "radius"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=-2.0), "mass"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=0.0), "mass"),
-    (lambda b: b.add_body("sphere", radius=0.1), "mass"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, density=5.0), "mass"),
-    (lambda b: b.add_body("box", half_extents=(1, 0, 1), mass=1.0), "half_extents"),
-    (lambda b: b.add_body("box", half_extents=(1, 1), mass=1.0), "half_extents"),
-    (lambda b: b.add_body("cylinder", radius=1.0, mass=1.0), "shape"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, position=(0, float("nan"), 0)), "position"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, orientation=(0, 0, 0, 0)), "orientation"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, material="steel"), "material"),
-    (lambda b: b.add_material("m", friction=-0.1), "friction"),
-    (lambda b: b.add_material("m", restitution=1.5), "restitution"),
-    (lambda b: b.add_particles([[0, 0, 0]], mass=0.0), "mass"),
-    (lambda b: b.add_particles([[0, 0, 0]], velocity=[[0, 0, 0], [1, 1, 1]]), "velocity"),
-    (lambda b: b.add_obstacle("plane", normal=(0, 0, 0)), "normal"),
-    (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, velocity="fast"), "velocity"),
-    (lambda b: b.add_particles([[0, 0, 0], [1, 1]]), "position"),
-    (lambda b: b.add_particles([[0, 0, 0], [1, 1, 1]], mass=[1.0, 2.0, 3.0]), "mass"),
-    (lambda b: b.add_particles([[0, 0, 0]], radius=-0.5), "radius"),
-])
+@pytest.mark.parametrize(
+    "call, field",
+    [
+        (lambda b: b.add_body("sphere", radius=-1.0, mass=1.0), "radius"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=-2.0), "mass"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=0.0), "mass"),
+        (lambda b: b.add_body("sphere", radius=0.1), "mass"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, density=5.0), "mass"),
+        (lambda b: b.add_body("box", half_extents=(1, 0, 1), mass=1.0), "half_extents"),
+        (lambda b: b.add_body("box", half_extents=(1, 1), mass=1.0), "half_extents"),
+        (lambda b: b.add_body("cylinder", radius=1.0, mass=1.0), "shape"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, position=(0, float("nan"), 0)), "position"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, orientation=(0, 0, 0, 0)), "orientation"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, material="steel"), "material"),
+        (lambda b: b.add_material("m", friction=-0.1), "friction"),
+        (lambda b: b.add_material("m", restitution=1.5), "restitution"),
+        (lambda b: b.add_particles([[0, 0, 0]], mass=0.0), "mass"),
+        (lambda b: b.add_particles([[0, 0, 0]], velocity=[[0, 0, 0], [1, 1, 1]]), "velocity"),
+        (lambda b: b.add_obstacle("plane", normal=(0, 0, 0)), "normal"),
+        (lambda b: b.add_body("sphere", radius=0.1, mass=1.0, velocity="fast"), "velocity"),
+        (lambda b: b.add_particles([[0, 0, 0], [1, 1]]), "position"),
+        (lambda b: b.add_particles([[0, 0, 0], [1, 1, 1]], mass=[1.0, 2.0, 3.0]), "mass"),
+        (lambda b: b.add_particles([[0, 0, 0]], radius=-0.5), "radius"),
+    ],
+)
 def test_bad_values_raise_one_clear_error(call, field):
     with pytest.raises(InputError) as error:
         call(ModelBuilder())
@@ -79,13 +82,13 @@ def test_capsule_mass_properties_against_voxels():
     r, h, n = 0.05, 0.12, 161
     axis = [np.linspace(-r, r, n), np.linspace(-r, r, n), np.linspace(-h - r, h + r, 3 * n)]
     x, y, z = np.meshgrid(*axis, indexing="ij")
-    inside = x ** 2 + y ** 2 + np.maximum(np.abs(z) - h, 0) ** 2 <= r ** 2
+    inside = x**2 + y**2 + np.maximum(np.abs(z) - h, 0) ** 2 <= r**2
     cell = np.prod([a[1] - a[0] for a in axis])
     mass = 1000.0 * inside.sum() * cell
     assert model.body_mass[0] == pytest.approx(mass, rel=3e-3)
     dm = 1000.0 * cell
-    Ixx = dm * np.sum((y ** 2 + z ** 2)[inside])
-    Izz = dm * np.sum((x ** 2 + y ** 2)[inside])
+    Ixx = dm * np.sum((y**2 + z**2)[inside])
+    Izz = dm * np.sum((x**2 + y**2)[inside])
     np.testing.assert_allclose(model.body_inertia[0], [Ixx, Ixx, Izz], rtol=5e-3)
 
 
@@ -103,6 +106,7 @@ def test_an_unknown_material_names_the_materials_there_are_default_included():
 
 def test_state_model_and_run_print_in_one_short_line():
     from contactlab import simulate
+
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1))
     b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, position=(1, 0, 1))

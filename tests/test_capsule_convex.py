@@ -11,15 +11,13 @@ brute-force NumPy reference written from the hull's points alone (SciPy's triang
   depth = radius − distance.
 """
 
-
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
 from contactlab.collision.capsule import capsule_box
 from contactlab.collision.capsule_convex import CAPSULE_CONVEX_CROSS_FEATURE, capsule_convex
-from contactlab.hulls import box_as_hull
-from contactlab.hulls import build_hull, hull_arrays, pack_hulls
+from contactlab.hulls import box_as_hull, build_hull, hull_arrays, pack_hulls
 
 I3 = np.eye(3)
 CUBE_HALF = np.array([0.5, 0.5, 0.5])
@@ -28,9 +26,13 @@ CUBE_HALF = np.array([0.5, 0.5, 0.5])
 def rotation_from_quaternion(q):
     q = np.asarray(q, dtype=float)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def random_rotation(rng):
@@ -52,8 +54,21 @@ def outputs(n=4):
 
 def run(center_a, rotation_a, radius, half_length, center_b, rotation_b, hull, margin=0.1):
     point, normal, depth, feature = outputs()
-    count = capsule_convex(np.asarray(center_a, float), rotation_a, radius, half_length, np.asarray(center_b, float),
-                           rotation_b, *hull, margin, point, normal, depth, feature, 0)
+    count = capsule_convex(
+        np.asarray(center_a, float),
+        rotation_a,
+        radius,
+        half_length,
+        np.asarray(center_b, float),
+        rotation_b,
+        *hull,
+        margin,
+        point,
+        normal,
+        depth,
+        feature,
+        0,
+    )
     return count, point[:count], normal[:count], depth[:count], feature[:count]
 
 
@@ -68,25 +83,26 @@ def cube():
 
 def test_lying_flat_gives_two_equal_contacts(cube):
     # capsule along x, resting on the top face, 0.01 deep
-    count, point, normal, depth, feature = run([0.0, 0.0, 0.5 + 0.2 - 0.01], axis_rotation([1, 0, 0]), 0.2, 0.3,
-                                               np.zeros(3), I3, cube)
+    count, point, normal, depth, feature = run(
+        [0.0, 0.0, 0.5 + 0.2 - 0.01], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube
+    )
     assert count == 2
     np.testing.assert_allclose(depth, [0.01, 0.01], atol=1e-12)
     np.testing.assert_allclose(normal, [[0, 0, 1], [0, 0, 1]], atol=1e-12)
     np.testing.assert_allclose(sorted(point[:, 0]), [-0.3, 0.3], atol=1e-12)
-    np.testing.assert_allclose(point[:, 2], 0.5 - 0.005, atol=1e-12)      # midway between the surfaces
+    np.testing.assert_allclose(point[:, 2], 0.5 - 0.005, atol=1e-12)  # midway between the surfaces
     assert feature[0] != feature[1] and 0 <= feature.min() and feature.max() <= 255
     # overhanging the edge: clipped at x = 0.5
-    count, point, normal, depth, feature = run([0.4, 0.0, 0.69], axis_rotation([1, 0, 0]), 0.2, 0.3,
-                                               np.zeros(3), I3, cube)
+    count, point, normal, depth, feature = run(
+        [0.4, 0.0, 0.69], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube
+    )
     assert count == 2
     np.testing.assert_allclose(sorted(point[:, 0]), [0.1, 0.5], atol=1e-12)
     np.testing.assert_allclose(depth, [0.01, 0.01], atol=1e-12)
 
 
 def test_upright_on_face_gives_one_contact(cube):
-    count, point, normal, depth, feature = run([0.1, -0.2, 0.5 + 0.3 + 0.2 - 0.02], I3, 0.2, 0.3, np.zeros(3), I3,
-                                               cube)
+    count, point, normal, depth, feature = run([0.1, -0.2, 0.5 + 0.3 + 0.2 - 0.02], I3, 0.2, 0.3, np.zeros(3), I3, cube)
     assert count == 1
     np.testing.assert_allclose(depth, [0.02], atol=1e-12)
     np.testing.assert_allclose(normal[0], [0, 0, 1], atol=1e-12)
@@ -97,28 +113,30 @@ def test_end_poking_an_edge_gives_one_contact(cube):
     # the capsule's −z end sits beyond the edge x = y = 0.5 (z = 0), pointing away diagonally
     direction = np.array([1.0, 1.0, 0.3]) / np.linalg.norm([1.0, 1.0, 0.3])
     tip = np.array([0.5, 0.5, 0.0]) + 0.15 * np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
-    count, point, normal, depth, feature = run(tip + 0.4 * direction, axis_rotation(direction), 0.2, 0.4,
-                                               np.zeros(3), I3, cube)
+    count, point, normal, depth, feature = run(
+        tip + 0.4 * direction, axis_rotation(direction), 0.2, 0.4, np.zeros(3), I3, cube
+    )
     assert count == 1
     np.testing.assert_allclose(depth, [0.05], atol=1e-12)
     np.testing.assert_allclose(normal[0], [1 / np.sqrt(2), 1 / np.sqrt(2), 0.0], atol=1e-12)
 
 
 def test_separated_within_margin_negative_depth(cube):
-    count, point, normal, depth, feature = run([0.0, 0.0, 0.5 + 0.2 + 0.03], axis_rotation([1, 0, 0]), 0.2, 0.3,
-                                               np.zeros(3), I3, cube, margin=0.05)
+    count, point, normal, depth, feature = run(
+        [0.0, 0.0, 0.5 + 0.2 + 0.03], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube, margin=0.05
+    )
     assert count == 2
     np.testing.assert_allclose(depth, [-0.03, -0.03], atol=1e-12)
-    count = run([0.0, 0.0, 0.5 + 0.2 + 0.06], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube,
-                margin=0.05)[0]
+    count = run([0.0, 0.0, 0.5 + 0.2 + 0.06], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube, margin=0.05)[0]
     assert count == 0
 
 
 def test_segment_deep_across_an_edge_uses_the_edge_axis(cube):
     # a segment along (1, −1, 0) crossing the cube near the edge x = y = 0.5: the axis
     # (1, 1, 0)/√2 overlaps 0.1/√2, less than every face (0.5 for z, 0.757 for x and y)
-    count, point, normal, depth, feature = run([0.45, 0.45, 0.0], axis_rotation([1, -1, 0]), 0.1, 1.0,
-                                               np.zeros(3), I3, cube)
+    count, point, normal, depth, feature = run(
+        [0.45, 0.45, 0.0], axis_rotation([1, -1, 0]), 0.1, 1.0, np.zeros(3), I3, cube
+    )
     assert count == 1
     np.testing.assert_allclose(normal[0], [1 / np.sqrt(2), 1 / np.sqrt(2), 0], atol=1e-12)
     np.testing.assert_allclose(depth[0], 0.1 + 0.1 / np.sqrt(2), atol=1e-12)
@@ -130,8 +148,9 @@ def test_rotated_and_moved_hull(cube):
     shift = np.array([1.0, -2.0, 0.5])
     # the flat capsule of the first test, carried along with the cube
     center = shift + rotation @ np.array([0.0, 0.0, 0.69])
-    count, point, normal, depth, feature = run(center, rotation @ axis_rotation([1, 0, 0]), 0.2, 0.3, shift, rotation,
-                                               cube)
+    count, point, normal, depth, feature = run(
+        center, rotation @ axis_rotation([1, 0, 0]), 0.2, 0.3, shift, rotation, cube
+    )
     assert count == 2
     np.testing.assert_allclose(depth, [0.01, 0.01], atol=1e-12)
     np.testing.assert_allclose(normal, [rotation[:, 2]] * 2, atol=1e-12)
@@ -156,10 +175,12 @@ def test_box_hulls_agree_with_capsule_box():
         center_b = rng.normal(size=3) * 0.1
         rotation_b = random_rotation(rng)
         margin = 0.2
-        count_box = capsule_box(center_a, rotation_a, radius, half_length, center_b, rotation_b, half, margin,
-                                p1, n1, d1, f1, 0)
-        count_hull = capsule_convex(center_a, rotation_a, radius, half_length, center_b, rotation_b, *hull, margin,
-                                    p2, n2, d2, f2, 0)
+        count_box = capsule_box(
+            center_a, rotation_a, radius, half_length, center_b, rotation_b, half, margin, p1, n1, d1, f1, 0
+        )
+        count_hull = capsule_convex(
+            center_a, rotation_a, radius, half_length, center_b, rotation_b, *hull, margin, p2, n2, d2, f2, 0
+        )
         assert count_box == count_hull
         if count_box == 0:
             continue
@@ -202,8 +223,8 @@ def _reference(points, triangles, origin, direction, half_length, directions):
     a, b, c = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
     normals = np.cross(b - a, c - a)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    wound = normals.copy()                         # as the corners wind (the point–triangle test needs it)
-    normals *= np.sign(np.einsum("ij,ij->i", normals, a - points.mean(axis=0)))[:, None]   # SciPy's may point in
+    wound = normals.copy()  # as the corners wind (the point–triangle test needs it)
+    normals *= np.sign(np.einsum("ij,ij->i", normals, a - points.mean(axis=0)))[:, None]  # SciPy's may point in
     edges = np.concatenate([b - a, c - b, a - c])
     cross = np.cross(direction, edges)
     keep = np.linalg.norm(cross, axis=1) > 1e-9
@@ -245,8 +266,15 @@ def test_random_hulls_against_brute_force():
         raw = rng.normal(size=(rng.integers(8, 40), 3))
         raw /= np.linalg.norm(raw, axis=1, keepdims=True)
         hull = build_hull(raw * semi_axes)
-        arrays = (hull.vertices, hull.face_normal, hull.face_offset, hull.face_vertex_start, hull.face_vertex_index,
-                  hull.edge_vertex, hull.edge_face)
+        arrays = (
+            hull.vertices,
+            hull.face_normal,
+            hull.face_offset,
+            hull.face_vertex_start,
+            hull.face_vertex_index,
+            hull.edge_vertex,
+            hull.edge_face,
+        )
         triangles = ConvexHull(hull.vertices).simplices
         for _ in range(15):
             center_a = rng.uniform(-0.8, 0.8, 3)
@@ -256,8 +284,21 @@ def test_random_hulls_against_brute_force():
             center_b = rng.normal(size=3) * 0.1
             rotation_b = random_rotation(rng)
             margin = 0.3
-            count = capsule_convex(center_a, rotation_a, radius, half_length, center_b, rotation_b, *arrays, margin,
-                                   point, normal, depth, feature, 0)
+            count = capsule_convex(
+                center_a,
+                rotation_a,
+                radius,
+                half_length,
+                center_b,
+                rotation_b,
+                *arrays,
+                margin,
+                point,
+                normal,
+                depth,
+                feature,
+                0,
+            )
             origin = rotation_b.T @ (center_a - center_b)
             direction = rotation_b.T @ rotation_a[:, 2]
             value, _ = _reference(hull.vertices, triangles, origin, direction, half_length, spread)
@@ -297,11 +338,24 @@ def test_hull_sliced_out_of_a_packed_layout_gives_the_same_contacts():
     packed = pack_hulls([first, second])
     sliced = hull_arrays(packed, 1)
     assert sliced[3][0] > 0
-    alone = (second.vertices, second.face_normal, second.face_offset, second.face_vertex_start,
-             second.face_vertex_index, second.edge_vertex, second.edge_face)
+    alone = (
+        second.vertices,
+        second.face_normal,
+        second.face_offset,
+        second.face_vertex_start,
+        second.face_vertex_index,
+        second.edge_vertex,
+        second.edge_face,
+    )
     for _ in range(200):
-        pose = (rng.uniform(-0.9, 0.9, 3), random_rotation(rng), 0.2, 0.3, rng.normal(size=3) * 0.1,
-                random_rotation(rng))
+        pose = (
+            rng.uniform(-0.9, 0.9, 3),
+            random_rotation(rng),
+            0.2,
+            0.3,
+            rng.normal(size=3) * 0.1,
+            random_rotation(rng),
+        )
         got = run(*pose, sliced)
         expected = run(*pose, alone)
         assert got[0] == expected[0]
@@ -314,8 +368,9 @@ def test_features_persist_while_sliding_and_tipping_over_an_edge(cube):
     # features keep their numbers throughout (as capsule_box's do)
     seen = set()
     for x in np.linspace(0.0, 0.75, 40):
-        count, point, normal, depth, feature = run([x, 0.0, 0.69], axis_rotation([1, 0, 0]), 0.2, 0.3,
-                                                   np.zeros(3), I3, cube)
+        count, point, normal, depth, feature = run(
+            [x, 0.0, 0.69], axis_rotation([1, 0, 0]), 0.2, 0.3, np.zeros(3), I3, cube
+        )
         assert count >= 1
         seen.update(int(f) for f in feature)
-    assert seen <= {10, 11}                   # top face = face 5 of box_as_hull: 2·5 + end
+    assert seen <= {10, 11}  # top face = face 5 of box_as_hull: 2·5 + end

@@ -13,8 +13,15 @@ from contactlab.simulation import simulate
 
 def _run(name, method="impulse", overrides=(), duration=None):
     scene = load_scene(name, list(overrides) + [f"simulation.method={method}"])
-    run = simulate(scene.model, method, scene.dt, duration or scene.duration,
-                   scene.method_options.get(method, {}), scene.integrator, scene_name=name)
+    run = simulate(
+        scene.model,
+        method,
+        scene.dt,
+        duration or scene.duration,
+        scene.method_options.get(method, {}),
+        scene.integrator,
+        scene_name=name,
+    )
     return scene, closed_form.checks(name, scene.model, run.arrays)
 
 
@@ -32,7 +39,7 @@ def test_expected_values_are_the_scenes_stated_numbers():
     # the numbers written in the scenes' descriptions, computed independently of closed_form
     bounce = _by_quantity(_run("bouncing_ball", duration=1.6)[1])
     assert bounce["rebound 1 apex"].expected == pytest.approx(0.64, rel=1e-12)
-    assert bounce["rebound 2 apex"].expected == pytest.approx(0.8 ** 4, rel=1e-12)
+    assert bounce["rebound 2 apex"].expected == pytest.approx(0.8**4, rel=1e-12)
     slide = _by_quantity(_run("sliding_block", duration=0.1)[1])
     assert slide["stopping distance"].expected == pytest.approx(9.0 / (2 * 0.3 * 9.81), rel=1e-3)
     assert slide["stopping time"].expected == pytest.approx(3.0 / (0.3 * 9.81), rel=1e-3)
@@ -44,13 +51,16 @@ def test_expected_values_are_the_scenes_stated_numbers():
     assert _by_quantity(_run("incline", duration=0.1)[1])["distance down the slope"].expected == 0.0
 
 
-@pytest.mark.parametrize("name, duration, tolerance", [
-    ("bouncing_ball", 1.6, 1e-4),       # impulses hit the apex to the step's accuracy
-    ("rod_impact", 0.4, 1e-4),          # R4 exactly: one impulse at the corner
-    ("rolling_sphere", 1.0, 0.02),      # the end of sliding is read at sample times (dt 0.002 s)
-    ("sliding_block", 1.5, 0.01),
-    ("newtons_cradle", 0.5, 1e-9),      # sequential impulses pass the velocity down the row
-])
+@pytest.mark.parametrize(
+    "name, duration, tolerance",
+    [
+        ("bouncing_ball", 1.6, 1e-4),  # impulses hit the apex to the step's accuracy
+        ("rod_impact", 0.4, 1e-4),  # R4 exactly: one impulse at the corner
+        ("rolling_sphere", 1.0, 0.02),  # the end of sliding is read at sample times (dt 0.002 s)
+        ("sliding_block", 1.5, 0.01),
+        ("newtons_cradle", 0.5, 1e-9),  # sequential impulses pass the velocity down the row
+    ],
+)
 def test_impulses_meet_the_closed_form(name, duration, tolerance):
     found = _run(name, duration=duration)[1]
     assert found
@@ -63,15 +73,15 @@ def test_impulses_meet_the_closed_form(name, duration, tolerance):
 
 def test_a_changed_scene_is_checked_against_its_own_answer():
     scene, found = _run("sliding_block", overrides=["bodies.0.velocity=[2,0,0]"], duration=0.1)
-    mu = np.sqrt(np.prod(scene.model.material_friction[[scene.model.body_material[0],
-                                                        scene.model.obstacle_material[0]]]))
+    mu = np.sqrt(
+        np.prod(scene.model.material_friction[[scene.model.body_material[0], scene.model.obstacle_material[0]]])
+    )
     assert _by_quantity(found)["stopping distance"].expected == pytest.approx(4.0 / (2 * mu * 9.81), rel=1e-12)
     # a steeper slope than the friction angle slides at g (sin θ − μ cos θ)
     theta = np.radians(40.0)
-    _, found = _run("incline", overrides=[f"obstacles.0.normal=[{-np.sin(theta)},0,{np.cos(theta)}]"],
-                    duration=0.3)
+    _, found = _run("incline", overrides=[f"obstacles.0.normal=[{-np.sin(theta)},0,{np.cos(theta)}]"], duration=0.3)
     a = 9.81 * (np.sin(theta) - 0.5 * np.cos(theta))
-    assert found[0].expected == pytest.approx(0.5 * a * 0.3 ** 2, rel=1e-6)
+    assert found[0].expected == pytest.approx(0.5 * a * 0.3**2, rel=1e-6)
 
 
 def test_no_check_when_the_formula_no_longer_applies():
@@ -82,14 +92,21 @@ def test_no_check_when_the_formula_no_longer_applies():
 
 # ---- verdicts: each scene's stated expectation as a check with a tolerance ---------------------
 
+
 def test_a_check_passes_within_its_tolerance_and_fails_outside_or_unreached():
     assert Check("x", "m", 1.0, 1.015, 0.02).passed is True
     assert Check("x", "m", 1.0, 1.03, 0.02).passed is False
-    assert Check("x", "m", 1.0, float("nan"), 0.02).passed is False           # never reached
-    assert Check("x", "m", 1.0, 1.0).passed is None                           # no tolerance, no verdict
+    assert Check("x", "m", 1.0, float("nan"), 0.02).passed is False  # never reached
+    assert Check("x", "m", 1.0, 1.0).passed is None  # no tolerance, no verdict
     assert Check("x", "m", 1.0, 1.03, 0.02).verdict() == "x: 1.03 m (expected 1 ± 0.02): FAIL"
     assert Check("x", "m", 1.0, 1.03, 0.02).as_record() == {
-        "quantity": "x", "unit": "m", "expected": 1.0, "measured": 1.03, "tolerance": 0.02, "passed": False}
+        "quantity": "x",
+        "unit": "m",
+        "expected": 1.0,
+        "measured": 1.03,
+        "tolerance": 0.02,
+        "passed": False,
+    }
 
 
 def test_every_built_in_check_carries_the_tolerance_the_module_sets():
@@ -97,15 +114,27 @@ def test_every_built_in_check_carries_the_tolerance_the_module_sets():
     bounce = _by_quantity(_run("bouncing_ball", duration=1.6)[1])
     assert bounce["rebound 1 apex"].tolerance == pytest.approx(0.02 * 0.64 + 1e-3, rel=1e-12)
     scene, found = _run("sliding_block", duration=0.1)
-    assert _by_quantity(found)["stopping time"].tolerance == pytest.approx(0.02 * 3.0 / (0.3 * 9.81) + scene.dt,
-                                                                            rel=1e-9)
+    assert _by_quantity(found)["stopping time"].tolerance == pytest.approx(
+        0.02 * 3.0 / (0.3 * 9.81) + scene.dt, rel=1e-9
+    )
     stack = _by_quantity(_run("box_stack", duration=0.05)[1])
     assert stack["largest body displacement"].tolerance == 0.01 and stack["deepest overlap"].tolerance == 0.005
 
 
-@pytest.mark.parametrize("name, duration", [("bouncing_ball", 1.6), ("rod_impact", 0.4), ("sliding_block", 1.5),
-                                            ("newtons_cradle", 0.5), ("box_stack", 1.0), ("card_house", 0.5),
-                                            ("incline", 0.5), ("particles_box", 1.0), ("domino_chain", 3.0)])
+@pytest.mark.parametrize(
+    "name, duration",
+    [
+        ("bouncing_ball", 1.6),
+        ("rod_impact", 0.4),
+        ("sliding_block", 1.5),
+        ("newtons_cradle", 0.5),
+        ("box_stack", 1.0),
+        ("card_house", 0.5),
+        ("incline", 0.5),
+        ("particles_box", 1.0),
+        ("domino_chain", 3.0),
+    ],
+)
 def test_impulses_meet_every_stated_expectation(name, duration):
     found = _run(name, duration=duration)[1]
     assert found and all(check.passed for check in found), [check.verdict() for check in found]
@@ -130,6 +159,7 @@ def test_a_method_that_misses_an_expectation_fails_it_with_the_number():
 def test_nothing_inside_an_obstacle_is_measured_from_the_centres():
     # a particle put 2 cm behind the floor of particles_box: its centre is 2 cm inside the floor's half-space
     from contactlab.closed_form import _centres_inside_obstacles
+
     scene = load_scene("particles_box")
     positions = np.array([[[0.0, 0.0, 0.3], [0.1, 0.0, -0.02]]])
     assert _centres_inside_obstacles(scene.model, positions) == pytest.approx(0.02, abs=1e-12)

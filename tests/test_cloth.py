@@ -9,29 +9,48 @@ from contactlab.dynamics.integrators import free_velocities, particle_system, so
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.scene import load_scene
 
-UPRIGHT = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)     # 90° about x: the grid's y axis points up
+UPRIGHT = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)  # 90° about x: the grid's y axis points up
 
 
 def sheet(n=6, k=1000.0, damping=0.0, pinned="top_corners", **extra):
     """A 0.5 m square cloth of 0.2 kg, horizontal at z = 1 m (n × n vertices)."""
     b = ModelBuilder()
-    b.add_cloth(size=(0.5, 0.5), resolution=(n, n), mass=0.2, position=(0, 0, 1), stretch_stiffness=k,
-                shear_stiffness=k / 10, bend_stiffness=k / 100, damping=damping, pinned=pinned, **extra)
+    b.add_cloth(
+        size=(0.5, 0.5),
+        resolution=(n, n),
+        mass=0.2,
+        position=(0, 0, 1),
+        stretch_stiffness=k,
+        shear_stiffness=k / 10,
+        bend_stiffness=k / 100,
+        damping=damping,
+        pinned=pinned,
+        **extra,
+    )
     return b.finalize()
 
 
 def jiggled(model, rng, amount=0.03):
     state = model.state()
-    return (state.particle_position + amount * rng.normal(size=state.particle_position.shape),
-            rng.normal(size=state.particle_position.shape))
+    return (
+        state.particle_position + amount * rng.normal(size=state.particle_position.shape),
+        rng.normal(size=state.particle_position.shape),
+    )
 
 
 # -- the model --------------------------------------------------------------------------------------
 def test_grid_topology_masses_and_pins():
     b = ModelBuilder()
     b.add_particles([[0, 0, 5.0]], mass=2.0)
-    vertices = b.add_cloth(size=(2.0, 1.0), resolution=(4, 3), density=0.5, position=(1, 2, 3),
-                           pinned=["top_edge", 1], thickness=0.01, name="flag")
+    vertices = b.add_cloth(
+        size=(2.0, 1.0),
+        resolution=(4, 3),
+        density=0.5,
+        position=(1, 2, 3),
+        pinned=["top_edge", 1],
+        thickness=0.01,
+        name="flag",
+    )
     model = b.finalize()
     assert vertices == range(1, 13)
     assert model.cloth_names == ("flag",) and model.cloth_count == 1
@@ -44,13 +63,15 @@ def test_grid_topology_masses_and_pins():
     np.testing.assert_allclose(x[1], [0.0, 1.5, 3.0])
     np.testing.assert_allclose(x[1 + 3 + 4 * 2], [2.0, 2.5, 3.0])
     pinned = np.nonzero(model.particle_pinned)[0]
-    assert pinned.tolist() == [2, 9, 10, 11, 12]                     # index 1 and the row b = 2
+    assert pinned.tolist() == [2, 9, 10, 11, 12]  # index 1 and the row b = 2
     assert (model.particle_inverse_mass[pinned] == 0).all() and model.particle_inverse_mass[0] == 0.5
     # 2 triangles per cell; stretch 3·3 + 4·2, shear 2·6, bend 2·3 + 4·1
     assert model.triangles.shape == (12, 3) and model.triangles.min() == 1
     assert model.spring_count == 17 + 12 + 10
-    np.testing.assert_allclose(model.spring_rest_length,
-                               np.linalg.norm(x[model.spring_particles[:, 1]] - x[model.spring_particles[:, 0]], axis=1))
+    np.testing.assert_allclose(
+        model.spring_rest_length,
+        np.linalg.norm(x[model.spring_particles[:, 1]] - x[model.spring_particles[:, 0]], axis=1),
+    )
     # triangles wound counter-clockwise seen from +z (the local front)
     t = model.triangles
     normals = np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]])
@@ -72,10 +93,17 @@ def test_cloth_from_mesh_file(tmp_path):
     # two triangles sharing the diagonal (0, 2) of a unit square, plus a duplicate of vertex 0
     (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 0\nf 1 2 3\nf 5 3 4\n")
     b = ModelBuilder()
-    b.add_cloth(file=str(tmp_path / "quad.obj"), scale=2.0, density=1.0, position=(0, 0, 1), pinned=[0],
-                stretch_stiffness=50.0, bend_stiffness=5.0)
+    b.add_cloth(
+        file=str(tmp_path / "quad.obj"),
+        scale=2.0,
+        density=1.0,
+        position=(0, 0, 1),
+        pinned=[0],
+        stretch_stiffness=50.0,
+        bend_stiffness=5.0,
+    )
     model = b.finalize()
-    assert model.particle_count == 4                                  # the duplicate is merged
+    assert model.particle_count == 4  # the duplicate is merged
     np.testing.assert_allclose(model.initial.particle_position[3], [0, 2, 1])
     # mass by area: 4 m² × 1 kg/m²; the diagonal's ends are in both triangles
     np.testing.assert_allclose(model.particle_mass, [4 / 3, 2 / 3, 4 / 3, 2 / 3])
@@ -89,17 +117,24 @@ def test_cloth_from_mesh_file(tmp_path):
 # -- forces, Jacobians, energy ----------------------------------------------------------------------
 def test_single_spring_force_and_energy():
     b = ModelBuilder(gravity=(0, 0, 0))
-    b.add_cloth(size=(1.0, 1.0), resolution=(2, 2), mass=1.0, stretch_stiffness=100.0, shear_stiffness=0.0,
-                bend_stiffness=0.0, damping=2.0)
+    b.add_cloth(
+        size=(1.0, 1.0),
+        resolution=(2, 2),
+        mass=1.0,
+        stretch_stiffness=100.0,
+        shear_stiffness=0.0,
+        bend_stiffness=0.0,
+        damping=2.0,
+    )
     model = b.finalize()
     x = model.initial.particle_position.copy()
-    x[1, 0] += 0.1                                 # stretch the bottom spring (0, 1) by 0.1 m
+    x[1, 0] += 0.1  # stretch the bottom spring (0, 1) by 0.1 m
     v = np.zeros_like(x)
-    v[1, 0] = 1.0                                  # separating at 1 m/s
+    v[1, 0] = 1.0  # separating at 1 m/s
     f = spring_forces(model, x, v)
     # spring (0,1): k·0.1 + c·1 = 12 N pulls 0 towards +x and 1 towards −x; spring (1,3) leans
     np.testing.assert_allclose(f[0], [12.0, 0.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12)       # internal forces: no net force
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12)  # internal forces: no net force
     length13 = np.hypot(0.1, 1.0)
     assert spring_energy(model, x) == pytest.approx(0.5 * 100 * (0.01 + (length13 - 1.0) ** 2))
 
@@ -129,7 +164,7 @@ def test_jacobians_match_finite_differences(rng, clamp):
     if clamp:
         # negative semidefinite, and exact wherever no spring is compressed
         assert np.linalg.eigvalsh(dense).max() < 1e-8
-        assert np.linalg.eigvalsh(numeric).max() > 1e-3                  # the exact K is not
+        assert np.linalg.eigvalsh(numeric).max() > 1e-3  # the exact K is not
     else:
         np.testing.assert_allclose(dense, numeric, atol=1e-5 * np.abs(numeric).max())
 
@@ -156,9 +191,11 @@ def test_backward_euler_system_pins_and_matches_its_definition(rng):
     assert np.all(delta[pinned] == 0.0)
     # on the free particles: (M − h D − h² K) Δv = h (f + h K v)
     K, D = spring_jacobians(model, state.particle_position, state.particle_velocity, clamp_compressed=True)
-    A = (np.diag(np.repeat(model.particle_mass, 3)) - h * D.toarray() - h * h * K.toarray())
-    f = (spring_forces(model, state.particle_position, state.particle_velocity)
-         + model.particle_mass[:, None] * model.gravity).ravel()
+    A = np.diag(np.repeat(model.particle_mass, 3)) - h * D.toarray() - h * h * K.toarray()
+    f = (
+        spring_forces(model, state.particle_position, state.particle_velocity)
+        + model.particle_mass[:, None] * model.gravity
+    ).ravel()
     free = np.repeat(~pinned, 3)
     residual = (A @ delta.ravel() - h * (f + h * K @ state.particle_velocity.ravel()))[free]
     assert np.abs(residual).max() < 1e-9 * np.abs(h * f).max()
@@ -171,19 +208,30 @@ def test_backward_euler_system_pins_and_matches_its_definition(rng):
 def test_pinned_vertices_do_not_move_and_free_particles_fall_freely(integrator):
     b = ModelBuilder()
     b.add_particles([[3.0, 0, 1.0]])
-    b.add_cloth(size=(0.5, 0.5), resolution=(4, 4), mass=0.1, position=(0, 0, 1), pinned="corners",
-                velocity=(0, 0, 1.0), stretch_stiffness=20.0, shear_stiffness=2.0, bend_stiffness=0.2)
+    b.add_cloth(
+        size=(0.5, 0.5),
+        resolution=(4, 4),
+        mass=0.1,
+        position=(0, 0, 1),
+        pinned="corners",
+        velocity=(0, 0, 1.0),
+        stretch_stiffness=20.0,
+        shear_stiffness=2.0,
+        bend_stiffness=0.2,
+    )
     model = b.finalize()
     pinned = model.particle_pinned
     assert np.all(model.initial.particle_velocity[pinned] == 0)
     # soft springs: explicit Euler grows every oscillation, slowly enough at this step
     run = simulate(model, "impulse", dt=0.001, duration=0.3, integrator=integrator)
     positions = run.arrays["particle_position"]
-    np.testing.assert_array_equal(positions[:, pinned], np.broadcast_to(positions[0, pinned], positions[:, pinned].shape))
-    assert positions[-1, ~pinned, 2].min() < positions[0, ~pinned, 2].min()     # the rest sags
+    np.testing.assert_array_equal(
+        positions[:, pinned], np.broadcast_to(positions[0, pinned], positions[:, pinned].shape)
+    )
+    assert positions[-1, ~pinned, 2].min() < positions[0, ~pinned, 2].min()  # the rest sags
     t = run.arrays["time"][-1]
     z = positions[-1, 0, 2]
-    assert z == pytest.approx(1.0 - 0.5 * 9.81 * t ** 2, abs=9.81 * 0.001 * t)   # the free particle falls
+    assert z == pytest.approx(1.0 - 0.5 * 9.81 * t**2, abs=9.81 * 0.001 * t)  # the free particle falls
 
 
 # -- statics: a hanging chain -----------------------------------------------------------------------
@@ -193,17 +241,26 @@ def test_hanging_chain_extension_matches_mg_over_k():
     it, so it stretches by i m g / k (the horizontal springs stay at rest length)."""
     rows, k, total_mass, length = 6, 200.0, 0.12, 0.5
     b = ModelBuilder()
-    b.add_cloth(size=(0.1, length), resolution=(2, rows), mass=total_mass, orientation=UPRIGHT,
-                position=(0, 0, 1), stretch_stiffness=k, shear_stiffness=0.0, bend_stiffness=0.0,
-                damping=0.5, pinned="top_edge")
+    b.add_cloth(
+        size=(0.1, length),
+        resolution=(2, rows),
+        mass=total_mass,
+        orientation=UPRIGHT,
+        position=(0, 0, 1),
+        stretch_stiffness=k,
+        shear_stiffness=0.0,
+        bend_stiffness=0.0,
+        damping=0.5,
+        pinned="top_edge",
+    )
     model = b.finalize()
     run = simulate(model, "impulse", dt=0.01, duration=3.0, integrator="backward_euler", record_every=300)
     x = run.state.particle_position
-    assert np.abs(run.state.particle_velocity).max() < 1e-6                    # at rest
+    assert np.abs(run.state.particle_velocity).max() < 1e-6  # at rest
     m, g = total_mass / (2 * rows), 9.81
     rest = length / (rows - 1)
     for column in range(2):
-        z = x[column::2, 2]                                                     # bottom to top
+        z = x[column::2, 2]  # bottom to top
         extension = np.diff(z) - rest
         expected = np.arange(1, rows) * m * g / k
         np.testing.assert_allclose(extension, expected, rtol=0.01)
@@ -223,7 +280,7 @@ def test_backward_euler_runs_ten_times_the_step_symplectic_euler_can():
         simulate(model, "impulse", dt=0.002, duration=0.5)
     big = simulate(model, "impulse", dt=0.02, duration=1.0, integrator="backward_euler")
     energy = big.arrays["energy_kinetic"] + big.arrays["energy_potential"]
-    assert big.state.is_finite() and energy.max() <= energy[0] + 1e-9      # backward Euler never gains energy here
+    assert big.state.is_finite() and energy.max() <= energy[0] + 1e-9  # backward Euler never gains energy here
     # it hangs below the pins, spread to about the cloth's size, not crumpled or exploded
     x = big.state.particle_position
     assert x[:, 2].max() <= 1.0 + 1e-9 and x[:, 2].min() > 1.0 - 0.5 * 1.2
@@ -232,12 +289,12 @@ def test_backward_euler_runs_ten_times_the_step_symplectic_euler_can():
 
 
 def test_undamped_swinging_cloth_keeps_its_energy_under_symplectic_euler():
-    model = sheet(n=6, k=300.0, pinned=[5])                   # one corner: it swings and flaps
+    model = sheet(n=6, k=300.0, pinned=[5])  # one corner: it swings and flaps
     run = simulate(model, "impulse", dt=0.001, duration=2.0, record_every=10)
     energy = run.arrays["energy_kinetic"] + run.arrays["energy_potential"]
-    drop = 0.2 * 9.81 * 0.5                                   # the scale of the energy that moves around
+    drop = 0.2 * 9.81 * 0.5  # the scale of the energy that moves around
     assert np.abs(energy - energy[0]).max() < 0.05 * drop
-    assert run.arrays["energy_kinetic"].max() > 0.3 * drop    # and it really swings
+    assert run.arrays["energy_kinetic"].max() > 0.3 * drop  # and it really swings
 
 
 # -- scene files and trajectory ---------------------------------------------------------------------
@@ -286,7 +343,8 @@ def test_scene_file_cloth_and_trajectory_arrays(tmp_path):
     state = run.state
     gravity_only = -np.sum(model.particle_mass * (state.particle_position @ model.gravity))
     assert diagnostics.potential_energy(model, state) == pytest.approx(
-        gravity_only + spring_energy(model, state.particle_position))
+        gravity_only + spring_energy(model, state.particle_position)
+    )
     assert spring_energy(model, state.particle_position) > 0
 
 
@@ -305,7 +363,7 @@ CLOTH_ERRORS = [
     ("size = [0.4, 0.4]", "size = [0.0, 0.4]", "cloth[0].size", "greater than 0"),
     ("size = [0.4, 0.4]", "size = [0.4]", "cloth[0].size", "list of 2"),
     ("thickness = 0.01", "stifness = 5.0", "cloth[0].stifness", "unknown key"),
-    ("resolution = [5, 5]", "resolution = [5, 5]\nfile = \"x.obj\"", "cloth[0].size", "exactly one"),
+    ("resolution = [5, 5]", 'resolution = [5, 5]\nfile = "x.obj"', "cloth[0].size", "exactly one"),
 ]
 
 
@@ -327,6 +385,6 @@ def test_a_cloth_landing_on_a_sphere_creates_no_energy_at_a_small_enough_step(me
     scene = load_scene("cloth_drape", [f"simulation.method={method}", f"simulation.dt={dt}"])
     run = simulate(scene.model, method, scene.dt, 0.45, scene.method_options.get(method, {}), scene.integrator)
     energy = run.arrays["energy_kinetic"] + run.arrays["energy_potential"] + run.arrays["energy_elastic"]
-    assert run.summary["max_contacts"] > 100                     # it did land on the sphere
+    assert run.summary["max_contacts"] > 100  # it did land on the sphere
     assert energy.max() <= energy[0] * (1 + 1e-3)
-    assert energy[-1] < 0.9 * energy[0]                          # and the landing lost energy
+    assert energy[-1] < 0.9 * energy[0]  # and the landing lost energy

@@ -31,16 +31,22 @@ def pyramid(tmp_path_factory):
 def ball(tmp_path_factory):
     """The bouncing ball past its first apex; penalty made to blow up by a stiffness of 1e12 N/m
     kept explicit."""
-    return compare("bouncing_ball", ["impulse", "penalty"], str(tmp_path_factory.mktemp("ball")),
-                   overrides=["method.penalty.stiffness=1e12", "method.penalty.implicit_springs=never"],
-                   duration=0.9, video=False)
+    return compare(
+        "bouncing_ball",
+        ["impulse", "penalty"],
+        str(tmp_path_factory.mktemp("ball")),
+        overrides=["method.penalty.stiffness=1e12", "method.penalty.implicit_springs=never"],
+        duration=0.9,
+        video=False,
+    )
 
 
 @pytest.fixture(scope="module")
 def cradle(tmp_path_factory):
     """Newton's cradle: no gravity, no obstacles, so momentum must be conserved."""
-    return compare("newtons_cradle", "impulse,projection", str(tmp_path_factory.mktemp("cradle")),
-                   duration=0.3, video=False)
+    return compare(
+        "newtons_cradle", "impulse,projection", str(tmp_path_factory.mktemp("cradle")), duration=0.3, video=False
+    )
 
 
 def _csv_rows(result):
@@ -91,6 +97,7 @@ def _assert_links_resolve(result):
 
 # ---- the numbers --------------------------------------------------------------------------------
 
+
 def test_one_csv_row_per_method_matching_each_summary(pyramid):
     rows = _csv_rows(pyramid)
     assert [row["method"] for row in rows] == list(AVAILABLE)
@@ -104,9 +111,12 @@ def test_one_csv_row_per_method_matching_each_summary(pyramid):
         assert float(row["max_penetration_mm"]) == pytest.approx(summary["max_penetration"] * 1000, rel=1e-12)
         assert int(row["max_solver_iterations"]) == summary["solver"]["max_iterations"]
         sweeps = _trajectory(pyramid, row["method"])["solver_iterations"]
-        assert len(sweeps) == summary["steps"] + 1                    # every step recorded, and the start
-        assert float(row["mean_solver_iterations"]) == summary["solver"]["mean_iterations"] == \
-            pytest.approx(sweeps[1:].mean(), rel=1e-12)
+        assert len(sweeps) == summary["steps"] + 1  # every step recorded, and the start
+        assert (
+            float(row["mean_solver_iterations"])
+            == summary["solver"]["mean_iterations"]
+            == pytest.approx(sweeps[1:].mean(), rel=1e-12)
+        )
         assert float(row["dt_s"]) == summary["dt"] and row["integrator"] == summary["integrator"]
 
 
@@ -149,10 +159,9 @@ def test_momentum_drift_without_obstacles_is_rounding_for_impulses(cradle):
     rows = {row["method"]: row for row in cradle.rows}
     assert rows["impulse"]["momentum_drift_Ns"] < 1e-9
     arrays = _trajectory(cradle, "impulse")
-    momentum = arrays["body_velocity"].sum(axis=1)                        # 1 kg balls
-    assert np.linalg.norm(momentum[-1] - momentum[0]) == pytest.approx(rows["impulse"]["momentum_drift_Ns"],
-                                                                       abs=1e-15)
-    assert isinstance(rows["projection"]["momentum_drift_Ns"], float)     # reported, whatever it is
+    momentum = arrays["body_velocity"].sum(axis=1)  # 1 kg balls
+    assert np.linalg.norm(momentum[-1] - momentum[0]) == pytest.approx(rows["impulse"]["momentum_drift_Ns"], abs=1e-15)
+    assert isinstance(rows["projection"]["momentum_drift_Ns"], float)  # reported, whatever it is
     with open(cradle.report_md, encoding="utf-8") as stream:
         assert "is a conservation check" in stream.read()
 
@@ -161,6 +170,7 @@ def test_closed_form_checks_become_error_columns_with_expected_and_measured_in_t
     closed_form = pytest.importorskip("contactlab.closed_form")
     arrays = _trajectory(ball, "impulse")
     from contactlab.scene import load_scene
+
     model = load_scene("bouncing_ball").model
     checks = closed_form.checks("bouncing_ball", model, arrays)
     assert checks
@@ -168,13 +178,13 @@ def test_closed_form_checks_become_error_columns_with_expected_and_measured_in_t
     first = checks[0]
     column = f"{first.quantity} error ({first.unit})"
     assert rows["impulse"][column] == pytest.approx(first.error, abs=1e-12)
-    assert abs(first.error) < 1e-3                                         # 0.64 m, to a fraction of a mm
-    assert rows["penalty"][column] is None                                 # it blew up
+    assert abs(first.error) < 1e-3  # 0.64 m, to a fraction of a mm
+    assert rows["penalty"][column] is None  # it blew up
     assert column in _csv_rows(ball)[0]
     with open(ball.report_md, encoding="utf-8") as stream:
         report = stream.read()
-    assert f"{first.quantity} ({first.unit}, expected {first.expected:.4g})" in report      # table heading
-    assert f"**{first.quantity}** ({first.unit}): expected {first.expected:.6g}" in report   # the check line
+    assert f"{first.quantity} ({first.unit}, expected {first.expected:.4g})" in report  # table heading
+    assert f"**{first.quantity}** ({first.unit}): expected {first.expected:.6g}" in report  # the check line
 
 
 def test_the_verdicts_match_the_checks_and_the_paragraph_names_what_was_missed(cradle):
@@ -198,23 +208,31 @@ def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
 
     def outcome(name, median, low, high):
         made = _Outcome(name, None)
-        made.row = {"steps_per_second": median, "steps_per_second_median": median, "steps_per_second_low": low,
-                    "steps_per_second_high": high}
+        made.row = {
+            "steps_per_second": median,
+            "steps_per_second_median": median,
+            "steps_per_second_low": low,
+            "steps_per_second_high": high,
+        }
         return made
+
     fast, close, slow = outcome("a", 1000, 950, 1050), outcome("b", 980, 900, 990), outcome("c", 500, 480, 520)
-    assert _speed_sentence([close, slow, fast]) == ("Fastest: a (1,000 steps/s, median); b within noise of it; "
-                                                    "slowest: c (500 steps/s).")
-    assert _speed_sentence([fast, close]) == ("Fastest: a (1,000 steps/s, median); b within noise of it "
-                                              "(their middle halves overlap).")
+    assert _speed_sentence([close, slow, fast]) == (
+        "Fastest: a (1,000 steps/s, median); b within noise of it; slowest: c (500 steps/s)."
+    )
+    assert _speed_sentence([fast, close]) == (
+        "Fastest: a (1,000 steps/s, median); b within noise of it (their middle halves overlap)."
+    )
 
 
 def test_a_run_measures_its_rate_in_windows_and_gives_median_and_quartiles(cradle):
-    from contactlab.simulation import Tally, WINDOW_SECONDS
+    from contactlab.simulation import WINDOW_SECONDS, Tally
+
     tally = Tally()
-    tally.timed(1, 5.0, 4.0)                           # the first step: compiling, never a measurement
-    for steps in (10, 20, 30, 40):                     # four windows of WINDOW_SECONDS: 100 to 400 steps/s
+    tally.timed(1, 5.0, 4.0)  # the first step: compiling, never a measurement
+    for steps in (10, 20, 30, 40):  # four windows of WINDOW_SECONDS: 100 to 400 steps/s
         tally.timed(2, WINDOW_SECONDS, 0.0, steps / (0.1 / WINDOW_SECONDS))
-    tally.timed(3, 1.0, 0.5, 1000)                     # steps that compiled something: not a measurement
+    tally.timed(3, 1.0, 0.5, 1000)  # steps that compiled something: not a measurement
     assert tally.window_rates == pytest.approx([100.0, 200.0, 300.0, 400.0])
     assert tally.rate_spread() == pytest.approx({"median": 250.0, "low": 175.0, "high": 325.0, "windows": 4})
     summary = _summary(cradle, "impulse")["steps_per_second_spread"]
@@ -224,6 +242,7 @@ def test_a_run_measures_its_rate_in_windows_and_gives_median_and_quartiles(cradl
 
 
 # ---- failures -----------------------------------------------------------------------------------
+
 
 def test_a_method_that_blows_up_is_reported_and_the_others_go_on(ball):
     rows = {row["method"]: row for row in ball.rows}
@@ -239,7 +258,7 @@ def test_a_method_that_blows_up_is_reported_and_the_others_go_on(ball):
     for path in (ball.report_md, ball.report_html):
         with open(path, encoding="utf-8") as stream:
             text = stream.read()
-        assert "blew up at t = " in text and "stiffness 1e+12 N/m" in text   # the health check's advice
+        assert "blew up at t = " in text and "stiffness 1e+12 N/m" in text  # the health check's advice
     _assert_links_resolve(ball)
 
 
@@ -293,7 +312,7 @@ def test_a_failure_while_writing_removes_what_the_comparison_wrote(tmp_path, mon
         compare("bouncing_ball", ["impulse", "constraints"], str(out), duration=0.02, video=False)
     assert not (tmp_path / "a").exists()
 
-    out.mkdir(parents=True)                          # a folder that was there before stays, with its files
+    out.mkdir(parents=True)  # a folder that was there before stays, with its files
     (out / "mine.txt").write_text("keep")
     with pytest.raises(OSError):
         compare("bouncing_ball", ["impulse"], str(out), duration=0.02, video=False)
@@ -311,6 +330,7 @@ def test_default_output_folder_is_out_scene_compare(tmp_path, monkeypatch):
 
 # ---- the reports --------------------------------------------------------------------------------
 
+
 def test_report_md_holds_the_table_links_and_the_summary(pyramid):
     with open(pyramid.report_md, encoding="utf-8") as stream:
         report = stream.read()
@@ -327,7 +347,7 @@ def test_report_md_holds_the_table_links_and_the_summary(pyramid):
 
 def test_report_html_parses_and_links_only_files_of_the_output(pyramid):
     parser = _assert_links_resolve(pyramid)
-    assert "video" not in parser.tags and "link" not in parser.tags            # video=False; no stylesheets
+    assert "video" not in parser.tags and "link" not in parser.tags  # video=False; no stylesheets
     with open(pyramid.report_html, encoding="utf-8") as stream:
         page = stream.read()
     assert "http://" not in page and "https://" not in page
@@ -337,16 +357,20 @@ def test_report_html_parses_and_links_only_files_of_the_output(pyramid):
 
 def test_text_is_escaped_in_the_html(tmp_path):
     scene = tmp_path / "odd.toml"
-    scene.write_text('description = "<b>bold</b> & \\"quoted\\""\n[simulation]\nduration = 0.02\n'
-                     '[[bodies]]\nshape = "sphere"\nradius = 0.1\nmass = 1.0\n', encoding="utf-8")
+    scene.write_text(
+        'description = "<b>bold</b> & \\"quoted\\""\n[simulation]\nduration = 0.02\n'
+        '[[bodies]]\nshape = "sphere"\nradius = 0.1\nmass = 1.0\n',
+        encoding="utf-8",
+    )
     result = compare(str(scene), ["impulse"], str(tmp_path / "out"), video=False)
     with open(result.report_html, encoding="utf-8") as stream:
         page = stream.read()
     assert "<b>bold</b>" not in page and "&lt;b&gt;bold&lt;/b&gt; &amp; &quot;quoted&quot;" in page
-    assert result.rows[0]["momentum_drift_Ns"] < 1e-12                  # free fall: P(T) − P(0) = M g T
+    assert result.rows[0]["momentum_drift_Ns"] < 1e-12  # free fall: P(T) − P(0) = M g T
 
 
 # ---- with videos, in a browser ------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def with_video(tmp_path_factory):
@@ -362,7 +386,7 @@ def test_videos_are_written_and_linked(with_video):
     parser = _assert_links_resolve(with_video)
     assert parser.tags.count("video") == 2
     assert "impulse/video.mp4" in parser.links and "impulse/still.png" in parser.links
-    assert "impulse/video.gif" in parser.links                                  # the fallback inside
+    assert "impulse/video.gif" in parser.links  # the fallback inside
 
 
 def _chromium():
@@ -374,29 +398,35 @@ def test_the_report_displays_in_headless_chromium(with_video, tmp_path):
     if browser is None:
         pytest.skip("no chromium, chromium-browser or google-chrome executable on PATH")
     url = "file://" + os.path.abspath(with_video.report_html)
-    flags = [browser, "--headless=new", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=8000",
-             f"--user-data-dir={tmp_path / 'profile'}"]
+    flags = [
+        browser,
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--virtual-time-budget=8000",
+        f"--user-data-dir={tmp_path / 'profile'}",
+    ]
     dom = subprocess.run([*flags, "--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
-    assert 'data-status="ok"' in dom, dom[dom.find("<body"):][:300]
+    assert 'data-status="ok"' in dom, dom[dom.find("<body") :][:300]
     screenshot = tmp_path / "report.png"
-    subprocess.run([*flags, f"--screenshot={screenshot}", "--window-size=1280,2000", url],
-                   capture_output=True, timeout=120)
+    subprocess.run(
+        [*flags, f"--screenshot={screenshot}", "--window-size=1280,2000", url], capture_output=True, timeout=120
+    )
     image = imread(screenshot)
     assert image.shape[:2] == (2000, 1280)
-    assert image[..., :3].std() > 0.05                                          # not a blank page
+    assert image[..., :3].std() > 0.05  # not a blank page
 
 
 def test_the_methods_run_on_a_dask_cluster_give_the_numbers_they_give_one_after_another(tmp_path):
     """workers=2: each method's run and video are a job of a real local cluster (two worker
     processes); every number but the timings is the one the runs in this process give."""
-    serial = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "here"), duration=0.5, video=False,
-                     workers=1)
-    spread = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "cluster"), duration=0.5, fps=10,
-                     workers=2)
+    serial = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "here"), duration=0.5, video=False, workers=1)
+    spread = compare("bouncing_ball", "impulse,penalty", str(tmp_path / "cluster"), duration=0.5, fps=10, workers=2)
     timings = set(compare_module.TIMINGS)
-    for here, there in zip(serial.rows, spread.rows):        # NaN where a rebound was not reached: equal too
-        np.testing.assert_equal({k: v for k, v in here.items() if k not in timings},
-                                {k: v for k, v in there.items() if k not in timings})
+    for here, there in zip(serial.rows, spread.rows):  # NaN where a rebound was not reached: equal too
+        np.testing.assert_equal(
+            {k: v for k, v in here.items() if k not in timings}, {k: v for k, v in there.items() if k not in timings}
+        )
     for method in ("impulse", "penalty"):
         files = spread.files[method]
         assert {"mp4", "gif", "still"} <= set(files) and all(os.path.isfile(files[name]) for name in files)
@@ -408,14 +438,17 @@ def test_methods_that_computed_the_same_trajectory_are_said_to_be_one_result(tmp
     """On one bouncing ball, impulses and constraints solve the same one-contact problem the same
     way (their positions differ by rounding only): the report says their numbers are one result;
     penalty's differ and it is not named."""
-    result = compare("bouncing_ball", "impulse,constraints,penalty", str(tmp_path / "out"), duration=0.6,
-                     video=False, workers=1)
+    result = compare(
+        "bouncing_ball", "impulse,constraints,penalty", str(tmp_path / "out"), duration=0.6, video=False, workers=1
+    )
     with open(result.report_md, encoding="utf-8") as stream:
         report = stream.read()
     impulse = open_trajectory(os.path.join(result.out, "impulse", "trajectory.h5"))
     constraints = open_trajectory(os.path.join(result.out, "constraints", "trajectory.h5"))
     apart = float(np.max(np.abs(impulse["body_position"] - constraints["body_position"])))
     assert apart < 1e-12
-    assert (f"- impulse and constraints computed the same trajectory to within rounding (positions apart by "
-            f"{apart:.2g} m at most)") in report
+    assert (
+        f"- impulse and constraints computed the same trajectory to within rounding (positions apart by "
+        f"{apart:.2g} m at most)"
+    ) in report
     assert "penalty computed the same" not in report and "and penalty computed" not in report

@@ -14,8 +14,14 @@ import pytest
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.collision import _colliders
 from contactlab.collision.broad_phase import brute_force_pairs
-from contactlab.collision.narrow_phase import (ALL_FAMILIES, FAMILIES, collide_pair, family, generate_contacts,
-                                               needs_hulls)
+from contactlab.collision.narrow_phase import (
+    ALL_FAMILIES,
+    FAMILIES,
+    collide_pair,
+    family,
+    generate_contacts,
+    needs_hulls,
+)
 from contactlab.compiling import NOTICE, FirstCompile, compile_notice
 
 OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) * 0.06
@@ -45,8 +51,15 @@ def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacl
     b.add_obstacle("convex", points=OCTAHEDRON, position=(5, 0, 0))
     model = b.finalize()
     # sphere and particle are both round: sphere_sphere; one sphere-like kind meets the boxes and so on
-    assert present(model.pair_families) == {"sphere_sphere", "sphere_box", "box_box", "sphere_plane", "box_plane",
-                                            "sphere_convex", "convex_convex"}
+    assert present(model.pair_families) == {
+        "sphere_sphere",
+        "sphere_box",
+        "box_box",
+        "sphere_plane",
+        "box_plane",
+        "sphere_convex",
+        "convex_convex",
+    }
     assert needs_hulls(model.pair_families)
     assert family(1, 5) == family(5, 1) == "convex_convex" and family(2, 2) is None and family(0, 6) is None
 
@@ -57,12 +70,24 @@ def mixed_model():
     for i in range(2):
         z = 0.15 + 0.12 * i
         b.add_body("sphere", radius=0.05, mass=1, position=(0.01 * i, 0, z))
-        b.add_body("box", half_extents=(0.05, 0.04, 0.03), mass=1, position=(0.07, 0.01 * i, z),
-                   orientation=(0.9, 0.1, 0.3, 0.2))
-        b.add_body("capsule", radius=0.03, half_length=0.05, mass=1, position=(0.04, 0.06, 0.18 + 0.05 * i),
-                   orientation=(0.8, 0.5, 0.2, 0.1))
-        b.add_body("convex", points=OCTAHEDRON, mass=1, position=(0.0, 0.07, z + 0.02),
-                   orientation=(0.7, 0.2, 0.6, 0.3))
+        b.add_body(
+            "box",
+            half_extents=(0.05, 0.04, 0.03),
+            mass=1,
+            position=(0.07, 0.01 * i, z),
+            orientation=(0.9, 0.1, 0.3, 0.2),
+        )
+        b.add_body(
+            "capsule",
+            radius=0.03,
+            half_length=0.05,
+            mass=1,
+            position=(0.04, 0.06, 0.18 + 0.05 * i),
+            orientation=(0.8, 0.5, 0.2, 0.1),
+        )
+        b.add_body(
+            "convex", points=OCTAHEDRON, mass=1, position=(0.0, 0.07, z + 0.02), orientation=(0.7, 0.2, 0.6, 0.3)
+        )
         b.add_body("convex", points=TETRAHEDRON, mass=1, position=(0.06, 0.08, z + 0.05))
     b.add_particles([[0.03, 0.05, 0.2], [0.08, 0.06, 0.25], [0.05, 0.0, 0.12]], radius=0.02)
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.12)
@@ -84,7 +109,7 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
     found = {name: 0 for name in FAMILIES}
     for (a, b), count in zip(pairs, np.bincount(everything[4], minlength=len(pairs))):
         found[family(kinds[a], kinds[b])] += count
-    assert all(found.values()), found                # every family touches somewhere in this scene
+    assert all(found.values()), found  # every family touches somewhere in this scene
     # each family alone, over its own pairs, and the scene's own families over all of them
     for name in FAMILIES:
         mine = np.array([family(kinds[a], kinds[b]) == name for a, b in pairs])
@@ -100,8 +125,20 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
     # and pair by pair, as collide_pair computes them (either order)
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
     for k, (a, b) in enumerate(pairs):
-        count = collide_pair(kinds[a], params[a], centers[a], rots[a], kinds[b], params[b], centers[b], rots[b],
-                             reach[k], model.hull_store, *out, 0)
+        count = collide_pair(
+            kinds[a],
+            params[a],
+            centers[a],
+            rots[a],
+            kinds[b],
+            params[b],
+            centers[b],
+            rots[b],
+            reach[k],
+            model.hull_store,
+            *out,
+            0,
+        )
         rows = everything[4] == k
         assert count == rows.sum()
         np.testing.assert_array_equal(out[1][:count], everything[1][rows])
@@ -109,7 +146,7 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
 
 def test_a_family_left_out_is_not_compiled_in():
     """The dispatch of a ball on the floor calls sphere_plane and no other pair routine."""
-    fresh = numba.njit(generate_contacts.py_func)          # not cached: its code is built here
+    fresh = numba.njit(generate_contacts.py_func)  # not cached: its code is built here
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.05))
     b.add_obstacle("plane", normal=(0, 0, 1))
@@ -127,16 +164,19 @@ def test_a_family_left_out_is_not_compiled_in():
 def test_collide_gives_the_same_contacts_whatever_the_shapes_around():
     """A sphere–box pair's contacts in a scene of spheres and boxes equal those in a scene
     that also holds capsules and hulls far away (another families specialization)."""
+
     def scene(extra):
         b = ModelBuilder()
         b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.19))
-        b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0.05, 0.02, 0.0),
-                   orientation=(0.95, 0.1, 0.2, 0.1))
+        b.add_body(
+            "box", half_extents=(0.1, 0.1, 0.1), mass=1, position=(0.05, 0.02, 0.0), orientation=(0.95, 0.1, 0.2, 0.1)
+        )
         if extra:
             b.add_body("capsule", radius=0.05, half_length=0.1, mass=1, position=(10, 0, 10))
             b.add_body("convex", points=OCTAHEDRON, mass=1, position=(20, 0, 10))
         b.add_obstacle("plane", normal=(0, 0, 1), offset=-0.09)
         return b.finalize()
+
     plain, extended = scene(False), scene(True)
     assert plain.pair_families != extended.pair_families
     a, b = collide(plain, plain.state(), margin=0.01), collide(extended, extended.state(), margin=0.01)
@@ -150,7 +190,7 @@ def test_a_compilation_prints_the_notice_once():
     with compile_notice(FirstCompile(stream=stream)) as listener:
         assert not listener.said
 
-        @numba.njit                                     # a function no cache holds: it compiles here
+        @numba.njit  # a function no cache holds: it compiles here
         def fresh(x):
             return x + 1.0
 
@@ -160,7 +200,7 @@ def test_a_compilation_prints_the_notice_once():
 
         assert another(1.0) == 4.0
     assert listener.said
-    with compile_notice(listener):                      # a run's later block: no second line
+    with compile_notice(listener):  # a run's later block: no second line
 
         @numba.njit
         def third(x):
@@ -176,7 +216,7 @@ def test_nothing_is_printed_when_nothing_compiles(capsys):
     def ready(x):
         return x * 3.0
 
-    ready(1.0)                                          # compiled before the block
+    ready(1.0)  # compiled before the block
     with compile_notice() as listener:
         assert ready(2.0) == 6.0
     assert not listener.said
@@ -188,7 +228,7 @@ def test_a_run_says_so_on_stderr_only_when_it_compiles(capsys):
     b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.2))
     b.add_obstacle("plane", normal=(0, 0, 1))
     model = b.finalize()
-    simulate(model, "impulse", dt=0.01, duration=0.3)      # compiles or loads what it needs
+    simulate(model, "impulse", dt=0.01, duration=0.3)  # compiles or loads what it needs
     capsys.readouterr()
     run = simulate(model, "impulse", dt=0.01, duration=0.3)
     captured = capsys.readouterr()
@@ -202,9 +242,27 @@ def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
 
     def run():
-        return subprocess.run([sys.executable, "-m", "contactlab", "run", "bouncing_ball", "--duration", "0.02",
-                               "--json", "--no-plots", "--out", str(tmp_path / "out")], cwd=tmp_path, env=env,
-                              capture_output=True, text=True, timeout=600)
+        return subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "contactlab",
+                "run",
+                "bouncing_ball",
+                "--duration",
+                "0.02",
+                "--json",
+                "--no-plots",
+                "--out",
+                str(tmp_path / "out"),
+            ],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+
     cold = run()
     assert cold.returncode == 0, cold.stderr
     assert NOTICE in cold.stderr.splitlines()
@@ -226,15 +284,18 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
 
     from contactlab import record
     from contactlab.methods import impulse, velocity_loop
+
     calls = []
 
     def compiling_first(real):
         """The first sample (the loop's own, or Recorder.sample's when stitched) compiles."""
+
         def sample(self, *args):
             if not calls:
                 with event.trigger_event("numba:compile", data={}):
                     time.sleep(0.2)
             return real(self, *args)
+
         return sample
 
     def compiling_on_the_third_call(real):
@@ -244,11 +305,14 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
                 with event.trigger_event("numba:compile", data={}):
                     time.sleep(0.2)
             return real(*args)
+
         return call
 
     if path == "loop":
         monkeypatch.setattr(velocity_loop.Stepper, "sample", compiling_first(velocity_loop.Stepper.sample))
-        monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_the_third_call(velocity_loop.Stepper.advance))
+        monkeypatch.setattr(
+            velocity_loop.Stepper, "advance", compiling_on_the_third_call(velocity_loop.Stepper.advance)
+        )
     else:
         monkeypatch.setattr(record.Recorder, "sample", compiling_first(record.Recorder.sample))
         monkeypatch.setattr(impulse, "step", compiling_on_the_third_call(impulse.step))

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import ball_on_plane, cube_on_plane
 
 from contactlab import ModelBuilder, simulate
 from contactlab.collision import collide
@@ -12,7 +13,6 @@ from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import constraints
 from contactlab.methods.sequential import rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from contactlab.scene import builtin_scenes, load_scene
-from conftest import ball_on_plane, cube_on_plane
 
 G = 9.81
 HALF = 0.05
@@ -20,14 +20,14 @@ HALF = 0.05
 
 def apexes(height, velocity):
     turning = np.nonzero((velocity[:-1] > 0) & (velocity[1:] <= 0))[0]
-    return np.array([height[i:i + 2].max() for i in turning])
+    return np.array([height[i : i + 2].max() for i in turning])
 
 
 @pytest.mark.parametrize("restitution", [0.0, 0.5, 0.8])
 def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution):
     model = ball_on_plane(restitution=restitution, height=1.0)
     fall = np.sqrt(2 / G)
-    duration = fall * (1 + 2 * sum(restitution ** k for k in range(1, 5)) + restitution ** 5) + 0.1
+    duration = fall * (1 + 2 * sum(restitution**k for k in range(1, 5)) + restitution**5) + 0.1
     run = simulate(model, "constraints", dt=0.001, duration=duration)
     z = run.arrays["body_position"][:, 0, 2] - 0.1
     found = apexes(z, run.arrays["body_velocity"][:, 0, 2])
@@ -44,8 +44,9 @@ def test_velocities_stop_an_impact_and_accelerations_cannot():
     model = ball_on_plane(height=0.5, restitution=0.0)
     on_velocities = simulate(model, "constraints", dt=0.004, duration=0.4)
     options = {"formulation": "acceleration", "stabilization": 0.0}
-    on_accelerations = simulate(model, "constraints", dt=0.004, duration=0.4, options=options,
-                                allow_divergence=True)           # it sinks on through the floor
+    on_accelerations = simulate(
+        model, "constraints", dt=0.004, duration=0.4, options=options, allow_divergence=True
+    )  # it sinks on through the floor
     impact_speed = np.sqrt(2 * G * 0.5)
     assert on_velocities.summary["max_penetration"] < 1e-9
     assert on_accelerations.summary["max_penetration"] > 0.5 * impact_speed * 0.004
@@ -54,7 +55,7 @@ def test_velocities_stop_an_impact_and_accelerations_cannot():
     with pytest.raises(SimulationDiverged, match="behind a static plane: it went through") as stopped:
         simulate(model, "constraints", dt=0.004, duration=0.4, options=options)
     z = stopped.value.run.arrays["body_position"][:, 0, 2]
-    assert z[-1] < -0.1 <= z[-2]              # the first sample with the centre a radius behind the floor
+    assert z[-1] < -0.1 <= z[-2]  # the first sample with the centre a radius behind the floor
 
 
 def test_acceleration_formulation_holds_a_resting_box():
@@ -74,7 +75,7 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
     x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
     stopped = np.argmax(np.abs(vx) < 1e-6)
     np.testing.assert_allclose(run.arrays["time"][stopped], v0 / (mu * G), rtol=0.03)
-    np.testing.assert_allclose(x[-1], v0 ** 2 / (2 * mu * G), rtol=0.03)
+    np.testing.assert_allclose(x[-1], v0**2 / (2 * mu * G), rtol=0.03)
 
 
 @pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
@@ -118,9 +119,14 @@ def resting_spheres(rng, friction=0.0):
     r = 0.1
     for i in range(4):
         b.add_body("sphere", radius=r, mass=rng.uniform(0.5, 3.0), position=(2.5 * r * i, 0, r), material="m")
-    for i in range(3):                                   # each touches two of the row below
-        b.add_body("sphere", radius=r, mass=rng.uniform(0.5, 3.0),
-                   position=(2.5 * r * i + 1.25 * r, 0, r + np.sqrt((2 * r) ** 2 - (1.25 * r) ** 2)), material="m")
+    for i in range(3):  # each touches two of the row below
+        b.add_body(
+            "sphere",
+            radius=r,
+            mass=rng.uniform(0.5, 3.0),
+            position=(2.5 * r * i + 1.25 * r, 0, r + np.sqrt((2 * r) ** 2 - (1.25 * r) ** 2)),
+            material="m",
+        )
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
     return b.finalize()
 
@@ -134,20 +140,29 @@ def contact_problem(model, dt=0.004):
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     target = np.zeros((contacts.count, 3))
-    target[:, 0] = np.maximum(-(-contacts.depth) / dt, 0.0)       # no overlap at the end: v_n ≥ 0 here
+    gap = -contacts.depth
+    target[:, 0] = np.maximum(-gap / dt, 0.0)  # no overlap at the end: v_n ≥ 0 here
     return state, contacts, rows, J, v_free, target
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.4])
 def test_matrix_free_and_assembled_give_the_same_lambda(rng, friction):
     from contactlab.lcp import solve_friction_contact, solve_lcp
+
     model = resting_spheres(rng, friction)
     state, contacts, rows, J, v_free, target = contact_problem(model)
     assert contacts.count == 10
     u = v_free.copy()
-    lam_free, _, change = solve_sequential_impulses(rows, contacts.friction, target[:, 0], u, 20000, 1e-14,
-                                                    np.zeros((contacts.count, 3)),
-                                                    *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)))
+    lam_free, _, change = solve_sequential_impulses(
+        rows,
+        contacts.friction,
+        target[:, 0],
+        u,
+        20000,
+        1e-14,
+        np.zeros((contacts.count, 3)),
+        *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
+    )
     inverse = constraints.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
     B, q = constraints.lcp_matrices(J, inverse, v_free, target.ravel())
     if friction == 0.0:
@@ -177,8 +192,13 @@ def sphere_column(rng):
 @pytest.mark.parametrize("solver", ["pgs", "redblack", "jacobi", "lemke"])
 def test_frictionless_lcp_solvers_hold_a_column(rng, solver):
     model = sphere_column(rng)
-    run = simulate(model, "constraints", dt=0.004, duration=0.5,
-                   options={"solver": solver, "omega": 0.7 if solver == "jacobi" else 1.0, "iterations": 500})
+    run = simulate(
+        model,
+        "constraints",
+        dt=0.004,
+        duration=0.5,
+        options={"solver": solver, "omega": 0.7 if solver == "jacobi" else 1.0, "iterations": 500},
+    )
     moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
     assert moved.max() < 1e-3
     assert run.summary["max_penetration"] < 1e-3
@@ -196,8 +216,9 @@ def test_newton_holds_the_stack_with_the_reactions_of_converged_sweeps():
     assert run.summary["solver"]["max_iterations"] < 30
     state = run.state
     newton = constraints.step(scene.model, state, scene.dt, constraints.Options(solver="newton", tolerance=1e-12))
-    sweeps = constraints.step(scene.model, state, scene.dt,
-                              constraints.Options(solver="nsgs", tolerance=1e-12, iterations=20000))
+    sweeps = constraints.step(
+        scene.model, state, scene.dt, constraints.Options(solver="nsgs", tolerance=1e-12, iterations=20000)
+    )
     np.testing.assert_allclose(newton[0].body_velocity, sweeps[0].body_velocity, atol=1e-7)
     np.testing.assert_allclose(newton[0].body_position, sweeps[0].body_position, atol=1e-9)
 
@@ -225,8 +246,18 @@ def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_pr
     # M4: 1/60 s; the symplectic cloth blows up at that step under projection
     b = ModelBuilder()
     b.add_material("m", friction=0.4, restitution=0.0)
-    b.add_cloth(size=(0.6, 0.6), resolution=(9, 9), position=(0, 0, 0.3), mass=0.1, stretch_stiffness=1000.0,
-                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m")
+    b.add_cloth(
+        size=(0.6, 0.6),
+        resolution=(9, 9),
+        position=(0, 0, 0.3),
+        mass=0.1,
+        stretch_stiffness=1000.0,
+        shear_stiffness=100.0,
+        bend_stiffness=1.0,
+        damping=0.01,
+        thickness=0.004,
+        material="m",
+    )
     b.add_obstacle("sphere", radius=0.15, position=(0.0, 0.0, 0.0), material="m")
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
     model = b.finalize()
@@ -236,11 +267,12 @@ def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_pr
     assert run.state.is_finite()
     assert run.summary["max_penetration"] < 0.002
     kinetic = run.arrays["energy_kinetic"]
-    assert kinetic[-1] < 0.05 * kinetic.max()                       # it landed and is settling
+    assert kinetic[-1] < 0.05 * kinetic.max()  # it landed and is settling
 
 
 def test_carried_values_follow_their_contact_ids():
     from contactlab.contacts import values_by_id
+
     previous_ids = np.array([50, 7, 31, 12], dtype=np.int64)
     previous = np.array([[5.0, 0.5], [0.7, 0.07], [3.1, 0.31], [1.2, 0.12]])
     values, found = values_by_id(previous_ids, previous, np.array([12, 99, 50, 7, 0]), 2)
@@ -252,6 +284,7 @@ def test_carried_values_follow_their_contact_ids():
 
 def test_each_body_moves_to_its_earliest_impact_first():
     from contactlab.methods.velocity_level import entity_impact_fractions
+
     model, _ = cube_on_plane()
     contacts = collide(model, model.state(), 0.01)
     assert contacts.count == 4
@@ -267,8 +300,18 @@ def draped_cloth(n=8):
     under constraints with backward Euler at 1/120 s: (model, state) with many vertex contacts."""
     b = ModelBuilder()
     b.add_material("m", friction=0.4, restitution=0.0)
-    b.add_cloth(size=(0.5, 0.5), resolution=(n, n), position=(0, 0, 0.25), mass=0.05, stretch_stiffness=1000.0,
-                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m")
+    b.add_cloth(
+        size=(0.5, 0.5),
+        resolution=(n, n),
+        position=(0, 0, 0.25),
+        mass=0.05,
+        stretch_stiffness=1000.0,
+        shear_stiffness=100.0,
+        bend_stiffness=1.0,
+        damping=0.01,
+        thickness=0.004,
+        material="m",
+    )
     b.add_obstacle("sphere", radius=0.1, position=(0.05, 0.0, 0.0), material="m")
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
     model = b.finalize()
@@ -298,16 +341,30 @@ def test_implicit_cloth_products_reach_the_assembled_answer():
     (by_products, info), (by_rows, _) = steps["matrix_free"], steps["nsgs"]
     assert info.solver_residual <= 1e-10
     np.testing.assert_allclose(by_products.particle_velocity, by_rows.particle_velocity, atol=1e-6)
-    np.testing.assert_allclose(by_products.carried["constraint_values"], by_rows.carried["constraint_values"],
-                               atol=1e-6 * np.abs(by_rows.carried["constraint_values"]).max())
+    np.testing.assert_allclose(
+        by_products.carried["constraint_values"],
+        by_rows.carried["constraint_values"],
+        atol=1e-6 * np.abs(by_rows.carried["constraint_values"]).max(),
+    )
 
 
 def test_implicit_cloth_whose_only_contact_is_a_pinned_vertex_runs():
     # the pinned corner starts inside a sphere: its contact's row of W = J A⁻¹ Jᵀ is zero, so W = 0
     b = ModelBuilder()
     b.add_material("m", friction=0.4, restitution=0.0)
-    b.add_cloth(size=(0.4, 0.4), resolution=(5, 5), position=(0, 0, 0.3), mass=0.05, stretch_stiffness=1000.0,
-                shear_stiffness=100.0, bend_stiffness=1.0, damping=0.01, thickness=0.004, material="m", pinned=[0])
+    b.add_cloth(
+        size=(0.4, 0.4),
+        resolution=(5, 5),
+        position=(0, 0, 0.3),
+        mass=0.05,
+        stretch_stiffness=1000.0,
+        shear_stiffness=100.0,
+        bend_stiffness=1.0,
+        damping=0.01,
+        thickness=0.004,
+        material="m",
+        pinned=[0],
+    )
     b.add_obstacle("sphere", radius=0.05, position=(-0.2, -0.2, 0.3), material="m")
     model = b.finalize()
     run = simulate(model, "constraints", dt=1 / 120, duration=0.05, integrator="backward_euler")
@@ -325,12 +382,19 @@ def test_delassus_bound_lies_above_the_largest_eigenvalue_of_j_a_inverse_jt():
     largest = np.linalg.eigvalsh(0.5 * (dense + dense.T)).max()
     bound = constraints.delassus_bound(J, inverse_mass_matrix(model, state.body_orientation))
     assert largest <= bound
-    assert bound < 10 * largest              # and near enough to serve as apgd's step
+    assert bound < 10 * largest  # and near enough to serve as apgd's step
 
 
-@pytest.mark.parametrize("table, field", [({"solver": "gauss"}, "solver"), ({"formulation": "force"}, "formulation"),
-                                          ({"omega": 2.5}, "omega"), ({"iterations": 0}, "iterations"),
-                                          ({"friction_model": "disk"}, "friction_model")])
+@pytest.mark.parametrize(
+    "table, field",
+    [
+        ({"solver": "gauss"}, "solver"),
+        ({"formulation": "force"}, "formulation"),
+        ({"omega": 2.5}, "omega"),
+        ({"iterations": 0}, "iterations"),
+        ({"friction_model": "disk"}, "friction_model"),
+    ],
+)
 def test_bad_options_name_the_field(table, field):
     with pytest.raises(InputError, match=field):
         constraints.Options(**table)
@@ -339,7 +403,13 @@ def test_bad_options_name_the_field(table, field):
 @pytest.mark.parametrize("name", [name for name, _ in builtin_scenes()])
 def test_runs_every_built_in_scene(name):
     scene = load_scene(name)
-    run = simulate(scene.model, "constraints", scene.dt, 25 * scene.dt, scene.method_options.get("constraints", {}),
-                   scene.integrator)
+    run = simulate(
+        scene.model,
+        "constraints",
+        scene.dt,
+        25 * scene.dt,
+        scene.method_options.get("constraints", {}),
+        scene.integrator,
+    )
     assert run.state.is_finite()
     assert run.summary["max_penetration"] < 0.01

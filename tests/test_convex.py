@@ -17,23 +17,21 @@ import itertools
 
 import numpy as np
 import pytest
+from conftest import random_rotations
 from scipy.spatial import ConvexHull
 
 from contactlab.collision import convex as cx
 from contactlab.collision import convex_convex as cc
-from contactlab.hulls import box_as_hull
 from contactlab.errors import InputError
-from contactlab.hulls import Hull, build_hull, hull_arrays, load_hull_points, pack_hulls
-from conftest import random_rotations
+from contactlab.hulls import Hull, box_as_hull, build_hull, hull_arrays, load_hull_points, pack_hulls
 
 I3 = np.eye(3)
-CUBE = np.array(list(itertools.product((-0.5, 0.5), repeat=3)))       # unit cube corners
+CUBE = np.array(list(itertools.product((-0.5, 0.5), repeat=3)))  # unit cube corners
 REGULAR_TETRAHEDRON = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
 
 
 # ------------------------------------------------------------------------------------------
 # helpers
-
 
 
 def rot_x(angle):
@@ -48,9 +46,13 @@ def rot_z(angle):
 
 def quaternion_matrix(q):
     w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def ellipsoid_points(rng, count):
@@ -65,14 +67,18 @@ def arrays(hull):
 
 
 def buffers(slot):
-    return (np.full((slot + 8, 3), np.nan), np.full((slot + 8, 3), np.nan), np.full(slot + 8, np.nan),
-            np.full(slot + 8, -1, dtype=np.int64))
+    return (
+        np.full((slot + 8, 3), np.nan),
+        np.full((slot + 8, 3), np.nan),
+        np.full(slot + 8, np.nan),
+        np.full(slot + 8, -1, dtype=np.int64),
+    )
 
 
 def _unpack(out, slot, count):
     point, normal, depth, feature = out
     assert 0 <= count <= cx.MAX_CONTACTS
-    assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count:]).all()     # nothing outside
+    assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count :]).all()  # nothing outside
     s = slice(slot, slot + count)
     return point[s], normal[s], depth[s], feature[s]
 
@@ -80,23 +86,46 @@ def _unpack(out, slot, count):
 def hull_hull(arr_a, R_a, c_a, arr_b, R_b, c_b, margin=0.0, slot=3):
     """convex_convex into fresh buffers, written from ``slot`` (to check the offset)."""
     out = buffers(slot)
-    count = cc.convex_convex(np.asarray(c_a, float), np.ascontiguousarray(R_a, dtype=float), *arr_a,
-                             np.asarray(c_b, float), np.ascontiguousarray(R_b, dtype=float), *arr_b,
-                             float(margin), *out, slot)
+    count = cc.convex_convex(
+        np.asarray(c_a, float),
+        np.ascontiguousarray(R_a, dtype=float),
+        *arr_a,
+        np.asarray(c_b, float),
+        np.ascontiguousarray(R_b, dtype=float),
+        *arr_b,
+        float(margin),
+        *out,
+        slot,
+    )
     return _unpack(out, slot, count)
 
 
 def hull_plane(arr, R, c, plane, margin=0.0, slot=2):
     out = buffers(slot)
-    count = cx.convex_plane(np.asarray(c, float), np.ascontiguousarray(R, dtype=float), arr[0],
-                            np.asarray(plane, float), float(margin), *out, slot)
+    count = cx.convex_plane(
+        np.asarray(c, float),
+        np.ascontiguousarray(R, dtype=float),
+        arr[0],
+        np.asarray(plane, float),
+        float(margin),
+        *out,
+        slot,
+    )
     return _unpack(out, slot, count)
 
 
 def sphere_hull(center, radius, arr, R, c, margin=0.0, slot=1):
     out = buffers(slot)
-    count = cx.sphere_convex(np.asarray(center, float), float(radius), np.asarray(c, float),
-                             np.ascontiguousarray(R, dtype=float), *arr[:5], float(margin), *out, slot)
+    count = cx.sphere_convex(
+        np.asarray(center, float),
+        float(radius),
+        np.asarray(c, float),
+        np.ascontiguousarray(R, dtype=float),
+        *arr[:5],
+        float(margin),
+        *out,
+        slot,
+    )
     return _unpack(out, slot, count)
 
 
@@ -106,8 +135,25 @@ def sat_depth(arr_a, R_a, c_a, arr_b, R_b, c_b):
     axis = np.zeros(3)
     va, na, oa, _, _, eva, efa = arr_a
     vb, nb, ob, _, _, evb, efb = arr_b
-    cc.convex_convex_sat(np.asarray(c_a, float), np.ascontiguousarray(R_a), va, na, oa, eva, efa,
-                         np.asarray(c_b, float), np.ascontiguousarray(R_b), vb, nb, ob, evb, efb, np.inf, result, axis)
+    cc.convex_convex_sat(
+        np.asarray(c_a, float),
+        np.ascontiguousarray(R_a),
+        va,
+        na,
+        oa,
+        eva,
+        efa,
+        np.asarray(c_b, float),
+        np.ascontiguousarray(R_b),
+        vb,
+        nb,
+        ob,
+        evb,
+        efb,
+        np.inf,
+        result,
+        axis,
+    )
     return result[7]
 
 
@@ -123,7 +169,7 @@ def sphere_directions(count):
     k = np.arange(count) + 0.5
     z = 1 - 2 * k / count
     r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * k
+    phi = np.pi * (1 + 5**0.5) * k
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
@@ -133,8 +179,9 @@ class Reference:
     def __init__(self, hull):
         triangulated = ConvexHull(hull.vertices)
         self.normals = triangulated.equations[:, :3]
-        edges = np.concatenate([triangulated.simplices[:, [0, 1]], triangulated.simplices[:, [1, 2]],
-                                triangulated.simplices[:, [2, 0]]])
+        edges = np.concatenate(
+            [triangulated.simplices[:, [0, 1]], triangulated.simplices[:, [1, 2]], triangulated.simplices[:, [2, 0]]]
+        )
         edges = np.unique(np.sort(edges, axis=1), axis=0)
         self.edges = hull.vertices[edges[:, 1]] - hull.vertices[edges[:, 0]]
 
@@ -142,7 +189,7 @@ class Reference:
 def support_overlap(world_a, world_b, directions):
     """min over the unit ``directions`` (D, 3) and their opposites of max_B d·x − min_A d·x."""
     d = np.ascontiguousarray(directions.T)
-    along_a = world_a[:, 0:1] * d[0] + world_a[:, 1:2] * d[1] + world_a[:, 2:3] * d[2]     # (V, D)
+    along_a = world_a[:, 0:1] * d[0] + world_a[:, 1:2] * d[1] + world_a[:, 2:3] * d[2]  # (V, D)
     along_b = world_b[:, 0:1] * d[0] + world_b[:, 1:2] * d[1] + world_b[:, 2:3] * d[2]
     return min((along_b.max(axis=0) - along_a.min(axis=0)).min(), (along_a.max(axis=0) - along_b.min(axis=0)).min())
 
@@ -176,7 +223,7 @@ def test_box_corners_give_the_box():
     x2, y2, z2 = (2 * half) ** 2
     assert np.allclose(hull.inertia, 2.0 / 12 * np.array([y2 + z2, x2 + z2, x2 + y2]), rtol=1e-12)
     assert np.allclose(hull.offset, offset, atol=1e-12)
-    assert np.allclose(hull.orientation, [1, 0, 0, 0])            # already principal: axes kept
+    assert np.allclose(hull.orientation, [1, 0, 0, 0])  # already principal: axes kept
     assert np.allclose(np.abs(hull.vertices), half, atol=1e-12)
     # faces: outward unit normals, offsets = half extents, corners counter-clockwise from outside
     for f in range(hull.face_count):
@@ -222,8 +269,8 @@ def test_regular_tetrahedron():
     edge = 2.0 * np.sqrt(2.0)
     hull = build_hull(REGULAR_TETRAHEDRON + [0.3, 0.0, -1.0], mass=3.0)
     assert (hull.vertex_count, hull.face_count, hull.edge_count) == (4, 4, 6)
-    assert hull.volume == pytest.approx(edge ** 3 / (6 * np.sqrt(2)), rel=1e-12)
-    assert np.allclose(hull.inertia, 3.0 * edge ** 2 / 20, rtol=1e-12)        # isotropic: m a²/20
+    assert hull.volume == pytest.approx(edge**3 / (6 * np.sqrt(2)), rel=1e-12)
+    assert np.allclose(hull.inertia, 3.0 * edge**2 / 20, rtol=1e-12)  # isotropic: m a²/20
     assert np.allclose(hull.offset, [0.3, 0.0, -1.0], atol=1e-12)
 
 
@@ -250,13 +297,14 @@ def test_right_tetrahedron_off_centre():
 def test_asymmetric_set_matches_trimesh():
     trimesh = pytest.importorskip("trimesh")
     rng = np.random.default_rng(11)
-    points = np.concatenate([ellipsoid_points(rng, 40), rng.normal(scale=0.1, size=(10, 3))])   # some inside
+    points = np.concatenate([ellipsoid_points(rng, 40), rng.normal(scale=0.1, size=(10, 3))])  # some inside
     hull = build_hull(points, density=1.0)
     reference = trimesh.convex.convex_hull(points)
     assert hull.volume == pytest.approx(reference.volume, rel=1e-12)
     assert np.allclose(hull.offset, reference.center_mass, atol=1e-12)
-    assert np.allclose(hull.inertia_tensor, reference.moment_inertia,
-                       atol=1e-12 * np.abs(reference.moment_inertia).max())
+    assert np.allclose(
+        hull.inertia_tensor, reference.moment_inertia, atol=1e-12 * np.abs(reference.moment_inertia).max()
+    )
     axes = hull.principal_axes
     diagonal = axes.T @ hull.inertia_tensor @ axes
     assert np.abs(diagonal - np.diag(np.diag(diagonal))).max() < 1e-12 * hull.inertia.max()
@@ -291,9 +339,19 @@ def test_pack_and_slice():
         assert np.array_equal(o, hull.face_offset) and np.array_equal(fvi, hull.face_vertex_index)
         assert np.array_equal(fvs - fvs[0], hull.face_vertex_start)
         assert np.array_equal(ev, hull.edge_vertex) and np.array_equal(ef, hull.edge_face)
-        view = cx.hull_view(packed["vertex_start"], packed["vertices"], packed["face_start"], packed["face_normal"],
-                            packed["face_offset"], packed["face_vertex_start"], packed["face_vertex_index"],
-                            packed["edge_start"], packed["edge_vertex"], packed["edge_face"], h)
+        view = cx.hull_view(
+            packed["vertex_start"],
+            packed["vertices"],
+            packed["face_start"],
+            packed["face_normal"],
+            packed["face_offset"],
+            packed["face_vertex_start"],
+            packed["face_vertex_index"],
+            packed["edge_start"],
+            packed["edge_vertex"],
+            packed["edge_face"],
+            h,
+        )
         for x, y in zip(view, (v, n, o, fvs, fvi, ev, ef)):
             assert np.array_equal(x, y)
     assert np.allclose(packed["radius"][0], np.sqrt(0.75))
@@ -303,10 +361,10 @@ def test_box_as_hull_matches_the_built_box():
     half = np.array([0.2, 0.4, 0.7])
     box = box_as_hull(half)
     hull = build_hull(CUBE * 2 * half)
-    assert np.allclose(box["vertices"][:, 0] > 0, [i & 1 for i in range(8)])     # corner bits as box_plane
+    assert np.allclose(box["vertices"][:, 0] > 0, [i & 1 for i in range(8)])  # corner bits as box_plane
     assert np.allclose(box["vertices"][:, 2] > 0, [bool(i & 4) for i in range(8)])
     for f in range(6):
-        corners = box["vertices"][box["face_vertex_index"][4 * f:4 * f + 4]]
+        corners = box["vertices"][box["face_vertex_index"][4 * f : 4 * f + 4]]
         n = box["face_normal"][f]
         assert np.allclose(corners @ n, box["face_offset"][f])
         assert sum(np.cross(corners[k], corners[(k + 1) % 4]) for k in range(4)) @ n > 0.0
@@ -325,27 +383,30 @@ def test_box_as_hull_matches_the_built_box():
 # input errors
 
 
-@pytest.mark.parametrize("points, words", [
-    (CUBE[:3], "at least 4"),
-    (np.zeros((5, 3)), "copies of one point"),
-    (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 0.2, 0]], float), "flat or collinear"),
-    (np.array([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]], float), "flat or collinear"),
-    (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, np.nan]]), "finite"),
-    (np.zeros((4, 2)), "shape (n, 3)"),
-])
+@pytest.mark.parametrize(
+    "points, words",
+    [
+        (CUBE[:3], "at least 4"),
+        (np.zeros((5, 3)), "copies of one point"),
+        (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 0.2, 0]], float), "flat or collinear"),
+        (np.array([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]], float), "flat or collinear"),
+        (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, np.nan]]), "finite"),
+        (np.zeros((4, 2)), "shape (n, 3)"),
+    ],
+)
 def test_bad_point_sets(points, words):
     with pytest.raises(InputError) as error:
         build_hull(points, field="bodies[2].points")
     assert error.value.field == "bodies[2].points"
     assert words in error.value.message
-    assert error.value.message.count(". ") == 0                 # one sentence
+    assert error.value.message.count(". ") == 0  # one sentence
 
 
 def test_non_convex_set_needs_a_mesh():
     rng = np.random.default_rng(5)
     inside = rng.uniform(-0.3, 0.3, size=(3, 3))
-    points = np.concatenate([CUBE, inside, [[0.5, 0.0, 0.0]]])     # a face point is not "inside"
-    build_hull(points)                                            # fine without require_convex
+    points = np.concatenate([CUBE, inside, [[0.5, 0.0, 0.0]]])  # a face point is not "inside"
+    build_hull(points)  # fine without require_convex
     with pytest.raises(InputError) as error:
         build_hull(points, require_convex=True, field="shape")
     assert "the points are not convex: 3 of 12 lie inside their hull" in error.value.message
@@ -359,8 +420,10 @@ def test_non_convex_set_needs_a_mesh():
 def test_load_hull_points(tmp_path):
     pytest.importorskip("trimesh")
     obj = tmp_path / "cube.obj"
-    obj.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in CUBE)
-                   + "f 1 2 4 3\nf 5 7 8 6\nf 1 5 6 2\nf 3 4 8 7\nf 1 3 7 5\nf 2 6 8 4\n")
+    obj.write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in CUBE)
+        + "f 1 2 4 3\nf 5 7 8 6\nf 1 5 6 2\nf 3 4 8 7\nf 1 3 7 5\nf 2 6 8 4\n"
+    )
     points = load_hull_points(obj, scale=2.0)
     assert points.shape == (8, 3) and np.allclose(np.abs(points), 1.0)
     hull = build_hull(points)
@@ -392,23 +455,24 @@ def test_cube_resting_on_plane_gives_four_corners():
     point, normal, depth, feature = hull_plane(cube, I3, [0.3, -0.2, 0.5 - d], [0, 0, 1, 0])
     assert len(depth) == 4
     assert np.allclose(depth, d) and np.allclose(normal, [0, 0, 1])
-    assert np.allclose(point[:, 2], -d / 2)                      # midway between the surfaces
+    assert np.allclose(point[:, 2], -d / 2)  # midway between the surfaces
     assert np.allclose(np.sort(point[:, 0]), [-0.2, -0.2, 0.8, 0.8])
     assert len(set(feature.tolist())) == 4 and feature.min() >= 0 and feature.max() <= 255
     # a box as a hull numbers its corners like box_plane
     from contactlab.collision.narrow_phase import box_plane
+
     box = box_as_hull([0.5, 0.5, 0.5])
     R = rot_x(0.3) @ rot_z(0.2)
-    c = np.array([0.0, 0.0, 0.6])                                  # all 8 corners within the margin
+    c = np.array([0.0, 0.0, 0.6])  # all 8 corners within the margin
     _, _, hull_depth, hull_feature = hull_plane(hull_arrays(box, 0), R, c, [0, 0, 1, 0], margin=2.0)
     out = buffers(0)
     count = box_plane(c, R, np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, *out, 0)
     box_depth, box_feature = out[2][:count], out[3][:count]
-    assert len(box_depth) > 4 and len(hull_depth) == 4             # more corners in the margin: reduced
+    assert len(box_depth) > 4 and len(hull_depth) == 4  # more corners in the margin: reduced
     depth_of_corner = dict(zip(box_feature.tolist(), box_depth.tolist()))
     for corner, depth in zip(hull_feature.tolist(), hull_depth.tolist()):
         assert depth == pytest.approx(depth_of_corner[corner], abs=1e-12)
-    assert hull_depth.max() == pytest.approx(box_depth.max())      # the deepest corner is kept
+    assert hull_depth.max() == pytest.approx(box_depth.max())  # the deepest corner is kept
 
 
 def test_many_vertices_on_a_plane_reduce_to_four():
@@ -420,7 +484,7 @@ def test_many_vertices_on_a_plane_reduce_to_four():
     order = np.argsort(np.arctan2(xy[:, 1], xy[:, 0]))
     x, y = xy[order].T
     area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-    assert area > 1.9                                            # ≈ the inscribed square (2), of π
+    assert area > 1.9  # ≈ the inscribed square (2), of π
     assert len(set(feature.tolist())) == 4
     # above the plane, within the margin: speculative contacts with negative depth
     point, normal, depth, feature = hull_plane(cylinder, I3, [0, 0, 0.52], [0, 0, 1, 0], margin=0.05)
@@ -461,10 +525,11 @@ def test_flush_stack_keeps_its_corners_and_features_under_jitter():
     for size in (1e-12, 1e-10, 1e-8, 1e-6, 1e-5):
         for _ in range(10):
             R = rot_z(rng.normal() * size) @ rot_x(rng.normal() * size)
-            point, normal, depth, feature = hull_hull(cube, R, np.array([0, 0, 0.98]) + rng.normal(scale=size, size=3),
-                                                      cube, I3, np.zeros(3))
+            point, normal, depth, feature = hull_hull(
+                cube, R, np.array([0, 0, 0.98]) + rng.normal(scale=size, size=3), cube, I3, np.zeros(3)
+            )
             assert len(depth) == 4
-            assert np.allclose(np.abs(point[:, :2]), 0.5, atol=10 * size + 1e-12)      # the 4 corners
+            assert np.allclose(np.abs(point[:, :2]), 0.5, atol=10 * size + 1e-12)  # the 4 corners
             assert np.allclose(depth, 0.02, atol=10 * size + 1e-12)
             first = sorted(feature.tolist()) if first is None else first
             assert sorted(feature.tolist()) == first
@@ -473,7 +538,7 @@ def test_flush_stack_keeps_its_corners_and_features_under_jitter():
 def test_tetrahedron_vertex_pokes_a_face():
     # a tetrahedron standing on a vertex (pointing down) over a large box's top face
     tet = build_hull(REGULAR_TETRAHEDRON * 0.3)
-    vertex = tet.vertices[np.argmin(tet.vertices @ [1, 1, 1])]           # turn this vertex to −z
+    vertex = tet.vertices[np.argmin(tet.vertices @ [1, 1, 1])]  # turn this vertex to −z
     axis = np.cross(vertex / np.linalg.norm(vertex), [0, 0, -1.0])
     angle = np.arcsin(np.linalg.norm(axis))
     if vertex[2] > 0:
@@ -484,7 +549,7 @@ def test_tetrahedron_vertex_pokes_a_face():
     tip = R @ vertex
     assert np.allclose(tip / np.linalg.norm(tip), [0, 0, -1])
     d = 0.01
-    c_tet = np.array([0.1, 0.2, 0.5 + np.linalg.norm(tip) - d])          # tip at height 0.5 − d
+    c_tet = np.array([0.1, 0.2, 0.5 + np.linalg.norm(tip) - d])  # tip at height 0.5 − d
     slab = box_as_hull([2.0, 2.0, 0.5])
     point, normal, depth, feature = hull_hull(arrays(tet), R, c_tet, hull_arrays(slab, 0), I3, np.zeros(3))
     assert len(depth) == 1
@@ -498,10 +563,10 @@ def test_tetrahedron_vertex_pokes_a_face():
 def test_edge_against_edge():
     # two cubes turned 45° about perpendicular axes meet edge to edge
     cube = arrays(build_hull(CUBE))
-    R_a = rot_x(np.pi / 4)            # lowest edge of A along x
+    R_a = rot_x(np.pi / 4)  # lowest edge of A along x
     s = np.sqrt(0.5)
-    R_b = np.array([[s, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, s]])   # 45° about y: highest edge of B along y
-    reach = np.sqrt(0.5)              # centre to edge of a cube turned 45°
+    R_b = np.array([[s, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, s]])  # 45° about y: highest edge of B along y
+    reach = np.sqrt(0.5)  # centre to edge of a cube turned 45°
     d = 0.01
     c_a = np.array([0.0, 0.0, 2 * reach - d])
     point, normal, depth, feature = hull_hull(cube, R_a, c_a, cube, R_b, np.zeros(3))
@@ -639,16 +704,19 @@ def test_random_hull_pairs_against_brute_force_and_fcl(random_hulls):
         assert len(d2) == len(depth)
         if len(depth):
             o1, o2 = np.lexsort(point.T), np.lexsort(p2.T)
-            difference = max(np.abs(point[o1] - p2[o2]).max(), np.abs(normal[o1] + n2[o2]).max(),
-                             np.abs(depth[o1] - d2[o2]).max())
+            difference = max(
+                np.abs(point[o1] - p2[o2]).max(), np.abs(normal[o1] + n2[o2]).max(), np.abs(depth[o1] - d2[o2]).max()
+            )
             worst["swap"] = max(worst["swap"], difference / scale)
             assert difference < 1e-9 * scale
             assert sorted(feature.tolist()) == sorted(f2.tolist())
     assert overlapping >= 600 and separated >= 600
     assert exact_axis >= 0.6 * overlapping
-    assert fcl_agrees >= 0.4 * overlapping            # fcl's EPA stops early in the others
-    print(f"\n{overlapping} overlapping, {separated} apart; exact axis {exact_axis}; fcl within 1e-6: "
-          f"{fcl_agrees}; worst relative errors {worst}")
+    assert fcl_agrees >= 0.4 * overlapping  # fcl's EPA stops early in the others
+    print(
+        f"\n{overlapping} overlapping, {separated} apart; exact axis {exact_axis}; fcl within 1e-6: "
+        f"{fcl_agrees}; worst relative errors {worst}"
+    )
 
 
 def closest_on_triangles(x, triangles):
@@ -672,7 +740,7 @@ def closest_on_triangles(x, triangles):
 def test_random_spheres_against_brute_force(random_hulls):
     hulls, hull_arrays_, _ = random_hulls
     rng = np.random.default_rng(8)
-    for trial in range(600):
+    for _trial in range(600):
         h = int(rng.integers(0, len(hulls)))
         hull = hulls[h]
         R = random_rotations(rng, 1)[0]
@@ -685,7 +753,7 @@ def test_random_spheres_against_brute_force(random_hulls):
         triangulated = ConvexHull(world)
         height = (centre @ triangulated.equations[:, :3].T + triangulated.equations[:, 3]).max()
         if height <= 0.0:
-            truth = radius - height                                  # inside: out through the nearest face
+            truth = radius - height  # inside: out through the nearest face
         else:
             truth = radius - closest_on_triangles(centre, world[triangulated.simplices])
         if truth < -margin:
@@ -697,14 +765,14 @@ def test_random_spheres_against_brute_force(random_hulls):
         surface_a = point[0] - 0.5 * depth[0] * normal[0]
         assert abs(signed_distance(world, surface_b)[0]) < 1e-12
         assert np.allclose(surface_a, centre - radius * normal[0], atol=1e-12)
-        if height > 1e-9:                                             # outside: along centre − closest point
+        if height > 1e-9:  # outside: along centre − closest point
             assert np.allclose(normal[0], (centre - surface_b) / np.linalg.norm(centre - surface_b), atol=1e-9)
 
 
 def test_random_hulls_on_a_plane(random_hulls):
     hulls, hull_arrays_, _ = random_hulls
     rng = np.random.default_rng(9)
-    for trial in range(300):
+    for _trial in range(300):
         h = int(rng.integers(0, len(hulls)))
         R = random_rotations(rng, 1)[0]
         normal = rng.normal(size=3)
@@ -718,5 +786,5 @@ def test_random_hulls_on_a_plane(random_hulls):
         assert len(depth) == min(len(candidates), 4) or (len(candidates) > 4 and len(depth) == 3)
         if len(depth):
             assert depth.max() == pytest.approx(-heights.min(), abs=1e-12)
-            assert set(feature.tolist()) <= set(candidates.tolist())          # vertex indices (< 256 here)
+            assert set(feature.tolist()) <= set(candidates.tolist())  # vertex indices (< 256 here)
             assert np.allclose(point - 0.5 * depth[:, None] * n, world[feature], atol=1e-12)

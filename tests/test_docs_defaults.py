@@ -33,7 +33,7 @@ def test_each_method_table_lists_its_options_with_their_defaults(name):
     fields = {field.name: field.default for field in dataclasses.fields(methods.get(name).Options)}
     assert set(table) == set(fields)
     for key, text in table.items():
-        if " / " in text:             # a default that depends on another option: both are named
+        if " / " in text:  # a default that depends on another option: both are named
             assert fields[key] is None, key
             continue
         assert value(text) == fields[key], (key, text, fields[key])

@@ -1,5 +1,6 @@
 """Issue 22: the documentation site builds with ``mkdocs build --strict`` (a link to a page, file or
-heading the site lacks, a page left out of the nav, or a docstring griffe cannot read fails it), its API reference holds the docstrings, and its
+heading the site lacks, a page left out of the nav, or a docstring griffe cannot read fails it), its API reference
+holds the docstrings, and its
 example gallery shows every script of examples/ and every notebook, in full."""
 
 import ast
@@ -25,7 +26,7 @@ def _missing_tools():
     for name, module in TOOLS.items():
         try:
             found = importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:        # a parent package absent
+        except ModuleNotFoundError:  # a parent package absent
             found = False
         if not found:
             missing.append(name)
@@ -39,8 +40,14 @@ def site(tmp_path_factory):
         pytest.skip(f"{', '.join(missing)} not installed (pip install '.[docs]'): the site is not built")
     out = tmp_path_factory.mktemp("site")
     environment = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
-    result = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
-                            cwd=ROOT, capture_output=True, text=True, timeout=300, env=environment)
+    result = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=environment,
+    )
     assert result.returncode == 0, result.stderr[-4000:]
     return out
 
@@ -94,4 +101,3 @@ def test_the_gallery_shows_every_example_in_full(site):
         for cell in cells:
             if cell["cell_type"] == "code":
                 assert _words("".join(cell["source"])) in page
-

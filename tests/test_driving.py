@@ -21,6 +21,7 @@ def _ball(gravity=(0.0, 0.0, 0.0)):
 
 # ---- forces and torques on a free body ------------------------------------------------------
 
+
 @pytest.mark.parametrize("method", METHODS)
 def test_constant_force_gives_half_a_t_squared(method):
     """F = 4 N on 2 kg from rest: v = (F/m) t exactly; symplectic Euler's x after n steps of h is
@@ -33,7 +34,7 @@ def test_constant_force_gives_half_a_t_squared(method):
     a = 4.0 / 2.0
     assert np.allclose(run.arrays["body_velocity"][:, 0, 0], a * t, rtol=0, atol=1e-12)
     assert np.allclose(x, 0.5 * a * t * (t + h), rtol=0, atol=1e-12)
-    assert abs(x[-1] - 0.5 * a * duration ** 2) <= 0.5 * a * h * duration + 1e-12
+    assert abs(x[-1] - 0.5 * a * duration**2) <= 0.5 * a * h * duration + 1e-12
     assert run.summary["compiled_loop"] is False
 
 
@@ -43,7 +44,7 @@ def test_torque_gives_omega_tau_over_i_t(method):
     builder = _ball()
     builder.add_force(0, torque=(0.0, 0.0, 0.3))
     run = simulate(builder.finalize(), method=method, dt=0.01, duration=0.5)
-    inertia = 0.4 * 2.0 * 0.1 ** 2
+    inertia = 0.4 * 2.0 * 0.1**2
     omega = run.arrays["body_angular_velocity"][:, 0]
     assert np.allclose(omega[:, 2], 0.3 / inertia * run.arrays["time"], rtol=1e-12, atol=1e-12)
     assert np.allclose(omega[:, :2], 0.0) and np.allclose(run.arrays["body_position"], 0.0)
@@ -53,8 +54,7 @@ def test_piecewise_linear_force_interpolates_and_holds_its_ends():
     builder = _ball()
     builder.add_force("ball", force=[[0, 0, 0], [2, 0, 0], [2, -4, 0]], times=[0.5, 1.0, 2.0])
     drive = builder.finalize().drive
-    for t, expected in ((0.0, [0, 0, 0]), (0.75, [1, 0, 0]), (1.0, [2, 0, 0]), (1.5, [2, -2, 0]),
-                        (9.0, [2, -4, 0])):
+    for t, expected in ((0.0, [0, 0, 0]), (0.75, [1, 0, 0]), (1.0, [2, 0, 0]), (1.5, [2, -2, 0]), (9.0, [2, -4, 0])):
         force, torque = drive.loads(t)
         assert np.allclose(force[0], expected) and np.allclose(torque, 0.0), t
 
@@ -74,20 +74,25 @@ def test_forces_add_up_and_a_function_of_time_is_called_once_a_step():
     assert np.allclose(force[0], [0.25, 1.0, 0.0]) and np.allclose(torque[0], [0, 0, 0.5])
     calls.clear()
     run = simulate(model, method="impulse", dt=0.1, duration=1.0)
-    assert np.allclose(calls, np.arange(10) * 0.1)                  # each step's start time, once
+    assert np.allclose(calls, np.arange(10) * 0.1)  # each step's start time, once
     # v_x = Σ h t_k / m over the steps' start times
     assert np.isclose(run.state.body_velocity[0, 0], 0.1 * np.sum(np.arange(10) * 0.1) / 2.0)
 
 
 # ---- kinematic bodies -------------------------------------------------------------------------
 
+
 def _paddle_and_ball(orientations=None):
     builder = ModelBuilder()
     builder.add_material("wood", friction=0.3)
     builder.add_body("sphere", radius=0.1, mass=1.0, position=(0.3, 0.0, 0.1), material="wood", name="ball")
     builder.add_body("box", half_extents=(0.05, 0.2, 0.05), mass=0.01, material="wood", name="paddle")
-    builder.add_path("paddle", positions=[[-0.2, 0, 0.12], [0.4, 0, 0.12], [0.4, 0, 0.4]], times=[0, 0.6, 1.0],
-                     orientations=orientations)
+    builder.add_path(
+        "paddle",
+        positions=[[-0.2, 0, 0.12], [0.4, 0, 0.12], [0.4, 0, 0.4]],
+        times=[0, 0.6, 1.0],
+        orientations=orientations,
+    )
     builder.add_obstacle("plane", normal=(0, 0, 1), material="wood")
     return builder.finalize()
 
@@ -112,7 +117,7 @@ def test_kinematic_body_keeps_its_path_whatever_it_hits(method):
     reference = np.array([_slerp_reference(np.array([1.0, 0, 0, 0]), q_end, (s - 0.6) / 0.4) for s in t[turning]])
     assert np.abs(q[turning] - reference).max() < 1e-9
     assert np.abs(q[t >= 1.0] - q_end).max() < 1e-9
-    assert run.arrays["body_position"][-1, 0, 0] > 0.4        # the ball was pushed ahead of the paddle
+    assert run.arrays["body_position"][-1, 0, 0] > 0.4  # the ball was pushed ahead of the paddle
 
 
 def test_path_function_and_fixed_pose():
@@ -135,6 +140,7 @@ def test_driven_models_step_outside_the_compiled_loop():
 
 
 # ---- the pushed box: closed form under every method ---------------------------------------------
+
 
 @pytest.mark.parametrize("method", METHODS)
 def test_pushed_box_moves_with_the_pusher_against_mu_m_g(method):
@@ -159,17 +165,24 @@ def test_pushed_box_moves_with_the_pusher_against_mu_m_g(method):
 
 # ---- bad input ------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("call, field, words", [
-    (lambda b: b.add_force("ball", force=(1.0, 2.0)), "force", "3 numbers"),
-    (lambda b: b.add_force("ball", force=(np.nan, 0, 0)), "force", "finite"),
-    (lambda b: b.add_force("bal", force=(1, 0, 0)), "body", "did you mean 'ball'"),
-    (lambda b: b.add_force("ball", force=[[0, 0, 0], [1, 0, 0]], times=[1.0, 0.5]), "times", "increase"),
-    (lambda b: b.add_force("ball", force=[[0, 0, 0]], times=[0.0, 1.0]), "force", "one per time"),
-    (lambda b: b.add_path("ball", positions=[[0, 0, 0], [1, 0, 0]], times=[0.0, 0.0]), "times", "increase"),
-    (lambda b: b.add_path("ball", positions=[[0, 0, 0], [1, 0, np.nan]], times=[0.0, 1.0]), "positions", "finite"),
-    (lambda b: b.add_path("ball", positions=[[0, 0, 0]], times=[0.0], orientations=[[0, 0, 0, 0]]),
-     "orientations", "zero quaternion"),
-])
+
+@pytest.mark.parametrize(
+    "call, field, words",
+    [
+        (lambda b: b.add_force("ball", force=(1.0, 2.0)), "force", "3 numbers"),
+        (lambda b: b.add_force("ball", force=(np.nan, 0, 0)), "force", "finite"),
+        (lambda b: b.add_force("bal", force=(1, 0, 0)), "body", "did you mean 'ball'"),
+        (lambda b: b.add_force("ball", force=[[0, 0, 0], [1, 0, 0]], times=[1.0, 0.5]), "times", "increase"),
+        (lambda b: b.add_force("ball", force=[[0, 0, 0]], times=[0.0, 1.0]), "force", "one per time"),
+        (lambda b: b.add_path("ball", positions=[[0, 0, 0], [1, 0, 0]], times=[0.0, 0.0]), "times", "increase"),
+        (lambda b: b.add_path("ball", positions=[[0, 0, 0], [1, 0, np.nan]], times=[0.0, 1.0]), "positions", "finite"),
+        (
+            lambda b: b.add_path("ball", positions=[[0, 0, 0]], times=[0.0], orientations=[[0, 0, 0, 0]]),
+            "orientations",
+            "zero quaternion",
+        ),
+    ],
+)
 def test_bad_input_names_the_field(call, field, words):
     with pytest.raises(InputError) as error:
         call(_ball())
@@ -208,17 +221,19 @@ mass = 1.0
 
 
 def test_scene_file_errors_give_the_field_path(tmp_path):
-    error = _scene_error(tmp_path, "[[forces]]\nbody = \"box\"\nforce = [1.0, 2.0]")
+    error = _scene_error(tmp_path, '[[forces]]\nbody = "box"\nforce = [1.0, 2.0]')
     assert error.field == "forces[0].force" and "(N)" in error.message
-    error = _scene_error(tmp_path, "[[forces]]\nbody = \"bx\"\nforce = [1.0, 2.0, 0.0]")
+    error = _scene_error(tmp_path, '[[forces]]\nbody = "bx"\nforce = [1.0, 2.0, 0.0]')
     assert error.field == "forces[0].body" and "did you mean 'box'" in error.message
-    error = _scene_error(tmp_path, "[[forces]]\nbody = \"box\"\nforec = [1.0, 2.0, 0.0]")
+    error = _scene_error(tmp_path, '[[forces]]\nbody = "box"\nforec = [1.0, 2.0, 0.0]')
     assert error.field == "forces[0].forec" and "did you mean 'force'" in error.message
-    error = _scene_error(tmp_path, "", "path = { times = [0.0, 1.0, 0.5], positions = [[0, 0, 0], [1, 0, 0], [2, 0, 0]] }")
+    error = _scene_error(
+        tmp_path, "", "path = { times = [0.0, 1.0, 0.5], positions = [[0, 0, 0], [1, 0, 0], [2, 0, 0]] }"
+    )
     assert error.field == "bodies[0].path.times[2]" and "increase" in error.message
     error = _scene_error(tmp_path, "", "path = { times = [0.0, 1.0], positions = [[0, 0, 0]] }")
     assert error.field == "bodies[0].path.positions" and "one per time" in error.message
-    error = _scene_error(tmp_path, "[[forces]]\nbody = \"box\"\ntimes = [0.0, 1.0]\nforce = [[0, 0, 0], [1, 0, nan]]")
+    error = _scene_error(tmp_path, '[[forces]]\nbody = "box"\ntimes = [0.0, 1.0]\nforce = [[0, 0, 0], [1, 0, nan]]')
     assert error.field == "forces[0].force[1]" and "finite" in error.message
 
 

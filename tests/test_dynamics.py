@@ -21,7 +21,7 @@ def test_free_fall_is_exact_parabola_sampled(integrator):
     t = run.arrays["time"]
     z = run.arrays["particle_position"][:, 0, 2]
     # symplectic Euler is leapfrog: positions are the parabola sampled, shifted by g h t / 2
-    exact = 10 + 2 * t - 0.5 * 9.81 * t ** 2
+    exact = 10 + 2 * t - 0.5 * 9.81 * t**2
     shift = -0.5 * 9.81 * 0.01 * t if integrator == "symplectic_euler" else 0.5 * 9.81 * 0.01 * t
     np.testing.assert_allclose(z, exact + shift, atol=1e-12)
     np.testing.assert_allclose(run.arrays["particle_position"][:, 0, 0], t, atol=1e-12)
@@ -45,7 +45,7 @@ def test_spinning_asymmetric_body_keeps_angular_momentum():
         spin_y = np.einsum("tji,tj->ti", R, run.arrays["body_angular_velocity"][:, 0])[:, 1]
         assert spin_y.min() < -3.0
     assert drift[0.002] < 0.005
-    assert drift[0.002] == pytest.approx(drift[0.004] / 2, rel=0.05)     # first order in h
+    assert drift[0.002] == pytest.approx(drift[0.004] / 2, rel=0.05)  # first order in h
 
 
 def test_torque_free_symmetric_spin_is_steady():
@@ -58,7 +58,7 @@ def test_torque_free_symmetric_spin_is_steady():
 
 def test_quaternions_stay_unit_and_rotate_at_the_right_rate():
     q = np.array([[1.0, 0, 0, 0]])
-    w = np.array([[0, 0, np.pi]])                 # half a turn per second about z
+    w = np.array([[0, 0, np.pi]])  # half a turn per second about z
     x = np.zeros((1, 3))
     for _ in range(1000):
         x, q, _ = advance_positions(x, q, np.zeros((0, 3)), np.zeros((1, 3)), w, np.zeros((0, 3)), 0.001, 0.001)
@@ -69,8 +69,7 @@ def test_quaternions_stay_unit_and_rotate_at_the_right_rate():
 
 def test_energy_terms_of_a_known_state():
     b = ModelBuilder()
-    b.add_body("sphere", radius=0.5, mass=2.0, position=(0, 0, 3.0), velocity=(1, 0, 0),
-               angular_velocity=(0, 0, 2.0))
+    b.add_body("sphere", radius=0.5, mass=2.0, position=(0, 0, 3.0), velocity=(1, 0, 0), angular_velocity=(0, 0, 2.0))
     b.add_particles([[0, 0, 1.0]], velocity=[[0, 3.0, 0]], mass=0.5)
     model = b.finalize()
     state = model.state()
@@ -81,6 +80,7 @@ def test_energy_terms_of_a_known_state():
 
 def test_elastic_bounce_conserves_energy():
     from conftest import ball_on_plane
+
     run = simulate(ball_on_plane(restitution=1.0, height=0.5), "impulse", dt=0.001, duration=2.0)
     total = run.arrays["energy_kinetic"] + run.arrays["energy_potential"]
     # leapfrog carries velocity half a step off the position: the sampled energy wobbles by m g |v| h / 2
@@ -116,6 +116,7 @@ def test_compilation_during_the_run_is_timed_apart_from_the_steps(path, monkeypa
     from numba.core import event
 
     from contactlab.methods import impulse, velocity_loop
+
     calls = []
 
     def compiling_on_call(number, real):
@@ -125,6 +126,7 @@ def test_compilation_during_the_run_is_timed_apart_from_the_steps(path, monkeypa
                 with event.trigger_event("numba:compile", data={}):
                     time.sleep(0.3)
             return real(*args)
+
         return call
 
     if path == "loop":
@@ -134,7 +136,7 @@ def test_compilation_during_the_run_is_timed_apart_from_the_steps(path, monkeypa
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
     run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1, compiled_loop=path == "loop")
-    assert len(calls) == 10 if path == "stitched" else len(calls) >= 3      # ten steps, or chunks 1, 1, 2, …
+    assert len(calls) == 10 if path == "stitched" else len(calls) >= 3  # ten steps, or chunks 1, 1, 2, …
     assert run.summary["compile_seconds"] >= 0.3
-    assert run.summary["steps_per_second"] > 9 / 0.3                # the 0.3 s is not in the 9 steps' time
+    assert run.summary["steps_per_second"] > 9 / 0.3  # the 0.3 s is not in the 9 steps' time
     assert run.summary["wall_seconds"] >= 0.3

@@ -11,8 +11,9 @@ EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__
 
 
 def run_example(name, *args, cwd):
-    result = subprocess.run([sys.executable, os.path.join(EXAMPLES, name), *args], cwd=cwd,
-                            capture_output=True, text=True, timeout=600)
+    result = subprocess.run(
+        [sys.executable, os.path.join(EXAMPLES, name), *args], cwd=cwd, capture_output=True, text=True, timeout=600
+    )
     assert result.returncode == 0, result.stderr
     return result.stdout
 
@@ -25,12 +26,11 @@ def test_every_example_is_tested():
 
 def test_bouncing_ball_rebounds(tmp_path):
     out = run_example("bouncing_ball.py", cwd=tmp_path)
-    heights = {line.split()[0]: [float(h) for h in re.findall(r"([\d.]+) m\b", line)]
-               for line in out.splitlines()[1:]}
+    heights = {line.split()[0]: [float(h) for h in re.findall(r"([\d.]+) m\b", line)] for line in out.splitlines()[1:]}
     for method in ("impulse", "constraints"):
         assert heights[method] == pytest.approx([0.64, 0.4096], rel=1e-3)
     assert heights["penalty"] == pytest.approx([0.64, 0.4096], rel=0.03)
-    assert "does not bounce" in out.splitlines()[2]          # projection
+    assert "does not bounce" in out.splitlines()[2]  # projection
 
 
 def test_lcp_column_three_solvers_agree_with_the_weights(tmp_path):
@@ -56,4 +56,4 @@ def test_cloth_export_matches_the_trajectory(tmp_path):
     frames = sorted(os.listdir(tmp_path / "cloth" / "frames"))
     assert frames[0] == "frame_00000.obj" and len(frames) > 5
     gap_mm = float(re.search(r"is ([\d.e+-]+) mm from", out).group(1))
-    assert gap_mm < 1e-3                     # USD points are single precision: about 1e-7 m
+    assert gap_mm < 1e-3  # USD points are single precision: about 1e-7 m

@@ -8,28 +8,40 @@ import pytest
 import trimesh
 from pxr import Sdf, Usd, UsdGeom
 
-from contactlab import InputError, ModelBuilder, rotations, simulate
-from contactlab import export, store
+from contactlab import InputError, ModelBuilder, export, rotations, simulate, store
 from contactlab.export import frame_samples, write_mesh_sequence, write_usd
 from contactlab.record import SERIES
 from contactlab.scene import load_scene
 from contactlab.surfaces import posed_body_vertices
 
-FLOAT = 2e-6      # USD points and PLY vertices are 32-bit floats: ~1e-7 relative, coordinates ≲ 2 m
+FLOAT = 2e-6  # USD points and PLY vertices are 32-bit floats: ~1e-7 relative, coordinates ≲ 2 m
 
 
 def _model():
     """A tumbling box, two bodies of one name, free particles between two cloths, a floor."""
     b = ModelBuilder()
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
-    b.add_body("box", half_extents=(0.1, 0.2, 0.3), mass=1.0, position=(0, 0, 1.0),
-               orientation=rotations.from_rotation_vector(np.array([[0.3, 0.2, 0.1]]))[0],
-               angular_velocity=(4.0, -6.0, 8.0), name="box A")
+    b.add_body(
+        "box",
+        half_extents=(0.1, 0.2, 0.3),
+        mass=1.0,
+        position=(0, 0, 1.0),
+        orientation=rotations.from_rotation_vector(np.array([[0.3, 0.2, 0.1]]))[0],
+        angular_velocity=(4.0, -6.0, 8.0),
+        name="box A",
+    )
     b.add_particles([[0.5, 0.5, 0.5], [0.6, 0.5, 0.5]], radius=0.02, mass=0.1)
     b.add_body("sphere", radius=0.1, mass=1.0, position=(1.0, 0, 1.0), name="ball")
     b.add_cloth(size=(0.4, 0.4), resolution=(3, 4), position=(0, 1.0, 0.8), mass=0.1)
-    b.add_body("capsule", radius=0.05, half_length=0.2, mass=1.0, position=(-1.0, 0, 1.0),
-               angular_velocity=(0, 5.0, 1.0), name="ball")
+    b.add_body(
+        "capsule",
+        radius=0.05,
+        half_length=0.2,
+        mass=1.0,
+        position=(-1.0, 0, 1.0),
+        angular_velocity=(0, 5.0, 1.0),
+        name="ball",
+    )
     b.add_particles([[-0.5, 0.5, 0.5]], radius=0.03, mass=0.1)
     b.add_cloth(size=(0.3, 0.3), resolution=(2, 2), position=(0, -1.0, 0.8), mass=0.1)
     return b.finalize()
@@ -37,13 +49,14 @@ def _model():
 
 @pytest.fixture(scope="module")
 def arrays():
-    return simulate(_model(), "impulse", dt=0.01, duration=0.1).arrays      # 11 samples
+    return simulate(_model(), "impulse", dt=0.01, duration=0.1).arrays  # 11 samples
 
 
 def _builtin(name, duration=0.05):
     scene = load_scene(name)
-    return simulate(scene.model, scene.method, scene.dt, duration, scene.method_options.get(scene.method, {}),
-                    scene.integrator).arrays
+    return simulate(
+        scene.model, scene.method, scene.dt, duration, scene.method_options.get(scene.method, {}), scene.integrator
+    ).arrays
 
 
 def _expected_objects(arrays, sample):
@@ -52,7 +65,7 @@ def _expected_objects(arrays, sample):
     posed = posed_body_vertices(arrays, sample)
     vs, ts = arrays["body_surface_vertex_start"], arrays["body_surface_triangle_start"]
     for b in range(len(vs) - 1):
-        objects[f"body{b}"] = (posed[vs[b]:vs[b + 1]], arrays["body_surface_triangles"][ts[b]:ts[b + 1]] - vs[b])
+        objects[f"body{b}"] = (posed[vs[b] : vs[b + 1]], arrays["body_surface_triangles"][ts[b] : ts[b + 1]] - vs[b])
     positions, cloth = arrays["particle_position"][sample], arrays["particle_cloth"]
     for c in range(cloth.max() + 1 if len(cloth) else 0):
         ids = np.flatnonzero(cloth == c)
@@ -79,6 +92,7 @@ def _concatenated(objects):
 # USD
 # ---------------------------------------------------------------------------------------------
 
+
 def _check_usd(arrays, path, every):
     stage = Usd.Stage.Open(str(path))
     T = len(arrays["time"])
@@ -100,10 +114,11 @@ def _check_usd(arrays, path, every):
             mesh = UsdGeom.Mesh(prim.GetChild("surface"))
             local = np.array(mesh.GetPointsAttr().Get(code), dtype=float)
             matrix = np.array(UsdGeom.Xformable(mesh).ComputeLocalToWorldTransform(code))
-            world = local @ matrix[:3, :3] + matrix[3, :3]          # USD: row vectors, p' = p M
+            world = local @ matrix[:3, :3] + matrix[3, :3]  # USD: row vectors, p' = p M
             np.testing.assert_allclose(world, expected[f"body{b}"][0], atol=FLOAT)
-            np.testing.assert_array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3),
-                                          expected[f"body{b}"][1])
+            np.testing.assert_array_equal(
+                np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), expected[f"body{b}"][1]
+            )
             assert set(mesh.GetFaceVertexCountsAttr().Get()) == {3}
         for c in range(cloth.max() + 1 if len(cloth) else 0):
             mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/Cloth/cloth{c}"))
@@ -116,18 +131,21 @@ def _check_usd(arrays, path, every):
             np.testing.assert_array_equal(ids[faces], mine)
         if (cloth < 0).any():
             particles = UsdGeom.Points(stage.GetPrimAtPath("/World/Particles"))
-            np.testing.assert_allclose(np.array(particles.GetPointsAttr().Get(code)),
-                                       arrays["particle_position"][s][cloth < 0], atol=FLOAT)
-            np.testing.assert_allclose(np.array(particles.GetWidthsAttr().Get()),
-                                       2 * arrays["particle_radius"][cloth < 0], rtol=1e-6)
+            np.testing.assert_allclose(
+                np.array(particles.GetPointsAttr().Get(code)), arrays["particle_position"][s][cloth < 0], atol=FLOAT
+            )
+            np.testing.assert_allclose(
+                np.array(particles.GetWidthsAttr().Get()), 2 * arrays["particle_radius"][cloth < 0], rtol=1e-6
+            )
         else:
             assert not stage.GetPrimAtPath("/World/Particles")
         assert stage.GetPrimAtPath("/World").GetAttribute("contactlab:time").Get(code) == arrays["time"][s]
     if len(arrays["obstacle_vertices"]):
         obstacles = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Obstacles"))
         np.testing.assert_allclose(np.array(obstacles.GetPointsAttr().Get()), arrays["obstacle_vertices"], atol=FLOAT)
-        np.testing.assert_array_equal(np.array(obstacles.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3),
-                                      arrays["obstacle_triangles"])
+        np.testing.assert_array_equal(
+            np.array(obstacles.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), arrays["obstacle_triangles"]
+        )
     return stage
 
 
@@ -135,7 +153,7 @@ def test_usd_holds_the_posed_bodies_cloth_particles_and_obstacles(arrays, tmp_pa
     path = tmp_path / "run.usda"
     assert write_usd(arrays, path, every=3) == str(path)
     stage = _check_usd(arrays, path, every=3)
-    assert stage.GetTimeCodesPerSecond() == 100.0               # 1/Δt, rounded off 99.99999999999999
+    assert stage.GetTimeCodesPerSecond() == 100.0  # 1/Δt, rounded off 99.99999999999999
     # prim names: valid identifiers, unique; the original name kept as display name
     names = [p.GetName() for p in stage.GetPrimAtPath("/World/Bodies").GetChildren()]
     assert names == ["box_A", "ball", "ball_1"]
@@ -158,11 +176,11 @@ def test_usd_holds_the_posed_bodies_cloth_particles_and_obstacles(arrays, tmp_pa
     local = np.array(mesh.GetPointsAttr().Get(), dtype=float)
     matrix = np.array(box.ComputeLocalToWorldTransform(mid))
     world = local @ matrix[:3, :3] + matrix[3, :3]
-    np.testing.assert_allclose(np.linalg.norm(world - world[0], axis=1), np.linalg.norm(local - local[0], axis=1),
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        np.linalg.norm(world - world[0], axis=1), np.linalg.norm(local - local[0], axis=1), atol=1e-6
+    )
     # box extent: the body's own frame
-    np.testing.assert_allclose(np.array(mesh.GetExtentAttr().Get()), [[-0.1, -0.2, -0.3], [0.1, 0.2, 0.3]],
-                               atol=1e-7)
+    np.testing.assert_allclose(np.array(mesh.GetExtentAttr().Get()), [[-0.1, -0.2, -0.3], [0.1, 0.2, 0.3]], atol=1e-7)
 
 
 @pytest.mark.parametrize("suffix, magic", [(".usd", b"PXR-USDC"), (".usdc", b"PXR-USDC"), (".usda", b"#usda")])
@@ -203,6 +221,7 @@ def test_usd_failure_keeps_the_old_file_and_leaves_no_temporary(arrays, tmp_path
 # OBJ and PLY sequences
 # ---------------------------------------------------------------------------------------------
 
+
 def _check_obj(arrays, paths, every):
     samples = frame_samples(len(arrays["time"]), every)
     assert [os.path.basename(p) for p in paths] == [f"frame_{j:05d}.obj" for j in range(len(samples))]
@@ -219,12 +238,12 @@ def _check_obj(arrays, paths, every):
         assert len(scene.geometry) == len(meshes)
         with open(path) as stream:
             names = [line.split(None, 1)[1].strip() for line in stream if line.startswith("o ")]
-        assert names[len(arrays["body_names"]):] == [k for k in expected if not k.startswith("body")]
+        assert names[len(arrays["body_names"]) :] == [k for k in expected if not k.startswith("body")]
 
 
 def test_obj_sequence_holds_every_object_of_every_exported_sample(arrays, tmp_path):
     paths = write_mesh_sequence(arrays, tmp_path / "frames", file_format="obj", every=3)
-    assert len(paths) == 5                                      # samples 0, 3, 6, 9 and the last, 10
+    assert len(paths) == 5  # samples 0, 3, 6, 9 and the last, 10
     _check_obj(arrays, paths, every=3)
     scene = trimesh.load_scene(paths[-1], process=False, split_objects=True, group_material=False)
     assert set(scene.geometry) == {"box_A", "ball", "ball_1", "cloth0", "cloth1", "obstacles"}
@@ -263,14 +282,15 @@ def test_a_shorter_export_replaces_the_whole_sequence(arrays, tmp_path):
     write_mesh_sequence(arrays, directory, file_format="ply", every=1)
     paths = write_mesh_sequence(arrays, directory, every=5)
     names = sorted(os.listdir(directory))
-    assert names == sorted([os.path.basename(p) for p in paths] + [f"frame_{j:05d}.ply" for j in range(11)]
-                           + ["notes.txt"])
+    assert names == sorted(
+        [os.path.basename(p) for p in paths] + [f"frame_{j:05d}.ply" for j in range(11)] + ["notes.txt"]
+    )
 
 
 @pytest.mark.parametrize("file_format", ["obj", "ply"])
 @pytest.mark.parametrize("existing", [False, True])
 def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_format, existing):
-    directory = tmp_path / "frames" if existing else tmp_path / "new" / "frames"    # parents made go too
+    directory = tmp_path / "frames" if existing else tmp_path / "new" / "frames"  # parents made go too
     if existing:
         directory.mkdir()
         (directory / "notes.txt").write_text("mine")
@@ -279,12 +299,13 @@ def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_fo
     def failing(write):
         def wrapped(*args):
             calls.append(1)
-            path = args[1] if file_format == "obj" else args[0]     # (self, path, …) or (path, …)
-            if len(calls) == 3:                     # the third frame breaks half-way
+            path = args[1] if file_format == "obj" else args[0]  # (self, path, …) or (path, …)
+            if len(calls) == 3:  # the third frame breaks half-way
                 with open(path, "w") as stream:
                     stream.write("v 1 2")
                 raise RuntimeError("broken writer")
             return write(*args)
+
         return wrapped
 
     if file_format == "obj":
@@ -295,9 +316,9 @@ def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_fo
         write_mesh_sequence(arrays, directory, file_format=file_format)
     assert len(calls) == 3
     if existing:
-        assert os.listdir(directory) == ["notes.txt"]           # no frame, no .partial- file
+        assert os.listdir(directory) == ["notes.txt"]  # no frame, no .partial- file
     else:
-        assert not directory.exists()                           # the folders it created are gone
+        assert not directory.exists()  # the folders it created are gone
     assert os.listdir(tmp_path) == (["frames"] if existing else [])
 
 
@@ -305,13 +326,17 @@ def test_a_failing_frame_leaves_no_frames(arrays, tmp_path, monkeypatch, file_fo
 # Arguments
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("kwargs, field", [
-    (dict(file_format="stl"), "file_format"),
-    (dict(file_format=None), "file_format"),
-    (dict(every=0), "every"),
-    (dict(every=1.5), "every"),
-    (dict(every=True), "every"),
-])
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(file_format="stl"), "file_format"),
+        (dict(file_format=None), "file_format"),
+        (dict(every=0), "every"),
+        (dict(every=1.5), "every"),
+        (dict(every=True), "every"),
+    ],
+)
 def test_bad_mesh_arguments_name_the_field(arrays, tmp_path, kwargs, field):
     with pytest.raises(InputError) as error:
         write_mesh_sequence(arrays, tmp_path / "frames", **kwargs)
@@ -319,12 +344,15 @@ def test_bad_mesh_arguments_name_the_field(arrays, tmp_path, kwargs, field):
     assert not (tmp_path / "frames").exists()
 
 
-@pytest.mark.parametrize("name, kwargs, field", [
-    ("run.abc", {}, "path"),
-    ("run", {}, "path"),
-    ("run.usd", dict(every=0), "every"),
-    ("run.usd", dict(every="2"), "every"),
-])
+@pytest.mark.parametrize(
+    "name, kwargs, field",
+    [
+        ("run.abc", {}, "path"),
+        ("run", {}, "path"),
+        ("run.usd", dict(every=0), "every"),
+        ("run.usd", dict(every="2"), "every"),
+    ],
+)
 def test_bad_usd_arguments_name_the_field(arrays, tmp_path, name, kwargs, field):
     with pytest.raises(InputError) as error:
         write_usd(arrays, tmp_path / name, **kwargs)

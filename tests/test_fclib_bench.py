@@ -18,7 +18,7 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
 SOLVERS = ["nsgs", "newton"]
 TOL = 1e-8
 GARBAGE = "garbage.dat"
-TINY = "3 1 0 3 3 3 3 1 0 0 0 1 0 0 0 1 -1 0 0 0.5\n"   # a Siconos dense problem: 1 contact
+TINY = "3 1 0 3 3 3 3 1 0 0 0 1 0 0 0 1 -1 0 0 0.5\n"  # a Siconos dense problem: 1 contact
 
 
 # ----------------------------------------------------------------------------- the profile
@@ -32,8 +32,8 @@ def test_profile_by_hand():
     solved = [[True, True], [True, True], [True, False], [False, False]]
     taus, fractions = performance_profile(times, solved, ["a", "b"])
     assert taus.tolist() == [1.0, 2.0, 3.0]
-    assert fractions["a"].tolist() == [2 / 4, 2 / 4, 3 / 4]       # p0, p2 at τ = 1; p1 joins at τ = 3
-    assert fractions["b"].tolist() == [1 / 4, 2 / 4, 2 / 4]       # p1 at τ = 1; p0 joins at τ = 2
+    assert fractions["a"].tolist() == [2 / 4, 2 / 4, 3 / 4]  # p0, p2 at τ = 1; p1 joins at τ = 3
+    assert fractions["b"].tolist() == [1 / 4, 2 / 4, 2 / 4]  # p1 at τ = 1; p0 joins at τ = 2
 
 
 def test_profile_nothing_solved_and_default_names():
@@ -48,7 +48,7 @@ def test_profile_checks_its_input():
         performance_profile([[1.0, 2.0]], [[True]])
     assert caught.value.field == "times"
     with pytest.raises(InputError):
-        performance_profile([[0.0]], [[True]])               # a solved pair needs a positive time
+        performance_profile([[0.0]], [[True]])  # a solved pair needs a positive time
 
 
 # ----------------------------------------------------------------------------- a real run
@@ -84,20 +84,21 @@ def test_every_problem_and_solver_has_a_row(run):
     names = sorted(path.name for path in folder.iterdir() if path.suffix in fclib_bench.PROBLEM_SUFFIXES)
     assert len(names) == 4
     expected = [(name, solver) for name in names for solver in SOLVERS]
-    assert list(zip(table["problem"], table["solver"])) == expected       # problems sorted, solvers as asked
-    assert table["worker"].str.startswith("tcp://127.0.0.1:").all()      # ran on the cluster's workers
+    assert list(zip(table["problem"], table["solver"])) == expected  # problems sorted, solvers as asked
+    assert table["worker"].str.startswith("tcp://127.0.0.1:").all()  # ran on the cluster's workers
 
 
 def test_errors_are_recomputed_and_match_a_serial_solve(run):
     folder, result = run
     good = result.table[result.table["status"] == "ok"]
-    assert len(good) == 6 and good["converged"].all()       # the smallest problems: both solvers solve them
+    assert len(good) == 6 and good["converged"].all()  # the smallest problems: both solvers solve them
     for row in good.itertuples(index=False):
         assert row.error <= TOL
         problem = read_problem(folder / row.problem)
         assert row.contacts == problem.nc
-        serial = solve_friction_contact(problem.W, problem.q, problem.mu, method=row.solver, tol=TOL,
-                                        max_iterations=MAX_ITERATIONS[row.solver])
+        serial = solve_friction_contact(
+            problem.W, problem.q, problem.mu, method=row.solver, tol=TOL, max_iterations=MAX_ITERATIONS[row.solver]
+        )
         assert row.iterations == serial.iterations
         assert row.error == natural_map_error(problem.W, problem.q, problem.mu, serial.r)
         assert row.seconds > 0
@@ -182,7 +183,7 @@ def test_unknown_solver(tmp_path):
             bench(tmp_path, solvers, out=tmp_path / "out")
         assert caught.value.field == "--solvers"
         assert "'lemke'" in caught.value.message
-        assert all(name in caught.value.message for name in fclib_bench.SOLVERS)     # the valid choices
+        assert all(name in caught.value.message for name in fclib_bench.SOLVERS)  # the valid choices
     with pytest.raises(InputError) as caught:
         bench(tmp_path, [], out=tmp_path / "out")
     assert caught.value.field == "--solvers"
@@ -191,8 +192,12 @@ def test_unknown_solver(tmp_path):
 def test_other_settings(tmp_path):
     (tmp_path / "p.dat").write_text(TINY)
     (tmp_path / "file").write_text("")
-    for keywords, field in ((dict(repeats=0), "--repeats"), (dict(tol=-1.0), "--tol"),
-                            (dict(max_iterations=0), "--max-iterations"), (dict(out=tmp_path / "file"), "--out")):
+    for keywords, field in (
+        (dict(repeats=0), "--repeats"),
+        (dict(tol=-1.0), "--tol"),
+        (dict(max_iterations=0), "--max-iterations"),
+        (dict(out=tmp_path / "file"), "--out"),
+    ):
         with pytest.raises(InputError) as caught:
             bench(tmp_path, **{"out": tmp_path / "out", **keywords})
         assert caught.value.field == field
@@ -204,17 +209,33 @@ def test_other_settings(tmp_path):
 def test_the_command_writes_the_table_and_profile_and_refuses_a_bad_solver_in_one_line(tmp_path):
     import subprocess
     import sys
+
     folder = tmp_path / "problems"
     folder.mkdir()
     for path in smallest_problems(2):
         shutil.copy(path, folder / path.name)
-    command = [sys.executable, "-m", "contactlab", "fclib", "bench", str(folder), "--solvers", "newton",
-               "--workers", "1", "--repeats", "1", "--out", str(tmp_path / "out")]
+    command = [
+        sys.executable,
+        "-m",
+        "contactlab",
+        "fclib",
+        "bench",
+        str(folder),
+        "--solvers",
+        "newton",
+        "--workers",
+        "1",
+        "--repeats",
+        "1",
+        "--out",
+        str(tmp_path / "out"),
+    ]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("2 problems: newton solved 2")
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["profile.png", "results.csv", "results.md"]
-    refused = subprocess.run([*command[:6], "--solvers", "lemke"], capture_output=True, text=True, timeout=120,
-                             cwd=tmp_path)
+    refused = subprocess.run(
+        [*command[:6], "--solvers", "lemke"], capture_output=True, text=True, timeout=120, cwd=tmp_path
+    )
     assert refused.returncode == 2 and refused.stderr.count("\n") == 1 and "Traceback" not in refused.stderr
     assert "--solvers: expected solvers among nsgs, staggered, apgd, newton, found 'lemke'" in refused.stderr

@@ -11,10 +11,9 @@ import time
 
 import numpy as np
 import pytest
-
 from conftest import ball_on_plane
-from contactlab import ModelBuilder, SimulationDiverged, simulate
-from contactlab import health
+
+from contactlab import ModelBuilder, SimulationDiverged, health, simulate
 from contactlab.scene import builtin_scenes, load_scene
 
 
@@ -37,7 +36,7 @@ def test_a_spring_too_stiff_for_explicit_euler_stops_the_run_with_the_fix():
     assert message.startswith("the run went wrong at t = ") and "total energy rose" in message
     assert "too long for penalty stiffness 1e+09 N/m under explicit_euler" in message
     run = stopped.value.run
-    impact = np.sqrt(2 * 0.4 / 9.81)                         # the ball's surface reaches the floor
+    impact = np.sqrt(2 * 0.4 / 9.81)  # the ball's surface reaches the floor
     assert impact < stopped.value.time < impact + 0.05
     assert run.arrays["time"][-1] == pytest.approx(stopped.value.time)
     assert run.summary["diverged"]["check"] == "energy"
@@ -59,8 +58,15 @@ def test_a_pile_stepped_too_coarsely_is_caught():
 
 def test_allow_divergence_records_the_violations_and_goes_on():
     model = ball_on_plane(height=0.4, restitution=0.5, friction=0.0)
-    run = simulate(model, "penalty", 0.01, 0.5, {"stiffness": 1e9, "implicit_springs": "never"},
-                   "explicit_euler", allow_divergence=True)
+    run = simulate(
+        model,
+        "penalty",
+        0.01,
+        0.5,
+        {"stiffness": 1e9, "implicit_springs": "never"},
+        "explicit_euler",
+        allow_divergence=True,
+    )
     found = {v["check"] for v in run.summary["health"]["violations"]}
     assert "energy" in found and run.summary["diverged"] is None
     assert run.summary["health"]["allow_divergence"] is True
@@ -69,7 +75,7 @@ def test_allow_divergence_records_the_violations_and_goes_on():
 def test_the_limits_scale_with_the_scene():
     """Speed scale √(2 g L) with L the centre's height above the floor (10.1 m: 14 m/s), or the
     fastest initial speed; energy scale the initial kinetic energy plus Σ m g L."""
-    model = ball_on_plane(height=10.0, friction=0.0)              # radius 0.1 m
+    model = ball_on_plane(height=10.0, friction=0.0)  # radius 0.1 m
     checks = health.Health(model, model.state(), 0.01)
     np.testing.assert_allclose(checks.speed_limit, health.SPEED_FACTOR * np.sqrt(2 * 9.81 * 10.1), rtol=1e-12)
     np.testing.assert_allclose(checks.energy_scale, 1.0 * 9.81 * 10.1, rtol=1e-12)
@@ -82,8 +88,15 @@ def test_no_built_in_scene_trips_a_check_at_its_defaults(name):
     """No false alarms: every built-in scene with its own method for a second (its start, where
     the impacts are) passes every check."""
     scene = load_scene(name)
-    run = simulate(scene.model, scene.method, scene.dt, min(scene.duration, 1.0),
-                   scene.method_options.get(scene.method, {}), scene.integrator, record_every=5)
+    run = simulate(
+        scene.model,
+        scene.method,
+        scene.dt,
+        min(scene.duration, 1.0),
+        scene.method_options.get(scene.method, {}),
+        scene.integrator,
+        record_every=5,
+    )
     assert run.summary["diverged"] is None and run.summary["health"]["violations"] == []
 
 
@@ -94,9 +107,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def _interrupted_run(tmp_path, delay, signum, method):
     env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "src"))
-    process = subprocess.Popen([sys.executable, "-m", "contactlab", "run", "box_pyramid", "--duration", "2",
-                                "--method", method], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "contactlab", "run", "box_pyramid", "--duration", "2", "--method", method],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(delay)
     process.send_signal(signum)
     _, stderr = process.communicate(timeout=300)
@@ -108,10 +126,11 @@ def test_a_run_interrupted_at_random_moments_ends_cleanly_every_time(tmp_path):
     (imports, compiled steps, writing, plotting); no .partial file remains, and every file the
     line says was written exists. (A run that finished before the signal exits 0.)"""
     chooser = random.Random(20)
-    for attempt in range(8):
+    for _attempt in range(8):
         signum = chooser.choice([signal.SIGINT, signal.SIGTERM])
-        code, stderr = _interrupted_run(tmp_path, chooser.uniform(0.3, 2.5), signum, chooser.choice(
-            ["impulse", "penalty"]))
+        code, stderr = _interrupted_run(
+            tmp_path, chooser.uniform(0.3, 2.5), signum, chooser.choice(["impulse", "penalty"])
+        )
         assert "Traceback" not in stderr, stderr
         assert glob.glob(str(tmp_path / "out" / "**" / ".partial-*"), recursive=True) == []
         if code == 0:
@@ -131,57 +150,67 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
     raised there as KeyboardInterrupt (contactlab.interrupts.Interrupted), never as a
     SystemError from inside the compiled call."""
     from contactlab.interrupts import Interrupted
+
     # Python's own Ctrl-C handler, as in an interactive session (a shell starts background jobs,
     # and so perhaps this test run, with SIGINT ignored)
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = load_scene("box_pyramid")
-    simulate(scene.model, "penalty", scene.dt, 2 * scene.dt, compiled_loop=False)   # compiled before the clock starts
+    simulate(scene.model, "penalty", scene.dt, 2 * scene.dt, compiled_loop=False)  # compiled before the clock starts
     calls = []
     from contactlab.methods import penalty
+
     real = penalty.step
 
     def step(*arguments):
         calls.append(1)
         if len(calls) == 3:
-            os.kill(os.getpid(), signal.SIGINT)       # lands while this step runs
+            os.kill(os.getpid(), signal.SIGINT)  # lands while this step runs
         return real(*arguments)
+
     penalty.step = step
     try:
-        with pytest.raises(Interrupted) as interrupted:     # the Python path, one call a step (not the loop)
+        with pytest.raises(Interrupted) as interrupted:  # the Python path, one call a step (not the loop)
             simulate(scene.model, "penalty", scene.dt, 1.0, compiled_loop=False)
     finally:
         penalty.step = real
         restored = signal.getsignal(signal.SIGINT)
         signal.signal(signal.SIGINT, previous)
     assert isinstance(interrupted.value, KeyboardInterrupt) and interrupted.value.exit_code == 130
-    assert len(calls) == 3                           # the third step finished; no fourth began
+    assert len(calls) == 3  # the third step finished; no fourth began
     assert restored is signal.default_int_handler
 
 
 # ---- limits before work (contactlab.budget) ----------------------------------------------------------
 
+
 def test_a_run_that_cannot_fit_is_refused_before_it_starts_with_the_estimate():
     """The trajectory of 10⁶ samples of one ball, 2 × 10⁶ × (13 + 8) × 8 bytes ≈ 320 MiB, against
     a 100 MB limit: refused at once, naming record_every and the sampling that fits."""
     from contactlab import InputError, budget
+
     model = ball_on_plane(friction=0.0)
-    needed = budget.estimate(model, 10 ** 6, 1)
-    assert needed["trajectory"] == 2 * (10 ** 6 + 2) * 8 * (13 + 8)
+    needed = budget.estimate(model, 10**6, 1)
+    assert needed["trajectory"] == 2 * (10**6 + 2) * 8 * (13 + 8)
     started = time.perf_counter()
     with pytest.raises(InputError, match=r"record_every: the run would hold 320 MB: 1,000,002 samples") as refused:
-        simulate(model, "impulse", 0.001, 1000.0, memory_limit=100 * 2 ** 20)
+        simulate(model, "impulse", 0.001, 1000.0, memory_limit=100 * 2**20)
     assert time.perf_counter() - started < 1.0
     every = int(refused.value.message.split("record every ")[1].split(" steps")[0].replace(",", ""))
-    assert budget.estimate(model, 10 ** 6, every)["total"] <= 100 * 2 ** 20 < budget.estimate(model, 10 ** 6, every - 1)["total"]
-    simulate(model, "impulse", 0.001, 0.01, memory_limit=float("inf"))      # no limit
+    assert (
+        budget.estimate(model, 10**6, every)["total"] <= 100 * 2**20 < budget.estimate(model, 10**6, every - 1)["total"]
+    )
+    simulate(model, "impulse", 0.001, 0.01, memory_limit=float("inf"))  # no limit
 
 
 def test_a_model_too_large_is_refused_before_it_is_built(tmp_path):
     from contactlab import InputError
     from contactlab.validation import MAX_DYNAMIC
+
     scene = tmp_path / "million.toml"
-    scene.write_text('[[bodies]]\nshape = "sphere"\nradius = 0.01\nmass = 1.0\nposition = [0, 0, 1]\n'
-                     'array = { count = [1000, 1000, 1], spacing = [0.03, 0.03, 1] }\n')
+    scene.write_text(
+        '[[bodies]]\nshape = "sphere"\nradius = 0.01\nmass = 1.0\nposition = [0, 0, 1]\n'
+        "array = { count = [1000, 1000, 1], spacing = [0.03, 0.03, 1] }\n"
+    )
     started = time.perf_counter()
     with pytest.raises(InputError, match="array.count: an array of 1000 x 1000 x 1 copies would make 1,000,000"):
         load_scene(str(scene))

@@ -6,19 +6,31 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from conftest import frictional_contacts
 
 import contactlab.lcp.solve as lcp_solve
-from conftest import frictional_contacts
-from contactlab.lcp.friction import largest_eigenvalue
 from contactlab.errors import InputError
-from contactlab.lcp import (color_contacts, color_rows, coloring_is_valid, natural_map_error, read_problem,
-                            solve_friction_contact, solve_lcp)
+from contactlab.lcp import (
+    color_contacts,
+    color_rows,
+    coloring_is_valid,
+    natural_map_error,
+    read_problem,
+    solve_friction_contact,
+    solve_lcp,
+)
+from contactlab.lcp.friction import largest_eigenvalue
 
 FCLIB = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
 FCLIB_FILES = sorted(p.name for p in FCLIB.iterdir() if p.suffix in (".dat", ".hdf5")) if FCLIB.is_dir() else []
 HARD = {"BoxesStack1-i100000-32.hdf5.dat", "local_problem_test.hdf5"}  # marked hard in the data README
-SMALL = ["FC3D_Example1.dat", "FrictionContact3D_1c.dat", "NESpheres_10_1.dat", "Rover1039.dat",
-         "LMGC_GlobalFrictionContactProblem00046.hdf5"]
+SMALL = [
+    "FC3D_Example1.dat",
+    "FrictionContact3D_1c.dat",
+    "NESpheres_10_1.dat",
+    "Rover1039.dat",
+    "LMGC_GlobalFrictionContactProblem00046.hdf5",
+]
 needs_data = pytest.mark.skipif(not FCLIB.is_dir(), reason=f"FCLIB test data folder {FCLIB} is absent")
 
 
@@ -30,8 +42,8 @@ def contact_lcp(rng, n, bodies=None):
     for row, (a, b) in enumerate(pairs):
         normal = rng.normal(size=3)
         normal /= np.linalg.norm(normal)
-        J[row, 3 * a:3 * a + 3] = normal
-        J[row, 3 * b:3 * b + 3] = -normal
+        J[row, 3 * a : 3 * a + 3] = normal
+        J[row, 3 * b : 3 * b + 3] = -normal
     J = J.tocsr()
     B = (J @ J.T + 0.05 * sp.eye(n)).tocsr()
     return B, rng.normal(size=n), pairs
@@ -169,13 +181,16 @@ def test_iterative_methods_report_when_stopped_early(rng):
     assert "stopped" in res.message
 
 
-@pytest.mark.parametrize("args, field", [
-    ((np.ones((2, 3)), np.ones(2)), "B"),
-    ((np.eye(3), np.ones(2)), "c"),
-    ((np.eye(2), np.array([1.0, np.nan])), "c"),
-    ((np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2)), "B"),
-    ((np.eye(2), np.ones(2), "sor"), "method"),
-])
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        ((np.ones((2, 3)), np.ones(2)), "B"),
+        ((np.eye(3), np.ones(2)), "c"),
+        ((np.eye(2), np.array([1.0, np.nan])), "c"),
+        ((np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2)), "B"),
+        ((np.eye(2), np.ones(2), "sor"), "method"),
+    ],
+)
 def test_lcp_input_errors(args, field):
     with pytest.raises(InputError) as info:
         solve_lcp(*args)
@@ -251,9 +266,14 @@ def test_apgd_on_fclib_problems(name):
 
 
 @needs_data
-@pytest.mark.parametrize("name, tol, cap", [("Capsules-i100-1090.dat", 1e-6, 3000),
-                                            ("Capsules-i101-404.dat", 1e-6, 3000),
-                                            ("Capsules-i101-404.dat", 1e-8, 3000)])
+@pytest.mark.parametrize(
+    "name, tol, cap",
+    [
+        ("Capsules-i100-1090.dat", 1e-6, 3000),
+        ("Capsules-i101-404.dat", 1e-6, 3000),
+        ("Capsules-i101-404.dat", 1e-8, 3000),
+    ],
+)
 def test_apgd_restart_solves_the_capsules_problems(name, tol, cap):
     # Before the function restart (issue 19) apgd stalled here: 4.3e-5 and 3.9e-6 after 3000 (and
     # 10 000) steps. With it: 413, 348 and 1224 steps (docs/lcp.md).
@@ -273,12 +293,12 @@ def test_apgd_needs_only_products_and_meets_the_coulomb_conditions(rng):
 
     operator = spla.LinearOperator(W.shape, matvec=product, dtype=float)
     L = np.linalg.eigvalsh(W).max()
-    by_products = solve_friction_contact(operator, q, mu, method="apgd", tol=1e-9, max_iterations=20000,
-                                         lipschitz=L)
+    by_products = solve_friction_contact(operator, q, mu, method="apgd", tol=1e-9, max_iterations=20000, lipschitz=L)
     assert by_products.converged, by_products.message
-    assert len(products) == by_products.iterations + 1          # one per step and one at the start (u is the best W r)
-    by_matrix = solve_friction_contact(sp.csr_matrix(W), q, mu, method="apgd", tol=1e-9, max_iterations=20000,
-                                       lipschitz=L)
+    assert len(products) == by_products.iterations + 1  # one per step and one at the start (u is the best W r)
+    by_matrix = solve_friction_contact(
+        sp.csr_matrix(W), q, mu, method="apgd", tol=1e-9, max_iterations=20000, lipschitz=L
+    )
     np.testing.assert_allclose(by_products.r, by_matrix.r, atol=1e-12 * np.abs(by_matrix.r).max())
     # the Coulomb conditions themselves, contact by contact, to ten times the tolerance in the
     # error's own scale (max of ‖q‖, ‖r‖, ‖u‖)
@@ -313,7 +333,7 @@ def test_friction_input_errors():
     with pytest.raises(InputError, match="mu"):
         solve_friction_contact(np.eye(3), np.zeros(3), [-0.5])
     with pytest.raises(InputError, match="method"):
-        solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="lemke")   # an LCP method, not these
+        solve_friction_contact(np.eye(3), np.zeros(3), [0.5], method="lemke")  # an LCP method, not these
     with pytest.raises(InputError, match="friction_model"):
         solve_friction_contact(np.eye(3), np.zeros(3), [0.5], friction_model="ellipse")
     with pytest.raises(InputError, match="friction_model"):
@@ -329,8 +349,9 @@ def test_friction_input_errors():
 
 def test_apgd_with_a_zero_operator_returns_no_reactions():
     # W = 0 (every contact between immovable points): no reaction changes anything, so none is given
-    res = solve_friction_contact(np.zeros((6, 6)), np.array([1.0, 0, 0, -1.0, 0.5, 0]), [0.5, 0.5], method="apgd",
-                                 r0=np.ones(6), lipschitz=0.0)
+    res = solve_friction_contact(
+        np.zeros((6, 6)), np.array([1.0, 0, 0, -1.0, 0.5, 0]), [0.5, 0.5], method="apgd", r0=np.ones(6), lipschitz=0.0
+    )
     assert not res.r.any() and res.iterations == 0
     assert res.error == pytest.approx(natural_map_error(np.zeros((6, 6)), res.u, [0.5, 0.5], res.r))
 

@@ -12,9 +12,9 @@ from contactlab.collision.granularity import surface_contacts, triangle_samples
 from contactlab.collision.mesh_contacts import box_mesh, shapes_against_mesh, sphere_mesh
 from contactlab.collision.mesh_sweep import sweep_sphere_mesh
 from contactlab.collision.signed_distance import box_obstacle, plane_obstacle, sphere_obstacle
-from contactlab.shapes import BOX, POINT, SPHERE
 from contactlab.errors import InputError
 from contactlab.meshes import TriangleMesh, builtin_mesh_path, load_mesh, triangles_near, vertex_normals
+from contactlab.shapes import BOX, POINT, SPHERE
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -22,6 +22,7 @@ trimesh = pytest.importorskip("trimesh")
 # ---------------------------------------------------------------------------------------------
 # helpers and independent references
 # ---------------------------------------------------------------------------------------------
+
 
 def square(half=1.0, z=0.0, two_sided=False):
     """The flat square [−half, half]² at height z as two triangles sharing the diagonal (0,0)–(2,2)."""
@@ -54,11 +55,11 @@ def sphere_contacts(mesh, center, radius, margin=0.0, max_contacts=8):
 
 def reference_closest(points, V, T):
     """Closest points (N, T, 3) of every triangle to every point, by projection then edge clamping."""
-    a, b, c = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]                      # (T, 3)
+    a, b, c = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]  # (T, 3)
     n = np.cross(b - a, c - a)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    p = points[:, None, :]                                             # (N, 1, 3)
-    projected = p - np.sum((p - a) * n, axis=2, keepdims=True) * n     # (N, T, 3)
+    p = points[:, None, :]  # (N, 1, 3)
+    projected = p - np.sum((p - a) * n, axis=2, keepdims=True) * n  # (N, T, 3)
     inside = np.ones(projected.shape[:2], dtype=bool)
     for u, v in ((a, b), (b, c), (c, a)):
         inside &= np.sum(np.cross(v - u, projected - u) * n, axis=2) >= 0.0
@@ -84,16 +85,17 @@ def reference_distance(points, V, T):
 # loading
 # ---------------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("extension", ["obj", "stl", "ply"])
 def test_load_each_format(tmp_path, extension):
     box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
     path = tmp_path / f"box.{extension}"
     box.export(path)
     mesh = load_mesh(path)
-    assert mesh.vertex_count == 8 and mesh.triangle_count == 12      # STL's 36 corners merged
+    assert mesh.vertex_count == 8 and mesh.triangle_count == 12  # STL's 36 corners merged
     np.testing.assert_allclose(mesh.bounds[0], [-0.5, -1.0, -1.5], atol=1e-6)
     centroids = mesh.vertices[mesh.triangles].mean(axis=1)
-    assert np.all(np.sum(mesh.triangle_normals * centroids, axis=1) > 0.0)        # outward
+    assert np.all(np.sum(mesh.triangle_normals * centroids, axis=1) > 0.0)  # outward
     np.testing.assert_allclose(np.linalg.norm(mesh.vertex_normals, axis=1), 1.0)
     assert np.all(np.sum(mesh.vertex_normals * mesh.vertices, axis=1) > 0.0)
     scaled = load_mesh(path, scale=2.0)
@@ -163,6 +165,7 @@ def test_load_errors(tmp_path):
 # BVH
 # ---------------------------------------------------------------------------------------------
 
+
 def test_bvh_query_equals_brute_force():
     rng = np.random.default_rng(1)
     centers = rng.uniform(-1.0, 1.0, (700, 3))
@@ -174,28 +177,62 @@ def test_bvh_query_equals_brute_force():
     for _ in range(1500):
         lower = rng.uniform(-1.2, 1.0, 3)
         upper = lower + rng.uniform(0.0, 0.5, 3)
-        found = triangles_near(mesh.node_lower, mesh.node_upper, mesh.node_left, mesh.node_right, mesh.node_start,
-                               mesh.node_count, mesh.node_order, mesh.triangle_lower, mesh.triangle_upper,
-                               lower, upper, out)
+        found = triangles_near(
+            mesh.node_lower,
+            mesh.node_upper,
+            mesh.node_left,
+            mesh.node_right,
+            mesh.node_start,
+            mesh.node_count,
+            mesh.node_order,
+            mesh.triangle_lower,
+            mesh.triangle_upper,
+            lower,
+            upper,
+            out,
+        )
         brute = np.nonzero(np.all((mesh.triangle_lower <= upper) & (mesh.triangle_upper >= lower), axis=1))[0]
         assert np.array_equal(np.sort(out[:found]), brute)
         # a too small buffer still reports the full count
-        assert triangles_near(mesh.node_lower, mesh.node_upper, mesh.node_left, mesh.node_right, mesh.node_start,
-                              mesh.node_count, mesh.node_order, mesh.triangle_lower, mesh.triangle_upper,
-                              lower, upper, small) == found
+        assert (
+            triangles_near(
+                mesh.node_lower,
+                mesh.node_upper,
+                mesh.node_left,
+                mesh.node_right,
+                mesh.node_start,
+                mesh.node_count,
+                mesh.node_order,
+                mesh.triangle_lower,
+                mesh.triangle_upper,
+                lower,
+                upper,
+                small,
+            )
+            == found
+        )
 
 
 # ---------------------------------------------------------------------------------------------
 # sphere and box against a mesh
 # ---------------------------------------------------------------------------------------------
 
+
 def test_sphere_on_two_triangle_square_gets_one_contact():
     mesh = square()
     radius = 0.1
     # inside a face, exactly over the shared diagonal, a hair either side of it, over the
     # centre vertex where both triangles meet, near a corner vertex, and slightly sunk in
-    for x, y in [(0.4, -0.3), (0.3, 0.3), (0.3 + 1e-13, 0.3), (0.3, 0.3 + 1e-13), (0.0, 0.0),
-                 (-0.7, -0.7), (0.95, 0.95), (0.6, 0.2)]:
+    for x, y in [
+        (0.4, -0.3),
+        (0.3, 0.3),
+        (0.3 + 1e-13, 0.3),
+        (0.3, 0.3 + 1e-13),
+        (0.0, 0.0),
+        (-0.7, -0.7),
+        (0.95, 0.95),
+        (0.6, 0.2),
+    ]:
         for height in (0.1, 0.09, 0.105):
             P, N, D, F = sphere_contacts(mesh, (x, y, height), radius, margin=0.01)
             assert len(D) == 1, (x, y, height, F)
@@ -206,7 +243,7 @@ def test_sphere_on_two_triangle_square_gets_one_contact():
     assert len(sphere_contacts(mesh, (0.2, 0.1, 0.2), radius, margin=0.05)[2]) == 0
     P, N, D, F = sphere_contacts(mesh, (1.06, 0.3, 0.079), radius)
     offset = np.array([0.06, 0.0, 0.079])
-    assert len(D) == 1 and F[0] == 16 * 0 + 2                       # triangle 0, edge (1, 2)
+    assert len(D) == 1 and F[0] == 16 * 0 + 2  # triangle 0, edge (1, 2)
     np.testing.assert_allclose(N[0], offset / np.linalg.norm(offset), atol=1e-12)
     assert D[0] == pytest.approx(radius - np.linalg.norm(offset), abs=1e-12)
 
@@ -240,7 +277,7 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
     mesh = square(half=2.0)
     half = np.array([0.3, 0.3, 0.2])
     P, N, D, F = buffers()
-    for yaw in (0.0, np.pi / 4, 0.3):                 # yaw π/4 puts two corners on the diagonal
+    for yaw in (0.0, np.pi / 4, 0.3):  # yaw π/4 puts two corners on the diagonal
         c, s = np.cos(yaw), np.sin(yaw)
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         for sink in (0.0, 0.002):
@@ -248,7 +285,7 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
             assert k == 4, (yaw, sink, F[:k])
             np.testing.assert_allclose(N[:k], np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
             np.testing.assert_allclose(D[:k], sink, atol=1e-12)
-            assert len(set((F[:k] % 16).tolist())) == 4           # four different corners
+            assert len(set((F[:k] % 16).tolist())) == 4  # four different corners
             np.testing.assert_allclose(P[:k, 2], -0.5 * sink, atol=1e-12)
     # a finely meshed floor: mesh vertices under the box add contacts, reduced to at most 8
     V, T = grid(11)
@@ -269,8 +306,19 @@ def test_box_on_a_mesh_peak_gets_vertex_contact():
     T = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
     mesh = TriangleMesh(V, T)
     P, N, D, F = buffers()
-    k = box_mesh(np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3), np.array([0.3, 0.3, 0.2]),
-                 mesh.geometry, 0.0, P, N, D, F, 0, 8)
+    k = box_mesh(
+        np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]),
+        np.eye(3),
+        np.array([0.3, 0.3, 0.2]),
+        mesh.geometry,
+        0.0,
+        P,
+        N,
+        D,
+        F,
+        0,
+        8,
+    )
     assert k == 1 and F[0] % 16 >= 8
     np.testing.assert_allclose(N[0], [0.0, 0.0, 1.0])
     assert D[0] == pytest.approx(0.01)
@@ -282,8 +330,9 @@ def test_shapes_against_mesh_batch():
     params = np.array([[0.1, 0, 0, 0], [0.0, 0, 0, 0], [0.3, 0.3, 0.2, 0], [0.1, 0, 0, 0]])
     centers = np.array([[0.5, 0.5, 0.09], [0.2, -0.3, -0.001], [-1.0, -1.0, 0.2], [0.0, 0.0, 3.0]])
     rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (4, 3, 3)))
-    point, normal, depth, feature, owner = shapes_against_mesh(kinds, params, centers, rots,
-                                                               np.zeros(4), mesh.geometry, 8)
+    point, normal, depth, feature, owner = shapes_against_mesh(
+        kinds, params, centers, rots, np.zeros(4), mesh.geometry, 8
+    )
     assert owner.tolist() == [0, 1, 2, 2, 2, 2]
     np.testing.assert_allclose(depth, [0.01, 0.001, 0, 0, 0, 0], atol=1e-12)
 
@@ -291,6 +340,7 @@ def test_shapes_against_mesh_batch():
 # ---------------------------------------------------------------------------------------------
 # randomized cross-check against independent implementations
 # ---------------------------------------------------------------------------------------------
+
 
 def test_sphere_mesh_cross_check_random():
     fcl = pytest.importorskip("fcl")
@@ -300,8 +350,10 @@ def test_sphere_mesh_cross_check_random():
     X, Y = np.meshgrid(xs, xs)
     terrain_V = np.column_stack([X.ravel(), Y.ravel(), 0.15 * np.sin(3 * X.ravel()) * np.cos(2 * Y.ravel())])
     _, terrain_T = grid(9)
-    cases = [(TriangleMesh(ball.vertices, ball.faces, max_depth=0.3), "closed"),
-             (TriangleMesh(terrain_V, terrain_T, two_sided=True), "sheet")]
+    cases = [
+        (TriangleMesh(ball.vertices, ball.faces, max_depth=0.3), "closed"),
+        (TriangleMesh(terrain_V, terrain_T, two_sided=True), "sheet"),
+    ]
     checked = with_contacts = 0
     for mesh, kind in cases:
         V, T = mesh.vertices, mesh.triangles
@@ -322,13 +374,16 @@ def test_sphere_mesh_cross_check_random():
         mesh_points = []
         _, distance = reference_closest(centers, V, T)
         minimum = distance.min(axis=1)
-        inside = np.all(np.sum((centers[:, None, :] - V[T[:, 0]]) * mesh.triangle_normals, axis=2) < 0.0, axis=1) \
-            if kind == "closed" else np.zeros(count, dtype=bool)
+        inside = (
+            np.all(np.sum((centers[:, None, :] - V[T[:, 0]]) * mesh.triangle_normals, axis=2) < 0.0, axis=1)
+            if kind == "closed"
+            else np.zeros(count, dtype=bool)
+        )
         for i in range(count):
             c, r, m = centers[i], radii[i], margins[i]
             deep = r + m + mesh.max_depth
             if abs(minimum[i] - (r + m)) < 1e-7 or abs(minimum[i] - deep) < 1e-7:
-                continue                                   # on the boundary of the search: either answer
+                continue  # on the boundary of the search: either answer
             P, N, D, F = sphere_contacts(mesh, c, r, margin=m, max_contacts=64)
             # outside: searched within radius + margin; inside a closed mesh, max_depth deeper
             expect_any = minimum[i] <= r + m or (inside[i] and minimum[i] <= deep)
@@ -358,7 +413,7 @@ def test_sphere_mesh_cross_check_random():
                 request, result = fcl.DistanceRequest(), fcl.DistanceResult()
                 sphere = fcl.CollisionObject(fcl.Sphere(r), fcl.Transform(c))
                 gap = fcl.distance(sphere, fcl_mesh, request, result)
-                if gap > 1e-6:        # (python-fcl returns a denormal, not −1, for an overlap)
+                if gap > 1e-6:  # (python-fcl returns a denormal, not −1, for an overlap)
                     assert gap == pytest.approx(-D[nearest], abs=1e-6)
         # every contact's mesh point lies on the mesh
         assert np.all(reference_distance(np.concatenate(mesh_points), V, T) < 1e-9)
@@ -369,17 +424,18 @@ def test_sphere_mesh_cross_check_random():
 # P2 granularities, P4 / P5 normals
 # ---------------------------------------------------------------------------------------------
 
+
 def cloth_pushed_into_plane():
     V, T = grid(6)
     V = V.copy()
-    V[:, 2] = -0.03 + 0.1 * V[:, 0] + 0.02 * V[:, 1] ** 2         # tilted, curved, partly below z = 0
+    V[:, 2] = -0.03 + 0.1 * V[:, 0] + 0.02 * V[:, 1] ** 2  # tilted, curved, partly below z = 0
     return V, T
 
 
 @pytest.mark.parametrize("samples", [1, 2, 3])
 def test_p2_granularities_on_a_plane(samples):
     V, T = cloth_pushed_into_plane()
-    plane = plane_obstacle((0.0, 0.0, 2.0), 0.0)             # z = 0, normal normalized
+    plane = plane_obstacle((0.0, 0.0, 2.0), 0.0)  # z = 0, normal normalized
     below = -V[:, 2]
     whole = surface_contacts(V, T, plane, granularity="object")
     assert len(whole.depth) == 1
@@ -436,8 +492,14 @@ def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
     # a small closed tetrahedron whose lowest vertex 0 dips into the box near its +x/+z edge
     base = np.array([[0.0, 0.0, 0.0], [0.3, 0.1, 0.4], [-0.1, 0.3, 0.4], [-0.1, -0.3, 0.4]])
     T = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 3], [1, 2, 3]])
-    assert np.all(np.einsum("td,td->t", np.cross(base[T[:, 1]] - base[T[:, 0]], base[T[:, 2]] - base[T[:, 0]]),
-                            base[T].mean(axis=1) - base.mean(axis=0)) > 0.0)     # wound outward
+    assert np.all(
+        np.einsum(
+            "td,td->t",
+            np.cross(base[T[:, 1]] - base[T[:, 0]], base[T[:, 2]] - base[T[:, 0]]),
+            base[T].mean(axis=1) - base.mean(axis=0),
+        )
+        > 0.0
+    )  # wound outward
     previous = {}
     jumps = {"object": 0.0, "vertex": 0.0}
     # vertex 0 travels along x at z = 0.9: it crosses the medial plane x = z of the box at x = 0.9
@@ -447,13 +509,13 @@ def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
             c = surface_contacts(V, T, box, granularity="vertex", normal=choice)
             row = np.nonzero(c.vertices[:, 0] == 0)[0]
             assert len(row) == 1
-            assert c.depth[row[0]] == pytest.approx(min(1.0 - x, 0.1))       # depth continuous
+            assert c.depth[row[0]] == pytest.approx(min(1.0 - x, 0.1))  # depth continuous
             n = c.normal[row[0]]
             if choice in previous:
                 jumps[choice] = max(jumps[choice], np.linalg.norm(n - previous[choice]))
             previous[choice] = n
-    assert jumps["object"] == pytest.approx(np.sqrt(2.0))     # (0,0,1) → (1,0,0) in one small step
-    assert jumps["vertex"] < 1e-12                            # −(vertex normal): does not jump
+    assert jumps["object"] == pytest.approx(np.sqrt(2.0))  # (0,0,1) → (1,0,0) in one small step
+    assert jumps["vertex"] < 1e-12  # −(vertex normal): does not jump
     np.testing.assert_allclose(previous["vertex"], -vertex_normals(base, T)[0])
 
 
@@ -461,17 +523,18 @@ def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
 # swept test: no tunnelling through a thin sheet
 # ---------------------------------------------------------------------------------------------
 
+
 def test_fast_particle_is_caught_by_a_single_triangle_sheet():
     sheet = TriangleMesh([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]], [[0, 1, 2]], two_sided=True)
     radius = 0.01
     start = np.array([0.1, 0.0, 3.0 * radius])
-    end = start - [0.0, 0.0, 10.0 * radius]                   # 10 radii in one step, through the sheet
+    end = start - [0.0, 0.0, 10.0 * radius]  # 10 radii in one step, through the sheet
     # the static test at the end position sees the particle on the far side: it would tunnel
     P, N, D, F = sphere_contacts(sheet, end, radius)
     assert len(D) == 0
     hit, toi, triangle, normal = sweep_sphere_mesh(start, end, radius, sheet.geometry)
     assert hit and triangle == 0
-    assert toi == pytest.approx(0.2)                          # the centre is one radius above the sheet
+    assert toi == pytest.approx(0.2)  # the centre is one radius above the sheet
     np.testing.assert_allclose(normal, [0.0, 0.0, 1.0])
     # from below, the normal faces down; a point particle (radius 0) hits at the plane itself
     hit, toi, _, normal = sweep_sphere_mesh(-start, -end, radius, sheet.geometry)
@@ -514,7 +577,7 @@ def test_swept_time_of_impact_matches_dense_sampling():
         touching = np.nonzero(distance <= radius)[0]
         if not hit:
             assert len(touching) == 0
-        elif len(touching) == 0:                            # a graze between two samples
+        elif len(touching) == 0:  # a graze between two samples
             assert distance.min() - radius < np.linalg.norm(end - start) * times[1]
         else:
             step = times[1]

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import frictional_contacts
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from conftest import frictional_contacts
 from contactlab.errors import InputError
 from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
 
@@ -34,16 +34,19 @@ def coulomb_violations(W, q, mu, r):
     u = W @ r + q
     R, U = r.reshape(-1, 3), u.reshape(-1, 3)
     slip = np.array([norm(t) for t in U[:, 1:]])
-    u_hat_n = U[:, 0] + mu * slip                      # û = u + [μ‖u_T‖, 0, 0]
+    u_hat_n = U[:, 0] + mu * slip  # û = u + [μ‖u_T‖, 0, 0]
     scale = max(norm(q), norm(r), norm(u))
-    if scale == 0.0:                                   # q = 0: r = 0 is the answer
+    if scale == 0.0:  # q = 0: r = 0 is the answer
         return {"r": float(np.abs(r).max())}, 1.0
-    return {
-        "cone": float(np.max(np.array([norm(t) for t in R[:, 1:]]) - mu * R[:, 0])),
-        "r_n >= 0": float(np.max(-R[:, 0])),
-        "dual cone": float(np.max(mu * slip - u_hat_n)),          # μ ‖û_T‖ ≤ û_N, i.e. u_N ≥ 0
-        "r . u_hat": float(np.max(np.abs(np.einsum("ij,ij->i", R / scale, np.column_stack([u_hat_n, U[:, 1:]]))))),
-    }, scale
+    return (
+        {
+            "cone": float(np.max(np.array([norm(t) for t in R[:, 1:]]) - mu * R[:, 0])),
+            "r_n >= 0": float(np.max(-R[:, 0])),
+            "dual cone": float(np.max(mu * slip - u_hat_n)),  # μ ‖û_T‖ ≤ û_N, i.e. u_N ≥ 0
+            "r . u_hat": float(np.max(np.abs(np.einsum("ij,ij->i", R / scale, np.column_stack([u_hat_n, U[:, 1:]]))))),
+        },
+        scale,
+    )
 
 
 # ------------------------------------------------------------------------------- FCLIB
@@ -76,15 +79,15 @@ def test_block_pushed_below_and_above_the_friction_limit(load, angle):
     mass, h, g, mu = 2.0, 0.01, 9.81, 0.5
     force = load * mu * mass * g
     direction = np.array([np.cos(angle), np.sin(angle)])
-    W = np.eye(3) / mass                                   # a point mass: u = v_free + r / m
+    W = np.eye(3) / mass  # a point mass: u = v_free + r / m
     q = h * np.concatenate([[-g], force / mass * direction])
     res = solve_friction_contact(W, q, [mu], method="newton", tol=1e-12)
     assert res.converged, res.message
-    normal = mass * g * h                                  # the impulse that stops the fall
-    if load <= 1.0:                                        # sticks: friction cancels the push
+    normal = mass * g * h  # the impulse that stops the fall
+    if load <= 1.0:  # sticks: friction cancels the push
         expected = np.concatenate([[normal], -force * h * direction])
         np.testing.assert_allclose(res.u, 0.0, atol=1e-12)
-    else:                                                  # slides: friction μ r_N against the slip
+    else:  # slides: friction μ r_N against the slip
         expected = np.concatenate([[normal], -mu * normal * direction])
         slip = h * (force / mass - mu * g)
         np.testing.assert_allclose(res.u, np.concatenate([[0.0], slip * direction]), atol=1e-12)
@@ -94,7 +97,7 @@ def test_block_pushed_below_and_above_the_friction_limit(load, angle):
 def test_single_contact_with_coupled_block_sticks_at_minus_w_inverse_q():
     # W with normal-tangent coupling; a q inside the stick region: r = −W⁻¹ q lies in the cone
     W = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.1], [-0.2, 0.1, 1.0]])
-    r_stick = np.array([1.0, 0.2, -0.3])                   # ‖r_T‖ = 0.36 < μ r_N = 0.8
+    r_stick = np.array([1.0, 0.2, -0.3])  # ‖r_T‖ = 0.36 < μ r_N = 0.8
     q = -W @ r_stick
     res = solve_friction_contact(W, q, [0.8], method="newton", tol=1e-13)
     np.testing.assert_allclose(res.r, r_stick, atol=1e-12)
@@ -102,8 +105,9 @@ def test_single_contact_with_coupled_block_sticks_at_minus_w_inverse_q():
 
 
 def test_separating_contacts_get_no_reaction():
-    res = solve_friction_contact(np.eye(6), np.array([1.0, 2.0, 0.0, 0.5, -1.0, 3.0]), 0.5, method="newton",
-                                 r0=np.ones(6))
+    res = solve_friction_contact(
+        np.eye(6), np.array([1.0, 2.0, 0.0, 0.5, -1.0, 3.0]), 0.5, method="newton", r0=np.ones(6)
+    )
     assert res.converged and not res.r.any() and res.iterations <= 2
 
 
@@ -112,7 +116,7 @@ def test_frictionless_problems_match_lemke(rng, nc, bodies):
     W, q, _ = frictional_contacts(rng, nc, bodies, 1e-2)
     res = solve_friction_contact(sp.csr_matrix(W), q, 0.0, method="newton", tol=1e-12)
     assert res.converged, res.message
-    assert not res.r.reshape(-1, 3)[:, 1:].any()           # μ = 0: no friction at all
+    assert not res.r.reshape(-1, 3)[:, 1:].any()  # μ = 0: no friction at all
     normal = slice(0, None, 3)
     # the normal LCP u_N = W_NN r_N + q_N ≥ 0 ⊥ r_N ≥ 0, in solve_lcp's form w = B λ − c
     exact = solve_lcp(W[normal, normal], -q[normal], method="lemke")
@@ -132,7 +136,7 @@ def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
     slip = u[sliding, 1:] / np.linalg.norm(u[sliding, 1:], axis=1)[:, None]
     friction = r[sliding, 1:] / np.linalg.norm(r[sliding, 1:], axis=1)[:, None]
     np.testing.assert_allclose(np.einsum("ij,ij->i", slip, friction), -1.0, atol=1e-6)
-    np.testing.assert_allclose(u[sliding, 0], 0.0, atol=1e-8 * scale)   # Coulomb: u_N = 0, not μ‖u_T‖
+    np.testing.assert_allclose(u[sliding, 0], 0.0, atol=1e-8 * scale)  # Coulomb: u_N = 0, not μ‖u_T‖
 
 
 # ------------------------------------------------------------------------------- property
@@ -148,7 +152,7 @@ def test_random_positive_definite_problems_meet_cone_and_complementarity(nc, dat
     G = data.draw(hnp.arrays(np.float64, (m, m), elements=entries), label="G")
     q = q_scale * data.draw(hnp.arrays(np.float64, m, elements=entries), label="q")
     mu = data.draw(hnp.arrays(np.float64, nc, elements=st.floats(0.0, 2.0)), label="mu")
-    W = G @ G.T + shift * np.eye(m)                         # positive definite: eigenvalues ≥ shift
+    W = G @ G.T + shift * np.eye(m)  # positive definite: eigenvalues ≥ shift
     res = solve_friction_contact(W, q, mu, method="newton", tol=1e-10, max_iterations=500)
     assert res.converged, res.message
     violations, scale = coulomb_violations(W, q, mu, res.r)
@@ -162,7 +166,7 @@ def test_warm_sweeps_and_input_errors():
     W, q = np.eye(3), np.array([-1.0, 2.0, 0.0])
     warm = solve_friction_contact(W, q, [0.5], method="newton", tol=1e-12, warm_sweeps=5)
     np.testing.assert_allclose(warm.r, [1.0, -0.5, 0.0], atol=1e-12)
-    assert warm.iterations == 0                            # one nsgs sweep solves one contact exactly
+    assert warm.iterations == 0  # one nsgs sweep solves one contact exactly
     for bad in (-1, 1.5, True):
         with pytest.raises(InputError, match="warm_sweeps"):
             solve_friction_contact(W, q, [0.5], method="newton", warm_sweeps=bad)

@@ -12,13 +12,15 @@ NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "notebooks" / "qui
 
 def test_the_quickstart_notebook_runs_and_shows_html(tmp_path):
     notebook = nbformat.read(NOTEBOOK, as_version=4)
-    NotebookClient(notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    NotebookClient(
+        notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
+    ).execute()
     outputs = [cell.outputs for cell in notebook.cells if cell.cell_type == "code"]
     html = [output["data"]["text/html"] for cell in outputs for output in cell if "text/html" in output.get("data", {})]
     assert len(html) == 3
     assert "contactlab Model" in html[0] and "1 sphere, 1 obstacle" in html[0]
     assert "contactlab Run" in html[1] and "data:image/png;base64," in html[1] and "completed" in html[1]
-    assert "<video controls" in html[1] and "data:video/mp4;base64," in html[1]      # the inline player
+    assert "<video controls" in html[1] and "data:video/mp4;base64," in html[1]  # the inline player
     assert "contactlab comparison of bouncing_ball" in html[2] and "report.html" in html[2]
     printed = "".join(output.get("text", "") for output in outputs[2])
     assert printed.startswith("first rebound apex 0.64")
@@ -27,11 +29,19 @@ def test_the_quickstart_notebook_runs_and_shows_html(tmp_path):
 
 def test_a_run_that_blew_up_says_so_and_a_trajectory_gone_nan_has_no_picture():
     from conftest import ball_on_plane
+
     from contactlab import SimulationDiverged, simulate
     from contactlab.notebook import _player, _still, run_html
+
     with pytest.raises(SimulationDiverged) as stopped:
-        simulate(ball_on_plane(height=0.4, restitution=0.5, friction=0.0), "penalty", 0.01, 2.0,
-                 {"stiffness": 1e9, "implicit_springs": "never"}, "explicit_euler")
+        simulate(
+            ball_on_plane(height=0.4, restitution=0.5, friction=0.0),
+            "penalty",
+            0.01,
+            2.0,
+            {"stiffness": 1e9, "implicit_springs": "never"},
+            "explicit_euler",
+        )
     run = stopped.value.run
     assert "diverged: the run went wrong at t = " in run_html(run, picture=False)
     blown = dict(run.arrays)

@@ -4,6 +4,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import ball_on_plane, cube_on_plane
 
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.contacts import Contacts, jacobian, tangent_basis
@@ -12,10 +13,9 @@ from contactlab.dynamics.integrators import world_inverse_inertia
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import penalty, sequential
 from contactlab.scene import builtin_scenes, load_scene
-from conftest import ball_on_plane, cube_on_plane
 
 G = 9.81
-HALF = 0.05          # half edge of the test cubes [m]
+HALF = 0.05  # half edge of the test cubes [m]
 
 
 def resting_cube(angle_degrees=0.0, friction=0.5, stiffness=1e4, mass=1.0, velocity=(0, 0, 0)):
@@ -27,6 +27,7 @@ def resting_cube(angle_degrees=0.0, friction=0.5, stiffness=1e4, mass=1.0, veloc
 
 # ---- P1, P3: the normal spring ---------------------------------------------------------------
 
+
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
 def test_resting_box_sinks_m_g_over_k_times_contacts(integrator):
     k = 2e4
@@ -34,8 +35,7 @@ def test_resting_box_sinks_m_g_over_k_times_contacts(integrator):
     b.add_material("m", friction=0.5, restitution=0.0)
     b.add_body("box", half_extents=(HALF, HALF, HALF), mass=2.0, position=(0, 0, HALF + 0.01), material="m")
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
-    run = simulate(b.finalize(), "penalty", dt=0.001, duration=1.0, options={"stiffness": k},
-                   integrator=integrator)
+    run = simulate(b.finalize(), "penalty", dt=0.001, duration=1.0, options={"stiffness": k}, integrator=integrator)
     settled = run.arrays["time"] > 0.8
     depth = HALF - run.arrays["body_position"][settled, 0, 2]
     np.testing.assert_allclose(depth, 2.0 * G / (k * 4), rtol=0.02)
@@ -44,31 +44,37 @@ def test_resting_box_sinks_m_g_over_k_times_contacts(integrator):
 
 def test_elastic_energy_is_half_k_delta_squared_and_its_gradient_the_force():
     k = 5e3
-    model = ball_on_plane(height=-0.004, friction=0.0)           # sunk 4 mm
+    model = ball_on_plane(height=-0.004, friction=0.0)  # sunk 4 mm
     state = model.state()
     options = penalty.Options(stiffness=k, damping_ratio=0.0)
-    _, info = penalty.step(model, state, 1e-9, options)             # a step too short to move
-    np.testing.assert_allclose(info.energy_elastic, 0.5 * k * 0.004 ** 2, rtol=1e-6)
+    _, info = penalty.step(model, state, 1e-9, options)  # a step too short to move
+    np.testing.assert_allclose(info.energy_elastic, 0.5 * k * 0.004**2, rtol=1e-6)
     # F = −∇E with ∇δ = −n: the force along n equals the energy's slope against the depth
-    springs = penalty.ContactSprings(np.array([k]), np.zeros(1), np.array([k]), np.zeros(1), np.zeros(1),
-                                     np.zeros((1, 2)))
+    springs = penalty.ContactSprings(
+        np.array([k]), np.zeros(1), np.array([k]), np.zeros(1), np.zeros(1), np.zeros((1, 2))
+    )
     forces, _ = penalty.spring_forces(springs, np.array([0.004]), np.zeros((1, 3)))
-    energy = lambda d: penalty.elastic_energy(springs, np.array([d]), np.zeros((1, 2)))
+
+    def energy(d):
+        return penalty.elastic_energy(springs, np.array([d]), np.zeros((1, 2)))
+
     slope = (energy(0.004 + 1e-7) - energy(0.004 - 1e-7)) / 2e-7
     np.testing.assert_allclose(forces[0], [slope, 0, 0], rtol=1e-6)
 
 
 def test_damping_is_optional_and_never_pulls():
-    springs = penalty.ContactSprings(np.full(3, 1e4), np.full(3, 50.0), np.full(3, 1e4), np.zeros(3),
-                                     np.zeros(3), np.zeros((3, 2)))
+    springs = penalty.ContactSprings(
+        np.full(3, 1e4), np.full(3, 50.0), np.full(3, 1e4), np.zeros(3), np.zeros(3), np.zeros((3, 2))
+    )
     depth = np.array([0.001, 0.001, -0.001])
-    velocity = np.array([[-0.1, 0, 0], [1.0, 0, 0], [-1.0, 0, 0]])     # approaching, leaving fast, apart
+    velocity = np.array([[-0.1, 0, 0], [1.0, 0, 0], [-1.0, 0, 0]])  # approaching, leaving fast, apart
     forces, _ = penalty.spring_forces(springs, depth, velocity)
-    np.testing.assert_allclose(forces[:, 0], [10.0 + 5.0, 0.0, 0.0])    # kδ − c v_n, clamped at 0
-    undamped = penalty.ContactSprings(np.full(3, 1e4), np.zeros(3), np.full(3, 1e4), np.zeros(3), np.zeros(3),
-                                      np.zeros((3, 2)))
+    np.testing.assert_allclose(forces[:, 0], [10.0 + 5.0, 0.0, 0.0])  # kδ − c v_n, clamped at 0
+    undamped = penalty.ContactSprings(
+        np.full(3, 1e4), np.zeros(3), np.full(3, 1e4), np.zeros(3), np.zeros(3), np.zeros((3, 2))
+    )
     forces, _ = penalty.spring_forces(undamped, depth, velocity)
-    np.testing.assert_allclose(forces[:, 0], [10.0, 10.0, 0.0])         # the slide: F = k δ n exactly
+    np.testing.assert_allclose(forces[:, 0], [10.0, 10.0, 0.0])  # the slide: F = k δ n exactly
 
 
 def test_restitution_sets_the_damping_ratio():
@@ -76,32 +82,40 @@ def test_restitution_sets_the_damping_ratio():
     zeta = penalty.damping_ratio_from_restitution(eps)
     np.testing.assert_allclose(zeta[[0, 3]], [1.0, 0.0])
     inner = zeta[1:3]
-    np.testing.assert_allclose(np.exp(-inner * np.pi / np.sqrt(1 - inner ** 2)), eps[1:3], rtol=1e-12)
+    np.testing.assert_allclose(np.exp(-inner * np.pi / np.sqrt(1 - inner**2)), eps[1:3], rtol=1e-12)
 
 
 # ---- energy (P3, M1) ---------------------------------------------------------------------------
 
+
 def test_undamped_bouncing_ball_keeps_its_energy_with_symplectic_euler():
-    drop, k, dt = 0.05, 2500.0, 0.0005    # contact period 2π/√(k/m) = 126 ms = 251 steps
+    drop, k, dt = 0.05, 2500.0, 0.0005  # contact period 2π/√(k/m) = 126 ms = 251 steps
     model = ball_on_plane(height=drop, friction=0.0)
-    run = simulate(model, "penalty", dt=dt, duration=2.8, options={"stiffness": k, "damping_ratio": 0.0},
-                   record_every=4)
+    run = simulate(
+        model, "penalty", dt=dt, duration=2.8, options={"stiffness": k, "damping_ratio": 0.0}, record_every=4
+    )
     a = run.arrays
-    total = a["energy_kinetic"] + a["energy_potential"] + a["energy_elastic"]   # potential zero on the floor
+    total = a["energy_kinetic"] + a["energy_potential"] + a["energy_elastic"]  # potential zero on the floor
     vz = a["body_velocity"][:, 0, 2]
     bounces = np.count_nonzero((vz[:-1] < 0) & (vz[1:] >= 0))
     assert bounces >= 10
     np.testing.assert_allclose(total, total[0], rtol=0.01)
     # symplectic Euler's energy error is bounded and of order h ω: it does not accumulate
     assert abs(total[-1] - total[0]) < 0.2 * np.abs(total - total[0]).max() + 1e-3 * total[0]
-    assert a["energy_elastic"].max() > 0.5 * G * drop                # the springs did hold it
+    assert a["energy_elastic"].max() > 0.5 * G * drop  # the springs did hold it
 
 
 def test_backward_euler_loses_energy_and_never_gains():
     drop, k = 0.1, 1e4
     model = ball_on_plane(height=drop, friction=0.0)
-    run = simulate(model, "penalty", dt=0.002, duration=1.0, options={"stiffness": k, "damping_ratio": 0.0},
-                   integrator="backward_euler")
+    run = simulate(
+        model,
+        "penalty",
+        dt=0.002,
+        duration=1.0,
+        options={"stiffness": k, "damping_ratio": 0.0},
+        integrator="backward_euler",
+    )
     a = run.arrays
     total = a["energy_kinetic"] + a["energy_potential"] + a["energy_elastic"]
     assert (np.diff(total) <= 1e-9).all()
@@ -109,18 +123,18 @@ def test_backward_euler_loses_energy_and_never_gains():
 
 
 def test_implicit_stays_stable_where_explicit_blows_up():
-    k, dt = 1e6, 0.004                    # h √(2k/m) = 5.7 for the squeezed 1 kg ball: explicit cannot follow
+    k, dt = 1e6, 0.004  # h √(2k/m) = 5.7 for the squeezed 1 kg ball: explicit cannot follow
     b = ModelBuilder()
     b.add_material("m", friction=0.0, restitution=0.0)
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 0.1), velocity=(0, 0, 0.1), material="m")
-    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="m")          # floor
-    b.add_obstacle("plane", normal=(0, 0, -1), offset=-0.199, material="m")      # a plate 1 mm too low
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="m")  # floor
+    b.add_obstacle("plane", normal=(0, 0, -1), offset=-0.199, material="m")  # a plate 1 mm too low
     model = b.finalize()
     options = {"stiffness": k, "damping_ratio": 0.0}
     with pytest.raises(SimulationDiverged, match="too long for penalty stiffness 1e[+]06 N/m.*backward_euler"):
         simulate(model, "penalty", dt=dt, duration=2.0, options=dict(options, implicit_springs="never"))
     run = simulate(model, "penalty", dt=dt, duration=1.0, options=options, integrator="backward_euler")
-    np.testing.assert_allclose(run.state.body_position[0, 2], 0.0995 - G / (2 * k), atol=1e-7)   # forces balance
+    np.testing.assert_allclose(run.state.body_position[0, 2], 0.0995 - G / (2 * k), atol=1e-7)  # forces balance
     assert np.abs(run.state.body_velocity).max() < 1e-6
     # at its default (implicit_springs = "auto") the symplectic run steps these springs by backward
     # Euler, says so, and reaches the same balance
@@ -136,25 +150,38 @@ def test_linear_solvers_agree(solver):
     model, _ = resting_cube(angle_degrees=10.0, friction=0.3, velocity=(0.5, 0.2, 0))
     options = {"stiffness": 1e4, "linear_solver": solver, "linear_tolerance": 1e-12}
     run = simulate(model, "penalty", dt=0.002, duration=0.1, options=options, integrator="backward_euler")
-    reference = simulate(model, "penalty", dt=0.002, duration=0.1, options=dict(options, linear_solver="direct"),
-                         integrator="backward_euler")
+    reference = simulate(
+        model,
+        "penalty",
+        dt=0.002,
+        duration=0.1,
+        options=dict(options, linear_solver="direct"),
+        integrator="backward_euler",
+    )
     np.testing.assert_allclose(run.state.body_position, reference.state.body_position, atol=1e-9)
     assert run.summary["solver"]["max_residual"] < 1e-9
 
 
 # ---- F3: friction by anchor springs ------------------------------------------------------------
 
+
 def test_anchor_spring_sticks_under_the_limit_and_slips_to_exactly_mu_fn():
     k, mu = 1e4, 0.5
-    springs = penalty.ContactSprings(np.full(2, k), np.zeros(2), np.full(2, k), np.zeros(2), np.full(2, mu),
-                                     np.array([[0.0002, 0.0], [0.003, 0.004]]))
+    springs = penalty.ContactSprings(
+        np.full(2, k),
+        np.zeros(2),
+        np.full(2, k),
+        np.zeros(2),
+        np.full(2, mu),
+        np.array([[0.0002, 0.0], [0.003, 0.004]]),
+    )
     forces, elongation = penalty.spring_forces(springs, np.full(2, 0.001), np.zeros((2, 3)))
     # normal force 10 N, limit 5 N: the first pulls 2 N and sticks, the second would pull 50 N
     np.testing.assert_allclose(forces[0], [10.0, -2.0, 0.0])
-    np.testing.assert_allclose(elongation[0], [0.0002, 0.0])                 # anchor stays
+    np.testing.assert_allclose(elongation[0], [0.0002, 0.0])  # anchor stays
     np.testing.assert_allclose(np.linalg.norm(forces[1, 1:]), mu * 10.0)
     np.testing.assert_allclose(forces[1, 1:] / np.linalg.norm(forces[1, 1:]), [-0.6, -0.8])
-    np.testing.assert_allclose(np.linalg.norm(elongation[1]), mu * 10.0 / k)   # anchor dragged along
+    np.testing.assert_allclose(np.linalg.norm(elongation[1]), mu * 10.0 / k)  # anchor dragged along
 
 
 def test_anchors_live_in_the_state_keyed_by_contact_id():
@@ -176,20 +203,20 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(integrator):
     x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
     stopped = np.argmax(np.abs(vx) < 0.005 * v0)
     np.testing.assert_allclose(run.arrays["time"][stopped], v0 / (mu * G), rtol=0.03)
-    np.testing.assert_allclose(x[stopped], v0 ** 2 / (2 * mu * G), rtol=0.03)
-    np.testing.assert_allclose(x[-1], v0 ** 2 / (2 * mu * G), rtol=0.03)    # and stays stopped
+    np.testing.assert_allclose(x[stopped], v0**2 / (2 * mu * G), rtol=0.03)
+    np.testing.assert_allclose(x[-1], v0**2 / (2 * mu * G), rtol=0.03)  # and stays stopped
 
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
 def test_block_sticks_on_an_incline_flatter_than_its_friction_angle(integrator):
-    model, _ = resting_cube(angle_degrees=20.0, friction=0.5)          # tan 20° = 0.36 < 0.5
+    model, _ = resting_cube(angle_degrees=20.0, friction=0.5)  # tan 20° = 0.36 < 0.5
     run = simulate(model, "penalty", dt=0.001, duration=2.0, options={"stiffness": 1e4}, integrator=integrator)
     drift = np.linalg.norm(run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0], axis=1)
     assert drift.max() < 0.001
 
 
 def test_block_slides_down_a_steeper_incline_at_g_sin_minus_mu_cos():
-    theta, mu = np.radians(20.0), 0.2                                   # tan 20° = 0.36 > 0.2
+    theta, mu = np.radians(20.0), 0.2  # tan 20° = 0.36 > 0.2
     model, downhill = resting_cube(angle_degrees=20.0, friction=mu)
     run = simulate(model, "penalty", dt=0.001, duration=1.5, options={"stiffness": 1e4})
     t = run.arrays["time"]
@@ -211,8 +238,10 @@ def test_sliding_sphere_rolls_at_five_sevenths():
 
 # ---- D1: one distribution through the Jacobian ---------------------------------------------------
 
+
 def mixed_contacts(rng, B, P, count):
     """Random contacts: body–body, body–static, particle–body and triangle-sample–static."""
+
     def side(kind):
         body, particles, weights = -1, np.full(3, -1), np.zeros(3)
         if kind == "body":
@@ -223,23 +252,44 @@ def mixed_contacts(rng, B, P, count):
             particles[:] = rng.choice(P, 3, replace=False)
             weights[:] = rng.dirichlet(np.ones(3))
         return body, particles, weights
+
     kinds = [("body", "body"), ("body", "static"), ("particle", "body"), ("triangle", "static")]
     rows = [side(a) + side(b) for a, b in (kinds[i % 4] for i in range(count))]
     normal = rng.normal(size=(count, 3))
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     t1, t2 = tangent_basis(normal)
-    column = lambda i: np.array([r[i] for r in rows])
-    return Contacts(body_a=column(0), body_b=column(3), particles_a=column(1), particles_b=column(4),
-                    weights_a=column(2), weights_b=column(5), point=rng.normal(size=(count, 3)), normal=normal,
-                    depth=np.full(count, 0.001), tangent1=t1, tangent2=t2, friction=np.zeros(count),
-                    restitution=np.zeros(count), feature_id=np.arange(count))
+
+    def column(i):
+        return np.array([r[i] for r in rows])
+
+    return Contacts(
+        body_a=column(0),
+        body_b=column(3),
+        particles_a=column(1),
+        particles_b=column(4),
+        weights_a=column(2),
+        weights_b=column(5),
+        point=rng.normal(size=(count, 3)),
+        normal=normal,
+        depth=np.full(count, 0.001),
+        tangent1=t1,
+        tangent2=t2,
+        friction=np.zeros(count),
+        restitution=np.zeros(count),
+        feature_id=np.arange(count),
+    )
 
 
 def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(rng):
     b = ModelBuilder()
     for i in range(3):
-        b.add_body("box", half_extents=(0.1, 0.2, 0.3), mass=1.0 + i, position=rng.normal(size=3),
-                   orientation=rng.normal(size=4))
+        b.add_body(
+            "box",
+            half_extents=(0.1, 0.2, 0.3),
+            mass=1.0 + i,
+            position=rng.normal(size=3),
+            orientation=rng.normal(size=4),
+        )
     b.add_particles(rng.normal(size=(5, 3)), mass=0.5)
     model = b.finalize()
     state = model.state()
@@ -257,16 +307,24 @@ def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(r
     c = 1
     world_force = forces[c] @ np.stack([contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c]])
     body = contacts.body_a[c]
-    linear, angular, _ = unstack(penalty.distribute(J[3 * c:3 * c + 3], inverse_mass_matrix(
-        model, state.body_orientation), forces[c:c + 1], 0.01), 3)
+    linear, angular, _ = unstack(
+        penalty.distribute(
+            J[3 * c : 3 * c + 3], inverse_mass_matrix(model, state.body_orientation), forces[c : c + 1], 0.01
+        ),
+        3,
+    )
     np.testing.assert_allclose(linear[body], 0.01 * world_force / model.body_mass[body], atol=1e-12)
     r = contacts.point[c] - state.body_position[body]
-    np.testing.assert_allclose(angular[body], 0.01 * world_inverse_inertia(model, state.body_orientation)[body] @ np.cross(r, world_force), atol=1e-12)
+    np.testing.assert_allclose(
+        angular[body],
+        0.01 * world_inverse_inertia(model, state.body_orientation)[body] @ np.cross(r, world_force),
+        atol=1e-12,
+    )
 
 
 # ---- P4 versus P5 ------------------------------------------------------------------------------
 
-SPACING = 0.0002     # m between the probed positions of the corner
+SPACING = 0.0002  # m between the probed positions of the corner
 
 
 def corner_in_edge_forces(normal_choice):
@@ -281,18 +339,18 @@ def corner_in_edge_forces(normal_choice):
     quaternion = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
     options = penalty.Options(stiffness=1e4, granularity="object", normal=normal_choice)
     totals = []
-    for shift in np.arange(-10, 11) * SPACING / np.sqrt(2):     # the corner at (−2 mm + s, 0, −2 mm − s)
+    for shift in np.arange(-10, 11) * SPACING / np.sqrt(2):  # the corner at (−2 mm + s, 0, −2 mm − s)
         tip = np.array([-0.002 + shift, 0.0, -0.002 - shift])
         b = ModelBuilder(gravity=(0, 0, 0))
-        b.add_body("box", half_extents=(HALF,) * 3, mass=1.0, position=tip - HALF * np.sqrt(3) * target,
-                   orientation=quaternion)
+        b.add_body(
+            "box", half_extents=(HALF,) * 3, mass=1.0, position=tip - HALF * np.sqrt(3) * target, orientation=quaternion
+        )
         b.add_obstacle("box", half_extents=(0.5, 0.5, 0.5), position=(-0.5, 0, -0.5))
         model = b.finalize()
         state = model.state()
         contacts = collide(model, state, 0.0, None, options.granularity, options.normal)
         J = jacobian(contacts, state.body_position, 1, 0)
-        springs = penalty.contact_springs(contacts, J, inverse_mass_matrix(model, state.body_orientation), {},
-                                          options)
+        springs = penalty.contact_springs(contacts, J, inverse_mass_matrix(model, state.body_orientation), {}, options)
         forces, _ = penalty.spring_forces(springs, contacts.depth, np.zeros((contacts.count, 3)))
         totals.append(forces[:, :1] * contacts.normal)
     assert all(len(f) == 1 for f in totals)
@@ -306,19 +364,22 @@ def test_p4_normal_jumps_across_the_medial_axis_and_p5_is_continuous():
     np.testing.assert_allclose(p4[0] / np.linalg.norm(p4[0]), [0, 0, 1], atol=1e-9)
     np.testing.assert_allclose(p4[-1] / np.linalg.norm(p4[-1]), [1, 0, 0], atol=1e-9)
     jump = np.linalg.norm(np.diff(p4, axis=0), axis=1).max()
-    assert jump > 1.3 * k * 0.0019                # a quarter turn of a force k δ with δ ≈ 1.9 mm
+    assert jump > 1.3 * k * 0.0019  # a quarter turn of a force k δ with δ ≈ 1.9 mm
     # P5: the corner's own (negated) normal, always (1, 0, 1)/√2; the force changes no faster
     # than k times how far the corner moved
-    np.testing.assert_allclose(p5 / np.linalg.norm(p5, axis=1, keepdims=True),
-                               np.tile(np.array([1, 0, 1]) / np.sqrt(2), (len(p5), 1)), atol=1e-9)
+    np.testing.assert_allclose(
+        p5 / np.linalg.norm(p5, axis=1, keepdims=True),
+        np.tile(np.array([1, 0, 1]) / np.sqrt(2), (len(p5), 1)),
+        atol=1e-9,
+    )
     assert np.linalg.norm(np.diff(p5, axis=0), axis=1).max() <= 1.0001 * k * SPACING
 
 
 # ---- k guidance --------------------------------------------------------------------------------
 
+
 def test_suggested_stiffness_holds_the_load_at_the_allowed_penetration():
-    advice = penalty.suggest_stiffness(mass=2.0, dt=0.001, allowed_penetration=0.002, contacts=4,
-                                       contact_mass=0.5)
+    advice = penalty.suggest_stiffness(mass=2.0, dt=0.001, allowed_penetration=0.002, contacts=4, contact_mass=0.5)
     np.testing.assert_allclose(advice.stiffness, 2.0 * G / (4 * 0.002))
     np.testing.assert_allclose(advice.penetration, 0.002)
     assert advice.stiffness < advice.accurate_limit < advice.stable_limit
@@ -328,15 +389,16 @@ def test_suggested_stiffness_is_capped_for_explicit_steps_and_says_what_would_do
     advice = penalty.suggest_stiffness(mass=100.0, dt=0.004, allowed_penetration=0.001, contact_mass=0.2)
     assert advice.stiffness == advice.accurate_limit < advice.needed
     assert "backward_euler" in advice.reason and "dt ≤" in advice.reason
-    implicit = penalty.suggest_stiffness(mass=100.0, dt=0.004, allowed_penetration=0.001, contact_mass=0.2,
-                                         integrator="backward_euler")
+    implicit = penalty.suggest_stiffness(
+        mass=100.0, dt=0.004, allowed_penetration=0.001, contact_mass=0.2, integrator="backward_euler"
+    )
     assert implicit.stiffness == implicit.needed
 
 
 def test_amplification_marks_the_symplectic_stability_limit():
     # one undamped spring: symplectic Euler is stable exactly while h ω < 2; explicit Euler never
-    assert penalty.amplification("symplectic_euler", 0.01, 1.99 ** 2 * 1e4, 1.0) <= 1 + 1e-12
-    assert penalty.amplification("symplectic_euler", 0.01, 2.01 ** 2 * 1e4, 1.0) > 1.01
+    assert penalty.amplification("symplectic_euler", 0.01, 1.99**2 * 1e4, 1.0) <= 1 + 1e-12
+    assert penalty.amplification("symplectic_euler", 0.01, 2.01**2 * 1e4, 1.0) > 1.01
     assert penalty.amplification("explicit_euler", 0.01, 1e2, 1.0) > 1.0
     assert penalty.amplification("backward_euler", 0.01, 1e12, 1.0) < 1.0
 
@@ -372,23 +434,31 @@ def test_penalty_holds_an_eight_box_stack_and_the_twenty_level_pyramid():
     """Issue 19, at the method's defaults and dt = 1/240 over 5 s: the 8-box stack moves < 20 mm
     and the 210-box pyramid < 10 mm (each contact sinks about allowed_penetration under its load)."""
     from conftest import box_column, box_pyramid
+
     stack = simulate(box_column(8), "penalty", 1 / 240, 5.0, record_every=24)
     assert _largest_motion(stack) < 0.020
     pyramid = simulate(box_pyramid(20), "penalty", 1 / 240, 5.0, record_every=24)
     assert _largest_motion(pyramid) < 0.010
 
 
-@pytest.mark.parametrize("table, field", [
-    ({"stiffness": "soft"}, "stiffness"), ({"stiffness": -1.0}, "stiffness"),
-    ({"damping_ratio": "lots"}, "damping_ratio"), ({"linear_solver": "lu"}, "linear_solver"),
-    ({"implicit_iterations": 0}, "implicit_iterations"), ({"allowed_penetration": 0.0}, "allowed_penetration"),
-])
+@pytest.mark.parametrize(
+    "table, field",
+    [
+        ({"stiffness": "soft"}, "stiffness"),
+        ({"stiffness": -1.0}, "stiffness"),
+        ({"damping_ratio": "lots"}, "damping_ratio"),
+        ({"linear_solver": "lu"}, "linear_solver"),
+        ({"implicit_iterations": 0}, "implicit_iterations"),
+        ({"allowed_penetration": 0.0}, "allowed_penetration"),
+    ],
+)
 def test_bad_options_name_the_field(table, field):
     with pytest.raises(InputError, match=field):
         penalty.Options(**table)
 
 
 # ---- every scene its shapes allow --------------------------------------------------------------
+
 
 @pytest.mark.parametrize("name", [name for name, _ in builtin_scenes()])
 def test_runs_every_built_in_scene(name):
@@ -401,30 +471,60 @@ def test_runs_every_built_in_scene(name):
 
 # ---- cloth (barycentric points, implicit together with the cloth's springs) ----------------------
 
+
 @pytest.mark.parametrize("integrator, dt", [("symplectic_euler", 0.0005), ("backward_euler", 0.01)])
 def test_a_resting_cloth_sinks_each_vertex_m_g_over_k(integrator, dt):
     k, thickness = 100.0, 0.004
     b = ModelBuilder()
     b.add_material("m", friction=0.5, restitution=0.0)
-    b.add_cloth(size=(0.4, 0.4), resolution=(5, 5), position=(0, 0, thickness), mass=0.25, stretch_stiffness=200.0,
-                shear_stiffness=20.0, bend_stiffness=1.0, damping=0.05, thickness=thickness, material="m")
+    b.add_cloth(
+        size=(0.4, 0.4),
+        resolution=(5, 5),
+        position=(0, 0, thickness),
+        mass=0.25,
+        stretch_stiffness=200.0,
+        shear_stiffness=20.0,
+        bend_stiffness=1.0,
+        damping=0.05,
+        thickness=thickness,
+        material="m",
+    )
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
-    run = simulate(b.finalize(), "penalty", dt=dt, duration=1.0, options={"stiffness": k}, integrator=integrator,
-                   record_every=10)
+    run = simulate(
+        b.finalize(), "penalty", dt=dt, duration=1.0, options={"stiffness": k}, integrator=integrator, record_every=10
+    )
     sink = thickness - run.state.particle_position[:, 2]
-    np.testing.assert_allclose(sink, 0.01 * G / k, rtol=0.02)            # each vertex carries 10 g
+    np.testing.assert_allclose(sink, 0.01 * G / k, rtol=0.02)  # each vertex carries 10 g
 
 
 def test_cloth_corner_pinned_hangs_in_contact_without_moving_the_pin():
     b = ModelBuilder()
     b.add_material("m", friction=0.3, restitution=0.0)
-    b.add_cloth(size=(0.4, 0.4), resolution=(6, 6), position=(0, 0, 0.3), orientation=(np.cos(0.6), np.sin(0.6), 0, 0),
-                mass=0.1, stretch_stiffness=500.0, shear_stiffness=50.0, bend_stiffness=1.0, damping=0.05,
-                pinned=["top_edge"], thickness=0.004, material="m")
+    b.add_cloth(
+        size=(0.4, 0.4),
+        resolution=(6, 6),
+        position=(0, 0, 0.3),
+        orientation=(np.cos(0.6), np.sin(0.6), 0, 0),
+        mass=0.1,
+        stretch_stiffness=500.0,
+        shear_stiffness=50.0,
+        bend_stiffness=1.0,
+        damping=0.05,
+        pinned=["top_edge"],
+        thickness=0.004,
+        material="m",
+    )
     b.add_obstacle("sphere", radius=0.12, position=(0.0, 0.05, 0.2), material="m")
     model = b.finalize()
-    run = simulate(model, "penalty", dt=0.01, duration=0.5, options={"stiffness": 500.0, "cloth_samples": 2},
-                   integrator="backward_euler", record_every=10)
+    run = simulate(
+        model,
+        "penalty",
+        dt=0.01,
+        duration=0.5,
+        options={"stiffness": 500.0, "cloth_samples": 2},
+        integrator="backward_euler",
+        record_every=10,
+    )
     pinned = model.particle_pinned
     np.testing.assert_array_equal(run.state.particle_position[pinned], model.initial.particle_position[pinned])
     assert run.state.is_finite() and run.arrays["contact_count"].max() > 0

@@ -14,8 +14,9 @@ from contactlab.simulation import simulate
 
 def _run(scene_name, method, duration):
     scene = load_scene(scene_name, [f"simulation.method={method}", f"simulation.duration={duration}"])
-    return simulate(scene.model, method, scene.dt, scene.duration, scene.method_options.get(method),
-                    scene.integrator).arrays
+    return simulate(
+        scene.model, method, scene.dt, scene.duration, scene.method_options.get(method), scene.integrator
+    ).arrays
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +52,7 @@ def test_write_plots_writes_four_800_by_450_pictures_that_are_not_blank(name, re
     directory = tmp_path / "plots" / "nested"
     paths = plots.write_plots(arrays, str(directory), title=f"{name} — test")
     assert set(paths) == set(plots.PLOTS)
-    assert sorted(os.listdir(directory)) == sorted(f"{plot}.png" for plot in plots.PLOTS)   # no temporaries
+    assert sorted(os.listdir(directory)) == sorted(f"{plot}.png" for plot in plots.PLOTS)  # no temporaries
     for plot, path in paths.items():
         assert path == str(directory / f"{plot}.png")
         _assert_picture(path)
@@ -78,7 +79,7 @@ def test_comparison_draws_one_line_per_method_in_every_plot(runs):
         assert ax.get_xlabel() in ("time (s)", "")
     energy = figures["energy"].axes[0]
     assert energy.get_ylabel() == "total energy (J)"
-    for line, arrays in zip(energy.get_lines(), runs.values()):        # each method's total energy
+    for line, arrays in zip(energy.get_lines(), runs.values()):  # each method's total energy
         assert np.allclose(line.get_ydata(), plots.total_energy(arrays))
     penetration = figures["penetration"].axes[0]
     assert penetration.get_ylabel() == "max penetration (mm)"
@@ -105,8 +106,11 @@ def test_write_comparison_plots_writes_the_four_pictures(runs, tmp_path):
 
 
 def test_residual_gets_a_log_axis_only_when_it_spans_decades(ball):
-    spread = dict(ball, solver_residual=np.geomspace(1e-9, 1e-3, len(ball["time"])),
-                  solver_iterations=np.ones(len(ball["time"]), dtype=int))
+    spread = dict(
+        ball,
+        solver_residual=np.geomspace(1e-9, 1e-3, len(ball["time"])),
+        solver_iterations=np.ones(len(ball["time"]), dtype=int),
+    )
     narrow = dict(spread, solver_residual=np.linspace(1.0, 2.0, len(ball["time"])))
     assert plots.build_figures({"a": spread})["residual"].axes[0].get_yscale() == "log"
     assert plots.build_figures({"a": narrow})["residual"].axes[0].get_yscale() == "linear"
@@ -128,7 +132,7 @@ def test_a_failure_leaves_no_file_and_no_folder_it_created(ball, tmp_path, monke
         plots.write_plots(ball, str(directory))
     assert len(written) == 2 and not directory.exists()
 
-    directory.mkdir()                                        # a folder that was there stays, empty
+    directory.mkdir()  # a folder that was there stays, empty
     written.clear()
     with pytest.raises(OSError):
         plots.write_comparison_plots({"impulse": ball}, str(directory))

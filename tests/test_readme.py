@@ -26,9 +26,14 @@ def test_the_figures_script_regenerates_every_picture_the_docs_show(tmp_path):
     """docs/make_figures.py (short runs) writes every file under docs/figures/ that a page shows."""
     import subprocess
     import sys
+
     root = Path(__file__).parent.parent
-    result = subprocess.run([sys.executable, str(root / "docs" / "make_figures.py"), "--quick", "--out",
-                             str(tmp_path)], capture_output=True, text=True, timeout=900)
+    result = subprocess.run(
+        [sys.executable, str(root / "docs" / "make_figures.py"), "--quick", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert result.returncode == 0, result.stderr
     shown = set()
     for page in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:
@@ -36,6 +41,7 @@ def test_the_figures_script_regenerates_every_picture_the_docs_show(tmp_path):
             shown.add((page.parent / target).resolve().relative_to((root / "docs" / "figures").resolve()))
     assert shown, "no page shows a figure"
     from contactlab.browser import chromium
+
     for figure in shown:
         if figure.name == "viewer.png" and chromium() is None:
             print("viewer.png not checked: it is drawn in headless Chromium, not on PATH")
@@ -70,6 +76,7 @@ def test_every_code_name_in_the_readme_spec_table_exists():
     from dataclasses import fields
 
     from contactlab import methods
+
     root = Path(__file__).parent.parent
     package, tests = root / "src" / "contactlab", root / "tests"
     rows = _spec_table_rows()
@@ -79,7 +86,7 @@ def test_every_code_name_in_the_readme_spec_table_exists():
         module, options = None, None
         for part in re.findall(r"\(([^)]*)\)|`([^`]+)`", where):
             names, token = part
-            if names:                                   # names the last file defines
+            if names:  # names the last file defines
                 for name in re.findall(r"`([^`]+)`", names):
                     if module is None or not _defined(module, name):
                         missing.append(f"{item}: {name} in {module}")
@@ -90,7 +97,7 @@ def test_every_code_name_in_the_readme_spec_table_exists():
                     missing.append(f"{item}: {token}")
                 module = module if token.endswith(".py") else None
             elif token.startswith("[method."):
-                options = {f.name for f in fields(methods.get(token[len("[method."):].split("]")[0]).Options)}
+                options = {f.name for f in fields(methods.get(token[len("[method.") :].split("]")[0]).Options)}
                 option = token.split("]", 1)[1].strip()
                 if option and option not in options:
                     missing.append(f"{item}: {token}")

@@ -10,16 +10,26 @@ from contactlab.methods import AVAILABLE
 from contactlab.scene import builtin_scenes, load_scene
 
 STEPS = 12
-FIELDS = ("body_position", "body_orientation", "body_velocity", "body_angular_velocity", "particle_position",
-          "particle_velocity", "contact_count", "solver_iterations", "solver_residual")
+FIELDS = (
+    "body_position",
+    "body_orientation",
+    "body_velocity",
+    "body_angular_velocity",
+    "particle_position",
+    "particle_velocity",
+    "contact_count",
+    "solver_iterations",
+    "solver_residual",
+)
 
 
 def _run(scene, method, threads):
     """The trajectory of STEPS steps, or the divergence's message (a result that must repeat too)."""
     options = scene.method_options.get(method, {})
     try:
-        return simulate(scene.model, method, scene.dt, STEPS * scene.dt, options, scene.integrator,
-                        threads=threads).arrays
+        return simulate(
+            scene.model, method, scene.dt, STEPS * scene.dt, options, scene.integrator, threads=threads
+        ).arrays
     except SimulationDiverged as error:
         return str(error)
 
@@ -31,7 +41,7 @@ def test_a_rerun_of_a_builtin_scene_is_bit_identical(name):
     for method in AVAILABLE:
         try:
             first = _run(scene, method, 1)
-        except InputError:              # a method whose set-up refuses this scene (compare leaves it out)
+        except InputError:  # a method whose set-up refuses this scene (compare leaves it out)
             continue
         again = _run(scene, method, "auto")
         ran += 1

@@ -8,8 +8,8 @@ import tracemalloc
 
 import numpy as np
 import pytest
-
 from conftest import ball_on_plane
+
 from contactlab import InputError, ModelBuilder, SimulationDiverged, budget, render, simulate, store
 from contactlab.export import write_mesh_sequence
 from contactlab.interrupts import Interrupted
@@ -41,16 +41,25 @@ def test_a_streamed_run_is_bit_for_bit_the_run_held_in_memory(tmp_path, method):
     assert streamed.summary["samples"] == held.summary["samples"] == len(held.arrays["time"])
     for key in ("energy", "max_penetration", "final_penetration", "solver", "max_contacts"):
         assert streamed.summary[key] == held.summary[key], key
-    assert os.listdir(tmp_path) == ["run.h5"]              # no temporary file left beside it
+    assert os.listdir(tmp_path) == ["run.h5"]  # no temporary file left beside it
 
 
 def test_a_file_reads_back_what_was_written_whole_or_a_few_samples_at_a_time(tmp_path):
     rng = np.random.default_rng(5)
-    arrays = {"time": np.arange(40) * 0.01, "body_position": rng.normal(size=(40, 3, 3)),
-              "contact_count": rng.integers(0, 9, size=40), "body_names": np.array(["a", "bé", "c"]),
-              "particle_position": np.zeros((40, 0, 3))}
-    path = store.write(tmp_path / "t.h5", arrays, record_every=3, status="interrupted",
-                       series=("time", "body_position", "contact_count", "particle_position"))
+    arrays = {
+        "time": np.arange(40) * 0.01,
+        "body_position": rng.normal(size=(40, 3, 3)),
+        "contact_count": rng.integers(0, 9, size=40),
+        "body_names": np.array(["a", "bé", "c"]),
+        "particle_position": np.zeros((40, 0, 3)),
+    }
+    path = store.write(
+        tmp_path / "t.h5",
+        arrays,
+        record_every=3,
+        status="interrupted",
+        series=("time", "body_position", "contact_count", "particle_position"),
+    )
     file = store.open_trajectory(path)
     assert (file.status, file.record_every, len(file)) == ("interrupted", 3, 5)
     for name, values in arrays.items():
@@ -76,11 +85,11 @@ def test_a_streamed_run_holds_flat_memory_however_long_it_runs(tmp_path):
     1.1 MB of trajectory) cost a run held in memory at least the extra trajectory, and a streamed
     run less than one chunk (store.CHUNK_BYTES) more."""
     model = _free_fall(300)
-    simulate(model, "impulse", 0.01, 0.02)                  # compiled and warm
+    simulate(model, "impulse", 0.01, 0.02)  # compiled and warm
     per_sample = sample_bytes(model)
     extra = (600 - 150) * per_sample
     held_growth = _peak_bytes(model, 6.0, None) - _peak_bytes(model, 1.5, None)
-    streamed_growth = (_peak_bytes(model, 6.0, tmp_path / "long.h5") - _peak_bytes(model, 1.5, tmp_path / "short.h5"))
+    streamed_growth = _peak_bytes(model, 6.0, tmp_path / "long.h5") - _peak_bytes(model, 1.5, tmp_path / "short.h5")
     assert held_growth >= extra
     assert streamed_growth < store.CHUNK_BYTES
     assert store.open_trajectory(tmp_path / "long.h5").shapes["body_position"] == (601, 300, 3)
@@ -96,8 +105,15 @@ def test_a_short_run_makes_a_small_file(tmp_path):
 def test_a_diverged_run_keeps_its_samples_up_to_the_blow_up_marked_diverged(tmp_path):
     model = ball_on_plane(height=0.4, restitution=0.5, friction=0.0)
     with pytest.raises(SimulationDiverged) as stopped:
-        simulate(model, "penalty", 0.01, 2.0, {"stiffness": 1e9, "implicit_springs": "never"}, "explicit_euler",
-                 trajectory=tmp_path / "run.h5")
+        simulate(
+            model,
+            "penalty",
+            0.01,
+            2.0,
+            {"stiffness": 1e9, "implicit_springs": "never"},
+            "explicit_euler",
+            trajectory=tmp_path / "run.h5",
+        )
     file = store.open_trajectory(tmp_path / "run.h5")
     assert file.status == "diverged"
     time = file["time"]
@@ -110,6 +126,7 @@ def test_an_interrupted_run_keeps_every_sample_it_made_marked_interrupted(tmp_pa
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = load_scene("box_pyramid")
     from contactlab.methods import penalty
+
     real, calls = penalty.step, []
 
     def step(*arguments):
@@ -117,23 +134,26 @@ def test_an_interrupted_run_keeps_every_sample_it_made_marked_interrupted(tmp_pa
         if len(calls) == 30:
             os.kill(os.getpid(), signal.SIGINT)
         return real(*arguments)
+
     penalty.step = step
     try:
         with pytest.raises(Interrupted) as interrupted:
-            simulate(scene.model, "penalty", scene.dt, 1.0, trajectory=tmp_path / "run.h5",
-                     compiled_loop=False)           # the Python path, one call a step (not the loop)
+            simulate(
+                scene.model, "penalty", scene.dt, 1.0, trajectory=tmp_path / "run.h5", compiled_loop=False
+            )  # the Python path, one call a step (not the loop)
     finally:
         penalty.step = real
         signal.signal(signal.SIGINT, previous)
     file = store.open_trajectory(tmp_path / "run.h5")
     assert file.status == "interrupted"
-    assert len(file["time"]) == 31                           # the initial state and the 30 steps made
+    assert len(file["time"]) == 31  # the initial state and the 30 steps made
     assert file["time"][-1] == pytest.approx(30 * scene.dt)
     assert interrupted.value.run.summary["samples"] == 31
 
 
 def test_a_run_that_fails_otherwise_leaves_nothing(tmp_path, monkeypatch):
     from contactlab.methods import impulse
+
     real, calls = impulse.step, []
 
     def step(*arguments):
@@ -141,6 +161,7 @@ def test_a_run_that_fails_otherwise_leaves_nothing(tmp_path, monkeypatch):
         if len(calls) == 5:
             raise MemoryError("no memory left")
         return real(*arguments)
+
     monkeypatch.setattr(impulse, "step", step)
     with pytest.raises(MemoryError):
         simulate(ball_on_plane(), "impulse", 0.01, 0.5, compiled_loop=False, trajectory=tmp_path / "run.h5")

@@ -41,8 +41,13 @@ def write(folder, text, name="study.toml"):
 
 # ---- the study file ---------------------------------------------------------------------------------
 
+
 def test_a_grid_expands_to_every_combination_and_explicit_cells_join_it(tmp_path):
-    study = load_study(write(tmp_path, BALL_STUDY + """
+    study = load_study(
+        write(
+            tmp_path,
+            BALL_STUDY
+            + """
 [[cells]]
 scene = "bouncing_ball"
 method = "impulse"
@@ -51,17 +56,25 @@ set = { "simulation.dt" = 0.004, "simulation.duration" = 1.0, "materials.0.resti
 scene = "box_pyramid"
 method = "constraints"
 set = { "method.constraints.iterations" = 20 }
-"""))
-    assert len(study.cells) == 2 * 2 * 2 + 1                 # the first listed cell is in the grid already
-    assert study.axes == ["simulation.dt", "simulation.duration", "materials.0.restitution",
-                          "method.constraints.iterations"]
+""",
+        )
+    )
+    assert len(study.cells) == 2 * 2 * 2 + 1  # the first listed cell is in the grid already
+    assert study.axes == [
+        "simulation.dt",
+        "simulation.duration",
+        "materials.0.restitution",
+        "method.constraints.iterations",
+    ]
     first = study.cells[0]
     assert (first.scene, first.method, dict(first.settings)) == (
-        "bouncing_ball", "impulse", {"simulation.dt": 0.004, "simulation.duration": 1.0,
-                                     "materials.0.restitution": 0.8})
+        "bouncing_ball",
+        "impulse",
+        {"simulation.dt": 0.004, "simulation.duration": 1.0, "materials.0.restitution": 0.8},
+    )
     assert first.overrides()[-1] == "simulation.method=impulse"
     assert len({cell.key for cell in study.cells}) == len(study.cells)
-    assert load_study(write(tmp_path, BALL_STUDY)).cells[0].key == first.key      # the same cell, the same key
+    assert load_study(write(tmp_path, BALL_STUDY)).cells[0].key == first.key  # the same cell, the same key
 
 
 def test_a_cell_key_changes_with_the_scene_text(tmp_path):
@@ -73,20 +86,32 @@ def test_a_cell_key_changes_with_the_scene_text(tmp_path):
     assert load_study(write(tmp_path, study)).cells[0].key != before
 
 
-@pytest.mark.parametrize("text, field, words", [
-    ('[grd]\nscenes = ["bouncing_ball"]', "grd", "did you mean 'grid'"),
-    ('[grid]\nscenes = ["bouncing_bal"]', "grid.scenes", "did you mean 'bouncing_ball'"),
-    ('[grid]\nscenes = ["bouncing_ball"]\nmethods = ["impulses"]', "grid.methods", "did you mean 'impulse'"),
-    ('[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dtt" = [0.1]', 'grid.set."simulation.dtt"',
-     "did you mean 'dt'"),
-    ('[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dt" = [-0.1]', 'grid.set."simulation.dt"',
-     "expected a number greater than 0 (s), found -0.1"),
-    ('[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dt" = []', 'grid.set."simulation.dt"',
-     "at least one value"),
-    ('[[cells]]\nscene = "bouncing_ball"', "cells[0].method", "needs a method"),
-    ('[study]\nrecord = "everything"', "study.record", "summary, trajectory"),
-    ('[study]\nname = "x"', "", "no cells"),
-])
+@pytest.mark.parametrize(
+    "text, field, words",
+    [
+        ('[grd]\nscenes = ["bouncing_ball"]', "grd", "did you mean 'grid'"),
+        ('[grid]\nscenes = ["bouncing_bal"]', "grid.scenes", "did you mean 'bouncing_ball'"),
+        ('[grid]\nscenes = ["bouncing_ball"]\nmethods = ["impulses"]', "grid.methods", "did you mean 'impulse'"),
+        (
+            '[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dtt" = [0.1]',
+            'grid.set."simulation.dtt"',
+            "did you mean 'dt'",
+        ),
+        (
+            '[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dt" = [-0.1]',
+            'grid.set."simulation.dt"',
+            "expected a number greater than 0 (s), found -0.1",
+        ),
+        (
+            '[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n"simulation.dt" = []',
+            'grid.set."simulation.dt"',
+            "at least one value",
+        ),
+        ('[[cells]]\nscene = "bouncing_ball"', "cells[0].method", "needs a method"),
+        ('[study]\nrecord = "everything"', "study.record", "summary, trajectory"),
+        ('[study]\nname = "x"', "", "no cells"),
+    ],
+)
 def test_a_wrong_study_is_one_input_error_naming_the_field(tmp_path, text, field, words):
     with pytest.raises(InputError) as refused:
         load_study(write(tmp_path, text))
@@ -95,15 +120,17 @@ def test_a_wrong_study_is_one_input_error_naming_the_field(tmp_path, text, field
 
 def test_toml_value_reads_back_as_the_value():
     from contactlab.scene.overrides import parse_value
-    for value in (0.1, 3, True, "text with \"quotes\"", [10, 10, 4], [0.5, [1, 2]], 1e-300, float("inf")):
+
+    for value in (0.1, 3, True, 'text with "quotes"', [10, 10, 4], [0.5, [1, 2]], 1e-300, float("inf")):
         assert parse_value(toml_value(value)) == value
 
 
 # ---- the report's arithmetic ------------------------------------------------------------------------
 
+
 def test_the_observed_order_of_a_power_law_is_its_exponent():
     dt = np.array([0.004, 0.002, 0.001, 0.0005])
-    assert observed_order(dt, 3.0 * dt ** 2) == pytest.approx(2.0, abs=1e-12)
+    assert observed_order(dt, 3.0 * dt**2) == pytest.approx(2.0, abs=1e-12)
     assert observed_order(dt, 0.5 * dt) == pytest.approx(1.0, abs=1e-12)
     assert observed_order(dt[:1], dt[:1]) is None and observed_order(dt, np.zeros(4)) is None
 
@@ -116,16 +143,26 @@ def test_the_pareto_front_holds_exactly_the_cells_nothing_beats():
 
 # ---- a local cluster ------------------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def ball_sweep(tmp_path_factory):
     from contactlab import sweep
+
     folder = tmp_path_factory.mktemp("sweep")
-    study = write(folder, BALL_STUDY + """
+    study = write(
+        folder,
+        BALL_STUDY
+        + """
 [[cells]]
 scene = "bouncing_ball"
 method = "penalty"
-set = { "simulation.dt" = 0.01, "simulation.integrator" = "explicit_euler", "method.penalty.stiffness" = 1e9, "method.penalty.implicit_springs" = "never" }
-""")
+[cells.set]
+"simulation.dt" = 0.01
+"simulation.integrator" = "explicit_euler"
+"method.penalty.stiffness" = 1e9
+"method.penalty.implicit_springs" = "never"
+""",
+    )
     lines = []
     table = sweep.run(study, folder / "out", workers=2, log=lines.append)
     return folder, study, table, lines
@@ -136,10 +173,19 @@ def test_every_cell_has_its_row_in_the_study_order_with_a_parquet_table_and_a_re
     cells = load_study(study).cells
     assert list(table["key"]) == [cell.key for cell in cells]
     assert lines[0] == "9 cells: 0 done already, 9 to run"
-    assert list(table.columns[:11]) == ["key", "scene", "method", "simulation.dt", "simulation.duration",
-                                        "materials.0.restitution", "simulation.integrator",
-                                        "method.penalty.stiffness", "method.penalty.implicit_springs",
-                                        "status", "message"]
+    assert list(table.columns[:11]) == [
+        "key",
+        "scene",
+        "method",
+        "simulation.dt",
+        "simulation.duration",
+        "materials.0.restitution",
+        "simulation.integrator",
+        "method.penalty.stiffness",
+        "method.penalty.implicit_springs",
+        "status",
+        "message",
+    ]
     on_disk = pd.read_parquet(folder / "out" / "results.parquet")
     pd.testing.assert_frame_equal(on_disk, table, check_dtype=False)
     assert all(worker.startswith("tcp://127.0.0.1:") for worker in table["worker"])
@@ -154,10 +200,12 @@ def test_a_cell_gives_the_numbers_of_the_same_run_made_directly(ball_sweep):
     """The impulse cell at dt = 2 ms, e = 0.5: its row against simulate() and the closed form
     computed here, in this process."""
     _, _, table, _ = ball_sweep
-    row = table[(table["method"] == "impulse") & (table["simulation.dt"] == 0.002)
-                & (table["materials.0.restitution"] == 0.5)].iloc[0]
-    scene = load_scene("bouncing_ball", ["simulation.dt=0.002", "simulation.duration=1.0",
-                                         "materials.0.restitution=0.5"])
+    row = table[
+        (table["method"] == "impulse") & (table["simulation.dt"] == 0.002) & (table["materials.0.restitution"] == 0.5)
+    ].iloc[0]
+    scene = load_scene(
+        "bouncing_ball", ["simulation.dt=0.002", "simulation.duration=1.0", "materials.0.restitution=0.5"]
+    )
     run = simulate(scene.model, "impulse", scene.dt, scene.duration, threads=1, scene_name=scene.name)
     assert row["status"] == "ok" and row["steps"] == run.summary["steps"] == 500
     assert row["max_penetration_mm"] == run.summary["max_penetration"] * 1000.0
@@ -167,7 +215,7 @@ def test_a_cell_gives_the_numbers_of_the_same_run_made_directly(ball_sweep):
     reached = [check.relative_error for check in checks if np.isfinite(check.measured)]
     assert reached and row["closed_form_error"] == max(reached)
     assert row["closed_form_unreached"] == len(checks) - len(reached)
-    assert row["closed_form_error"] < 1e-3                   # the rebound apex e² h, within 0.1 %
+    assert row["closed_form_error"] < 1e-3  # the rebound apex e² h, within 0.1 %
 
 
 def test_a_cell_that_diverges_is_recorded_and_the_sweep_goes_on(ball_sweep):
@@ -180,13 +228,15 @@ def test_a_cell_that_diverges_is_recorded_and_the_sweep_goes_on(ball_sweep):
 
 def test_a_rerun_recomputes_nothing(ball_sweep):
     from contactlab import sweep
+
     folder, study, table, _ = ball_sweep
     cells = folder / "out" / "cells"
     stamps = {path.name: path.stat().st_mtime_ns for path in cells.iterdir()}
 
-    class NoCluster:                                     # any job submitted would fail the test
+    class NoCluster:  # any job submitted would fail the test
         def submit(self, *arguments, **keywords):
             raise AssertionError("a cell was run again")
+
     lines = []
     again = sweep.run(study, folder / "out", client=NoCluster(), log=lines.append)
     assert lines == ["9 cells: 9 done already, 0 to run"]
@@ -196,6 +246,7 @@ def test_a_rerun_recomputes_nothing(ball_sweep):
 
 # ---- a separately started scheduler and workers ------------------------------------------------------
 
+
 def _free_port():
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
@@ -203,8 +254,12 @@ def _free_port():
 
 
 def _dask(*arguments):
-    return subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_" + arguments[0], *arguments[1:]],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_" + arguments[0], *arguments[1:]],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
 
 
 @pytest.fixture
@@ -213,9 +268,12 @@ def scheduler():
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     processes = [_dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")]
-    processes += [_dask("worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
-                        "--host", "127.0.0.1") for _ in range(2)]
+    processes += [
+        _dask("worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1")
+        for _ in range(2)
+    ]
     from distributed import Client
+
     with Client(address, timeout=60) as client:
         client.wait_for_workers(2, timeout=120)
     yield address, processes
@@ -230,8 +288,13 @@ def scheduler():
 
 
 def _sweep_command(*arguments, cwd):
-    return subprocess.run([sys.executable, "-m", "contactlab", "sweep", *map(str, arguments)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "contactlab", "sweep", *map(str, arguments)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def _numbers(table):
@@ -242,31 +305,40 @@ def _numbers(table):
 
 def test_the_cluster_gives_the_local_table_and_survives_a_worker_killed_mid_study(tmp_path, scheduler, ball_sweep):
     address, processes = scheduler
-    study = write(tmp_path, BALL_STUDY.replace('"simulation.duration" = [1.0]', '"simulation.duration" = [1.0, 2.0]')
-                  .replace('name = "ball"', 'name = "ball2"'))
+    study = write(
+        tmp_path,
+        BALL_STUDY.replace('"simulation.duration" = [1.0]', '"simulation.duration" = [1.0, 2.0]').replace(
+            'name = "ball"', 'name = "ball2"'
+        ),
+    )
     out = tmp_path / "out"
-    command = subprocess.Popen([sys.executable, "-m", "contactlab", "sweep", str(study), "--out", str(out),
-                                "--scheduler", address], cwd=tmp_path, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+    command = subprocess.Popen(
+        [sys.executable, "-m", "contactlab", "sweep", str(study), "--out", str(out), "--scheduler", address],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline, killed = time.monotonic() + 300, None
-    while time.monotonic() < deadline and command.poll() is None:      # kill a worker once cells finish
+    while time.monotonic() < deadline and command.poll() is None:  # kill a worker once cells finish
         if (out / "cells").is_dir() and len(os.listdir(out / "cells")) >= 2:
             os.killpg(processes[1].pid, signal.SIGKILL)
             killed = len(os.listdir(out / "cells"))
             break
         time.sleep(0.05)
     stdout, stderr = command.communicate(timeout=600)
-    assert killed is not None and killed < 16                         # it died mid-study
+    assert killed is not None and killed < 16  # it died mid-study
     assert processes[1].wait(timeout=10) == -signal.SIGKILL
     assert command.returncode == 0, stderr
     assert "16 cells (16 ok)" in stdout
     table = pd.read_parquet(out / "results.parquet")
     assert (table["status"] == "ok").all() and len(table) == 16
     local = ball_sweep[2]
-    local = local[local["method"] != "penalty"][table.columns]     # without the penalty cell's own axes
+    local = local[local["method"] != "penalty"][table.columns]  # without the penalty cell's own axes
     shared = table[table["simulation.duration"] == 1.0]
-    pd.testing.assert_frame_equal(_numbers(shared).drop(columns="key"), _numbers(local).drop(columns="key"),
-                                  check_dtype=False)
+    pd.testing.assert_frame_equal(
+        _numbers(shared).drop(columns="key"), _numbers(local).drop(columns="key"), check_dtype=False
+    )
     again = _sweep_command(study, "--out", out, "--scheduler", address, cwd=tmp_path)
     assert again.returncode == 0 and "16 cells: 16 done already, 0 to run" in again.stderr
 
@@ -277,8 +349,7 @@ def test_a_bad_study_on_the_command_line_is_one_line_exit_2_and_nothing_written(
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert result.stderr.strip().count("\n") == 0 and "grid.methods: unknown method 'teleport'" in result.stderr
     assert os.listdir(tmp_path) == ["study.toml"]
-    result = _sweep_command(write(tmp_path, BALL_STUDY), "--scheduler", f"tcp://127.0.0.1:{_free_port()}",
-                            cwd=tmp_path)
+    result = _sweep_command(write(tmp_path, BALL_STUDY), "--scheduler", f"tcp://127.0.0.1:{_free_port()}", cwd=tmp_path)
     assert result.returncode == 2 and "could not reach a Dask scheduler" in result.stderr.splitlines()[-1]
     assert sorted(os.listdir(tmp_path)) == ["study.toml"]
 
@@ -292,7 +363,9 @@ def test_a_local_cluster_takes_one_worker_per_idle_core():
     """A process spinning on a core takes that core from the default worker count; with every
     core kept busy there is still one worker."""
     import multiprocessing
+
     from contactlab import cluster
+
     cores = cluster.cores()
     stop = multiprocessing.Event()
     spinners = [multiprocessing.Process(target=_spin, args=(stop,)) for _ in range(cores)]
@@ -313,8 +386,13 @@ def test_a_local_cluster_takes_one_worker_per_idle_core():
 
 def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rerun(tmp_path):
     write(tmp_path, BALL_STUDY.replace('name = "ball"', 'name = "stopped"'))
-    process = subprocess.Popen([sys.executable, "-m", "contactlab", "sweep", "study.toml", "--workers", "1"],
-                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "contactlab", "sweep", "study.toml", "--workers", "1"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     cells = tmp_path / "out" / "stopped-sweep" / "cells"
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and not (cells.is_dir() and len(os.listdir(cells)) >= 2):
@@ -323,7 +401,10 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     _, stderr = process.communicate(timeout=300)
     kept = len(os.listdir(cells))
     assert process.returncode == 130 and "Traceback" not in stderr and 2 <= kept < 8
-    assert stderr.splitlines()[-1] == f"interrupted (SIGINT); written before it: {os.path.join('out', 'stopped-sweep', 'cells')}"
+    assert (
+        stderr.splitlines()[-1]
+        == f"interrupted (SIGINT); written before it: {os.path.join('out', 'stopped-sweep', 'cells')}"
+    )
     assert not any(name.startswith(".partial-") for name in os.listdir(cells))
     again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr

@@ -23,8 +23,13 @@ def sphere_lattice(side=6, layers=8, overlap=1e-3, friction=0.0):
     for i in range(side):
         for j in range(side):
             for k in range(layers):
-                b.add_body("sphere", radius=RADIUS, mass=1.0 + 0.1 * ((i + 2 * j + 3 * k) % 5),
-                           position=(i * spacing, j * spacing, RADIUS - overlap / 2 + k * spacing), material="m")
+                b.add_body(
+                    "sphere",
+                    radius=RADIUS,
+                    mass=1.0 + 0.1 * ((i + 2 * j + 3 * k) % 5),
+                    position=(i * spacing, j * spacing, RADIUS - overlap / 2 + k * spacing),
+                    material="m",
+                )
     top = RADIUS - overlap / 2 + (layers - 1) * spacing + RADIUS + 0.01 - overlap
     b.add_particles([[i * spacing, 0.0, top] for i in range(side)], mass=0.2, radius=0.01, material="m")
     b.add_obstacle("plane", normal=(0, 0, 1), material="m")
@@ -37,14 +42,17 @@ def problem(model):
     rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)
     u = stack(*free_velocities(model, state, DT))
-    target = np.maximum(contacts.depth / DT * 0.2, 0.0)         # push a fifth of each overlap out
+    target = np.maximum(contacts.depth / DT * 0.2, 0.0)  # push a fifth of each overlap out
     return state, contacts, rows, order, u, target
 
 
 def entities(contacts, model, c):
     """The movable bodies and particles of contact c, as ("b", i) / ("p", j)."""
     found = set()
-    for body, particles in ((contacts.body_a[c], contacts.particles_a[c]), (contacts.body_b[c], contacts.particles_b[c])):
+    for body, particles in (
+        (contacts.body_a[c], contacts.particles_a[c]),
+        (contacts.body_b[c], contacts.particles_b[c]),
+    ):
         if body >= 0:
             found.add(("b", int(body)))
         found.update(("p", int(p)) for p in particles if p >= 0 and model.particle_inverse_mass[p] > 0)
@@ -56,21 +64,21 @@ def test_groups_share_nothing_that_moves_and_keep_the_sweep_order():
     state, contacts, rows, order, u, target = problem(model)
     assert contacts.count > 700
     grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=2, min_contacts=0)
-    assert sorted(grouped.tolist()) == list(range(contacts.count))        # a permutation
+    assert sorted(grouped.tolist()) == list(range(contacts.count))  # a permutation
     assert starts[0] == 0 and starts[-1] == contacts.count and np.all(np.diff(starts) >= 0)
     owners = {}
     rank = np.empty(contacts.count, dtype=int)
     rank[order] = np.arange(contacts.count)
     for g in range(len(starts) - 1):
-        members = grouped[starts[g]:starts[g + 1]]
-        assert np.all(np.diff(rank[members]) > 0)                         # each group in sweep order
+        members = grouped[starts[g] : starts[g + 1]]
+        assert np.all(np.diff(rank[members]) > 0)  # each group in sweep order
         if g == len(starts) - 2:
-            continue                                                      # the spanning group runs alone
+            continue  # the spanning group runs alone
         for c in members:
             for entity in entities(contacts, model, c):
-                assert owners.setdefault(entity, g) == g                  # never in two parallel groups
+                assert owners.setdefault(entity, g) == g  # never in two parallel groups
     sizes = np.diff(starts)
-    assert min(sizes[:2]) > 0.3 * contacts.count and sizes[2] < 0.2 * contacts.count   # balanced, few spanning
+    assert min(sizes[:2]) > 0.3 * contacts.count and sizes[2] < 0.2 * contacts.count  # balanced, few spanning
 
 
 def test_parallel_sweep_is_the_serial_sweep_in_the_grouped_order_bit_for_bit():
@@ -80,10 +88,20 @@ def test_parallel_sweep_is_the_serial_sweep_in_the_grouped_order_bit_for_bit():
     assert len(starts) == 4
     warm = np.zeros((contacts.count, 3))
     u_parallel, u_serial = u0.copy(), u0.copy()
-    lam_parallel, sweeps, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u_parallel, 30,
-                                                                   -1.0, warm, grouped, starts)
-    lam_serial, _, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u_serial, 30, -1.0, warm,
-                                                            grouped, np.array([0, contacts.count, contacts.count]))
+    lam_parallel, sweeps, _ = sequential.solve_sequential_impulses(
+        rows, contacts.friction, target, u_parallel, 30, -1.0, warm, grouped, starts
+    )
+    lam_serial, _, _ = sequential.solve_sequential_impulses(
+        rows,
+        contacts.friction,
+        target,
+        u_serial,
+        30,
+        -1.0,
+        warm,
+        grouped,
+        np.array([0, contacts.count, contacts.count]),
+    )
     assert sweeps == 30
     np.testing.assert_array_equal(lam_parallel, lam_serial)
     np.testing.assert_array_equal(u_parallel, u_serial)
@@ -98,13 +116,13 @@ def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
     results = []
     for sweep_order, sweep_starts in ((grouped, starts), (order, np.array([0, contacts.count, contacts.count]))):
         u = u0.copy()
-        lam, sweeps, change = sequential.solve_sequential_impulses(rows, contacts.friction, target, u, 20000, 1e-13,
-                                                                   np.zeros((contacts.count, 3)), sweep_order,
-                                                                   sweep_starts)
+        lam, sweeps, change = sequential.solve_sequential_impulses(
+            rows, contacts.friction, target, u, 20000, 1e-13, np.zeros((contacts.count, 3)), sweep_order, sweep_starts
+        )
         assert change <= 1e-13
         vn = sequential.row_products(rows, u)[:, 0]
-        assert np.all(vn >= target - 1e-9)                                  # every contact meets its target
-        assert np.all(lam[:, 0] * (vn - target) <= 1e-9)                     # complementary
+        assert np.all(vn >= target - 1e-9)  # every contact meets its target
+        assert np.all(lam[:, 0] * (vn - target) <= 1e-9)  # complementary
         results.append(u)
     np.testing.assert_allclose(results[0], results[1], atol=1e-8)
 
@@ -116,13 +134,22 @@ def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
     grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=groups)
     assert groups == 1 or contacts.count < sequential.PARALLEL_MIN_CONTACTS
     np.testing.assert_array_equal(grouped, order)
-    assert starts is None                                   # one group: the serial sweep, nothing parallel compiled
-    lam, sweeps, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u.copy(), 20, -1.0,
-                                                          np.zeros((contacts.count, 3)), grouped, starts)
-    lam_array, _, _ = sequential.solve_sequential_impulses(rows, contacts.friction, target, u.copy(), 20, -1.0,
-                                                           np.zeros((contacts.count, 3)), grouped,
-                                                           np.array([0, contacts.count, contacts.count]))
-    np.testing.assert_array_equal(lam, lam_array)           # the same sweep as one group given explicitly
+    assert starts is None  # one group: the serial sweep, nothing parallel compiled
+    lam, sweeps, _ = sequential.solve_sequential_impulses(
+        rows, contacts.friction, target, u.copy(), 20, -1.0, np.zeros((contacts.count, 3)), grouped, starts
+    )
+    lam_array, _, _ = sequential.solve_sequential_impulses(
+        rows,
+        contacts.friction,
+        target,
+        u.copy(),
+        20,
+        -1.0,
+        np.zeros((contacts.count, 3)),
+        grouped,
+        np.array([0, contacts.count, contacts.count]),
+    )
+    np.testing.assert_array_equal(lam, lam_array)  # the same sweep as one group given explicitly
 
 
 def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):
@@ -136,7 +163,7 @@ def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):
     contacts = collide(model, model.state(), 0.002)
     order = sequential.solve_order(contacts, model.gravity)
     height = contacts.point[order, 2]
-    assert np.all(np.diff(height) <= 1e-9)                      # top to bottom
+    assert np.all(np.diff(height) <= 1e-9)  # top to bottom
     assert sorted(order.tolist()) == list(range(contacts.count))
 
 
@@ -152,24 +179,34 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     from contactlab.methods import impulse
     from contactlab.methods.velocity_level import resting_target
     from contactlab.scene import load_scene
+
     scene = load_scene("box_stack")
     model, dt = scene.model, scene.dt
     state = simulate(model, "impulse", dt, 0.5).state
     options = impulse.Options()
     v, w, p = free_velocities(model, state, dt)
-    contacts, _ = collide_keeping(model, state, state.carried["manifolds"], options.manifold_tolerance,
-                                  options.contact_margin, swept_distances(model, v, w, p, dt), options.granularity,
-                                  options.normal, options.samples)
+    contacts, _ = collide_keeping(
+        model,
+        state,
+        state.carried["manifolds"],
+        options.manifold_tolerance,
+        options.contact_margin,
+        swept_distances(model, v, w, p, dt),
+        options.granularity,
+        options.normal,
+        options.samples,
+    )
     rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)
     warm, found = values_by_id(state.carried["impulse_ids"], state.carried["impulse_values"], contacts.feature_id, 3)
-    assert found.all()                                     # every contact warm-started
+    assert found.all()  # every contact warm-started
     target = resting_target(-contacts.depth, dt, options)
     u = stack(v, w, p)
-    lam, sweeps, change = sequential.solve_sequential_impulses(rows, contacts.friction, target, u, 100, 1e-7, warm,
-                                                               order, np.array([0, contacts.count, contacts.count]))
+    lam, sweeps, change = sequential.solve_sequential_impulses(
+        rows, contacts.friction, target, u, 100, 1e-7, warm, order, np.array([0, contacts.count, contacts.count])
+    )
     assert sweeps < 50 and change <= 1e-7
     before = u.copy()
     largest_update = sequential.sweep_contacts(order, contacts.count, target, lam, rows, contacts.friction, u)
-    assert largest_update > 10 * 1e-7                      # the single-update rule would have gone on
+    assert largest_update > 10 * 1e-7  # the single-update rule would have gone on
     assert sequential.largest_row_change(rows, u, before) < largest_update

@@ -13,14 +13,13 @@ AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0,
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3).filter(
-    lambda v: np.linalg.norm(v) > 1e-3))
+@given(st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3).filter(lambda v: np.linalg.norm(v) > 1e-3))
 def test_the_basis_is_orthonormal_and_right_handed(vector):
     n = np.array(vector)[None] / np.linalg.norm(vector)
     t1, t2 = tangent_basis(n)
     frame = np.stack([t1[0], t2[0], n[0]])
     np.testing.assert_allclose(frame @ frame.T, np.eye(3), atol=1e-12)
-    assert np.linalg.det(frame) > 0.999999                      # (t1, t2, n) right-handed
+    assert np.linalg.det(frame) > 0.999999  # (t1, t2, n) right-handed
 
 
 def test_exact_axes_keep_the_basis_they_always_had():

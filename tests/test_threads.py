@@ -7,14 +7,14 @@ import json
 import numba
 import numpy as np
 import pytest
+from test_sweeps import problem, sphere_lattice
 
 from contactlab import InputError, simulate, threads
 from contactlab.methods import sequential
 
-from test_sweeps import problem, sphere_lattice
-
-TWO_THREADS = pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2,
-                                 reason="needs NUMBA_NUM_THREADS ≥ 2 to run a sweep on two threads")
+TWO_THREADS = pytest.mark.skipif(
+    numba.config.NUMBA_NUM_THREADS < 2, reason="needs NUMBA_NUM_THREADS ≥ 2 to run a sweep on two threads"
+)
 
 
 @pytest.mark.parametrize("given, expected", [("auto", "auto"), ("AUTO", "auto"), (1, 1), ("1", 1), (None, "auto")])
@@ -46,7 +46,7 @@ def test_a_two_group_sweep_is_bit_for_bit_the_same_on_one_thread_and_on_two():
     model = sphere_lattice(friction=0.5)
     state, contacts, rows, order, u0, target = problem(model)
     grouped, starts = sequential.sweep_groups(rows, contacts, state, order, groups=2, min_contacts=0)
-    assert len(starts) == 4                                   # two parallel groups and the spanning one
+    assert len(starts) == 4  # two parallel groups and the spanning one
     results = []
     saved = numba.get_num_threads()
     try:
@@ -54,7 +54,8 @@ def test_a_two_group_sweep_is_bit_for_bit_the_same_on_one_thread_and_on_two():
             numba.set_num_threads(count)
             u = u0.copy()
             lam, sweeps, change = sequential.solve_sequential_impulses(
-                rows, contacts.friction, target, u, 40, -1.0, np.zeros((contacts.count, 3)), grouped, starts)
+                rows, contacts.friction, target, u, 40, -1.0, np.zeros((contacts.count, 3)), grouped, starts
+            )
             results.append((lam, u, change))
     finally:
         numba.set_num_threads(saved)
@@ -67,16 +68,14 @@ def test_a_two_group_sweep_is_bit_for_bit_the_same_on_one_thread_and_on_two():
 def test_a_run_is_bit_for_bit_the_same_on_any_thread_setting():
     """A lattice of 512 spheres makes over 1000 contacts, so the sweeps run in two groups."""
     model = sphere_lattice(side=8, layers=8, friction=0.5)
-    runs = {setting: simulate(model, "constraints", 1 / 240, 8 / 240, threads=setting)
-            for setting in (1, 2, "auto")}
+    runs = {setting: simulate(model, "constraints", 1 / 240, 8 / 240, threads=setting) for setting in (1, 2, "auto")}
     assert runs[1].summary["max_contacts"] >= sequential.PARALLEL_MIN_CONTACTS
-    assert runs[1].summary["threads"] == {"setting": 1, "available": threads.available_threads(),
-                                          "steps_at": {"1": 8}}
+    assert runs[1].summary["threads"] == {"setting": 1, "available": threads.available_threads(), "steps_at": {"1": 8}}
     assert runs[2].summary["threads"]["steps_at"] == {"2": 8}
     for setting in (2, "auto"):
         for name in ("body_position", "body_orientation", "body_velocity", "solver_residual"):
             np.testing.assert_array_equal(runs[setting].arrays[name], runs[1].arrays[name])
-    assert numba.get_num_threads() == threads.available_threads()        # put back after each run
+    assert numba.get_num_threads() == threads.available_threads()  # put back after each run
 
 
 class FakeNumba:
@@ -112,15 +111,15 @@ def fake(monkeypatch):
 def test_auto_keeps_two_threads_where_they_are_faster(fake):
     chooser = threads.ThreadChooser("auto", trial_steps=4, hold_steps=10)
     drive(chooser, fake, {1: 0.010, 2: 0.006}, 8)
-    assert fake.history == [1] * 4 + [2] * 4                   # the trial: one thread first
+    assert fake.history == [1] * 4 + [2] * 4  # the trial: one thread first
     drive(chooser, fake, {1: 0.010, 2: 0.006}, 10)
-    assert fake.history[8:] == [2] * 10                        # the verdict held for 10 steps
+    assert fake.history[8:] == [2] * 10  # the verdict held for 10 steps
     assert chooser.counts == {1: 4, 2: 14}
 
 
 def test_auto_falls_back_to_one_thread_on_a_busy_machine_and_gives_up_a_hopeless_trial(fake):
     chooser = threads.ThreadChooser("auto", trial_steps=4, hold_steps=10)
-    drive(chooser, fake, {1: 0.030, 2: 0.500}, 5)               # 4 steps on one, 1 on two: hopeless
+    drive(chooser, fake, {1: 0.030, 2: 0.500}, 5)  # 4 steps on one, 1 on two: hopeless
     assert fake.history == [1, 1, 1, 1, 2]
     drive(chooser, fake, {1: 0.030, 2: 0.500}, 10)
     assert fake.history[5:] == [1] * 10
@@ -128,12 +127,12 @@ def test_auto_falls_back_to_one_thread_on_a_busy_machine_and_gives_up_a_hopeless
 
 def test_auto_follows_the_load_and_holds_a_repeated_verdict_longer(fake):
     chooser = threads.ThreadChooser("auto", trial_steps=2, hold_steps=4, longest_hold=16)
-    busy, idle = {1: 0.03, 2: 0.04}, {1: 0.03, 2: 0.02}     # 0.04: slower, but not enough to give up
-    drive(chooser, fake, busy, 4)                              # trial (2 + 2): one thread wins
+    busy, idle = {1: 0.03, 2: 0.04}, {1: 0.03, 2: 0.02}  # 0.04: slower, but not enough to give up
+    drive(chooser, fake, busy, 4)  # trial (2 + 2): one thread wins
     assert chooser.hold == 4
-    drive(chooser, fake, busy, 4 + 4)                          # hold, trial again: same verdict
+    drive(chooser, fake, busy, 4 + 4)  # hold, trial again: same verdict
     assert chooser.hold == 8
-    drive(chooser, fake, idle, 8 + 4)                          # the load went away: two threads win
+    drive(chooser, fake, idle, 8 + 4)  # the load went away: two threads win
     assert chooser.hold == 4 and fake.history[-1] == 2
     drive(chooser, fake, idle, 4)
     assert fake.history[-4:] == [2] * 4
@@ -145,13 +144,25 @@ def test_a_fixed_count_is_set_before_every_step_and_never_tried_otherwise(fake):
     assert fake.history == [1] * 20
     with chooser:
         pass
-    assert fake.current == 2                                    # the process's count put back
+    assert fake.current == 2  # the process's count put back
 
 
 def test_the_command_line_takes_a_thread_count_and_refuses_a_bad_one(tmp_path):
     from test_cli import contactlab
-    result = contactlab("run", "sliding_block", "--duration", "0.05", "--dt", "0.001", "--threads", "1", "--json", "--no-plots",
-                        cwd=tmp_path)
+
+    result = contactlab(
+        "run",
+        "sliding_block",
+        "--duration",
+        "0.05",
+        "--dt",
+        "0.001",
+        "--threads",
+        "1",
+        "--json",
+        "--no-plots",
+        cwd=tmp_path,
+    )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["threads"]["steps_at"] == {"1": 50}
     elsewhere = tmp_path / "bad"
@@ -159,5 +170,6 @@ def test_the_command_line_takes_a_thread_count_and_refuses_a_bad_one(tmp_path):
     bad = contactlab("run", "sliding_block", "--threads", "none", cwd=elsewhere)
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
-        "error: sliding_block: --threads: expected 'auto' or a whole number of threads ≥ 1, found 'none'"]
-    assert list(elsewhere.iterdir()) == []                      # nothing written
+        "error: sliding_block: --threads: expected 'auto' or a whole number of threads ≥ 1, found 'none'"
+    ]
+    assert list(elsewhere.iterdir()) == []  # nothing written

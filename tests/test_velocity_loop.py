@@ -5,8 +5,8 @@ bit-identical trajectories and diagnostics — the loop is a faster path, not ot
 
 import numpy as np
 import pytest
-
 from conftest import ball_on_plane
+
 from contactlab import SimulationDiverged, simulate
 from contactlab.methods import get, impulse, velocity_loop
 from contactlab.record import SERIES
@@ -21,30 +21,43 @@ def _served(name, method):
     return scene, velocity_loop.applies(scene.model, method, options, scene.integrator)
 
 
-CASES = [(name, method) for name, _ in builtin_scenes() for method in velocity_loop.METHODS
-         if _served(name, method)[1]]
+CASES = [(name, method) for name, _ in builtin_scenes() for method in velocity_loop.METHODS if _served(name, method)[1]]
 
 
 @pytest.mark.parametrize("method", velocity_loop.METHODS)
 def test_the_loop_serves_the_rigid_scenes_and_not_cloth_or_meshes(method):
     served = {name for name, each in CASES if each == method}
-    assert {"bouncing_ball", "box_pyramid", "box_stack", "sphere_pile", "newtons_cradle", "capsule_pile",
-            "particles_box"} <= served
+    assert {
+        "bouncing_ball",
+        "box_pyramid",
+        "box_stack",
+        "sphere_pile",
+        "newtons_cradle",
+        "capsule_pile",
+        "particles_box",
+    } <= served
     assert not served & {"cloth_drape", "cloth_table", "mesh_bowl"}
 
 
-@pytest.mark.parametrize("name,method,options", [(name, method, None) for name, method in CASES] + [
-    # projection with more passes, half the warm start and no slop: every pass and the warm start count
-    ("box_stack", "projection", {"passes": 3, "warm_start": 0.5, "slop": 0.0}),
-    ("capsule_pile", "projection", {"passes": 4, "tolerance": 1e-6})])
+@pytest.mark.parametrize(
+    "name,method,options",
+    [(name, method, None) for name, method in CASES]
+    + [
+        # projection with more passes, half the warm start and no slop: every pass and the warm start count
+        ("box_stack", "projection", {"passes": 3, "warm_start": 0.5, "slop": 0.0}),
+        ("capsule_pile", "projection", {"passes": 4, "tolerance": 1e-6}),
+    ],
+)
 def test_the_loop_gives_the_stitched_steps_numbers(name, method, options):
     scene, _ = _served(name, method)
     options = scene.method_options.get(method, {}) if options is None else options
     steps = min(STEPS, max(1, int(round(scene.duration / scene.dt))))
-    looped = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7,
-                      compiled_loop=True)
-    stitched = simulate(scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7,
-                        compiled_loop=False)
+    looped = simulate(
+        scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7, compiled_loop=True
+    )
+    stitched = simulate(
+        scene.model, method, scene.dt, steps * scene.dt, options, scene.integrator, record_every=7, compiled_loop=False
+    )
     assert looped.summary["compiled_loop"] and not stitched.summary["compiled_loop"]
     for series in SERIES:
         assert np.array_equal(looped.arrays[series], stitched.arrays[series]), series
@@ -59,7 +72,7 @@ def test_the_loop_gives_the_stitched_steps_numbers(name, method, options):
         if value is None or other is None:
             assert value is other, key
             continue
-        for field in (vars(value) if hasattr(value, "__dataclass_fields__") else {key: value}):
+        for field in vars(value) if hasattr(value, "__dataclass_fields__") else {key: value}:
             left = getattr(value, field) if hasattr(value, "__dataclass_fields__") else value
             right = getattr(other, field) if hasattr(other, "__dataclass_fields__") else other
             assert np.array_equal(left, right), (key, field)
@@ -106,9 +119,9 @@ def test_a_ball_dropped_in_the_loop_bounces_to_the_closed_form_apex():
     run = simulate(model, "impulse", 1 / 240, 1.2, compiled_loop=True)
     assert run.summary["threads"]["setting"] == "auto"
     height = run.arrays["body_position"][:, 0, 2]
-    bounced = np.argmax(np.diff(height) > 0)                       # the first step that rises
+    bounced = np.argmax(np.diff(height) > 0)  # the first step that rises
     apex = height[bounced:].max()
-    expected = 0.05 + 0.8 ** 2 * (1.0 - 0.05)
+    expected = 0.05 + 0.8**2 * (1.0 - 0.05)
     assert abs(apex - expected) < 2e-3 * expected
 
 
@@ -117,13 +130,14 @@ def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
     the scene's speed scale (√(2 g h) for a ball h = 5 m up), a falling ball stops the run at
     the first step faster than that, v = g t, with the run up to then kept."""
     from contactlab import health
+
     monkeypatch.setattr(health, "SPEED_FACTOR", 0.1)
     model = ball_on_plane(height=5.0, radius=0.05, friction=0.0)
     dt, g = 0.004, 9.81
     limit = 0.1 * np.sqrt(2 * g * 5.0)
     with pytest.raises(SimulationDiverged, match="reached .* m/s") as stopped:
         simulate(model, "impulse", dt, 1.0, compiled_loop=True)
-    steps = int(np.floor(limit / (g * dt))) + 1                   # the first with g n dt > limit
+    steps = int(np.floor(limit / (g * dt))) + 1  # the first with g n dt > limit
     run = stopped.value.run
     assert run.summary["compiled_loop"] and run.summary["diverged"]["check"] == "speed"
     assert stopped.value.time == pytest.approx(steps * dt)
@@ -137,23 +151,26 @@ def test_a_short_first_run_steps_from_python_and_a_long_one_compiles_the_loop(mo
     model, options = scene.model, impulse.Options()
 
     def chosen(steps, compiled_loop=None):
-        return velocity_loop.stepper_for(model, "impulse", options, scene.integrator, scene.dt, model.state(), steps,
-                                         compiled_loop)
+        return velocity_loop.stepper_for(
+            model, "impulse", options, scene.integrator, scene.dt, model.state(), steps, compiled_loop
+        )
+
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    assert chosen(4000) is None                                  # 4000 steps save < 1 s of Python
-    assert velocity_loop.repays_compiling(model, 10 ** 6)        # a million save about 100 s
-    assert isinstance(chosen(10 ** 6), velocity_loop.Stepper)
+    assert chosen(4000) is None  # 4000 steps save < 1 s of Python
+    assert velocity_loop.repays_compiling(model, 10**6)  # a million save about 100 s
+    assert isinstance(chosen(10**6), velocity_loop.Stepper)
     assert isinstance(chosen(10, compiled_loop=True), velocity_loop.Stepper)
-    assert chosen(10 ** 6, compiled_loop=False) is None
+    assert chosen(10**6, compiled_loop=False) is None
     monkeypatch.undo()
     assert simulate(model, "impulse", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
-    assert chosen(10).compiled_already()                         # compiled now (or cached before)
+    assert chosen(10).compiled_already()  # compiled now (or cached before)
     assert simulate(model, "impulse", scene.dt, 10 * scene.dt).summary["compiled_loop"]
     assert isinstance(chosen(10), velocity_loop.Stepper)
 
 
 def test_compiled_loop_must_be_a_yes_or_no():
     from contactlab import InputError
+
     with pytest.raises(InputError, match="compiled_loop"):
         simulate(load_scene("bouncing_ball").model, "impulse", 0.01, 0.1, compiled_loop="yes")
 
@@ -166,15 +183,17 @@ def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_i
     model, options = scene.model, get("projection").Options(passes=3)
 
     def chosen(steps, compiled_loop=None):
-        return velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state(),
-                                         steps, compiled_loop)
+        return velocity_loop.stepper_for(
+            model, "projection", options, scene.integrator, scene.dt, model.state(), steps, compiled_loop
+        )
+
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
     assert chosen(4000) is None
-    stepper = chosen(10 ** 6)
+    stepper = chosen(10**6)
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
-    assert stepper.flags[2:5] == (None, None, True)               # (velocity, impulse, projection)
+    assert stepper.flags[2:5] == (None, None, True)  # (velocity, impulse, projection)
     assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (True, True, None)
     assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
     monkeypatch.undo()
     assert simulate(model, "projection", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
-    assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]     # compiled now
+    assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]  # compiled now

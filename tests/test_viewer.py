@@ -14,8 +14,8 @@ import pytest
 from contactlab import ModelBuilder, browser, cli, simulate
 from contactlab.compare import compare
 from contactlab.errors import InputError
-from contactlab.record import load_run
 from contactlab.methods import AVAILABLE
+from contactlab.record import load_run
 from contactlab.viewer import HOST, Viewer, contacts_at, view
 
 
@@ -59,7 +59,7 @@ def test_the_scene_graph_holds_bodies_obstacles_and_contacts_when_toggled(viewer
     nodes = viewer.nodes()
     assert {f"/run0/bodies/{b}" for b in range(15)} <= set(nodes)
     assert {"/run0/obstacles", "/run0/label"} <= set(nodes)
-    assert not any("/contacts/" in name for name in nodes)            # nothing computed while off
+    assert not any("/contacts/" in name for name in nodes)  # nothing computed while off
     for toggle in ("points", "normals", "forces"):
         viewer.gui[toggle].value = True
     viewer.show_time(0.05)
@@ -67,7 +67,7 @@ def test_the_scene_graph_holds_bodies_obstacles_and_contacts_when_toggled(viewer
     assert {"/run0/contacts/points", "/run0/contacts/normals", "/run0/contacts/forces"} <= set(viewer.nodes())
     contacts = viewer.contacts[0]
     assert len(contacts.points) > 0 and np.allclose(np.linalg.norm(contacts.normals, axis=1), 1.0)
-    on_floor = contacts.force_points[:, 2] < 0.005                     # the floor holds the whole pyramid up
+    on_floor = contacts.force_points[:, 2] < 0.005  # the floor holds the whole pyramid up
     weight = viewer.runs[0].model.body_mass.sum() * 9.81
     assert contacts.forces[on_floor, 2].sum() == pytest.approx(weight, rel=0.05)
     viewer.gui["forces"].value = False
@@ -89,7 +89,7 @@ def test_the_timeline_moves_the_bodies_to_the_recorded_positions(viewer, pyramid
 def test_bodies_are_coloured_by_speed_and_by_penetration(compared):
     shown = view(compared)
     try:
-        shown.show_time(0.2)                                      # the balls fall at about 2 m/s
+        shown.show_time(0.2)  # the balls fall at about 2 m/s
         own = [tuple(run.bodies[0].color) for run in shown.runs]
         shown.gui["colour"].value = "speed"
         shown.redraw()
@@ -97,7 +97,7 @@ def test_bodies_are_coloured_by_speed_and_by_penetration(compared):
         assert "m/s" in shown.gui["colour_legend"].content
         shown.gui["colour"].value = "penetration"
         shown.redraw()
-        assert all(contacts is not None for contacts in shown.contacts)    # computed for the colours
+        assert all(contacts is not None for contacts in shown.contacts)  # computed for the colours
         assert "mm" in shown.gui["colour_legend"].content
     finally:
         shown.stop()
@@ -106,7 +106,7 @@ def test_bodies_are_coloured_by_speed_and_by_penetration(compared):
 def test_playing_moves_the_clock_at_the_chosen_speed(viewer):
     viewer.gui["speed"].value = "0.5×"
     viewer.set_playing(True)
-    time.sleep(0.1)                                          # the run lasts 0.1 s: no wrapping round
+    time.sleep(0.1)  # the run lasts 0.1 s: no wrapping round
     viewer.set_playing(False)
     assert 0.0 < viewer.gui["time"].value <= 0.5 * 0.1 + 0.03
 
@@ -118,7 +118,7 @@ def test_a_compare_folder_opens_its_methods_side_by_side(compared):
         left, right = (run.offset for run in shown.runs)
         assert right[0] > left[0] and left[1:].tolist() == right[1:].tolist() == [0.0, 0.0]
         assert {"/run0/label", "/run1/label", "/run0/bodies/0", "/run1/bodies/0"} <= set(shown.nodes())
-        shown.show_time(0.1)                                              # one clock for both
+        shown.show_time(0.1)  # one clock for both
         assert [shown.runs[i].arrays["time"][k] for i, k in enumerate(shown.shown)] == pytest.approx([0.1, 0.1])
     finally:
         shown.stop()
@@ -156,7 +156,7 @@ def test_every_method_gives_the_forces_that_hold_a_resting_box(method):
 
 
 def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(Viewer, "wait", Viewer.stop)          # Ctrl-C at once
+    monkeypatch.setattr(Viewer, "wait", Viewer.stop)  # Ctrl-C at once
     out = str(tmp_path / "ball")
     assert cli.main(["run", "bouncing_ball", "--duration", "0.05", "--out", out, "--no-plots", "--view"]) == 0
     assert "Viewer: http://127.0.0.1:" in capsys.readouterr().out
@@ -168,7 +168,7 @@ def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
 def test_a_run_whose_scene_cannot_be_loaded_is_shown_without_contacts(pyramid, tmp_path):
     lone = tmp_path / "lone"
     lone.mkdir()
-    shutil.copy(os.path.join(pyramid, "trajectory.h5"), lone)            # no summary.json: no scene to load
+    shutil.copy(os.path.join(pyramid, "trajectory.h5"), lone)  # no summary.json: no scene to load
     shown = view(str(lone), pyramid)
     try:
         assert [run.model is None for run in shown.runs] == [True, False]
@@ -198,10 +198,11 @@ def test_a_port_in_use_is_refused(pyramid, capsys):
         assert cli.main(["view", pyramid, "--port", str(port)]) == 2
         assert f"port {port} on 127.0.0.1 is in use" in capsys.readouterr().err
         assert cli.main(["run", "bouncing_ball", "--view", "--port", str(port), "--out", "unused"]) == 2
-        assert not os.path.exists("unused")                      # refused before the run
+        assert not os.path.exists("unused")  # refused before the run
 
 
 # -- a real browser -----------------------------------------------------------------------
+
 
 def test_the_page_draws_the_scene_and_follows_the_clock_in_headless_chromium(compared, tmp_path):
     """The compare folder's two falling balls: drawn, then lower once the clock moves on."""
@@ -210,22 +211,29 @@ def test_the_page_draws_the_scene_and_follows_the_clock_in_headless_chromium(com
     shown = view(compared)
     try:
         with browser.Page(shown.url) as page:
-            first = page.wait_for(tmp_path / "first.png", lambda p: browser.coloured(browser.scene_part(p)) > 0.005,
-                                  what="the bodies drawn")           # WebGL in software: a few seconds
+            first = page.wait_for(
+                tmp_path / "first.png",
+                lambda p: browser.coloured(browser.scene_part(p)) > 0.005,
+                what="the bodies drawn",
+            )  # WebGL in software: a few seconds
             assert shown.server.get_clients(), "the server never saw the page connect"
-            shown.show_time(shown.end)                                 # the clock moves on
-            later = page.wait_for(tmp_path / "later.png", lambda p: np.abs(browser.scene_part(p)
-                                                                           - browser.scene_part(first)).max() > 0.2,
-                                  seconds=20, what="the page following the clock")
+            shown.show_time(shown.end)  # the clock moves on
+            later = page.wait_for(
+                tmp_path / "later.png",
+                lambda p: np.abs(browser.scene_part(p) - browser.scene_part(first)).max() > 0.2,
+                seconds=20,
+                what="the page following the clock",
+            )
             assert browser.coloured(browser.scene_part(later)) > 0.005  # the balls are still drawn
             shown.show_time(shown.start)
-            assert page.click("Play")                                  # a user presses Play: the clock runs
+            assert page.click("Play")  # a user presses Play: the clock runs
             deadline = time.monotonic() + 10
             while not (shown.playing and shown.gui["time"].value > shown.start):
                 assert time.monotonic() < deadline, "pressing Play in the page did not start the clock"
                 time.sleep(0.1)
             local = (shown.url, f"ws://{HOST}:{shown.port}", "data:", "blob:")
-            assert page.requests and not [address[:100] for address in page.requests
-                                          if not address.startswith(local)]   # nothing fetched from the network
+            assert page.requests and not [
+                address[:100] for address in page.requests if not address.startswith(local)
+            ]  # nothing fetched from the network
     finally:
         shown.stop()

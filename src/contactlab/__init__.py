@@ -16,11 +16,29 @@ from .errors import InputError, SimulationDiverged
 
 # the rest is imported on first use (PEP 562), so that ``python -m contactlab`` and the
 # ``contactlab`` command install their signal handlers before Numba and NumPy load
-_LAZY = {"ModelBuilder": "builder", "collide": "collision", "Contacts": "contacts", "Model": "model",
-         "Run": "simulation", "simulate": "simulation", "State": "state", "set_threads": "threads"}
+_LAZY = {
+    "ModelBuilder": "builder",
+    "collide": "collision",
+    "Contacts": "contacts",
+    "Model": "model",
+    "Run": "simulation",
+    "simulate": "simulation",
+    "State": "state",
+    "set_threads": "threads",
+}
 
-__all__ = ["ModelBuilder", "Model", "State", "Contacts", "collide", "simulate", "Run",
-           "InputError", "SimulationDiverged", "set_threads"]
+__all__ = [
+    "ModelBuilder",
+    "Model",
+    "State",
+    "Contacts",
+    "collide",
+    "simulate",
+    "Run",
+    "InputError",
+    "SimulationDiverged",
+    "set_threads",
+]
 __version__ = "0.1.0"
 
 

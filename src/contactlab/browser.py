@@ -20,10 +20,17 @@ import urllib.request
 
 from matplotlib.image import imread
 
-FLAGS = ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-         "--hide-scrollbars", "--no-first-run", "--remote-debugging-address=127.0.0.1",
-         "--remote-debugging-port=0")
-START_SECONDS = 30          # s: Chromium's DevTools server is up within this, or it failed
+FLAGS = (
+    "--headless=new",
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--hide-scrollbars",
+    "--no-first-run",
+    "--remote-debugging-address=127.0.0.1",
+    "--remote-debugging-port=0",
+)
+START_SECONDS = 30  # s: Chromium's DevTools server is up within this, or it failed
 
 
 def chromium():
@@ -39,20 +46,23 @@ class Page:
 
     def __init__(self, url, width=1000, height=700):
         from websockets.sync.client import connect
+
         browser = chromium()
         if browser is None:
             raise RuntimeError("no chromium, chromium-browser or google-chrome on PATH (apt-get install chromium)")
         self.profile = tempfile.TemporaryDirectory(prefix="contactlab-chromium-")
-        self.process = subprocess.Popen([browser, *FLAGS, f"--window-size={width},{height}",
-                                         f"--user-data-dir={self.profile.name}", "about:blank"],
-                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.process = subprocess.Popen(
+            [browser, *FLAGS, f"--window-size={width},{height}", f"--user-data-dir={self.profile.name}", "about:blank"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             self.socket = connect(self._page_socket(), max_size=None)
         except BaseException:
             self._end_process()
             raise
         self.calls, self.requests = 0, []
-        self.call("Network.enable")                  # every request from here on is seen
+        self.call("Network.enable")  # every request from here on is seen
         self.call("Page.enable")
         self.call("Page.navigate", url=url)
         self._read_until("Page.loadEventFired")
@@ -94,9 +104,14 @@ class Page:
 
     def click(self, text):
         """Click the page's button that reads ``text``; returns whether there was one."""
-        found = self.call("Runtime.evaluate", expression=(
-            f"(() => {{ const b = [...document.querySelectorAll('button')].find(b => b.textContent.trim() === "
-            f"{json.dumps(text)}); if (b) b.click(); return !!b; }})()"), returnByValue=True)
+        found = self.call(
+            "Runtime.evaluate",
+            expression=(
+                f"(() => {{ const b = [...document.querySelectorAll('button')].find(b => b.textContent.trim() === "
+                f"{json.dumps(text)}); if (b) b.click(); return !!b; }})()"
+            ),
+            returnByValue=True,
+        )
         return bool(found.get("result", {}).get("value"))
 
     def screenshot(self, path):

@@ -18,9 +18,9 @@ import shutil
 from . import record, store
 from .errors import InputError
 
-MEMORY_SHARE = 0.5            # of the physical memory, for one run
-WORKING_BYTES = 16 * 1024     # per body, particle or cloth vertex, a step's working arrays
-FALLBACK_MEMORY = 8 * 2 ** 30  # where the machine does not say
+MEMORY_SHARE = 0.5  # of the physical memory, for one run
+WORKING_BYTES = 16 * 1024  # per body, particle or cloth vertex, a step's working arrays
+FALLBACK_MEMORY = 8 * 2**30  # where the machine does not say
 
 
 def physical_memory() -> int:
@@ -40,8 +40,14 @@ def estimate(model, steps, record_every, streamed=False) -> dict:
     file = samples * per_sample
     trajectory = min(2 * file, 2 * max(store.CHUNK_BYTES, per_sample)) if streamed else 2 * file
     working = WORKING_BYTES * (model.body_count + model.particle_count)
-    return {"samples": samples, "per_sample": per_sample, "file": file, "trajectory": trajectory,
-            "working": working, "total": trajectory + working}
+    return {
+        "samples": samples,
+        "per_sample": per_sample,
+        "file": file,
+        "trajectory": trajectory,
+        "working": working,
+        "total": trajectory + working,
+    }
 
 
 def check(model, steps, record_every, memory_limit=None, trajectory=None):
@@ -55,22 +61,31 @@ def check(model, steps, record_every, memory_limit=None, trajectory=None):
         free = _free_disk(trajectory)
         if free is not None and needed["file"] > free:
             fewer = max(record_every + 1, -(-steps // max(1, free // per_sample - 2)))
-            raise InputError("record_every", f"the trajectory would take {_size(needed['file'])}: "
-                                             f"{needed['samples']:,} samples of {dynamic:,} bodies and particles, "
-                                             f"more than the {_size(free)} free on the disk of {trajectory}; "
-                                             f"record every {fewer:,} steps or more, or run shorter")
+            raise InputError(
+                "record_every",
+                f"the trajectory would take {_size(needed['file'])}: "
+                f"{needed['samples']:,} samples of {dynamic:,} bodies and particles, "
+                f"more than the {_size(free)} free on the disk of {trajectory}; "
+                f"record every {fewer:,} steps or more, or run shorter",
+            )
     if needed["total"] <= limit:
         return needed
-    affordable = int((limit - needed["working"]) / (2 * per_sample)) - 2        # samples that would fit
-    if trajectory is None and affordable >= 1:    # the trajectory is what does not fit: record less often
+    affordable = int((limit - needed["working"]) / (2 * per_sample)) - 2  # samples that would fit
+    if trajectory is None and affordable >= 1:  # the trajectory is what does not fit: record less often
         fewer = max(record_every + 1, -(-steps // affordable))
-        raise InputError("record_every", f"the run would hold {_size(needed['total'])}: {needed['samples']:,} samples "
-                                         f"of {dynamic:,} bodies and particles, over its limit of {_size(limit)}; "
-                                         f"record every {fewer:,} steps or more, run shorter, stream the "
-                                         f"trajectory to a file (trajectory=…), or raise memory_limit (--memory-limit)")
-    raise InputError("model", f"the run would need about {_size(needed['working'] + 6 * per_sample)} for "
-                              f"{dynamic:,} bodies, particles and cloth vertices at the fewest samples, over its "
-                              f"limit of {_size(limit)}; simulate fewer, or raise memory_limit (--memory-limit)")
+        raise InputError(
+            "record_every",
+            f"the run would hold {_size(needed['total'])}: {needed['samples']:,} samples "
+            f"of {dynamic:,} bodies and particles, over its limit of {_size(limit)}; "
+            f"record every {fewer:,} steps or more, run shorter, stream the "
+            f"trajectory to a file (trajectory=…), or raise memory_limit (--memory-limit)",
+        )
+    raise InputError(
+        "model",
+        f"the run would need about {_size(needed['working'] + 6 * per_sample)} for "
+        f"{dynamic:,} bodies, particles and cloth vertices at the fewest samples, over its "
+        f"limit of {_size(limit)}; simulate fewer, or raise memory_limit (--memory-limit)",
+    )
 
 
 def _free_disk(path):
@@ -82,4 +97,4 @@ def _free_disk(path):
 
 
 def _size(count):
-    return f"{count / 2 ** 30:.3g} GB" if count >= 2 ** 30 else f"{count / 2 ** 20:.3g} MB"
+    return f"{count / 2**30:.3g} GB" if count >= 2**30 else f"{count / 2**20:.3g} MB"

@@ -26,11 +26,29 @@ from .driving import force_record, pack, path_record, start_on_paths
 from .errors import InputError
 from .model import Model
 from .state import State
-from .validation import (ACCELERATION, ANGULAR_SPEED, DAMPING, DENSITY, DIRECTION, FACTOR, FRICTION, LENGTH, MASS,
-                         SPEED, STIFFNESS, as_array, check_dynamic_count, derived_mass, file_path, number, one_of,
-                         unit_quaternion, vector)
+from .validation import (
+    ACCELERATION,
+    ANGULAR_SPEED,
+    DAMPING,
+    DENSITY,
+    DIRECTION,
+    FACTOR,
+    FRICTION,
+    LENGTH,
+    MASS,
+    SPEED,
+    STIFFNESS,
+    as_array,
+    check_dynamic_count,
+    derived_mass,
+    file_path,
+    number,
+    one_of,
+    unit_quaternion,
+    vector,
+)
 
-DEFAULT_MATERIAL = ("default", 0.5, 0.0)   # name, friction μ, restitution ε
+DEFAULT_MATERIAL = ("default", 0.5, 0.0)  # name, friction μ, restitution ε
 
 
 # -- which shape takes which arguments ------------------------------------------------------
@@ -75,15 +93,15 @@ class ModelBuilder:
 
     def __init__(self, gravity=(0.0, 0.0, -9.81)):
         self.gravity = vector(gravity, "gravity", quantity=ACCELERATION)
-        self._materials = []          # (name, friction, restitution)
-        self._bodies = []             # dicts
-        self._particles = []          # dicts of arrays (a cloth's vertices are one group)
-        self._cloths = []             # dicts: name, first particle, triangles and springs (local indices)
-        self._obstacles = []          # dicts
-        self._hulls = []              # contactlab.hulls.Hull of the convex shapes
-        self._meshes = []             # contactlab.meshes.TriangleMesh, world frame
-        self._forces = []             # dicts: body, force, torque, times, function (see add_force)
-        self._paths = []              # dicts: body, times, positions, orientations, function (see add_path)
+        self._materials = []  # (name, friction, restitution)
+        self._bodies = []  # dicts
+        self._particles = []  # dicts of arrays (a cloth's vertices are one group)
+        self._cloths = []  # dicts: name, first particle, triangles and springs (local indices)
+        self._obstacles = []  # dicts
+        self._hulls = []  # contactlab.hulls.Hull of the convex shapes
+        self._meshes = []  # contactlab.meshes.TriangleMesh, world frame
+        self._forces = []  # dicts: body, force, torque, times, function (see add_force)
+        self._paths = []  # dicts: body, times, positions, orientations, function (see add_path)
 
     # -- materials -------------------------------------------------------------------
     def add_material(self, name, friction=0.5, restitution=0.0) -> int:
@@ -92,8 +110,13 @@ class ModelBuilder:
             raise InputError("name", f"expected a non-empty string, found {name!r}")
         if any(m[0] == name for m in self._materials):
             raise InputError("name", f"material {name!r} is defined twice; give each a distinct name")
-        self._materials.append((name, number(friction, "friction", 0.0, quantity=FRICTION),
-                                number(restitution, "restitution", 0.0, maximum=1.0)))
+        self._materials.append(
+            (
+                name,
+                number(friction, "friction", 0.0, quantity=FRICTION),
+                number(restitution, "restitution", 0.0, maximum=1.0),
+            )
+        )
         return len(self._materials) - 1
 
     def _material_index(self, material) -> int:
@@ -113,16 +136,37 @@ class ModelBuilder:
         if material in names:
             return names.index(material)
         known = ", ".join(repr(n) for n in names)
-        builtin = (f"{DEFAULT_MATERIAL[0]!r}, contactlab's own (friction {DEFAULT_MATERIAL[1]}, restitution "
-                   f"{DEFAULT_MATERIAL[2]}), what a body without a material gets")
-        raise InputError("material", f"unknown material {material!r}: the materials are "
-                                     f"{known + ' and ' if known else ''}{builtin}; define {material!r} "
-                                     f"first (add_material, or [[materials]] in a scene file)")
+        builtin = (
+            f"{DEFAULT_MATERIAL[0]!r}, contactlab's own (friction {DEFAULT_MATERIAL[1]}, restitution "
+            f"{DEFAULT_MATERIAL[2]}), what a body without a material gets"
+        )
+        raise InputError(
+            "material",
+            f"unknown material {material!r}: the materials are "
+            f"{known + ' and ' if known else ''}{builtin}; define {material!r} "
+            f"first (add_material, or [[materials]] in a scene file)",
+        )
 
     # -- rigid bodies ----------------------------------------------------------------
-    def add_body(self, shape, *, radius=None, half_extents=None, half_length=None, points=None, file=None,
-                 scale=None, mass=None, density=None, position=(0, 0, 0), orientation=(1, 0, 0, 0),
-                 velocity=(0, 0, 0), angular_velocity=(0, 0, 0), material=None, name=None) -> int:
+    def add_body(
+        self,
+        shape,
+        *,
+        radius=None,
+        half_extents=None,
+        half_length=None,
+        points=None,
+        file=None,
+        scale=None,
+        mass=None,
+        density=None,
+        position=(0, 0, 0),
+        orientation=(1, 0, 0, 0),
+        velocity=(0, 0, 0),
+        angular_velocity=(0, 0, 0),
+        material=None,
+        name=None,
+    ) -> int:
         """Add a rigid body; returns its index.
 
         shape: "sphere" (needs radius [m]), "box" (needs half_extents [m], 3 numbers),
@@ -135,9 +179,13 @@ class ModelBuilder:
         are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
         Magnitudes are checked against :data:`~contactlab.validation.LIMITS` (the mass a density gives too).
         """
-        shape = _shape(shape, BODY_SHAPE_ARGUMENTS, dict(radius=radius, half_extents=half_extents,
-                                                         half_length=half_length, points=points, file=file,
-                                                         scale=scale))
+        shape = _shape(
+            shape,
+            BODY_SHAPE_ARGUMENTS,
+            dict(
+                radius=radius, half_extents=half_extents, half_length=half_length, points=points, file=file, scale=scale
+            ),
+        )
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
             raise InputError("mass", f"give exactly one of mass (kg) or density (kg/m^3), found {found}")
@@ -163,13 +211,20 @@ class ModelBuilder:
             self._hulls.append(hull)
         check_dynamic_count(1, "shape", "another body", self._dynamic_count())
         index = len(self._bodies)
-        self._bodies.append(dict(
-            name=str(name) if name is not None else f"body{index}",
-            kind=kind, params=params, mass=mass, inertia=inertia,
-            position=position, orientation=orientation,
-            velocity=vector(velocity, "velocity", quantity=SPEED),
-            angular_velocity=vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
-            material=self._material_index(material)))
+        self._bodies.append(
+            dict(
+                name=str(name) if name is not None else f"body{index}",
+                kind=kind,
+                params=params,
+                mass=mass,
+                inertia=inertia,
+                position=position,
+                orientation=orientation,
+                velocity=vector(velocity, "velocity", quantity=SPEED),
+                angular_velocity=vector(angular_velocity, "angular_velocity", quantity=ANGULAR_SPEED),
+                material=self._material_index(material),
+            )
+        )
         return index
 
     # -- driving: external forces, kinematic paths (contactlab.driving) ----------------------
@@ -183,6 +238,7 @@ class ModelBuilder:
         if isinstance(body, str) and body in names:
             return names.index(body)
         import difflib
+
         close = difflib.get_close_matches(str(body), names, n=1)
         hint = f"; did you mean {close[0]!r}?" if close else f" (the bodies: {', '.join(map(repr, names)) or 'none'})"
         raise InputError("body", f"no body named {body!r}{hint}")
@@ -229,6 +285,7 @@ class ModelBuilder:
     def _hull(points, file, scale, mass=None, density=None):
         """The convex hull of ``points`` or of a mesh file's vertices (InputError if not convex)."""
         from .hulls import build_hull, load_hull_points
+
         if (points is None) == (file is None):
             raise InputError("points", "a convex shape needs exactly one of points = [[x, y, z], ...] or file")
         scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
@@ -236,10 +293,10 @@ class ModelBuilder:
             points, field = load_hull_points(file_path(file), scale, field="file"), "file"
         else:
             points, field = as_array(points, "points", "a list of [x, y, z] points") * scale, "points"
-        if np.isfinite(points).all():              # (non-finite points: build_hull's error)
+        if np.isfinite(points).all():  # (non-finite points: build_hull's error)
             LENGTH.check(points, field)
         if mass is None and density is None:
-            mass = 1.0                   # static geometry: the mass is not used
+            mass = 1.0  # static geometry: the mass is not used
         return build_hull(points, field, mass=mass, density=density, require_convex=True)
 
     @staticmethod
@@ -300,8 +357,11 @@ class ModelBuilder:
             raise InputError("radius", f"must be at least 0 (m) for every particle, found {radii.min():g}")
         LENGTH.check(radii, "radius")
         start = sum(len(p["position"]) for p in self._particles)
-        self._particles.append(dict(position=position, velocity=velocity, mass=masses,
-                                    radius=radii, material=self._material_index(material)))
+        self._particles.append(
+            dict(
+                position=position, velocity=velocity, mass=masses, radius=radii, material=self._material_index(material)
+            )
+        )
         return range(start, start + count)
 
     @staticmethod
@@ -309,14 +369,30 @@ class ModelBuilder:
         array = as_array(value, name, f"a number or a list of {count} numbers")
         if array.ndim == 0 or array.shape == (count,):
             return np.broadcast_to(array, (count,)).copy()
-        raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), "
-                               f"found {array.size}")
+        raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), found {array.size}")
 
     # -- cloth -----------------------------------------------------------------------
-    def add_cloth(self, *, size=None, resolution=None, file=None, scale=1.0, position=(0, 0, 0),
-                  orientation=(1, 0, 0, 0), velocity=(0, 0, 0), mass=None, density=None,
-                  stretch_stiffness=1000.0, shear_stiffness=100.0, bend_stiffness=10.0, damping=0.0,
-                  pinned=(), thickness=0.005, material=None, name=None) -> range:
+    def add_cloth(
+        self,
+        *,
+        size=None,
+        resolution=None,
+        file=None,
+        scale=1.0,
+        position=(0, 0, 0),
+        orientation=(1, 0, 0, 0),
+        velocity=(0, 0, 0),
+        mass=None,
+        density=None,
+        stretch_stiffness=1000.0,
+        shear_stiffness=100.0,
+        bend_stiffness=10.0,
+        damping=0.0,
+        pinned=(),
+        thickness=0.005,
+        material=None,
+        name=None,
+    ) -> range:
         """Add a mass-spring cloth; returns the particle indices of its vertices (a range).
 
         Its vertices are particles (3 DOF each) of radius ``thickness`` [m], so the particle
@@ -353,9 +429,14 @@ class ModelBuilder:
         position = vector(position, "position", quantity=LENGTH)
         orientation = unit_quaternion(orientation, "orientation")
         velocity = vector(velocity, "velocity", quantity=SPEED)
-        stiffness = {key: number(value, key, 0.0, quantity=STIFFNESS) for key, value in (
-            ("stretch_stiffness", stretch_stiffness), ("shear_stiffness", shear_stiffness),
-            ("bend_stiffness", bend_stiffness))}
+        stiffness = {
+            key: number(value, key, 0.0, quantity=STIFFNESS)
+            for key, value in (
+                ("stretch_stiffness", stretch_stiffness),
+                ("shear_stiffness", shear_stiffness),
+                ("bend_stiffness", bend_stiffness),
+            )
+        }
         damping = number(damping, "damping", 0.0, quantity=DAMPING)
         thickness = number(thickness, "thickness", 0.0, quantity=LENGTH)
         if (size is None) == (file is None):
@@ -363,25 +444,56 @@ class ModelBuilder:
         if file is not None and resolution is not None:
             raise InputError("resolution", "a cloth from a mesh file takes no resolution")
         mesh = cloth_mesh.grid(size, resolution) if file is None else cloth_mesh.from_file(file, scale)
-        cloth = cloth_mesh.lay_out(mesh, file is not None, position, orientation, mass, density,
-                                   tuple(stiffness.values()), pinned)
+        cloth = cloth_mesh.lay_out(
+            mesh, file is not None, position, orientation, mass, density, tuple(stiffness.values()), pinned
+        )
         count = len(cloth.position)
         vertex_velocity = np.where(cloth.pinned[:, None], 0.0, velocity[None, :])
-        check_dynamic_count(count, "resolution" if file is None else "file", f"a cloth of {count:,} vertices",
-                            self._dynamic_count())
+        check_dynamic_count(
+            count, "resolution" if file is None else "file", f"a cloth of {count:,} vertices", self._dynamic_count()
+        )
         start = sum(len(p["position"]) for p in self._particles)
         index = len(self._cloths)
-        self._particles.append(dict(position=cloth.position, velocity=vertex_velocity, mass=cloth.mass,
-                                    radius=np.full(count, thickness), material=self._material_index(material),
-                                    cloth=index, pinned=cloth.pinned))
-        self._cloths.append(dict(name=str(name) if name is not None else f"cloth{index}", start=start,
-                                 triangles=cloth.triangles, springs=cloth.springs, stiffness=cloth.stiffness,
-                                 rest=cloth.rest, damping=np.full(len(cloth.springs), damping)))
+        self._particles.append(
+            dict(
+                position=cloth.position,
+                velocity=vertex_velocity,
+                mass=cloth.mass,
+                radius=np.full(count, thickness),
+                material=self._material_index(material),
+                cloth=index,
+                pinned=cloth.pinned,
+            )
+        )
+        self._cloths.append(
+            dict(
+                name=str(name) if name is not None else f"cloth{index}",
+                start=start,
+                triangles=cloth.triangles,
+                springs=cloth.springs,
+                stiffness=cloth.stiffness,
+                rest=cloth.rest,
+                damping=np.full(len(cloth.springs), damping),
+            )
+        )
         return range(start, start + count)
 
     # -- static obstacles ------------------------------------------------------------
-    def add_obstacle(self, shape, *, normal=None, offset=None, radius=None, half_extents=None, points=None,
-                     file=None, scale=None, position=None, orientation=None, material=None) -> int:
+    def add_obstacle(
+        self,
+        shape,
+        *,
+        normal=None,
+        offset=None,
+        radius=None,
+        half_extents=None,
+        points=None,
+        file=None,
+        scale=None,
+        position=None,
+        orientation=None,
+        material=None,
+    ) -> int:
         """Add static geometry; returns its index.
 
         "plane": the half-space normal · x ≤ offset is solid (normal need not be unit).
@@ -392,9 +504,21 @@ class ModelBuilder:
         Defaults: offset 0 [m], scale 1, position the origin, orientation none; a shape given an
         argument it does not take (a plane's position) is an InputError.
         """
-        shape = _shape(shape, OBSTACLE_SHAPE_ARGUMENTS, dict(
-            normal=normal, offset=offset, radius=radius, half_extents=half_extents, points=points, file=file,
-            scale=scale, position=position, orientation=orientation))
+        shape = _shape(
+            shape,
+            OBSTACLE_SHAPE_ARGUMENTS,
+            dict(
+                normal=normal,
+                offset=offset,
+                radius=radius,
+                half_extents=half_extents,
+                points=points,
+                file=file,
+                scale=scale,
+                position=position,
+                orientation=orientation,
+            ),
+        )
         position = vector((0, 0, 0) if position is None else position, "position", quantity=LENGTH)
         orientation = unit_quaternion((1, 0, 0, 0) if orientation is None else orientation, "orientation")
         if shape == "plane":
@@ -409,6 +533,7 @@ class ModelBuilder:
             kind = shapes.PLANE
         elif shape == "mesh":
             from .meshes import load_mesh
+
             if file is None:
                 raise InputError("file", "a mesh obstacle needs a file (OBJ, STL or PLY)")
             scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
@@ -424,13 +549,21 @@ class ModelBuilder:
             position, orientation = hull.body_pose(position, orientation)
         else:
             kind, params = self._solid_shape(shape, radius, half_extents, shapes.OBSTACLE_SHAPES)
-        self._obstacles.append(dict(kind=kind, params=params, position=position, orientation=orientation,
-                                    material=self._material_index(material)))
+        self._obstacles.append(
+            dict(
+                kind=kind,
+                params=params,
+                position=position,
+                orientation=orientation,
+                material=self._material_index(material),
+            )
+        )
         return len(self._obstacles) - 1
 
     def _pack_hulls(self, shapes_with_params):
         """Pack the convex hulls, then one 8-corner hull per box (its index stored in params[3])."""
         from .hulls import box_as_hull, pack_hulls
+
         packs = [pack_hulls(self._hulls)]
         count = len(self._hulls)
         for item in shapes_with_params:
@@ -455,8 +588,11 @@ class ModelBuilder:
             return np.array([item[key] for item in items], dtype=dtype).reshape(shape)
 
         def cat(key, shape):
-            return (np.concatenate([p[key] for p in particles]).reshape(shape) if particles
-                    else np.zeros(shape if shape[0] != -1 else (0,) + shape[1:]))
+            return (
+                np.concatenate([p[key] for p in particles]).reshape(shape)
+                if particles
+                else np.zeros(shape if shape[0] != -1 else (0,) + shape[1:])
+            )
 
         initial = State(
             time=0.0,
@@ -467,17 +603,27 @@ class ModelBuilder:
             particle_position=cat("position", (-1, 3)),
             particle_velocity=cat("velocity", (-1, 3)),
         )
-        particle_material = (np.concatenate([np.full(len(p["position"]), p["material"]) for p in particles])
-                             if particles else np.zeros(0, dtype=np.int64))
-        particle_cloth = (np.concatenate([np.full(len(p["position"]), p.get("cloth", -1)) for p in particles])
-                          if particles else np.zeros(0)).astype(np.int64)
-        particle_pinned = (np.concatenate([p.get("pinned", np.zeros(len(p["position"]), dtype=bool))
-                                           for p in particles]) if particles else np.zeros(0)).astype(bool)
+        particle_material = (
+            np.concatenate([np.full(len(p["position"]), p["material"]) for p in particles])
+            if particles
+            else np.zeros(0, dtype=np.int64)
+        )
+        particle_cloth = (
+            np.concatenate([np.full(len(p["position"]), p.get("cloth", -1)) for p in particles])
+            if particles
+            else np.zeros(0)
+        ).astype(np.int64)
+        particle_pinned = (
+            np.concatenate([p.get("pinned", np.zeros(len(p["position"]), dtype=bool)) for p in particles])
+            if particles
+            else np.zeros(0)
+        ).astype(bool)
         cloths = self._cloths
 
         def cloth_cat(key, shape, offset=False, dtype=float):
             parts = [c[key] + (c["start"] if offset else 0) for c in cloths]
             return (np.concatenate(parts) if parts else np.zeros(0)).astype(dtype).reshape(shape)
+
         drive = pack(len(bodies), self._forces, self._paths)
         start_on_paths(drive, initial)
         return Model(
@@ -514,12 +660,14 @@ class ModelBuilder:
         )
 
 
-
-
 def _concatenate_packed(packs):
     """Join packed hull dicts (contactlab.hulls.pack_hulls layout), shifting their start indices."""
-    starts = {"vertex_start": "vertices", "face_start": "face_normal", "edge_start": "edge_vertex",
-              "face_vertex_start": "face_vertex_index"}
+    starts = {
+        "vertex_start": "vertices",
+        "face_start": "face_normal",
+        "edge_start": "edge_vertex",
+        "face_vertex_start": "face_vertex_index",
+    }
     out = {key: [] for key in packs[0]}
     base = {key: 0 for key in starts}
     for k, hull_pack in enumerate(packs):
@@ -543,8 +691,10 @@ def _fan_triangles(packed):
     for h in range(len(packed["vertex_start"]) - 1):
         before = len(triangles)
         for f in range(packed["face_start"][h], packed["face_start"][h + 1]):
-            corners = fvi[fvs[f]:fvs[f + 1]]
+            corners = fvi[fvs[f] : fvs[f + 1]]
             triangles.extend((corners[0], corners[i], corners[i + 1]) for i in range(1, len(corners) - 1))
         counts.append(len(triangles) - before)
-    return {"triangle_start": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-            "triangles": np.array(triangles, dtype=np.int64).reshape(-1, 3)}
+    return {
+        "triangle_start": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        "triangles": np.array(triangles, dtype=np.int64).reshape(-1, 3),
+    }

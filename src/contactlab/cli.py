@@ -1,14 +1,14 @@
 """The command line: parses, calls the library, prints. See docs/cli.md.
 
-    contactlab                 run the default scene (same as ``contactlab demo``)
-    contactlab scenes          list the built-in scenes
-    contactlab run SCENE ...   run a built-in scene or a .toml file
-    contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
-    contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
-    contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
-    contactlab view RUN_DIR... the runs in an interactive 3-D viewer in the web browser
-    contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
-    contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
+contactlab                 run the default scene (same as ``contactlab demo``)
+contactlab scenes          list the built-in scenes
+contactlab run SCENE ...   run a built-in scene or a .toml file
+contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
+contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
+contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
+contactlab view RUN_DIR... the runs in an interactive 3-D viewer in the web browser
+contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
+contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
 
 import argparse
@@ -18,22 +18,25 @@ import signal
 import sys
 import warnings
 
-from .errors import InputError, SimulationDiverged, shorten
 from . import interrupts
+from .errors import InputError, SimulationDiverged, shorten
 from .interrupts import EXIT_CODES, Interrupted, handled, tracking_written, written_paths
 
 DEFAULT_SCENE = "bouncing_ball"
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):           # one line, exit code 2, no usage dump; long values cut
+    def error(self, message):  # one line, exit code 2, no usage dump; long values cut
         self.exit(2, f"error: {shorten(message)} (see '{self.prog} --help')\n")
 
 
 def _parser():
-    parser = _Parser(prog="contactlab", description="Contact resolution: penalty, projection, impulses, "
-                                                    "constraints on the same scenes.")
+    parser = _Parser(
+        prog="contactlab",
+        description="Contact resolution: penalty, projection, impulses, constraints on the same scenes.",
+    )
     from . import __version__
+
     parser.add_argument("--version", action="version", version=f"contactlab {__version__}")
     commands = parser.add_subparsers(dest="command", parser_class=_Parser)
     commands.add_parser("demo", help="run the default scene and say where its outputs are")
@@ -47,19 +50,32 @@ def _parser():
     run.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     run.add_argument("--video", action="store_true", help="also write video.mp4, video.gif and still.png")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the video (default 30)")
-    run.add_argument("--export", default="", metavar="FORMATS",
-                     help="also export the run: a comma-separated list of usd, obj, ply")
+    run.add_argument(
+        "--export", default="", metavar="FORMATS", help="also export the run: a comma-separated list of usd, obj, ply"
+    )
     run.add_argument("--no-plots", action="store_true", help="do not write plots/ (energy, penetration, ...)")
-    run.add_argument("--view", action="store_true", help="open the run in the interactive viewer afterwards "
-                                                         "(served on 127.0.0.1 until Ctrl-C)")
+    run.add_argument(
+        "--view",
+        action="store_true",
+        help="open the run in the interactive viewer afterwards (served on 127.0.0.1 until Ctrl-C)",
+    )
     run.add_argument("--port", type=int, help="the viewer's port with --view (default: a free one)")
-    run.add_argument("--memory-limit", metavar="GB", help="the most memory the run may need by its estimate "
-                                                          "(default: half this machine's; 'none': no limit)")
-    run.add_argument("--yes", action="store_true", help="run even a run of more than 500,000 steps (a duration "
-                                                        "or dt in the wrong unit?)")
-    run.add_argument("--allow-divergence", action="store_true",
-                     help="go on when a health check fails (energy from nowhere, a speed beyond the scene's "
-                          "scale, a contact deep enough to pass through), noting it in the summary")
+    run.add_argument(
+        "--memory-limit",
+        metavar="GB",
+        help="the most memory the run may need by its estimate (default: half this machine's; 'none': no limit)",
+    )
+    run.add_argument(
+        "--yes",
+        action="store_true",
+        help="run even a run of more than 500,000 steps (a duration or dt in the wrong unit?)",
+    )
+    run.add_argument(
+        "--allow-divergence",
+        action="store_true",
+        help="go on when a health check fails (energy from nowhere, a speed beyond the scene's "
+        "scale, a contact deep enough to pass through), noting it in the summary",
+    )
 
     compare = commands.add_parser("compare", help="run a scene with several methods and write a side-by-side report")
     _scene_arguments(compare)
@@ -68,8 +84,10 @@ def _parser():
     compare.add_argument("--no-video", action="store_true", help="skip the videos (faster)")
     compare.add_argument("--fps", type=int, default=30, help="frames per second of the videos (default 30)")
     compare.add_argument("--allow-divergence", action="store_true", help="as for run: go on past failed health checks")
-    _cluster_arguments(compare, "one per idle core when there are videos or long runs, else the runs one after "
-                                "another; 1: one after another")
+    _cluster_arguments(
+        compare,
+        "one per idle core when there are videos or long runs, else the runs one after another; 1: one after another",
+    )
 
     render = commands.add_parser("render", help="draw a run's trajectory: video.mp4, video.gif, still.png")
     render.add_argument("directory", metavar="OUT_DIR", help="a run's output folder (holding trajectory.h5)")
@@ -86,8 +104,10 @@ def _parser():
 
     fclib = commands.add_parser("fclib", help="FCLIB frictional-contact problems")
     fclib_commands = fclib.add_subparsers(dest="fclib_command", parser_class=_Parser, required=True)
-    bench = fclib_commands.add_parser("bench", help="solve every problem of a folder with every solver on a Dask "
-                                                    "cluster; a table and performance profiles")
+    bench = fclib_commands.add_parser(
+        "bench",
+        help="solve every problem of a folder with every solver on a Dask cluster; a table and performance profiles",
+    )
     bench.add_argument("directory", metavar="DIR", help="a folder of FCLIB .hdf5 / Siconos .dat problems")
     bench.add_argument("--solvers", help="comma-separated: nsgs, staggered, apgd, newton (default: all)")
     bench.add_argument("--out", help="output folder (default: out/fclib-bench/)")
@@ -96,8 +116,12 @@ def _parser():
     _cluster_arguments(bench)
 
     view = commands.add_parser("view", help="look around runs in an interactive 3-D viewer in the web browser")
-    view.add_argument("directories", nargs="+", metavar="RUN_DIR",
-                      help="a run's output folder, or a compare folder (all its methods side by side)")
+    view.add_argument(
+        "directories",
+        nargs="+",
+        metavar="RUN_DIR",
+        help="a run's output folder, or a compare folder (all its methods side by side)",
+    )
     view.add_argument("--port", type=int, help="port on 127.0.0.1 to serve on (default: a free one)")
 
     export = commands.add_parser("export", help="export a run for Blender, Houdini or usdview")
@@ -108,21 +132,35 @@ def _parser():
 
 
 def _cluster_arguments(command, workers="one per idle core"):
-    command.add_argument("--scheduler", metavar="ADDRESS",
-                         help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
-    command.add_argument("--workers", type=int, metavar="N",
-                         help=f"worker processes of the local cluster (default: {workers})")
+    command.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
+    )
+    command.add_argument(
+        "--workers", type=int, metavar="N", help=f"worker processes of the local cluster (default: {workers})"
+    )
 
 
 def _scene_arguments(command):
     command.add_argument("scene", help="a built-in scene name (see 'contactlab scenes') or a path to a .toml file")
     command.add_argument("--dt", help="time step in seconds (default: the scene's)")
     command.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
-    command.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                         help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]")
-    command.add_argument("--threads", default="auto", metavar="N",
-                         help="threads of the compiled sweeps: a number, or auto (default: all cores, or one "
-                              "while that is faster on a busy machine); results are the same on any count")
+    command.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]",
+    )
+    command.add_argument(
+        "--threads",
+        default="auto",
+        metavar="N",
+        help="threads of the compiled sweeps: a number, or auto (default: all cores, or one "
+        "while that is faster on a busy machine); results are the same on any count",
+    )
 
 
 def _scene_overrides(args):
@@ -158,11 +196,25 @@ def _memory_limit(text):
         gigabytes = float("nan")
     if not gigabytes > 0 or gigabytes == float("inf"):
         raise InputError("--memory-limit", f"expected a number of GB > 0 or 'none', found {text!r}")
-    return gigabytes * 2 ** 30
+    return gigabytes * 2**30
 
 
-def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, video=False, fps=30,
-         exports=(), plots=True, allow_divergence=False, memory_limit=None, yes=False, view=False, port=None):
+def _run(
+    scene_source,
+    overrides=(),
+    out=None,
+    record_every=1,
+    as_json=False,
+    video=False,
+    fps=30,
+    exports=(),
+    plots=True,
+    allow_divergence=False,
+    memory_limit=None,
+    yes=False,
+    view=False,
+    port=None,
+):
     from .closed_form import checks
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
@@ -170,25 +222,41 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
     from .simulation import simulate
     from .validation import run_length
 
-    if video:                                     # a bad --fps fails before the run, not after it
+    if video:  # a bad --fps fails before the run, not after it
         from .render import check_settings
+
         check_settings(fps)
-    if view:                                      # and so does a bad or busy --port
+    if view:  # and so does a bad or busy --port
         from .viewer import check_port
+
         check_port(port)
     scene = load_scene(scene_source, overrides)
     steps = run_length(scene.dt, scene.duration)[2]
     if steps > MANY_STEPS and not yes:
-        raise InputError("--yes", f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
-                                  f"{scene.dt:g} s): times are in seconds; add --yes to run it")
+        raise InputError(
+            "--yes",
+            f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
+            f"{scene.dt:g} s): times are in seconds; add --yes to run it",
+        )
     out = out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
-    try:                                          # the samples stream into trajectory.h5 as the run goes
-        result = simulate(scene.model, scene.method, scene.dt, scene.duration, scene.options[scene.method],
-                          scene.integrator, record_every, progress=sys.stderr.isatty(), scene_name=scene.name,
-                          allow_divergence=allow_divergence, memory_limit=memory_limit, trajectory=trajectory)
-    except (SimulationDiverged, KeyboardInterrupt) as error:      # the run up to then is kept, its summary marked
+    try:  # the samples stream into trajectory.h5 as the run goes
+        result = simulate(
+            scene.model,
+            scene.method,
+            scene.dt,
+            scene.duration,
+            scene.options[scene.method],
+            scene.integrator,
+            record_every,
+            progress=sys.stderr.isatty(),
+            scene_name=scene.name,
+            allow_divergence=allow_divergence,
+            memory_limit=memory_limit,
+            trajectory=trajectory,
+        )
+    except (SimulationDiverged, KeyboardInterrupt) as error:  # the run up to then is kept, its summary marked
         if getattr(error, "run", None) is not None:
             error.run.summary.update(trajectory=trajectory, source=scene.origin(overrides))
             write_summary(out, error.run.summary)
@@ -196,20 +264,20 @@ def _run(scene_source, overrides=(), out=None, record_every=1, as_json=False, vi
         else:
             remove_empty(made)
         raise
-    except BaseException:                         # an input error before the run: nothing written, no folder
+    except BaseException:  # an input error before the run: nothing written, no folder
         remove_empty(made)
         raise
     result.summary["trajectory"] = trajectory
-    found = checks(scene.name, scene.model, result.arrays)        # the scene's stated expectations
+    found = checks(scene.name, scene.model, result.arrays)  # the scene's stated expectations
     result.summary["checks"] = [check.as_record() for check in found]
-    result.summary["source"] = scene.origin(overrides)      # how to load the scene again (the viewer's contacts)
+    result.summary["source"] = scene.origin(overrides)  # how to load the scene again (the viewer's contacts)
     write_summary(out, result.summary)
     written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
     if as_json:
         print(json.dumps(result.summary))
     else:
         print(_plain_summary(result.summary, scene, written, found))
-    if view:                                      # with --json, standard output holds the JSON alone
+    if view:  # with --json, standard output holds the JSON alone
         _view([out], port, sys.stderr if as_json else sys.stdout)
     return result
 
@@ -220,16 +288,20 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     written = []
     if plots:
         from .plots import write_plots
+
         written += list(write_plots(arrays, os.path.join(out, "plots"), title=title).values())
     if video:
         from .render import render
+
         written += list(render(arrays, out, fps=fps, title=title, progress=progress).values())
     if "usd" in exports:
         from .export import write_usd
+
         written.append(write_usd(arrays, os.path.join(out, "run.usd"), every=every))
     for file_format in ("obj", "ply"):
         if file_format in exports:
             from .export import write_mesh_sequence
+
             frames = write_mesh_sequence(arrays, os.path.join(out, "frames"), file_format=file_format, every=every)
             written.append(os.path.join(out, "frames", f"frame_*.{file_format} ({len(frames)} files)"))
     return written
@@ -239,6 +311,7 @@ def _view(sources, port=None, stream=None):
     """Serve the viewer of ``sources`` (run or compare folders) until Ctrl-C, its address
     printed on ``stream`` (standard output unless given)."""
     from .viewer import view
+
     viewer = view(*sources, port=port)
     print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", file=stream or sys.stdout, flush=True)
     viewer.wait()
@@ -248,26 +321,47 @@ def _compare(args):
     from .compare import compare
     from .methods import AVAILABLE
     from .validation import whole_number
+
     methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods else None
     whole_number(args.fps, "--fps", 1)
-    comparison = compare(args.scene, methods, args.out, overrides=_scene_overrides(args),
-                         video=not args.no_video, progress=sys.stderr.isatty(), fps=args.fps,
-                         allow_divergence=args.allow_divergence, workers=args.workers, scheduler=args.scheduler)
+    comparison = compare(
+        args.scene,
+        methods,
+        args.out,
+        overrides=_scene_overrides(args),
+        video=not args.no_video,
+        progress=sys.stderr.isatty(),
+        fps=args.fps,
+        allow_divergence=args.allow_divergence,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
     print(comparison.summary_text)
-    print(f"Report: {comparison.report_html} (also {os.path.basename(comparison.report_md)} and "
-          f"{os.path.basename(comparison.csv)} beside it)")
+    print(
+        f"Report: {comparison.report_html} (also {os.path.basename(comparison.report_md)} and "
+        f"{os.path.basename(comparison.csv)} beside it)"
+    )
 
 
 def _sweep(args):
     from . import sweep
     from .study import load_study
+
     study = load_study(args.study)
     out = args.out or os.path.join("out", f"{study.name}-sweep")
-    table = sweep.run(study, out, scheduler=args.scheduler, workers=args.workers, progress=sys.stderr.isatty(),
-                      log=lambda line: print(line, file=sys.stderr))
+    table = sweep.run(
+        study,
+        out,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=sys.stderr.isatty(),
+        log=lambda line: print(line, file=sys.stderr),
+    )
     counts = ", ".join(f"{count} {status}" for status, count in table["status"].value_counts().items())
     print(f"{study.name}: {len(table)} cells ({counts}).")
-    print(f"Table: {os.path.join(out, 'results.parquet')} (and results.csv); report: {os.path.join(out, 'report.html')}")
+    print(
+        f"Table: {os.path.join(out, 'results.parquet')} (and results.csv); report: {os.path.join(out, 'report.html')}"
+    )
 
 
 def _where_time_went(summary):
@@ -284,18 +378,24 @@ def _where_time_went(summary):
 
 def _plain_summary(summary, scene, written=(), found=()):
     energy = summary["energy"]
-    return (f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
-            f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
-            f"({_where_time_went(summary)}); "
-            f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
-            f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
-            f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end."
-            + (f" The contact springs were too stiff for {summary['integrator']} at this dt in "
-               f"{summary['implicit_spring_steps']} steps: those stepped them by backward Euler."
-               if summary.get("implicit_spring_steps") else "") + "\n"
-            + "".join(f"Expectation: {check.verdict()}\n" for check in found)
-            + f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
-            + "".join(f", {path}" for path in written))
+    return (
+        f"{summary['scene']} ({scene.model.describe()}) with {summary['method']}: "
+        f"{summary['steps']} steps of {summary['dt']:g} s in {summary['wall_seconds']:.2f} s "
+        f"({_where_time_went(summary)}); "
+        f"at most {summary['max_contacts']} contact{'' if summary['max_contacts'] == 1 else 's'} at once, "
+        f"deepest penetration {summary['max_penetration'] * 1000:.3g} mm; total energy "
+        f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end."
+        + (
+            f" The contact springs were too stiff for {summary['integrator']} at this dt in "
+            f"{summary['implicit_spring_steps']} steps: those stepped them by backward Euler."
+            if summary.get("implicit_spring_steps")
+            else ""
+        )
+        + "\n"
+        + "".join(f"Expectation: {check.verdict()}\n" for check in found)
+        + f"Outputs: {summary['trajectory']} and {os.path.join(os.path.dirname(summary['trajectory']), 'summary.json')}"
+        + "".join(f", {path}" for path in written)
+    )
 
 
 def _print_warning(message, category, filename, lineno, file=None, line=None):
@@ -308,12 +408,12 @@ def main(argv=None) -> int:
     ``python -m contactlab`` call it; then a signal after the work is done, while the
     interpreter shuts down, is ignored: there is nothing left to stop)."""
     with handled(restore=argv is not None), tracking_written():
-        try:        # signals take effect between steps, files and frames (interrupts.check), never inside a
-            with interrupts.deferred():         # library call: Numba compiling, matplotlib drawing
+        try:  # signals take effect between steps, files and frames (interrupts.check), never inside a
+            with interrupts.deferred():  # library call: Numba compiling, matplotlib drawing
                 code = _main(argv)
-                if argv is None:                # exiting: from here on a signal has nothing to stop
+                if argv is None:  # exiting: from here on a signal has nothing to stop
                     interrupts.ignore_signals()
-        except Interrupted:         # it came after the last step, file and frame: the command had finished
+        except Interrupted:  # it came after the last step, file and frame: the command had finished
             pass
         return code
 
@@ -324,57 +424,98 @@ def _main(argv):
     try:
         if hasattr(args, "threads"):
             from .threads import set_threads
+
             set_threads(args.threads, "--threads")
         if args.command in (None, "demo"):
             _run(DEFAULT_SCENE)
         elif args.command == "scenes":
             from .scene import builtin_scenes
+
             for name, description in builtin_scenes():
                 print(f"{name:20s} {description}")
         elif args.command == "run":
             from .validation import whole_number
+
             whole_number(args.record_every, "--record-every", 1)
             whole_number(args.fps, "--fps", 1)
-            _run(args.scene, _scene_overrides(args), args.out, args.record_every, args.json, video=args.video,
-                 fps=args.fps, exports=_list_option(args.export, "--export", EXPORT_FORMATS),
-                 plots=not args.no_plots, allow_divergence=args.allow_divergence,
-                 memory_limit=_memory_limit(args.memory_limit), yes=args.yes,
-                 view=args.view, port=args.port)
+            _run(
+                args.scene,
+                _scene_overrides(args),
+                args.out,
+                args.record_every,
+                args.json,
+                video=args.video,
+                fps=args.fps,
+                exports=_list_option(args.export, "--export", EXPORT_FORMATS),
+                plots=not args.no_plots,
+                allow_divergence=args.allow_divergence,
+                memory_limit=_memory_limit(args.memory_limit),
+                yes=args.yes,
+                view=args.view,
+                port=args.port,
+            )
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":
             _sweep(args)
         elif args.command == "fclib":
             from .fclib_bench import bench
-            result = bench(args.directory, args.solvers, args.out, scheduler=args.scheduler, workers=args.workers,
-                           tol=args.tol, repeats=args.repeats, progress=sys.stderr.isatty())
+
+            result = bench(
+                args.directory,
+                args.solvers,
+                args.out,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                tol=args.tol,
+                repeats=args.repeats,
+                progress=sys.stderr.isatty(),
+            )
             solved = result.table.groupby("solver", sort=False)["converged"].sum()
             problems = result.table["problem"].nunique()
-            print(f"{problems} problems: " + ", ".join(f"{solver} solved {int(count)}" for solver, count in
-                                                       solved.items()))
+            print(
+                f"{problems} problems: "
+                + ", ".join(f"{solver} solved {int(count)}" for solver, count in solved.items())
+            )
             print(f"Table: {result.csv} (and {result.markdown.name}); performance profile: {result.profile_png}")
         elif args.command == "render":
             from .record import load_run
+
             arrays, summary = load_run(args.directory)
             from .render import render
+
             title = f"{summary['scene']} — {summary['method']}" if "scene" in summary else None
-            paths = render(arrays, args.directory, fps=args.fps, width=args.width, height=args.height,
-                           elevation=args.elevation, azimuth=args.azimuth, title=title,
-                           progress=sys.stderr.isatty())
+            paths = render(
+                arrays,
+                args.directory,
+                fps=args.fps,
+                width=args.width,
+                height=args.height,
+                elevation=args.elevation,
+                azimuth=args.azimuth,
+                title=title,
+                progress=sys.stderr.isatty(),
+            )
             print("Wrote " + ", ".join(paths.values()))
         elif args.command == "view":
             _view(args.directories, args.port)
         elif args.command == "export":
             formats = _list_option(args.format, "--format", EXPORT_FORMATS)
             from .validation import whole_number
+
             whole_number(args.every, "--every", 1)
             from .record import load_run
+
             arrays, _ = load_run(args.directory)
             print("Wrote " + ", ".join(_extras(arrays, args.directory, None, exports=formats, every=args.every)))
     except InputError as error:
-        source = (getattr(args, "scene", None) or getattr(args, "directory", None) or getattr(args, "study", None)
-                  or DEFAULT_SCENE)
-        if args.command == "view" or error.field == "--port":     # the message names the folder or port itself
+        source = (
+            getattr(args, "scene", None)
+            or getattr(args, "directory", None)
+            or getattr(args, "study", None)
+            or DEFAULT_SCENE
+        )
+        if args.command == "view" or error.field == "--port":  # the message names the folder or port itself
             print(f"error: {error}", file=sys.stderr)
         else:
             print(f"error: {shorten(str(source))}: {error}", file=sys.stderr)

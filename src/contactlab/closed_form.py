@@ -31,21 +31,21 @@ import numpy as np
 
 from . import rotations, shapes
 
-RELATIVE = 0.02         # share of a closed-form value its measurement may miss it by
-LENGTH_FLOOR = 1e-3     # m: a length's tolerance besides RELATIVE (expected values of 0)
-SPEED_FLOOR = 0.01      # share of the scene's initial speed a velocity's tolerance has besides RELATIVE
-STANDING = 0.01         # m: how far a body of a structure that must stand may move (the scenes say < 1 cm)
-SINKING = 0.005         # m: the deepest overlap of a stack that must not sink (box_stack says 5 mm)
-OVERLAP_SHARE = 0.1     # of the smallest radius: the deepest overlap of a pile that must not sink into itself
+RELATIVE = 0.02  # share of a closed-form value its measurement may miss it by
+LENGTH_FLOOR = 1e-3  # m: a length's tolerance besides RELATIVE (expected values of 0)
+SPEED_FLOOR = 0.01  # share of the scene's initial speed a velocity's tolerance has besides RELATIVE
+STANDING = 0.01  # m: how far a body of a structure that must stand may move (the scenes say < 1 cm)
+SINKING = 0.005  # m: the deepest overlap of a stack that must not sink (box_stack says 5 mm)
+OVERLAP_SHARE = 0.1  # of the smallest radius: the deepest overlap of a pile that must not sink into itself
 
 
 @dataclass(frozen=True)
 class Check:
-    quantity: str        # what is compared, e.g. "first rebound apex"
-    unit: str            # of expected and measured, e.g. "m"
-    expected: float      # the closed-form value
-    measured: float      # what the run gave (nan when the run never reached it)
-    tolerance: float = None   # the largest |measured − expected| the scene's expectation allows, in ``unit``
+    quantity: str  # what is compared, e.g. "first rebound apex"
+    unit: str  # of expected and measured, e.g. "m"
+    expected: float  # the closed-form value
+    measured: float  # what the run gave (nan when the run never reached it)
+    tolerance: float = None  # the largest |measured − expected| the scene's expectation allows, in ``unit``
 
     @property
     def passed(self):
@@ -58,9 +58,14 @@ class Check:
     def as_record(self) -> dict:
         """The check as plain data (summary.json's ``checks``, a sweep's ``closed_form_checks``):
         quantity, unit, expected, measured (None: not reached), tolerance, passed."""
-        return {"quantity": self.quantity, "unit": self.unit, "expected": float(self.expected),
-                "measured": float(self.measured) if np.isfinite(self.measured) else None,
-                "tolerance": self.tolerance, "passed": self.passed}
+        return {
+            "quantity": self.quantity,
+            "unit": self.unit,
+            "expected": float(self.expected),
+            "measured": float(self.measured) if np.isfinite(self.measured) else None,
+            "tolerance": self.tolerance,
+            "passed": self.passed,
+        }
 
     def verdict(self) -> str:
         """One line: "<quantity>: <measured> <unit> (expected <e> ± <tolerance>): pass|FAIL"."""
@@ -100,6 +105,7 @@ def _sample_interval(arrays):
 
 # ---- what the formulas need of a scene ---------------------------------------------------------
 
+
 def _gravity(model):
     """(|g| [m/s²], unit vector 'up' (3,)); up is None without gravity."""
     g = float(np.linalg.norm(model.gravity))
@@ -108,8 +114,13 @@ def _gravity(model):
 
 def _one_body_on_plane(model, kind):
     """(body shape params, plane params) when the scene is one body of ``kind`` and one plane."""
-    if (model.body_count != 1 or model.particle_count or model.obstacle_count != 1
-            or model.body_shape[0] != kind or model.obstacle_shape[0] != shapes.PLANE):
+    if (
+        model.body_count != 1
+        or model.particle_count
+        or model.obstacle_count != 1
+        or model.body_shape[0] != kind
+        or model.obstacle_shape[0] != shapes.PLANE
+    ):
         return None
     return model.body_params[0], model.obstacle_params[0]
 
@@ -143,6 +154,7 @@ def _first_time(time, condition):
 
 # ---- the scenes --------------------------------------------------------------------------------
 
+
 def _bouncing_ball(model, arrays):
     """Dropped from rest at height h0: the n-th rebound peaks at ε^(2n) h0."""
     layout = _body_on_floor(model, shapes.SPHERE)
@@ -157,10 +169,17 @@ def _bouncing_ball(model, arrays):
         return []
     # apexes: where the upward speed turns from positive to non-positive
     turning = np.flatnonzero((rise[:-1] > 0) & (rise[1:] <= 0))
-    apexes = [float(height[i:i + 2].max()) for i in turning]
-    return [Check(f"rebound {n} apex", "m", restitution ** (2 * n) * h0,
-                  apexes[n - 1] if len(apexes) >= n else float("nan"),
-                  _relative(restitution ** (2 * n) * h0, LENGTH_FLOOR)) for n in (1, 2)]
+    apexes = [float(height[i : i + 2].max()) for i in turning]
+    return [
+        Check(
+            f"rebound {n} apex",
+            "m",
+            restitution ** (2 * n) * h0,
+            apexes[n - 1] if len(apexes) >= n else float("nan"),
+            _relative(restitution ** (2 * n) * h0, LENGTH_FLOOR),
+        )
+        for n in (1, 2)
+    ]
 
 
 def _sliding_block(model, arrays):
@@ -176,11 +195,17 @@ def _sliding_block(model, arrays):
     moved = arrays["body_position"][:, 0] - arrays["body_position"][0, 0]
     moved -= np.outer(moved @ up, up)
     speed = np.linalg.norm(arrays["body_velocity"][:, 0], axis=1)
-    distance, stop = v0 ** 2 / (2 * friction * g), v0 / (friction * g)
-    return [Check("stopping distance", "m", distance, float(np.linalg.norm(moved[-1])),
-                  _relative(distance, LENGTH_FLOOR)),
-            Check("stopping time", "s", stop, _first_time(arrays["time"], speed < 1e-3 * v0),
-                  _relative(stop, _sample_interval(arrays)))]
+    distance, stop = v0**2 / (2 * friction * g), v0 / (friction * g)
+    return [
+        Check("stopping distance", "m", distance, float(np.linalg.norm(moved[-1])), _relative(distance, LENGTH_FLOOR)),
+        Check(
+            "stopping time",
+            "s",
+            stop,
+            _first_time(arrays["time"], speed < 1e-3 * v0),
+            _relative(stop, _sample_interval(arrays)),
+        ),
+    ]
 
 
 def _rolling_sphere(model, arrays):
@@ -196,13 +221,25 @@ def _rolling_sphere(model, arrays):
     v0 = float(np.linalg.norm(v[0]))
     if friction == 0 or v0 == 0 or np.linalg.norm(w[0]) > 0:
         return []
-    slip = np.linalg.norm(v + np.cross(w, -radius * up), axis=1)     # velocity of the touching point
+    slip = np.linalg.norm(v + np.cross(w, -radius * up), axis=1)  # velocity of the touching point
     sliding = 2.0 * v0 / (7.0 * friction * g)
     # the slip falls linearly to 0, so it crosses the 1 % read here 1 % of the time early
-    return [Check("rolling speed", "m/s", 5.0 / 7.0 * v0, float(np.linalg.norm(v[-1])),
-                  _relative(5.0 / 7.0 * v0, SPEED_FLOOR * v0)),
-            Check("end of sliding", "s", sliding, _first_time(arrays["time"], slip < 0.01 * v0),
-                  _relative(sliding, 0.01 * sliding + _sample_interval(arrays)))]
+    return [
+        Check(
+            "rolling speed",
+            "m/s",
+            5.0 / 7.0 * v0,
+            float(np.linalg.norm(v[-1])),
+            _relative(5.0 / 7.0 * v0, SPEED_FLOOR * v0),
+        ),
+        Check(
+            "end of sliding",
+            "s",
+            sliding,
+            _first_time(arrays["time"], slip < 0.01 * v0),
+            _relative(sliding, 0.01 * sliding + _sample_interval(arrays)),
+        ),
+    ]
 
 
 def _incline(model, arrays):
@@ -217,20 +254,26 @@ def _incline(model, arrays):
     if np.linalg.norm(downhill) < 1e-12:
         return []
     downhill /= np.linalg.norm(downhill)
-    sin_theta = float(np.sqrt(max(0.0, 1.0 - cos_theta ** 2)))
+    sin_theta = float(np.sqrt(max(0.0, 1.0 - cos_theta**2)))
     friction, _ = _materials(model)
     acceleration = max(0.0, g * (sin_theta - friction * cos_theta))
     elapsed = float(arrays["time"][-1] - arrays["time"][0])
     moved = float((arrays["body_position"][-1, 0] - arrays["body_position"][0, 0]) @ downhill)
-    expected = 0.5 * acceleration * elapsed ** 2
+    expected = 0.5 * acceleration * elapsed**2
     return [Check("distance down the slope", "m", expected, moved, _relative(expected, LENGTH_FLOOR))]
 
 
 def _newtons_cradle(model, arrays):
     """Equal balls, ε = 1, no gravity: the striker's velocity ends in the last ball, the others stop."""
-    if (model.body_count < 2 or model.obstacle_count or model.particle_count or np.any(model.gravity != 0)
-            or np.any(model.body_shape != shapes.SPHERE) or np.ptp(model.body_mass) > 0
-            or np.any(model.material_restitution[model.body_material] != 1.0)):
+    if (
+        model.body_count < 2
+        or model.obstacle_count
+        or model.particle_count
+        or np.any(model.gravity != 0)
+        or np.any(model.body_shape != shapes.SPHERE)
+        or np.ptp(model.body_mass) > 0
+        or np.any(model.material_restitution[model.body_material] != 1.0)
+    ):
         return []
     v = arrays["body_velocity"]
     v0 = v[0, 0]
@@ -238,10 +281,16 @@ def _newtons_cradle(model, arrays):
         return []
     speed = float(np.linalg.norm(v0))
     direction = v0 / speed
-    return [Check("last ball velocity", "m/s", speed, float(v[-1, -1] @ direction),
-                  _relative(speed, SPEED_FLOOR * speed)),
-            Check("largest speed of the other balls", "m/s", 0.0,
-                  float(np.linalg.norm(v[-1, :-1], axis=1).max()), SPEED_FLOOR * speed)]
+    return [
+        Check("last ball velocity", "m/s", speed, float(v[-1, -1] @ direction), _relative(speed, SPEED_FLOOR * speed)),
+        Check(
+            "largest speed of the other balls",
+            "m/s",
+            0.0,
+            float(np.linalg.norm(v[-1, :-1], axis=1).max()),
+            SPEED_FLOOR * speed,
+        ),
+    ]
 
 
 def _rod_impact(model, arrays):
@@ -257,12 +306,15 @@ def _rod_impact(model, arrays):
         return []
     params, g, up, floor = layout
     friction, restitution = _materials(model)
-    if (friction != 0 or np.linalg.norm(arrays["body_velocity"][0, 0]) > 0
-            or np.linalg.norm(arrays["body_angular_velocity"][0, 0]) > 0):
+    if (
+        friction != 0
+        or np.linalg.norm(arrays["body_velocity"][0, 0]) > 0
+        or np.linalg.norm(arrays["body_angular_velocity"][0, 0]) > 0
+    ):
         return []
-    R = rotations.to_matrix(arrays["body_orientation"][0, :1])[0]        # unchanged while falling
+    R = rotations.to_matrix(arrays["body_orientation"][0, :1])[0]  # unchanged while falling
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * params[:3]
-    r = min(corners @ R.T, key=lambda c: c @ up)            # the lowest corner, from the centre, world
+    r = min(corners @ R.T, key=lambda c: c @ up)  # the lowest corner, from the centre, world
     drop = float((arrays["body_position"][0, 0] + r) @ up - floor)
     impact_time = arrays["time"][0] + np.sqrt(2.0 * drop / g)
     v_normal = -np.sqrt(2.0 * g * drop)
@@ -271,7 +323,7 @@ def _rod_impact(model, arrays):
     j = -(1.0 + restitution) * v_normal / effective
     v_after = v_normal + j / model.body_mass[0]
     w_after = inverse_inertia @ np.cross(r, j * up)
-    axis = int(np.argmax(np.abs(w_after)))                 # the impact is planar: one axis spins
+    axis = int(np.argmax(np.abs(w_after)))  # the impact is planar: one axis spins
     touching = arrays["contact_count"] > 0
     first = np.argmax(touching) if touching.any() else len(touching)
     after = np.flatnonzero(~touching & (np.arange(len(touching)) > first))
@@ -281,10 +333,22 @@ def _rod_impact(model, arrays):
         measured_w = float(arrays["body_angular_velocity"][k, 0, axis])
     else:
         measured_v = measured_w = float("nan")
-    return [Check("vertical velocity after the impact", "m/s", float(v_after), measured_v,
-                  _relative(v_after, SPEED_FLOOR * abs(v_normal))),
-            Check(f"angular velocity about {'xyz'[axis]} after the impact", "rad/s", float(w_after[axis]),
-                  measured_w, _relative(w_after[axis], 0.0))]
+    return [
+        Check(
+            "vertical velocity after the impact",
+            "m/s",
+            float(v_after),
+            measured_v,
+            _relative(v_after, SPEED_FLOOR * abs(v_normal)),
+        ),
+        Check(
+            f"angular velocity about {'xyz'[axis]} after the impact",
+            "rad/s",
+            float(w_after[axis]),
+            measured_w,
+            _relative(w_after[axis], 0.0),
+        ),
+    ]
 
 
 def _box_pushed(model, arrays):
@@ -301,10 +365,19 @@ def _box_pushed(model, arrays):
     differs from μ m g by μ m |Δv_z| / Δt at most, Δv_z the box's vertical velocity change."""
     drive = model.drive
     g, up = _gravity(model)
-    if (drive is None or model.body_count != 2 or model.particle_count or model.obstacle_count != 1
-            or up is None or _horizontal_floor(model, up) is None or model.body_shape[0] != shapes.BOX
-            or list(np.flatnonzero(drive.kinematic)) != [1] or list(drive.path_body) != [1] or drive.has_loads
-            or len(drive.path_times[0]) != 2):
+    if (
+        drive is None
+        or model.body_count != 2
+        or model.particle_count
+        or model.obstacle_count != 1
+        or up is None
+        or _horizontal_floor(model, up) is None
+        or model.body_shape[0] != shapes.BOX
+        or list(np.flatnonzero(drive.kinematic)) != [1]
+        or list(drive.path_body) != [1]
+        or drive.has_loads
+        or len(drive.path_times[0]) != 2
+    ):
         return []
     start, end = drive.path_times[0]
     velocity = (drive.path_positions[0, 1] - drive.path_positions[0, 0]) / (end - start)
@@ -317,7 +390,7 @@ def _box_pushed(model, arrays):
     time = arrays["time"]
     along = arrays["body_velocity"][:, 0] @ direction
     moved = (arrays["body_position"][:, 0] - arrays["body_position"][0, 0]) @ direction
-    first = _first_time(time, along > 0.5 * speed)            # the first contact
+    first = _first_time(time, along > 0.5 * speed)  # the first contact
     window = (time >= first + 0.5 * (end - first)) & (time <= end)
     mean_speed = float("nan")
     if np.isfinite(first) and window.sum() >= 2:
@@ -328,9 +401,16 @@ def _box_pushed(model, arrays):
     if len(sliding) >= 2:
         a, b = sliding[0], sliding[-1]
         force = float(mass * (along[a] - along[b]) / (time[b] - time[a]))
-    return [Check("box speed while pushed", "m/s", speed, mean_speed, _relative(speed, SPEED_FLOOR * speed)),
-            Check("push force: the sliding friction it balances", "N", friction * mass * g, force,
-                  _relative(friction * mass * g, 0.0))]
+    return [
+        Check("box speed while pushed", "m/s", speed, mean_speed, _relative(speed, SPEED_FLOOR * speed)),
+        Check(
+            "push force: the sliding friction it balances",
+            "N",
+            friction * mass * g,
+            force,
+            _relative(friction * mass * g, 0.0),
+        ),
+    ]
 
 
 def _standing(model, arrays):
@@ -346,13 +426,16 @@ def _standing(model, arrays):
 def _standing_unsunk(model, arrays):
     """A stack must stand and nothing may sink: :func:`_standing`, and no overlap deeper than SINKING."""
     found = _standing(model, arrays)
-    return found + [Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])), SINKING)] if found else []
+    return (
+        found + [Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])), SINKING)] if found else []
+    )
 
 
 def _centres_inside_obstacles(model, positions):
     """The deepest any centre (positions (T, K, 3)) gets inside a static plane, sphere or box
     obstacle [m], 0 when none ever does (meshes are two-sided: they have no inside)."""
     from .collision.signed_distance import points_against_shape
+
     points = np.ascontiguousarray(positions.reshape(-1, 3), dtype=float)
     deepest = 0.0
     for index in range(model.obstacle_count):
@@ -360,8 +443,13 @@ def _centres_inside_obstacles(model, positions):
         if kind not in (shapes.PLANE, shapes.SPHERE, shapes.BOX) or not len(points):
             continue
         rotation = rotations.to_matrix(np.asarray(model.obstacle_orientation[index], dtype=float)[None])[0]
-        signed = points_against_shape(points, kind, np.asarray(model.obstacle_params[index], dtype=float),
-                                      np.asarray(model.obstacle_position[index], dtype=float), rotation)[0]
+        signed = points_against_shape(
+            points,
+            kind,
+            np.asarray(model.obstacle_params[index], dtype=float),
+            np.asarray(model.obstacle_position[index], dtype=float),
+            rotation,
+        )[0]
         deepest = max(deepest, float(-signed.min()))
     return deepest
 
@@ -371,13 +459,13 @@ def _kept_out(model, arrays):
     inside a static obstacle, and no overlap deeper than OVERLAP_SHARE of the smallest radius."""
     if model.body_count + model.particle_count == 0 or model.obstacle_count == 0:
         return []
-    positions = np.concatenate([np.asarray(arrays["body_position"]), np.asarray(arrays["particle_position"])],
-                               axis=1)
+    positions = np.concatenate([np.asarray(arrays["body_position"]), np.asarray(arrays["particle_position"])], axis=1)
     radius = _smallest_radius(model)
     found = [Check("deepest centre inside an obstacle", "m", 0.0, _centres_inside_obstacles(model, positions), 0.0)]
     if np.isfinite(radius):
-        found.append(Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])),
-                           OVERLAP_SHARE * radius))
+        found.append(
+            Check("deepest overlap", "m", 0.0, float(np.max(arrays["max_penetration"])), OVERLAP_SHARE * radius)
+        )
     return found
 
 
@@ -393,17 +481,25 @@ def _smallest_radius(model):
 def _in_the_bowl(model, arrays):
     """Everything dropped into a mesh bowl ends inside it: the largest distance of an end
     position outside the bowl's bounds [m] (its vertices' box), 0 when all are in."""
-    meshes = [int(model.obstacle_params[i, 0]) for i in range(model.obstacle_count)
-              if model.obstacle_shape[i] == shapes.MESH]
+    meshes = [
+        int(model.obstacle_params[i, 0]) for i in range(model.obstacle_count) if model.obstacle_shape[i] == shapes.MESH
+    ]
     if len(meshes) != 1 or model.body_count + model.particle_count == 0:
         return []
     vertices = np.asarray(model.meshes[meshes[0]].vertices, dtype=float)
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     ends = np.concatenate([np.asarray(arrays["body_position"][-1]), np.asarray(arrays["particle_position"][-1])])
     outside = np.maximum(np.maximum(low - ends, ends - high), 0.0)
-    outside[:, 2] = np.maximum(low[2] - ends[:, 2], 0.0)            # open at the top: only below counts
-    return [Check("largest distance of an end position outside the bowl", "m", 0.0,
-                  float(np.linalg.norm(outside, axis=1).max()), 0.0)]
+    outside[:, 2] = np.maximum(low[2] - ends[:, 2], 0.0)  # open at the top: only below counts
+    return [
+        Check(
+            "largest distance of an end position outside the bowl",
+            "m",
+            0.0,
+            float(np.linalg.norm(outside, axis=1).max()),
+            0.0,
+        )
+    ]
 
 
 def _domino_chain(model, arrays):
@@ -417,7 +513,7 @@ def _domino_chain(model, arrays):
     long_axis = int(np.argmax(model.body_params[-1, :3]))
     start = rotations.to_matrix(np.asarray(arrays["body_orientation"][0, -1:], dtype=float))[0][:, long_axis]
     end = rotations.to_matrix(np.asarray(arrays["body_orientation"][-1, -1:], dtype=float))[0][:, long_axis]
-    if abs(start @ up) < 0.99:                  # the last domino does not start upright
+    if abs(start @ up) < 0.99:  # the last domino does not start upright
         return []
     tilt = float(np.degrees(np.arccos(np.clip(abs(end @ up), 0.0, 1.0))))
     return [Check("tilt of the last domino", "deg", 90.0, tilt, 45.0)]

@@ -37,24 +37,26 @@ PINNED_NAMES = ("corners", "top_corners", "top_edge", "bottom_edge", "left_edge"
 class ClothMesh:
     """A cloth in its local frame, before it is placed: V vertices, F triangles and the vertex
     pairs (local indices) of its three spring families."""
-    vertices: np.ndarray      # (V, 3) [m]
-    triangles: np.ndarray     # (F, 3) int64, counter-clockwise seen from +z of a grid
-    stretch: np.ndarray       # (E, 2) int64: grid lines, or every triangle edge of a mesh file
-    shear: np.ndarray         # (H, 2) int64: both diagonals of each grid cell; none for a mesh file
-    bend: np.ndarray          # (G, 2) int64: vertices two apart, or the far corners of triangles sharing an edge
-    named: dict               # vertex set name -> local indices (a grid's PINNED_NAMES; none for a mesh file)
+
+    vertices: np.ndarray  # (V, 3) [m]
+    triangles: np.ndarray  # (F, 3) int64, counter-clockwise seen from +z of a grid
+    stretch: np.ndarray  # (E, 2) int64: grid lines, or every triangle edge of a mesh file
+    shear: np.ndarray  # (H, 2) int64: both diagonals of each grid cell; none for a mesh file
+    bend: np.ndarray  # (G, 2) int64: vertices two apart, or the far corners of triangles sharing an edge
+    named: dict  # vertex set name -> local indices (a grid's PINNED_NAMES; none for a mesh file)
 
 
 @dataclass
 class LaidOut:
     """A cloth placed in the world: what ``ModelBuilder.add_cloth`` stores of it."""
-    position: np.ndarray      # (V, 3) [m] world positions of the vertices
-    triangles: np.ndarray     # (F, 3) int64 local vertex indices
-    springs: np.ndarray       # (S, 2) int64 local vertex pairs: stretch, then shear, then bend
-    stiffness: np.ndarray     # (S,) [N/m]
-    rest: np.ndarray          # (S,) [m] the springs' lengths as built
-    mass: np.ndarray          # (V,) [kg] each vertex's share of the cloth's mass
-    pinned: np.ndarray        # (V,) bool: held in place
+
+    position: np.ndarray  # (V, 3) [m] world positions of the vertices
+    triangles: np.ndarray  # (F, 3) int64 local vertex indices
+    springs: np.ndarray  # (S, 2) int64 local vertex pairs: stretch, then shear, then bend
+    stiffness: np.ndarray  # (S,) [N/m]
+    rest: np.ndarray  # (S,) [m] the springs' lengths as built
+    mass: np.ndarray  # (V,) [kg] each vertex's share of the cloth's mass
+    pinned: np.ndarray  # (V,) bool: held in place
 
 
 def grid(size, resolution) -> ClothMesh:
@@ -71,25 +73,39 @@ def grid(size, resolution) -> ClothMesh:
     if nx < 2 or ny < 2:
         raise InputError("resolution", f"must be at least 2 vertices along each axis, found [{nx}, {ny}]")
     check_dynamic_count(nx * ny, "resolution", f"a cloth of {nx} x {ny} vertices")
-    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")     # (ny, nx): a along x, fastest
-    vertices = np.stack([-width / 2 + a.ravel() * width / (nx - 1), -height / 2 + b.ravel() * height / (ny - 1),
-                         np.zeros(nx * ny)], axis=1)
-    vid = a + nx * b                                                    # (ny, nx) vertex index
+    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")  # (ny, nx): a along x, fastest
+    vertices = np.stack(
+        [-width / 2 + a.ravel() * width / (nx - 1), -height / 2 + b.ravel() * height / (ny - 1), np.zeros(nx * ny)],
+        axis=1,
+    )
+    vid = a + nx * b  # (ny, nx) vertex index
 
     def pairs(first, second):
         return np.stack([first.ravel(), second.ravel()], axis=1).astype(np.int64)
 
     corner00, corner10, corner01, corner11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
-    triangles = np.concatenate([np.stack([corner00.ravel(), corner10.ravel(), corner11.ravel()], axis=1),
-                                np.stack([corner00.ravel(), corner11.ravel(), corner01.ravel()], axis=1)])
-    named = {"corners": np.array([vid[0, 0], vid[0, -1], vid[-1, 0], vid[-1, -1]]),
-             "top_corners": np.array([vid[-1, 0], vid[-1, -1]]),
-             "top_edge": vid[-1, :], "bottom_edge": vid[0, :], "left_edge": vid[:, 0], "right_edge": vid[:, -1]}
-    return ClothMesh(vertices, triangles.astype(np.int64),
-                     stretch=np.concatenate([pairs(vid[:, :-1], vid[:, 1:]), pairs(vid[:-1, :], vid[1:, :])]),
-                     shear=np.concatenate([pairs(corner00, corner11), pairs(corner10, corner01)]),
-                     bend=np.concatenate([pairs(vid[:, :-2], vid[:, 2:]), pairs(vid[:-2, :], vid[2:, :])]),
-                     named=named)
+    triangles = np.concatenate(
+        [
+            np.stack([corner00.ravel(), corner10.ravel(), corner11.ravel()], axis=1),
+            np.stack([corner00.ravel(), corner11.ravel(), corner01.ravel()], axis=1),
+        ]
+    )
+    named = {
+        "corners": np.array([vid[0, 0], vid[0, -1], vid[-1, 0], vid[-1, -1]]),
+        "top_corners": np.array([vid[-1, 0], vid[-1, -1]]),
+        "top_edge": vid[-1, :],
+        "bottom_edge": vid[0, :],
+        "left_edge": vid[:, 0],
+        "right_edge": vid[:, -1],
+    }
+    return ClothMesh(
+        vertices,
+        triangles.astype(np.int64),
+        stretch=np.concatenate([pairs(vid[:, :-1], vid[:, 1:]), pairs(vid[:-1, :], vid[1:, :])]),
+        shear=np.concatenate([pairs(corner00, corner11), pairs(corner10, corner01)]),
+        bend=np.concatenate([pairs(vid[:, :-2], vid[:, 2:]), pairs(vid[:-2, :], vid[2:, :])]),
+        named=named,
+    )
 
 
 def from_file(file, scale) -> ClothMesh:
@@ -99,6 +115,7 @@ def from_file(file, scale) -> ClothMesh:
     triangles sharing an edge, no shear springs, no named vertex sets. InputError naming
     "file" or "scale"."""
     from .meshes import MESH_FORMATS
+
     scale = number(scale, "scale", 0.0, strict=True, quantity=FACTOR)
     path = file_path(file)
     if not os.path.isfile(path):
@@ -107,10 +124,11 @@ def from_file(file, scale) -> ClothMesh:
         raise InputError("file", f"unsupported mesh format of {path}; expected .obj, .stl or .ply")
     try:
         import trimesh
+
         loaded = trimesh.load(path, force="mesh", process=False)
         vertices = np.asarray(loaded.vertices, dtype=float)
         faces = np.asarray(loaded.faces, dtype=np.int64)
-    except Exception as error:                      # trimesh raises many types on broken files
+    except Exception as error:  # trimesh raises many types on broken files
         raise InputError("file", f"could not read the mesh file {path} ({first_line(error)})") from None
     if faces.ndim != 2 or faces.shape[1:] != (3,) or len(faces) == 0 or len(vertices) == 0:
         raise InputError("file", f"the mesh file {path} contains no triangles")
@@ -134,11 +152,12 @@ def from_file(file, scale) -> ClothMesh:
     edge_of = edge_of.reshape(-1)
     order = np.argsort(edge_of, kind="stable")
     sorted_edges, sorted_opposite = edge_of[order], opposite[order]
-    shared = np.nonzero(sorted_edges[1:] == sorted_edges[:-1])[0]      # consecutive half-edges of one edge
+    shared = np.nonzero(sorted_edges[1:] == sorted_edges[:-1])[0]  # consecutive half-edges of one edge
     bends = np.stack([sorted_opposite[shared], sorted_opposite[shared + 1]], axis=1)
     bends = bends[bends[:, 0] != bends[:, 1]]
-    return ClothMesh(vertices, faces, edges.astype(np.int64), np.zeros((0, 2), dtype=np.int64),
-                     bends.astype(np.int64), {})
+    return ClothMesh(
+        vertices, faces, edges.astype(np.int64), np.zeros((0, 2), dtype=np.int64), bends.astype(np.int64), {}
+    )
 
 
 def triangle_areas(vertices, triangles) -> np.ndarray:
@@ -193,8 +212,10 @@ def lay_out(mesh, from_a_file, position, orientation, mass, density, stiffness, 
     if from_a_file:
         share = np.bincount(mesh.triangles.ravel(), np.repeat(area / 3.0, 3), minlength=count)
         if (share <= 0.0).any():
-            raise InputError("file", f"vertex {int(np.argmin(share))} of the mesh is in no triangle of "
-                                     "positive area, so it gets no mass")
+            raise InputError(
+                "file",
+                f"vertex {int(np.argmin(share))} of the mesh is in no triangle of positive area, so it gets no mass",
+            )
         share = share / share.sum()
     else:
         share = np.full(count, 1.0 / count)
@@ -209,6 +230,12 @@ def lay_out(mesh, from_a_file, position, orientation, mass, density, stiffness, 
     rest = np.linalg.norm(vertex_position[springs[:, 1]] - vertex_position[springs[:, 0]], axis=1)
     if (rest <= 0.0).any():
         raise InputError(field, "two vertices of the cloth coincide")
-    return LaidOut(vertex_position, mesh.triangles, springs,
-                   np.concatenate([np.full(len(g), k) for g, k in zip(groups, stiffness)]), rest, total * share,
-                   pinned_mask)
+    return LaidOut(
+        vertex_position,
+        mesh.triangles,
+        springs,
+        np.concatenate([np.full(len(g), k) for g, k in zip(groups, stiffness)]),
+        rest,
+        total * share,
+        pinned_mask,
+    )

@@ -30,9 +30,9 @@ import uuid
 from . import interrupts
 from .errors import InputError, first_line
 
-CONNECT_TIMEOUT = 10.0          # s: how long connecting to a scheduler may take
-POLL_SECONDS = 0.5              # s: how often the wait for results looks for a signal
-IDLE_PROBE_SECONDS = 0.3        # s: how long default_workers watches the machine's load
+CONNECT_TIMEOUT = 10.0  # s: how long connecting to a scheduler may take
+POLL_SECONDS = 0.5  # s: how often the wait for results looks for a signal
+IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 
 
 def cores() -> int:
@@ -46,10 +46,12 @@ def cores() -> int:
 def idle_cores(seconds=IDLE_PROBE_SECONDS):
     """How many cores of the machine sat idle over the next ``seconds`` (from /proc/stat; None
     where it cannot be read)."""
+
     def times():
         with open("/proc/stat", encoding="ascii") as stream:
             values = [int(value) for value in stream.readline().split()[1:]]
-        return sum(values), values[3] + values[4]          # all, idle + iowait (in clock ticks)
+        return sum(values), values[3] + values[4]  # all, idle + iowait (in clock ticks)
+
     try:
         total, idle = times()
         time.sleep(seconds)
@@ -85,9 +87,14 @@ def connect(scheduler=None, workers=None, field="--scheduler"):
     if scheduler is None:
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
             raise InputError("--workers", f"expected a whole number of worker processes ≥ 1, found {workers!r}")
-        cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                               silence_logs=logging.ERROR)     # a cancelled task's warning is no news
+        cluster = LocalCluster(
+            n_workers=workers or default_workers(),
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.ERROR,
+        )  # a cancelled task's warning is no news
         try:
             with Client(cluster) as client:
                 yield client
@@ -95,15 +102,21 @@ def connect(scheduler=None, workers=None, field="--scheduler"):
             cluster.close()
         return
     if workers is not None:
-        raise InputError("--workers", "sets the workers of a local cluster; an existing cluster (--scheduler) has "
-                                      "the workers started for it ('dask worker ADDRESS')")
+        raise InputError(
+            "--workers",
+            "sets the workers of a local cluster; an existing cluster (--scheduler) has "
+            "the workers started for it ('dask worker ADDRESS')",
+        )
     if not isinstance(scheduler, str) or "://" not in scheduler:
         raise InputError(field, f"expected a scheduler address such as tcp://127.0.0.1:8786, found {scheduler!r}")
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as error:
-        raise InputError(field, f"could not reach a Dask scheduler at {scheduler} ({first_line(error)}); "
-                                f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'") from None
+        raise InputError(
+            field,
+            f"could not reach a Dask scheduler at {scheduler} ({first_line(error)}); "
+            f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'",
+        ) from None
     with client:
         yield client
 
@@ -112,7 +125,8 @@ def dashboard(client) -> str:
     """The address of the cluster's dashboard, or a sentence saying there is none."""
     link = getattr(client, "dashboard_link", None)
     import importlib.util
-    if importlib.util.find_spec("bokeh") is None:    # the dashboard is served only with bokeh installed
+
+    if importlib.util.find_spec("bokeh") is None:  # the dashboard is served only with bokeh installed
         return "none (install bokeh to get one)"
     return link or "none"
 
@@ -125,7 +139,7 @@ def run_tasks(client, function, jobs, progress=False, description="jobs"):
     finished are cancelled."""
     from distributed import wait
 
-    token = uuid.uuid4().hex[:8]            # task keys of this call only, on a scheduler others may share
+    token = uuid.uuid4().hex[:8]  # task keys of this call only, on a scheduler others may share
     futures = {}
     for key, job in jobs:
         future = client.submit(function, job, key=f"contactlab-{key}-{token}", pure=False)
@@ -133,6 +147,7 @@ def run_tasks(client, function, jobs, progress=False, description="jobs"):
     bar = None
     if progress:
         from tqdm import tqdm
+
         bar = tqdm(total=len(futures), desc=description, unit="job", leave=False)
     try:
         while futures:
@@ -145,14 +160,14 @@ def run_tasks(client, function, jobs, progress=False, description="jobs"):
                 key = futures.pop(future)
                 try:
                     result = future.result()
-                except Exception as error:        # escaped the job function, or its workers died
+                except Exception as error:  # escaped the job function, or its workers died
                     result = error
                 future.release()
                 if bar is not None:
                     bar.update(1)
                 yield key, result
     finally:
-        for future in futures:              # stopped early (a signal, the caller): cancel the rest
+        for future in futures:  # stopped early (a signal, the caller): cancel the rest
             future.cancel()
         if bar is not None:
             bar.close()
@@ -162,6 +177,7 @@ def worker_address() -> str:
     """The address of the Dask worker running the caller, or "local" outside one."""
     try:
         from distributed import get_worker
+
         return get_worker().address
     except (ImportError, ValueError):
         return "local"

@@ -24,20 +24,20 @@ from numba import njit
 
 @dataclass
 class Contacts:
-    body_a: np.ndarray        # (C,) int, −1 when side A is not a rigid body
-    body_b: np.ndarray        # (C,) int
-    particles_a: np.ndarray   # (C, 3) int particle indices carrying side A's point, −1 unused
-    particles_b: np.ndarray   # (C, 3) int
-    weights_a: np.ndarray     # (C, 3) barycentric weights of those particles
-    weights_b: np.ndarray     # (C, 3)
-    point: np.ndarray         # (C, 3) world contact point, midway between the surfaces [m]
-    normal: np.ndarray        # (C, 3) unit, from B into A
-    depth: np.ndarray         # (C,) penetration [m], > 0 overlapping, < 0 a gap
-    tangent1: np.ndarray      # (C, 3) unit, ⟂ normal
-    tangent2: np.ndarray      # (C, 3) unit, normal × tangent1
-    friction: np.ndarray      # (C,) combined Coulomb μ
-    restitution: np.ndarray   # (C,) combined ε
-    feature_id: np.ndarray    # (C,) int64 persistent id: (collider pair, feature), stable while the contact lasts
+    body_a: np.ndarray  # (C,) int, −1 when side A is not a rigid body
+    body_b: np.ndarray  # (C,) int
+    particles_a: np.ndarray  # (C, 3) int particle indices carrying side A's point, −1 unused
+    particles_b: np.ndarray  # (C, 3) int
+    weights_a: np.ndarray  # (C, 3) barycentric weights of those particles
+    weights_b: np.ndarray  # (C, 3)
+    point: np.ndarray  # (C, 3) world contact point, midway between the surfaces [m]
+    normal: np.ndarray  # (C, 3) unit, from B into A
+    depth: np.ndarray  # (C,) penetration [m], > 0 overlapping, < 0 a gap
+    tangent1: np.ndarray  # (C, 3) unit, ⟂ normal
+    tangent2: np.ndarray  # (C, 3) unit, normal × tangent1
+    friction: np.ndarray  # (C,) combined Coulomb μ
+    restitution: np.ndarray  # (C,) combined ε
+    feature_id: np.ndarray  # (C,) int64 persistent id: (collider pair, feature), stable while the contact lasts
 
     @property
     def count(self) -> int:
@@ -55,9 +55,22 @@ class Contacts:
     @classmethod
     def concatenate(cls, parts) -> "Contacts":
         """Join several Contacts (empty list → no contacts)."""
-        shapes = dict(body_a=(0,), body_b=(0,), particles_a=(0, 3), particles_b=(0, 3),
-                      weights_a=(0, 3), weights_b=(0, 3), point=(0, 3), normal=(0, 3), depth=(0,),
-                      tangent1=(0, 3), tangent2=(0, 3), friction=(0,), restitution=(0,), feature_id=(0,))
+        shapes = dict(
+            body_a=(0,),
+            body_b=(0,),
+            particles_a=(0, 3),
+            particles_b=(0, 3),
+            weights_a=(0, 3),
+            weights_b=(0, 3),
+            point=(0, 3),
+            normal=(0, 3),
+            depth=(0,),
+            tangent1=(0, 3),
+            tangent2=(0, 3),
+            friction=(0,),
+            restitution=(0,),
+            feature_id=(0,),
+        )
         ints = {"body_a", "body_b", "particles_a", "particles_b", "feature_id"}
         out = {}
         for f in fields(cls):
@@ -68,7 +81,9 @@ class Contacts:
 
 
 ContactArrays = namedtuple("ContactArrays", [f.name for f in fields(Contacts)])
-ContactArrays.__doc__ = """The fields of a Contacts, in order, as a named tuple: the form compiled code builds and reads."""
+ContactArrays.__doc__ = (
+    """The fields of a Contacts, in order, as a named tuple: the form compiled code builds and reads."""
+)
 
 
 def values_by_id(previous_ids, previous_values, feature_id, width):
@@ -81,9 +96,11 @@ def values_by_id(previous_ids, previous_values, feature_id, width):
     C = len(feature_id)
     if previous_ids is None or len(previous_ids) == 0 or C == 0:
         return np.zeros((C, width)), np.zeros(C, dtype=bool)
-    return values_carried(np.asarray(previous_ids, dtype=np.int64),
-                         np.asarray(previous_values, dtype=float).reshape(len(previous_ids), width),
-                         np.asarray(feature_id, dtype=np.int64))
+    return values_carried(
+        np.asarray(previous_ids, dtype=np.int64),
+        np.asarray(previous_values, dtype=float).reshape(len(previous_ids), width),
+        np.asarray(feature_id, dtype=np.int64),
+    )
 
 
 @njit(cache=True)
@@ -100,8 +117,8 @@ def values_carried(previous_ids, previous_values, feature_id):
         p = place[c]
         if p < sorted_ids.shape[0] and sorted_ids[p] == feature_id[c]:
             found[c] = True
-            for j in range(previous_values.shape[1]):     # not values[c, :] = …: a slice assignment
-                values[c, j] = previous_values[order[p], j]   # compiles Numba's shape-mismatch message
+            for j in range(previous_values.shape[1]):  # not values[c, :] = …: a slice assignment
+                values[c, j] = previous_values[order[p], j]  # compiles Numba's shape-mismatch message
     return values, found
 
 
@@ -123,9 +140,9 @@ def tangent_frames(normal):
         # its basis from step to step, so last step's friction impulses, stored along (t1, t2),
         # still point the same way when they warm-start this step's (choosing by the least
         # aligned axis flipped t1 by 90° whenever two tiny components swapped sizes).
-        if abs(nx) >= abs(ny) and abs(nx) >= abs(nz):     # n × ŷ
+        if abs(nx) >= abs(ny) and abs(nx) >= abs(nz):  # n × ŷ
             ux, uy, uz = -nz, 0.0, nx
-        else:                                             # n × x̂
+        else:  # n × x̂
             ux, uy, uz = 0.0, nz, -ny
         length = np.sqrt(ux * ux + uy * uy + uz * uz)
         ux, uy, uz = ux / length, uy / length, uz / length
@@ -146,15 +163,16 @@ def jacobian(contacts: Contacts, body_position, body_count: int, particle_count:
     rows, cols, vals = [], [], []
     row_index = np.arange(3 * C).reshape(C, 3)
     for body, particles, weights, sign in (
-            (contacts.body_a, contacts.particles_a, contacts.weights_a, 1.0),
-            (contacts.body_b, contacts.particles_b, contacts.weights_b, -1.0)):
+        (contacts.body_a, contacts.particles_a, contacts.weights_a, 1.0),
+        (contacts.body_b, contacts.particles_b, contacts.weights_b, -1.0),
+    ):
         has_body = body >= 0
         if has_body.any():
             c = np.nonzero(has_body)[0]
-            r = contacts.point[c] - body_position[body[c]]                  # (k,3)
-            linear = directions[c]                                          # (k,3,3)
-            angular = np.cross(r[:, None, :], linear)                       # r × d
-            block = np.concatenate([linear, angular], axis=2) * sign        # (k,3,6)
+            r = contacts.point[c] - body_position[body[c]]  # (k,3)
+            linear = directions[c]  # (k,3,3)
+            angular = np.cross(r[:, None, :], linear)  # r × d
+            block = np.concatenate([linear, angular], axis=2) * sign  # (k,3,6)
             rows.append(np.repeat(row_index[c], 6, axis=1).ravel())
             cols.append((6 * body[c][:, None, None] + np.arange(6)[None, None, :]).repeat(3, axis=1).ravel())
             vals.append(block.ravel())
@@ -162,12 +180,13 @@ def jacobian(contacts: Contacts, body_position, body_count: int, particle_count:
             has = particles[:, k] >= 0
             if has.any():
                 c = np.nonzero(has)[0]
-                block = directions[c] * (sign * weights[c, k])[:, None, None]   # (k,3,3)
+                block = directions[c] * (sign * weights[c, k])[:, None, None]  # (k,3,3)
                 rows.append(np.repeat(row_index[c], 3, axis=1).ravel())
                 col0 = 6 * body_count + 3 * particles[c, k]
                 cols.append((col0[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1).ravel())
                 vals.append(block.ravel())
-    import scipy.sparse as sp               # here, not at the top: it is a tenth of `import contactlab`
+    import scipy.sparse as sp  # here, not at the top: it is a tenth of `import contactlab`
+
     shape = (3 * C, 6 * body_count + 3 * particle_count)
     if not rows:
         return sp.csr_matrix(shape)

@@ -9,14 +9,23 @@ from .dynamics.cloth import spring_energy
 
 def kinetic_energy(model, state) -> float:
     """½ m v² + ½ ωᵀ I ω over bodies, ½ m v² over particles [J]."""
-    return float(kinetic(model.body_mass, model.body_inertia, rotations.to_matrix(state.body_orientation),
-                         state.body_velocity, state.body_angular_velocity, model.particle_mass,
-                         state.particle_velocity))
+    return float(
+        kinetic(
+            model.body_mass,
+            model.body_inertia,
+            rotations.to_matrix(state.body_orientation),
+            state.body_velocity,
+            state.body_angular_velocity,
+            model.particle_mass,
+            state.particle_velocity,
+        )
+    )
 
 
 @njit(cache=True)
-def kinetic(body_mass, body_inertia, body_rotation, body_velocity, body_angular_velocity, particle_mass,
-            particle_velocity):
+def kinetic(
+    body_mass, body_inertia, body_rotation, body_velocity, body_angular_velocity, particle_mass, particle_velocity
+):
     """``kinetic_energy`` from the arrays [J]: masses (B,), (P,) [kg], principal inertia (B, 3)
     [kg m²], rotations (B, 3, 3), velocities (B, 3), (B, 3) world, (P, 3)."""
     energy = 0.0
@@ -24,7 +33,7 @@ def kinetic(body_mass, body_inertia, body_rotation, body_velocity, body_angular_
         v, w, R = body_velocity[b], body_angular_velocity[b], body_rotation[b]
         energy += 0.5 * body_mass[b] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         for i in range(3):
-            spin = R[0, i] * w[0] + R[1, i] * w[1] + R[2, i] * w[2]          # body frame: Rᵀ ω
+            spin = R[0, i] * w[0] + R[1, i] * w[1] + R[2, i] * w[2]  # body frame: Rᵀ ω
             energy += 0.5 * body_inertia[b, i] * spin * spin
     for p in range(particle_mass.shape[0]):
         v = particle_velocity[p]
@@ -35,9 +44,16 @@ def kinetic(body_mass, body_inertia, body_rotation, body_velocity, body_angular_
 def potential_energy(model, state) -> float:
     """Gravitational potential −m g·x (zero at the origin) plus the elastic energy
     Σ ½ k (l − L)² of the cloth springs [J]."""
-    return float(gravitational(model.body_mass, state.body_position, model.particle_mass, state.particle_position,
-                               np.asarray(model.gravity, dtype=float))
-                 + spring_energy(model, state.particle_position))
+    return float(
+        gravitational(
+            model.body_mass,
+            state.body_position,
+            model.particle_mass,
+            state.particle_position,
+            np.asarray(model.gravity, dtype=float),
+        )
+        + spring_energy(model, state.particle_position)
+    )
 
 
 @njit(cache=True)
@@ -68,8 +84,8 @@ def angular_momentum(model, state, origin=(0.0, 0.0, 0.0)):
     if model.body_count:
         inertia_world = rotations.world_inertia(rotations.to_matrix(state.body_orientation), model.body_inertia)
         total += np.einsum("bij,bj->i", inertia_world, state.body_angular_velocity)
-        total += np.sum(np.cross(state.body_position - origin,
-                                 model.body_mass[:, None] * state.body_velocity), axis=0)
-    total += np.sum(np.cross(state.particle_position - origin,
-                             model.particle_mass[:, None] * state.particle_velocity), axis=0)
+        total += np.sum(np.cross(state.body_position - origin, model.body_mass[:, None] * state.body_velocity), axis=0)
+    total += np.sum(
+        np.cross(state.particle_position - origin, model.particle_mass[:, None] * state.particle_velocity), axis=0
+    )
     return total

@@ -27,10 +27,11 @@ from . import rotations
 from .errors import InputError
 from .validation import DIRECTION, FORCE, LENGTH, TORQUE, unit_quaternion, vector
 
-PATH_VELOCITY_STEP = 1e-6       # s: the forward difference giving a kinematic body's velocity at time 0
+PATH_VELOCITY_STEP = 1e-6  # s: the forward difference giving a kinematic body's velocity at time 0
 
 
 # ---- checking the keyframes ------------------------------------------------------------------
+
 
 def keyframe_times(times, name="times"):
     """``times`` as a float array (T,) of finite, strictly increasing numbers [s], T ≥ 1."""
@@ -45,8 +46,10 @@ def keyframe_times(times, name="times"):
     back = np.flatnonzero(np.diff(array) <= 0.0)
     if len(back):
         i = int(back[0])
-        raise InputError(name, f"times must increase strictly, found {array[i + 1]:g} s after {array[i]:g} s "
-                               f"(keyframes {i} and {i + 1})")
+        raise InputError(
+            name,
+            f"times must increase strictly, found {array[i + 1]:g} s after {array[i]:g} s (keyframes {i} and {i + 1})",
+        )
     return array
 
 
@@ -58,8 +61,10 @@ def keyframe_values(values, name, count, size, what, quantity=None):
     except (TypeError, ValueError, OverflowError):
         raise InputError(name, f"expected {count} lists of {size} numbers ({what}), found {values!r}") from None
     if array.shape != (count, size):
-        raise InputError(name, f"expected {count} lists of {size} numbers ({what}), one per time, found an array "
-                               f"of shape {array.shape}")
+        raise InputError(
+            name,
+            f"expected {count} lists of {size} numbers ({what}), one per time, found an array of shape {array.shape}",
+        )
     if not np.isfinite(array).all():
         raise InputError(name, f"expected finite numbers ({what}), found {array.tolist()}")
     if quantity is not None:
@@ -76,14 +81,16 @@ def force_record(body, force=None, torque=None, times=None):
         _given_alone("force", "torque", {"torque": torque, "times": times})
         return dict(body=body, force=None, torque=None, times=None, function=force)
     if times is None:
-        force, torque = (np.zeros(3) if value is None else vector(value, name, quantity=quantity)
-                         for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE)))
+        force, torque = (
+            np.zeros(3) if value is None else vector(value, name, quantity=quantity)
+            for value, name, quantity in ((force, "force", FORCE), (torque, "torque", TORQUE))
+        )
     else:
         times = keyframe_times(times)
-        force, torque = (np.zeros((len(times), 3)) if value is None else
-                         keyframe_values(value, name, len(times), 3, unit, quantity)
-                         for value, name, unit, quantity in ((force, "force", "N", FORCE),
-                                                             (torque, "torque", "N m", TORQUE)))
+        force, torque = (
+            np.zeros((len(times), 3)) if value is None else keyframe_values(value, name, len(times), 3, unit, quantity)
+            for value, name, unit, quantity in ((force, "force", "N", FORCE), (torque, "torque", "N m", TORQUE))
+        )
     return dict(body=body, force=force, torque=torque, times=times, function=None)
 
 
@@ -103,12 +110,15 @@ def path_record(body, positions, orientations, times, orientation):
         times = keyframe_times(times)
         positions = keyframe_values(positions, "positions", len(times), 3, "m", LENGTH)
         if orientations is not None:
-            orientations = keyframe_values(orientations, "orientations", len(times), 4, "quaternions w, x, y, z",
-                                           DIRECTION)
+            orientations = keyframe_values(
+                orientations, "orientations", len(times), 4, "quaternions w, x, y, z", DIRECTION
+            )
             norms = np.linalg.norm(orientations, axis=1)
             if (norms < 1e-12).any():
-                raise InputError("orientations", f"keyframe {int(np.argmin(norms))} is a zero quaternion, no "
-                                                  f"rotation; use [1, 0, 0, 0] for none")
+                raise InputError(
+                    "orientations",
+                    f"keyframe {int(np.argmin(norms))} is a zero quaternion, no rotation; use [1, 0, 0, 0] for none",
+                )
             orientations = orientations / norms[:, None]
     if orientations is None:
         orientations = np.repeat(orientation[None], len(times), axis=0)
@@ -120,11 +130,13 @@ def _given_alone(kind, returns, others):
     a ``kind`` function, which returns the ``returns`` itself."""
     for name, value in others.items():
         if value is not None:
-            raise InputError(name, f"a {kind} function returns the {returns} itself; give no "
-                                   f"{' or '.join(others)} with it")
+            raise InputError(
+                name, f"a {kind} function returns the {returns} itself; give no {' or '.join(others)} with it"
+            )
 
 
 # ---- evaluating padded keyframes, all at once -------------------------------------------------
+
 
 def pad_keyframes(times_list, values_list, size):
     """Keyframe lists of different lengths as padded arrays: times (K, T) and values (K, T, size),
@@ -165,7 +177,7 @@ def slerp(q0, q1, w):
     dot = np.abs(dot)
     angle = np.arccos(np.clip(dot, -1.0, 1.0))
     sine = np.sin(angle)
-    near = sine < 1e-9                      # (nearly) the same rotation: linear, then normalized
+    near = sine < 1e-9  # (nearly) the same rotation: linear, then normalized
     safe = np.where(near, 1.0, sine)
     a = np.where(near, 1.0 - w, np.sin((1.0 - w) * angle) / safe)
     b = np.where(near, w, np.sin(w * angle) / safe)
@@ -187,6 +199,7 @@ def rotation_vectors(q_from, q_to):
 
 # ---- the drive of a model ---------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Drive:
     """Forces and paths of a model with B bodies (see the module docstring).
@@ -197,6 +210,7 @@ class Drive:
     callable t -> (force (3,), torque (3,))), ...). path_body (Q,) int, path_times (Q, T) [s],
     path_positions (Q, T, 3) [m], path_orientations (Q, T, 4): keyframed paths;
     path_functions: ((body, callable t -> (position (3,), orientation (4,))), ...)."""
+
     kinematic: np.ndarray
     constant_force: np.ndarray
     constant_torque: np.ndarray
@@ -217,8 +231,9 @@ class Drive:
 
     @property
     def has_loads(self) -> bool:
-        return bool(self.constant_force.any() or self.constant_torque.any() or len(self.keyed_body)
-                    or self.force_functions)
+        return bool(
+            self.constant_force.any() or self.constant_torque.any() or len(self.keyed_body) or self.force_functions
+        )
 
     def loads(self, t):
         """The external (force (B, 3) [N], torque (B, 3) [N m]) at time t [s], world frame."""
@@ -266,12 +281,15 @@ def called_load(function, t):
 def called_pose(function, t):
     """(position (3,) [m], unit orientation (4,)) of a path callable at time t [s], checked:
     InputError("positions") for a zero quaternion too."""
-    position, orientation = called_pair(function, t, "positions", (3, 4),
-                                        "(position [m] (3,), orientation quaternion (w, x, y, z) (4,))")
+    position, orientation = called_pair(
+        function, t, "positions", (3, 4), "(position [m] (3,), orientation quaternion (w, x, y, z) (4,))"
+    )
     norm = np.linalg.norm(orientation)
     if not norm >= 1e-12:
-        raise InputError("positions", f"the path function returned the zero quaternion at t = {t:g} s; use "
-                                      f"[1, 0, 0, 0] for no rotation")
+        raise InputError(
+            "positions",
+            f"the path function returned the zero quaternion at t = {t:g} s; use [1, 0, 0, 0] for no rotation",
+        )
     return position, orientation / norm
 
 
@@ -288,10 +306,12 @@ def called_pair(function, t, name, sizes, expected):
         first, second = (np.asarray(part, dtype=float) for part in result)
     except (TypeError, ValueError):
         first = second = None
-    if (first is None or (first.shape, second.shape) != ((sizes[0],), (sizes[1],))
-            or not (np.isfinite(first).all() and np.isfinite(second).all())):
-        raise InputError(name, f"the function returned {result!r} at t = {t:g} s; expected {expected}, "
-                               f"finite numbers")
+    if (
+        first is None
+        or (first.shape, second.shape) != ((sizes[0],), (sizes[1],))
+        or not (np.isfinite(first).all() and np.isfinite(second).all())
+    ):
+        raise InputError(name, f"the function returned {result!r} at t = {t:g} s; expected {expected}, finite numbers")
     return first, second
 
 
@@ -308,20 +328,28 @@ def pack(body_count, forces, paths):
         if f["times"] is None and f["function"] is None:
             constant_force[f["body"]] += f["force"]
             constant_torque[f["body"]] += f["torque"]
-    keyed_times, keyed_loads = pad_keyframes([f["times"] for f in keyed],
-                                             [np.hstack([f["force"], f["torque"]]) for f in keyed], 6)
+    keyed_times, keyed_loads = pad_keyframes(
+        [f["times"] for f in keyed], [np.hstack([f["force"], f["torque"]]) for f in keyed], 6
+    )
     framed = [p for p in paths if p["function"] is None]
     path_times, path_positions = pad_keyframes([p["times"] for p in framed], [p["positions"] for p in framed], 3)
     _, path_orientations = pad_keyframes([p["times"] for p in framed], [p["orientations"] for p in framed], 4)
     kinematic = np.zeros(body_count, dtype=bool)
     kinematic[[p["body"] for p in paths]] = True
-    return Drive(kinematic=kinematic, constant_force=constant_force, constant_torque=constant_torque,
-                 keyed_body=np.array([f["body"] for f in keyed], dtype=np.int64),
-                 keyed_times=keyed_times, keyed_loads=keyed_loads,
-                 force_functions=tuple((f["body"], f["function"]) for f in forces if f["function"] is not None),
-                 path_body=np.array([p["body"] for p in framed], dtype=np.int64), path_times=path_times,
-                 path_positions=path_positions, path_orientations=path_orientations,
-                 path_functions=tuple((p["body"], p["function"]) for p in paths if p["function"] is not None))
+    return Drive(
+        kinematic=kinematic,
+        constant_force=constant_force,
+        constant_torque=constant_torque,
+        keyed_body=np.array([f["body"] for f in keyed], dtype=np.int64),
+        keyed_times=keyed_times,
+        keyed_loads=keyed_loads,
+        force_functions=tuple((f["body"], f["function"]) for f in forces if f["function"] is not None),
+        path_body=np.array([p["body"] for p in framed], dtype=np.int64),
+        path_times=path_times,
+        path_positions=path_positions,
+        path_orientations=path_orientations,
+        path_functions=tuple((p["body"], p["function"]) for p in paths if p["function"] is not None),
+    )
 
 
 def start_on_paths(drive, state):
@@ -331,7 +359,8 @@ def start_on_paths(drive, state):
         return state
     bodies, position, orientation = drive.poses(state.time)
     state.body_position[bodies], state.body_orientation[bodies] = position, orientation
-    bodies, velocity, angular = drive.path_velocities(state.body_position, state.body_orientation, state.time,
-                                                      PATH_VELOCITY_STEP)
+    bodies, velocity, angular = drive.path_velocities(
+        state.body_position, state.body_orientation, state.time, PATH_VELOCITY_STEP
+    )
     state.body_velocity[bodies], state.body_angular_velocity[bodies] = velocity, angular
     return state

@@ -11,12 +11,12 @@ cuts it (in :class:`InputError` itself, so every message is cut the same way).
 
 import re
 
-LONGEST_WORD = 80           # characters: a longer run without spaces (a key, a value, a path) is cut
-LONGEST_MESSAGE = 500       # characters: a longer message is cut
+LONGEST_WORD = 80  # characters: a longer run without spaces (a key, a value, a path) is cut
+LONGEST_MESSAGE = 500  # characters: a longer message is cut
 ELLIPSIS = "…"
 
-_LINE_BREAKING = re.compile("[\x00-\x1f\x7f\x85\u2028\u2029]")   # control characters, line breaks
-_LONG_WORD = re.compile(r"\S{%d,}" % (LONGEST_WORD + 1))
+_LINE_BREAKING = re.compile("[\x00-\x1f\x7f\x85\u2028\u2029]")  # control characters, line breaks
+_LONG_WORD = re.compile(rf"\S{{{LONGEST_WORD + 1},}}")
 
 
 def _cut(text, limit):
@@ -24,7 +24,7 @@ def _cut(text, limit):
     if len(text) <= limit:
         return text
     head = (limit - 1) // 2
-    return text[:head] + ELLIPSIS + text[len(text) - (limit - 1 - head):]
+    return text[:head] + ELLIPSIS + text[len(text) - (limit - 1 - head) :]
 
 
 def shorten(text) -> str:

@@ -26,23 +26,35 @@ import numpy as np
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import (atomic_path, checked_times, make_folders, read_trajectory, remove_empty, sample_count,
-                     undo_written)
+from .record import atomic_path, checked_times, make_folders, read_trajectory, remove_empty, sample_count, undo_written
 from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
-OBJ_DIGITS = 9              # decimals of the coordinates in OBJ text: 1 nm
+OBJ_DIGITS = 9  # decimals of the coordinates in OBJ text: 1 nm
 
-_REQUIRED = ("time", "body_position", "body_orientation", "body_names", "particle_position",
-             "particle_radius", "particle_cloth", "triangles", "body_surface_vertices",
-             "body_surface_vertex_start", "body_surface_triangles", "body_surface_triangle_start",
-             "obstacle_vertices", "obstacle_triangles")
+_REQUIRED = (
+    "time",
+    "body_position",
+    "body_orientation",
+    "body_names",
+    "particle_position",
+    "particle_radius",
+    "particle_cloth",
+    "triangles",
+    "body_surface_vertices",
+    "body_surface_vertex_start",
+    "body_surface_triangles",
+    "body_surface_triangle_start",
+    "obstacle_vertices",
+    "obstacle_triangles",
+)
 
 
 # ---------------------------------------------------------------------------------------------
 # Arguments and the static decomposition of a trajectory into objects
 # ---------------------------------------------------------------------------------------------
+
 
 def _check_every(every):
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
@@ -54,7 +66,7 @@ def frame_samples(count, every=1) -> np.ndarray:
     """Indices of the samples exported from a trajectory of ``count`` samples: every
     ``every``-th one, starting with the first and always including the last."""
     every = _check_every(every)
-    samples = np.arange(0, count, min(every, max(count, 1)))    # beyond the count: the first and the last
+    samples = np.arange(0, count, min(every, max(count, 1)))  # beyond the count: the first and the last
     if count and samples[-1] != count - 1:
         samples = np.append(samples, count - 1)
     return samples
@@ -83,8 +95,7 @@ class _Parts:
         self.body_count = len(start) - 1
         self.body_vertices = [(int(start[b]), int(start[b + 1])) for b in range(self.body_count)]
         # triangles of body b, as indices into its own vertices
-        self.body_triangles = [triangles[tri_start[b]:tri_start[b + 1]] - start[b]
-                               for b in range(self.body_count)]
+        self.body_triangles = [triangles[tri_start[b] : tri_start[b + 1]] - start[b] for b in range(self.body_count)]
         self.body_local = data["body_surface_vertices"].astype(float).reshape(-1, 3)
         self.body_names = [str(name) for name in data["body_names"]]
 
@@ -92,7 +103,7 @@ class _Parts:
         cloth_triangles = data["triangles"].astype(np.int64).reshape(-1, 3)
         owner = cloth[cloth_triangles[:, 0]] if len(cloth_triangles) else np.zeros(0, np.int64)
         lookup = np.full(len(cloth), -1, dtype=np.int64)
-        self.cloths = []                    # (cloth index, particle indices, local triangles)
+        self.cloths = []  # (cloth index, particle indices, local triangles)
         for c in range(int(cloth.max()) + 1 if len(cloth) else 0):
             ids = np.flatnonzero(cloth == c)
             if len(ids) == 0:
@@ -104,12 +115,13 @@ class _Parts:
 
         self.obstacle_vertices = data["obstacle_vertices"].astype(float).reshape(-1, 3)
         self.obstacle_triangles = data["obstacle_triangles"].astype(np.int64).reshape(-1, 3)
-        self.object_names = _obj_names(self)     # the bodies' names in mesh files
+        self.object_names = _obj_names(self)  # the bodies' names in mesh files
 
 
 # ---------------------------------------------------------------------------------------------
 # Mesh sequences: OBJ and PLY
 # ---------------------------------------------------------------------------------------------
+
 
 def _frame_objects(parts, data, sample):
     """[(name, world vertices (n,3), triangles (m,3) or None for points)] of one sample, in the
@@ -154,7 +166,7 @@ class _ObjWriter:
             name = name.replace("{", "{{").replace("}", "}}")
             pieces.append(f"o {name}\n")
             pieces.append(f"v {{:.{OBJ_DIGITS}f}} {{:.{OBJ_DIGITS}f}} {{:.{OBJ_DIGITS}f}}\n" * len(vertices))
-            if tri is not None:        # a point-only object (particles) is loose vertices
+            if tri is not None:  # a point-only object (particles) is loose vertices
                 pieces.append(("f {} {} {}\n" * len(tri)).format(*(tri + count + 1).ravel().tolist()))
             count += len(vertices)
         self.template = "".join(pieces)
@@ -204,7 +216,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     file_format = file_format.lower().lstrip(".")
     every = _check_every(every)
     samples = frame_samples(sample_count(arrays), every)
-    data = read_trajectory(arrays, _REQUIRED, samples)      # only the samples exported are read
+    data = read_trajectory(arrays, _REQUIRED, samples)  # only the samples exported are read
     check_arrays(data)
     parts = _Parts(data)
     writer = _ObjWriter(_frame_objects(parts, data, 0)) if file_format == "obj" else None
@@ -213,13 +225,12 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
     made, written = make_folders(directory), []
     try:
         for j, sample in enumerate(samples):
-            interrupts.check()                    # Ctrl-C or SIGTERM: between frames
+            interrupts.check()  # Ctrl-C or SIGTERM: between frames
             path = os.path.join(directory, f"frame_{j:05d}.{file_format}")
             objects = _frame_objects(parts, data, j)
             with atomic_path(path) as temporary:
                 if file_format == "obj":
-                    header = (f"contactlab frame {j}: sample {sample}, t = {float(data['time'][j]):.9g} s; "
-                              "metres, z up")
+                    header = f"contactlab frame {j}: sample {sample}, t = {float(data['time'][j]):.9g} s; metres, z up"
                     writer.write(temporary, objects, header)
                 else:
                     _write_ply(temporary, objects)
@@ -228,7 +239,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
         undo_written(written, made)
         raise
     pattern = re.compile(r"frame_(\d{5,})\." + file_format + "$")
-    for name in os.listdir(directory):          # stale frames of a longer, earlier export
+    for name in os.listdir(directory):  # stale frames of a longer, earlier export
         match = pattern.match(name)
         if match and int(match.group(1)) >= len(samples):
             os.unlink(os.path.join(directory, name))
@@ -238,6 +249,7 @@ def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> lis
 # ---------------------------------------------------------------------------------------------
 # USD
 # ---------------------------------------------------------------------------------------------
+
 
 def _continuous(q):
     """Quaternions (S, B, 4) with signs flipped so that consecutive samples lie in one
@@ -253,6 +265,7 @@ def _continuous(q):
 def _extent(points, pad=None):
     """[min, max] corners of ``points`` (n, 3), grown by ``pad`` (n,) per point if given."""
     from pxr import Vt
+
     if len(points) == 0:
         return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
     pad = np.zeros((len(points), 1)) if pad is None else np.asarray(pad)[:, None]
@@ -263,11 +276,12 @@ def _extent(points, pad=None):
 def _define_mesh(stage, path, points, triangles, double_sided=False):
     """A triangle Mesh at ``path`` with static topology; ``points`` static if given."""
     from pxr import UsdGeom, Vt
+
     mesh = UsdGeom.Mesh.Define(stage, path)
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(triangles), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(triangles.astype(np.int32).ravel()))
-    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)    # flat triangles, not a subdivision cage
-    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)   # counter-clockwise seen from the front
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)  # flat triangles, not a subdivision cage
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # counter-clockwise seen from the front
     mesh.CreateDoubleSidedAttr(double_sided)
     if points is not None:
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)))
@@ -293,7 +307,7 @@ def write_usd(arrays, path, *, every=1) -> str:
     every = _check_every(every)
     time = checked_times(arrays).astype(float)
     samples = frame_samples(len(time), every)
-    data = read_trajectory(arrays, _REQUIRED, samples)      # only the samples exported are read
+    data = read_trajectory(arrays, _REQUIRED, samples)  # only the samples exported are read
     check_arrays(data)
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
@@ -305,7 +319,7 @@ def write_usd(arrays, path, *, every=1) -> str:
     steps = steps[steps > 0]
     if len(steps):
         rate = 1.0 / float(np.median(steps))
-        if abs(rate - round(rate)) < 1e-9 * rate:       # 1/(1/240) is 240.00000000000085
+        if abs(rate - round(rate)) < 1e-9 * rate:  # 1/(1/240) is 240.00000000000085
             rate = float(round(rate))
         stage.SetTimeCodesPerSecond(rate)
         stage.SetFramesPerSecond(rate)
@@ -327,7 +341,7 @@ def write_usd(arrays, path, *, every=1) -> str:
         orientation = _continuous(data["body_orientation"].astype(float))
         for b, name in enumerate(names):
             body = UsdGeom.Xform.Define(stage, f"/World/Bodies/{name}")
-            if name != parts.body_names[b] and hasattr(Usd.Prim, "SetDisplayName"):   # USD ≥ 23.11
+            if name != parts.body_names[b] and hasattr(Usd.Prim, "SetDisplayName"):  # USD ≥ 23.11
                 body.GetPrim().SetDisplayName(parts.body_names[b])
             translate = body.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
             orient = body.AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
@@ -361,8 +375,7 @@ def write_usd(arrays, path, *, every=1) -> str:
             extent.Set(_extent(positions[k, parts.free], parts.free_radius), code)
 
     if len(parts.obstacle_vertices):
-        _define_mesh(stage, "/World/Obstacles", parts.obstacle_vertices, parts.obstacle_triangles,
-                     double_sided=True)
+        _define_mesh(stage, "/World/Obstacles", parts.obstacle_vertices, parts.obstacle_triangles, double_sided=True)
 
     # pxr picks the file format (text or crate) from the suffix, which the temporary keeps
     path = os.fspath(path)

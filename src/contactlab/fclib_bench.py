@@ -37,7 +37,7 @@ from .threads import available_threads
 
 SOLVERS = ("nsgs", "staggered", "apgd", "newton")
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-MAX_ITERATIONS = {"newton": 1000, "nsgs": 10000, "staggered": 10000, "apgd": 10000}   # default caps
+MAX_ITERATIONS = {"newton": 1000, "nsgs": 10000, "staggered": 10000, "apgd": 10000}  # default caps
 COLUMNS = ("problem", "contacts", "solver", "converged", "error", "iterations", "seconds", "worker", "status")
 DEFAULT_OUT = os.path.join("out", "fclib-bench")
 
@@ -47,6 +47,7 @@ class Bench:
     """What :func:`bench` did: ``table`` (pandas.DataFrame, columns COLUMNS, one row per
     (problem, solver), problems in file-name order, solvers in the order asked), and the paths
     of the folder ``out`` and of the files written into it."""
+
     table: pd.DataFrame
     csv: Path
     markdown: Path
@@ -59,6 +60,7 @@ class Job:
     """One (problem, solver) solve, as sent to a worker: the problem's ``path``, the
     ``solver``, the tolerance ``tol`` on the normalized natural-map error (dimensionless), the
     ``max_iterations`` cap, and how many timed ``repeats``."""
+
     path: str
     solver: str
     tol: float
@@ -81,34 +83,48 @@ def run_job(job: Job) -> dict:
         row["contacts"] = problem.nc
 
         def solve():
-            return solve_friction_contact(problem.W, problem.q, problem.mu, method=job.solver, tol=job.tol,
-                                          max_iterations=job.max_iterations)
+            return solve_friction_contact(
+                problem.W, problem.q, problem.mu, method=job.solver, tol=job.tol, max_iterations=job.max_iterations
+            )
 
-        solve()                                 # untimed: Numba compiles, or loads its cache
+        solve()  # untimed: Numba compiles, or loads its cache
         best = math.inf
         for _ in range(job.repeats):
             start = time.perf_counter()
             result = solve()
             best = min(best, time.perf_counter() - start)
         error = natural_map_error(problem.W, problem.q, problem.mu, result.r)
-    except Exception as failure:                # a bad file, a solver's error: the row says so
+    except Exception as failure:  # a bad file, a solver's error: the row says so
         row["status"] = _status(failure)
         return row
-    row.update(converged=bool(error <= job.tol), error=float(error), iterations=int(result.iterations),
-               seconds=best, status="ok")
+    row.update(
+        converged=bool(error <= job.tol),
+        error=float(error),
+        iterations=int(result.iterations),
+        seconds=best,
+        status="ok",
+    )
     return row
 
 
 def _failed_row(job, failure, worker=""):
     """The row of ``job`` when it gave no result: status from ``failure`` ("" if None), the
     ``worker`` it ran on ("" when unknown)."""
-    return dict(problem=Path(job.path).name, contacts=None, solver=job.solver, converged=False, error=math.nan,
-                iterations=None, seconds=math.nan, worker=worker,
-                status=_status(failure) if failure is not None else "")
+    return dict(
+        problem=Path(job.path).name,
+        contacts=None,
+        solver=job.solver,
+        converged=False,
+        error=math.nan,
+        iterations=None,
+        seconds=math.nan,
+        worker=worker,
+        status=_status(failure) if failure is not None else "",
+    )
 
 
 def _status(failure) -> str:
-    """"error: <type>: <first line>" of an exception, one short line."""
+    """ "error: <type>: <first line>" of an exception, one short line."""
     first = first_line(failure)
     name = type(failure).__name__
     return shorten(f"error: {name}: {first}" if first != name else f"error: {name}")
@@ -116,8 +132,9 @@ def _status(failure) -> str:
 
 def _machine() -> dict:
     """Where a worker runs: host, cores, NUMBA_NUM_THREADS and the 1-minute load average."""
-    return dict(host=socket.gethostname(), cores=os.cpu_count(), numba_threads=available_threads(),
-                load=os.getloadavg()[0])
+    return dict(
+        host=socket.gethostname(), cores=os.cpu_count(), numba_threads=available_threads(), load=os.getloadavg()[0]
+    )
 
 
 # ----------------------------------------------------------------------------- the performance profile
@@ -138,19 +155,21 @@ def performance_profile(times, solved, solvers=None):
     times = np.asarray(times, dtype=np.float64)
     solved = np.asarray(solved, dtype=bool)
     if times.ndim != 2 or times.shape != solved.shape or times.shape[0] == 0:
-        raise InputError("times", f"expected times and solved of one shape (problems ≥ 1, solvers), "
-                                  f"found {times.shape} and {solved.shape}.")
+        raise InputError(
+            "times",
+            f"expected times and solved of one shape (problems ≥ 1, solvers), found {times.shape} and {solved.shape}.",
+        )
     names = list(range(times.shape[1])) if solvers is None else list(solvers)
     if len(names) != times.shape[1]:
         raise InputError("solvers", f"expected {times.shape[1]} solver names, found {len(names)}.")
     if not np.all(np.isfinite(times[solved]) & (times[solved] > 0)):
         raise InputError("times", "expected a positive finite time for every solved pair.")
     usable = np.where(solved, times, np.inf)
-    best = usable.min(axis=1, keepdims=True)                 # inf where no solver solved the problem
+    best = usable.min(axis=1, keepdims=True)  # inf where no solver solved the problem
     with np.errstate(invalid="ignore"):
         ratios = np.where(solved, usable / best, np.inf)
     taus = np.unique(np.concatenate(([1.0], ratios[np.isfinite(ratios)])))
-    within = ratios[:, :, None] <= taus[None, None, :]       # (P, S, T)
+    within = ratios[:, :, None] <= taus[None, None, :]  # (P, S, T)
     fractions = within.sum(axis=0) / times.shape[0]
     return taus, {name: fractions[index] for index, name in enumerate(names)}
 
@@ -159,10 +178,17 @@ def profile_figure(taus, fractions, title):
     """A Figure of the profile (:func:`performance_profile`'s output): one step line per solver,
     τ on a log2 axis from 1 to past the largest ratio."""
     figure, (ax,) = _figure(title)
-    right = max(2.0, float(taus[-1]) * 2 ** 0.25)           # room to see the last step
+    right = max(2.0, float(taus[-1]) * 2**0.25)  # room to see the last step
     for index, (solver, values) in enumerate(fractions.items()):
-        ax.step(np.append(taus, right), np.append(values, values[-1]), where="post", label=str(solver),
-                color=f"C{index % 10}", linestyle=STYLES[index % len(STYLES)], linewidth=1.6)
+        ax.step(
+            np.append(taus, right),
+            np.append(values, values[-1]),
+            where="post",
+            label=str(solver),
+            color=f"C{index % 10}",
+            linestyle=STYLES[index % len(STYLES)],
+            linewidth=1.6,
+        )
     ax.set_xscale("log", base=2)
     ax.set_xlim(1.0, right)
     ax.set_ylim(-0.02, 1.02)
@@ -222,8 +248,18 @@ def _check_settings(tol, repeats, out):
         raise InputError("--out", f"expected a folder for the results, found a file at {out}.")
 
 
-def bench(directory, solvers=None, out=None, *, scheduler=None, workers=None, tol=1e-8, max_iterations=None,
-          repeats=3, progress=False) -> Bench:
+def bench(
+    directory,
+    solvers=None,
+    out=None,
+    *,
+    scheduler=None,
+    workers=None,
+    tol=1e-8,
+    max_iterations=None,
+    repeats=3,
+    progress=False,
+) -> Bench:
     """Solve every problem file of ``directory`` with every solver of ``solvers`` (default:
     all of SOLVERS) on Dask, and write results.csv, results.md and profile.png into ``out``
     (default ``out/fclib-bench``, created if needed).
@@ -245,8 +281,11 @@ def bench(directory, solvers=None, out=None, *, scheduler=None, workers=None, to
     _check_settings(tol, repeats, out)
     repeats = int(repeats)
     files = problem_files(directory)
-    jobs = {f"fclib-{index}-{solver}": Job(str(path.resolve()), solver, float(tol), caps[solver], repeats)
-            for index, path in enumerate(files) for solver in solvers}
+    jobs = {
+        f"fclib-{index}-{solver}": Job(str(path.resolve()), solver, float(tol), caps[solver], repeats)
+        for index, path in enumerate(files)
+        for solver in solvers
+    }
 
     rows = {}
     with cluster.connect(scheduler, workers) as client:
@@ -255,7 +294,7 @@ def bench(directory, solvers=None, out=None, *, scheduler=None, workers=None, to
             rows[key] = _failed_row(jobs[key], result) if isinstance(result, BaseException) else result
         after = client.run(_machine, on_error="ignore")
 
-    table = pd.DataFrame([rows[key] for key in jobs], columns=list(COLUMNS))   # jobs' order: problems, solvers
+    table = pd.DataFrame([rows[key] for key in jobs], columns=list(COLUMNS))  # jobs' order: problems, solvers
     table = table.astype({"contacts": "Int64", "iterations": "Int64", "converged": bool})
     settings = dict(directory=str(directory), tol=float(tol), caps=caps, repeats=repeats)
     return _write(table, solvers, out, settings, _machine_line(before, after))
@@ -334,8 +373,10 @@ def markdown(table, solvers, settings, machine) -> str:
     summary = []
     for solver in solvers:
         rows = table[table["solver"] == solver]
-        summary.append(f"{solver} {int(rows['converged'].sum())} of {problems} solved, "
-                       f"{rows['seconds'].sum(skipna=True):.3g} s in all")
+        summary.append(
+            f"{solver} {int(rows['converged'].sum())} of {problems} solved, "
+            f"{rows['seconds'].sum(skipna=True):.3g} s in all"
+        )
     lines += ["", "Per solver: " + "; ".join(summary) + ".", "", machine, ""]
     return "\n".join(lines)
 
@@ -353,7 +394,9 @@ def _machine_line(before, after) -> str:
         info = entries[0][0]
         loads_after = [later["load"] for _, later in entries if later]
         load_after = f"{loads_after[0]:.2f}" if loads_after else "unknown"
-        parts.append(f"{host} ({info['cores']} cores, NUMBA_NUM_THREADS {info['numba_threads']}, "
-                     f"{len(entries)} Dask worker{'s' if len(entries) != 1 else ''}), load average (1 min) "
-                     f"{info['load']:.2f} before the jobs, {load_after} after")
+        parts.append(
+            f"{host} ({info['cores']} cores, NUMBA_NUM_THREADS {info['numba_threads']}, "
+            f"{len(entries)} Dask worker{'s' if len(entries) != 1 else ''}), load average (1 min) "
+            f"{info['load']:.2f} before the jobs, {load_after} after"
+        )
     return "Machine: " + "; ".join(parts) + "."

@@ -33,17 +33,18 @@ import numpy as np
 from . import shapes
 from .collision import pass_through_depths
 
-SPEED_FACTOR = 10.0       # × the scene's speed scale
-ENERGY_GAIN = 0.5         # × the scene's energy scale
-DEPTH_FRACTION = 0.75     # × a contact's pass-through depth
-HARD_SPEED = 1e6          # m/s: beyond this (or non-finite) the state is unusable, whatever is allowed
-ENERGY_SERIES = ("time", "energy_kinetic", "energy_potential", "energy_elastic")   # what check_samples reads
+SPEED_FACTOR = 10.0  # × the scene's speed scale
+ENERGY_GAIN = 0.5  # × the scene's energy scale
+DEPTH_FRACTION = 0.75  # × a contact's pass-through depth
+HARD_SPEED = 1e6  # m/s: beyond this (or non-finite) the state is unusable, whatever is allowed
+ENERGY_SERIES = ("time", "energy_kinetic", "energy_potential", "energy_elastic")  # what check_samples reads
 
 
 @dataclass
 class Violation:
     """What a check found: ``check`` (finite | speed | energy | depth), at ``time`` [s], in one
     sentence ``what`` (no fix: see ``Health.message``)."""
+
     check: str
     time: float
     what: str
@@ -73,11 +74,15 @@ class Health:
         dynamic = model.body_count + model.particle_count
         params = model.collider_table[1][dynamic:][kinds[dynamic:] == shapes.PLANE]
         length = np.linalg.norm(params[:, :3], axis=1)
-        self.plane_normals = params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3))   # (Pl, 3)
+        self.plane_normals = params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3))  # (Pl, 3)
         self.plane_offsets = params[:, 3] / length if len(params) else np.zeros(0)
-        self.half_thickness = model.collider_half_thickness[:dynamic] + np.r_[     # pinned, kinematic: never checked
-            np.where(model.body_kinematic, np.inf, 0.0), np.where(model.particle_pinned, np.inf, 0.0)]
-        self.initial_depth_ratio = 0.0      # see start()
+        self.half_thickness = (
+            model.collider_half_thickness[:dynamic]
+            + np.r_[  # pinned, kinematic: never checked
+                np.where(model.body_kinematic, np.inf, 0.0), np.where(model.particle_pinned, np.inf, 0.0)
+            ]
+        )
+        self.initial_depth_ratio = 0.0  # see start()
 
     # ---- the checks --------------------------------------------------------------------------
 
@@ -86,12 +91,20 @@ class Health:
         ``full`` False (between samples): the speeds alone, which a non-finite velocity makes NaN."""
         speed = state.max_speed()
         if not (speed <= HARD_SPEED and (not full or state.is_finite())):
-            return self._found(Violation("finite", state.time, f"the state stopped being finite (or passed "
-                                                                f"{HARD_SPEED:g} m/s)"), always=True)
+            return self._found(
+                Violation("finite", state.time, f"the state stopped being finite (or passed {HARD_SPEED:g} m/s)"),
+                always=True,
+            )
         if speed > self.speed_limit:
-            return self._found(Violation("speed", state.time, f"a body or particle reached {speed:.3g} m/s, "
-                                                              f"{SPEED_FACTOR:g}× the scene's speed scale "
-                                                              f"({self.speed_limit / SPEED_FACTOR:.3g} m/s)"))
+            return self._found(
+                Violation(
+                    "speed",
+                    state.time,
+                    f"a body or particle reached {speed:.3g} m/s, "
+                    f"{SPEED_FACTOR:g}× the scene's speed scale "
+                    f"({self.speed_limit / SPEED_FACTOR:.3g} m/s)",
+                )
+            )
         return None
 
     def check_samples(self, arrays, first=0):
@@ -109,10 +122,15 @@ class Health:
                 return self._found(Violation("finite", time, "the energy stopped being finite"), always=True)
             gain = float(energy[row]) - self.initial_energy
             if gain > ENERGY_GAIN * self.energy_scale + 1e-9:
-                found = self._found(Violation(
-                    "energy", time, f"the total energy rose {gain:.3g} J above its start ({self.initial_energy:.4g} "
-                                    f"J), more than {ENERGY_GAIN:g}× the scene's energy scale "
-                                    f"({self.energy_scale:.3g} J) and with no outside work to explain it"))
+                found = self._found(
+                    Violation(
+                        "energy",
+                        time,
+                        f"the total energy rose {gain:.3g} J above its start ({self.initial_energy:.4g} "
+                        f"J), more than {ENERGY_GAIN:g}× the scene's energy scale "
+                        f"({self.energy_scale:.3g} J) and with no outside work to explain it",
+                    )
+                )
                 if found:
                     return found
         return None
@@ -121,6 +139,7 @@ class Health:
         """Note how deep the run starts (a scene may begin overlapping, or with a pinned vertex
         inside an obstacle): the depth check then trips only past that."""
         from .collision import collide
+
         ratio, _ = self._depth_ratios(collide(self.model, state))
         self.initial_depth_ratio = float(ratio.max(initial=0.0))
 
@@ -131,8 +150,8 @@ class Health:
         if contacts.count == 0:
             return np.zeros(0), np.zeros(0)
         through = pass_through_depths(self.model, contacts)
-        free = np.r_[~np.asarray(self.model.particle_pinned, dtype=bool), False]     # index −1: no particle
-        moves = np.r_[~self.model.body_kinematic, False]                               # index −1: no body
+        free = np.r_[~np.asarray(self.model.particle_pinned, dtype=bool), False]  # index −1: no particle
+        moves = np.r_[~self.model.body_kinematic, False]  # index −1: no body
         movable = moves[contacts.body_a] | moves[contacts.body_b]
         for side in (contacts.particles_a, contacts.particles_b):
             movable |= free[side].any(axis=1)
@@ -144,10 +163,16 @@ class Health:
             ratio, through = self._depth_ratios(contacts)
             worst = int(np.argmax(ratio))
             if ratio[worst] > max(1.0, 1.1 * self.initial_depth_ratio):
-                return self._found(Violation("depth", state.time, f"a contact is {contacts.depth[worst] * 1000:.3g} mm "
-                                                                  f"deep, past {DEPTH_FRACTION:g} of the depth at which "
-                                                                  f"one side reaches the other's middle "
-                                                                  f"({through[worst] * 1000:.3g} mm)"))
+                return self._found(
+                    Violation(
+                        "depth",
+                        state.time,
+                        f"a contact is {contacts.depth[worst] * 1000:.3g} mm "
+                        f"deep, past {DEPTH_FRACTION:g} of the depth at which "
+                        f"one side reaches the other's middle "
+                        f"({through[worst] * 1000:.3g} mm)",
+                    )
+                )
         return self._behind_planes(state)
 
     def _behind_planes(self, state):
@@ -157,9 +182,15 @@ class Health:
         behind = self.plane_offsets[None, :] - centres @ self.plane_normals.T - self.half_thickness[:, None]
         worst = np.unravel_index(np.argmax(behind), behind.shape)
         if behind[worst] > 1e-9:
-            return self._found(Violation("depth", state.time, f"a body or particle centre is "
-                                                              f"{behind[worst] + self.half_thickness[worst[0]]:.3g} m "
-                                                              f"behind a static plane: it went through"))
+            return self._found(
+                Violation(
+                    "depth",
+                    state.time,
+                    f"a body or particle centre is "
+                    f"{behind[worst] + self.half_thickness[worst[0]]:.3g} m "
+                    f"behind a static plane: it went through",
+                )
+            )
         return None
 
     # ---- what is done with a violation ---------------------------------------------------------
@@ -179,9 +210,14 @@ class Health:
 
     def summary(self):
         """The summary's ``health`` entry: the checks' limits and what was let pass."""
-        return {"speed_limit": self.speed_limit, "energy_scale": self.energy_scale, "energy_gain": ENERGY_GAIN,
-                "depth_fraction": DEPTH_FRACTION, "allow_divergence": self.allow_divergence,
-                "violations": [{"check": v.check, "time": v.time, "what": v.what} for v in self.violations]}
+        return {
+            "speed_limit": self.speed_limit,
+            "energy_scale": self.energy_scale,
+            "energy_gain": ENERGY_GAIN,
+            "depth_fraction": DEPTH_FRACTION,
+            "allow_divergence": self.allow_divergence,
+            "violations": [{"check": v.check, "time": v.time, "what": v.what} for v in self.violations],
+        }
 
 
 def _scene_size(model, state):
@@ -200,4 +236,5 @@ def _scene_size(model, state):
 
 def _kinetic(model, state):
     from .diagnostics import kinetic_energy
+
     return float(kinetic_energy(model, state))

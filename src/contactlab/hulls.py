@@ -48,14 +48,15 @@ compiled routines of :mod:`contactlab.collision.convex`; :func:`box_as_hull` pac
 way (the builder gives every box body such a hull, for the hull routines to meet it).
 """
 
-from dataclasses import dataclass, field as dataclass_field
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 
 import numpy as np
 
 from .errors import InputError
 
-TOLERANCE = 1e-9          # geometric tolerance, × the diagonal of the points' bounding box
-CONVEX_TOLERANCE = 1e-6   # require_convex: a point deeper inside than this × the diagonal is "inside"
+TOLERANCE = 1e-9  # geometric tolerance, × the diagonal of the points' bounding box
+CONVEX_TOLERANCE = 1e-6  # require_convex: a point deeper inside than this × the diagonal is "inside"
 DEFAULT_DENSITY = 1000.0  # [kg/m³] when neither mass nor density is given (water)
 
 
@@ -120,7 +121,7 @@ class Hull:
 
     def face(self, f) -> np.ndarray:
         """Vertex indices (counter-clockwise from outside) of face ``f``."""
-        return self.face_vertex_index[self.face_vertex_start[f]:self.face_vertex_start[f + 1]]
+        return self.face_vertex_index[self.face_vertex_start[f] : self.face_vertex_start[f + 1]]
 
     def given_vertices(self) -> np.ndarray:
         """(V, 3) the vertices [m] in the frame the points were given in."""
@@ -139,8 +140,10 @@ class Hull:
         return body_position, body_orientation
 
     def __repr__(self):
-        return (f"Hull({self.vertex_count} vertices, {self.face_count} faces, {self.edge_count} edges, "
-                f"volume {self.volume:.6g} m³, mass {self.mass:.6g} kg)")
+        return (
+            f"Hull({self.vertex_count} vertices, {self.face_count} faces, {self.edge_count} edges, "
+            f"volume {self.volume:.6g} m³, mass {self.mass:.6g} kg)"
+        )
 
 
 # ------------------------------------------------------------------------------------------
@@ -170,13 +173,14 @@ def build_hull(points, field="points", *, mass=None, density=None, require_conve
     if len(unique) < 4:
         raise InputError(field, f"expected at least 4 distinct points, found {len(unique)}")
     triangles, equations = _qhull(points[unique], field)
-    triangles = unique[triangles]                         # back to indices into ``points``
+    triangles = unique[triangles]  # back to indices into ``points``
     faces, face_normals = _merge_coplanar(points, triangles, equations, tolerance)
     faces = _polygons(points, faces, face_normals, tolerance)
     volume, center, second_moment = _volume_moments(points, faces)
-    if not volume > TOLERANCE * size ** 3:                    # zero volume up to round-off
-        raise InputError(field, "expected points spanning a solid, found a flat or collinear set "
-                         f"(volume {volume:.3g} m³)")
+    if not volume > TOLERANCE * size**3:  # zero volume up to round-off
+        raise InputError(
+            field, f"expected points spanning a solid, found a flat or collinear set (volume {volume:.3g} m³)"
+        )
     if require_convex:
         _check_convex(points, faces, face_normals, field, size)
     edges, edge_faces = _edges(faces, field)
@@ -194,7 +198,7 @@ def build_hull(points, field="points", *, mass=None, density=None, require_conve
     local = np.full(len(points), -1, dtype=np.int64)
     local[used] = np.arange(len(used))
     body_vertices = (points[used] - center) @ axes
-    normals = face_normals @ axes                         # rows: the normals in the body frame
+    normals = face_normals @ axes  # rows: the normals in the body frame
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     starts = np.concatenate([[0], np.cumsum([len(p) for p in faces])]).astype(np.int64)
     corners = local[np.concatenate(faces)]
@@ -210,9 +214,13 @@ def build_hull(points, field="points", *, mass=None, density=None, require_conve
         face_vertex_index=corners.astype(np.int64),
         edge_vertex=local[edges].astype(np.int64).reshape(-1, 2) if len(edges) else np.zeros((0, 2), np.int64),
         edge_face=edge_faces,
-        mass=float(mass), volume=float(volume), density=float(density),
-        inertia=moments, inertia_tensor=tensor,
-        orientation=_matrix_to_quaternion(axes), offset=center,
+        mass=float(mass),
+        volume=float(volume),
+        density=float(density),
+        inertia=moments,
+        inertia_tensor=tensor,
+        orientation=_matrix_to_quaternion(axes),
+        offset=center,
         radius=float(np.linalg.norm(body_vertices, axis=1).max()),
         source_indices=used,
     )
@@ -222,16 +230,20 @@ def _as_points(points, field):
     try:
         points = np.array(points, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(field, "expected an array of 3D points (n, 3) [m], "
-                         "found values that are not numbers") from None
+        raise InputError(
+            field, "expected an array of 3D points (n, 3) [m], found values that are not numbers"
+        ) from None
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError(field, f"expected an array of 3D points of shape (n, 3), found shape {points.shape}")
     if len(points) < 4:
         raise InputError(field, f"expected at least 4 points to enclose a solid, found {len(points)}")
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any():
-        raise InputError(field, f"expected finite coordinates, found {int(bad.sum())} points with NaN or infinite "
-                         f"values (first: point {int(np.argmax(bad))})")
+        raise InputError(
+            field,
+            f"expected finite coordinates, found {int(bad.sum())} points with NaN or infinite "
+            f"values (first: point {int(np.argmax(bad))})",
+        )
     return points
 
 
@@ -277,8 +289,9 @@ def _qhull(points, field):
     try:
         hull = ConvexHull(points)
     except QhullError:
-        raise InputError(field, "expected points spanning a solid, "
-                         "found a flat or collinear set (zero volume)") from None
+        raise InputError(
+            field, "expected points spanning a solid, found a flat or collinear set (zero volume)"
+        ) from None
     return hull.simplices.astype(np.int64), hull.equations
 
 
@@ -311,8 +324,10 @@ def _merge_coplanar(points, triangles, equations, tolerance):
     offsets = -equations[:, 3]
     close = np.einsum("ij,ij->i", normals[s_idx], normals[t_idx]) >= 1.0 - 5e-13
     for s, t in zip(s_idx[close].tolist(), t_idx[close].tolist()):
-        if (np.abs(points[triangles[t]] @ normals[s] - offsets[s]).max() > tolerance
-                or np.abs(points[triangles[s]] @ normals[t] - offsets[t]).max() > tolerance):
+        if (
+            np.abs(points[triangles[t]] @ normals[s] - offsets[s]).max() > tolerance
+            or np.abs(points[triangles[s]] @ normals[t] - offsets[t]).max() > tolerance
+        ):
             continue
         rs, rt = root(s), root(t)
         if rs != rt:
@@ -356,8 +371,9 @@ def _plane_basis(normal):
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = helper - (helper @ normal) * normal
     u /= np.sqrt(u @ u)
-    v = np.array([normal[1] * u[2] - normal[2] * u[1], normal[2] * u[0] - normal[0] * u[2],
-                  normal[0] * u[1] - normal[1] * u[0]])
+    v = np.array(
+        [normal[1] * u[2] - normal[2] * u[1], normal[2] * u[0] - normal[0] * u[2], normal[0] * u[1] - normal[1] * u[0]]
+    )
     return u, v
 
 
@@ -411,15 +427,19 @@ def _volume_moments(points, polygons):
     a = points[tris[:, 0]] - r0
     b = points[tris[:, 1]] - r0
     c = points[tris[:, 2]] - r0
-    det = np.einsum("ij,ij->i", a, np.cross(b, c))        # 6 × signed volume of (r0, a, b, c)
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))  # 6 × signed volume of (r0, a, b, c)
     volume = det.sum() / 6.0
     if volume <= 0.0:
         return 0.0, r0, np.zeros((3, 3))
     centroid_rel = (det[:, None] * (a + b + c)).sum(axis=0) / 24.0 / volume
     # ∫ x xᵀ over the tetrahedron (0, a, b, c) = det/120 · (Σ_i v_i v_iᵀ + (Σ v_i)(Σ v_i)ᵀ)
     s = a + b + c
-    second_rel = (np.einsum("t,ti,tj->ij", det, a, a) + np.einsum("t,ti,tj->ij", det, b, b)
-                  + np.einsum("t,ti,tj->ij", det, c, c) + np.einsum("t,ti,tj->ij", det, s, s)) / 120.0
+    second_rel = (
+        np.einsum("t,ti,tj->ij", det, a, a)
+        + np.einsum("t,ti,tj->ij", det, b, b)
+        + np.einsum("t,ti,tj->ij", det, c, c)
+        + np.einsum("t,ti,tj->ij", det, s, s)
+    ) / 120.0
     # shift the second moment from r0 to the origin of the given frame
     m1 = volume * centroid_rel
     second = second_rel + np.outer(m1, r0) + np.outer(r0, m1) + volume * np.outer(r0, r0)
@@ -429,11 +449,14 @@ def _volume_moments(points, polygons):
 def _check_convex(points, polygons, normals, field, size):
     """InputError when some given point lies inside the hull by more than CONVEX_TOLERANCE × size."""
     offsets = np.array([(points[p] @ n).max() for p, n in zip(polygons, normals)])
-    height = (points @ normals.T - offsets).max(axis=1)      # ≤ 0 inside; 0 on the surface
+    height = (points @ normals.T - offsets).max(axis=1)  # ≤ 0 inside; 0 on the surface
     inside = height < -CONVEX_TOLERANCE * size
     if inside.any():
-        raise InputError(field, f"the points are not convex: {int(inside.sum())} of {len(points)} lie inside "
-                         f"their hull; use shape = \"mesh\" for a static non-convex object")
+        raise InputError(
+            field,
+            f"the points are not convex: {int(inside.sum())} of {len(points)} lie inside "
+            f'their hull; use shape = "mesh" for a static non-convex object',
+        )
 
 
 def _edges(polygons, field):
@@ -443,14 +466,20 @@ def _edges(polygons, field):
         for k in range(len(polygon)):
             a, b = int(polygon[k]), int(polygon[(k + 1) % len(polygon)])
             if (a, b) in directed:
-                raise InputError(field, "could not build a consistent hull from these points (an edge is used "
-                                 "twice in one direction); they are numerically degenerate")
+                raise InputError(
+                    field,
+                    "could not build a consistent hull from these points (an edge is used "
+                    "twice in one direction); they are numerically degenerate",
+                )
             directed[(a, b)] = f
     edges, faces = [], []
     for (a, b), f in directed.items():
         if (b, a) not in directed:
-            raise InputError(field, "could not build a consistent hull from these points (an edge has no "
-                             "neighbouring face); they are numerically degenerate")
+            raise InputError(
+                field,
+                "could not build a consistent hull from these points (an edge has no "
+                "neighbouring face); they are numerically degenerate",
+            )
         if a < b:
             edges.append((a, b))
             faces.append((f, directed[(b, a)]))
@@ -505,22 +534,26 @@ def _matrix_to_quaternion(R):
 
 def _quaternion_to_matrix(q):
     w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _quaternion_multiply(p, q):
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    return np.array([
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    ])
+    return np.array(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ]
+    )
 
 
 # ------------------------------------------------------------------------------------------
@@ -535,6 +568,7 @@ def load_hull_points(path, scale=1.0, field="file") -> np.ndarray:
     for a bad scale, a missing file, an unsupported format, an unreadable file, no triangles).
     """
     from .meshes import load_mesh
+
     return load_mesh(path, scale, field=field).vertices.copy()
 
 
@@ -595,7 +629,7 @@ def box_as_hull(half_extents) -> dict:
             ids = np.nonzero(signs[:, k] == sign)[0]
             u = np.zeros(3)
             u[(k + 1) % 3] = 1.0
-            v = np.cross(n, u)                 # u × v = n
+            v = np.cross(n, u)  # u × v = n
             angle = np.arctan2(signs[ids] @ v, signs[ids] @ u)
             polygons.append(ids[np.argsort(angle)])
             normals.append(n)
@@ -625,7 +659,13 @@ def hull_arrays(packed, h):
     v0, v1 = packed["vertex_start"][h], packed["vertex_start"][h + 1]
     f0, f1 = packed["face_start"][h], packed["face_start"][h + 1]
     e0, e1 = packed["edge_start"][h], packed["edge_start"][h + 1]
-    fvs = packed["face_vertex_start"][f0:f1 + 1]
-    return (packed["vertices"][v0:v1], packed["face_normal"][f0:f1], packed["face_offset"][f0:f1],
-            fvs, packed["face_vertex_index"][fvs[0]:fvs[-1]],
-            packed["edge_vertex"][e0:e1], packed["edge_face"][e0:e1])
+    fvs = packed["face_vertex_start"][f0 : f1 + 1]
+    return (
+        packed["vertices"][v0:v1],
+        packed["face_normal"][f0:f1],
+        packed["face_offset"][f0:f1],
+        fvs,
+        packed["face_vertex_index"][fvs[0] : fvs[-1]],
+        packed["edge_vertex"][e0:e1],
+        packed["edge_face"][e0:e1],
+    )

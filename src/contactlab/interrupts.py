@@ -15,7 +15,7 @@ import contextlib
 import signal
 import threading
 
-EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}     # 128 + the signal's number
+EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
 
 
 class Interrupted(KeyboardInterrupt):
@@ -33,8 +33,8 @@ class Interrupted(KeyboardInterrupt):
         return EXIT_CODES.get(self.signum, 130)
 
 
-_deferring = 0           # how many deferred() blocks are open (the main thread's)
-_pending = None          # the signal noted while deferring
+_deferring = 0  # how many deferred() blocks are open (the main thread's)
+_pending = None  # the signal noted while deferring
 
 
 def _handler(signum, frame):
@@ -106,7 +106,7 @@ def check():
 
 # ---- what an interrupted command wrote ------------------------------------------------------
 
-_written = None          # the files completed inside tracking_written(), or None
+_written = None  # the files completed inside tracking_written(), or None
 
 
 @contextlib.contextmanager

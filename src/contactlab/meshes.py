@@ -49,30 +49,55 @@ from .errors import InputError, first_line
 
 LEAF_SIZE = 4
 MESH_FORMATS = (".obj", ".stl", ".ply")
-DEGENERATE_AREA = 1e-12    # a triangle whose |e1 × e2| is below this × (longest edge)² has no normal
-TOLERANCE = 1e-9           # geometric tolerance of the contact routines, × the mesh's bounding diagonal
+DEGENERATE_AREA = 1e-12  # a triangle whose |e1 × e2| is below this × (longest edge)² has no normal
+TOLERANCE = 1e-9  # geometric tolerance of the contact routines, × the mesh's bounding diagonal
 
 # Everything the compiled routines need, in one argument (a namedtuple of arrays: Numba passes it
 # by reference). ``tolerance`` [m] is a length below which two points are the same point;
 # ``max_depth`` [m] how far below a one-sided mesh's surface a point is still found (inside).
-MeshGeometry = namedtuple("MeshGeometry", [
-    "vertices", "triangles", "triangle_normals", "vertex_normals",
-    "triangle_edges", "edge_normals", "vertex_pseudo_normals", "vertex_owner",
-    "node_lower", "node_upper", "node_left", "node_right", "node_start", "node_count", "node_order",
-    "triangle_lower", "triangle_upper", "tolerance", "two_sided", "max_depth"])
+MeshGeometry = namedtuple(
+    "MeshGeometry",
+    [
+        "vertices",
+        "triangles",
+        "triangle_normals",
+        "vertex_normals",
+        "triangle_edges",
+        "edge_normals",
+        "vertex_pseudo_normals",
+        "vertex_owner",
+        "node_lower",
+        "node_upper",
+        "node_left",
+        "node_right",
+        "node_start",
+        "node_count",
+        "node_order",
+        "triangle_lower",
+        "triangle_upper",
+        "tolerance",
+        "two_sided",
+        "max_depth",
+    ],
+)
 
 
 # ---------------------------------------------------------------------------------------------
 # normals
 # ---------------------------------------------------------------------------------------------
 
+
 def triangle_normals(vertices, triangles):
     """Unit normals (T, 3) by the winding, and the doubled areas (T,) [m²]; degenerate: zero normal."""
     v0, v1, v2 = vertices[triangles[:, 0]], vertices[triangles[:, 1]], vertices[triangles[:, 2]]
     cross = np.cross(v1 - v0, v2 - v0)
     doubled_area = np.linalg.norm(cross, axis=1)
-    longest = np.max(np.stack([np.sum((v1 - v0) ** 2, axis=1), np.sum((v2 - v1) ** 2, axis=1),
-                               np.sum((v0 - v2) ** 2, axis=1)], axis=1), axis=1)
+    longest = np.max(
+        np.stack(
+            [np.sum((v1 - v0) ** 2, axis=1), np.sum((v2 - v1) ** 2, axis=1), np.sum((v0 - v2) ** 2, axis=1)], axis=1
+        ),
+        axis=1,
+    )
     degenerate = doubled_area <= DEGENERATE_AREA * longest
     normals = np.where(degenerate[:, None], 0.0, cross / np.where(degenerate, 1.0, doubled_area)[:, None])
     return normals, np.where(degenerate, 0.0, doubled_area)
@@ -87,7 +112,7 @@ def vertex_normals(vertices, triangles):
     vertices = np.asarray(vertices, dtype=float)
     triangles = np.asarray(triangles, dtype=np.int64)
     v0, v1, v2 = vertices[triangles[:, 0]], vertices[triangles[:, 1]], vertices[triangles[:, 2]]
-    weighted = np.cross(v1 - v0, v2 - v0)          # normal × 2 area
+    weighted = np.cross(v1 - v0, v2 - v0)  # normal × 2 area
     summed = np.zeros_like(vertices)
     for k in range(3):
         np.add.at(summed, triangles[:, k], weighted)
@@ -98,7 +123,7 @@ def vertex_normals(vertices, triangles):
 def _pseudo_normals(vertices, triangles, normals):
     """Edges (E,2), triangle edges (T,3), edge pseudo-normals (E,3), angle-weighted vertex pseudo-normals (V,3)."""
     T = len(triangles)
-    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)   # (3T, 2): k → k+1
+    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)  # (3T, 2): k → k+1
     undirected = np.sort(directed, axis=1)
     edges, inverse = np.unique(undirected, axis=0, return_inverse=True)
     triangle_edges = inverse.reshape(T, 3).astype(np.int64)
@@ -114,7 +139,7 @@ def _pseudo_normals(vertices, triangles, normals):
         angles[:, k] = np.arctan2(np.linalg.norm(np.cross(u, w), axis=1), np.sum(u * w, axis=1))
     vertex_sum = np.zeros_like(vertices)
     for k in range(3):
-        np.add.at(vertex_sum, triangles[:, k], normals * angles[:, k:k + 1])
+        np.add.at(vertex_sum, triangles[:, k], normals * angles[:, k : k + 1])
     return edges.astype(np.int64), triangle_edges, edge_normals, _unit_rows(vertex_sum)
 
 
@@ -126,6 +151,7 @@ def _unit_rows(a):
 # ---------------------------------------------------------------------------------------------
 # BVH
 # ---------------------------------------------------------------------------------------------
+
 
 def build_bvh(triangle_lower, triangle_upper, leaf_size=LEAF_SIZE):
     """Median-split BVH over boxes (T, 3) [m], built level by level with vectorized NumPy.
@@ -142,7 +168,7 @@ def build_bvh(triangle_lower, triangle_upper, leaf_size=LEAF_SIZE):
     order = np.arange(count, dtype=np.int64)
     starts, ends = [np.array([0])], [np.array([count])]
     lefts, rights = [], []
-    frontier_first, total = 0, 1            # node ids of the current level: frontier_first .. total − 1
+    frontier_first, total = 0, 1  # node ids of the current level: frontier_first .. total − 1
     levels = [(0, 1)]
     while True:
         level_start = np.concatenate(starts)[frontier_first:total]
@@ -198,15 +224,27 @@ def build_bvh(triangle_lower, triangle_upper, leaf_size=LEAF_SIZE):
 
 
 @njit(cache=True)
-def triangles_near(node_lower, node_upper, node_left, node_right, node_start, node_count, node_order,
-                   triangle_lower, triangle_upper, lower, upper, out):
+def triangles_near(
+    node_lower,
+    node_upper,
+    node_left,
+    node_right,
+    node_start,
+    node_count,
+    node_order,
+    triangle_lower,
+    triangle_upper,
+    lower,
+    upper,
+    out,
+):
     """Triangles whose boxes overlap the box [lower, upper] (3,) [m] (closed intervals).
 
     Writes their indices into ``out`` (int64) and returns how many there are. When there
     are more than ``len(out)`` only the first ``len(out)`` are written and the full count is
     returned, so a caller can grow ``out`` and ask again. Order: BVH leaf order.
     """
-    stack = np.empty(128, dtype=np.int64)      # median splits: depth ≤ log2(T) + 1, 2 pushed per level
+    stack = np.empty(128, dtype=np.int64)  # median splits: depth ≤ log2(T) + 1, 2 pushed per level
     stack[0] = 0
     top = 1
     found = 0
@@ -214,16 +252,26 @@ def triangles_near(node_lower, node_upper, node_left, node_right, node_start, no
     while top > 0:
         top -= 1
         node = stack[top]
-        if (node_lower[node, 0] > upper[0] or node_upper[node, 0] < lower[0]
-                or node_lower[node, 1] > upper[1] or node_upper[node, 1] < lower[1]
-                or node_lower[node, 2] > upper[2] or node_upper[node, 2] < lower[2]):
+        if (
+            node_lower[node, 0] > upper[0]
+            or node_upper[node, 0] < lower[0]
+            or node_lower[node, 1] > upper[1]
+            or node_upper[node, 1] < lower[1]
+            or node_lower[node, 2] > upper[2]
+            or node_upper[node, 2] < lower[2]
+        ):
             continue
         if node_count[node] > 0:
             for k in range(node_start[node], node_start[node] + node_count[node]):
                 t = node_order[k]
-                if (triangle_lower[t, 0] > upper[0] or triangle_upper[t, 0] < lower[0]
-                        or triangle_lower[t, 1] > upper[1] or triangle_upper[t, 1] < lower[1]
-                        or triangle_lower[t, 2] > upper[2] or triangle_upper[t, 2] < lower[2]):
+                if (
+                    triangle_lower[t, 0] > upper[0]
+                    or triangle_upper[t, 0] < lower[0]
+                    or triangle_lower[t, 1] > upper[1]
+                    or triangle_upper[t, 1] < lower[1]
+                    or triangle_lower[t, 2] > upper[2]
+                    or triangle_upper[t, 2] < lower[2]
+                ):
                     continue
                 if found < capacity:
                     out[found] = t
@@ -241,20 +289,43 @@ def mesh_triangles_near(mesh, lower, upper, buffer):
 
     Returns the candidate indices (a view of the buffer, or of a larger new array).
     """
-    found = triangles_near(mesh.node_lower, mesh.node_upper, mesh.node_left, mesh.node_right, mesh.node_start,
-                           mesh.node_count, mesh.node_order, mesh.triangle_lower, mesh.triangle_upper,
-                           lower, upper, buffer)
+    found = triangles_near(
+        mesh.node_lower,
+        mesh.node_upper,
+        mesh.node_left,
+        mesh.node_right,
+        mesh.node_start,
+        mesh.node_count,
+        mesh.node_order,
+        mesh.triangle_lower,
+        mesh.triangle_upper,
+        lower,
+        upper,
+        buffer,
+    )
     if found > buffer.shape[0]:
         buffer = np.empty(found, dtype=np.int64)
-        triangles_near(mesh.node_lower, mesh.node_upper, mesh.node_left, mesh.node_right, mesh.node_start,
-                       mesh.node_count, mesh.node_order, mesh.triangle_lower, mesh.triangle_upper,
-                       lower, upper, buffer)
+        triangles_near(
+            mesh.node_lower,
+            mesh.node_upper,
+            mesh.node_left,
+            mesh.node_right,
+            mesh.node_start,
+            mesh.node_count,
+            mesh.node_order,
+            mesh.triangle_lower,
+            mesh.triangle_upper,
+            lower,
+            upper,
+            buffer,
+        )
     return buffer[:found]
 
 
 # ---------------------------------------------------------------------------------------------
 # the mesh
 # ---------------------------------------------------------------------------------------------
+
 
 class TriangleMesh:
     """A static triangle mesh with its normals, pseudo-normals and BVH (see the module docstring).
@@ -275,15 +346,19 @@ class TriangleMesh:
         if vertices.ndim != 2 or vertices.shape[1] != 3:
             raise InputError(field, f"vertices must have shape (V, 3), found {vertices.shape}")
         if triangles.ndim != 2 or triangles.shape[1] != 3 or not np.issubdtype(triangles.dtype, np.integer):
-            raise InputError(field, f"triangles must be integers of shape (T, 3), found {triangles.dtype} "
-                             f"{triangles.shape}")
+            raise InputError(
+                field, f"triangles must be integers of shape (T, 3), found {triangles.dtype} {triangles.shape}"
+            )
         if len(triangles) == 0:
             raise InputError(field, "the mesh has no triangles")
         if not np.all(np.isfinite(vertices)):
             raise InputError(field, "the mesh has non-finite vertex coordinates")
         if triangles.min() < 0 or triangles.max() >= len(vertices):
-            raise InputError(field, f"triangle vertex indices must lie in [0, {len(vertices) - 1}], "
-                             f"found {triangles.min()}..{triangles.max()}")
+            raise InputError(
+                field,
+                f"triangle vertex indices must lie in [0, {len(vertices) - 1}], "
+                f"found {triangles.min()}..{triangles.max()}",
+            )
         triangles = triangles.astype(np.int64)
         self.two_sided = bool(two_sided)
         self.vertices = vertices
@@ -293,18 +368,26 @@ class TriangleMesh:
             raise InputError(field, "every triangle of the mesh is degenerate (zero area)")
         self.triangle_areas = 0.5 * doubled_area
         self.vertex_normals = vertex_normals(vertices, triangles)
-        (self.edges, self.triangle_edges, self.edge_normals,
-         self.vertex_pseudo_normals) = _pseudo_normals(vertices, triangles, self.triangle_normals)
+        (self.edges, self.triangle_edges, self.edge_normals, self.vertex_pseudo_normals) = _pseudo_normals(
+            vertices, triangles, self.triangle_normals
+        )
         owner = np.full(len(vertices), len(triangles), dtype=np.int64)
         good = np.nonzero(doubled_area > 0.0)[0]
         for k in range(3):
             np.minimum.at(owner, triangles[good, k], good)
         self.vertex_owner = np.where(owner == len(triangles), -1, owner)
-        corners = vertices[triangles]                               # (T, 3, 3)
+        corners = vertices[triangles]  # (T, 3, 3)
         self.triangle_lower = corners.min(axis=1)
         self.triangle_upper = corners.max(axis=1)
-        (self.node_lower, self.node_upper, self.node_left, self.node_right, self.node_start, self.node_count,
-         self.node_order) = build_bvh(self.triangle_lower, self.triangle_upper, LEAF_SIZE)
+        (
+            self.node_lower,
+            self.node_upper,
+            self.node_left,
+            self.node_right,
+            self.node_start,
+            self.node_count,
+            self.node_order,
+        ) = build_bvh(self.triangle_lower, self.triangle_upper, LEAF_SIZE)
         self.bounds = (vertices[triangles.ravel()].min(axis=0), vertices[triangles.ravel()].max(axis=0))
         diagonal = float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
         self.tolerance = TOLERANCE * max(diagonal, 1e-3)
@@ -313,17 +396,50 @@ class TriangleMesh:
         if not (np.isfinite(max_depth) and max_depth >= 0.0):
             raise InputError(field, f"max_depth must be a finite number ≥ 0, found {max_depth}")
         self.max_depth = float(max_depth)
-        for name in ("vertices", "triangles", "triangle_normals", "triangle_areas", "vertex_normals", "edges",
-                     "triangle_edges", "edge_normals", "vertex_pseudo_normals", "vertex_owner",
-                     "triangle_lower", "triangle_upper", "node_lower", "node_upper", "node_left", "node_right",
-                     "node_start", "node_count", "node_order"):
+        for name in (
+            "vertices",
+            "triangles",
+            "triangle_normals",
+            "triangle_areas",
+            "vertex_normals",
+            "edges",
+            "triangle_edges",
+            "edge_normals",
+            "vertex_pseudo_normals",
+            "vertex_owner",
+            "triangle_lower",
+            "triangle_upper",
+            "node_lower",
+            "node_upper",
+            "node_left",
+            "node_right",
+            "node_start",
+            "node_count",
+            "node_order",
+        ):
             getattr(self, name).flags.writeable = False
         self.geometry = MeshGeometry(
-            self.vertices, self.triangles, self.triangle_normals, self.vertex_normals,
-            self.triangle_edges, self.edge_normals, self.vertex_pseudo_normals, self.vertex_owner,
-            self.node_lower, self.node_upper, self.node_left, self.node_right, self.node_start,
-            self.node_count, self.node_order, self.triangle_lower, self.triangle_upper, float(self.tolerance),
-            self.two_sided, self.max_depth)
+            self.vertices,
+            self.triangles,
+            self.triangle_normals,
+            self.vertex_normals,
+            self.triangle_edges,
+            self.edge_normals,
+            self.vertex_pseudo_normals,
+            self.vertex_owner,
+            self.node_lower,
+            self.node_upper,
+            self.node_left,
+            self.node_right,
+            self.node_start,
+            self.node_count,
+            self.node_order,
+            self.triangle_lower,
+            self.triangle_upper,
+            float(self.tolerance),
+            self.two_sided,
+            self.max_depth,
+        )
 
     @property
     def vertex_count(self) -> int:
@@ -348,8 +464,10 @@ class TriangleMesh:
         return TriangleMesh(world, self.triangles, two_sided=self.two_sided, max_depth=self.max_depth)
 
     def __repr__(self):
-        return (f"TriangleMesh({self.vertex_count} vertices, {self.triangle_count} triangles"
-                f"{', two-sided' if self.two_sided else ''})")
+        return (
+            f"TriangleMesh({self.vertex_count} vertices, {self.triangle_count} triangles"
+            f"{', two-sided' if self.two_sided else ''})"
+        )
 
 
 def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) -> TriangleMesh:
@@ -377,13 +495,13 @@ def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) ->
         raise InputError(field, f"unsupported mesh format '{extension}' of {path}; expected .obj, .stl or .ply")
     try:
         import trimesh
-    except ImportError:                                     # pragma: no cover - a runtime dependency
+    except ImportError:  # pragma: no cover - a runtime dependency
         raise InputError(field, "reading mesh files needs the 'trimesh' package (pip install trimesh)") from None
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
         vertices = np.asarray(loaded.vertices, dtype=float)
         faces = np.asarray(loaded.faces)
-    except Exception as error:                               # trimesh raises many types on broken files
+    except Exception as error:  # trimesh raises many types on broken files
         raise InputError(field, f"could not read the mesh file {path} ({first_line(error)})") from None
     if faces.ndim != 2 or len(faces) == 0 or vertices.ndim != 2 or len(vertices) == 0:
         raise InputError(field, f"the mesh file {path} contains no triangles")

@@ -18,28 +18,28 @@ from . import rotations, shapes
 
 @dataclass(frozen=True)
 class Model:
-    gravity: np.ndarray                 # (3,) m/s²
+    gravity: np.ndarray  # (3,) m/s²
     # materials
-    material_names: tuple               # (M,)
-    material_friction: np.ndarray       # (M,) Coulomb μ
-    material_restitution: np.ndarray    # (M,) ε in [0, 1]
+    material_names: tuple  # (M,)
+    material_friction: np.ndarray  # (M,) Coulomb μ
+    material_restitution: np.ndarray  # (M,) ε in [0, 1]
     # rigid bodies (6 DOF each: linear velocity, world angular velocity)
-    body_names: tuple                   # (B,)
-    body_shape: np.ndarray              # (B,) int, a kind from contactlab.shapes
-    body_params: np.ndarray             # (B, 4) shape parameters [m]
-    body_mass: np.ndarray               # (B,) kg
-    body_inertia: np.ndarray            # (B, 3) principal moments in the body frame, kg m²
-    body_material: np.ndarray           # (B,) int index into materials
+    body_names: tuple  # (B,)
+    body_shape: np.ndarray  # (B,) int, a kind from contactlab.shapes
+    body_params: np.ndarray  # (B, 4) shape parameters [m]
+    body_mass: np.ndarray  # (B,) kg
+    body_inertia: np.ndarray  # (B, 3) principal moments in the body frame, kg m²
+    body_material: np.ndarray  # (B,) int index into materials
     # particles (3 DOF each)
-    particle_mass: np.ndarray           # (P,) kg
-    particle_radius: np.ndarray         # (P,) contact radius, m
-    particle_material: np.ndarray       # (P,) int
+    particle_mass: np.ndarray  # (P,) kg
+    particle_radius: np.ndarray  # (P,) contact radius, m
+    particle_material: np.ndarray  # (P,) int
     # static obstacles
-    obstacle_shape: np.ndarray          # (O,) int kind
-    obstacle_params: np.ndarray         # (O, 4) shape parameters (see contactlab.shapes)
-    obstacle_position: np.ndarray       # (O, 3) m (centre; unused for planes)
-    obstacle_orientation: np.ndarray    # (O, 4) unit quaternion (w, x, y, z)
-    obstacle_material: np.ndarray       # (O,) int
+    obstacle_shape: np.ndarray  # (O,) int kind
+    obstacle_params: np.ndarray  # (O, 4) shape parameters (see contactlab.shapes)
+    obstacle_position: np.ndarray  # (O, 3) m (centre; unused for planes)
+    obstacle_orientation: np.ndarray  # (O, 4) unit quaternion (w, x, y, z)
+    obstacle_material: np.ndarray  # (O,) int
     # convex hulls (of convex shapes and of every box), packed: see contactlab.hulls.pack_hulls
     hulls: dict = field(repr=False, default=None)
     # static triangle meshes in world coordinates (contactlab.meshes.TriangleMesh), by index
@@ -47,16 +47,16 @@ class Model:
     # the state at time 0
     initial: "object" = field(repr=False, default=None)
     # cloth (see ModelBuilder.add_cloth): topology and mass-spring network over the particles
-    cloth_names: tuple = ()                                                     # (C,)
+    cloth_names: tuple = ()  # (C,)
     triangles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
     #                                   (F, 3) int, particle indices, counter-clockwise seen from the front
-    particle_cloth: np.ndarray = field(repr=False, default=None)                # (P,) int cloth index, −1 if none
-    particle_pinned: np.ndarray = field(repr=False, default=None)               # (P,) bool, held in place
+    particle_cloth: np.ndarray = field(repr=False, default=None)  # (P,) int cloth index, −1 if none
+    particle_pinned: np.ndarray = field(repr=False, default=None)  # (P,) bool, held in place
     spring_particles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
     #                                   (S, 2) int, the two particles each spring joins
-    spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))   # (S,) m
-    spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))     # (S,) N/m
-    spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))       # (S,) N s/m
+    spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) m
+    spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N/m
+    spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N s/m
     # external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene
     drive: "object" = field(repr=False, default=None)
 
@@ -66,8 +66,8 @@ class Model:
             object.__setattr__(self, "particle_cloth", np.full(len(self.particle_mass), -1, dtype=np.int64))
         if self.particle_pinned is None:
             object.__setattr__(self, "particle_pinned", np.zeros(len(self.particle_mass), dtype=bool))
-        for name, value in vars(self).items():
-            for array in (value.values() if isinstance(value, dict) else [value]):
+        for _name, value in vars(self).items():
+            for array in value.values() if isinstance(value, dict) else [value]:
                 if isinstance(array, np.ndarray):
                     array.flags.writeable = False
 
@@ -75,8 +75,18 @@ class Model:
     def hull_store(self) -> tuple:
         """The packed hull arrays as the compiled routines take them (see collision.convex.hull_view)."""
         h = self.hulls
-        return (h["vertex_start"], h["vertices"], h["face_start"], h["face_normal"], h["face_offset"],
-                h["face_vertex_start"], h["face_vertex_index"], h["edge_start"], h["edge_vertex"], h["edge_face"])
+        return (
+            h["vertex_start"],
+            h["vertices"],
+            h["face_start"],
+            h["face_normal"],
+            h["face_offset"],
+            h["face_vertex_start"],
+            h["face_vertex_index"],
+            h["edge_start"],
+            h["edge_vertex"],
+            h["edge_face"],
+        )
 
     @property
     def body_count(self) -> int:
@@ -118,6 +128,7 @@ class Model:
         """Where the springs' Jacobian blocks sit in a (3P, 3P) CSR matrix
         (``dynamics.cloth.SpringPattern``): fixed by the topology, built on first use and kept."""
         from .dynamics.cloth import spring_pattern
+
         return spring_pattern(self.spring_particles, self.particle_count)
 
     @cached_property
@@ -133,8 +144,9 @@ class Model:
         rotation matrices (O, 3, 3); built on first use and kept."""
         particle_params = np.zeros((self.particle_count, 4))
         particle_params[:, 0] = self.particle_radius
-        kinds = np.concatenate([self.body_shape, np.full(self.particle_count, shapes.POINT),
-                                self.obstacle_shape]).astype(np.int64)
+        kinds = np.concatenate(
+            [self.body_shape, np.full(self.particle_count, shapes.POINT), self.obstacle_shape]
+        ).astype(np.int64)
         params = np.concatenate([self.body_params, particle_params, self.obstacle_params])
         materials = np.concatenate([self.body_material, self.particle_material, self.obstacle_material])
         return kinds, params, materials, rotations.to_matrix(self.obstacle_orientation)
@@ -146,8 +158,9 @@ class Model:
         a box's smallest half extent, a hull's inradius about its origin, a mesh's ``max_depth``
         (how far below its surface a point is still found), a plane's ∞. Built on first use."""
         kinds, params = self.collider_table[0], self.collider_table[1]
-        thickness = np.select([kinds == shapes.BOX, kinds == shapes.PLANE], [params[:, :3].min(axis=1), np.inf],
-                              default=params[:, 0])
+        thickness = np.select(
+            [kinds == shapes.BOX, kinds == shapes.PLANE], [params[:, :3].min(axis=1), np.inf], default=params[:, 0]
+        )
         for g in np.nonzero(kinds == shapes.CONVEX)[0]:
             h = int(params[g, 0])
             start, end = self.hulls["face_start"][h], self.hulls["face_start"][h + 1]
@@ -162,15 +175,17 @@ class Model:
         of ``collision.narrow_phase.scene_families``): the compiled narrow phase is specialised
         on it, so only those routines are compiled; built on first use and kept."""
         from .collision.narrow_phase import scene_families
+
         B, P = self.body_count, self.particle_count
         kinds = self.collider_table[0]
-        return scene_families(kinds[:B + P], kinds[B + P:])
+        return scene_families(kinds[: B + P], kinds[B + P :])
 
     @cached_property
     def stepping_arrays(self):
         """The arrays the compiled stepping loop reads (``methods.velocity_loop.LoopModel``):
         built on first use and kept."""
         from .methods.velocity_loop import loop_model
+
         return loop_model(self)
 
     @property
@@ -182,8 +197,10 @@ class Model:
         """(friction μ, restitution ε) of contacts between materials ``material_a`` and
         ``material_b`` (indices, scalars or arrays of one shape): μ = √(μ_a μ_b), the geometric
         mean, and ε = max(ε_a, ε_b), the larger."""
-        return (np.sqrt(self.material_friction[material_a] * self.material_friction[material_b]),
-                np.maximum(self.material_restitution[material_a], self.material_restitution[material_b]))
+        return (
+            np.sqrt(self.material_friction[material_a] * self.material_friction[material_b]),
+            np.maximum(self.material_restitution[material_a], self.material_restitution[material_b]),
+        )
 
     def state(self):
         """A fresh copy of the state at time 0."""
@@ -192,8 +209,9 @@ class Model:
     def __repr__(self):
         return f"Model({self.describe()})"
 
-    def _repr_html_(self):              # Jupyter (contactlab.notebook)
+    def _repr_html_(self):  # Jupyter (contactlab.notebook)
         from .notebook import model_html
+
         return model_html(self)
 
     def describe(self) -> str:
@@ -208,8 +226,11 @@ class Model:
             vertices = self.particle_count - free
             parts.append(f"{self.cloth_count} cloth{'s' if self.cloth_count > 1 else ''} ({vertices} vertices)")
         parts.append(f"{self.obstacle_count} obstacle{'s' if self.obstacle_count != 1 else ''}")
-        if self.drive is not None:      # driven: which bodies follow a path, whether forces push
+        if self.drive is not None:  # driven: which bodies follow a path, whether forces push
             paths = int(self.body_kinematic.sum())
-            parts.append(", ".join(([f"{paths} on a path"] if paths else [])
-                                   + (["external forces"] if self.drive.has_loads else [])))
+            parts.append(
+                ", ".join(
+                    ([f"{paths} on a path"] if paths else []) + (["external forces"] if self.drive.has_loads else [])
+                )
+            )
         return ", ".join(parts)

@@ -15,20 +15,26 @@ import html
 import os
 import tempfile
 
-PLAYER_FPS = 12         # frames per second of the inline player at most
-PLAYER_FRAMES = 120     # frames of it at most (a long run plays at fewer frames per second)
+PLAYER_FPS = 12  # frames per second of the inline player at most
+PLAYER_FRAMES = 120  # frames of it at most (a long run plays at fewer frames per second)
 
 
 def _table(rows) -> str:
-    cells = "".join(f"<tr><th style='text-align:left;padding-right:1em'>{html.escape(str(key))}</th>"
-                    f"<td>{html.escape(str(value))}</td></tr>" for key, value in rows)
+    cells = "".join(
+        f"<tr><th style='text-align:left;padding-right:1em'>{html.escape(str(key))}</th>"
+        f"<td>{html.escape(str(value))}</td></tr>"
+        for key, value in rows
+    )
     return f"<table>{cells}</table>"
 
 
 def model_html(model) -> str:
     """A Model: what it holds, its materials and gravity."""
-    rows = [("holds", model.describe()), ("materials", ", ".join(model.material_names) or "default"),
-            ("gravity", f"{tuple(float(g) for g in model.gravity)} m/s²")]
+    rows = [
+        ("holds", model.describe()),
+        ("materials", ", ".join(model.material_names) or "default"),
+        ("gravity", f"{tuple(float(g) for g in model.gravity)} m/s²"),
+    ]
     return f"<div><b>contactlab Model</b>{_table(rows)}</div>"
 
 
@@ -36,32 +42,56 @@ def run_html(run, picture=True) -> str:
     """A Run: its summary's main numbers and (``picture``) an inline player of it (its last sample
     drawn, where no video can be)."""
     s = run.summary
-    ended = ("diverged: " + s["diverged"]["message"] if s.get("diverged") else
-             f"interrupted ({s['interrupted']['signal']})" if s.get("interrupted") else "completed")
+    ended = (
+        "diverged: " + s["diverged"]["message"]
+        if s.get("diverged")
+        else f"interrupted ({s['interrupted']['signal']})"
+        if s.get("interrupted")
+        else "completed"
+    )
     energy = s["energy"]
-    rows = [("scene, method", f"{s['scene']}, {s['method']} ({s['integrator']})"),
-            ("steps", f"{s['steps']:,} of {s['dt']:g} s, {s.get('samples', '?')} samples"),
-            ("time", f"{s['wall_seconds']:.3g} s: {s['compile_seconds']:.3g} s compiling or loading kernels, "
-                     f"{s['steps_per_second']:,.0f} steps/s stepping"),
-            ("deepest penetration", f"{s['max_penetration'] * 1000:.3g} mm (at the end {s['final_penetration'] * 1000:.3g} mm)"),
-            ("total energy", f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end"),
-            ("ended", ended)]
+    rows = [
+        ("scene, method", f"{s['scene']}, {s['method']} ({s['integrator']})"),
+        ("steps", f"{s['steps']:,} of {s['dt']:g} s, {s.get('samples', '?')} samples"),
+        (
+            "time",
+            f"{s['wall_seconds']:.3g} s: {s['compile_seconds']:.3g} s compiling or loading kernels, "
+            f"{s['steps_per_second']:,.0f} steps/s stepping",
+        ),
+        (
+            "deepest penetration",
+            f"{s['max_penetration'] * 1000:.3g} mm (at the end {s['final_penetration'] * 1000:.3g} mm)",
+        ),
+        ("total energy", f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end"),
+        ("ended", ended),
+    ]
     image = _player(run.arrays, _still(run.arrays)) if picture else ""
-    return (f"<div style='display:flex;gap:1em;align-items:flex-start'>{image}"
-            f"<div><b>contactlab Run</b>{_table(rows)}</div></div>")
+    return (
+        f"<div style='display:flex;gap:1em;align-items:flex-start'>{image}"
+        f"<div><b>contactlab Run</b>{_table(rows)}</div></div>"
+    )
 
 
 def comparison_html(result) -> str:
     """A comparison (contactlab.compare.Comparison): one row per method, and its report."""
-    columns = (("method", "method"), ("status", "status"), ("steps_per_second", "steps/s"),
-               ("max_penetration_mm", "max penetration (mm)"), ("energy_drift_J", "energy drift (J)"))
+    columns = (
+        ("method", "method"),
+        ("status", "status"),
+        ("steps_per_second", "steps/s"),
+        ("max_penetration_mm", "max penetration (mm)"),
+        ("energy_drift_J", "energy drift (J)"),
+    )
     head = "".join(f"<th>{html.escape(title)}</th>" for _, title in columns)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_shown(row.get(key)))}</td>" for key, _ in columns) + "</tr>"
-                   for row in result.rows)
-    return (f"<div><b>contactlab comparison of {html.escape(result.scene)}</b>"
-            f"<table><tr>{head}</tr>{body}</table>"
-            f"<p>{html.escape(result.summary_text)}</p>"
-            f"<p>Report: <a href='{html.escape(result.report_html)}'>{html.escape(result.report_html)}</a></p></div>")
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(_shown(row.get(key)))}</td>" for key, _ in columns) + "</tr>"
+        for row in result.rows
+    )
+    return (
+        f"<div><b>contactlab comparison of {html.escape(result.scene)}</b>"
+        f"<table><tr>{head}</tr>{body}</table>"
+        f"<p>{html.escape(result.summary_text)}</p>"
+        f"<p>Report: <a href='{html.escape(result.report_html)}'>{html.escape(result.report_html)}</a></p></div>"
+    )
 
 
 def _shown(value):
@@ -78,6 +108,7 @@ def _player(arrays, still) -> str:
         return ""
     from .errors import InputError
     from .render import render
+
     time = arrays["time"]
     duration = float(time[-1] - time[0]) if len(time) > 1 else 0.0
     if duration <= 0.0:
@@ -86,24 +117,27 @@ def _player(arrays, still) -> str:
     with tempfile.TemporaryDirectory() as folder:
         try:
             paths = render(arrays, folder, fps=fps, width=320, height=240, formats=("mp4",))
-        except (InputError, OSError, RuntimeError):     # nothing finite to draw, or no encoder here
+        except (InputError, OSError, RuntimeError):  # nothing finite to draw, or no encoder here
             return still
         with open(paths["mp4"], "rb") as stream:
             data = base64.b64encode(stream.read()).decode("ascii")
     poster = still.split("src='", 1)[1].split("'", 1)[0]
-    return ("<video controls loop muted playsinline width='320' height='240' "
-            f"poster='{poster}' src='data:video/mp4;base64,{data}'>{still}</video>")
+    return (
+        "<video controls loop muted playsinline width='320' height='240' "
+        f"poster='{poster}' src='data:video/mp4;base64,{data}'>{still}</video>"
+    )
 
 
 def _still(arrays) -> str:
     """The last sample drawn small, as an inline <img>; "" when the trajectory cannot be drawn."""
     from .errors import InputError
     from .render import still
+
     with tempfile.TemporaryDirectory() as folder:
         path = os.path.join(folder, "still.png")
         try:
             still(arrays, path, width=320, height=240)
-        except InputError:              # a run that blew up: nothing finite to draw
+        except InputError:  # a run that blew up: nothing finite to draw
             return ""
         with open(path, "rb") as stream:
             data = base64.b64encode(stream.read()).decode("ascii")

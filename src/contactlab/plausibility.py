@@ -21,9 +21,9 @@ PlausibilityWarning)`` silences them.
 
 import numpy as np
 
-SIZE_RATIO = 20.0              # a body this many times the others' median size (or 1/this) is flagged
-START_DEPTH_FRACTION = 0.25    # an initial overlap deeper than this share of the body's radius is flagged
-MANY_STEPS = 500_000           # runs of more steps are flagged (the CLI asks for --yes)
+SIZE_RATIO = 20.0  # a body this many times the others' median size (or 1/this) is flagged
+START_DEPTH_FRACTION = 0.25  # an initial overlap deeper than this share of the body's radius is flagged
+MANY_STEPS = 500_000  # runs of more steps are flagged (the CLI asks for --yes)
 
 
 class PlausibilityWarning(UserWarning):
@@ -48,8 +48,10 @@ def _sizes(model):
         ratio = radius / typical if typical > 0 else 1.0
         if ratio > SIZE_RATIO or (len(radii) > 2 and ratio < 1 / SIZE_RATIO):
             than = "the bodies' median" if len(radii) > 2 else "the other body's"
-            found.append(f"{_body(model, body)} has a bounding radius of {radius:.3g} m, {ratio:.3g}× {than} "
-                         f"{typical:.3g} m: lengths are in metres")
+            found.append(
+                f"{_body(model, body)} has a bounding radius of {radius:.3g} m, {ratio:.3g}× {than} "
+                f"{typical:.3g} m: lengths are in metres"
+            )
             if len(found) == 3:
                 break
     return found
@@ -57,6 +59,7 @@ def _sizes(model):
 
 def _start_depths(model, state):
     from .collision import collide
+
     contacts = collide(model, state)
     if not contacts.count:
         return []
@@ -69,9 +72,11 @@ def _start_depths(model, state):
         seen.add(body)
         radius = float(model.body_radii[body])
         if depth > START_DEPTH_FRACTION * radius:
-            found.append(f"{_body(model, body)} starts {depth:.3g} m deep inside what it touches (its bounding "
-                         f"radius is {radius:.3g} m): lengths are in metres; move it out, or is a size or a "
-                         f"position in other units?")
+            found.append(
+                f"{_body(model, body)} starts {depth:.3g} m deep inside what it touches (its bounding "
+                f"radius is {radius:.3g} m): lengths are in metres; move it out, or is a size or a "
+                f"position in other units?"
+            )
         if len(found) == 3 or depth <= 0:
             break
     return found
@@ -80,8 +85,7 @@ def _start_depths(model, state):
 def _step_count(dt, steps):
     if steps <= MANY_STEPS:
         return []
-    return [f"the run makes {steps:,} steps (duration {steps * dt:.6g} s at dt = {dt:g} s): times are in "
-            f"seconds"]
+    return [f"the run makes {steps:,} steps (duration {steps * dt:.6g} s at dt = {dt:g} s): times are in seconds"]
 
 
 def _body(model, body):

@@ -24,16 +24,20 @@ from .record import atomic_path, make_folders, undo_written
 
 PLOTS = ("energy", "penetration", "contacts", "residual")
 DPI = 100
-SIZE_INCHES = (8.0, 4.5)               # 800 × 450 px at DPI
-LOG_SPAN = 100.0                       # residuals spanning more than this factor get a log axis
-ENERGY_TERMS = (("energy_kinetic", "kinetic"), ("energy_potential", "potential"),
-                ("energy_elastic", "elastic (contact springs)"))
+SIZE_INCHES = (8.0, 4.5)  # 800 × 450 px at DPI
+LOG_SPAN = 100.0  # residuals spanning more than this factor get a log axis
+ENERGY_TERMS = (
+    ("energy_kinetic", "kinetic"),
+    ("energy_potential", "potential"),
+    ("energy_elastic", "elastic (contact springs)"),
+)
 RESIDUAL_LABEL = "solver residual (method units)"
 
 
 @dataclass
 class Line:
     """One series of a plot: ``values`` against ``time`` [s]."""
+
     label: str
     time: np.ndarray
     values: np.ndarray
@@ -47,7 +51,7 @@ def total_energy(arrays) -> np.ndarray:
     return arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
 
 
-STYLES = ("-", "--", "-.", ":")      # one per run, so runs that coincide still show
+STYLES = ("-", "--", "-.", ":")  # one per run, so runs that coincide still show
 
 
 def _look(index, label):
@@ -60,17 +64,23 @@ def _look(index, label):
 
 def _series(runs, key, scale=1.0):
     """One Line per run: ``arrays[key] * scale``."""
-    return [Line(str(label), arrays["time"], np.asarray(arrays[key], dtype=float) * scale, *_look(index, label))
-            for index, (label, arrays) in enumerate(runs.items())]
+    return [
+        Line(str(label), arrays["time"], np.asarray(arrays[key], dtype=float) * scale, *_look(index, label))
+        for index, (label, arrays) in enumerate(runs.items())
+    ]
 
 
 def _energy_lines(runs, components):
     if not components:
-        return [Line(str(label), arrays["time"], total_energy(arrays), *_look(index, label))
-                for index, (label, arrays) in enumerate(runs.items())]
+        return [
+            Line(str(label), arrays["time"], total_energy(arrays), *_look(index, label))
+            for index, (label, arrays) in enumerate(runs.items())
+        ]
     (arrays,) = runs.values()
-    lines = [Line(name, arrays["time"], np.asarray(arrays[key], dtype=float), f"C{index}")
-             for index, (key, name) in enumerate(ENERGY_TERMS)]
+    lines = [
+        Line(name, arrays["time"], np.asarray(arrays[key], dtype=float), f"C{index}")
+        for index, (key, name) in enumerate(ENERGY_TERMS)
+    ]
     return lines + [Line("total", arrays["time"], total_energy(arrays), "black", width=2.0)]
 
 
@@ -93,8 +103,7 @@ def draw(ax, lines, ylabel, *, log=False, legend=True):
     """Draw ``lines`` on ``ax`` with a labelled time axis [s], ``ylabel``, grid and legend:
     the one function every plot goes through."""
     for line in lines:
-        ax.plot(line.time, line.values, label=line.label, color=line.color, linewidth=line.width,
-                linestyle=line.style)
+        ax.plot(line.time, line.values, label=line.label, color=line.color, linewidth=line.width, linestyle=line.style)
     if log:
         ax.set_yscale("log")
     ax.set_xlabel("time (s)")
@@ -153,7 +162,7 @@ def _save(figures, directory) -> dict:
     made, written = make_folders(os.fspath(directory)), {}
     try:
         for name, figure in figures.items():
-            interrupts.check()                    # Ctrl-C or SIGTERM: between pictures
+            interrupts.check()  # Ctrl-C or SIGTERM: between pictures
             path = os.path.join(directory, f"{name}.png")
             with atomic_path(path) as temporary:
                 figure.savefig(temporary, format="png", dpi=DPI)
@@ -180,4 +189,3 @@ def write_comparison_plots(runs, directory, *, title=None) -> dict:
     """``runs``: {method name: trajectory arrays}. The same four pictures with one line per
     method (the energy plot: each method's total energy [J]); returns {"energy": path, ...}."""
     return _save(build_figures(dict(runs), components=False, title=title), directory)
-

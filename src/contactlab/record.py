@@ -23,47 +23,70 @@ from .collision import collide
 from .errors import InputError
 from .trajectory import check_arrays, check_shapes
 
-SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
-          "particle_position", "particle_velocity", "energy_kinetic", "energy_potential",
-          "energy_elastic", "max_penetration", "contact_count", "solver_iterations", "solver_residual")
-WHOLE_SERIES = ("contact_count", "solver_iterations")        # 64-bit whole numbers; the rest are floats
-TRAJECTORY = "trajectory.h5"    # the file name of a run's trajectory in its output folder
+SERIES = (
+    "time",
+    "body_position",
+    "body_orientation",
+    "body_velocity",
+    "body_angular_velocity",
+    "particle_position",
+    "particle_velocity",
+    "energy_kinetic",
+    "energy_potential",
+    "energy_elastic",
+    "max_penetration",
+    "contact_count",
+    "solver_iterations",
+    "solver_residual",
+)
+WHOLE_SERIES = ("contact_count", "solver_iterations")  # 64-bit whole numbers; the rest are floats
+TRAJECTORY = "trajectory.h5"  # the file name of a run's trajectory in its output folder
 
 
 def series_rows(model) -> dict:
     """name -> (shape of one sample, dtype) of every series of a run of ``model``."""
     B, P = model.body_count, model.particle_count
-    shapes = {"body_position": (B, 3), "body_orientation": (B, 4), "body_velocity": (B, 3),
-              "body_angular_velocity": (B, 3), "particle_position": (P, 3), "particle_velocity": (P, 3)}
+    shapes = {
+        "body_position": (B, 3),
+        "body_orientation": (B, 4),
+        "body_velocity": (B, 3),
+        "body_angular_velocity": (B, 3),
+        "particle_position": (P, 3),
+        "particle_velocity": (P, 3),
+    }
     return {name: (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64) for name in SERIES}
 
 
 def sample_bytes(model) -> int:
     """Bytes one sample of a run of ``model`` takes (every series of :func:`series_rows`)."""
-    return sum(int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-               for shape, dtype in series_rows(model).values())
+    return sum(
+        int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize for shape, dtype in series_rows(model).values()
+    )
 
 
 def static_arrays(model) -> dict:
     """What does not change during a run of ``model``: body_names (B,), the cloth topology
     triangles (F, 3) and particle_cloth (P,), and the shapes' surfaces for drawing and export
     (contactlab.surfaces)."""
-    return {"body_names": np.array(model.body_names, dtype=str),
-            "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
-            "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
-            **surfaces.surface_arrays(model)}
+    return {
+        "body_names": np.array(model.body_names, dtype=str),
+        "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
+        "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
+        **surfaces.surface_arrays(model),
+    }
 
 
 @dataclass
 class Totals:
     """What a run's summary says of all its samples, gathered chunk by chunk."""
-    count: int = 0                      # samples
-    first_time: float = math.nan        # s
-    last_time: float = math.nan         # s
-    energy_initial: float = math.nan    # J, kinetic + potential + elastic
-    energy_final: float = math.nan      # J
-    energy_max: float = -math.inf       # J, the largest finite one (the initial one if none is)
-    max_penetration: float = 0.0        # m, NaNs skipped
+
+    count: int = 0  # samples
+    first_time: float = math.nan  # s
+    last_time: float = math.nan  # s
+    energy_initial: float = math.nan  # J, kinetic + potential + elastic
+    energy_final: float = math.nan  # J
+    energy_max: float = -math.inf  # J, the largest finite one (the initial one if none is)
+    max_penetration: float = 0.0  # m, NaNs skipped
     final_penetration: float = math.nan  # m
     max_iterations: int = 0
     max_residual: float = 0.0
@@ -87,8 +110,11 @@ class Totals:
 
     def energy(self) -> dict:
         """The summary's energy: {initial, final, max} [J]."""
-        return {"initial": self.energy_initial, "final": self.energy_final,
-                "max": self.energy_max if self.energy_max > -math.inf else self.energy_initial}
+        return {
+            "initial": self.energy_initial,
+            "final": self.energy_final,
+            "max": self.energy_max if self.energy_max > -math.inf else self.energy_initial,
+        }
 
 
 class Recorder:
@@ -102,11 +128,13 @@ class Recorder:
         self.sink = sink
         self.rows = series_rows(model)
         self.chunk_samples = max(1, min(store.CHUNK_BYTES // max(1, sample_bytes(model)), samples or math.inf))
-        self.buffer = {name: np.empty((self.chunk_samples, *shape), dtype=dtype)    # the chunk being filled
-                       for name, (shape, dtype) in self.rows.items()}
-        self.filled = 0             # samples in the buffer
-        self.kept = []              # without a sink: the chunks passed on, in order
-        self.last = None            # name -> the last sample passed on (one row)
+        self.buffer = {
+            name: np.empty((self.chunk_samples, *shape), dtype=dtype)  # the chunk being filled
+            for name, (shape, dtype) in self.rows.items()
+        }
+        self.filled = 0  # samples in the buffer
+        self.kept = []  # without a sink: the chunks passed on, in order
+        self.last = None  # name -> the last sample passed on (one row)
         self.totals = Totals()
 
     def sample(self, state, info=None):
@@ -116,9 +144,12 @@ class Recorder:
         contacts = collide(model, state)
         values = dict(
             time=state.time,
-            body_position=state.body_position, body_orientation=state.body_orientation,
-            body_velocity=state.body_velocity, body_angular_velocity=state.body_angular_velocity,
-            particle_position=state.particle_position, particle_velocity=state.particle_velocity,
+            body_position=state.body_position,
+            body_orientation=state.body_orientation,
+            body_velocity=state.body_velocity,
+            body_angular_velocity=state.body_angular_velocity,
+            particle_position=state.particle_position,
+            particle_velocity=state.particle_velocity,
             energy_kinetic=diagnostics.kinetic_energy(model, state),
             energy_potential=diagnostics.potential_energy(model, state),
             energy_elastic=info.energy_elastic if info else 0.0,
@@ -141,7 +172,7 @@ class Recorder:
         while done < count:
             take = min(count - done, self.chunk_samples - self.filled)
             for name in SERIES:
-                self.buffer[name][self.filled:self.filled + take] = samples[name][done:done + take]
+                self.buffer[name][self.filled : self.filled + take] = samples[name][done : done + take]
             self.filled += take
             done += take
             if self.filled == self.chunk_samples:
@@ -150,18 +181,18 @@ class Recorder:
     def latest(self, names=SERIES) -> dict:
         """The last sample of the series ``names``, as arrays of one row."""
         if self.filled:
-            return {name: self.buffer[name][self.filled - 1:self.filled].copy() for name in names}
+            return {name: self.buffer[name][self.filled - 1 : self.filled].copy() for name in names}
         return {name: self.last[name].copy() for name in names}
 
     def flush(self):
         """Pass the samples in the buffer on: to the sink, or to the chunks kept in memory."""
         if not self.filled:
             return
-        chunk = {name: values[:self.filled] for name, values in self.buffer.items()}
+        chunk = {name: values[: self.filled] for name, values in self.buffer.items()}
         self.totals.add(chunk)
         self.last = {name: values[-1:].copy() for name, values in chunk.items()}
         if self.sink is not None:
-            self.sink.append(chunk)         # written at once: the buffer can be filled again
+            self.sink.append(chunk)  # written at once: the buffer can be filled again
         else:
             self.kept.append({name: values.copy() for name, values in chunk.items()})
         self.filled = 0
@@ -170,9 +201,14 @@ class Recorder:
         """The trajectory held in memory, as arrays: time (T,), body_position (T,B,3), … and
         the static arrays (:func:`static_arrays`)."""
         self.flush()
-        out = {name: (np.concatenate([chunk[name] for chunk in self.kept]) if self.kept
-                      else np.zeros((0, *shape), dtype=dtype))
-               for name, (shape, dtype) in self.rows.items()}
+        out = {
+            name: (
+                np.concatenate([chunk[name] for chunk in self.kept])
+                if self.kept
+                else np.zeros((0, *shape), dtype=dtype)
+            )
+            for name, (shape, dtype) in self.rows.items()
+        }
         out.update(static_arrays(self.model))
         return out
 
@@ -194,10 +230,10 @@ def atomic_path(path):
     """
     temporary = None
     try:
-        with interrupts.deferred():     # a signal waits until the temporary file is known, to be removed
+        with interrupts.deferred():  # a signal waits until the temporary file is known, to be removed
             temporary = store.temporary_beside(path)
         yield temporary
-        with interrupts.deferred():     # renamed and noted as written, or neither
+        with interrupts.deferred():  # renamed and noted as written, or neither
             os.replace(temporary, path)
             interrupts.note_written(path)
     except BaseException:
@@ -246,13 +282,16 @@ def read_trajectory(arrays, keys, samples=None) -> dict:
     trajectory written before contactlab recorded surfaces) or there is no sample."""
     missing = [key for key in keys if key not in arrays]
     if missing:
-        raise InputError("arrays", f"not a trajectory with surfaces: missing {', '.join(missing)}; "
-                                   f"record the run again with this version of contactlab")
+        raise InputError(
+            "arrays",
+            f"not a trajectory with surfaces: missing {', '.join(missing)}; "
+            f"record the run again with this version of contactlab",
+        )
     if samples is None:
         out = {key: np.asarray(arrays[key]) for key in keys}
     else:
         shapes = getattr(arrays, "shapes", None) or {key: np.shape(arrays[key]) for key in keys}
-        check_shapes({key: shapes[key] for key in keys}, "arrays")     # no read beyond the samples there are
+        check_shapes({key: shapes[key] for key in keys}, "arrays")  # no read beyond the samples there are
         rows = getattr(arrays, "rows", lambda key, chosen: np.asarray(arrays[key])[chosen])
         out = {key: rows(key, samples) if key in SERIES else np.asarray(arrays[key]) for key in keys}
     if "time" in out and len(out["time"]) == 0:
@@ -297,20 +336,23 @@ def load_run(directory, field="OUT_DIR"):
     holding a JSON object that names the scene and the method. A folder that is not a run is an
     InputError on ``field`` (the option or argument that named it)."""
     from .trajectory import load_npz
+
     path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
     if os.path.isfile(path):
         arrays = store.open_trajectory(path, field)
     elif os.path.isfile(older):
         arrays, path = load_npz(older, field), older
     else:
-        raise InputError(field, f"found no {TRAJECTORY} in {directory}; give the folder a "
-                                f"'contactlab run' wrote (its --out)")
+        raise InputError(
+            field, f"found no {TRAJECTORY} in {directory}; give the folder a 'contactlab run' wrote (its --out)"
+        )
     if "body_surface_vertices" not in arrays:
-        raise InputError(field, f"{path} was written by an older contactlab without the shapes' "
-                                f"surfaces; run the scene again")
+        raise InputError(
+            field, f"{path} was written by an older contactlab without the shapes' surfaces; run the scene again"
+        )
     summary_path = os.path.join(directory, "summary.json")
     summary = {}
-    if os.path.isfile(summary_path):               # never open a FIFO or a device of that name
+    if os.path.isfile(summary_path):  # never open a FIFO or a device of that name
         try:
             with open(summary_path, encoding="utf-8") as stream:
                 summary = json.load(stream)
@@ -328,8 +370,9 @@ def write_outputs(directory, arrays, summary):
     """
     made, written = make_folders(directory), []
     try:
-        written.append(store.write(os.path.join(directory, TRAJECTORY), arrays,
-                                   series=[name for name in SERIES if name in arrays]))
+        written.append(
+            store.write(os.path.join(directory, TRAJECTORY), arrays, series=[name for name in SERIES if name in arrays])
+        )
         written.append(write_summary(directory, summary))
     except BaseException:
         undo_written(written, made)

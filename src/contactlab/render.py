@@ -44,28 +44,51 @@ from .record import atomic_path, checked_times, make_folders, read_trajectory, r
 from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
-GIF_MAX_FPS = 15            # frames per second of the GIF at most (its delay is a whole 1/100 s)
-GIF_MAX_HEIGHT = 300        # pixels; the GIF is the video scaled down to this height at most
-MIN_SIZE = 16               # pixels, smallest width or height accepted
-MAX_SIZE = 8192            # pixels, largest width or height accepted (8K video is 7680 x 4320)
-MAX_FPS = 240              # frames per second at most (the video plays in real time)
+GIF_MAX_FPS = 15  # frames per second of the GIF at most (its delay is a whole 1/100 s)
+GIF_MAX_HEIGHT = 300  # pixels; the GIF is the video scaled down to this height at most
+MIN_SIZE = 16  # pixels, smallest width or height accepted
+MAX_SIZE = 8192  # pixels, largest width or height accepted (8K video is 7680 x 4320)
+MAX_FPS = 240  # frames per second at most (the video plays in real time)
 DPI = 100
-AMBIENT = 0.4               # share of a colour kept by a face turned away from the light
+AMBIENT = 0.4  # share of a colour kept by a face turned away from the light
 BACKGROUND = "white"
 OBSTACLE_RGBA = (0.72, 0.72, 0.72, 0.3)
 PARTICLE_RGB = (0.15, 0.3, 0.6)
-STILL_SAMPLES = 600         # samples a still reads at most to frame its camera
-MARGIN = 0.15               # planes reach this share of the content's size beyond it
-REQUIRED = ("time", "body_position", "body_orientation", "particle_position", "particle_radius",
-            "particle_cloth", "triangles", "body_surface_vertices", "body_surface_vertex_start",
-            "body_surface_triangles", "body_surface_triangle_start", "obstacle_vertices",
-            "obstacle_triangles")
+STILL_SAMPLES = 600  # samples a still reads at most to frame its camera
+MARGIN = 0.15  # planes reach this share of the content's size beyond it
+REQUIRED = (
+    "time",
+    "body_position",
+    "body_orientation",
+    "particle_position",
+    "particle_radius",
+    "particle_cloth",
+    "triangles",
+    "body_surface_vertices",
+    "body_surface_vertex_start",
+    "body_surface_triangles",
+    "body_surface_triangle_start",
+    "obstacle_vertices",
+    "obstacle_triangles",
+)
 
 
 # -- public API -------------------------------------------------------------------------
 
-def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, azimuth=-60.0,
-           formats=("mp4", "gif"), title=None, progress=False) -> dict:
+
+def render(
+    arrays,
+    directory,
+    *,
+    fps=30,
+    width=640,
+    height=480,
+    elevation=25.0,
+    azimuth=-60.0,
+    formats=("mp4", "gif"),
+    title=None,
+    progress=False,
+) -> dict:
     """Write video.mp4, video.gif (whichever `formats` names) and still.png into `directory` (created if
     needed); return {"mp4": path, "gif": path, "still": path} for what was written.
 
@@ -80,14 +103,15 @@ def render(arrays, directory, *, fps=30, width=640, height=480, elevation=25.0, 
     formats = _formats(formats)
     time = checked_times(arrays)
     mp4_times, gif_times, _ = _video_times(time, fps, formats)
-    drawn = {len(time) - 1} | {int(k) for times in (mp4_times, gif_times) if times is not None
-                               for k in nearest(time, times)}
+    drawn = {len(time) - 1} | {
+        int(k) for times in (mp4_times, gif_times) if times is not None for k in nearest(time, times)
+    }
     picture = _Picture(arrays, width, height, elevation, azimuth, title, np.array(sorted(drawn)))
     paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
     paths["still"] = os.path.join(directory, "still.png")
     made = make_folders(os.fspath(directory))
     try:
-        with contextlib.ExitStack() as stack:     # renames every file at the end, or removes them all
+        with contextlib.ExitStack() as stack:  # renames every file at the end, or removes them all
             temporary = {name: stack.enter_context(atomic_path(path)) for name, path in paths.items()}
             _write_videos(picture, temporary, fps, progress)
             imageio.v3.imwrite(temporary["still"], picture.draw(len(picture.time) - 1))
@@ -105,8 +129,11 @@ def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azi
     """
     count = len(checked_times(arrays))
     if isinstance(sample, bool) or not isinstance(sample, (int, np.integer)) or not -count <= sample < count:
-        raise InputError("sample", f"expected a whole number from {-count} to {count - 1} "
-                                   f"(the trajectory has {count} samples), found {sample!r}")
+        raise InputError(
+            "sample",
+            f"expected a whole number from {-count} to {count - 1} "
+            f"(the trajectory has {count} samples), found {sample!r}",
+        )
     sample = int(sample) % count
     framing = np.union1d(spread_samples(count), [sample])
     picture = _Picture(arrays, width, height, elevation, azimuth, title, framing)
@@ -129,9 +156,10 @@ def _write_videos(picture, paths, fps, progress):
     gif_count = Counter(nearest(time, gif_times).tolist() if "gif" in paths else [])
     gif_frames = []
     with _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4:
-        for sample in tqdm(sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False,
-                           disable=not progress):
-            interrupts.check()                    # Ctrl-C or SIGTERM: between frames
+        for sample in tqdm(
+            sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False, disable=not progress
+        ):
+            interrupts.check()  # Ctrl-C or SIGTERM: between frames
             image = picture.draw(sample)
             for _ in range(mp4_count[sample]):
                 mp4.append_data(_even(image))
@@ -142,26 +170,37 @@ def _write_videos(picture, paths, fps, progress):
 
 # -- arguments ----------------------------------------------------------------------------
 
+
 def check_settings(fps=30, width=640, height=480, elevation=25.0, azimuth=-60.0):
     """The drawing settings checked, an InputError naming the first bad one: fps [1/s] in
     (0, MAX_FPS], width and height [px] whole numbers from MIN_SIZE to MAX_SIZE, elevation and
     azimuth finite [degrees]. Returns them as (fps, width, height, elevation, azimuth). A
     caller that renders after a long run (``contactlab run --video``, compare) calls it first."""
-    return (_fps(fps), _size(width, "width"), _size(height, "height"), _angle(elevation, "elevation"),
-            _angle(azimuth, "azimuth"))
+    return (
+        _fps(fps),
+        _size(width, "width"),
+        _size(height, "height"),
+        _angle(elevation, "elevation"),
+        _angle(azimuth, "azimuth"),
+    )
 
 
 def _number(value, name, check, expected):
     """``value`` as a float if it is a real number passing ``check``, else InputError."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(value) or not check(value):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+        or not check(value)
+    ):
         raise InputError(name, f"expected {expected}, found {value!r}")
     return float(value)
 
 
 def _fps(value):
-    return _number(value, "fps", lambda v: 0 < v <= MAX_FPS, f"a number of frames per second from above 0 to "
-                                                            f"{MAX_FPS} (e.g. 30)")
+    return _number(
+        value, "fps", lambda v: 0 < v <= MAX_FPS, f"a number of frames per second from above 0 to {MAX_FPS} (e.g. 30)"
+    )
 
 
 def _angle(value, name):
@@ -170,8 +209,9 @@ def _angle(value, name):
 
 def _size(value, name):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not MIN_SIZE <= value <= MAX_SIZE:
-        raise InputError(name, f"expected a whole number of pixels from {MIN_SIZE} to {MAX_SIZE} (e.g. 640), "
-                               f"found {value!r}")
+        raise InputError(
+            name, f"expected a whole number of pixels from {MIN_SIZE} to {MAX_SIZE} (e.g. 640), found {value!r}"
+        )
     return int(value)
 
 
@@ -188,6 +228,7 @@ def _formats(formats):
 
 
 # -- timing -------------------------------------------------------------------------------
+
 
 def _video_times(time, fps, formats):
     """(MP4 frame times, GIF frame times, GIF delay [1/100 s]) of a trajectory sampled at
@@ -231,6 +272,7 @@ def _gif_delay(fps):
 
 # -- images -------------------------------------------------------------------------------
 
+
 def _fit(image, height, width):
     """``image`` (h, w, 3) cropped or edge-padded to exactly (height, width, 3)."""
     image = image[:height, :width]
@@ -255,12 +297,21 @@ def _shrink(image, max_height):
 
 def _mp4_writer(path, fps):
     """An imageio writer of H.264 MP4 (yuv420p) at ``fps``; frames must have even sizes."""
-    return imageio.v2.get_writer(path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-                                 pixelformat="yuv420p", macro_block_size=1, quality=8,
-                                 ffmpeg_log_level="error")
+    return imageio.v2.get_writer(
+        path,
+        format="FFMPEG",
+        mode="I",
+        fps=fps,
+        codec="libx264",
+        pixelformat="yuv420p",
+        macro_block_size=1,
+        quality=8,
+        ffmpeg_log_level="error",
+    )
 
 
 # -- geometry -----------------------------------------------------------------------------
+
 
 def _normals(faces):
     """Unit normals (N, 3) of triangles ``faces`` (N, 3, 3), right-handed (counter-clockwise)."""
@@ -284,8 +335,7 @@ def _light_direction(elevation, azimuth):
     """Unit vector towards a light above the camera and a little to its left (degrees as view_init)."""
     elevation = np.radians(min(elevation + 30.0, 80.0))
     azimuth = np.radians(azimuth - 15.0)
-    return np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
-                     np.sin(elevation)])
+    return np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
 
 
 def _obstacle_pieces(triangles):
@@ -324,7 +374,7 @@ def _clip(polygon, halfspaces):
     for normal, offset in halfspaces:
         if len(polygon) == 0:
             break
-        inside = polygon @ normal - offset                  # ≥ 0 inside
+        inside = polygon @ normal - offset  # ≥ 0 inside
         kept = []
         for i in range(len(polygon)):
             j = (i + 1) % len(polygon)
@@ -346,7 +396,7 @@ def _cut_flat(flat, lower, upper):
     planes = [(i, normals[i], normals[i] @ faces[0, 0] - 1e-9) for i, faces in enumerate(flat) if len(faces) == 2]
     polygons, polygon_normals = [], []
     for i, (faces, normal) in enumerate(zip(flat, normals)):
-        helper = np.eye(3)[np.argmin(np.abs(normal))]       # the world axis most along the plane
+        helper = np.eye(3)[np.argmin(np.abs(normal))]  # the world axis most along the plane
         u = helper - (helper @ normal) * normal
         u /= np.linalg.norm(u)
         halfspaces = [(n, o) for j, n, o in planes if j != i]
@@ -423,6 +473,7 @@ def scenery(arrays):
 
 # -- the picture --------------------------------------------------------------------------
 
+
 class _Picture:
     """One matplotlib Figure that draws any sample of one trajectory.
 
@@ -460,16 +511,16 @@ class _Picture:
         self._add_flat(flat_polygons, flat_normals)
         self.surfaces = None
         if len(self.body_triangles) + len(self.cloth_triangles) + len(solid):
-            self.surfaces = self.axes.add_collection3d(Poly3DCollection(
-                np.zeros((0, 3, 3)), linewidths=0.8, zorder=2))
+            self.surfaces = self.axes.add_collection3d(Poly3DCollection(np.zeros((0, 3, 3)), linewidths=0.8, zorder=2))
         self.particles = None
         if len(self.free):
-            self.particles = self.axes.scatter(*arrays["particle_position"][0, self.free].T,
-                                               color=PARTICLE_RGB, edgecolors="none", zorder=3)
+            self.particles = self.axes.scatter(
+                *arrays["particle_position"][0, self.free].T, color=PARTICLE_RGB, edgecolors="none", zorder=3
+            )
         if title:
             self.figure.text(0.5, 1.0 - 6.0 / self.height, str(title), ha="center", va="top", fontsize=11)
         self.clock = self.figure.text(0.015, 0.015, "", ha="left", va="bottom", fontsize=10, family="monospace")
-        self.canvas.draw()                  # lays out the axes: needed to size the particles
+        self.canvas.draw()  # lays out the axes: needed to size the particles
         if self.particles is not None:
             self.particles.set_sizes(self._particle_sizes(arrays["particle_radius"][self.free]))
 
@@ -488,7 +539,7 @@ class _Picture:
             axis.set_label_text(f"{name} [m]", fontsize=8)
             axis.set_tick_params(labelsize=7, pad=0)
             axis.labelpad = -2
-            axis.set_pane_color((1.0, 1.0, 1.0, 0.0))     # only obstacles are grey
+            axis.set_pane_color((1.0, 1.0, 1.0, 0.0))  # only obstacles are grey
         return axes
 
     def _add_flat(self, polygons, normals):
@@ -517,8 +568,13 @@ class _Picture:
         bodies = surfaces.posed_body_vertices(arrays, sample)[self.body_triangles]
         cloths = arrays["particle_position"][sample][self.cloth_triangles]
         faces = np.concatenate([bodies, cloths, self.obstacle_faces])
-        rgba = np.concatenate([_shade(self.body_rgba, _normals(bodies), self.light, False),
-                               _shade(self.cloth_rgba, _normals(cloths), self.light, True), self.obstacle_rgba])
+        rgba = np.concatenate(
+            [
+                _shade(self.body_rgba, _normals(bodies), self.light, False),
+                _shade(self.cloth_rgba, _normals(cloths), self.light, True),
+                self.obstacle_rgba,
+            ]
+        )
         return faces, rgba
 
     def draw(self, sample):
@@ -527,7 +583,7 @@ class _Picture:
             faces, rgba = self._surface_faces(sample)
             self.surfaces.set_verts(faces)
             self.surfaces.set_facecolor(rgba)
-            edges = rgba.copy()             # hide the seams between opaque faces only
+            edges = rgba.copy()  # hide the seams between opaque faces only
             edges[rgba[:, 3] < 1.0, 3] = 0.0
             self.surfaces.set_edgecolor(edges)
         if self.particles is not None:

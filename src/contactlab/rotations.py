@@ -19,7 +19,7 @@ def to_matrix(q):
     NumPy form cost 24 µs for a single body."""
     q = np.asarray(q, dtype=float)
     flat = np.ascontiguousarray(q.reshape(-1, 4))
-    if not flat.flags.writeable:        # a Model's arrays: Numba would compile a read-only twin
+    if not flat.flags.writeable:  # a Model's arrays: Numba would compile a read-only twin
         flat = flat.copy()
     return matrices(flat).reshape(q.shape[:-1] + (3, 3))
 
@@ -46,12 +46,15 @@ def multiply(p, q):
     """Hamilton product p ⊗ q, shapes (count, 4)."""
     pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    ], axis=-1)
+    return np.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
 
 
 def from_rotation_vector(phi):
@@ -87,10 +90,10 @@ def integrate_compiled(q, angular_velocity, dt):
         px, py, pz = angular_velocity[i, 0] * dt[i], angular_velocity[i, 1] * dt[i], angular_velocity[i, 2] * dt[i]
         angle = np.sqrt(px * px + py * py + pz * pz)
         half = 0.5 * angle
-        scale = 0.5 - angle * angle / 48.0 if angle < 1e-8 else np.sin(half) / angle   # sin(half)/angle → ½
+        scale = 0.5 - angle * angle / 48.0 if angle < 1e-8 else np.sin(half) / angle  # sin(half)/angle → ½
         aw, ax, ay, az = np.cos(half), px * scale, py * scale, pz * scale
         qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-        w = aw * qw - ax * qx - ay * qy - az * qz                 # a ⊗ q
+        w = aw * qw - ax * qx - ay * qy - az * qz  # a ⊗ q
         x = aw * qx + ax * qw + ay * qz - az * qy
         y = aw * qy - ax * qz + ay * qw + az * qx
         z = aw * qz + ax * qy - ay * qx + az * qw
@@ -112,6 +115,9 @@ def world_tensors(R, principal):
     for b in range(R.shape[0]):
         for i in range(3):
             for j in range(3):
-                out[b, i, j] = (R[b, i, 0] * principal[b, 0] * R[b, j, 0] + R[b, i, 1] * principal[b, 1] * R[b, j, 1]
-                                + R[b, i, 2] * principal[b, 2] * R[b, j, 2])
+                out[b, i, j] = (
+                    R[b, i, 0] * principal[b, 0] * R[b, j, 0]
+                    + R[b, i, 1] * principal[b, 1] * R[b, j, 1]
+                    + R[b, i, 2] * principal[b, 2] * R[b, j, 2]
+                )
     return out

@@ -34,8 +34,15 @@ MESH = 6
 
 BODY_SHAPES = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE, "convex": CONVEX}
 OBSTACLE_SHAPES = {"plane": PLANE, "sphere": SPHERE, "box": BOX, "convex": CONVEX, "mesh": MESH}
-NAMES = {SPHERE: "sphere", BOX: "box", PLANE: "plane", POINT: "particle", CAPSULE: "capsule", CONVEX: "convex",
-         MESH: "mesh"}
+NAMES = {
+    SPHERE: "sphere",
+    BOX: "box",
+    PLANE: "plane",
+    POINT: "particle",
+    CAPSULE: "capsule",
+    CONVEX: "convex",
+    MESH: "mesh",
+}
 
 
 def volume(kind, params):
@@ -46,7 +53,7 @@ def volume(kind, params):
         return 8.0 * params[0] * params[1] * params[2]
     if kind == CAPSULE:
         r, h = params[0], params[1]
-        return np.pi * r * r * 2.0 * h + 4.0 / 3.0 * np.pi * r ** 3
+        return np.pi * r * r * 2.0 * h + 4.0 / 3.0 * np.pi * r**3
     raise ValueError(f"shape {NAMES[kind]} has no volume")
 
 
@@ -63,8 +70,9 @@ def principal_inertia(kind, params, mass):
         cylinder = mass * (np.pi * r * r * H) / volume(kind, params)
         caps = mass - cylinder
         axial = cylinder * r * r / 2.0 + caps * 2.0 * r * r / 5.0
-        transverse = (cylinder * (r * r / 4.0 + H * H / 12.0)
-                      + caps * (2.0 * r * r / 5.0 + H * H / 4.0 + 3.0 * H * r / 8.0))
+        transverse = cylinder * (r * r / 4.0 + H * H / 12.0) + caps * (
+            2.0 * r * r / 5.0 + H * H / 4.0 + 3.0 * H * r / 8.0
+        )
         return np.array([transverse, transverse, axial])
     raise ValueError(f"shape {NAMES[kind]} has no inertia")
 
@@ -72,6 +80,8 @@ def principal_inertia(kind, params, mass):
 def bounding_radii(kinds, params):
     """Radii [m] (N,) of spheres about the shapes' centres that enclose them; planes: inf."""
     kinds = np.asarray(kinds)
-    return np.select([kinds == BOX, kinds == PLANE, kinds == CAPSULE, kinds == CONVEX],
-                     [np.linalg.norm(params[:, :3], axis=1), np.inf, params[:, 0] + params[:, 1], params[:, 1]],
-                     default=params[:, 0])
+    return np.select(
+        [kinds == BOX, kinds == PLANE, kinds == CAPSULE, kinds == CONVEX],
+        [np.linalg.norm(params[:, :3], axis=1), np.inf, params[:, 0] + params[:, 1], params[:, 1]],
+        default=params[:, 0],
+    )

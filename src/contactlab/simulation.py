@@ -1,8 +1,8 @@
 """The driver: step a model with a method for a duration, recording every K steps.
 
-    run = simulate(model, method="impulse", dt=0.002, duration=2.0)
-    run.arrays["body_position"]      # (T, B, 3)
-    run.summary["max_penetration"]   # m
+run = simulate(model, method="impulse", dt=0.002, duration=2.0)
+run.arrays["body_position"]      # (T, B, 3)
+run.summary["max_penetration"]   # m
 """
 
 import os
@@ -14,21 +14,19 @@ import numpy as np
 from numba.core import event as numba_event
 from tqdm import tqdm
 
-from . import methods
-from .methods import velocity_loop
+from . import budget, interrupts, methods, plausibility
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
-from . import budget, interrupts, plausibility
 from .errors import InputError, SimulationDiverged
 from .health import ENERGY_SERIES, HARD_SPEED, Health
+from .methods import velocity_loop
 from .model import Model
 from .record import Recorder, streaming_recorder
 from .state import State
 from .store import TrajectoryFile
 from .threads import ThreadChooser
 from .validation import MAX_STEPS, one_of, run_length
-
 
 
 @dataclass
@@ -39,15 +37,18 @@ class Run:
     path, that file read back (a :class:`contactlab.store.TrajectoryFile`); ``summary`` holds
     what a run's ``summary.json`` does; docs/trajectory.md describes both. In Jupyter a Run
     shows itself as a compact HTML summary with a picture of its last sample."""
-    state: object        # the final State
-    arrays: dict         # the trajectory (see docs/trajectory.md)
-    summary: dict        # the JSON summary (see docs/trajectory.md)
+
+    state: object  # the final State
+    arrays: dict  # the trajectory (see docs/trajectory.md)
+    summary: dict  # the JSON summary (see docs/trajectory.md)
     model: object = None  # the Model it ran (None for a run read back from a folder)
 
     def __repr__(self):
         s = self.summary
-        return (f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
-                f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})")
+        return (
+            f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
+            f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})"
+        )
 
     def show(self, port=None):
         """Open this run in the interactive viewer (contactlab.viewer, docs/viewer.md), served on
@@ -55,10 +56,12 @@ class Run:
         ``.stop()`` ends it), so a notebook goes on. Its trajectory is shown where it is, in memory
         or in its trajectory.h5; contacts and forces use the run's Model."""
         from .viewer import view
+
         return view(self, port=port)
 
-    def _repr_html_(self):              # Jupyter (contactlab.notebook): the summary and the last sample drawn
+    def _repr_html_(self):  # Jupyter (contactlab.notebook): the summary and the last sample drawn
         from .notebook import run_html
+
         return run_html(self)
 
 
@@ -69,20 +72,32 @@ def _checked_arguments(model, method, dt, duration, options, integrator, record_
     (checked there), an Options of the method taken as it is; the model has something to move;
     a given state has this model's shapes."""
     if not isinstance(model, Model):
-        raise InputError("model", f"expected a contactlab Model (ModelBuilder(...).finalize() or "
-                                  f"load_scene(...).model), found {_kind(model)}")
+        raise InputError(
+            "model",
+            f"expected a contactlab Model (ModelBuilder(...).finalize() or "
+            f"load_scene(...).model), found {_kind(model)}",
+        )
     if model.body_count + model.particle_count == 0:
-        raise InputError("model", "has no bodies and no particles (nor cloth): there is nothing to simulate; "
-                                  "add a body, particles or a cloth")
+        raise InputError(
+            "model",
+            "has no bodies and no particles (nor cloth): there is nothing to simulate; "
+            "add a body, particles or a cloth",
+        )
     dt, duration, steps = run_length(dt, duration)
-    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) \
-            or not 1 <= record_every <= MAX_STEPS:
+    if (
+        isinstance(record_every, bool)
+        or not isinstance(record_every, (int, np.integer))
+        or not 1 <= record_every <= MAX_STEPS
+    ):
         raise InputError("record_every", f"expected a whole number from 1 to {MAX_STEPS:.0e}, found {record_every!r}")
     one_of(integrator, "integrator", INTEGRATORS)
     if integrator == "explicit_euler" and model.body_kinematic.any():
-        raise InputError("integrator", "explicit_euler moves positions by the velocities before the step, which "
-                                       "cannot follow a kinematic body's path; use symplectic_euler or "
-                                       "backward_euler")
+        raise InputError(
+            "integrator",
+            "explicit_euler moves positions by the velocities before the step, which "
+            "cannot follow a kinematic body's path; use symplectic_euler or "
+            "backward_euler",
+        )
     if not isinstance(method, str):
         raise InputError("method", f"expected a method name ({', '.join(methods.AVAILABLE)}), found {_kind(method)}")
     module = methods.get(method)
@@ -92,8 +107,11 @@ def _checked_arguments(model, method, dt, duration, options, integrator, record_
             raise InputError("options", f"expected option names (strings) as keys, found {strange[0]!r}")
         options = methods.make_options(module, options or {}, f"method.{method}")
     elif not isinstance(options, module.Options):
-        raise InputError("options", f"expected None, a dict or a contactlab.methods.{method}.Options for the "
-                                    f"{method} method, found {_kind(options)}")
+        raise InputError(
+            "options",
+            f"expected None, a dict or a contactlab.methods.{method}.Options for the "
+            f"{method} method, found {_kind(options)}",
+        )
     if state is not None:
         _check_state(model, state)
     if not isinstance(scene_name, str):
@@ -104,19 +122,28 @@ def _checked_arguments(model, method, dt, duration, options, integrator, record_
 def _check_state(model, state):
     """InputError("state", ...) unless ``state`` is a State of ``model``'s shapes, finite."""
     if not isinstance(state, State):
-        raise InputError("state", f"expected a contactlab State (model.state(), or the state of a run), "
-                                  f"found {_kind(state)}")
+        raise InputError(
+            "state", f"expected a contactlab State (model.state(), or the state of a run), found {_kind(state)}"
+        )
     B, P = model.body_count, model.particle_count
-    shapes = {"body_position": (B, 3), "body_orientation": (B, 4), "body_velocity": (B, 3),
-              "body_angular_velocity": (B, 3), "particle_position": (P, 3), "particle_velocity": (P, 3)}
+    shapes = {
+        "body_position": (B, 3),
+        "body_orientation": (B, 4),
+        "body_velocity": (B, 3),
+        "body_angular_velocity": (B, 3),
+        "particle_position": (P, 3),
+        "particle_velocity": (P, 3),
+    }
     for name, shape in shapes.items():
         value = getattr(state, name)
         found = getattr(value, "shape", None)
         if not isinstance(value, np.ndarray) or value.shape != shape or value.dtype != np.float64:
-            raise InputError("state", f"its {name} is {_kind(value)} of shape {found}, where this model's "
-                                      f"is an array of floats of shape {shape}: a state of another model?")
-    if not state.is_finite() or not isinstance(state.time, (int, float, np.number)) \
-            or not np.isfinite(state.time):
+            raise InputError(
+                "state",
+                f"its {name} is {_kind(value)} of shape {found}, where this model's "
+                f"is an array of floats of shape {shape}: a state of another model?",
+            )
+    if not state.is_finite() or not isinstance(state.time, (int, float, np.number)) or not np.isfinite(state.time):
         raise InputError("state", "has a time, position or velocity that is not a finite number")
 
 
@@ -127,9 +154,23 @@ def _kind(value):
     return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
 
 
-def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, integrator="symplectic_euler",
-             record_every=1, state=None, progress=False, scene_name="custom", threads=None,
-             compiled_loop=None, allow_divergence=False, memory_limit=None, trajectory=None) -> Run:
+def simulate(
+    model,
+    method="impulse",
+    dt=0.004,
+    duration=1.0,
+    options=None,
+    integrator="symplectic_euler",
+    record_every=1,
+    state=None,
+    progress=False,
+    scene_name="custom",
+    threads=None,
+    compiled_loop=None,
+    allow_divergence=False,
+    memory_limit=None,
+    trajectory=None,
+) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
     method: a name from contactlab.methods; options: that method's Options, taken as they are (they
@@ -157,66 +198,147 @@ def simulate(model, method="impulse", dt=0.004, duration=1.0, options=None, inte
     then (its summary's ``interrupted`` says when); a streamed trajectory is kept either way, its
     ``status`` saying how the run ended.
     """
-    with interrupts.deferred():         # compiling or stepping, a signal waits for a step boundary
-        return _simulate(model, method, dt, duration, options, integrator, record_every, state, progress,
-                         scene_name, threads, compiled_loop, allow_divergence, memory_limit, trajectory)
+    with interrupts.deferred():  # compiling or stepping, a signal waits for a step boundary
+        return _simulate(
+            model,
+            method,
+            dt,
+            duration,
+            options,
+            integrator,
+            record_every,
+            state,
+            progress,
+            scene_name,
+            threads,
+            compiled_loop,
+            allow_divergence,
+            memory_limit,
+            trajectory,
+        )
 
 
-def _simulate(model, method, dt, duration, options, integrator, record_every, state, progress, scene_name,
-              threads, compiled_loop, allow_divergence, memory_limit, trajectory):
-    module, options, dt, duration, steps = _checked_arguments(model, method, dt, duration, options, integrator,
-                                                              record_every, state, scene_name)
+def _simulate(
+    model,
+    method,
+    dt,
+    duration,
+    options,
+    integrator,
+    record_every,
+    state,
+    progress,
+    scene_name,
+    threads,
+    compiled_loop,
+    allow_divergence,
+    memory_limit,
+    trajectory,
+):
+    module, options, dt, duration, steps = _checked_arguments(
+        model, method, dt, duration, options, integrator, record_every, state, scene_name
+    )
     check_supported(model)
     chooser = ThreadChooser(threads)
     state = model.state() if state is None else state.copy()
-    if memory_limit is not None and (isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float))
-                                     or not memory_limit > 0):
+    if memory_limit is not None and (
+        isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float)) or not memory_limit > 0
+    ):
         raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
     if compiled_loop not in (None, True, False):
         raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
     if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
         raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
     samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
-    for line in plausibility.warnings_for(model, state, dt, steps):     # a unit slip? one line each
+    for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
         warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=3)
     advice = getattr(module, "divergence_advice", None)
     health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
-    recorder = (Recorder(model, record_every, samples=samples) if trajectory is None
-                else streaming_recorder(model, record_every, trajectory, samples))
+    recorder = (
+        Recorder(model, record_every, samples=samples)
+        if trajectory is None
+        else streaming_recorder(model, record_every, trajectory, samples)
+    )
     try:
-        return _record_run(model, module, method, dt, steps, options, integrator, recorder, state, progress,
-                           scene_name, chooser, compiled_loop, health)
+        return _record_run(
+            model,
+            module,
+            method,
+            dt,
+            steps,
+            options,
+            integrator,
+            recorder,
+            state,
+            progress,
+            scene_name,
+            chooser,
+            compiled_loop,
+            health,
+        )
     except BaseException:
-        if recorder.sink is not None:       # not a run to keep (a bug, a full disk): nothing of it remains
+        if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
             recorder.sink.discard()
         raise
 
 
-def _record_run(model, module, method, dt, steps, options, integrator, recorder, state, progress, scene_name,
-                chooser, compiled_loop, health):
+def _record_run(
+    model,
+    module,
+    method,
+    dt,
+    steps,
+    options,
+    integrator,
+    recorder,
+    state,
+    progress,
+    scene_name,
+    chooser,
+    compiled_loop,
+    health,
+):
     """Step and record the run; the Run, or SimulationDiverged or Interrupted carrying it
     (``error.run``), the trajectory up to then included."""
-    compiling = numba_event.TimingListener()       # Numba's own clock of its compilations
-    notice = FirstCompile()                        # one line on stderr at the first compilation
-    run_started = time.perf_counter()              # the run: its first sample, the steps, the other samples
+    compiling = numba_event.TimingListener()  # Numba's own clock of its compilations
+    notice = FirstCompile()  # one line on stderr at the first compilation
+    run_started = time.perf_counter()  # the run: its first sample, the steps, the other samples
     stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         if stepper is None:
-            recorder.sample(state)                 # its collide() compiles the collision kernels first
+            recorder.sample(state)  # its collide() compiles the collision kernels first
         else:
-            recorder.extend(stepper.sample())      # the loop's own recording, which the steps use too
+            recorder.extend(stepper.sample())  # the loop's own recording, which the steps use too
     setup_compile_seconds = _seconds(compiling)
-    health.check_samples(recorder.latest(ENERGY_SERIES), 0)     # the energy to hold the run to
-    health.start(state)                            # and how deep it starts
+    health.check_samples(recorder.latest(ENERGY_SERIES), 0)  # the energy to hold the run to
+    health.start(state)  # and how deep it starts
     tally = Tally()
     stopped = interrupted = None
-    with numba_event.install_listener("numba:compile", compiling), compile_notice(notice), \
-            tqdm(total=steps, delay=1.0, disable=not progress, unit="step", leave=False,
-                 desc=f"{scene_name} ({method})") as bar, chooser:
+    with (
+        numba_event.install_listener("numba:compile", compiling),
+        compile_notice(notice),
+        tqdm(
+            total=steps, delay=1.0, disable=not progress, unit="step", leave=False, desc=f"{scene_name} ({method})"
+        ) as bar,
+        chooser,
+    ):
         try:
             if stepper is None:
-                state = _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser,
-                                        compiling, tally, bar, health)
+                state = _step_in_python(
+                    module,
+                    model,
+                    state,
+                    dt,
+                    options,
+                    integrator,
+                    steps,
+                    recorder,
+                    chooser,
+                    compiling,
+                    tally,
+                    bar,
+                    health,
+                )
             else:
                 state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health)
         except _Stopped as stop:
@@ -234,26 +356,38 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
     first_step_seconds, stepping_seconds = tally.first_step_seconds, tally.stepping_seconds
     ordinary_step = stepping_seconds / (steps - 1) if steps > 1 else 0.0
     summary = {
-        "scene": scene_name, "method": method, "integrator": integrator, "dt": dt, "steps": steps,
+        "scene": scene_name,
+        "method": method,
+        "integrator": integrator,
+        "dt": dt,
+        "steps": steps,
         "options": asdict(options),
         "wall_seconds": wall,
         "first_step_seconds": first_step_seconds,
-        "compile_seconds": (setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step)
-                            + tally.later_compile_seconds),
+        "compile_seconds": (
+            setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step) + tally.later_compile_seconds
+        ),
         "recording_seconds": tally.recording_seconds,
         "compiled_loop": stepper is not None,
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
-        "steps_per_second": ((steps - 1) / stepping_seconds if steps > 1 and stepping_seconds > 0
-                             else 1.0 / max(first_step_seconds, 1e-9)),
+        "steps_per_second": (
+            (steps - 1) / stepping_seconds
+            if steps > 1 and stepping_seconds > 0
+            else 1.0 / max(first_step_seconds, 1e-9)
+        ),
         "steps_per_second_spread": tally.rate_spread(),
-        "bodies": model.body_count, "particles": model.particle_count, "max_contacts": tally.max_contacts,
+        "bodies": model.body_count,
+        "particles": model.particle_count,
+        "max_contacts": tally.max_contacts,
         "max_penetration": totals.max_penetration,
         "final_penetration": totals.final_penetration,
         "energy": totals.energy(),
-        "solver": {"max_iterations": totals.max_iterations,
-                   "mean_iterations": tally.sweeps_made / steps,
-                   "max_residual": totals.max_residual},
+        "solver": {
+            "max_iterations": totals.max_iterations,
+            "mean_iterations": tally.sweeps_made / steps,
+            "max_residual": totals.max_residual,
+        },
         "samples": totals.count,
         "health": health.summary(),
         "diverged": None,
@@ -262,8 +396,12 @@ def _record_run(model, module, method, dt, steps, options, integrator, recorder,
     steps_made = int(round((state.time - totals.first_time) / dt))
     if stopped is not None:
         message = health.message(stopped)
-        summary["diverged"] = {"check": stopped.check, "time": stopped.time, "message": message,
-                               "steps_made": steps_made}
+        summary["diverged"] = {
+            "check": stopped.check,
+            "time": stopped.time,
+            "message": message,
+            "steps_made": steps_made,
+        }
         raise SimulationDiverged(message, time=stopped.time, run=Run(state, arrays, summary, model))
     if interrupted is not None:
         summary["interrupted"] = {"signal": interrupted.name, "time": totals.last_time, "steps_made": steps_made}
@@ -283,16 +421,17 @@ class _Stopped(Exception):
 @dataclass
 class Tally:
     """What the stepping measured, whichever path stepped."""
-    first_step_seconds: float = 0.0      # the first step, compiling the kernels on first use
-    stepping_seconds: float = 0.0        # the later steps: stepping only, no Python recording, no compiling
-    later_compile_seconds: float = 0.0   # kernels first needed after the first step (say, at the first contact)
+
+    first_step_seconds: float = 0.0  # the first step, compiling the kernels on first use
+    stepping_seconds: float = 0.0  # the later steps: stepping only, no Python recording, no compiling
+    later_compile_seconds: float = 0.0  # kernels first needed after the first step (say, at the first contact)
     recording_seconds: float = 0.0
     max_contacts: int = 0
-    sweeps_made: int = 0                 # solver sweeps summed over every step (recorded or not)
-    implicit_spring_steps: int = 0       # penalty: steps whose contact springs went implicit (explicit unstable)
-    state: object = None                 # the latest State the Python path made
-    window_rates: list = field(default_factory=list)   # steps/s of each WINDOW_SECONDS of stepping
-    window: list = field(default_factory=lambda: [0, 0.0])   # the window being filled: steps, seconds
+    sweeps_made: int = 0  # solver sweeps summed over every step (recorded or not)
+    implicit_spring_steps: int = 0  # penalty: steps whose contact springs went implicit (explicit unstable)
+    state: object = None  # the latest State the Python path made
+    window_rates: list = field(default_factory=list)  # steps/s of each WINDOW_SECONDS of stepping
+    window: list = field(default_factory=lambda: [0, 0.0])  # the window being filled: steps, seconds
 
     def take(self, stepper):
         """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
@@ -307,7 +446,7 @@ class Tally:
             return False
         self.stepping_seconds += elapsed - compiled
         self.later_compile_seconds += compiled
-        if compiled == 0.0:             # a window of plain stepping: one measurement of the rate
+        if compiled == 0.0:  # a window of plain stepping: one measurement of the rate
             self.window[0] += steps
             self.window[1] += elapsed
             if self.window[1] >= WINDOW_SECONDS:
@@ -328,8 +467,9 @@ class Tally:
         return {"median": float(median), "low": float(low), "high": float(high), "windows": len(rates)}
 
 
-def _step_in_python(module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar,
-                    health):
+def _step_in_python(
+    module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar, health
+):
     """Step with the method's ``step``, one Python call a step (cloth, meshes, penalty, projection…),
     checking the run's health after every step and at every sample."""
     record_every = recorder.record_every
@@ -353,11 +493,12 @@ def _step_in_python(module, model, state, dt, options, integrator, steps, record
             started = time.perf_counter()
             contacts = recorder.sample(state, info)
             tally.recording_seconds += time.perf_counter() - started
-            violation = (health.check_samples(recorder.latest(ENERGY_SERIES), 0)
-                         or health.check_contacts(state, contacts))
+            violation = health.check_samples(recorder.latest(ENERGY_SERIES), 0) or health.check_contacts(
+                state, contacts
+            )
         if violation is not None:
             if not recorded:
-                recorder.sample(state, info)       # the state that went wrong ends the trajectory
+                recorder.sample(state, info)  # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
         _advance(bar, step_index, 1)
     return state
@@ -371,8 +512,8 @@ def _advance(bar, step_index, made):
     bar.update(made)
 
 
-CHUNK_SECONDS = 0.1     # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
-WINDOW_SECONDS = 0.1    # s of stepping per measurement of the rate (summary "steps_per_second_spread")
+CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
+WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
 def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health):
@@ -380,6 +521,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
     about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside; the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
     from .collision import collide
+
     speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
     step_index, chunk = 1, 1
     while step_index <= steps:
@@ -395,14 +537,15 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
         recorder.extend(samples)
         state = stepper.state()
         violation = health.check_state(state) if diverged else None
-        violation = (violation or health.check_samples(samples, 0)
-                     or health.check_contacts(state, collide(stepper.model, state)))
+        violation = (
+            violation or health.check_samples(samples, 0) or health.check_contacts(state, collide(stepper.model, state))
+        )
         if violation is not None:
             tally.take(stepper)
             if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
                 recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
-        if step_index > 1:          # the next chunk: about CHUNK_SECONDS of steps at this pace
+        if step_index > 1:  # the next chunk: about CHUNK_SECONDS of steps at this pace
             chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         _advance(bar, step_index, made)
         step_index += made

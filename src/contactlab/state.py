@@ -11,19 +11,21 @@ import numpy as np
 
 @dataclass
 class State:
-    time: float                          # s
-    body_position: np.ndarray            # (B, 3) centre of mass, m
-    body_orientation: np.ndarray         # (B, 4) unit quaternion (w, x, y, z)
-    body_velocity: np.ndarray            # (B, 3) m/s
-    body_angular_velocity: np.ndarray    # (B, 3) rad/s, world frame
-    particle_position: np.ndarray        # (P, 3) m
-    particle_velocity: np.ndarray        # (P, 3) m/s
+    time: float  # s
+    body_position: np.ndarray  # (B, 3) centre of mass, m
+    body_orientation: np.ndarray  # (B, 4) unit quaternion (w, x, y, z)
+    body_velocity: np.ndarray  # (B, 3) m/s
+    body_angular_velocity: np.ndarray  # (B, 3) rad/s, world frame
+    particle_position: np.ndarray  # (P, 3) m
+    particle_velocity: np.ndarray  # (P, 3) m/s
     carried: dict = field(default_factory=dict)
 
     def __repr__(self):
         bodies, particles = len(self.body_position), len(self.particle_position)
-        return (f"State(t = {self.time:.6g} s, {bodies} bod{'y' if bodies == 1 else 'ies'}, "
-                f"{particles} particle{'' if particles == 1 else 's'})")
+        return (
+            f"State(t = {self.time:.6g} s, {bodies} bod{'y' if bodies == 1 else 'ies'}, "
+            f"{particles} particle{'' if particles == 1 else 's'})"
+        )
 
     @classmethod
     def assemble(cls, time, positions, velocities, carried=None) -> "State":
@@ -56,10 +58,22 @@ class State:
 
     def max_speed(self) -> float:
         """The largest linear speed of a body centre or particle [m/s] (0 with none)."""
-        return float(max(np.linalg.norm(self.body_velocity, axis=1).max(initial=0.0),
-                         np.linalg.norm(self.particle_velocity, axis=1).max(initial=0.0)))
+        return float(
+            max(
+                np.linalg.norm(self.body_velocity, axis=1).max(initial=0.0),
+                np.linalg.norm(self.particle_velocity, axis=1).max(initial=0.0),
+            )
+        )
 
     def is_finite(self) -> bool:
-        return all(np.isfinite(a).all() for a in (
-            self.body_position, self.body_orientation, self.body_velocity,
-            self.body_angular_velocity, self.particle_position, self.particle_velocity))
+        return all(
+            np.isfinite(a).all()
+            for a in (
+                self.body_position,
+                self.body_orientation,
+                self.body_velocity,
+                self.body_angular_velocity,
+                self.particle_position,
+                self.particle_velocity,
+            )
+        )

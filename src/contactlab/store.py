@@ -12,7 +12,8 @@ Layout (docs/trajectory.md): one dataset per array of ``record.SERIES``, T rows,
 along T and chunked by samples; the static arrays (names, cloth triangles, surfaces) as plain
 datasets; attributes ``format`` (:data:`FORMAT`), ``version`` (:data:`VERSION`), ``status``,
 ``record_every``. Every chunk of numbers carries a Fletcher-32 checksum, so a damaged file is refused
-on reading rather than drawn with wrong numbers. Series are stored uncompressed: floating-point trajectories shrink only to
+on reading rather than drawn with wrong numbers. Series are stored uncompressed: floating-point trajectories shrink
+only to
 0.77–0.81 of their size under lzf or gzip (measured on a pile's positions) while compressing
 would cost more time than the steps that made them.
 
@@ -34,9 +35,9 @@ from .errors import InputError, first_line
 
 FORMAT = "contactlab trajectory"
 VERSION = 1
-CHUNK_BYTES = 1 << 20          # bytes: a chunk of samples of one series is about this big (one sample at least)
+CHUNK_BYTES = 1 << 20  # bytes: a chunk of samples of one series is about this big (one sample at least)
 STATUSES = ("running", "complete", "diverged", "interrupted")
-_TEXT = h5py.string_dtype()     # UTF-8 strings (body names)
+_TEXT = h5py.string_dtype()  # UTF-8 strings (body names)
 
 
 class TrajectoryWriter:
@@ -64,18 +65,24 @@ class TrajectoryWriter:
                 for name, value in static.items():
                     value = np.asarray(value)
                     checked = {"fletcher32": True, "chunks": True} if value.size and value.dtype.kind != "U" else {}
-                    self.file.create_dataset(name, data=value.astype(_TEXT) if value.dtype.kind == "U" else value,
-                                             **checked)
+                    self.file.create_dataset(
+                        name, data=value.astype(_TEXT) if value.dtype.kind == "U" else value, **checked
+                    )
                 self.series, self.empty = {}, {}
                 for name, (shape, dtype) in rows.items():
                     sample_size = int(np.prod(shape, dtype=np.int64))
-                    if sample_size == 0 and shape:       # (T, 0, 3): nothing to store, written at the end
+                    if sample_size == 0 and shape:  # (T, 0, 3): nothing to store, written at the end
                         self.empty[name] = (shape, dtype)
                         continue
                     chunk = max(1, min(CHUNK_BYTES // (sample_size * np.dtype(dtype).itemsize), expected, 1 << 16))
                     self.series[name] = self.file.create_dataset(
-                        name, shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=(chunk, *shape),
-                        fletcher32=True)
+                        name,
+                        shape=(0, *shape),
+                        maxshape=(None, *shape),
+                        dtype=dtype,
+                        chunks=(chunk, *shape),
+                        fletcher32=True,
+                    )
             except BaseException:
                 self._remove()
                 raise
@@ -87,9 +94,9 @@ class TrajectoryWriter:
             return
         for name, dataset in self.series.items():
             dataset.resize(self.count + count, axis=0)
-            dataset[self.count:] = samples[name]
+            dataset[self.count :] = samples[name]
         self.count += count
-        self.file.flush()          # what is written so far is readable if the process is killed
+        self.file.flush()  # what is written so far is readable if the process is killed
 
     def finish(self, status="complete") -> str:
         """Close the file, mark it with ``status`` (one of STATUSES) and rename it to its path
@@ -123,8 +130,9 @@ class TrajectoryWriter:
 def temporary_beside(path):
     """An empty file beside ``path`` named ``.partial-<random><name>``, with the usual rights
     (mkstemp makes it private)."""
-    handle, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".partial-",
-                                         suffix=os.path.basename(path))
+    handle, temporary = tempfile.mkstemp(
+        dir=os.path.dirname(os.path.abspath(path)), prefix=".partial-", suffix=os.path.basename(path)
+    )
     os.close(handle)
     umask = os.umask(0)
     os.umask(umask)
@@ -138,8 +146,9 @@ def write(path, arrays, record_every=1, status="complete", series=()):
     per-sample ones (T rows), the rest are static."""
     static = {name: value for name, value in arrays.items() if name not in series}
     rows = {name: (np.shape(arrays[name])[1:], np.asarray(arrays[name]).dtype) for name in series}
-    writer = TrajectoryWriter(path, static, rows, record_every,
-                              expected=len(arrays["time"]) if "time" in series else 1 << 16)
+    writer = TrajectoryWriter(
+        path, static, rows, record_every, expected=len(arrays["time"]) if "time" in series else 1 << 16
+    )
     try:
         writer.append({name: np.asarray(arrays[name]) for name in series})
     except BaseException:
@@ -161,8 +170,11 @@ class TrajectoryFile(Mapping):
                 raise InputError(field, f"{self.path} is an HDF5 file but not a contactlab trajectory")
             version = int(file.attrs.get("version", 0))
             if version > VERSION:
-                raise InputError(field, f"{self.path} was written by a newer contactlab (trajectory format "
-                                        f"{version}, this one reads {VERSION}); update contactlab")
+                raise InputError(
+                    field,
+                    f"{self.path} was written by a newer contactlab (trajectory format "
+                    f"{version}, this one reads {VERSION}); update contactlab",
+                )
             self.status = str(file.attrs.get("status", "complete"))
             self.record_every = int(file.attrs.get("record_every", 1))
             self.names = tuple(file.keys())
@@ -170,16 +182,18 @@ class TrajectoryFile(Mapping):
             kinds = {name: file[name].dtype for name in self.names}
         bad = [name for name, dtype in kinds.items() if dtype.kind == "O" and not h5py.check_string_dtype(dtype)]
         if bad:
-            raise InputError(field, f"{self.path} holds {bad[0]} of a type contactlab never writes: "
-                                    f"this trajectory is damaged")
+            raise InputError(
+                field, f"{self.path} holds {bad[0]} of a type contactlab never writes: this trajectory is damaged"
+            )
 
     def _open(self):
         try:
             return h5py.File(self.path, "r")
         except (OSError, ValueError) as error:
-            raise InputError(self.field, f"{self.path} is not a trajectory contactlab can read "
-                                         f"({first_line(error)}); "
-                                         f"run the scene again") from None
+            raise InputError(
+                self.field,
+                f"{self.path} is not a trajectory contactlab can read ({first_line(error)}); run the scene again",
+            ) from None
 
     def __getitem__(self, name):
         if name not in self.names:
@@ -195,16 +209,17 @@ class TrajectoryFile(Mapping):
         with self._open() as file:
             dataset = file[name]
             try:
-                if dataset.size == 0:           # (T, 0, 3): no storage to select from
+                if dataset.size == 0:  # (T, 0, 3): no storage to select from
                     return np.zeros(dataset.shape, dtype=dataset.dtype)[selection]
                 if h5py.check_string_dtype(dataset.dtype):
                     return dataset.asstr()[selection].astype(str)
                 return dataset[selection]
             except (OSError, ValueError, TypeError) as error:
-                raise InputError(self.field, f"{self.path}: {name} cannot be read ({error}): this trajectory "
-                                             f"is damaged") from None
+                raise InputError(
+                    self.field, f"{self.path}: {name} cannot be read ({error}): this trajectory is damaged"
+                ) from None
 
-    def __contains__(self, name):       # without reading the array (Mapping's would read it)
+    def __contains__(self, name):  # without reading the array (Mapping's would read it)
         return name in self.names
 
     def __iter__(self):

@@ -45,18 +45,22 @@ from .scene.schema import _did_you_mean, show
 from .scene.toml import parse_toml
 
 RECORD = ("summary", "trajectory")
-MAX_CELLS = 100_000           # cells a study may have
-KEYS = {"study": ("name", "record", "description"), "grid": ("scenes", "methods", "set"),
-        "cells": ("scene", "method", "set")}
+MAX_CELLS = 100_000  # cells a study may have
+KEYS = {
+    "study": ("name", "record", "description"),
+    "grid": ("scenes", "methods", "set"),
+    "cells": ("scene", "method", "set"),
+}
 
 
 @dataclass(frozen=True)
 class Cell:
     """One run of a study: ``scene`` (a built-in name or a path), ``method``, ``settings``
     (``--set`` path -> value, in the order given) and ``key`` (hex digest naming it)."""
+
     scene: str
     method: str
-    settings: tuple           # ((path, value), ...)
+    settings: tuple  # ((path, value), ...)
     record: str
     key: str
 
@@ -69,6 +73,7 @@ class Cell:
 class Study:
     """A study read from ``path``: ``name``, ``record``, ``cells`` and the ``axes`` (the
     setting paths any cell sets, in order of first appearance)."""
+
     name: str
     path: str
     record: str
@@ -108,7 +113,7 @@ def load_study(path) -> Study:
     if not isinstance(study_name, str) or not study_name or os.sep in study_name or "/" in study_name:
         raise InputError("study.name", f"expected a name usable as a folder name, found {show(study_name)}")
     base = Path(origin).parent
-    specs = []                                   # (field, scene, method, settings)
+    specs = []  # (field, scene, method, settings)
     if "grid" in raw:
         specs += _grid_cells(_table(raw["grid"], "grid"))
     cells = raw.get("cells", [])
@@ -125,11 +130,17 @@ def load_study(path) -> Study:
     if not specs:
         raise InputError("", "the study has no cells: give a [grid] with scenes, or [[cells]]")
     if len(specs) > MAX_CELLS:
-        raise InputError("grid", f"the study has {len(specs):,} cells, more than the {MAX_CELLS:,} a study may "
-                                 f"have; split it")
-    return Study(study_name, origin, record, _checked_cells(specs, base, record),
-                 axes=list(dict.fromkeys(path for *_, settings in specs for path, _ in settings)),
-                 description=head.get("description", ""))
+        raise InputError(
+            "grid", f"the study has {len(specs):,} cells, more than the {MAX_CELLS:,} a study may have; split it"
+        )
+    return Study(
+        study_name,
+        origin,
+        record,
+        _checked_cells(specs, base, record),
+        axes=list(dict.fromkeys(path for *_, settings in specs for path, _ in settings)),
+        description=head.get("description", ""),
+    )
 
 
 def _grid_cells(grid):
@@ -141,14 +152,21 @@ def _grid_cells(grid):
     for path, options in axes.items():
         options = _list(options, f"grid.set.{toml_value(path)}")
         values.append([(path, value) for value in options])
-    return [("grid", scene, method, tuple(chosen))
-            for scene in scenes for method in methods for chosen in itertools.product(*values)]
+    return [
+        ("grid", scene, method, tuple(chosen))
+        for scene in scenes
+        for method in methods
+        for chosen in itertools.product(*values)
+    ]
 
 
 def _field(where, key):
     """Where a cell's ``key`` ("scene", "method" or "set") is written in the study file."""
-    return {"scene": "grid.scenes", "method": "grid.methods", "set": "grid.set"}[key] if where == "grid" \
+    return (
+        {"scene": "grid.scenes", "method": "grid.methods", "set": "grid.set"}[key]
+        if where == "grid"
         else f"{where}.{key}"
+    )
 
 
 def _checked_cells(specs, base, record):
@@ -156,11 +174,13 @@ def _checked_cells(specs, base, record):
     cells, seen, texts = [], set(), {}
     for where, scene, method, settings in specs:
         if not isinstance(scene, str) or not scene:
-            raise InputError(_field(where, "scene"), f"expected a built-in scene name or a .toml file, "
-                                                     f"found {show(scene)}")
+            raise InputError(
+                _field(where, "scene"), f"expected a built-in scene name or a .toml file, found {show(scene)}"
+            )
         if not isinstance(method, str) or method not in AVAILABLE:
-            raise InputError(_field(where, "method"), f"unknown method {show(method)}"
-                                                      f"{_did_you_mean(method, AVAILABLE)}")
+            raise InputError(
+                _field(where, "method"), f"unknown method {show(method)}{_did_you_mean(method, AVAILABLE)}"
+            )
         source = scene if not scene.endswith(".toml") or os.path.isabs(scene) else str(base / scene)
         if source not in texts:
             try:
@@ -170,22 +190,26 @@ def _checked_cells(specs, base, record):
         cell = Cell(source, method, settings, record, _key(texts[source], method, settings, record))
         try:
             load_scene(source, cell.overrides())
-        except InputError as error:        # named by the setting it came from, where it did
+        except InputError as error:  # named by the setting it came from, where it did
             paths = {path.replace("[", ".").replace("]", ""): path for path, _ in settings}
             setting = paths.get((error.field or "").replace("[", ".").replace("]", ""))
             place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
             inner = f"{error.field}: " if error.field and not setting else ""
             raise InputError(place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}") from None
-        if cell.key not in seen:                 # the same cell twice (grid and list) runs once
+        if cell.key not in seen:  # the same cell twice (grid and list) runs once
             seen.add(cell.key)
             cells.append(cell)
     return cells
 
 
 def _key(scene_text, method, settings, record):
-    identity = {"scene": hashlib.sha256(scene_text.encode()).hexdigest(), "method": method,
-                "settings": [[path, toml_value(value)] for path, value in settings], "record": record,
-                "contactlab": __version__}
+    identity = {
+        "scene": hashlib.sha256(scene_text.encode()).hexdigest(),
+        "method": method,
+        "settings": [[path, toml_value(value)] for path, value in settings],
+        "record": record,
+        "contactlab": __version__,
+    }
     return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:20]
 
 

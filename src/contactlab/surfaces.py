@@ -27,8 +27,8 @@ import numpy as np
 
 from . import _icosphere, rotations, shapes
 
-SPHERE_SUBDIVISIONS = 1     # an icosphere of 80 triangles
-CAPSULE_SEGMENTS = 8        # around the axis
+SPHERE_SUBDIVISIONS = 1  # an icosphere of 80 triangles
+CAPSULE_SEGMENTS = 8  # around the axis
 
 
 def _hull_surface(hulls, index):
@@ -38,19 +38,20 @@ def _hull_surface(hulls, index):
     return hulls["vertices"][v0:v1], hulls["triangles"][t0:t1]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _unit_sphere():
     """(vertices (42, 3), triangles (80, 3)) of the unit icosphere of SPHERE_SUBDIVISIONS = 1:
     trimesh.creation.icosphere's, written out in contactlab._icosphere (no trimesh import)."""
-    return _read_only(np.array(_icosphere.VERTICES, dtype=float)), _read_only(np.array(_icosphere.TRIANGLES,
-                                                                                       dtype=np.int64))
+    return _read_only(np.array(_icosphere.VERTICES, dtype=float)), _read_only(
+        np.array(_icosphere.TRIANGLES, dtype=np.int64)
+    )
 
 
 @functools.lru_cache(maxsize=64)
 def _capsule(radius, half_length):
-    import trimesh                      # half a second to import: only scenes with capsules pay it
-    mesh = trimesh.creation.capsule(height=2.0 * half_length, radius=radius,
-                                    count=[CAPSULE_SEGMENTS, CAPSULE_SEGMENTS])
+    import trimesh  # half a second to import: only scenes with capsules pay it
+
+    mesh = trimesh.creation.capsule(height=2.0 * half_length, radius=radius, count=[CAPSULE_SEGMENTS, CAPSULE_SEGMENTS])
     return _read_only(mesh.vertices), _read_only(mesh.faces)
 
 
@@ -69,7 +70,7 @@ def _solid_surface(model, kind, params):
         return vertices * params[0], faces
     if kind == shapes.CAPSULE:
         return _capsule(float(params[0]), float(params[1]))
-    if kind == shapes.BOX:                  # its own 8-corner hull, kept in params[3]
+    if kind == shapes.BOX:  # its own 8-corner hull, kept in params[3]
         return _hull_surface(model.hulls, int(params[3]))
     if kind == shapes.CONVEX:
         return _hull_surface(model.hulls, int(params[0]))
@@ -80,8 +81,7 @@ def scene_bounds(model) -> tuple:
     """(lower (3,), upper (3,)) [m] around the initial bodies, particles and bounded obstacles."""
     state = model.state()
     points = [state.body_position, state.particle_position]
-    radii = [shapes.bounding_radii(model.body_shape, model.body_params),
-             np.asarray(model.particle_radius)]
+    radii = [shapes.bounding_radii(model.body_shape, model.body_params), np.asarray(model.particle_radius)]
     bounded = model.obstacle_shape != shapes.PLANE
     bounded &= model.obstacle_shape != shapes.MESH
     points.append(model.obstacle_position[bounded])

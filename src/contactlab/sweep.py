@@ -28,7 +28,7 @@ from .errors import InputError, SimulationDiverged
 from .record import atomic_path, make_folders, remove_empty
 from .study import Study, load_study, toml_value
 
-TIMING_COLUMNS = (*TIMINGS, "cell_seconds", "worker")   # what differs from one run of a cell to the next
+TIMING_COLUMNS = (*TIMINGS, "cell_seconds", "worker")  # what differs from one run of a cell to the next
 
 
 def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=False, log=None):
@@ -46,7 +46,7 @@ def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=
     try:
         if study.record == "trajectory":
             made += make_folders(os.path.join(out, "trajectories"))
-        done = {name[:-len(".parquet")] for name in os.listdir(cells_folder) if name.endswith(".parquet")}
+        done = {name[: -len(".parquet")] for name in os.listdir(cells_folder) if name.endswith(".parquet")}
         todo = [cell for cell in study.cells if cell.key not in done]
         say = log or (lambda line: None)
         say(f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run")
@@ -58,29 +58,38 @@ def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=
                 with cluster.connect(scheduler, workers) as connected:
                     _run_jobs(connected, jobs, cells_folder, progress, say)
     except BaseException:
-        remove_empty(made)                      # nothing finished: no folder left (finished cells stay)
+        remove_empty(made)  # nothing finished: no folder left (finished cells stay)
         raise
     table = pd.DataFrame([_read_row(cells_folder, cell.key) for cell in study.cells])
     table = table.reindex(columns=_columns(study, table))
     _write_table(table, out)
     from .sweep_report import write_report
+
     write_report(study, table, out)
     return table
 
 
 def _job(cell, study, out):
     """What a worker needs to run ``cell``: plain data, so it pickles anywhere."""
-    return {"key": cell.key, "scene": cell.scene, "method": cell.method, "overrides": cell.overrides(),
-            "settings": [[path, _column_value(value)] for path, value in cell.settings],
-            "trajectory": (os.path.abspath(os.path.join(out, "trajectories", f"{cell.key}.h5"))
-                           if study.record == "trajectory" else None)}
+    return {
+        "key": cell.key,
+        "scene": cell.scene,
+        "method": cell.method,
+        "overrides": cell.overrides(),
+        "settings": [[path, _column_value(value)] for path, value in cell.settings],
+        "trajectory": (
+            os.path.abspath(os.path.join(out, "trajectories", f"{cell.key}.h5"))
+            if study.record == "trajectory"
+            else None
+        ),
+    }
 
 
 def _run_jobs(client, jobs, cells_folder, progress, say):
     say(f"Dask dashboard: {cluster.dashboard(client)}")
     settings = {key: job for key, job in jobs}
     for key, row in cluster.run_tasks(client, run_cell, jobs, progress=progress, description="cells"):
-        if isinstance(row, BaseException):       # the cell's workers kept dying, or a bug escaped
+        if isinstance(row, BaseException):  # the cell's workers kept dying, or a bug escaped
             row = _failed_row(settings[key], "error", f"{type(row).__name__}: {_one_line(row)}")
         _write_row(cells_folder, key, row)
 
@@ -96,22 +105,30 @@ def run_cell(job) -> dict:
     started = time.perf_counter()
     try:
         scene = load_scene(job["scene"], job["overrides"])
-        run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                       scene.options[scene.method], scene.integrator, scene_name=scene.name,
-                       threads=1, trajectory=job["trajectory"])
+        run = simulate(
+            scene.model,
+            scene.method,
+            scene.dt,
+            scene.duration,
+            scene.options[scene.method],
+            scene.integrator,
+            scene_name=scene.name,
+            threads=1,
+            trajectory=job["trajectory"],
+        )
     except SimulationDiverged as error:
         return _failed_row(job, "diverged", str(error), started, diverged_at=error.time)
-    except Exception as error:                   # InputError included: a study checked cannot fail that way
+    except Exception as error:  # InputError included: a study checked cannot fail that way
         return _failed_row(job, "error", f"{type(error).__name__}: {_one_line(error)}", started)
     row = _identity(job)
     row.update(status="ok", message="", integrator=scene.integrator, dt_s=scene.dt, duration_s=scene.duration)
     measured = metrics(scene.model, run.arrays, run.summary)
     if measured["momentum_drift_Ns"] == "n/a":
-        measured["momentum_drift_Ns"] = None     # one type per column
+        measured["momentum_drift_Ns"] = None  # one type per column
     row.update(measured)
     found = closed_form_checks(scene.name, scene.model, run.arrays)
     relative = [check.relative_error for check in found if check.relative_error is not None]
-    reached = [error for error in relative if not math.isnan(error)]     # nan: the run never got there
+    reached = [error for error in relative if not math.isnan(error)]  # nan: the run never got there
     row["closed_form_error"] = max(reached) if reached else (math.inf if relative else None)
     row["closed_form_unreached"] = len(relative) - len(reached) if relative else None
 
@@ -131,8 +148,12 @@ def _identity(job):
 
 def _failed_row(job, status, message, started=None, diverged_at=None):
     row = _identity(job)
-    row.update(status=status, message=message, diverged_at_s=diverged_at,
-               cell_seconds=time.perf_counter() - started if started is not None else None)
+    row.update(
+        status=status,
+        message=message,
+        diverged_at_s=diverged_at,
+        cell_seconds=time.perf_counter() - started if started is not None else None,
+    )
     return row
 
 
@@ -148,25 +169,30 @@ def _one_line(error):
 
 # ---- the table on disk -----------------------------------------------------------------------------
 
+
 def _write_row(folder, key, row):
     import pandas as pd
+
     path = os.path.join(folder, f"{key}.parquet")
     with atomic_path(path) as temporary:
         pd.DataFrame([row]).to_parquet(temporary, index=False)
-    interrupts.note_written(path, removed=True)     # an interrupted sweep names the folder of the cells
-    if folder not in interrupts.written_paths():    # it kept, not every cell's file
+    interrupts.note_written(path, removed=True)  # an interrupted sweep names the folder of the cells
+    if folder not in interrupts.written_paths():  # it kept, not every cell's file
         interrupts.note_written(folder)
 
 
 def _read_row(folder, key) -> dict:
     import pandas as pd
+
     path = os.path.join(folder, f"{key}.parquet")
     try:
         return pd.read_parquet(path).iloc[0].to_dict()
-    except Exception as error:                   # a file damaged since: that cell runs again next time
+    except Exception as error:  # a file damaged since: that cell runs again next time
         os.unlink(path)
-        raise InputError("OUT", f"{path} could not be read ({_one_line(error)}); it was removed, so run the "
-                                f"study again to redo that cell") from None
+        raise InputError(
+            "OUT",
+            f"{path} could not be read ({_one_line(error)}); it was removed, so run the study again to redo that cell",
+        ) from None
 
 
 def _columns(study, table):
@@ -180,4 +206,3 @@ def _write_table(table, out):
         table.to_parquet(temporary, index=False)
     with atomic_path(os.path.join(out, "results.csv")) as temporary:
         table.to_csv(temporary, index=False)
-

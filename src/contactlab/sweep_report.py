@@ -24,9 +24,8 @@ import pandas as pd
 from .plots import STYLES, _figure, _save
 from .record import atomic_path
 
-METHOD_COLOURS = {"penalty": "tab:blue", "projection": "tab:orange", "impulse": "tab:green",
-                  "constraints": "tab:red"}
-METHOD_MARKERS = {"penalty": "o", "projection": "s", "impulse": "^", "constraints": "v"}   # coinciding runs show
+METHOD_COLOURS = {"penalty": "tab:blue", "projection": "tab:orange", "impulse": "tab:green", "constraints": "tab:red"}
+METHOD_MARKERS = {"penalty": "o", "projection": "s", "impulse": "^", "constraints": "v"}  # coinciding runs show
 DT_AXIS = "simulation.dt"
 
 
@@ -77,14 +76,12 @@ def _pareto_figure(scene, rows):
     figure, (ax,) = _figure(f"{scene}: error against cost")
     for method, group in rows.groupby("method", sort=False):
         points = _finite(group["wall_seconds"], error[group.index])
-        unmeasured = len(group) - len(points[0])          # no finite error: a check never reached
+        unmeasured = len(group) - len(points[0])  # no finite error: a check never reached
         shown = f"{method} ({unmeasured} of {len(group)} cells without a finite error)" if unmeasured else method
-        ax.scatter(*points, label=shown, s=24, color=METHOD_COLOURS.get(method),
-                   marker=METHOD_MARKERS.get(method, "o"))
+        ax.scatter(*points, label=shown, s=24, color=METHOD_COLOURS.get(method), marker=METHOD_MARKERS.get(method, "o"))
     front = pareto_front(cost, error.to_numpy())
     if front:
-        ax.plot(cost[front], error.to_numpy()[front], color="black", drawstyle="steps-post", lw=1,
-                label="Pareto front")
+        ax.plot(cost[front], error.to_numpy()[front], color="black", drawstyle="steps-post", lw=1, label="Pareto front")
     _log_axes(ax, cost, error.to_numpy())
     ax.set_xlabel("wall time of the run (s)")
     ax.set_ylabel(label)
@@ -103,8 +100,14 @@ def _convergence_figure(scene, rows, axes):
         shown = ", ".join(f"{axis.split('.')[-1]} = {value}" for axis, value in zip(others, setting))
         name = f"{method}{f' ({shown})' if shown else ''}" + (f": order {order:.2f}" if order is not None else "")
         style = styles.setdefault(tuple(setting), STYLES[len(styles) % len(STYLES)])
-        ax.plot(*_finite(group[DT_AXIS], error[group.index]), label=name, linestyle=style,
-                color=METHOD_COLOURS.get(method), marker=METHOD_MARKERS.get(method, "o"), markerfacecolor="none")
+        ax.plot(
+            *_finite(group[DT_AXIS], error[group.index]),
+            label=name,
+            linestyle=style,
+            color=METHOD_COLOURS.get(method),
+            marker=METHOD_MARKERS.get(method, "o"),
+            markerfacecolor="none",
+        )
     _log_axes(ax, rows[DT_AXIS].astype(float).to_numpy(), error.to_numpy())
     ax.set_xlabel("dt (s)")
     ax.set_ylabel(label)
@@ -164,14 +167,20 @@ def write_report(study, table, out) -> dict:
 def _html(study, table, plots, out):
     counts = table["status"].value_counts().to_dict() if len(table) else {}
     status = ", ".join(f"{count} {name}" for name, count in counts.items())
-    shown = table.drop(columns=[c for c in ("key", "closed_form_checks", "trajectory", "contactlab_version")
-                                if c in table])
-    images = "\n".join(f'<figure><img src="{html.escape(os.path.relpath(path, out))}" alt="{html.escape(name)}">'
-                       f"<figcaption>{html.escape(name)}</figcaption></figure>" for name, path in plots.items())
+    shown = table.drop(
+        columns=[c for c in ("key", "closed_form_checks", "trajectory", "contactlab_version") if c in table]
+    )
+    images = "\n".join(
+        f'<figure><img src="{html.escape(os.path.relpath(path, out))}" alt="{html.escape(name)}">'
+        f"<figcaption>{html.escape(name)}</figcaption></figure>"
+        for name, path in plots.items()
+    )
     failed = table[table["status"] != "ok"] if len(table) else table
-    failures = "".join(f"<li><code>{html.escape(str(row['scene']))}</code> {html.escape(str(row['method']))}: "
-                       f"{html.escape(str(row['status']))} — {html.escape(str(row['message']))}</li>"
-                       for _, row in failed.iterrows())
+    failures = "".join(
+        f"<li><code>{html.escape(str(row['scene']))}</code> {html.escape(str(row['method']))}: "
+        f"{html.escape(str(row['status']))} — {html.escape(str(row['message']))}</li>"
+        for _, row in failed.iterrows()
+    )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(study.name)} — contactlab sweep</title>
 <style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;font-size:small}}
@@ -179,11 +188,11 @@ td,th{{border:1px solid #ccc;padding:2px 6px}} figure{{display:inline-block;marg
 img{{max-width:640px}}</style></head><body>
 <h1>Sweep {html.escape(study.name)}</h1>
 <p>{html.escape(study.description)}</p>
-<p>{len(table)} cells ({html.escape(status)}); axes: {html.escape(', '.join(study.axes) or 'none')}.
+<p>{len(table)} cells ({html.escape(status)}); axes: {html.escape(", ".join(study.axes) or "none")}.
 The table: <a href="results.parquet">results.parquet</a>, <a href="results.csv">results.csv</a>.</p>
-{f'<h2>Cells that did not finish</h2><ul>{failures}</ul>' if failures else ''}
+{f"<h2>Cells that did not finish</h2><ul>{failures}</ul>" if failures else ""}
 <h2>Plots</h2>
-{images or '<p>No plot: the study has no finished cell with a cost.</p>'}
+{images or "<p>No plot: the study has no finished cell with a cost.</p>"}
 <h2>Cells</h2>
 {shown.to_html(index=False, na_rep="–", float_format=lambda v: f"{v:.4g}", escape=True)}
 </body></html>

@@ -36,7 +36,7 @@ if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "3000")
 
 AUTO = "auto"
-_default = AUTO         # what ``threads=None`` means: set_threads changes it
+_default = AUTO  # what ``threads=None`` means: set_threads changes it
 
 
 def available_threads():
@@ -61,8 +61,11 @@ def check_threads(threads, field="threads"):
         raise InputError(field, f"expected 'auto' or a whole number of threads ≥ 1, found {threads!r}")
     most = available_threads()
     if threads > most:
-        raise InputError(field, f"{threads} threads asked for, but this process has at most {most}; "
-                                f"start it with NUMBA_NUM_THREADS={threads} to allow more")
+        raise InputError(
+            field,
+            f"{threads} threads asked for, but this process has at most {most}; "
+            f"start it with NUMBA_NUM_THREADS={threads} to allow more",
+        )
     return threads
 
 
@@ -88,8 +91,9 @@ class ThreadChooser:
     loop) the hold is at its longest. ``counts`` tallies the steps run at each count.
     """
 
-    def __init__(self, threads=AUTO, trial_steps=6, hold_steps=200, longest_hold=3200, give_up=1.5,
-                 too_short_to_matter=2e-4):
+    def __init__(
+        self, threads=AUTO, trial_steps=6, hold_steps=200, longest_hold=3200, give_up=1.5, too_short_to_matter=2e-4
+    ):
         self.mode = check_threads(threads)
         self.most = available_threads()
         self.trial_steps = trial_steps
@@ -99,9 +103,9 @@ class ThreadChooser:
         self.give_up = give_up
         self.too_short = too_short_to_matter
         self.counts = {}
-        self._plan = []             # thread counts of the steps to come (a trial), in order
-        self._timed = {}            # thread count -> step times of the running trial
-        self._held = 0              # steps left at the current verdict
+        self._plan = []  # thread counts of the steps to come (a trial), in order
+        self._timed = {}  # thread count -> step times of the running trial
+        self._held = 0  # steps left at the current verdict
         self._current = self.most if self.mode == AUTO else self.mode
         self._verdict = None
         self._saved = numba.get_num_threads()
@@ -145,7 +149,7 @@ class ThreadChooser:
             count = self._plan.pop(0)
             self._timed[count].append(seconds)
             if count == self.most and seconds >= self.give_up * _median(self._timed[1]):
-                self._timed[count] = [seconds]          # hopeless: stop the trial here
+                self._timed[count] = [seconds]  # hopeless: stop the trial here
                 self._plan = []
             if not self._plan:
                 self._decide()
@@ -175,8 +179,11 @@ class ThreadChooser:
 
     def summary(self):
         """What the run used: {"setting": "auto" or N, "available": N, "steps_at": {count: steps}}."""
-        return {"setting": self.mode, "available": self.most,
-                "steps_at": {str(count): steps for count, steps in sorted(self.counts.items())}}
+        return {
+            "setting": self.mode,
+            "available": self.most,
+            "steps_at": {str(count): steps for count, steps in sorted(self.counts.items())},
+        }
 
 
 def _median(values):

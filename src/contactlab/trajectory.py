@@ -24,7 +24,7 @@ from numpy.lib.npyio import NpzFile
 
 from .errors import InputError, first_line
 
-MAX_COORDINATE = 1e12      # m: positions and surface vertices beyond this are corrupt (scenes are ≤ 1e6 m)
+MAX_COORDINATE = 1e12  # m: positions and surface vertices beyond this are corrupt (scenes are ≤ 1e6 m)
 
 # name -> (kind, shape): kind "float" (real numbers, finite), "index" (whole numbers) or "text";
 # shape in the symbols of docs/trajectory.md ("B+1": one more than B).
@@ -47,13 +47,22 @@ SHAPES = {
     "obstacle_triangles": ("index", ("M", 3)),
     "particle_radius": ("float", ("P",)),
 }
-FINITE = ("body_position", "body_orientation", "particle_position", "body_surface_vertices",
-          "obstacle_vertices", "particle_radius")          # what is drawn or exported: finite, ≤ MAX_COORDINATE
+FINITE = (
+    "body_position",
+    "body_orientation",
+    "particle_position",
+    "body_surface_vertices",
+    "obstacle_vertices",
+    "particle_radius",
+)  # what is drawn or exported: finite, ≤ MAX_COORDINATE
 # index array -> (the array whose rows it indexes, the smallest index allowed)
-INDEXES = {"triangles": ("particle_position", 0), "body_surface_triangles": ("body_surface_vertices", 0),
-           "obstacle_triangles": ("obstacle_vertices", 0), "particle_cloth": (None, -1)}
-STARTS = {"body_surface_vertex_start": "body_surface_vertices",
-          "body_surface_triangle_start": "body_surface_triangles"}
+INDEXES = {
+    "triangles": ("particle_position", 0),
+    "body_surface_triangles": ("body_surface_vertices", 0),
+    "obstacle_triangles": ("obstacle_vertices", 0),
+    "particle_cloth": (None, -1),
+}
+STARTS = {"body_surface_vertex_start": "body_surface_vertices", "body_surface_triangle_start": "body_surface_triangles"}
 
 _NOT_AN_ARCHIVE = (OSError, ValueError, EOFError, KeyError, NotImplementedError, zipfile.BadZipFile, zlib.error)
 
@@ -69,8 +78,9 @@ def load_npz(path, field="OUT_DIR") -> dict:
         with archive:
             return {name: archive[name] for name in archive.files}
     except _NOT_AN_ARCHIVE as error:
-        raise InputError(field, f"{path} is not a trajectory contactlab can read ({_reason(error)}); "
-                                f"run the scene again") from None
+        raise InputError(
+            field, f"{path} is not a trajectory contactlab can read ({_reason(error)}); run the scene again"
+        ) from None
 
 
 def _reason(error):
@@ -105,23 +115,27 @@ def check_arrays(arrays, field="arrays"):
         if name in arrays and target in arrays:
             start = np.asarray(arrays[name])
             if len(start) == 0 or start[0] != 0 or np.any(np.diff(start) < 0) or start[-1] != len(arrays[target]):
-                raise InputError(field, f"{name} is not a list of starts from 0 to the {len(arrays[target])} rows "
-                                        f"of {target}: this trajectory is damaged")
+                raise InputError(
+                    field,
+                    f"{name} is not a list of starts from 0 to the {len(arrays[target])} rows "
+                    f"of {target}: this trajectory is damaged",
+                )
 
 
 def _check_kind(array, name, kind, field):
     wanted = {"float": "fiu", "index": "iu", "text": "US"}[kind]
     if array.size and array.dtype.kind not in wanted:
         words = {"float": "numbers", "index": "whole numbers", "text": "names"}[kind]
-        raise InputError(field, f"{name} holds {array.dtype} values where it should hold {words}: "
-                                f"this trajectory is damaged")
+        raise InputError(
+            field, f"{name} holds {array.dtype} values where it should hold {words}: this trajectory is damaged"
+        )
 
 
 def check_shapes(shapes, field="arrays"):
     """InputError naming ``field`` unless the shapes ``shapes`` (name -> tuple, of the arrays
     of SHAPES present) have their documented dimensions and agree on the counts T, B, P, ...
     (checked before a file's samples are read, so that no read goes beyond them)."""
-    sizes = {}          # the counts (T, B, ...) met so far
+    sizes = {}  # the counts (T, B, ...) met so far
     for name, (_, shape) in SHAPES.items():
         if name in shapes:
             _check_shape(tuple(shapes[name]), name, shape, sizes, field)
@@ -130,8 +144,11 @@ def check_shapes(shapes, field="arrays"):
 def _check_shape(found, name, shape, sizes, field):
     """The shape ``found`` of the array ``name`` against ``shape``."""
     if len(found) != len(shape):
-        raise InputError(field, f"{name} has {len(found)} dimensions where it should have {len(shape)} "
-                                f"({', '.join(map(str, shape))}): this trajectory is damaged")
+        raise InputError(
+            field,
+            f"{name} has {len(found)} dimensions where it should have {len(shape)} "
+            f"({', '.join(map(str, shape))}): this trajectory is damaged",
+        )
     for axis, (symbol, size) in enumerate(zip(shape, found)):
         if isinstance(symbol, int):
             expected, counted = symbol, None
@@ -142,8 +159,11 @@ def _check_shape(found, name, shape, sizes, field):
             expected = sizes[counted] + offset
         if size != expected:
             what = f"{symbol} = {expected}" if counted else str(expected)
-            raise InputError(field, f"{name} has {size} entries along axis {axis} where the other arrays give "
-                                    f"{what}: this trajectory is damaged")
+            raise InputError(
+                field,
+                f"{name} has {size} entries along axis {axis} where the other arrays give "
+                f"{what}: this trajectory is damaged",
+            )
 
 
 def _check_finite(values, name, arrays, field):
@@ -152,11 +172,14 @@ def _check_finite(values, name, arrays, field):
     bad = ~np.isfinite(values) | (np.abs(values) > MAX_COORDINATE)
     if bad.any():
         where = ""
-        if values.ndim == 3 and "time" in arrays:                          # (T, n, k): say from when
+        if values.ndim == 3 and "time" in arrays:  # (T, n, k): say from when
             first = int(np.argmax(bad.reshape(len(values), -1).any(axis=1)))
             where = f" at t = {float(np.asarray(arrays['time'])[first]):.4g} s (the first sample used that is)"
-        raise InputError(field, f"{name} holds numbers that are not finite or beyond {MAX_COORDINATE:g}{where} "
-                                f"(a run that blew up, or a damaged file): nothing to draw or export")
+        raise InputError(
+            field,
+            f"{name} holds numbers that are not finite or beyond {MAX_COORDINATE:g}{where} "
+            f"(a run that blew up, or a damaged file): nothing to draw or export",
+        )
 
 
 def _row_count(arrays, target, name):
@@ -174,5 +197,6 @@ def _check_indices(indices, name, smallest, rows, field):
     low, high = int(indices.min()), int(indices.max())
     if low < smallest or (rows is not None and high >= rows):
         allowed = f"{smallest} to {rows - 1}" if rows is not None else f"at least {smallest}"
-        raise InputError(field, f"{name} holds indices from {low} to {high} where they must be {allowed}: "
-                                f"this trajectory is damaged")
+        raise InputError(
+            field, f"{name} holds indices from {low} to {high} where they must be {allowed}: this trajectory is damaged"
+        )

@@ -19,10 +19,12 @@ from .errors import InputError
 
 # -- the magnitudes accepted ------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Quantity:
     """The magnitudes accepted for one kind of value: at most ``largest`` [unit] in absolute
     value and, for a value that must be positive, at least ``smallest``."""
+
     what: str
     unit: str
     largest: float
@@ -33,40 +35,62 @@ class Quantity:
         finite numbers) is within the bounds (``smallest`` only where ``positive``)."""
         magnitudes = np.abs(np.asarray(values, dtype=float))
         if magnitudes.size and magnitudes.max() > self.largest:
-            raise InputError(name, f"expected a {self.what} of at most {self.largest:g}{self._unit}, found "
-                                   f"{magnitudes.max():g}{self._unit} (see Limits in docs/scene-format.md)")
+            raise InputError(
+                name,
+                f"expected a {self.what} of at most {self.largest:g}{self._unit}, found "
+                f"{magnitudes.max():g}{self._unit} (see Limits in docs/scene-format.md)",
+            )
         if positive and magnitudes.size and magnitudes.min() < self.smallest:
-            raise InputError(name, f"expected a {self.what} of at least {self.smallest:g}{self._unit}, found "
-                                   f"{magnitudes.min():g}{self._unit} (see Limits in docs/scene-format.md)")
+            raise InputError(
+                name,
+                f"expected a {self.what} of at least {self.smallest:g}{self._unit}, found "
+                f"{magnitudes.min():g}{self._unit} (see Limits in docs/scene-format.md)",
+            )
 
     @property
     def _unit(self):
         return f" {self.unit}" if self.unit else ""
 
 
-LENGTH = Quantity("length", "m", 1e6, 1e-6)                 # positions, sizes, offsets: 1000 km; sizes ≥ 1 µm
-MASS = Quantity("mass", "kg", 1e12, 1e-12)                 # given or from a density: a nanogram to a mountain
-DENSITY = Quantity("density", "kg/m^3", 1e6)               # osmium is 22,590 kg/m³
-AREAL_DENSITY = Quantity("areal density", "kg/m^2", 1e6)   # of cloth; canvas is about 0.3 kg/m²
-SPEED = Quantity("speed", "m/s", 1e5)                      # a rifle bullet is 1e3 m/s
+LENGTH = Quantity("length", "m", 1e6, 1e-6)  # positions, sizes, offsets: 1000 km; sizes ≥ 1 µm
+MASS = Quantity("mass", "kg", 1e12, 1e-12)  # given or from a density: a nanogram to a mountain
+DENSITY = Quantity("density", "kg/m^3", 1e6)  # osmium is 22,590 kg/m³
+AREAL_DENSITY = Quantity("areal density", "kg/m^2", 1e6)  # of cloth; canvas is about 0.3 kg/m²
+SPEED = Quantity("speed", "m/s", 1e5)  # a rifle bullet is 1e3 m/s
 ANGULAR_SPEED = Quantity("angular speed", "rad/s", 1e6)
-ACCELERATION = Quantity("gravity", "m/s^2", 1e4)           # a thousand g
+ACCELERATION = Quantity("gravity", "m/s^2", 1e4)  # a thousand g
 STIFFNESS = Quantity("stiffness", "N/m", 1e12)
 DAMPING = Quantity("damping", "N s/m", 1e12)
-FRICTION = Quantity("friction coefficient", "", 1e3)       # rubber on rubber is about 1
+FRICTION = Quantity("friction coefficient", "", 1e3)  # rubber on rubber is about 1
 FACTOR = Quantity("scale factor", "", 1e6, 1e-6)
-DIRECTION = Quantity("direction component", "", 1e6)       # normals and quaternions, normalized after
-TIME = Quantity("time", "s", 1e9, 1e-9)                    # dt and duration (contactlab.simulate)
-FORCE = Quantity("force", "N", 1e12)                       # external forces (add_force)
+DIRECTION = Quantity("direction component", "", 1e6)  # normals and quaternions, normalized after
+TIME = Quantity("time", "s", 1e9, 1e-9)  # dt and duration (contactlab.simulate)
+FORCE = Quantity("force", "N", 1e12)  # external forces (add_force)
 TORQUE = Quantity("torque", "N m", 1e12)
-LIMITS = (LENGTH, MASS, DENSITY, AREAL_DENSITY, SPEED, ANGULAR_SPEED, ACCELERATION, STIFFNESS, DAMPING,
-          FRICTION, FACTOR, DIRECTION, TIME, FORCE, TORQUE)
-MAX_DYNAMIC = 200_000     # bodies, particles and cloth vertices in one model: seconds and gigabytes a step past it
-MAX_STEPS = 10 ** 9       # steps of one run at most (duration / dt); a run's record_every at most too
-WHOLE_NUMBERS = (-2 ** 63, 2 ** 63 - 1)     # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
+LIMITS = (
+    LENGTH,
+    MASS,
+    DENSITY,
+    AREAL_DENSITY,
+    SPEED,
+    ANGULAR_SPEED,
+    ACCELERATION,
+    STIFFNESS,
+    DAMPING,
+    FRICTION,
+    FACTOR,
+    DIRECTION,
+    TIME,
+    FORCE,
+    TORQUE,
+)
+MAX_DYNAMIC = 200_000  # bodies, particles and cloth vertices in one model: seconds and gigabytes a step past it
+MAX_STEPS = 10**9  # steps of one run at most (duration / dt); a run's record_every at most too
+WHOLE_NUMBERS = (-(2**63), 2**63 - 1)  # whole numbers accepted: 64-bit, as TOML allows and compiled kernels take
 
 
 # -- numbers and arrays -------------------------------------------------------------------
+
 
 def number(value, name, minimum=None, strict=False, maximum=None, quantity=None) -> float:
     """``value`` (an int or float, numpy's too, never a bool) as a finite float, at least
@@ -78,7 +102,7 @@ def number(value, name, minimum=None, strict=False, maximum=None, quantity=None)
         raise InputError(name, f"expected a number, found {value!r}")
     try:
         value = float(value)
-    except OverflowError:                       # a Python int beyond the float range
+    except OverflowError:  # a Python int beyond the float range
         value = float("inf")
     if not np.isfinite(value):
         raise InputError(name, f"expected a finite number, found {value!r}")
@@ -106,11 +130,15 @@ def run_length(dt, duration) -> tuple:
     dt = time_step(dt)
     duration = time_step(duration, "duration")
     if dt > duration:
-        raise InputError("", f"dt = {dt:g} s is longer than duration = {duration:g} s, so the run would make one "
-                             f"whole step of {dt:g} s; give a dt no longer than the duration")
+        raise InputError(
+            "",
+            f"dt = {dt:g} s is longer than duration = {duration:g} s, so the run would make one "
+            f"whole step of {dt:g} s; give a dt no longer than the duration",
+        )
     if duration / dt > MAX_STEPS + 0.5:
-        raise InputError("dt", f"duration / dt = {duration / dt:.3g} steps, more than the {MAX_STEPS:.0e} a run "
-                               f"may make")
+        raise InputError(
+            "dt", f"duration / dt = {duration / dt:.3g} steps, more than the {MAX_STEPS:.0e} a run may make"
+        )
     return dt, duration, max(1, int(round(duration / dt)))
 
 
@@ -126,8 +154,9 @@ def sixty_four_bits(value, name) -> int:
     """``value`` (an int) unchanged if it is within :data:`WHOLE_NUMBERS`, the 64 bits the
     compiled kernels take; InputError naming ``name`` otherwise."""
     if not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]:
-        raise InputError(name, f"expected a whole number of at most 64 bits, found one of {len(str(abs(value)))} "
-                               f"digits")
+        raise InputError(
+            name, f"expected a whole number of at most 64 bits, found one of {len(str(abs(value)))} digits"
+        )
     return value
 
 
@@ -198,12 +227,16 @@ def file_path(file) -> str:
 
 # -- model sizes ----------------------------------------------------------------------------
 
+
 def derived_mass(mass, name):
     """InputError naming ``name`` (the density it came from) unless ``mass`` [kg] is within
     the bounds of :data:`MASS`."""
     if not MASS.smallest <= mass <= MASS.largest:
-        raise InputError(name, f"gives a mass of {mass:g} kg, outside the {MASS.smallest:g} to {MASS.largest:g} kg "
-                               f"accepted (see Limits in docs/scene-format.md)")
+        raise InputError(
+            name,
+            f"gives a mass of {mass:g} kg, outside the {MASS.smallest:g} to {MASS.largest:g} kg "
+            f"accepted (see Limits in docs/scene-format.md)",
+        )
 
 
 def check_dynamic_count(count, field, what, already=0):
@@ -211,5 +244,8 @@ def check_dynamic_count(count, field, what, already=0):
     vertices, after ``already``) would take a model past :data:`MAX_DYNAMIC`, before anything
     is built."""
     if already + count > MAX_DYNAMIC:
-        raise InputError(field, f"{what} would make {already + count:,} bodies, particles and cloth vertices, more "
-                                f"than the {MAX_DYNAMIC:,} a model may hold (each costs kilobytes of memory a step)")
+        raise InputError(
+            field,
+            f"{what} would make {already + count:,} bodies, particles and cloth vertices, more "
+            f"than the {MAX_DYNAMIC:,} a model may hold (each costs kilobytes of memory a step)",
+        )

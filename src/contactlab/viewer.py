@@ -46,22 +46,30 @@ from .record import TRAJECTORY, load_run, read_trajectory
 from .render import OBSTACLE_RGBA, PARTICLE_RGB, REQUIRED, nearest, scenery, spread_samples
 from .trajectory import check_arrays
 
-HOST = "127.0.0.1"          # the viewer listens on loopback only
+HOST = "127.0.0.1"  # the viewer listens on loopback only
 FRAME_SECONDS = 1.0 / 30.0  # s: how often the clock moves while playing
-GAP = 0.3                   # runs side by side are this share of the widest (or tallest) apart
+GAP = 0.3  # runs side by side are this share of the widest (or tallest) apart
 SPEEDS = ("0.1×", "0.25×", "0.5×", "1×", "2×", "4×")
 COLOURINGS = ("each body its colour", "penetration", "speed")
-FORCE_SHARE = 0.25          # the heaviest body's weight draws as an arrow of this share of the scene's size
-STATE_SERIES = ("time", "body_position", "body_orientation", "body_velocity", "body_angular_velocity",
-                "particle_position", "particle_velocity")
+FORCE_SHARE = 0.25  # the heaviest body's weight draws as an arrow of this share of the scene's size
+STATE_SERIES = (
+    "time",
+    "body_position",
+    "body_orientation",
+    "body_velocity",
+    "body_angular_velocity",
+    "particle_position",
+    "particle_velocity",
+)
 POINT_RGB = (220, 30, 30)
 NORMAL_RGB = (30, 90, 220)
 FORCE_RGB = (255, 140, 0)
 SPEED_MAP, PENETRATION_MAP = "viridis", "YlOrRd"
-BODY_SEEN_THROUGH = 0.55    # bodies' opacity while contacts are shown (their arrows are inside them)
+BODY_SEEN_THROUGH = 0.55  # bodies' opacity while contacts are shown (their arrows are inside them)
 
 
 # -- opening runs -------------------------------------------------------------------------
+
 
 @dataclass(eq=False)
 class Shown:
@@ -70,6 +78,7 @@ class Shown:
     summary.json, {} unknown), ``model`` (its Model, None when it cannot be rebuilt: no contacts
     then), ``offset`` (3,) [m] where its origin sits in the viewer. The Viewer adds its drawing
     state to it: the bodies' scene handles and colours, the colour scales' ranges."""
+
     label: str
     arrays: object
     summary: dict
@@ -86,17 +95,26 @@ def run_folders(directory, field="RUN_DIR"):
     sub-folders that do (a ``contactlab compare`` output: one per method, in the order of
     :data:`contactlab.methods.AVAILABLE`, then by name). InputError naming the folder otherwise."""
     from .methods import AVAILABLE
+
     directory = os.fspath(directory)
     if not os.path.isdir(directory):
-        raise InputError(field, f"{directory} is not a folder; give the output folder of 'contactlab run' "
-                                f"(its --out) or of 'contactlab compare'")
+        raise InputError(
+            field,
+            f"{directory} is not a folder; give the output folder of 'contactlab run' "
+            f"(its --out) or of 'contactlab compare'",
+        )
     if _is_run(directory):
         return [directory]
-    names = sorted((name for name in os.listdir(directory) if _is_run(os.path.join(directory, name))),
-                   key=lambda name: (AVAILABLE.index(name) if name in AVAILABLE else len(AVAILABLE), name))
+    names = sorted(
+        (name for name in os.listdir(directory) if _is_run(os.path.join(directory, name))),
+        key=lambda name: (AVAILABLE.index(name) if name in AVAILABLE else len(AVAILABLE), name),
+    )
     if not names:
-        raise InputError(field, f"found no {TRAJECTORY} in {directory} nor in its sub-folders; give the output "
-                                f"folder of 'contactlab run' (its --out) or of 'contactlab compare'")
+        raise InputError(
+            field,
+            f"found no {TRAJECTORY} in {directory} nor in its sub-folders; give the output "
+            f"folder of 'contactlab run' (its --out) or of 'contactlab compare'",
+        )
     return [os.path.join(directory, name) for name in names]
 
 
@@ -105,13 +123,16 @@ def model_of(summary, arrays):
     from the built-in scene its summary names; None when neither loads or the model's body and
     particle counts differ from the trajectory's (the scene file changed since)."""
     from .scene import load_scene
+
     source = summary.get("source")
-    attempts = [(source["scene"], source.get("overrides", []))] if isinstance(source, dict) and "scene" in source \
-        else []
+    attempts = (
+        [(source["scene"], source.get("overrides", []))] if isinstance(source, dict) and "scene" in source else []
+    )
     if "scene" in summary:
         attempts.append((summary["scene"], [f"simulation.method={summary.get('method', 'impulse')}"]))
-    shapes = getattr(arrays, "shapes", None) or {key: np.shape(arrays[key]) for key in ("body_position",
-                                                                                          "particle_position")}
+    shapes = getattr(arrays, "shapes", None) or {
+        key: np.shape(arrays[key]) for key in ("body_position", "particle_position")
+    }
     for scene, overrides in attempts:
         try:
             model = load_scene(scene, overrides).model
@@ -139,14 +160,21 @@ def open_runs(sources, field="RUN_DIR"):
             continue
         for directory in run_folders(source, field):
             arrays, summary = load_run(directory, field)
-            shown.append(Shown(_label(summary, os.path.basename(os.path.normpath(directory))), arrays, summary,
-                               model_of(summary, arrays)))
+            shown.append(
+                Shown(
+                    _label(summary, os.path.basename(os.path.normpath(directory))),
+                    arrays,
+                    summary,
+                    model_of(summary, arrays),
+                )
+            )
     if not shown:
         raise InputError(field, "no run given; give a run's output folder")
     return shown
 
 
 # -- contacts and forces --------------------------------------------------------------------
+
 
 @dataclass
 class ContactView:
@@ -155,6 +183,7 @@ class ContactView:
     force_points (K, 3) [m] and forces (K, 3) [N] from one step of the method: the force on side A,
     or on side B where A is static geometry (what a moving thing feels);
     body_depth (B,) [m] the deepest overlap of each body (0 when it touches nothing)."""
+
     points: np.ndarray
     normals: np.ndarray
     depth: np.ndarray
@@ -166,9 +195,9 @@ class ContactView:
 def state_at(arrays, sample):
     """The :class:`contactlab.state.State` recorded at trajectory sample ``sample``."""
     from .state import State
+
     row = read_trajectory(arrays, STATE_SERIES, [sample])
-    return State(float(row["time"][0]), *(np.ascontiguousarray(row[name][0], dtype=float)
-                                          for name in STATE_SERIES[1:]))
+    return State(float(row["time"][0]), *(np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]))
 
 
 def contacts_at(model, summary, state):
@@ -176,6 +205,7 @@ def contacts_at(model, summary, state):
     a method, its options and dt (else none)."""
     from . import methods
     from .collision import collide
+
     found = collide(model, state)
     depth = np.maximum(found.depth, 0.0)
     body_depth = np.zeros(model.body_count)
@@ -193,13 +223,16 @@ def contacts_at(model, summary, state):
         def step(start):
             return module.step(model, start, summary["dt"], options, summary.get("integrator", "symplectic_euler"))
 
-        warm = step(state)[0].carried        # a first step finds what to warm start from, as the run had
+        warm = step(state)[0].carried  # a first step finds what to warm start from, as the run had
         _, info = step(dataclasses.replace(state, carried=warm))
         if info.impulses is not None and info.contacts.count:
             c = info.contacts
-            push = (info.impulses[:, :1] * c.normal + info.impulses[:, 1:2] * c.tangent1
-                    + info.impulses[:, 2:3] * c.tangent2) / summary["dt"]
-            static_a = (c.body_a < 0) & (c.particles_a[:, 0] < 0)       # the floor's side: show what B feels
+            push = (
+                info.impulses[:, :1] * c.normal
+                + info.impulses[:, 1:2] * c.tangent1
+                + info.impulses[:, 2:3] * c.tangent2
+            ) / summary["dt"]
+            static_a = (c.body_a < 0) & (c.particles_a[:, 0] < 0)  # the floor's side: show what B feels
             push[static_a] *= -1.0
             acting = np.linalg.norm(push, axis=1) > 0.0
             force_points, forces = c.point[acting], push[acting]
@@ -215,14 +248,24 @@ def _arrows(starts, vectors, head=0.25):
     """Arrows as line segments (3N, 2, 3): a shaft from each of ``starts`` (N, 3) along
     ``vectors`` (N, 3), and two barbs at its tip, ``head`` of its length long."""
     tips = starts + vectors
-    across = np.cross(vectors, np.where(np.abs(vectors[:, 2:3]) < 0.9 * np.linalg.norm(vectors, axis=1,
-                                                                                        keepdims=True),
-                                        [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]))
-    across *= 0.5 * head * np.linalg.norm(vectors, axis=1, keepdims=True) / np.maximum(
-        np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+    across = np.cross(
+        vectors,
+        np.where(
+            np.abs(vectors[:, 2:3]) < 0.9 * np.linalg.norm(vectors, axis=1, keepdims=True),
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0],
+        ),
+    )
+    across *= (
+        0.5
+        * head
+        * np.linalg.norm(vectors, axis=1, keepdims=True)
+        / np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+    )
     back = tips - head * vectors
-    return np.concatenate([_segments(starts, vectors), np.stack([tips, back + across], axis=1),
-                           np.stack([tips, back - across], axis=1)])
+    return np.concatenate(
+        [_segments(starts, vectors), np.stack([tips, back + across], axis=1), np.stack([tips, back - across], axis=1)]
+    )
 
 
 def _rgb255(rgb):
@@ -230,6 +273,7 @@ def _rgb255(rgb):
 
 
 # -- the viewer ---------------------------------------------------------------------------
+
 
 def _quiet():
     """viser prints a banner on starting and a line on stopping whatever its ``verbose``; the
@@ -248,8 +292,10 @@ def check_port(port):
         try:
             probe.bind((HOST, int(port)))
         except OSError:
-            raise InputError("--port", f"port {port} on {HOST} is in use (another viewer?); give another --port, "
-                                       f"or none for a free one") from None
+            raise InputError(
+                "--port",
+                f"port {port} on {HOST} is in use (another viewer?); give another --port, or none for a free one",
+            ) from None
     return int(port)
 
 
@@ -265,19 +311,20 @@ class Viewer:
 
     def __init__(self, runs, port=None):
         import viser
+
         requested = check_port(port)
         self.runs = runs
         self.lock = threading.RLock()
         self.time = [np.asarray(read_trajectory(run.arrays, ("time",))["time"], dtype=float) for run in runs]
         self.start = min(float(t[0]) for t in self.time)
         self.end = max(float(t[-1]) for t in self.time)
-        self.shown = [None] * len(runs)          # the sample each run shows
-        self.contacts = [None] * len(runs)       # its ContactView while a toggle needs one
+        self.shown = [None] * len(runs)  # the sample each run shows
+        self.contacts = [None] * len(runs)  # its ContactView while a toggle needs one
         self.playing = False
         self.speed = 1.0
         with _quiet():
             self.server = viser.ViserServer(host=HOST, port=requested, verbose=False)
-        if requested and self.server.get_port() != requested:       # taken meanwhile: viser moved to the next
+        if requested and self.server.get_port() != requested:  # taken meanwhile: viser moved to the next
             self._stop_server()
             check_port(requested)
         self.port = self.server.get_port()
@@ -320,8 +367,10 @@ class Viewer:
         vertices = np.concatenate([solid.reshape(-1, 3), *flat])
         counts = np.array([len(polygon) for polygon in flat], dtype=np.int64)
         first = len(solid) * 3 + np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        fans = [np.column_stack([np.full(n - 2, f), f + np.arange(1, n - 1), f + np.arange(2, n)])
-                for f, n in zip(first, counts)]          # each flat polygon (convex) as a fan of triangles
+        fans = [
+            np.column_stack([np.full(n - 2, f), f + np.arange(1, n - 1), f + np.arange(2, n)])
+            for f, n in zip(first, counts)
+        ]  # each flat polygon (convex) as a fan of triangles
         triangles = np.concatenate([np.arange(3 * len(solid)).reshape(-1, 3), *fans]).astype(np.int64)
         points = [vertices] + ([np.stack(content)] if content is not None else [])
         points = np.concatenate(points)
@@ -330,40 +379,67 @@ class Viewer:
 
     def _add_run(self, index, run, lower, upper, obstacles):
         scene, root = self.server.scene, f"/run{index}"
-        arrays = read_trajectory(run.arrays, ("body_surface_vertices", "body_surface_vertex_start",
-                                              "body_surface_triangles", "body_surface_triangle_start", "triangles",
-                                              "particle_cloth", "particle_radius"))
+        arrays = read_trajectory(
+            run.arrays,
+            (
+                "body_surface_vertices",
+                "body_surface_vertex_start",
+                "body_surface_triangles",
+                "body_surface_triangle_start",
+                "triangles",
+                "particle_cloth",
+                "particle_radius",
+            ),
+        )
         scene.add_frame(root, show_axes=False, position=run.offset)
         vertices, triangles = obstacles
         if len(triangles):
-            scene.add_mesh_simple(f"{root}/obstacles", vertices, triangles, color=tuple(_rgb255(OBSTACLE_RGBA)),
-                                  opacity=0.5, side="double", flat_shading=True)
+            scene.add_mesh_simple(
+                f"{root}/obstacles",
+                vertices,
+                triangles,
+                color=tuple(_rgb255(OBSTACLE_RGBA)),
+                opacity=0.5,
+                side="double",
+                flat_shading=True,
+            )
         starts, tri_starts = arrays["body_surface_vertex_start"], arrays["body_surface_triangle_start"]
         run.body_rgb = _rgb255(colormaps["tab10"](np.arange(len(starts) - 1) % 10))
-        run.bodies = [scene.add_mesh_simple(
-            f"{root}/bodies/{b}", arrays["body_surface_vertices"][starts[b]:starts[b + 1]],
-            arrays["body_surface_triangles"][tri_starts[b]:tri_starts[b + 1]] - starts[b],
-            color=tuple(run.body_rgb[b]), flat_shading=True) for b in range(len(starts) - 1)]
+        run.bodies = [
+            scene.add_mesh_simple(
+                f"{root}/bodies/{b}",
+                arrays["body_surface_vertices"][starts[b] : starts[b + 1]],
+                arrays["body_surface_triangles"][tri_starts[b] : tri_starts[b + 1]] - starts[b],
+                color=tuple(run.body_rgb[b]),
+                flat_shading=True,
+            )
+            for b in range(len(starts) - 1)
+        ]
         run.cloth_triangles = arrays["triangles"]
         run.free = np.flatnonzero(arrays["particle_cloth"] < 0)
         run.point_size = float(2.0 * np.mean(arrays["particle_radius"][run.free])) if len(run.free) else 0.0
         centre = 0.5 * (lower + upper)
         above = upper[2] + 0.08 * (upper - lower).max()
         scene.add_label(f"{root}/label", run.label, position=(centre[0], centre[1], above), anchor="bottom-center")
-        series = read_trajectory(run.arrays, ("body_velocity", "max_penetration"),
-                                 spread_samples(len(self.time[index])))
+        series = read_trajectory(
+            run.arrays, ("body_velocity", "max_penetration"), spread_samples(len(self.time[index]))
+        )
         speeds = np.linalg.norm(series["body_velocity"], axis=-1)
         run.speed_range = float(max(speeds.max(initial=0.0), 1e-6))
         run.depth_range = float(max(np.max(series["max_penetration"], initial=0.0), 1e-6))
-        run.weight = float(np.max(run.model.body_mass, initial=0.0) * np.linalg.norm(run.model.gravity)) \
-            if run.model is not None else 0.0
+        run.weight = (
+            float(np.max(run.model.body_mass, initial=0.0) * np.linalg.norm(run.model.gravity))
+            if run.model is not None
+            else 0.0
+        )
 
     def _add_gui(self):
         gui, self.gui = self.server.gui, {}
         step = min((float(np.min(np.diff(t))) for t in self.time if len(t) > 1), default=1.0)
         with gui.add_folder("Time"):
-            self.gui["time"] = gui.add_slider("time [s]", self.start, max(self.end, self.start + step), step,
-                                              self.start)
+            self.gui["time"] = gui.add_slider(
+                "time [s]", self.start, max(self.end, self.start + step), step, self.start
+            )
             self.gui["play"] = gui.add_button("Play", icon=None)
             self.gui["speed"] = gui.add_dropdown("speed", SPEEDS, initial_value="1×")
         with gui.add_folder("Contacts"):
@@ -380,8 +456,10 @@ class Viewer:
             self.gui["colour_legend"] = gui.add_markdown("")
         missing = [run.label for run in self.runs if run.model is None]
         if missing:
-            gui.add_markdown(f"*No contacts for {', '.join(missing)}: they need the run's scene, which could not "
-                             f"be loaded again (a scene file moved or changed since the run).*")
+            gui.add_markdown(
+                f"*No contacts for {', '.join(missing)}: they need the run's scene, which could not "
+                f"be loaded again (a scene file moved or changed since the run).*"
+            )
         self.gui["time"].on_update(lambda _: self.show_time(self.gui["time"].value, from_slider=True))
         self.gui["play"].on_click(lambda _: self.set_playing(not self.playing))
         self.gui["speed"].on_update(lambda _: setattr(self, "speed", float(self.gui["speed"].value.rstrip("×"))))
@@ -391,12 +469,16 @@ class Viewer:
 
     def _legends(self):
         scale = float(self.gui["force_scale"].value)
-        self.gui["legend"].content = (f"Red dots: contact points; blue: normals (from B into A); orange arrows: "
-                                      f"the force on a moving side (on A where both move). "
-                                      f"**Arrow scale: 10 cm = {0.1 * scale:.3g} N.**")
+        self.gui["legend"].content = (
+            f"Red dots: contact points; blue: normals (from B into A); orange arrows: "
+            f"the force on a moving side (on A where both move). "
+            f"**Arrow scale: 10 cm = {0.1 * scale:.3g} N.**"
+        )
         colour = self.gui["colour"].value
-        ranges = {"speed": ("speed", "m/s", "dark blue 0 → yellow"),
-                  "penetration": ("deepest contact", "mm", "pale yellow 0 → dark red")}
+        ranges = {
+            "speed": ("speed", "m/s", "dark blue 0 → yellow"),
+            "penetration": ("deepest contact", "mm", "pale yellow 0 → dark red"),
+        }
         if colour in ranges:
             what, unit, words = ranges[colour]
             top = max(run.speed_range if colour == "speed" else 1000.0 * run.depth_range for run in self.runs)
@@ -439,24 +521,39 @@ class Viewer:
                 self._draw(index, run, self.shown[index], moved)
 
     def _wants_contacts(self):
-        return (self.gui["points"].value or self.gui["normals"].value or self.gui["forces"].value
-                or self.gui["colour"].value == "penetration")
+        return (
+            self.gui["points"].value
+            or self.gui["normals"].value
+            or self.gui["forces"].value
+            or self.gui["colour"].value == "penetration"
+        )
 
     def _draw(self, index, run, sample, moved):
         scene, root = self.server.scene, f"/run{index}"
-        row = read_trajectory(run.arrays, ("body_position", "body_orientation", "body_velocity",
-                                           "particle_position"), [sample])
+        row = read_trajectory(
+            run.arrays, ("body_position", "body_orientation", "body_velocity", "particle_position"), [sample]
+        )
         if moved:
             for body, handle in enumerate(run.bodies):
                 handle.position = row["body_position"][0, body]
                 handle.wxyz = row["body_orientation"][0, body]
             if len(run.cloth_triangles):
-                scene.add_mesh_simple(f"{root}/cloth", row["particle_position"][0], run.cloth_triangles,
-                                      color=tuple(_rgb255(colormaps["Set2"](0))), side="double", flat_shading=True)
+                scene.add_mesh_simple(
+                    f"{root}/cloth",
+                    row["particle_position"][0],
+                    run.cloth_triangles,
+                    color=tuple(_rgb255(colormaps["Set2"](0))),
+                    side="double",
+                    flat_shading=True,
+                )
             if len(run.free):
-                scene.add_point_cloud(f"{root}/particles", row["particle_position"][0, run.free],
-                                      colors=tuple(_rgb255(PARTICLE_RGB)), point_size=run.point_size,
-                                      point_shape="circle")
+                scene.add_point_cloud(
+                    f"{root}/particles",
+                    row["particle_position"][0, run.free],
+                    colors=tuple(_rgb255(PARTICLE_RGB)),
+                    point_size=run.point_size,
+                    point_shape="circle",
+                )
         wanted = self._wants_contacts() and run.model is not None
         if wanted and (moved or self.contacts[index] is None):
             self.contacts[index] = contacts_at(run.model, run.summary, state_at(run.arrays, sample))
@@ -469,19 +566,30 @@ class Viewer:
         thickness = 0.004 * self.size
         drawn = set()
         if contacts is not None and self.gui["points"].value and len(contacts.points):
-            scene.add_point_cloud(f"{root}/contacts/points", contacts.points, colors=POINT_RGB,
-                                  point_size=0.01 * self.size, point_shape="circle")
+            scene.add_point_cloud(
+                f"{root}/contacts/points",
+                contacts.points,
+                colors=POINT_RGB,
+                point_size=0.01 * self.size,
+                point_shape="circle",
+            )
             drawn.add("points")
         if contacts is not None and self.gui["normals"].value and len(contacts.points):
-            scene.add_line_segments(f"{root}/contacts/normals",
-                                    _segments(contacts.points, 0.06 * self.size * contacts.normals),
-                                    colors=NORMAL_RGB, thickness=thickness)
+            scene.add_line_segments(
+                f"{root}/contacts/normals",
+                _segments(contacts.points, 0.06 * self.size * contacts.normals),
+                colors=NORMAL_RGB,
+                thickness=thickness,
+            )
             drawn.add("normals")
         if contacts is not None and self.gui["forces"].value and len(contacts.forces):
             scale = float(self.gui["force_scale"].value)
-            scene.add_line_segments(f"{root}/contacts/forces",
-                                    _arrows(contacts.force_points, contacts.forces / max(scale, 1e-12)),
-                                    colors=FORCE_RGB, thickness=1.5 * thickness)
+            scene.add_line_segments(
+                f"{root}/contacts/forces",
+                _arrows(contacts.force_points, contacts.forces / max(scale, 1e-12)),
+                colors=FORCE_RGB,
+                thickness=1.5 * thickness,
+            )
             drawn.add("forces")
         for name in {"points", "normals", "forces"} - drawn:
             scene.remove_by_name(f"{root}/contacts/{name}")
@@ -495,8 +603,8 @@ class Viewer:
             rgb = _rgb255(colormaps[PENETRATION_MAP](contacts.body_depth / run.depth_range))
         else:
             rgb = run.body_rgb
-        opacity = BODY_SEEN_THROUGH if contacts is not None else None     # arrows inside bodies show
-        if getattr(run, "painted", None) == (rgb.tobytes(), opacity):      # unchanged: nothing to send
+        opacity = BODY_SEEN_THROUGH if contacts is not None else None  # arrows inside bodies show
+        if getattr(run, "painted", None) == (rgb.tobytes(), opacity):  # unchanged: nothing to send
             return
         run.painted = (rgb.tobytes(), opacity)
         for handle, value in zip(run.bodies, rgb):
@@ -513,7 +621,7 @@ class Viewer:
         """Stop serving (the page shows the connection lost)."""
         if not self._stopping.is_set():
             self._stopping.set()
-            self._player.join()             # a frame being drawn is finished first
+            self._player.join()  # a frame being drawn is finished first
             self._stop_server()
 
     def _stop_server(self):
@@ -531,10 +639,12 @@ class Viewer:
         finally:
             self.stop()
 
-    def _repr_html_(self):          # Jupyter: a link to open it
+    def _repr_html_(self):  # Jupyter: a link to open it
         address = html.escape(self.url)
-        return (f"<div>contactlab viewer of {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}: "
-                f"<a href='{address}' target='_blank'>{address}</a> (<code>.stop()</code> ends it)</div>")
+        return (
+            f"<div>contactlab viewer of {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}: "
+            f"<a href='{address}' target='_blank'>{address}</a> (<code>.stop()</code> ends it)</div>"
+        )
 
     def __repr__(self):
         return f"Viewer({self.url}, {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}; .stop() ends it)"

@@ -13,9 +13,11 @@ from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
-from .granularity import GRANULARITIES, NORMALS, polytope_contacts
-from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
+from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
+from .granularity import NORMALS as NORMALS
+from .granularity import polytope_contacts
 from .manifolds import generate_reusing
+from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
 from .narrow_phase import generate_contacts, needs_hulls, supported
 
 
@@ -29,11 +31,14 @@ def check_supported(model):
         partners = [b for b in dynamic.tolist() if b > a or (b == a and count_of[a] > 1)] + static
         for b in partners:
             if not supported(a, b):
-                raise InputError("bodies", f"contact between a {shapes.NAMES[a]} and a {shapes.NAMES[b]} "
-                                 "is not supported yet; change the shape of one of them")
+                raise InputError(
+                    "bodies",
+                    f"contact between a {shapes.NAMES[a]} and a {shapes.NAMES[b]} "
+                    "is not supported yet; change the shape of one of them",
+                )
 
 
-FEATURE_BITS = 24   # contact id = (collider pair) << FEATURE_BITS | feature within the pair
+FEATURE_BITS = 24  # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
 def swept_distances(model, body_velocity, body_angular_velocity, particle_velocity, dt):
@@ -48,8 +53,13 @@ def swept_distances(model, body_velocity, body_angular_velocity, particle_veloci
 def _colliders(model, state):
     """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
     kinds, params, _, obstacle_rotations = model.collider_table
-    centers, rots = collider_poses(state.body_position, rotations.to_matrix(state.body_orientation),
-                                   state.particle_position, model.obstacle_position, obstacle_rotations)
+    centers, rots = collider_poses(
+        state.body_position,
+        rotations.to_matrix(state.body_orientation),
+        state.particle_position,
+        model.obstacle_position,
+        obstacle_rotations,
+    )
     return kinds, params, centers, rots
 
 
@@ -92,8 +102,11 @@ def _bounds(kinds, params, centers, rots, margin):
             if kind == shapes.PLANE:
                 half = np.inf
             elif kind == shapes.BOX:
-                half = abs(rots[n, i, 0]) * params[n, 0] + abs(rots[n, i, 1]) * params[n, 1] + \
-                    abs(rots[n, i, 2]) * params[n, 2]
+                half = (
+                    abs(rots[n, i, 0]) * params[n, 0]
+                    + abs(rots[n, i, 1]) * params[n, 1]
+                    + abs(rots[n, i, 2]) * params[n, 2]
+                )
             elif kind == shapes.CAPSULE:
                 half = abs(rots[n, i, 2]) * params[n, 1] + params[n, 0]
             elif kind == shapes.CONVEX:
@@ -131,15 +144,26 @@ def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, larg
     return lower, upper, pairs[:count]
 
 
-def collide(model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2,
-            cloth_samples=0) -> Contacts:
+def collide(
+    model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2, cloth_samples=0
+) -> Contacts:
     """All contacts of the state, including gaps down to −margin [m]; the contacts of
     :func:`collide_keeping` with nothing kept."""
     return collide_keeping(model, state, None, 0.0, margin, sweep, granularity, normal, samples, cloth_samples)[0]
 
 
-def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, granularity="vertex",
-                    normal="object", samples=2, cloth_samples=0):
+def collide_keeping(
+    model,
+    state,
+    manifolds,
+    tolerance,
+    margin=0.0,
+    sweep=None,
+    granularity="vertex",
+    normal="object",
+    samples=2,
+    cloth_samples=0,
+):
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
     to keep for the next step: (Contacts, Manifolds or None).
 
@@ -168,37 +192,49 @@ def collide_keeping(model, state, manifolds, tolerance, margin=0.0, sweep=None, 
     reach = np.full(dynamic + O, 0.5 * float(margin))
     if sweep is not None:
         reach[:dynamic] += sweep
-    cloth_of = np.concatenate([np.full(B, -1), model.particle_cloth])    # neighbours within one cloth: no contact
-    large = True if dynamic >= GRID_FROM else None          # None: the grids are never needed, nor compiled
+    cloth_of = np.concatenate([np.full(B, -1), model.particle_cloth])  # neighbours within one cloth: no contact
+    large = True if dynamic >= GRID_FROM else None  # None: the grids are never needed, nor compiled
     lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
-    mesh_parts = [_against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
-                  for g in range(dynamic, dynamic + O) if kinds[g] == shapes.MESH]
+    mesh_parts = [
+        _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
+        for g in range(dynamic, dynamic + O)
+        if kinds[g] == shapes.MESH
+    ]
     if granularity != "vertex" or normal != "object":
         reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
-        surface_parts, bodies, obstacles = polytope_contacts(model, state, granularity, normal, samples,
-                                                             reach_all, dynamic + O)
+        surface_parts, bodies, obstacles = polytope_contacts(
+            model, state, granularity, normal, samples, reach_all, dynamic + O
+        )
         replaced = np.isin(pairs[:, 0], bodies) & np.isin(pairs[:, 1], dynamic + obstacles)
         pairs = pairs[~replaced]
-        mesh_parts = [tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))]
-                            for column in part) for part in mesh_parts] + surface_parts
-    families = model.pair_families          # only these pair routines are compiled (narrow_phase.FAMILIES)
+        mesh_parts = [
+            tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))] for column in part)
+            for part in mesh_parts
+        ] + surface_parts
+    families = model.pair_families  # only these pair routines are compiled (narrow_phase.FAMILIES)
     hulls = model.hull_store if needs_hulls(families) else None
     if tolerance > 0.0:
         contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(
-            pairs, kinds, params, centers, rots, reach, hulls, families, manifolds, tolerance, dynamic + O)
+            pairs, kinds, params, centers, rots, reach, hulls, families, manifolds, tolerance, dynamic + O
+        )
     else:
         contact_point, contact_normal, depth, feature, owner = generate_contacts(
-            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls, families)
+            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls, families
+        )
         manifolds = None
     parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
     a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
-    found = Contacts.empty() if len(a) == 0 else _assemble(model, a, b, contact_point, contact_normal, depth,
-                                                           feature, dynamic + O)
+    found = (
+        Contacts.empty()
+        if len(a) == 0
+        else _assemble(model, a, b, contact_point, contact_normal, depth, feature, dynamic + O)
+    )
     if cloth_samples > 0 and len(getattr(model, "triangles", ())):
         reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
-        found = Contacts.concatenate([found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth,
-                                                                   (dynamic + O) ** 2)])
+        found = Contacts.concatenate(
+            [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
+        )
     return found, manifolds
 
 
@@ -207,10 +243,13 @@ def pass_through_depths(model, contacts) -> np.ndarray:
     — the sum of the two colliders' half thicknesses (``Model.collider_half_thickness``). Deeper
     than that the contact's normal no longer says which way is out: a force along it may push
     a body on through. See ``half_thickness_sums``."""
-    return half_thickness_sums(np.asarray(contacts.feature_id, dtype=np.int64),
-                               np.asarray(contacts.particles_a, dtype=np.int64),
-                               np.asarray(model.collider_half_thickness, dtype=float),
-                               np.asarray(model.particle_radius, dtype=float), model.body_count + model.particle_count)
+    return half_thickness_sums(
+        np.asarray(contacts.feature_id, dtype=np.int64),
+        np.asarray(contacts.particles_a, dtype=np.int64),
+        np.asarray(model.collider_half_thickness, dtype=float),
+        np.asarray(model.particle_radius, dtype=float),
+        model.body_count + model.particle_count,
+    )
 
 
 @njit(cache=True)
@@ -240,21 +279,53 @@ def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, d
     near &= np.isin(kinds[:dynamic], MESH_PARTNERS)
     chosen = np.nonzero(near)[0]
     point, normal, depth, feature, owner = shapes_against_mesh(
-        kinds[chosen], params[chosen], centers[chosen], rots[chosen], reach[chosen] + reach[g], mesh.geometry,
-        MAX_PER_SHAPE, model.hull_store)
+        kinds[chosen],
+        params[chosen],
+        centers[chosen],
+        rots[chosen],
+        reach[chosen] + reach[g],
+        mesh.geometry,
+        MAX_PER_SHAPE,
+        model.hull_store,
+    )
     return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
 
 
 def _assemble(model, a, b, point, normal, depth, feature, total):
     materials = model.collider_table[2]
-    return Contacts.from_arrays(assemble_contacts(a, b, point, normal, depth, feature, model.body_count,
-                                                  model.particle_count, materials, model.material_friction,
-                                                  model.material_restitution, total))
+    return Contacts.from_arrays(
+        assemble_contacts(
+            a,
+            b,
+            point,
+            normal,
+            depth,
+            feature,
+            model.body_count,
+            model.particle_count,
+            materials,
+            model.material_friction,
+            model.material_restitution,
+            total,
+        )
+    )
 
 
 @njit(cache=True)
-def assemble_contacts(a, b, point, normal, depth, feature, body_count, particle_count, materials,
-                      material_friction, material_restitution, total):
+def assemble_contacts(
+    a,
+    b,
+    point,
+    normal,
+    depth,
+    feature,
+    body_count,
+    particle_count,
+    materials,
+    material_friction,
+    material_restitution,
+    total,
+):
     """The ContactArrays of contacts found between global colliders a and b (C,) int64, with
     point, normal (C, 3), depth (C,) [m] and feature (C,) int64 from the narrow phase: each side
     a body (index < B), a particle (weight 1) or static; the tangents (``tangent_basis``); the
@@ -281,5 +352,19 @@ def assemble_contacts(a, b, point, normal, depth, feature, body_count, particle_
         feature_id[c] = ((a[c] * total + b[c]) << FEATURE_BITS) | feature[c]
     unit = np.ascontiguousarray(normal)
     t1, t2 = tangent_frames(unit)
-    return ContactArrays(body[0], body[1], particles[0], particles[1], weights[0], weights[1], point, unit, depth,
-                         t1, t2, friction, restitution, feature_id)
+    return ContactArrays(
+        body[0],
+        body[1],
+        particles[0],
+        particles[1],
+        weights[0],
+        weights[1],
+        point,
+        unit,
+        depth,
+        t1,
+        t2,
+        friction,
+        restitution,
+        feature_id,
+    )

@@ -67,15 +67,15 @@ from numba import njit
 
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 
-FACE_REL_TOL = 0.05       # relative tolerance favouring the reference face's box, and faces over edges
-FACE_ABS_TOL = 1e-5       # absolute part of that tolerance, × the largest half extent of the pair [-]
-PARALLEL_SIN2 = 1e-12     # |a_i × b_j|² below this (edges within 1e-6 rad of parallel): no edge axis
-MAX_CONTACTS = MAX_POINTS # contacts written per box pair, at most
-EDGE_FEATURE = 0          # feature of the single edge–edge contact
-COLLINEAR_TOL = 1e-4      # clipped corners this close (× the smaller face's half width) to a straight line are dropped
+FACE_REL_TOL = 0.05  # relative tolerance favouring the reference face's box, and faces over edges
+FACE_ABS_TOL = 1e-5  # absolute part of that tolerance, × the largest half extent of the pair [-]
+PARALLEL_SIN2 = 1e-12  # |a_i × b_j|² below this (edges within 1e-6 rad of parallel): no edge axis
+MAX_CONTACTS = MAX_POINTS  # contacts written per box pair, at most
+EDGE_FEATURE = 0  # feature of the single edge–edge contact
+COLLINEAR_TOL = 1e-4  # clipped corners this close (× the smaller face's half width) to a straight line are dropped
 
 _NO_AXIS = -1
-_UP = np.array([0.0, 0.0, 1.0])     # the reference face's normal in its own (u, v, h) frame
+_UP = np.array([0.0, 0.0, 1.0])  # the reference face's normal in its own (u, v, h) frame
 
 
 @njit(cache=True)
@@ -115,12 +115,16 @@ def sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, ove
             L1 /= length
             L2 /= length
         # projection radii of the two boxes on L, written out (no loop, no allocation: hot path)
-        ra = (half_a[0] * abs(rotation_a[0, 0] * L0 + rotation_a[1, 0] * L1 + rotation_a[2, 0] * L2)
-              + half_a[1] * abs(rotation_a[0, 1] * L0 + rotation_a[1, 1] * L1 + rotation_a[2, 1] * L2)
-              + half_a[2] * abs(rotation_a[0, 2] * L0 + rotation_a[1, 2] * L1 + rotation_a[2, 2] * L2))
-        rb = (half_b[0] * abs(rotation_b[0, 0] * L0 + rotation_b[1, 0] * L1 + rotation_b[2, 0] * L2)
-              + half_b[1] * abs(rotation_b[0, 1] * L0 + rotation_b[1, 1] * L1 + rotation_b[2, 1] * L2)
-              + half_b[2] * abs(rotation_b[0, 2] * L0 + rotation_b[1, 2] * L1 + rotation_b[2, 2] * L2))
+        ra = (
+            half_a[0] * abs(rotation_a[0, 0] * L0 + rotation_a[1, 0] * L1 + rotation_a[2, 0] * L2)
+            + half_a[1] * abs(rotation_a[0, 1] * L0 + rotation_a[1, 1] * L1 + rotation_a[2, 1] * L2)
+            + half_a[2] * abs(rotation_a[0, 2] * L0 + rotation_a[1, 2] * L1 + rotation_a[2, 2] * L2)
+        )
+        rb = (
+            half_b[0] * abs(rotation_b[0, 0] * L0 + rotation_b[1, 0] * L1 + rotation_b[2, 0] * L2)
+            + half_b[1] * abs(rotation_b[0, 1] * L0 + rotation_b[1, 1] * L1 + rotation_b[2, 1] * L2)
+            + half_b[2] * abs(rotation_b[0, 2] * L0 + rotation_b[1, 2] * L1 + rotation_b[2, 2] * L2)
+        )
         distance = d0 * L0 + d1 * L1 + d2 * L2
         sign = 1.0 if distance >= 0.0 else -1.0
         overlap[axis] = ra + rb - abs(distance)
@@ -144,9 +148,27 @@ def _clip(source, source_label, count, coordinate, sign, limit, target, target_l
 
 
 @njit(cache=True)
-def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
-                   center_inc, rotation_inc, half_inc, owner, contact_normal, margin, scale,
-                   real, whole, out_point, out_normal, out_depth, out_feature, slot):
+def _face_contacts(
+    center_ref,
+    rotation_ref,
+    half_ref,
+    axis,
+    outward_sign,
+    center_inc,
+    rotation_inc,
+    half_inc,
+    owner,
+    contact_normal,
+    margin,
+    scale,
+    real,
+    whole,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Clip the incident box's face against face ``axis`` of the reference box, whose outward
     normal is ``outward_sign · contact_normal``. ``real`` (≥ 100 floats) and ``whole`` (≥ 48
     integers) are scratch."""
@@ -159,7 +181,7 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
     score = real[48:56]
     fc = real[56:59]
     local = real[59:68].reshape((3, 3))
-    flat = real[68:92].reshape((8, 3))      # the polygon's (u, v, 0): its shadow on the reference face
+    flat = real[68:92].reshape((8, 3))  # the polygon's (u, v, 0): its shadow on the reference face
     height = real[92:100]
     labels = whole[:16].reshape((2, 8))
     keep = whole[16:24]
@@ -190,7 +212,7 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
     kv = (k_inc + 2) % 3
     # incident face centre and half edges in the reference frame:
     # (u, v, h) = ((x − fc)·U, (x − fc)·V, (x − fc)·m)
-    for r in range(3):                  # rows of local: centre, half edge along ku, half edge along kv
+    for r in range(3):  # rows of local: centre, half edge along ku, half edge along kv
         if r == 0:
             x0 = center_inc[0] + s_inc * half_inc[k_inc] * rotation_inc[0, k_inc] - fc[0]
             x1 = center_inc[1] + s_inc * half_inc[k_inc] * rotation_inc[1, k_inc] - fc[1]
@@ -211,14 +233,23 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
             polygon[0, corner, c] = local[0, c] + su * local[1, c] + sv * local[2, c]
         labels[0, corner] = corner
     distance = np.empty(polygon.shape[1])
-    count = polygon.shape[1] // 2       # 4 corners (not a literal constant: spares Numba a specialization)
+    count = polygon.shape[1] // 2  # 4 corners (not a literal constant: spares Numba a specialization)
     source = 0
-    for plane in range(4):              # u ≤ hu, −u ≤ hu, v ≤ hv, −v ≤ hv
+    for plane in range(4):  # u ≤ hu, −u ≤ hu, v ≤ hv, −v ≤ hv
         coordinate = plane // 2
         sign = 1.0 if plane % 2 == 0 else -1.0
         limit = hu if coordinate == 0 else hv
-        count = _clip(polygon[source], labels[source], count, coordinate, sign, limit,
-                      polygon[1 - source], labels[1 - source], distance)
+        count = _clip(
+            polygon[source],
+            labels[source],
+            count,
+            coordinate,
+            sign,
+            limit,
+            polygon[1 - source],
+            labels[1 - source],
+            distance,
+        )
         source = 1 - source
     points = polygon[0]
     # the polygon lies inside both faces: its size sets the tolerance for straight corners
@@ -230,13 +261,13 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
         flat[k, 2] = 0.0
         rows[k] = k
     count = drop_collinear(flat, rows, count, tolerance, _UP, np.inf)
-    for k in range(count):              # rows[k] ≥ k: compacting in place is safe
+    for k in range(count):  # rows[k] ≥ k: compacting in place is safe
         for c in range(3):
             points[k, c] = points[rows[k], c]
         labels[0, k] = labels[0, rows[k]]
         height[k] = points[k, 2]
     # keep the points below the reference face, or above it by at most the margin
-    kept = count - count                # 0, typed like count (see above)
+    kept = count - count  # 0, typed like count (see above)
     for k in range(count):
         if points[k, 2] <= margin:
             keep[kept] = k
@@ -265,8 +296,9 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
         row = slot + k
         for c in range(3):
             # incident point moved halfway to the reference plane: fc + u U + v V + (h/2) m
-            out_point[row, c] = (fc[c] + u * rotation_ref[c, iu] + v * rotation_ref[c, iv]
-                                 + 0.5 * h * outward_sign * contact_normal[c])
+            out_point[row, c] = (
+                fc[c] + u * rotation_ref[c, iu] + v * rotation_ref[c, iv] + 0.5 * h * outward_sign * contact_normal[c]
+            )
             out_normal[row, c] = contact_normal[c]
         out_depth[row] = -h
         out_feature[row] = 4 * owner + label_of[k]
@@ -274,8 +306,24 @@ def _face_contacts(center_ref, rotation_ref, half_ref, axis, outward_sign,
 
 
 @njit(cache=True)
-def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b, j, normal, depth,
-                  ends, out_point, out_normal, out_depth, out_feature, slot):
+def _edge_contact(
+    center_a,
+    rotation_a,
+    half_a,
+    i,
+    center_b,
+    rotation_b,
+    half_b,
+    j,
+    normal,
+    depth,
+    ends,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """One contact midway between the closest points of edge ∥a_i of A and edge ∥b_j of B
     (``ends``: (2, 3) scratch)."""
     # supporting edges: A's edge furthest along −n, B's furthest along +n
@@ -317,8 +365,20 @@ def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b,
 
 
 @njit(cache=True)
-def box_box(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin,
-            out_point, out_normal, out_depth, out_feature, slot):
+def box_box(
+    center_a,
+    rotation_a,
+    half_a,
+    center_b,
+    rotation_b,
+    half_b,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Box A against box B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Parameters: centres (3,) [m], rotations (3, 3) body → world, half extents (3,) [m],
@@ -366,19 +426,68 @@ def box_box(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin,
             # the edge axis is clearly better than any face
             i = (best_e - 6) // 3
             j = (best_e - 6) % 3
-            return _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b, j,
-                                 normal[best_e], over_e, work[60:66].reshape((2, 3)),
-                                 out_point, out_normal, out_depth, out_feature, slot)
+            return _edge_contact(
+                center_a,
+                rotation_a,
+                half_a,
+                i,
+                center_b,
+                rotation_b,
+                half_b,
+                j,
+                normal[best_e],
+                over_e,
+                work[60:66].reshape((2, 3)),
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot,
+            )
     contact_normal = normal[face]
     owner = int(use_b)
     if use_b:
         # reference face on B: its outward normal is the contact normal; incident box A
-        return _face_contacts(center_b, rotation_b, half_b, face - 3, 1.0,
-                              center_a, rotation_a, half_a, owner, contact_normal, margin, scale,
-                              work[60:], np.empty(48, dtype=np.int64),
-                              out_point, out_normal, out_depth, out_feature, slot)
+        return _face_contacts(
+            center_b,
+            rotation_b,
+            half_b,
+            face - 3,
+            1.0,
+            center_a,
+            rotation_a,
+            half_a,
+            owner,
+            contact_normal,
+            margin,
+            scale,
+            work[60:],
+            np.empty(48, dtype=np.int64),
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
     # reference face on A: its outward normal points from A towards B; incident box B
-    return _face_contacts(center_a, rotation_a, half_a, face, -1.0,
-                          center_b, rotation_b, half_b, owner, contact_normal, margin, scale,
-                          work[60:], np.empty(48, dtype=np.int64),
-                          out_point, out_normal, out_depth, out_feature, slot)
+    return _face_contacts(
+        center_a,
+        rotation_a,
+        half_a,
+        face,
+        -1.0,
+        center_b,
+        rotation_b,
+        half_b,
+        owner,
+        contact_normal,
+        margin,
+        scale,
+        work[60:],
+        np.empty(48, dtype=np.int64),
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )

@@ -45,18 +45,30 @@ import numpy as np
 from numba import njit
 
 from .contact_output import write_contact, write_local_contact
-from .geometry import (axpy, clamp, column, cross, dot, midpoint, norm, rotate, scaled, segment_closest_parameters,
-                       unit_axis, unrotate)
+from .geometry import (
+    axpy,
+    clamp,
+    column,
+    cross,
+    dot,
+    midpoint,
+    norm,
+    rotate,
+    scaled,
+    segment_closest_parameters,
+    unit_axis,
+    unrotate,
+)
 
-MAX_CONTACTS = 2            # contacts written per capsule pair, at most
-PARALLEL_SIN = 1e-3         # capsule axes with |sin angle| below this are "parallel" (2-point contact)
-OVERLAP_REL = 1e-6          # a parallel overlap shorter than this × (sum of half lengths and radii) is a point
-NORMAL_EPS = 1e-12          # distances [m] below this give no direction; a fallback normal is used
-BOX_REL_EPS = 1e-9          # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
-CROSS_AXIS_EPS = 1e-8       # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
+MAX_CONTACTS = 2  # contacts written per capsule pair, at most
+PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
+OVERLAP_REL = 1e-6  # a parallel overlap shorter than this × (sum of half lengths and radii) is a point
+NORMAL_EPS = 1e-12  # distances [m] below this give no direction; a fallback normal is used
+BOX_REL_EPS = 1e-9  # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
+CROSS_AXIS_EPS = 1e-8  # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
 
-CAPSULE_BOX_EDGE_FEATURE = 12     # capsule–box contacts alongside a box edge: 12 + 2 · edge + end (12..35)
-CAPSULE_BOX_CROSS_FEATURE = 36    # the capsule–box contact of a segment inside the box, across an edge
+CAPSULE_BOX_EDGE_FEATURE = 12  # capsule–box contacts alongside a box edge: 12 + 2 · edge + end (12..35)
+CAPSULE_BOX_CROSS_FEATURE = 36  # the capsule–box contact of a segment inside the box, across an edge
 CAPSULE_CAPSULE_SINGLE_FEATURE = 0
 
 
@@ -64,9 +76,11 @@ CAPSULE_CAPSULE_SINGLE_FEATURE = 0
 # capsule – plane
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
-def capsule_plane(center, rotation, radius, half_length, plane, margin,
-                  out_point, out_normal, out_depth, out_feature, slot):
+def capsule_plane(
+    center, rotation, radius, half_length, plane, margin, out_point, out_normal, out_depth, out_feature, slot
+):
     """Capsule A against the plane B = (n, offset) (solid side n·x < offset; n unit).
 
     center: (3,) [m]; rotation: (3, 3) body → world, the segment along its third column;
@@ -98,9 +112,22 @@ def capsule_plane(center, rotation, radius, half_length, plane, margin,
 # sphere – capsule
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
-def sphere_capsule(center_a, radius_a, center_b, rotation_b, radius_b, half_length_b, margin,
-                   out_point, out_normal, out_depth, out_feature, slot):
+def sphere_capsule(
+    center_a,
+    radius_a,
+    center_b,
+    rotation_b,
+    radius_b,
+    half_length_b,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Sphere (or particle: a sphere of radius ≥ 0) A against capsule B: at most 1 contact.
 
     center_a: (3,) [m]; radius_a [m]; center_b: (3,) [m]; rotation_b: (3, 3) body → world;
@@ -131,9 +158,24 @@ def sphere_capsule(center_a, radius_a, center_b, rotation_b, radius_b, half_leng
 # capsule – capsule
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
-def capsule_capsule(center_a, rotation_a, radius_a, half_a, center_b, rotation_b, radius_b, half_b, margin,
-                    out_point, out_normal, out_depth, out_feature, slot):
+def capsule_capsule(
+    center_a,
+    rotation_a,
+    radius_a,
+    half_a,
+    center_b,
+    rotation_b,
+    radius_b,
+    half_b,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Capsule A against capsule B: 1 contact, or 2 when the axes are (nearly) parallel.
 
     center_*: (3,) [m]; rotation_*: (3, 3) body → world (segment along the third column);
@@ -201,20 +243,31 @@ def capsule_capsule(center_a, rotation_a, radius_a, half_a, center_b, rotation_b
                 if depth_end >= -margin:
                     surface_a = axpy(axpy(center_a, s_end, axis_a), -radius_a, normal)
                     point = axpy(surface_a, 0.5 * depth_end, normal)
-                    write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end,
-                           1 + end)
+                    write_contact(
+                        out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end, 1 + end
+                    )
                     count += 1
             return count
 
     point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth,
-           np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))
+    write_contact(
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+        point,
+        normal,
+        depth,
+        np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE),
+    )
     return 1
 
 
 # ---------------------------------------------------------------------------------------------
 # capsule – box
 # ---------------------------------------------------------------------------------------------
+
 
 @njit(cache=True)
 def _box_distance2(origin, direction, s, half_extents):
@@ -249,7 +302,7 @@ def segment_box_closest(origin, direction, half_length, half_extents):
                     count += 1
     breaks[count] = half_length
     count += 1
-    for i in range(1, count):                   # insertion sort (at most 8 values)
+    for i in range(1, count):  # insertion sort (at most 8 values)
         value = breaks[i]
         j = i - 1
         while j >= 0 and breaks[j] > value:
@@ -310,8 +363,24 @@ def _face_interval(origin, direction, half_length, half_extents, face_axis, tol)
 
 
 @njit(cache=True)
-def _face_contact(origin, direction, s, radius, half_extents, face_axis, face_sign, feature, margin,
-                  box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _face_contact(
+    origin,
+    direction,
+    s,
+    radius,
+    half_extents,
+    face_axis,
+    face_sign,
+    feature,
+    margin,
+    box_center,
+    box_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """One contact of the segment point ``s`` (box frame) against the face ``x[face_axis] =
     face_sign · h``: normal the face's, depth ``radius − height above the face`` (exact over the
     face: the distance to a face is linear along the segment). Returns 1 if written (depth ≥
@@ -323,14 +392,32 @@ def _face_contact(origin, direction, s, radius, half_extents, face_axis, face_si
         return 0
     normal_local = unit_axis(face_axis, face_sign)
     point = axpy(box_center, 1.0, rotate(box_rotation, axpy(x, -0.5 * (radius + height), normal_local)))
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, rotate(box_rotation, normal_local), depth,
-           feature)
+    write_contact(
+        out_point, out_normal, out_depth, out_feature, slot, point, rotate(box_rotation, normal_local), depth, feature
+    )
     return 1
 
 
 @njit(cache=True)
-def _face_patch(origin, direction, half_length, radius, half_extents, face_axis, face_sign, s_keep, margin, tol,
-                box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _face_patch(
+    origin,
+    direction,
+    half_length,
+    radius,
+    half_extents,
+    face_axis,
+    face_sign,
+    s_keep,
+    margin,
+    tol,
+    box_center,
+    box_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Contacts of the segment (box frame) against one box face: the two ends of the part of
     the segment over the face (``s_keep``, unless nan, is kept inside that part), each with its
     own depth; a part shorter than ``tol`` gives 1 contact at its deeper end.
@@ -338,31 +425,96 @@ def _face_patch(origin, direction, half_length, radius, half_extents, face_axis,
     low ``s`` end, 1 at the high one (a single point: the side of the capsule centre it is on).
     """
     lo, hi = _face_interval(origin, direction, half_length, half_extents, face_axis, tol)
-    if s_keep == s_keep:                        # not nan
+    if s_keep == s_keep:  # not nan
         lo = min(lo, s_keep)
         hi = max(hi, s_keep)
-    if lo > hi:                                 # grazing a side of the face within round-off
+    if lo > hi:  # grazing a side of the face within round-off
         lo = clamp(0.5 * (lo + hi), -half_length, half_length)
         hi = lo
     face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
     if hi - lo > tol:
-        count = _face_contact(origin, direction, lo, radius, half_extents, face_axis, face_sign, 2 * face, margin,
-                              box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot)
-        count += _face_contact(origin, direction, hi, radius, half_extents, face_axis, face_sign, 2 * face + 1,
-                               margin, box_center, box_rotation, out_point, out_normal, out_depth, out_feature,
-                               slot + count)
+        count = _face_contact(
+            origin,
+            direction,
+            lo,
+            radius,
+            half_extents,
+            face_axis,
+            face_sign,
+            2 * face,
+            margin,
+            box_center,
+            box_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
+        count += _face_contact(
+            origin,
+            direction,
+            hi,
+            radius,
+            half_extents,
+            face_axis,
+            face_sign,
+            2 * face + 1,
+            margin,
+            box_center,
+            box_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot + count,
+        )
         return count
     # one point: the deeper end
     if face_sign * direction[face_axis] * (hi - lo) < 0.0:
         lo = hi
     end = 1 if lo > 0.0 else 0
-    return _face_contact(origin, direction, lo, radius, half_extents, face_axis, face_sign, 2 * face + end, margin,
-                         box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot)
+    return _face_contact(
+        origin,
+        direction,
+        lo,
+        radius,
+        half_extents,
+        face_axis,
+        face_sign,
+        2 * face + end,
+        margin,
+        box_center,
+        box_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
 
 
 @njit(cache=True)
-def write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin, feature,
-                     center, rotation, out_point, out_normal, out_depth, out_feature, slot):
+def write_patch_ends(
+    origin,
+    direction,
+    lo,
+    hi,
+    s,
+    depth,
+    slope,
+    radius_a,
+    normal_local,
+    margin,
+    feature,
+    center,
+    rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """The two ends s = lo, hi [m] of the part of capsule A's segment ``origin + s · direction``
     (in the frame of B, at ``center`` (3,) [m] with ``rotation`` (3, 3)) that lies alongside an
     edge of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end −
@@ -375,16 +527,39 @@ def write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, norma
         depth_end = depth - slope * (s_end - s)
         if depth_end >= -margin:
             surface_a = axpy(axpy(origin, s_end, direction), -radius_a, normal_local)
-            write_local_contact(axpy(surface_a, 0.5 * depth_end, normal_local), normal_local, depth_end,
-                                feature + end, center, rotation, out_point, out_normal, out_depth, out_feature,
-                                slot + count)
+            write_local_contact(
+                axpy(surface_a, 0.5 * depth_end, normal_local),
+                normal_local,
+                depth_end,
+                feature + end,
+                center,
+                rotation,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot + count,
+            )
             count += 1
     return count
 
 
 @njit(cache=True)
-def capsule_box(center_a, rotation_a, radius_a, half_length_a, box_center, box_rotation, half_extents, margin,
-                out_point, out_normal, out_depth, out_feature, slot):
+def capsule_box(
+    center_a,
+    rotation_a,
+    radius_a,
+    half_length_a,
+    box_center,
+    box_rotation,
+    half_extents,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Capsule A against box B (static or dynamic): up to 2 contacts.
 
     center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);
@@ -442,22 +617,68 @@ def capsule_box(center_a, rotation_a, radius_a, half_length_a, box_center, box_r
         return 0
 
     if distance > tol:
-        return _segment_outside(origin, direction, s, distance, radius_a, half_length_a, half_extents, margin, tol,
-                                box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot)
-    return _segment_inside(origin, direction, radius_a, half_length_a, half_extents, margin, tol,
-                           box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot)
+        return _segment_outside(
+            origin,
+            direction,
+            s,
+            distance,
+            radius_a,
+            half_length_a,
+            half_extents,
+            margin,
+            tol,
+            box_center,
+            box_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
+    return _segment_inside(
+        origin,
+        direction,
+        radius_a,
+        half_length_a,
+        half_extents,
+        margin,
+        tol,
+        box_center,
+        box_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
 
 
 @njit(cache=True)
-def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, half_extents, margin, tol,
-                     box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _segment_outside(
+    origin,
+    direction,
+    s,
+    distance,
+    radius_a,
+    half_length_a,
+    half_extents,
+    margin,
+    tol,
+    box_center,
+    box_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Case 1 of :func:`capsule_box` (box frame): the segment is outside the box; ``s`` is its
     closest point's parameter, ``distance`` > 0 the segment–box distance."""
     depth = radius_a - distance
     p = axpy(origin, s, direction)
     q = np.empty(3)
     outside = 0
-    face_axis = np.int64(0)         # np.int64, not 0: callees are compiled once, not also for Literal[int](0)
+    face_axis = np.int64(0)  # np.int64, not 0: callees are compiled once, not also for Literal[int](0)
     largest = -1e300
     for k in range(3):
         q[k] = clamp(p[k], -half_extents[k], half_extents[k])
@@ -469,9 +690,25 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
             face_axis = k
     face_sign = 1.0 if p[face_axis] > 0.0 else -1.0
     if outside <= 1:
-        return _face_patch(origin, direction, half_length_a, radius_a, half_extents, face_axis, face_sign, s,
-                           margin, tol, box_center, box_rotation,
-                           out_point, out_normal, out_depth, out_feature, slot)
+        return _face_patch(
+            origin,
+            direction,
+            half_length_a,
+            radius_a,
+            half_extents,
+            face_axis,
+            face_sign,
+            s,
+            margin,
+            tol,
+            box_center,
+            box_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
     normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
     point_local = midpoint(axpy(p, -radius_a, normal_local), q)
     slope = dot(normal_local, direction)
@@ -494,9 +731,26 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
                 if i > j:
                     i, j = j, i
                 edge = 4 * edge_axis + 2 * (1 if p[i] > 0.0 else 0) + (1 if p[j] > 0.0 else 0)
-                return write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin,
-                                        CAPSULE_BOX_EDGE_FEATURE + 2 * edge, box_center, box_rotation,
-                                        out_point, out_normal, out_depth, out_feature, slot)
+                return write_patch_ends(
+                    origin,
+                    direction,
+                    lo,
+                    hi,
+                    s,
+                    depth,
+                    slope,
+                    radius_a,
+                    normal_local,
+                    margin,
+                    CAPSULE_BOX_EDGE_FEATURE + 2 * edge,
+                    box_center,
+                    box_rotation,
+                    out_point,
+                    out_normal,
+                    out_depth,
+                    out_feature,
+                    slot,
+                )
 
     # an edge crossed at an angle, or a corner: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
@@ -506,21 +760,61 @@ def _segment_outside(origin, direction, s, distance, radius_a, half_length_a, ha
         end = 1 if s > 0.5 * (lo + hi) else 0
     else:
         end = 1 if s > 0.0 else 0
-    write_local_contact(point_local, normal_local, depth, 2 * face + end, box_center, box_rotation,
-                        out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(
+        point_local,
+        normal_local,
+        depth,
+        2 * face + end,
+        box_center,
+        box_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
     count = 1
     if hi - lo > tol:
         other = lo if end == 1 else hi
         if abs(other - s) > tol:
-            count += _face_contact(origin, direction, other, radius_a, half_extents, face_axis, face_sign,
-                                   2 * face + 1 - end, margin, box_center, box_rotation,
-                                   out_point, out_normal, out_depth, out_feature, slot + count)
+            count += _face_contact(
+                origin,
+                direction,
+                other,
+                radius_a,
+                half_extents,
+                face_axis,
+                face_sign,
+                2 * face + 1 - end,
+                margin,
+                box_center,
+                box_rotation,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot + count,
+            )
     return count
 
 
 @njit(cache=True)
-def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, margin, tol,
-                    box_center, box_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _segment_inside(
+    origin,
+    direction,
+    radius_a,
+    half_length_a,
+    half_extents,
+    margin,
+    tol,
+    box_center,
+    box_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Case 2 of :func:`capsule_box` (box frame): the segment touches or enters the box."""
     best_face = np.int64(0)
     best_face_overlap = 1e300
@@ -534,24 +828,44 @@ def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, ma
     best_edge_axis = np.zeros(3)
     for k in range(3):
         axis = np.zeros(3)
-        axis[(k + 1) % 3] = direction[(k + 2) % 3]       # direction × e_k
+        axis[(k + 1) % 3] = direction[(k + 2) % 3]  # direction × e_k
         axis[(k + 2) % 3] = -direction[(k + 1) % 3]
         length = norm(axis)
         if length < CROSS_AXIS_EPS:
             continue
         axis = scaled(1.0 / length, axis)
         # the segment is perpendicular to this axis: its projection is one number
-        overlap = (half_extents[0] * abs(axis[0]) + half_extents[1] * abs(axis[1])
-                   + half_extents[2] * abs(axis[2]) - abs(dot(origin, axis)))
+        overlap = (
+            half_extents[0] * abs(axis[0])
+            + half_extents[1] * abs(axis[1])
+            + half_extents[2] * abs(axis[2])
+            - abs(dot(origin, axis))
+        )
         if overlap < best_edge_overlap:
             best_edge_overlap = overlap
             best_edge = k
             best_edge_axis = axis
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
         face_sign = 1.0 if origin[best_face] >= 0.0 else -1.0
-        return _face_patch(origin, direction, half_length_a, radius_a, half_extents, best_face, face_sign, np.nan,
-                           margin, tol, box_center, box_rotation,
-                           out_point, out_normal, out_depth, out_feature, slot)
+        return _face_patch(
+            origin,
+            direction,
+            half_length_a,
+            radius_a,
+            half_extents,
+            best_face,
+            face_sign,
+            np.nan,
+            margin,
+            tol,
+            box_center,
+            box_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
 
     depth = radius_a + best_edge_overlap
     if depth < -margin:
@@ -563,11 +877,22 @@ def _segment_inside(origin, direction, radius_a, half_length_a, half_extents, ma
         if j != best_edge:
             edge_center[j] = half_extents[j] if normal_local[j] >= 0.0 else -half_extents[j]
     edge_direction = unit_axis(best_edge, 1.0)
-    s, t = segment_closest_parameters(origin, direction, half_length_a, edge_center, edge_direction,
-                                      half_extents[best_edge])
+    s, t = segment_closest_parameters(
+        origin, direction, half_length_a, edge_center, edge_direction, half_extents[best_edge]
+    )
     p = axpy(origin, s, direction)
     q = axpy(edge_center, t, edge_direction)
-    write_local_contact(midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth,
-                        np.int64(CAPSULE_BOX_CROSS_FEATURE), box_center, box_rotation,
-                        out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(
+        midpoint(axpy(p, -radius_a, normal_local), q),
+        normal_local,
+        depth,
+        np.int64(CAPSULE_BOX_CROSS_FEATURE),
+        box_center,
+        box_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
     return 1

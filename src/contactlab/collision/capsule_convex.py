@@ -61,8 +61,8 @@ import numpy as np
 from numba import njit
 
 from .capsule import BOX_REL_EPS, CROSS_AXIS_EPS, PARALLEL_SIN, write_patch_ends
-from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 from .contact_output import write_local_contact
+from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255
@@ -80,8 +80,9 @@ def _side_normal(vertices, face_vertex_index, start, stop, i, n):
 
 
 @njit(cache=True)
-def _face_interval(origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index,
-                   face, tol):
+def _face_interval(
+    origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
+):
     """Parameters ``(lo, hi)`` of the part of the segment over face ``face`` (inside all side
     planes of its polygon, widened by ``tol``); ``lo > hi`` when there is none."""
     base = face_vertex_start[0]
@@ -126,8 +127,23 @@ def _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_ind
 
 
 @njit(cache=True)
-def _face_contact(origin, direction, s, radius, normal, offset, feature, margin,
-                  hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _face_contact(
+    origin,
+    direction,
+    s,
+    radius,
+    normal,
+    offset,
+    feature,
+    margin,
+    hull_center,
+    hull_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """One contact of the segment point ``s`` (hull frame) against a face plane (normal, offset):
     depth ``radius − height``; written if ≥ −margin. Returns 1 if written, else 0."""
     x = axpy(origin, s, direction)
@@ -135,20 +151,51 @@ def _face_contact(origin, direction, s, radius, normal, offset, feature, margin,
     depth = radius - height
     if depth < -margin:
         return 0
-    write_local_contact(axpy(x, -0.5 * (radius + height), normal), normal, depth, feature, hull_center,
-                        hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(
+        axpy(x, -0.5 * (radius + height), normal),
+        normal,
+        depth,
+        feature,
+        hull_center,
+        hull_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
     return 1
 
 
 @njit(cache=True)
-def _face_patch(origin, direction, half_length, radius, vertices, face_normal, face_offset, face_vertex_start,
-                face_vertex_index, face, s_keep, margin, tol, hull_center, hull_rotation,
-                out_point, out_normal, out_depth, out_feature, slot):
+def _face_patch(
+    origin,
+    direction,
+    half_length,
+    radius,
+    vertices,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    face,
+    s_keep,
+    margin,
+    tol,
+    hull_center,
+    hull_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """The two ends of the part of the segment over face ``face`` (``s_keep``, unless nan, kept
     inside that part), each with its own depth; a part shorter than ``tol`` gives 1 contact at
     its deeper end. Features ``(2 · face + end) mod 256``."""
-    lo, hi = _face_interval(origin, direction, half_length, vertices, face_normal, face_vertex_start,
-                            face_vertex_index, face, tol)
+    lo, hi = _face_interval(
+        origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
+    )
     if s_keep == s_keep:
         lo = min(lo, s_keep)
         hi = max(hi, s_keep)
@@ -158,22 +205,85 @@ def _face_patch(origin, direction, half_length, radius, vertices, face_normal, f
     normal = face_normal[face]
     offset = face_offset[face]
     if hi - lo > tol:
-        count = _face_contact(origin, direction, lo, radius, normal, offset, (2 * face) & 255, margin,
-                              hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
-        count += _face_contact(origin, direction, hi, radius, normal, offset, (2 * face + 1) & 255, margin,
-                               hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot + count)
+        count = _face_contact(
+            origin,
+            direction,
+            lo,
+            radius,
+            normal,
+            offset,
+            (2 * face) & 255,
+            margin,
+            hull_center,
+            hull_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
+        count += _face_contact(
+            origin,
+            direction,
+            hi,
+            radius,
+            normal,
+            offset,
+            (2 * face + 1) & 255,
+            margin,
+            hull_center,
+            hull_rotation,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot + count,
+        )
         return count
     if dot(normal, direction) * (hi - lo) < 0.0:
         lo = hi
     end = 1 if lo > 0.0 else 0
-    return _face_contact(origin, direction, lo, radius, normal, offset, (2 * face + end) & 255, margin,
-                         hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot)
+    return _face_contact(
+        origin,
+        direction,
+        lo,
+        radius,
+        normal,
+        offset,
+        (2 * face + end) & 255,
+        margin,
+        hull_center,
+        hull_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
 
 
 @njit(cache=True)
-def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rotation_b, vertices, face_normal,
-                   face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face, margin,
-                   out_point, out_normal, out_depth, out_feature, slot):
+def capsule_convex(
+    center_a,
+    rotation_a,
+    radius_a,
+    half_length_a,
+    center_b,
+    rotation_b,
+    vertices,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    edge_vertex,
+    edge_face,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.
 
     center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);
@@ -198,7 +308,7 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
         n = face_normal[f]
         overlap = face_offset[f] - dot(n, origin) + half_length_a * abs(dot(n, direction))
         if overlap < -reach:
-            return 0                            # separated by more than radius + margin
+            return 0  # separated by more than radius + margin
         if overlap < best_face_overlap:
             best_face_overlap = overlap
             best_face = f
@@ -228,7 +338,7 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
             continue
         l0, l1, l2 = l0 / length, l1 / length, l2 / length
         if l0 * (n0[0] + n1[0]) + l1 * (n0[1] + n1[1]) + l2 * (n0[2] + n1[2]) < 0.0:
-            l0, l1, l2 = -l0, -l1, -l2          # into the arc: the edge supports the hull along it
+            l0, l1, l2 = -l0, -l1, -l2  # into the arc: the edge supports the hull along it
         overlap = l0 * (a[0] - origin[0]) + l1 * (a[1] - origin[1]) + l2 * (a[2] - origin[2])
         if overlap < -reach:
             return 0
@@ -286,13 +396,54 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
         if distance > tol:
             if face_id >= 0 and face_distance <= edge_distance + tol:
                 # the closest point lies inside a face: a face patch
-                return _face_patch(origin, direction, half_length_a, radius_a, vertices, face_normal, face_offset,
-                                   face_vertex_start, face_vertex_index, face_id, face_s, margin, tol,
-                                   center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
-            return _apart_edge(origin, direction, edge_s, edge_q, edge_distance, edge_id, edge_at_end, radius_a,
-                               half_length_a, vertices, face_normal, face_offset, face_vertex_start,
-                               face_vertex_index, edge_vertex, margin, tol, center_b, rotation_b,
-                               out_point, out_normal, out_depth, out_feature, slot)
+                return _face_patch(
+                    origin,
+                    direction,
+                    half_length_a,
+                    radius_a,
+                    vertices,
+                    face_normal,
+                    face_offset,
+                    face_vertex_start,
+                    face_vertex_index,
+                    face_id,
+                    face_s,
+                    margin,
+                    tol,
+                    center_b,
+                    rotation_b,
+                    out_point,
+                    out_normal,
+                    out_depth,
+                    out_feature,
+                    slot,
+                )
+            return _apart_edge(
+                origin,
+                direction,
+                edge_s,
+                edge_q,
+                edge_distance,
+                edge_id,
+                edge_at_end,
+                radius_a,
+                half_length_a,
+                vertices,
+                face_normal,
+                face_offset,
+                face_vertex_start,
+                face_vertex_index,
+                edge_vertex,
+                margin,
+                tol,
+                center_b,
+                rotation_b,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot,
+            )
 
     # touching or overlapping: the separating axis with the least overlap (faces win near ties)
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
@@ -302,13 +453,41 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
         slope = dot(face_normal[best_face], direction)
         if slope != 0.0 and half_length_a > 0.0:
             s_deep = -half_length_a if slope > 0.0 else half_length_a
-            lo, hi = _face_interval(origin, direction, half_length_a, vertices, face_normal, face_vertex_start,
-                                    face_vertex_index, best_face, tol)
+            lo, hi = _face_interval(
+                origin,
+                direction,
+                half_length_a,
+                vertices,
+                face_normal,
+                face_vertex_start,
+                face_vertex_index,
+                best_face,
+                tol,
+            )
             if lo > hi or -slope * (s_deep - clamp(s_deep, lo, hi)) > tol:
                 s_keep = s_deep
-        return _face_patch(origin, direction, half_length_a, radius_a, vertices, face_normal, face_offset,
-                           face_vertex_start, face_vertex_index, best_face, s_keep, margin, tol,
-                           center_b, rotation_b, out_point, out_normal, out_depth, out_feature, slot)
+        return _face_patch(
+            origin,
+            direction,
+            half_length_a,
+            radius_a,
+            vertices,
+            face_normal,
+            face_offset,
+            face_vertex_start,
+            face_vertex_index,
+            best_face,
+            s_keep,
+            margin,
+            tol,
+            center_b,
+            rotation_b,
+            out_point,
+            out_normal,
+            out_depth,
+            out_feature,
+            slot,
+        )
     depth = radius_a + best_edge_overlap
     if depth < -margin:
         return 0
@@ -317,20 +496,52 @@ def capsule_convex(center_a, rotation_a, radius_a, half_length_a, center_b, rota
     b = vertices[edge_vertex[best_edge, 1]]
     span = axpy(b, -1.0, a)
     half = 0.5 * np.sqrt(dot(span, span))
-    s, t = segment_closest_parameters(origin, direction, half_length_a, midpoint(a, b), scaled(0.5 / half, span),
-                                      half)
+    s, t = segment_closest_parameters(origin, direction, half_length_a, midpoint(a, b), scaled(0.5 / half, span), half)
     p = axpy(origin, s, direction)
     q = axpy(midpoint(a, b), t, scaled(0.5 / half, span))
-    write_local_contact(midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth,
-                        CAPSULE_CONVEX_CROSS_FEATURE, center_b, rotation_b, out_point, out_normal, out_depth,
-                        out_feature, slot)
+    write_local_contact(
+        midpoint(axpy(p, -radius_a, normal_local), q),
+        normal_local,
+        depth,
+        CAPSULE_CONVEX_CROSS_FEATURE,
+        center_b,
+        rotation_b,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
     return 1
 
 
 @njit(cache=True)
-def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, half_length_a, vertices, face_normal,
-                face_offset, face_vertex_start, face_vertex_index, edge_vertex, margin, tol,
-                hull_center, hull_rotation, out_point, out_normal, out_depth, out_feature, slot):
+def _apart_edge(
+    origin,
+    direction,
+    s,
+    q,
+    distance,
+    edge,
+    at_vertex,
+    radius_a,
+    half_length_a,
+    vertices,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    edge_vertex,
+    margin,
+    tol,
+    hull_center,
+    hull_rotation,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
     (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter."""
     depth = radius_a - distance
@@ -354,9 +565,26 @@ def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, ha
             hi = min(half_length_a, max(t0, t1))
             if hi - lo > tol and lo - tol <= s <= hi + tol:
                 # (2 (F + edge)) mod 256 is even: adding the end (0, 1) commutes with the mod
-                return write_patch_ends(origin, direction, lo, hi, s, depth, slope, radius_a, normal_local, margin,
-                                        (2 * (face_count + edge)) & 255, hull_center, hull_rotation,
-                                        out_point, out_normal, out_depth, out_feature, slot)
+                return write_patch_ends(
+                    origin,
+                    direction,
+                    lo,
+                    hi,
+                    s,
+                    depth,
+                    slope,
+                    radius_a,
+                    normal_local,
+                    margin,
+                    (2 * (face_count + edge)) & 255,
+                    hull_center,
+                    hull_rotation,
+                    out_point,
+                    out_normal,
+                    out_depth,
+                    out_feature,
+                    slot,
+                )
     # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
     face = 0
@@ -366,20 +594,46 @@ def _apart_edge(origin, direction, s, q, distance, edge, at_vertex, radius_a, ha
         if height > highest:
             highest = height
             face = f
-    lo, hi = _face_interval(origin, direction, half_length_a, vertices, face_normal, face_vertex_start,
-                            face_vertex_index, face, tol)
+    lo, hi = _face_interval(
+        origin, direction, half_length_a, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
+    )
     if lo <= hi:
         end = 1 if s > 0.5 * (lo + hi) else 0
     else:
         end = 1 if s > 0.0 else 0
     point_local = midpoint(axpy(p, -radius_a, normal_local), q)
-    write_local_contact(point_local, normal_local, depth, (2 * face + end) & 255, hull_center, hull_rotation,
-                        out_point, out_normal, out_depth, out_feature, slot)
+    write_local_contact(
+        point_local,
+        normal_local,
+        depth,
+        (2 * face + end) & 255,
+        hull_center,
+        hull_rotation,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
     count = 1
     if hi - lo > tol:
         other = lo if end == 1 else hi
         if abs(other - s) > tol:
-            count += _face_contact(origin, direction, other, radius_a, face_normal[face], face_offset[face],
-                                   (2 * face + 1 - end) & 255, margin, hull_center, hull_rotation,
-                                   out_point, out_normal, out_depth, out_feature, slot + count)
+            count += _face_contact(
+                origin,
+                direction,
+                other,
+                radius_a,
+                face_normal[face],
+                face_offset[face],
+                (2 * face + 1 - end) & 255,
+                margin,
+                hull_center,
+                hull_rotation,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot + count,
+            )
     return count

@@ -42,17 +42,40 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .mesh_features import (EDGE2, FACE, FEATURES_PER_TRIANGLE, candidate_rows, closest_feature,
-                            closest_point_on_triangle, distance_to_triangle, keep_spread, nearest_feature,
-                            segment_triangle_closest, signed_normal, write_kept)
+from .mesh_features import (
+    EDGE2,
+    FACE,
+    FEATURES_PER_TRIANGLE,
+    candidate_rows,
+    closest_feature,
+    closest_point_on_triangle,
+    distance_to_triangle,
+    keep_spread,
+    nearest_feature,
+    segment_triangle_closest,
+    signed_normal,
+    write_kept,
+)
 
-END_FEATURE = 7            # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
+END_FEATURE = 7  # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
 COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this are coplanar
 
 
 @njit(cache=True)
-def capsule_mesh(center, rotation, radius, half_length, mesh, margin, out_point, out_normal, out_depth,
-                 out_feature, slot, max_contacts):
+def capsule_mesh(
+    center,
+    rotation,
+    radius,
+    half_length,
+    mesh,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+    max_contacts,
+):
     """Capsule A (centre (3,) [m], rotation (3, 3) body → world, the segment along its third
     column, ``radius``, ``half_length`` [m]) against the static mesh B (module docstring).
 
@@ -109,7 +132,7 @@ def capsule_mesh(center, rotation, radius, half_length, mesh, margin, out_point,
         qx, qy, qz, region, d = closest_feature(mesh, t, x, tol)
         at_end = abs(s - half_length) <= tol or abs(s + half_length) <= tol
         if region == FACE and at_end:
-            continue                                   # an end over the face: an end contact already
+            continue  # an end over the face: an end contact already
         rec_s[count], rec_triangle[count], rec_region[count], rec_distance[count] = s, t, region, d
         rec_q[count, 0], rec_q[count, 1], rec_q[count, 2] = qx, qy, qz
         rec_local[count] = region
@@ -137,8 +160,9 @@ def capsule_mesh(center, rotation, radius, half_length, mesh, margin, out_point,
             if j == t or other_distance[c] == np.inf:
                 continue
             other = mesh.triangles[j]
-            px, py, pz, _ = closest_point_on_triangle(q, mesh.vertices[other[0]], mesh.vertices[other[1]],
-                                                      mesh.vertices[other[2]])
+            px, py, pz, _ = closest_point_on_triangle(
+                q, mesh.vertices[other[0]], mesh.vertices[other[1]], mesh.vertices[other[2]]
+            )
             contains = (px - q[0]) ** 2 + (py - q[1]) ** 2 + (pz - q[2]) ** 2 <= tol * tol
             if not contains:
                 continue
@@ -189,5 +213,15 @@ def capsule_mesh(center, rotation, radius, half_length, mesh, margin, out_point,
         point[found, 2] = 0.5 * (x[2] - radius * nz + q[2])
         feature[found] = FEATURES_PER_TRIANGLE * t + rec_local[r]
         found += 1
-    return write_kept(keep_spread(point[:found], depth[:found], max_contacts, tol), point, normal, depth, feature,
-                         out_point, out_normal, out_depth, out_feature, slot)
+    return write_kept(
+        keep_spread(point[:found], depth[:found], max_contacts, tol),
+        point,
+        normal,
+        depth,
+        feature,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )

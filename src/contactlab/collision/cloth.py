@@ -35,8 +35,11 @@ def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -
     per_triangle = samples * samples
     parts = []
     for o in obstacles:
-        surface = (model.meshes[int(model.obstacle_params[o, 0])] if model.obstacle_shape[o] == shapes.MESH
-                   else model_obstacle(model, o))
+        surface = (
+            model.meshes[int(model.obstacle_params[o, 0])]
+            if model.obstacle_shape[o] == shapes.MESH
+            else model_obstacle(model, o)
+        )
         found = surface_contacts(state.particle_position, triangles, surface, "samples", normal, reach, samples)
         depth = found.depth + np.einsum("ck,ck->c", found.weights, thickness[found.vertices])
         keep = depth >= -margin
@@ -48,11 +51,23 @@ def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -
         count = int(keep.sum())
         t1, t2 = tangent_basis(found.normal[keep])
         friction, restitution = model.pair_materials(material_a, material_b)
-        parts.append(Contacts(
-            body_a=np.full(count, -1), body_b=np.full(count, -1),
-            particles_a=found.vertices[keep], particles_b=np.full((count, 3), -1),
-            weights_a=found.weights[keep], weights_b=np.zeros((count, 3)),
-            point=found.point[keep], normal=found.normal[keep], depth=depth[keep], tangent1=t1, tangent2=t2,
-            friction=friction, restitution=restitution,
-            feature_id=((feature_base + triangle * model.obstacle_count + o) << 24) | (found.feature[keep] % per_triangle)))
+        parts.append(
+            Contacts(
+                body_a=np.full(count, -1),
+                body_b=np.full(count, -1),
+                particles_a=found.vertices[keep],
+                particles_b=np.full((count, 3), -1),
+                weights_a=found.weights[keep],
+                weights_b=np.zeros((count, 3)),
+                point=found.point[keep],
+                normal=found.normal[keep],
+                depth=depth[keep],
+                tangent1=t1,
+                tangent2=t2,
+                friction=friction,
+                restitution=restitution,
+                feature_id=((feature_base + triangle * model.obstacle_count + o) << 24)
+                | (found.feature[keep] % per_triangle),
+            )
+        )
     return Contacts.concatenate(parts)

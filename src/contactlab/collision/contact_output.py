@@ -21,10 +21,19 @@ def write_contact(out_point, out_normal, out_depth, out_feature, slot, point, no
 
 
 @njit(cache=True)
-def write_local_contact(point_local, normal_local, depth, feature, center, rotation,
-                        out_point, out_normal, out_depth, out_feature, slot):
+def write_local_contact(
+    point_local, normal_local, depth, feature, center, rotation, out_point, out_normal, out_depth, out_feature, slot
+):
     """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal
     (3,) there, the collider at ``center`` (3,) [m] with ``rotation`` (3, 3) body → world."""
-    write_contact(out_point, out_normal, out_depth, out_feature, slot,
-                  axpy(center, 1.0, rotate(rotation, point_local)), rotate(rotation, normal_local), depth,
-                  np.int64(feature))
+    write_contact(
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+        axpy(center, 1.0, rotate(rotation, point_local)),
+        rotate(rotation, normal_local),
+        depth,
+        np.int64(feature),
+    )

@@ -15,8 +15,8 @@ Compiled (``@njit(cache=True)``), float64, no fastmath; no allocation.
 import numpy as np
 from numba import njit
 
-MAX_POINTS = 4            # points kept of a contact polygon, at most
-REDUCE_TIE = 1e-6         # relative tolerance of a tie in the reduction to 4 points
+MAX_POINTS = 4  # points kept of a contact polygon, at most
+REDUCE_TIE = 1e-6  # relative tolerance of a tie in the reduction to 4 points
 
 
 @njit(cache=True)
@@ -35,7 +35,7 @@ def clip_polygon(source, label, count, distance, target, target_label):
         d_prev = distance[prev]
         d_cur = distance[cur]
         if d_cur <= 0.0:
-            if d_prev > 0.0 and d_cur < 0.0:      # entering: the crossing replaces the cut corner prev
+            if d_prev > 0.0 and d_cur < 0.0:  # entering: the crossing replaces the cut corner prev
                 s = d_prev / (d_prev - d_cur)
                 for c in range(3):
                     target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])
@@ -45,7 +45,7 @@ def clip_polygon(source, label, count, distance, target, target_label):
                 target[out, c] = source[cur, c]
             target_label[out] = label[cur]
             out += 1
-        elif d_prev < 0.0:                       # leaving: the crossing replaces the cut corner cur
+        elif d_prev < 0.0:  # leaving: the crossing replaces the cut corner cur
             s = d_prev / (d_prev - d_cur)
             for c in range(3):
                 target[out, c] = source[prev, c] + s * (source[cur, c] - source[prev, c])

@@ -52,7 +52,7 @@ from numba import njit
 from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four
 
-MAX_CONTACTS = MAX_POINTS # contacts written per pair, at most
+MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
 SPHERE_FEATURE = 0
 
 
@@ -97,8 +97,12 @@ def convex_plane(center, rotation, vertices, plane, margin, out_point, out_norma
         h = height[v]
         row = slot + k
         for c in range(3):
-            x = (center[c] + rotation[c, 0] * vertices[v, 0] + rotation[c, 1] * vertices[v, 1]
-                 + rotation[c, 2] * vertices[v, 2])
+            x = (
+                center[c]
+                + rotation[c, 0] * vertices[v, 0]
+                + rotation[c, 1] * vertices[v, 1]
+                + rotation[c, 2] * vertices[v, 2]
+            )
             out_point[row, c] = x - 0.5 * h * plane[c]
             out_normal[row, c] = plane[c]
         out_depth[row] = -h
@@ -127,8 +131,23 @@ def _closest_on_segment(px, py, pz, a, b, out):
 
 
 @njit(cache=True)
-def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_normal, face_offset,
-                  face_vertex_start, face_vertex_index, margin, out_point, out_normal, out_depth, out_feature, slot):
+def sphere_convex(
+    center,
+    radius,
+    hull_center,
+    hull_rotation,
+    vertices,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B: one contact.
 
     Inside the hull the centre leaves through the face of least penetration; outside, the
@@ -138,7 +157,7 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
     d0 = center[0] - hull_center[0]
     d1 = center[1] - hull_center[1]
     d2 = center[2] - hull_center[2]
-    x0 = r[0, 0] * d0 + r[1, 0] * d1 + r[2, 0] * d2            # the centre in the hull's frame
+    x0 = r[0, 0] * d0 + r[1, 0] * d1 + r[2, 0] * d2  # the centre in the hull's frame
     x1 = r[0, 1] * d0 + r[1, 1] * d1 + r[2, 1] * d2
     x2 = r[0, 2] * d0 + r[1, 2] * d1 + r[2, 2] * d2
     face_count = face_offset.shape[0]
@@ -149,7 +168,7 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
         if s > best_s:
             best_s = s
             best = f
-    if best_s > radius + margin:          # the distance is at least best_s: too far
+    if best_s > radius + margin:  # the distance is at least best_s: too far
         return 0
     base = face_vertex_start[0]
     closest = np.empty(3)
@@ -166,9 +185,9 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
         for f in range(face_count):
             s = face_normal[f, 0] * x0 + face_normal[f, 1] * x1 + face_normal[f, 2] * x2 - face_offset[f]
             if s <= 0.0:
-                continue                   # this face does not see the centre
+                continue  # this face does not see the centre
             m0, m1, m2 = face_normal[f, 0], face_normal[f, 1], face_normal[f, 2]
-            q0, q1, q2 = x0 - s * m0, x1 - s * m1, x2 - s * m2        # projection on the face plane
+            q0, q1, q2 = x0 - s * m0, x1 - s * m1, x2 - s * m2  # projection on the face plane
             start = face_vertex_start[f] - base
             stop = face_vertex_start[f + 1] - base
             corners = stop - start
@@ -189,7 +208,7 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
                     best_d2 = s * s
                     closest[0], closest[1], closest[2] = q0, q1, q2
                 if f == best:
-                    break                  # the largest face distance is a lower bound: done
+                    break  # the largest face distance is a lower bound: done
                 continue
             for k in range(corners):
                 a = vertices[face_vertex_index[start + k]]
@@ -221,14 +240,31 @@ def sphere_convex(center, radius, hull_center, hull_rotation, vertices, face_nor
 
 
 @njit(cache=True)
-def hull_view(vertex_start, vertices, face_start, face_normal, face_offset, face_vertex_start, face_vertex_index,
-              edge_start, edge_vertex, edge_face, h):
+def hull_view(
+    vertex_start,
+    vertices,
+    face_start,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    edge_start,
+    edge_vertex,
+    edge_face,
+    h,
+):
     """Hull ``h``'s arrays out of the packed layout (:func:`contactlab.hulls.pack_hulls`), as views:
     (vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face),
     the argument order of the routines here. The compiled twin of :func:`contactlab.hulls.hull_arrays`."""
     f0 = face_start[h]
     f1 = face_start[h + 1]
-    fvs = face_vertex_start[f0:f1 + 1]
-    return (vertices[vertex_start[h]:vertex_start[h + 1]], face_normal[f0:f1], face_offset[f0:f1], fvs,
-            face_vertex_index[fvs[0]:fvs[fvs.shape[0] - 1]], edge_vertex[edge_start[h]:edge_start[h + 1]],
-            edge_face[edge_start[h]:edge_start[h + 1]])
+    fvs = face_vertex_start[f0 : f1 + 1]
+    return (
+        vertices[vertex_start[h] : vertex_start[h + 1]],
+        face_normal[f0:f1],
+        face_offset[f0:f1],
+        fvs,
+        face_vertex_index[fvs[0] : fvs[fvs.shape[0] - 1]],
+        edge_vertex[edge_start[h] : edge_start[h + 1]],
+        edge_face[edge_start[h] : edge_start[h + 1]],
+    )

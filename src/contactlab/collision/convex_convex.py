@@ -57,12 +57,12 @@ from numba import njit
 
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear, reduce_to_four
 
-MAX_CONTACTS = MAX_POINTS # contacts written per pair, at most
-FACE_REL_TOL = 0.05       # relative tolerance favouring faces over edges, and the larger reference face
-FACE_ABS_TOL = 1e-5       # absolute part of that tolerance, × the larger hull radius [-]
-PARALLEL_SIN2 = 1e-12     # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
-DEPTH_TOL = 1e-9          # a nearly straight clipped corner deeper than its neighbours by this × size is kept
-COLLINEAR_TOL = 1e-4      # clipped corners this close to straight (× the shorter face's shortest edge) are dropped
+MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
+FACE_REL_TOL = 0.05  # relative tolerance favouring faces over edges, and the larger reference face
+FACE_ABS_TOL = 1e-5  # absolute part of that tolerance, × the larger hull radius [-]
+PARALLEL_SIN2 = 1e-12  # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
+DEPTH_TOL = 1e-9  # a nearly straight clipped corner deeper than its neighbours by this × size is kept
+COLLINEAR_TOL = 1e-4  # clipped corners this close to straight (× the shorter face's shortest edge) are dropped
 
 _FNV_OFFSET = 2166136261
 _FNV_PRIME = 16777619
@@ -87,9 +87,11 @@ def _clip_side(source, label, count, plane_point, plane_normal, distance, target
     the reference face); ``distance`` is scratch space. Returns the new count (see
     contact_polygon.clip_polygon)."""
     for k in range(count):
-        distance[k] = (plane_normal[0] * (source[k, 0] - plane_point[0])
-                       + plane_normal[1] * (source[k, 1] - plane_point[1])
-                       + plane_normal[2] * (source[k, 2] - plane_point[2]))
+        distance[k] = (
+            plane_normal[0] * (source[k, 0] - plane_point[0])
+            + plane_normal[1] * (source[k, 1] - plane_point[1])
+            + plane_normal[2] * (source[k, 2] - plane_point[2])
+        )
     return clip_polygon(source, label, count, distance, target, target_label)
 
 
@@ -125,9 +127,29 @@ def _face_area(points, face_vertex_start, face_vertex_index, f, normal):
 
 
 @njit(cache=True)
-def _face_contacts(ref_points, ref_normal, ref_offset, ref_fvs, ref_fvi, ref_face, inc_points, inc_normal,
-                   inc_fvs, inc_fvi, sign, margin, scale, fallback, center_a, rotation_a,
-                   out_point, out_normal, out_depth, out_feature, slot):
+def _face_contacts(
+    ref_points,
+    ref_normal,
+    ref_offset,
+    ref_fvs,
+    ref_fvi,
+    ref_face,
+    inc_points,
+    inc_normal,
+    inc_fvs,
+    inc_fvi,
+    sign,
+    margin,
+    scale,
+    fallback,
+    center_a,
+    rotation_a,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Clip the incident face against reference face ``ref_face``; everything in A's frame.
 
     ``ref_points``/``inc_points`` (·, 3): the two hulls' vertices in A's frame; ``ref_normal``
@@ -184,11 +206,12 @@ def _face_contacts(ref_points, ref_normal, ref_offset, ref_fvs, ref_fvi, ref_fac
         a = ref_points[ref_fvi[ref_start + side]]
         b = ref_points[ref_fvi[ref_start + (side + 1) % ref_corners]]
         e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-        side_normal[0] = e1 * m2 - e2 * m1                # e × m: outward in the face plane
+        side_normal[0] = e1 * m2 - e2 * m1  # e × m: outward in the face plane
         side_normal[1] = e2 * m0 - e0 * m2
         side_normal[2] = e0 * m1 - e1 * m0
-        count = _clip_side(polygon[source], labels[source], count, a, side_normal, distance,
-                           polygon[1 - source], labels[1 - source])
+        count = _clip_side(
+            polygon[source], labels[source], count, a, side_normal, distance, polygon[1 - source], labels[1 - source]
+        )
         source = 1 - source
         if count == 0:
             break
@@ -196,10 +219,12 @@ def _face_contacts(ref_points, ref_normal, ref_offset, ref_fvs, ref_fvi, ref_fac
     point_labels = labels[source]
     # drop nearly straight corners, at a tolerance set by the smaller face
     if count > 2:
-        tolerance = COLLINEAR_TOL * min(_shortest_edge(ref_points, ref_fvs, ref_fvi, ref_face),
-                                        _shortest_edge(inc_points, inc_fvs, inc_fvi, inc_face))
+        tolerance = COLLINEAR_TOL * min(
+            _shortest_edge(ref_points, ref_fvs, ref_fvi, ref_face),
+            _shortest_edge(inc_points, inc_fvs, inc_fvi, inc_face),
+        )
         count = drop_collinear(points, point_labels, count, tolerance, ref_normal, DEPTH_TOL * scale)
-    height = distance                                     # reuse: height above the reference plane
+    height = distance  # reuse: height above the reference plane
     keep = np.empty(max(capacity, 1), dtype=np.int64)
     kept = 0
     for k in range(count):
@@ -286,9 +311,25 @@ def _least_face_overlap(normal, offset, faces, points, count, margin, result, at
 
 
 @njit(cache=True)
-def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a, edge_vertex_a, edge_face_a,
-                      center_b, rotation_b, vertices_b, face_normal_b, face_offset_b, edge_vertex_b, edge_face_b,
-                      margin, result, axis):
+def convex_convex_sat(
+    center_a,
+    rotation_a,
+    vertices_a,
+    face_normal_a,
+    face_offset_a,
+    edge_vertex_a,
+    edge_face_a,
+    center_b,
+    rotation_b,
+    vertices_b,
+    face_normal_b,
+    face_offset_b,
+    edge_vertex_b,
+    edge_face_b,
+    margin,
+    result,
+    axis,
+):
     """Separating axis test of hull A against hull B, in A's body frame.
 
     Arguments as for :func:`convex_convex` (without the face corner lists). Fills ``result``
@@ -305,12 +346,18 @@ def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offs
     Rab = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
-            Rab[i, j] = (rotation_a[0, i] * rotation_b[0, j] + rotation_a[1, i] * rotation_b[1, j]
-                         + rotation_a[2, i] * rotation_b[2, j])
+            Rab[i, j] = (
+                rotation_a[0, i] * rotation_b[0, j]
+                + rotation_a[1, i] * rotation_b[1, j]
+                + rotation_a[2, i] * rotation_b[2, j]
+            )
     t = np.empty(3)
     for i in range(3):
-        t[i] = (rotation_a[0, i] * (center_b[0] - center_a[0]) + rotation_a[1, i] * (center_b[1] - center_a[1])
-                + rotation_a[2, i] * (center_b[2] - center_a[2]))
+        t[i] = (
+            rotation_a[0, i] * (center_b[0] - center_a[0])
+            + rotation_a[1, i] * (center_b[1] - center_a[1])
+            + rotation_a[2, i] * (center_b[2] - center_a[2])
+        )
     count_b = vertices_b.shape[0]
     vb = np.empty((count_b, 3))
     for j in range(count_b):
@@ -321,8 +368,9 @@ def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offs
     ob = np.empty(faces_b)
     for g in range(faces_b):
         for i in range(3):
-            nb[g, i] = (Rab[i, 0] * face_normal_b[g, 0] + Rab[i, 1] * face_normal_b[g, 1]
-                        + Rab[i, 2] * face_normal_b[g, 2])
+            nb[g, i] = (
+                Rab[i, 0] * face_normal_b[g, 0] + Rab[i, 1] * face_normal_b[g, 1] + Rab[i, 2] * face_normal_b[g, 2]
+            )
         ob[g] = face_offset_b[g] + nb[g, 0] * t[0] + nb[g, 1] * t[1] + nb[g, 2] * t[2]
     for k in range(8):
         result[k] = np.inf
@@ -381,7 +429,7 @@ def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offs
                 continue
             length = np.sqrt(length2)
             L0, L1, L2 = L0 / length, L1 / length, L2 / length
-            if L0 * pa[0] + L1 * pa[1] + L2 * pa[2] < 0.0:      # orient from A (origin inside) towards B
+            if L0 * pa[0] + L1 * pa[1] + L2 * pa[2] < 0.0:  # orient from A (origin inside) towards B
                 L0, L1, L2 = -L0, -L1, -L2
             overlap = -(L0 * (pb[0] - pa[0]) + L1 * (pb[1] - pa[1]) + L2 * (pb[2] - pa[2]))
             if overlap < -margin:
@@ -396,11 +444,32 @@ def convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offs
 
 
 @njit(cache=True)
-def convex_convex(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a, face_vertex_start_a,
-                  face_vertex_index_a, edge_vertex_a, edge_face_a,
-                  center_b, rotation_b, vertices_b, face_normal_b, face_offset_b, face_vertex_start_b,
-                  face_vertex_index_b, edge_vertex_b, edge_face_b,
-                  margin, out_point, out_normal, out_depth, out_feature, slot):
+def convex_convex(
+    center_a,
+    rotation_a,
+    vertices_a,
+    face_normal_a,
+    face_offset_a,
+    face_vertex_start_a,
+    face_vertex_index_a,
+    edge_vertex_a,
+    edge_face_a,
+    center_b,
+    rotation_b,
+    vertices_b,
+    face_normal_b,
+    face_offset_b,
+    face_vertex_start_b,
+    face_vertex_index_b,
+    edge_vertex_b,
+    edge_face_b,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays (module
@@ -409,10 +478,25 @@ def convex_convex(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a
     """
     result = np.empty(8)
     axis = np.zeros(3)
-    close, vb, nb, ob = convex_convex_sat(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a,
-                                          edge_vertex_a, edge_face_a, center_b, rotation_b, vertices_b,
-                                          face_normal_b, face_offset_b, edge_vertex_b, edge_face_b, margin,
-                                          result, axis)
+    close, vb, nb, ob = convex_convex_sat(
+        center_a,
+        rotation_a,
+        vertices_a,
+        face_normal_a,
+        face_offset_a,
+        edge_vertex_a,
+        edge_face_a,
+        center_b,
+        rotation_b,
+        vertices_b,
+        face_normal_b,
+        face_offset_b,
+        edge_vertex_b,
+        edge_face_b,
+        margin,
+        result,
+        axis,
+    )
     if not close:
         return 0
     scale = 0.0
@@ -436,9 +520,9 @@ def convex_convex(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a
         use_b = over_b < over_a
     face_overlap = over_b if use_b else over_a
     over_e = result[4]
-    chosen = 1 if use_b else 0                 # 0: face of A, 1: face of B, 2: edge pair
+    chosen = 1 if use_b else 0  # 0: face of A, 1: face of B, 2: edge pair
     if over_e < np.inf and face_overlap > over_e + FACE_REL_TOL * abs(over_e) + absolute:
-        chosen = 2                             # the edge axis is clearly better than any face
+        chosen = 2  # the edge axis is clearly better than any face
     # the exact minimum (first of A's face, B's face, edge on ties)
     exact = 0
     if over_b < over_a:
@@ -453,35 +537,108 @@ def convex_convex(center_a, rotation_a, vertices_a, face_normal_a, face_offset_a
             break
         fallback = kind == exact
         if kind == 2:
-            return _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, int(result[5]), int(result[6]),
-                                 axis, over_e, center_a, rotation_a, out_point, out_normal, out_depth, out_feature,
-                                 slot)
+            return _edge_contact(
+                vertices_a,
+                edge_vertex_a,
+                vb,
+                edge_vertex_b,
+                int(result[5]),
+                int(result[6]),
+                axis,
+                over_e,
+                center_a,
+                rotation_a,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot,
+            )
         if kind == 1:
             # reference face on B (its outward normal is the contact normal); incident hull A
-            count = _face_contacts(vb, nb[face_b], ob[face_b], face_vertex_start_b, face_vertex_index_b, face_b,
-                                   vertices_a, face_normal_a, face_vertex_start_a, face_vertex_index_a, 1.0, margin,
-                                   scale, fallback, center_a, rotation_a, out_point, out_normal, out_depth,
-                                   out_feature, slot)
+            count = _face_contacts(
+                vb,
+                nb[face_b],
+                ob[face_b],
+                face_vertex_start_b,
+                face_vertex_index_b,
+                face_b,
+                vertices_a,
+                face_normal_a,
+                face_vertex_start_a,
+                face_vertex_index_a,
+                1.0,
+                margin,
+                scale,
+                fallback,
+                center_a,
+                rotation_a,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot,
+            )
         else:
             # reference face on A (its outward normal points from A to B); incident hull B
-            count = _face_contacts(vertices_a, face_normal_a[face_a], face_offset_a[face_a], face_vertex_start_a,
-                                   face_vertex_index_a, face_a, vb, nb, face_vertex_start_b, face_vertex_index_b, -1.0,
-                                   margin, scale, fallback, center_a, rotation_a, out_point, out_normal, out_depth,
-                                   out_feature, slot)
+            count = _face_contacts(
+                vertices_a,
+                face_normal_a[face_a],
+                face_offset_a[face_a],
+                face_vertex_start_a,
+                face_vertex_index_a,
+                face_a,
+                vb,
+                nb,
+                face_vertex_start_b,
+                face_vertex_index_b,
+                -1.0,
+                margin,
+                scale,
+                fallback,
+                center_a,
+                rotation_a,
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot,
+            )
         if count > 0:
             return count
     return 0
 
 
 @njit(cache=True)
-def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, ea, eb, axis, overlap, center_a, rotation_a,
-                  out_point, out_normal, out_depth, out_feature, slot):
+def _edge_contact(
+    vertices_a,
+    edge_vertex_a,
+    vb,
+    edge_vertex_b,
+    ea,
+    eb,
+    axis,
+    overlap,
+    center_a,
+    rotation_a,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B (all in
     A's frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it)."""
     pa = np.empty(3)
     pb = np.empty(3)
-    _segment_closest(vertices_a[edge_vertex_a[ea, 0]], vertices_a[edge_vertex_a[ea, 1]],
-                     vb[edge_vertex_b[eb, 0]], vb[edge_vertex_b[eb, 1]], pa, pb)
+    _segment_closest(
+        vertices_a[edge_vertex_a[ea, 0]],
+        vertices_a[edge_vertex_a[ea, 1]],
+        vb[edge_vertex_b[eb, 0]],
+        vb[edge_vertex_b[eb, 1]],
+        pa,
+        pb,
+    )
     m0 = 0.5 * (pa[0] + pb[0])
     m1 = 0.5 * (pa[1] + pb[1])
     m2 = 0.5 * (pa[2] + pb[2])
@@ -490,5 +647,5 @@ def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, ea, eb, axis, ov
         # the axis points from A towards B; the contact normal from B into A is its opposite
         out_normal[slot, c] = -(rotation_a[c, 0] * axis[0] + rotation_a[c, 1] * axis[1] + rotation_a[c, 2] * axis[2])
     out_depth[slot] = overlap
-    out_feature[slot] = _feature_of(-1 - min(ea, eb), -1, max(ea, eb))   # symmetric: swapping A, B keeps it
+    out_feature[slot] = _feature_of(-1 - min(ea, eb), -1, max(ea, eb))  # symmetric: swapping A, B keeps it
     return 1

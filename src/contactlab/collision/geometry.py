@@ -9,7 +9,7 @@ no BLAS); float64, no fastmath. Used by the capsule pairs (:mod:`.capsule`,
 import numpy as np
 from numba import njit
 
-LINE_SIN2 = 1e-20           # |a × b|² below this: lines treated as exactly parallel in closest points
+LINE_SIN2 = 1e-20  # |a × b|² below this: lines treated as exactly parallel in closest points
 
 
 @njit(cache=True)
@@ -45,17 +45,25 @@ def column(rotation, k):
 @njit(cache=True)
 def rotate(rotation, v):
     """rotation @ v for a 3×3 matrix, written out (cheaper to compile than the BLAS product)."""
-    return np.array([rotation[0, 0] * v[0] + rotation[0, 1] * v[1] + rotation[0, 2] * v[2],
-                     rotation[1, 0] * v[0] + rotation[1, 1] * v[1] + rotation[1, 2] * v[2],
-                     rotation[2, 0] * v[0] + rotation[2, 1] * v[1] + rotation[2, 2] * v[2]])
+    return np.array(
+        [
+            rotation[0, 0] * v[0] + rotation[0, 1] * v[1] + rotation[0, 2] * v[2],
+            rotation[1, 0] * v[0] + rotation[1, 1] * v[1] + rotation[1, 2] * v[2],
+            rotation[2, 0] * v[0] + rotation[2, 1] * v[1] + rotation[2, 2] * v[2],
+        ]
+    )
 
 
 @njit(cache=True)
 def unrotate(rotation, v):
     """rotation.T @ v for a 3×3 matrix, written out."""
-    return np.array([rotation[0, 0] * v[0] + rotation[1, 0] * v[1] + rotation[2, 0] * v[2],
-                     rotation[0, 1] * v[0] + rotation[1, 1] * v[1] + rotation[2, 1] * v[2],
-                     rotation[0, 2] * v[0] + rotation[1, 2] * v[1] + rotation[2, 2] * v[2]])
+    return np.array(
+        [
+            rotation[0, 0] * v[0] + rotation[1, 0] * v[1] + rotation[2, 0] * v[2],
+            rotation[0, 1] * v[0] + rotation[1, 1] * v[1] + rotation[2, 1] * v[2],
+            rotation[0, 2] * v[0] + rotation[1, 2] * v[1] + rotation[2, 2] * v[2],
+        ]
+    )
 
 
 @njit(cache=True)
@@ -107,12 +115,12 @@ def segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_
     n2 = axis_a[0] * axis_b[1] - axis_a[1] * axis_b[0]
     sin2 = n0 * n0 + n1 * n1 + n2 * n2
     if sin2 > LINE_SIN2:
-        m0 = axis_b[1] * r2 - axis_b[2] * r1          # m = axis_b × r
+        m0 = axis_b[1] * r2 - axis_b[2] * r1  # m = axis_b × r
         m1 = axis_b[2] * r0 - axis_b[0] * r2
         m2 = axis_b[0] * r1 - axis_b[1] * r0
         s = clamp((m0 * n0 + m1 * n1 + m2 * n2) / sin2, -half_a, half_a)
     else:
-        s = clamp(-c, -half_a, half_a)               # parallel: A's point nearest B's centre
+        s = clamp(-c, -half_a, half_a)  # parallel: A's point nearest B's centre
     t = b * s + f
     if t < -half_b:
         t = -half_b

@@ -40,9 +40,9 @@ from ..errors import InputError
 from ..meshes import TriangleMesh, vertex_normals
 from .signed_distance import ShapeObstacle, model_obstacle, points_against_mesh, points_against_shape
 
-GRANULARITIES = ("object", "vertex", "samples")     # P2a, P2b, P2c
-NORMALS = ("object", "vertex")                      # P4, P5
-SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)    # static kinds handled here
+GRANULARITIES = ("object", "vertex", "samples")  # P2a, P2b, P2c
+NORMALS = ("object", "vertex")  # P4, P5
+SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)  # static kinds handled here
 POLYTOPES = (shapes.BOX, shapes.CONVEX)
 
 
@@ -55,6 +55,7 @@ contact (−1 unused); weights (C, 3) their barycentric weights (sum 1; 0 where 
 contact point of A is Σ w_i x_i and a force F is distributed as w_i F to vertex i (D1);
 feature (C,) int64: 0 (P2a), the vertex (P2b), or triangle · k² + sample (P2c)."""
 
+
 def triangle_samples(samples_per_edge):
     """Barycentric weights (k², 3) of k × k samples on a triangle: the centroids of the k²
     congruent sub-triangles of its k-subdivision (every weight > 0, the samples even)."""
@@ -62,15 +63,24 @@ def triangle_samples(samples_per_edge):
     rows = []
     for a in range(k):
         for b in range(k - a):
-            rows.append((a + 1.0 / 3.0, b + 1.0 / 3.0))          # upward sub-triangle
+            rows.append((a + 1.0 / 3.0, b + 1.0 / 3.0))  # upward sub-triangle
             if a + b <= k - 2:
-                rows.append((a + 2.0 / 3.0, b + 2.0 / 3.0))      # downward sub-triangle
+                rows.append((a + 2.0 / 3.0, b + 2.0 / 3.0))  # downward sub-triangle
     ab = np.array(rows) / k
     return np.column_stack([1.0 - ab[:, 0] - ab[:, 1], ab[:, 0], ab[:, 1]])
 
 
-def surface_contacts(vertices, triangles, obstacle, granularity="vertex", normal="object", margin=0.0,
-                     samples=2, max_depth=None, object_vertex_normals=None) -> SurfaceContacts:
+def surface_contacts(
+    vertices,
+    triangles,
+    obstacle,
+    granularity="vertex",
+    normal="object",
+    margin=0.0,
+    samples=2,
+    max_depth=None,
+    object_vertex_normals=None,
+) -> SurfaceContacts:
     """Contacts of object A (its triangle mesh) against a static surface B, at a SPEC P2 granularity.
 
     vertices: (V, 3) world positions of A [m]; triangles: (T, 3) int, wound outward.
@@ -96,13 +106,13 @@ def surface_contacts(vertices, triangles, obstacle, granularity="vertex", normal
     if granularity == "samples" and k < 1:
         raise InputError("samples", f"the samples per triangle edge must be ≥ 1, found {samples}")
     if granularity == "samples":
-        weights_pattern = triangle_samples(k)                                   # (S, 3)
+        weights_pattern = triangle_samples(k)  # (S, 3)
         S = len(weights_pattern)
-        corner_positions = vertices[triangles]                                  # (T, 3, 3)
+        corner_positions = vertices[triangles]  # (T, 3, 3)
         points = np.einsum("sk,tkd->tsd", weights_pattern, corner_positions).reshape(-1, 3)
-        carriers = np.repeat(triangles, S, axis=0)                              # (T·S, 3)
+        carriers = np.repeat(triangles, S, axis=0)  # (T·S, 3)
         weights = np.tile(weights_pattern, (len(triangles), 1))
-        features = np.arange(len(points), dtype=np.int64)                       # t · k² + s
+        features = np.arange(len(points), dtype=np.int64)  # t · k² + s
     else:
         points = vertices
         carriers = np.full((len(vertices), 3), -1, dtype=np.int64)
@@ -113,12 +123,15 @@ def surface_contacts(vertices, triangles, obstacle, granularity="vertex", normal
     if isinstance(obstacle, TriangleMesh):
         if max_depth is None:
             max_depth = obstacle.max_depth
-        signed, obstacle_normal, closest, _ = points_against_mesh(points, obstacle.geometry,
-                                                                  float(margin + max_depth))
+        signed, obstacle_normal, closest, _ = points_against_mesh(points, obstacle.geometry, float(margin + max_depth))
     elif isinstance(obstacle, ShapeObstacle):
         signed, obstacle_normal, closest = points_against_shape(
-            points, int(obstacle.kind), np.asarray(obstacle.params, dtype=float),
-            np.asarray(obstacle.position, dtype=float), np.ascontiguousarray(obstacle.rotation, dtype=float))
+            points,
+            int(obstacle.kind),
+            np.asarray(obstacle.params, dtype=float),
+            np.asarray(obstacle.position, dtype=float),
+            np.ascontiguousarray(obstacle.rotation, dtype=float),
+        )
     else:
         raise InputError("obstacle", f"expected a ShapeObstacle or a TriangleMesh, found {type(obstacle).__name__}")
     depth = -signed
@@ -129,8 +142,11 @@ def surface_contacts(vertices, triangles, obstacle, granularity="vertex", normal
     if normal == "object":
         normals = obstacle_normal[chosen]
     else:
-        own = vertex_normals(vertices, triangles) if object_vertex_normals is None else np.asarray(
-            object_vertex_normals, dtype=float)
+        own = (
+            vertex_normals(vertices, triangles)
+            if object_vertex_normals is None
+            else np.asarray(object_vertex_normals, dtype=float)
+        )
         blended = np.einsum("ck,ckd->cd", weights[chosen], own[np.maximum(carriers[chosen], 0)])
         length = np.linalg.norm(blended, axis=1, keepdims=True)
         normals = -blended / np.where(length > 0.0, length, 1.0)
@@ -148,8 +164,9 @@ def _soup(model, state, bodies):
     """World vertices (V,3), triangles (T,3), each vertex's body (V,) and local index (V,),
     each triangle's body (T,) and local index (T,), for the given polytope bodies."""
     hulls = model.hulls
-    hull = np.where(model.body_shape[bodies] == shapes.CONVEX, model.body_params[bodies, 0],
-                    model.body_params[bodies, 3]).astype(np.int64)
+    hull = np.where(
+        model.body_shape[bodies] == shapes.CONVEX, model.body_params[bodies, 0], model.body_params[bodies, 3]
+    ).astype(np.int64)
 
     def ranges(start, count):
         """Concatenated aranges start[i] .. start[i]+count[i]-1, with the owner and local index."""
@@ -173,7 +190,7 @@ def angle_weighted_normals(vertices, triangles):
 
     Unlike area weighting this does not depend on how a polygon face was split into triangles
     (a cube's corner gets the diagonal (±1, ±1, ±1)/√3 whichever way its faces are fanned)."""
-    corners = vertices[triangles]                                            # (T, 3, 3)
+    corners = vertices[triangles]  # (T, 3, 3)
     face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     face /= np.linalg.norm(face, axis=1, keepdims=True)
     normals = np.zeros_like(vertices)
@@ -199,10 +216,21 @@ def polytope_contacts(model, state, granularity, normal, samples, margin, total)
     parts = []
     dynamic = model.body_count + model.particle_count
     for o in obstacles:
-        surface = (model.meshes[int(model.obstacle_params[o, 0])] if model.obstacle_shape[o] == shapes.MESH
-                   else model_obstacle(model, o))
-        found = surface_contacts(world, triangles, surface, "vertex" if granularity == "object" else granularity,
-                                 normal, margin, samples, object_vertex_normals=own_normals)
+        surface = (
+            model.meshes[int(model.obstacle_params[o, 0])]
+            if model.obstacle_shape[o] == shapes.MESH
+            else model_obstacle(model, o)
+        )
+        found = surface_contacts(
+            world,
+            triangles,
+            surface,
+            "vertex" if granularity == "object" else granularity,
+            normal,
+            margin,
+            samples,
+            object_vertex_normals=own_normals,
+        )
         if granularity == "samples":
             triangle = found.feature // samples_per_triangle
             body = triangle_body[triangle]
@@ -211,9 +239,17 @@ def polytope_contacts(model, state, granularity, normal, samples, margin, total)
             body = vertex_body[found.vertices[:, 0]]
             feature = vertex_local[found.vertices[:, 0]]
         keep = np.arange(len(body))
-        if granularity == "object":                     # P2a: the deepest contact of each body
+        if granularity == "object":  # P2a: the deepest contact of each body
             order = np.lexsort((-found.depth, body))
             keep = order[np.r_[True, body[order][1:] != body[order][:-1]]] if len(order) else order
-        parts.append((body[keep], np.full(len(keep), dynamic + o), found.point[keep], found.normal[keep],
-                      found.depth[keep], feature[keep]))
+        parts.append(
+            (
+                body[keep],
+                np.full(len(keep), dynamic + o),
+                found.point[keep],
+                found.normal[keep],
+                found.depth[keep],
+                feature[keep],
+            )
+        )
     return parts, bodies, obstacles

@@ -33,20 +33,28 @@ from .narrow_phase import MAX_PER_PAIR, generate_contacts
 @dataclass(frozen=True)
 class Manifolds:
     """Contacts kept per collider pair. K pairs, sorted by ``keys``; S = MAX_PER_PAIR slots."""
-    keys: np.ndarray        # (K,) int64, pair (a, b) of global colliders as a · total + b
-    reach: np.ndarray       # (K,) [m] the reach the contacts were computed with
-    center: np.ndarray      # (K, 2, 3) [m] the colliders' centres then
-    rotation: np.ndarray    # (K, 2, 3, 3) their rotations then (collider → world)
-    count: np.ndarray       # (K,) int64 contacts kept (0: near, not touching)
-    witness: np.ndarray     # (K, S, 2, 3) [m] each contact's surface points of A and B, in their own frames
-    normal: np.ndarray      # (K, S, 3) unit, from B into A, in A's frame
-    feature: np.ndarray     # (K, S) int64 feature number within the pair
+
+    keys: np.ndarray  # (K,) int64, pair (a, b) of global colliders as a · total + b
+    reach: np.ndarray  # (K,) [m] the reach the contacts were computed with
+    center: np.ndarray  # (K, 2, 3) [m] the colliders' centres then
+    rotation: np.ndarray  # (K, 2, 3, 3) their rotations then (collider → world)
+    count: np.ndarray  # (K,) int64 contacts kept (0: near, not touching)
+    witness: np.ndarray  # (K, S, 2, 3) [m] each contact's surface points of A and B, in their own frames
+    normal: np.ndarray  # (K, S, 3) unit, from B into A, in A's frame
+    feature: np.ndarray  # (K, S) int64 feature number within the pair
 
     @classmethod
     def empty(cls) -> "Manifolds":
-        return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2, 3)), np.zeros((0, 2, 3, 3)),
-                   np.zeros(0, np.int64), np.zeros((0, MAX_PER_PAIR, 2, 3)), np.zeros((0, MAX_PER_PAIR, 3)),
-                   np.zeros((0, MAX_PER_PAIR), np.int64))
+        return cls(
+            np.zeros(0, np.int64),
+            np.zeros(0),
+            np.zeros((0, 2, 3)),
+            np.zeros((0, 2, 3, 3)),
+            np.zeros(0, np.int64),
+            np.zeros((0, MAX_PER_PAIR, 2, 3)),
+            np.zeros((0, MAX_PER_PAIR, 3)),
+            np.zeros((0, MAX_PER_PAIR), np.int64),
+        )
 
     def __len__(self):
         return len(self.keys)
@@ -64,8 +72,20 @@ def kept_pairs(kinds, pairs):
 
 
 @njit(cache=True)
-def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, kept_keys, reach_then, center_then,
-                 rotation_then, tolerance):
+def _still_valid(
+    pairs,
+    keys,
+    keeps,
+    pair_reach,
+    radius,
+    centers,
+    rotations_,
+    kept_keys,
+    reach_then,
+    center_then,
+    rotation_then,
+    tolerance,
+):
     """For each pair k (K,), the row of its kept manifold if that is still valid, else −1 (see
     the module's docstring). ``keeps`` (K,) bool: pairs that keep manifolds; ``radius`` (N,)
     bounding radii [m]; ``kept_keys`` sorted."""
@@ -110,6 +130,7 @@ def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, ke
 # array assignment together with its shape-mismatch message, seconds of string formatting on
 # a cold cache. Same shape on both sides; 1, 2 or 3 dimensions.
 
+
 @njit(cache=True, inline="always")
 def _copy1(destination, source):
     for i in range(destination.shape[0]):
@@ -132,9 +153,28 @@ def _copy3(destination, source):
 
 
 @njit(cache=True)
-def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotations_,
-             point, normal, depth, feature, owner,
-             kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature):
+def _combine(
+    pairs,
+    keys,
+    keeps,
+    pair_reach,
+    computed_reach,
+    row,
+    centers,
+    rotations_,
+    point,
+    normal,
+    depth,
+    feature,
+    owner,
+    kept_reach,
+    kept_center,
+    kept_rotation,
+    kept_count,
+    kept_witness,
+    kept_normal,
+    kept_feature,
+):
     """The step's contacts in pair order, and the manifolds to keep, sorted by key.
 
     Pair k takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
@@ -163,13 +203,13 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
     new_witness = np.zeros((M, S, 2, 3))
     new_normal = np.zeros((M, S, 3))
     new_feature = np.zeros((M, S), dtype=np.int64)
-    c = 0           # contacts written
-    f = 0           # next fresh contact
-    r = 0           # manifolds written
+    c = 0  # contacts written
+    f = 0  # next fresh contact
+    r = 0  # manifolds written
     for k in range(K):
         a, b = pairs[k, 0], pairs[k, 1]
         m = row[k]
-        if m >= 0:                  # reused: refreshed from the witness points
+        if m >= 0:  # reused: refreshed from the witness points
             new_keys[r], new_reach[r], new_count[r] = keys[k], kept_reach[m], kept_count[m]
             _copy2(new_center[r], kept_center[m])
             _copy3(new_rotation[r], kept_rotation[m])
@@ -194,7 +234,7 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
                     out_depth[c], out_feature[c], out_owner[c] = gap, kept_feature[m, s], k
                     c += 1
             continue
-        if keeps[k]:                # computed afresh: kept as a new manifold
+        if keeps[k]:  # computed afresh: kept as a new manifold
             new_keys[r], new_reach[r] = keys[k], computed_reach[k]
             _copy1(new_center[r, 0], centers[a])
             _copy1(new_center[r, 1], centers[b])
@@ -225,33 +265,55 @@ def _combine(pairs, keys, keeps, pair_reach, computed_reach, row, centers, rotat
         if keeps[k]:
             r += 1
     order = np.argsort(new_keys)
-    return ((out_point[:c], out_normal[:c], out_depth[:c], out_feature[:c], out_owner[:c]),
-            (new_keys[order], new_reach[order], new_center[order], new_rotation[order], new_count[order],
-             new_witness[order], new_normal[order], new_feature[order]))
+    return (
+        (out_point[:c], out_normal[:c], out_depth[:c], out_feature[:c], out_owner[:c]),
+        (
+            new_keys[order],
+            new_reach[order],
+            new_center[order],
+            new_rotation[order],
+            new_count[order],
+            new_witness[order],
+            new_normal[order],
+            new_feature[order],
+        ),
+    )
 
 
 def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, families, manifolds, tolerance, total):
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
     None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
     number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
-    them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in pair order, as from
+    them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in
+    pair order, as from
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
     kept = manifolds if manifolds is not None else Manifolds.empty()
-    if not kept_pairs(kinds, pairs).any():     # a pile of spheres: no reuse (and its code never compiled)
+    if not kept_pairs(kinds, pairs).any():  # a pile of spheres: no reuse (and its code never compiled)
         pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]
-        return (*generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
-                Manifolds.empty())
-    contacts, made = reuse_or_generate(pairs, kinds, params, centers, rots, reach,
-                                       shapes.bounding_radii(kinds, params), hull_store, families,
-                                       (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness,
-                                        kept.normal, kept.feature), tolerance, total)
+        return (
+            *generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
+            Manifolds.empty(),
+        )
+    contacts, made = reuse_or_generate(
+        pairs,
+        kinds,
+        params,
+        centers,
+        rots,
+        reach,
+        shapes.bounding_radii(kinds, params),
+        hull_store,
+        families,
+        (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature),
+        tolerance,
+        total,
+    )
     return (*contacts, Manifolds(*made))
 
 
 @njit(cache=True)
-def reuse_or_generate(pairs, kinds, params, centers, rots, reach, radius, hull_store, families, kept, tolerance,
-                      total):
+def reuse_or_generate(pairs, kinds, params, centers, rots, reach, radius, hull_store, families, kept, tolerance, total):
     """``generate_reusing``, compiled (the stepping loops of contactlab.methods.velocity_loop call
     it): ``radius`` (N,) the colliders' bounding radii [m]; ``kept`` the last manifolds as the
     tuple of Manifolds' eight fields. Returns ((point, normal, depth, feature, owner), the
@@ -261,16 +323,56 @@ def reuse_or_generate(pairs, kinds, params, centers, rots, reach, radius, hull_s
     keys = first * total + second
     pair_reach = reach[first] + reach[second]
     keeps = kept_pairs(kinds, pairs)
-    if not keeps.any():             # a pile of spheres: nothing to keep, nothing to look up
-        empty = (kept_keys[:0], kept_reach[:0], kept_center[:0], kept_rotation[:0], kept_count[:0],
-                 kept_witness[:0], kept_normal[:0], kept_feature[:0])
+    if not keeps.any():  # a pile of spheres: nothing to keep, nothing to look up
+        empty = (
+            kept_keys[:0],
+            kept_reach[:0],
+            kept_center[:0],
+            kept_rotation[:0],
+            kept_count[:0],
+            kept_witness[:0],
+            kept_normal[:0],
+            kept_feature[:0],
+        )
         return generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families), empty
-    row = _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rots, kept_keys, kept_reach, kept_center,
-                       kept_rotation, tolerance)
+    row = _still_valid(
+        pairs,
+        keys,
+        keeps,
+        pair_reach,
+        radius,
+        centers,
+        rots,
+        kept_keys,
+        kept_reach,
+        kept_center,
+        kept_rotation,
+        tolerance,
+    )
     fresh = np.nonzero(row < 0)[0]
-    widened = pair_reach + tolerance * keeps          # a kept manifold reaches a tolerance further
-    point, normal, depth, feature, owner = generate_contacts(pairs[fresh], kinds, params, centers, rots,
-                                                             widened[fresh], hull_store, families)
-    return _combine(pairs, keys, keeps, pair_reach, widened, row, centers, rots, point, normal, depth, feature,
-                    fresh[owner], kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal,
-                    kept_feature)
+    widened = pair_reach + tolerance * keeps  # a kept manifold reaches a tolerance further
+    point, normal, depth, feature, owner = generate_contacts(
+        pairs[fresh], kinds, params, centers, rots, widened[fresh], hull_store, families
+    )
+    return _combine(
+        pairs,
+        keys,
+        keeps,
+        pair_reach,
+        widened,
+        row,
+        centers,
+        rots,
+        point,
+        normal,
+        depth,
+        feature,
+        fresh[owner],
+        kept_reach,
+        kept_center,
+        kept_rotation,
+        kept_count,
+        kept_witness,
+        kept_normal,
+        kept_feature,
+    )

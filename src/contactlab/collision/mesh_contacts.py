@@ -81,16 +81,26 @@ from .. import shapes
 from ..meshes import mesh_triangles_near
 from .capsule_mesh import capsule_mesh
 from .convex import hull_view
-from .mesh_features import (EDGE2, FACE, FEATURES_PER_TRIANGLE, closest_point_on_triangle, features_near,
-                            candidate_rows, keep_deepest, keep_spread, nearest_feature, signed_normal,
-                            write_kept)
+from .mesh_features import (
+    EDGE2,
+    FACE,
+    FEATURES_PER_TRIANGLE,
+    candidate_rows,
+    closest_point_on_triangle,
+    features_near,
+    keep_deepest,
+    keep_spread,
+    nearest_feature,
+    signed_normal,
+    write_kept,
+)
 
-MAX_PER_SHAPE = 8         # the usual cap of contacts per shape against one mesh (as MAX_PER_PAIR)
-CORNER_CONTACTS = 4       # box–mesh contacts kept per box corner (the deepest local minima)
+MAX_PER_SHAPE = 8  # the usual cap of contacts per shape against one mesh (as MAX_PER_PAIR)
+CORNER_CONTACTS = 4  # box–mesh contacts kept per box corner (the deepest local minima)
 HULL_VERTEX_FEATURES = 13  # hull vertex v: 16 t + v mod 13; mesh vertex k inside the hull: 16 t + 13 + k
 
 SPHERE, BOX, POINT, CAPSULE, CONVEX = shapes.SPHERE, shapes.BOX, shapes.POINT, shapes.CAPSULE, shapes.CONVEX
-MESH_PARTNERS = (SPHERE, POINT, BOX, CAPSULE, CONVEX)   # the dynamic shapes with a routine against a mesh
+MESH_PARTNERS = (SPHERE, POINT, BOX, CAPSULE, CONVEX)  # the dynamic shapes with a routine against a mesh
 
 
 @njit(cache=True)
@@ -115,12 +125,17 @@ def _mesh_vertices_near(mesh, candidates, center, rotation):
                 continue
             p = mesh.vertices[v]
             for a in range(3):
-                local[n, a] = (rotation[0, a] * (p[0] - center[0]) + rotation[1, a] * (p[1] - center[1])
-                               + rotation[2, a] * (p[2] - center[2]))
+                local[n, a] = (
+                    rotation[0, a] * (p[0] - center[0])
+                    + rotation[1, a] * (p[1] - center[1])
+                    + rotation[2, a] * (p[2] - center[2])
+                )
             psi = mesh.vertex_pseudo_normals[v]
             side[n] = 1.0
-            if mesh.two_sided and ((center[0] - p[0]) * psi[0] + (center[1] - p[1]) * psi[1]
-                                   + (center[2] - p[2]) * psi[2]) < 0.0:
+            if (
+                mesh.two_sided
+                and ((center[0] - p[0]) * psi[0] + (center[1] - p[1]) * psi[1] + (center[2] - p[2]) * psi[2]) < 0.0
+            ):
                 side[n] = -1.0
             vertex[n], owner[n], index[n] = v, t, k
             n += 1
@@ -133,14 +148,24 @@ def _corners_against_mesh(corners, local, mesh, margin, point, normal, depth, fe
     mesh, with the sphere rules: at most ``CORNER_CONTACTS`` each, the deepest. Appends them to
     the candidate rows point, normal, depth, feature from ``count`` on, with feature
     ``16 · triangle + local[v]`` for corner v (local (V,) < 16); returns the new count."""
-    corner_limit = count * 0 + CORNER_CONTACTS          # (an int64 variable, not a literal)
+    corner_limit = count * 0 + CORNER_CONTACTS  # (an int64 variable, not a literal)
     corner_point = np.empty((CORNER_CONTACTS, 3))
     corner_normal = np.empty((CORNER_CONTACTS, 3))
     corner_depth = np.empty(CORNER_CONTACTS)
     corner_feature = np.empty(CORNER_CONTACTS, dtype=np.int64)
     for v in range(corners.shape[0]):
-        found = sphere_mesh(corners[v], 0.0, mesh, margin, corner_point, corner_normal, corner_depth,
-                            corner_feature, count * 0, corner_limit)
+        found = sphere_mesh(
+            corners[v],
+            0.0,
+            mesh,
+            margin,
+            corner_point,
+            corner_normal,
+            corner_depth,
+            corner_feature,
+            count * 0,
+            corner_limit,
+        )
         for k in range(found):
             for i in range(3):
                 point[count, i] = corner_point[k, i]
@@ -156,6 +181,7 @@ def _corners_against_mesh(corners, local, mesh, margin, point, normal, depth, fe
 # sphere / particle against a mesh
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
 def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, out_feature, slot, max_contacts):
     """Sphere (or particle) A of ``radius`` [m] at ``center`` (3,) against the static mesh B.
@@ -168,20 +194,23 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
     reach = radius + margin
     tol = mesh.tolerance
     candidates, closest, distance, region = features_near(
-        mesh, center, reach, np.empty((32, 3)), np.empty(32), np.empty(32, dtype=np.int64))
+        mesh, center, reach, np.empty((32, 3)), np.empty(32), np.empty(32, dtype=np.int64)
+    )
     nearest = nearest_feature(candidates, distance, region)
     if nearest < 0 or distance[nearest] > reach:
         # nothing within reach: a centre deeper than that inside a one-sided mesh?
         if mesh.two_sided or mesh.max_depth <= 0.0:
             return 0
-        candidates, closest, distance, region = features_near(mesh, center, reach + mesh.max_depth,
-                                                               closest, distance, region)
+        candidates, closest, distance, region = features_near(
+            mesh, center, reach + mesh.max_depth, closest, distance, region
+        )
         nearest = nearest_feature(candidates, distance, region)
         if nearest < 0 or distance[nearest] > reach + mesh.max_depth:
             return 0
     q = closest[nearest]
-    signed, nx, ny, nz = signed_normal(mesh, candidates[nearest], region[nearest], center,
-                                        q[0], q[1], q[2], distance[nearest])
+    signed, nx, ny, nz = signed_normal(
+        mesh, candidates[nearest], region[nearest], center, q[0], q[1], q[2], distance[nearest]
+    )
     if signed < 0.0:
         if max_contacts < 1:
             return 0
@@ -204,8 +233,9 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
             if j == i or not distance[j] < distance[i] - tol:
                 continue
             other = mesh.triangles[candidates[j]]
-            px, py, pz, _ = closest_point_on_triangle(closest[i], mesh.vertices[other[0]], mesh.vertices[other[1]],
-                                                      mesh.vertices[other[2]])
+            px, py, pz, _ = closest_point_on_triangle(
+                closest[i], mesh.vertices[other[0]], mesh.vertices[other[1]], mesh.vertices[other[2]]
+            )
             ex, ey, ez = px - closest[i, 0], py - closest[i, 1], pz - closest[i, 2]
             if ex * ex + ey * ey + ez * ez <= tol * tol:
                 keep[i] = False
@@ -235,8 +265,9 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
         if not keep[i]:
             continue
         t = candidates[i]
-        signed, nx, ny, nz = signed_normal(mesh, t, region[i], center, closest[i, 0], closest[i, 1],
-                                            closest[i, 2], distance[i])
+        signed, nx, ny, nz = signed_normal(
+            mesh, t, region[i], center, closest[i, 0], closest[i, 1], closest[i, 2], distance[i]
+        )
         this_depth = radius - signed
         if signed < 0.0 or this_depth < -margin:
             continue
@@ -249,17 +280,29 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
         feature[count] = FEATURES_PER_TRIANGLE * t + region[i]
         count += 1
     # 4. the deepest max_contacts
-    return write_kept(keep_deepest(depth[:count], max_contacts), point, normal, depth, feature, out_point,
-                         out_normal, out_depth, out_feature, slot)
+    return write_kept(
+        keep_deepest(depth[:count], max_contacts),
+        point,
+        normal,
+        depth,
+        feature,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
 # box against a mesh
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
-def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal, out_depth, out_feature,
-             slot, max_contacts):
+def box_mesh(
+    center, rotation, half_extents, mesh, margin, out_point, out_normal, out_depth, out_feature, slot, max_contacts
+):
     """Box A (centre (3,), rotation (3,3) body → world, half extents (3,)) against the static mesh B.
 
     Each corner as a point (a sphere of radius 0: inside/outside and local minima as for
@@ -271,8 +314,11 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
     lower = np.empty(3)
     upper = np.empty(3)
     for i in range(3):
-        reach = (abs(rotation[i, 0]) * half_extents[0] + abs(rotation[i, 1]) * half_extents[1]
-                 + abs(rotation[i, 2]) * half_extents[2]) + margin
+        reach = (
+            abs(rotation[i, 0]) * half_extents[0]
+            + abs(rotation[i, 1]) * half_extents[1]
+            + abs(rotation[i, 2]) * half_extents[2]
+        ) + margin
         lower[i] = center[i] - reach
         upper[i] = center[i] + reach
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
@@ -280,7 +326,7 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
     capacity = 8 * CORNER_CONTACTS + 3 * candidates.shape[0]
     point, normal, depth, feature = candidate_rows(capacity)
     corners = np.empty((8, 3))
-    for corner in range(8):                             # local index: the corner, numbered as in box_plane
+    for corner in range(8):  # local index: the corner, numbered as in box_plane
         sx = half_extents[0] if corner & 1 else -half_extents[0]
         sy = half_extents[1] if corner & 2 else -half_extents[1]
         sz = half_extents[2] if corner & 4 else -half_extents[2]
@@ -315,16 +361,43 @@ def box_mesh(center, rotation, half_extents, mesh, margin, out_point, out_normal
         depth[count] = best_gap
         feature[count] = FEATURES_PER_TRIANGLE * owner[n] + 8 + index[n]
         count += 1
-    return write_kept(keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
-                         feature, out_point, out_normal, out_depth, out_feature, slot)
+    return write_kept(
+        keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance),
+        point,
+        normal,
+        depth,
+        feature,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
+
 
 # ---------------------------------------------------------------------------------------------
 # convex hull against a mesh
 # ---------------------------------------------------------------------------------------------
 
+
 @njit(cache=True)
-def convex_mesh(center, rotation, vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, mesh,
-                margin, out_point, out_normal, out_depth, out_feature, slot, max_contacts):
+def convex_mesh(
+    center,
+    rotation,
+    vertices,
+    face_normal,
+    face_offset,
+    face_vertex_start,
+    face_vertex_index,
+    mesh,
+    margin,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+    max_contacts,
+):
     """Convex hull A (centre (3,) [m], rotation (3, 3) body → world; body-frame arrays as in
     :mod:`.convex`) against the static mesh B, as :func:`box_mesh` (module docstring).
 
@@ -339,8 +412,12 @@ def convex_mesh(center, rotation, vertices, face_normal, face_offset, face_verte
     upper = np.full(3, -np.inf)
     for v in range(vertex_count):
         for i in range(3):
-            world[v, i] = (center[i] + rotation[i, 0] * vertices[v, 0] + rotation[i, 1] * vertices[v, 1]
-                           + rotation[i, 2] * vertices[v, 2])
+            world[v, i] = (
+                center[i]
+                + rotation[i, 0] * vertices[v, 0]
+                + rotation[i, 1] * vertices[v, 1]
+                + rotation[i, 2] * vertices[v, 2]
+            )
             lower[i] = min(lower[i], world[v, i])
             upper[i] = max(upper[i], world[v, i])
     for i in range(3):
@@ -349,15 +426,20 @@ def convex_mesh(center, rotation, vertices, face_normal, face_offset, face_verte
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
     capacity = vertex_count * CORNER_CONTACTS + 3 * candidates.shape[0]
     point, normal, depth, feature = candidate_rows(capacity)
-    count = _corners_against_mesh(world, np.arange(vertex_count) % HULL_VERTEX_FEATURES, mesh, margin, point, normal,
-                                  depth, feature, slot * 0)
+    count = _corners_against_mesh(
+        world, np.arange(vertex_count) % HULL_VERTEX_FEATURES, mesh, margin, point, normal, depth, feature, slot * 0
+    )
     # mesh vertices inside the hull (its face planes moved out by the margin), each once
     vertex, owner, index, local, side = _mesh_vertices_near(mesh, candidates, center, rotation)
     for n in range(vertex.shape[0]):
         inside = True
         for f in range(face_count):
-            if (face_normal[f, 0] * local[n, 0] + face_normal[f, 1] * local[n, 1] + face_normal[f, 2] * local[n, 2]
-                    - face_offset[f]) > margin:
+            if (
+                face_normal[f, 0] * local[n, 0]
+                + face_normal[f, 1] * local[n, 1]
+                + face_normal[f, 2] * local[n, 2]
+                - face_offset[f]
+            ) > margin:
                 inside = False
                 break
         if not inside:
@@ -366,32 +448,59 @@ def convex_mesh(center, rotation, vertices, face_normal, face_offset, face_verte
         psi = mesh.vertex_pseudo_normals[vertex[n]]
         best_gap, best_face = np.inf, -1
         for f in range(face_count):
-            wx = rotation[0, 0] * face_normal[f, 0] + rotation[0, 1] * face_normal[f, 1] + rotation[0, 2] * face_normal[f, 2]
-            wy = rotation[1, 0] * face_normal[f, 0] + rotation[1, 1] * face_normal[f, 1] + rotation[1, 2] * face_normal[f, 2]
-            wz = rotation[2, 0] * face_normal[f, 0] + rotation[2, 1] * face_normal[f, 1] + rotation[2, 2] * face_normal[f, 2]
+            wx = (
+                rotation[0, 0] * face_normal[f, 0]
+                + rotation[0, 1] * face_normal[f, 1]
+                + rotation[0, 2] * face_normal[f, 2]
+            )
+            wy = (
+                rotation[1, 0] * face_normal[f, 0]
+                + rotation[1, 1] * face_normal[f, 1]
+                + rotation[1, 2] * face_normal[f, 2]
+            )
+            wz = (
+                rotation[2, 0] * face_normal[f, 0]
+                + rotation[2, 1] * face_normal[f, 1]
+                + rotation[2, 2] * face_normal[f, 2]
+            )
             # contact normal = −(outward face normal); it must leave the mesh
             along = -(wx * psi[0] + wy * psi[1] + wz * psi[2])
-            gap = face_offset[f] - (face_normal[f, 0] * local[n, 0] + face_normal[f, 1] * local[n, 1]
-                                    + face_normal[f, 2] * local[n, 2])
+            gap = face_offset[f] - (
+                face_normal[f, 0] * local[n, 0] + face_normal[f, 1] * local[n, 1] + face_normal[f, 2] * local[n, 2]
+            )
             if side[n] * along > 0.0 and gap < best_gap:
                 best_gap, best_face = gap, f
         if best_face < 0 or best_gap < -margin:
             continue
         for i in range(3):
-            face = (rotation[i, 0] * face_normal[best_face, 0] + rotation[i, 1] * face_normal[best_face, 1]
-                    + rotation[i, 2] * face_normal[best_face, 2])
+            face = (
+                rotation[i, 0] * face_normal[best_face, 0]
+                + rotation[i, 1] * face_normal[best_face, 1]
+                + rotation[i, 2] * face_normal[best_face, 2]
+            )
             normal[count, i] = -face
             point[count, i] = p[i] + 0.5 * best_gap * face
         depth[count] = best_gap
         feature[count] = FEATURES_PER_TRIANGLE * owner[n] + HULL_VERTEX_FEATURES + index[n]
         count += 1
-    return write_kept(keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), point, normal, depth,
-                         feature, out_point, out_normal, out_depth, out_feature, slot)
+    return write_kept(
+        keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance),
+        point,
+        normal,
+        depth,
+        feature,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
 # many shapes against one mesh
 # ---------------------------------------------------------------------------------------------
+
 
 @njit(cache=True)
 def shapes_against_mesh(kinds, params, centers, rotations_, margins, mesh, max_per_shape, hull_store=None):
@@ -409,27 +518,86 @@ def shapes_against_mesh(kinds, params, centers, rotations_, margins, mesh, max_p
     capacity = max(1, count_shapes * max_per_shape)
     point, normal, depth, feature = candidate_rows(capacity)
     owner = np.empty(capacity, dtype=np.int64)
-    count = np.int64(capacity) * 0          # (not the literal 0: that would compile the callees twice)
+    count = np.int64(capacity) * 0  # (not the literal 0: that would compile the callees twice)
     for s in range(count_shapes):
         kind = kinds[s]
         written = 0
         if kind == SPHERE or kind == POINT:
-            written = sphere_mesh(centers[s], params[s, 0], mesh, margins[s], point, normal, depth, feature,
-                                  count, max_per_shape)
+            written = sphere_mesh(
+                centers[s], params[s, 0], mesh, margins[s], point, normal, depth, feature, count, max_per_shape
+            )
         elif kind == BOX:
-            written = box_mesh(centers[s], rotations_[s], params[s, :3], mesh, margins[s], point, normal, depth,
-                               feature, count, max_per_shape)
+            written = box_mesh(
+                centers[s],
+                rotations_[s],
+                params[s, :3],
+                mesh,
+                margins[s],
+                point,
+                normal,
+                depth,
+                feature,
+                count,
+                max_per_shape,
+            )
         elif kind == CAPSULE:
-            written = capsule_mesh(centers[s], rotations_[s], params[s, 0], params[s, 1], mesh, margins[s], point,
-                                   normal, depth, feature, count, max_per_shape)
+            written = capsule_mesh(
+                centers[s],
+                rotations_[s],
+                params[s, 0],
+                params[s, 1],
+                mesh,
+                margins[s],
+                point,
+                normal,
+                depth,
+                feature,
+                count,
+                max_per_shape,
+            )
         elif kind == CONVEX and hull_store is not None:
-            (vertex_start, hull_vertices, face_start, face_normal, face_offset, face_vertex_start,
-             face_vertex_index, edge_start, edge_vertex, edge_face) = hull_store
-            v, fn, fo, fvs, fvi, _, _ = hull_view(vertex_start, hull_vertices, face_start, face_normal, face_offset,
-                                                  face_vertex_start, face_vertex_index, edge_start, edge_vertex,
-                                                  edge_face, np.int64(params[s, 0]))
-            written = convex_mesh(centers[s], rotations_[s], v, fn, fo, fvs, fvi, mesh, margins[s], point, normal,
-                                  depth, feature, count, max_per_shape)
+            (
+                vertex_start,
+                hull_vertices,
+                face_start,
+                face_normal,
+                face_offset,
+                face_vertex_start,
+                face_vertex_index,
+                edge_start,
+                edge_vertex,
+                edge_face,
+            ) = hull_store
+            v, fn, fo, fvs, fvi, _, _ = hull_view(
+                vertex_start,
+                hull_vertices,
+                face_start,
+                face_normal,
+                face_offset,
+                face_vertex_start,
+                face_vertex_index,
+                edge_start,
+                edge_vertex,
+                edge_face,
+                np.int64(params[s, 0]),
+            )
+            written = convex_mesh(
+                centers[s],
+                rotations_[s],
+                v,
+                fn,
+                fo,
+                fvs,
+                fvi,
+                mesh,
+                margins[s],
+                point,
+                normal,
+                depth,
+                feature,
+                count,
+                max_per_shape,
+            )
         for k in range(count, count + written):
             owner[k] = s
         count += written

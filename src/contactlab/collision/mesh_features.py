@@ -21,8 +21,8 @@ from ..meshes import mesh_triangles_near
 from .contact_output import write_contact
 from .geometry import segment_closest_parameters
 
-FACE, EDGE0, EDGE1, EDGE2, VERTEX0, VERTEX1, VERTEX2 = 0, 1, 2, 3, 4, 5, 6   # Voronoi regions of a triangle
-FEATURES_PER_TRIANGLE = 16    # contact feature = 16 · triangle + local index (local index < 16)
+FACE, EDGE0, EDGE1, EDGE2, VERTEX0, VERTEX1, VERTEX2 = 0, 1, 2, 3, 4, 5, 6  # Voronoi regions of a triangle
+FEATURES_PER_TRIANGLE = 16  # contact feature = 16 · triangle + local index (local index < 16)
 
 
 @njit(cache=True)
@@ -79,7 +79,6 @@ def pseudo_normal(mesh, triangle, region):
     return mesh.vertex_pseudo_normals[mesh.triangles[triangle, region - VERTEX0]]
 
 
-
 @njit(cache=True)
 def closest_feature(mesh, triangle, x, tol):
     """Closest point (qx, qy, qz) of a triangle to x, its region and distance [m].
@@ -90,8 +89,9 @@ def closest_feature(mesh, triangle, x, tol):
     face the distance is |(x − q) · n|, exact in the height even where q has round-off.
     """
     tri = mesh.triangles[triangle]
-    qx, qy, qz, region = closest_point_on_triangle(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]],
-                                                   mesh.vertices[tri[2]])
+    qx, qy, qz, region = closest_point_on_triangle(
+        x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]
+    )
     dx, dy, dz = x[0] - qx, x[1] - qy, x[2] - qz
     d2 = dx * dx + dy * dy + dz * dz
     nt = mesh.triangle_normals[triangle]
@@ -139,10 +139,14 @@ def nearest_feature(candidates, distance, region):
     for i in range(candidates.shape[0]):
         if distance[i] == np.inf:
             continue
-        if (best < 0 or distance[i] < distance[best]
-                or (distance[i] == distance[best]
-                    and (region[i] < region[best]
-                         or (region[i] == region[best] and candidates[i] < candidates[best])))):
+        if (
+            best < 0
+            or distance[i] < distance[best]
+            or (
+                distance[i] == distance[best]
+                and (region[i] < region[best] or (region[i] == region[best] and candidates[i] < candidates[best]))
+            )
+        ):
             best = i
     return best
 
@@ -168,7 +172,7 @@ def features_near(mesh, center, reach, closest, distance, region):
     for i in range(n):
         t = candidates[i]
         normal_t = mesh.triangle_normals[t]
-        if normal_t[0] == 0.0 and normal_t[1] == 0.0 and normal_t[2] == 0.0:   # degenerate
+        if normal_t[0] == 0.0 and normal_t[1] == 0.0 and normal_t[2] == 0.0:  # degenerate
             distance[i] = np.inf
             region[i] = FACE
             continue
@@ -186,8 +190,7 @@ def distance_to_triangle(mesh, triangle, x):
     if nt[0] == 0.0 and nt[1] == 0.0 and nt[2] == 0.0:
         return np.inf
     tri = mesh.triangles[triangle]
-    qx, qy, qz, _ = closest_point_on_triangle(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]],
-                                              mesh.vertices[tri[2]])
+    qx, qy, qz, _ = closest_point_on_triangle(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]])
     return np.sqrt((x[0] - qx) ** 2 + (x[1] - qy) ** 2 + (x[2] - qz) ** 2)
 
 
@@ -231,10 +234,16 @@ def segment_triangle_closest(center, axis, half_length, mesh, triangle, tol):
     # the segment crossing the triangle's plane inside it
     nt = mesh.triangle_normals[triangle]
     v0 = mesh.vertices[tri[0]]
-    h0 = ((center[0] - half_length * axis[0] - v0[0]) * nt[0] + (center[1] - half_length * axis[1] - v0[1]) * nt[1]
-          + (center[2] - half_length * axis[2] - v0[2]) * nt[2])
-    h1 = ((center[0] + half_length * axis[0] - v0[0]) * nt[0] + (center[1] + half_length * axis[1] - v0[1]) * nt[1]
-          + (center[2] + half_length * axis[2] - v0[2]) * nt[2])
+    h0 = (
+        (center[0] - half_length * axis[0] - v0[0]) * nt[0]
+        + (center[1] - half_length * axis[1] - v0[1]) * nt[1]
+        + (center[2] - half_length * axis[2] - v0[2]) * nt[2]
+    )
+    h1 = (
+        (center[0] + half_length * axis[0] - v0[0]) * nt[0]
+        + (center[1] + half_length * axis[1] - v0[1]) * nt[1]
+        + (center[2] + half_length * axis[2] - v0[2]) * nt[2]
+    )
     if best_d > tol and h0 * h1 < 0.0:
         s = -half_length + 2.0 * half_length * h0 / (h0 - h1)
         for i in range(3):
@@ -248,6 +257,7 @@ def segment_triangle_closest(center, axis, half_length, mesh, triangle, tol):
 # ---------------------------------------------------------------------------------------------
 # choosing among a shape's candidate contacts against a mesh
 # ---------------------------------------------------------------------------------------------
+
 
 @njit(cache=True)
 def candidate_rows(capacity):
@@ -313,7 +323,8 @@ def write_kept(chosen, point, normal, depth, feature, out_point, out_normal, out
     written = 0
     for i in range(chosen.shape[0]):
         if chosen[i]:
-            write_contact(out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i],
-                          depth[i], feature[i])
+            write_contact(
+                out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i], feature[i]
+            )
             written += 1
     return written

@@ -22,7 +22,7 @@ def _segment_crosses_triangle(start, motion, a, b, c, nt, tol):
     s0 = (start[0] - a[0]) * nt[0] + (start[1] - a[1]) * nt[1] + (start[2] - a[2]) * nt[2]
     rate = motion[0] * nt[0] + motion[1] * nt[1] + motion[2] * nt[2]
     if rate == 0.0 or s0 * rate > 0.0 or (s0 == 0.0 and rate > 0.0):
-        return np.inf          # parallel, moving away, or leaving the plane towards the front
+        return np.inf  # parallel, moving away, or leaving the plane towards the front
     t = -s0 / rate
     if t < 0.0 or t > 1.0:
         return np.inf
@@ -45,7 +45,7 @@ def _segment_enters_sphere(start, motion, center, radius):
     if a == 0.0 or b >= 0.0:
         return np.inf
     if c <= 0.0:
-        return 0.0                 # touching already (within rounding) and moving in
+        return 0.0  # touching already (within rounding) and moving in
     disc = b * b - a * c
     if disc < 0.0:
         return np.inf
@@ -74,7 +74,7 @@ def _segment_enters_cylinder(start, motion, a, b, radius):
     if A == 0.0 or B >= 0.0:
         return np.inf
     if C <= 0.0:
-        t = 0.0                    # touching already (within rounding) and moving in
+        t = 0.0  # touching already (within rounding) and moving in
     else:
         disc = B * B - A * C
         if disc < 0.0:
@@ -114,8 +114,11 @@ def sweep_sphere_mesh(start, end, radius, mesh):
     best_t, best_triangle = np.inf, -1
     for c in range(candidates.shape[0]):
         t_index = candidates[c]
-        if (mesh.triangle_normals[t_index, 2] == 0.0 and mesh.triangle_normals[t_index, 0] == 0.0
-                and mesh.triangle_normals[t_index, 1] == 0.0):
+        if (
+            mesh.triangle_normals[t_index, 2] == 0.0
+            and mesh.triangle_normals[t_index, 0] == 0.0
+            and mesh.triangle_normals[t_index, 1] == 0.0
+        ):
             continue
         tri = mesh.triangles[t_index]
         a, b, cc = mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]
@@ -135,7 +138,7 @@ def sweep_sphere_mesh(start, end, radius, mesh):
                 t_face = max(0.0, (radius - side * s0) / rate)
                 if t_face <= 1.0:
                     p = np.empty(3)
-                    height = s0 + side * rate * t_face          # the centre's height at t_face
+                    height = s0 + side * rate * t_face  # the centre's height at t_face
                     for i in range(3):
                         p[i] = start[i] + t_face * motion[i] - height * nt[i]
                     px, py, pz, _ = closest_point_on_triangle(p, a, b, cc)
@@ -157,14 +160,18 @@ def sweep_sphere_mesh(start, end, radius, mesh):
     at = np.empty(3)
     for i in range(3):
         at[i] = start[i] + best_t * motion[i]
-    qx, qy, qz, region = closest_point_on_triangle(at, mesh.vertices[tri[0]], mesh.vertices[tri[1]],
-                                                   mesh.vertices[tri[2]])
+    qx, qy, qz, region = closest_point_on_triangle(
+        at, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]
+    )
     dx, dy, dz = at[0] - qx, at[1] - qy, at[2] - qz
     d = np.sqrt(dx * dx + dy * dy + dz * dz)
     if region == FACE or d <= tol:
         # face (or the centre itself crossing): the normal facing where the sphere came from
-        s0 = ((start[0] - mesh.vertices[tri[0], 0]) * nt[0] + (start[1] - mesh.vertices[tri[0], 1]) * nt[1]
-              + (start[2] - mesh.vertices[tri[0], 2]) * nt[2])
+        s0 = (
+            (start[0] - mesh.vertices[tri[0], 0]) * nt[0]
+            + (start[1] - mesh.vertices[tri[0], 1]) * nt[1]
+            + (start[2] - mesh.vertices[tri[0], 2]) * nt[2]
+        )
         side = 1.0 if s0 >= 0.0 else -1.0
         normal[0], normal[1], normal[2] = side * nt[0], side * nt[1], side * nt[2]
     else:

@@ -14,17 +14,23 @@ from numba.core.errors import TypingError
 from numba.extending import overload
 
 from .. import shapes
-from .contact_output import write_contact
 from .box_box import box_box
 from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_convex import capsule_convex
+from .contact_output import write_contact
 from .convex import convex_plane, hull_view, sphere_convex
 from .convex_convex import convex_convex
 
 MAX_PER_PAIR = 8
 
-SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (shapes.SPHERE, shapes.BOX, shapes.PLANE, shapes.POINT,
-                                              shapes.CAPSULE, shapes.CONVEX)
+SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (
+    shapes.SPHERE,
+    shapes.BOX,
+    shapes.PLANE,
+    shapes.POINT,
+    shapes.CAPSULE,
+    shapes.CONVEX,
+)
 
 
 @njit(cache=True)
@@ -37,15 +43,23 @@ def sphere_plane(center, radius, plane, margin, out_point, out_normal, out_depth
     depth = radius - distance
     if depth < -margin:
         return 0
-    back = 0.5 * (radius + distance)            # the point midway between the two surfaces
-    write_contact(out_point, out_normal, out_depth, out_feature, slot,
-                  (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back), (nx, ny, nz), depth, 0)
+    back = 0.5 * (radius + distance)  # the point midway between the two surfaces
+    write_contact(
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+        (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back),
+        (nx, ny, nz),
+        depth,
+        0,
+    )
     return 1
 
 
 @njit(cache=True)
-def sphere_sphere(center_a, radius_a, center_b, radius_b, margin,
-                  out_point, out_normal, out_depth, out_feature, slot):
+def sphere_sphere(center_a, radius_a, center_b, radius_b, margin, out_point, out_normal, out_depth, out_feature, slot):
     """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
 
     Written in scalars (no temporary arrays): a pile makes thousands of these pairs a step."""
@@ -56,13 +70,25 @@ def sphere_sphere(center_a, radius_a, center_b, radius_b, margin,
         return 0
     if distance > 1e-12:
         nx, ny, nz = dx / distance, dy / distance, dz / distance
-    else:                       # concentric: any direction separates; pick +z
+    else:  # concentric: any direction separates; pick +z
         nx, ny, nz = 0.0, 0.0, 1.0
     # midway between the surfaces: ½ (centre_a − r_a n + centre_b + r_b n)
     back = 0.5 * (radius_b - radius_a)
-    write_contact(out_point, out_normal, out_depth, out_feature, slot,
-                  (0.5 * (center_a[0] + center_b[0]) + back * nx, 0.5 * (center_a[1] + center_b[1]) + back * ny,
-                   0.5 * (center_a[2] + center_b[2]) + back * nz), (nx, ny, nz), depth, 0)
+    write_contact(
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        slot,
+        (
+            0.5 * (center_a[0] + center_b[0]) + back * nx,
+            0.5 * (center_a[1] + center_b[1]) + back * ny,
+            0.5 * (center_a[2] + center_b[2]) + back * nz,
+        ),
+        (nx, ny, nz),
+        depth,
+        0,
+    )
     return 1
 
 
@@ -79,15 +105,25 @@ def box_plane(center, rotation, half_extents, plane, margin, out_point, out_norm
         x = center + rotation @ local
         distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
         if -distance >= -margin:
-            write_contact(out_point, out_normal, out_depth, out_feature, slot + count,
-                   x - normal * (0.5 * distance), normal, -distance, corner)
+            write_contact(
+                out_point,
+                out_normal,
+                out_depth,
+                out_feature,
+                slot + count,
+                x - normal * (0.5 * distance),
+                normal,
+                -distance,
+                corner,
+            )
             count += 1
     return count
 
 
 @njit(cache=True)
-def sphere_box(center, radius, box_center, box_rotation, half_extents, margin,
-               out_point, out_normal, out_depth, out_feature, slot):
+def sphere_box(
+    center, radius, box_center, box_rotation, half_extents, margin, out_point, out_normal, out_depth, out_feature, slot
+):
     """Sphere A (or particle) against box B, by the closest point of the box to the centre.
 
     A centre inside the box is pushed out through the nearest face (feature = 1 + face);
@@ -117,7 +153,9 @@ def sphere_box(center, radius, box_center, box_rotation, half_extents, margin,
     normal = box_rotation @ normal_local
     surface_b = box_center + box_rotation @ closest
     surface_a = center - normal * radius
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
+    write_contact(
+        out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature
+    )
     return 1
 
 
@@ -128,7 +166,7 @@ def supported(kind_a, kind_b):
         kind_a, kind_b = kind_b, kind_a
     if kind_b == PLANE:
         return kind_a != PLANE
-    if kind_b == shapes.MESH:            # meshes are static: only dynamic shapes meet them
+    if kind_b == shapes.MESH:  # meshes are static: only dynamic shapes meet them
         return kind_a != PLANE
     return True
 
@@ -138,9 +176,18 @@ def empty_hull_store():
 
     Read-only like a Model's, so the compiled dispatch is the same one (Numba types read-only
     and writable arrays apart and would compile everything twice)."""
-    store = (np.zeros(1, dtype=np.int64), np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((0, 3)),
-             np.zeros(0), np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64),
-             np.zeros((0, 2), dtype=np.int64), np.zeros((0, 2), dtype=np.int64))
+    store = (
+        np.zeros(1, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(1, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(0),
+        np.zeros(1, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        np.zeros(1, dtype=np.int64),
+        np.zeros((0, 2), dtype=np.int64),
+        np.zeros((0, 2), dtype=np.int64),
+    )
     for array in store:
         array.flags.writeable = False
     return store
@@ -156,20 +203,41 @@ def empty_hull_store():
 # typed, so their routines are never compiled. Each distinct tuple is one cached
 # specialization (a scene of spheres and boxes on planes: four routines).
 
-FAMILIES = ("sphere_sphere", "sphere_capsule", "sphere_box", "sphere_plane", "capsule_capsule", "capsule_box",
-            "capsule_plane", "box_box", "box_plane", "sphere_convex", "capsule_convex", "convex_convex",
-            "convex_plane")
+FAMILIES = (
+    "sphere_sphere",
+    "sphere_capsule",
+    "sphere_box",
+    "sphere_plane",
+    "capsule_capsule",
+    "capsule_box",
+    "capsule_plane",
+    "box_box",
+    "box_plane",
+    "sphere_convex",
+    "capsule_convex",
+    "convex_convex",
+    "convex_plane",
+)
 HULL_FAMILIES = frozenset(("sphere_convex", "capsule_convex", "convex_convex", "convex_plane"))  # need hull_store
-ALL_FAMILIES = (True,) * len(FAMILIES)         # every routine (collide_pair; tests)
+ALL_FAMILIES = (True,) * len(FAMILIES)  # every routine (collide_pair; tests)
 
 _CLASS = {SPHERE: "sphere", POINT: "sphere", CAPSULE: "capsule", BOX: "box", CONVEX: "convex", PLANE: "plane"}
-_ROUTINE = {("sphere", "sphere"): "sphere_sphere", ("sphere", "capsule"): "sphere_capsule",
-            ("sphere", "box"): "sphere_box", ("sphere", "plane"): "sphere_plane",
-            ("capsule", "capsule"): "capsule_capsule", ("capsule", "box"): "capsule_box",
-            ("capsule", "plane"): "capsule_plane", ("box", "box"): "box_box", ("box", "plane"): "box_plane",
-            ("sphere", "convex"): "sphere_convex", ("capsule", "convex"): "capsule_convex",
-            ("box", "convex"): "convex_convex", ("convex", "convex"): "convex_convex",
-            ("convex", "plane"): "convex_plane"}
+_ROUTINE = {
+    ("sphere", "sphere"): "sphere_sphere",
+    ("sphere", "capsule"): "sphere_capsule",
+    ("sphere", "box"): "sphere_box",
+    ("sphere", "plane"): "sphere_plane",
+    ("capsule", "capsule"): "capsule_capsule",
+    ("capsule", "box"): "capsule_box",
+    ("capsule", "plane"): "capsule_plane",
+    ("box", "box"): "box_box",
+    ("box", "plane"): "box_plane",
+    ("sphere", "convex"): "sphere_convex",
+    ("capsule", "convex"): "capsule_convex",
+    ("box", "convex"): "convex_convex",
+    ("convex", "convex"): "convex_convex",
+    ("convex", "plane"): "convex_plane",
+}
 
 
 def family(kind_a, kind_b):
@@ -219,14 +287,49 @@ def _rank(kind):
 @njit(cache=True)
 def _hull(hull_store, index):
     """Hull number ``index`` (a float parameter) out of the store, as collision.convex.hull_view gives it."""
-    (vertex_start, vertices, face_start, face_normal, face_offset, face_vertex_start, face_vertex_index,
-     edge_start, edge_vertex, edge_face) = hull_store
-    return hull_view(vertex_start, vertices, face_start, face_normal, face_offset, face_vertex_start,
-                     face_vertex_index, edge_start, edge_vertex, edge_face, np.int64(index))
+    (
+        vertex_start,
+        vertices,
+        face_start,
+        face_normal,
+        face_offset,
+        face_vertex_start,
+        face_vertex_index,
+        edge_start,
+        edge_vertex,
+        edge_face,
+    ) = hull_store
+    return hull_view(
+        vertex_start,
+        vertices,
+        face_start,
+        face_normal,
+        face_offset,
+        face_vertex_start,
+        face_vertex_index,
+        edge_start,
+        edge_vertex,
+        edge_face,
+        np.int64(index),
+    )
 
 
-def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
-               out_point, out_normal, out_depth, out_feature, out_owner, slot):
+def _pairs_loop(
+    families,
+    pairs,
+    kinds,
+    params,
+    centers,
+    rotations_,
+    reach,
+    hull_store,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    out_owner,
+    slot,
+):
     """The contacts of every pair k of ``pairs`` (K, 2), reaching gaps down to ``reach[k]``,
     written from row ``slot`` on in pair order, with ``out_owner`` = k; returns how many were
     written. Each pair is taken in canonical order (rank of A ≤ rank of B; computed swapped and
@@ -236,20 +339,60 @@ def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull
 
 
 @overload(_pairs_loop)
-def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
-                    out_point, out_normal, out_depth, out_feature, out_owner, slot):
+def _pairs_loop_for(
+    families,
+    pairs,
+    kinds,
+    params,
+    centers,
+    rotations_,
+    reach,
+    hull_store,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    out_owner,
+    slot,
+):
     """The loop for one families type. Its ``None`` entries are the constant False here, so
     Numba drops those routines' branches before typing and never compiles them. The loop and
     the dispatch are one function: a call per pair that handed over the arrays (and the hull
     store's ten) would cost more than a sphere pair itself."""
     if not isinstance(families, types.BaseTuple) or len(families) != len(FAMILIES):
         raise TypingError(f"families: expected a tuple of {len(FAMILIES)} True or None, found {families}")
-    (has_sphere_sphere, has_sphere_capsule, has_sphere_box, has_sphere_plane, has_capsule_capsule,
-     has_capsule_box, has_capsule_plane, has_box_box, has_box_plane, has_sphere_convex, has_capsule_convex,
-     has_convex_convex, has_convex_plane) = (not isinstance(t, types.NoneType) for t in families.types)
+    (
+        has_sphere_sphere,
+        has_sphere_capsule,
+        has_sphere_box,
+        has_sphere_plane,
+        has_capsule_capsule,
+        has_capsule_box,
+        has_capsule_plane,
+        has_box_box,
+        has_box_plane,
+        has_sphere_convex,
+        has_capsule_convex,
+        has_convex_convex,
+        has_convex_plane,
+    ) = (not isinstance(t, types.NoneType) for t in families.types)
 
-    def loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
-             out_point, out_normal, out_depth, out_feature, out_owner, slot):
+    def loop(
+        families,
+        pairs,
+        kinds,
+        params,
+        centers,
+        rotations_,
+        reach,
+        hull_store,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        out_owner,
+        slot,
+    ):
         count = slot
         for k in range(pairs.shape[0]):
             a, b = pairs[k, 0], pairs[k, 1]
@@ -265,66 +408,225 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
             written = 0
             if has_sphere_sphere:
                 if round_a and round_b:
-                    written = sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin,
-                                            out_point, out_normal, out_depth, out_feature, count)
+                    written = sphere_sphere(
+                        center_a,
+                        params_a[0],
+                        center_b,
+                        params_b[0],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_sphere_capsule:
                 if round_a and kind_b == CAPSULE:
-                    written = sphere_capsule(center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1],
-                                             margin, out_point, out_normal, out_depth, out_feature, count)
+                    written = sphere_capsule(
+                        center_a,
+                        params_a[0],
+                        center_b,
+                        rotation_b,
+                        params_b[0],
+                        params_b[1],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_sphere_box:
                 if round_a and kind_b == BOX:
-                    written = sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin,
-                                         out_point, out_normal, out_depth, out_feature, count)
+                    written = sphere_box(
+                        center_a,
+                        params_a[0],
+                        center_b,
+                        rotation_b,
+                        params_b[:3],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_sphere_plane:
                 if round_a and kind_b == PLANE:
-                    written = sphere_plane(center_a, params_a[0], params_b, margin,
-                                           out_point, out_normal, out_depth, out_feature, count)
+                    written = sphere_plane(
+                        center_a, params_a[0], params_b, margin, out_point, out_normal, out_depth, out_feature, count
+                    )
             if has_capsule_capsule:
                 if kind_a == CAPSULE and kind_b == CAPSULE:
-                    written = capsule_capsule(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                              params_b[0], params_b[1], margin,
-                                              out_point, out_normal, out_depth, out_feature, count)
+                    written = capsule_capsule(
+                        center_a,
+                        rotation_a,
+                        params_a[0],
+                        params_a[1],
+                        center_b,
+                        rotation_b,
+                        params_b[0],
+                        params_b[1],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_capsule_box:
                 if kind_a == CAPSULE and kind_b == BOX:
-                    written = capsule_box(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                          params_b[:3], margin, out_point, out_normal, out_depth, out_feature, count)
+                    written = capsule_box(
+                        center_a,
+                        rotation_a,
+                        params_a[0],
+                        params_a[1],
+                        center_b,
+                        rotation_b,
+                        params_b[:3],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_capsule_plane:
                 if kind_a == CAPSULE and kind_b == PLANE:
-                    written = capsule_plane(center_a, rotation_a, params_a[0], params_a[1], params_b, margin,
-                                            out_point, out_normal, out_depth, out_feature, count)
+                    written = capsule_plane(
+                        center_a,
+                        rotation_a,
+                        params_a[0],
+                        params_a[1],
+                        params_b,
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_box_box:
                 if kind_a == BOX and kind_b == BOX:
-                    written = box_box(center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3],
-                                      margin, out_point, out_normal, out_depth, out_feature, count)
+                    written = box_box(
+                        center_a,
+                        rotation_a,
+                        params_a[:3],
+                        center_b,
+                        rotation_b,
+                        params_b[:3],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_box_plane:
                 if kind_a == BOX and kind_b == PLANE:
-                    written = box_plane(center_a, rotation_a, params_a[:3], params_b, margin,
-                                        out_point, out_normal, out_depth, out_feature, count)
+                    written = box_plane(
+                        center_a,
+                        rotation_a,
+                        params_a[:3],
+                        params_b,
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_sphere_convex:
                 if round_a and kind_b == CONVEX:
                     hb = _hull(hull_store, params_b[0])
-                    written = sphere_convex(center_a, params_a[0], center_b, rotation_b, hb[0], hb[1], hb[2], hb[3],
-                                            hb[4], margin, out_point, out_normal, out_depth, out_feature, count)
+                    written = sphere_convex(
+                        center_a,
+                        params_a[0],
+                        center_b,
+                        rotation_b,
+                        hb[0],
+                        hb[1],
+                        hb[2],
+                        hb[3],
+                        hb[4],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_capsule_convex:
                 if kind_a == CAPSULE and kind_b == CONVEX:
                     hb = _hull(hull_store, params_b[0])
-                    written = capsule_convex(center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b,
-                                             hb[0], hb[1], hb[2], hb[3], hb[4], hb[5], hb[6], margin,
-                                             out_point, out_normal, out_depth, out_feature, count)
+                    written = capsule_convex(
+                        center_a,
+                        rotation_a,
+                        params_a[0],
+                        params_a[1],
+                        center_b,
+                        rotation_b,
+                        hb[0],
+                        hb[1],
+                        hb[2],
+                        hb[3],
+                        hb[4],
+                        hb[5],
+                        hb[6],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_convex_convex:
                 if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
                     ha = _hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
                     hb = _hull(hull_store, params_b[0])
-                    written = convex_convex(center_a, rotation_a, ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], ha[6],
-                                            center_b, rotation_b, hb[0], hb[1], hb[2], hb[3], hb[4], hb[5], hb[6],
-                                            margin, out_point, out_normal, out_depth, out_feature, count)
+                    written = convex_convex(
+                        center_a,
+                        rotation_a,
+                        ha[0],
+                        ha[1],
+                        ha[2],
+                        ha[3],
+                        ha[4],
+                        ha[5],
+                        ha[6],
+                        center_b,
+                        rotation_b,
+                        hb[0],
+                        hb[1],
+                        hb[2],
+                        hb[3],
+                        hb[4],
+                        hb[5],
+                        hb[6],
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             if has_convex_plane:
                 if kind_a == CONVEX and kind_b == PLANE:
                     ha = _hull(hull_store, params_a[0])
-                    written = convex_plane(center_a, rotation_a, ha[0], params_b, margin,
-                                           out_point, out_normal, out_depth, out_feature, count)
+                    written = convex_plane(
+                        center_a,
+                        rotation_a,
+                        ha[0],
+                        params_b,
+                        margin,
+                        out_point,
+                        out_normal,
+                        out_depth,
+                        out_feature,
+                        count,
+                    )
             for c in range(count, count + written):
-                if swapped:                 # normals from B into A of the pair as given
+                if swapped:  # normals from B into A of the pair as given
                     for i in range(3):
                         out_normal[c, i] = -out_normal[c, i]
                 out_owner[c] = k
@@ -335,8 +637,23 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
 
 
 @njit(cache=True)
-def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, center_b, rotation_b,
-                 margin, hull_store, out_point, out_normal, out_depth, out_feature, slot):
+def collide_pair(
+    kind_a,
+    params_a,
+    center_a,
+    rotation_a,
+    kind_b,
+    params_b,
+    center_b,
+    rotation_b,
+    margin,
+    hull_store,
+    out_point,
+    out_normal,
+    out_depth,
+    out_feature,
+    slot,
+):
     """Contacts of shape A against shape B written from ``slot`` on; returns their count
     (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and nothing else. Every
     routine is compiled in: the scene-wide narrow phase (``generate_contacts``) compiles only
@@ -357,9 +674,22 @@ def collide_pair(kind_a, params_a, center_a, rotation_a, kind_b, params_b, cente
         for j in range(3):
             rotations_[0, i, j], rotations_[1, i, j] = rotation_a[i, j], rotation_b[i, j]
     owner = np.empty(out_depth.shape[0], dtype=np.int64)
-    return _pairs_loop(ALL_FAMILIES, np.array([[0, 1]], dtype=np.int64), kinds, params, centers, rotations_,
-                       np.full(1, margin), hull_store, out_point, out_normal, out_depth, out_feature, owner,
-                       np.int64(slot))
+    return _pairs_loop(
+        ALL_FAMILIES,
+        np.array([[0, 1]], dtype=np.int64),
+        kinds,
+        params,
+        centers,
+        rotations_,
+        np.full(1, margin),
+        hull_store,
+        out_point,
+        out_normal,
+        out_depth,
+        out_feature,
+        owner,
+        np.int64(slot),
+    )
 
 
 @njit(cache=True)
@@ -377,9 +707,23 @@ def generate_contacts(pairs, kinds, params, centers, rotations_, reach, hull_sto
     normal = np.empty((capacity, 3))
     depth = np.empty(capacity)
     feature = np.empty(capacity, dtype=np.int64)
-    owner = np.empty(capacity, dtype=np.int64)      # which pair each contact came from
+    owner = np.empty(capacity, dtype=np.int64)  # which pair each contact came from
     # the slot as an int64, not a literal 0: Numba would type every routine for slot = 0
     # first and compile each of them twice
-    count = _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store,
-                        point, normal, depth, feature, owner, np.int64(0))
+    count = _pairs_loop(
+        families,
+        pairs,
+        kinds,
+        params,
+        centers,
+        rotations_,
+        reach,
+        hull_store,
+        point,
+        normal,
+        depth,
+        feature,
+        owner,
+        np.int64(0),
+    )
     return point[:count], normal[:count], depth[:count], feature[:count], owner[:count]

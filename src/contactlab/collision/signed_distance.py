@@ -38,8 +38,9 @@ def sphere_obstacle(center, radius):
     """A solid sphere of ``radius`` [m] at ``center`` (3,)."""
     if not radius > 0.0:
         raise InputError("radius", f"the sphere radius must be positive, found {radius}")
-    return ShapeObstacle(SPHERE, np.array([float(radius), 0.0, 0.0, 0.0]),
-                         np.asarray(center, dtype=float).reshape(3), np.eye(3))
+    return ShapeObstacle(
+        SPHERE, np.array([float(radius), 0.0, 0.0, 0.0]), np.asarray(center, dtype=float).reshape(3), np.eye(3)
+    )
 
 
 def box_obstacle(center, half_extents, quaternion=(1.0, 0.0, 0.0, 0.0)):
@@ -55,8 +56,12 @@ def box_obstacle(center, half_extents, quaternion=(1.0, 0.0, 0.0, 0.0)):
 def model_obstacle(model, index):
     """The :class:`ShapeObstacle` of obstacle ``index`` of a :class:`~contactlab.model.Model`."""
     R = rotations.to_matrix(np.asarray(model.obstacle_orientation[index], dtype=float)[None])[0]
-    return ShapeObstacle(int(model.obstacle_shape[index]), np.asarray(model.obstacle_params[index], dtype=float),
-                         np.asarray(model.obstacle_position[index], dtype=float), R)
+    return ShapeObstacle(
+        int(model.obstacle_shape[index]),
+        np.asarray(model.obstacle_params[index], dtype=float),
+        np.asarray(model.obstacle_position[index], dtype=float),
+        R,
+    )
 
 
 @njit(cache=True)
@@ -89,8 +94,11 @@ def shape_signed_distance(kind, params, position, rotation, x):
     # box
     local = np.empty(3)
     for a in range(3):
-        local[a] = (rotation[0, a] * (x[0] - position[0]) + rotation[1, a] * (x[1] - position[1])
-                    + rotation[2, a] * (x[2] - position[2]))
+        local[a] = (
+            rotation[0, a] * (x[0] - position[0])
+            + rotation[1, a] * (x[1] - position[1])
+            + rotation[2, a] * (x[2] - position[2])
+        )
     clamped = np.empty(3)
     outside = 0.0
     for a in range(3):
@@ -114,10 +122,12 @@ def shape_signed_distance(kind, params, position, rotation, x):
         clamped[axis] = sign * params[axis]
         signed = -gap
     for i in range(3):
-        normal[i] = (rotation[i, 0] * normal_local[0] + rotation[i, 1] * normal_local[1]
-                     + rotation[i, 2] * normal_local[2])
-        closest[i] = position[i] + (rotation[i, 0] * clamped[0] + rotation[i, 1] * clamped[1]
-                                    + rotation[i, 2] * clamped[2])
+        normal[i] = (
+            rotation[i, 0] * normal_local[0] + rotation[i, 1] * normal_local[1] + rotation[i, 2] * normal_local[2]
+        )
+        closest[i] = position[i] + (
+            rotation[i, 0] * clamped[0] + rotation[i, 1] * clamped[1] + rotation[i, 2] * clamped[2]
+        )
     return signed, normal, closest
 
 
@@ -129,7 +139,8 @@ def mesh_signed_distance(mesh, x, reach):
     (a two-sided mesh: always ≥ 0); the normal as in :func:`sphere_mesh`.
     """
     candidates, closest, distance, region = features_near(
-        mesh, x, reach, np.empty((32, 3)), np.empty(32), np.empty(32, dtype=np.int64))
+        mesh, x, reach, np.empty((32, 3)), np.empty(32), np.empty(32, dtype=np.int64)
+    )
     nearest = nearest_feature(candidates, distance, region)
     normal = np.zeros(3)
     q = np.zeros(3)
@@ -137,8 +148,9 @@ def mesh_signed_distance(mesh, x, reach):
         return np.inf, normal, q, -1
     for i in range(3):
         q[i] = closest[nearest, i]
-    signed, normal[0], normal[1], normal[2] = signed_normal(mesh, candidates[nearest], region[nearest], x,
-                                                             q[0], q[1], q[2], distance[nearest])
+    signed, normal[0], normal[1], normal[2] = signed_normal(
+        mesh, candidates[nearest], region[nearest], x, q[0], q[1], q[2], distance[nearest]
+    )
     return signed, normal, q, candidates[nearest]
 
 

@@ -34,6 +34,21 @@ from .measures import (
 from .report import COLUMNS, MEANINGS
 from .run import PARALLEL_WORK, Comparison, compare, run_method, supports
 
-__all__ = ["COLUMNS", "MEANINGS", "PARALLEL_WORK", "ROW_KEYS", "SAME_WITHIN", "TIMINGS", "TINY_ENERGY", "Comparison",
-           "compare", "energy_scale", "expectation_verdict", "metrics", "momentum_drift", "run_method",
-           "same_computation", "supports"]
+__all__ = [
+    "COLUMNS",
+    "MEANINGS",
+    "PARALLEL_WORK",
+    "ROW_KEYS",
+    "SAME_WITHIN",
+    "TIMINGS",
+    "TINY_ENERGY",
+    "Comparison",
+    "compare",
+    "energy_scale",
+    "expectation_verdict",
+    "metrics",
+    "momentum_drift",
+    "run_method",
+    "same_computation",
+    "supports",
+]

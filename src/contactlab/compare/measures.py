@@ -10,14 +10,35 @@ import numpy as np
 from .. import closed_form
 from ..plots import total_energy
 
-TIMINGS = ("steps_per_second", "steps_per_second_median", "steps_per_second_low", "steps_per_second_high",
-           "wall_seconds")     # the row's keys that differ from one run of the same computation to the next
-TINY_ENERGY = 1e-9          # J: an energy scale below this (times max(1, |E(0)|)) gives no relative drift
-SAME_WITHIN = 1e-9          # m (and unit quaternion components): trajectories this close are one computation
+TIMINGS = (
+    "steps_per_second",
+    "steps_per_second_median",
+    "steps_per_second_low",
+    "steps_per_second_high",
+    "wall_seconds",
+)  # the row's keys that differ from one run of the same computation to the next
+TINY_ENERGY = 1e-9  # J: an energy scale below this (times max(1, |E(0)|)) gives no relative drift
+SAME_WITHIN = 1e-9  # m (and unit quaternion components): trajectories this close are one computation
 # the keys of a row, in the order of comparison.csv's header; the checks' error columns follow them
-ROW_KEYS = ("method", "status", "expectations", "integrator", "dt_s", "steps", *TIMINGS, "max_contacts",
-            "max_penetration_mm", "mean_penetration_mm", "energy_drift_J", "energy_drift_relative",
-            "momentum_drift_Ns", "max_solver_iterations", "mean_solver_iterations", "max_solver_residual")
+ROW_KEYS = (
+    "method",
+    "status",
+    "expectations",
+    "integrator",
+    "dt_s",
+    "steps",
+    *TIMINGS,
+    "max_contacts",
+    "max_penetration_mm",
+    "mean_penetration_mm",
+    "energy_drift_J",
+    "energy_drift_relative",
+    "momentum_drift_Ns",
+    "max_solver_iterations",
+    "mean_solver_iterations",
+    "max_solver_residual",
+)
+
 
 def energy_scale(model, arrays) -> float:
     """The energy [J] a drift is measured against: the larger of (a) the most energy the run
@@ -53,10 +74,18 @@ def _rates(summary):
     for a run too short to time)."""
     spread = summary.get("steps_per_second_spread")
     if not spread:
-        return {"steps_per_second": summary["steps_per_second"], "steps_per_second_median": None,
-                "steps_per_second_low": None, "steps_per_second_high": None}
-    return {"steps_per_second": summary["steps_per_second"], "steps_per_second_median": spread["median"],
-            "steps_per_second_low": spread["low"], "steps_per_second_high": spread["high"]}
+        return {
+            "steps_per_second": summary["steps_per_second"],
+            "steps_per_second_median": None,
+            "steps_per_second_low": None,
+            "steps_per_second_high": None,
+        }
+    return {
+        "steps_per_second": summary["steps_per_second"],
+        "steps_per_second_median": spread["median"],
+        "steps_per_second_low": spread["low"],
+        "steps_per_second_high": spread["high"],
+    }
 
 
 def metrics(model, arrays, summary) -> dict:
@@ -102,9 +131,12 @@ def fill_rows(outcomes) -> None:
     its ``checks`` (contactlab.closed_form.Check)."""
     for outcome in outcomes:
         scene = outcome.scene
-        row = {"method": outcome.method,
-               "status": "ok" if outcome.run else blew_up(outcome),
-               "integrator": scene.integrator, "dt_s": scene.dt}
+        row = {
+            "method": outcome.method,
+            "status": "ok" if outcome.run else blew_up(outcome),
+            "integrator": scene.integrator,
+            "dt_s": scene.dt,
+        }
         if outcome.run:
             row.update(metrics(scene.model, outcome.run.arrays, outcome.run.summary))
             outcome.checks = closed_form.checks(scene.name, scene.model, outcome.run.arrays)
@@ -128,22 +160,27 @@ def blew_up(outcome) -> str:
 def dissipative(model) -> bool:
     """Whether the scene's contacts lose energy by design (restitution < 1 or friction > 0)."""
     used = np.concatenate([model.body_material, model.particle_material, model.obstacle_material]).astype(int)
-    return bool(used.size and (np.any(model.material_restitution[used] < 1.0)
-                               or np.any(model.material_friction[used] > 0.0)))
+    return bool(
+        used.size and (np.any(model.material_restitution[used] < 1.0) or np.any(model.material_friction[used] > 0.0))
+    )
 
 
 def same_computation(outcomes) -> list:
     """(method names, largest difference [m]) of each group of runs whose positions,
     orientations and particles agree within SAME_WITHIN at every sample: rounding, not physics."""
     ran = [outcome for outcome in outcomes if outcome.run is not None]
-    series = {outcome.method: [np.asarray(outcome.run.arrays[name]) for name in
-                               ("body_position", "body_orientation", "particle_position")] for outcome in ran}
+    series = {
+        outcome.method: [
+            np.asarray(outcome.run.arrays[name]) for name in ("body_position", "body_orientation", "particle_position")
+        ]
+        for outcome in ran
+    }
     groups, placed = [], set()
     for index, outcome in enumerate(ran):
         if outcome.method in placed:
             continue
         group, largest = [outcome.method], 0.0
-        for other in ran[index + 1:]:
+        for other in ran[index + 1 :]:
             if other.method in placed:
                 continue
             mine, theirs = series[outcome.method], series[other.method]
@@ -151,7 +188,7 @@ def same_computation(outcomes) -> list:
                 apart = [float(np.max(np.abs(a - b))) if a.size else 0.0 for a, b in zip(mine, theirs)]
                 if max(apart) <= SAME_WITHIN:
                     group.append(other.method)
-                    largest = max(largest, apart[0], apart[2])       # positions [m]
+                    largest = max(largest, apart[0], apart[2])  # positions [m]
         if len(group) > 1:
             placed.update(group)
             groups.append((group, largest))

@@ -20,6 +20,7 @@ from .measures import ROW_KEYS, blew_up, dissipative, same_computation
 
 # ---- the table: cells built once, written as CSV, Markdown and HTML ------------------------------
 
+
 def _number(format_spec):
     return lambda value: format(value, format_spec)
 
@@ -47,18 +48,18 @@ SHOWN = {
     "mean_solver_iterations": ("sweeps per step", _number(".3g")),
     "max_solver_residual": ("max residual (method units)", _number(".3g")),
 }
-COLUMNS = tuple((key, *SHOWN[key]) for key in ROW_KEYS)     # (row key, heading, show), the CSV's order
+COLUMNS = tuple((key, *SHOWN[key]) for key in ROW_KEYS)  # (row key, heading, show), the CSV's order
 
 # what each column means, printed in the report itself so it reads without docs/compare.md
 MEANINGS = {
     "status": "ok, or blew up at t = … s (a health check stopped the run)",
     "expectations": "how many of the scene's stated expectations (the checks below the table: a closed form, "
-                    "a structure that must stand, nothing inside an obstacle) the run met; n/a: it states none",
+    "a structure that must stand, nothing inside an obstacle) the run met; n/a: it states none",
     "dt_s": "the time step",
     "steps_per_second": "the stepping rate over the whole run (compiling and the first step left out)",
     "steps_per_second_median": "the same rate measured over every ~0.1 s window of the run: the median window, "
-                               "then the middle half of the windows (1st to 3rd quartile); two methods whose "
-                               "middle halves overlap are equally fast within the machine's noise",
+    "then the middle half of the windows (1st to 3rd quartile); two methods whose "
+    "middle halves overlap are equally fast within the machine's noise",
     "wall_seconds": "the whole run: stepping, compiling and recording",
     "max_contacts": "the most contacts in one step",
     "max_penetration_mm": "the deepest overlap of any two things at any sample",
@@ -81,8 +82,12 @@ def _meanings():
             shown.append(("steps/s (median), 1st and 3rd quartile", meaning))
         else:
             shown.append((headings[key], meaning))
-    shown.append(("<check> (unit, expected …), within ± …",
-                  "a closed-form or stated expectation: measured (measured − expected) and pass or FAIL"))
+    shown.append(
+        (
+            "<check> (unit, expected …), within ± …",
+            "a closed-form or stated expectation: measured (measured − expected) and pass or FAIL",
+        )
+    )
     return shown
 
 
@@ -97,8 +102,7 @@ def _check_heading(quantity, unit, checks):
     expected = {check.expected for check in checks}
     shown = f", expected {next(iter(expected)):.4g}" if len(expected) == 1 else ""
     tolerances = {check.tolerance for check in checks}
-    allowed = (f", within ± {next(iter(tolerances)):.2g}" if len(tolerances) == 1 and None not in tolerances
-               else "")
+    allowed = f", within ± {next(iter(tolerances)):.2g}" if len(tolerances) == 1 and None not in tolerances else ""
     return f"{quantity} ({unit}{shown}){allowed}"
 
 
@@ -148,6 +152,7 @@ def csv_text(rows) -> str:
 def _markdown_table(headings, cells):
     def line(texts):
         return "| " + " | ".join(text.replace("|", "\\|") for text in texts) + " |"
+
     return "\n".join([line(headings), "|" + "---|" * len(headings), *(line(row) for row in cells)])
 
 
@@ -158,6 +163,7 @@ def _html_table(headings, cells):
 
 
 # ---- words ------------------------------------------------------------------------------------
+
 
 def _leaders(outcomes, value, lowest):
     """Methods sharing the best ``value`` (to the 3 significant digits the report shows)."""
@@ -171,7 +177,7 @@ def _names(names):
 
 
 def _ranking(ran, labels, value, lowest, show):
-    """"<best label>: <methods> (<value>); <worst label>: <methods> (<value>)", or, when all
+    """ "<best label>: <methods> (<value>); <worst label>: <methods> (<value>)", or, when all
     share the best value, that they do."""
     best, best_value = _leaders(ran, value, lowest)
     if len(ran) > 1 and len(best) == len(ran):
@@ -195,9 +201,11 @@ def _speed_sentence(ran):
     """Who stepped fastest and slowest by the median rate, naming the methods whose speed is
     within noise of the fastest (their middle halves overlap), so a reordering between two
     runs of the same comparison is not read as a result."""
+
     def rate(outcome):
         median = outcome.row.get("steps_per_second_median")
         return outcome.row["steps_per_second"] if median is None else median
+
     ordered = sorted(ran, key=rate, reverse=True)
     fastest = ordered[0]
     noise = [o.method for o in ordered[1:] if _alike(fastest, o)]
@@ -223,10 +231,19 @@ def _expectation_sentence(ran):
     for outcome in judged:
         failed = [check for check in outcome.checks if check.passed is False]
         if failed:
-            missed.append(f"{outcome.method} (" + "; ".join(
-                (f"{check.quantity} {check.measured:.3g} {check.unit}" if math.isfinite(check.measured)
-                 else f"{check.quantity} not reached")
-                + f", expected {check.expected:.3g} ± {check.tolerance:.2g}" for check in failed) + ")")
+            missed.append(
+                f"{outcome.method} ("
+                + "; ".join(
+                    (
+                        f"{check.quantity} {check.measured:.3g} {check.unit}"
+                        if math.isfinite(check.measured)
+                        else f"{check.quantity} not reached"
+                    )
+                    + f", expected {check.expected:.3g} ± {check.tolerance:.2g}"
+                    for check in failed
+                )
+                + ")"
+            )
     parts = []
     if met:
         parts.append(f"met by {_names(met)}")
@@ -242,23 +259,43 @@ def paragraph(scene, outcomes, skipped) -> str:
     sentences = []
     if ran:
         duration = ran[0].run.arrays["time"][-1]
-        sentences.append(f"{len(outcomes)} method{'s' if len(outcomes) > 1 else ''} on {scene.name} "
-                         f"for {duration:.3g} s of simulated time.")
+        sentences.append(
+            f"{len(outcomes)} method{'s' if len(outcomes) > 1 else ''} on {scene.name} "
+            f"for {duration:.3g} s of simulated time."
+        )
         sentences.append(_speed_sentence(ran))
-        sentences.append(_ranking(ran, ("Least penetration", "deepest"), lambda o: o.row["max_penetration_mm"], True,
-                                  lambda v: f"{v:.3g} mm"))
-        sentences.append(_ranking(ran, ("Energy kept best", "worst"), lambda o: abs(o.row["energy_drift_J"]), True,
-                                  lambda v: f"total energy changed by {v:.3g} J"))
+        sentences.append(
+            _ranking(
+                ran,
+                ("Least penetration", "deepest"),
+                lambda o: o.row["max_penetration_mm"],
+                True,
+                lambda v: f"{v:.3g} mm",
+            )
+        )
+        sentences.append(
+            _ranking(
+                ran,
+                ("Energy kept best", "worst"),
+                lambda o: abs(o.row["energy_drift_J"]),
+                True,
+                lambda v: f"total energy changed by {v:.3g} J",
+            )
+        )
         if dissipative(scene.model):
-            sentences.append("Restitution below 1 or friction makes this scene lose energy by design, "
-                             "so part of every energy change is physical.")
+            sentences.append(
+                "Restitution below 1 or friction makes this scene lose energy by design, "
+                "so part of every energy change is physical."
+            )
         sentences.append(_expectation_sentence(ran))
     else:
         sentences.append(f"No method finished {scene.name}.")
     for outcome in outcomes:
         if outcome.failure:
-            sentences.append(f"{outcome.method} {blew_up(outcome)} ({outcome.scene.integrator}, "
-                             f"dt = {outcome.scene.dt:g} s): it needs a smaller dt or a softer setting.")
+            sentences.append(
+                f"{outcome.method} {blew_up(outcome)} ({outcome.scene.integrator}, "
+                f"dt = {outcome.scene.dt:g} s): it needs a smaller dt or a softer setting."
+            )
     for name, why in skipped.items():
         sentences.append(f"{name} was left out: {why}.")
     return " ".join(sentence for sentence in sentences if sentence)
@@ -266,29 +303,38 @@ def paragraph(scene, outcomes, skipped) -> str:
 
 def _notes(outcomes):
     """Caveats worth printing under the table, as plain sentences."""
-    notes = ["Energy drift is the total energy (kinetic + potential + elastic) at the end minus at "
-             "the start; its % is of the run's energy scale: the larger of the most energy it held above "
-             "the lowest potential energy it reached, and the initial potential energy above the lowest "
-             "mass.",
-             "Solver residuals are in each method's own unit (impulse, constraints: m/s of the last "
-             "sweep; projection: m; penalty with backward Euler: relative linear residual), so compare "
-             "them within a method, not across."]
+    notes = [
+        "Energy drift is the total energy (kinetic + potential + elastic) at the end minus at "
+        "the start; its % is of the run's energy scale: the larger of the most energy it held above "
+        "the lowest potential energy it reached, and the initial potential energy above the lowest "
+        "mass.",
+        "Solver residuals are in each method's own unit (impulse, constraints: m/s of the last "
+        "sweep; projection: m; penalty with backward Euler: relative linear residual), so compare "
+        "them within a method, not across.",
+    ]
     if any(outcome.row.get("momentum_drift_Ns") == "n/a" for outcome in outcomes):
-        notes.append("Momentum drift is n/a: the scene has static obstacles (or pinned cloth), whose "
-                     "forces change the momentum, so it is no conservation check here.")
+        notes.append(
+            "Momentum drift is n/a: the scene has static obstacles (or pinned cloth), whose "
+            "forces change the momentum, so it is no conservation check here."
+        )
     else:
-        notes.append("Momentum drift ‖P(T) − P(0) − M g T‖ is a conservation check: no obstacles act on "
-                     "this scene, so anything but rounding is an error of the method.")
+        notes.append(
+            "Momentum drift ‖P(T) − P(0) − M g T‖ is a conservation check: no obstacles act on "
+            "this scene, so anything but rounding is an error of the method."
+        )
     for group, largest in same_computation(outcomes):
-        notes.append(f"{_names(group)} computed the same trajectory to within rounding (positions apart by "
-                     f"{largest:.2g} m at most): at these settings they solve the same problem the same way, "
-                     f"so their numbers are one result, not {len(group)} that agree (their speeds still differ).")
+        notes.append(
+            f"{_names(group)} computed the same trajectory to within rounding (positions apart by "
+            f"{largest:.2g} m at most): at these settings they solve the same problem the same way, "
+            f"so their numbers are one result, not {len(group)} that agree (their speeds still differ)."
+        )
     for outcome in outcomes:
         notes += [f"{outcome.method}: warning: {text}" for text in outcome.warnings]
     return notes
 
 
 # ---- the reports ------------------------------------------------------------------------------
+
 
 def _link(out, path):
     """``path`` relative to ``out``, with / separators, quoted for a URL."""
@@ -307,8 +353,11 @@ def _check_lines(outcomes):
         for method, check in entries:
             relative = check.relative_error
             share = f", {relative * 100:.3g} %" if relative is not None and math.isfinite(relative) else ""
-            measured = (f"{check.measured:.6g} (error {check.error:+.3g}{share})"
-                        if math.isfinite(check.measured) else "not reached")
+            measured = (
+                f"{check.measured:.6g} (error {check.error:+.3g}{share})"
+                if math.isfinite(check.measured)
+                else "not reached"
+            )
             word = {True: ": pass", False: ": FAIL", None: ""}[check.passed]
             parts.append(f"{method} {measured}{word}")
         first = entries[0][1]
@@ -329,22 +378,46 @@ def markdown_text(scene, outcomes, summary_text, table, plot_paths, out) -> str:
         links = [f"[{name}]({_link(out, path)})" for name, path in outcome.files.items()]
         files_lines.append(f"- **{outcome.method}**: " + " · ".join(links))
     checks = [f"- **{quantity}** ({unit}): {text}" for quantity, unit, text in _check_lines(outcomes)]
-    text = [f"# {scene.name}: the methods compared", "",
-            scene.description, "", summary_text, "",
-            "## Numbers", "", _markdown_table(*table), "",
-            "What the columns mean:", "", *(f"- **{heading}**: {meaning}" for heading, meaning in _meanings()), ""]
+    text = [
+        f"# {scene.name}: the methods compared",
+        "",
+        scene.description,
+        "",
+        summary_text,
+        "",
+        "## Numbers",
+        "",
+        _markdown_table(*table),
+        "",
+        "What the columns mean:",
+        "",
+        *(f"- **{heading}**: {meaning}" for heading, meaning in _meanings()),
+        "",
+    ]
     if checks:
         text += ["## Expectations and closed-form checks", "", *checks, ""]
-    text += ["## Files", "", *files_lines, "",
-             "## Comparison plots", "",
-             *(f"![{name}]({_link(out, path)})" for name, path in plot_paths.items()), "",
-             "## Notes", "", *(f"- {note}" for note in _notes(outcomes)), ""]
+    text += [
+        "## Files",
+        "",
+        *files_lines,
+        "",
+        "## Comparison plots",
+        "",
+        *(f"![{name}]({_link(out, path)})" for name, path in plot_paths.items()),
+        "",
+        "## Notes",
+        "",
+        *(f"- {note}" for note in _notes(outcomes)),
+        "",
+    ]
     return "\n".join(text)
 
 
 def _key_numbers(row):
-    return (f"expectations {row['expectations']} · {row['steps_per_second']:,.0f} steps/s · "
-            f"max penetration {row['max_penetration_mm']:.3g} mm · energy drift {row['energy_drift_J']:+.3g} J")
+    return (
+        f"expectations {row['expectations']} · {row['steps_per_second']:,.0f} steps/s · "
+        f"max penetration {row['max_penetration_mm']:.3g} mm · energy drift {row['energy_drift_J']:+.3g} J"
+    )
 
 
 def _media(outcome, out):
@@ -353,10 +426,13 @@ def _media(outcome, out):
     if "mp4" in files:
         poster = f' poster="{html.escape(_link(out, files["still"]))}"' if "still" in files else ""
         fallback = files.get("gif") or files.get("still")
-        inner = (f'<img src="{html.escape(_link(out, fallback))}" alt="{html.escape(outcome.method)}">' if fallback
-                 else "")
-        return (f'<video controls autoplay muted loop playsinline preload="auto"{poster}>'
-                f'<source src="{html.escape(_link(out, files["mp4"]))}" type="video/mp4">{inner}</video>')
+        inner = (
+            f'<img src="{html.escape(_link(out, fallback))}" alt="{html.escape(outcome.method)}">' if fallback else ""
+        )
+        return (
+            f'<video controls autoplay muted loop playsinline preload="auto"{poster}>'
+            f'<source src="{html.escape(_link(out, files["mp4"]))}" type="video/mp4">{inner}</video>'
+        )
     for name in ("gif", "still"):
         if name in files:
             return f'<img src="{html.escape(_link(out, files[name]))}" alt="{html.escape(outcome.method)}">'
@@ -366,36 +442,49 @@ def _media(outcome, out):
 def _card(outcome, out):
     name = f'<span class="name">{html.escape(outcome.method)}</span>'
     if not outcome.run:
-        return (f'<figure class="card"><div class="failed">{html.escape(blew_up(outcome))}</div>'
-                f'<figcaption>{name}<br>{html.escape(outcome.failure)}</figcaption></figure>')
-    return (f'<figure class="card">{_media(outcome, out)}<figcaption>{name} '
-            f'({html.escape(outcome.scene.integrator)}, dt = {outcome.scene.dt * 1000:.4g} ms)<br>'
-            f'{html.escape(_key_numbers(outcome.row))}</figcaption></figure>')
+        return (
+            f'<figure class="card"><div class="failed">{html.escape(blew_up(outcome))}</div>'
+            f"<figcaption>{name}<br>{html.escape(outcome.failure)}</figcaption></figure>"
+        )
+    return (
+        f'<figure class="card">{_media(outcome, out)}<figcaption>{name} '
+        f"({html.escape(outcome.scene.integrator)}, dt = {outcome.scene.dt * 1000:.4g} ms)<br>"
+        f"{html.escape(_key_numbers(outcome.row))}</figcaption></figure>"
+    )
 
 
 def _images(paths, out):
-    return "".join(f'<a href="{html.escape(_link(out, path))}"><img src="{html.escape(_link(out, path))}" '
-                   f'alt="{html.escape(name)}"></a>' for name, path in paths.items())
+    return "".join(
+        f'<a href="{html.escape(_link(out, path))}"><img src="{html.escape(_link(out, path))}" '
+        f'alt="{html.escape(name)}"></a>'
+        for name, path in paths.items()
+    )
 
 
 def _method_details(outcome, out):
     if not outcome.run:
         return ""
     plots = {name: outcome.files[f"plot {name}"] for name in PLOTS if f"plot {name}" in outcome.files}
-    links = " · ".join(f'<a href="{html.escape(_link(out, path))}">{html.escape(name)}</a>'
-                       for name, path in outcome.files.items())
-    return (f"<details><summary>{html.escape(outcome.method)}</summary>"
-            f"<p>{links}</p><div class=\"plots\">{_images(plots, out)}</div></details>")
+    links = " · ".join(
+        f'<a href="{html.escape(_link(out, path))}">{html.escape(name)}</a>' for name, path in outcome.files.items()
+    )
+    return (
+        f"<details><summary>{html.escape(outcome.method)}</summary>"
+        f'<p>{links}</p><div class="plots">{_images(plots, out)}</div></details>'
+    )
 
 
 def html_text(scene, outcomes, summary_text, table, plot_paths, out) -> str:
     """report.html: what report.md holds, with each method's video in a card, its plots folded
     away, and the style and script of report.css and report.js inlined."""
-    check_items = "".join(f"<li><b>{html.escape(quantity)}</b> ({html.escape(unit)}): {html.escape(text)}</li>"
-                          for quantity, unit, text in _check_lines(outcomes))
+    check_items = "".join(
+        f"<li><b>{html.escape(quantity)}</b> ({html.escape(unit)}): {html.escape(text)}</li>"
+        for quantity, unit, text in _check_lines(outcomes)
+    )
     title = f"{scene.name}: the methods compared"
     parts = [
-        "<!doctype html>", '<html lang="en"><head><meta charset="utf-8">',
+        "<!doctype html>",
+        '<html lang="en"><head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         f"<title>{html.escape(title)}</title><style>\n{_asset('report.css')}</style></head>",
         '<body data-status="pending">',
@@ -403,18 +492,26 @@ def html_text(scene, outcomes, summary_text, table, plot_paths, out) -> str:
         f'<p class="description">{html.escape(scene.description)}</p>',
         f'<p class="summary">{html.escape(summary_text)}</p>',
         '<section class="videos">' + "".join(_card(outcome, out) for outcome in outcomes) + "</section>",
-        "<h2>Numbers</h2>", f'<div class="scroll">{_html_table(*table)}</div>',
+        "<h2>Numbers</h2>",
+        f'<div class="scroll">{_html_table(*table)}</div>',
         '<details class="notes"><summary>What the columns mean</summary><dl>'
         + "".join(f"<dt>{html.escape(heading)}</dt><dd>{html.escape(meaning)}</dd>" for heading, meaning in _meanings())
         + "</dl></details>",
     ]
     if check_items:
         parts += ["<h2>Expectations and closed-form checks</h2>", f"<ul>{check_items}</ul>"]
-    parts += ["<h2>Comparison plots</h2>", f'<div class="plots">{_images(plot_paths, out)}</div>',
-              "<h2>Each method</h2>", *(_method_details(outcome, out) for outcome in outcomes),
-              '<h2>Notes</h2><ul class="notes">'
-              + "".join(f"<li>{html.escape(note)}</li>" for note in _notes(outcomes)) + "</ul>",
-              f"<script>\n{_asset('report.js')}</script>", "</body></html>", ""]
+    parts += [
+        "<h2>Comparison plots</h2>",
+        f'<div class="plots">{_images(plot_paths, out)}</div>',
+        "<h2>Each method</h2>",
+        *(_method_details(outcome, out) for outcome in outcomes),
+        '<h2>Notes</h2><ul class="notes">'
+        + "".join(f"<li>{html.escape(note)}</li>" for note in _notes(outcomes))
+        + "</ul>",
+        f"<script>\n{_asset('report.js')}</script>",
+        "</body></html>",
+        "",
+    ]
     return "\n".join(parts)
 
 

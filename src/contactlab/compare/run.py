@@ -26,7 +26,7 @@ from ..store import open_trajectory
 from . import report
 from .measures import fill_rows
 
-PARALLEL_WORK = 200_000     # steps × (bodies + particles) of all runs from which they go to a local cluster
+PARALLEL_WORK = 200_000  # steps × (bodies + particles) of all runs from which they go to a local cluster
 
 
 @dataclass
@@ -40,6 +40,7 @@ class Comparison:
     they do not support the scene (name → why); checks: method → its closed-form checks
     (contactlab.closed_form.Check); files: method → {name: path} of what it wrote.
     """
+
     rows: list
     out: str
     report_html: str
@@ -51,8 +52,9 @@ class Comparison:
     checks: dict = field(default_factory=dict)
     files: dict = field(default_factory=dict)
 
-    def _repr_html_(self):              # Jupyter (contactlab.notebook): the table and the report's link
+    def _repr_html_(self):  # Jupyter (contactlab.notebook): the table and the report's link
         from ..notebook import comparison_html
+
         return comparison_html(self)
 
 
@@ -60,20 +62,22 @@ class Comparison:
 class _Outcome:
     """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message),
     set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
+
     method: str
     scene: object
     run: object = None
     failure: str = None
-    failed_run: object = None    # the Run up to the blow-up (its trajectory streamed to disk)
-    failed_at: float = None      # s, simulated time of the blow-up when the message says it
+    failed_run: object = None  # the Run up to the blow-up (its trajectory streamed to disk)
+    failed_at: float = None  # s, simulated time of the blow-up when the message says it
     warnings: list = field(default_factory=list)
-    media: dict = field(default_factory=dict)        # the video, GIF and still drawn of it
+    media: dict = field(default_factory=dict)  # the video, GIF and still drawn of it
     checks: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
     row: dict = field(default_factory=dict)
 
 
 # ---- choosing and running the methods ----------------------------------------------------------
+
 
 def _method_names(methods):
     """(names, named): the methods to compare, and whether the caller named them."""
@@ -107,25 +111,39 @@ def run_method(job) -> dict:
     ``failure``, ``failed_at`` [s] for a run a health check stopped, or ``media`` (name -> path)
     for a rendered one; ``input_error`` [field, message] for a scene the method refuses."""
     from ..render import render
+
     result = {"warnings": []}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             scene = load_scene(job["scene"], job["overrides"])
-            run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                           scene.options[scene.method], scene.integrator,
-                           progress=job["progress"], scene_name=scene.name, allow_divergence=job["allow_divergence"],
-                           trajectory=job["trajectory"])
+            run = simulate(
+                scene.model,
+                scene.method,
+                scene.dt,
+                scene.duration,
+                scene.options[scene.method],
+                scene.integrator,
+                progress=job["progress"],
+                scene_name=scene.name,
+                allow_divergence=job["allow_divergence"],
+                trajectory=job["trajectory"],
+            )
             result["summary"] = run.summary
         except SimulationDiverged as error:
             result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
         except InputError as error:
             return {"input_error": [error.field, error.message], "warnings": []}
-    result["summary"]["source"] = scene.origin(job["overrides"])     # how to load the scene again (the viewer)
+    result["summary"]["source"] = scene.origin(job["overrides"])  # how to load the scene again (the viewer)
     result["warnings"] = [(warning.category, str(warning.message)) for warning in caught]
     if job["video"] is not None and "failure" not in result:
-        result["media"] = render(open_trajectory(job["trajectory"]), os.path.dirname(job["trajectory"]),
-                                 fps=job["video"], title=f"{scene.name} — {scene.method}", progress=job["progress"])
+        result["media"] = render(
+            open_trajectory(job["trajectory"]),
+            os.path.dirname(job["trajectory"]),
+            fps=job["video"],
+            title=f"{scene.name} — {scene.method}",
+            progress=job["progress"],
+        )
     return result
 
 
@@ -140,13 +158,16 @@ def _parallel(workers, scheduler, scenes, video) -> bool:
         return workers > 1
     if len(scenes) < 2:
         return False
-    work = sum(max(1, round(scene.duration / scene.dt)) * (scene.model.body_count + scene.model.particle_count)
-               for scene in scenes.values())
+    work = sum(
+        max(1, round(scene.duration / scene.dt)) * (scene.model.body_count + scene.model.particle_count)
+        for scene in scenes.values()
+    )
     return (video or work >= PARALLEL_WORK) and cluster.default_workers() > 1
 
 
-def _run_all(scene_source, names, named, overrides, progress, allow_divergence, out, created, video,
-             workers=None, scheduler=None):
+def _run_all(
+    scene_source, names, named, overrides, progress, allow_divergence, out, created, video, workers=None, scheduler=None
+):
     """Load the scene for every method, then run it with each, streaming each trajectory to
     out/<method>/trajectory.h5 and rendering it (``video``: fps, or None), one after another
     or on a Dask cluster (:func:`_parallel`); folders and files noted in ``created``.
@@ -161,13 +182,22 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence, 
             skipped[name] = "not supported"
             continue
         created.folder(os.path.join(out, name))
-        jobs.append((name, {**scene.origin([*overrides, f"simulation.method={name}"]),
-                            "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)), "video": video,
-                            "allow_divergence": allow_divergence, "progress": progress}))
+        jobs.append(
+            (
+                name,
+                {
+                    **scene.origin([*overrides, f"simulation.method={name}"]),
+                    "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)),
+                    "video": video,
+                    "allow_divergence": allow_divergence,
+                    "progress": progress,
+                },
+            )
+        )
     if _parallel(workers, scheduler, scenes, video is not None):
         with cluster.connect(scheduler, workers) as client:
             for job in jobs:
-                job[1]["progress"] = False               # the bar is over the methods
+                job[1]["progress"] = False  # the bar is over the methods
             results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
     else:
         results = {name: run_method(job) for name, job in jobs}
@@ -184,13 +214,14 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence, 
                 raise error
             skipped[name] = str(error)
             first_error = first_error or error
-            remove_empty([os.path.join(out, name)])     # its folder, empty: the method left nothing
+            remove_empty([os.path.join(out, name)])  # its folder, empty: the method left nothing
             continue
         trajectory = os.path.join(out, name, TRAJECTORY)
         created.add(trajectory, *result.get("media", {}).values())
         run = Run(None, open_trajectory(trajectory), result["summary"])
-        outcome = _Outcome(name, scenes[name], warnings=[message for _, message in result["warnings"]],
-                           media=result.get("media", {}))
+        outcome = _Outcome(
+            name, scenes[name], warnings=[message for _, message in result["warnings"]], media=result.get("media", {})
+        )
         if "failure" in result:
             outcome.failure, outcome.failed_at, outcome.failed_run = result["failure"], result["failed_at"], run
         else:
@@ -202,6 +233,7 @@ def _run_all(scene_source, names, named, overrides, progress, allow_divergence, 
 
 
 # ---- writing ----------------------------------------------------------------------------------
+
 
 class _Created:
     """Files and folders one compare() call wrote, so a failure can remove them again."""
@@ -223,8 +255,8 @@ class _Created:
         return path
 
     def remove(self):
-        undo_written(self.files)                              # an interrupted compare says it wrote nothing
-        for folder in self.folders:                           # what a stopped worker was writing
+        undo_written(self.files)  # an interrupted compare says it wrote nothing
+        for folder in self.folders:  # what a stopped worker was writing
             for name in os.listdir(folder) if os.path.isdir(folder) else ():
                 if name.startswith(".partial-"):
                     os.unlink(os.path.join(folder, name))
@@ -236,6 +268,7 @@ def _video_fps(video, fps):
     if not video:
         return None
     from ..render import check_settings
+
     return check_settings(fps)[0]
 
 
@@ -259,8 +292,20 @@ def _write_method(outcome, out, created):
     outcome.files = files
 
 
-def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None, video=True,
-            progress=False, fps=30, allow_divergence=False, workers=None, scheduler=None) -> Comparison:
+def compare(
+    scene_source,
+    methods=None,
+    out=None,
+    *,
+    overrides=(),
+    duration=None,
+    video=True,
+    progress=False,
+    fps=30,
+    allow_divergence=False,
+    workers=None,
+    scheduler=None,
+) -> Comparison:
     """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
     the comparison into ``out`` (default ``out/<scene>-compare/``).
 
@@ -277,11 +322,12 @@ def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None
     """
     names, named = _method_names(methods)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
-    video = _video_fps(video, fps)                   # a missing renderer or a bad fps fails before the runs
+    video = _video_fps(video, fps)  # a missing renderer or a bad fps fails before the runs
     created = _Created()
     try:
-        outcomes, skipped, out = _run_all(scene_source, names, named, overrides, progress, allow_divergence,
-                                          out, created, video, workers, scheduler)
+        outcomes, skipped, out = _run_all(
+            scene_source, names, named, overrides, progress, allow_divergence, out, created, video, workers, scheduler
+        )
         scene = outcomes[0].scene
         fill_rows(outcomes)
         summary_text = report.paragraph(scene, outcomes, skipped)
@@ -296,14 +342,24 @@ def compare(scene_source, methods=None, out=None, *, overrides=(), duration=None
         rows = [outcome.row for outcome in outcomes]
         table = report.table_cells(outcomes)
         csv_path = created.text(os.path.join(out, "comparison.csv"), report.csv_text(rows))
-        md_path = created.text(os.path.join(out, "report.md"),
-                               report.markdown_text(scene, outcomes, summary_text, table, plot_paths, out))
-        html_path = created.text(os.path.join(out, "report.html"),
-                                 report.html_text(scene, outcomes, summary_text, table, plot_paths, out))
+        md_path = created.text(
+            os.path.join(out, "report.md"), report.markdown_text(scene, outcomes, summary_text, table, plot_paths, out)
+        )
+        html_path = created.text(
+            os.path.join(out, "report.html"), report.html_text(scene, outcomes, summary_text, table, plot_paths, out)
+        )
     except BaseException:
         created.remove()
         raise
-    return Comparison(rows=rows, out=out, report_html=html_path, report_md=md_path, csv=csv_path,
-                      summary_text=summary_text, scene=scene.name, skipped=skipped,
-                      checks={outcome.method: outcome.checks for outcome in outcomes},
-                      files={outcome.method: outcome.files for outcome in outcomes})
+    return Comparison(
+        rows=rows,
+        out=out,
+        report_html=html_path,
+        report_md=md_path,
+        csv=csv_path,
+        summary_text=summary_text,
+        scene=scene.name,
+        skipped=skipped,
+        checks={outcome.method: outcome.checks for outcome in outcomes},
+        files={outcome.method: outcome.files for outcome in outcomes},
+    )

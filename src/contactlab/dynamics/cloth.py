@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-TINY_LENGTH = 1e-12     # m: a spring shorter than this has no direction; its axis is taken as zero
+TINY_LENGTH = 1e-12  # m: a spring shorter than this has no direction; its axis is taken as zero
 
 
 def _axes(model, particle_position):
@@ -47,9 +47,10 @@ def _axes(model, particle_position):
 def _gather(index_i, index_j, force_on_i, count):
     """Sum per-spring forces (S, 3) on i and their opposites on j into (count, 3)."""
     total = np.empty((count, 3))
-    for axis in range(3):      # three bincounts: vectorized over the springs
-        total[:, axis] = (np.bincount(index_i, force_on_i[:, axis], minlength=count)
-                          - np.bincount(index_j, force_on_i[:, axis], minlength=count))
+    for axis in range(3):  # three bincounts: vectorized over the springs
+        total[:, axis] = np.bincount(index_i, force_on_i[:, axis], minlength=count) - np.bincount(
+            index_j, force_on_i[:, axis], minlength=count
+        )
     return total
 
 
@@ -59,8 +60,7 @@ def spring_tensions(model, particle_position, particle_velocity=None):
     i, j, _, length, u = _axes(model, particle_position)
     tension = model.spring_stiffness * (length - model.spring_rest_length)
     if particle_velocity is not None:
-        tension = tension + model.spring_damping * np.einsum(
-            "si,si->s", particle_velocity[j] - particle_velocity[i], u)
+        tension = tension + model.spring_damping * np.einsum("si,si->s", particle_velocity[j] - particle_velocity[i], u)
     return tension
 
 
@@ -80,11 +80,12 @@ class SpringPattern:
     """Where each spring's four 3×3 blocks sit in a CSR matrix (3P, 3P) that also holds the whole
     diagonal: the sparsity of K, D and the backward Euler matrix, fixed by the cloth's topology,
     so a step fills the values and never sorts indices. nnz entries."""
-    indptr: np.ndarray      # (3P + 1,) int64
-    indices: np.ndarray     # (nnz,) int64, column of each entry, sorted within a row
-    rows: np.ndarray        # (nnz,) int64, row of each entry
-    slots: np.ndarray       # (S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)
-    diagonal: np.ndarray    # (3P,) int64, entry of each diagonal element
+
+    indptr: np.ndarray  # (3P + 1,) int64
+    indices: np.ndarray  # (nnz,) int64, column of each entry, sorted within a row
+    rows: np.ndarray  # (nnz,) int64, row of each entry
+    slots: np.ndarray  # (S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)
+    diagonal: np.ndarray  # (3P,) int64, entry of each diagonal element
 
     def values(self, blocks):
         """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on
@@ -94,7 +95,8 @@ class SpringPattern:
 
     def matrix(self, values):
         """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
-        import scipy.sparse as sp           # SciPy on first use: it is a tenth of `import contactlab`
+        import scipy.sparse as sp  # SciPy on first use: it is a tenth of `import contactlab`
+
         n = len(self.indptr) - 1
         return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
 
@@ -110,8 +112,8 @@ def spring_pattern(spring_particles, count) -> SpringPattern:
     unique, entry = np.unique(keys, return_inverse=True)
     rows = unique // n
     indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-    slots = entry[:keys.size - n].reshape(len(i), 4, 3, 3)
-    return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n:])
+    slots = entry[: keys.size - n].reshape(len(i), 4, 3, 3)
+    return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n :])
 
 
 def jacobian_blocks(model, particle_position, clamp_compressed=False):
@@ -119,7 +121,7 @@ def jacobian_blocks(model, particle_position, clamp_compressed=False):
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
     _, _, _, length, u = _axes(model, particle_position)
     k, rest = model.spring_stiffness, model.spring_rest_length
-    outer = u[:, :, None] * u[:, None, :]                               # (S, 3, 3) u uᵀ
+    outer = u[:, :, None] * u[:, None, :]  # (S, 3, 3) u uᵀ
     with np.errstate(divide="ignore", invalid="ignore"):
         transverse = np.where(length > TINY_LENGTH, 1.0 - rest / length, 0.0)
     if clamp_compressed:
@@ -150,6 +152,7 @@ def spring_jacobians(model, particle_position, particle_velocity=None, clamp_com
     count = len(particle_position)
     if model.spring_count == 0:
         import scipy.sparse as sp
+
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
     stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)

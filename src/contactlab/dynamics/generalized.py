@@ -22,8 +22,9 @@ def dof_count(model) -> int:
 
 def stack(body_velocity, body_angular_velocity, particle_velocity):
     """v (N,) from body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)."""
-    return stacked(*(np.ascontiguousarray(a, dtype=float) for a in (body_velocity, body_angular_velocity,
-                                                                    particle_velocity)))
+    return stacked(
+        *(np.ascontiguousarray(a, dtype=float) for a in (body_velocity, body_angular_velocity, particle_velocity))
+    )
 
 
 def unstack(v, body_count):
@@ -44,8 +45,8 @@ def unstacked(v, body_count):
     """``unstack``, compiled (the compiled steps call it too): copies (B, 3), (B, 3), (P, 3) of a
     C-contiguous v (N,)."""
     B = body_count
-    bodies = v[:6 * B].reshape(B, 6)
-    return bodies[:, :3].copy(), bodies[:, 3:].copy(), v[6 * B:].reshape(-1, 3).copy()
+    bodies = v[: 6 * B].reshape(B, 6)
+    return bodies[:, :3].copy(), bodies[:, 3:].copy(), v[6 * B :].reshape(-1, 3).copy()
 
 
 def _block_diagonal(body_linear, body_angular, particle):
@@ -58,9 +59,12 @@ def _block_diagonal(body_linear, body_angular, particle):
     cols = (6 * np.arange(B)[:, None, None] + np.arange(6)[None, None, :]).repeat(6, axis=1)
     diagonal = 6 * B + np.arange(3 * P)
     return sp.csr_matrix(
-        (np.concatenate([blocks.ravel(), np.repeat(particle, 3)]),
-         (np.concatenate([rows.ravel(), diagonal]), np.concatenate([cols.ravel(), diagonal]))),
-        shape=(6 * B + 3 * P, 6 * B + 3 * P))
+        (
+            np.concatenate([blocks.ravel(), np.repeat(particle, 3)]),
+            (np.concatenate([rows.ravel(), diagonal]), np.concatenate([cols.ravel(), diagonal])),
+        ),
+        shape=(6 * B + 3 * P, 6 * B + 3 * P),
+    )
 
 
 def mass_matrix(model, body_orientation):
@@ -72,8 +76,9 @@ def mass_matrix(model, body_orientation):
 def inverse_mass_matrix(model, body_orientation):
     """M⁻¹ (N, N) CSR [1/kg, 1/(kg m²)] at the given orientations (B, 4)."""
     R = rotations.to_matrix(body_orientation)
-    return _block_diagonal(model.body_inverse_mass, rotations.world_inertia(R, model.body_inverse_inertia),
-                           model.particle_inverse_mass)
+    return _block_diagonal(
+        model.body_inverse_mass, rotations.world_inertia(R, model.body_inverse_inertia), model.particle_inverse_mass
+    )
 
 
 def implicit_base(model, state, dt, v_free, cloth_implicit=True):
@@ -83,19 +88,20 @@ def implicit_base(model, state, dt, v_free, cloth_implicit=True):
     cloth's linearized springs, A_p = M − h D − h² K and A_p v⁺ = A_p v + h (f + h K v) (see
     dynamics.integrators.particle_system), so contact springs added to A₀ are solved together
     with the cloth's own; with ``cloth_implicit`` False (the cloth stepped explicitly, its
-    springs already in v*) M v⁺ = M v* for particles too. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs that move —
+    springs already in v*) M v⁺ = M v* for particles too. Returns (A₀ CSR (N, N), b₀ (N,), free (N,) bool: the DOFs
+    that move —
     a pinned vertex's and a kinematic body's do not).
     """
     B = model.body_count
     M = mass_matrix(model, state.body_orientation)
-    bodies = M[:6 * B, :6 * B]
+    bodies = M[: 6 * B, : 6 * B]
     if model.spring_count and cloth_implicit:
         system = particle_system(model, state, dt)
         particles = system.matrix
         b_particles = particles @ state.particle_velocity.ravel() + system.rhs
     else:
-        particles = M[6 * B:, 6 * B:]
-        b_particles = particles @ v_free[6 * B:]
+        particles = M[6 * B :, 6 * B :]
+        b_particles = particles @ v_free[6 * B :]
     A0 = sp.block_diag([bodies, particles], format="csr")
     free = np.concatenate([np.repeat(~model.body_kinematic, 6), np.repeat(~model.particle_pinned, 3)])
-    return A0, np.concatenate([bodies @ v_free[:6 * B], b_particles]), free
+    return A0, np.concatenate([bodies @ v_free[: 6 * B], b_particles]), free

@@ -54,8 +54,13 @@ def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=
     spinning &= np.any(angular_velocity != 0.0, axis=1)
     if not spinning.any():
         return angular_velocity.copy()
-    return gyroscopic_midpoint(rotations.to_matrix(orientation), np.ascontiguousarray(inertia_all, dtype=float),
-                               np.ascontiguousarray(angular_velocity, dtype=float), float(dt), newton_steps)
+    return gyroscopic_midpoint(
+        rotations.to_matrix(orientation),
+        np.ascontiguousarray(inertia_all, dtype=float),
+        np.ascontiguousarray(angular_velocity, dtype=float),
+        float(dt),
+        newton_steps,
+    )
 
 
 @njit(cache=True)
@@ -70,24 +75,39 @@ def gyroscopic_midpoint(rotation, inertia, angular_velocity, dt, newton_steps):
     for b in range(rotation.shape[0]):
         mean = (inertia[b, 0] + inertia[b, 1] + inertia[b, 2]) / 3.0
         spread = max(abs(inertia[b, 0] - mean), abs(inertia[b, 1] - mean), abs(inertia[b, 2] - mean))
-        if not spread > 0.0 or (angular_velocity[b, 0] == 0.0 and angular_velocity[b, 1] == 0.0
-                                and angular_velocity[b, 2] == 0.0):
+        if not spread > 0.0 or (
+            angular_velocity[b, 0] == 0.0 and angular_velocity[b, 1] == 0.0 and angular_velocity[b, 2] == 0.0
+        ):
             continue
         R, I = rotation[b], inertia[b]
         w1 = np.empty(3)
-        for i in range(3):          # body frame: Rᵀ ω
-            w1[i] = R[0, i] * angular_velocity[b, 0] + R[1, i] * angular_velocity[b, 1] + R[2, i] * angular_velocity[b, 2]
+        for i in range(3):  # body frame: Rᵀ ω
+            w1[i] = (
+                R[0, i] * angular_velocity[b, 0] + R[1, i] * angular_velocity[b, 1] + R[2, i] * angular_velocity[b, 2]
+            )
         w2 = w1.copy()
         for _ in range(newton_steps):
             m0, m1, m2 = 0.5 * (w1[0] + w2[0]), 0.5 * (w1[1] + w2[1]), 0.5 * (w1[2] + w2[2])
-            l0, l1, l2 = I[0] * m0, I[1] * m1, I[2] * m2                  # I ω̄
+            l0, l1, l2 = I[0] * m0, I[1] * m1, I[2] * m2  # I ω̄
             residual[0] = I[0] * (w2[0] - w1[0]) + dt * (m1 * l2 - m2 * l1)
             residual[1] = I[1] * (w2[1] - w1[1]) + dt * (m2 * l0 - m0 * l2)
             residual[2] = I[2] * (w2[2] - w1[2]) + dt * (m0 * l1 - m1 * l0)
             # ∂/∂ω₂ = I + ½ h ([ω̄]× I − [I ω̄]×)
-            jacobian[0, 0], jacobian[0, 1], jacobian[0, 2] = I[0], 0.5 * dt * (-m2 * I[1] + l2), 0.5 * dt * (m1 * I[2] - l1)
-            jacobian[1, 0], jacobian[1, 1], jacobian[1, 2] = 0.5 * dt * (m2 * I[0] - l2), I[1], 0.5 * dt * (-m0 * I[2] + l0)
-            jacobian[2, 0], jacobian[2, 1], jacobian[2, 2] = 0.5 * dt * (-m1 * I[0] + l1), 0.5 * dt * (m0 * I[1] - l0), I[2]
+            jacobian[0, 0], jacobian[0, 1], jacobian[0, 2] = (
+                I[0],
+                0.5 * dt * (-m2 * I[1] + l2),
+                0.5 * dt * (m1 * I[2] - l1),
+            )
+            jacobian[1, 0], jacobian[1, 1], jacobian[1, 2] = (
+                0.5 * dt * (m2 * I[0] - l2),
+                I[1],
+                0.5 * dt * (-m0 * I[2] + l0),
+            )
+            jacobian[2, 0], jacobian[2, 1], jacobian[2, 2] = (
+                0.5 * dt * (-m1 * I[0] + l1),
+                0.5 * dt * (m0 * I[1] - l0),
+                I[2],
+            )
             step = _solve3(jacobian, residual)
             for i in range(3):
                 w2[i] -= step[i]
@@ -145,6 +165,7 @@ class ParticleSystem:
     coupled: (P,) bool, the particles that need the linear solve (in a spring, not pinned);
     for the others A is m I and Δv = h f / m directly.
     """
+
     matrix: object
     rhs: np.ndarray
     coupled: np.ndarray
@@ -166,11 +187,11 @@ def particle_system(model, state, dt, particle_force=None, clamp_compressed=True
         force = force + particle_force
     stiffness, damping = jacobian_blocks(model, x, clamp_compressed)
     pattern = model.spring_pattern
-    values = pattern.values(-h * damping - h * h * stiffness)          # − h D − h² K
-    values[pattern.diagonal] += np.repeat(model.particle_mass, 3)       # + M
+    values = pattern.values(-h * damping - h * h * stiffness)  # − h D − h² K
+    values[pattern.diagonal] += np.repeat(model.particle_mass, 3)  # + M
     free = np.repeat(~model.particle_pinned, 3)
-    values[~(free[pattern.rows] & free[pattern.indices])] = 0.0         # a pinned DOF's row and column
-    values[pattern.diagonal[~free]] = 1.0                               # hold it: 1 · Δv = 0
+    values[~(free[pattern.rows] & free[pattern.indices])] = 0.0  # a pinned DOF's row and column
+    values[pattern.diagonal[~free]] = 1.0  # hold it: 1 · Δv = 0
     rhs = np.where(free, h * (force + h * block_product(model, stiffness, v)).ravel(), 0.0)
     coupled = np.zeros(P, dtype=bool)
     coupled[model.spring_particles.ravel()] = True
@@ -184,10 +205,12 @@ def factor_symmetric(matrix):
     that ordering (a positive definite matrix needs no row exchanges). The default threshold
     pivoting breaks the symmetric ordering: on a draped 64 × 64 cloth its factor was 20x denser
     and took 30 s, against 0.17 s (and 5 ms a solve) this way."""
-    import scipy.sparse as sp               # SciPy on first use: it is a tenth of `import contactlab`
+    import scipy.sparse as sp  # SciPy on first use: it is a tenth of `import contactlab`
     import scipy.sparse.linalg as spla
-    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                     options={"SymmetricMode": True})
+
+    return spla.splu(
+        sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
 
 
 def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
@@ -198,7 +221,7 @@ def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
     (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
     ``particle_system`` and not used."""
     A, rhs = system.matrix, system.rhs
-    delta = rhs / A.diagonal()                       # exact for the uncoupled rows (A = m I there)
+    delta = rhs / A.diagonal()  # exact for the uncoupled rows (A = m I there)
     dofs = np.nonzero(np.repeat(system.coupled, 3))[0]
     if len(dofs):
         sub = A[dofs][:, dofs].tocsr()
@@ -206,19 +229,29 @@ def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
         solution, info = None, 1
         if solver == "cg":
             import scipy.sparse.linalg as spla
+
             inverse_diagonal = 1.0 / sub.diagonal()
             preconditioner = spla.LinearOperator(sub.shape, matvec=lambda r: r * inverse_diagonal)
-            solution, info = spla.cg(sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0,
-                                     maxiter=max(100, len(dofs)), M=preconditioner)
+            solution, info = spla.cg(
+                sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0, maxiter=max(100, len(dofs)), M=preconditioner
+            )
         if info != 0:
             solution = factor_symmetric(sub).solve(b)
         delta[dofs] = solution
     return delta.reshape(-1, 3)
 
 
-def free_velocities(model, state, dt, integrator="symplectic_euler",
-                    body_force=None, body_torque=None, particle_force=None, linear_solver="cg",
-                    linear_tolerance=1e-6):
+def free_velocities(
+    model,
+    state,
+    dt,
+    integrator="symplectic_euler",
+    body_force=None,
+    body_torque=None,
+    particle_force=None,
+    linear_solver="cg",
+    linear_tolerance=1e-6,
+):
     """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
 
     body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
@@ -231,8 +264,9 @@ def free_velocities(model, state, dt, integrator="symplectic_euler",
     g = model.gravity
     if model.spring_count and integrator == "backward_euler":
         system = particle_system(model, state, dt, particle_force)
-        particle_velocity = state.particle_velocity + solve_particle_system(system, model, linear_tolerance,
-                                                                            linear_solver)
+        particle_velocity = state.particle_velocity + solve_particle_system(
+            system, model, linear_tolerance, linear_solver
+        )
     else:
         particle_velocity = state.particle_velocity + dt * g
         if particle_force is not None:
@@ -270,13 +304,22 @@ def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_f
         inv = world_inverse_inertia(model, state.body_orientation)
         angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
     if drive is not None and drive.kinematic.any():
-        bodies, body_velocity[bodies], angular[bodies] = drive.path_velocities(state.body_position,
-                                                                              state.body_orientation, state.time, dt)
+        bodies, body_velocity[bodies], angular[bodies] = drive.path_velocities(
+            state.body_position, state.body_orientation, state.time, dt
+        )
     return body_velocity, angular
 
 
-def advance_positions(body_position, body_orientation, particle_position,
-                      body_velocity, body_angular_velocity, particle_velocity, body_dt, particle_dt):
+def advance_positions(
+    body_position,
+    body_orientation,
+    particle_position,
+    body_velocity,
+    body_angular_velocity,
+    particle_velocity,
+    body_dt,
+    particle_dt,
+):
     """Positions and orientations moved at constant velocities for a time step.
 
     body_dt: scalar or (B,) [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the
@@ -285,14 +328,34 @@ def advance_positions(body_position, body_orientation, particle_position,
     """
     body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(body_position),)).copy()
     particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(particle_position),)).copy()
-    return moved(*(np.ascontiguousarray(a, dtype=float) for a in (
-        body_position, body_orientation, particle_position, body_velocity, body_angular_velocity,
-        particle_velocity)), body_dt, particle_dt)
+    return moved(
+        *(
+            np.ascontiguousarray(a, dtype=float)
+            for a in (
+                body_position,
+                body_orientation,
+                particle_position,
+                body_velocity,
+                body_angular_velocity,
+                particle_velocity,
+            )
+        ),
+        body_dt,
+        particle_dt,
+    )
 
 
 @njit(cache=True)
-def moved(body_position, body_orientation, particle_position, body_velocity, body_angular_velocity,
-          particle_velocity, body_dt, particle_dt):
+def moved(
+    body_position,
+    body_orientation,
+    particle_position,
+    body_velocity,
+    body_angular_velocity,
+    particle_velocity,
+    body_dt,
+    particle_dt,
+):
     """``advance_positions``, compiled, with body_dt (B,) and particle_dt (P,) [s]: x + Δt v, and
     the orientations turned by Δt ω (``rotations.integrate``)."""
     position = np.empty_like(body_position)

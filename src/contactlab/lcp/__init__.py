@@ -20,6 +20,15 @@ from .friction import FrictionResult, natural_map_error, solve_friction_contact
 from .solve import LCP_METHODS, LCPResult, solve_lcp
 
 __all__ = [
-    "LCPResult", "LCP_METHODS", "solve_lcp", "color_rows", "color_contacts", "coloring_is_valid",
-    "FrictionResult", "solve_friction_contact", "natural_map_error", "FrictionProblem", "read_problem",
+    "LCPResult",
+    "LCP_METHODS",
+    "solve_lcp",
+    "color_rows",
+    "color_contacts",
+    "coloring_is_valid",
+    "FrictionResult",
+    "solve_friction_contact",
+    "natural_map_error",
+    "FrictionProblem",
+    "read_problem",
 ]

@@ -22,7 +22,9 @@ def square_csr(matrix, field: str) -> sp.csr_matrix:
         try:
             dense = np.asarray(matrix, dtype=np.float64)
         except (TypeError, ValueError) as exc:
-            raise InputError(field, f"expected a square matrix of numbers, got {type(matrix).__name__} ({exc}).")
+            raise InputError(
+                field, f"expected a square matrix of numbers, got {type(matrix).__name__} ({exc})."
+            ) from None
         if dense.ndim != 2:
             raise InputError(field, f"expected a square 2-D matrix, got an array of shape {dense.shape}.")
         csr = sp.csr_matrix(dense)
@@ -40,7 +42,7 @@ def vector(values, n: int, field: str) -> np.ndarray:
     try:
         out = np.array(values, dtype=np.float64, copy=True)
     except (TypeError, ValueError) as exc:
-        raise InputError(field, f"expected a vector of {n} numbers ({exc}).")
+        raise InputError(field, f"expected a vector of {n} numbers ({exc}).") from None
     if out.ndim != 1 or out.shape[0] != n:
         raise InputError(field, f"expected a vector of length {n}, got shape {out.shape}.")
     if not np.all(np.isfinite(out)):
@@ -50,8 +52,13 @@ def vector(values, n: int, field: str) -> np.ndarray:
 
 def positive_float(value, field: str, zero: bool = False) -> float:
     """``value`` as a finite float > 0 (≥ 0 with ``zero``); InputError naming ``field`` otherwise."""
-    if (isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value)
-            or value < 0 or (value == 0 and not zero)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Real)
+        or not np.isfinite(value)
+        or value < 0
+        or (value == 0 and not zero)
+    ):
         wanted = "a finite number ≥ 0" if zero else "a positive finite number"
         raise InputError(field, f"expected {wanted}, got {value!r}.")
     return float(value)

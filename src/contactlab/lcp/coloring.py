@@ -89,7 +89,7 @@ def color_contacts(index_lists, n_dofs: int | None = None) -> np.ndarray:
         try:
             dof_array = np.asarray(list(dofs), dtype=np.int64).ravel()
         except (TypeError, ValueError):
-            raise InputError(f"index_lists[{row}]", "expected a sequence of non-negative integers.")
+            raise InputError(f"index_lists[{row}]", "expected a sequence of non-negative integers.") from None
         if dof_array.size and dof_array.min() < 0:
             raise InputError(f"index_lists[{row}]", "expected non-negative integers, found a negative index.")
         rows.append(np.full(dof_array.size, row, dtype=np.int64))

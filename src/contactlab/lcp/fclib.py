@@ -105,7 +105,7 @@ def _read_hdf5(path):
     try:
         handle = h5py.File(path, "r")
     except OSError as exc:
-        raise _Bad(f"not a readable HDF5 file ({exc})")
+        raise _Bad(f"not a readable HDF5 file ({exc})") from None
     with handle:
         try:
             if "fclib_local" in handle:
@@ -128,7 +128,7 @@ def _read_hdf5(path):
                 W, q = _reduce_global(M, H, f, w)
                 return W, q, mu, "fclib_global"
         except KeyError as exc:
-            raise _Bad(f"a required FCLIB entry is missing ({exc})")
+            raise _Bad(f"a required FCLIB entry is missing ({exc})") from None
         raise _Bad("it has neither an /fclib_local nor an /fclib_global group")
 
 
@@ -163,7 +163,7 @@ def _fclib_matrix(group, name):
         if nz == -2:  # compressed rows
             return sp.csr_matrix((x[: p[-1]], i[: p[-1]], p), shape=(rows, cols))
     except (ValueError, IndexError) as exc:
-        raise _Bad(f"matrix {name} is inconsistent ({exc})")
+        raise _Bad(f"matrix {name} is inconsistent ({exc})") from None
     raise _Bad(f"matrix {name} has an unknown storage code nz = {nz}")
 
 
@@ -175,7 +175,7 @@ def _reduce_global(M, H, f, w):
     try:
         lu = spla.splu(sp.csc_matrix(M))
     except RuntimeError as exc:
-        raise _Bad(f"the mass matrix M is singular ({exc})")
+        raise _Bad(f"the mass matrix M is singular ({exc})") from None
     Minv_H = lu.solve(H.toarray())
     Minv_f = lu.solve(f)
     W = H.T @ Minv_H
@@ -197,7 +197,7 @@ class _Tokens:
     def take(self, count, what):
         if self.at + count > len(self.words):
             raise _Bad(f"the file ends early, while reading {what}")
-        chunk = self.words[self.at:self.at + count]
+        chunk = self.words[self.at : self.at + count]
         self.at += count
         return chunk
 
@@ -205,7 +205,7 @@ class _Tokens:
         try:
             return np.array([int(t) for t in self.take(count, what)], dtype=np.int64)
         except ValueError:
-            raise _Bad(f"expected integers for {what}")
+            raise _Bad(f"expected integers for {what}") from None
 
     def int(self, what):
         return int(self.ints(1, what)[0])
@@ -214,7 +214,7 @@ class _Tokens:
         try:
             return np.array(self.take(count, what), dtype=np.float64)
         except ValueError:
-            raise _Bad(f"expected numbers for {what}")
+            raise _Bad(f"expected numbers for {what}") from None
 
 
 def _read_siconos_text(path):
@@ -222,7 +222,7 @@ def _read_siconos_text(path):
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError:
-        raise _Bad("it is neither HDF5 nor a Siconos text file (non-text bytes)")
+        raise _Bad("it is neither HDF5 nor a Siconos text file (non-text bytes)") from None
     tokens = _Tokens(text.split())
     dim = tokens.int("the dimension")
     if dim != 3:
@@ -259,8 +259,14 @@ def _sparse_block(tokens, size0, size1):
     filled1, filled2 = tokens.int("the block row pointer count"), tokens.int("the block count")
     row_pointers = tokens.ints(filled1, "the block row pointers")
     block_columns = tokens.ints(filled2, "the block column indices")
-    if (row_ends.size and row_ends[-1] != size0) or (col_ends.size and col_ends[-1] != size1) \
-            or filled2 != nblocks or filled1 < 1 or row_pointers[-1] != nblocks or filled1 - 1 > block_rows:
+    if (
+        (row_ends.size and row_ends[-1] != size0)
+        or (col_ends.size and col_ends[-1] != size1)
+        or filled2 != nblocks
+        or filled1 < 1
+        or row_pointers[-1] != nblocks
+        or filled1 - 1 > block_rows
+    ):
         raise _Bad("the sparse block structure is inconsistent with the matrix size")
     row_starts = np.concatenate(([0], row_ends[:-1]))
     col_starts = np.concatenate(([0], col_ends[:-1]))
@@ -280,5 +286,6 @@ def _sparse_block(tokens, size0, size1):
             all_values.append(values.ravel())
     if not all_values:
         return sp.csr_matrix((size0, size1))
-    return sp.coo_matrix((np.concatenate(all_values), (np.concatenate(all_rows), np.concatenate(all_cols))),
-                         shape=(size0, size1)).tocsr()
+    return sp.coo_matrix(
+        (np.concatenate(all_values), (np.concatenate(all_rows), np.concatenate(all_cols))), shape=(size0, size1)
+    ).tocsr()

@@ -56,7 +56,7 @@ from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
 
 FRICTION_METHODS = ("nsgs", "staggered", "apgd", "newton")
-OPERATOR_METHODS = ("apgd",)            # those that need W only as products W x
+OPERATOR_METHODS = ("apgd",)  # those that need W only as products W x
 FRICTION_MODELS = ("cone", "pyramid")
 _SQRT_HALF = math.sqrt(0.5)
 
@@ -421,8 +421,8 @@ def largest_eigenvalue(product, size, iterations=30, rtol=1e-3, start=None) -> f
     return max(estimate, norm)
 
 
-LIPSCHITZ_SAFETY = 1.2      # L = 1.2 × the power iteration's estimate, which approaches from below
-RESTART_RISE = 2.0          # apgd restarts its momentum when the error exceeds this × the phase's lowest
+LIPSCHITZ_SAFETY = 1.2  # L = 1.2 × the power iteration's estimate, which approaches from below
+RESTART_RISE = 2.0  # apgd restarts its momentum when the error exceeds this × the phase's lowest
 
 
 def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
@@ -454,7 +454,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         return best, best_W, 0, best_error
     step = 1.0 / lipschitz
     y, Wy, theta = r.copy(), Wr.copy(), 1.0
-    phase_lowest = math.inf                     # lowest error since the last restart
+    phase_lowest = math.inf  # lowest error since the last restart
     for iteration in range(1, max_iterations + 1):
         gradient = _de_saxce(Wy + q, mu)
         new = _project_cone(y - step * gradient, mu)
@@ -468,7 +468,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         next_theta = 0.5 * theta * (math.sqrt(theta * theta + 4.0) - theta)
         beta = theta * (1.0 - theta) / (theta * theta + next_theta)
         if gradient @ (new - r) > 0.0 or error > RESTART_RISE * phase_lowest:
-            beta, next_theta = 0.0, 1.0         # restart the momentum
+            beta, next_theta = 0.0, 1.0  # restart the momentum
             phase_lowest = error
         y = new + beta * (new - r)
         Wy = W_new + beta * (W_new - Wr)
@@ -476,8 +476,18 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     return best, best_W, max_iterations, best_error
 
 
-def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=1000, r0=None,
-                           friction_model="cone", lipschitz=None, warm_sweeps=0) -> FrictionResult:
+def solve_friction_contact(
+    W,
+    q,
+    mu,
+    method="nsgs",
+    tol=1e-6,
+    max_iterations=1000,
+    r0=None,
+    friction_model="cone",
+    lipschitz=None,
+    warm_sweeps=0,
+) -> FrictionResult:
     """Solve the 3D Coulomb friction problem ``u = W r + q``, ``r ∈ K_μ``, ``û ⊥ r`` (FCLIB local form).
 
     Parameters
@@ -511,8 +521,11 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
         raise InputError("friction_model", f"{method} solves the cone model; use nsgs or staggered for the pyramid.")
     operator = isinstance(W, spla.LinearOperator)
     if operator and method not in OPERATOR_METHODS:
-        raise InputError("W", f"{method} sweeps the rows of W, so it needs W as a matrix; "
-                              f"only {', '.join(OPERATOR_METHODS)} takes a LinearOperator.")
+        raise InputError(
+            "W",
+            f"{method} sweeps the rows of W, so it needs W as a matrix; "
+            f"only {', '.join(OPERATOR_METHODS)} takes a LinearOperator.",
+        )
     csr, q, mu = _check_problem(W, q, mu)
     tol = positive_float(tol, "tol")
     max_iterations = positive_int(max_iterations, "max_iterations")
@@ -525,15 +538,16 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
     if m == 0:
         iterations, error = 0, 0.0
     elif method == "apgd":
-        product = csr.dot                     # a sparse matrix's or a LinearOperator's W x
+        product = csr.dot  # a sparse matrix's or a LinearOperator's W x
         if lipschitz is None:
             lipschitz = LIPSCHITZ_SAFETY * largest_eigenvalue(product, m, start=r)
         lipschitz = positive_float(lipschitz, "lipschitz", zero=True)
-        if lipschitz == 0.0:      # W = 0 (say, only pinned points touch): reactions change nothing
+        if lipschitz == 0.0:  # W = 0 (say, only pinned points touch): reactions change nothing
             r[:] = 0.0
         r, Wr, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, lipschitz)
     elif method == "newton":
-        from .newton import solve_newton    # here, not at the top: newton.py builds on this module
+        from .newton import solve_newton  # here, not at the top: newton.py builds on this module
+
         r, iterations, error, restarts = solve_newton(csr, q, mu, r, tol, max_iterations, int(warm_sweeps))
     else:
         blocks = _diagonal_blocks(csr, nc)
@@ -542,15 +556,15 @@ def solve_friction_contact(W, q, mu, method="nsgs", tol=1e-6, max_iterations=100
         if method == "nsgs":
             iterations, error = _nsgs(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
         else:
-            iterations, error = _staggered(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations,
-                                           pyramid, 25)
+            iterations, error = _staggered(
+                indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid, 25
+            )
     u = (Wr if method == "apgd" and m else csr @ r) + q
     converged = bool(error <= tol)
     if converged:
         message = f"{method} reached the error {error:.3e} <= tol in {iterations} iterations."
     else:
-        message = (f"{method} stopped after {iterations} iterations at the error {error:.3e}, above "
-                   f"tol = {tol:.1e}.")
+        message = f"{method} stopped after {iterations} iterations at the error {error:.3e}, above tol = {tol:.1e}."
     if method == "newton" and m and restarts:
         message = message[:-1] + f" (the watchdog restarted it {restarts} times)."
     return FrictionResult(r, u, int(iterations), converged, float(error), method, friction_model, message)

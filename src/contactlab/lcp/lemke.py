@@ -80,8 +80,10 @@ def lemke(M: np.ndarray, q: np.ndarray, max_pivots: int):
         entering = leaving + n if leaving < n else leaving - n
         if pivots >= max_pivots:
             status = "max_pivots"
-            message = (f"Lemke's method stopped at the pivot limit ({max_pivots}) before finding a solution; "
-                       "raise max_iterations.")
+            message = (
+                f"Lemke's method stopped at the pivot limit ({max_pivots}) before finding a solution; "
+                "raise max_iterations."
+            )
             break
         column = tableau[:, entering]
         z0_rows = np.flatnonzero(basis == 2 * n)
@@ -90,9 +92,11 @@ def lemke(M: np.ndarray, q: np.ndarray, max_pivots: int):
         if row < 0:
             kind = f"z[{entering - n}]" if entering >= n else f"w[{entering}]"
             status = "ray"
-            message = (f"Lemke's method ended on a secondary ray after {pivots} pivots ({kind} can grow without "
-                       "bound): no solution was found; if B is copositive-plus (e.g. positive semidefinite) "
-                       "the LCP has no solution.")
+            message = (
+                f"Lemke's method ended on a secondary ray after {pivots} pivots ({kind} can grow without "
+                "bound): no solution was found; if B is copositive-plus (e.g. positive semidefinite) "
+                "the LCP has no solution."
+            )
             break
     z = np.zeros(n)
     in_z = (basis >= n) & (basis < 2 * n)

@@ -95,14 +95,14 @@ from numba import njit
 
 from .friction import _diagonal_blocks, _error, _nsgs
 
-NONMONOTONE_WEIGHT = 0.9        # η of Zhang & Hager's reference (0: monotone Armijo)
-ARMIJO_SLOPE = 1e-4             # ψ must fall by ARMIJO_SLOPE · t · ψ (a Newton step predicts 2 t ψ)
-MAX_HALVINGS = 30               # line-search trials, t = 1 down to 2⁻²⁹
-REGULARIZATION_CAP = 0.1        # κ: δ = w̄ min(κ, error)
-WATCHDOG_PATIENCE = 30          # iterations without 10 % progress before the watchdog acts
-WATCHDOG_PROGRESS = 0.9         # the factor the best error must beat within the patience
-WATCHDOG_SWEEPS = 20            # nsgs sweeps the watchdog runs from the best iterate (doubled each time)
-WATCHDOG_DOUBLINGS = 8          # at most 20 · 2⁸ = 5120 sweeps in one restart
+NONMONOTONE_WEIGHT = 0.9  # η of Zhang & Hager's reference (0: monotone Armijo)
+ARMIJO_SLOPE = 1e-4  # ψ must fall by ARMIJO_SLOPE · t · ψ (a Newton step predicts 2 t ψ)
+MAX_HALVINGS = 30  # line-search trials, t = 1 down to 2⁻²⁹
+REGULARIZATION_CAP = 0.1  # κ: δ = w̄ min(κ, error)
+WATCHDOG_PATIENCE = 30  # iterations without 10 % progress before the watchdog acts
+WATCHDOG_PROGRESS = 0.9  # the factor the best error must beat within the patience
+WATCHDOG_SWEEPS = 20  # nsgs sweeps the watchdog runs from the best iterate (doubled each time)
+WATCHDOG_DOUBLINGS = 8  # at most 20 · 2⁸ = 5120 sweeps in one restart
 RHO_FACTORS = (10.0, 0.1, 1.0)  # ρ scalings the watchdog cycles through
 
 
@@ -126,11 +126,11 @@ def _alart_curnier(r, u, mu, rho, phi, a_blocks, b_blocks, jacobian):
                     a_blocks[a, k, col] = 0.0
                     b_blocks[a, k, col] = 0.0
         xn = rn - rho_n * u[i]
-        if xn > 0.0:                       # closed: Φ_N = r_N − x_N = ρ_N u_N
+        if xn > 0.0:  # closed: Φ_N = r_N − x_N = ρ_N u_N
             fn = rho_n * u[i]
             if jacobian:
                 b_blocks[a, 0, 0] = rho_n
-        else:                              # open: Φ_N = r_N
+        else:  # open: Φ_N = r_N
             fn = rn
             if jacobian:
                 a_blocks[a, 0, 0] = 1.0
@@ -144,13 +144,13 @@ def _alart_curnier(r, u, mu, rho, phi, a_blocks, b_blocks, jacobian):
             if jacobian:
                 b_blocks[a, 1, 1] = rho_t
                 b_blocks[a, 2, 2] = rho_t
-        else:                              # slide (or no friction available): Φ_T = r_T − R ŷ
+        else:  # slide (or no friction available): Φ_T = r_T − R ŷ
             e1 = y1 / ny if ny > 0.0 else 0.0
             e2 = y2 / ny if ny > 0.0 else 0.0
             f1 = rt1 - radius * e1
             f2 = rt2 - radius * e2
             if jacobian:
-                s = radius / ny if ny > 0.0 else 0.0      # R Γ = (R/‖y‖)(I − ŷŷᵀ)
+                s = radius / ny if ny > 0.0 else 0.0  # R Γ = (R/‖y‖)(I − ŷŷᵀ)
                 g11 = s * (1.0 - e1 * e1)
                 g12 = -s * e1 * e2
                 g22 = s * (1.0 - e2 * e2)
@@ -162,7 +162,7 @@ def _alart_curnier(r, u, mu, rho, phi, a_blocks, b_blocks, jacobian):
                 b_blocks[a, 1, 2] = rho_t * g12
                 b_blocks[a, 2, 1] = rho_t * g12
                 b_blocks[a, 2, 2] = rho_t * g22
-                if xn > 0.0:                              # dR = μ (dr_N − ρ_N du_N)
+                if xn > 0.0:  # dR = μ (dr_N − ρ_N du_N)
                     a_blocks[a, 1, 0] = -m_a * e1
                     a_blocks[a, 2, 0] = -m_a * e2
                     b_blocks[a, 1, 0] = m_a * rho_n * e1
@@ -215,7 +215,7 @@ def split_rho(blocks):
     nc = blocks.shape[0]
     wnn, t11, t22 = blocks[:, 0, 0], blocks[:, 1, 1], blocks[:, 2, 2]
     t12 = 0.5 * (blocks[:, 1, 2] + blocks[:, 2, 1])
-    largest = 0.5 * (t11 + t22) + np.sqrt(0.25 * (t11 - t22) ** 2 + t12 ** 2)
+    largest = 0.5 * (t11 + t22) + np.sqrt(0.25 * (t11 - t22) ** 2 + t12**2)
     diagonal = np.concatenate([wnn, t11, t22])
     positive = diagonal[diagonal > 0.0]
     fallback = 1.0 / positive.mean() if positive.size else 1.0
@@ -244,7 +244,7 @@ def _newton_step(j_indptr, j_indices, j_data, rhs):
     transposed = sp.csc_matrix((j_data, j_indices, j_indptr), shape=(m, m))
     try:
         d = spla.splu(transposed, permc_spec="MMD_AT_PLUS_A").solve(rhs, trans="T")
-    except RuntimeError:               # "Factor is exactly singular"
+    except RuntimeError:  # "Factor is exactly singular"
         return None
     return d if np.all(np.isfinite(d)) else None
 
@@ -266,11 +266,10 @@ def solve_newton(csr, q, mu, r, tol, max_iterations, warm_sweeps=0):
     r / max|q|, and the merit ½‖Φ‖² neither underflows nor overflows whatever the units
     (q ~ 1e-160 did underflow).
     """
-    scale = float(np.abs(q).max()) if q.size else 0.0      # max |q|: its square cannot underflow
+    scale = float(np.abs(q).max()) if q.size else 0.0  # max |q|: its square cannot underflow
     if not scale > 0.0:
         scale = 1.0
-    r_scaled, iterations, error, restarts = _solve_unit(csr, q / scale, mu, r / scale, tol, max_iterations,
-                                                        warm_sweeps)
+    r_scaled, iterations, error, restarts = _solve_unit(csr, q / scale, mu, r / scale, tol, max_iterations, warm_sweeps)
     return r_scaled * scale, iterations, error, restarts
 
 
@@ -291,7 +290,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
 
     if warm_sweeps > 0:
         _nsgs(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, warm_sweeps, False)
-    error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)      # also u = W r + q
+    error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)  # also u = W r + q
     best_r, best_error = r.copy(), error
     if error <= tol:
         return best_r, 0, best_error, 0
@@ -304,9 +303,9 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
     phi = np.empty(m)
     trial_phi = np.empty(m)
 
-    mark_error, mark_at = error, 0      # the watchdog's reference: last 10 % progress and when
+    mark_error, mark_at = error, 0  # the watchdog's reference: last 10 % progress and when
     restarts = 0
-    reference, weight = None, 0.0       # Zhang–Hager's C and Q (None: restart from ψ)
+    reference, weight = None, 0.0  # Zhang–Hager's C and Q (None: restart from ψ)
     for iteration in range(1, max_iterations + 1):
         merit = _alart_curnier(r, u, mu, rho, phi, a_blocks, b_blocks, True)
         if reference is None:
@@ -320,14 +319,13 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
         delta = w_bar * min(REGULARIZATION_CAP, error)
         direction = None
         while direction is None:
-            _fill_jacobian(w_indptr, w_indices, w_data, j_indptr, j_indices, a_blocks, b_blocks, delta,
-                           scratch, j_data)
+            _fill_jacobian(w_indptr, w_indices, w_data, j_indptr, j_indices, a_blocks, b_blocks, delta, scratch, j_data)
             direction = _newton_step(j_indptr, j_indices, j_data, -phi)
             if direction is None:
                 if delta >= w_bar:
                     break
                 delta = min(w_bar, max(100.0 * delta, 1e-12 * w_bar))
-        if direction is None:           # singular even at δ = w̄: steepest descent on ψ, d = −Jᵀ Φ
+        if direction is None:  # singular even at δ = w̄: steepest descent on ψ, d = −Jᵀ Φ
             jacobian = sp.csr_matrix((j_data, j_indices, j_indptr), shape=(m, m))
             direction = -(jacobian.T @ phi)
 
@@ -335,8 +333,9 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
         w_direction = csr @ direction
         step = 1.0
         for _ in range(MAX_HALVINGS):
-            trial = _alart_curnier(r + step * direction, u + step * w_direction, mu, rho, trial_phi,
-                                   a_blocks, b_blocks, False)
+            trial = _alart_curnier(
+                r + step * direction, u + step * w_direction, mu, rho, trial_phi, a_blocks, b_blocks, False
+            )
             if trial <= reference - ARMIJO_SLOPE * step * merit:
                 break
             step *= 0.5

@@ -45,7 +45,7 @@ def lcp_residual(indptr, indices, data, c, lam, w):
     return math.sqrt(_residual_rows(indptr, indices, data, c, lam, w, 0, c.shape[0]))
 
 
-RESIDUAL_CHUNKS = 8     # row blocks of the parallel residual (a few per thread, for balance)
+RESIDUAL_CHUNKS = 8  # row blocks of the parallel residual (a few per thread, for balance)
 
 
 @njit(cache=True, parallel=True)
@@ -54,8 +54,9 @@ def lcp_residual_parallel(indptr, indices, data, c, lam, w):
     n = c.shape[0]
     partial = np.zeros(RESIDUAL_CHUNKS)
     for chunk in prange(RESIDUAL_CHUNKS):
-        partial[chunk] = _residual_rows(indptr, indices, data, c, lam, w, chunk * n // RESIDUAL_CHUNKS,
-                                        (chunk + 1) * n // RESIDUAL_CHUNKS)
+        partial[chunk] = _residual_rows(
+            indptr, indices, data, c, lam, w, chunk * n // RESIDUAL_CHUNKS, (chunk + 1) * n // RESIDUAL_CHUNKS
+        )
     return math.sqrt(partial.sum())
 
 

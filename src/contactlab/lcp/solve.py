@@ -83,15 +83,20 @@ def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None
         residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))
         converged = status == "solved" and residual <= tol
         if status == "solved" and not converged:
-            message = (f"Lemke's pivoting ended on a solution but round-off leaves a residual {residual:.3e} "
-                       f"above tol = {tol:.1e}.")
+            message = (
+                f"Lemke's pivoting ended on a solution but round-off leaves a residual {residual:.3e} "
+                f"above tol = {tol:.1e}."
+            )
         return LCPResult(lam, w, iterations, residual, converged, method, message)
 
     diag = csr.diagonal()
     if np.any(diag < 0.0):
         row = int(np.flatnonzero(diag < 0.0)[0])
-        raise InputError("B", f"{method} needs a non-negative diagonal, but B[{row}, {row}] = {diag[row]:.3g}; "
-                              "use method='lemke' for such matrices.")
+        raise InputError(
+            "B",
+            f"{method} needs a non-negative diagonal, but B[{row}, {row}] = {diag[row]:.3g}; "
+            "use method='lemke' for such matrices.",
+        )
     indptr = csr.indptr.astype(np.int64)
     indices = csr.indices.astype(np.int64)
     data = csr.data
@@ -108,21 +113,33 @@ def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None
         permuted = csr[order][:, order].tocsr()
         permuted.sort_indices()
         lam_permuted = np.ascontiguousarray(lam[order])
-        iterations, residual = _kernels.red_black(permuted.indptr.astype(np.int64),
-                                                  permuted.indices.astype(np.int64), permuted.data,
-                                                  diag[order], np.ascontiguousarray(c[order]), lam_permuted,
-                                                  omega, tol, max_iterations, np.arange(n, dtype=np.int64),
-                                                  color_start, REDBLACK_MIN_PARALLEL_ROWS)
+        iterations, residual = _kernels.red_black(
+            permuted.indptr.astype(np.int64),
+            permuted.indices.astype(np.int64),
+            permuted.data,
+            diag[order],
+            np.ascontiguousarray(c[order]),
+            lam_permuted,
+            omega,
+            tol,
+            max_iterations,
+            np.arange(n, dtype=np.int64),
+            color_start,
+            REDBLACK_MIN_PARALLEL_ROWS,
+        )
         lam[order] = lam_permuted
     else:
-        iterations, residual = _kernels.gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol,
-                                                     max_iterations, method == "jacobi")
+        iterations, residual = _kernels.gauss_seidel(
+            indptr, indices, data, diag, c, lam, omega, tol, max_iterations, method == "jacobi"
+        )
     w = csr @ lam - c
     residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))
     converged = residual <= tol
     if converged:
         message = f"{method} reached the residual {residual:.3e} <= tol in {iterations} sweeps."
     else:
-        message = (f"{method} stopped after {iterations} sweeps at the residual {residual:.3e}, above "
-                   f"tol = {tol:.1e} (slow convergence, SPEC C9, or an LCP this method cannot solve).")
+        message = (
+            f"{method} stopped after {iterations} sweeps at the residual {residual:.3e}, above "
+            f"tol = {tol:.1e} (slow convergence, SPEC C9, or an LCP this method cannot solve)."
+        )
     return LCPResult(lam, w, int(iterations), residual, converged, method, message, ncolors)

@@ -24,12 +24,15 @@ from ..validation import check_choices, check_counts, number
 @dataclass
 class StepInfo:
     """What a step reports besides the new state."""
-    contacts: Contacts            # the contacts the response acted on
-    solver_iterations: int = 0    # sweeps the solver made (0 where there is none)
+
+    contacts: Contacts  # the contacts the response acted on
+    solver_iterations: int = 0  # sweeps the solver made (0 where there is none)
     solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
-    energy_elastic: float = 0.0   # energy stored in contact springs [J]
-    implicit_springs: bool = False  # penalty: contact springs stepped by backward Euler, the explicit step being unstable
-    impulses: np.ndarray = None   # (C, 3) [N s] each contact's push on side A over the step, along (normal,
+    energy_elastic: float = 0.0  # energy stored in contact springs [J]
+    implicit_springs: bool = (
+        False  # penalty: contact springs stepped by backward Euler, the explicit step being unstable
+    )
+    impulses: np.ndarray = None  # (C, 3) [N s] each contact's push on side A over the step, along (normal,
     #                               tangent1, tangent2) of ``contacts``; None: no contacts (the viewer's arrows)
 
 
@@ -41,11 +44,12 @@ class CollisionOptions:
     """The collision-detection settings every method's Options starts with, declared and
     checked here once (see docs/collision.md); a method that wants another default declares
     the field again with it."""
-    contact_margin: float = 0.002         # m: gaps this small become (speculative) contacts
-    granularity: str = "vertex"           # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"                # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2                      # samples per triangle edge for granularity = "samples"
-    cloth_samples: int = 0                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+
+    contact_margin: float = 0.002  # m: gaps this small become (speculative) contacts
+    granularity: str = "vertex"  # boxes and hulls on static surfaces: object | vertex | samples (P2)
+    normal: str = "object"  # their contact normal: object (P4) | vertex (P5)
+    samples: int = 2  # samples per triangle edge for granularity = "samples"
+    cloth_samples: int = 0  # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
 
     def __post_init__(self):
         self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
@@ -57,7 +61,8 @@ class CollisionOptions:
 class KeptManifoldOptions(CollisionOptions):
     """CollisionOptions and the tolerance under which a pair's contacts are reused from the last
     step (the methods that step positions once per step: impulse, constraints)."""
-    manifold_tolerance: float = 1e-4      # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
+
+    manifold_tolerance: float = 1e-4  # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
 
     def __post_init__(self):
         super().__post_init__()
@@ -68,15 +73,19 @@ def get(name):
     """The method module called ``name``; InputError for an unknown or unavailable one."""
     if name == "impulse":
         from . import impulse
+
         return impulse
     if name == "penalty":
         from . import penalty
+
         return penalty
     if name == "projection":
         from . import projection
+
         return projection
     if name == "constraints":
         from . import constraints
+
         return constraints
     raise InputError("method", f"unknown method {name!r}; expected one of: {', '.join(AVAILABLE)}")
 
@@ -84,6 +93,7 @@ def get(name):
 def make_options(module, table, path):
     """Build ``module.Options`` from a scene-file table (dict); unknown keys are InputErrors."""
     import difflib
+
     known = {f.name: f for f in fields(module.Options)}
     values = {}
     for key, value in table.items():

@@ -49,11 +49,18 @@ from ..state import State
 from ..validation import check_choices, check_counts, number
 from . import KeptManifoldOptions, StepInfo
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
-from .velocity_level import (detect, normal_targets, positions_split_at_impact, predict, relative_gravity,
-                             restitution_threshold, step_without_contacts)
+from .velocity_level import (
+    detect,
+    normal_targets,
+    positions_split_at_impact,
+    predict,
+    relative_gravity,
+    restitution_threshold,
+    step_without_contacts,
+)
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "newton", "pgs", "redblack", "jacobi", "lemke")
-CONE_ONLY_SOLVERS = ("apgd", "newton")      # they solve the Coulomb cone, not its pyramid
+CONE_ONLY_SOLVERS = ("apgd", "newton")  # they solve the Coulomb cone, not its pyramid
 FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
 FORMULATIONS = ("velocity", "acceleration")
 
@@ -61,27 +68,35 @@ FORMULATIONS = ("velocity", "acceleration")
 @dataclass
 class Options(KeptManifoldOptions):
     """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
-    solver: str = "matrix_free"           # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
-    formulation: str = "velocity"         # velocity (C5b) | acceleration (C5a)
-    friction_model: str = "cone"          # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
-    iterations: int = 100                 # solver sweeps per step (at most; newton: Newton steps)
-    tolerance: float = None               # matrix_free: m/s a sweep changes a contact's velocity (1e-7); others: their residual (1e-6)
-    omega: float = 1.0                    # over-relaxation of pgs, redblack, jacobi
-    warm_start: float = 1.0               # fraction of last step's λ to start from (by contact id; 0 = cold)
-    restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
-    stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
-    slop: float = 0.0005                  # m of penetration left alone by the stabilization
-    max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
-    time_of_impact: bool = True           # split the step at the impact (see methods.impulse)
+
+    solver: str = (
+        "matrix_free"  # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
+    )
+    formulation: str = "velocity"  # velocity (C5b) | acceleration (C5a)
+    friction_model: str = "cone"  # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
+    iterations: int = 100  # solver sweeps per step (at most; newton: Newton steps)
+    tolerance: float = (
+        None  # matrix_free: m/s a sweep changes a contact's velocity (1e-7); others: their residual (1e-6)
+    )
+    omega: float = 1.0  # over-relaxation of pgs, redblack, jacobi
+    warm_start: float = 1.0  # fraction of last step's λ to start from (by contact id; 0 = cold)
+    restitution_threshold: float = -1.0  # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
+    stabilization: float = 0.2  # fraction of an existing penetration removed per step (0 = none)
+    slop: float = 0.0005  # m of penetration left alone by the stabilization
+    max_push_velocity: float = 1.0  # m/s: the stabilization never pushes apart faster
+    time_of_impact: bool = True  # split the step at the impact (see methods.impulse)
 
     def __post_init__(self):
         super().__post_init__()
         check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid")})
         check_counts(self, {"iterations": 1})
         if self.solver in CONE_ONLY_SOLVERS and self.friction_model != "cone":
-            raise InputError("friction_model", f"solver {self.solver!r} solves the Coulomb cone only; use "
-                             f"friction_model = \"cone\", or solver \"nsgs\" or \"staggered\" for the pyramid")
-        if self.tolerance is None:        # each solver's own measure, so each its own default
+            raise InputError(
+                "friction_model",
+                f"solver {self.solver!r} solves the Coulomb cone only; use "
+                f'friction_model = "cone", or solver "nsgs" or "staggered" for the pyramid',
+            )
+        if self.tolerance is None:  # each solver's own measure, so each its own default
             self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
         self.tolerance = number(self.tolerance, "tolerance", 0.0, strict=True)
         self.omega = number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
@@ -95,6 +110,7 @@ class Options(KeptManifoldOptions):
 
 
 # ---- C6: the MLCP reduced to an LCP ----------------------------------------------------------
+
 
 class SystemInverse:
     """Applies A⁻¹ for the MLCP's A: M⁻¹ block by block when A = M, a sparse LU of A (with the
@@ -131,8 +147,7 @@ def delassus_operator(J, inverse):
     """W = J A⁻¹ Jᵀ (3C, 3C) as a LinearOperator, x ↦ J (A⁻¹ (Jᵀ x)): one solve with A per
     product, W never formed. J (3C, N) sparse; inverse: a SystemInverse."""
     transpose = J.T.tocsr()
-    return spla.LinearOperator((J.shape[0], J.shape[0]), matvec=lambda x: J @ inverse.solve(transpose @ x),
-                               dtype=float)
+    return spla.LinearOperator((J.shape[0], J.shape[0]), matvec=lambda x: J @ inverse.solve(transpose @ x), dtype=float)
 
 
 def delassus_bound(J, inverse_mass):
@@ -149,26 +164,47 @@ def solve_assembled(J, inverse, inverse_mass, v_free, target, friction, warm, op
     ``delassus_operator`` and its step from ``delassus_bound`` (``inverse_mass`` M⁻¹ (N, N)
     sparse); the others sweep W assembled by ``lcp_matrices``."""
     from ..lcp import solve_friction_contact, solve_lcp
+
     solver = solver or options.solver
     C = len(friction)
     if solver == "apgd":
-        result = solve_friction_contact(delassus_operator(J, inverse), J @ v_free - target, friction,
-                                        method="apgd", tol=options.tolerance, max_iterations=options.iterations,
-                                        r0=warm.ravel(), lipschitz=delassus_bound(J, inverse_mass))
+        result = solve_friction_contact(
+            delassus_operator(J, inverse),
+            J @ v_free - target,
+            friction,
+            method="apgd",
+            tol=options.tolerance,
+            max_iterations=options.iterations,
+            r0=warm.ravel(),
+            lipschitz=delassus_bound(J, inverse_mass),
+        )
         return result.r.reshape(C, 3), result.iterations, result.error
     B, q = lcp_matrices(J, inverse, v_free, target)
     if solver in FRICTIONLESS_SOLVERS:
         normal_rows = np.arange(0, 3 * C, 3)
-        result = solve_lcp(B[normal_rows][:, normal_rows], -q[normal_rows], method=solver,
-                           tol=options.tolerance, max_iterations=options.iterations,
-                           warm_start=warm[:, 0], omega=options.omega)
+        result = solve_lcp(
+            B[normal_rows][:, normal_rows],
+            -q[normal_rows],
+            method=solver,
+            tol=options.tolerance,
+            max_iterations=options.iterations,
+            warm_start=warm[:, 0],
+            omega=options.omega,
+        )
         lam = np.zeros((C, 3))
         lam[:, 0] = result.lam
         return lam, result.iterations, result.residual
-    method = "nsgs" if solver == "matrix_free" else solver     # the same F4a sweeps, on W
-    result = solve_friction_contact(B, q, friction, method=method, tol=options.tolerance,
-                                    max_iterations=options.iterations, r0=warm.ravel(),
-                                    friction_model=options.friction_model)
+    method = "nsgs" if solver == "matrix_free" else solver  # the same F4a sweeps, on W
+    result = solve_friction_contact(
+        B,
+        q,
+        friction,
+        method=method,
+        tol=options.tolerance,
+        max_iterations=options.iterations,
+        r0=warm.ravel(),
+        friction_model=options.friction_model,
+    )
     return result.r.reshape(C, 3), result.iterations, result.error
 
 
@@ -179,13 +215,15 @@ def acceleration_target(current_velocity, free_velocity, gap_at_start, dt, optio
     has no constraint on accelerations (its target lies below its free velocity, so it never
     binds), and a touching contact already approaching keeps approaching: accelerations
     cannot stop an impact within a step. All (C,) [m/s, m]."""
-    push = np.minimum(options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt,
-                      options.max_push_velocity)
-    touching = gap_at_start <= options.slop          # within the slop: in contact, d ≈ 0
+    push = np.minimum(
+        options.stabilization * np.maximum(-gap_at_start - options.slop, 0.0) / dt, options.max_push_velocity
+    )
+    touching = gap_at_start <= options.slop  # within the slop: in contact, d ≈ 0
     return np.where(touching, np.minimum(current_velocity, 0.0) + push, free_velocity - 1.0)
 
 
 # ---- the step: loop L3 --------------------------------------------------------------------
+
 
 def implicit_free_velocities(model, state, h):
     """Backward Euler's free velocities with the cloth (M4) from one factorization of
@@ -206,11 +244,17 @@ def normal_row_targets(model, state, contacts, rows, v_free, h, options):
     normal_velocity = row_products(rows, v_free)[:, 0]
     gap_at_start = -contacts.depth
     if options.formulation == "velocity":
-        return normal_targets(gap_at_start, normal_velocity, relative_gravity(model, contacts), contacts.restitution,
-                              h, restitution_threshold(model, h, options), options)
+        return normal_targets(
+            gap_at_start,
+            normal_velocity,
+            relative_gravity(model, contacts),
+            contacts.restitution,
+            h,
+            restitution_threshold(model, h, options),
+            options,
+        )
     current = row_products(rows, stack(*state.velocities))[:, 0]
-    return (acceleration_target(current, normal_velocity, gap_at_start, h, options),
-            np.full(contacts.count, -1.0))
+    return (acceleration_target(current, normal_velocity, gap_at_start, h, options), np.full(contacts.count, -1.0))
 
 
 def solve_constraints(model, state, contacts, rows, v_free, target, warm, options, implicit_inverse=None):
@@ -220,10 +264,16 @@ def solve_constraints(model, state, contacts, rows, v_free, target, warm, option
     solve the assembled problem."""
     if options.solver == "matrix_free" and implicit_inverse is None:
         u = v_free.copy()
-        lam, iterations, residual = solve_sequential_impulses(rows, contacts.friction, target, u, options.iterations,
-                                                              options.tolerance, warm,
-                                                              *sweep_groups(rows, contacts, state,
-                                                                            solve_order(contacts, model.gravity)))
+        lam, iterations, residual = solve_sequential_impulses(
+            rows,
+            contacts.friction,
+            target,
+            u,
+            options.iterations,
+            options.tolerance,
+            warm,
+            *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
+        )
         return lam, u, iterations, residual
     inverse_mass = inverse_mass_matrix(model, state.body_orientation)
     # A = M, or with implicit cloth the A factored in stage 1
@@ -234,8 +284,9 @@ def solve_constraints(model, state, contacts, rows, v_free, target, warm, option
     # on implicit cloth, matrix_free means products with W = J A⁻¹ Jᵀ (apgd): sweeps would
     # need W's rows, that is A⁻¹ Jᵀ in full — dense, seconds a step on a 64 × 64 drape
     solver = "apgd" if options.solver == "matrix_free" else options.solver
-    lam, iterations, residual = solve_assembled(J, inverse, inverse_mass, v_free, targets.ravel(), contacts.friction,
-                                                warm, options, solver)
+    lam, iterations, residual = solve_assembled(
+        J, inverse, inverse_mass, v_free, targets.ravel(), contacts.friction, warm, options, solver
+    )
     return lam, v_free + inverse.solve(J.T @ lam.ravel()), iterations, residual
 
 
@@ -260,15 +311,23 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)
-    warm, _ = values_by_id(state.carried.get("constraint_ids"), state.carried.get("constraint_values"),
-                           contacts.feature_id, 3)
-    lam, v_new, iterations, residual = solve_constraints(model, state, contacts, rows, v_free, target,
-                                                         warm * options.warm_start, options,
-                                                         inverse if implicit_cloth else None)
+    warm, _ = values_by_id(
+        state.carried.get("constraint_ids"), state.carried.get("constraint_values"), contacts.feature_id, 3
+    )
+    lam, v_new, iterations, residual = solve_constraints(
+        model,
+        state,
+        contacts,
+        rows,
+        v_free,
+        target,
+        warm * options.warm_start,
+        options,
+        inverse if implicit_cloth else None,
+    )
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
     solved = unstack(v_new, model.body_count)
     positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
     carried = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, solved, carried)
-    return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual),
-                          impulses=lam)
+    return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual), impulses=lam)

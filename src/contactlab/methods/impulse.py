@@ -38,24 +38,31 @@ from ..errors import InputError
 from ..state import State
 from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
-from .velocity_level import (detect, positions_split_at_impact, predict, relative_gravity, resting_target,
-                             restitution_threshold, step_without_contacts)
-from .sequential import (contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts,
-                         sweep_groups)
+from .sequential import contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
+from .velocity_level import (
+    detect,
+    positions_split_at_impact,
+    predict,
+    relative_gravity,
+    resting_target,
+    restitution_threshold,
+    step_without_contacts,
+)
 
 
 @dataclass
 class Options(KeptManifoldOptions):
     """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md), after
     the collision settings of KeptManifoldOptions."""
-    iterations: int = 100                 # sweeps of sequential impulses per step, and collision waves (at most)
-    tolerance: float = 1e-7               # m/s: stop once a sweep changes no contact's velocity more
-    restitution_threshold: float = -1.0   # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
-    stabilization: float = 0.2            # fraction of an existing penetration removed per step (0 = none)
-    slop: float = 0.0005                  # m of penetration left alone by the stabilization
-    max_push_velocity: float = 1.0        # m/s: the stabilization never pushes apart faster
-    time_of_impact: bool = True           # split the step at the impact (see module docs)
-    warm_start: float = 1.0               # fraction of last step's impulses to start from (0 = cold)
+
+    iterations: int = 100  # sweeps of sequential impulses per step, and collision waves (at most)
+    tolerance: float = 1e-7  # m/s: stop once a sweep changes no contact's velocity more
+    restitution_threshold: float = -1.0  # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
+    stabilization: float = 0.2  # fraction of an existing penetration removed per step (0 = none)
+    slop: float = 0.0005  # m of penetration left alone by the stabilization
+    max_push_velocity: float = 1.0  # m/s: the stabilization never pushes apart faster
+    time_of_impact: bool = True  # split the step at the impact (see module docs)
+    warm_start: float = 1.0  # fraction of last step's impulses to start from (0 = cold)
 
     def __post_init__(self):
         super().__post_init__()
@@ -71,8 +78,21 @@ class Options(KeptManifoldOptions):
 
 
 @njit(cache=True)
-def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start, dt,
-                       threshold, u, max_waves, sweeps, tolerance, tau, order):
+def resolve_collisions(
+    rows,
+    friction,
+    restitution,
+    gravity_normal,
+    gap_at_start,
+    dt,
+    threshold,
+    u,
+    max_waves,
+    sweeps,
+    tolerance,
+    tau,
+    order,
+):
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
     A wave is every contact that is approaching now: at the current velocities it would be
@@ -99,13 +119,13 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
     for c in range(C):
         tau[c] = -1.0
     for wave in range(max_waves):
-        count = np.int64(0)         # not a literal 0, which would compile sweep_contacts twice
+        count = np.int64(0)  # not a literal 0, which would compile sweep_contacts twice
         for o in range(C):
             c = order[o]
             if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
                 continue
             vn = contact_velocity(c, rows, u)[0]
-            if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:      # separating, or still open at the end
+            if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:  # separating, or still open at the end
                 continue
             closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
             impact = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
@@ -117,7 +137,7 @@ def resolve_collisions(rows, friction, restitution, gravity_normal, gap_at_start
                 count += 1
         if count == 0:
             return wave
-        for sweep in range(sweeps):
+        for _sweep in range(sweeps):
             if sweep_contacts(members, count, target, impulses, rows, friction, u) <= tolerance:
                 break
     return max_waves
@@ -137,19 +157,37 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, "impulse_")
     # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
-    gap_at_start = -contacts.depth                         # d₀
+    gap_at_start = -contacts.depth  # d₀
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     u = stack(*free)
     order = solve_order(contacts, model.gravity)
     tau = np.empty(contacts.count)
-    resolve_collisions(rows, contacts.friction, contacts.restitution, relative_gravity(model, contacts),
-                       gap_at_start, h, restitution_threshold(model, h, options), u, options.iterations,
-                       options.iterations, options.tolerance, tau, order)
+    resolve_collisions(
+        rows,
+        contacts.friction,
+        contacts.restitution,
+        relative_gravity(model, contacts),
+        gap_at_start,
+        h,
+        restitution_threshold(model, h, options),
+        u,
+        options.iterations,
+        options.iterations,
+        options.tolerance,
+        tau,
+        order,
+    )
     warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
-    impulses, sweeps, change = solve_sequential_impulses(rows, contacts.friction,
-                                                         resting_target(gap_at_start, h, options), u,
-                                                         options.iterations, options.tolerance, warm,
-                                                         *sweep_groups(rows, contacts, state, order))
+    impulses, sweeps, change = solve_sequential_impulses(
+        rows,
+        contacts.friction,
+        resting_target(gap_at_start, h, options),
+        u,
+        options.iterations,
+        options.tolerance,
+        warm,
+        *sweep_groups(rows, contacts, state, order),
+    )
     solved = unstack(u, model.body_count)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)

@@ -30,23 +30,33 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 import scipy.sparse.linalg as spla
+from numba import njit
 
 from .. import rotations
 from ..collision import collide, pass_through_depths, swept_distances
 from ..contacts import jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, stack, unstack
 from ..dynamics.integrators import advance_positions, factor_symmetric, free_velocities
-from ..rotations import world_tensors
 from ..errors import InputError
+from ..rotations import world_tensors
 from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
 from . import CollisionOptions, StepInfo
-from .sequential import (along_rows, apply_impulses, contact_velocity, row_products, rows_of, solve_order,
-                         solve_sequential_impulses, sweep_groups)
+from .sequential import (
+    along_rows,
+    apply_impulses,
+    contact_velocity,
+    row_products,
+    rows_of,
+    solve_order,
+    solve_sequential_impulses,
+    sweep_groups,
+)
 
-ACCURATE_FREQUENCY_STEP = 0.25    # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
+ACCURATE_FREQUENCY_STEP = (
+    0.25  # h ω of one spring under "auto": 25 steps per period (a box on four corners rings 2× faster)
+)
 LINEAR_SOLVERS = ("cg", "direct")
 IMPLICIT_SPRINGS = ("auto", "always", "never")
 
@@ -54,15 +64,16 @@ IMPLICIT_SPRINGS = ("auto", "always", "never")
 @dataclass
 class Options(CollisionOptions):
     """Settings of ``[method.penalty]`` (after the collision settings of CollisionOptions)."""
-    stiffness: object = "auto"            # N/m per contact point, or "auto": each contact's load over allowed_penetration
-    allowed_penetration: float = 0.0003   # m: how deep "auto" stiffness lets each contact sink under the load it carries
+
+    stiffness: object = "auto"  # N/m per contact point, or "auto": each contact's load over allowed_penetration
+    allowed_penetration: float = 0.0003  # m: how deep "auto" stiffness lets each contact sink under the load it carries
     damping_ratio: object = "restitution"  # ζ of each contact spring, or "restitution": ζ from the material's ε
-    friction_stiffness: object = "auto"   # N/m of the anchor springs (F3), or "auto": the normal stiffness
-    contact_margin: float = 0.001         # m: gaps this small are detected (their springs are slack)
-    linear_solver: str = "cg"             # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
-    linear_tolerance: float = 1e-10       # backward Euler with cg: relative residual to reach
-    implicit_iterations: int = 8          # backward Euler: most passes to settle which springs act / slip
-    implicit_springs: str = "auto"        # auto: contact springs by backward Euler in the steps where the explicit step is unstable | always | never
+    friction_stiffness: object = "auto"  # N/m of the anchor springs (F3), or "auto": the normal stiffness
+    contact_margin: float = 0.001  # m: gaps this small are detected (their springs are slack)
+    linear_solver: str = "cg"  # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
+    linear_tolerance: float = 1e-10  # backward Euler with cg: relative residual to reach
+    implicit_iterations: int = 8  # backward Euler: most passes to settle which springs act / slip
+    implicit_springs: str = "auto"  # auto: backward Euler where an explicit step is unstable | always | never
 
     def __post_init__(self):
         super().__post_init__()
@@ -71,8 +82,9 @@ class Options(CollisionOptions):
         self.allowed_penetration = number(self.allowed_penetration, "allowed_penetration", 0.0, strict=True)
         if self.damping_ratio != "restitution":
             if isinstance(self.damping_ratio, str):
-                raise InputError("damping_ratio", f"expected a number ≥ 0 or \"restitution\", "
-                                 f"found {self.damping_ratio!r}")
+                raise InputError(
+                    "damping_ratio", f'expected a number ≥ 0 or "restitution", found {self.damping_ratio!r}'
+                )
             self.damping_ratio = number(self.damping_ratio, "damping_ratio", 0.0)
         self.linear_tolerance = number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
         check_choices(self, {"linear_solver": LINEAR_SOLVERS, "implicit_springs": IMPLICIT_SPRINGS})
@@ -83,25 +95,28 @@ def _stiffness(value, name):
     if value == "auto":
         return value
     if isinstance(value, str):
-        raise InputError(name, f"expected a stiffness in N/m or \"auto\", found {value!r}")
+        raise InputError(name, f'expected a stiffness in N/m or "auto", found {value!r}')
     return number(value, name, 0.0, strict=True)
 
 
 # ---- guidance for k -----------------------------------------------------------------------
 
+
 @dataclass
 class StiffnessAdvice:
     """What ``suggest_stiffness`` proposes, and why."""
-    stiffness: float        # N/m: the proposal
-    needed: float           # N/m: holds the load with the allowed penetration
-    stable_limit: float     # N/m: symplectic Euler diverges above this (h ω = 2) for the contact mass
-    accurate_limit: float   # N/m: h ω = 0.5, about 12 steps per oscillation of a contact spring
-    penetration: float      # m: the resting penetration under the load with the proposal
-    reason: str             # one sentence
+
+    stiffness: float  # N/m: the proposal
+    needed: float  # N/m: holds the load with the allowed penetration
+    stable_limit: float  # N/m: symplectic Euler diverges above this (h ω = 2) for the contact mass
+    accurate_limit: float  # N/m: h ω = 0.5, about 12 steps per oscillation of a contact spring
+    penetration: float  # m: the resting penetration under the load with the proposal
+    reason: str  # one sentence
 
 
-def suggest_stiffness(mass, dt, allowed_penetration, gravity=9.81, contacts=1, contact_mass=None,
-                      integrator="symplectic_euler") -> StiffnessAdvice:
+def suggest_stiffness(
+    mass, dt, allowed_penetration, gravity=9.81, contacts=1, contact_mass=None, integrator="symplectic_euler"
+) -> StiffnessAdvice:
     """Propose a penalty stiffness k [N/m] per contact point.
 
     mass [kg]: the load, resting on ``contacts`` contact points, under ``gravity`` [m/s²];
@@ -126,10 +141,12 @@ def suggest_stiffness(mass, dt, allowed_penetration, gravity=9.81, contacts=1, c
     else:
         k = accurate
         step_needed = ACCURATE_FREQUENCY_STEP * np.sqrt(contact_mass / needed)
-        reason = (f"a penetration of {allowed_penetration:g} m needs k = {needed:.4g} N/m, more than explicit "
-                  f"integration follows at dt = {dt:g} s (k ≤ {accurate:.4g} N/m); capped there, so the load "
-                  f"sinks {mass * gravity / (contacts * k):.3g} m: use dt ≤ {step_needed:.3g} s or "
-                  f"integrator = \"backward_euler\" for less")
+        reason = (
+            f"a penetration of {allowed_penetration:g} m needs k = {needed:.4g} N/m, more than explicit "
+            f"integration follows at dt = {dt:g} s (k ≤ {accurate:.4g} N/m); capped there, so the load "
+            f"sinks {mass * gravity / (contacts * k):.3g} m: use dt ≤ {step_needed:.3g} s or "
+            f'integrator = "backward_euler" for less'
+        )
     return StiffnessAdvice(k, needed, stable, accurate, mass * gravity / (contacts * k), reason)
 
 
@@ -144,11 +161,11 @@ def step_amplification(integrator, w2, d):
     """``amplification``, compiled: integrator 0 symplectic, 1 explicit, 2 backward Euler (as in
     INTEGRATORS); w2 = (h ω)², d = h c / m. The 2×2 step matrix on (x / h, v) and the moduli of
     its eigenvalues in closed form (a complex pair: both √det)."""
-    if integrator == 0:         # v⁺ = v − (ω²h x + 2ζω h v),  x⁺ = x + h v⁺   (x in units of h)
+    if integrator == 0:  # v⁺ = v − (ω²h x + 2ζω h v),  x⁺ = x + h v⁺   (x in units of h)
         a, b, c, e = 1.0 - w2, 1.0 - d, -w2, 1.0 - d
-    elif integrator == 1:       # x⁺ = x + h v,  v⁺ = v − h(ω² x + c/m v)
+    elif integrator == 1:  # x⁺ = x + h v,  v⁺ = v − h(ω² x + c/m v)
         a, b, c, e = 1.0, 1.0, -w2, 1.0 - d
-    else:                       # backward Euler: the same at the new state; the step is this matrix's inverse
+    else:  # backward Euler: the same at the new state; the step is this matrix's inverse
         a, b, c, e = 1.0, -1.0, w2, 1.0 + d
     half, det = 0.5 * (a + e), a * e - b * c
     disc = half * half - det
@@ -176,7 +193,7 @@ def damping_ratios(restitution):
             zeta[c] = 1.0
         else:
             log = np.log(min(restitution[c], 1.0))
-            zeta[c] = -log / np.sqrt(np.pi ** 2 + log ** 2)
+            zeta[c] = -log / np.sqrt(np.pi**2 + log**2)
     return zeta
 
 
@@ -186,7 +203,7 @@ def lightest_contact_mass(model) -> float:
     masses = [np.inf]
     if model.body_count:
         reach = model.body_radii
-        masses.append(np.min(1.0 / (model.body_inverse_mass + reach ** 2 / model.body_inertia.min(axis=1))))
+        masses.append(np.min(1.0 / (model.body_inverse_mass + reach**2 / model.body_inertia.min(axis=1))))
     if model.particle_count:
         masses.append(model.particle_mass.min())
     return float(min(masses))
@@ -199,32 +216,41 @@ def divergence_advice(model, dt, options, integrator):
     that step such springs implicitly; else a smaller dt."""
     light = lightest_contact_mass(model)
     if integrator != "backward_euler" and options.implicit_springs == "never" and np.isfinite(light):
-        ratios = ([options.damping_ratio] if options.damping_ratio != "restitution"
-                  else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist())
+        ratios = (
+            [options.damping_ratio]
+            if options.damping_ratio != "restitution"
+            else damping_ratio_from_restitution(np.unique(model.material_restitution)).tolist()
+        )
         for k in (options.stiffness, options.friction_stiffness):
             if k == "auto":
                 continue
             worst = max(amplification(integrator, dt, k, light, 2.0 * z * np.sqrt(k * light)) for z in ratios)
             if worst > 1.0 + 1e-12:
                 limit = 2.0 * np.sqrt(light / k)
-                instead = (f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
-                           if integrator == "symplectic_euler" else "use damping, ")
-                return (f"dt = {dt:g} s is too long for penalty stiffness {k:.4g} N/m under {integrator} (a "
-                        f"contact moving {light:.3g} kg grows {worst:.3g}× a step): {instead}implicit_springs = "
-                        f"\"auto\" or integrator = \"backward_euler\"")
-    return f"use a smaller dt than {dt:g} s, or integrator = \"backward_euler\""
+                instead = (
+                    f"use dt < {limit:.3g} s, a stiffness below {light * (2.0 / dt) ** 2:.3g} N/m, "
+                    if integrator == "symplectic_euler"
+                    else "use damping, "
+                )
+                return (
+                    f"dt = {dt:g} s is too long for penalty stiffness {k:.4g} N/m under {integrator} (a "
+                    f"contact moving {light:.3g} kg grows {worst:.3g}× a step): {instead}implicit_springs = "
+                    f'"auto" or integrator = "backward_euler"'
+                )
+    return f'use a smaller dt than {dt:g} s, or integrator = "backward_euler"'
 
 
 # ---- the load each contact carries ----------------------------------------------------------
 
-SUPPORT_COSINE = 0.3      # a contact whose normal is within 72° of "up" (against gravity) supports its upper side
+SUPPORT_COSINE = 0.3  # a contact whose normal is within 72° of "up" (against gravity) supports its upper side
 
 
 def contact_entities(contacts, body_count):
     """Each contact's two sides as entities (bodies 0..B−1, then particles B..B+P−1; a point on
     a cloth triangle counts as its first vertex; −1 a static side): (side A (C,), side B (C,))."""
-    return entities_of(contacts.body_a, contacts.particles_a, body_count), \
-        entities_of(contacts.body_b, contacts.particles_b, body_count)
+    return entities_of(contacts.body_a, contacts.particles_a, body_count), entities_of(
+        contacts.body_b, contacts.particles_b, body_count
+    )
 
 
 @njit(cache=True)
@@ -237,8 +263,7 @@ def entities_of(body, particles, body_count):
 
 
 @njit(cache=True)
-def supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass,
-                    gravity):
+def supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass, gravity):
     """The weight each contact carries [N] (C,): every body and free particle, from the highest
     down, hands its own weight and what rests on it to the contacts it rests on (normals within
     72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
@@ -252,12 +277,12 @@ def supported_loads(entity_a, entity_b, normal, body_position, particle_position
     if g == 0.0 or C == 0:
         return loads
     up = -gravity / g
-    upper = np.full(C, -1)                # the supported side's entity (bodies, then particles), −1: none
+    upper = np.full(C, -1)  # the supported side's entity (bodies, then particles), −1: none
     lower = np.full(C, -1)
     supports = np.zeros(B + P, dtype=np.int64)
     for c in range(C):
         a, b = entity_a[c], entity_b[c]
-        along = normal[c, 0] * up[0] + normal[c, 1] * up[1] + normal[c, 2] * up[2]     # normal: from B into A
+        along = normal[c, 0] * up[0] + normal[c, 1] * up[1] + normal[c, 2] * up[2]  # normal: from B into A
         if along > SUPPORT_COSINE and a >= 0:
             upper[c], lower[c] = a, b
         elif along < -SUPPORT_COSINE and b >= 0:
@@ -271,8 +296,8 @@ def supported_loads(entity_a, entity_b, normal, body_position, particle_position
         weight[e] = g * (body_mass[e] if e < B else particle_mass[e - B])
         height[e] = position[0] * up[0] + position[1] * up[1] + position[2] * up[2]
     own_share = weight / np.maximum(supports, 1)
-    carried = weight.copy()               # own weight plus everything handed down so far
-    start = np.zeros(B + P + 1, dtype=np.int64)     # the contacts each entity rests on, grouped
+    carried = weight.copy()  # own weight plus everything handed down so far
+    start = np.zeros(B + P + 1, dtype=np.int64)  # the contacts each entity rests on, grouped
     for c in range(C):
         if upper[c] >= 0:
             start[upper[c] + 1] += 1
@@ -294,73 +319,95 @@ def supported_loads(entity_a, entity_b, normal, body_position, particle_position
             if lower[c] >= 0:
                 carried[lower[c]] += share
     for c in range(C):
-        if upper[c] < 0:                  # a side contact: the lighter dynamic side's share
+        if upper[c] < 0:  # a side contact: the lighter dynamic side's share
             least = np.inf
             for e in (entity_a[c], entity_b[c]):
-                if e >= 0 and own_share[e] > 0.0:       # weightless: a kinematic body, a driven side
+                if e >= 0 and own_share[e] > 0.0:  # weightless: a kinematic body, a driven side
                     least = min(least, own_share[e])
             loads[c] = least if least < np.inf else 0.0
     return loads
 
 
-
-
 # ---- the contact springs ------------------------------------------------------------------
 
-ContactSprings = namedtuple("ContactSprings", (
-    "stiffness",                # (C,) k [N/m]
-    "damping",                  # (C,) c [N s/m] along the normal
-    "friction_stiffness",       # (C,) k_t [N/m] of the anchor springs
-    "friction_damping",         # (C,) c_t [N s/m]
-    "friction",                 # (C,) μ
-    "elongation",               # (C, 2) s = point − anchor in (t1, t2) components [m]
-    "inverse_effective_mass",   # (C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg] (None: not known)
-), defaults=(None,))
+ContactSprings = namedtuple(
+    "ContactSprings",
+    (
+        "stiffness",  # (C,) k [N/m]
+        "damping",  # (C,) c [N s/m] along the normal
+        "friction_stiffness",  # (C,) k_t [N/m] of the anchor springs
+        "friction_damping",  # (C,) c_t [N s/m]
+        "friction",  # (C,) μ
+        "elongation",  # (C, 2) s = point − anchor in (t1, t2) components [m]
+        "inverse_effective_mass",  # (C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg] (None: not known)
+    ),
+    defaults=(None,),
+)
 ContactSprings.__doc__ = "The springs of C contacts, as this step sees them (a named tuple: compiled code takes it)."
 
-SpringSettings = namedtuple("SpringSettings", (
-    "stiffness",                # N/m, or −1: "auto" (each contact's load over allowed_penetration)
-    "allowed_penetration",      # m
-    "damping_ratio",            # ζ, or −1: from the material's restitution
-    "friction_stiffness",       # N/m, or −1: "auto" (the normal stiffness)
-    "implicit",                 # 0 never, 1 auto (where the explicit step is unstable), 2 always, 3 backward Euler
-    "integrator",               # 0 symplectic, 1 explicit, 2 backward Euler (``amplification``'s cases)
-    "implicit_iterations",      # passes of the active set, at most
-    "linear_tolerance",         # relative residual of the conjugate gradients
-))
+SpringSettings = namedtuple(
+    "SpringSettings",
+    (
+        "stiffness",  # N/m, or −1: "auto" (each contact's load over allowed_penetration)
+        "allowed_penetration",  # m
+        "damping_ratio",  # ζ, or −1: from the material's restitution
+        "friction_stiffness",  # N/m, or −1: "auto" (the normal stiffness)
+        "implicit",  # 0 never, 1 auto (where the explicit step is unstable), 2 always, 3 backward Euler
+        "integrator",  # 0 symplectic, 1 explicit, 2 backward Euler (``amplification``'s cases)
+        "implicit_iterations",  # passes of the active set, at most
+        "linear_tolerance",  # relative residual of the conjugate gradients
+    ),
+)
 SpringSettings.__doc__ = "The penalty Options and integrator as plain numbers, for the compiled stages."
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
 
 def spring_settings(options, integrator):
     """The SpringSettings of these Options and integrator."""
+
     def number(value):
         return -1.0 if isinstance(value, str) else float(value)
+
     implicit = 3 if integrator == "backward_euler" else {"never": 0, "auto": 1, "always": 2}[options.implicit_springs]
-    return SpringSettings(number(options.stiffness), float(options.allowed_penetration),
-                          number(options.damping_ratio), number(options.friction_stiffness), implicit,
-                          INTEGRATORS.index(integrator), int(options.implicit_iterations),
-                          float(options.linear_tolerance))
+    return SpringSettings(
+        number(options.stiffness),
+        float(options.allowed_penetration),
+        number(options.damping_ratio),
+        number(options.friction_stiffness),
+        implicit,
+        INTEGRATORS.index(integrator),
+        int(options.implicit_iterations),
+        float(options.linear_tolerance),
+    )
 
 
 def contact_stiffness(model, state, contacts, options):
     """k (C,) [N/m] of each contact's normal spring: the option's number, or for "auto" the load
     the contact carries (``supported_loads``) over ``allowed_penetration``, so every contact of
     a stack sinks about that far however much rests on it (``normal_stiffness``)."""
-    return normal_stiffness(spring_settings(options, "symplectic_euler"), *contact_entities(contacts, model.body_count),
-                            contacts.normal, state.body_position, state.particle_position,
-                            np.where(model.body_kinematic, 0.0, model.body_mass), np.asarray(model.particle_mass, dtype=float),
-                            np.asarray(model.gravity, dtype=float))
+    return normal_stiffness(
+        spring_settings(options, "symplectic_euler"),
+        *contact_entities(contacts, model.body_count),
+        contacts.normal,
+        state.body_position,
+        state.particle_position,
+        np.where(model.body_kinematic, 0.0, model.body_mass),
+        np.asarray(model.particle_mass, dtype=float),
+        np.asarray(model.gravity, dtype=float),
+    )
 
 
 @njit(cache=True)
-def normal_stiffness(settings, entity_a, entity_b, normal, body_position, particle_position, body_mass,
-                     particle_mass, gravity):
+def normal_stiffness(
+    settings, entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass, gravity
+):
     """``contact_stiffness``, compiled: sides as ``contact_entities``, the rest as ``supported_loads``."""
     if settings.stiffness >= 0.0:
         return np.full(entity_a.shape[0], settings.stiffness)
-    return supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass,
-                           gravity) / settings.allowed_penetration
+    return (
+        supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass, gravity)
+        / settings.allowed_penetration
+    )
 
 
 def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None):
@@ -370,8 +417,16 @@ def contact_springs(contacts, J, inverse_mass, carried, options, stiffness=None)
     inverse_effective = np.asarray((J @ inverse_mass).multiply(J).sum(axis=1)).ravel().reshape(C, 3)
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
     offsets, _ = values_by_id(carried.get("anchor_ids"), carried.get("anchor_offsets"), contacts.feature_id, 3)
-    return springs_of(spring_settings(options, "symplectic_euler"), k, inverse_effective, contacts.restitution,
-                      contacts.friction, offsets, contacts.tangent1, contacts.tangent2)
+    return springs_of(
+        spring_settings(options, "symplectic_euler"),
+        k,
+        inverse_effective,
+        contacts.restitution,
+        contacts.friction,
+        offsets,
+        contacts.tangent1,
+        contacts.tangent2,
+    )
 
 
 @njit(cache=True)
@@ -451,8 +506,9 @@ def spring_forces(springs, depth, velocity):
     C = depth.shape[0]
     forces, elongation = np.empty((C, 3)), springs.elongation.copy()
     for c in range(C):
-        normal = max(springs.stiffness[c] * depth[c] - springs.damping[c] * velocity[c, 0], 0.0) \
-            if depth[c] > 0.0 else 0.0
+        normal = (
+            max(springs.stiffness[c] * depth[c] - springs.damping[c] * velocity[c, 0], 0.0) if depth[c] > 0.0 else 0.0
+        )
         k_t, c_t = springs.friction_stiffness[c], springs.friction_damping[c]
         t1 = -k_t * springs.elongation[c, 0] - c_t * velocity[c, 1]
         t2 = -k_t * springs.elongation[c, 1] - c_t * velocity[c, 2]
@@ -519,8 +575,8 @@ def anchors_after(springs, rows, depth, moved_by, elongation, follow, tangent1, 
 
 # ---- the swept step: nothing passes through ----------------------------------------------
 
-PASS_THROUGH_FRACTION = 0.5   # of a contact's pass-through depth: the deepest overlap a step may carry it to
-GUARD_SWEEPS, GUARD_TOLERANCE = 100, 1e-6      # sweeps, m/s of the guard's solve
+PASS_THROUGH_FRACTION = 0.5  # of a contact's pass-through depth: the deepest overlap a step may carry it to
+GUARD_SWEEPS, GUARD_TOLERANCE = 100, 1e-6  # sweeps, m/s of the guard's solve
 
 
 @njit(cache=True)
@@ -547,9 +603,16 @@ def hold_back(model, state, contacts, rows, velocity, h):
     if not below:
         return velocity
     held = velocity.copy()
-    solve_sequential_impulses(rows, np.zeros(contacts.count), slowest, held, GUARD_SWEEPS, GUARD_TOLERANCE,
-                              np.zeros((contacts.count, 3)), *sweep_groups(rows, contacts, state,
-                                                                           solve_order(contacts, model.gravity)))
+    solve_sequential_impulses(
+        rows,
+        np.zeros(contacts.count),
+        slowest,
+        held,
+        GUARD_SWEEPS,
+        GUARD_TOLERANCE,
+        np.zeros((contacts.count, 3)),
+        *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
+    )
     return held
 
 
@@ -558,6 +621,7 @@ def hold_back(model, state, contacts, rows, velocity, h):
 # The springs' system (M + h (h K + D)) v⁺ = M v* + h Jᵀ F₀ is solved matrix-free: M as its
 # blocks (body masses (B,), world inertia tensors (B, 3, 3), particle masses (P,)), J and Jᵀ
 # through the contact rows (``sequential.ContactRows``), the springs as a weight (C, 3) per row.
+
 
 @njit(cache=True)
 def mass_blocks(body_mass, body_inertia, rotation, particle_mass):
@@ -639,8 +703,11 @@ def system_diagonal(rows, weight, mass, free):
                 b = rows.body[c, side]
                 if b >= 0:
                     r = rows.arm[c, side]
-                    lever = (r[1] * direction[2] - r[2] * direction[1], r[2] * direction[0] - r[0] * direction[2],
-                             r[0] * direction[1] - r[1] * direction[0])
+                    lever = (
+                        r[1] * direction[2] - r[2] * direction[1],
+                        r[2] * direction[0] - r[0] * direction[2],
+                        r[0] * direction[1] - r[1] * direction[0],
+                    )
                     for i in range(3):
                         diagonal[6 * b + i] += free[6 * b + i] * w * direction[i] ** 2
                         diagonal[6 * b + 3 + i] += free[6 * b + 3 + i] * w * lever[i] ** 2
@@ -664,7 +731,7 @@ def conjugate_gradients(rows, weight, mass, free, rhs, guess, tolerance, most):
     x, r, z, p, Ap, kept = guess.copy(), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
     system_product(rows, weight, mass, free, x, kept, Ap)
     for i in range(N):
-        if diagonal[i] == 0.0:          # a DOF with no mass and no spring: left as it is
+        if diagonal[i] == 0.0:  # a DOF with no mass and no spring: left as it is
             diagonal[i] = 1.0
         r[i] = rhs[i] - Ap[i]
         z[i] = r[i] / diagonal[i]
@@ -712,8 +779,13 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
     after the step (C, 2) [m], passes, relative residual of the last linear solve).
     """
     C = depth.shape[0]
-    k, c_n, k_t, c_t, mu = springs.stiffness, springs.damping, springs.friction_stiffness, \
-        springs.friction_damping, springs.friction
+    k, c_n, k_t, c_t, mu = (
+        springs.stiffness,
+        springs.damping,
+        springs.friction_stiffness,
+        springs.friction_damping,
+        springs.friction,
+    )
     start = row_products(rows, v_free)
     engaged, sticks, slips = np.empty(C, np.bool_), np.empty(C, np.bool_), np.zeros(C, np.bool_)
     for c in range(C):
@@ -732,8 +804,9 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
             for d in range(2):
                 pull[c, 1 + d] = -k_t[c] * springs.elongation[c, d] if sticks[c] else slip_force[c, d]
         rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
-        v_new, residual, _ = conjugate_gradients(rows, weight, mass, free, rhs, v_new, settings.linear_tolerance,
-                                                 10 * v_free.shape[0])
+        v_new, residual, _ = conjugate_gradients(
+            rows, weight, mass, free, rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
+        )
         # the forces at the new state say which springs act
         velocity = row_products(rows, v_new)
         settled = True
@@ -748,7 +821,7 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
                 elongation[c, d] = springs.elongation[c, d] + h * velocity[c, 1 + d]
                 trial[c, d] = -k_t[c] * elongation[c, d] - c_t[c] * velocity[c, 1 + d]
             size, limit = np.sqrt(trial[c, 0] ** 2 + trial[c, 1] ** 2), mu[c] * normal[c]
-            if passes == 1:          # the elastic predictor decides who slips, and which way
+            if passes == 1:  # the elastic predictor decides who slips, and which way
                 slips[c] = sticks[c] and size > limit
                 for d in range(2):
                     slip_direction[c, d] = trial[c, d] / max(size, 1e-300) if slips[c] else 0.0
@@ -757,11 +830,12 @@ def implicit_spring_velocities(settings, springs, rows, depth, v_free, mass, fre
                 now_sticks = sticks[c] and now_engaged
             settled = settled and now_engaged == engaged[c] and now_sticks == sticks[c]
             engaged[c], sticks[c] = now_engaged, now_sticks
-        for c in range(C):           # μ F_n⁺ along the slip, F_n⁺ of this pass
+        for c in range(C):  # μ F_n⁺ along the slip, F_n⁺ of this pass
             for d in range(2):
                 force = slip_direction[c, d] * mu[c] * normal[c]
-                settled = settled and abs(force - slip_force[c, d]) <= 1e-9 * max(1.0, largest) \
-                    + 1e-6 * abs(slip_force[c, d])
+                settled = settled and abs(force - slip_force[c, d]) <= 1e-9 * max(1.0, largest) + 1e-6 * abs(
+                    slip_force[c, d]
+                )
                 slip_force[c, d] = force
         if settled:
             break
@@ -796,10 +870,12 @@ def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
     keep = sp.diags(free.astype(float))
     v_new, residual = v_free, 0.0
     for passes in range(1, options.implicit_iterations + 1):
-        weight = np.column_stack([engaged * h * (h * k + c),
-                                  np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)])
-        pull = np.column_stack([engaged * k * depth,
-                                np.where(sticks[:, None], -k_t[:, None] * springs.elongation, slip_force)])
+        weight = np.column_stack(
+            [engaged * h * (h * k + c), np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)]
+        )
+        pull = np.column_stack(
+            [engaged * k * depth, np.where(sticks[:, None], -k_t[:, None] * springs.elongation, slip_force)]
+        )
         A = (A0 + keep @ (J.T @ sp.diags(weight.ravel()) @ J) @ keep).tocsr()
         rhs = b0 + free * (h * (J.T @ pull.ravel()))
         v_new = _solve(A, rhs, v_new, options)
@@ -813,15 +889,18 @@ def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
         elongation = springs.elongation + h * velocity[:, 1:]
         trial = -k_t[:, None] * elongation - c_t[:, None] * velocity[:, 1:]
         size, limit = np.linalg.norm(trial, axis=1), springs.friction * normal
-        if passes == 1:              # the elastic predictor decides who slips, and which way
+        if passes == 1:  # the elastic predictor decides who slips, and which way
             slips = sticks & (size > limit)
             slip_direction = np.where(slips[:, None], trial / np.maximum(size, 1e-300)[:, None], 0.0)
             now_sticks = sticks & ~slips
         else:
             now_sticks = sticks & now_engaged
-        new_slip_force = slip_direction * limit[:, None]      # μ F_n⁺ along it, F_n⁺ of this pass
-        settled = (np.array_equal(now_engaged, engaged) and np.array_equal(now_sticks, sticks)
-                   and np.allclose(new_slip_force, slip_force, rtol=1e-6, atol=1e-9 * max(1.0, limit.max(initial=0.0))))
+        new_slip_force = slip_direction * limit[:, None]  # μ F_n⁺ along it, F_n⁺ of this pass
+        settled = (
+            np.array_equal(now_engaged, engaged)
+            and np.array_equal(now_sticks, sticks)
+            and np.allclose(new_slip_force, slip_force, rtol=1e-6, atol=1e-9 * max(1.0, limit.max(initial=0.0)))
+        )
         engaged, sticks, slip_force = now_engaged, now_sticks, new_slip_force
         if settled:
             break
@@ -836,16 +915,16 @@ def implicit_velocities(springs, J, A0, b0, free, v_free, depth, dt, options):
 
 
 def _solve(A, rhs, guess, options):
-    if options.linear_solver == "direct":     # A is symmetric positive definite (conjugate gradients need it too)
+    if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
         return factor_symmetric(A).solve(rhs)
     diagonal = A.diagonal()
     preconditioner = spla.LinearOperator(A.shape, matvec=lambda x: x / diagonal)
-    solution, info = spla.cg(A, rhs, x0=guess, rtol=options.linear_tolerance, maxiter=10 * A.shape[0],
-                             M=preconditioner)
+    solution, info = spla.cg(A, rhs, x0=guess, rtol=options.linear_tolerance, maxiter=10 * A.shape[0], M=preconditioner)
     return solution
 
 
 # ---- the step: loop L1 --------------------------------------------------------------------
+
 
 def step(model, state, dt, options, integrator="symplectic_euler"):
     """One step of loop L1 with penalty forces; returns (new State, StepInfo). Its compiled stages
@@ -855,13 +934,30 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     h, settings = dt, spring_settings(options, integrator)
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
-    contacts = collide(model, state, options.contact_margin, sweep, options.granularity, options.normal,
-                       options.samples, cloth_samples=options.cloth_samples)
+    contacts = collide(
+        model,
+        state,
+        options.contact_margin,
+        sweep,
+        options.granularity,
+        options.normal,
+        options.samples,
+        cloth_samples=options.cloth_samples,
+    )
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    offsets, _ = values_by_id(state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"),
-                              contacts.feature_id, 3)
-    springs = springs_of(settings, contact_stiffness(model, state, contacts, options), rows.k[:, :3],
-                         contacts.restitution, contacts.friction, offsets, contacts.tangent1, contacts.tangent2)
+    offsets, _ = values_by_id(
+        state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"), contacts.feature_id, 3
+    )
+    springs = springs_of(
+        settings,
+        contact_stiffness(model, state, contacts, options),
+        rows.k[:, :3],
+        contacts.restitution,
+        contacts.friction,
+        offsets,
+        contacts.tangent1,
+        contacts.tangent2,
+    )
     v = stack(*state.velocities)
     # 2. collision forces F = k δ n and anchor springs (P1, F3), at the current state
     forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
@@ -870,11 +966,13 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1); the
     # springs by backward Euler (M1) under that integrator, or where an explicit step would grow
     passes, residual = 0, 0.0
-    implicit = springs_implicit(settings, springs, *contact_entities(contacts, model.body_count),
-                                model.body_count + model.particle_count, h)
+    implicit = springs_implicit(
+        settings, springs, *contact_entities(contacts, model.body_count), model.body_count + model.particle_count, h
+    )
     if implicit:
-        v_new, forces, elongation, passes, residual = _implicit(model, state, contacts, springs, rows, v_free, h,
-                                                                options, integrator)
+        v_new, forces, elongation, passes, residual = _implicit(
+            model, state, contacts, springs, rows, v_free, h, options, integrator
+        )
         moved_by = v_new
     else:
         v_new = explicit_velocities(rows, forces, v_free, h)
@@ -886,12 +984,19 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
         moved_by = held
     positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)
     # 5. advance dt; the anchors of pressed contacts go on, by contact id
-    elongation, offsets, energy = anchors_after(springs, rows, contacts.depth, moved_by, elongation, not implicit,
-                                                contacts.tangent1, contacts.tangent2, h)
+    elongation, offsets, energy = anchors_after(
+        springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
+    )
     carried = dict(state.carried, anchor_ids=contacts.feature_id, anchor_offsets=offsets)
     new = State.assemble(state.time + dt, positions, unstack(v_new, model.body_count), carried)
-    return new, StepInfo(contacts, solver_iterations=passes, solver_residual=residual, energy_elastic=energy,
-                         implicit_springs=implicit and integrator != "backward_euler", impulses=h * forces)
+    return new, StepInfo(
+        contacts,
+        solver_iterations=passes,
+        solver_residual=residual,
+        energy_elastic=energy,
+        implicit_springs=implicit and integrator != "backward_euler",
+        impulses=h * forces,
+    )
 
 
 def _implicit(model, state, contacts, springs, rows, v_free, h, options, integrator):
@@ -899,11 +1004,22 @@ def _implicit(model, state, contacts, springs, rows, v_free, h, options, integra
     contacts is M (no cloth stepped implicitly) and the solver is "cg"; else with SciPy on the
     assembled system (``implicit_velocities``)."""
     if options.linear_solver == "cg" and not (model.spring_count and integrator == "backward_euler"):
-        mass = mass_blocks(np.asarray(model.body_mass, dtype=float), np.asarray(model.body_inertia, dtype=float),
-                           rotations.matrices(np.ascontiguousarray(state.body_orientation, dtype=float)),
-                           np.asarray(model.particle_mass, dtype=float))
-        return implicit_spring_velocities(spring_settings(options, integrator), springs, rows, contacts.depth,
-                                          v_free, mass, free_dofs(model.particle_pinned, model.body_count), h)
+        mass = mass_blocks(
+            np.asarray(model.body_mass, dtype=float),
+            np.asarray(model.body_inertia, dtype=float),
+            rotations.matrices(np.ascontiguousarray(state.body_orientation, dtype=float)),
+            np.asarray(model.particle_mass, dtype=float),
+        )
+        return implicit_spring_velocities(
+            spring_settings(options, integrator),
+            springs,
+            rows,
+            contacts.depth,
+            v_free,
+            mass,
+            free_dofs(model.particle_pinned, model.body_count),
+            h,
+        )
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
     A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
     return implicit_velocities(springs, J, A0, b0, free, v_free, contacts.depth, h, options)

@@ -41,21 +41,22 @@ from ..dynamics.integrators import free_velocities, moved
 from ..state import State
 from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
-from .velocity_level import detect
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from .velocity_level import detect
 
 
 @dataclass
 class Options(KeptManifoldOptions):
     """Settings of ``[method.projection]`` (after the collision settings of KeptManifoldOptions:
     the first pass of a step detects at the step's start, keeping box and hull manifolds)."""
-    iterations: int = 100                 # Gauss-Seidel sweeps per projection (at most)
-    tolerance: float = 1e-10              # m: stop once a sweep moves no contact point more
-    passes: int = 2                       # detect-and-project rounds per step
-    contact_margin: float = 0.001         # m: gaps this small are detected too
-    cloth_samples: int = 2                # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
-    slop: float = 0.0005                  # m of penetration left alone (the rest is projected out)
-    warm_start: float = 1.0               # fraction of last step's projection λ to start from (by contact id; 0 = cold)
+
+    iterations: int = 100  # Gauss-Seidel sweeps per projection (at most)
+    tolerance: float = 1e-10  # m: stop once a sweep moves no contact point more
+    passes: int = 2  # detect-and-project rounds per step
+    contact_margin: float = 0.001  # m: gaps this small are detected too
+    cloth_samples: int = 2  # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+    slop: float = 0.0005  # m of penetration left alone (the rest is projected out)
+    warm_start: float = 1.0  # fraction of last step's projection λ to start from (by contact id; 0 = cold)
 
     def __post_init__(self):
         super().__post_init__()
@@ -81,20 +82,37 @@ def project(model, at, offset, displacement, options, sweep=None, carried=None, 
     contacts, λ (C, 3) [kg m], sweeps, last correction [m]).
     """
     if contacts is None:
-        contacts = collide(model, at, options.contact_margin, sweep, options.granularity, options.normal,
-                           options.samples, cloth_samples=options.cloth_samples)
+        contacts = collide(
+            model,
+            at,
+            options.contact_margin,
+            sweep,
+            options.granularity,
+            options.normal,
+            options.samples,
+            cloth_samples=options.cloth_samples,
+        )
     if contacts.count == 0:
         return displacement, contacts, np.zeros((0, 3)), 0, 0.0
     warm = np.zeros((contacts.count, 3))
     if carried is not None and options.warm_start > 0.0:
-        warm = options.warm_start * values_by_id(carried.get("projection_ids"), carried.get("projection_values"),
-                                                 contacts.feature_id, 3)[0]
+        warm = (
+            options.warm_start
+            * values_by_id(carried.get("projection_ids"), carried.get("projection_values"), contacts.feature_id, 3)[0]
+        )
     rows = rows_of(model, contacts, at.body_position, at.body_orientation)
-    target = projection_targets(rows, offset, contacts.depth, options.slop)         # J_n u ≥ J_n offset + δ
+    target = projection_targets(rows, offset, contacts.depth, options.slop)  # J_n u ≥ J_n offset + δ
     corrected = displacement.copy()
-    lam, sweeps, change = solve_sequential_impulses(rows, contacts.friction, target, corrected, options.iterations,
-                                                    options.tolerance, warm,
-                                                    *sweep_groups(rows, contacts, at, solve_order(contacts, model.gravity)))
+    lam, sweeps, change = solve_sequential_impulses(
+        rows,
+        contacts.friction,
+        target,
+        corrected,
+        options.iterations,
+        options.tolerance,
+        warm,
+        *sweep_groups(rows, contacts, at, solve_order(contacts, model.gravity)),
+    )
     return corrected, contacts, lam, sweeps, change
 
 
@@ -111,18 +129,26 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # (speculative: a gap may close, never be crossed), projected — nothing passes through
     # anything, however fast; then at the projected positions, for what the linearization missed
     contacts, manifolds = detect(model, state, options, sweep)
-    displacement, contacts, lam, total_sweeps, change = project(model, state, np.zeros_like(predicted_displacement),
-                                                                 predicted_displacement, options, sweep, state.carried,
-                                                                 contacts)
+    displacement, contacts, lam, total_sweeps, change = project(
+        model,
+        state,
+        np.zeros_like(predicted_displacement),
+        predicted_displacement,
+        options,
+        sweep,
+        state.carried,
+        contacts,
+    )
     carried = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
-    pushed = lam                    # [kg m] each contact's λ summed over the passes, by contact id
+    pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
     for _ in range(options.passes - 1):
         if contacts.count == 0:
             break
         projected = State.assemble(state.time + h, displaced(*_positions(state), displacement, h), state.velocities)
         ids = contacts.feature_id
-        displacement, contacts, more, sweeps, change = project(model, projected, displacement, displacement, options,
-                                                               sweep)
+        displacement, contacts, more, sweeps, change = project(
+            model, projected, displacement, displacement, options, sweep
+        )
         pushed = values_by_id(ids, pushed, contacts.feature_id, 3)[0] + more
         total_sweeps += sweeps
         if sweeps <= 1 and change <= options.tolerance:
@@ -130,8 +156,9 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     # 5. advance dt, velocities from the projected positions
     positions, velocities = advance(*_positions(state), v_free, displacement, predicted_displacement, h)
     new = State.assemble(state.time + h, positions, velocities, carried)
-    return new, StepInfo(contacts, solver_iterations=total_sweeps, solver_residual=change,
-                         impulses=pushed / h)    # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
+    return new, StepInfo(
+        contacts, solver_iterations=total_sweeps, solver_residual=change, impulses=pushed / h
+    )  # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
 
 
 def _positions(state):
@@ -140,6 +167,7 @@ def _positions(state):
 
 
 # ---- the compiled stages the Python step and the compiled loop (methods.velocity_loop) share ----
+
 
 @njit(cache=True)
 def projection_targets(rows, offset, depth, slop):
@@ -162,8 +190,16 @@ def displaced(body_position, body_orientation, particle_position, displacement, 
     generalized displacement (N,) [m, rad]: translations added, rotation vectors applied by the
     exponential map (as velocities displacement / h for h, ``integrators.moved``)."""
     rate = unstacked(displacement / h, body_position.shape[0])
-    return moved(body_position, body_orientation, particle_position, rate[0], rate[1], rate[2],
-                 np.full(body_position.shape[0], h), np.full(particle_position.shape[0], h))
+    return moved(
+        body_position,
+        body_orientation,
+        particle_position,
+        rate[0],
+        rate[1],
+        rate[2],
+        np.full(body_position.shape[0], h),
+        np.full(particle_position.shape[0], h),
+    )
 
 
 @njit(cache=True)

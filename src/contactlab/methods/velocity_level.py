@@ -39,9 +39,18 @@ def detect(model, state, options, sweep):
     gaps down to what the motion could close (speculative contacts, so nothing tunnels), box,
     hull and plane pairs that barely moved keeping last step's manifolds. Returns (Contacts,
     the manifolds to carry)."""
-    return collide_keeping(model, state, state.carried.get("manifolds"), options.manifold_tolerance,
-                           options.contact_margin, sweep, options.granularity, options.normal, options.samples,
-                           cloth_samples=options.cloth_samples)
+    return collide_keeping(
+        model,
+        state,
+        state.carried.get("manifolds"),
+        options.manifold_tolerance,
+        options.contact_margin,
+        sweep,
+        options.granularity,
+        options.normal,
+        options.samples,
+        cloth_samples=options.cloth_samples,
+    )
 
 
 def step_without_contacts(state, h, predicted, free, contacts, manifolds, warm_prefix):
@@ -81,8 +90,9 @@ def resting_target(gap_at_start, dt, options):
     ``stabilization`` of its depth beyond ``slop`` per step, never faster than
     ``max_push_velocity`` (a deep overlap must not turn into a launch).
     """
-    return resting_targets(np.asarray(gap_at_start, dtype=float), dt, options.stabilization, options.slop,
-                           options.max_push_velocity)
+    return resting_targets(
+        np.asarray(gap_at_start, dtype=float), dt, options.stabilization, options.slop, options.max_push_velocity
+    )
 
 
 @njit(cache=True)
@@ -109,9 +119,14 @@ def relative_gravity(model, contacts):
     velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
     gravity acts over the rest of the step (see ``resolve_collisions``).
     """
-    return gravity_along_normals(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                                 np.ascontiguousarray(contacts.normal, dtype=float),
-                                 np.asarray(model.gravity, dtype=float))
+    return gravity_along_normals(
+        contacts.body_a,
+        contacts.body_b,
+        contacts.particles_a,
+        contacts.particles_b,
+        np.ascontiguousarray(contacts.normal, dtype=float),
+        np.asarray(model.gravity, dtype=float),
+    )
 
 
 @njit(cache=True)
@@ -121,8 +136,9 @@ def gravity_along_normals(body_a, body_b, particles_a, particles_b, normal, grav
     for c in range(normal.shape[0]):
         dynamic_a = 1.0 if body_a[c] >= 0 or particles_a[c, 0] >= 0 else 0.0
         dynamic_b = 1.0 if body_b[c] >= 0 or particles_b[c, 0] >= 0 else 0.0
-        out[c] = (dynamic_a - dynamic_b) * (normal[c, 0] * gravity[0] + normal[c, 1] * gravity[1]
-                                            + normal[c, 2] * gravity[2])
+        out[c] = (dynamic_a - dynamic_b) * (
+            normal[c, 0] * gravity[0] + normal[c, 1] * gravity[1] + normal[c, 2] * gravity[2]
+        )
     return out
 
 
@@ -130,8 +146,15 @@ def entity_impact_fractions(model, contacts, tau):
     """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
     −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
     acts over the whole step."""
-    return earliest_impacts(contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b,
-                             np.asarray(tau, dtype=float), model.body_count, model.particle_count)
+    return earliest_impacts(
+        contacts.body_a,
+        contacts.body_b,
+        contacts.particles_a,
+        contacts.particles_b,
+        np.asarray(tau, dtype=float),
+        model.body_count,
+        model.particle_count,
+    )
 
 
 @njit(cache=True)
@@ -167,14 +190,20 @@ def normal_targets(gap_at_start, normal_velocity, gravity_normal, restitution, d
     −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
     ``resting_target``. Returns (target (C,) [m/s], τ (C,), −1 where there was no impact).
     """
-    return impact_targets(*(np.asarray(a, dtype=float) for a in (gap_at_start, normal_velocity, gravity_normal,
-                                                                  restitution)),
-                          dt, threshold, options.stabilization, options.slop, options.max_push_velocity)
+    return impact_targets(
+        *(np.asarray(a, dtype=float) for a in (gap_at_start, normal_velocity, gravity_normal, restitution)),
+        dt,
+        threshold,
+        options.stabilization,
+        options.slop,
+        options.max_push_velocity,
+    )
 
 
 @njit(cache=True)
-def impact_targets(gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, stabilization, slop,
-                   max_push_velocity):
+def impact_targets(
+    gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, stabilization, slop, max_push_velocity
+):
     """``normal_targets``, compiled, with the options' stabilization, slop and max push velocity."""
     h = dt
     C = gap_at_start.shape[0]

@@ -58,7 +58,7 @@ def build_model(scene, base=None):
                 arguments["position"] = (np.asarray(body["position"]) + offset).tolist()
                 arguments["name"] = f"{body['name']}_{copy}" if body["name"] is not None else None
             index = _call(f"bodies[{i}]", builder.add_body, **arguments)
-            if body["path"] is not None:          # each copy moves along the path, shifted by its offset
+            if body["path"] is not None:  # each copy moves along the path, shifted by its offset
                 path = dict(body["path"], positions=(np.asarray(body["path"]["positions"]) + offset).tolist())
                 _call(f"bodies[{i}].path", builder.add_path, body=index, **path)
     for i, particles in enumerate(scene["particles"]):
@@ -69,11 +69,20 @@ def build_model(scene, base=None):
         if velocity is not None:
             if len(velocity) != len(particles["position"]):
                 # checked here, before the array copies, so the counts match what the file says
-                raise InputError(f"particles[{i}].velocity", f"expected {len(particles['position'])} "
-                                 f"velocities, one per position, found {len(velocity)}")
+                raise InputError(
+                    f"particles[{i}].velocity",
+                    f"expected {len(particles['position'])} velocities, one per position, found {len(velocity)}",
+                )
             velocity = np.tile(np.asarray(velocity), (len(offsets), 1))
-        _call(f"particles[{i}]", builder.add_particles, position=position, velocity=velocity,
-              mass=particles["mass"], radius=particles["radius"], material=particles["material"])
+        _call(
+            f"particles[{i}]",
+            builder.add_particles,
+            position=position,
+            velocity=velocity,
+            mass=particles["mass"],
+            radius=particles["radius"],
+            material=particles["material"],
+        )
     for i, cloth in enumerate(scene.get("cloth", [])):
         _call(f"cloth[{i}]", builder.add_cloth, **_resolve_files(cloth, base))
     for i, obstacle in enumerate(scene["obstacles"]):

@@ -25,8 +25,8 @@ from .overrides import apply_overrides
 from .schema import show, validate
 from .toml import parse_toml
 
-BUILTIN_PACKAGE = __package__          # scene files live in <this package>/builtin/*.toml
-MAX_SCENE_BYTES = 16 * 2 ** 20         # bytes: a larger scene file is refused unread (built-in ones are under 2 kB)
+BUILTIN_PACKAGE = __package__  # scene files live in <this package>/builtin/*.toml
+MAX_SCENE_BYTES = 16 * 2**20  # bytes: a larger scene file is refused unread (built-in ones are under 2 kB)
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,7 @@ class Scene:
     for every method with a table and the selected one (its defaults where it has none): what
     to pass to ``simulate``.
     """
+
     name: str
     model: Model
     method: str = "impulse"
@@ -56,8 +57,10 @@ class Scene:
         ``source``): ``{"scene": the built-in name or the file's absolute path, "overrides":
         the --set strings it was loaded with}``."""
         builtin = self.source.startswith("builtin:")
-        return {"scene": self.source[len("builtin:"):] if builtin else os.path.abspath(self.source),
-                "overrides": [str(line) for line in overrides]}
+        return {
+            "scene": self.source[len("builtin:") :] if builtin else os.path.abspath(self.source),
+            "overrides": [str(line) for line in overrides],
+        }
 
 
 def _builtin_dir():
@@ -65,8 +68,7 @@ def _builtin_dir():
 
 
 def _builtin_names():
-    return sorted(entry.name[:-len(".toml")] for entry in _builtin_dir().iterdir()
-                  if entry.name.endswith(".toml"))
+    return sorted(entry.name[: -len(".toml")] for entry in _builtin_dir().iterdir() if entry.name.endswith(".toml"))
 
 
 def builtin_scenes():
@@ -80,9 +82,13 @@ def builtin_scenes():
 
 def _not_a_file(mode):
     """What a non-regular file is, in words (from its ``os.stat`` mode)."""
-    kinds = ((stat.S_ISDIR, "the directory"), (stat.S_ISCHR, "the character device"),
-             (stat.S_ISBLK, "the block device"), (stat.S_ISFIFO, "the FIFO (named pipe)"),
-             (stat.S_ISSOCK, "the socket"))
+    kinds = (
+        (stat.S_ISDIR, "the directory"),
+        (stat.S_ISCHR, "the character device"),
+        (stat.S_ISBLK, "the block device"),
+        (stat.S_ISFIFO, "the FIFO (named pipe)"),
+        (stat.S_ISSOCK, "the socket"),
+    )
     return next((words for test, words in kinds if test(mode)), "the special file")
 
 
@@ -94,26 +100,31 @@ def _read_file(path):
         status = os.stat(path)
     except FileNotFoundError:
         raise InputError("", f"no such file {shown}") from None
-    except (OSError, ValueError) as error:           # ValueError: a NUL character in the path
+    except (OSError, ValueError) as error:  # ValueError: a NUL character in the path
         raise InputError("", f"cannot read {shown} ({getattr(error, 'strerror', None) or error})") from None
     if not stat.S_ISREG(status.st_mode):
         raise InputError("", f"expected a .toml file, found {_not_a_file(status.st_mode)} {shown}")
     if status.st_size > MAX_SCENE_BYTES:
-        raise InputError("", f"the scene file {shown} is {status.st_size / 2 ** 20:.1f} MiB, more than the "
-                             f"{MAX_SCENE_BYTES // 2 ** 20} MiB a scene file may be")
+        raise InputError(
+            "",
+            f"the scene file {shown} is {status.st_size / 2**20:.1f} MiB, more than the "
+            f"{MAX_SCENE_BYTES // 2**20} MiB a scene file may be",
+        )
     try:
         with open(path, "rb") as stream:
             data = stream.read(MAX_SCENE_BYTES + 1)
     except OSError as error:
         raise InputError("", f"cannot read {shown} ({error.strerror or error})") from None
-    if len(data) > MAX_SCENE_BYTES:                  # it grew since the stat
-        raise InputError("", f"the scene file {shown} is more than the {MAX_SCENE_BYTES // 2 ** 20} MiB "
-                             f"a scene file may be")
+    if len(data) > MAX_SCENE_BYTES:  # it grew since the stat
+        raise InputError(
+            "", f"the scene file {shown} is more than the {MAX_SCENE_BYTES // 2**20} MiB a scene file may be"
+        )
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as error:
-        raise InputError("", f"expected UTF-8 text, found a byte 0x{data[error.start]:02x} at offset "
-                             f"{error.start} that is not") from None
+        raise InputError(
+            "", f"expected UTF-8 text, found a byte 0x{data[error.start]:02x} at offset {error.start} that is not"
+        ) from None
 
 
 def read_source(source):
@@ -121,16 +132,24 @@ def read_source(source):
     text_source = os.fspath(source) if isinstance(source, os.PathLike) else source
     if not isinstance(text_source, str) or not text_source:
         raise InputError("", f"expected a built-in scene name or a path to a .toml file, found {show(source)}")
-    looks_like_path = (isinstance(source, os.PathLike) or text_source.endswith(".toml")
-                       or os.sep in text_source or "/" in text_source or os.path.exists(text_source))
+    looks_like_path = (
+        isinstance(source, os.PathLike)
+        or text_source.endswith(".toml")
+        or os.sep in text_source
+        or "/" in text_source
+        or os.path.exists(text_source)
+    )
     if looks_like_path:
         return Path(text_source).stem, _read_file(text_source), text_source
     names = _builtin_names()
     if text_source not in names:
         close = difflib.get_close_matches(text_source, names, n=3)
         hint = f" (did you mean {', '.join(show(c) for c in close)}?)" if close else ""
-        raise InputError("", f"unknown built-in scene {show(text_source)}{hint}; run `contactlab scenes` "
-                             f"to list them, or give the path of a .toml file")
+        raise InputError(
+            "",
+            f"unknown built-in scene {show(text_source)}{hint}; run `contactlab scenes` "
+            f"to list them, or give the path of a .toml file",
+        )
     text = _builtin_dir().joinpath(f"{text_source}.toml").read_text(encoding="utf-8")
     return text_source, text, f"builtin:{text_source}"
 
@@ -139,8 +158,11 @@ def _method_options(scene):
     """Method name -> its Options, built from the ``[method.NAME]`` table of every available
     method that has one, and for the selected method (from no table: its defaults); InputError
     naming the table's key, or "simulation.method" for an unavailable selected method."""
-    built = {name: methods.make_options(methods.get(name), table, f"method.{name}")
-             for name, table in scene["method"].items() if name in methods.AVAILABLE}
+    built = {
+        name: methods.make_options(methods.get(name), table, f"method.{name}")
+        for name, table in scene["method"].items()
+        if name in methods.AVAILABLE
+    }
     selected = scene["simulation"]["method"]
     try:
         module = methods.get(selected)

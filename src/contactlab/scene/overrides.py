@@ -29,12 +29,14 @@ def parse_override(assignment):
         raise InputError(FIELD, f"expected PATH=VALUE (for example simulation.dt=0.001), found {show(assignment)}")
     path_text, value_text = (part.strip() for part in assignment.split("=", 1))
     if not path_text:
-        raise InputError(FIELD, f"expected a path before '=' (for example simulation.dt=0.001), "
-                                f"found {show(assignment)}")
+        raise InputError(
+            FIELD, f"expected a path before '=' (for example simulation.dt=0.001), found {show(assignment)}"
+        )
     parts = path_text.replace("[", ".").replace("]", "").split(".")
     if any(not part.strip() for part in parts):
-        raise InputError(FIELD, f"expected a path of names and indices separated by dots, "
-                                f"found an empty part in {show(path_text)}")
+        raise InputError(
+            FIELD, f"expected a path of names and indices separated by dots, found an empty part in {show(path_text)}"
+        )
     path = [int(part) if part.strip().isdigit() else part.strip() for part in parts]
     return path, parse_value(value_text)
 
@@ -45,22 +47,28 @@ def _step(node, part, where, assignment, create_next=None):
         key = str(part)
         if key not in node and create_next is not None:
             if isinstance(create_next, int):
-                raise InputError(path_join(where, key), f"there is no list {key} to index in --set "
-                                                        f"{show(assignment)}")
+                raise InputError(path_join(where, key), f"there is no list {key} to index in --set {show(assignment)}")
             node[key] = {}
         return node, key
     if isinstance(node, list):
         if not isinstance(part, int):
-            raise InputError(where, f"this is a list, so --set {show(assignment)} must index it with a number "
-                                    f"such as 0, found {show(part)}")
+            raise InputError(
+                where,
+                f"this is a list, so --set {show(assignment)} must index it with a number "
+                f"such as 0, found {show(part)}",
+            )
         if part >= len(node):
-            entries = {0: "no entries", 1: "1 entry, index 0"}.get(len(node), f"{len(node)} entries, indices 0 "
-                                                                                f"to {len(node) - 1}")
-            raise InputError(path_join(where, part), f"index {part} is out of range in --set "
-                                                     f"{show(assignment)} ({where} has {entries})")
+            entries = {0: "no entries", 1: "1 entry, index 0"}.get(
+                len(node), f"{len(node)} entries, indices 0 to {len(node) - 1}"
+            )
+            raise InputError(
+                path_join(where, part),
+                f"index {part} is out of range in --set {show(assignment)} ({where} has {entries})",
+            )
         return node, part
-    raise InputError(where, f"this is a value ({show(node)}), not a table, so --set {show(assignment)} "
-                            f"cannot set anything inside it")
+    raise InputError(
+        where, f"this is a value ({show(node)}), not a table, so --set {show(assignment)} cannot set anything inside it"
+    )
 
 
 def apply_overrides(raw, overrides):

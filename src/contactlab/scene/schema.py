@@ -35,7 +35,7 @@ def show(value, limit=60):
     if isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, str):
-        text = repr(value)              # quoted as the builder and contactlab.methods quote names
+        text = repr(value)  # quoted as the builder and contactlab.methods quote names
     elif isinstance(value, (int, float)):
         text = repr(value)
     elif isinstance(value, dict):
@@ -44,7 +44,7 @@ def show(value, limit=60):
         text = "[" + ", ".join(show(v, limit) for v in value) + "]"
     else:
         text = str(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def path_join(path, key):
@@ -102,8 +102,9 @@ class Choice:
         if not isinstance(value, str):
             raise InputError(field, f"expected one of {', '.join(self.values)}, found {show(value)}")
         if value in self.planned:
-            raise InputError(field, f"the {self.what} {show(value)} is not supported yet; "
-                                    f"use one of {', '.join(self.values)}")
+            raise InputError(
+                field, f"the {self.what} {show(value)} is not supported yet; use one of {', '.join(self.values)}"
+            )
         if value not in self.values:
             raise InputError(field, f"unknown {self.what} {show(value)}{_did_you_mean(value, self.values)}")
         return value
@@ -119,10 +120,14 @@ class Vector:
         self.size, self.whole = size, whole
 
     def check(self, value, field, unit=""):
-        what = (f"a list of {self.size} whole numbers ≥ 1" if self.whole
-                else f"a list of {self.size} numbers{_unit(unit)}")
-        if (not isinstance(value, list) or len(value) != self.size
-                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)):
+        what = (
+            f"a list of {self.size} whole numbers ≥ 1" if self.whole else f"a list of {self.size} numbers{_unit(unit)}"
+        )
+        if (
+            not isinstance(value, list)
+            or len(value) != self.size
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)
+        ):
             raise InputError(field, f"expected {what}, found {show(value)}")
         if self.whole:
             if any(not isinstance(x, int) or x < 1 for x in value):
@@ -143,8 +148,7 @@ class Points:
 
     def check(self, value, field, unit=""):
         if not isinstance(value, list) or not value:
-            raise InputError(field, f"expected a non-empty list of [x, y, z] points{_unit(unit)}, "
-                                    f"found {show(value)}")
+            raise InputError(field, f"expected a non-empty list of [x, y, z] points{_unit(unit)}, found {show(value)}")
         return [self.point.check(p, f"{field}[{i}]", unit) for i, p in enumerate(value)]
 
     def describe(self):
@@ -162,8 +166,10 @@ class Times:
         times = [self.number.check(t, f"{field}[{i}]", unit) for i, t in enumerate(value)]
         for i in range(1, len(times)):
             if times[i] <= times[i - 1]:
-                raise InputError(f"{field}[{i}]", f"times must increase strictly, found {show(value[i])} after "
-                                                  f"{show(value[i - 1])}{_unit(unit)}")
+                raise InputError(
+                    f"{field}[{i}]",
+                    f"times must increase strictly, found {show(value[i])} after {show(value[i - 1])}{_unit(unit)}",
+                )
         return times
 
     def describe(self):
@@ -207,8 +213,11 @@ class Pinned:
             ok = isinstance(item, str) or (isinstance(item, int) and not isinstance(item, bool) and item >= 0)
             if not ok:
                 where = f"{field}[{i}]" if isinstance(value, list) else field
-                raise InputError(where, f"expected a vertex index (a whole number ≥ 0) or a vertex set name "
-                                        f"such as \"corners\", found {show(item)}")
+                raise InputError(
+                    where,
+                    f"expected a vertex index (a whole number ≥ 0) or a vertex set name "
+                    f'such as "corners", found {show(item)}',
+                )
         return list(items)
 
     def describe(self):
@@ -239,12 +248,17 @@ class GridArray(Table):
         array = super().check(value, field, unit)
         copies = math.prod(array["count"])
         if copies > MAX_ARRAY_COPIES:
-            raise InputError(f"{field}.count", f"expected at most {MAX_ARRAY_COPIES} copies in all, "
-                                               f"found {show(array['count'])} = {copies}")
+            raise InputError(
+                f"{field}.count",
+                f"expected at most {MAX_ARRAY_COPIES} copies in all, found {show(array['count'])} = {copies}",
+            )
         for axis, (count, spacing) in enumerate(zip(array["count"], array["spacing"])):
             if count > 1 and spacing == 0:
-                raise InputError(f"{field}.spacing", f"expected a non-zero spacing along {'xyz'[axis]}, "
-                                                     f"where count is {count}, found {show(array['spacing'])}")
+                raise InputError(
+                    f"{field}.spacing",
+                    f"expected a non-zero spacing along {'xyz'[axis]}, "
+                    f"where count is {count}, found {show(array['spacing'])}",
+                )
         return array
 
 
@@ -275,8 +289,9 @@ class MethodTables:
             raise InputError(field, f"expected tables [method.NAME], found {show(value)}")
         for name, table in value.items():
             if name not in self.names:
-                raise InputError(path_join(field, name),
-                                 f"unknown method {show(name)}{_did_you_mean(name, self.names)}")
+                raise InputError(
+                    path_join(field, name), f"unknown method {show(name)}{_did_you_mean(name, self.names)}"
+                )
             if not isinstance(table, dict):
                 raise InputError(path_join(field, name), f"expected a table of options, found {show(table)}")
         return {name: dict(table) for name, table in value.items()}
@@ -288,11 +303,12 @@ class MethodTables:
 @dataclass(frozen=True)
 class Key:
     """One key of a table: its kind, unit, default and, for shape-specific keys, the shapes."""
+
     kind: object
-    default: object = None        # None: left to the builder (or absent)
+    default: object = None  # None: left to the builder (or absent)
     unit: str = ""
     required: bool = False
-    shapes: tuple = ()            # non-empty: only these shapes take the key
+    shapes: tuple = ()  # non-empty: only these shapes take the key
 
 
 def taking(name, table):
@@ -323,10 +339,7 @@ MATERIAL = {
     "restitution": Key(Number(), 0.0, "epsilon"),
 }
 
-ARRAY = {
-    "count": Key(Vector(3, whole=True), required=True),
-    "spacing": Key(Vector(3), required=True, unit="m"),
-}
+ARRAY = {"count": Key(Vector(3, whole=True), required=True), "spacing": Key(Vector(3), required=True, unit="m")}
 
 PATH = {
     "times": Key(Times(), required=True, unit="s"),
@@ -336,8 +349,7 @@ PATH = {
 
 BODY = {
     "name": Key(Text()),
-    "shape": Key(Choice(("sphere", "box", "capsule", "convex"), PLANNED_BODY_SHAPES, what="body shape"),
-                 required=True),
+    "shape": Key(Choice(("sphere", "box", "capsule", "convex"), PLANNED_BODY_SHAPES, what="body shape"), required=True),
     "radius": Key(Number(), unit="m", shapes=taking("radius", BODY_SHAPE_ARGUMENTS)),
     "half_extents": Key(Vector(3), unit="m", shapes=taking("half_extents", BODY_SHAPE_ARGUMENTS)),
     "half_length": Key(Number(), unit="m", shapes=taking("half_length", BODY_SHAPE_ARGUMENTS)),
@@ -392,8 +404,10 @@ CLOTH = {
 }
 
 OBSTACLE = {
-    "shape": Key(Choice(("plane", "sphere", "box", "convex", "mesh"), PLANNED_OBSTACLE_SHAPES,
-                        what="obstacle shape"), required=True),
+    "shape": Key(
+        Choice(("plane", "sphere", "box", "convex", "mesh"), PLANNED_OBSTACLE_SHAPES, what="obstacle shape"),
+        required=True,
+    ),
     "normal": Key(Vector(3), shapes=taking("normal", OBSTACLE_SHAPE_ARGUMENTS)),
     "offset": Key(Number(), 0.0, "m", shapes=taking("offset", OBSTACLE_SHAPE_ARGUMENTS)),
     "radius": Key(Number(), unit="m", shapes=taking("radius", OBSTACLE_SHAPE_ARGUMENTS)),
@@ -402,8 +416,9 @@ OBSTACLE = {
     "file": Key(Text(), shapes=taking("file", OBSTACLE_SHAPE_ARGUMENTS)),
     "scale": Key(Number(positive=True), 1.0, shapes=taking("scale", OBSTACLE_SHAPE_ARGUMENTS)),
     "position": Key(Vector(3), [0.0, 0.0, 0.0], "m", shapes=taking("position", OBSTACLE_SHAPE_ARGUMENTS)),
-    "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z",
-                       shapes=taking("orientation", OBSTACLE_SHAPE_ARGUMENTS)),
+    "orientation": Key(
+        Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z", shapes=taking("orientation", OBSTACLE_SHAPE_ARGUMENTS)
+    ),
     "material": Key(Text()),
 }
 
@@ -419,9 +434,18 @@ TOP = {
     "forces": Key(TableList(FORCE), []),
 }
 
-TABLES = {"top level": TOP, "[simulation]": SIMULATION, "[[materials]]": MATERIAL,
-          "[[bodies]]": BODY, "[[particles]]": PARTICLES, "[[cloth]]": CLOTH, "[[obstacles]]": OBSTACLE, "array": ARRAY,
-          "path": PATH, "[[forces]]": FORCE}
+TABLES = {
+    "top level": TOP,
+    "[simulation]": SIMULATION,
+    "[[materials]]": MATERIAL,
+    "[[bodies]]": BODY,
+    "[[particles]]": PARTICLES,
+    "[[cloth]]": CLOTH,
+    "[[obstacles]]": OBSTACLE,
+    "array": ARRAY,
+    "path": PATH,
+    "[[forces]]": FORCE,
+}
 
 
 def validate_table(table, keys, path, shapes=None):

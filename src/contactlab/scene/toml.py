@@ -15,12 +15,12 @@ from ..validation import WHOLE_NUMBERS
 
 if sys.version_info >= (3, 11):
     import tomllib
-else:                                   # pragma: no cover - exercised on Python 3.10 only
+else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
 TOMLDecodeError = tomllib.TOMLDecodeError
 
-MAX_NESTING = 32                        # tables and arrays inside one another, at most
+MAX_NESTING = 32  # tables and arrays inside one another, at most
 
 _WHERE = re.compile(r"\s*\((?:at line (\d+), column (\d+)|at end of document)\)\s*$")
 
@@ -34,7 +34,7 @@ def loads(text, field=""):
         raise InputError(field, _too_deep()) from None
     except TOMLDecodeError:
         raise
-    except ValueError:                   # an integer of more digits than Python converts
+    except ValueError:  # an integer of more digits than Python converts
         raise InputError(field, "this is not valid TOML (a number of thousands of digits)") from None
     _check_values(document, field)
     return document
@@ -49,7 +49,7 @@ def parse_toml(text):
         match = _WHERE.search(message)
         field = ""
         if match:
-            message = message[:match.start()]
+            message = message[: match.start()]
             field = f"line {match.group(1)}, column {match.group(2)}" if match.group(1) else "end of file"
         message = message[:1].lower() + message[1:]
         raise InputError(field, f"this is not valid TOML ({message})") from None
@@ -74,7 +74,11 @@ def _check_values(document, field):
                 raise InputError(field, _too_deep())
             children = value.values() if isinstance(value, dict) else value
             pending.extend((child, depth + 1) for child in children)
-        elif isinstance(value, int) and not isinstance(value, bool) \
-                and not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]:
-            raise InputError(field, f"an integer of {len(str(abs(value)))} digits is outside the 64-bit range "
-                                    f"TOML allows (±9.2e18); write a float such as 1e30 for a huge number")
+        elif (
+            isinstance(value, int) and not isinstance(value, bool) and not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]
+        ):
+            raise InputError(
+                field,
+                f"an integer of {len(str(abs(value)))} digits is outside the 64-bit range "
+                f"TOML allows (±9.2e18); write a float such as 1e30 for a huge number",
+            )
