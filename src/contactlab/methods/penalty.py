@@ -631,9 +631,14 @@ def mass_blocks(body_mass, body_inertia, rotation, particle_mass):
 
 
 @njit(cache=True)
-def free_dofs(particle_pinned, body_count):
-    """(N,) 1.0 for each DOF that moves, 0.0 for a pinned particle's."""
+def free_dofs(particle_pinned, body_fixed):
+    """(N,) 1.0 for each DOF that moves, 0.0 for a pinned particle's (particle_pinned (P,) bool)
+    and a kinematic body's (body_fixed (B,) bool: its path, not the springs, moves it)."""
+    body_count = body_fixed.shape[0]
     free = np.ones(6 * body_count + 3 * particle_pinned.shape[0])
+    for b in range(body_count):
+        if body_fixed[b]:
+            free[6 * b : 6 * b + 6] = 0.0
     for p in range(particle_pinned.shape[0]):
         if particle_pinned[p]:
             free[6 * body_count + 3 * p] = free[6 * body_count + 3 * p + 1] = free[6 * body_count + 3 * p + 2] = 0.0
@@ -1017,7 +1022,7 @@ def _implicit(model, state, contacts, springs, rows, v_free, h, options, integra
             contacts.depth,
             v_free,
             mass,
-            free_dofs(model.particle_pinned, model.body_count),
+            free_dofs(model.particle_pinned, np.asarray(model.body_kinematic, dtype=np.bool_)),
             h,
         )
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)

@@ -794,7 +794,14 @@ def penalty_step(model, settings, plan, large, slabs, parallel, penalty, motion,
     if implicit:
         mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
         v_new, forces, elongation, passes, residual = implicit_spring_velocities(
-            penalty.springs, springs, rows, contacts.depth, v_free, mass, free_dofs(model.particle_pinned, B), h
+            penalty.springs,
+            springs,
+            rows,
+            contacts.depth,
+            v_free,
+            mass,
+            free_dofs(model.particle_pinned, np.zeros(B, dtype=np.bool_)),
+            h,
         )
     else:
         v_new = explicit_velocities(rows, forces, v_free, h)
