@@ -5,6 +5,10 @@ contact radius), static obstacles B+P..B+P+O−1. Dynamic pairs come from the sw
 broad phase; each dynamic collider is tested against the obstacles its bounds reach.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -20,8 +24,13 @@ from .manifolds import generate_reusing
 from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
 from .narrow_phase import generate_contacts, needs_hulls, supported
 
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
+    from .manifolds import Manifolds
 
-def check_supported(model):
+
+def check_supported(model: Model) -> None:
     """Raise InputError naming the first pair of shapes in the model with no contact routine."""
     kinds = np.concatenate([model.body_shape, np.full(model.particle_count, shapes.POINT)])
     dynamic, counts = np.unique(kinds, return_counts=True)
@@ -41,7 +50,9 @@ def check_supported(model):
 FEATURE_BITS = 24  # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
-def swept_distances(model, body_velocity, body_angular_velocity, particle_velocity, dt):
+def swept_distances(
+    model: Model, body_velocity: np.ndarray, body_angular_velocity: np.ndarray, particle_velocity: np.ndarray, dt: float
+) -> np.ndarray:
     """How far each body and particle may move in a step of dt [s] at the given velocities,
     (B + P,) [m]: h |v|, plus for a body how far its farthest point turns, h |ω| r. This is the
     ``sweep`` argument of :func:`collide`."""
@@ -64,7 +75,13 @@ def _colliders(model, state):
 
 
 @njit(cache=True)
-def collider_poses(body_position, body_rotation, particle_position, obstacle_position, obstacle_rotation):
+def collider_poses(
+    body_position: np.ndarray,
+    body_rotation: np.ndarray,
+    particle_position: np.ndarray,
+    obstacle_position: np.ndarray,
+    obstacle_rotation: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Centres (N, 3) [m] and rotations (N, 3, 3) (collider → world, C order, which the
     compiled pair routines are built for) of every collider: bodies (B, 3) and (B, 3, 3),
     particles (P, 3) (unrotated), obstacles (O, 3) and (O, 3, 3)."""
@@ -120,7 +137,16 @@ def _bounds(kinds, params, centers, rots, margin):
 
 
 @njit(cache=True)
-def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large):
+def candidate_pairs(
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rots: np.ndarray,
+    reach: np.ndarray,
+    dynamic: int,
+    cloth_of: np.ndarray,
+    large: bool | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The broad phase: (lower, upper) bounds (N, 3) [m] of the colliders grown by ``reach``
     (N,) [m], and the candidate pairs (K, 2) int64 — the dynamic pairs (colliders 0 … dynamic−1)
     whose bounds overlap, sorted, then each dynamic collider against the static obstacles
@@ -145,7 +171,14 @@ def candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, larg
 
 
 def collide(
-    model, state, margin=0.0, sweep=None, granularity="vertex", normal="object", samples=2, cloth_samples=0
+    model: Model,
+    state: State,
+    margin: float = 0.0,
+    sweep: np.ndarray | None = None,
+    granularity: str = "vertex",
+    normal: str = "object",
+    samples: int = 2,
+    cloth_samples: int = 0,
 ) -> Contacts:
     """All contacts of the state, including gaps down to −margin [m]; the contacts of
     :func:`collide_keeping` with nothing kept."""
@@ -153,17 +186,17 @@ def collide(
 
 
 def collide_keeping(
-    model,
-    state,
-    manifolds,
-    tolerance,
-    margin=0.0,
-    sweep=None,
-    granularity="vertex",
-    normal="object",
-    samples=2,
-    cloth_samples=0,
-):
+    model: Model,
+    state: State,
+    manifolds: Manifolds | None,
+    tolerance: float,
+    margin: float = 0.0,
+    sweep: np.ndarray | None = None,
+    granularity: str = "vertex",
+    normal: str = "object",
+    samples: int = 2,
+    cloth_samples: int = 0,
+) -> tuple[Contacts, Manifolds | None]:
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
     to keep for the next step: (Contacts, Manifolds or None).
 
@@ -238,7 +271,7 @@ def collide_keeping(
     return found, manifolds
 
 
-def pass_through_depths(model, contacts) -> np.ndarray:
+def pass_through_depths(model: Model, contacts: Contacts) -> np.ndarray:
     """(C,) [m]: for each contact, the overlap at which one side would reach the other's middle
     — the sum of the two colliders' half thicknesses (``Model.collider_half_thickness``). Deeper
     than that the contact's normal no longer says which way is out: a force along it may push
@@ -253,7 +286,9 @@ def pass_through_depths(model, contacts) -> np.ndarray:
 
 
 @njit(cache=True)
-def half_thickness_sums(feature_id, particles_a, thickness, particle_radius, dynamic):
+def half_thickness_sums(
+    feature_id: np.ndarray, particles_a: np.ndarray, thickness: np.ndarray, particle_radius: np.ndarray, dynamic: int
+) -> np.ndarray:
     """``pass_through_depths``, compiled (the penalty step and its compiled loop take it): the
     colliders are read from the contact ids (collider pair a · N + b; cloth samples: N² +
     triangle · O + obstacle, see collision.cloth, side A then the cloth's thickness, its first
@@ -313,19 +348,19 @@ def _assemble(model, a, b, point, normal, depth, feature, total):
 
 @njit(cache=True)
 def assemble_contacts(
-    a,
-    b,
-    point,
-    normal,
-    depth,
-    feature,
-    body_count,
-    particle_count,
-    materials,
-    material_friction,
-    material_restitution,
-    total,
-):
+    a: np.ndarray,
+    b: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+    feature: np.ndarray,
+    body_count: int,
+    particle_count: int,
+    materials: np.ndarray,
+    material_friction: np.ndarray,
+    material_restitution: np.ndarray,
+    total: int,
+) -> ContactArrays:
     """The ContactArrays of contacts found between global colliders a and b (C,) int64, with
     point, normal (C, 3), depth (C,) [m] and feature (C,) int64 from the narrow phase: each side
     a body (index < B), a particle (weight 1) or static; the tangents (``tangent_basis``); the

@@ -62,6 +62,8 @@ feature ``EDGE_FEATURE`` (0).
 Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -79,7 +81,16 @@ _UP = np.array([0.0, 0.0, 1.0])  # the reference face's normal in its own (u, v,
 
 
 @njit(cache=True)
-def sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, overlap, normal):
+def sat_overlaps(
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    half_a: np.ndarray,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    half_b: np.ndarray,
+    overlap: np.ndarray,
+    normal: np.ndarray,
+) -> int:
     """Projection overlap on each of the 15 SAT axes.
 
     Fills ``overlap`` (15,) [m] and ``normal`` (15, 3) (unit, oriented from B into A): indices
@@ -366,19 +377,19 @@ def _edge_contact(
 
 @njit(cache=True)
 def box_box(
-    center_a,
-    rotation_a,
-    half_a,
-    center_b,
-    rotation_b,
-    half_b,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    half_a: np.ndarray,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    half_b: np.ndarray,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Box A against box B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Parameters: centres (3,) [m], rotations (3, 3) body → world, half extents (3,) [m],

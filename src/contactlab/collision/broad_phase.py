@@ -15,6 +15,8 @@ Three algorithms, one answer (``overlapping_pairs`` picks):
   dense pile puts 10 boxes or more in a cell and tests about 10 candidates per true pair.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -27,7 +29,7 @@ NEIGHBOUR_GRID_SIZE_RATIO = 4.0  # neighbour cells only if no box is 4x the medi
 NEIGHBOUR_GRID_CELLS = 8  # ... and the grid has at most 8 cells per box (+ 4096)
 
 
-def overlapping_pairs(lower, upper):
+def overlapping_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Pairs (i, j), i < j, whose boxes overlap, sorted; lower/upper (N, 3) [m] → int64 array (K, 2)."""
     if len(lower) < 2:  # one body, no pair (and nothing to compile for it)
         return np.zeros((0, 2), dtype=np.int64)
@@ -35,7 +37,7 @@ def overlapping_pairs(lower, upper):
 
 
 @njit(cache=True)
-def boxes_overlapping(lower, upper, large):
+def boxes_overlapping(lower: np.ndarray, upper: np.ndarray, large: bool | None) -> np.ndarray:
     """``overlapping_pairs``, compiled (the stepping loops call it): the sweep below GRID_FROM
     boxes, else the neighbour-cell grid where the boxes suit it, else the hash grid. ``large``
     None says there are always fewer than GRID_FROM boxes: the grids are then not compiled
@@ -70,7 +72,7 @@ def _append_pair(pairs, found, a, b):
 
 
 @njit(cache=True)
-def sweep_and_prune(lower, upper):
+def sweep_and_prune(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Pairs (i, j), i < j, whose boxes overlap, by sweeping along x (see the module)."""
     count = lower.shape[0]
     order = np.argsort(lower[:, 0])
@@ -95,7 +97,7 @@ def sweep_and_prune(lower, upper):
 
 
 @njit(cache=True)
-def neighbour_cell_pairs(lower, upper):
+def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
     """(pairs (K, 2) sorted by (i, j), True) of the overlapping boxes by the neighbour-cell grid
     (see the module); (empty, False) when the boxes do not suit it — sizes too mixed, or spread
     over too many cells — and another algorithm must answer.
@@ -171,7 +173,7 @@ def neighbour_cell_pairs(lower, upper):
 
 
 @njit(cache=True)
-def grid_pairs(lower, upper):
+def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Pairs (i, j), i < j, whose boxes overlap, by a uniform hash grid (see the module).
 
     The cell edge is twice the median of the boxes' largest extents, so a typical box touches
@@ -244,7 +246,7 @@ def grid_pairs(lower, upper):
     return pairs[:found]
 
 
-def brute_force_pairs(lower, upper):
+def brute_force_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """The same pairs by testing every pair (NumPy, O(n²)): the reference for tests."""
     overlap = ((lower[:, None, :] <= upper[None, :, :]) & (lower[None, :, :] <= upper[:, None, :])).all(axis=2)
     i, j = np.nonzero(np.triu(overlap, k=1))
@@ -252,7 +254,9 @@ def brute_force_pairs(lower, upper):
 
 
 @njit(cache=True)
-def static_pairs(lower, upper, kinds, params, dynamic):
+def static_pairs(
+    lower: np.ndarray, upper: np.ndarray, kinds: np.ndarray, params: np.ndarray, dynamic: int
+) -> np.ndarray:
     """Candidate pairs (K, 2) of the dynamic colliders 0 … dynamic−1 with the static ones after
     them, obstacle by obstacle, each in collider order: against a plane (normal n, offset in
     ``params``) when the bounds' centre lies within their half-width along n of its front,

@@ -57,6 +57,8 @@ The two contacts of a pair always differ (the same face or edge, different ``end
 Everything is compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -264,26 +266,26 @@ def _face_patch(
 
 @njit(cache=True)
 def capsule_convex(
-    center_a,
-    rotation_a,
-    radius_a,
-    half_length_a,
-    center_b,
-    rotation_b,
-    vertices,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    edge_vertex,
-    edge_face,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    radius_a: float,
+    half_length_a: float,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    vertices: np.ndarray,
+    face_normal: np.ndarray,
+    face_offset: np.ndarray,
+    face_vertex_start: np.ndarray,
+    face_vertex_index: np.ndarray,
+    edge_vertex: np.ndarray,
+    edge_face: np.ndarray,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.
 
     center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);

@@ -38,6 +38,10 @@ those chosen (as :func:`~.mesh_contacts.box_mesh`).
 Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -57,25 +61,28 @@ from .mesh_features import (
     write_kept,
 )
 
+if TYPE_CHECKING:
+    from ..meshes import MeshGeometry
+
 END_FEATURE = 7  # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
 COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this are coplanar
 
 
 @njit(cache=True)
 def capsule_mesh(
-    center,
-    rotation,
-    radius,
-    half_length,
-    mesh,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-    max_contacts,
-):
+    center: np.ndarray,
+    rotation: np.ndarray,
+    radius: float,
+    half_length: float,
+    mesh: MeshGeometry,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+    max_contacts: int,
+) -> int:
     """Capsule A (centre (3,) [m], rotation (3, 3) body → world, the segment along its third
     column, ``radius``, ``half_length`` [m]) against the static mesh B (module docstring).
 

@@ -9,6 +9,10 @@ than the thickness is a contact whose side A is the triangle's three particles w
 sample's barycentric weights: a response at the sample moves vertex i by its share w_i (D1).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .. import shapes
@@ -16,8 +20,14 @@ from ..contacts import Contacts, tangent_basis
 from .granularity import SURFACES, surface_contacts
 from .signed_distance import model_obstacle
 
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
 
-def cloth_sample_contacts(model, state, samples, normal, margin, feature_base) -> Contacts:
+
+def cloth_sample_contacts(
+    model: Model, state: State, samples: int, normal: str, margin: float, feature_base: int
+) -> Contacts:
     """Contacts of the samples of every cloth triangle with every static plane, sphere, box and mesh.
 
     samples: per triangle edge (k × k per triangle); normal: "object" (P4) or "vertex" (P5);

@@ -4,6 +4,8 @@ out_point (N, 3) [m], out_normal (N, 3) unit from B into A, out_depth (N,) [m] (
 overlapping), out_feature (N,) int64 (stable id of the contact within its pair).
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -11,7 +13,17 @@ from .geometry import axpy, rotate
 
 
 @njit(cache=True)
-def write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, feature):
+def write_contact(
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+    point: np.ndarray,
+    normal: np.ndarray,
+    depth: float,
+    feature: int,
+) -> None:
     """Store one contact at row ``slot``."""
     for i in range(3):
         out_point[slot, i] = point[i]
@@ -22,8 +34,18 @@ def write_contact(out_point, out_normal, out_depth, out_feature, slot, point, no
 
 @njit(cache=True)
 def write_local_contact(
-    point_local, normal_local, depth, feature, center, rotation, out_point, out_normal, out_depth, out_feature, slot
-):
+    point_local: np.ndarray,
+    normal_local: np.ndarray,
+    depth: float,
+    feature: int,
+    center: np.ndarray,
+    rotation: np.ndarray,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> None:
     """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal
     (3,) there, the collider at ``center`` (3,) [m] with ``rotation`` (3, 3) body → world."""
     write_contact(

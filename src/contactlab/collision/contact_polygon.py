@@ -12,6 +12,8 @@ keeps its own frame, tolerances and feature numbers; what is here is the shared 
 Compiled (``@njit(cache=True)``), float64, no fastmath; no allocation.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -20,7 +22,14 @@ REDUCE_TIE = 1e-6  # relative tolerance of a tie in the reduction to 4 points
 
 
 @njit(cache=True)
-def clip_polygon(source, label, count, distance, target, target_label):
+def clip_polygon(
+    source: np.ndarray,
+    label: np.ndarray,
+    count: int,
+    distance: np.ndarray,
+    target: np.ndarray,
+    target_label: np.ndarray,
+) -> int:
     """Keep the part of polygon ``source`` (rows of 3) whose signed distance to a plane is ≤ 0.
 
     distance: (≥ count,) each point's signed distance to the plane (> 0: cut away). Each point
@@ -55,7 +64,9 @@ def clip_polygon(source, label, count, distance, target, target_label):
 
 
 @njit(cache=True)
-def drop_collinear(points, labels, count, tolerance, normal, depth_tolerance):
+def drop_collinear(
+    points: np.ndarray, labels: np.ndarray, count: int, tolerance: float, normal: np.ndarray, depth_tolerance: float
+) -> int:
     """Remove corners of the clipped polygon within ``tolerance`` [m] of the chord of their two
     neighbours (near-duplicates, or crossings of an incident edge with a side plane that it
     nearly touches all along, as with faces stacked flush: such a crossing lands anywhere along
@@ -103,7 +114,7 @@ def drop_collinear(points, labels, count, tolerance, normal, depth_tolerance):
 
 
 @njit(cache=True)
-def first_near_best(score, count):
+def first_near_best(score: np.ndarray, count: int) -> int:
     """Index of the first of ``score[:count]`` within a relative ``REDUCE_TIE`` of the largest one."""
     best = score[0]
     for k in range(1, count):
@@ -116,7 +127,15 @@ def first_near_best(score, count):
 
 
 @njit(cache=True)
-def reduce_to_four(points, height, keep, count, axis, depth_tolerance, score):
+def reduce_to_four(
+    points: np.ndarray,
+    height: np.ndarray,
+    keep: np.ndarray,
+    count: int,
+    axis: np.ndarray,
+    depth_tolerance: float,
+    score: np.ndarray,
+) -> int:
     """Choose at most 4 of the ``count`` candidates ``keep[:count]`` (rows of ``points`` (·, 3)
     [m] with ``height`` (·,) [m]: lower is deeper) in the plane normal to unit ``axis`` (3,).
 
@@ -199,7 +218,7 @@ def reduce_to_four(points, height, keep, count, axis, depth_tolerance, score):
 
 
 @njit(cache=True)
-def claim_feature(feature, used):
+def claim_feature(feature: int, used: np.ndarray) -> int:
     """The first free feature number (0..255) from ``feature`` on (+1 mod 256), marked used in
     ``used`` (256,) bool: so the ≤ 4 contacts of a pair always differ in feature."""
     f = feature & 255

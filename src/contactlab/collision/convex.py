@@ -46,6 +46,8 @@ Hull against hull: :mod:`.convex_convex`.
 Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -61,7 +63,18 @@ SPHERE_FEATURE = 0
 
 
 @njit(cache=True)
-def convex_plane(center, rotation, vertices, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
+def convex_plane(
+    center: np.ndarray,
+    rotation: np.ndarray,
+    vertices: np.ndarray,
+    plane: np.ndarray,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Hull A (centre (3,) [m], rotation (3, 3) body → world, body-frame ``vertices`` (V, 3))
     against the plane B = (n, offset) (4,): one contact per vertex within the margin, reduced
     to at most 4. Feature: the vertex index (mod 256, see the module docstring)."""
@@ -132,22 +145,22 @@ def _closest_on_segment(px, py, pz, a, b, out):
 
 @njit(cache=True)
 def sphere_convex(
-    center,
-    radius,
-    hull_center,
-    hull_rotation,
-    vertices,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+    center: np.ndarray,
+    radius: float,
+    hull_center: np.ndarray,
+    hull_rotation: np.ndarray,
+    vertices: np.ndarray,
+    face_normal: np.ndarray,
+    face_offset: np.ndarray,
+    face_vertex_start: np.ndarray,
+    face_vertex_index: np.ndarray,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B: one contact.
 
     Inside the hull the centre leaves through the face of least penetration; outside, the
@@ -241,18 +254,18 @@ def sphere_convex(
 
 @njit(cache=True)
 def hull_view(
-    vertex_start,
-    vertices,
-    face_start,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    edge_start,
-    edge_vertex,
-    edge_face,
-    h,
-):
+    vertex_start: np.ndarray,
+    vertices: np.ndarray,
+    face_start: np.ndarray,
+    face_normal: np.ndarray,
+    face_offset: np.ndarray,
+    face_vertex_start: np.ndarray,
+    face_vertex_index: np.ndarray,
+    edge_start: np.ndarray,
+    edge_vertex: np.ndarray,
+    edge_face: np.ndarray,
+    h: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Hull ``h``'s arrays out of the packed layout (:func:`contactlab.hulls.pack_hulls`), as views:
     (vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face),
     the argument order of the routines here. The compiled twin of :func:`contactlab.hulls.hull_arrays`."""

@@ -52,6 +52,8 @@ new features. Which hull is A does not enter: swapping A and B gives the same fe
 Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -312,24 +314,24 @@ def _least_face_overlap(normal, offset, faces, points, count, margin, result, at
 
 @njit(cache=True)
 def convex_convex_sat(
-    center_a,
-    rotation_a,
-    vertices_a,
-    face_normal_a,
-    face_offset_a,
-    edge_vertex_a,
-    edge_face_a,
-    center_b,
-    rotation_b,
-    vertices_b,
-    face_normal_b,
-    face_offset_b,
-    edge_vertex_b,
-    edge_face_b,
-    margin,
-    result,
-    axis,
-):
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    vertices_a: np.ndarray,
+    face_normal_a: np.ndarray,
+    face_offset_a: np.ndarray,
+    edge_vertex_a: np.ndarray,
+    edge_face_a: np.ndarray,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    vertices_b: np.ndarray,
+    face_normal_b: np.ndarray,
+    face_offset_b: np.ndarray,
+    edge_vertex_b: np.ndarray,
+    edge_face_b: np.ndarray,
+    margin: float,
+    result: np.ndarray,
+    axis: np.ndarray,
+) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
     """Separating axis test of hull A against hull B, in A's body frame.
 
     Arguments as for :func:`convex_convex` (without the face corner lists). Fills ``result``
@@ -445,31 +447,31 @@ def convex_convex_sat(
 
 @njit(cache=True)
 def convex_convex(
-    center_a,
-    rotation_a,
-    vertices_a,
-    face_normal_a,
-    face_offset_a,
-    face_vertex_start_a,
-    face_vertex_index_a,
-    edge_vertex_a,
-    edge_face_a,
-    center_b,
-    rotation_b,
-    vertices_b,
-    face_normal_b,
-    face_offset_b,
-    face_vertex_start_b,
-    face_vertex_index_b,
-    edge_vertex_b,
-    edge_face_b,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    vertices_a: np.ndarray,
+    face_normal_a: np.ndarray,
+    face_offset_a: np.ndarray,
+    face_vertex_start_a: np.ndarray,
+    face_vertex_index_a: np.ndarray,
+    edge_vertex_a: np.ndarray,
+    edge_face_a: np.ndarray,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    vertices_b: np.ndarray,
+    face_normal_b: np.ndarray,
+    face_offset_b: np.ndarray,
+    face_vertex_start_b: np.ndarray,
+    face_vertex_index_b: np.ndarray,
+    edge_vertex_b: np.ndarray,
+    edge_face_b: np.ndarray,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays (module

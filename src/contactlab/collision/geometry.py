@@ -6,6 +6,8 @@ no BLAS); float64, no fastmath. Used by the capsule pairs (:mod:`.capsule`,
 :mod:`.capsule_convex`) and the mesh features (:mod:`.mesh_features`).
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
 
@@ -13,37 +15,37 @@ LINE_SIN2 = 1e-20  # |a × b|² below this: lines treated as exactly parallel in
 
 
 @njit(cache=True)
-def dot(a, b):
+def dot(a: np.ndarray, b: np.ndarray) -> float:
     """a · b for (3,) arrays."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @njit(cache=True)
-def cross(a, b):
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b for (3,) arrays, as a new array."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @njit(cache=True)
-def norm(a):
+def norm(a: np.ndarray) -> float:
     """|a| for a (3,) array."""
     return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
 @njit(cache=True)
-def clamp(x, lo, hi):
+def clamp(x: float, lo: float, hi: float) -> float:
     """x clamped to [lo, hi]."""
     return lo if x < lo else (hi if x > hi else x)
 
 
 @njit(cache=True)
-def column(rotation, k):
+def column(rotation: np.ndarray, k: int) -> np.ndarray:
     """Column ``k`` of a 3×3 matrix, as a fresh contiguous (3,) array (the body axis k in world)."""
     return np.array([rotation[0, k], rotation[1, k], rotation[2, k]])
 
 
 @njit(cache=True)
-def rotate(rotation, v):
+def rotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rotation @ v for a 3×3 matrix, written out (cheaper to compile than the BLAS product)."""
     return np.array(
         [
@@ -55,7 +57,7 @@ def rotate(rotation, v):
 
 
 @njit(cache=True)
-def unrotate(rotation, v):
+def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rotation.T @ v for a 3×3 matrix, written out."""
     return np.array(
         [
@@ -67,25 +69,25 @@ def unrotate(rotation, v):
 
 
 @njit(cache=True)
-def axpy(x, scale, y):
+def axpy(x: np.ndarray, scale: float, y: np.ndarray) -> np.ndarray:
     """x + scale · y for (3,) arrays, as a new array (written out: quick to compile, no temporaries)."""
     return np.array([x[0] + scale * y[0], x[1] + scale * y[1], x[2] + scale * y[2]])
 
 
 @njit(cache=True)
-def midpoint(a, b):
+def midpoint(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(a + b) / 2 for (3,) arrays."""
     return np.array([0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])])
 
 
 @njit(cache=True)
-def scaled(scale, a):
+def scaled(scale: float, a: np.ndarray) -> np.ndarray:
     """scale · a for a (3,) array."""
     return np.array([scale * a[0], scale * a[1], scale * a[2]])
 
 
 @njit(cache=True)
-def unit_axis(k, sign):
+def unit_axis(k: int, sign: float) -> np.ndarray:
     """sign · e_k, (3,)."""
     e = np.zeros(3)
     e[k] = sign
@@ -93,7 +95,9 @@ def unit_axis(k, sign):
 
 
 @njit(cache=True)
-def segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b):
+def segment_closest_parameters(
+    center_a: np.ndarray, axis_a: np.ndarray, half_a: float, center_b: np.ndarray, axis_b: np.ndarray, half_b: float
+) -> tuple[float, float]:
     """Closest points of two segments ``center + s · axis``, ``|s| ≤ half`` (unit axes).
 
     Returns ``(s, t)``: the parameters [m] of the closest points on segment A and segment B.

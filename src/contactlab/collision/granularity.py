@@ -31,7 +31,10 @@ All bodies go through in one vectorized batch per surface: their hulls' fan tria
 once with the model) are placed in the world as one triangle soup.
 """
 
+from __future__ import annotations
+
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +42,10 @@ from .. import rotations, shapes
 from ..errors import InputError
 from ..meshes import TriangleMesh, vertex_normals
 from .signed_distance import ShapeObstacle, model_obstacle, points_against_mesh, points_against_shape
+
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
 
 GRANULARITIES = ("object", "vertex", "samples")  # P2a, P2b, P2c
 NORMALS = ("object", "vertex")  # P4, P5
@@ -56,7 +63,7 @@ contact point of A is Σ w_i x_i and a force F is distributed as w_i F to vertex
 feature (C,) int64: 0 (P2a), the vertex (P2b), or triangle · k² + sample (P2c)."""
 
 
-def triangle_samples(samples_per_edge):
+def triangle_samples(samples_per_edge: int) -> np.ndarray:
     """Barycentric weights (k², 3) of k × k samples on a triangle: the centroids of the k²
     congruent sub-triangles of its k-subdivision (every weight > 0, the samples even)."""
     k = int(samples_per_edge)
@@ -71,15 +78,15 @@ def triangle_samples(samples_per_edge):
 
 
 def surface_contacts(
-    vertices,
-    triangles,
-    obstacle,
-    granularity="vertex",
-    normal="object",
-    margin=0.0,
-    samples=2,
-    max_depth=None,
-    object_vertex_normals=None,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    obstacle: ShapeObstacle | TriangleMesh,
+    granularity: str = "vertex",
+    normal: str = "object",
+    margin: float = 0.0,
+    samples: int = 2,
+    max_depth: float | None = None,
+    object_vertex_normals: np.ndarray | None = None,
 ) -> SurfaceContacts:
     """Contacts of object A (its triangle mesh) against a static surface B, at a SPEC P2 granularity.
 
@@ -185,7 +192,7 @@ def _soup(model, state, bodies):
     return world, triangles, bodies[v_owner], v_local, bodies[t_owner], t_local
 
 
-def angle_weighted_normals(vertices, triangles):
+def angle_weighted_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Unit vertex normals (V, 3): the triangles' normals weighted by their angle at the vertex.
 
     Unlike area weighting this does not depend on how a polygon face was split into triangles
@@ -202,7 +209,9 @@ def angle_weighted_normals(vertices, triangles):
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
-def polytope_contacts(model, state, granularity, normal, samples, margin, total):
+def polytope_contacts(
+    model: Model, state: State, granularity: str, normal: str, samples: int, margin: float, total: int
+) -> tuple[list[tuple[np.ndarray, ...]], np.ndarray, np.ndarray]:
     """Contacts (a, b, point, normal, depth, feature) of every box and hull body against every
     static plane, sphere, box and mesh, and the (body, obstacle) pairs they replace."""
     bodies = np.nonzero(np.isin(model.body_shape, POLYTOPES))[0]

@@ -21,6 +21,8 @@ reach are dropped from what the step sees. Anything else (a new pair, a moving p
 with a sphere, capsule or particle) is computed afresh.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +46,7 @@ class Manifolds:
     feature: np.ndarray  # (K, S) int64 feature number within the pair
 
     @classmethod
-    def empty(cls) -> "Manifolds":
+    def empty(cls) -> Manifolds:
         return cls(
             np.zeros(0, np.int64),
             np.zeros(0),
@@ -61,7 +63,7 @@ class Manifolds:
 
 
 @njit(cache=True)
-def kept_pairs(kinds, pairs):
+def kept_pairs(kinds: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """(K,) bool: the pairs that keep manifolds: boxes and convex hulls against each other and
     against planes. Their contacts sit at vertices, edges and faces, which move with the
     bodies; a sphere's or a capsule's contact point rolls over its surface instead, so
@@ -280,7 +282,19 @@ def _combine(
     )
 
 
-def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, families, manifolds, tolerance, total):
+def generate_reusing(
+    pairs: np.ndarray,
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rots: np.ndarray,
+    reach: np.ndarray,
+    hull_store: tuple[np.ndarray, ...] | None,
+    families: tuple[bool | None, ...],
+    manifolds: Manifolds | None,
+    tolerance: float,
+    total: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Manifolds]:
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
     None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
     number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
@@ -313,7 +327,20 @@ def generate_reusing(pairs, kinds, params, centers, rots, reach, hull_store, fam
 
 
 @njit(cache=True)
-def reuse_or_generate(pairs, kinds, params, centers, rots, reach, radius, hull_store, families, kept, tolerance, total):
+def reuse_or_generate(
+    pairs: np.ndarray,
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rots: np.ndarray,
+    reach: np.ndarray,
+    radius: np.ndarray,
+    hull_store: tuple[np.ndarray, ...] | None,
+    families: tuple[bool | None, ...],
+    kept: tuple[np.ndarray, ...],
+    tolerance: float,
+    total: int,
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
     """``generate_reusing``, compiled (the stepping loops of contactlab.methods.velocity_loop call
     it): ``radius`` (N,) the colliders' bounding radii [m]; ``kept`` the last manifolds as the
     tuple of Manifolds' eight fields. Returns ((point, normal, depth, feature, owner), the

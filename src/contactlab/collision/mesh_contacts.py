@@ -74,6 +74,10 @@ Closest features and pseudo-normals: :mod:`.mesh_features`. Everything per conta
 compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -94,6 +98,9 @@ from .mesh_features import (
     signed_normal,
     write_kept,
 )
+
+if TYPE_CHECKING:
+    from ..meshes import MeshGeometry
 
 MAX_PER_SHAPE = 8  # the usual cap of contacts per shape against one mesh (as MAX_PER_PAIR)
 CORNER_CONTACTS = 4  # box–mesh contacts kept per box corner (the deepest local minima)
@@ -183,7 +190,18 @@ def _corners_against_mesh(corners, local, mesh, margin, point, normal, depth, fe
 
 
 @njit(cache=True)
-def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, out_feature, slot, max_contacts):
+def sphere_mesh(
+    center: np.ndarray,
+    radius: float,
+    mesh: MeshGeometry,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+    max_contacts: int,
+) -> int:
     """Sphere (or particle) A of ``radius`` [m] at ``center`` (3,) against the static mesh B.
 
     Writes at most ``max_contacts`` contacts (the deepest) from ``slot`` on and returns how
@@ -301,8 +319,18 @@ def sphere_mesh(center, radius, mesh, margin, out_point, out_normal, out_depth, 
 
 @njit(cache=True)
 def box_mesh(
-    center, rotation, half_extents, mesh, margin, out_point, out_normal, out_depth, out_feature, slot, max_contacts
-):
+    center: np.ndarray,
+    rotation: np.ndarray,
+    half_extents: np.ndarray,
+    mesh: MeshGeometry,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+    max_contacts: int,
+) -> int:
     """Box A (centre (3,), rotation (3,3) body → world, half extents (3,)) against the static mesh B.
 
     Each corner as a point (a sphere of radius 0: inside/outside and local minima as for
@@ -382,22 +410,22 @@ def box_mesh(
 
 @njit(cache=True)
 def convex_mesh(
-    center,
-    rotation,
-    vertices,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    mesh,
-    margin,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-    max_contacts,
-):
+    center: np.ndarray,
+    rotation: np.ndarray,
+    vertices: np.ndarray,
+    face_normal: np.ndarray,
+    face_offset: np.ndarray,
+    face_vertex_start: np.ndarray,
+    face_vertex_index: np.ndarray,
+    mesh: MeshGeometry,
+    margin: float,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+    max_contacts: int,
+) -> int:
     """Convex hull A (centre (3,) [m], rotation (3, 3) body → world; body-frame arrays as in
     :mod:`.convex`) against the static mesh B, as :func:`box_mesh` (module docstring).
 
@@ -503,7 +531,16 @@ def convex_mesh(
 
 
 @njit(cache=True)
-def shapes_against_mesh(kinds, params, centers, rotations_, margins, mesh, max_per_shape, hull_store=None):
+def shapes_against_mesh(
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rotations_: np.ndarray,
+    margins: np.ndarray,
+    mesh: MeshGeometry,
+    max_per_shape: int,
+    hull_store: tuple[np.ndarray, ...] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Contacts of many dynamic shapes against one static mesh.
 
     kinds (N,), params (N, 4), centers (N, 3) [m], rotations_ (N, 3, 3), margins (N,) [m] per

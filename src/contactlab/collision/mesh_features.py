@@ -14,6 +14,10 @@ Everything is compiled (``@njit(cache=True)``), float64, no fastmath; scalar ari
 allocation in the inner loops.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -21,12 +25,17 @@ from ..meshes import mesh_triangles_near
 from .contact_output import write_contact
 from .geometry import segment_closest_parameters
 
+if TYPE_CHECKING:
+    from ..meshes import MeshGeometry
+
 FACE, EDGE0, EDGE1, EDGE2, VERTEX0, VERTEX1, VERTEX2 = 0, 1, 2, 3, 4, 5, 6  # Voronoi regions of a triangle
 FEATURES_PER_TRIANGLE = 16  # contact feature = 16 · triangle + local index (local index < 16)
 
 
 @njit(cache=True)
-def closest_point_on_triangle(p, a, b, c):
+def closest_point_on_triangle(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[float, float, float, int]:
     """Closest point (qx, qy, qz) of triangle (a, b, c) to p, and its region (FACE, EDGE*, VERTEX*).
 
     Ericson, Real-Time Collision Detection, 5.1.5: the Voronoi regions of the vertices,
@@ -70,7 +79,7 @@ def closest_point_on_triangle(p, a, b, c):
 
 
 @njit(cache=True)
-def pseudo_normal(mesh, triangle, region):
+def pseudo_normal(mesh: MeshGeometry, triangle: int, region: int) -> np.ndarray:
     """The pseudo-normal (3,) of a triangle's face, edge or vertex (a view of the mesh arrays)."""
     if region == FACE:
         return mesh.triangle_normals[triangle]
@@ -80,7 +89,9 @@ def pseudo_normal(mesh, triangle, region):
 
 
 @njit(cache=True)
-def closest_feature(mesh, triangle, x, tol):
+def closest_feature(
+    mesh: MeshGeometry, triangle: int, x: np.ndarray, tol: float
+) -> tuple[float, float, float, int, float]:
     """Closest point (qx, qy, qz) of a triangle to x, its region and distance [m].
 
     An edge or vertex point that is x's projection on the triangle's plane (within ``tol``:
@@ -103,7 +114,9 @@ def closest_feature(mesh, triangle, x, tol):
 
 
 @njit(cache=True)
-def signed_normal(mesh, triangle, region, x, qx, qy, qz, distance):
+def signed_normal(
+    mesh: MeshGeometry, triangle: int, region: int, x: np.ndarray, qx: float, qy: float, qz: float, distance: float
+) -> tuple[float, float, float, float]:
     """Signed distance [m] of x from the mesh feature at q, and the outward normal (nx, ny, nz).
 
     One-sided: the sign of (x − q) · pseudo-normal; the face normal exactly on a face; the
@@ -133,7 +146,7 @@ def signed_normal(mesh, triangle, region, x, qx, qy, qz, distance):
 
 
 @njit(cache=True)
-def nearest_feature(candidates, distance, region):
+def nearest_feature(candidates: np.ndarray, distance: np.ndarray, region: np.ndarray) -> int:
     """Position of the nearest candidate (ties: a face first, then the lowest triangle); −1 if none."""
     best = -1
     for i in range(candidates.shape[0]):
@@ -152,7 +165,9 @@ def nearest_feature(candidates, distance, region):
 
 
 @njit(cache=True)
-def features_near(mesh, center, reach, closest, distance, region):
+def features_near(
+    mesh: MeshGeometry, center: np.ndarray, reach: float, closest: np.ndarray, distance: np.ndarray, region: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Candidate triangles within the box center ± reach, with closest points, distances, regions.
 
     Fills the given arrays when they are long enough, else new ones; returns
@@ -184,7 +199,7 @@ def features_near(mesh, center, reach, closest, distance, region):
 
 
 @njit(cache=True)
-def distance_to_triangle(mesh, triangle, x):
+def distance_to_triangle(mesh: MeshGeometry, triangle: int, x: np.ndarray) -> float:
     """Distance [m] of x (3,) from a triangle (exact closest point; inf for a degenerate one)."""
     nt = mesh.triangle_normals[triangle]
     if nt[0] == 0.0 and nt[1] == 0.0 and nt[2] == 0.0:
@@ -195,7 +210,9 @@ def distance_to_triangle(mesh, triangle, x):
 
 
 @njit(cache=True)
-def segment_triangle_closest(center, axis, half_length, mesh, triangle, tol):
+def segment_triangle_closest(
+    center: np.ndarray, axis: np.ndarray, half_length: float, mesh: MeshGeometry, triangle: int, tol: float
+) -> tuple[float, float]:
     """Segment parameter s [m] of the closest pair between the segment center + s·axis (|s| ≤
     half_length, unit axis) and a triangle of the mesh, and that distance [m].
 
@@ -260,14 +277,14 @@ def segment_triangle_closest(center, axis, half_length, mesh, triangle, tol):
 
 
 @njit(cache=True)
-def candidate_rows(capacity):
+def candidate_rows(capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Empty candidate contacts for a shape against a mesh: point (capacity, 3) [m], normal
     (capacity, 3), depth (capacity,) [m], feature (capacity,) int64."""
     return np.empty((capacity, 3)), np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, dtype=np.int64)
 
 
 @njit(cache=True)
-def keep_deepest(depth, limit):
+def keep_deepest(depth: np.ndarray, limit: int) -> np.ndarray:
     """Mask (C,) of the ``limit`` deepest of the contacts with ``depth`` (C,) (ties: the earliest)."""
     count = depth.shape[0]
     taken = np.zeros(count, dtype=np.bool_)
@@ -281,7 +298,7 @@ def keep_deepest(depth, limit):
 
 
 @njit(cache=True)
-def keep_spread(points, depth, limit, tolerance):
+def keep_spread(points: np.ndarray, depth: np.ndarray, limit: int, tolerance: float) -> np.ndarray:
     """Mask (C,) of at most ``limit`` of the contacts at ``points`` (C, 3) with ``depth`` (C,): the
     deepest (the first within ``tolerance``), then repeatedly the one farthest from those
     chosen (ties: the earliest)."""
@@ -317,7 +334,18 @@ def keep_spread(points, depth, limit, tolerance):
 
 
 @njit(cache=True)
-def write_kept(chosen, point, normal, depth, feature, out_point, out_normal, out_depth, out_feature, slot):
+def write_kept(
+    chosen: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+    feature: np.ndarray,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Write the candidates marked in ``chosen`` (C,) — rows of point (C, 3), normal (C, 3),
     depth (C,) [m], feature (C,) — from ``slot`` on, in their order; returns how many."""
     written = 0

@@ -9,11 +9,18 @@ three vertex spheres); the time of impact in [0, 1] is exact for that shape.
 Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
 from .mesh_features import FACE, closest_point_on_triangle
+
+if TYPE_CHECKING:
+    from ..meshes import MeshGeometry
 
 
 @njit(cache=True)
@@ -89,7 +96,9 @@ def _segment_enters_cylinder(start, motion, a, b, radius):
 
 
 @njit(cache=True)
-def sweep_sphere_mesh(start, end, radius, mesh):
+def sweep_sphere_mesh(
+    start: np.ndarray, end: np.ndarray, radius: float, mesh: MeshGeometry
+) -> tuple[bool, float, int, np.ndarray]:
     """First contact of a sphere (radius ≥ 0 [m]) moving from ``start`` to ``end`` (3,) with the mesh.
 
     Returns (hit, time_of_impact in [0, 1], triangle, normal (3,)). The normal points from
@@ -180,7 +189,9 @@ def sweep_sphere_mesh(start, end, radius, mesh):
 
 
 @njit(cache=True)
-def sweep_spheres_mesh(starts, ends, radii, mesh):
+def sweep_spheres_mesh(
+    starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, mesh: MeshGeometry
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`sweep_sphere_mesh` for N spheres: hit (N,) bool, toi (N,), triangle (N,), normal (N, 3)."""
     count = starts.shape[0]
     hit = np.zeros(count, dtype=np.bool_)

@@ -8,7 +8,10 @@ point comes with both. A static surface is a :class:`ShapeObstacle` (:func:`plan
 (:mod:`.cloth`) and the closed-form references (:mod:`contactlab.closed_form`) ask these.
 """
 
+from __future__ import annotations
+
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -16,6 +19,10 @@ from numba import njit
 from .. import rotations, shapes
 from ..errors import InputError
 from .mesh_features import features_near, nearest_feature, signed_normal
+
+if TYPE_CHECKING:
+    from ..meshes import MeshGeometry
+    from ..model import Model
 
 SPHERE, BOX, PLANE = shapes.SPHERE, shapes.BOX, shapes.PLANE
 
@@ -25,7 +32,7 @@ ShapeObstacle.__doc__ = """A convex static surface: a kind of :mod:`contactlab.s
 its parameter row (4,), its centre (3,) [m] and rotation matrix (3, 3) (body → world)."""
 
 
-def plane_obstacle(normal, offset=0.0):
+def plane_obstacle(normal: np.ndarray, offset: float = 0.0) -> ShapeObstacle:
     """The plane {x : n · x = offset} (solid side n · x < offset); n and offset are divided by |n|."""
     n = np.asarray(normal, dtype=float).reshape(3)
     length = np.linalg.norm(n)
@@ -34,7 +41,7 @@ def plane_obstacle(normal, offset=0.0):
     return ShapeObstacle(PLANE, np.array([*(n / length), float(offset) / length]), np.zeros(3), np.eye(3))
 
 
-def sphere_obstacle(center, radius):
+def sphere_obstacle(center: np.ndarray, radius: float) -> ShapeObstacle:
     """A solid sphere of ``radius`` [m] at ``center`` (3,)."""
     if not radius > 0.0:
         raise InputError("radius", f"the sphere radius must be positive, found {radius}")
@@ -43,7 +50,11 @@ def sphere_obstacle(center, radius):
     )
 
 
-def box_obstacle(center, half_extents, quaternion=(1.0, 0.0, 0.0, 0.0)):
+def box_obstacle(
+    center: np.ndarray,
+    half_extents: np.ndarray,
+    quaternion: tuple[float, float, float, float] | np.ndarray = (1.0, 0.0, 0.0, 0.0),
+) -> ShapeObstacle:
     """A solid box of ``half_extents`` (3,) [m] at ``center`` (3,), orientation (w, x, y, z)."""
     h = np.asarray(half_extents, dtype=float).reshape(3)
     if not np.all(h > 0.0):
@@ -53,7 +64,7 @@ def box_obstacle(center, half_extents, quaternion=(1.0, 0.0, 0.0, 0.0)):
     return ShapeObstacle(BOX, np.array([h[0], h[1], h[2], 0.0]), np.asarray(center, dtype=float).reshape(3), R)
 
 
-def model_obstacle(model, index):
+def model_obstacle(model: Model, index: int) -> ShapeObstacle:
     """The :class:`ShapeObstacle` of obstacle ``index`` of a :class:`~contactlab.model.Model`."""
     R = rotations.to_matrix(np.asarray(model.obstacle_orientation[index], dtype=float)[None])[0]
     return ShapeObstacle(
@@ -65,7 +76,9 @@ def model_obstacle(model, index):
 
 
 @njit(cache=True)
-def shape_signed_distance(kind, params, position, rotation, x):
+def shape_signed_distance(
+    kind: int, params: np.ndarray, position: np.ndarray, rotation: np.ndarray, x: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Signed distance [m] (< 0 inside), outward unit normal (3,) and closest surface point (3,)
     of a plane, sphere or box obstacle at the point x (3,).
 
@@ -132,7 +145,7 @@ def shape_signed_distance(kind, params, position, rotation, x):
 
 
 @njit(cache=True)
-def mesh_signed_distance(mesh, x, reach):
+def mesh_signed_distance(mesh: MeshGeometry, x: np.ndarray, reach: float) -> tuple[float, np.ndarray, np.ndarray, int]:
     """Signed distance [m], outward normal (3,), closest point (3,) and triangle of the point of
     the mesh closest to x (3,), searched within ``reach`` [m]; triangle −1 (distance +inf)
     when nothing is that near. The sign is that of the closest feature's pseudo-normal
@@ -155,7 +168,9 @@ def mesh_signed_distance(mesh, x, reach):
 
 
 @njit(cache=True)
-def points_against_shape(points, kind, params, position, rotation):
+def points_against_shape(
+    points: np.ndarray, kind: int, params: np.ndarray, position: np.ndarray, rotation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`shape_signed_distance` for points (N, 3): signed distance (N,), normal (N, 3), closest (N, 3)."""
     count = points.shape[0]
     signed = np.empty(count)
@@ -171,7 +186,9 @@ def points_against_shape(points, kind, params, position, rotation):
 
 
 @njit(cache=True)
-def points_against_mesh(points, mesh, reach):
+def points_against_mesh(
+    points: np.ndarray, mesh: MeshGeometry, reach: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`mesh_signed_distance` for points (N, 3): signed distance (N,) (+inf beyond
     ``reach``), normal (N, 3), closest (N, 3), triangle (N,)."""
     count = points.shape[0]

@@ -27,9 +27,17 @@ Shapes: P particles, S springs; the DOF vector of the particles has 3P entries, 
 owns [3p, 3p + 3). Everything is vectorized over springs (no Python loop per spring).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+
+    from ..model import Model
 
 TINY_LENGTH = 1e-12  # m: a spring shorter than this has no direction; its axis is taken as zero
 
@@ -54,7 +62,9 @@ def _gather(index_i, index_j, force_on_i, count):
     return total
 
 
-def spring_tensions(model, particle_position, particle_velocity=None):
+def spring_tensions(
+    model: Model, particle_position: np.ndarray, particle_velocity: np.ndarray | None = None
+) -> np.ndarray:
     """Scalar pull of each spring along its axis (S,) [N]: k (l − L) + c (v_j − v_i)·u
     (positive when it pulls its ends together)."""
     i, j, _, length, u = _axes(model, particle_position)
@@ -64,7 +74,9 @@ def spring_tensions(model, particle_position, particle_velocity=None):
     return tension
 
 
-def spring_forces(model, particle_position, particle_velocity=None):
+def spring_forces(
+    model: Model, particle_position: np.ndarray, particle_velocity: np.ndarray | None = None
+) -> np.ndarray:
     """Spring forces on the particles (P, 3) [N] at positions (P, 3) [m] and velocities
     (P, 3) [m/s] (None: no damping force). Zero for particles without springs."""
     count = len(particle_position)
@@ -87,13 +99,13 @@ class SpringPattern:
     slots: np.ndarray  # (S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)
     diagonal: np.ndarray  # (3P,) int64, entry of each diagonal element
 
-    def values(self, blocks):
+    def values(self, blocks: np.ndarray) -> np.ndarray:
         """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on
         its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); springs sharing an entry add."""
         signed = np.stack([-blocks, -blocks, blocks, blocks], axis=1)
         return np.bincount(self.slots.ravel(), signed.ravel(), minlength=len(self.indices))
 
-    def matrix(self, values):
+    def matrix(self, values: np.ndarray) -> sp.csr_matrix:
         """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
         import scipy.sparse as sp  # SciPy on first use: it is a tenth of `import contactlab`
 
@@ -101,7 +113,7 @@ class SpringPattern:
         return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
 
 
-def spring_pattern(spring_particles, count) -> SpringPattern:
+def spring_pattern(spring_particles: np.ndarray, count: int) -> SpringPattern:
     """The ``SpringPattern`` of springs joining ``spring_particles`` (S, 2) among ``count`` particles."""
     n = 3 * count
     i, j = spring_particles[:, 0], spring_particles[:, 1]
@@ -116,7 +128,9 @@ def spring_pattern(spring_particles, count) -> SpringPattern:
     return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n :])
 
 
-def jacobian_blocks(model, particle_position, clamp_compressed=False):
+def jacobian_blocks(
+    model: Model, particle_position: np.ndarray, clamp_compressed: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
     _, _, _, length, u = _axes(model, particle_position)
@@ -130,7 +144,7 @@ def jacobian_blocks(model, particle_position, clamp_compressed=False):
     return stiffness, model.spring_damping[:, None, None] * outer
 
 
-def block_product(model, blocks, vectors):
+def block_product(model: Model, blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """(Σ_s B_s over the springs, assembled as in ``SpringPattern.values``) applied to ``vectors``
     (P, 3): each spring adds B_s (v_j − v_i) on i and its opposite on j; (P, 3)."""
     i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
@@ -138,7 +152,12 @@ def block_product(model, blocks, vectors):
     return _gather(i, j, pull, len(vectors))
 
 
-def spring_jacobians(model, particle_position, particle_velocity=None, clamp_compressed=False):
+def spring_jacobians(
+    model: Model,
+    particle_position: np.ndarray,
+    particle_velocity: np.ndarray | None = None,
+    clamp_compressed: bool = False,
+) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """(K, D): the Jacobians ∂f/∂x [N/m] and ∂f/∂v [N s/m] of ``spring_forces``, SciPy CSR
     matrices (3P, 3P), symmetric, with the blocks of the module docstring (on the pattern of
     ``model.spring_pattern``, whose diagonal is always stored).
@@ -160,7 +179,7 @@ def spring_jacobians(model, particle_position, particle_velocity=None, clamp_com
     return pattern.matrix(pattern.values(stiffness)), pattern.matrix(pattern.values(damping))
 
 
-def spring_energy(model, particle_position) -> float:
+def spring_energy(model: Model, particle_position: np.ndarray) -> float:
     """Elastic energy of the springs Σ ½ k (l − L)² [J] at positions (P, 3) [m]."""
     if model.spring_count == 0:
         return 0.0

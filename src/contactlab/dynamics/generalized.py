@@ -7,6 +7,10 @@ particle. This is the layout of ``contacts.jacobian``, so a contact force F_p (3
 degrees of freedom as f = Jᵀ F_p and changes their velocities by h M⁻¹ Jᵀ F_p.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
@@ -14,34 +18,38 @@ from numba import njit
 from .. import rotations
 from .integrators import particle_system
 
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
 
-def dof_count(model) -> int:
+
+def dof_count(model: Model) -> int:
     """N = 6B + 3P."""
     return 6 * model.body_count + 3 * model.particle_count
 
 
-def stack(body_velocity, body_angular_velocity, particle_velocity):
+def stack(body_velocity: np.ndarray, body_angular_velocity: np.ndarray, particle_velocity: np.ndarray) -> np.ndarray:
     """v (N,) from body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)."""
     return stacked(
         *(np.ascontiguousarray(a, dtype=float) for a in (body_velocity, body_angular_velocity, particle_velocity))
     )
 
 
-def unstack(v, body_count):
+def unstack(v: np.ndarray, body_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)) from v (N,),
     copies, for B = body_count."""
     return unstacked(np.ascontiguousarray(v, dtype=float), body_count)
 
 
 @njit(cache=True)
-def stacked(body_velocity, body_angular_velocity, particle_velocity):
+def stacked(body_velocity: np.ndarray, body_angular_velocity: np.ndarray, particle_velocity: np.ndarray) -> np.ndarray:
     """``stack``, compiled (the compiled steps call it too): v (N,) from (B, 3), (B, 3), (P, 3)."""
     bodies = np.concatenate((body_velocity, body_angular_velocity), axis=1).ravel()
     return np.concatenate((bodies, particle_velocity.ravel()))
 
 
 @njit(cache=True)
-def unstacked(v, body_count):
+def unstacked(v: np.ndarray, body_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``unstack``, compiled (the compiled steps call it too): copies (B, 3), (B, 3), (P, 3) of a
     C-contiguous v (N,)."""
     B = body_count
@@ -67,13 +75,13 @@ def _block_diagonal(body_linear, body_angular, particle):
     )
 
 
-def mass_matrix(model, body_orientation):
+def mass_matrix(model: Model, body_orientation: np.ndarray) -> sp.csr_matrix:
     """M (N, N) CSR [kg, kg m²] at the given orientations (B, 4)."""
     R = rotations.to_matrix(body_orientation)
     return _block_diagonal(model.body_mass, rotations.world_inertia(R, model.body_inertia), model.particle_mass)
 
 
-def inverse_mass_matrix(model, body_orientation):
+def inverse_mass_matrix(model: Model, body_orientation: np.ndarray) -> sp.csr_matrix:
     """M⁻¹ (N, N) CSR [1/kg, 1/(kg m²)] at the given orientations (B, 4)."""
     R = rotations.to_matrix(body_orientation)
     return _block_diagonal(
@@ -81,7 +89,9 @@ def inverse_mass_matrix(model, body_orientation):
     )
 
 
-def implicit_base(model, state, dt, v_free, cloth_implicit=True):
+def implicit_base(
+    model: Model, state: State, dt: float, v_free: np.ndarray, cloth_implicit: bool = True
+) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     """The backward Euler system without contacts, A₀ v⁺ = b₀, over all N degrees of freedom.
 
     Bodies: M v⁺ = M v* (gravity and the gyroscopic term are already in v*). Particles: the

@@ -22,7 +22,10 @@ velocity under every integrator: gravity and springs do not move them.
 Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -30,10 +33,17 @@ from numba import njit
 from .. import rotations
 from .cloth import block_product, jacobian_blocks, spring_forces
 
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from ..model import Model
+    from ..state import State
+
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
 
-def world_inverse_inertia(model, orientation):
+def world_inverse_inertia(model: Model, orientation: np.ndarray) -> np.ndarray:
     """I⁻¹ in world frame, (B, 3, 3), for orientations (B, 4)."""
     return rotations.world_inertia(rotations.to_matrix(orientation), model.body_inverse_inertia)
 
@@ -64,7 +74,9 @@ def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=
 
 
 @njit(cache=True)
-def gyroscopic_midpoint(rotation, inertia, angular_velocity, dt, newton_steps):
+def gyroscopic_midpoint(
+    rotation: np.ndarray, inertia: np.ndarray, angular_velocity: np.ndarray, dt: float, newton_steps: int
+) -> np.ndarray:
     """``_gyroscopic_implicit``, compiled, body by body: rotation (B, 3, 3) body → world,
     inertia (B, 3) principal [kg m²], angular_velocity (B, 3) world [rad/s]. A body with an
     isotropic inertia, or at rest, keeps its ω (it has no gyroscopic torque); the others take
@@ -171,7 +183,9 @@ class ParticleSystem:
     coupled: np.ndarray
 
 
-def particle_system(model, state, dt, particle_force=None, clamp_compressed=True) -> ParticleSystem:
+def particle_system(
+    model: Model, state: State, dt: float, particle_force: np.ndarray | None = None, clamp_compressed: bool = True
+) -> ParticleSystem:
     """The backward Euler step of the particles under gravity, cloth springs and
     ``particle_force`` (P, 3) [N], linearized at ``state`` (see ``ParticleSystem``).
 
@@ -199,7 +213,7 @@ def particle_system(model, state, dt, particle_force=None, clamp_compressed=True
     return ParticleSystem(pattern.matrix(values), rhs, coupled)
 
 
-def factor_symmetric(matrix):
+def factor_symmetric(matrix: sp.spmatrix) -> spla.SuperLU:
     """A sparse LU (SciPy's SuperLU) of a symmetric positive definite matrix (N, N), for repeated
     solves (``.solve(rhs)``): a fill-reducing ordering of A + Aᵀ and diagonal pivots, which keep
     that ordering (a positive definite matrix needs no row exchanges). The default threshold
@@ -213,7 +227,9 @@ def factor_symmetric(matrix):
     )
 
 
-def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
+def solve_particle_system(
+    system: ParticleSystem, model: Model, tolerance: float = 1e-6, solver: str = "cg"
+) -> np.ndarray:
     """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
     with a Jacobi preconditioner (``solver="cg"``, to the relative residual ``tolerance`` —
     the linearization itself is only first-order accurate, so 1e-6 is plenty; a sparse direct
@@ -242,16 +258,16 @@ def solve_particle_system(system, model, tolerance=1e-6, solver="cg"):
 
 
 def free_velocities(
-    model,
-    state,
-    dt,
-    integrator="symplectic_euler",
-    body_force=None,
-    body_torque=None,
-    particle_force=None,
-    linear_solver="cg",
-    linear_tolerance=1e-6,
-):
+    model: Model,
+    state: State,
+    dt: float,
+    integrator: str = "symplectic_euler",
+    body_force: np.ndarray | None = None,
+    body_torque: np.ndarray | None = None,
+    particle_force: np.ndarray | None = None,
+    linear_solver: str = "cg",
+    linear_tolerance: float = 1e-6,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
 
     body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
@@ -279,7 +295,14 @@ def free_velocities(
     return (*body_free_velocities(model, state, dt, integrator, body_force, body_torque), particle_velocity)
 
 
-def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_force=None, body_torque=None):
+def body_free_velocities(
+    model: Model,
+    state: State,
+    dt: float,
+    integrator: str = "symplectic_euler",
+    body_force: np.ndarray | None = None,
+    body_torque: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The rigid bodies' part of ``free_velocities``: (body_velocity (B,3) [m/s],
     body_angular_velocity (B,3) [rad/s]) after dt under gravity and the optional body_force,
     body_torque (B, 3) [N], [N m]. The gyroscopic term is explicit under explicit Euler and
@@ -311,15 +334,15 @@ def body_free_velocities(model, state, dt, integrator="symplectic_euler", body_f
 
 
 def advance_positions(
-    body_position,
-    body_orientation,
-    particle_position,
-    body_velocity,
-    body_angular_velocity,
-    particle_velocity,
-    body_dt,
-    particle_dt,
-):
+    body_position: np.ndarray,
+    body_orientation: np.ndarray,
+    particle_position: np.ndarray,
+    body_velocity: np.ndarray,
+    body_angular_velocity: np.ndarray,
+    particle_velocity: np.ndarray,
+    body_dt: float | np.ndarray,
+    particle_dt: float | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions and orientations moved at constant velocities for a time step.
 
     body_dt: scalar or (B,) [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the
@@ -347,15 +370,15 @@ def advance_positions(
 
 @njit(cache=True)
 def moved(
-    body_position,
-    body_orientation,
-    particle_position,
-    body_velocity,
-    body_angular_velocity,
-    particle_velocity,
-    body_dt,
-    particle_dt,
-):
+    body_position: np.ndarray,
+    body_orientation: np.ndarray,
+    particle_position: np.ndarray,
+    body_velocity: np.ndarray,
+    body_angular_velocity: np.ndarray,
+    particle_velocity: np.ndarray,
+    body_dt: np.ndarray,
+    particle_dt: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``advance_positions``, compiled, with body_dt (B,) and particle_dt (P,) [s]: x + Δt v, and
     the orientations turned by Δt ω (``rotations.integrate``)."""
     position = np.empty_like(body_position)

@@ -13,6 +13,8 @@ when they share a degree of freedom (a body), so the rows of one color touch dis
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
@@ -41,7 +43,7 @@ def _greedy_color(indptr, indices, order):
     return colors
 
 
-def coupling_graph(B) -> sp.csr_matrix:
+def coupling_graph(B: sp.spmatrix | np.ndarray) -> sp.csr_matrix:
     """The symmetric sparsity pattern of ``B`` without its diagonal: a CSR matrix (n, n) whose
     entry (i, j) is 1 when rows i and j are coupled (``B[i, j] != 0`` or ``B[j, i] != 0``)."""
     csr = square_csr(B, "B")
@@ -65,7 +67,7 @@ def _color_graph(graph: sp.csr_matrix) -> np.ndarray:
     return _greedy_color(graph.indptr.astype(np.int64), graph.indices.astype(np.int64), order)
 
 
-def color_rows(B) -> np.ndarray:
+def color_rows(B: sp.spmatrix | np.ndarray) -> np.ndarray:
     """Color the rows of the LCP matrix ``B`` (SciPy sparse or dense, (n, n)) for SPEC C8.
 
     Returns ``colors`` (n,) int64 in ``0 .. ncolors-1`` such that two rows with the same color
@@ -75,7 +77,7 @@ def color_rows(B) -> np.ndarray:
     return _color_graph(coupling_graph(B))
 
 
-def color_contacts(index_lists, n_dofs: int | None = None) -> np.ndarray:
+def color_contacts(index_lists: Sequence[Sequence[int]], n_dofs: int | None = None) -> np.ndarray:
     """Color rows given, for each row, the degrees of freedom (or bodies) it touches.
 
     ``index_lists``: a sequence of n integer sequences (e.g. ``[(body_a, body_b), ...]`` for n
@@ -108,7 +110,7 @@ def color_contacts(index_lists, n_dofs: int | None = None) -> np.ndarray:
     return _color_graph(coupling_graph(incidence @ incidence.T))
 
 
-def coloring_is_valid(B, colors) -> bool:
+def coloring_is_valid(B: sp.spmatrix | np.ndarray, colors: np.ndarray) -> bool:
     """True when no two distinct rows with the same color are coupled in ``B``."""
     graph = coupling_graph(B).tocoo()
     colors = np.asarray(colors)

@@ -57,7 +57,7 @@ class _Bad(Exception):
     """Internal: what is wrong with the file (turned into an InputError naming the path)."""
 
 
-def read_problem(path) -> FrictionProblem:
+def read_problem(path: str | Path) -> FrictionProblem:
     """Read an FCLIB HDF5 file or a Siconos ``.dat`` friction problem (3D) from ``path``.
 
     The format is recognised from the content (HDF5 signature, else text). Raises

@@ -46,9 +46,11 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
@@ -351,7 +353,9 @@ def _diagonal_blocks(csr, nc):
     return values.reshape(nc, 3, 3).astype(np.float64)
 
 
-def natural_map_error(W, q, mu, r, normalization="max") -> float:
+def natural_map_error(
+    W: sp.spmatrix | np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray, normalization: str = "max"
+) -> float:
     """Natural-map residual of the FCLIB local problem at r (FCLIB/Siconos measure).
 
     ``F^α(r) = r^α − P_Kμα(r^α − û^α)`` with ``u = W r + q`` and ``û^α = u^α + [μ_α‖u^α_T‖, 0, 0]``.
@@ -402,7 +406,13 @@ def _project_cone(r, mu):
     return rr.ravel()
 
 
-def largest_eigenvalue(product, size, iterations=30, rtol=1e-3, start=None) -> float:
+def largest_eigenvalue(
+    product: Callable[[np.ndarray], np.ndarray],
+    size: int,
+    iterations: int = 30,
+    rtol: float = 1e-3,
+    start: np.ndarray | None = None,
+) -> float:
     """The largest eigenvalue of a symmetric positive semidefinite operator given by ``product``
     (x (size,) → W x), by power iteration from ``start`` (or ones) until it changes by less than
     ``rtol``; at most ``iterations`` products. It approaches from below."""
@@ -477,16 +487,16 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
 
 
 def solve_friction_contact(
-    W,
-    q,
-    mu,
-    method="nsgs",
-    tol=1e-6,
-    max_iterations=1000,
-    r0=None,
-    friction_model="cone",
-    lipschitz=None,
-    warm_sweeps=0,
+    W: sp.spmatrix | np.ndarray | spla.LinearOperator,
+    q: np.ndarray,
+    mu: np.ndarray,
+    method: str = "nsgs",
+    tol: float = 1e-6,
+    max_iterations: int = 1000,
+    r0: np.ndarray | None = None,
+    friction_model: str = "cone",
+    lipschitz: float | None = None,
+    warm_sweeps: int = 0,
 ) -> FrictionResult:
     """Solve the 3D Coulomb friction problem ``u = W r + q``, ``r ∈ K_μ``, ``û ⊥ r`` (FCLIB local form).
 

@@ -43,7 +43,7 @@ def _lexicographic_row(rhs, tableau, column, n, z0_row, pivot_tol):
     return int(ties[0])
 
 
-def lemke(M: np.ndarray, q: np.ndarray, max_pivots: int):
+def lemke(M: np.ndarray, q: np.ndarray, max_pivots: int) -> tuple[np.ndarray, int, str, str]:
     """Run Lemke's method on ``w = M z + q``.
 
     Returns ``(z, pivots, status, message)`` with status ``"solved"``, ``"ray"`` or

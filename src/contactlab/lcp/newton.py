@@ -208,7 +208,7 @@ def _fill_jacobian(w_indptr, w_indices, w_data, j_indptr, j_indices, a_blocks, b
 # ----------------------------------------------------------------------------- helpers
 
 
-def split_rho(blocks):
+def split_rho(blocks: np.ndarray) -> np.ndarray:
     """ρ (3·nc,) = per contact (1/W_NN, 1/λ_max(W_TT), 1/λ_max(W_TT)) from the diagonal blocks
     (nc, 3, 3) of W (units: impulse per velocity). A block without a positive value there takes
     1 / the mean positive diagonal of W (1 if none is positive)."""
@@ -252,7 +252,15 @@ def _newton_step(j_indptr, j_indices, j_data, rhs):
 # ----------------------------------------------------------------------------- the solver
 
 
-def solve_newton(csr, q, mu, r, tol, max_iterations, warm_sweeps=0):
+def solve_newton(
+    csr: sp.csr_matrix,
+    q: np.ndarray,
+    mu: np.ndarray,
+    r: np.ndarray,
+    tol: float,
+    max_iterations: int,
+    warm_sweeps: int = 0,
+) -> tuple[np.ndarray, int, float, int]:
     """Semi-smooth Newton (module docstring) on FC(W, q, μ) from r.
 
     csr: (m, m) W as SciPy CSR with sorted indices; q (m,); mu (nc,); r (m,) start reactions

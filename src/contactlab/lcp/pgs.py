@@ -40,7 +40,9 @@ def _residual_rows(indptr, indices, data, c, lam, w, start, stop):
 
 
 @njit(cache=True)
-def lcp_residual(indptr, indices, data, c, lam, w):
+def lcp_residual(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, c: np.ndarray, lam: np.ndarray, w: np.ndarray
+) -> float:
     """Fill ``w = B λ − c`` and return ``‖λ − max(0, λ − w)‖₂`` (sequential)."""
     return math.sqrt(_residual_rows(indptr, indices, data, c, lam, w, 0, c.shape[0]))
 
@@ -49,7 +51,9 @@ RESIDUAL_CHUNKS = 8  # row blocks of the parallel residual (a few per thread, fo
 
 
 @njit(cache=True, parallel=True)
-def lcp_residual_parallel(indptr, indices, data, c, lam, w):
+def lcp_residual_parallel(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, c: np.ndarray, lam: np.ndarray, w: np.ndarray
+) -> float:
     """Same as :func:`lcp_residual`, in ``RESIDUAL_CHUNKS`` blocks of rows in parallel."""
     n = c.shape[0]
     partial = np.zeros(RESIDUAL_CHUNKS)
@@ -61,7 +65,18 @@ def lcp_residual_parallel(indptr, indices, data, c, lam, w):
 
 
 @njit(cache=True)
-def gauss_seidel(indptr, indices, data, diag, c, lam, omega, tol, max_iterations, jacobi):
+def gauss_seidel(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    diag: np.ndarray,
+    c: np.ndarray,
+    lam: np.ndarray,
+    omega: float,
+    tol: float,
+    max_iterations: int,
+    jacobi: bool,
+) -> tuple[int, float]:
     """Projected Gauss-Seidel (``jacobi=False``, SPEC C7) or projected Jacobi sweeps on λ (n,),
     updated in place, until the residual is ``<= tol`` or ``max_iterations`` sweeps.
     Returns ``(sweeps, residual)``."""
@@ -101,7 +116,20 @@ def _relax_row(indptr, indices, data, diag, c, lam, source, omega, i):
 
 
 @njit(cache=True, parallel=True)
-def red_black(indptr, indices, data, diag, c, lam, omega, tol, max_iterations, order, color_start, min_parallel):
+def red_black(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    diag: np.ndarray,
+    c: np.ndarray,
+    lam: np.ndarray,
+    omega: float,
+    tol: float,
+    max_iterations: int,
+    order: np.ndarray,
+    color_start: np.ndarray,
+    min_parallel: int,
+) -> tuple[int, float]:
     """Multi-color projected Gauss-Seidel (SPEC C8) on λ (n,), in place.
 
     ``order`` (n,) lists the rows grouped by color, ``color_start`` (ncolors + 1,) the start of

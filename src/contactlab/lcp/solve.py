@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -11,6 +12,9 @@ from . import pgs as _kernels
 from ._checks import choice, positive_float, positive_int, square_csr, vector
 from .coloring import color_rows
 from .lemke import lemke
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
 
@@ -45,7 +49,15 @@ class LCPResult:
     colors: int = 0
 
 
-def solve_lcp(B, c, method="pgs", tol=1e-8, max_iterations=1000, warm_start=None, omega=1.0) -> LCPResult:
+def solve_lcp(
+    B: sp.spmatrix | np.ndarray,
+    c: np.ndarray,
+    method: str = "pgs",
+    tol: float = 1e-8,
+    max_iterations: int = 1000,
+    warm_start: np.ndarray | None = None,
+    omega: float = 1.0,
+) -> LCPResult:
     """Solve the LCP ``w = B λ − c ≥ 0, λ ≥ 0, λᵀ w = 0`` (SPEC C6).
 
     Parameters

@@ -11,7 +11,10 @@ A method module provides:
   time step or stiffness an explicit step could follow).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, fields
+from types import ModuleType
 
 import numpy as np
 
@@ -29,10 +32,9 @@ class StepInfo:
     solver_iterations: int = 0  # sweeps the solver made (0 where there is none)
     solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
     energy_elastic: float = 0.0  # energy stored in contact springs [J]
-    implicit_springs: bool = (
-        False  # penalty: contact springs stepped by backward Euler, the explicit step being unstable
-    )
-    impulses: np.ndarray = None  # (C, 3) [N s] each contact's push on side A over the step, along (normal,
+    # penalty: contact springs stepped by backward Euler, the explicit step being unstable
+    implicit_springs: bool = False
+    impulses: np.ndarray | None = None  # (C, 3) [N s] each contact's push on side A over the step, along (normal,
     #                               tangent1, tangent2) of ``contacts``; None: no contacts (the viewer's arrows)
 
 
@@ -69,7 +71,7 @@ class KeptManifoldOptions(CollisionOptions):
         self.manifold_tolerance = number(self.manifold_tolerance, "manifold_tolerance", 0.0)
 
 
-def get(name):
+def get(name: str) -> ModuleType:
     """The method module called ``name``; InputError for an unknown or unavailable one."""
     if name == "impulse":
         from . import impulse
@@ -90,7 +92,7 @@ def get(name):
     raise InputError("method", f"unknown method {name!r}; expected one of: {', '.join(AVAILABLE)}")
 
 
-def make_options(module, table, path):
+def make_options(module: ModuleType, table: dict[str, object], path: str) -> CollisionOptions:
     """Build ``module.Options`` from a scene-file table (dict); unknown keys are InputErrors."""
     import difflib
 

@@ -35,7 +35,10 @@ resting but has no means to stop an impact within a step — why velocities are 
 when things collide.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -59,6 +62,11 @@ from .velocity_level import (
     step_without_contacts,
 )
 
+if TYPE_CHECKING:
+    from ..contacts import Contacts
+    from ..model import Model
+    from .sequential import ContactRows
+
 SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "newton", "pgs", "redblack", "jacobi", "lemke")
 CONE_ONLY_SOLVERS = ("apgd", "newton")  # they solve the Coulomb cone, not its pyramid
 FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
@@ -69,16 +77,16 @@ FORMULATIONS = ("velocity", "acceleration")
 class Options(KeptManifoldOptions):
     """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
 
-    solver: str = (
-        "matrix_free"  # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
-    )
+    # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
+    solver: str = "matrix_free"
     formulation: str = "velocity"  # velocity (C5b) | acceleration (C5a)
     friction_model: str = "cone"  # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
     iterations: int = 100  # solver sweeps per step (at most; newton: Newton steps)
-    tolerance: float = (
-        None  # matrix_free: m/s a sweep changes a contact's velocity (1e-7); others: their residual (1e-6)
-    )
-    omega: float = 1.0  # over-relaxation of pgs, redblack, jacobi
+    # matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
+    # jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1]
+    # (default 1e-6)
+    tolerance: float | None = None
+    omega: float = 1.0  # over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)
     warm_start: float = 1.0  # fraction of last step's λ to start from (by contact id; 0 = cold)
     restitution_threshold: float = -1.0  # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
     stabilization: float = 0.2  # fraction of an existing penetration removed per step (0 = none)
@@ -116,13 +124,15 @@ class SystemInverse:
     """Applies A⁻¹ for the MLCP's A: M⁻¹ block by block when A = M, a sparse LU of A (with the
     pinned degrees of freedom held) when the cloth is integrated implicitly (M4)."""
 
-    def __init__(self, inverse_mass=None, matrix=None, free=None):
+    def __init__(
+        self, inverse_mass: sp.spmatrix | None = None, matrix: sp.spmatrix | None = None, free: np.ndarray | None = None
+    ) -> None:
         self.inverse_mass = inverse_mass
         self.free = free
         # A is symmetric positive definite (clamped spring Jacobians, damping, masses)
         self.factor = None if matrix is None else factor_symmetric(matrix)
 
-    def solve(self, rhs):
+    def solve(self, rhs: np.ndarray | sp.spmatrix) -> np.ndarray:
         """A⁻¹ rhs for rhs (N,) or (N, k); pinned degrees of freedom get 0."""
         if self.factor is None:
             return self.inverse_mass @ rhs
@@ -131,7 +141,9 @@ class SystemInverse:
         return np.where(mask, self.factor.solve(np.where(mask, rhs, 0.0)), 0.0)
 
 
-def lcp_matrices(J, inverse, v_free, target):
+def lcp_matrices(
+    J: sp.spmatrix, inverse: SystemInverse, v_free: np.ndarray, target: np.ndarray
+) -> tuple[sp.spmatrix, np.ndarray]:
     """B = J A⁻¹ Jᵀ (3C, 3C) and q = J v* − t (3C,) of the local problem u = B λ + q (C6).
 
     J (3C, N) sparse; inverse: a SystemInverse; v_free v* = A⁻¹ b (N,); target t (3C,) (the
@@ -143,14 +155,14 @@ def lcp_matrices(J, inverse, v_free, target):
     return B, J @ v_free - target
 
 
-def delassus_operator(J, inverse):
+def delassus_operator(J: sp.spmatrix, inverse: SystemInverse) -> spla.LinearOperator:
     """W = J A⁻¹ Jᵀ (3C, 3C) as a LinearOperator, x ↦ J (A⁻¹ (Jᵀ x)): one solve with A per
     product, W never formed. J (3C, N) sparse; inverse: a SystemInverse."""
     transpose = J.T.tocsr()
     return spla.LinearOperator((J.shape[0], J.shape[0]), matvec=lambda x: J @ inverse.solve(transpose @ x), dtype=float)
 
 
-def delassus_bound(J, inverse_mass):
+def delassus_bound(J: sp.spmatrix, inverse_mass: sp.spmatrix) -> float:
     """An upper bound on the largest eigenvalue of W = J A⁻¹ Jᵀ [m/s per N s]: the largest
     absolute row sum of J M⁻¹ Jᵀ (Gershgorin). It holds because A ⪰ M: backward Euler's
     A = M − h D − h² K adds −h D − h² K ⪰ 0 (clamped springs, damping), so A⁻¹ ⪯ M⁻¹.
@@ -158,7 +170,17 @@ def delassus_bound(J, inverse_mass):
     return float(abs(J @ inverse_mass @ J.T).sum(axis=1).max())
 
 
-def solve_assembled(J, inverse, inverse_mass, v_free, target, friction, warm, options, solver=None):
+def solve_assembled(
+    J: sp.spmatrix,
+    inverse: SystemInverse,
+    inverse_mass: sp.spmatrix,
+    v_free: np.ndarray,
+    target: np.ndarray,
+    friction: np.ndarray,
+    warm: np.ndarray,
+    options: Options,
+    solver: str | None = None,
+) -> tuple[np.ndarray, int, float]:
     """λ (C, 3) of the problem u = W λ + q with the chosen solver (``solver`` overrides
     ``options.solver``); (λ, iterations, residual). apgd takes W as the operator
     ``delassus_operator`` and its step from ``delassus_bound`` (``inverse_mass`` M⁻¹ (N, N)
@@ -208,7 +230,9 @@ def solve_assembled(J, inverse, inverse_mass, v_free, target, friction, warm, op
     return result.r.reshape(C, 3), result.iterations, result.error
 
 
-def acceleration_target(current_velocity, free_velocity, gap_at_start, dt, options):
+def acceleration_target(
+    current_velocity: np.ndarray, free_velocity: np.ndarray, gap_at_start: np.ndarray, dt: float, options: Options
+) -> np.ndarray:
     """C5a: the constraints differentiated once, J_n a ≥ 0 for the contacts that touch (d ≤ slop),
     written as a velocity target after one step of a: v_n⁺ ≥ v_n (the normal velocity they
     have now, ``current_velocity``), plus the stabilization of an overlap. An open contact
@@ -225,7 +249,9 @@ def acceleration_target(current_velocity, free_velocity, gap_at_start, dt, optio
 # ---- the step: loop L3 --------------------------------------------------------------------
 
 
-def implicit_free_velocities(model, state, h):
+def implicit_free_velocities(
+    model: Model, state: State, h: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], SystemInverse]:
     """Backward Euler's free velocities with the cloth (M4) from one factorization of
     A = M − h D − h² K, which the contact solve then reuses: (free velocities as
     ``free_velocities`` returns them, the SystemInverse of A). One LU and one solve cost about
@@ -238,7 +264,9 @@ def implicit_free_velocities(model, state, h):
     return unstack(inverse.solve(b0), model.body_count), inverse
 
 
-def normal_row_targets(model, state, contacts, rows, v_free, h, options):
+def normal_row_targets(
+    model: Model, state: State, contacts: Contacts, rows: ContactRows, v_free: np.ndarray, h: float, options: Options
+) -> tuple[np.ndarray, np.ndarray]:
     """Stage 4a: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
     none) — on velocities (C5b, ``normal_targets``) or on accelerations (C5a)."""
     normal_velocity = row_products(rows, v_free)[:, 0]
@@ -257,7 +285,17 @@ def normal_row_targets(model, state, contacts, rows, v_free, h, options):
     return (acceleration_target(current, normal_velocity, gap_at_start, h, options), np.full(contacts.count, -1.0))
 
 
-def solve_constraints(model, state, contacts, rows, v_free, target, warm, options, implicit_inverse=None):
+def solve_constraints(
+    model: Model,
+    state: State,
+    contacts: Contacts,
+    rows: ContactRows,
+    v_free: np.ndarray,
+    target: np.ndarray,
+    warm: np.ndarray,
+    options: Options,
+    implicit_inverse: SystemInverse | None = None,
+) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Stage 4b: the reactions λ (C, 3) [N s] and v⁺ = v* + A⁻¹ Jᵀ λ (N,), with the solver's sweeps
     and residual. "matrix_free" sweeps the rows (sequential impulses on v); the other solvers,
     and any solver on implicit cloth (``implicit_inverse``: the SystemInverse of stage 1),
@@ -290,7 +328,9 @@ def solve_constraints(model, state, contacts, rows, v_free, target, warm, option
     return lam, v_free + inverse.solve(J.T @ lam.ravel()), iterations, residual
 
 
-def step(model, state, dt, options, integrator="symplectic_euler"):
+def step(
+    model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
+) -> tuple[State, StepInfo]:
     """One step of loop L3 with hard constraints; returns (new State, StepInfo). Its compiled
     stages are called one by one from Python; ``simulate`` steps the scenes the compiled loop
     serves (methods.velocity_loop) through that loop instead, which gives the very same numbers."""

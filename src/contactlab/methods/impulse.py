@@ -26,7 +26,10 @@ its position is x₀ + h(τ v* + (1 − τ) v⁺) (orientation likewise). This i
 heights follow h₀ ε²ⁿ instead of bouncing early, from wherever the step happened to end.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -48,6 +51,10 @@ from .velocity_level import (
     restitution_threshold,
     step_without_contacts,
 )
+
+if TYPE_CHECKING:
+    from ..model import Model
+    from .sequential import ContactRows
 
 
 @dataclass
@@ -79,20 +86,20 @@ class Options(KeptManifoldOptions):
 
 @njit(cache=True)
 def resolve_collisions(
-    rows,
-    friction,
-    restitution,
-    gravity_normal,
-    gap_at_start,
-    dt,
-    threshold,
-    u,
-    max_waves,
-    sweeps,
-    tolerance,
-    tau,
-    order,
-):
+    rows: ContactRows,
+    friction: np.ndarray,
+    restitution: np.ndarray,
+    gravity_normal: np.ndarray,
+    gap_at_start: np.ndarray,
+    dt: float,
+    threshold: float,
+    u: np.ndarray,
+    max_waves: int,
+    sweeps: int,
+    tolerance: float,
+    tau: np.ndarray,
+    order: np.ndarray,
+) -> int:
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
     A wave is every contact that is approaching now: at the current velocities it would be
@@ -143,7 +150,9 @@ def resolve_collisions(
     return max_waves
 
 
-def step(model, state, dt, options, integrator="symplectic_euler"):
+def step(
+    model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
+) -> tuple[State, StepInfo]:
     """One step of loop L3 with impulses; returns (new State, StepInfo). Its compiled stages are
     called one by one from Python; ``simulate`` steps the scenes the compiled loop serves
     (methods.velocity_loop) through that loop instead, which gives the very same numbers."""
@@ -196,7 +205,7 @@ def step(model, state, dt, options, integrator="symplectic_euler"):
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change, impulses=impulses)
 
 
-def warm_start_impulses(carried, feature_id, fraction):
+def warm_start_impulses(carried: dict, feature_id: np.ndarray, fraction: float) -> np.ndarray:
     """Last step's resting-contact impulses (C, 3) for the contacts that persist, by id, times
     ``fraction``; 0 for new ones."""
     if fraction <= 0.0:

@@ -29,7 +29,10 @@ out, round-off overlaps become velocity and set stacks rocking); each step start
 step's λ by contact id (``warm_start``).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -43,6 +46,11 @@ from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
 from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import detect
+
+if TYPE_CHECKING:
+    from ..contacts import Contacts
+    from ..model import Model
+    from .sequential import ContactRows
 
 
 @dataclass
@@ -66,7 +74,16 @@ class Options(KeptManifoldOptions):
         self.slop = number(self.slop, "slop", 0.0)
 
 
-def project(model, at, offset, displacement, options, sweep=None, carried=None, contacts=None):
+def project(
+    model: Model,
+    at: State,
+    offset: np.ndarray,
+    displacement: np.ndarray,
+    options: Options,
+    sweep: np.ndarray | None = None,
+    carried: dict | None = None,
+    contacts: Contacts | None = None,
+) -> tuple[np.ndarray, Contacts, np.ndarray, int, float]:
     """Project the colliding points of the state ``at`` onto the surfaces.
 
     at: the State where contacts are detected, reached from the step's start by the
@@ -116,7 +133,9 @@ def project(model, at, offset, displacement, options, sweep=None, carried=None, 
     return corrected, contacts, lam, sweeps, change
 
 
-def step(model, state, dt, options, integrator="symplectic_euler"):
+def step(
+    model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
+) -> tuple[State, StepInfo]:
     """One step of loop L2 with projection; returns (new State, StepInfo)."""
     h = dt
     # 1. internal forces → free velocities v*
@@ -170,7 +189,7 @@ def _positions(state):
 
 
 @njit(cache=True)
-def projection_targets(rows, offset, depth, slop):
+def projection_targets(rows: ContactRows, offset: np.ndarray, depth: np.ndarray, slop: float) -> np.ndarray:
     """The least normal displacement each contact must reach, (C,) [m]: J_n u ≥ J_n offset + δ,
     for contacts of depth δ (C,) [m] (> 0: overlapping) detected at positions the displacement
     ``offset`` (N,) [m, rad] reached from the step's start (``rows``, a ContactRows, built
@@ -185,7 +204,13 @@ def projection_targets(rows, offset, depth, slop):
 
 
 @njit(cache=True)
-def displaced(body_position, body_orientation, particle_position, displacement, h):
+def displaced(
+    body_position: np.ndarray,
+    body_orientation: np.ndarray,
+    particle_position: np.ndarray,
+    displacement: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions (B, 3), orientations (B, 4) and particle positions (P, 3) moved over h [s] by a
     generalized displacement (N,) [m, rad]: translations added, rotation vectors applied by the
     exponential map (as velocities displacement / h for h, ``integrators.moved``)."""
@@ -203,7 +228,15 @@ def displaced(body_position, body_orientation, particle_position, displacement, 
 
 
 @njit(cache=True)
-def advance(body_position, body_orientation, particle_position, free, displacement, predicted, h):
+def advance(
+    body_position: np.ndarray,
+    body_orientation: np.ndarray,
+    particle_position: np.ndarray,
+    free: np.ndarray,
+    displacement: np.ndarray,
+    predicted: np.ndarray,
+    h: float,
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Stage 5: the step's end from its start positions ((B, 3), (B, 4), (P, 3)): positions moved by
     the projected displacement (N,) [m, rad], velocities v = v* + (u − h v*) / h from the free ones
     ``free`` (N,) and the ``predicted`` displacement h v* (N,). Returns (positions, velocities

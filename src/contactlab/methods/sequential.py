@@ -13,10 +13,18 @@ Each update solves one contact's normal row for its target with the accumulated 
 (Coulomb, F2/F4a).
 """
 
+from __future__ import annotations
+
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit, prange
+
+if TYPE_CHECKING:
+    from ..contacts import Contacts
+    from ..model import Model
+    from ..state import State
 
 # ---- the compiled solver: every contact as three rows of J over the generalized velocity ----
 #
@@ -61,21 +69,21 @@ ContactRows.__doc__ = """The contacts' rows of J in the compact form above (a na
 
 @njit(cache=True)
 def contact_rows(
-    body_a,
-    body_b,
-    particles_a,
-    particles_b,
-    weights_a,
-    weights_b,
-    point,
-    body_position,
-    normal,
-    tangent1,
-    tangent2,
-    body_inverse_mass,
-    body_inverse_inertia_world,
-    particle_inverse_mass,
-):
+    body_a: np.ndarray,
+    body_b: np.ndarray,
+    particles_a: np.ndarray,
+    particles_b: np.ndarray,
+    weights_a: np.ndarray,
+    weights_b: np.ndarray,
+    point: np.ndarray,
+    body_position: np.ndarray,
+    normal: np.ndarray,
+    tangent1: np.ndarray,
+    tangent2: np.ndarray,
+    body_inverse_mass: np.ndarray,
+    body_inverse_inertia_world: np.ndarray,
+    particle_inverse_mass: np.ndarray,
+) -> ContactRows:
     """The contacts' rows in the compact form above, a ``ContactRows``.
 
     Shapes: C contacts; body_a, body_b (C,) int; particles_* (C, 3) int; weights_* (C, 3);
@@ -151,7 +159,7 @@ def _coupling(c, d, e, body, particle, weight, arm, inverse_mass, inverse_inerti
 
 
 @njit(cache=True, inline="always")
-def contact_velocity(c, rows, u):
+def contact_velocity(c: int, rows: ContactRows, u: np.ndarray) -> tuple[float, float, float]:
     """Contact c's three row velocities (v_n, v_t1, v_t2) = rows of J applied to u [m/s]."""
     body, particle, weight, arm, frame = rows.body, rows.particle, rows.weight, rows.arm, rows.frame
     B = rows.body_inverse_mass.shape[0]
@@ -183,13 +191,13 @@ def contact_velocity(c, rows, u):
 
 
 @njit(cache=True, inline="always")
-def apply_impulse(c, rows, dn, d1, d2, u):
+def apply_impulse(c: int, rows: ContactRows, dn: float, d1: float, d2: float, u: np.ndarray) -> None:
     """Add contact c's impulse (dn, d1, d2) [N s] along (n, t1, t2) to u: u += M⁻¹ Jᵀ λ."""
     along_rows(c, rows, dn, d1, d2, u, True)
 
 
 @njit(cache=True, inline="always")
-def along_rows(c, rows, dn, d1, d2, u, inverse_mass):
+def along_rows(c: int, rows: ContactRows, dn: float, d1: float, d2: float, u: np.ndarray, inverse_mass: bool) -> None:
     """u += M⁻¹ Jᵀ λ for contact c's λ = (dn, d1, d2) along (n, t1, t2) where ``inverse_mass``
     (a velocity change from an impulse [N s]), else u += Jᵀ λ (a generalized force from a force
     [N]): the world vector P = dn n + d1 t1 + d2 t2 on each side, ±(P, r × P) for a body (times
@@ -238,14 +246,22 @@ def along_rows(c, rows, dn, d1, d2, u, inverse_mass):
 
 
 @njit(cache=True)
-def apply_impulses(rows, impulses, u):
+def apply_impulses(rows: ContactRows, impulses: np.ndarray, u: np.ndarray) -> None:
     """u += M⁻¹ Jᵀ λ for every contact's impulses (C, 3) [N s] as (normal, t1, t2)."""
     for c in range(impulses.shape[0]):
         apply_impulse(c, rows, impulses[c, 0], impulses[c, 1], impulses[c, 2], u)
 
 
 @njit(cache=True)
-def sweep_contacts(members, count, target, impulses, rows, friction, u):
+def sweep_contacts(
+    members: np.ndarray,
+    count: int,
+    target: np.ndarray,
+    impulses: np.ndarray,
+    rows: ContactRows,
+    friction: np.ndarray,
+    u: np.ndarray,
+) -> float:
     """One Gauss-Seidel sweep (C7 on velocities) over contacts ``members[:count]`` in that order;
     returns the largest velocity change it made [m/s].
 
@@ -289,7 +305,7 @@ def sweep_contacts(members, count, target, impulses, rows, friction, u):
 
 
 @njit(cache=True)
-def largest_row_change(rows, u, before):
+def largest_row_change(rows: ContactRows, u: np.ndarray, before: np.ndarray) -> float:
     """max over contacts and their three rows of |J (u − before)| [m/s]: how much the
     generalized velocity's change from ``before`` to ``u`` (N,) moved any contact. Takes
     ``before`` as scratch: it is left holding u − before."""
@@ -303,7 +319,7 @@ def largest_row_change(rows, u, before):
 
 
 @njit(cache=True)
-def rows_in_order(rows, order):
+def rows_in_order(rows: ContactRows, order: np.ndarray) -> ContactRows:
     """``rows`` with the per-contact arrays taken in ``order`` (C,) int; the body data as is."""
     return ContactRows(
         rows.body[order],
@@ -319,7 +335,15 @@ def rows_in_order(rows, order):
 
 
 @njit(cache=True, parallel=True)
-def sweep_groups_in_parallel(members, starts, target, impulses, rows, friction, u):
+def sweep_groups_in_parallel(
+    members: np.ndarray,
+    starts: np.ndarray,
+    target: np.ndarray,
+    impulses: np.ndarray,
+    rows: ContactRows,
+    friction: np.ndarray,
+    u: np.ndarray,
+) -> None:
     """One sweep of groups 0 … G−1 side by side (one thread each), then of the last group
     (``starts`` (G + 2,) from ``sweep_groups``). Its largest single update is not returned:
     the solve stops on the sweep's net change (``largest_row_change``).
@@ -335,8 +359,16 @@ def sweep_groups_in_parallel(members, starts, target, impulses, rows, friction, 
 
 @njit(cache=True)
 def solve_sequential_impulses(
-    rows, friction, target_normal_velocity, u, iterations, tolerance, initial_impulses, order, starts
-):
+    rows: ContactRows,
+    friction: np.ndarray,
+    target_normal_velocity: np.ndarray,
+    u: np.ndarray,
+    iterations: int,
+    tolerance: float,
+    initial_impulses: np.ndarray,
+    order: np.ndarray,
+    starts: np.ndarray | None,
+) -> tuple[np.ndarray, int, float]:
     """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
 
     ``rows`` as from ``contact_rows``. ``initial_impulses`` (C, 3) [N s] are applied first
@@ -400,8 +432,16 @@ SWEEP_GROUPS = 2
 
 @njit(cache=True)
 def split_into_slabs(
-    order, point, body, particle, body_position, body_inverse_mass, particle_position, particle_inverse_mass, slabs
-):
+    order: np.ndarray,
+    point: np.ndarray,
+    body: np.ndarray,
+    particle: np.ndarray,
+    body_position: np.ndarray,
+    body_inverse_mass: np.ndarray,
+    particle_position: np.ndarray,
+    particle_inverse_mass: np.ndarray,
+    slabs: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """``sweep_groups``' work on the packed sides of ``rows``: (order (C,), starts (slabs + 2,))."""
     C = order.shape[0]
     axis, extent = 0, -1.0  # the axis along which the contacts spread most
@@ -450,7 +490,14 @@ def _joined(g, slab):
     return -2
 
 
-def sweep_groups(rows, contacts, state, order, groups=SWEEP_GROUPS, min_contacts=PARALLEL_MIN_CONTACTS):
+def sweep_groups(
+    rows: ContactRows,
+    contacts: Contacts,
+    state: State,
+    order: np.ndarray,
+    groups: int = SWEEP_GROUPS,
+    min_contacts: int = PARALLEL_MIN_CONTACTS,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Group the contacts so that a Gauss-Seidel sweep can run on several threads (C8) and still
     be one serial sweep: returns (order (C,) int, starts (G + 2,) int, or None for one group —
     so that ``solve_sequential_impulses`` compiles no parallel sweep for a scene that never
@@ -482,7 +529,7 @@ def sweep_groups(rows, contacts, state, order, groups=SWEEP_GROUPS, min_contacts
     )
 
 
-def rows_of(model, contacts, body_position, body_orientation):
+def rows_of(model: Model, contacts: Contacts, body_position: np.ndarray, body_orientation: np.ndarray) -> ContactRows:
     """``contact_rows`` of a Contacts at the given body positions (B, 3) and orientations (B, 4)
     (the state the contacts were detected at)."""
     from ..dynamics.integrators import world_inverse_inertia
@@ -505,7 +552,7 @@ def rows_of(model, contacts, body_position, body_orientation):
     )
 
 
-def solve_order(contacts, gravity):
+def solve_order(contacts: Contacts, gravity: np.ndarray) -> np.ndarray:
     """The order of the Gauss-Seidel sweeps (C,) int: highest contact point first along −g.
 
     In a stack the top contact is solved first, and the impulse it puts on the body below is
@@ -526,7 +573,7 @@ def solve_order(contacts, gravity):
 
 
 @njit(cache=True)
-def contact_order(point, feature_id, gravity):
+def contact_order(point: np.ndarray, feature_id: np.ndarray, gravity: np.ndarray) -> np.ndarray:
     """``solve_order``, compiled: point (C, 3) [m], feature_id (C,) int64, gravity (3,) [m/s²]."""
     C = point.shape[0]
     g = np.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1] + gravity[2] * gravity[2])
@@ -566,7 +613,7 @@ def _order_ties(order, height, scramble):
 
 
 @njit(cache=True)
-def row_products(rows, u):
+def row_products(rows: ContactRows, u: np.ndarray) -> np.ndarray:
     """J u per contact (C, 3): each contact's normal and tangent rows applied to u [m/s]."""
     C = rows.k.shape[0]
     out = np.empty((C, 3))

@@ -15,6 +15,10 @@ the positions with the corrected velocities, split at the moment of impact. The 
   contacts), or pushes out a fraction of an existing overlap (``resting_target``).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -23,8 +27,18 @@ from ..dynamics.integrators import advance_positions
 from ..state import State
 from . import StepInfo
 
+if TYPE_CHECKING:
+    from ..collision.manifolds import Manifolds
+    from ..contacts import Contacts
+    from ..model import Model
+    from . import KeptManifoldOptions
+    from .constraints import Options as ConstraintsOptions
+    from .impulse import Options as ImpulseOptions
 
-def predict(model, state, free, integrator, h):
+
+def predict(
+    model: Model, state: State, free: tuple[np.ndarray, np.ndarray, np.ndarray], integrator: str, h: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
     """Stage 2: positions integrated with the free velocities ``free`` (body (B, 3), angular (B, 3),
     particle (P, 3)) over h [s] — a prediction of how far everything sweeps. Returns (the
     velocities that move the positions: v*, or the old ones under explicit Euler; the predicted
@@ -34,7 +48,9 @@ def predict(model, state, free, integrator, h):
     return move, predicted, swept_distances(model, move[0], free[1], move[2], h)
 
 
-def detect(model, state, options, sweep):
+def detect(
+    model: Model, state: State, options: KeptManifoldOptions, sweep: np.ndarray
+) -> tuple[Contacts, Manifolds | None]:
     """Stage 3: collision detection over the swept step — contacts at the start positions with
     gaps down to what the motion could close (speculative contacts, so nothing tunnels), box,
     hull and plane pairs that barely moved keeping last step's manifolds. Returns (Contacts,
@@ -53,7 +69,15 @@ def detect(model, state, options, sweep):
     )
 
 
-def step_without_contacts(state, h, predicted, free, contacts, manifolds, warm_prefix):
+def step_without_contacts(
+    state: State,
+    h: float,
+    predicted: tuple[np.ndarray, np.ndarray, np.ndarray],
+    free: tuple[np.ndarray, np.ndarray, np.ndarray],
+    contacts: Contacts,
+    manifolds: Manifolds | None,
+    warm_prefix: str,
+) -> tuple[State, StepInfo]:
     """The step when nothing touches: the prediction stands; the warm-start values carried under
     keys starting with ``warm_prefix`` are dropped (no contact persists). Returns (State, StepInfo)."""
     carried = {key: value for key, value in state.carried.items() if not key.startswith(warm_prefix)}
@@ -61,14 +85,24 @@ def step_without_contacts(state, h, predicted, free, contacts, manifolds, warm_p
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
 
-def restitution_threshold(model, h, options):
+def restitution_threshold(model: Model, h: float, options: ImpulseOptions | ConstraintsOptions) -> float:
     """Approaches slower than this [m/s] get no bounce: the option, or 2 |g| h where it is < 0."""
     if options.restitution_threshold >= 0:
         return options.restitution_threshold
     return 2.0 * np.linalg.norm(model.gravity) * h
 
 
-def positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, time_of_impact):
+def positions_split_at_impact(
+    model: Model,
+    state: State,
+    contacts: Contacts,
+    tau: np.ndarray,
+    move: tuple[np.ndarray, np.ndarray, np.ndarray],
+    free: tuple[np.ndarray, np.ndarray, np.ndarray],
+    solved: tuple[np.ndarray, np.ndarray, np.ndarray],
+    h: float,
+    time_of_impact: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stage 5: positions x = x₀ + h v⁺, with the part of the step before each body's earliest
     impact (τ (C,) per contact, −1 where none; see ``entity_impact_fractions``) travelled with
     the velocities that moved the prediction (``move``) and the rest with them corrected by the
@@ -81,7 +115,7 @@ def positions_split_at_impact(model, state, contacts, tau, move, free, solved, h
     return advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
 
 
-def resting_target(gap_at_start, dt, options):
+def resting_target(gap_at_start: np.ndarray, dt: float, options: ImpulseOptions | ConstraintsOptions) -> np.ndarray:
     """The least normal relative velocity each contact may end the step with (C,) [m/s].
 
     Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
@@ -96,7 +130,9 @@ def resting_target(gap_at_start, dt, options):
 
 
 @njit(cache=True)
-def resting_targets(gap_at_start, dt, stabilization, slop, max_push_velocity):
+def resting_targets(
+    gap_at_start: np.ndarray, dt: float, stabilization: float, slop: float, max_push_velocity: float
+) -> np.ndarray:
     """``resting_target``, compiled, with the options' three numbers [1, m, m/s]."""
     target = np.empty_like(gap_at_start)
     for c in range(gap_at_start.shape[0]):
@@ -112,7 +148,7 @@ def _resting(gap, dt, stabilization, slop, max_push_velocity):
     return min(stabilization * max(-gap - slop, 0.0) / dt, max_push_velocity)
 
 
-def relative_gravity(model, contacts):
+def relative_gravity(model: Model, contacts: Contacts) -> np.ndarray:
     """g_n per contact (C,) [m/s²]: the normal component of the gravity of A relative to B.
 
     Symplectic Euler carries velocities at the middle of the step (it is leapfrog), so the
@@ -130,7 +166,14 @@ def relative_gravity(model, contacts):
 
 
 @njit(cache=True)
-def gravity_along_normals(body_a, body_b, particles_a, particles_b, normal, gravity):
+def gravity_along_normals(
+    body_a: np.ndarray,
+    body_b: np.ndarray,
+    particles_a: np.ndarray,
+    particles_b: np.ndarray,
+    normal: np.ndarray,
+    gravity: np.ndarray,
+) -> np.ndarray:
     """``relative_gravity``, compiled: (dynamic A − dynamic B) n · g per contact (C,) [m/s²]."""
     out = np.empty(normal.shape[0])
     for c in range(normal.shape[0]):
@@ -142,7 +185,7 @@ def gravity_along_normals(body_a, body_b, particles_a, particles_b, normal, grav
     return out
 
 
-def entity_impact_fractions(model, contacts, tau):
+def entity_impact_fractions(model: Model, contacts: Contacts, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
     −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
     acts over the whole step."""
@@ -158,7 +201,15 @@ def entity_impact_fractions(model, contacts, tau):
 
 
 @njit(cache=True)
-def earliest_impacts(body_a, body_b, particles_a, particles_b, tau, body_count, particle_count):
+def earliest_impacts(
+    body_a: np.ndarray,
+    body_b: np.ndarray,
+    particles_a: np.ndarray,
+    particles_b: np.ndarray,
+    tau: np.ndarray,
+    body_count: int,
+    particle_count: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """``entity_impact_fractions``, compiled (one pass over the contacts' sides)."""
     tau_body = np.ones(body_count)
     tau_particle = np.ones(particle_count)
@@ -180,7 +231,15 @@ def earliest_impacts(body_a, body_b, particles_a, particles_b, tau, body_count, 
     return tau_body, tau_particle
 
 
-def normal_targets(gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, options):
+def normal_targets(
+    gap_at_start: np.ndarray,
+    normal_velocity: np.ndarray,
+    gravity_normal: np.ndarray,
+    restitution: np.ndarray,
+    dt: float,
+    threshold: float,
+    options: ImpulseOptions | ConstraintsOptions,
+) -> tuple[np.ndarray, np.ndarray]:
     """Every contact's target normal velocity, all contacts at once (a simultaneous impact).
 
     gap_at_start d₀ (C,) [m]; normal_velocity v_n* (C,) [m/s] without contact forces;
@@ -202,8 +261,16 @@ def normal_targets(gap_at_start, normal_velocity, gravity_normal, restitution, d
 
 @njit(cache=True)
 def impact_targets(
-    gap_at_start, normal_velocity, gravity_normal, restitution, dt, threshold, stabilization, slop, max_push_velocity
-):
+    gap_at_start: np.ndarray,
+    normal_velocity: np.ndarray,
+    gravity_normal: np.ndarray,
+    restitution: np.ndarray,
+    dt: float,
+    threshold: float,
+    stabilization: float,
+    slop: float,
+    max_push_velocity: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """``normal_targets``, compiled, with the options' stabilization, slop and max push velocity."""
     h = dt
     C = gap_at_start.shape[0]
