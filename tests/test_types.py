@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "src" / "contactlab"
 # the share of the package's public functions fully annotated when this test was last raised: it
 # may grow, never fall (methods/, lcp/, dynamics/ and collision/ are annotated on their own)
-LEAST_SHARE = 0.329
+LEAST_SHARE = 0.574
 
 
 def _checked_paths():

@@ -220,7 +220,8 @@ class ModelBuilder:
             kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
             if density is not None:
                 mass = density * shapes.volume(kind, params)
-            inertia = shapes.principal_inertia(kind, params, mass)
+            # mass: given, or derived from density just above (exactly one of the two, checked above)
+            inertia = shapes.principal_inertia(kind, params, mass)  # type: ignore[arg-type]
         if density is not None:
             derived_mass(mass, "density")  # type: ignore[arg-type]  # mass was just derived from density
         if shape == "convex":
