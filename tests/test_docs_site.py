@@ -76,7 +76,11 @@ def test_the_site_builds_strict_and_the_api_page_holds_the_docstrings(site):
     for paragraph in docstring.split("\n\n"):
         assert _words(paragraph) in page
     # the signature, on one line or wrapped by a formatter (mkdocstrings uses ruff or black when present)
-    assert re.search(r"simulate\(\s*model,\s*method=['\"]impulse['\"],\s*dt=0\.004", page)
+    # (with the parameters' annotations, which the site shows)
+    assert re.search(
+        r"simulate\(\s*model(:\s*Model)?,\s*method(:\s*str)?\s*=\s*['\"]impulse['\"],\s*dt(:\s*float)?\s*=\s*0\.004",
+        page,
+    )
     # a Sphinx role that names a documented object became a link to it
     assert 'href="#contactlab.threads.set_threads"' in (site / "api" / "simulation" / "index.html").read_text()
     # dataclass fields are documented by the comment on their line

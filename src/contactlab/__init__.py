@@ -11,6 +11,7 @@ Build a model, step it with a method of the lecture, record it::
 """
 
 from importlib import import_module
+from typing import Any
 
 from .errors import InputError, SimulationDiverged
 
@@ -42,7 +43,7 @@ __all__ = [
 __version__ = "0.1.0"
 
 
-def __getattr__(name):
+def __getattr__(name: str) -> Any:
     if name in _LAZY:
         value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
         globals()[name] = value
@@ -50,5 +51,5 @@ def __getattr__(name):
     raise AttributeError(f"module 'contactlab' has no attribute {name!r}")
 
 
-def __dir__():
+def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_LAZY))

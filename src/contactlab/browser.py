@@ -9,6 +9,8 @@ WebGL runs in software (SwiftShader), so no display or GPU is needed. Chromium i
 None when there is none. The websocket client is the ``websockets`` package viser brings.
 """
 
+from __future__ import annotations
+
 import base64
 import json
 import os
@@ -17,8 +19,13 @@ import subprocess
 import tempfile
 import time
 import urllib.request
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from matplotlib.image import imread
+
+if TYPE_CHECKING:
+    import numpy as np
 
 FLAGS = (
     "--headless=new",
@@ -33,7 +40,7 @@ FLAGS = (
 START_SECONDS = 30  # s: Chromium's DevTools server is up within this, or it failed
 
 
-def chromium():
+def chromium() -> str | None:
     """The path of a Chromium executable on PATH, or None."""
     return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 
@@ -44,7 +51,7 @@ class Page:
     address of every request the page has made (its loads, scripts, websockets), as far as
     the replies read so far tell."""
 
-    def __init__(self, url, width=1000, height=700):
+    def __init__(self, url: str, width: int = 1000, height: int = 700) -> None:
         from websockets.sync.client import connect
 
         browser = chromium()
@@ -67,7 +74,7 @@ class Page:
         self.call("Page.navigate", url=url)
         self._read_until("Page.loadEventFired")
 
-    def call(self, method, **params):
+    def call(self, method: str, **params: Any) -> dict[str, Any]:
         """Call DevTools' ``method`` with ``params``; returns its result (dict). Network events
         read on the way are noted in ``requests``."""
         self.calls += 1
@@ -102,7 +109,7 @@ class Page:
                     return pages[0]["webSocketDebuggerUrl"]
             time.sleep(0.1)
 
-    def click(self, text):
+    def click(self, text: str) -> bool:
         """Click the page's button that reads ``text``; returns whether there was one."""
         found = self.call(
             "Runtime.evaluate",
@@ -114,14 +121,16 @@ class Page:
         )
         return bool(found.get("result", {}).get("value"))
 
-    def screenshot(self, path):
+    def screenshot(self, path: str) -> np.ndarray:
         """Write the page as a PNG to ``path``; returns the picture (h, w, 3) in [0, 1]."""
         data = self.call("Page.captureScreenshot", format="png")["data"]
         with open(path, "wb") as stream:
             stream.write(base64.b64decode(data))
         return imread(path)[..., :3]
 
-    def wait_for(self, path, ready, seconds=40.0, what="the page"):
+    def wait_for(
+        self, path: str, ready: Callable[[np.ndarray], bool], seconds: float = 40.0, what: str = "the page"
+    ) -> np.ndarray:
         """Screenshots to ``path`` every half second until ``ready(picture)``; returns that
         picture, or raises TimeoutError after ``seconds``."""
         deadline = time.monotonic() + seconds
@@ -138,7 +147,7 @@ class Page:
         self.process.wait(timeout=10)
         self.profile.cleanup()
 
-    def close(self):
+    def close(self) -> None:
         self.socket.close()
         self._end_process()
 
@@ -149,11 +158,11 @@ class Page:
         self.close()
 
 
-def scene_part(picture, share=0.62):
+def scene_part(picture: np.ndarray, share: float = 0.62) -> np.ndarray:
     """The 3-D view's pixels of a viewer page, left of viser's control panel (its right 35 %)."""
     return picture[:, : int(share * picture.shape[1])]
 
 
-def coloured(picture):
+def coloured(picture: np.ndarray) -> float:
     """Share of the pixels of ``picture`` that are clearly coloured (the page is white and grey)."""
     return float(((picture.max(axis=-1) - picture.min(axis=-1)) > 0.25).mean())

@@ -12,11 +12,18 @@ sets another limit in bytes; ``math.inf`` none. A streamed trajectory must also 
 disk: a run whose file would outgrow the free space there is refused the same way.
 """
 
+from __future__ import annotations
+
 import os
 import shutil
+from typing import TYPE_CHECKING
 
 from . import record, store
 from .errors import InputError
+
+if TYPE_CHECKING:
+    from .model import Model
+
 
 MEMORY_SHARE = 0.5  # of the physical memory, for one run
 WORKING_BYTES = 16 * 1024  # per body, particle or cloth vertex, a step's working arrays
@@ -31,7 +38,7 @@ def physical_memory() -> int:
         return FALLBACK_MEMORY
 
 
-def estimate(model, steps, record_every, streamed=False) -> dict:
+def estimate(model: Model, steps: int, record_every: int, streamed: bool = False) -> dict[str, int]:
     """Bytes a run of ``steps`` steps recorded every ``record_every`` will hold at most:
     ``file`` (the trajectory's size), ``trajectory`` (in memory: twice the file, the samples and
     their arrays; two chunks when ``streamed``), ``working`` and ``total``."""
@@ -50,7 +57,13 @@ def estimate(model, steps, record_every, streamed=False) -> dict:
     }
 
 
-def check(model, steps, record_every, memory_limit=None, trajectory=None):
+def check(
+    model: Model,
+    steps: int,
+    record_every: int,
+    memory_limit: float | None = None,
+    trajectory: str | os.PathLike[str] | None = None,
+) -> dict[str, int]:
     """InputError, one sentence with the estimate and the limit, when the run cannot fit: in
     memory, and for a run streaming to the file ``trajectory``, on that file's disk."""
     limit = MEMORY_SHARE * physical_memory() if memory_limit is None else memory_limit

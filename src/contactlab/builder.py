@@ -19,7 +19,13 @@ Example::
     state = model.state()
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import cloth_mesh, shapes
 from .driving import force_record, pack, path_record, start_on_paths
@@ -48,7 +54,17 @@ from .validation import (
     vector,
 )
 
+if TYPE_CHECKING:
+    from .hulls import Hull
+    from .meshes import TriangleMesh
+
 DEFAULT_MATERIAL = ("default", 0.5, 0.0)  # name, friction μ, restitution ε
+
+# what the add_* methods accept: a material or body by index or name; a force or path as values or as a
+# function of time [s]
+MaterialRef = int | str | None
+BodyRef = int | str
+DriveValue = ArrayLike | Callable[[float], tuple] | None
 
 
 # -- which shape takes which arguments ------------------------------------------------------
@@ -71,7 +87,7 @@ OBSTACLE_SHAPE_ARGUMENTS = {
 }
 
 
-def check_shape_arguments(shape, table, given):
+def check_shape_arguments(shape: str, table: Mapping[str, Sequence[str]], given: Collection[str]) -> None:
     """InputError naming the first of ``given`` (names of shape-specific arguments) that
     ``shape`` takes not, by ``table`` (BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
     takes = table[shape]
@@ -91,20 +107,20 @@ def _shape(shape, table, given):
 class ModelBuilder:
     """Collects a scene and freezes it into a :class:`~contactlab.model.Model`."""
 
-    def __init__(self, gravity=(0.0, 0.0, -9.81)):
+    def __init__(self, gravity: ArrayLike = (0.0, 0.0, -9.81)) -> None:
         self.gravity = vector(gravity, "gravity", quantity=ACCELERATION)
-        self._materials = []  # (name, friction, restitution)
-        self._bodies = []  # dicts
-        self._particles = []  # dicts of arrays (a cloth's vertices are one group)
-        self._cloths = []  # dicts: name, first particle, triangles and springs (local indices)
-        self._obstacles = []  # dicts
-        self._hulls = []  # contactlab.hulls.Hull of the convex shapes
-        self._meshes = []  # contactlab.meshes.TriangleMesh, world frame
-        self._forces = []  # dicts: body, force, torque, times, function (see add_force)
-        self._paths = []  # dicts: body, times, positions, orientations, function (see add_path)
+        self._materials: list[tuple[str, float, float]] = []  # (name, friction, restitution)
+        self._bodies: list[dict[str, Any]] = []  # dicts
+        self._particles: list[dict[str, Any]] = []  # dicts of arrays (a cloth's vertices are one group)
+        self._cloths: list[dict[str, Any]] = []  # dicts: name, first particle, triangles and springs (local indices)
+        self._obstacles: list[dict[str, Any]] = []  # dicts
+        self._hulls: list[Hull] = []  # contactlab.hulls.Hull of the convex shapes
+        self._meshes: list[TriangleMesh] = []  # contactlab.meshes.TriangleMesh, world frame
+        self._forces: list[dict[str, Any]] = []  # dicts: body, force, torque, times, function (see add_force)
+        self._paths: list[dict[str, Any]] = []  # dicts: body, times, positions, orientations, function (see add_path)
 
     # -- materials -------------------------------------------------------------------
-    def add_material(self, name, friction=0.5, restitution=0.0) -> int:
+    def add_material(self, name: str, friction: float = 0.5, restitution: float = 0.0) -> int:
         """Add a material; returns its index. friction: Coulomb μ ≥ 0; restitution ε in [0, 1]."""
         if not isinstance(name, str) or not name:
             raise InputError("name", f"expected a non-empty string, found {name!r}")
@@ -150,22 +166,22 @@ class ModelBuilder:
     # -- rigid bodies ----------------------------------------------------------------
     def add_body(
         self,
-        shape,
+        shape: str,
         *,
-        radius=None,
-        half_extents=None,
-        half_length=None,
-        points=None,
-        file=None,
-        scale=None,
-        mass=None,
-        density=None,
-        position=(0, 0, 0),
-        orientation=(1, 0, 0, 0),
-        velocity=(0, 0, 0),
-        angular_velocity=(0, 0, 0),
-        material=None,
-        name=None,
+        radius: float | None = None,
+        half_extents: ArrayLike | None = None,
+        half_length: float | None = None,
+        points: ArrayLike | None = None,
+        file: str | None = None,
+        scale: float | None = None,
+        mass: float | None = None,
+        density: float | None = None,
+        position: ArrayLike = (0, 0, 0),
+        orientation: ArrayLike = (1, 0, 0, 0),
+        velocity: ArrayLike = (0, 0, 0),
+        angular_velocity: ArrayLike = (0, 0, 0),
+        material: MaterialRef = None,
+        name: str | None = None,
     ) -> int:
         """Add a rigid body; returns its index.
 
@@ -204,9 +220,10 @@ class ModelBuilder:
             kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
             if density is not None:
                 mass = density * shapes.volume(kind, params)
-            inertia = shapes.principal_inertia(kind, params, mass)
+            # mass: given, or derived from density just above (exactly one of the two, checked above)
+            inertia = shapes.principal_inertia(kind, params, mass)  # type: ignore[arg-type]
         if density is not None:
-            derived_mass(mass, "density")
+            derived_mass(mass, "density")  # type: ignore[arg-type]  # mass was just derived from density
         if shape == "convex":
             self._hulls.append(hull)
         check_dynamic_count(1, "shape", "another body", self._dynamic_count())
@@ -243,7 +260,9 @@ class ModelBuilder:
         hint = f"; did you mean {close[0]!r}?" if close else f" (the bodies: {', '.join(map(repr, names)) or 'none'})"
         raise InputError("body", f"no body named {body!r}{hint}")
 
-    def add_force(self, body, force=None, torque=None, times=None):
+    def add_force(
+        self, body: BodyRef, force: DriveValue = None, torque: ArrayLike | None = None, times: ArrayLike | None = None
+    ) -> None:
         """Push ``body`` (index or name) with an external force at its centre of mass and a torque
         about it, world frame, added to gravity in every method's free velocities.
 
@@ -258,7 +277,13 @@ class ModelBuilder:
         (not the compiled loop of impulse and constraints)."""
         self._forces.append(force_record(self._body_index(body), force, torque, times))
 
-    def add_path(self, body, positions, orientations=None, times=None):
+    def add_path(
+        self,
+        body: BodyRef,
+        positions: DriveValue,
+        orientations: ArrayLike | None = None,
+        times: ArrayLike | None = None,
+    ) -> None:
         """Make ``body`` (index or name) kinematic: its pose follows a path instead of its forces.
 
         - keyframes: ``times`` (T,) [s], strictly increasing, ``positions`` (T, 3) [m] of its
@@ -324,7 +349,15 @@ class ModelBuilder:
         return len(self._bodies) + sum(len(group["position"]) for group in self._particles)
 
     # -- particles -------------------------------------------------------------------
-    def add_particles(self, position, velocity=None, *, mass=1.0, radius=0.0, material=None):
+    def add_particles(
+        self,
+        position: ArrayLike,
+        velocity: ArrayLike | None = None,
+        *,
+        mass: float | ArrayLike = 1.0,
+        radius: float | ArrayLike = 0.0,
+        material: MaterialRef = None,
+    ) -> range:
         """Add particles; returns their indices (range).
 
         position, velocity: (count, 3) [m], [m/s]; mass [kg] and radius [m] are per particle
@@ -375,23 +408,23 @@ class ModelBuilder:
     def add_cloth(
         self,
         *,
-        size=None,
-        resolution=None,
-        file=None,
-        scale=1.0,
-        position=(0, 0, 0),
-        orientation=(1, 0, 0, 0),
-        velocity=(0, 0, 0),
-        mass=None,
-        density=None,
-        stretch_stiffness=1000.0,
-        shear_stiffness=100.0,
-        bend_stiffness=10.0,
-        damping=0.0,
-        pinned=(),
-        thickness=0.005,
-        material=None,
-        name=None,
+        size: ArrayLike | None = None,
+        resolution: Sequence[int] | None = None,
+        file: str | None = None,
+        scale: float = 1.0,
+        position: ArrayLike = (0, 0, 0),
+        orientation: ArrayLike = (1, 0, 0, 0),
+        velocity: ArrayLike = (0, 0, 0),
+        mass: float | None = None,
+        density: float | None = None,
+        stretch_stiffness: float = 1000.0,
+        shear_stiffness: float = 100.0,
+        bend_stiffness: float = 10.0,
+        damping: float = 0.0,
+        pinned: int | str | Sequence[int | str] = (),
+        thickness: float = 0.005,
+        material: MaterialRef = None,
+        name: str | None = None,
     ) -> range:
         """Add a mass-spring cloth; returns the particle indices of its vertices (a range).
 
@@ -481,18 +514,18 @@ class ModelBuilder:
     # -- static obstacles ------------------------------------------------------------
     def add_obstacle(
         self,
-        shape,
+        shape: str,
         *,
-        normal=None,
-        offset=None,
-        radius=None,
-        half_extents=None,
-        points=None,
-        file=None,
-        scale=None,
-        position=None,
-        orientation=None,
-        material=None,
+        normal: ArrayLike | None = None,
+        offset: float | None = None,
+        radius: float | None = None,
+        half_extents: ArrayLike | None = None,
+        points: ArrayLike | None = None,
+        file: str | None = None,
+        scale: float | None = None,
+        position: ArrayLike | None = None,
+        orientation: ArrayLike | None = None,
+        material: MaterialRef = None,
     ) -> int:
         """Add static geometry; returns its index.
 

@@ -11,12 +11,15 @@ contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parq
 contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
 
+from __future__ import annotations
+
 import argparse
 import json
 import os
 import signal
 import sys
 import warnings
+from collections.abc import Sequence
 
 from . import interrupts
 from .errors import InputError, SimulationDiverged, shorten
@@ -403,7 +406,7 @@ def _print_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """The command (``argv`` None: the program's own arguments, as the ``contactlab`` command and
     ``python -m contactlab`` call it; then a signal after the work is done, while the
     interpreter shuts down, is ignored: there is nothing left to stop)."""

@@ -25,11 +25,18 @@ its stated expectation allows, and ``passed``. How the tolerances are set, once 
   obstacle (tolerance 0), and no overlap deeper than ``OVERLAP_SHARE`` of the smallest radius.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import rotations, shapes
+
+if TYPE_CHECKING:
+    from .model import Model
 
 RELATIVE = 0.02  # share of a closed-form value its measurement may miss it by
 LENGTH_FLOOR = 1e-3  # m: a length's tolerance besides RELATIVE (expected values of 0)
@@ -45,10 +52,10 @@ class Check:
     unit: str  # of expected and measured, e.g. "m"
     expected: float  # the closed-form value
     measured: float  # what the run gave (nan when the run never reached it)
-    tolerance: float = None  # the largest |measured − expected| the scene's expectation allows, in ``unit``
+    tolerance: float | None = None  # the largest |measured − expected| the scene's expectation allows, in ``unit``
 
     @property
-    def passed(self):
+    def passed(self) -> bool | None:
         """The verdict: True when the measurement is within ``tolerance`` of the expected value,
         False when it is not (or was never reached), None for a check without a tolerance."""
         if self.tolerance is None:
@@ -80,12 +87,12 @@ class Check:
         return self.measured - self.expected
 
     @property
-    def relative_error(self):
+    def relative_error(self) -> float | None:
         """|error| / |expected|; None when the expected value is 0 (compare ``error`` instead)."""
         return abs(self.error) / abs(self.expected) if self.expected != 0 else None
 
 
-def checks(scene_name, model, arrays) -> list:
+def checks(scene_name: str, model: Model | None, arrays: Mapping[str, Any]) -> list[Check]:
     """The closed-form checks of built-in scene ``scene_name`` on a run's ``arrays``; [] when the
     scene has none or no longer has the layout its formula needs."""
     check = _CHECKS.get(scene_name)

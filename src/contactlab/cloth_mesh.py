@@ -10,10 +10,14 @@ This is the cloth's geometry when it is built; its forces while it moves (the sp
 and their Jacobians) are :mod:`contactlab.dynamics.cloth`'s concern.
 """
 
+from __future__ import annotations
+
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import rotations
 from .errors import InputError, first_line
@@ -59,7 +63,7 @@ class LaidOut:
     pinned: np.ndarray  # (V,) bool: held in place
 
 
-def grid(size, resolution) -> ClothMesh:
+def grid(size: ArrayLike | None, resolution: Sequence[int] | None) -> ClothMesh:
     """A grid cloth of ``size`` (w, h) [m] and ``resolution`` (nx, ny ≥ 2) vertices, centred on
     its origin: vertex (a, b) is local index a + nx b, at (−w/2 + a w/(nx−1), −h/2 + b h/(ny−1), 0).
     InputError naming "size" or "resolution"."""
@@ -108,7 +112,7 @@ def grid(size, resolution) -> ClothMesh:
     )
 
 
-def from_file(file, scale) -> ClothMesh:
+def from_file(file: str | os.PathLike[str], scale: float) -> ClothMesh:
     """A cloth from a mesh file: its vertices [m] times ``scale``, coincident ones merged (the
     first kept in place, so indices follow the file's order otherwise), degenerate triangles
     dropped; stretch springs along the edges, bend springs between the far corners of each two
@@ -160,14 +164,16 @@ def from_file(file, scale) -> ClothMesh:
     )
 
 
-def triangle_areas(vertices, triangles) -> np.ndarray:
+def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Areas (F,) [m²] of triangles (F, 3) over vertices (V, 3)."""
     e1 = vertices[triangles[:, 1]] - vertices[triangles[:, 0]]
     e2 = vertices[triangles[:, 2]] - vertices[triangles[:, 0]]
     return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
 
 
-def pinned_vertices(pinned, count, named) -> np.ndarray:
+def pinned_vertices(
+    pinned: int | str | Sequence[int | str] | None, count: int, named: Mapping[str, Sequence[int]]
+) -> np.ndarray:
     """Mask (count,) of the vertices ``pinned`` names: local indices and names of ``named``
     (one alone or a list; None: none). InputError naming "pinned"."""
     if pinned is None:
@@ -194,7 +200,16 @@ def pinned_vertices(pinned, count, named) -> np.ndarray:
     return mask
 
 
-def lay_out(mesh, from_a_file, position, orientation, mass, density, stiffness, pinned) -> LaidOut:
+def lay_out(
+    mesh: ClothMesh,
+    from_a_file: bool,
+    position: np.ndarray,
+    orientation: np.ndarray,
+    mass: float | None,
+    density: float | None,
+    stiffness: Sequence[float],
+    pinned: int | str | Sequence[int | str] | None,
+) -> LaidOut:
     """``mesh`` (from :func:`grid`, or :func:`from_file` where ``from_a_file``) placed at
     ``position`` (3,) [m] turned by the unit quaternion ``orientation`` (4,), with springs of
     ``stiffness`` (stretch, shear, bend) [N/m]. Of ``mass`` [kg] (the whole cloth) and

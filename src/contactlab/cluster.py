@@ -21,14 +21,22 @@ a row saying so rather than raise; an exception that escapes (or a job whose wor
 dying) comes back from :func:`run_tasks` as the exception, in place of a result.
 """
 
+from __future__ import annotations
+
 import contextlib
 import logging
 import os
 import time
 import uuid
+from collections.abc import Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any
 
 from . import interrupts
 from .errors import InputError, first_line
+
+if TYPE_CHECKING:
+    from distributed import Client
+
 
 CONNECT_TIMEOUT = 10.0  # s: how long connecting to a scheduler may take
 POLL_SECONDS = 0.5  # s: how often the wait for results looks for a signal
@@ -43,7 +51,7 @@ def cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def idle_cores(seconds=IDLE_PROBE_SECONDS):
+def idle_cores(seconds: float = IDLE_PROBE_SECONDS) -> int | None:
     """How many cores of the machine sat idle over the next ``seconds`` (from /proc/stat; None
     where it cannot be read)."""
 
@@ -76,7 +84,7 @@ def default_workers() -> int:
 
 
 @contextlib.contextmanager
-def connect(scheduler=None, workers=None, field="--scheduler"):
+def connect(scheduler: str | None = None, workers: int | None = None, field: str = "--scheduler") -> Iterator[Client]:
     """Yield a ``distributed.Client``: to the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
     or, when None, to a new local cluster of ``workers`` single-threaded worker processes
     (default :func:`default_workers`) listening on 127.0.0.1 only, closed on exit.
@@ -121,7 +129,7 @@ def connect(scheduler=None, workers=None, field="--scheduler"):
         yield client
 
 
-def dashboard(client) -> str:
+def dashboard(client: Client) -> str:
     """The address of the cluster's dashboard, or a sentence saying there is none."""
     link = getattr(client, "dashboard_link", None)
     import importlib.util
@@ -131,7 +139,13 @@ def dashboard(client) -> str:
     return link or "none"
 
 
-def run_tasks(client, function, jobs, progress=False, description="jobs"):
+def run_tasks(
+    client: Client,
+    function: Callable[[Any], Any],
+    jobs: Iterable[tuple[Any, Any]],
+    progress: bool = False,
+    description: str = "jobs",
+) -> Iterator[tuple[Any, Any]]:
     """Run ``function(job)`` for every ``(key, job)`` of ``jobs`` on ``client``'s workers;
     yield ``(key, result)`` as each finishes — the exception in place of the result when one
     escaped the function or its workers kept dying. ``progress``: a tqdm bar on stderr. A

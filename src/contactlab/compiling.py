@@ -11,8 +11,12 @@ anything starts compiling, and nothing at all when everything comes from the cac
         run_the_steps()          # "compiling contact kernels for first use…" if it compiles
 """
 
+from __future__ import annotations
+
 import sys
+from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import TextIO
 
 from numba.core import event
 
@@ -25,23 +29,23 @@ class FirstCompile(event.Listener):
     ``said`` tells whether it has printed. Numba sends "numba:compile" only for a real
     compilation (a function it has no cached machine code for), never for a cache load."""
 
-    def __init__(self, message=NOTICE, stream=None):
+    def __init__(self, message: str = NOTICE, stream: TextIO | None = None) -> None:
         self.message = message
         self.stream = stream
         self.said = False
 
-    def on_start(self, event):
+    def on_start(self, event: event.Event) -> None:
         if not self.said:
             self.said = True
             stream = self.stream if self.stream is not None else sys.stderr
             print(self.message, file=stream, flush=True)
 
-    def on_end(self, event):
+    def on_end(self, event: event.Event) -> None:
         pass
 
 
 @contextmanager
-def compile_notice(listener=None):
+def compile_notice(listener: FirstCompile | None = None) -> Iterator[FirstCompile]:
     """Within the block, the first Numba compilation prints ``NOTICE`` as one line on
     ``sys.stderr``; yields the FirstCompile listener. Hand the same ``listener`` to several
     blocks (one run's set-up and its steps) for one line at most over all of them."""

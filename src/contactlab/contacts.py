@@ -15,11 +15,18 @@ particle j owns [6B + 3j, 6B + 3j + 3). The velocity of the contact point is J v
 Forces distribute as F_x = Jᵀ F_p (D1). Shapes: C contacts.
 """
 
+from __future__ import annotations
+
 from collections import namedtuple
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 
 @dataclass
@@ -44,16 +51,16 @@ class Contacts:
         return len(self.depth)
 
     @classmethod
-    def from_arrays(cls, arrays) -> "Contacts":
+    def from_arrays(cls, arrays: Sequence[np.ndarray]) -> Contacts:
         """The Contacts of a ``ContactArrays`` (what compiled code builds)."""
         return cls(*arrays)
 
     @classmethod
-    def empty(cls) -> "Contacts":
+    def empty(cls) -> Contacts:
         return cls.concatenate([])
 
     @classmethod
-    def concatenate(cls, parts) -> "Contacts":
+    def concatenate(cls, parts: Sequence[Contacts]) -> Contacts:
         """Join several Contacts (empty list → no contacts)."""
         shapes = dict(
             body_a=(0,),
@@ -80,13 +87,15 @@ class Contacts:
         return cls(**out)
 
 
-ContactArrays = namedtuple("ContactArrays", [f.name for f in fields(Contacts)])
+ContactArrays = namedtuple("ContactArrays", [f.name for f in fields(Contacts)])  # type: ignore[misc]
 ContactArrays.__doc__ = (
     """The fields of a Contacts, in order, as a named tuple: the form compiled code builds and reads."""
 )
 
 
-def values_by_id(previous_ids, previous_values, feature_id, width):
+def values_by_id(
+    previous_ids: np.ndarray | None, previous_values: np.ndarray | None, feature_id: np.ndarray, width: int
+) -> tuple[np.ndarray, np.ndarray]:
     """What a method carried for each contact from the last step, matched by persistent id.
 
     previous_ids (K,) int64 and previous_values (K, width) as stored last step (None: nothing
@@ -104,7 +113,9 @@ def values_by_id(previous_ids, previous_values, feature_id, width):
 
 
 @njit(cache=True)
-def values_carried(previous_ids, previous_values, feature_id):
+def values_carried(
+    previous_ids: np.ndarray, previous_values: np.ndarray, feature_id: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``values_by_id``, compiled: one sort of last step's ids, one binary search per contact
     (it runs every step; in NumPy its masks and gathers cost 0.27 ms for 3 300 contacts).
     previous_ids (K,) int64 (K may be 0), previous_values (K, width); feature_id (C,) int64."""
@@ -122,13 +133,13 @@ def values_carried(previous_ids, previous_values, feature_id):
     return values, found
 
 
-def tangent_basis(normal):
+def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (C, 3) each, with (t1, t2, n) right-handed, from unit normals (C, 3)."""
     return tangent_frames(np.ascontiguousarray(normal, dtype=float))
 
 
 @njit(cache=True)
-def tangent_frames(normal):
+def tangent_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``tangent_basis``, compiled: it runs on every contact of every step."""
     C = normal.shape[0]
     t1 = np.empty((C, 3))
@@ -151,7 +162,7 @@ def tangent_frames(normal):
     return t1, t2
 
 
-def jacobian(contacts: Contacts, body_position, body_count: int, particle_count: int):
+def jacobian(contacts: Contacts, body_position: np.ndarray, body_count: int, particle_count: int) -> csr_matrix:
     """The contact Jacobian as a SciPy CSR matrix, shape (3C, 6B + 3P).
 
     Rows 3c, 3c+1, 3c+2 are the normal, tangent1 and tangent2 directions of contact c

@@ -1,13 +1,23 @@
 """Quantities that judge a run: energies, penetration, momentum. Pure functions of a state."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from . import rotations
 from .dynamics.cloth import spring_energy
 
+if TYPE_CHECKING:
+    from .contacts import Contacts
+    from .model import Model
+    from .state import State
 
-def kinetic_energy(model, state) -> float:
+
+def kinetic_energy(model: Model, state: State) -> float:
     """½ m v² + ½ ωᵀ I ω over bodies, ½ m v² over particles [J]."""
     return float(
         kinetic(
@@ -24,8 +34,14 @@ def kinetic_energy(model, state) -> float:
 
 @njit(cache=True)
 def kinetic(
-    body_mass, body_inertia, body_rotation, body_velocity, body_angular_velocity, particle_mass, particle_velocity
-):
+    body_mass: np.ndarray,
+    body_inertia: np.ndarray,
+    body_rotation: np.ndarray,
+    body_velocity: np.ndarray,
+    body_angular_velocity: np.ndarray,
+    particle_mass: np.ndarray,
+    particle_velocity: np.ndarray,
+) -> float:
     """``kinetic_energy`` from the arrays [J]: masses (B,), (P,) [kg], principal inertia (B, 3)
     [kg m²], rotations (B, 3, 3), velocities (B, 3), (B, 3) world, (P, 3)."""
     energy = 0.0
@@ -41,7 +57,7 @@ def kinetic(
     return energy
 
 
-def potential_energy(model, state) -> float:
+def potential_energy(model: Model, state: State) -> float:
     """Gravitational potential −m g·x (zero at the origin) plus the elastic energy
     Σ ½ k (l − L)² of the cloth springs [J]."""
     return float(
@@ -57,7 +73,13 @@ def potential_energy(model, state) -> float:
 
 
 @njit(cache=True)
-def gravitational(body_mass, body_position, particle_mass, particle_position, gravity):
+def gravitational(
+    body_mass: np.ndarray,
+    body_position: np.ndarray,
+    particle_mass: np.ndarray,
+    particle_position: np.ndarray,
+    gravity: np.ndarray,
+) -> float:
     """The gravitational part of ``potential_energy``, Σ −m g·x over bodies and particles [J]."""
     energy = 0.0
     for masses, positions in ((body_mass, body_position), (particle_mass, particle_position)):
@@ -67,17 +89,17 @@ def gravitational(body_mass, body_position, particle_mass, particle_position, gr
     return energy
 
 
-def max_penetration(contacts) -> float:
+def max_penetration(contacts: Contacts) -> float:
     """Deepest overlap among contacts [m], 0 when none overlap."""
     return float(max(0.0, contacts.depth.max())) if contacts.count else 0.0
 
 
-def linear_momentum(model, state):
+def linear_momentum(model: Model, state: State) -> np.ndarray:
     """Total linear momentum (3,) [kg m/s]."""
     return model.body_mass @ state.body_velocity + model.particle_mass @ state.particle_velocity
 
 
-def angular_momentum(model, state, origin=(0.0, 0.0, 0.0)):
+def angular_momentum(model: Model, state: State, origin: ArrayLike = (0.0, 0.0, 0.0)) -> np.ndarray:
     """Total angular momentum about ``origin`` (3,) [kg m²/s]: spins plus orbital parts."""
     origin = np.asarray(origin, dtype=float)
     total = np.zeros(3)

@@ -19,13 +19,23 @@ Keyframed forces and paths of all bodies are evaluated together (arrays padded t
 keyframe list); callables are called once each per step.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import rotations
 from .errors import InputError
 from .validation import DIRECTION, FORCE, LENGTH, TORQUE, unit_quaternion, vector
+
+if TYPE_CHECKING:
+    from .state import State
+    from .validation import Quantity
+
 
 PATH_VELOCITY_STEP = 1e-6  # s: the forward difference giving a kinematic body's velocity at time 0
 
@@ -33,7 +43,7 @@ PATH_VELOCITY_STEP = 1e-6  # s: the forward difference giving a kinematic body's
 # ---- checking the keyframes ------------------------------------------------------------------
 
 
-def keyframe_times(times, name="times"):
+def keyframe_times(times: ArrayLike, name: str = "times") -> np.ndarray:
     """``times`` as a float array (T,) of finite, strictly increasing numbers [s], T ≥ 1."""
     try:
         array = np.asarray(times, dtype=float)
@@ -53,7 +63,9 @@ def keyframe_times(times, name="times"):
     return array
 
 
-def keyframe_values(values, name, count, size, what, quantity=None):
+def keyframe_values(
+    values: ArrayLike, name: str, count: int, size: int, what: str, quantity: Quantity | None = None
+) -> np.ndarray:
     """``values`` as a float array (count, size) of finite numbers (one row per keyframe), each
     within ``quantity``'s magnitudes (a contactlab.validation.Quantity) when one is given."""
     try:
@@ -72,7 +84,9 @@ def keyframe_values(values, name, count, size, what, quantity=None):
     return array
 
 
-def force_record(body, force=None, torque=None, times=None):
+def force_record(
+    body: int, force: Any = None, torque: ArrayLike | None = None, times: ArrayLike | None = None
+) -> dict[str, Any]:
     """The record :func:`pack` takes of one ``ModelBuilder.add_force`` (see it for the three
     ways to give a force), its arguments checked: dict(body, force, torque, times, function),
     force and torque (3,) [N], [N m], or (T, 3) with times (T,) [s]. InputError naming the
@@ -94,7 +108,9 @@ def force_record(body, force=None, torque=None, times=None):
     return dict(body=body, force=force, torque=torque, times=times, function=None)
 
 
-def path_record(body, positions, orientations, times, orientation):
+def path_record(
+    body: int, positions: Any, orientations: ArrayLike | None, times: ArrayLike | None, orientation: np.ndarray
+) -> dict[str, Any]:
     """The record :func:`pack` takes of one ``ModelBuilder.add_path`` (see it for the three ways
     to give a path), its arguments checked: dict(body, times (T,) [s], positions (T, 3) [m],
     orientations (T, 4) unit quaternions, function); a path without orientations keeps the
@@ -138,7 +154,9 @@ def _given_alone(kind, returns, others):
 # ---- evaluating padded keyframes, all at once -------------------------------------------------
 
 
-def pad_keyframes(times_list, values_list, size):
+def pad_keyframes(
+    times_list: Sequence[np.ndarray], values_list: Sequence[np.ndarray], size: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Keyframe lists of different lengths as padded arrays: times (K, T) and values (K, T, size),
     T the longest list (at least 2); a shorter list is continued by its last value at later
     times, so interpolation past its end holds that value."""
@@ -152,7 +170,7 @@ def pad_keyframes(times_list, values_list, size):
     return times, values
 
 
-def bracket(times, t):
+def bracket(times: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
     """For padded keyframe times (K, T) and a time t [s]: (index i (K,) of the segment
     [t_i, t_i+1] holding t, fraction w (K,) in [0, 1] of the way along it); clamped at the ends."""
     K, T = times.shape
@@ -162,14 +180,14 @@ def bracket(times, t):
     return index, np.clip((t - start) / (end - start), 0.0, 1.0)
 
 
-def interpolate(times, values, t):
+def interpolate(times: np.ndarray, values: np.ndarray, t: float) -> np.ndarray:
     """Linear interpolation (K, d) of padded keyframes (``pad_keyframes``) at time t [s]."""
     index, w = bracket(times, t)
     rows = np.arange(len(index))
     return (1.0 - w)[:, None] * values[rows, index] + w[:, None] * values[rows, index + 1]
 
 
-def slerp(q0, q1, w):
+def slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Spherical linear interpolation (K, 4) from unit quaternions q0 to q1 (K, 4) by fractions
     w (K,), along the shorter arc."""
     dot = np.sum(q0 * q1, axis=1)
@@ -184,7 +202,7 @@ def slerp(q0, q1, w):
     return rotations.normalize(a[:, None] * q0 + b[:, None] * q1)
 
 
-def rotation_vectors(q_from, q_to):
+def rotation_vectors(q_from: np.ndarray, q_to: np.ndarray) -> np.ndarray:
     """The world rotation vectors φ (K, 3) [rad] with exp(φ) ⊗ q_from = q_to (the shorter way),
     for unit quaternions (K, 4): the inverse of ``rotations.integrate`` over one step."""
     conjugate = q_from * np.array([1.0, -1.0, -1.0, -1.0])
@@ -235,7 +253,7 @@ class Drive:
             self.constant_force.any() or self.constant_torque.any() or len(self.keyed_body) or self.force_functions
         )
 
-    def loads(self, t):
+    def loads(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The external (force (B, 3) [N], torque (B, 3) [N m]) at time t [s], world frame."""
         force, torque = self.constant_force.copy(), self.constant_torque.copy()
         if len(self.keyed_body):
@@ -248,7 +266,7 @@ class Drive:
             torque[body] += tau
         return force, torque
 
-    def poses(self, t):
+    def poses(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where the kinematic bodies' paths are at time t [s]: (bodies (Q,) int, positions
         (Q, 3) [m], orientations (Q, 4) unit quaternions)."""
         bodies = [self.path_body]
@@ -263,7 +281,9 @@ class Drive:
             orientations.append(orientation[None])
         return np.concatenate(bodies), np.concatenate(positions), np.concatenate(orientations)
 
-    def path_velocities(self, body_position, body_orientation, t, h):
+    def path_velocities(
+        self, body_position: np.ndarray, body_orientation: np.ndarray, t: float, h: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The kinematic bodies' velocities over the step from t to t + h [s]: those that carry
         their present pose (body_position (B, 3), body_orientation (B, 4)) onto the path's pose
         at t + h. Returns (bodies (Q,), velocity (Q, 3) [m/s], angular velocity (Q, 3) [rad/s],
@@ -273,12 +293,12 @@ class Drive:
         return bodies, velocity, rotation_vectors(body_orientation[bodies], orientation) / h
 
 
-def called_load(function, t):
+def called_load(function: Callable[[float], Any], t: float) -> tuple[np.ndarray, np.ndarray]:
     """(force (3,) [N], torque (3,) [N m]) of a force callable at time t [s], checked."""
     return called_pair(function, t, "force", (3, 3), "(force [N] (3,), torque [N m] (3,))")
 
 
-def called_pose(function, t):
+def called_pose(function: Callable[[float], Any], t: float) -> tuple[np.ndarray, np.ndarray]:
     """(position (3,) [m], unit orientation (4,)) of a path callable at time t [s], checked:
     InputError("positions") for a zero quaternion too."""
     position, orientation = called_pair(
@@ -293,7 +313,9 @@ def called_pose(function, t):
     return position, orientation / norm
 
 
-def called_pair(function, t, name, sizes, expected):
+def called_pair(
+    function: Callable[[float], Any], t: float, name: str, sizes: tuple[int, int], expected: str
+) -> tuple[np.ndarray, np.ndarray]:
     """The two float arrays of ``sizes`` that ``function(t)`` returns, finite; else
     InputError(``name``) saying what it returned at t [s] and the ``expected`` pair."""
     try:
@@ -315,7 +337,7 @@ def called_pair(function, t, name, sizes, expected):
     return first, second
 
 
-def pack(body_count, forces, paths):
+def pack(body_count: int, forces: Sequence[Mapping[str, Any]], paths: Sequence[Mapping[str, Any]]) -> Drive | None:
     """The Drive of ``body_count`` bodies from the builder's records, or None when there are
     neither forces nor paths. forces: dicts (body, force (3,) or (T, 3), torque likewise, times
     (T,) or None, function or None); paths: dicts (body, times (T,) or None, positions (T, 3),
@@ -352,7 +374,7 @@ def pack(body_count, forces, paths):
     )
 
 
-def start_on_paths(drive, state):
+def start_on_paths(drive: Drive | None, state: State) -> State:
     """``state`` (changed in place) with its kinematic bodies at their paths' poses at its time
     and moving at the paths' velocities there (a forward difference of PATH_VELOCITY_STEP)."""
     if drive is None or not drive.kinematic.any():

@@ -9,7 +9,13 @@ However long or odd the input it quotes, the sentence stays one short line: :fun
 cuts it (in :class:`InputError` itself, so every message is cut the same way).
 """
 
+from __future__ import annotations
+
 import re
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .simulation import Run
 
 LONGEST_WORD = 80  # characters: a longer run without spaces (a key, a value, a path) is cut
 LONGEST_MESSAGE = 500  # characters: a longer message is cut
@@ -27,7 +33,7 @@ def _cut(text, limit):
     return text[:head] + ELLIPSIS + text[len(text) - (limit - 1 - head) :]
 
 
-def shorten(text) -> str:
+def shorten(text: object) -> str:
     """``text`` as one short line: control characters and line breaks written as escapes
     (``\\n``), every run of more than LONGEST_WORD non-space characters and then the whole
     beyond LONGEST_MESSAGE characters cut in the middle to an ellipsis. Cutting twice changes
@@ -37,7 +43,7 @@ def shorten(text) -> str:
     return _cut(text, LONGEST_MESSAGE)
 
 
-def first_line(error) -> str:
+def first_line(error: BaseException) -> str:
     """The first line of an exception's message, or its type's name when it has none: what a
     one-line error says of a library's failure."""
     text = str(error).strip()
@@ -54,7 +60,7 @@ class InputError(ValueError):
     and values cut.
     """
 
-    def __init__(self, field: str, message: str):
+    def __init__(self, field: str, message: str) -> None:
         self.field = shorten(field)
         self.message = shorten(message)
         super().__init__(f"{self.field}: {self.message}" if self.field else self.message)
@@ -68,7 +74,7 @@ class SimulationDiverged(RuntimeError):
     ``run``, the :class:`contactlab.simulation.Run` up to then (its summary's ``"diverged"``
     says what and when), or None."""
 
-    def __init__(self, message: str, time=None, run=None):
+    def __init__(self, message: str, time: float | None = None, run: Run | None = None) -> None:
         super().__init__(message)
         self.time = time
         self.run = run

@@ -19,8 +19,12 @@ half-written; a mesh sequence that fails part-way removes the frames it wrote.
     write_usd(run.arrays, "out/run.usd")
 """
 
+from __future__ import annotations
+
 import os
 import re
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -62,7 +66,7 @@ def _check_every(every):
     return int(every)
 
 
-def frame_samples(count, every=1) -> np.ndarray:
+def frame_samples(count: int, every: int = 1) -> np.ndarray:
     """Indices of the samples exported from a trajectory of ``count`` samples: every
     ``every``-th one, starting with the first and always including the last."""
     every = _check_every(every)
@@ -197,7 +201,9 @@ def _write_ply(path, objects):
         stream.write(export_ply(mesh, encoding="binary", include_attributes=False))
 
 
-def write_mesh_sequence(arrays, directory, *, file_format="obj", every=1) -> list:
+def write_mesh_sequence(
+    arrays: Mapping[str, Any], directory: str, *, file_format: str = "obj", every: int = 1
+) -> list[str]:
     """One mesh file per sample (every ``every``-th sample, always including the last) into
     ``directory`` (created if needed), named frame_00000.obj (or .ply), … ; returns the paths
     in order.
@@ -289,7 +295,7 @@ def _define_mesh(stage, path, points, triangles, double_sided=False):
     return mesh
 
 
-def write_usd(arrays, path, *, every=1) -> str:
+def write_usd(arrays: Mapping[str, Any], path: str, *, every: int = 1) -> str:
     """One USD stage (.usd/.usda/.usdc by the path's suffix) with the whole animation; returns
     path.
 

@@ -17,13 +17,17 @@ machine) and ``profile.png`` (the Dolan–Moré performance profile, :func:`perf
 into the output folder. See ``docs/fclib_bench.md``.
 """
 
+from __future__ import annotations
+
 import math
 import numbers
 import os
 import socket
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -34,6 +38,10 @@ from .lcp import natural_map_error, read_problem, solve_friction_contact
 from .plots import DPI, STYLES, _figure
 from .record import atomic_path, make_folders, undo_written
 from .threads import available_threads
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 
 SOLVERS = ("nsgs", "staggered", "apgd", "newton")
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
@@ -140,7 +148,9 @@ def _machine() -> dict:
 # ----------------------------------------------------------------------------- the performance profile
 
 
-def performance_profile(times, solved, solvers=None):
+def performance_profile(
+    times: np.ndarray, solved: np.ndarray, solvers: Sequence[str] | None = None
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The Dolan–Moré performance profile of S solvers on P problems.
 
     ``times``: (P, S) solve times [s] (any unit, > 0 where solved); ``solved``: (P, S) bools,
@@ -174,7 +184,7 @@ def performance_profile(times, solved, solvers=None):
     return taus, {name: fractions[index] for index, name in enumerate(names)}
 
 
-def profile_figure(taus, fractions, title):
+def profile_figure(taus: np.ndarray, fractions: Mapping[str, np.ndarray], title: str) -> Figure:
     """A Figure of the profile (:func:`performance_profile`'s output): one step line per solver,
     τ on a log2 axis from 1 to past the largest ratio."""
     figure, (ax,) = _figure(title)
@@ -202,7 +212,7 @@ def profile_figure(taus, fractions, title):
 # ----------------------------------------------------------------------------- the benchmark
 
 
-def problem_files(directory) -> list:
+def problem_files(directory: str | os.PathLike[str]) -> list[Path]:
     """The problem files (PROBLEM_SUFFIXES) of the folder ``directory``, sorted by name;
     InputError("DIR") when it is not a folder or holds none."""
     folder = Path(directory)
@@ -215,7 +225,7 @@ def problem_files(directory) -> list:
     return files
 
 
-def check_solvers(solvers) -> list:
+def check_solvers(solvers: str | Sequence[str] | None) -> list[str]:
     """``solvers`` (None: all of SOLVERS; names, or one comma-separated string) as a list of
     distinct names in the order given; InputError("--solvers") naming the choices otherwise."""
     if solvers is None:
@@ -249,16 +259,16 @@ def _check_settings(tol, repeats, out):
 
 
 def bench(
-    directory,
-    solvers=None,
-    out=None,
+    directory: str | os.PathLike[str],
+    solvers: str | Sequence[str] | None = None,
+    out: str | os.PathLike[str] | None = None,
     *,
-    scheduler=None,
-    workers=None,
-    tol=1e-8,
-    max_iterations=None,
-    repeats=3,
-    progress=False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    tol: float = 1e-8,
+    max_iterations: int | None = None,
+    repeats: int = 3,
+    progress: bool = False,
 ) -> Bench:
     """Solve every problem file of ``directory`` with every solver of ``solvers`` (default:
     all of SOLVERS) on Dask, and write results.csv, results.md and profile.png into ``out``
@@ -352,7 +362,7 @@ def _cell(value, column) -> str:
     return str(value).replace("|", "\\|")
 
 
-def markdown(table, solvers, settings, machine) -> str:
+def markdown(table: Any, solvers: Sequence[str], settings: Mapping[str, Any], machine: str) -> str:
     """results.md: the settings, the table (COLUMNS), solved counts and total times per solver,
     and the ``machine`` line."""
     caps = ", ".join(f"{solver} {settings['caps'][solver]}" for solver in solvers)

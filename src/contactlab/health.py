@@ -26,12 +26,22 @@ keeps the physics checks to the summary's ``health`` list and goes on, for studi
 blow-ups; a non-finite state always stops the run, having nothing left to step.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import shapes
 from .collision import pass_through_depths
+
+if TYPE_CHECKING:
+    from .contacts import Contacts
+    from .model import Model
+    from .state import State
+
 
 SPEED_FACTOR = 10.0  # × the scene's speed scale
 ENERGY_GAIN = 0.5  # × the scene's energy scale
@@ -57,7 +67,9 @@ class Health:
     ``divergence_advice``, else a smaller dt); ``allow_divergence``: record physics
     violations instead of stopping on them (see the module docstring)."""
 
-    def __init__(self, model, state, dt, advice=None, allow_divergence=False):
+    def __init__(
+        self, model: Model, state: State, dt: float, advice: str | None = None, allow_divergence: bool = False
+    ) -> None:
         self.model = model
         self.dt = dt
         self.allow_divergence = allow_divergence
@@ -86,7 +98,7 @@ class Health:
 
     # ---- the checks --------------------------------------------------------------------------
 
-    def check_state(self, state, full=True):
+    def check_state(self, state: State, full: bool = True) -> Violation | None:
         """Finite and speed, on a State; stops the run (returns the Violation) or records it.
         ``full`` False (between samples): the speeds alone, which a non-finite velocity makes NaN."""
         speed = state.max_speed()
@@ -107,7 +119,7 @@ class Health:
             )
         return None
 
-    def check_samples(self, arrays, first=0):
+    def check_samples(self, arrays: Mapping[str, np.ndarray], first: int = 0) -> Violation | None:
         """Energy, speed and finite on recorded samples ``arrays`` (the trajectory's series,
         rows from ``first`` on). Returns the first Violation that stops the run, or None."""
         energy = arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
@@ -135,7 +147,7 @@ class Health:
                     return found
         return None
 
-    def start(self, state):
+    def start(self, state: State) -> None:
         """Note how deep the run starts (a scene may begin overlapping, or with a pinned vertex
         inside an obstacle): the depth check then trips only past that."""
         from .collision import collide
@@ -157,7 +169,7 @@ class Health:
             movable |= free[side].any(axis=1)
         return np.where(movable, contacts.depth / (DEPTH_FRACTION * through), 0.0), through
 
-    def check_contacts(self, state, contacts):
+    def check_contacts(self, state: State, contacts: Contacts) -> Violation | None:
         """Depth, on a State and the contacts of its own positions (a collision pass)."""
         if contacts.count:
             ratio, through = self._depth_ratios(contacts)
@@ -204,11 +216,11 @@ class Health:
             self.violations.append(violation)
         return None
 
-    def message(self, violation):
+    def message(self, violation: Violation) -> str:
         """The one sentence a stopped run reports."""
         return f"the run went wrong at t = {violation.time:.4g} s: {violation.what}; {self.advice}"
 
-    def summary(self):
+    def summary(self) -> dict[str, Any]:
         """The summary's ``health`` entry: the checks' limits and what was let pass."""
         return {
             "speed_limit": self.speed_limit,

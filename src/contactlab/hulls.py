@@ -48,10 +48,15 @@ compiled routines of :mod:`contactlab.collision.convex`; :func:`box_as_hull` pac
 way (the builder gives every box body such a hull, for the hull routines to meet it).
 """
 
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .errors import InputError
 
@@ -119,7 +124,7 @@ class Hull:
         """(3, 3) rotation matrix body → given frame; its columns are the principal axes."""
         return _quaternion_to_matrix(self.orientation)
 
-    def face(self, f) -> np.ndarray:
+    def face(self, f: int) -> np.ndarray:
         """Vertex indices (counter-clockwise from outside) of face ``f``."""
         return self.face_vertex_index[self.face_vertex_start[f] : self.face_vertex_start[f + 1]]
 
@@ -127,7 +132,9 @@ class Hull:
         """(V, 3) the vertices [m] in the frame the points were given in."""
         return self.vertices @ self.principal_axes.T + self.offset
 
-    def body_pose(self, position=(0.0, 0.0, 0.0), orientation=(1.0, 0.0, 0.0, 0.0)):
+    def body_pose(
+        self, position: ArrayLike = (0.0, 0.0, 0.0), orientation: ArrayLike = (1.0, 0.0, 0.0, 0.0)
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Pose of the body frame when the given frame is placed at ``position`` [m] with
         ``orientation`` (w, x, y, z) in the world: returns (body position (3,), body orientation (4,))."""
         position = np.asarray(position, dtype=float)
@@ -150,7 +157,14 @@ class Hull:
 # construction
 
 
-def build_hull(points, field="points", *, mass=None, density=None, require_convex=False) -> Hull:
+def build_hull(
+    points: ArrayLike,
+    field: str = "points",
+    *,
+    mass: float | None = None,
+    density: float | None = None,
+    require_convex: bool = False,
+) -> Hull:
     """The convex hull of ``points`` (n, 3) [m] as a uniform solid, in its body frame.
 
     ``mass`` [kg] or ``density`` [kg/m³] (at most one; neither: ``DEFAULT_DENSITY``).
@@ -560,7 +574,7 @@ def _quaternion_multiply(p, q):
 # files
 
 
-def load_hull_points(path, scale=1.0, field="file") -> np.ndarray:
+def load_hull_points(path: str | os.PathLike[str], scale: float = 1.0, field: str = "file") -> np.ndarray:
     """The vertices (n, 3) [m] of the triangles of an OBJ, STL or PLY file, × ``scale``: the
     hull of the vertices is what :func:`build_hull` makes of them.
 
@@ -576,7 +590,7 @@ def load_hull_points(path, scale=1.0, field="file") -> np.ndarray:
 # packed layout
 
 
-def pack_hulls(hulls) -> dict:
+def pack_hulls(hulls: Iterable[Hull]) -> dict[str, np.ndarray]:
     """Concatenate hulls into flat arrays (see the module docstring for names and shapes)."""
     hulls = list(hulls)
     vertex_counts = [h.vertex_count for h in hulls]
@@ -608,7 +622,7 @@ def pack_hulls(hulls) -> dict:
     }
 
 
-def box_as_hull(half_extents) -> dict:
+def box_as_hull(half_extents: ArrayLike) -> dict[str, np.ndarray]:
     """The packed arrays (as :func:`pack_hulls` makes them, H = 1) of a box
     with ``half_extents`` (3,) [m], centred on its body origin along its body axes.
 
@@ -650,7 +664,7 @@ def box_as_hull(half_extents) -> dict:
     }
 
 
-def hull_arrays(packed, h):
+def hull_arrays(packed: Mapping[str, np.ndarray], h: int) -> tuple[np.ndarray, ...]:
     """One hull's arrays out of a packed dict, as the compiled routines take them:
     (vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face).
 

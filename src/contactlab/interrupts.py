@@ -11,18 +11,21 @@ and their temporary files are removed on the way out (``record.atomic_path``). O
 deferred block, with :func:`handled` installed, a signal raises at once.
 """
 
+from __future__ import annotations
+
 import contextlib
 import signal
 import threading
+from collections.abc import Iterator
 
-EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
+EXIT_CODES: dict[int, int] = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
 
 
 class Interrupted(KeyboardInterrupt):
     """The run was stopped by a signal: ``signum`` (SIGINT or SIGTERM) and its ``name``;
     ``run``, set by ``simulate``, the run up to then (a contactlab.simulation.Run) or None."""
 
-    def __init__(self, signum):
+    def __init__(self, signum: int) -> None:
         self.signum = signum
         self.run = None
         self.name = signal.Signals(signum).name
@@ -34,7 +37,7 @@ class Interrupted(KeyboardInterrupt):
 
 
 _deferring = 0  # how many deferred() blocks are open (the main thread's)
-_pending = None  # the signal noted while deferring
+_pending: int | None = None  # the signal noted while deferring
 
 
 def _handler(signum, frame):
@@ -50,7 +53,7 @@ def _main_thread():
 
 
 @contextlib.contextmanager
-def handled(restore=True):
+def handled(restore: bool = True) -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` while this is open (main thread only; a
     signal the process was started ignoring, as a shell does for background jobs, stays
     ignored); the previous handlers come back at the end unless ``restore`` is False."""
@@ -66,7 +69,7 @@ def handled(restore=True):
                 signal.signal(s, handler)
 
 
-def ignore_signals():
+def ignore_signals() -> None:
     """Ignore SIGINT and SIGTERM from now on (a finished command, exiting)."""
     if _main_thread():
         for s in EXIT_CODES:
@@ -74,7 +77,7 @@ def ignore_signals():
 
 
 @contextlib.contextmanager
-def deferred():
+def deferred() -> Iterator[None]:
     """Signals wait for :func:`check` (or the end of the block) while this is open. Installs the
     handler for SIGINT where Python's default one is in place (a library caller), and leaves a
     caller's own handlers alone."""
@@ -96,7 +99,7 @@ def deferred():
         check()
 
 
-def check():
+def check() -> None:
     """Raise :class:`Interrupted` if a signal arrived while deferred (and forget it)."""
     global _pending
     if _pending is not None:
@@ -106,11 +109,11 @@ def check():
 
 # ---- what an interrupted command wrote ------------------------------------------------------
 
-_written = None  # the files completed inside tracking_written(), or None
+_written: list[str] | None = None  # the files completed inside tracking_written(), or None
 
 
 @contextlib.contextmanager
-def tracking_written():
+def tracking_written() -> Iterator[None]:
     """Note every file ``note_written`` reports while this is open (``written_paths``): what an
     interrupted command can truthfully say it wrote (``record.atomic_path`` reports each)."""
     global _written
@@ -121,7 +124,7 @@ def tracking_written():
         _written = previous
 
 
-def note_written(path, removed=False):
+def note_written(path: str, removed: bool = False) -> None:
     """``path`` was completed (or, ``removed``, taken away again), if tracking."""
     if _written is not None:
         if removed:
@@ -131,6 +134,6 @@ def note_written(path, removed=False):
             _written.append(path)
 
 
-def written_paths():
+def written_paths() -> list[str]:
     """The files completed so far inside ``tracking_written`` (empty outside it)."""
     return list(_written or ())

@@ -38,11 +38,14 @@ node ``i`` has bounds ``node_lower[i]``, ``node_upper[i]`` (N, 3); a leaf has
 ``triangle_lower`` / ``triangle_upper`` (T, 3) are each triangle's own box.
 """
 
+from __future__ import annotations
+
 import os
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from . import rotations
 from .errors import InputError, first_line
@@ -87,7 +90,7 @@ MeshGeometry = namedtuple(
 # ---------------------------------------------------------------------------------------------
 
 
-def triangle_normals(vertices, triangles):
+def triangle_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (T, 3) by the winding, and the doubled areas (T,) [m²]; degenerate: zero normal."""
     v0, v1, v2 = vertices[triangles[:, 0]], vertices[triangles[:, 1]], vertices[triangles[:, 2]]
     cross = np.cross(v1 - v0, v2 - v0)
@@ -103,7 +106,7 @@ def triangle_normals(vertices, triangles):
     return normals, np.where(degenerate, 0.0, doubled_area)
 
 
-def vertex_normals(vertices, triangles):
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) of a triangle mesh (vertices (V, 3), triangles (T, 3)).
 
     Vectorized, cheap enough to call every step for a deforming object (P5 needs them).
@@ -153,7 +156,9 @@ def _unit_rows(a):
 # ---------------------------------------------------------------------------------------------
 
 
-def build_bvh(triangle_lower, triangle_upper, leaf_size=LEAF_SIZE):
+def build_bvh(
+    triangle_lower: ArrayLike, triangle_upper: ArrayLike, leaf_size: int = LEAF_SIZE
+) -> tuple[np.ndarray, ...]:
     """Median-split BVH over boxes (T, 3) [m], built level by level with vectorized NumPy.
 
     Returns (node_lower, node_upper, node_left, node_right, node_start, node_count,
@@ -225,19 +230,19 @@ def build_bvh(triangle_lower, triangle_upper, leaf_size=LEAF_SIZE):
 
 @njit(cache=True)
 def triangles_near(
-    node_lower,
-    node_upper,
-    node_left,
-    node_right,
-    node_start,
-    node_count,
-    node_order,
-    triangle_lower,
-    triangle_upper,
-    lower,
-    upper,
-    out,
-):
+    node_lower: np.ndarray,
+    node_upper: np.ndarray,
+    node_left: np.ndarray,
+    node_right: np.ndarray,
+    node_start: np.ndarray,
+    node_count: np.ndarray,
+    node_order: np.ndarray,
+    triangle_lower: np.ndarray,
+    triangle_upper: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    out: np.ndarray,
+) -> int:
     """Triangles whose boxes overlap the box [lower, upper] (3,) [m] (closed intervals).
 
     Writes their indices into ``out`` (int64) and returns how many there are. When there
@@ -284,7 +289,7 @@ def triangles_near(
 
 
 @njit(cache=True)
-def mesh_triangles_near(mesh, lower, upper, buffer):
+def mesh_triangles_near(mesh: MeshGeometry, lower: np.ndarray, upper: np.ndarray, buffer: np.ndarray) -> np.ndarray:
     """:func:`triangles_near` on a :class:`MeshGeometry`, growing ``buffer`` when it is too small.
 
     Returns the candidate indices (a view of the buffer, or of a larger new array).
@@ -340,7 +345,14 @@ class TriangleMesh:
     diagonal. Arrays are read-only; :meth:`transformed` makes a moved copy.
     """
 
-    def __init__(self, vertices, triangles, two_sided=False, max_depth=None, field="mesh"):
+    def __init__(
+        self,
+        vertices: ArrayLike,
+        triangles: ArrayLike,
+        two_sided: bool = False,
+        max_depth: float | None = None,
+        field: str = "mesh",
+    ) -> None:
         vertices = np.array(vertices, dtype=float)
         triangles = np.array(triangles)
         if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -449,7 +461,9 @@ class TriangleMesh:
     def triangle_count(self) -> int:
         return len(self.triangles)
 
-    def transformed(self, position=(0.0, 0.0, 0.0), quaternion=(1.0, 0.0, 0.0, 0.0)) -> "TriangleMesh":
+    def transformed(
+        self, position: ArrayLike = (0.0, 0.0, 0.0), quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0)
+    ) -> TriangleMesh:
         """The mesh moved to the world frame: x_world = R(quaternion) x + position.
 
         position (3,) [m]; quaternion (4,) (w, x, y, z), normalized here. The BVH is rebuilt
@@ -470,7 +484,13 @@ class TriangleMesh:
         )
 
 
-def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) -> TriangleMesh:
+def load_mesh(
+    path: str | os.PathLike[str],
+    scale: float = 1.0,
+    field: str = "file",
+    two_sided: bool = False,
+    max_depth: float | None = None,
+) -> TriangleMesh:
     """Read an OBJ, STL or PLY file into a :class:`TriangleMesh` (vertices × ``scale`` [m]).
 
     ``two_sided`` and ``max_depth`` as in :class:`TriangleMesh`. Uses ``trimesh`` (loaded
@@ -524,6 +544,6 @@ def load_mesh(path, scale=1.0, field="file", two_sided=False, max_depth=None) ->
     return TriangleMesh(vertices, faces.reshape(-1, 3), two_sided=two_sided, max_depth=max_depth, field=field)
 
 
-def builtin_mesh_path(name):
+def builtin_mesh_path(name: str) -> str:
     """Path of a mesh file shipped with contactlab (``scene/meshes/NAME``)."""
     return os.path.join(os.path.dirname(__file__), "scene", "meshes", name)

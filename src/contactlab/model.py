@@ -8,23 +8,32 @@ triangles, S cloth springs. Cloth vertices are particles (3 DOF each): the P par
 free ones and the vertices of every cloth, in the order they were added.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import rotations, shapes
+
+if TYPE_CHECKING:
+    from .driving import Drive
+    from .dynamics.cloth import SpringPattern
+    from .meshes import TriangleMesh
+    from .state import State
 
 
 @dataclass(frozen=True)
 class Model:
     gravity: np.ndarray  # (3,) m/s²
     # materials
-    material_names: tuple  # (M,)
+    material_names: tuple[str, ...]  # (M,)
     material_friction: np.ndarray  # (M,) Coulomb μ
     material_restitution: np.ndarray  # (M,) ε in [0, 1]
     # rigid bodies (6 DOF each: linear velocity, world angular velocity)
-    body_names: tuple  # (B,)
+    body_names: tuple[str, ...]  # (B,)
     body_shape: np.ndarray  # (B,) int, a kind from contactlab.shapes
     body_params: np.ndarray  # (B, 4) shape parameters [m]
     body_mass: np.ndarray  # (B,) kg
@@ -41,13 +50,13 @@ class Model:
     obstacle_orientation: np.ndarray  # (O, 4) unit quaternion (w, x, y, z)
     obstacle_material: np.ndarray  # (O,) int
     # convex hulls (of convex shapes and of every box), packed: see contactlab.hulls.pack_hulls
-    hulls: dict = field(repr=False, default=None)
+    hulls: dict[str, np.ndarray] = field(repr=False, default=None)
     # static triangle meshes in world coordinates (contactlab.meshes.TriangleMesh), by index
-    meshes: tuple = field(repr=False, default=())
+    meshes: tuple[TriangleMesh, ...] = field(repr=False, default=())
     # the state at time 0
-    initial: "object" = field(repr=False, default=None)
+    initial: State = field(repr=False, default=None)
     # cloth (see ModelBuilder.add_cloth): topology and mass-spring network over the particles
-    cloth_names: tuple = ()  # (C,)
+    cloth_names: tuple[str, ...] = ()  # (C,)
     triangles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
     #                                   (F, 3) int, particle indices, counter-clockwise seen from the front
     particle_cloth: np.ndarray = field(repr=False, default=None)  # (P,) int cloth index, −1 if none
@@ -58,7 +67,7 @@ class Model:
     spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N/m
     spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N s/m
     # external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene
-    drive: "object" = field(repr=False, default=None)
+    drive: Drive | None = field(repr=False, default=None)
 
     def __post_init__(self):
         # models built without cloth: no particle belongs to one, none is pinned
@@ -124,7 +133,7 @@ class Model:
         return len(self.spring_rest_length)
 
     @cached_property
-    def spring_pattern(self):
+    def spring_pattern(self) -> SpringPattern:
         """Where the springs' Jacobian blocks sit in a (3P, 3P) CSR matrix
         (``dynamics.cloth.SpringPattern``): fixed by the topology, built on first use and kept."""
         from .dynamics.cloth import spring_pattern
@@ -138,7 +147,7 @@ class Model:
         return shapes.bounding_radii(self.body_shape, self.body_params)
 
     @cached_property
-    def collider_table(self):
+    def collider_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The fixed part of collision's global collider arrays (bodies, then particles, then
         obstacles): kinds (N,) int64, params (N, 4), materials (N,) int and the obstacles'
         rotation matrices (O, 3, 3); built on first use and kept."""
@@ -181,7 +190,7 @@ class Model:
         return scene_families(kinds[: B + P], kinds[B + P :])
 
     @cached_property
-    def stepping_arrays(self):
+    def stepping_arrays(self) -> Any:
         """The arrays the compiled stepping loop reads (``methods.velocity_loop.LoopModel``):
         built on first use and kept."""
         from .methods.velocity_loop import loop_model
@@ -193,7 +202,9 @@ class Model:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
         return np.where(self.particle_pinned, 0.0, 1.0 / self.particle_mass)
 
-    def pair_materials(self, material_a, material_b):
+    def pair_materials(
+        self, material_a: int | np.ndarray, material_b: int | np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(friction μ, restitution ε) of contacts between materials ``material_a`` and
         ``material_b`` (indices, scalars or arrays of one shape): μ = √(μ_a μ_b), the geometric
         mean, and ε = max(ε_a, ε_b), the larger."""
@@ -202,7 +213,7 @@ class Model:
             np.maximum(self.material_restitution[material_a], self.material_restitution[material_b]),
         )
 
-    def state(self):
+    def state(self) -> State:
         """A fresh copy of the state at time 0."""
         return self.initial.copy()
 
@@ -215,7 +226,7 @@ class Model:
         return model_html(self)
 
     def describe(self) -> str:
-        kinds = {}
+        kinds: dict[str, int] = {}
         for k in self.body_shape:
             kinds[shapes.NAMES[int(k)]] = kinds.get(shapes.NAMES[int(k)], 0) + 1
         parts = [f"{n} {k}{'es' if k == 'box' and n > 1 else 's' if n > 1 else ''}" for k, n in kinds.items()]

@@ -10,10 +10,19 @@ report. Everything is escaped; videos and pictures are inline, so the notebook n
 beside it. For an interactive 3D view, ``run.show()`` opens the viewer.
 """
 
+from __future__ import annotations
+
 import base64
 import html
 import os
 import tempfile
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .compare import Comparison
+    from .model import Model
+    from .simulation import Run
+
 
 PLAYER_FPS = 12  # frames per second of the inline player at most
 PLAYER_FRAMES = 120  # frames of it at most (a long run plays at fewer frames per second)
@@ -28,7 +37,7 @@ def _table(rows) -> str:
     return f"<table>{cells}</table>"
 
 
-def model_html(model) -> str:
+def model_html(model: Model) -> str:
     """A Model: what it holds, its materials and gravity."""
     rows = [
         ("holds", model.describe()),
@@ -38,7 +47,7 @@ def model_html(model) -> str:
     return f"<div><b>contactlab Model</b>{_table(rows)}</div>"
 
 
-def run_html(run, picture=True) -> str:
+def run_html(run: Run, picture: bool = True) -> str:
     """A Run: its summary's main numbers and (``picture``) an inline player of it (its last sample
     drawn, where no video can be)."""
     s = run.summary
@@ -72,7 +81,7 @@ def run_html(run, picture=True) -> str:
     )
 
 
-def comparison_html(result) -> str:
+def comparison_html(result: Comparison) -> str:
     """A comparison (contactlab.compare.Comparison): one row per method, and its report."""
     columns = (
         ("method", "method"),

@@ -19,7 +19,16 @@ scene someone may mean. ``simulate`` issues them; ``warnings.simplefilter("ignor
 PlausibilityWarning)`` silences them.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .model import Model
+    from .state import State
+
 
 SIZE_RATIO = 20.0  # a body this many times the others' median size (or 1/this) is flagged
 START_DEPTH_FRACTION = 0.25  # an initial overlap deeper than this share of the body's radius is flagged
@@ -30,7 +39,7 @@ class PlausibilityWarning(UserWarning):
     """A scene value that looks like a unit slip (contactlab.plausibility)."""
 
 
-def warnings_for(model, state, dt, steps) -> list:
+def warnings_for(model: Model, state: State, dt: float, steps: int) -> list[str]:
     """The sentences of every plausibility check ``model`` (at ``state``), stepped ``steps``
     times at ``dt`` [s], fails; [] when none does."""
     return [*_sizes(model), *_start_depths(model, state), *_step_count(dt, steps)]

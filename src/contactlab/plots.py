@@ -11,8 +11,12 @@ canvas only (no pyplot, no display); every file is written atomically, and a cal
 leaves none of its files behind.
 """
 
+from __future__ import annotations
+
 import os
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -21,6 +25,10 @@ from matplotlib.figure import Figure
 from . import interrupts
 from .methods import AVAILABLE
 from .record import atomic_path, make_folders, undo_written
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
 
 PLOTS = ("energy", "penetration", "contacts", "residual")
 DPI = 100
@@ -46,7 +54,7 @@ class Line:
     width: float = 1.4
 
 
-def total_energy(arrays) -> np.ndarray:
+def total_energy(arrays: Mapping[str, Any]) -> np.ndarray:
     """Kinetic + potential + elastic energy of each sample [J]."""
     return arrays["energy_kinetic"] + arrays["energy_potential"] + arrays["energy_elastic"]
 
@@ -99,7 +107,7 @@ def _residual_lines(runs):
     return lines, log
 
 
-def draw(ax, lines, ylabel, *, log=False, legend=True):
+def draw(ax: Axes, lines: Iterable[Any], ylabel: str, *, log: bool = False, legend: bool = True) -> None:
     """Draw ``lines`` on ``ax`` with a labelled time axis [s], ``ylabel``, grid and legend:
     the one function every plot goes through."""
     for line in lines:
@@ -122,7 +130,9 @@ def _figure(title, rows=1):
     return figure, axes
 
 
-def build_figures(runs, *, components=False, title=None) -> dict:
+def build_figures(
+    runs: Mapping[str, Mapping[str, Any]], *, components: bool = False, title: str | None = None
+) -> dict[str, Figure]:
     """The four Figures (name → matplotlib Figure, names as PLOTS) of ``runs``, a dict
     {label: trajectory arrays}. ``components``: the energy plot shows kinetic, potential,
     elastic and total of the one run instead of one total per run."""
@@ -173,7 +183,7 @@ def _save(figures, directory) -> dict:
     return written
 
 
-def write_plots(arrays, directory, *, title=None) -> dict:
+def write_plots(arrays: Mapping[str, Any], directory: str, *, title: str | None = None) -> dict[str, str]:
     """energy.png, penetration.png, contacts.png, residual.png of one run (its trajectory
     arrays, docs/trajectory.md) into ``directory`` (created if needed); returns
     {"energy": path, "penetration": path, "contacts": path, "residual": path}.
@@ -185,7 +195,9 @@ def write_plots(arrays, directory, *, title=None) -> dict:
     return _save(build_figures({label: arrays}, components=True, title=title), directory)
 
 
-def write_comparison_plots(runs, directory, *, title=None) -> dict:
+def write_comparison_plots(
+    runs: Mapping[str, Mapping[str, Any]], directory: str, *, title: str | None = None
+) -> dict[str, str]:
     """``runs``: {method name: trajectory arrays}. The same four pictures with one line per
     method (the energy plot: each method's total energy [J]); returns {"energy": path, ...}."""
     return _save(build_figures(dict(runs), components=False, title=title), directory)

@@ -10,11 +10,15 @@ through :func:`atomic_path` (a temporary file, then a rename, so an interrupted 
 half-written file). The arrays are documented in ``docs/trajectory.md``.
 """
 
+from __future__ import annotations
+
 import contextlib
 import json
 import math
 import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +26,11 @@ from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
 from .errors import InputError
 from .trajectory import check_arrays, check_shapes
+
+if TYPE_CHECKING:
+    from .contacts import Contacts
+    from .model import Model
+    from .state import State
 
 SERIES = (
     "time",
@@ -43,7 +52,7 @@ WHOLE_SERIES = ("contact_count", "solver_iterations")  # 64-bit whole numbers; t
 TRAJECTORY = "trajectory.h5"  # the file name of a run's trajectory in its output folder
 
 
-def series_rows(model) -> dict:
+def series_rows(model: Model) -> dict[str, tuple[tuple[int, ...], type]]:
     """name -> (shape of one sample, dtype) of every series of a run of ``model``."""
     B, P = model.body_count, model.particle_count
     shapes = {
@@ -57,14 +66,14 @@ def series_rows(model) -> dict:
     return {name: (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64) for name in SERIES}
 
 
-def sample_bytes(model) -> int:
+def sample_bytes(model: Model) -> int:
     """Bytes one sample of a run of ``model`` takes (every series of :func:`series_rows`)."""
     return sum(
         int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize for shape, dtype in series_rows(model).values()
     )
 
 
-def static_arrays(model) -> dict:
+def static_arrays(model: Model) -> dict[str, np.ndarray]:
     """What does not change during a run of ``model``: body_names (B,), the cloth topology
     triangles (F, 3) and particle_cloth (P,), and the shapes' surfaces for drawing and export
     (contactlab.surfaces)."""
@@ -91,7 +100,7 @@ class Totals:
     max_iterations: int = 0
     max_residual: float = 0.0
 
-    def add(self, chunk):
+    def add(self, chunk: Mapping[str, np.ndarray]) -> None:
         """Take in the samples of ``chunk`` (name -> array of n rows)."""
         n = len(chunk["time"])
         if n == 0:
@@ -108,7 +117,7 @@ class Totals:
         self.max_iterations = max(self.max_iterations, int(np.max(chunk["solver_iterations"])))
         self.max_residual = float(max(self.max_residual, np.max(chunk["solver_residual"])))
 
-    def energy(self) -> dict:
+    def energy(self) -> dict[str, float]:
         """The summary's energy: {initial, final, max} [J]."""
         return {
             "initial": self.energy_initial,
@@ -122,22 +131,30 @@ class Recorder:
     with a ``sink`` (store.TrajectoryWriter) they go to it in chunks instead of staying in memory.
     ``samples``: about how many there will be (a buffer no longer than that)."""
 
-    def __init__(self, model, record_every=1, sink=None, samples=None):
+    def __init__(
+        self,
+        model: Model,
+        record_every: int = 1,
+        sink: store.TrajectoryWriter | None = None,
+        samples: int | None = None,
+    ) -> None:
         self.model = model
         self.record_every = record_every
         self.sink = sink
         self.rows = series_rows(model)
-        self.chunk_samples = max(1, min(store.CHUNK_BYTES // max(1, sample_bytes(model)), samples or math.inf))
-        self.buffer = {
+        self.chunk_samples: int = max(  # type: ignore[assignment]  # min(n, inf) is n
+            1, min(store.CHUNK_BYTES // max(1, sample_bytes(model)), samples or math.inf)
+        )
+        self.buffer: dict[str, np.ndarray] = {
             name: np.empty((self.chunk_samples, *shape), dtype=dtype)  # the chunk being filled
             for name, (shape, dtype) in self.rows.items()
         }
         self.filled = 0  # samples in the buffer
-        self.kept = []  # without a sink: the chunks passed on, in order
-        self.last = None  # name -> the last sample passed on (one row)
+        self.kept: list[dict[str, np.ndarray]] = []  # without a sink: the chunks passed on, in order
+        self.last: dict[str, np.ndarray] = None  # type: ignore[assignment]  # set by the first flush; name -> the last sample passed on (one row)
         self.totals = Totals()
 
-    def sample(self, state, info=None):
+    def sample(self, state: State, info: Any = None) -> Contacts:
         """Record ``state``; penetration is measured on its own positions (collision pass), whose
         Contacts it returns."""
         model = self.model
@@ -165,7 +182,7 @@ class Recorder:
             self.flush()
         return contacts
 
-    def extend(self, samples):
+    def extend(self, samples: Mapping[str, np.ndarray]) -> None:
         """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
         to an array with one row per sample."""
         count, done = len(samples["time"]), 0
@@ -178,13 +195,13 @@ class Recorder:
             if self.filled == self.chunk_samples:
                 self.flush()
 
-    def latest(self, names=SERIES) -> dict:
+    def latest(self, names: Iterable[str] = SERIES) -> dict[str, np.ndarray]:
         """The last sample of the series ``names``, as arrays of one row."""
         if self.filled:
             return {name: self.buffer[name][self.filled - 1 : self.filled].copy() for name in names}
         return {name: self.last[name].copy() for name in names}
 
-    def flush(self):
+    def flush(self) -> None:
         """Pass the samples in the buffer on: to the sink, or to the chunks kept in memory."""
         if not self.filled:
             return
@@ -197,7 +214,7 @@ class Recorder:
             self.kept.append({name: values.copy() for name, values in chunk.items()})
         self.filled = 0
 
-    def arrays(self) -> dict:
+    def arrays(self) -> dict[str, np.ndarray]:
         """The trajectory held in memory, as arrays: time (T,), body_position (T,B,3), … and
         the static arrays (:func:`static_arrays`)."""
         self.flush()
@@ -213,7 +230,7 @@ class Recorder:
         return out
 
 
-def streaming_recorder(model, record_every, path, samples) -> Recorder:
+def streaming_recorder(model: Model, record_every: int, path: str | os.PathLike[str], samples: int) -> Recorder:
     """A Recorder whose samples (about ``samples`` of them) stream into the trajectory file
     ``path`` (store.TrajectoryWriter); its ``sink.finish(status)`` or ``sink.discard()`` ends the file."""
     writer = store.TrajectoryWriter(path, static_arrays(model), series_rows(model), record_every, expected=samples)
@@ -221,7 +238,7 @@ def streaming_recorder(model, record_every, path, samples) -> Recorder:
 
 
 @contextlib.contextmanager
-def atomic_path(path):
+def atomic_path(path: str) -> Iterator[str]:
     """Yield a temporary path beside ``path`` (same suffix) to write to; on success it is
     renamed to ``path``, on any failure it is removed, so ``path`` is never half-written.
 
@@ -242,7 +259,7 @@ def atomic_path(path):
         raise
 
 
-def make_folders(path) -> list:
+def make_folders(path: str) -> list[str]:
     """Create the folder ``path`` and whichever of its parents are missing; returns the folders
     created, outermost first (for :func:`remove_empty`)."""
     missing = []
@@ -255,14 +272,14 @@ def make_folders(path) -> list:
     return missing
 
 
-def remove_empty(folders):
+def remove_empty(folders: Sequence[str]) -> None:
     """Remove those of ``folders`` (as :func:`make_folders` returns them) that are empty, innermost first."""
     for folder in reversed(folders):
         with contextlib.suppress(OSError):
             os.rmdir(folder)
 
 
-def undo_written(paths, folders=()):
+def undo_written(paths: Iterable[str], folders: Sequence[str] = ()) -> None:
     """After a failed or interrupted write of several files: remove ``paths`` (those this call
     completed), un-note them (``interrupts.note_written``), and remove the ``folders`` this call
     created (:func:`make_folders`) that are empty again, so nothing of the call remains."""
@@ -273,7 +290,9 @@ def undo_written(paths, folders=()):
     remove_empty(folders)
 
 
-def read_trajectory(arrays, keys, samples=None) -> dict:
+def read_trajectory(
+    arrays: Mapping[str, Any], keys: Iterable[str], samples: slice | Sequence[int] | np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """The trajectory arrays named in ``keys`` as plain NumPy arrays, from
     ``simulate(...).arrays``, a trajectory file read back (``store.TrajectoryFile``) or the
     dict of an older trajectory.npz; with ``samples`` (a slice, or sample indices in
@@ -299,7 +318,7 @@ def read_trajectory(arrays, keys, samples=None) -> dict:
     return out
 
 
-def checked_times(arrays):
+def checked_times(arrays: Mapping[str, Any]) -> np.ndarray:
     """The trajectory's time (T,) [s], read whole and checked (finite, in order, at least one
     sample): what a reader needs to choose the samples it will read."""
     time = read_trajectory(arrays, ("time",))["time"]
@@ -307,7 +326,7 @@ def checked_times(arrays):
     return time
 
 
-def sample_count(arrays) -> int:
+def sample_count(arrays: Mapping[str, Any]) -> int:
     """T, the samples of a trajectory (a dict of arrays or a store.TrajectoryFile), read
     without reading the series; InputError when it has no time."""
     if "time" not in arrays:
@@ -321,14 +340,14 @@ def _atomic_write(path, write):
         write(stream)
 
 
-def write_summary(directory, summary):
+def write_summary(directory: str, summary: Mapping[str, Any]) -> str:
     """Write ``summary.json`` into ``directory`` (atomically); returns its path."""
     path = os.path.join(directory, "summary.json")
     _atomic_write(path, lambda s: s.write((json.dumps(summary, indent=2) + "\n").encode()))
     return path
 
 
-def load_run(directory, field="OUT_DIR"):
+def load_run(directory: str, field: str = "OUT_DIR") -> tuple[Mapping[str, Any], dict[str, Any]]:
     """(trajectory, summary) of an earlier run's output folder ``directory``. The trajectory is
     trajectory.h5 read back lazily (contactlab.store), or the trajectory.npz of an older
     contactlab read without unpickling anything (contactlab.trajectory.load_npz); render, export
@@ -339,7 +358,7 @@ def load_run(directory, field="OUT_DIR"):
 
     path, older = os.path.join(directory, TRAJECTORY), os.path.join(directory, "trajectory.npz")
     if os.path.isfile(path):
-        arrays = store.open_trajectory(path, field)
+        arrays: Mapping[str, Any] = store.open_trajectory(path, field)
     elif os.path.isfile(older):
         arrays, path = load_npz(older, field), older
     else:
@@ -362,7 +381,7 @@ def load_run(directory, field="OUT_DIR"):
     return arrays, summary if named else {}
 
 
-def write_outputs(directory, arrays, summary):
+def write_outputs(directory: str, arrays: Mapping[str, Any], summary: Mapping[str, Any]) -> None:
     """Write a trajectory held in memory (``arrays``) as ``trajectory.h5`` and ``summary`` as
     ``summary.json`` into ``directory`` (created if needed).
 

@@ -21,10 +21,14 @@ GIFs get huge; the MP4 (H.264, yuv420p) uses the full ``fps`` and size. Every fi
 through :func:`contactlab.record.atomic_path`, so none is ever left half-written.
 """
 
+from __future__ import annotations
+
 import contextlib
 import math
 import os
 from collections import Counter
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import imageio.v2
 import imageio.v3
@@ -35,6 +39,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+from numpy.typing import ArrayLike
 from PIL import Image
 from tqdm import tqdm
 
@@ -77,18 +82,18 @@ REQUIRED = (
 
 
 def render(
-    arrays,
-    directory,
+    arrays: Mapping[str, Any],
+    directory: str,
     *,
-    fps=30,
-    width=640,
-    height=480,
-    elevation=25.0,
-    azimuth=-60.0,
-    formats=("mp4", "gif"),
-    title=None,
-    progress=False,
-) -> dict:
+    fps: float = 30,
+    width: int = 640,
+    height: int = 480,
+    elevation: float = 25.0,
+    azimuth: float = -60.0,
+    formats: Sequence[str] = ("mp4", "gif"),
+    title: str | None = None,
+    progress: bool = False,
+) -> dict[str, str]:
     """Write video.mp4, video.gif (whichever `formats` names) and still.png into `directory` (created if
     needed); return {"mp4": path, "gif": path, "still": path} for what was written.
 
@@ -121,7 +126,17 @@ def render(
     return paths
 
 
-def still(arrays, path, *, sample=-1, width=640, height=480, elevation=25.0, azimuth=-60.0, title=None) -> str:
+def still(
+    arrays: Mapping[str, Any],
+    path: str,
+    *,
+    sample: int = -1,
+    width: int = 640,
+    height: int = 480,
+    elevation: float = 25.0,
+    azimuth: float = -60.0,
+    title: str | None = None,
+) -> str:
     """Write one PNG picture of trajectory sample `sample` to `path`; return the path.
 
     sample: index into the trajectory's samples (negative counts from the end);
@@ -171,7 +186,9 @@ def _write_videos(picture, paths, fps, progress):
 # -- arguments ----------------------------------------------------------------------------
 
 
-def check_settings(fps=30, width=640, height=480, elevation=25.0, azimuth=-60.0):
+def check_settings(
+    fps: float = 30, width: int = 640, height: int = 480, elevation: float = 25.0, azimuth: float = -60.0
+) -> tuple[float, int, int, float, float]:
     """The drawing settings checked, an InputError naming the first bad one: fps [1/s] in
     (0, MAX_FPS], width and height [px] whole numbers from MIN_SIZE to MAX_SIZE, elevation and
     azimuth finite [degrees]. Returns them as (fps, width, height, elevation, azimuth). A
@@ -251,13 +268,13 @@ def _frame_times(time, rate):
     return time[0] + np.arange(count) / rate
 
 
-def spread_samples(count, most=STILL_SAMPLES):
+def spread_samples(count: int, most: int = STILL_SAMPLES) -> np.ndarray:
     """At most ``most`` sample indices (n,) spread evenly over ``count`` samples, first and last
     included: those that frame a camera without reading a whole long run."""
     return np.unique(np.linspace(0, count - 1, min(count, most)).astype(int))
 
 
-def nearest(times, wanted):
+def nearest(times: np.ndarray, wanted: ArrayLike) -> np.ndarray:
     """Index (n,) of the entry of the sorted ``times`` (T,) nearest to each of ``wanted`` (n,)."""
     after = np.clip(np.searchsorted(times, wanted), 1, max(len(times) - 1, 1))
     before = after - 1
@@ -458,7 +475,7 @@ def _limits(content, flat_polygons):
     return centre - half, centre + half
 
 
-def scenery(arrays):
+def scenery(arrays: Mapping[str, Any]) -> tuple[Any, list[np.ndarray], np.ndarray, np.ndarray]:
     """The static obstacles framed around what moves in the trajectory ``arrays`` (its samples
     all read: pass the few that frame it), as still(), render() and the viewer draw them:
     (content: (lower (3,), upper (3,)) [m] of the bodies, particles and solid obstacles over

@@ -4,16 +4,19 @@ Vectorized over the leading axis: ``q`` has shape (count, 4), matrices (count, 3
 Angular velocities are in the world frame [rad/s].
 """
 
+from __future__ import annotations
+
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 
-def normalize(q):
+def normalize(q: np.ndarray) -> np.ndarray:
     """Unit quaternions, shape (count, 4); a zero quaternion is an input error upstream."""
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def to_matrix(q):
+def to_matrix(q: ArrayLike) -> np.ndarray:
     """Rotation matrices R (count, 3, 3) with x_world = R x_body, from unit q (count, 4) (or any
     leading shape (..., 4) → (..., 3, 3)). Compiled: it runs several times a step, and its
     NumPy form cost 24 µs for a single body."""
@@ -25,7 +28,7 @@ def to_matrix(q):
 
 
 @njit(cache=True)
-def matrices(q):
+def matrices(q: np.ndarray) -> np.ndarray:
     """``to_matrix`` on q (count, 4), the same arithmetic in the same order as element by element."""
     R = np.empty((q.shape[0], 3, 3))
     for i in range(q.shape[0]):
@@ -42,7 +45,7 @@ def matrices(q):
     return R
 
 
-def multiply(p, q):
+def multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Hamilton product p ⊗ q, shapes (count, 4)."""
     pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -57,7 +60,7 @@ def multiply(p, q):
     )
 
 
-def from_rotation_vector(phi):
+def from_rotation_vector(phi: np.ndarray) -> np.ndarray:
     """Quaternions (count, 4) of rotations by angle |phi| about phi/|phi|; phi (count, 3) [rad]."""
     angle = np.linalg.norm(phi, axis=-1)
     half = 0.5 * angle
@@ -67,7 +70,7 @@ def from_rotation_vector(phi):
     return np.concatenate([np.cos(half)[..., None], phi * scale[..., None]], axis=-1)
 
 
-def integrate(q, angular_velocity, dt):
+def integrate(q: np.ndarray, angular_velocity: np.ndarray, dt: float | np.ndarray) -> np.ndarray:
     """Orientation after rotating at constant world angular velocity for dt seconds.
 
     Uses the exponential map q⁺ = exp(dt ω / 2) ⊗ q, which stays unit; renormalized
@@ -83,7 +86,7 @@ def integrate(q, angular_velocity, dt):
 
 
 @njit(cache=True)
-def integrate_compiled(q, angular_velocity, dt):
+def integrate_compiled(q: np.ndarray, angular_velocity: np.ndarray, dt: np.ndarray) -> np.ndarray:
     """``integrate`` body by body, compiled; dt (count,) [s]."""
     out = np.empty_like(q)
     for i in range(q.shape[0]):
@@ -102,13 +105,13 @@ def integrate_compiled(q, angular_velocity, dt):
     return out
 
 
-def world_inertia(R, principal):
+def world_inertia(R: ArrayLike, principal: ArrayLike) -> np.ndarray:
     """World-frame tensors R diag(principal) Rᵀ, shape (count, 3, 3); principal (count, 3)."""
     return world_tensors(np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(principal, dtype=float))
 
 
 @njit(cache=True)
-def world_tensors(R, principal):
+def world_tensors(R: np.ndarray, principal: np.ndarray) -> np.ndarray:
     """``world_inertia``, compiled, entry by entry as Σ_k R_ik p_k R_jk (the stepping loop and the
     methods' steps take the same numbers from it)."""
     out = np.empty_like(R)

@@ -22,7 +22,10 @@ A capsule is the segment from −half_length to +half_length along its body z ax
 sphere of its radius.
 """
 
+from __future__ import annotations
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 SPHERE = 0
 BOX = 1
@@ -45,7 +48,7 @@ NAMES = {
 }
 
 
-def volume(kind, params):
+def volume(kind: int, params: np.ndarray) -> float:
     """Volume [m³] of a solid shape."""
     if kind == SPHERE:
         return 4.0 / 3.0 * np.pi * params[0] ** 3
@@ -57,7 +60,7 @@ def volume(kind, params):
     raise ValueError(f"shape {NAMES[kind]} has no volume")
 
 
-def principal_inertia(kind, params, mass):
+def principal_inertia(kind: int, params: np.ndarray, mass: float) -> np.ndarray:
     """Principal moments of inertia [kg m²], shape (3,), of a uniform solid about its centre."""
     if kind == SPHERE:
         return np.full(3, 0.4 * mass * params[0] ** 2)
@@ -77,7 +80,7 @@ def principal_inertia(kind, params, mass):
     raise ValueError(f"shape {NAMES[kind]} has no inertia")
 
 
-def bounding_radii(kinds, params):
+def bounding_radii(kinds: ArrayLike, params: np.ndarray) -> np.ndarray:
     """Radii [m] (N,) of spheres about the shapes' centres that enclose them; planes: inf."""
     kinds = np.asarray(kinds)
     return np.select(

@@ -5,10 +5,14 @@ run.arrays["body_position"]      # (T, B, 3)
 run.summary["max_penetration"]   # m
 """
 
+from __future__ import annotations
+
 import os
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba.core import event as numba_event
@@ -28,6 +32,9 @@ from .store import TrajectoryFile
 from .threads import ThreadChooser
 from .validation import MAX_STEPS, one_of, run_length
 
+if TYPE_CHECKING:
+    from .viewer import Viewer
+
 
 @dataclass
 class Run:
@@ -38,10 +45,10 @@ class Run:
     what a run's ``summary.json`` does; docs/trajectory.md describes both. In Jupyter a Run
     shows itself as a compact HTML summary with a picture of its last sample."""
 
-    state: object  # the final State
-    arrays: dict  # the trajectory (see docs/trajectory.md)
-    summary: dict  # the JSON summary (see docs/trajectory.md)
-    model: object = None  # the Model it ran (None for a run read back from a folder)
+    state: State | None  # the final State (None for a comparison's run read back from its files)
+    arrays: Mapping[str, Any]  # the trajectory (see docs/trajectory.md): name -> array, a dict or a TrajectoryFile
+    summary: dict[str, Any]  # the JSON summary (see docs/trajectory.md)
+    model: Model | None = None  # the Model it ran (None for a run read back from a folder)
 
     def __repr__(self):
         s = self.summary
@@ -50,7 +57,7 @@ class Run:
             f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})"
         )
 
-    def show(self, port=None):
+    def show(self, port: int | None = None) -> Viewer:
         """Open this run in the interactive viewer (contactlab.viewer, docs/viewer.md), served on
         127.0.0.1 in the background, a free port unless ``port``: returns the Viewer (its ``url``;
         ``.stop()`` ends it), so a notebook goes on. Its trajectory is shown where it is, in memory
@@ -155,21 +162,21 @@ def _kind(value):
 
 
 def simulate(
-    model,
-    method="impulse",
-    dt=0.004,
-    duration=1.0,
-    options=None,
-    integrator="symplectic_euler",
-    record_every=1,
-    state=None,
-    progress=False,
-    scene_name="custom",
-    threads=None,
-    compiled_loop=None,
-    allow_divergence=False,
-    memory_limit=None,
-    trajectory=None,
+    model: Model,
+    method: str = "impulse",
+    dt: float = 0.004,
+    duration: float = 1.0,
+    options: Any = None,
+    integrator: str = "symplectic_euler",
+    record_every: int = 1,
+    state: State | None = None,
+    progress: bool = False,
+    scene_name: str = "custom",
+    threads: int | str | None = None,
+    compiled_loop: bool | None = None,
+    allow_divergence: bool = False,
+    memory_limit: float | None = None,
+    trajectory: str | os.PathLike[str] | None = None,
 ) -> Run:
     """Run ``model`` from ``state`` (default: its initial state) for ``duration`` seconds.
 
@@ -429,16 +436,16 @@ class Tally:
     max_contacts: int = 0
     sweeps_made: int = 0  # solver sweeps summed over every step (recorded or not)
     implicit_spring_steps: int = 0  # penalty: steps whose contact springs went implicit (explicit unstable)
-    state: object = None  # the latest State the Python path made
-    window_rates: list = field(default_factory=list)  # steps/s of each WINDOW_SECONDS of stepping
-    window: list = field(default_factory=lambda: [0, 0.0])  # the window being filled: steps, seconds
+    state: State | None = None  # the latest State the Python path made
+    window_rates: list[float] = field(default_factory=list)  # steps/s of each WINDOW_SECONDS of stepping
+    window: list[Any] = field(default_factory=lambda: [0, 0.0])  # the window being filled: steps, seconds
 
-    def take(self, stepper):
+    def take(self, stepper: Any) -> None:
         """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
         self.max_contacts, self.sweeps_made = stepper.max_contacts, stepper.sweeps_made
         self.implicit_spring_steps = stepper.implicit_spring_steps
 
-    def timed(self, step_index, elapsed, compiled, steps=1):
+    def timed(self, step_index: int, elapsed: float, compiled: float, steps: int = 1) -> bool:
         """Book the ``steps`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled``
         [s] of it compiling; returns whether they say anything of the thread count (nothing compiled)."""
         if step_index == 1:
@@ -454,7 +461,7 @@ class Tally:
                 self.window = [0, 0.0]
         return compiled == 0.0
 
-    def rate_spread(self):
+    def rate_spread(self) -> dict[str, float] | None:
         """The stepping rate as repeated measurements: {"median", "low", "high" (the quartiles)
         [steps/s], "windows": how many WINDOW_SECONDS windows} — a short run's last, partial
         window counts when fewer than three are full; None when nothing was timed."""

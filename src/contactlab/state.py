@@ -4,7 +4,10 @@ Shapes: B bodies, P particles. Angular velocity is in the world frame. ``carried
 what a method keeps from one step to the next (warm-start impulses, penalty anchors), by name.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -18,7 +21,7 @@ class State:
     body_angular_velocity: np.ndarray  # (B, 3) rad/s, world frame
     particle_position: np.ndarray  # (P, 3) m
     particle_velocity: np.ndarray  # (P, 3) m/s
-    carried: dict = field(default_factory=dict)
+    carried: dict[str, Any] = field(default_factory=dict)  # by name: what a method keeps between steps
 
     def __repr__(self):
         bodies, particles = len(self.body_position), len(self.particle_position)
@@ -28,23 +31,29 @@ class State:
         )
 
     @classmethod
-    def assemble(cls, time, positions, velocities, carried=None) -> "State":
+    def assemble(
+        cls,
+        time: float,
+        positions: tuple[np.ndarray, np.ndarray, np.ndarray],
+        velocities: tuple[np.ndarray, np.ndarray, np.ndarray],
+        carried: dict[str, Any] | None = None,
+    ) -> State:
         """A state from (body_position, body_orientation, particle_position) and
         (body_velocity, body_angular_velocity, particle_velocity)."""
         (bx, bq, px), (bv, bw, pv) = positions, velocities
         return cls(time, bx, bq, bv, bw, px, pv, {} if carried is None else carried)
 
     @property
-    def positions(self):
+    def positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body_position, body_orientation, particle_position)."""
         return self.body_position, self.body_orientation, self.particle_position
 
     @property
-    def velocities(self):
+    def velocities(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body_velocity, body_angular_velocity, particle_velocity)."""
         return self.body_velocity, self.body_angular_velocity, self.particle_velocity
 
-    def copy(self) -> "State":
+    def copy(self) -> State:
         return replace(
             self,
             body_position=self.body_position.copy(),

@@ -23,9 +23,12 @@ samples, which is how ``render`` (the frames it draws) and ``export`` (every k-t
 a long run without holding all of it.
 """
 
+from __future__ import annotations
+
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 import h5py
 import numpy as np
@@ -51,7 +54,14 @@ class TrajectoryWriter:
     removes it. Opening and finishing defer signals (a signal never leaves a file nobody removes).
     """
 
-    def __init__(self, path, static, rows, record_every=1, expected=1 << 16):
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        static: Mapping[str, Any],
+        rows: Mapping[str, tuple[tuple[int, ...], Any]],
+        record_every: int = 1,
+        expected: int = 1 << 16,
+    ) -> None:
         self.path = os.fspath(path)
         directory = os.path.dirname(os.path.abspath(self.path))
         if not os.path.isdir(directory):
@@ -87,7 +97,7 @@ class TrajectoryWriter:
                 self._remove()
                 raise
 
-    def append(self, samples):
+    def append(self, samples: Mapping[str, np.ndarray]) -> None:
         """Add the samples ``samples`` (name -> array of n rows, every series the same n)."""
         count = len(next(iter(samples.values()))) if samples else 0
         if count == 0:
@@ -98,7 +108,7 @@ class TrajectoryWriter:
         self.count += count
         self.file.flush()  # what is written so far is readable if the process is killed
 
-    def finish(self, status="complete") -> str:
+    def finish(self, status: str = "complete") -> str:
         """Close the file, mark it with ``status`` (one of STATUSES) and rename it to its path
         (noted as written, :func:`contactlab.interrupts.note_written`); returns the path."""
         with interrupts.deferred():
@@ -114,7 +124,7 @@ class TrajectoryWriter:
             interrupts.note_written(self.path)
         return self.path
 
-    def discard(self):
+    def discard(self) -> None:
         """Close and remove the file: the run left nothing."""
         with interrupts.deferred():
             self._remove()
@@ -127,7 +137,7 @@ class TrajectoryWriter:
             os.unlink(self.temporary)
 
 
-def temporary_beside(path):
+def temporary_beside(path: str) -> str:
     """An empty file beside ``path`` named ``.partial-<random><name>``, with the usual rights
     (mkstemp makes it private)."""
     handle, temporary = tempfile.mkstemp(
@@ -140,7 +150,13 @@ def temporary_beside(path):
     return temporary
 
 
-def write(path, arrays, record_every=1, status="complete", series=()):
+def write(
+    path: str | os.PathLike[str],
+    arrays: Mapping[str, Any],
+    record_every: int = 1,
+    status: str = "complete",
+    series: Collection[str] = (),
+) -> str:
     """Write the trajectory ``arrays`` (held in memory: name -> array) to the HDF5 file ``path``
     at once, through the same writer a streaming run uses; the names in ``series`` are the
     per-sample ones (T rows), the rest are static."""
@@ -163,7 +179,7 @@ class TrajectoryFile(Mapping):
     its attributes; :meth:`rows` reads only some samples of a series. The file is open only
     while an array is being read."""
 
-    def __init__(self, path, field="OUT_DIR"):
+    def __init__(self, path: str | os.PathLike[str], field: str = "OUT_DIR") -> None:
         self.path, self.field = os.fspath(path), field
         with self._open() as file:
             if file.attrs.get("format") != FORMAT:
@@ -200,7 +216,7 @@ class TrajectoryFile(Mapping):
             raise KeyError(name)
         return self._read(name, ())
 
-    def rows(self, name, samples):
+    def rows(self, name: str, samples: slice | Sequence[int] | np.ndarray) -> np.ndarray:
         """The samples ``samples`` (a slice, or sample indices in increasing order) of the
         series ``name``: reads those rows only."""
         return self._read(name, samples)
@@ -233,7 +249,7 @@ class TrajectoryFile(Mapping):
         return f"TrajectoryFile({self.path!r}, {samples} samples, {self.status})"
 
 
-def open_trajectory(path, field="OUT_DIR") -> TrajectoryFile:
+def open_trajectory(path: str | os.PathLike[str], field: str = "OUT_DIR") -> TrajectoryFile:
     """The trajectory file ``path`` read back (InputError naming ``field`` when it is not one)."""
     if not os.path.isfile(path):
         raise InputError(field, f"{path} is not a file")

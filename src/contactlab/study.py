@@ -28,6 +28,8 @@ anything runs, with the field path of the mistake — and returns a :class:`Stud
 is recorded and the contactlab version, which is how a rerun knows a cell is done.
 """
 
+from __future__ import annotations
+
 import hashlib
 import itertools
 import json
@@ -82,7 +84,7 @@ class Study:
     description: str = ""
 
 
-def toml_value(value) -> str:
+def toml_value(value: object) -> str:
     """``value`` spelt as TOML (what ``--set`` reads back to the same value)."""
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -99,7 +101,7 @@ def toml_value(value) -> str:
     raise InputError("set", f"a value of a kind TOML has no spelling for: {show(value)}")
 
 
-def load_study(path) -> Study:
+def load_study(path: str | os.PathLike[str]) -> Study:
     """Read, check and expand the study file ``path``; InputError with the field path of any mistake."""
     name, text, origin = read_source(path)
     raw = parse_toml(text)

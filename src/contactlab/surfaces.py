@@ -21,11 +21,19 @@ array                          shape       meaning
 Triangles are wound counter-clockwise seen from outside.
 """
 
+from __future__ import annotations
+
 import functools
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import _icosphere, rotations, shapes
+
+if TYPE_CHECKING:
+    from .model import Model
+
 
 SPHERE_SUBDIVISIONS = 1  # an icosphere of 80 triangles
 CAPSULE_SEGMENTS = 8  # around the axis
@@ -77,7 +85,7 @@ def _solid_surface(model, kind, params):
     raise ValueError(f"shape {shapes.NAMES[kind]} has no solid surface")
 
 
-def scene_bounds(model) -> tuple:
+def scene_bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """(lower (3,), upper (3,)) [m] around the initial bodies, particles and bounded obstacles."""
     state = model.state()
     points = [state.body_position, state.particle_position]
@@ -107,7 +115,7 @@ def _plane_surface(params, centre, half_size):
     return corners, np.array([[0, 1, 2], [0, 2, 3]])
 
 
-def surface_arrays(model) -> dict:
+def surface_arrays(model: Model) -> dict[str, np.ndarray]:
     """The surface arrays of the module docstring, for ``model``."""
     vertices, triangles, vertex_start, triangle_start = [], [], [0], [0]
     for kind, params in zip(model.body_shape, model.body_params):
@@ -149,7 +157,7 @@ def surface_arrays(model) -> dict:
     }
 
 
-def posed_body_vertices(arrays, sample) -> np.ndarray:
+def posed_body_vertices(arrays: Mapping[str, Any], sample: int) -> np.ndarray:
     """World positions (V, 3) [m] of every body surface vertex at trajectory sample ``sample``.
 
     ``arrays``: a trajectory (the dict of ``simulate`` or an ``np.load`` of trajectory.npz).

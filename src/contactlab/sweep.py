@@ -17,10 +17,14 @@ and ``OUT/report.html`` with its plots (contactlab.sweep_report). A cell gives t
 numbers wherever it runs, bar its timings and its worker. The columns are in docs/sweep.md.
 """
 
+from __future__ import annotations
+
 import json
 import math
 import os
 import time
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from . import __version__, cluster, interrupts
 from .compare import TIMINGS
@@ -28,10 +32,24 @@ from .errors import InputError, SimulationDiverged
 from .record import atomic_path, make_folders, remove_empty
 from .study import Study, load_study, toml_value
 
+if TYPE_CHECKING:
+    import pandas as pd
+    from distributed import Client
+
+
 TIMING_COLUMNS = (*TIMINGS, "cell_seconds", "worker")  # what differs from one run of a cell to the next
 
 
-def run(study, out=None, *, client=None, scheduler=None, workers=None, progress=False, log=None):
+def run(
+    study: Study | str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    client: Client | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool = False,
+    log: Callable[[str], object] | None = None,
+) -> pd.DataFrame:
     """Run every cell of ``study`` (a Study or the path of a study file) not done already in
     ``out`` (default ``out/<study name>-sweep``) on ``client``, or on a cluster from
     :func:`contactlab.cluster.connect` (``scheduler``: an address; ``workers``: local worker
@@ -94,7 +112,7 @@ def _run_jobs(client, jobs, cells_folder, progress, say):
         _write_row(cells_folder, key, row)
 
 
-def run_cell(job) -> dict:
+def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     """One cell, on a worker: load its scene with its settings, simulate, measure. Returns its
     row; never raises for the run's own failure (status "diverged" or "error")."""
     from .closed_form import checks as closed_form_checks

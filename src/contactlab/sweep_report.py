@@ -14,22 +14,32 @@
 All written atomically into the sweep's folder, beside ``results.parquet``.
 """
 
+from __future__ import annotations
+
 import html
 import math
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 from .plots import STYLES, _figure, _save
 from .record import atomic_path
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from .study import Study
+
 
 METHOD_COLOURS = {"penalty": "tab:blue", "projection": "tab:orange", "impulse": "tab:green", "constraints": "tab:red"}
 METHOD_MARKERS = {"penalty": "o", "projection": "s", "impulse": "^", "constraints": "v"}  # coinciding runs show
 DT_AXIS = "simulation.dt"
 
 
-def accuracy(table):
+def accuracy(table: pd.DataFrame) -> tuple[str, pd.Series]:
     """(name of the error, a Series of it) for the rows of one scene: the closed-form error
     when any cell has one, else the deepest penetration [mm]."""
     if "closed_form_error" in table and table["closed_form_error"].notna().any():
@@ -39,7 +49,7 @@ def accuracy(table):
     return "max penetration (mm)", pd.Series(np.nan, index=table.index)
 
 
-def pareto_front(cost, error):
+def pareto_front(cost: ArrayLike, error: ArrayLike) -> list[int]:
     """Indices of the cells no other cell beats on both ``cost`` and ``error`` (n,), by cost."""
     order = np.lexsort((error, cost))
     front, best = [], math.inf
@@ -50,7 +60,7 @@ def pareto_front(cost, error):
     return front
 
 
-def observed_order(dt, error):
+def observed_order(dt: ArrayLike, error: ArrayLike) -> float | None:
     """The slope of log(error) against log(dt) by least squares (None under two usable points)."""
     dt, error = np.asarray(dt, dtype=float), np.asarray(error, dtype=float)
     usable = np.isfinite(dt) & np.isfinite(error) & (dt > 0) & (error > 0)
@@ -140,7 +150,7 @@ def _log_axes(ax, x, y):
             scale("log")
 
 
-def figures(study, table) -> dict:
+def figures(study: Study, table: pd.DataFrame) -> dict[str, Figure]:
     """name -> matplotlib Figure of every plot the study's table supports (see above)."""
     result = {}
     ok = _ok(table)
@@ -155,7 +165,7 @@ def figures(study, table) -> dict:
     return result
 
 
-def write_report(study, table, out) -> dict:
+def write_report(study: Study, table: pd.DataFrame, out: str) -> dict[str, str]:
     """The plots and ``report.html`` of ``study``'s ``table`` into ``out``; name -> path."""
     paths = _save(figures(study, table), os.path.join(out, "plots"))
     path = os.path.join(out, "report.html")

@@ -19,7 +19,10 @@ run of the process with :func:`set_threads`. The most threads there can be is fi
 Numba starts: ``NUMBA_NUM_THREADS`` (default: the number of cores).
 """
 
+from __future__ import annotations
+
 import os
+from typing import Any
 
 import numba
 
@@ -36,15 +39,15 @@ if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "3000")
 
 AUTO = "auto"
-_default = AUTO  # what ``threads=None`` means: set_threads changes it
+_default: int | str = AUTO  # what ``threads=None`` means: set_threads changes it
 
 
-def available_threads():
+def available_threads() -> int:
     """The most threads the compiled kernels can use in this process (NUMBA_NUM_THREADS)."""
     return int(numba.config.NUMBA_NUM_THREADS)
 
 
-def check_threads(threads, field="threads"):
+def check_threads(threads: int | str | None, field: str = "threads") -> int | str:
     """``threads`` as given to ``simulate`` or ``--threads``: "auto", or a whole number from 1 to
     ``available_threads()`` (None: the process default, see :func:`set_threads`). Returns
     "auto" or an int; raises InputError naming ``field`` otherwise."""
@@ -69,7 +72,7 @@ def check_threads(threads, field="threads"):
     return threads
 
 
-def set_threads(threads, field="threads"):
+def set_threads(threads: int | str | None, field: str = "threads") -> None:
     """Make ``threads`` ("auto" or a whole number, see :func:`check_threads`; None: "auto") the
     default of every later run in this process that does not name its own."""
     global _default
@@ -92,8 +95,14 @@ class ThreadChooser:
     """
 
     def __init__(
-        self, threads=AUTO, trial_steps=6, hold_steps=200, longest_hold=3200, give_up=1.5, too_short_to_matter=2e-4
-    ):
+        self,
+        threads: int | str | None = AUTO,
+        trial_steps: int = 6,
+        hold_steps: int = 200,
+        longest_hold: int = 3200,
+        give_up: float = 1.5,
+        too_short_to_matter: float = 2e-4,
+    ) -> None:
         self.mode = check_threads(threads)
         self.most = available_threads()
         self.trial_steps = trial_steps
@@ -102,11 +111,11 @@ class ThreadChooser:
         self.longest_hold = longest_hold
         self.give_up = give_up
         self.too_short = too_short_to_matter
-        self.counts = {}
-        self._plan = []  # thread counts of the steps to come (a trial), in order
-        self._timed = {}  # thread count -> step times of the running trial
+        self.counts: dict[int, int] = {}
+        self._plan: list[int] = []  # thread counts of the steps to come (a trial), in order
+        self._timed: dict[int, list[float]] = {}  # thread count -> step times of the running trial
         self._held = 0  # steps left at the current verdict
-        self._current = self.most if self.mode == AUTO else self.mode
+        self._current: int = self.most if self.mode == AUTO else self.mode  # type: ignore[assignment]  # an int
         self._verdict = None
         self._saved = numba.get_num_threads()
         if self.mode == AUTO and self.most > 1:
@@ -116,7 +125,7 @@ class ThreadChooser:
         self._plan = [1] * self.trial_steps + [self.most] * self.trial_steps
         self._timed = {self.most: [], 1: []}
 
-    def before_step(self, count=1):
+    def before_step(self, count: int = 1) -> None:
         """Set the thread count for the next step (or the next ``count`` steps, at most
         ``steps_at_this_count()``)."""
         if self._plan:
@@ -124,7 +133,7 @@ class ThreadChooser:
         numba.set_num_threads(self._current)
         self.counts[self._current] = self.counts.get(self._current, 0) + count
 
-    def steps_at_this_count(self):
+    def steps_at_this_count(self) -> int | None:
         """How many steps may run before the next report is due: 1 during a trial, the rest of
         the hold in "auto" mode, else any number (None)."""
         if self._plan:
@@ -133,7 +142,7 @@ class ThreadChooser:
             return max(1, self._held)
         return None
 
-    def after_steps(self, count, seconds):
+    def after_steps(self, count: int, seconds: float) -> None:
         """Report ``count`` steps just made in ``seconds`` [s] of stepping (one during a trial)."""
         if self._plan or count == 1:
             self.after_step(seconds / count)
@@ -143,7 +152,7 @@ class ThreadChooser:
             if self._held <= 0:
                 self._start_trial()
 
-    def after_step(self, seconds):
+    def after_step(self, seconds: float) -> None:
         """Report the step just made: ``seconds`` [s] of stepping."""
         if self._plan:
             count = self._plan.pop(0)
@@ -177,7 +186,7 @@ class ThreadChooser:
         """Put back the thread count the process had before the run."""
         numba.set_num_threads(self._saved)
 
-    def summary(self):
+    def summary(self) -> dict[str, Any]:
         """What the run used: {"setting": "auto" or N, "available": N, "steps_at": {count: steps}}."""
         return {
             "setting": self.mode,

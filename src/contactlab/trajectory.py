@@ -16,8 +16,13 @@ matplotlib, NumPy or a zip reader:
 given, so a trajectory passed from Python is held to the same rules as one read from disk.
 """
 
+from __future__ import annotations
+
+import os
 import zipfile
 import zlib
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from numpy.lib.npyio import NpzFile
@@ -67,7 +72,7 @@ STARTS = {"body_surface_vertex_start": "body_surface_vertices", "body_surface_tr
 _NOT_AN_ARCHIVE = (OSError, ValueError, EOFError, KeyError, NotImplementedError, zipfile.BadZipFile, zlib.error)
 
 
-def load_npz(path, field="OUT_DIR") -> dict:
+def load_npz(path: str | os.PathLike[str], field: str = "OUT_DIR") -> dict[str, np.ndarray]:
     """Every array of the NumPy archive at ``path`` (name -> ndarray), read without unpickling
     anything; InputError naming ``field`` when the file is not such an archive (random bytes,
     a truncated or corrupt zip, a bare .npy, object arrays)."""
@@ -90,7 +95,7 @@ def _reason(error):
     return text
 
 
-def check_arrays(arrays, field="arrays"):
+def check_arrays(arrays: Mapping[str, Any], field: str = "arrays") -> None:
     """InputError naming ``field`` unless the arrays of ``arrays`` named in SHAPES (those
     present) have their documented kinds and shapes, agree on the counts, index within range,
     and hold finite coordinates within MAX_COORDINATE and times in order."""
@@ -131,11 +136,11 @@ def _check_kind(array, name, kind, field):
         )
 
 
-def check_shapes(shapes, field="arrays"):
+def check_shapes(shapes: Mapping[str, tuple[int, ...]], field: str = "arrays") -> None:
     """InputError naming ``field`` unless the shapes ``shapes`` (name -> tuple, of the arrays
     of SHAPES present) have their documented dimensions and agree on the counts T, B, P, ...
     (checked before a file's samples are read, so that no read goes beyond them)."""
-    sizes = {}  # the counts (T, B, ...) met so far
+    sizes: dict[str, int] = {}  # the counts (T, B, ...) met so far
     for name, (_, shape) in SHAPES.items():
         if name in shapes:
             _check_shape(tuple(shapes[name]), name, shape, sizes, field)

@@ -10,12 +10,19 @@ squares and products the dynamics forms (m r², m v², 1/m) overflow or lose eve
 run would report NaN energies (see Limits in docs/scene-format.md).
 """
 
+from __future__ import annotations
+
 import os
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .errors import InputError
+
+_T = TypeVar("_T")
 
 # -- the magnitudes accepted ------------------------------------------------------------
 
@@ -30,7 +37,7 @@ class Quantity:
     largest: float
     smallest: float = 0.0
 
-    def check(self, values, name, positive=False):
+    def check(self, values: ArrayLike, name: str, positive: bool = False) -> None:
         """InputError naming ``name`` unless every one of ``values`` (a number or an array of
         finite numbers) is within the bounds (``smallest`` only where ``positive``)."""
         magnitudes = np.abs(np.asarray(values, dtype=float))
@@ -92,7 +99,14 @@ WHOLE_NUMBERS = (-(2**63), 2**63 - 1)  # whole numbers accepted: 64-bit, as TOML
 # -- numbers and arrays -------------------------------------------------------------------
 
 
-def number(value, name, minimum=None, strict=False, maximum=None, quantity=None) -> float:
+def number(
+    value: object,
+    name: str,
+    minimum: float | None = None,
+    strict: bool = False,
+    maximum: float | None = None,
+    quantity: Quantity | None = None,
+) -> float:
     """``value`` (an int or float, numpy's too, never a bool) as a finite float, at least
     ``minimum`` (greater than it where ``strict``), at most ``maximum``, and within
     ``quantity``'s magnitudes when one is given (its smallest where ``strict``: a value that
@@ -116,14 +130,14 @@ def number(value, name, minimum=None, strict=False, maximum=None, quantity=None)
     return value
 
 
-def time_step(dt, name="dt") -> float:
+def time_step(dt: object, name: str = "dt") -> float:
     """The time step ``dt`` [s] as a float greater than 0 and within :data:`TIME` (1 ns to
     10⁹ s): the one check of a time step, wherever one enters (``simulate``,
     ``penalty.suggest_stiffness``). InputError naming ``name`` as :func:`number` words it."""
     return number(dt, name, 0.0, strict=True, quantity=TIME)
 
 
-def run_length(dt, duration) -> tuple:
+def run_length(dt: object, duration: object) -> tuple[float, float, int]:
     """(dt [s], duration [s], steps) of a run: both times by :func:`time_step`, dt no longer
     than the duration, and at most :data:`MAX_STEPS` steps (duration / dt rounded, at least 1).
     InputError naming "dt" or "duration" (or "" when dt is longer than the duration)."""
@@ -142,7 +156,7 @@ def run_length(dt, duration) -> tuple:
     return dt, duration, max(1, int(round(duration / dt)))
 
 
-def whole_number(value, name, minimum) -> int:
+def whole_number(value: object, name: str, minimum: int) -> int:
     """``value`` unchanged if it is an int (a Python int, never a bool) of at least ``minimum``;
     InputError naming ``name`` "expected a whole number ≥ minimum" otherwise."""
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
@@ -150,7 +164,7 @@ def whole_number(value, name, minimum) -> int:
     return value
 
 
-def sixty_four_bits(value, name) -> int:
+def sixty_four_bits(value: int, name: str) -> int:
     """``value`` (an int) unchanged if it is within :data:`WHOLE_NUMBERS`, the 64 bits the
     compiled kernels take; InputError naming ``name`` otherwise."""
     if not WHOLE_NUMBERS[0] <= value <= WHOLE_NUMBERS[1]:
@@ -160,7 +174,7 @@ def sixty_four_bits(value, name) -> int:
     return value
 
 
-def one_of(value, name, values):
+def one_of(value: _T, name: str, values: Collection[str]) -> _T:
     """``value`` unchanged if it is one of ``values`` (a tuple of strings, or a dict whose
     keys are); InputError naming ``name`` "expected one of ..., found ..." otherwise."""
     if not isinstance(value, str) or value not in values:
@@ -168,14 +182,14 @@ def one_of(value, name, values):
     return value
 
 
-def check_choices(options, allowed):
+def check_choices(options: object, allowed: Mapping[str, Collection[str]]) -> None:
     """:func:`one_of` on each attribute of ``options`` named in ``allowed`` (name -> tuple of
     values): the choices of a method's Options."""
     for name, values in allowed.items():
         one_of(getattr(options, name), name, values)
 
 
-def check_counts(options, least):
+def check_counts(options: object, least: Mapping[str, int]) -> None:
     """:func:`whole_number` and :func:`sixty_four_bits` on each attribute of ``options`` named
     in ``least`` (name -> minimum): the counts of a method's Options (sweeps, passes, samples),
     which the compiled kernels take."""
@@ -183,7 +197,7 @@ def check_counts(options, least):
         sixty_four_bits(whole_number(getattr(options, name), name, minimum), name)
 
 
-def as_array(value, name, what) -> np.ndarray:
+def as_array(value: Any, name: str, what: str) -> np.ndarray:
     """``value`` as a float array of any shape; InputError naming ``name`` "expected ``what``"
     for strings, ragged lists and ints beyond the float range."""
     try:
@@ -192,7 +206,9 @@ def as_array(value, name, what) -> np.ndarray:
         raise InputError(name, f"expected {what}, found {value!r}") from None
 
 
-def vector(value, name, size=3, quantity=None, positive=False) -> np.ndarray:
+def vector(
+    value: Any, name: str, size: int = 3, quantity: Quantity | None = None, positive: bool = False
+) -> np.ndarray:
     """``value`` as a float array (size,) of finite numbers, each within ``quantity``'s
     magnitudes when one is given, and greater than 0 where ``positive``; InputError naming
     ``name`` otherwise."""
@@ -208,7 +224,7 @@ def vector(value, name, size=3, quantity=None, positive=False) -> np.ndarray:
     return array
 
 
-def unit_quaternion(value, name) -> np.ndarray:
+def unit_quaternion(value: Any, name: str) -> np.ndarray:
     """``value`` (w, x, y, z) as a unit quaternion (4,), components within :data:`DIRECTION`;
     InputError naming ``name`` for a zero one."""
     q = vector(value, name, 4, quantity=DIRECTION)
@@ -218,7 +234,7 @@ def unit_quaternion(value, name) -> np.ndarray:
     return q / norm
 
 
-def file_path(file) -> str:
+def file_path(file: object) -> str:
     """``file`` (a str or os.PathLike) as a path string; InputError("file", ...) otherwise."""
     if not isinstance(file, (str, os.PathLike)):
         raise InputError("file", f"expected the path of a mesh file (OBJ, STL or PLY), found {file!r}")
@@ -228,7 +244,7 @@ def file_path(file) -> str:
 # -- model sizes ----------------------------------------------------------------------------
 
 
-def derived_mass(mass, name):
+def derived_mass(mass: float, name: str) -> None:
     """InputError naming ``name`` (the density it came from) unless ``mass`` [kg] is within
     the bounds of :data:`MASS`."""
     if not MASS.smallest <= mass <= MASS.largest:
@@ -239,7 +255,7 @@ def derived_mass(mass, name):
         )
 
 
-def check_dynamic_count(count, field, what, already=0):
+def check_dynamic_count(count: int, field: str, what: str, already: int = 0) -> None:
     """InputError naming ``field`` when ``what`` (``count`` more bodies, particles or cloth
     vertices, after ``already``) would take a model past :data:`MAX_DYNAMIC`, before anything
     is built."""

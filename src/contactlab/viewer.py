@@ -27,6 +27,8 @@ What it shows (docs/viewer.md):
 * bodies coloured each its own colour, or by penetration (their deepest contact) or by speed.
 """
 
+from __future__ import annotations
+
 import contextlib
 import dataclasses
 import html
@@ -35,7 +37,9 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib import colormaps
@@ -45,6 +49,12 @@ from .errors import InputError
 from .record import TRAJECTORY, load_run, read_trajectory
 from .render import OBSTACLE_RGBA, PARTICLE_RGB, REQUIRED, nearest, scenery, spread_samples
 from .trajectory import check_arrays
+
+if TYPE_CHECKING:
+    from .model import Model
+    from .simulation import Run
+    from .state import State
+
 
 HOST = "127.0.0.1"  # the viewer listens on loopback only
 FRAME_SECONDS = 1.0 / 30.0  # s: how often the clock moves while playing
@@ -90,7 +100,7 @@ def _is_run(directory):
     return any(os.path.isfile(os.path.join(directory, name)) for name in (TRAJECTORY, "trajectory.npz"))
 
 
-def run_folders(directory, field="RUN_DIR"):
+def run_folders(directory: str, field: str = "RUN_DIR") -> list[str]:
     """The run folders ``directory`` stands for: itself when it holds a trajectory, else its
     sub-folders that do (a ``contactlab compare`` output: one per method, in the order of
     :data:`contactlab.methods.AVAILABLE`, then by name). InputError naming the folder otherwise."""
@@ -118,7 +128,7 @@ def run_folders(directory, field="RUN_DIR"):
     return [os.path.join(directory, name) for name in names]
 
 
-def model_of(summary, arrays):
+def model_of(summary: Mapping[str, Any], arrays: Mapping[str, Any]) -> Model | None:
     """The Model of a run, loaded again from its summary's ``source`` (scene and overrides), or
     from the built-in scene its summary names; None when neither loads or the model's body and
     particle counts differ from the trajectory's (the scene file changed since)."""
@@ -147,7 +157,7 @@ def _label(summary, fallback):
     return f"{summary['scene']} — {summary['method']}" if "scene" in summary else fallback
 
 
-def open_runs(sources, field="RUN_DIR"):
+def open_runs(sources: Iterable[str | os.PathLike[str] | Run], field: str = "RUN_DIR") -> list[Shown]:
     """A :class:`Shown` for every run of ``sources``: run folders, compare folders (every
     method's run), or :class:`contactlab.simulation.Run` objects (shown from their arrays,
     in memory or on disk). InputError for a folder that is not a run."""
@@ -192,7 +202,7 @@ class ContactView:
     body_depth: np.ndarray
 
 
-def state_at(arrays, sample):
+def state_at(arrays: Mapping[str, Any], sample: int) -> State:
     """The :class:`contactlab.state.State` recorded at trajectory sample ``sample``."""
     from .state import State
 
@@ -200,7 +210,7 @@ def state_at(arrays, sample):
     return State(float(row["time"][0]), *(np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]))
 
 
-def contacts_at(model, summary, state):
+def contacts_at(model: Model, summary: Mapping[str, Any], state: State) -> ContactView:
     """The :class:`ContactView` of ``state`` for ``model``; forces only when the summary names
     a method, its options and dt (else none)."""
     from . import methods
@@ -281,7 +291,7 @@ def _quiet():
     return contextlib.redirect_stdout(io.StringIO())
 
 
-def check_port(port):
+def check_port(port: int | None) -> int:
     """``port`` checked (None: any free one, 0 to the OS): a whole number from 1 to 65535 that
     nothing on 127.0.0.1 listens on, else InputError("--port", ...)."""
     if port is None:
@@ -309,7 +319,7 @@ class Viewer:
     ``gui["time"]`` [s], ``gui["play"]``, ``gui["speed"]``.
     """
 
-    def __init__(self, runs, port=None):
+    def __init__(self, runs: list[Shown], port: int | None = None) -> None:
         import viser
 
         requested = check_port(port)
@@ -488,7 +498,7 @@ class Viewer:
 
     # -- the clock -------------------------------------------------------------------------
 
-    def set_playing(self, playing):
+    def set_playing(self, playing: bool) -> None:
         """Start (True) or pause (False) the clock."""
         self.playing = bool(playing)
         self.gui["play"].label = "Pause" if self.playing else "Play"
@@ -502,7 +512,7 @@ class Viewer:
                 self.show_time(self.start if t > self.end else t)
             last = now
 
-    def show_time(self, t, from_slider=False):
+    def show_time(self, t: float, from_slider: bool = False) -> None:
         """Show every run at its sample nearest to time ``t`` [s] (clamped to the runs' span)."""
         t = float(min(max(t, self.start), self.end))
         with self.lock:
@@ -513,7 +523,7 @@ class Viewer:
                 self.shown = samples
                 self.redraw(moved=True)
 
-    def redraw(self, moved=False):
+    def redraw(self, moved: bool = False) -> None:
         """Draw the shown samples again (after a toggle, or ``moved``: new samples)."""
         with self.lock, self.server.atomic():
             self._legends()
@@ -611,13 +621,13 @@ class Viewer:
             handle.color = tuple(int(v) for v in value)
             handle.opacity = opacity
 
-    def nodes(self):
+    def nodes(self) -> list[str]:
         """The names of the scene's nodes (``/run0/bodies/3``, …), sorted."""
         return sorted(self.server.scene._handle_from_node_name)
 
     # -- serving ---------------------------------------------------------------------------
 
-    def stop(self):
+    def stop(self) -> None:
         """Stop serving (the page shows the connection lost)."""
         if not self._stopping.is_set():
             self._stopping.set()
@@ -628,7 +638,7 @@ class Viewer:
         with _quiet():
             self.server.stop()
 
-    def wait(self):
+    def wait(self) -> None:
         """Serve until Ctrl-C (or SIGTERM), then stop."""
         try:
             while True:
@@ -650,7 +660,7 @@ class Viewer:
         return f"Viewer({self.url}, {len(self.runs)} run{'s' if len(self.runs) != 1 else ''}; .stop() ends it)"
 
 
-def view(*sources, port=None, field="RUN_DIR"):
+def view(*sources: str | os.PathLike[str] | Run, port: int | None = None, field: str = "RUN_DIR") -> Viewer:
     """Open the viewer on ``sources`` (run folders, compare folders, Runs); returns the
     :class:`Viewer`, serving in the background at ``viewer.url`` until ``viewer.stop()``.
     port: a free one when None; InputError when it is in use or a folder is not a run."""

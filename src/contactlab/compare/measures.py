@@ -5,10 +5,20 @@ The columns and their units are defined in docs/compare.md; contactlab.sweep mea
 cells with :func:`metrics` too.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from .. import closed_form
 from ..plots import total_energy
+
+if TYPE_CHECKING:
+    from ..closed_form import Check
+    from ..model import Model
+    from .run import _Outcome
 
 TIMINGS = (
     "steps_per_second",
@@ -40,7 +50,7 @@ ROW_KEYS = (
 )
 
 
-def energy_scale(model, arrays) -> float:
+def energy_scale(model: Model, arrays: Mapping[str, Any]) -> float:
     """The energy [J] a drift is measured against: the larger of (a) the most energy the run
     ever held above the lowest potential energy it reached, max E − min V, and (b) the
     potential energy of the initial configuration above its own lowest mass,
@@ -56,7 +66,7 @@ def energy_scale(model, arrays) -> float:
     return max(held, stored)
 
 
-def momentum_drift(model, arrays):
+def momentum_drift(model: Model, arrays: Mapping[str, Any]) -> float | None:
     """‖P(T) − P(0) − M g T‖ [N·s], P = Σ m v over bodies and particles, M g T the impulse of
     gravity over the run. None when the scene has static obstacles or pinned particles: their
     forces are external, so momentum is not conserved and the number means nothing."""
@@ -88,7 +98,7 @@ def _rates(summary):
     }
 
 
-def metrics(model, arrays, summary) -> dict:
+def metrics(model: Model, arrays: Mapping[str, Any], summary: Mapping[str, Any]) -> dict[str, Any]:
     """The numbers of one run (keys as in comparison.csv; units in docs/compare.md)."""
     energy = total_energy(arrays)
     drift = float(energy[-1] - energy[0])
@@ -111,7 +121,7 @@ def metrics(model, arrays, summary) -> dict:
     }
 
 
-def expectation_verdict(checks) -> str:
+def expectation_verdict(checks: Sequence[Check]) -> str:
     """The scene's stated expectations on one run, in a word and a count: "pass (2 of 2)",
     "FAIL (1 of 2)" — met of those with a verdict —, or "n/a" when the scene states none."""
     judged = [check.passed for check in checks if check.passed is not None]
@@ -125,7 +135,7 @@ def _check_column(check) -> str:
     return f"{check.quantity} error ({check.unit})"
 
 
-def fill_rows(outcomes) -> None:
+def fill_rows(outcomes: Sequence[_Outcome]) -> None:
     """Give each outcome (contactlab.compare.run) its ``row``: identity, status, metrics, and one
     error column per check quantity any of them has (None where a run has no such check), and
     its ``checks`` (contactlab.closed_form.Check)."""
@@ -152,12 +162,12 @@ def fill_rows(outcomes) -> None:
         outcome.row = {key: outcome.row.get(key, errors.get(key)) for key in [*ROW_KEYS, *check_columns]}
 
 
-def blew_up(outcome) -> str:
+def blew_up(outcome: _Outcome) -> str:
     """The status of a run a health check stopped: "blew up at t = … s" (simulated time)."""
     return f"blew up at t = {outcome.failed_at:.4g} s" if outcome.failed_at is not None else "blew up"
 
 
-def dissipative(model) -> bool:
+def dissipative(model: Model) -> bool:
     """Whether the scene's contacts lose energy by design (restitution < 1 or friction > 0)."""
     used = np.concatenate([model.body_material, model.particle_material, model.obstacle_material]).astype(int)
     return bool(
@@ -165,13 +175,14 @@ def dissipative(model) -> bool:
     )
 
 
-def same_computation(outcomes) -> list:
+def same_computation(outcomes: Sequence[_Outcome]) -> list[tuple[list[str], float]]:
     """(method names, largest difference [m]) of each group of runs whose positions,
     orientations and particles agree within SAME_WITHIN at every sample: rounding, not physics."""
     ran = [outcome for outcome in outcomes if outcome.run is not None]
     series = {
         outcome.method: [
-            np.asarray(outcome.run.arrays[name]) for name in ("body_position", "body_orientation", "particle_position")
+            np.asarray(outcome.run.arrays[name])  # type: ignore[union-attr]  # the runs that ran
+            for name in ("body_position", "body_orientation", "particle_position")
         ]
         for outcome in ran
     }

@@ -7,16 +7,25 @@ style and script are the package's files report.css and report.js, inlined so th
 works from disk with no network.
 """
 
+from __future__ import annotations
+
 import csv
 import html
 import io
 import math
 import os
 import urllib.parse
+from collections.abc import Mapping, Sequence
 from importlib import resources
+from typing import TYPE_CHECKING, Any
 
 from ..plots import PLOTS
 from .measures import ROW_KEYS, blew_up, dissipative, same_computation
+
+if TYPE_CHECKING:
+    from ..closed_form import Check
+    from ..scene import Scene
+    from .run import _Outcome
 
 # ---- the table: cells built once, written as CSV, Markdown and HTML ------------------------------
 
@@ -115,12 +124,12 @@ def _check_cell(check):
     return f"{check.measured:.4g} ({check.error:+.2g}){word}"
 
 
-def table_cells(outcomes) -> tuple:
+def table_cells(outcomes: Sequence[_Outcome]) -> tuple[list[str], list[list[str]]]:
     """(headings, rows of cell texts) of the report table: the CSV's columns, with each check
     shown as "measured (error)" under a heading that carries its expected value."""
     headings = [heading for _, heading, _ in COLUMNS]
     cells = [[_show(outcome.row.get(key), show) for key, _, show in COLUMNS] for outcome in outcomes]
-    quantities = {}
+    quantities: dict[tuple[str, str], list[Check]] = {}
     for outcome in outcomes:
         for check in outcome.checks:
             quantities.setdefault((check.quantity, check.unit), []).append(check)
@@ -139,7 +148,7 @@ def _csv_value(value):
     return str(value)
 
 
-def csv_text(rows) -> str:
+def csv_text(rows: Sequence[Mapping[str, Any]]) -> str:
     """comparison.csv: a header of the rows' keys, then one line per method."""
     stream = io.StringIO()
     writer = csv.writer(stream, lineterminator="\n")
@@ -252,13 +261,13 @@ def _expectation_sentence(ran):
     return "The scene's stated expectations: " + "; ".join(parts) + "."
 
 
-def paragraph(scene, outcomes, skipped) -> str:
+def paragraph(scene: Scene, outcomes: Sequence[_Outcome], skipped: Mapping[str, str]) -> str:
     """The plain-words paragraph: fastest, least penetration, best energy, expectations met,
     failures and the methods left out (``skipped``: name → why)."""
     ran = [outcome for outcome in outcomes if outcome.run]
     sentences = []
     if ran:
-        duration = ran[0].run.arrays["time"][-1]
+        duration = ran[0].run.arrays["time"][-1]  # type: ignore[union-attr]  # a run that ran
         sentences.append(
             f"{len(outcomes)} method{'s' if len(outcomes) > 1 else ''} on {scene.name} "
             f"for {duration:.3g} s of simulated time."
@@ -366,7 +375,14 @@ def _check_lines(outcomes):
     return lines
 
 
-def markdown_text(scene, outcomes, summary_text, table, plot_paths, out) -> str:
+def markdown_text(
+    scene: Scene,
+    outcomes: Sequence[_Outcome],
+    summary_text: str,
+    table: tuple[list[str], list[list[str]]],
+    plot_paths: Mapping[str, str],
+    out: str,
+) -> str:
     """report.md: the paragraph, the table (``table``: :func:`table_cells`), the checks, each
     method's files, the comparison plots (``plot_paths``: name → path) and the notes; links
     relative to ``out``."""
@@ -474,7 +490,14 @@ def _method_details(outcome, out):
     )
 
 
-def html_text(scene, outcomes, summary_text, table, plot_paths, out) -> str:
+def html_text(
+    scene: Scene,
+    outcomes: Sequence[_Outcome],
+    summary_text: str,
+    table: tuple[list[str], list[list[str]]],
+    plot_paths: Mapping[str, str],
+    out: str,
+) -> str:
     """report.html: what report.md holds, with each method's video in a card, its plots folded
     away, and the style and script of report.css and report.js inlined."""
     check_items = "".join(

@@ -11,16 +11,21 @@ and if the comparison fails (other than a method's own divergence) the files and
 created are removed again.
 """
 
+from __future__ import annotations
+
 import os
 import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from .. import cluster
+from ..closed_form import Check
 from ..errors import InputError, SimulationDiverged
 from ..methods import AVAILABLE
 from ..plots import write_comparison_plots, write_plots
 from ..record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
-from ..scene import load_scene
+from ..scene import Scene, load_scene
 from ..simulation import Run, simulate
 from ..store import open_trajectory
 from . import report
@@ -41,16 +46,16 @@ class Comparison:
     (contactlab.closed_form.Check); files: method → {name: path} of what it wrote.
     """
 
-    rows: list
+    rows: list[dict[str, Any]]
     out: str
     report_html: str
     report_md: str
     csv: str
     summary_text: str
     scene: str = ""
-    skipped: dict = field(default_factory=dict)
-    checks: dict = field(default_factory=dict)
-    files: dict = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
+    checks: dict[str, list[Check]] = field(default_factory=dict)
+    files: dict[str, dict[str, str]] = field(default_factory=dict)
 
     def _repr_html_(self):  # Jupyter (contactlab.notebook): the table and the report's link
         from ..notebook import comparison_html
@@ -64,11 +69,11 @@ class _Outcome:
     set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
 
     method: str
-    scene: object
-    run: object = None
-    failure: str = None
-    failed_run: object = None  # the Run up to the blow-up (its trajectory streamed to disk)
-    failed_at: float = None  # s, simulated time of the blow-up when the message says it
+    scene: Scene
+    run: Run | None = None
+    failure: str | None = None
+    failed_run: Run | None = None  # the Run up to the blow-up (its trajectory streamed to disk)
+    failed_at: float | None = None  # s, simulated time of the blow-up when the message says it
     warnings: list = field(default_factory=list)
     media: dict = field(default_factory=dict)  # the video, GIF and still drawn of it
     checks: list = field(default_factory=list)
@@ -97,14 +102,14 @@ def _method_names(methods):
     return names, True
 
 
-def supports(method, scene) -> bool:
+def supports(method: str, scene: Scene) -> bool:
     """Whether ``method`` is meant to run ``scene``: every method supports every scene today.
     The hook for a method that cannot (besides this, a method whose set-up rejects the scene
     with an InputError is left out when the methods were not named)."""
     return True
 
 
-def run_method(job) -> dict:
+def run_method(job: Mapping[str, Any]) -> dict[str, Any]:
     """One method's run, here or on a Dask worker: load the scene for the method, simulate it
     streaming its trajectory to ``job["trajectory"]``, and (``job["video"]``: fps) render it
     beside that. Returns plain data: ``summary``, ``warnings`` [(category, message)], and
@@ -112,7 +117,7 @@ def run_method(job) -> dict:
     for a rendered one; ``input_error`` [field, message] for a scene the method refuses."""
     from ..render import render
 
-    result = {"warnings": []}
+    result: dict[str, Any] = {"warnings": []}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -131,7 +136,7 @@ def run_method(job) -> dict:
             )
             result["summary"] = run.summary
         except SimulationDiverged as error:
-            result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)
+            result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)  # type: ignore[union-attr]
         except InputError as error:
             return {"input_error": [error.field, error.message], "warnings": []}
     result["summary"]["source"] = scene.origin(job["overrides"])  # how to load the scene again (the viewer)
@@ -167,7 +172,7 @@ def _parallel(workers, scheduler, scenes, video) -> bool:
 
 def _run_all(
     scene_source, names, named, overrides, progress, allow_divergence, out, created, video, workers=None, scheduler=None
-):
+) -> tuple[list[_Outcome], dict[str, str], str]:
     """Load the scene for every method, then run it with each, streaming each trajectory to
     out/<method>/trajectory.h5 and rendering it (``video``: fps, or None), one after another
     or on a Dask cluster (:func:`_parallel`); folders and files noted in ``created``.
@@ -293,18 +298,18 @@ def _write_method(outcome, out, created):
 
 
 def compare(
-    scene_source,
-    methods=None,
-    out=None,
+    scene_source: str | os.PathLike[str],
+    methods: str | Sequence[str] | None = None,
+    out: str | os.PathLike[str] | None = None,
     *,
-    overrides=(),
-    duration=None,
-    video=True,
-    progress=False,
-    fps=30,
-    allow_divergence=False,
-    workers=None,
-    scheduler=None,
+    overrides: Sequence[str] = (),
+    duration: float | None = None,
+    video: bool = True,
+    progress: bool = False,
+    fps: int = 30,
+    allow_divergence: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> Comparison:
     """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
     the comparison into ``out`` (default ``out/<scene>-compare/``).

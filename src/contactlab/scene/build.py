@@ -10,13 +10,21 @@ body's ``path`` table to ``ModelBuilder.add_path`` (``bodies[1].path.times``) an
 entries to ``ModelBuilder.add_force`` (``forces[0].force``).
 """
 
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..builder import ModelBuilder
 from ..errors import InputError
 from ..validation import check_dynamic_count
+
+if TYPE_CHECKING:
+    from ..model import Model
 
 
 def _call(prefix, function, **arguments):
@@ -28,7 +36,7 @@ def _call(prefix, function, **arguments):
         raise InputError(field, error.message) from None
 
 
-def grid_offsets(array):
+def grid_offsets(array: Mapping[str, Any] | None) -> np.ndarray:
     """Offsets (count, 3) [m] of the copies an ``array`` table makes; one zero row without one."""
     if array is None:
         return np.zeros((1, 3))
@@ -45,7 +53,7 @@ def _resolve_files(entry, base):
     return dict(entry, file=str(Path(str(base)) / entry["file"]))
 
 
-def build_model(scene, base=None):
+def build_model(scene: Mapping[str, Any], base: str | os.PathLike[str] | None = None) -> Model:
     """The Model of a validated scene dict; ``file`` keys are relative to the folder ``base``."""
     builder = _call("simulation", ModelBuilder, gravity=scene["simulation"]["gravity"])
     for i, material in enumerate(scene["materials"]):

@@ -10,12 +10,16 @@ there, once: ``simulate`` takes them as they are) → check that the selected me
 available → build the Model. Every mistake is an InputError.
 """
 
+from __future__ import annotations
+
 import difflib
 import os
 import stat
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from .. import methods
 from ..errors import InputError
@@ -47,12 +51,12 @@ class Scene:
     dt: float = 0.004
     duration: float = 2.0
     integrator: str = "symplectic_euler"
-    method_options: dict = field(default_factory=dict)
+    method_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     description: str = ""
     source: str = ""
-    options: dict = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
 
-    def origin(self, overrides=()) -> dict:
+    def origin(self, overrides: Sequence[str] = ()) -> dict[str, Any]:
         """How to load this scene again from any folder, as a run's summary records it (its
         ``source``): ``{"scene": the built-in name or the file's absolute path, "overrides":
         the --set strings it was loaded with}``."""
@@ -71,7 +75,7 @@ def _builtin_names():
     return sorted(entry.name[: -len(".toml")] for entry in _builtin_dir().iterdir() if entry.name.endswith(".toml"))
 
 
-def builtin_scenes():
+def builtin_scenes() -> list[tuple[str, str]]:
     """(name, description) of every built-in scene, sorted by name."""
     result = []
     for name in _builtin_names():
@@ -127,7 +131,7 @@ def _read_file(path):
         ) from None
 
 
-def read_source(source):
+def read_source(source: str | os.PathLike[str]) -> tuple[str, str, str]:
     """(name, text, origin) of a built-in name or a path to a .toml file."""
     text_source = os.fspath(source) if isinstance(source, os.PathLike) else source
     if not isinstance(text_source, str) or not text_source:
@@ -173,7 +177,7 @@ def _method_options(scene):
     return built
 
 
-def load_scene(source, overrides=()) -> Scene:
+def load_scene(source: str | os.PathLike[str], overrides: str | Sequence[str] = ()) -> Scene:
     """Load a scene from a built-in name (``"bouncing_ball"``) or a path to a .toml file.
 
     overrides: ``"dotted.path=VALUE"`` strings (``--set``), applied before validation.

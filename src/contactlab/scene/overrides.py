@@ -8,6 +8,11 @@ is created (and then validated like any key, so a typo gets a "did you mean"); a
 the end of a list is an error.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
 from ..errors import InputError
 from .schema import path_join, show
 from .toml import TOMLDecodeError, loads
@@ -15,7 +20,7 @@ from .toml import TOMLDecodeError, loads
 FIELD = "--set"
 
 
-def parse_value(text):
+def parse_value(text: str) -> Any:
     """A TOML value, or the text itself where it is not one (InputError for one nested too deep)."""
     try:
         return loads("value = " + text, FIELD)["value"]
@@ -23,7 +28,7 @@ def parse_value(text):
         return text
 
 
-def parse_override(assignment):
+def parse_override(assignment: str) -> tuple[list[str | int], Any]:
     """``"a.0.b=VALUE"`` -> (["a", 0, "b"], value)."""
     if not isinstance(assignment, str) or "=" not in assignment:
         raise InputError(FIELD, f"expected PATH=VALUE (for example simulation.dt=0.001), found {show(assignment)}")
@@ -71,7 +76,7 @@ def _step(node, part, where, assignment, create_next=None):
     )
 
 
-def apply_overrides(raw, overrides):
+def apply_overrides(raw: dict[str, Any], overrides: str | Sequence[str]) -> dict[str, Any]:
     """Apply each ``PATH=VALUE`` string of ``overrides`` to ``raw`` in place; returns ``raw``."""
     if isinstance(overrides, str):
         overrides = [overrides]

@@ -15,9 +15,13 @@ Every error is an :class:`~contactlab.errors.InputError` whose field is the full
 offending value (``bodies[0].mass``) and whose message is one sentence.
 """
 
+from __future__ import annotations
+
 import difflib
 import math
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 from .. import methods
 from ..builder import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, check_shape_arguments
@@ -30,7 +34,7 @@ PLANNED_OBSTACLE_SHAPES = ()
 MAX_ARRAY_COPIES = 1_000_000
 
 
-def show(value, limit=60):
+def show(value: object, limit: int = 60) -> str:
     """A value for a message (TOML spelling, strings quoted as repr), shortened to about ``limit`` characters."""
     if isinstance(value, bool):
         text = "true" if value else "false"
@@ -47,7 +51,7 @@ def show(value, limit=60):
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def path_join(path, key):
+def path_join(path: str, key: str | int) -> str:
     """``bodies[0]`` + ``mass`` -> ``bodies[0].mass``; integers become ``[i]``."""
     if isinstance(key, int):
         return f"{path}[{key}]"
@@ -59,13 +63,22 @@ def _unit(unit):
 
 
 # -- kinds of value ---------------------------------------------------------------------------
+class Kind(Protocol):
+    """What a :class:`Key`'s kind does: ``check`` a value found at ``field`` (InputError naming it)
+    and return it normalized; ``describe`` it in a few words for the docs."""
+
+    def check(self, value: Any, field: str, unit: str = "") -> Any: ...
+
+    def describe(self) -> str: ...
+
+
 class Number:
     """A finite int or float (never a bool), returned as float; ``positive`` demands > 0."""
 
-    def __init__(self, positive=False):
+    def __init__(self, positive: bool = False) -> None:
         self.positive = positive
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(field, f"expected a number{_unit(unit)}, found {show(value)}")
         if not math.isfinite(value):
@@ -74,31 +87,31 @@ class Number:
             raise InputError(field, f"expected a number greater than 0{_unit(unit)}, found {show(value)}")
         return float(value)
 
-    def describe(self):
+    def describe(self) -> str:
         return "number > 0" if self.positive else "number"
 
 
 class Text:
     """A string on one line."""
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, str):
             raise InputError(field, f"expected a string, found {show(value)}")
         if "\n" in value or "\r" in value:
             raise InputError(field, f"expected a single line, found {show(value)}")
         return value
 
-    def describe(self):
+    def describe(self) -> str:
         return "string"
 
 
 class Choice:
     """One of ``values``; names in ``planned`` get a "not supported yet" error."""
 
-    def __init__(self, values, planned=(), what="value"):
+    def __init__(self, values: Collection[str], planned: Collection[str] = (), what: str = "value") -> None:
         self.values, self.planned, self.what = tuple(values), tuple(planned), what
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, str):
             raise InputError(field, f"expected one of {', '.join(self.values)}, found {show(value)}")
         if value in self.planned:
@@ -109,17 +122,17 @@ class Choice:
             raise InputError(field, f"unknown {self.what} {show(value)}{_did_you_mean(value, self.values)}")
         return value
 
-    def describe(self):
+    def describe(self) -> str:
         return " | ".join(self.values)
 
 
 class Vector:
     """A list of ``size`` numbers; ``whole`` demands integers ≥ 1."""
 
-    def __init__(self, size, whole=False):
+    def __init__(self, size: int, whole: bool = False) -> None:
         self.size, self.whole = size, whole
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         what = (
             f"a list of {self.size} whole numbers ≥ 1" if self.whole else f"a list of {self.size} numbers{_unit(unit)}"
         )
@@ -137,7 +150,7 @@ class Vector:
             raise InputError(field, f"expected finite numbers{_unit(unit)}, found {show(value)}")
         return [float(x) for x in value]
 
-    def describe(self):
+    def describe(self) -> str:
         return f"[{', '.join('n' if self.whole else 'x' for _ in range(self.size))}]"
 
 
@@ -146,12 +159,12 @@ class Points:
 
     point = Vector(3)
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, list) or not value:
             raise InputError(field, f"expected a non-empty list of [x, y, z] points{_unit(unit)}, found {show(value)}")
         return [self.point.check(p, f"{field}[{i}]", unit) for i, p in enumerate(value)]
 
-    def describe(self):
+    def describe(self) -> str:
         return "[[x, y, z], ...]"
 
 
@@ -160,7 +173,7 @@ class Times:
 
     number = Number()
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, list) or not value:
             raise InputError(field, f"expected a non-empty list of times{_unit(unit)}, found {show(value)}")
         times = [self.number.check(t, f"{field}[{i}]", unit) for i, t in enumerate(value)]
@@ -172,7 +185,7 @@ class Times:
                 )
         return times
 
-    def describe(self):
+    def describe(self) -> str:
         return "[t0, t1, ...]"
 
 
@@ -181,12 +194,12 @@ class Quaternions(Points):
 
     point = Vector(4)
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, list) or not value:
             raise InputError(field, f"expected a non-empty list of [w, x, y, z] quaternions, found {show(value)}")
         return [self.point.check(q, f"{field}[{i}]", unit) for i, q in enumerate(value)]
 
-    def describe(self):
+    def describe(self) -> str:
         return "[[w, x, y, z], ...]"
 
 
@@ -195,19 +208,19 @@ class VectorOrKeyframes:
 
     vector, points = Vector(3), Points()
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if isinstance(value, list) and value and all(isinstance(item, list) for item in value):
             return self.points.check(value, field, unit)
         return self.vector.check(value, field, unit)
 
-    def describe(self):
+    def describe(self) -> str:
         return "[x, y, z] or [[x, y, z], ...]"
 
 
 class Pinned:
     """Cloth vertices: a list of whole numbers ≥ 0 (vertex indices) and names, or one of them."""
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         items = value if isinstance(value, list) else [value]
         for i, item in enumerate(items):
             ok = isinstance(item, str) or (isinstance(item, int) and not isinstance(item, bool) and item >= 0)
@@ -220,7 +233,7 @@ class Pinned:
                 )
         return list(items)
 
-    def describe(self):
+    def describe(self) -> str:
         return "[index or name, ...]"
 
 
@@ -229,22 +242,22 @@ class Table:
     ``shape`` key picks a shape, the builder's table of which shape takes which key
     (contactlab.builder.BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
 
-    def __init__(self, keys, shapes=None):
+    def __init__(self, keys: Mapping[str, Key], shapes: Mapping[str, Sequence[str]] | None = None) -> None:
         self.keys, self.shapes = keys, shapes
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, dict):
             raise InputError(field, f"expected a table, found {show(value)}")
         return validate_table(value, self.keys, field, self.shapes)
 
-    def describe(self):
+    def describe(self) -> str:
         return "table"
 
 
 class GridArray(Table):
     """The ``array`` table of a body or particle group: copies on a grid (see .build)."""
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         array = super().check(value, field, unit)
         copies = math.prod(array["count"])
         if copies > MAX_ARRAY_COPIES:
@@ -265,16 +278,16 @@ class GridArray(Table):
 class TableList:
     """An array of tables (``[[name]]`` in TOML), each checked as ``Table``."""
 
-    def __init__(self, keys, shapes=None):
+    def __init__(self, keys: Mapping[str, Key], shapes: Mapping[str, Sequence[str]] | None = None) -> None:
         self.table = Table(keys, shapes)
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
             short = field.rsplit(".", 1)[-1]
             raise InputError(field, f"expected an array of tables written [[{short}]], found {show(value)}")
         return [self.table.check(item, f"{field}[{i}]") for i, item in enumerate(value)]
 
-    def describe(self):
+    def describe(self) -> str:
         return "array of tables"
 
 
@@ -284,7 +297,7 @@ class MethodTables:
 
     names = methods.AVAILABLE
 
-    def check(self, value, field, unit=""):
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, dict):
             raise InputError(field, f"expected tables [method.NAME], found {show(value)}")
         for name, table in value.items():
@@ -296,7 +309,7 @@ class MethodTables:
                 raise InputError(path_join(field, name), f"expected a table of options, found {show(table)}")
         return {name: dict(table) for name, table in value.items()}
 
-    def describe(self):
+    def describe(self) -> str:
         return "tables"
 
 
@@ -304,14 +317,14 @@ class MethodTables:
 class Key:
     """One key of a table: its kind, unit, default and, for shape-specific keys, the shapes."""
 
-    kind: object
+    kind: Kind
     default: object = None  # None: left to the builder (or absent)
     unit: str = ""
     required: bool = False
-    shapes: tuple = ()  # non-empty: only these shapes take the key
+    shapes: tuple[str, ...] = ()  # non-empty: only these shapes take the key
 
 
-def taking(name, table):
+def taking(name: str, table: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
     """The shapes of ``table`` (contactlab.builder's BODY_ or OBSTACLE_SHAPE_ARGUMENTS) that
     take the argument ``name``: the builder says which shape takes which key, once."""
     return tuple(shape for shape, names in table.items() if name in names)
@@ -448,7 +461,12 @@ TABLES = {
 }
 
 
-def validate_table(table, keys, path, shapes=None):
+def validate_table(
+    table: Mapping[str, Any],
+    keys: Mapping[str, Key],
+    path: str,
+    shapes: Mapping[str, Sequence[str]] | None = None,
+) -> dict[str, Any]:
     """Check ``table`` against ``keys``; a normalized dict with every key (None where absent).
     ``shapes`` (see Table): the table's ``shape`` key picks which shape-specific keys it takes."""
     shape_key = "shape" if shapes is not None else None
@@ -474,14 +492,14 @@ def validate_table(table, keys, path, shapes=None):
             continue
         if key.shapes and shape not in key.shapes:
             try:
-                check_shape_arguments(shape, shapes, [name])
+                check_shape_arguments(shape, shapes, [name])  # type: ignore[arg-type]  # a shape key: shapes given
             except InputError as error:
                 raise InputError(path_join(path, name), error.message) from None
         result[name] = key.kind.check(table[name], path_join(path, name), key.unit)
     return result
 
 
-def validate(raw):
+def validate(raw: object) -> dict[str, Any]:
     """The whole scene: a normalized dict with the keys of ``TOP``; InputError on the first mistake."""
     if not isinstance(raw, dict):
         raise InputError("", f"expected a TOML document (a table), found {show(raw)}")

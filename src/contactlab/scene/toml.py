@@ -7,8 +7,11 @@ and integers outside the 64-bit range the TOML specification allows (Python woul
 size, and a thousand-digit ``mass`` cannot become a float).
 """
 
+from __future__ import annotations
+
 import re
 import sys
+from typing import Any
 
 from ..errors import InputError
 from ..validation import WHOLE_NUMBERS
@@ -25,7 +28,7 @@ MAX_NESTING = 32  # tables and arrays inside one another, at most
 _WHERE = re.compile(r"\s*\((?:at line (\d+), column (\d+)|at end of document)\)\s*$")
 
 
-def loads(text, field=""):
+def loads(text: str, field: str = "") -> dict[str, Any]:
     """The TOML document ``text`` as a dict; TOMLDecodeError on a syntax error, InputError
     naming ``field`` for nesting deeper than MAX_NESTING or an integer beyond 64 bits."""
     try:
@@ -40,7 +43,7 @@ def loads(text, field=""):
     return document
 
 
-def parse_toml(text):
+def parse_toml(text: str) -> dict[str, Any]:
     """The document as a dict; InputError with field "line L, column C" on a syntax error."""
     try:
         return loads(text)
