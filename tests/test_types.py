@@ -22,8 +22,9 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "src" / "contactlab"
 # the share of the package's public functions fully annotated when this test was last raised: it
-# may grow, never fall (methods/, lcp/, dynamics/ and collision/ are annotated on their own)
-LEAST_SHARE = 0.574
+# may grow, never fall (what is left: methods/velocity_loop.py, methods/penalty.py,
+# collision/capsule.py and collision/narrow_phase.py)
+LEAST_SHARE = 0.86
 
 
 def _checked_paths():
@@ -91,7 +92,12 @@ def test_the_package_keeps_its_annotated_share():
 
 
 def test_what_contactlab_exports_is_annotated():
-    # ModelBuilder, Model, State, Contacts, Run (their public methods), simulate, set_threads, the errors
+    # ModelBuilder, Model, State, Contacts, Run (their public methods), simulate, set_threads, the errors, collide
     exported = ["builder.py", "model.py", "state.py", "contacts.py", "simulation.py", "threads.py", "errors.py"]
     missing = [name for file in exported for name, annotated in _public_functions(PACKAGE / file) if not annotated]
+    missing += [
+        name
+        for name, annotated in _public_functions(PACKAGE / "collision" / "__init__.py")
+        if name.endswith(" collide") and not annotated
+    ]
     assert not missing, "not fully annotated: " + ", ".join(missing)
