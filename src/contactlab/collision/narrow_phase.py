@@ -15,7 +15,8 @@ from numba.extending import overload
 
 from .. import shapes
 from .box_box import box_box
-from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
+from .capsule import capsule_capsule, capsule_plane, sphere_capsule
+from .capsule_box import capsule_box
 from .capsule_convex import capsule_convex
 from .contact_output import write_contact
 from .convex import convex_plane, hull_view, sphere_convex
