@@ -32,16 +32,14 @@ import pytest
 from conftest import random_rotations
 
 from contactlab.collision.capsule import (
-    CAPSULE_BOX_CROSS_FEATURE,
-    CAPSULE_BOX_EDGE_FEATURE,
     PARALLEL_SIN,
-    capsule_box,
     capsule_capsule,
     capsule_plane,
-    segment_box_closest,
     segment_closest_parameters,
     sphere_capsule,
 )
+from contactlab.collision.capsule_box import CAPSULE_BOX_CROSS_FEATURE, CAPSULE_BOX_EDGE_FEATURE, capsule_box
+from contactlab.collision.segment_box import segment_box_closest
 
 I3 = np.eye(3)
 RANDOM_COUNT = 2000

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from contactlab.collision.capsule import capsule_box
+from contactlab.collision.capsule_box import capsule_box
 from contactlab.collision.capsule_convex import CAPSULE_CONVEX_CROSS_FEATURE, capsule_convex
 from contactlab.hulls import box_as_hull, build_hull, hull_arrays, pack_hulls
 

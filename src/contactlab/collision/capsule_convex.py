@@ -62,9 +62,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .capsule import BOX_REL_EPS, CROSS_AXIS_EPS, PARALLEL_SIN, write_patch_ends
+from .capsule import PARALLEL_SIN
+from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
 from .contact_output import write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
+from .segment_box import write_patch_ends
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255

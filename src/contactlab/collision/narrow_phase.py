@@ -6,6 +6,14 @@ for speculative use), and ``point`` midway between the two surfaces. It returns 
 contacts it wrote (at most ``MAX_PER_PAIR``) and a feature number for each, which makes the
 contact id persistent. Shapes are described as in :mod:`contactlab.shapes`: a kind, a row of
 4 parameters, a centre and a rotation matrix (body → world).
+
+This module holds the dispatcher (``generate_contacts`` over a scene's pairs, ``collide_pair``
+for one) and what it needs (``supported``, the hull store); the pair routines live in a module
+per family (:mod:`~contactlab.collision.primitive_pairs` for spheres and boxes against planes,
+spheres and boxes, :mod:`~contactlab.collision.capsule`, :mod:`~contactlab.collision.capsule_box`,
+:mod:`~contactlab.collision.box_box`, :mod:`~contactlab.collision.convex`,
+:mod:`~contactlab.collision.convex_convex`, :mod:`~contactlab.collision.capsule_convex`), and
+which of them a scene needs in :mod:`~contactlab.collision.families`.
 """
 
 import numpy as np
@@ -15,152 +23,23 @@ from numba.extending import overload
 
 from .. import shapes
 from .box_box import box_box
-from .capsule import capsule_box, capsule_capsule, capsule_plane, sphere_capsule
+from .capsule import capsule_capsule, capsule_plane, sphere_capsule
+from .capsule_box import capsule_box
 from .capsule_convex import capsule_convex
-from .contact_output import write_contact
 from .convex import convex_plane, hull_view, sphere_convex
 from .convex_convex import convex_convex
+from .families import ALL_FAMILIES, BOX, CAPSULE, CONVEX, FAMILIES, PLANE, POINT, SPHERE
+from .families import families_of as families_of  # re-exported: the narrow phase's callers name them here
+from .families import family as family
+from .families import needs_hulls as needs_hulls
+from .families import scene_families as scene_families
+from .primitive_pairs import box_plane, sphere_box, sphere_plane, sphere_sphere
 
 MAX_PER_PAIR = 8
 
-SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (
-    shapes.SPHERE,
-    shapes.BOX,
-    shapes.PLANE,
-    shapes.POINT,
-    shapes.CAPSULE,
-    shapes.CONVEX,
-)
-
 
 @njit(cache=True)
-def sphere_plane(center, radius, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
-    """Sphere (or particle of this radius) A against the plane B = (n, offset).
-
-    Written in scalars (no temporary arrays): it runs once per sphere and wall every step."""
-    nx, ny, nz = plane[0], plane[1], plane[2]
-    distance = center[0] * nx + center[1] * ny + center[2] * nz - plane[3]
-    depth = radius - distance
-    if depth < -margin:
-        return 0
-    back = 0.5 * (radius + distance)  # the point midway between the two surfaces
-    write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-        (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back),
-        (nx, ny, nz),
-        depth,
-        0,
-    )
-    return 1
-
-
-@njit(cache=True)
-def sphere_sphere(center_a, radius_a, center_b, radius_b, margin, out_point, out_normal, out_depth, out_feature, slot):
-    """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
-
-    Written in scalars (no temporary arrays): a pile makes thousands of these pairs a step."""
-    dx, dy, dz = center_a[0] - center_b[0], center_a[1] - center_b[1], center_a[2] - center_b[2]
-    distance = np.sqrt(dx * dx + dy * dy + dz * dz)
-    depth = radius_a + radius_b - distance
-    if depth < -margin:
-        return 0
-    if distance > 1e-12:
-        nx, ny, nz = dx / distance, dy / distance, dz / distance
-    else:  # concentric: any direction separates; pick +z
-        nx, ny, nz = 0.0, 0.0, 1.0
-    # midway between the surfaces: ½ (centre_a − r_a n + centre_b + r_b n)
-    back = 0.5 * (radius_b - radius_a)
-    write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-        (
-            0.5 * (center_a[0] + center_b[0]) + back * nx,
-            0.5 * (center_a[1] + center_b[1]) + back * ny,
-            0.5 * (center_a[2] + center_b[2]) + back * nz,
-        ),
-        (nx, ny, nz),
-        depth,
-        0,
-    )
-    return 1
-
-
-@njit(cache=True)
-def box_plane(center, rotation, half_extents, plane, margin, out_point, out_normal, out_depth, out_feature, slot):
-    """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
-    normal = plane[:3]
-    count = 0
-    for corner in range(8):
-        sx = 1.0 if corner & 1 else -1.0
-        sy = 1.0 if corner & 2 else -1.0
-        sz = 1.0 if corner & 4 else -1.0
-        local = np.array([sx * half_extents[0], sy * half_extents[1], sz * half_extents[2]])
-        x = center + rotation @ local
-        distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
-        if -distance >= -margin:
-            write_contact(
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot + count,
-                x - normal * (0.5 * distance),
-                normal,
-                -distance,
-                corner,
-            )
-            count += 1
-    return count
-
-
-@njit(cache=True)
-def sphere_box(
-    center, radius, box_center, box_rotation, half_extents, margin, out_point, out_normal, out_depth, out_feature, slot
-):
-    """Sphere A (or particle) against box B, by the closest point of the box to the centre.
-
-    A centre inside the box is pushed out through the nearest face (feature = 1 + face);
-    outside, the feature is 0.
-    """
-    local = box_rotation.T @ (center - box_center)
-    closest = np.minimum(np.maximum(local, -half_extents), half_extents)
-    delta = local - closest
-    distance = np.sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2])
-    if distance > 1e-12:
-        normal_local = delta / distance
-        depth = radius - distance
-        feature = 0
-    else:
-        # inside: leave through the face with the least penetration
-        gaps = half_extents - np.abs(local)
-        axis = np.argmin(gaps)
-        normal_local = np.zeros(3)
-        sign = 1.0 if local[axis] >= 0.0 else -1.0
-        normal_local[axis] = sign
-        closest = local.copy()
-        closest[axis] = sign * half_extents[axis]
-        depth = radius + gaps[axis]
-        feature = 1 + 2 * axis + (1 if sign > 0 else 0)
-    if depth < -margin:
-        return 0
-    normal = box_rotation @ normal_local
-    surface_b = box_center + box_rotation @ closest
-    surface_a = center - normal * radius
-    write_contact(
-        out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature
-    )
-    return 1
-
-
-@njit(cache=True)
-def supported(kind_a, kind_b):
+def supported(kind_a: int, kind_b: int) -> bool:
     """Whether a contact routine exists for this pair (order does not matter)."""
     if kind_a > kind_b:
         kind_a, kind_b = kind_b, kind_a
@@ -171,7 +50,7 @@ def supported(kind_a, kind_b):
     return True
 
 
-def empty_hull_store():
+def empty_hull_store() -> tuple:
     """A hull store with no hulls, for pairs that need none (see Model.hull_store).
 
     Read-only like a Model's, so the compiled dispatch is the same one (Numba types read-only
@@ -191,83 +70,6 @@ def empty_hull_store():
     for array in store:
         array.flags.writeable = False
     return store
-
-
-# -- which pair routines a scene needs ------------------------------------------------------
-#
-# Compiling every pair routine costs some 30 s on a cold cache, most of it for pairs a scene
-# never has (box–box and capsule–box alone are 10 s; a ball on the floor needs sphere_plane
-# only). So the dispatch below is specialised on a *families* tuple, one entry per routine in
-# FAMILIES: ``True`` where the scene can have such a pair, ``None`` where it cannot. Numba types
-# the two apart, and the dispatch's branches for the ``None`` entries are dropped before it is
-# typed, so their routines are never compiled. Each distinct tuple is one cached
-# specialization (a scene of spheres and boxes on planes: four routines).
-
-FAMILIES = (
-    "sphere_sphere",
-    "sphere_capsule",
-    "sphere_box",
-    "sphere_plane",
-    "capsule_capsule",
-    "capsule_box",
-    "capsule_plane",
-    "box_box",
-    "box_plane",
-    "sphere_convex",
-    "capsule_convex",
-    "convex_convex",
-    "convex_plane",
-)
-HULL_FAMILIES = frozenset(("sphere_convex", "capsule_convex", "convex_convex", "convex_plane"))  # need hull_store
-ALL_FAMILIES = (True,) * len(FAMILIES)  # every routine (collide_pair; tests)
-
-_CLASS = {SPHERE: "sphere", POINT: "sphere", CAPSULE: "capsule", BOX: "box", CONVEX: "convex", PLANE: "plane"}
-_ROUTINE = {
-    ("sphere", "sphere"): "sphere_sphere",
-    ("sphere", "capsule"): "sphere_capsule",
-    ("sphere", "box"): "sphere_box",
-    ("sphere", "plane"): "sphere_plane",
-    ("capsule", "capsule"): "capsule_capsule",
-    ("capsule", "box"): "capsule_box",
-    ("capsule", "plane"): "capsule_plane",
-    ("box", "box"): "box_box",
-    ("box", "plane"): "box_plane",
-    ("sphere", "convex"): "sphere_convex",
-    ("capsule", "convex"): "capsule_convex",
-    ("box", "convex"): "convex_convex",
-    ("convex", "convex"): "convex_convex",
-    ("convex", "plane"): "convex_plane",
-}
-
-
-def family(kind_a, kind_b):
-    """The name in FAMILIES of the routine for a pair of shape kinds, in either order; None for
-    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_contacts)."""
-    a, b = _CLASS.get(int(kind_a)), _CLASS.get(int(kind_b))
-    return _ROUTINE.get((a, b)) or _ROUTINE.get((b, a))
-
-
-def families_of(kind_pairs):
-    """The families tuple (see FAMILIES) of an iterable of (kind_a, kind_b) pairs."""
-    present = {family(a, b) for a, b in kind_pairs}
-    return tuple(True if name in present else None for name in FAMILIES)
-
-
-def scene_families(dynamic_kinds, static_kinds):
-    """The families tuple of a scene: every pair of two dynamic colliders (two of one kind only
-    if there are two such colliders) and of a dynamic collider with a static one.
-
-    dynamic_kinds: (B + P,) the bodies' kinds and POINT per particle; static_kinds: (O,)."""
-    kinds, counts = np.unique(np.asarray(dynamic_kinds, dtype=np.int64), return_counts=True)
-    statics = set(np.asarray(static_kinds, dtype=np.int64).tolist())
-    pairs = [(a, b) for i, a in enumerate(kinds.tolist()) for b in kinds[i:].tolist() if a != b or counts[i] > 1]
-    pairs += [(a, b) for a in kinds.tolist() for b in statics]
-    return families_of(pairs)
-
-
-def needs_hulls(families):
-    """Whether a families tuple includes a routine that reads the hull store."""
-    return any(flag is not None and name in HULL_FAMILIES for name, flag in zip(FAMILIES, families))
 
 
 @njit(cache=True)
@@ -638,22 +440,22 @@ def _pairs_loop_for(
 
 @njit(cache=True)
 def collide_pair(
-    kind_a,
-    params_a,
-    center_a,
-    rotation_a,
-    kind_b,
-    params_b,
-    center_b,
-    rotation_b,
-    margin,
-    hull_store,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+    kind_a: int,
+    params_a: np.ndarray,
+    center_a: np.ndarray,
+    rotation_a: np.ndarray,
+    kind_b: int,
+    params_b: np.ndarray,
+    center_b: np.ndarray,
+    rotation_b: np.ndarray,
+    margin: float,
+    hull_store: tuple,
+    out_point: np.ndarray,
+    out_normal: np.ndarray,
+    out_depth: np.ndarray,
+    out_feature: np.ndarray,
+    slot: int,
+) -> int:
     """Contacts of shape A against shape B written from ``slot`` on; returns their count
     (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and nothing else. Every
     routine is compiled in: the scene-wide narrow phase (``generate_contacts``) compiles only
@@ -693,7 +495,16 @@ def collide_pair(
 
 
 @njit(cache=True)
-def generate_contacts(pairs, kinds, params, centers, rotations_, reach, hull_store, families):
+def generate_contacts(
+    pairs: np.ndarray,
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rotations_: np.ndarray,
+    reach: np.ndarray,
+    hull_store: tuple | None,
+    families: tuple,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The narrow phase over ``pairs`` (K, 2) of global colliders: (point (C, 3) [m], normal
     (C, 3), depth (C,) [m], feature (C,), owner (C,)) of every contact, owner being its
     pair's row, with gaps down to ``reach`` (K,) [m] of its pair; contacts in pair order.

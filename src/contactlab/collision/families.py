@@ -1,0 +1,97 @@
+"""Which pair routines a scene needs: the pair families (``FAMILIES``), the family of a pair of
+shape kinds, and the families tuple of a scene that the compiled narrow phase
+(:mod:`contactlab.collision.narrow_phase`, ``generate_contacts``) is specialised on.
+"""
+
+from collections.abc import Iterable
+
+import numpy as np
+
+from .. import shapes
+
+SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (
+    shapes.SPHERE,
+    shapes.BOX,
+    shapes.PLANE,
+    shapes.POINT,
+    shapes.CAPSULE,
+    shapes.CONVEX,
+)
+
+
+# -- which pair routines a scene needs ------------------------------------------------------
+#
+# Compiling every pair routine costs some 30 s on a cold cache, most of it for pairs a scene
+# never has (box–box and capsule–box alone are 10 s; a ball on the floor needs sphere_plane
+# only). So the dispatch (``narrow_phase.generate_contacts``) is specialised on a *families*
+# tuple, one entry per routine in FAMILIES: ``True`` where the scene can have such a pair,
+# ``None`` where it cannot. Numba types the two apart, and the dispatch's branches for the
+# ``None`` entries are dropped before it is typed, so their routines are never compiled. Each
+# distinct tuple is one cached specialization (a scene of spheres and boxes on planes: four
+# routines).
+
+FAMILIES = (
+    "sphere_sphere",
+    "sphere_capsule",
+    "sphere_box",
+    "sphere_plane",
+    "capsule_capsule",
+    "capsule_box",
+    "capsule_plane",
+    "box_box",
+    "box_plane",
+    "sphere_convex",
+    "capsule_convex",
+    "convex_convex",
+    "convex_plane",
+)
+HULL_FAMILIES = frozenset(("sphere_convex", "capsule_convex", "convex_convex", "convex_plane"))  # need hull_store
+ALL_FAMILIES = (True,) * len(FAMILIES)  # every routine (collide_pair; tests)
+
+_CLASS = {SPHERE: "sphere", POINT: "sphere", CAPSULE: "capsule", BOX: "box", CONVEX: "convex", PLANE: "plane"}
+_ROUTINE = {
+    ("sphere", "sphere"): "sphere_sphere",
+    ("sphere", "capsule"): "sphere_capsule",
+    ("sphere", "box"): "sphere_box",
+    ("sphere", "plane"): "sphere_plane",
+    ("capsule", "capsule"): "capsule_capsule",
+    ("capsule", "box"): "capsule_box",
+    ("capsule", "plane"): "capsule_plane",
+    ("box", "box"): "box_box",
+    ("box", "plane"): "box_plane",
+    ("sphere", "convex"): "sphere_convex",
+    ("capsule", "convex"): "capsule_convex",
+    ("box", "convex"): "convex_convex",
+    ("convex", "convex"): "convex_convex",
+    ("convex", "plane"): "convex_plane",
+}
+
+
+def family(kind_a: int, kind_b: int) -> str | None:
+    """The name in FAMILIES of the routine for a pair of shape kinds, in either order; None for
+    a pair this narrow phase has no routine for (two planes; meshes, see collision.mesh_contacts)."""
+    a, b = _CLASS.get(int(kind_a)), _CLASS.get(int(kind_b))
+    return _ROUTINE.get((a, b)) or _ROUTINE.get((b, a))
+
+
+def families_of(kind_pairs: Iterable[tuple[int, int]]) -> tuple:
+    """The families tuple (see FAMILIES) of an iterable of (kind_a, kind_b) pairs."""
+    present = {family(a, b) for a, b in kind_pairs}
+    return tuple(True if name in present else None for name in FAMILIES)
+
+
+def scene_families(dynamic_kinds: np.ndarray, static_kinds: np.ndarray) -> tuple:
+    """The families tuple of a scene: every pair of two dynamic colliders (two of one kind only
+    if there are two such colliders) and of a dynamic collider with a static one.
+
+    dynamic_kinds: (B + P,) the bodies' kinds and POINT per particle; static_kinds: (O,)."""
+    kinds, counts = np.unique(np.asarray(dynamic_kinds, dtype=np.int64), return_counts=True)
+    statics = set(np.asarray(static_kinds, dtype=np.int64).tolist())
+    pairs = [(a, b) for i, a in enumerate(kinds.tolist()) for b in kinds[i:].tolist() if a != b or counts[i] > 1]
+    pairs += [(a, b) for a in kinds.tolist() for b in statics]
+    return families_of(pairs)
+
+
+def needs_hulls(families: tuple) -> bool:
+    """Whether a families tuple includes a routine that reads the hull store."""
+    return any(flag is not None and name in HULL_FAMILIES for name, flag in zip(FAMILIES, families))

@@ -1,0 +1,423 @@
+"""The stages every compiled step shares, and the loop's data (loops L1–L3).
+
+The arrays ``run`` (:mod:`contactlab.methods.velocity_loop`) steps — the model's (LoopModel),
+the settings as plain numbers (LoopSettings), the state's six arrays (Motion) and the recording
+(Samples) — and the stages each method's compiled step (:mod:`contactlab.methods.loop_steps`)
+calls: free motion, how far each collider sweeps, detection with kept manifolds, the contact
+rows, the sequential-impulse sweeps, and after a step the state stored, checked and recorded.
+They live apart from the steps so that each step reads as its loop on the slide.
+
+Numba caches each of these next to this file, but ``run`` compiles them in and is refreshed
+only when ``velocity_loop.py`` changes: after editing a stage here, delete the caches
+(README, "For developers").
+
+Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
+colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
+contactlab.contacts.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .. import rotations
+from ..collision import assemble_contacts, candidate_pairs, collider_poses
+from ..collision.manifolds import reuse_or_generate
+from ..collision.narrow_phase import generate_contacts
+from ..contacts import ContactArrays
+from ..diagnostics import gravitational, kinetic
+from ..dynamics.integrators import gyroscopic_midpoint
+from .sequential import (
+    PARALLEL_MIN_CONTACTS,
+    SWEEP_GROUPS,
+    ContactRows,
+    contact_rows,
+    solve_sequential_impulses,
+    split_into_slabs,
+)
+
+LoopModel = namedtuple(
+    "LoopModel",
+    (
+        "gravity",  # (3,) m/s²
+        "body_inverse_mass",  # (B,) 1/kg
+        "body_inertia",  # (B, 3) principal moments, kg m²
+        "body_inverse_inertia",  # (B, 3) 1/(kg m²)
+        "body_mass",  # (B,) kg
+        "particle_mass",  # (P,) kg
+        "particle_inverse_mass",  # (P,) 1/kg, 0 pinned
+        "particle_pinned",  # (P,) bool
+        "kinds",
+        "params",  # (N,) int64, (N, 4): the colliders (Model.collider_table)
+        "radius",  # (N,) bounding radii [m]
+        "materials",  # (N,) int
+        "obstacle_position",  # (O, 3) m
+        "obstacle_rotation",  # (O, 3, 3)
+        "material_friction",  # (M,)
+        "material_restitution",  # (M,)
+        "cloth_of",  # (B + P,) int, −1: no cloth (always, here)
+    ),
+)
+LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
+
+LoopSettings = namedtuple(
+    "LoopSettings",
+    (
+        "dt",
+        "iterations",
+        "tolerance",
+        "threshold",
+        "stabilization",
+        "slop",
+        "max_push_velocity",
+        "time_of_impact",
+        "warm_start",
+        "margin",
+        "manifold_tolerance",
+        "passes",
+    ),
+)
+LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
+([m/s]; projection: [m]), restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s],
+time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
+detect-and-project passes. What a method's Options lack is 0 (False, 1 pass): see ``loop_settings``."""
+
+Motion = namedtuple(
+    "Motion",
+    (
+        "body_position",
+        "body_orientation",
+        "body_velocity",
+        "body_angular_velocity",
+        "particle_position",
+        "particle_velocity",
+    ),
+)
+Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
+
+Samples = namedtuple(
+    "Samples",
+    (
+        "time",
+        "body_position",
+        "body_orientation",
+        "body_velocity",
+        "body_angular_velocity",
+        "particle_position",
+        "particle_velocity",
+        "energy_kinetic",
+        "energy_potential",
+        "energy_elastic",
+        "max_penetration",
+        "contact_count",
+        "solver_iterations",
+        "solver_residual",
+    ),
+)
+Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
+
+
+# ---- the stages every step shares (loops L1–L3) --------------------------------------------
+
+
+@njit(cache=True)
+def free_motion(
+    model: LoopModel, motion: Motion, rotation: np.ndarray, h: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage 1: velocities after h [s] under gravity alone, v* = v + h g (the gyroscopic term by the
+    midpoint rule; pinned particles held): (body (B, 3), angular (B, 3), particle (P, 3))."""
+    body = motion.body_velocity + h * model.gravity
+    angular = gyroscopic_midpoint(rotation, model.body_inertia, motion.body_angular_velocity, h, 4)
+    particle = motion.particle_velocity + h * model.gravity
+    for p in range(particle.shape[0]):
+        if model.particle_pinned[p]:
+            particle[p, 0] = particle[p, 1] = particle[p, 2] = 0.0
+    return body, angular, particle
+
+
+@njit(cache=True)
+def swept_reach(
+    model: LoopModel,
+    body_velocity: np.ndarray,
+    angular_velocity: np.ndarray,
+    particle_velocity: np.ndarray,
+    h: float,
+    margin: float,
+) -> np.ndarray:
+    """Stage 2: how far each collider reaches this step (N,) [m]: half the contact margin, plus
+    for a dynamic one the distance it sweeps, h |v| (+ h |ω| r for a body's farthest point)."""
+    B, P = body_velocity.shape[0], particle_velocity.shape[0]
+    reach = np.full(model.kinds.shape[0], 0.5 * margin)
+    for b in range(B):
+        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * model.radius[b])
+    for p in range(P):
+        reach[B + p] += h * _norm(particle_velocity[p])
+    return reach
+
+
+@njit(cache=True, inline="always")
+def _norm(v):
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@njit(cache=True)
+def detect(
+    model: LoopModel,
+    plan: tuple,
+    large: bool | None,
+    keeping: bool | None,
+    motion: Motion,
+    rotation: np.ndarray,
+    reach: np.ndarray,
+    kept: tuple,
+    tolerance: float,
+) -> tuple[ContactArrays, tuple]:
+    """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
+    hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
+    when ``tolerance`` [m] > 0. ``plan`` = (families, hull store) of the narrow phase; ``large``
+    and ``keeping`` None: never a grid broad phase, never a kept manifold (see ``Stepper``).
+    Returns (ContactArrays, the manifolds to keep)."""
+    families, hull_store = plan
+    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
+    centers, rots = collider_poses(
+        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
+    )
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
+    total = model.kinds.shape[0]
+    made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
+    if keeping is None:  # no pair keeps a manifold (reuse_or_generate would find none)
+        found = generate_contacts(
+            pairs,
+            model.kinds,
+            model.params,
+            centers,
+            rots,
+            reach[pairs[:, 0]] + reach[pairs[:, 1]],
+            hull_store,
+            families,
+        )
+    elif tolerance > 0.0:
+        found, made = reuse_or_generate(
+            pairs,
+            model.kinds,
+            model.params,
+            centers,
+            rots,
+            reach,
+            model.radius,
+            hull_store,
+            families,
+            kept,
+            tolerance,
+            total,
+        )
+    else:
+        found = generate_contacts(
+            pairs,
+            model.kinds,
+            model.params,
+            centers,
+            rots,
+            reach[pairs[:, 0]] + reach[pairs[:, 1]],
+            hull_store,
+            families,
+        )
+    point, normal, depth, feature, owner = found
+    contacts = assemble_contacts(
+        pairs[owner, 0],
+        pairs[owner, 1],
+        point,
+        normal,
+        depth,
+        feature,
+        B,
+        P,
+        model.materials,
+        model.material_friction,
+        model.material_restitution,
+        total,
+    )
+    return contacts, made
+
+
+@njit(cache=True)
+def build_rows(model: LoopModel, contacts: ContactArrays, motion: Motion, rotation: np.ndarray) -> ContactRows:
+    """Stage 4a: the contacts' rows of J (a ContactRows) at the step's start."""
+    inverse_inertia = rotations.world_tensors(rotation, model.body_inverse_inertia)
+    return contact_rows(
+        contacts.body_a,
+        contacts.body_b,
+        contacts.particles_a,
+        contacts.particles_b,
+        contacts.weights_a,
+        contacts.weights_b,
+        contacts.point,
+        motion.body_position,
+        contacts.normal,
+        contacts.tangent1,
+        contacts.tangent2,
+        model.body_inverse_mass,
+        inverse_inertia,
+        model.particle_inverse_mass,
+    )
+
+
+@njit(cache=True)
+def solve(
+    settings: LoopSettings,
+    slabs: bool | None,
+    parallel: bool | None,
+    rows: ContactRows,
+    contacts: ContactArrays,
+    motion: Motion,
+    u: np.ndarray,
+    target: np.ndarray,
+    warm: np.ndarray,
+    order: np.ndarray,
+) -> tuple[np.ndarray, int, float]:
+    """Stage 4c: the warm-started sweeps of sequential impulses on u (changed in place), the
+    contacts grouped for threads as ``sequential.sweep_groups`` does (``slabs`` None: never
+    PARALLEL_MIN_CONTACTS contacts, never grouped); ``parallel`` None compiles no parallel sweep
+    (the groups are then swept one after the other: the same numbers). Returns (impulses (C, 3)
+    [N s], sweeps, last change [m/s])."""
+    C = order.shape[0]
+    grouped, starts = order, np.array([0, C, C])
+    if slabs is None:
+        return solve_sequential_impulses(
+            rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, None
+        )
+    if C >= PARALLEL_MIN_CONTACTS:
+        grouped, starts = split_into_slabs(
+            order,
+            contacts.point,
+            rows.body,
+            rows.particle,
+            motion.body_position,
+            rows.body_inverse_mass,
+            motion.particle_position,
+            rows.particle_inverse_mass,
+            SWEEP_GROUPS,
+        )
+    if parallel is None:
+        return solve_sequential_impulses(
+            rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, None
+        )
+    return solve_sequential_impulses(
+        rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, starts
+    )
+
+
+# ---- after a step: the state stored, checked and recorded ---------------------------------
+
+
+@njit(cache=True)
+def store(motion: Motion, positions: tuple, velocities: tuple) -> None:
+    """Copy a step's new positions and velocities into the state's arrays."""
+    for target, source in (
+        (motion.body_position, positions[0]),
+        (motion.body_velocity, velocities[0]),
+        (motion.body_angular_velocity, velocities[1]),
+        (motion.particle_position, positions[2]),
+        (motion.particle_velocity, velocities[2]),
+    ):
+        for n in range(target.shape[0]):
+            for i in range(3):
+                target[n, i] = source[n, i]
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            motion.body_orientation[b, i] = positions[1][b, i]
+
+
+@njit(cache=True)
+def healthy(motion: Motion, max_speed: float) -> bool:
+    """Every value finite and no body centre or particle faster than max_speed [m/s]."""
+    for array in (
+        motion.body_position,
+        motion.body_velocity,
+        motion.body_angular_velocity,
+        motion.particle_position,
+        motion.particle_velocity,
+    ):
+        for n in range(array.shape[0]):
+            for i in range(3):
+                if not np.isfinite(array[n, i]):
+                    return False
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            if not np.isfinite(motion.body_orientation[b, i]):
+                return False
+    for velocity in (motion.body_velocity, motion.particle_velocity):
+        for n in range(velocity.shape[0]):
+            if _norm(velocity[n]) > max_speed:
+                return False
+    return True
+
+
+@njit(cache=True)
+def record(
+    samples: Samples,
+    row: int,
+    model: LoopModel,
+    plan: tuple,
+    large: bool | None,
+    motion: Motion,
+    time: float,
+    contact_count: int,
+    sweeps: int,
+    change: float,
+) -> None:
+    """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
+    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does); the
+    step's ``contact_count``, or where it is −1 (no step) that of the fresh pass."""
+    samples.time[row] = time
+    for target, source in (
+        (samples.body_position, motion.body_position),
+        (samples.body_velocity, motion.body_velocity),
+        (samples.body_angular_velocity, motion.body_angular_velocity),
+        (samples.particle_position, motion.particle_position),
+        (samples.particle_velocity, motion.particle_velocity),
+    ):
+        for n in range(source.shape[0]):
+            for i in range(3):
+                target[row, n, i] = source[n, i]
+    for b in range(motion.body_orientation.shape[0]):
+        for i in range(4):
+            samples.body_orientation[row, b, i] = motion.body_orientation[b, i]
+    rotation = rotations.matrices(motion.body_orientation)
+    samples.energy_kinetic[row] = kinetic(
+        model.body_mass,
+        model.body_inertia,
+        rotation,
+        motion.body_velocity,
+        motion.body_angular_velocity,
+        model.particle_mass,
+        motion.particle_velocity,
+    )
+    samples.energy_potential[row] = gravitational(
+        model.body_mass, motion.body_position, model.particle_mass, motion.particle_position, model.gravity
+    )
+    samples.energy_elastic[row] = 0.0
+    centers, rots = collider_poses(
+        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
+    )
+    touching = np.zeros(model.kinds.shape[0])
+    _, _, pairs = candidate_pairs(
+        model.kinds,
+        model.params,
+        centers,
+        rots,
+        touching,
+        motion.body_position.shape[0] + motion.particle_position.shape[0],
+        model.cloth_of,
+        large,
+    )
+    depth = generate_contacts(
+        pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
+    )[2]
+    samples.max_penetration[row] = max(0.0, depth.max()) if depth.shape[0] else 0.0
+    samples.contact_count[row] = depth.shape[0] if contact_count < 0 else contact_count
+    samples.solver_iterations[row] = sweeps
+    samples.solver_residual[row] = change

@@ -1,0 +1,379 @@
+"""Contact springs by backward Euler (SPEC M1; loop L1, stage 4).
+
+The springs' system (M + h (h K + D)) v⁺ = M v* + h Jᵀ F₀, with the active set of engaged
+normal springs and sticking or slipping anchors settled by repeated solves: compiled and
+matrix-free (``implicit_spring_velocities``, M as its blocks, J and Jᵀ through the contact rows,
+conjugate gradients) for rigid bodies and free particles, and with SciPy on the assembled
+system (``implicit_velocities``) where cloth joins the base system or the direct solver is
+chosen. :mod:`contactlab.methods.penalty`'s ``step`` chooses between them; the compiled loop
+(:mod:`contactlab.methods.loop_steps`, ``penalty_step``) takes the first.
+
+Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows as
+``sequential.ContactRows``; springs as ``penalty_springs.ContactSprings``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numba import njit
+
+from ..dynamics.integrators import factor_symmetric
+from ..rotations import world_tensors
+from .penalty_springs import ContactSprings, SpringSettings
+from .sequential import ContactRows, along_rows, contact_velocity, row_products
+
+# ---- backward Euler -----------------------------------------------------------------------
+#
+# The springs' system (M + h (h K + D)) v⁺ = M v* + h Jᵀ F₀ is solved matrix-free: M as its
+# blocks (body masses (B,), world inertia tensors (B, 3, 3), particle masses (P,)), J and Jᵀ
+# through the contact rows (``sequential.ContactRows``), the springs as a weight (C, 3) per row.
+
+if TYPE_CHECKING:
+    from .penalty import Options
+
+
+@njit(cache=True)
+def mass_blocks(
+    body_mass: np.ndarray, body_inertia: np.ndarray, rotation: np.ndarray, particle_mass: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M's blocks at the rotations (B, 3, 3): (body_mass (B,) [kg], world inertia R I Rᵀ (B, 3, 3)
+    [kg m²], particle_mass (P,) [kg])."""
+    return body_mass, world_tensors(rotation, body_inertia), particle_mass
+
+
+@njit(cache=True)
+def free_dofs(particle_pinned: np.ndarray, body_fixed: np.ndarray) -> np.ndarray:
+    """(N,) 1.0 for each DOF that moves, 0.0 for a pinned particle's (particle_pinned (P,) bool)
+    and a kinematic body's (body_fixed (B,) bool: its path, not the springs, moves it)."""
+    body_count = body_fixed.shape[0]
+    free = np.ones(6 * body_count + 3 * particle_pinned.shape[0])
+    for b in range(body_count):
+        if body_fixed[b]:
+            free[6 * b : 6 * b + 6] = 0.0
+    for p in range(particle_pinned.shape[0]):
+        if particle_pinned[p]:
+            free[6 * body_count + 3 * p] = free[6 * body_count + 3 * p + 1] = free[6 * body_count + 3 * p + 2] = 0.0
+    return free
+
+
+@njit(cache=True)
+def mass_product(mass: tuple, x: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out = M x (N,) for M's blocks ``mass`` (``mass_blocks``) and x (N,); returns out."""
+    body_mass, inertia, particle_mass = mass
+    B = body_mass.shape[0]
+    for b in range(B):
+        o = 6 * b
+        for i in range(3):
+            out[o + i] = body_mass[b] * x[o + i]
+            out[o + 3 + i] = inertia[b, i, 0] * x[o + 3] + inertia[b, i, 1] * x[o + 4] + inertia[b, i, 2] * x[o + 5]
+    for p in range(particle_mass.shape[0]):
+        for i in range(3):
+            out[6 * B + 3 * p + i] = particle_mass[p] * x[6 * B + 3 * p + i]
+    return out
+
+
+@njit(cache=True)
+def transpose_product(rows: ContactRows, values: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out += Jᵀ λ (N,) for each contact's row values λ (C, 3) (normal, t1, t2); returns out."""
+    for c in range(values.shape[0]):
+        along_rows(c, rows, values[c, 0], values[c, 1], values[c, 2], out, False)
+    return out
+
+
+@njit(cache=True)
+def system_product(
+    rows: ContactRows,
+    weight: np.ndarray,
+    mass: tuple,
+    free: np.ndarray,
+    x: np.ndarray,
+    kept: np.ndarray,
+    out: np.ndarray,
+) -> np.ndarray:
+    """out = A x (N,) with A = M + F Jᵀ W J F: the springs' weights W (C, 3) on J's rows,
+    F = diag(free) (N,) (1 for a DOF that moves, 0 for a pinned particle's); ``kept`` (N,) is
+    scratch. Allocates nothing: the conjugate gradients call it every iteration. Returns out."""
+    N = x.shape[0]
+    for i in range(N):
+        kept[i] = free[i] * x[i]
+        out[i] = 0.0
+    for c in range(weight.shape[0]):
+        vn, v1, v2 = contact_velocity(c, rows, kept)
+        along_rows(c, rows, weight[c, 0] * vn, weight[c, 1] * v1, weight[c, 2] * v2, out, False)
+    mass_product(mass, x, kept)
+    for i in range(N):
+        out[i] = kept[i] + free[i] * out[i]
+    return out
+
+
+@njit(cache=True)
+def system_diagonal(rows: ContactRows, weight: np.ndarray, mass: tuple, free: np.ndarray) -> np.ndarray:
+    """The diagonal of A (``system_product``) (N,): M's and Σ W (J_row,i)² over the rows."""
+    body_mass, inertia, particle_mass = mass
+    B = body_mass.shape[0]
+    diagonal = np.empty(free.shape[0])
+    for b in range(B):
+        for i in range(3):
+            diagonal[6 * b + i], diagonal[6 * b + 3 + i] = body_mass[b], inertia[b, i, i]
+    for p in range(particle_mass.shape[0]):
+        for i in range(3):
+            diagonal[6 * B + 3 * p + i] = particle_mass[p]
+    for c in range(weight.shape[0]):
+        for d in range(3):
+            w, direction = weight[c, d], rows.frame[c, d]
+            if w == 0.0:
+                continue
+            for side in range(2):
+                b = rows.body[c, side]
+                if b >= 0:
+                    r = rows.arm[c, side]
+                    lever = (
+                        r[1] * direction[2] - r[2] * direction[1],
+                        r[2] * direction[0] - r[0] * direction[2],
+                        r[0] * direction[1] - r[1] * direction[0],
+                    )
+                    for i in range(3):
+                        diagonal[6 * b + i] += free[6 * b + i] * w * direction[i] ** 2
+                        diagonal[6 * b + 3 + i] += free[6 * b + 3 + i] * w * lever[i] ** 2
+                for m in range(3):
+                    p = rows.particle[c, side, m]
+                    if p < 0:
+                        break
+                    for i in range(3):
+                        o = 6 * B + 3 * p + i
+                        diagonal[o] += free[o] * w * (rows.weight[c, side, m] * direction[i]) ** 2
+    return diagonal
+
+
+@njit(cache=True)
+def conjugate_gradients(
+    rows: ContactRows,
+    weight: np.ndarray,
+    mass: tuple,
+    free: np.ndarray,
+    rhs: np.ndarray,
+    guess: np.ndarray,
+    tolerance: float,
+    most: int,
+) -> tuple[np.ndarray, float, int]:
+    """A v = rhs (``system_product``) by conjugate gradients with the Jacobi preconditioner
+    diag(A), from ``guess`` (N,), until |r| ≤ tolerance |rhs| or ``most`` iterations. Returns
+    (v (N,), |A v − rhs| / |rhs|, iterations)."""
+    N = rhs.shape[0]
+    diagonal = system_diagonal(rows, weight, mass, free)
+    x, r, z, p, Ap, kept = guess.copy(), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
+    system_product(rows, weight, mass, free, x, kept, Ap)
+    for i in range(N):
+        if diagonal[i] == 0.0:  # a DOF with no mass and no spring: left as it is
+            diagonal[i] = 1.0
+        r[i] = rhs[i] - Ap[i]
+        z[i] = r[i] / diagonal[i]
+        p[i] = z[i]
+    scale = max(np.sqrt(np.dot(rhs, rhs)), 1e-300)
+    rz = np.dot(r, z)
+    iterations = 0
+    while iterations < most and np.sqrt(np.dot(r, r)) > tolerance * scale and rz != 0.0:
+        system_product(rows, weight, mass, free, p, kept, Ap)
+        alpha = rz / np.dot(p, Ap)
+        for i in range(N):
+            x[i] += alpha * p[i]
+            r[i] -= alpha * Ap[i]
+            z[i] = r[i] / diagonal[i]
+        following = np.dot(r, z)
+        beta = following / rz
+        for i in range(N):
+            p[i] = z[i] + beta * p[i]
+        rz = following
+        iterations += 1
+    system_product(rows, weight, mass, free, x, kept, Ap)
+    for i in range(N):
+        Ap[i] -= rhs[i]
+    return x, np.sqrt(np.dot(Ap, Ap)) / scale, iterations
+
+
+@njit(cache=True)
+def implicit_spring_velocities(
+    settings: SpringSettings,
+    springs: ContactSprings,
+    rows: ContactRows,
+    depth: np.ndarray,
+    v_free: np.ndarray,
+    mass: tuple,
+    free: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """Backward Euler for the contact springs: v⁺ with M v⁺ = M v* + h Jᵀ F(x + h v⁺, v⁺), where
+    M v⁺ = M v* is the step without contacts (rigid bodies and free particles: M as
+    ``mass_blocks``); ``free`` (N,) 1.0 for the DOFs that may move, 0.0 for a pinned
+    particle's; v_free (N,) the velocities without contacts, depth (C,) [m], h [s].
+
+    The springs are linear in v⁺ along the Jacobian fixed at x: δ⁺ = δ − h J_n v⁺ and
+    s⁺ = s + h J_t v⁺, so an engaged normal spring adds h (h k + c) J_nᵀ J_n to the matrix and
+    h k δ J_nᵀ to the right-hand side, and a sticking anchor spring likewise along J_t.
+
+    Friction is settled first, as in plasticity's return mapping: a pass with every pressed
+    contact sticking (the elastic predictor) says which anchor springs would pull harder than
+    μ F_n; those contacts slip in the direction of that pull, with the force μ F_n⁺ of the
+    latest pass. Then the engaged normal springs (F_n⁺ > 0) and the slip forces are found by
+    repeating the solve (``conjugate_gradients``) until they stop changing (an active-set
+    iteration; for convex energies such as a plane's, and no friction, it is the exact backward
+    Euler step, which never adds energy). Returns (v⁺ (N,), forces (C, 3) [N], elongation
+    after the step (C, 2) [m], passes, relative residual of the last linear solve).
+    """
+    C = depth.shape[0]
+    k, c_n, k_t, c_t, mu = (
+        springs.stiffness,
+        springs.damping,
+        springs.friction_stiffness,
+        springs.friction_damping,
+        springs.friction,
+    )
+    start = row_products(rows, v_free)
+    engaged, sticks, slips = np.empty(C, np.bool_), np.empty(C, np.bool_), np.zeros(C, np.bool_)
+    for c in range(C):
+        engaged[c] = depth[c] - h * start[c, 0] > 0.0
+        sticks[c] = engaged[c] and mu[c] > 0.0
+    slip_force, slip_direction = np.zeros((C, 2)), np.zeros((C, 2))
+    weight, pull = np.empty((C, 3)), np.empty((C, 3))
+    normal, trial, elongation = np.zeros(C), np.zeros((C, 2)), np.zeros((C, 2))
+    base = mass_product(mass, v_free, np.empty(v_free.shape[0]))
+    v_new, residual, passes = v_free, 0.0, 0
+    for passes in range(1, settings.implicit_iterations + 1):
+        for c in range(C):
+            weight[c, 0] = h * (h * k[c] + c_n[c]) if engaged[c] else 0.0
+            weight[c, 1] = weight[c, 2] = h * (h * k_t[c] + c_t[c]) if sticks[c] else 0.0
+            pull[c, 0] = k[c] * depth[c] if engaged[c] else 0.0
+            for d in range(2):
+                pull[c, 1 + d] = -k_t[c] * springs.elongation[c, d] if sticks[c] else slip_force[c, d]
+        rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
+        v_new, residual, _ = conjugate_gradients(
+            rows, weight, mass, free, rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
+        )
+        # the forces at the new state say which springs act
+        velocity = row_products(rows, v_new)
+        settled = True
+        largest = 0.0
+        for c in range(C):
+            depth_new = depth[c] - h * velocity[c, 0]
+            force = k[c] * depth_new - c_n[c] * velocity[c, 0]
+            now_engaged = depth_new > 0.0 and force > 0.0
+            normal[c] = force if now_engaged else 0.0
+            largest = max(largest, mu[c] * normal[c])
+            for d in range(2):
+                elongation[c, d] = springs.elongation[c, d] + h * velocity[c, 1 + d]
+                trial[c, d] = -k_t[c] * elongation[c, d] - c_t[c] * velocity[c, 1 + d]
+            size, limit = np.sqrt(trial[c, 0] ** 2 + trial[c, 1] ** 2), mu[c] * normal[c]
+            if passes == 1:  # the elastic predictor decides who slips, and which way
+                slips[c] = sticks[c] and size > limit
+                for d in range(2):
+                    slip_direction[c, d] = trial[c, d] / max(size, 1e-300) if slips[c] else 0.0
+                now_sticks = sticks[c] and not slips[c]
+            else:
+                now_sticks = sticks[c] and now_engaged
+            settled = settled and now_engaged == engaged[c] and now_sticks == sticks[c]
+            engaged[c], sticks[c] = now_engaged, now_sticks
+        for c in range(C):  # μ F_n⁺ along the slip, F_n⁺ of this pass
+            for d in range(2):
+                force = slip_direction[c, d] * mu[c] * normal[c]
+                settled = settled and abs(force - slip_force[c, d]) <= 1e-9 * max(1.0, largest) + 1e-6 * abs(
+                    slip_force[c, d]
+                )
+                slip_force[c, d] = force
+        if settled:
+            break
+    # return mapping: an anchor spring never pulls harder than μ F_n at the end of the step
+    forces = np.empty((C, 3))
+    for c in range(C):
+        t1, t2 = (trial[c, 0], trial[c, 1]) if sticks[c] else (slip_force[c, 0], slip_force[c, 1])
+        size, limit = np.sqrt(t1 * t1 + t2 * t2), mu[c] * normal[c]
+        over = size > limit
+        if over:
+            t1, t2 = t1 * (limit / size), t2 * (limit / size)
+        if not (sticks[c] and not over):
+            elongation[c, 0], elongation[c, 1] = -t1 / k_t[c], -t2 / k_t[c]
+        if not engaged[c]:
+            elongation[c, 0] = elongation[c, 1] = 0.0
+        forces[c, 0], forces[c, 1], forces[c, 2] = normal[c], t1, t2
+    return v_new, forces, elongation, passes, residual
+
+
+def implicit_velocities(
+    springs: ContactSprings,
+    J: sp.spmatrix,
+    A0: sp.spmatrix,
+    b0: np.ndarray,
+    free: np.ndarray,
+    v_free: np.ndarray,
+    depth: np.ndarray,
+    dt: float,
+    options: Options,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """``implicit_spring_velocities`` with any base system A₀ v⁺ = b₀ (N, N) sparse
+    (``dynamics.generalized.implicit_base``: the cloth's linearized springs for cloth vertices
+    under backward Euler) and the Jacobian J (3C, N) sparse, solved by SciPy (``linear_solver``
+    "direct", or "cg" there): the path of cloth under backward Euler and of the direct solver.
+    ``free`` (N,) bool. Returns what ``implicit_spring_velocities`` returns."""
+    h = dt
+    C = len(depth)
+    k, c, k_t, c_t = springs.stiffness, springs.damping, springs.friction_stiffness, springs.friction_damping
+    engaged = depth - h * (J @ v_free)[0::3] > 0.0
+    sticks = engaged & (springs.friction > 0.0)
+    slip_force = np.zeros((C, 2))
+    keep = sp.diags(free.astype(float))
+    v_new, residual = v_free, 0.0
+    for passes in range(1, options.implicit_iterations + 1):
+        weight = np.column_stack(
+            [engaged * h * (h * k + c), np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)]
+        )
+        pull = np.column_stack(
+            [engaged * k * depth, np.where(sticks[:, None], -k_t[:, None] * springs.elongation, slip_force)]
+        )
+        A = (A0 + keep @ (J.T @ sp.diags(weight.ravel()) @ J) @ keep).tocsr()
+        rhs = b0 + free * (h * (J.T @ pull.ravel()))
+        v_new = _solve(A, rhs, v_new, options)
+        residual = float(np.linalg.norm(A @ v_new - rhs) / max(np.linalg.norm(rhs), 1e-300))
+        # the forces at the new state say which springs act
+        velocity = (J @ v_new).reshape(C, 3)
+        depth_new = depth - h * velocity[:, 0]
+        normal = k * depth_new - c * velocity[:, 0]
+        now_engaged = (depth_new > 0.0) & (normal > 0.0)
+        normal = np.where(now_engaged, normal, 0.0)
+        elongation = springs.elongation + h * velocity[:, 1:]
+        trial = -k_t[:, None] * elongation - c_t[:, None] * velocity[:, 1:]
+        size, limit = np.linalg.norm(trial, axis=1), springs.friction * normal
+        if passes == 1:  # the elastic predictor decides who slips, and which way
+            slips = sticks & (size > limit)
+            slip_direction = np.where(slips[:, None], trial / np.maximum(size, 1e-300)[:, None], 0.0)
+            now_sticks = sticks & ~slips
+        else:
+            now_sticks = sticks & now_engaged
+        new_slip_force = slip_direction * limit[:, None]  # μ F_n⁺ along it, F_n⁺ of this pass
+        settled = (
+            np.array_equal(now_engaged, engaged)
+            and np.array_equal(now_sticks, sticks)
+            and np.allclose(new_slip_force, slip_force, rtol=1e-6, atol=1e-9 * max(1.0, limit.max(initial=0.0)))
+        )
+        engaged, sticks, slip_force = now_engaged, now_sticks, new_slip_force
+        if settled:
+            break
+    # return mapping: an anchor spring never pulls harder than μ F_n at the end of the step
+    tangential = np.where(sticks[:, None], trial, slip_force)
+    size, limit = np.linalg.norm(tangential, axis=1), springs.friction * normal
+    over = size > limit
+    tangential[over] *= (limit[over] / size[over])[:, None]
+    elongation = np.where((sticks & ~over)[:, None], elongation, -tangential / k_t[:, None])
+    elongation[~engaged] = 0.0
+    return v_new, np.column_stack([normal, tangential]), elongation, passes, residual
+
+
+def _solve(A, rhs, guess, options):
+    if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
+        return factor_symmetric(A).solve(rhs)
+    diagonal = A.diagonal()
+    preconditioner = spla.LinearOperator(A.shape, matvec=lambda x: x / diagonal)
+    solution, info = spla.cg(A, rhs, x0=guess, rtol=options.linear_tolerance, maxiter=10 * A.shape[0], M=preconditioner)
+    return solution

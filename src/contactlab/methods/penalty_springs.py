@@ -1,0 +1,387 @@
+"""The compiled stages of penalty contact springs (SPEC P1, P3, F3, M1; loop L1, stages 2–5).
+
+How stiff each contact's spring is (the load it carries over the allowed penetration), its
+damping and its anchor (``springs_of``), the forces (``spring_forces``, P1 and F3) and the
+energy they store (P3), whether an explicit step would amplify them (``step_amplification``,
+``springs_implicit``), the velocities they give (``explicit_velocities``), the guard that holds
+a contact short of passing through (``slowest_approach``) and the anchors carried on
+(``anchors_after``). :mod:`contactlab.methods.penalty`'s ``step`` calls them one by one from
+Python and the compiled loop (:mod:`contactlab.methods.loop_steps`, ``penalty_step``) in
+compiled code; the springs by backward Euler are :mod:`contactlab.methods.penalty_implicit`.
+
+Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows as
+``sequential.ContactRows``.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .sequential import ContactRows, apply_impulses, contact_velocity, row_products
+
+# ---- one spring's step, and ζ from restitution ---------------------------------------------
+
+
+@njit(cache=True)
+def step_amplification(integrator: int, w2: float, d: float) -> float:
+    """``amplification``, compiled: integrator 0 symplectic, 1 explicit, 2 backward Euler (as in
+    INTEGRATORS); w2 = (h ω)², d = h c / m. The 2×2 step matrix on (x / h, v) and the moduli of
+    its eigenvalues in closed form (a complex pair: both √det)."""
+    if integrator == 0:  # v⁺ = v − (ω²h x + 2ζω h v),  x⁺ = x + h v⁺   (x in units of h)
+        a, b, c, e = 1.0 - w2, 1.0 - d, -w2, 1.0 - d
+    elif integrator == 1:  # x⁺ = x + h v,  v⁺ = v − h(ω² x + c/m v)
+        a, b, c, e = 1.0, 1.0, -w2, 1.0 - d
+    else:  # backward Euler: the same at the new state; the step is this matrix's inverse
+        a, b, c, e = 1.0, -1.0, w2, 1.0 + d
+    half, det = 0.5 * (a + e), a * e - b * c
+    disc = half * half - det
+    if disc < 0.0:
+        largest = smallest = np.sqrt(det)
+    else:
+        first, second = abs(half + np.sqrt(disc)), abs(half - np.sqrt(disc))
+        largest, smallest = max(first, second), min(first, second)
+    return 1.0 / smallest if integrator == 2 else largest
+
+
+@njit(cache=True)
+def damping_ratios(restitution: np.ndarray) -> np.ndarray:
+    """``damping_ratio_from_restitution``, compiled, on an array (C,)."""
+    zeta = np.empty(restitution.shape[0])
+    for c in range(zeta.shape[0]):
+        if restitution[c] <= 0.0:
+            zeta[c] = 1.0
+        else:
+            log = np.log(min(restitution[c], 1.0))
+            zeta[c] = -log / np.sqrt(np.pi**2 + log**2)
+    return zeta
+
+
+# ---- the load each contact carries ----------------------------------------------------------
+
+SUPPORT_COSINE = 0.3  # a contact whose normal is within 72° of "up" (against gravity) supports its upper side
+
+
+@njit(cache=True)
+def entities_of(body: np.ndarray, particles: np.ndarray, body_count: int) -> np.ndarray:
+    """``contact_entities`` of one side, compiled: body (C,), particles (C, 3) → (C,) int64."""
+    out = np.empty(body.shape[0], dtype=np.int64)
+    for c in range(body.shape[0]):
+        out[c] = body[c] if body[c] >= 0 else (body_count + particles[c, 0] if particles[c, 0] >= 0 else -1)
+    return out
+
+
+@njit(cache=True)
+def supported_loads(
+    entity_a: np.ndarray,
+    entity_b: np.ndarray,
+    normal: np.ndarray,
+    body_position: np.ndarray,
+    particle_position: np.ndarray,
+    body_mass: np.ndarray,
+    particle_mass: np.ndarray,
+    gravity: np.ndarray,
+) -> np.ndarray:
+    """The weight each contact carries [N] (C,): every body and free particle, from the highest
+    down, hands its own weight and what rests on it to the contacts it rests on (normals within
+    72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
+    or particle below; a static side takes it out. Contacts that support nothing carry the
+    lighter side's weight per supporting contact. A kinematic body is given weight 0: it hands
+    nothing down and, like a static side, does not count as the lighter side. Sides as ``contact_entities`` gives them.
+    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
+    C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
+    g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
+    loads = np.zeros(C)
+    if g == 0.0 or C == 0:
+        return loads
+    up = -gravity / g
+    upper = np.full(C, -1)  # the supported side's entity (bodies, then particles), −1: none
+    lower = np.full(C, -1)
+    supports = np.zeros(B + P, dtype=np.int64)
+    for c in range(C):
+        a, b = entity_a[c], entity_b[c]
+        along = normal[c, 0] * up[0] + normal[c, 1] * up[1] + normal[c, 2] * up[2]  # normal: from B into A
+        if along > SUPPORT_COSINE and a >= 0:
+            upper[c], lower[c] = a, b
+        elif along < -SUPPORT_COSINE and b >= 0:
+            upper[c], lower[c] = b, a
+        if upper[c] >= 0:
+            supports[upper[c]] += 1
+    weight = np.empty(B + P)
+    height = np.empty(B + P)
+    for e in range(B + P):
+        position = body_position[e] if e < B else particle_position[e - B]
+        weight[e] = g * (body_mass[e] if e < B else particle_mass[e - B])
+        height[e] = position[0] * up[0] + position[1] * up[1] + position[2] * up[2]
+    own_share = weight / np.maximum(supports, 1)
+    carried = weight.copy()  # own weight plus everything handed down so far
+    start = np.zeros(B + P + 1, dtype=np.int64)  # the contacts each entity rests on, grouped
+    for c in range(C):
+        if upper[c] >= 0:
+            start[upper[c] + 1] += 1
+    for e in range(B + P):
+        start[e + 1] += start[e]
+    filled = start[:-1].copy()
+    resting_on = np.empty(start[-1], dtype=np.int64)
+    for c in range(C):
+        if upper[c] >= 0:
+            resting_on[filled[upper[c]]] = c
+            filled[upper[c]] += 1
+    for e in np.argsort(-height):
+        if supports[e] == 0:
+            continue
+        share = carried[e] / supports[e]
+        for i in range(start[e], start[e + 1]):
+            c = resting_on[i]
+            loads[c] = share
+            if lower[c] >= 0:
+                carried[lower[c]] += share
+    for c in range(C):
+        if upper[c] < 0:  # a side contact: the lighter dynamic side's share
+            least = np.inf
+            for e in (entity_a[c], entity_b[c]):
+                if e >= 0 and own_share[e] > 0.0:  # weightless: a kinematic body, a driven side
+                    least = min(least, own_share[e])
+            loads[c] = least if least < np.inf else 0.0
+    return loads
+
+
+# ---- the contact springs ------------------------------------------------------------------
+
+ContactSprings = namedtuple(
+    "ContactSprings",
+    (
+        "stiffness",  # (C,) k [N/m]
+        "damping",  # (C,) c [N s/m] along the normal
+        "friction_stiffness",  # (C,) k_t [N/m] of the anchor springs
+        "friction_damping",  # (C,) c_t [N s/m]
+        "friction",  # (C,) μ
+        "elongation",  # (C, 2) s = point − anchor in (t1, t2) components [m]
+        "inverse_effective_mass",  # (C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg] (None: not known)
+    ),
+    defaults=(None,),
+)
+ContactSprings.__doc__ = "The springs of C contacts, as this step sees them (a named tuple: compiled code takes it)."
+
+SpringSettings = namedtuple(
+    "SpringSettings",
+    (
+        "stiffness",  # N/m, or −1: "auto" (each contact's load over allowed_penetration)
+        "allowed_penetration",  # m
+        "damping_ratio",  # ζ, or −1: from the material's restitution
+        "friction_stiffness",  # N/m, or −1: "auto" (the normal stiffness)
+        "implicit",  # 0 never, 1 auto (where the explicit step is unstable), 2 always, 3 backward Euler
+        "integrator",  # 0 symplectic, 1 explicit, 2 backward Euler (``amplification``'s cases)
+        "implicit_iterations",  # passes of the active set, at most
+        "linear_tolerance",  # relative residual of the conjugate gradients
+    ),
+)
+SpringSettings.__doc__ = "The penalty Options and integrator as plain numbers, for the compiled stages."
+INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
+
+
+@njit(cache=True)
+def normal_stiffness(
+    settings: SpringSettings,
+    entity_a: np.ndarray,
+    entity_b: np.ndarray,
+    normal: np.ndarray,
+    body_position: np.ndarray,
+    particle_position: np.ndarray,
+    body_mass: np.ndarray,
+    particle_mass: np.ndarray,
+    gravity: np.ndarray,
+) -> np.ndarray:
+    """``contact_stiffness``, compiled: sides as ``contact_entities``, the rest as ``supported_loads``."""
+    if settings.stiffness >= 0.0:
+        return np.full(entity_a.shape[0], settings.stiffness)
+    return (
+        supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass, gravity)
+        / settings.allowed_penetration
+    )
+
+
+@njit(cache=True)
+def springs_of(
+    settings: SpringSettings,
+    stiffness: np.ndarray,
+    inverse_effective: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    offsets: np.ndarray,
+    tangent1: np.ndarray,
+    tangent2: np.ndarray,
+) -> ContactSprings:
+    """The springs of C contacts: normal stiffness ``stiffness`` (C,) [N/m] (``normal_stiffness``),
+    damping c = 2 ζ √(k m_eff) with each contact's effective mass m_eff = 1 / (J M⁻¹ Jᵀ) along its
+    normal (and tangent) from ``inverse_effective`` (C, 3) [1/kg] (ζ the option's or from the
+    restitution (C,)), friction stiffness the normal one where "auto", μ = ``friction`` (C,), and
+    the anchor elongations ``offsets`` (C, 3) [m] carried from the last step turned into the
+    current tangent plane (t1, t2 (C, 3)), their length kept (the plane may have turned)."""
+    C = stiffness.shape[0]
+    zeta = damping_ratios(restitution) if settings.damping_ratio < 0.0 else np.full(C, settings.damping_ratio)
+    k_t = stiffness.copy() if settings.friction_stiffness < 0.0 else np.full(C, settings.friction_stiffness)
+    damping, friction_damping, elongation = np.empty(C), np.empty(C), np.empty((C, 2))
+    for c in range(C):
+        n, t = inverse_effective[c, 0], inverse_effective[c, 1]
+        damping[c] = 2.0 * zeta[c] * np.sqrt(stiffness[c] / n) if n > 0.0 else 0.0
+        friction_damping[c] = 2.0 * zeta[c] * np.sqrt(k_t[c] / t) if t > 0.0 else 0.0
+        o = offsets[c]
+        e1 = o[0] * tangent1[c, 0] + o[1] * tangent1[c, 1] + o[2] * tangent1[c, 2]
+        e2 = o[0] * tangent2[c, 0] + o[1] * tangent2[c, 1] + o[2] * tangent2[c, 2]
+        length, projected = np.sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2]), np.sqrt(e1 * e1 + e2 * e2)
+        scale = length / max(projected, 1e-300) if projected > 0.0 else 0.0
+        elongation[c, 0], elongation[c, 1] = e1 * scale, e2 * scale
+    return ContactSprings(stiffness, damping, k_t, friction_damping, friction, elongation, inverse_effective)
+
+
+@njit(cache=True)
+def springs_unstable(
+    springs: ContactSprings, entity_a: np.ndarray, entity_b: np.ndarray, entities: int, h: float, integrator: int
+) -> bool:
+    """Whether the explicit ``integrator`` (0 symplectic, 1 explicit Euler) at h [s] would amplify
+    the contact springs' motion (``step_amplification`` > 1). Each of the ``entities`` bodies and
+    particles rings at most at ω² = Σ k J M⁻¹ Jᵀ over the rows of the springs that hold it (a
+    Gershgorin bound: a box on four corners, each with a normal and two anchor springs, rings
+    √12 times faster than one spring alone), damped at the largest damping ratio among the
+    contacts. Sides (C,) as ``contact_entities``."""
+    inverse, k = springs.inverse_effective_mass, springs.stiffness
+    total = np.zeros(entities)
+    for side in (entity_a, entity_b):
+        for c in range(side.shape[0]):
+            if side[c] >= 0:
+                total[side[c]] += k[c] * inverse[c, 0] + springs.friction_stiffness[c] * (inverse[c, 1] + inverse[c, 2])
+    omega_squared = 0.0
+    for e in range(entities):
+        omega_squared = max(omega_squared, total[e])
+    if omega_squared <= 0.0:
+        return False
+    zeta = 0.0
+    for c in range(k.shape[0]):
+        if k[c] > 0.0:
+            zeta = max(zeta, springs.damping[c] * np.sqrt(inverse[c, 0]) / (2.0 * np.sqrt(k[c])))
+    omega = np.sqrt(omega_squared)
+    return step_amplification(integrator, omega_squared * h * h, 2.0 * zeta * omega * h) > 1.0 + 1e-12
+
+
+@njit(cache=True)
+def springs_implicit(
+    settings: SpringSettings,
+    springs: ContactSprings,
+    entity_a: np.ndarray,
+    entity_b: np.ndarray,
+    entities: int,
+    h: float,
+) -> bool:
+    """Whether this step takes its contact springs by backward Euler: always under that
+    integrator or with implicit_springs "always", never with "never" or without contacts, and
+    under "auto" where the explicit step would amplify them (``springs_unstable``)."""
+    if settings.implicit == 3:
+        return True
+    if entity_a.shape[0] == 0 or settings.implicit == 0:
+        return False
+    return settings.implicit == 2 or springs_unstable(springs, entity_a, entity_b, entities, h, settings.integrator)
+
+
+@njit(cache=True)
+def spring_forces(springs: ContactSprings, depth: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Contact forces at penetration ``depth`` (C,) [m] and contact-point relative velocities
+    ``velocity`` (C, 3) = (v_n, v_t1, v_t2) [m/s] (that is, J v reshaped).
+
+    Normal (P1 with damping): F_n = k δ − c v_n where δ > 0, never negative (C2). Friction
+    (F3): the anchor spring's pull F_t = −k_t s − c_t v_t; if |F_t| > μ F_n the contact slips:
+    F_t is cut to μ F_n and the anchor is moved so the spring alone pulls that hard. Returns
+    (forces (C, 3) = (F_n, F_t1, F_t2) [N], elongation after slipping (C, 2) [m]).
+    """
+    C = depth.shape[0]
+    forces, elongation = np.empty((C, 3)), springs.elongation.copy()
+    for c in range(C):
+        normal = (
+            max(springs.stiffness[c] * depth[c] - springs.damping[c] * velocity[c, 0], 0.0) if depth[c] > 0.0 else 0.0
+        )
+        k_t, c_t = springs.friction_stiffness[c], springs.friction_damping[c]
+        t1 = -k_t * springs.elongation[c, 0] - c_t * velocity[c, 1]
+        t2 = -k_t * springs.elongation[c, 1] - c_t * velocity[c, 2]
+        limit, size = springs.friction[c] * normal, np.sqrt(t1 * t1 + t2 * t2)
+        if size > limit:
+            scale = limit / size
+            t1, t2 = t1 * scale, t2 * scale
+            elongation[c, 0], elongation[c, 1] = -t1 / k_t, -t2 / k_t
+        forces[c, 0], forces[c, 1], forces[c, 2] = normal, t1, t2
+    return forces, elongation
+
+
+@njit(cache=True)
+def elastic_energy(springs: ContactSprings, depth: np.ndarray, elongation: np.ndarray) -> float:
+    """Energy stored in the springs [J]: Σ ½ k δ² over compressed contacts (P3), plus ½ k_t |s|²
+    of their anchor springs; depth (C,) [m], elongation (C, 2) [m]."""
+    normal = anchors = 0.0
+    for c in range(depth.shape[0]):
+        if depth[c] > 0.0:
+            normal += springs.stiffness[c] * depth[c] ** 2
+            anchors += springs.friction_stiffness[c] * (elongation[c, 0] ** 2 + elongation[c, 1] ** 2)
+    return 0.5 * normal + 0.5 * anchors
+
+
+@njit(cache=True)
+def explicit_velocities(rows: ContactRows, forces: np.ndarray, v_free: np.ndarray, h: float) -> np.ndarray:
+    """v* + h M⁻¹ Jᵀ F (N,): the contact forces (C, 3) [N] of ``spring_forces`` over h [s] added to
+    the free velocities, contact by contact through the rows (``sequential.apply_impulses``)."""
+    v_new = v_free.copy()
+    apply_impulses(rows, h * forces, v_new)
+    return v_new
+
+
+@njit(cache=True)
+def anchors_after(
+    springs: ContactSprings,
+    rows: ContactRows,
+    depth: np.ndarray,
+    moved_by: np.ndarray,
+    elongation: np.ndarray,
+    follow: bool,
+    tangent1: np.ndarray,
+    tangent2: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Stage 5: the anchors at the end of the step moved by ``moved_by`` (N,) over h [s]: where
+    ``follow`` (an explicit step) the elongation (C, 2) [m] takes the point's tangential motion
+    h v_t; a contact no longer pressed (depth after the step ≤ 0) drops its anchor. Returns
+    (elongation (C, 2), the anchor offsets to carry (C, 3) = s₁ t1 + s₂ t2 [m], elastic energy
+    at the end of the step [J])."""
+    C = depth.shape[0]
+    velocity = row_products(rows, moved_by)
+    after = elongation.copy()
+    offsets = np.empty((C, 3))
+    depth_after = np.empty(C)
+    for c in range(C):
+        if follow:
+            after[c, 0], after[c, 1] = elongation[c, 0] + h * velocity[c, 1], elongation[c, 1] + h * velocity[c, 2]
+        depth_after[c] = depth[c] - h * velocity[c, 0]
+        if depth_after[c] <= 0.0:
+            after[c, 0] = after[c, 1] = 0.0
+        for i in range(3):
+            offsets[c, i] = after[c, 0] * tangent1[c, i] + after[c, 1] * tangent2[c, i]
+    return after, offsets, elastic_energy(springs, depth_after, after)
+
+
+# ---- the swept step: nothing passes through ----------------------------------------------
+
+PASS_THROUGH_FRACTION = 0.5  # of a contact's pass-through depth: the deepest overlap a step may carry it to
+GUARD_SWEEPS, GUARD_TOLERANCE = 100, 1e-6  # sweeps, m/s of the guard's solve
+
+
+@njit(cache=True)
+def slowest_approach(
+    rows: ContactRows, velocity: np.ndarray, depth: np.ndarray, pass_through: np.ndarray, h: float
+) -> tuple[np.ndarray, bool]:
+    """The guard of ``hold_back``: each contact's least normal velocity v_n ≥ −(D/2 − δ) / h
+    (C,) [m/s] from its pass-through depth D (C,) [m] (``collision.half_thickness_sums``) and
+    depth δ, and whether ``velocity`` (N,) goes below it anywhere (the rows tell, C × 3)."""
+    slowest = -(PASS_THROUGH_FRACTION * pass_through - depth) / h
+    below = False
+    for c in range(depth.shape[0]):
+        below = below or contact_velocity(c, rows, velocity)[0] < slowest[c]
+    return slowest, below
