@@ -46,4 +46,4 @@ def test_a_run_that_blew_up_says_so_and_a_trajectory_gone_nan_has_no_picture():
     assert "diverged: the run went wrong at t = " in run_html(run, picture=False)
     blown = dict(run.arrays)
     blown["body_position"] = blown["body_position"] * float("nan")
-    assert _still(blown) == "" and _player(blown, _still(blown)) == ""
+    assert _still(blown) == "" and _player(blown) == ""

@@ -74,7 +74,7 @@ def run_html(run: Run, picture: bool = True) -> str:
         ("total energy", f"{energy['initial']:.4g} J at the start, {energy['final']:.4g} J at the end"),
         ("ended", ended),
     ]
-    image = _player(run.arrays, _still(run.arrays)) if picture else ""
+    image = _player(run.arrays) if picture else ""
     return (
         f"<div style='display:flex;gap:1em;align-items:flex-start'>{image}"
         f"<div><b>contactlab Run</b>{_table(rows)}</div></div>"
@@ -109,31 +109,29 @@ def _shown(value):
     return "–" if value is None else str(value)
 
 
-def _player(arrays, still) -> str:
-    """The run as an inline <video> with controls (MP4, 320 × 240, real time), the ``still``
-    (an inline <img> of its last sample, or "") its poster; the still alone when no video can be
-    drawn (a single sample, no video encoder), "" when neither can (a run gone NaN)."""
-    if not still:
-        return ""
+def _player(arrays) -> str:
+    """The run as an inline <video> with controls (MP4, 320 × 240, real time), its last sample
+    as the poster (the still ``render`` draws with the video); the still alone when no video can
+    be drawn (a single sample, no video encoder), "" when nothing can (a run gone NaN)."""
     from .errors import InputError
     from .render import render
 
     time = arrays["time"]
     duration = float(time[-1] - time[0]) if len(time) > 1 else 0.0
     if duration <= 0.0:
-        return still
+        return _still(arrays)
     fps = min(PLAYER_FPS, PLAYER_FRAMES / duration)
     with tempfile.TemporaryDirectory() as folder:
         try:
             paths = render(arrays, folder, fps=fps, width=320, height=240, formats=("mp4",))
-        except (InputError, OSError, RuntimeError):  # nothing finite to draw, or no encoder here
-            return still
-        with open(paths["mp4"], "rb") as stream:
-            data = base64.b64encode(stream.read()).decode("ascii")
-    poster = still.split("src='", 1)[1].split("'", 1)[0]
+        except InputError:  # a run that blew up: nothing finite to draw
+            return ""
+        except (OSError, RuntimeError):  # no video encoder here: the still alone
+            return _still(arrays)
+        video, poster = _data_uri(paths["mp4"], "video/mp4"), _data_uri(paths["still"], "image/png")
     return (
         "<video controls loop muted playsinline width='320' height='240' "
-        f"poster='{poster}' src='data:video/mp4;base64,{data}'>{still}</video>"
+        f"poster='{poster}' src='{video}'>{_image(poster)}</video>"
     )
 
 
@@ -148,6 +146,15 @@ def _still(arrays) -> str:
             still(arrays, path, width=320, height=240)
         except InputError:  # a run that blew up: nothing finite to draw
             return ""
-        with open(path, "rb") as stream:
-            data = base64.b64encode(stream.read()).decode("ascii")
-    return f"<img src='data:image/png;base64,{data}' width='320' height='240' alt='the last sample'>"
+        return _image(_data_uri(path, "image/png"))
+
+
+def _data_uri(path, kind) -> str:
+    """The file at ``path`` as a data: URI of MIME type ``kind``."""
+    with open(path, "rb") as stream:
+        return f"data:{kind};base64,{base64.b64encode(stream.read()).decode('ascii')}"
+
+
+def _image(uri) -> str:
+    """An inline 320 × 240 <img> of the last sample from its data: URI."""
+    return f"<img src='{uri}' width='320' height='240' alt='the last sample'>"
