@@ -248,13 +248,10 @@ class Stepper:
         self.keep_manifolds = options.manifold_tolerance > 0.0
         self.settings = loop_settings(model, method, options, dt)
         self.flags = compile_flags(model, method, options) + (None,)  # penalty: None (PenaltyStepper)
-        kept = state.carried.get("manifolds") or Manifolds.empty()
-        ids = state.carried.get(self.prefix + "ids")
-        values = state.carried.get(self.prefix + "values")
-        self.carried = (
-            (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature),
-            np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
-            np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3),
+        self.carried = _carried(
+            state.carried.get("manifolds") or Manifolds.empty(),
+            state.carried.get(self.prefix + "ids"),
+            state.carried.get(self.prefix + "values"),
         )
         self.other = {k: v for k, v in state.carried.items() if k != "manifolds" and not k.startswith(self.prefix)}
 
@@ -404,12 +401,7 @@ class PenaltyStepper(Stepper):
                 self.settings,
             ),
         )
-        ids, offsets = state.carried.get("anchor_ids"), state.carried.get("anchor_offsets")
-        self.carried = (
-            _no_manifolds(),
-            np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, np.int64),
-            np.zeros((0, 3)) if offsets is None else np.asarray(offsets, dtype=float).reshape(-1, 3),
-        )
+        self.carried = _carried(Manifolds.empty(), state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"))
         self.other = {k: v for k, v in state.carried.items() if k not in ("anchor_ids", "anchor_offsets")}
 
     def state(self) -> State:
@@ -428,10 +420,15 @@ class PenaltyStepper(Stepper):
         )
 
 
-def _no_manifolds():
-    """The eight fields of no kept manifold (Manifolds.empty()), the form ``run`` carries them in."""
-    kept = Manifolds.empty()
-    return (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature)
+def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None) -> tuple:
+    """What ``run`` carries from step to step, from a State's carried data: the ``kept``
+    manifolds' eight fields, last step's contact ids (K,) and their values (K, 3) (impulses,
+    projection λ or penalty anchor offsets), empty where the State has none."""
+    return (
+        (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature),
+        np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
+        np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3),
+    )
 
 
 LOOP_COMPILE_SECONDS = 30.0  # s: about what compiling ``run`` costs on an empty cache (2-core machine)
