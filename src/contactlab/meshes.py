@@ -398,9 +398,8 @@ class TriangleMesh:
         self.max_depth = float(max_depth)
         for name in (*GEOMETRY_ARRAYS, "triangle_areas", "edges"):
             getattr(self, name).flags.writeable = False
-        self.geometry = MeshGeometry(
-            *(getattr(self, name) for name in GEOMETRY_ARRAYS), float(self.tolerance), self.two_sided, self.max_depth
-        )
+        arrays = [getattr(self, name) for name in GEOMETRY_ARRAYS]
+        self.geometry = MeshGeometry._make([*arrays, float(self.tolerance), self.two_sided, self.max_depth])
 
     @property
     def vertex_count(self) -> int:
