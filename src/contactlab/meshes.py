@@ -229,20 +229,6 @@ def build_bvh(
     return node_lower, node_upper, node_left, node_right, node_start, node_count, order
 
 
-@njit(cache=True, inline="always")
-def _box_misses(box_lower, box_upper, i, lower, upper):
-    """Whether box ``i`` of (N, 3) corner arrays [m] and the box [lower, upper] (3,) are apart
-    along some axis (closed intervals: touching boxes overlap)."""
-    return (
-        box_lower[i, 0] > upper[0]
-        or box_upper[i, 0] < lower[0]
-        or box_lower[i, 1] > upper[1]
-        or box_upper[i, 1] < lower[1]
-        or box_lower[i, 2] > upper[2]
-        or box_upper[i, 2] < lower[2]
-    )
-
-
 @njit(cache=True)
 def triangles_near(
     node_lower: np.ndarray,
@@ -272,12 +258,28 @@ def triangles_near(
     while top > 0:
         top -= 1
         node = stack[top]
-        if _box_misses(node_lower, node_upper, node, lower, upper):
+        # the node's and (below) the triangle's box tests are written out: as a helper, even an
+        # inlined one, the query ran 1.8 to 3 times slower (Numba 0.68, the mesh_bowl scene's bowl)
+        if (
+            node_lower[node, 0] > upper[0]
+            or node_upper[node, 0] < lower[0]
+            or node_lower[node, 1] > upper[1]
+            or node_upper[node, 1] < lower[1]
+            or node_lower[node, 2] > upper[2]
+            or node_upper[node, 2] < lower[2]
+        ):
             continue
         if node_count[node] > 0:
             for k in range(node_start[node], node_start[node] + node_count[node]):
                 t = node_order[k]
-                if _box_misses(triangle_lower, triangle_upper, t, lower, upper):
+                if (
+                    triangle_lower[t, 0] > upper[0]
+                    or triangle_upper[t, 0] < lower[0]
+                    or triangle_lower[t, 1] > upper[1]
+                    or triangle_upper[t, 1] < lower[1]
+                    or triangle_lower[t, 2] > upper[2]
+                    or triangle_upper[t, 2] < lower[2]
+                ):
                     continue
                 if found < capacity:
                     out[found] = t
