@@ -13,6 +13,7 @@ import pytest
 from matplotlib.image import imread
 
 from contactlab import compare as compare_module
+from contactlab import simulation
 from contactlab.compare import compare, report, run
 from contactlab.errors import InputError
 from contactlab.methods import AVAILABLE
@@ -285,14 +286,14 @@ def test_a_bad_scene_stops_everything_before_anything_is_written(tmp_path):
 
 
 def test_methods_rejecting_the_scene_are_left_out_unless_named(tmp_path, monkeypatch):
-    real = run.simulate
+    real = simulation.simulate  # what Scene.simulate calls, looked up at each call
 
     def simulate(model, method, *args, **kwargs):
         if method == "projection":
             raise InputError("integrator", "projection cannot run this")
         return real(model, method, *args, **kwargs)
 
-    monkeypatch.setattr(run, "simulate", simulate)
+    monkeypatch.setattr(simulation, "simulate", simulate)
     result = compare("bouncing_ball", None, str(tmp_path / "all"), duration=0.02, video=False)
     assert [row["method"] for row in result.rows] == ["penalty", "impulse", "constraints"]
     assert "projection cannot run this" in result.skipped["projection"]

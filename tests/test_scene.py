@@ -606,3 +606,22 @@ def test_every_method_option_is_documented(name):
     section = section[: section.index("\n## ")] if "\n## " in section else section
     for field in fields(methods.get(name).Options):
         assert f"| `{field.name}` |" in section, field.name
+
+
+def test_scene_simulate_is_simulate_with_the_scene_s_own_arguments():
+    scene = load_scene("bouncing_ball", ["simulation.duration=0.05", "simulation.method=projection"])
+    by_scene = scene.simulate(record_every=2)
+    by_hand = simulate(
+        scene.model,
+        "projection",
+        scene.dt,
+        0.05,
+        scene.options["projection"],
+        scene.integrator,
+        record_every=2,
+        scene_name="bouncing_ball",
+    )
+    assert by_scene.summary["scene"] == "bouncing_ball" and by_scene.summary["method"] == "projection"
+    assert sorted(by_scene.arrays) == sorted(by_hand.arrays)
+    for key in by_hand.arrays:
+        np.testing.assert_array_equal(np.asarray(by_scene.arrays[key]), np.asarray(by_hand.arrays[key]))

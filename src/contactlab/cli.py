@@ -222,7 +222,6 @@ def _run(
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
-    from .simulation import simulate
     from .validation import run_length
 
     if video:  # a bad --fps fails before the run, not after it
@@ -245,16 +244,9 @@ def _run(
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
     try:  # the samples stream into trajectory.h5 as the run goes
-        result = simulate(
-            scene.model,
-            scene.method,
-            scene.dt,
-            scene.duration,
-            scene.options[scene.method],
-            scene.integrator,
-            record_every,
+        result = scene.simulate(
+            record_every=record_every,
             progress=sys.stderr.isatty(),
-            scene_name=scene.name,
             allow_divergence=allow_divergence,
             memory_limit=memory_limit,
             trajectory=trajectory,

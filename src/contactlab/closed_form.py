@@ -133,12 +133,12 @@ def _one_body_on_plane(model, kind):
 
 
 def _body_on_floor(model, kind):
-    """(shape params (4,), |g|, up (3,), floor offset along up) when the scene is one body of
-    ``kind`` on one horizontal plane under gravity; else None."""
+    """(shape params (4,), |g|, up (3,), floor offset along up, and the contact's μ and ε) when
+    the scene is one body of ``kind`` on one horizontal plane under gravity; else None."""
     layout = _one_body_on_plane(model, kind)
     g, up = _gravity(model)
     floor = _horizontal_floor(model, up) if layout is not None else None
-    return None if floor is None else (layout[0], g, up, floor)
+    return None if floor is None else (layout[0], g, up, floor, *_materials(model))
 
 
 def _materials(model):
@@ -167,8 +167,7 @@ def _bouncing_ball(model, arrays):
     layout = _body_on_floor(model, shapes.SPHERE)
     if layout is None:
         return []
-    params, g, up, floor = layout
-    _, restitution = _materials(model)
+    params, g, up, floor, _, restitution = layout
     height = arrays["body_position"][:, 0] @ up - floor - params[0]
     rise = arrays["body_velocity"][:, 0] @ up
     h0 = float(height[0])
@@ -194,8 +193,7 @@ def _sliding_block(model, arrays):
     layout = _body_on_floor(model, shapes.BOX)
     if layout is None:
         return []
-    _, g, up, _ = layout
-    friction, _ = _materials(model)
+    _, g, up, _, friction, _ = layout
     v0 = np.linalg.norm(arrays["body_velocity"][0, 0] - (arrays["body_velocity"][0, 0] @ up) * up)
     if friction == 0 or v0 == 0:
         return []
@@ -220,9 +218,8 @@ def _rolling_sphere(model, arrays):
     layout = _body_on_floor(model, shapes.SPHERE)
     if layout is None:
         return []
-    params, g, up, _ = layout
+    params, g, up, _, friction, _ = layout
     radius = params[0]
-    friction, _ = _materials(model)
     v = arrays["body_velocity"][:, 0]
     w = arrays["body_angular_velocity"][:, 0]
     v0 = float(np.linalg.norm(v[0]))
@@ -311,8 +308,7 @@ def _rod_impact(model, arrays):
     layout = _body_on_floor(model, shapes.BOX)
     if layout is None:
         return []
-    params, g, up, floor = layout
-    friction, restitution = _materials(model)
+    params, g, up, floor, friction, restitution = layout
     if (
         friction != 0
         or np.linalg.norm(arrays["body_velocity"][0, 0]) > 0

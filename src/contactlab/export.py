@@ -30,29 +30,23 @@ import numpy as np
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, checked_times, make_folders, read_trajectory, remove_empty, sample_count, undo_written
+from .record import (
+    DRAWN,
+    atomic_path,
+    checked_times,
+    make_folders,
+    read_trajectory,
+    remove_empty,
+    sample_count,
+    undo_written,
+)
 from .trajectory import check_arrays
 
 MESH_FORMATS = ("obj", "ply")
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
 OBJ_DIGITS = 9  # decimals of the coordinates in OBJ text: 1 nm
 
-_REQUIRED = (
-    "time",
-    "body_position",
-    "body_orientation",
-    "body_names",
-    "particle_position",
-    "particle_radius",
-    "particle_cloth",
-    "triangles",
-    "body_surface_vertices",
-    "body_surface_vertex_start",
-    "body_surface_triangles",
-    "body_surface_triangle_start",
-    "obstacle_vertices",
-    "obstacle_triangles",
-)
+_REQUIRED = (*DRAWN, "body_names")  # a picture's arrays, and the names the exported objects take
 
 
 # ---------------------------------------------------------------------------------------------

@@ -25,6 +25,8 @@ import numpy as np
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
 from .errors import InputError
+from .state import ARRAYS as STATE_ARRAYS
+from .state import array_shapes
 from .trajectory import check_arrays, check_shapes
 
 if TYPE_CHECKING:
@@ -34,12 +36,7 @@ if TYPE_CHECKING:
 
 SERIES = (
     "time",
-    "body_position",
-    "body_orientation",
-    "body_velocity",
-    "body_angular_velocity",
-    "particle_position",
-    "particle_velocity",
+    *STATE_ARRAYS,
     "energy_kinetic",
     "energy_potential",
     "energy_elastic",
@@ -49,20 +46,27 @@ SERIES = (
     "solver_residual",
 )
 WHOLE_SERIES = ("contact_count", "solver_iterations")  # 64-bit whole numbers; the rest are floats
+DRAWN = (  # what a picture of a run reads (render, viewer, export): its time, poses and surfaces
+    "time",
+    "body_position",
+    "body_orientation",
+    "particle_position",
+    "particle_radius",
+    "particle_cloth",
+    "triangles",
+    "body_surface_vertices",
+    "body_surface_vertex_start",
+    "body_surface_triangles",
+    "body_surface_triangle_start",
+    "obstacle_vertices",
+    "obstacle_triangles",
+)
 TRAJECTORY = "trajectory.h5"  # the file name of a run's trajectory in its output folder
 
 
 def series_rows(model: Model) -> dict[str, tuple[tuple[int, ...], type]]:
     """name -> (shape of one sample, dtype) of every series of a run of ``model``."""
-    B, P = model.body_count, model.particle_count
-    shapes = {
-        "body_position": (B, 3),
-        "body_orientation": (B, 4),
-        "body_velocity": (B, 3),
-        "body_angular_velocity": (B, 3),
-        "particle_position": (P, 3),
-        "particle_velocity": (P, 3),
-    }
+    shapes = array_shapes(model.body_count, model.particle_count)
     return {name: (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64) for name in SERIES}
 
 

@@ -27,7 +27,7 @@ from .health import ENERGY_SERIES, HARD_SPEED, Health
 from .methods import velocity_loop
 from .model import Model
 from .record import Recorder, streaming_recorder
-from .state import State
+from .state import State, array_shapes
 from .store import TrajectoryFile
 from .threads import ThreadChooser
 from .validation import MAX_STEPS, one_of, run_length
@@ -132,16 +132,7 @@ def _check_state(model, state):
         raise InputError(
             "state", f"expected a contactlab State (model.state(), or the state of a run), found {_kind(state)}"
         )
-    B, P = model.body_count, model.particle_count
-    shapes = {
-        "body_position": (B, 3),
-        "body_orientation": (B, 4),
-        "body_velocity": (B, 3),
-        "body_angular_velocity": (B, 3),
-        "particle_position": (P, 3),
-        "particle_velocity": (P, 3),
-    }
-    for name, shape in shapes.items():
+    for name, shape in array_shapes(model.body_count, model.particle_count).items():
         value = getattr(state, name)
         found = getattr(value, "shape", None)
         if not isinstance(value, np.ndarray) or value.shape != shape or value.dtype != np.float64:

@@ -86,3 +86,21 @@ class State:
                 self.particle_velocity,
             )
         )
+
+
+def array_shapes(body_count: int, particle_count: int) -> dict[str, tuple[int, int]]:
+    """name -> shape of each of a State's six arrays, in field order, for B = ``body_count``
+    bodies and P = ``particle_count`` particles: what a state is checked against and what a
+    recorded sample of it holds."""
+    B, P = body_count, particle_count
+    return {
+        "body_position": (B, 3),
+        "body_orientation": (B, 4),
+        "body_velocity": (B, 3),
+        "body_angular_velocity": (B, 3),
+        "particle_position": (P, 3),
+        "particle_velocity": (P, 3),
+    }
+
+
+ARRAYS = tuple(array_shapes(0, 0))  # the six array fields' names, in order

@@ -118,19 +118,11 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     from .closed_form import checks as closed_form_checks
     from .compare import metrics
     from .scene import load_scene
-    from .simulation import simulate
 
     started = time.perf_counter()
     try:
         scene = load_scene(job["scene"], job["overrides"])
-        run = simulate(
-            scene.model,
-            scene.method,
-            scene.dt,
-            scene.duration,
-            scene.options[scene.method],
-            scene.integrator,
-            scene_name=scene.name,
+        run = scene.simulate(
             threads=1,
             trajectory=job["trajectory"],
         )

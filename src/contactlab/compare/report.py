@@ -375,14 +375,22 @@ def _check_lines(outcomes):
     return lines
 
 
-def markdown_text(
+def report_texts(
     scene: Scene,
     outcomes: Sequence[_Outcome],
     summary_text: str,
     table: tuple[list[str], list[list[str]]],
     plot_paths: Mapping[str, str],
     out: str,
-) -> str:
+) -> tuple[str, str]:
+    """The text of report.md and of report.html (``_markdown_text``, ``_html_text``) from the
+    same parts: ``table`` from :func:`table_cells`, ``plot_paths`` the comparison plots (name →
+    path), links relative to ``out``."""
+    parts = (scene, outcomes, summary_text, table, plot_paths, out)
+    return _markdown_text(*parts), _html_text(*parts)
+
+
+def _markdown_text(scene, outcomes, summary_text, table, plot_paths, out):
     """report.md: the paragraph, the table (``table``: :func:`table_cells`), the checks, each
     method's files, the comparison plots (``plot_paths``: name → path) and the notes; links
     relative to ``out``."""
@@ -490,14 +498,7 @@ def _method_details(outcome, out):
     )
 
 
-def html_text(
-    scene: Scene,
-    outcomes: Sequence[_Outcome],
-    summary_text: str,
-    table: tuple[list[str], list[list[str]]],
-    plot_paths: Mapping[str, str],
-    out: str,
-) -> str:
+def _html_text(scene, outcomes, summary_text, table, plot_paths, out):
     """report.html: what report.md holds, with each method's video in a card, its plots folded
     away, and the style and script of report.css and report.js inlined."""
     check_items = "".join(

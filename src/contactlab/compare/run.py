@@ -26,7 +26,7 @@ from ..methods import AVAILABLE
 from ..plots import write_comparison_plots, write_plots
 from ..record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
 from ..scene import Scene, load_scene
-from ..simulation import Run, simulate
+from ..simulation import Run
 from ..store import open_trajectory
 from . import report
 from .measures import fill_rows
@@ -122,15 +122,8 @@ def run_method(job: Mapping[str, Any]) -> dict[str, Any]:
         warnings.simplefilter("always")
         try:
             scene = load_scene(job["scene"], job["overrides"])
-            run = simulate(
-                scene.model,
-                scene.method,
-                scene.dt,
-                scene.duration,
-                scene.options[scene.method],
-                scene.integrator,
+            run = scene.simulate(
                 progress=job["progress"],
-                scene_name=scene.name,
                 allow_divergence=job["allow_divergence"],
                 trajectory=job["trajectory"],
             )
@@ -347,12 +340,9 @@ def compare(
         rows = [outcome.row for outcome in outcomes]
         table = report.table_cells(outcomes)
         csv_path = created.text(os.path.join(out, "comparison.csv"), report.csv_text(rows))
-        md_path = created.text(
-            os.path.join(out, "report.md"), report.markdown_text(scene, outcomes, summary_text, table, plot_paths, out)
-        )
-        html_path = created.text(
-            os.path.join(out, "report.html"), report.html_text(scene, outcomes, summary_text, table, plot_paths, out)
-        )
+        markdown, html = report.report_texts(scene, outcomes, summary_text, table, plot_paths, out)
+        md_path = created.text(os.path.join(out, "report.md"), markdown)
+        html_path = created.text(os.path.join(out, "report.html"), html)
     except BaseException:
         created.remove()
         raise

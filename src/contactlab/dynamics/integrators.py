@@ -295,6 +295,8 @@ def free_velocities(
     return (*body_free_velocities(model, state, dt, integrator, body_force, body_torque), particle_velocity)
 
 
+# Deliberately free_velocities' first parameters again: this is its rigid-body part, which the
+# constraints method calls alone (its particles are solved with the contacts).
 def body_free_velocities(
     model: Model,
     state: State,

@@ -221,18 +221,14 @@ def _friction_update(blocks, a, r, i, ut1, ut2, m_a, pyramid):
         bound = m_a * rn * _SQRT_HALF
         # projected coordinate steps, exact per component; two passes couple T1 and T2
         for _ in range(2):
-            if a00 > 0.0:
-                new = min(max(r[i + 1] - ut1 / a00, -bound), bound)
-                delta = new - r[i + 1]
-                r[i + 1] = new
-                ut1 += a00 * delta
-                ut2 += a10 * delta
-            if a11 > 0.0:
-                new = min(max(r[i + 2] - ut2 / a11, -bound), bound)
-                delta = new - r[i + 2]
-                r[i + 2] = new
-                ut1 += a01 * delta
-                ut2 += a11 * delta
+            for k in (1, 2):  # T1, then T2: its diagonal entry, and its column moves u_T
+                diagonal = blocks[a, k, k]
+                if diagonal > 0.0:
+                    new = min(max(r[i + k] - (ut1 if k == 1 else ut2) / diagonal, -bound), bound)
+                    delta = new - r[i + k]
+                    r[i + k] = new
+                    ut1 += blocks[a, 1, k] * delta
+                    ut2 += blocks[a, 2, k] * delta
         return
     # b = u_T − W_TT r_T: the part of u_T that does not come from this contact's own friction
     b1 = ut1 - a00 * r[i + 1] - a01 * r[i + 2]
@@ -243,13 +239,19 @@ def _friction_update(blocks, a, r, i, ut1, ut2, m_a, pyramid):
 
 
 @njit(cache=True)
-def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid):
-    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
+def _start(indptr, indices, data, q, mu, r, pyramid):
+    """What both sweeps start from: (contact count nc, u (m,) holding W r + q, |q|, the error
+    of r) for r (m,), q (m,) with m = 3 nc."""
     m = q.shape[0]
-    nc = m // 3
     u = np.empty(m)
     norm_q = math.sqrt(np.sum(q * q))
-    error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+    return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+
+
+@njit(cache=True)
+def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid):
+    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
+    nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error
     for sweep in range(1, max_iterations + 1):
@@ -279,11 +281,7 @@ def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyr
     Each round: up to ``inner`` projected Gauss-Seidel sweeps over all normal rows (frictions
     fixed), then up to ``inner`` sweeps of exact friction solves over all contacts (normals
     fixed); a phase stops early when its largest change is below ``tol/10`` of the largest r."""
-    m = q.shape[0]
-    nc = m // 3
-    u = np.empty(m)
-    norm_q = math.sqrt(np.sum(q * q))
-    error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+    nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error
     for rnd in range(1, max_iterations + 1):

@@ -281,6 +281,15 @@ def solve_newton(
     return r_scaled * scale, iterations, error, restarts
 
 
+def _keep_best(r, error, best_r, best_error):
+    """The lower of ``error`` (of r (m,)) and ``best_error`` (of best_r (m,)); r is copied into
+    best_r when it is the better iterate."""
+    if error < best_error:
+        best_r[:] = r
+        return error
+    return best_error
+
+
 def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
     """:func:`solve_newton` on the problem scaled to max|q| = 1 (or q = 0); r (m,) is overwritten."""
     m = q.shape[0]
@@ -350,9 +359,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
         r += step * direction
         error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
 
-        if error < best_error:
-            best_error = error
-            best_r[:] = r
+        best_error = _keep_best(r, error, best_r, best_error)
         if error <= tol:
             return best_r, iteration, best_error, restarts
         if error < WATCHDOG_PROGRESS * mark_error:
@@ -365,11 +372,9 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
             _nsgs(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, sweeps, False)
             rho = RHO_FACTORS[(restarts - 1) % len(RHO_FACTORS)] * base_rho
             error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
-            if error < best_error:
-                best_error = error
-                best_r[:] = r
-                if error <= tol:
-                    return best_r, iteration, best_error, restarts
+            best_error = _keep_best(r, error, best_r, best_error)
+            if error <= tol:  # as when it was kept: best_error > tol until now, so this error is the best
+                return best_r, iteration, best_error, restarts
             mark_error, mark_at = error, iteration
             reference = None
     return best_r, max_iterations, best_error, restarts

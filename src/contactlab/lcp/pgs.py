@@ -115,6 +115,8 @@ def _relax_row(indptr, indices, data, diag, c, lam, source, omega, i):
         lam[i] = value if value > 0.0 else 0.0
 
 
+# Deliberately gauss_seidel's parameters again (the same problem and sweep settings, then the
+# colors): the two stay apart so that the sequential sweeps remain a plain, not parallel=True, kernel.
 @njit(cache=True, parallel=True)
 def red_black(
     indptr: np.ndarray,

@@ -15,13 +15,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..collision import GRANULARITIES, NORMALS
+from ..collision import GRANULARITIES, NORMALS, collide_keeping
 from ..contacts import Contacts
 from ..errors import InputError
 from ..validation import check_choices, check_counts, number
+
+if TYPE_CHECKING:
+    from ..collision.manifolds import Manifolds
+    from ..model import Model
+    from ..state import State
 
 
 @dataclass
@@ -57,6 +63,31 @@ class CollisionOptions:
         self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"samples": 1, "cloth_samples": 0})
+
+    def collide(
+        self,
+        model: Model,
+        state: State,
+        sweep: np.ndarray | None,
+        manifolds: Manifolds | None = None,
+        tolerance: float = 0.0,
+    ) -> tuple[Contacts, Manifolds | None]:
+        """``collide_keeping`` with these settings: the contacts of ``state`` down to gaps of
+        ``contact_margin`` [m], or each collider's ``sweep`` (B + P,) [m] where larger, and the
+        manifolds to carry; pairs that moved less than ``tolerance`` [m] keep theirs from
+        ``manifolds`` (last step's; None or 0: nothing kept, as ``collide``)."""
+        return collide_keeping(
+            model,
+            state,
+            manifolds,
+            tolerance,
+            self.contact_margin,
+            sweep,
+            self.granularity,
+            self.normal,
+            self.samples,
+            self.cloth_samples,
+        )
 
 
 @dataclass

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import rotations
-from ..collision import collide, pass_through_depths, swept_distances
+from ..collision import pass_through_depths, swept_distances
 from ..contacts import Contacts, jacobian, values_by_id
 from ..dynamics.generalized import implicit_base, stack, unstack
 from ..dynamics.integrators import advance_positions, free_velocities
@@ -357,16 +357,7 @@ def step(
     h, settings = dt, spring_settings(options, integrator)
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
-    contacts = collide(
-        model,
-        state,
-        options.contact_margin,
-        sweep,
-        options.granularity,
-        options.normal,
-        options.samples,
-        cloth_samples=options.cloth_samples,
-    )
+    contacts, _ = options.collide(model, state, sweep)
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     offsets, _ = values_by_id(
         state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"), contacts.feature_id, 3

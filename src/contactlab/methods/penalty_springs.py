@@ -183,24 +183,14 @@ INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
 
 @njit(cache=True)
-def normal_stiffness(
-    settings: SpringSettings,
-    entity_a: np.ndarray,
-    entity_b: np.ndarray,
-    normal: np.ndarray,
-    body_position: np.ndarray,
-    particle_position: np.ndarray,
-    body_mass: np.ndarray,
-    particle_mass: np.ndarray,
-    gravity: np.ndarray,
-) -> np.ndarray:
-    """``contact_stiffness``, compiled: sides as ``contact_entities``, the rest as ``supported_loads``."""
+def normal_stiffness(settings: SpringSettings, *loads_of: np.ndarray) -> np.ndarray:
+    """``contact_stiffness``, compiled: each contact's normal stiffness (C,) [N/m], the fixed one
+    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the eight
+    arguments of ``supported_loads`` (entity_a, entity_b, normal, body_position,
+    particle_position, body_mass, particle_mass, gravity), in its order."""
     if settings.stiffness >= 0.0:
-        return np.full(entity_a.shape[0], settings.stiffness)
-    return (
-        supported_loads(entity_a, entity_b, normal, body_position, particle_position, body_mass, particle_mass, gravity)
-        / settings.allowed_penetration
-    )
+        return np.full(loads_of[0].shape[0], settings.stiffness)
+    return supported_loads(*loads_of) / settings.allowed_penetration
 
 
 @njit(cache=True)

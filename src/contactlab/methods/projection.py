@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from ..collision import collide, swept_distances
+from ..collision import swept_distances
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
@@ -99,16 +99,7 @@ def project(
     contacts, λ (C, 3) [kg m], sweeps, last correction [m]).
     """
     if contacts is None:
-        contacts = collide(
-            model,
-            at,
-            options.contact_margin,
-            sweep,
-            options.granularity,
-            options.normal,
-            options.samples,
-            cloth_samples=options.cloth_samples,
-        )
+        contacts, _ = options.collide(model, at, sweep)
     if contacts.count == 0:
         return displacement, contacts, np.zeros((0, 3)), 0, 0.0
     warm = np.zeros((contacts.count, 3))

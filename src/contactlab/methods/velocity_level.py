@@ -21,8 +21,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
-from ..collision import collide_keeping, swept_distances
+from ..collision import swept_distances
 from ..dynamics.integrators import advance_positions
 from ..state import State
 from . import StepInfo
@@ -55,18 +56,7 @@ def detect(
     gaps down to what the motion could close (speculative contacts, so nothing tunnels), box,
     hull and plane pairs that barely moved keeping last step's manifolds. Returns (Contacts,
     the manifolds to carry)."""
-    return collide_keeping(
-        model,
-        state,
-        state.carried.get("manifolds"),
-        options.manifold_tolerance,
-        options.contact_margin,
-        sweep,
-        options.granularity,
-        options.normal,
-        options.samples,
-        cloth_samples=options.cloth_samples,
-    )
+    return options.collide(model, state, sweep, state.carried.get("manifolds"), options.manifold_tolerance)
 
 
 def step_without_contacts(
@@ -232,10 +222,10 @@ def earliest_impacts(
 
 
 def normal_targets(
-    gap_at_start: np.ndarray,
-    normal_velocity: np.ndarray,
-    gravity_normal: np.ndarray,
-    restitution: np.ndarray,
+    gap_at_start: ArrayLike,  # array-likes: converted to float arrays for ``impact_targets``
+    normal_velocity: ArrayLike,
+    gravity_normal: ArrayLike,
+    restitution: ArrayLike,
     dt: float,
     threshold: float,
     options: ImpulseOptions | ConstraintsOptions,

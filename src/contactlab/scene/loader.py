@@ -1,8 +1,7 @@
 """Finding a scene (a built-in name or a .toml path), reading it and turning it into a :class:`Scene`.
 
     scene = load_scene("bouncing_ball", overrides=["simulation.dt=0.0005"])
-    run = simulate(scene.model, scene.method, scene.dt, scene.duration,
-                   scene.options[scene.method], scene.integrator)
+    run = scene.simulate()  # simulate(scene.model, scene.method, scene.dt, ..., scene_name=scene.name)
 
 Order: read the text → parse TOML → apply ``--set`` overrides to the raw dict → validate
 against the schema → build each ``[method.NAME]`` table into that method's Options (checked
@@ -19,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .. import methods
 from ..errors import InputError
@@ -28,6 +27,9 @@ from .build import build_model
 from .overrides import apply_overrides
 from .schema import show, validate
 from .toml import parse_toml
+
+if TYPE_CHECKING:
+    from ..simulation import Run
 
 BUILTIN_PACKAGE = __package__  # scene files live in <this package>/builtin/*.toml
 MAX_SCENE_BYTES = 16 * 2**20  # bytes: a larger scene file is refused unread (built-in ones are under 2 kB)
@@ -65,6 +67,24 @@ class Scene:
             "scene": self.source[len("builtin:") :] if builtin else os.path.abspath(self.source),
             "overrides": [str(line) for line in overrides],
         }
+
+    def simulate(self, **keywords: Any) -> Run:
+        """``simulate`` this scene as it says (its model, method, dt, duration, selected method's
+        options and integrator, named after it); ``keywords`` are the rest of ``simulate``'s
+        (progress, trajectory, record_every, threads, ...). What the CLI, a comparison and a
+        sweep each run."""
+        from ..simulation import simulate  # here: loading a scene does not load the stepping code
+
+        return simulate(
+            self.model,
+            self.method,
+            self.dt,
+            self.duration,
+            self.options[self.method],
+            self.integrator,
+            scene_name=self.name,
+            **keywords,
+        )
 
 
 def _builtin_dir():

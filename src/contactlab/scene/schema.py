@@ -154,29 +154,38 @@ class Vector:
         return f"[{', '.join('n' if self.whole else 'x' for _ in range(self.size))}]"
 
 
-class Points:
-    """A non-empty list of [x, y, z] points."""
+class _ListOf:
+    """A non-empty list of values of the kind ``item``, each checked by it (``field[i]``)."""
 
-    point = Vector(3)
+    item: Any
+    noun = ""  # what a message calls the list, followed by its unit
+    noun_says_unit = False
 
     def check(self, value: Any, field: str, unit: str = "") -> Any:
         if not isinstance(value, list) or not value:
-            raise InputError(field, f"expected a non-empty list of [x, y, z] points{_unit(unit)}, found {show(value)}")
-        return [self.point.check(p, f"{field}[{i}]", unit) for i, p in enumerate(value)]
+            shown = "" if self.noun_says_unit else _unit(unit)
+            raise InputError(field, f"expected a non-empty list of {self.noun}{shown}, found {show(value)}")
+        return [self.item.check(x, f"{field}[{i}]", unit) for i, x in enumerate(value)]
+
+
+class Points(_ListOf):
+    """A non-empty list of [x, y, z] points."""
+
+    item = Vector(3)
+    noun = "[x, y, z] points"
 
     def describe(self) -> str:
         return "[[x, y, z], ...]"
 
 
-class Times:
+class Times(_ListOf):
     """Keyframe times: a non-empty list of finite numbers, strictly increasing."""
 
-    number = Number()
+    item = Number()
+    noun = "times"
 
     def check(self, value: Any, field: str, unit: str = "") -> Any:
-        if not isinstance(value, list) or not value:
-            raise InputError(field, f"expected a non-empty list of times{_unit(unit)}, found {show(value)}")
-        times = [self.number.check(t, f"{field}[{i}]", unit) for i, t in enumerate(value)]
+        times = super().check(value, field, unit)
         for i in range(1, len(times)):
             if times[i] <= times[i - 1]:
                 raise InputError(
@@ -189,15 +198,12 @@ class Times:
         return "[t0, t1, ...]"
 
 
-class Quaternions(Points):
+class Quaternions(_ListOf):
     """A non-empty list of [w, x, y, z] quaternions."""
 
-    point = Vector(4)
-
-    def check(self, value: Any, field: str, unit: str = "") -> Any:
-        if not isinstance(value, list) or not value:
-            raise InputError(field, f"expected a non-empty list of [w, x, y, z] quaternions, found {show(value)}")
-        return [self.point.check(q, f"{field}[{i}]", unit) for i, q in enumerate(value)]
+    item = Vector(4)
+    noun = "[w, x, y, z] quaternions"
+    noun_says_unit = True  # the unit, "quaternion w, x, y, z", would only say it again
 
     def describe(self) -> str:
         return "[[w, x, y, z], ...]"
