@@ -510,8 +510,11 @@ def test_a_resting_cloth_sinks_each_vertex_m_g_over_k(integrator, dt):
     )
     sink = thickness - run.state.particle_position[:, 2]
     np.testing.assert_allclose(sink, 0.01 * G / k, rtol=0.02)  # each vertex carries 10 g
-    # the springs stepped implicitly solve a linear system (SciPy's matrix, compiled CG) every step
-    assert run.summary["solver"]["cg_iterations_per_step"] >= 1.0
+    # springs stepped implicitly solve a linear system (SciPy's matrix, compiled CG) every step,
+    # from the velocities without contacts, which at rest often meet the tolerance already;
+    # explicit ones solve none
+    implicit = integrator == "backward_euler" or run.summary["implicit_spring_steps"] > 0
+    assert (run.summary["solver"]["cg_iterations_per_step"] > 0.0) == implicit
 
 
 def test_cloth_corner_pinned_hangs_in_contact_without_moving_the_pin():
