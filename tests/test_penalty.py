@@ -162,6 +162,21 @@ def test_linear_solvers_agree(solver):
     assert run.summary["solver"]["max_residual"] < 1e-9
 
 
+def test_summary_reports_the_conjugate_gradient_iterations_per_step():
+    # a cube resting on four corners under backward Euler: every step solves the springs' system
+    # (6 DOFs), which conjugate gradients finish in at most 6 iterations a pass in exact arithmetic
+    model, _ = resting_cube()
+    run = simulate(model, "penalty", dt=0.002, duration=0.1, options={"stiffness": 1e4}, integrator="backward_euler")
+    solver = run.summary["solver"]
+    assert 1.0 <= solver["cg_iterations_per_step"] <= 2 * 6 * solver["mean_iterations"]
+    # nothing touches: no solve, no iteration
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 5.0))
+    b.add_obstacle("plane", normal=(0, 0, 1))
+    falling = simulate(b.finalize(), "penalty", dt=0.002, duration=0.1, integrator="backward_euler")
+    assert falling.summary["max_contacts"] == 0 and falling.summary["solver"]["cg_iterations_per_step"] == 0.0
+
+
 # ---- F3: friction by anchor springs ------------------------------------------------------------
 
 
@@ -495,6 +510,11 @@ def test_a_resting_cloth_sinks_each_vertex_m_g_over_k(integrator, dt):
     )
     sink = thickness - run.state.particle_position[:, 2]
     np.testing.assert_allclose(sink, 0.01 * G / k, rtol=0.02)  # each vertex carries 10 g
+    # springs stepped implicitly solve a linear system (SciPy's matrix, compiled CG) every step,
+    # from the velocities without contacts, which at rest often meet the tolerance already;
+    # explicit ones solve none
+    implicit = integrator == "backward_euler" or run.summary["implicit_spring_steps"] > 0
+    assert (run.summary["solver"]["cg_iterations_per_step"] > 0.0) == implicit
 
 
 def test_cloth_corner_pinned_hangs_in_contact_without_moving_the_pin():

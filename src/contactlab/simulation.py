@@ -384,6 +384,7 @@ def _record_run(
         "solver": {
             "max_iterations": totals.max_iterations,
             "mean_iterations": tally.sweeps_made / steps,
+            "cg_iterations_per_step": tally.linear_iterations_made / steps,
             "max_residual": totals.max_residual,
         },
         "samples": totals.count,
@@ -427,6 +428,7 @@ class Tally:
     max_contacts: int = 0
     sweeps_made: int = 0  # solver sweeps summed over every step (recorded or not)
     implicit_spring_steps: int = 0  # penalty: steps whose contact springs went implicit (explicit unstable)
+    linear_iterations_made: int = 0  # penalty: conjugate-gradient iterations of the implicit springs, every step
     state: State | None = None  # the latest State the Python path made
     window_rates: list[float] = field(default_factory=list)  # steps/s of each WINDOW_SECONDS of stepping
     window: list[Any] = field(default_factory=lambda: [0, 0.0])  # the window being filled: steps, seconds
@@ -435,6 +437,7 @@ class Tally:
         """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
         self.max_contacts, self.sweeps_made = stepper.max_contacts, stepper.sweeps_made
         self.implicit_spring_steps = stepper.implicit_spring_steps
+        self.linear_iterations_made = stepper.linear_iterations_made
 
     def timed(self, step_index: int, elapsed: float, compiled: float, steps: int = 1) -> bool:
         """Book the ``steps`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled``
@@ -483,6 +486,7 @@ def _step_in_python(
         tally.max_contacts = max(tally.max_contacts, info.contacts.count)
         tally.sweeps_made += info.solver_iterations
         tally.implicit_spring_steps += info.implicit_springs
+        tally.linear_iterations_made += info.linear_iterations
         tally.state = state
         sampled = step_index % record_every == 0 or step_index == steps
         violation = health.check_state(state, full=sampled)

@@ -24,7 +24,8 @@ stays symmetric positive definite, at the price of an approximate Jacobian for c
 springs (the step's fixed point, f = 0 at rest, is unchanged).
 
 Shapes: P particles, S springs; the DOF vector of the particles has 3P entries, particle p
-owns [3p, 3p + 3). Everything is vectorized over springs (no Python loop per spring).
+owns [3p, 3p + 3). Each stage is one compiled loop over the springs (Numba), which also sums
+their pulls onto the particles: no Python loop per spring or per particle.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -43,23 +45,104 @@ TINY_LENGTH = 1e-12  # m: a spring shorter than this has no direction; its axis 
 
 
 def _axes(model, particle_position):
-    """(i (S,), j (S,), d (S,3), l (S,), u (S,3)) of the springs at the given positions."""
-    i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
-    d = particle_position[j] - particle_position[i]
-    length = np.sqrt(np.einsum("si,si->s", d, d))
-    u = d / np.where(length > TINY_LENGTH, length, 1.0)[:, None]
-    u[length <= TINY_LENGTH] = 0.0
-    return i, j, d, length, u
+    """(length (S,) [m], u (S, 3)) of the springs at the given positions (P, 3) [m]."""
+    return spring_axes(model.spring_particles, _float_rows(particle_position))
 
 
-def _gather(index_i, index_j, force_on_i, count):
-    """Sum per-spring forces (S, 3) on i and their opposites on j into (count, 3)."""
-    total = np.empty((count, 3))
-    for axis in range(3):  # three bincounts: vectorized over the springs
-        total[:, axis] = np.bincount(index_i, force_on_i[:, axis], minlength=count) - np.bincount(
-            index_j, force_on_i[:, axis], minlength=count
+def _float_rows(array):
+    """``array`` as the compiled kernels take it: a C-contiguous float64 array."""
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+@njit(cache=True)
+def _axis(particle_position, i, j):
+    """(l [m], u_x, u_y, u_z) of the spring from particle i to j: d = x_j − x_i, l = |d|, u = d / l
+    (u = 0 for a spring shorter than TINY_LENGTH: it has no direction)."""
+    dx = particle_position[j, 0] - particle_position[i, 0]
+    dy = particle_position[j, 1] - particle_position[i, 1]
+    dz = particle_position[j, 2] - particle_position[i, 2]
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= TINY_LENGTH:
+        return length, 0.0, 0.0, 0.0
+    return length, dx / length, dy / length, dz / length
+
+
+@njit(cache=True)
+def spring_axes(spring_particles: np.ndarray, particle_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each spring's length l (S,) [m] and unit axis u (S, 3) from i to j, at positions (P, 3) [m]."""
+    S = spring_particles.shape[0]
+    length, u = np.empty(S), np.empty((S, 3))
+    for s in range(S):
+        length[s], u[s, 0], u[s, 1], u[s, 2] = _axis(particle_position, spring_particles[s, 0], spring_particles[s, 1])
+    return length, u
+
+
+@njit(cache=True)
+def _tension(spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s):
+    """(k (l − L) + c (v_j − v_i)·u [N], u (3 floats)) of spring s; without the damping term
+    unless ``damped``."""
+    i, j = spring_particles[s, 0], spring_particles[s, 1]
+    length, ux, uy, uz = _axis(particle_position, i, j)
+    tension = stiffness[s] * (length - rest_length[s])
+    if damped:
+        closing = (
+            (particle_velocity[j, 0] - particle_velocity[i, 0]) * ux
+            + (particle_velocity[j, 1] - particle_velocity[i, 1]) * uy
+            + (particle_velocity[j, 2] - particle_velocity[i, 2]) * uz
         )
-    return total
+        tension = tension + damping[s] * closing
+    return tension, ux, uy, uz
+
+
+@njit(cache=True)
+def tensions(
+    spring_particles: np.ndarray,
+    stiffness: np.ndarray,
+    rest_length: np.ndarray,
+    damping: np.ndarray,
+    particle_position: np.ndarray,
+    particle_velocity: np.ndarray,
+    damped: bool,
+) -> np.ndarray:
+    """``spring_tensions`` on the model's spring arrays (S,): k (l − L) + c (v_j − v_i)·u [N]
+    (the damping term only if ``damped``; ``particle_velocity`` (P, 3) is not read otherwise)."""
+    S = spring_particles.shape[0]
+    out = np.empty(S)
+    for s in range(S):
+        out[s] = _tension(
+            spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s
+        )[0]
+    return out
+
+
+@njit(cache=True)
+def forces(
+    spring_particles: np.ndarray,
+    stiffness: np.ndarray,
+    rest_length: np.ndarray,
+    damping: np.ndarray,
+    particle_position: np.ndarray,
+    particle_velocity: np.ndarray,
+    damped: bool,
+) -> np.ndarray:
+    """``spring_forces`` on the model's spring arrays: f_i = tension · u on i, −f_i on j, summed
+    into (P, 3) [N] in one pass over the springs. The pulls on the i ends and on the j ends are
+    summed apart, in spring order, and subtracted at the end: a fixed order (reruns give the same
+    bits) that also matches the bincount sums of the NumPy version this replaced."""
+    P = particle_position.shape[0]
+    on_i, on_j = np.zeros((P, 3)), np.zeros((P, 3))
+    for s in range(spring_particles.shape[0]):
+        tension, ux, uy, uz = _tension(
+            spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s
+        )
+        i, j = spring_particles[s, 0], spring_particles[s, 1]
+        on_i[i, 0] += tension * ux
+        on_i[i, 1] += tension * uy
+        on_i[i, 2] += tension * uz
+        on_j[j, 0] += tension * ux
+        on_j[j, 1] += tension * uy
+        on_j[j, 2] += tension * uz
+    return on_i - on_j
 
 
 def spring_tensions(
@@ -67,11 +150,17 @@ def spring_tensions(
 ) -> np.ndarray:
     """Scalar pull of each spring along its axis (S,) [N]: k (l − L) + c (v_j − v_i)·u
     (positive when it pulls its ends together)."""
-    i, j, _, length, u = _axes(model, particle_position)
-    tension = model.spring_stiffness * (length - model.spring_rest_length)
-    if particle_velocity is not None:
-        tension = tension + model.spring_damping * np.einsum("si,si->s", particle_velocity[j] - particle_velocity[i], u)
-    return tension
+    x = _float_rows(particle_position)
+    v = x if particle_velocity is None else _float_rows(particle_velocity)
+    return tensions(
+        model.spring_particles,
+        model.spring_stiffness,
+        model.spring_rest_length,
+        model.spring_damping,
+        x,
+        v,
+        particle_velocity is not None,
+    )
 
 
 def spring_forces(
@@ -79,12 +168,19 @@ def spring_forces(
 ) -> np.ndarray:
     """Spring forces on the particles (P, 3) [N] at positions (P, 3) [m] and velocities
     (P, 3) [m/s] (None: no damping force). Zero for particles without springs."""
-    count = len(particle_position)
     if model.spring_count == 0:
-        return np.zeros((count, 3))
-    i, j, _, _, u = _axes(model, particle_position)
-    tension = spring_tensions(model, particle_position, particle_velocity)
-    return _gather(i, j, tension[:, None] * u, count)
+        return np.zeros((len(particle_position), 3))
+    x = _float_rows(particle_position)
+    v = x if particle_velocity is None else _float_rows(particle_velocity)
+    return forces(
+        model.spring_particles,
+        model.spring_stiffness,
+        model.spring_rest_length,
+        model.spring_damping,
+        x,
+        v,
+        particle_velocity is not None,
+    )
 
 
 @dataclass(frozen=True)
@@ -102,8 +198,7 @@ class SpringPattern:
     def values(self, blocks: np.ndarray) -> np.ndarray:
         """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on
         its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); springs sharing an entry add."""
-        signed = np.stack([-blocks, -blocks, blocks, blocks], axis=1)
-        return np.bincount(self.slots.ravel(), signed.ravel(), minlength=len(self.indices))
+        return pattern_values(self.slots, _float_rows(blocks), len(self.indices))
 
     def matrix(self, values: np.ndarray) -> sp.csr_matrix:
         """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
@@ -128,28 +223,86 @@ def spring_pattern(spring_particles: np.ndarray, count: int) -> SpringPattern:
     return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n :])
 
 
+@njit(cache=True)
+def pattern_values(slots: np.ndarray, blocks: np.ndarray, nnz: int) -> np.ndarray:
+    """``SpringPattern.values``, compiled: −B_s added at the entries ``slots`` (S, 4, 3, 3) of the
+    (i, i) and (j, j) blocks, +B_s at those of (i, j) and (j, i), for blocks (S, 3, 3); (nnz,).
+    Entries shared by several springs are summed in spring order (reruns give the same bits)."""
+    values = np.zeros(nnz)
+    for s in range(slots.shape[0]):
+        for block in range(4):
+            sign = -1.0 if block < 2 else 1.0
+            for a in range(3):
+                for b in range(3):
+                    values[slots[s, block, a, b]] += sign * blocks[s, a, b]
+    return values
+
+
+@njit(cache=True)
+def blocks_of(
+    spring_particles: np.ndarray,
+    stiffness: np.ndarray,
+    rest_length: np.ndarray,
+    damping: np.ndarray,
+    particle_position: np.ndarray,
+    clamp_compressed: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``jacobian_blocks`` on the model's spring arrays (S,): K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ)
+    and D_s = c u uᵀ (S, 3, 3), written as k (u uᵀ + (1 − L/l)(I − u uᵀ)); 1 − L/l is 0 for a
+    spring without direction and clamped at 0 if ``clamp_compressed``."""
+    S = spring_particles.shape[0]
+    K, D = np.empty((S, 3, 3)), np.empty((S, 3, 3))
+    for s in range(S):
+        length, ux, uy, uz = _axis(particle_position, spring_particles[s, 0], spring_particles[s, 1])
+        transverse = 1.0 - rest_length[s] / length if length > TINY_LENGTH else 0.0
+        if clamp_compressed:
+            transverse = max(transverse, 0.0)
+        u = (ux, uy, uz)
+        for a in range(3):
+            for b in range(3):
+                outer = u[a] * u[b]
+                identity = 1.0 if a == b else 0.0
+                K[s, a, b] = stiffness[s] * (outer + transverse * (identity - outer))
+                D[s, a, b] = damping[s] * outer
+    return K, D
+
+
 def jacobian_blocks(
     model: Model, particle_position: np.ndarray, clamp_compressed: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
-    _, _, _, length, u = _axes(model, particle_position)
-    k, rest = model.spring_stiffness, model.spring_rest_length
-    outer = u[:, :, None] * u[:, None, :]  # (S, 3, 3) u uᵀ
-    with np.errstate(divide="ignore", invalid="ignore"):
-        transverse = np.where(length > TINY_LENGTH, 1.0 - rest / length, 0.0)
-    if clamp_compressed:
-        transverse = np.maximum(transverse, 0.0)
-    stiffness = k[:, None, None] * (outer + transverse[:, None, None] * (np.eye(3) - outer))
-    return stiffness, model.spring_damping[:, None, None] * outer
+    return blocks_of(
+        model.spring_particles,
+        model.spring_stiffness,
+        model.spring_rest_length,
+        model.spring_damping,
+        _float_rows(particle_position),
+        clamp_compressed,
+    )
+
+
+@njit(cache=True)
+def spring_block_product(spring_particles: np.ndarray, blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """``block_product`` on the springs' particles (S, 2): B_s (v_j − v_i) added on i and
+    subtracted on j, each end's sum kept apart in spring order (as ``forces``); (P, 3)."""
+    P = vectors.shape[0]
+    on_i, on_j = np.zeros((P, 3)), np.zeros((P, 3))
+    for s in range(spring_particles.shape[0]):
+        i, j = spring_particles[s, 0], spring_particles[s, 1]
+        for a in range(3):
+            pull = 0.0
+            for b in range(3):
+                pull += blocks[s, a, b] * (vectors[j, b] - vectors[i, b])
+            on_i[i, a] += pull
+            on_j[j, a] += pull
+    return on_i - on_j
 
 
 def block_product(model: Model, blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """(Σ_s B_s over the springs, assembled as in ``SpringPattern.values``) applied to ``vectors``
     (P, 3): each spring adds B_s (v_j − v_i) on i and its opposite on j; (P, 3)."""
-    i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
-    pull = np.einsum("sab,sb->sa", blocks, vectors[j] - vectors[i])
-    return _gather(i, j, pull, len(vectors))
+    return spring_block_product(model.spring_particles, _float_rows(blocks), _float_rows(vectors))
 
 
 def spring_jacobians(
@@ -183,5 +336,5 @@ def spring_energy(model: Model, particle_position: np.ndarray) -> float:
     """Elastic energy of the springs Σ ½ k (l − L)² [J] at positions (P, 3) [m]."""
     if model.spring_count == 0:
         return 0.0
-    _, _, _, length, _ = _axes(model, particle_position)
+    length, _ = _axes(model, particle_position)
     return float(0.5 * np.sum(model.spring_stiffness * (length - model.spring_rest_length) ** 2))

@@ -236,25 +236,148 @@ def solve_particle_system(
     solve if it does not converge in 3P iterations) or by a sparse direct solve
     (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
     ``particle_system`` and not used."""
-    A, rhs = system.matrix, system.rhs
-    delta = rhs / A.diagonal()  # exact for the uncoupled rows (A = m I there)
-    dofs = np.nonzero(np.repeat(system.coupled, 3))[0]
-    if len(dofs):
-        sub = A[dofs][:, dofs].tocsr()
-        b = rhs[dofs]
-        solution, info = None, 1
-        if solver == "cg":
-            import scipy.sparse.linalg as spla
+    return solve_coupled(system.matrix, system.rhs, np.repeat(system.coupled, 3), tolerance, solver)[0].reshape(-1, 3)
 
-            inverse_diagonal = 1.0 / sub.diagonal()
-            preconditioner = spla.LinearOperator(sub.shape, matvec=lambda r: r * inverse_diagonal)
-            solution, info = spla.cg(
-                sub, b, x0=delta[dofs], rtol=tolerance, atol=0.0, maxiter=max(100, len(dofs)), M=preconditioner
-            )
-        if info != 0:
-            solution = factor_symmetric(sub).solve(b)
-        delta[dofs] = solution
-    return delta.reshape(-1, 3)
+
+def solve_coupled(
+    matrix: sp.spmatrix, rhs: np.ndarray, coupled: np.ndarray, tolerance: float = 1e-6, solver: str = "cg"
+) -> tuple[np.ndarray, int]:
+    """x (N,) of A x = rhs for a symmetric positive definite A (N, N) whose rows and columns
+    outside ``coupled`` (N,) bool hold only their diagonal: those from the diagonal, the coupled
+    ones as ``solve_particle_system`` says (``solver`` "cg": compiled Jacobi-preconditioned
+    conjugate gradients to the relative residual ``tolerance``, a sparse direct solve if they do
+    not converge in max(100, N_coupled) iterations; "direct": the sparse direct solve). Returns
+    (x, conjugate-gradient iterations made)."""
+    A = matrix.tocsr()
+    delta = rhs / A.diagonal()  # exact for the uncoupled rows (A = m I there)
+    if not coupled.any():
+        return delta, 0
+    iterations, converged = 0, False
+    if solver == "cg":
+        delta, iterations, converged = conjugate_gradients(
+            A.indptr.astype(np.int64),
+            A.indices.astype(np.int64),
+            np.ascontiguousarray(A.data, dtype=np.float64),
+            np.ascontiguousarray(rhs, dtype=np.float64),
+            delta,
+            coupled,
+            tolerance,
+            max(100, int(coupled.sum())),
+        )
+    if not converged:
+        dofs = np.nonzero(coupled)[0]
+        delta[dofs] = factor_symmetric(A[dofs][:, dofs].tocsr()).solve(rhs[dofs])
+    return delta, iterations
+
+
+@njit(cache=True)
+def conjugate_gradients(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    rhs: np.ndarray,
+    guess: np.ndarray,
+    active: np.ndarray,
+    tolerance: float,
+    most: int,
+) -> tuple[np.ndarray, int, bool]:
+    """A x = rhs on the ``active`` (N,) bool rows and columns of the CSR matrix A (``indptr``
+    (N + 1,), ``indices``, ``data`` (nnz,)) by conjugate gradients with the Jacobi preconditioner
+    diag(A), from ``guess`` (N,) (whose other entries are returned as they are), until
+    |r| < tolerance |rhs| over the active rows or ``most`` iterations (the stopping rule of
+    SciPy's ``cg`` with atol = 0), on the active part taken out as a compact CSR matrix once. One
+    thread, sums in index order: the same bits on every rerun. Returns (x (N,), iterations,
+    converged)."""
+    x = guess.copy()
+    rows = np.nonzero(active)[0]  # the active DOFs, in order: the compact system's rows
+    start, column, value = _active_part(indptr, indices, data, active)
+    m = rows.shape[0]
+    inverse_diagonal, r, z, p, q, y = np.empty(m), np.empty(m), np.empty(m), np.zeros(m), np.empty(m), np.empty(m)
+    scale = 0.0
+    for k in range(m):
+        scale += rhs[rows[k]] * rhs[rows[k]]
+        y[k] = x[rows[k]]
+        diagonal = 0.0
+        for e in range(start[k], start[k + 1]):
+            if column[e] == k:
+                diagonal += value[e]
+        inverse_diagonal[k] = 1.0 / diagonal
+    if scale == 0.0:  # rhs = 0: so is x
+        x[rows] = 0.0
+        return x, 0, True
+    limit = tolerance * np.sqrt(scale)
+    _product(start, column, value, y, q)
+    residual, current = 0.0, 0.0
+    for k in range(m):
+        r[k] = rhs[rows[k]] - q[k]
+        z[k] = r[k] * inverse_diagonal[k]
+        residual += r[k] * r[k]
+        current += r[k] * z[k]
+    iterations, converged, previous = 0, False, 1.0
+    while True:
+        if np.sqrt(residual) < limit:
+            converged = True
+            break
+        if iterations == most:
+            break
+        beta = current / previous if iterations > 0 else 0.0
+        for k in range(m):
+            p[k] = z[k] + beta * p[k]
+        _product(start, column, value, p, q)
+        alpha = current / _dot(p, q)
+        previous, residual, current = current, 0.0, 0.0
+        for k in range(m):  # one pass: x, r, z and the two sums of the next iteration
+            y[k] += alpha * p[k]
+            r[k] -= alpha * q[k]
+            z[k] = r[k] * inverse_diagonal[k]
+            residual += r[k] * r[k]
+            current += r[k] * z[k]
+        iterations += 1
+    x[rows] = y
+    return x, iterations, converged
+
+
+@njit(cache=True)
+def _active_part(indptr, indices, data, active):
+    """The CSR arrays (start (m + 1,), column, value) of A's active rows and columns, renumbered
+    0..m−1 in order: the compact system conjugate gradients iterate on."""
+    n = indptr.shape[0] - 1
+    number = np.full(n, -1)
+    m = 0
+    for row in range(n):
+        if active[row]:
+            number[row] = m
+            m += 1
+    start = np.zeros(m + 1, dtype=np.int64)
+    column, value = np.empty(indices.shape[0], dtype=np.int64), np.empty(indices.shape[0])
+    count = 0
+    for row in range(n):
+        if active[row]:
+            for e in range(indptr[row], indptr[row + 1]):
+                if active[indices[e]]:
+                    column[count], value[count] = number[indices[e]], data[e]
+                    count += 1
+            start[number[row] + 1] = count
+    return start, column[:count], value[:count]
+
+
+@njit(cache=True)
+def _product(start, column, value, x, out):
+    """out = A x for A in CSR (start, column, value)."""
+    for row in range(start.shape[0] - 1):
+        total = 0.0
+        for e in range(start[row], start[row + 1]):
+            total += value[e] * x[column[e]]
+        out[row] = total
+
+
+@njit(cache=True)
+def _dot(a, b):
+    """a · b summed in index order (a library dot may split the sum by the arrays' alignment)."""
+    total = 0.0
+    for k in range(a.shape[0]):
+        total += a[k] * b[k]
+    return total
 
 
 def free_velocities(

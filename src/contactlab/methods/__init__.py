@@ -37,6 +37,7 @@ class StepInfo:
     contacts: Contacts  # the contacts the response acted on
     solver_iterations: int = 0  # sweeps the solver made (0 where there is none)
     solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
+    linear_iterations: int = 0  # conjugate-gradient iterations of the step's linear solves (penalty's implicit springs)
     energy_elastic: float = 0.0  # energy stored in contact springs [J]
     # penalty: contact springs stepped by backward Euler, the explicit step being unstable
     implicit_springs: bool = False

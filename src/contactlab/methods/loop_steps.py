@@ -380,7 +380,7 @@ def penalty_step(
     (K, 3) [m]); flags as ``velocity_step``'s. Returns (positions, velocities — the state's six
     arrays, new —, the carried triple, the ContactArrays, active-set passes, the last linear
     solve's relative residual, the elastic energy at the step's end [J], whether the springs
-    went implicit under an explicit integrator)."""
+    went implicit under an explicit integrator, the conjugate-gradient iterations of its solves)."""
     h, B = settings.dt, motion.body_position.shape[0]
     rotation = rotations.matrices(motion.body_orientation)
     # 1. collision detection, with the gaps this step's motion could close
@@ -398,10 +398,10 @@ def penalty_step(
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
     implicit = springs_implicit(penalty.springs, springs, sides[0], sides[1], sides[2], h)
-    passes, residual = 0, 0.0
+    passes, residual, linear_iterations = 0, 0.0, 0
     if implicit:
         mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
-        v_new, forces, elongation, passes, residual = implicit_spring_velocities(
+        v_new, forces, elongation, passes, residual, linear_iterations = implicit_spring_velocities(
             penalty.springs,
             springs,
             rows,
@@ -440,6 +440,7 @@ def penalty_step(
         residual,
         energy,
         implicit and penalty.springs.implicit != 3,
+        linear_iterations,
     )
 
 

@@ -379,12 +379,12 @@ def step(
     v_free = stack(*free_velocities(model, state, h, integrator))
     # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1); the
     # springs by backward Euler (M1) under that integrator, or where an explicit step would grow
-    passes, residual = 0, 0.0
+    passes, residual, linear_iterations = 0, 0.0, 0
     implicit = springs_implicit(
         settings, springs, *contact_entities(contacts, model.body_count), model.body_count + model.particle_count, h
     )
     if implicit:
-        v_new, forces, elongation, passes, residual = _implicit(
+        v_new, forces, elongation, passes, residual, linear_iterations = _implicit(
             model, state, contacts, springs, rows, v_free, h, options, integrator
         )
         moved_by = v_new
@@ -407,6 +407,7 @@ def step(
         contacts,
         solver_iterations=passes,
         solver_residual=residual,
+        linear_iterations=linear_iterations,
         energy_elastic=energy,
         implicit_springs=implicit and integrator != "backward_euler",
         impulses=h * forces,

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numba import njit
 
+from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import factor_symmetric
 from ..rotations import world_tensors
 from .penalty_springs import ContactSprings, SpringSettings
@@ -205,7 +205,7 @@ def implicit_spring_velocities(
     mass: tuple,
     free: np.ndarray,
     h: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, int]:
     """Backward Euler for the contact springs: v⁺ with M v⁺ = M v* + h Jᵀ F(x + h v⁺, v⁺), where
     M v⁺ = M v* is the step without contacts (rigid bodies and free particles: M as
     ``mass_blocks``); ``free`` (N,) 1.0 for the DOFs that may move, 0.0 for a pinned
@@ -222,7 +222,8 @@ def implicit_spring_velocities(
     repeating the solve (``conjugate_gradients``) until they stop changing (an active-set
     iteration; for convex energies such as a plane's, and no friction, it is the exact backward
     Euler step, which never adds energy). Returns (v⁺ (N,), forces (C, 3) [N], elongation
-    after the step (C, 2) [m], passes, relative residual of the last linear solve).
+    after the step (C, 2) [m], passes, relative residual of the last linear solve, conjugate-gradient
+    iterations summed over the passes).
     """
     C = depth.shape[0]
     k, c_n, k_t, c_t, mu = (
@@ -241,7 +242,7 @@ def implicit_spring_velocities(
     weight, pull = np.empty((C, 3)), np.empty((C, 3))
     normal, trial, elongation = np.zeros(C), np.zeros((C, 2)), np.zeros((C, 2))
     base = mass_product(mass, v_free, np.empty(v_free.shape[0]))
-    v_new, residual, passes = v_free, 0.0, 0
+    v_new, residual, passes, linear_iterations = v_free, 0.0, 0, 0
     for passes in range(1, settings.implicit_iterations + 1):
         for c in range(C):
             weight[c, 0] = h * (h * k[c] + c_n[c]) if engaged[c] else 0.0
@@ -250,9 +251,10 @@ def implicit_spring_velocities(
             for d in range(2):
                 pull[c, 1 + d] = -k_t[c] * springs.elongation[c, d] if sticks[c] else slip_force[c, d]
         rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
-        v_new, residual, _ = conjugate_gradients(
+        v_new, residual, iterations = conjugate_gradients(
             rows, weight, mass, free, rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
         )
+        linear_iterations += iterations
         # the forces at the new state say which springs act
         velocity = row_products(rows, v_new)
         settled = True
@@ -298,7 +300,7 @@ def implicit_spring_velocities(
         if not engaged[c]:
             elongation[c, 0] = elongation[c, 1] = 0.0
         forces[c, 0], forces[c, 1], forces[c, 2] = normal[c], t1, t2
-    return v_new, forces, elongation, passes, residual
+    return v_new, forces, elongation, passes, residual, linear_iterations
 
 
 def implicit_velocities(
@@ -311,7 +313,7 @@ def implicit_velocities(
     depth: np.ndarray,
     dt: float,
     options: Options,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, int]:
     """``implicit_spring_velocities`` with any base system A₀ v⁺ = b₀ (N, N) sparse
     (``dynamics.generalized.implicit_base``: the cloth's linearized springs for cloth vertices
     under backward Euler) and the Jacobian J (3C, N) sparse, solved by SciPy (``linear_solver``
@@ -324,7 +326,7 @@ def implicit_velocities(
     sticks = engaged & (springs.friction > 0.0)
     slip_force = np.zeros((C, 2))
     keep = sp.diags(free.astype(float))
-    v_new, residual = v_free, 0.0
+    v_new, residual, linear_iterations = v_free, 0.0, 0
     for passes in range(1, options.implicit_iterations + 1):
         weight = np.column_stack(
             [engaged * h * (h * k + c), np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)]
@@ -334,7 +336,8 @@ def implicit_velocities(
         )
         A = (A0 + keep @ (J.T @ sp.diags(weight.ravel()) @ J) @ keep).tocsr()
         rhs = b0 + free * (h * (J.T @ pull.ravel()))
-        v_new = _solve(A, rhs, v_new, options)
+        v_new, iterations = _solve(A, rhs, v_new, options)
+        linear_iterations += iterations
         residual = float(np.linalg.norm(A @ v_new - rhs) / max(np.linalg.norm(rhs), 1e-300))
         # the forces at the new state say which springs act
         velocity = (J @ v_new).reshape(C, 3)
@@ -367,13 +370,22 @@ def implicit_velocities(
     tangential[over] *= (limit[over] / size[over])[:, None]
     elongation = np.where((sticks & ~over)[:, None], elongation, -tangential / k_t[:, None])
     elongation[~engaged] = 0.0
-    return v_new, np.column_stack([normal, tangential]), elongation, passes, residual
+    return v_new, np.column_stack([normal, tangential]), elongation, passes, residual, linear_iterations
 
 
 def _solve(A, rhs, guess, options):
+    """(x, conjugate-gradient iterations) of A x = rhs: compiled Jacobi-preconditioned conjugate
+    gradients (``integrators.conjugate_gradients``) from ``guess``, or the sparse direct solve."""
     if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
-        return factor_symmetric(A).solve(rhs)
-    diagonal = A.diagonal()
-    preconditioner = spla.LinearOperator(A.shape, matvec=lambda x: x / diagonal)
-    solution, info = spla.cg(A, rhs, x0=guess, rtol=options.linear_tolerance, maxiter=10 * A.shape[0], M=preconditioner)
-    return solution
+        return factor_symmetric(A).solve(rhs), 0
+    solution, iterations, _ = sparse_conjugate_gradients(
+        A.indptr.astype(np.int64),
+        A.indices.astype(np.int64),
+        np.ascontiguousarray(A.data, dtype=np.float64),
+        np.ascontiguousarray(rhs, dtype=np.float64),
+        np.ascontiguousarray(guess, dtype=np.float64),
+        np.ones(A.shape[0], dtype=np.bool_),
+        options.linear_tolerance,
+        10 * A.shape[0],
+    )
+    return solution, iterations

@@ -113,14 +113,16 @@ def run(
     sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
     ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
     ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
-    written, most contacts, sweeps made, steps whose contact springs went implicit)."""
+    written, most contacts, sweeps made, steps whose contact springs went implicit, penalty's
+    conjugate-gradient iterations made)."""
     written = 0
     most = 0
     sweeps_made = 0
     implicit_steps = 0
+    linear_made = 0
     for s in range(steps):
         index = first_index + s
-        elastic, implicit = 0.0, False
+        elastic, implicit, linear = 0.0, False, 0
         # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
         # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
@@ -132,7 +134,7 @@ def run(
                 model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried
             )
         if penalty is not None:
-            positions, velocities, carried, contacts, sweeps, change, elastic, implicit = penalty_step(
+            positions, velocities, carried, contacts, sweeps, change, elastic, implicit, linear = penalty_step(
                 model, settings, plan, large, slabs, parallel, penalty, motion, carried
             )
         store(motion, positions, velocities)
@@ -141,13 +143,14 @@ def run(
         most = max(most, count)
         sweeps_made += sweeps
         implicit_steps += implicit
+        linear_made += linear
         if not healthy(motion, max_speed):
-            return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps
+            return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
             record(samples, written, model, plan, large, motion, time, count, sweeps, change)
             samples.energy_elastic[written] = elastic
             written += 1
-    return steps, False, carried, time, written, most, sweeps_made, implicit_steps
+    return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
 
 
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
@@ -279,6 +282,7 @@ class Stepper:
         self.sweeps_made = 0
         self.last_contacts = 0
         self.implicit_spring_steps = 0
+        self.linear_iterations_made = 0
 
     def samples_for(self, count: int) -> Samples:
         """Empty Samples for ``count`` samples."""
@@ -316,12 +320,13 @@ class Stepper:
         indices = np.arange(first_index, first_index + steps)
         count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
         samples = self.samples_for(count)
-        made, diverged, self.carried, self.time, written, most, sweeps, implicit = run(
+        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(
             *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
         )
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
+        self.linear_iterations_made += linear
         return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
