@@ -233,8 +233,8 @@ def solve_particle_system(
     """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
     with a Jacobi preconditioner (``solver="cg"``, to the relative residual ``tolerance`` —
     the linearization itself is only first-order accurate, so 1e-6 is plenty; a sparse direct
-    solve if it does not converge in 3P iterations) or by a sparse direct solve
-    (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
+    solve if it does not converge in max(100, coupled DOFs) iterations) or by a sparse direct
+    solve (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
     ``particle_system`` and not used."""
     return solve_coupled(system.matrix, system.rhs, np.repeat(system.coupled, 3), tolerance, solver)[0].reshape(-1, 3)
 
