@@ -134,7 +134,7 @@ def check_port(port: int | None) -> int:
 
 
 class Viewer:
-    """The viewer of a list of :class:`Shown` runs, serving on 127.0.0.1 from construction on.
+    """The viewer of a list of :class:`~contactlab.viewed_runs.Shown` runs, serving on 127.0.0.1 from construction on.
 
     ``url``: its address; ``server``: the viser.ViserServer (``server.scene`` holds the nodes
     the module docstring names); :meth:`show_time` moves the clock, :meth:`stop` ends it.
