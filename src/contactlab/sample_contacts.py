@@ -17,22 +17,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import InputError
-from .record import read_trajectory
+from .record import SERIES, read_trajectory
 
 if TYPE_CHECKING:
     from .model import Model
     from .state import State
 
-# the trajectory's series that make a State, in the order of State's fields
-STATE_SERIES = (
-    "time",
-    "body_position",
-    "body_orientation",
-    "body_velocity",
-    "body_angular_velocity",
-    "particle_position",
-    "particle_velocity",
-)
+# the trajectory's series that make a State: its time, then positions and velocities in State's field order
+STATE_SERIES = SERIES[: SERIES.index("particle_velocity") + 1]
 
 
 @dataclass
