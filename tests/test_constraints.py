@@ -11,7 +11,8 @@ from contactlab.dynamics.generalized import inverse_mass_matrix, stack
 from contactlab.dynamics.integrators import free_velocities
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import constraints
-from contactlab.methods.sequential import rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from contactlab.methods.jacobian_rows import rows_of
+from contactlab.methods.sequential import solve_order, solve_sequential_impulses, sweep_groups
 from contactlab.scene import builtin_scenes, load_scene
 
 G = 9.81

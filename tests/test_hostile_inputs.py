@@ -25,12 +25,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from contactlab import cli, render, store
-from contactlab.builder import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, ModelBuilder
+from contactlab.builder import ModelBuilder
 from contactlab.errors import LONGEST_MESSAGE, InputError, SimulationDiverged
 from contactlab.methods import AVAILABLE, penalty
 from contactlab.plausibility import PlausibilityWarning
 from contactlab.scene import load_scene, loader
 from contactlab.scene.toml import MAX_NESTING
+from contactlab.shape_arguments import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS
 from contactlab.shapes import BODY_SHAPES, OBSTACLE_SHAPES
 from contactlab.simulation import simulate
 from contactlab.validation import LENGTH, LIMITS, MASS

@@ -8,7 +8,7 @@ from contactlab import ModelBuilder, collide, simulate
 from contactlab.contacts import jacobian
 from contactlab.dynamics.generalized import stack, unstack
 from contactlab.dynamics.integrators import free_velocities, world_inverse_inertia
-from contactlab.methods import impulse, sequential
+from contactlab.methods import impulse, jacobian_rows
 
 G = 9.81
 
@@ -155,7 +155,7 @@ def test_matrix_free_rows_equal_the_assembled_jacobian():
         k = 6 * model.body_count + 3 * j
         Minv[k : k + 3, k : k + 3] = np.eye(3) / m
     W = J @ Minv @ J.T
-    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     k = rows.k
     for c in range(contacts.count):
         for d in range(3):
@@ -164,11 +164,11 @@ def test_matrix_free_rows_equal_the_assembled_jacobian():
         assert k[c, 4] == pytest.approx(W[3 * c + 2, 3 * c], rel=1e-12, abs=1e-14)
     rng = np.random.default_rng(3)
     u = rng.normal(size=J.shape[1])
-    np.testing.assert_allclose(sequential.row_products(rows, u).ravel(), J @ u, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(jacobian_rows.row_products(rows, u).ravel(), J @ u, rtol=1e-12, atol=1e-12)
     lam = rng.normal(size=(contacts.count, 3))
     after = u.copy()
     for c in range(contacts.count):
-        sequential.apply_impulse(c, rows, lam[c, 0], lam[c, 1], lam[c, 2], after)
+        jacobian_rows.apply_impulse(c, rows, lam[c, 0], lam[c, 1], lam[c, 2], after)
     np.testing.assert_allclose(after, u + Minv @ J.T @ lam.ravel(), rtol=1e-12, atol=1e-12)
 
 
@@ -410,7 +410,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         # the Jacobian form: J written out, against the rows the solver sweeps (bodies placed so
         # that the contact point, the origin, has these lever arms)
         t1, t2 = tangent_basis(n[None])
-        rows = sequential.contact_rows(
+        rows = jacobian_rows.contact_rows(
             np.array([0]),
             np.array([1]),
             -np.ones((1, 3), np.int64),
@@ -434,7 +434,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
             M_inv[6 * i : 6 * i + 3, 6 * i : 6 * i + 3] = np.eye(3) / mass[i]
             M_inv[6 * i + 3 : 6 * i + 6, 6 * i + 3 : 6 * i + 6] = inverse_world[i]
         assert J @ u == pytest.approx(n @ v_rel, rel=1e-12, abs=1e-12)  # v_n = J v
-        assert sequential.row_products(rows, u)[0, 0] == pytest.approx(J @ u, rel=1e-12, abs=1e-12)
+        assert jacobian_rows.row_products(rows, u)[0, 0] == pytest.approx(J @ u, rel=1e-12, abs=1e-12)
         assert k[0, 0] == pytest.approx(J @ M_inv @ J, rel=1e-12)  # J M⁻¹ Jᵀ
         assert k[0, 0] == pytest.approx(denominator, rel=1e-12)  # = R4's denominator
         j = -(1 + eps) * (J @ u) / k[0, 0]

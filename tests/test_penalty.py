@@ -11,7 +11,7 @@ from contactlab.contacts import Contacts, jacobian, tangent_basis
 from contactlab.dynamics.generalized import inverse_mass_matrix, unstack
 from contactlab.dynamics.integrators import world_inverse_inertia
 from contactlab.errors import InputError, SimulationDiverged
-from contactlab.methods import penalty, sequential
+from contactlab.methods import jacobian_rows, penalty
 from contactlab.scene import builtin_scenes, load_scene
 
 G = 9.81
@@ -313,10 +313,10 @@ def test_forces_reach_particles_bodies_and_triangle_points_through_j_transpose(r
     J = jacobian(contacts, state.body_position, 3, 5)
     change = penalty.distribute(J, inverse_mass_matrix(model, state.body_orientation), forces, 0.01)
     # the same velocity change matrix-free, contact by contact, through the solver's rows
-    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     u = np.zeros(3 * 6 + 5 * 3)
     for c in range(12):
-        sequential.apply_impulse(c, rows, *(0.01 * forces[c]), u)
+        jacobian_rows.apply_impulse(c, rows, *(0.01 * forces[c]), u)
     np.testing.assert_allclose(change, u, atol=1e-12)
     # and by hand for one body contact: h F / m and h I⁻¹ (r × F)
     c = 1

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from contactlab import InputError, ModelBuilder, render, simulate, store
+from contactlab import InputError, ModelBuilder, render, scenery, simulate, store
 from contactlab.record import SERIES, Recorder
 from contactlab.scene import load_scene
 
@@ -175,9 +175,9 @@ def test_walls_end_at_the_floor():
         ],
         float,
     )
-    assert render._normals(floor)[0] == pytest.approx([0, 0, 1])
-    assert np.allclose(render._normals(wall), [-1, 0, 0])
-    polygons, normals = render._cut_flat([floor, wall], np.array([-0.2, -0.2, -0.2]), np.array([0.8, 0.2, 0.2]))
+    assert scenery.triangle_normals(floor)[0] == pytest.approx([0, 0, 1])
+    assert np.allclose(scenery.triangle_normals(wall), [-1, 0, 0])
+    polygons, normals = scenery.cut_flat([floor, wall], np.array([-0.2, -0.2, -0.2]), np.array([0.8, 0.2, 0.2]))
     floor_points = np.concatenate([p for p, n in zip(polygons, normals) if n[2] == 1])
     wall_points = np.concatenate([p for p, n in zip(polygons, normals) if n[0] == -1])
     assert wall_points[:, 2].min() == pytest.approx(0.0, abs=1e-6)  # the wall stops at the floor …

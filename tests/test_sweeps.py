@@ -8,7 +8,7 @@ import pytest
 from contactlab import ModelBuilder, collide
 from contactlab.dynamics.generalized import stack
 from contactlab.dynamics.integrators import free_velocities
-from contactlab.methods import sequential
+from contactlab.methods import jacobian_rows, sequential
 
 RADIUS = 0.05
 DT = 1 / 240
@@ -39,7 +39,7 @@ def sphere_lattice(side=6, layers=8, overlap=1e-3, friction=0.0):
 def problem(model):
     state = model.state()
     contacts = collide(model, state, 0.002)
-    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)
     u = stack(*free_velocities(model, state, DT))
     target = np.maximum(contacts.depth / DT * 0.2, 0.0)  # push a fifth of each overlap out
@@ -120,7 +120,7 @@ def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
             rows, contacts.friction, target, u, 20000, 1e-13, np.zeros((contacts.count, 3)), sweep_order, sweep_starts
         )
         assert change <= 1e-13
-        vn = sequential.row_products(rows, u)[:, 0]
+        vn = jacobian_rows.row_products(rows, u)[:, 0]
         assert np.all(vn >= target - 1e-9)  # every contact meets its target
         assert np.all(lam[:, 0] * (vn - target) <= 1e-9)  # complementary
         results.append(u)
@@ -196,7 +196,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
         options.normal,
         options.samples,
     )
-    rows = sequential.rows_of(model, contacts, state.body_position, state.body_orientation)
+    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)
     warm, found = values_by_id(state.carried["impulse_ids"], state.carried["impulse_values"], contacts.feature_id, 3)
     assert found.all()  # every contact warm-started

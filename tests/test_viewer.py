@@ -16,7 +16,8 @@ from contactlab.compare import compare
 from contactlab.errors import InputError
 from contactlab.methods import AVAILABLE
 from contactlab.record import load_run
-from contactlab.viewer import HOST, Viewer, contacts_at, view
+from contactlab.sample_contacts import contacts_at
+from contactlab.viewer import HOST, Viewer, view
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,8 @@ scene-file path to it): its type, its range (positive masses and sizes, restitut
 [0, 1], ...), its magnitude against the generous limits of
 :data:`contactlab.validation.LIMITS` (a ball of radius 10²⁰⁰ m is refused, not simulated into
 NaN energies), and that each shape is given only the arguments it takes
-(:data:`BODY_SHAPE_ARGUMENTS`, :data:`OBSTACLE_SHAPE_ARGUMENTS`). A cloth's mesh and springs
+(:data:`~contactlab.shape_arguments.BODY_SHAPE_ARGUMENTS`,
+:data:`~contactlab.shape_arguments.OBSTACLE_SHAPE_ARGUMENTS`). A cloth's mesh and springs
 are laid out by :mod:`contactlab.cloth_mesh`.
 
 Example::
@@ -21,7 +22,7 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -31,25 +32,30 @@ from . import cloth_mesh, shapes
 from .driving import force_record, pack, path_record, start_on_paths
 from .errors import InputError
 from .model import Model
+from .particle_arguments import particle_positions, particle_values
+from .shape_arguments import (
+    BODY_SHAPE_ARGUMENTS,
+    OBSTACLE_SHAPE_ARGUMENTS,
+    checked_shape,
+    convex_hull,
+    mesh_obstacle,
+    plane_params,
+    solid_shape,
+)
 from .state import State
 from .validation import (
     ACCELERATION,
     ANGULAR_SPEED,
     DAMPING,
     DENSITY,
-    DIRECTION,
-    FACTOR,
     FRICTION,
     LENGTH,
     MASS,
     SPEED,
     STIFFNESS,
-    as_array,
     check_dynamic_count,
     derived_mass,
-    file_path,
     number,
-    one_of,
     unit_quaternion,
     vector,
 )
@@ -65,43 +71,6 @@ DEFAULT_MATERIAL = ("default", 0.5, 0.0)  # name, friction μ, restitution ε
 MaterialRef = int | str | None
 BodyRef = int | str
 DriveValue = ArrayLike | Callable[[float], tuple] | None
-
-
-# -- which shape takes which arguments ------------------------------------------------------
-
-# The shape-specific arguments of add_body and add_obstacle that each shape takes; any other of
-# them given (not None) is an InputError. The scene schema (contactlab.scene.schema) reads its
-# shape-specific keys from these too.
-BODY_SHAPE_ARGUMENTS = {
-    "sphere": ("radius",),
-    "box": ("half_extents",),
-    "capsule": ("radius", "half_length"),
-    "convex": ("points", "file", "scale"),
-}
-OBSTACLE_SHAPE_ARGUMENTS = {
-    "plane": ("normal", "offset"),
-    "sphere": ("radius", "position"),
-    "box": ("half_extents", "position", "orientation"),
-    "convex": ("points", "file", "scale", "position", "orientation"),
-    "mesh": ("file", "scale", "position", "orientation"),
-}
-
-
-def check_shape_arguments(shape: str, table: Mapping[str, Sequence[str]], given: Collection[str]) -> None:
-    """InputError naming the first of ``given`` (names of shape-specific arguments) that
-    ``shape`` takes not, by ``table`` (BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
-    takes = table[shape]
-    for name in given:
-        if name not in takes:
-            raise InputError(name, f"a {shape} takes no {name} (a {shape} takes: {', '.join(takes)})")
-
-
-def _shape(shape, table, given):
-    """``shape`` checked: one of ``table``'s names, given only its own arguments (``given``:
-    name -> value of every shape-specific argument, None where left out)."""
-    one_of(shape, "shape", table)
-    check_shape_arguments(shape, table, [name for name, value in given.items() if value is not None])
-    return shape
 
 
 class ModelBuilder:
@@ -195,7 +164,7 @@ class ModelBuilder:
         are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
         Magnitudes are checked against :data:`~contactlab.validation.LIMITS` (the mass a density gives too).
         """
-        shape = _shape(
+        shape = checked_shape(
             shape,
             BODY_SHAPE_ARGUMENTS,
             dict(
@@ -212,12 +181,12 @@ class ModelBuilder:
         position = vector(position, "position", quantity=LENGTH)
         orientation = unit_quaternion(orientation, "orientation")
         if shape == "convex":
-            hull = self._hull(points, file, scale, mass=mass, density=density)
+            hull = convex_hull(points, file, scale, mass=mass, density=density)
             kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
             mass, inertia = hull.mass, hull.inertia
             position, orientation = hull.body_pose(position, orientation)
         else:
-            kind, params = self._solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
+            kind, params = solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
             if density is not None:
                 mass = density * shapes.volume(kind, params)
             # mass: given, or derived from density just above (exactly one of the two, checked above)
@@ -306,44 +275,6 @@ class ModelBuilder:
             raise InputError("body", f"body {self._bodies[index]['name']!r} already has a path; give it one only")
         self._paths.append(path_record(index, positions, orientations, times, self._bodies[index]["orientation"]))
 
-    @staticmethod
-    def _hull(points, file, scale, mass=None, density=None):
-        """The convex hull of ``points`` or of a mesh file's vertices (InputError if not convex)."""
-        from .hulls import build_hull, load_hull_points
-
-        if (points is None) == (file is None):
-            raise InputError("points", "a convex shape needs exactly one of points = [[x, y, z], ...] or file")
-        scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
-        if file is not None:
-            points, field = load_hull_points(file_path(file), scale, field="file"), "file"
-        else:
-            points, field = as_array(points, "points", "a list of [x, y, z] points") * scale, "points"
-        if np.isfinite(points).all():  # (non-finite points: build_hull's error)
-            LENGTH.check(points, field)
-        if mass is None and density is None:
-            mass = 1.0  # static geometry: the mass is not used
-        return build_hull(points, field, mass=mass, density=density, require_convex=True)
-
-    @staticmethod
-    def _solid_shape(shape, radius, half_extents, kinds, half_length=None):
-        """(kind, params) of a sphere, box or capsule (``shape`` already checked) by ``kinds``
-        (shapes.BODY_SHAPES or shapes.OBSTACLE_SHAPES)."""
-        kind = kinds[shape]
-        params = np.zeros(4)
-        if kind in (shapes.SPHERE, shapes.CAPSULE):
-            if radius is None:
-                raise InputError("radius", f"a {shape} needs a radius (m)")
-            params[0] = number(radius, "radius", 0.0, strict=True, quantity=LENGTH)
-        if kind == shapes.CAPSULE:
-            if half_length is None:
-                raise InputError("half_length", "a capsule needs a half_length (m): half its segment's length")
-            params[1] = number(half_length, "half_length", 0.0, quantity=LENGTH)
-        elif kind == shapes.BOX:
-            if half_extents is None:
-                raise InputError("half_extents", "a box needs half_extents = [hx, hy, hz] (m)")
-            params[:3] = vector(half_extents, "half_extents", quantity=LENGTH, positive=True)
-        return kind, params
-
     def _dynamic_count(self):
         """Bodies, particles and cloth vertices added so far."""
         return len(self._bodies) + sum(len(group["position"]) for group in self._particles)
@@ -363,32 +294,10 @@ class ModelBuilder:
         position, velocity: (count, 3) [m], [m/s]; mass [kg] and radius [m] are per particle
         (one number for all, or one per particle). A radius of 0 makes a point.
         """
-        position = as_array(position, "position", "a list of [x, y, z] points")
-        if position.ndim == 1 and position.shape == (3,):
-            position = position[None]
-        if position.ndim != 2 or position.shape[1] != 3 or len(position) == 0:
-            raise InputError("position", "expected a non-empty list of [x, y, z] points")
-        if not np.isfinite(position).all():
-            raise InputError("position", "expected finite numbers")
-        LENGTH.check(position, "position")
+        position = particle_positions(position)
         count = len(position)
         check_dynamic_count(count, "position", f"{count:,} more particles", self._dynamic_count())
-        if velocity is None:
-            velocity = np.zeros_like(position)
-        velocity = as_array(velocity, "velocity", "a list of [vx, vy, vz] velocities")
-        if velocity.shape != position.shape:
-            raise InputError("velocity", f"expected {count} velocities, one per position")
-        if not np.isfinite(velocity).all():
-            raise InputError("velocity", "expected finite numbers")
-        SPEED.check(velocity, "velocity")
-        masses = self._per_particle(mass, "mass", count)
-        if (masses <= 0).any() or not np.isfinite(masses).all():
-            raise InputError("mass", f"must be greater than 0 (kg) for every particle, found {masses.min():g}")
-        MASS.check(masses, "mass", positive=True)
-        radii = self._per_particle(radius, "radius", count)
-        if (radii < 0).any() or not np.isfinite(radii).all():
-            raise InputError("radius", f"must be at least 0 (m) for every particle, found {radii.min():g}")
-        LENGTH.check(radii, "radius")
+        velocity, masses, radii = particle_values(position, velocity, mass, radius)
         start = sum(len(p["position"]) for p in self._particles)
         self._particles.append(
             dict(
@@ -396,13 +305,6 @@ class ModelBuilder:
             )
         )
         return range(start, start + count)
-
-    @staticmethod
-    def _per_particle(value, name, count):
-        array = as_array(value, name, f"a number or a list of {count} numbers")
-        if array.ndim == 0 or array.shape == (count,):
-            return np.broadcast_to(array, (count,)).copy()
-        raise InputError(name, f"expected a number or a list of {count} numbers (one per particle), found {array.size}")
 
     # -- cloth -----------------------------------------------------------------------
     def add_cloth(
@@ -537,7 +439,7 @@ class ModelBuilder:
         Defaults: offset 0 [m], scale 1, position the origin, orientation none; a shape given an
         argument it does not take (a plane's position) is an InputError.
         """
-        shape = _shape(
+        shape = checked_shape(
             shape,
             OBSTACLE_SHAPE_ARGUMENTS,
             dict(
@@ -555,33 +457,17 @@ class ModelBuilder:
         position = vector((0, 0, 0) if position is None else position, "position", quantity=LENGTH)
         orientation = unit_quaternion((1, 0, 0, 0) if orientation is None else orientation, "orientation")
         if shape == "plane":
-            if normal is None:
-                raise InputError("normal", "a plane needs a normal = [nx, ny, nz]")
-            n = vector(normal, "normal", quantity=DIRECTION)
-            length = np.linalg.norm(n)
-            if length < 1e-12:
-                raise InputError("normal", "the normal must not be zero")
-            offset = number(0.0 if offset is None else offset, "offset", quantity=LENGTH)
-            params = np.concatenate([n / length, [offset / length]])
-            kind = shapes.PLANE
+            kind, params = shapes.PLANE, plane_params(normal, offset)
         elif shape == "mesh":
-            from .meshes import load_mesh
-
-            if file is None:
-                raise InputError("file", "a mesh obstacle needs a file (OBJ, STL or PLY)")
-            scale = number(1.0 if scale is None else scale, "scale", 0.0, strict=True, quantity=FACTOR)
-            mesh = load_mesh(file_path(file), scale, field="file")
-            LENGTH.check(mesh.vertices, "file")
-            mesh = mesh.transformed(position, orientation)
             kind, params = shapes.MESH, np.array([len(self._meshes), 0.0, 0.0, 0.0])
-            self._meshes.append(mesh)
+            self._meshes.append(mesh_obstacle(file, scale, position, orientation))
         elif shape == "convex":
-            hull = self._hull(points, file, scale)
+            hull = convex_hull(points, file, scale)
             kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
             self._hulls.append(hull)
             position, orientation = hull.body_pose(position, orientation)
         else:
-            kind, params = self._solid_shape(shape, radius, half_extents, shapes.OBSTACLE_SHAPES)
+            kind, params = solid_shape(shape, radius, half_extents, shapes.OBSTACLE_SHAPES)
         self._obstacles.append(
             dict(
                 kind=kind,
@@ -595,7 +481,7 @@ class ModelBuilder:
 
     def _pack_hulls(self, shapes_with_params):
         """Pack the convex hulls, then one 8-corner hull per box (its index stored in params[3])."""
-        from .hulls import box_as_hull, pack_hulls
+        from .hulls import box_as_hull, fan_triangles, join_packed, pack_hulls
 
         packs = [pack_hulls(self._hulls)]
         count = len(self._hulls)
@@ -605,8 +491,8 @@ class ModelBuilder:
                 item["params"][3] = count
                 packs.append(box_as_hull(item["params"][:3]))
                 count += 1
-        packed = _concatenate_packed(packs)
-        packed.update(_fan_triangles(packed))
+        packed = join_packed(packs)
+        packed.update(fan_triangles(packed))
         return packed
 
     # -- freeze ------------------------------------------------------------------------
@@ -691,43 +577,3 @@ class ModelBuilder:
             spring_stiffness=cloth_cat("stiffness", (-1,)),
             spring_damping=cloth_cat("damping", (-1,)),
         )
-
-
-def _concatenate_packed(packs):
-    """Join packed hull dicts (contactlab.hulls.pack_hulls layout), shifting their start indices."""
-    starts = {
-        "vertex_start": "vertices",
-        "face_start": "face_normal",
-        "edge_start": "edge_vertex",
-        "face_vertex_start": "face_vertex_index",
-    }
-    out = {key: [] for key in packs[0]}
-    base = {key: 0 for key in starts}
-    for k, hull_pack in enumerate(packs):
-        for key, values in hull_pack.items():
-            if key in starts:
-                shifted = values + base[key]
-                out[key].append(shifted if k == 0 else shifted[1:])
-                base[key] += len(hull_pack[starts[key]])
-            else:
-                out[key].append(values)
-    return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}
-
-
-def _fan_triangles(packed):
-    """Triangles of every hull's faces, fanned from each face's first corner (built once).
-
-    Returns triangle_start (H+1,) int64 and triangles (T, 3) int64, local vertex indices, wound
-    like the faces (counter-clockwise from outside)."""
-    triangles, counts = [], []
-    fvs, fvi = packed["face_vertex_start"], packed["face_vertex_index"]
-    for h in range(len(packed["vertex_start"]) - 1):
-        before = len(triangles)
-        for f in range(packed["face_start"][h], packed["face_start"][h + 1]):
-            corners = fvi[fvs[f] : fvs[f + 1]]
-            triangles.extend((corners[0], corners[i], corners[i + 1]) for i in range(1, len(corners) - 1))
-        counts.append(len(triangles) - before)
-    return {
-        "triangle_start": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-        "triangles": np.array(triangles, dtype=np.int64).reshape(-1, 3),
-    }

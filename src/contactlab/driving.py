@@ -326,13 +326,13 @@ def called_pair(
         raise InputError(name, f"the function raised {type(error).__name__} at t = {t:g} s: {error}") from None
     try:
         first, second = (np.asarray(part, dtype=float) for part in result)
-    except (TypeError, ValueError):
-        first = second = None
-    if (
-        first is None
-        or (first.shape, second.shape) != ((sizes[0],), (sizes[1],))
-        or not (np.isfinite(first).all() and np.isfinite(second).all())
-    ):
+    except (TypeError, ValueError):  # not a pair of numbers or arrays of numbers
+        fits = False
+    else:
+        fits = (first.shape, second.shape) == ((sizes[0],), (sizes[1],)) and bool(
+            np.isfinite(first).all() and np.isfinite(second).all()
+        )
+    if not fits:
         raise InputError(name, f"the function returned {result!r} at t = {t:g} s; expected {expected}, finite numbers")
     return first, second
 

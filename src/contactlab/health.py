@@ -74,13 +74,13 @@ class Health:
         self.dt = dt
         self.allow_divergence = allow_divergence
         self.advice = advice or f"use a smaller dt than {dt:g} s"
-        self.violations = []
+        self.violations: list[Violation] = []
         g = float(np.linalg.norm(model.gravity))
         size = max(_scene_size(model, state), 0.1)
         speeds = np.linalg.norm(np.concatenate([state.body_velocity, state.particle_velocity]), axis=1)
         self.speed_limit = SPEED_FACTOR * float(max(1.0, speeds.max(initial=0.0), np.sqrt(2.0 * g * size)))
         mass = float(np.sum(model.body_mass) + np.sum(model.particle_mass))
-        self.initial_energy = None
+        self.initial_energy: float | None = None  # the first recorded sample's, once there is one
         self.energy_scale = _kinetic(model, state) + mass * g * size
         kinds = model.collider_table[0]
         dynamic = model.body_count + model.particle_count
@@ -126,19 +126,22 @@ class Health:
         if self.model.spring_count or self.model.drive is not None:
             # the total leaves the cloth's springs out, or outside work goes in: finite only
             energy = np.where(np.isfinite(energy), 0.0, energy)
-        if self.initial_energy is None and len(energy):
+        if self.initial_energy is None:
+            if not len(energy):
+                return None  # no sample yet: nothing to check, nothing to start from
             self.initial_energy = float(energy[0])
+        initial = self.initial_energy
         for row in range(first, len(energy)):
             time = float(arrays["time"][row])
             if not np.isfinite(energy[row]):
                 return self._found(Violation("finite", time, "the energy stopped being finite"), always=True)
-            gain = float(energy[row]) - self.initial_energy
+            gain = float(energy[row]) - initial
             if gain > ENERGY_GAIN * self.energy_scale + 1e-9:
                 found = self._found(
                     Violation(
                         "energy",
                         time,
-                        f"the total energy rose {gain:.3g} J above its start ({self.initial_energy:.4g} "
+                        f"the total energy rose {gain:.3g} J above its start ({initial:.4g} "
                         f"J), more than {ENERGY_GAIN:g}× the scene's energy scale "
                         f"({self.energy_scale:.3g} J) and with no outside work to explain it",
                     )

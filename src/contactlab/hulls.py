@@ -45,13 +45,17 @@ array                  shape        meaning
 
 :func:`hull_arrays` slices one hull out of a packed dict, in the argument order of the
 compiled routines of :mod:`contactlab.collision.convex`; :func:`box_as_hull` packs a box the same
-way (the builder gives every box body such a hull, for the hull routines to meet it).
+way (the builder gives every box body such a hull, for the hull routines to meet it);
+:func:`join_packed` joins packed dicts and :func:`fan_triangles` adds every face's triangles.
+
+The geometric steps of :func:`build_hull` (faces from Qhull's triangles, edges, mass moments,
+principal frame) are in :mod:`contactlab.hull_geometry`.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 
@@ -59,6 +63,19 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .errors import InputError
+from .hull_geometry import (
+    check_convex,
+    face_polygons,
+    hull_edges,
+    matrix_to_quaternion,
+    merge_close,
+    merge_coplanar,
+    principal_frame,
+    qhull_triangles,
+    quaternion_multiply,
+    quaternion_to_matrix,
+    volume_moments,
+)
 
 TOLERANCE = 1e-9  # geometric tolerance, × the diagonal of the points' bounding box
 CONVEX_TOLERANCE = 1e-6  # require_convex: a point deeper inside than this × the diagonal is "inside"
@@ -100,7 +117,7 @@ class Hull:
     orientation: np.ndarray
     offset: np.ndarray
     radius: float
-    source_indices: np.ndarray = dataclass_field(default=None, repr=False)
+    source_indices: np.ndarray | None = dataclass_field(default=None, repr=False)
 
     @property
     def vertex_count(self) -> int:
@@ -122,7 +139,7 @@ class Hull:
     @property
     def principal_axes(self) -> np.ndarray:
         """(3, 3) rotation matrix body → given frame; its columns are the principal axes."""
-        return _quaternion_to_matrix(self.orientation)
+        return quaternion_to_matrix(self.orientation)
 
     def face(self, f: int) -> np.ndarray:
         """Vertex indices (counter-clockwise from outside) of face ``f``."""
@@ -140,8 +157,8 @@ class Hull:
         position = np.asarray(position, dtype=float)
         q = np.asarray(orientation, dtype=float)
         q = q / np.linalg.norm(q)
-        body_position = position + _quaternion_to_matrix(q) @ self.offset
-        body_orientation = _quaternion_multiply(q, self.orientation)
+        body_position = position + quaternion_to_matrix(q) @ self.offset
+        body_orientation = quaternion_multiply(q, self.orientation)
         if body_orientation[0] < 0.0:
             body_orientation = -body_orientation
         return body_position, body_orientation
@@ -176,42 +193,39 @@ def build_hull(
     fewer than 4 points, non-finite values, a flat or collinear set (zero volume), a
     non-convex set when ``require_convex``, and a bad mass or density.
     """
-    points = _as_points(points, field)
-    mass, density = _mass_or_density(mass, density, field)
-    size = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    xyz = _as_points(points, field)
+    given_mass, given_density = _mass_or_density(mass, density, field)
+    size = float(np.linalg.norm(xyz.max(axis=0) - xyz.min(axis=0)))
     if size == 0.0:
-        raise InputError(field, f"expected points spanning a solid, found {len(points)} copies of one point")
+        raise InputError(field, f"expected xyz spanning a solid, found {len(xyz)} copies of one point")
     tolerance = TOLERANCE * size
-    representative = _merge_close(points, tolerance)
+    representative = merge_close(xyz, tolerance)
     unique = np.unique(representative)
     if len(unique) < 4:
-        raise InputError(field, f"expected at least 4 distinct points, found {len(unique)}")
-    triangles, equations = _qhull(points[unique], field)
-    triangles = unique[triangles]  # back to indices into ``points``
-    faces, face_normals = _merge_coplanar(points, triangles, equations, tolerance)
-    faces = _polygons(points, faces, face_normals, tolerance)
-    volume, center, second_moment = _volume_moments(points, faces)
+        raise InputError(field, f"expected at least 4 distinct xyz, found {len(unique)}")
+    triangles, equations = qhull_triangles(xyz[unique], field)
+    triangles = unique[triangles]  # back to indices into ``xyz``
+    faces, face_normals = merge_coplanar(xyz, triangles, equations, tolerance)
+    faces = face_polygons(xyz, faces, face_normals, tolerance)
+    volume, center, second_moment = volume_moments(xyz, faces)
     if not volume > TOLERANCE * size**3:  # zero volume up to round-off
         raise InputError(
-            field, f"expected points spanning a solid, found a flat or collinear set (volume {volume:.3g} m³)"
+            field, f"expected xyz spanning a solid, found a flat or collinear set (volume {volume:.3g} m³)"
         )
     if require_convex:
-        _check_convex(points, faces, face_normals, field, size)
-    edges, edge_faces = _edges(faces, field)
-    if mass is None:
-        mass = density * volume
-    else:
-        density = mass / volume
+        check_convex(xyz, faces, face_normals, field, CONVEX_TOLERANCE * size)
+    edges, edge_faces = hull_edges(faces, field)
+    solid_mass, solid_density = _solid_mass(given_mass, given_density, volume)
     # inertia about the centre of mass: I = tr(C) 1 − C with C = ∫ ρ r rᵀ dV
-    covariance = density * (second_moment - volume * np.outer(center, center))
+    covariance = solid_density * (second_moment - volume * np.outer(center, center))
     tensor = np.trace(covariance) * np.eye(3) - covariance
     tensor = 0.5 * (tensor + tensor.T)
-    moments, axes = _principal(tensor)
-    # renumber: the hull's own vertices 0..V−1 in the order of the given points
+    moments, axes = principal_frame(tensor)
+    # renumber: the hull's own vertices 0..V−1 in the order of the given xyz
     used = np.unique(np.concatenate(faces))
-    local = np.full(len(points), -1, dtype=np.int64)
+    local = np.full(len(xyz), -1, dtype=np.int64)
     local[used] = np.arange(len(used))
-    body_vertices = (points[used] - center) @ axes
+    body_vertices = (xyz[used] - center) @ axes
     normals = face_normals @ axes  # rows: the normals in the body frame
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     starts = np.concatenate([[0], np.cumsum([len(p) for p in faces])]).astype(np.int64)
@@ -228,19 +242,19 @@ def build_hull(
         face_vertex_index=corners.astype(np.int64),
         edge_vertex=local[edges].astype(np.int64).reshape(-1, 2) if len(edges) else np.zeros((0, 2), np.int64),
         edge_face=edge_faces,
-        mass=float(mass),
+        mass=float(solid_mass),
         volume=float(volume),
-        density=float(density),
+        density=float(solid_density),
         inertia=moments,
         inertia_tensor=tensor,
-        orientation=_matrix_to_quaternion(axes),
+        orientation=matrix_to_quaternion(axes),
         offset=center,
         radius=float(np.linalg.norm(body_vertices, axis=1).max()),
         source_indices=used,
     )
 
 
-def _as_points(points, field):
+def _as_points(points: ArrayLike, field: str) -> np.ndarray:
     try:
         points = np.array(points, dtype=float)
     except (TypeError, ValueError):
@@ -261,7 +275,7 @@ def _as_points(points, field):
     return points
 
 
-def _mass_or_density(mass, density, field):
+def _mass_or_density(mass: float | None, density: float | None, field: str) -> tuple[float | None, float | None]:
     if mass is not None and density is not None:
         raise InputError(field, "expected a mass or a density, found both")
     for name, value in (("mass", mass), ("density", density)):
@@ -277,297 +291,13 @@ def _mass_or_density(mass, density, field):
     return (None if mass is None else float(mass)), (None if density is None else float(density))
 
 
-def _merge_close(points, tolerance):
-    """For each point, the index of the first point within ``tolerance`` [m] of it (chains merged)."""
-    from scipy.spatial import cKDTree
-
-    parent = np.arange(len(points))
-    pairs = cKDTree(points).query_pairs(tolerance, output_type="ndarray")
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i, j in pairs:
-        ri, rj = root(i), root(j)
-        if ri != rj:
-            parent[max(ri, rj)] = min(ri, rj)
-    return np.array([root(i) for i in range(len(points))], dtype=np.int64)
-
-
-def _qhull(points, field):
-    from scipy.spatial import ConvexHull, QhullError
-
-    try:
-        hull = ConvexHull(points)
-    except QhullError:
-        raise InputError(
-            field, "expected points spanning a solid, found a flat or collinear set (zero volume)"
-        ) from None
-    return hull.simplices.astype(np.int64), hull.equations
-
-
-def _merge_coplanar(points, triangles, equations, tolerance):
-    """Group the hull triangles into faces: neighbours whose planes agree within tolerance.
-
-    Returns (faces, normals): a list of vertex-index arrays (unordered) per face and their
-    outward unit normals (F, 3) (the mean of the triangles' normals). Triangles are joined
-    through shared edges only (a plane supporting a convex set meets it in one connected
-    face), with union–find; a triangle joins its neighbour when their unit normals differ by
-    less than 1e−6 rad and each one's vertices lie within ``tolerance`` of the other's plane.
-    """
-    count = len(triangles)
-    parent = np.arange(count)
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    # the neighbour pairs: triangles sharing an undirected edge (sorted edge keys, then runs)
-    edge_keys = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    owner = np.tile(np.arange(count), 3)
-    order = np.lexsort((edge_keys[:, 1], edge_keys[:, 0]))
-    keys, owner = edge_keys[order], owner[order]
-    same = (keys[1:] == keys[:-1]).all(axis=1)
-    s_idx, t_idx = owner[:-1][same], owner[1:][same]
-    normals = equations[:, :3]
-    offsets = -equations[:, 3]
-    close = np.einsum("ij,ij->i", normals[s_idx], normals[t_idx]) >= 1.0 - 5e-13
-    for s, t in zip(s_idx[close].tolist(), t_idx[close].tolist()):
-        if (
-            np.abs(points[triangles[t]] @ normals[s] - offsets[s]).max() > tolerance
-            or np.abs(points[triangles[s]] @ normals[t] - offsets[t]).max() > tolerance
-        ):
-            continue
-        rs, rt = root(s), root(t)
-        if rs != rt:
-            parent[max(rs, rt)] = min(rs, rt)
-    roots = np.array([root(t) for t in range(count)])
-    order = np.argsort(roots, kind="stable")
-    groups = np.split(order, np.nonzero(np.diff(roots[order]))[0] + 1)
-    faces = [np.unique(triangles[members]) if len(members) > 1 else triangles[members[0]] for members in groups]
-    sums = np.add.reduceat(normals[order], np.concatenate([[0], np.cumsum([len(g) for g in groups])[:-1]]), axis=0)
-    return faces, sums / np.linalg.norm(sums, axis=1, keepdims=True)
-
-
-def _corners_2d(uv, tolerance):
-    """Indices of the strict corners of the convex hull of 2D points ``uv`` (m, 2), counter-
-    clockwise (Andrew's monotone chain; points within ``tolerance`` [m] of an edge are dropped)."""
-    order = np.lexsort((uv[:, 1], uv[:, 0])).tolist()
-    xy = uv.tolist()
-
-    def turn(o, a, b):
-        # signed distance of b from the line o → a (left positive)
-        dx, dy = xy[a][0] - xy[o][0], xy[a][1] - xy[o][1]
-        length = (dx * dx + dy * dy) ** 0.5
-        cross = dx * (xy[b][1] - xy[o][1]) - dy * (xy[b][0] - xy[o][0])
-        return cross / length if length > 0.0 else 0.0
-
-    def chain(indices):
-        hull = []
-        for i in indices:
-            while len(hull) >= 2 and turn(hull[-2], hull[-1], i) <= tolerance:
-                hull.pop()
-            hull.append(i)
-        return hull
-
-    lower = chain(order)
-    upper = chain(order[::-1])
-    return lower[:-1] + upper[:-1]
-
-
-def _plane_basis(normal):
-    """Two unit vectors u, v with u × v = normal."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = helper - (helper @ normal) * normal
-    u /= np.sqrt(u @ u)
-    v = np.array(
-        [normal[1] * u[2] - normal[2] * u[1], normal[2] * u[0] - normal[0] * u[2], normal[0] * u[1] - normal[1] * u[0]]
-    )
-    return u, v
-
-
-def _polygons(points, faces, normals, tolerance):
-    """Order each face's vertices counter-clockwise seen from outside; drop non-corners.
-
-    Pass 1 finds each face's strict corners (2D hull in the face plane); a vertex is kept
-    when it is a strict corner of at least one face. Pass 2 orders each face's kept vertices
-    by angle about its corners' mean, so that a vertex kept for one face but nearly straight
-    on another stays in both and every edge is shared by exactly two faces. (A triangle whose
-    corners are all kept needs no sorting, only orienting.)
-    """
-    bases, corner_sets = [], []
-    kept = set()
-    for ids, n in zip(faces, normals):
-        u, v = _plane_basis(n)
-        x = points[ids]
-        uv = np.stack([x @ u, x @ v], axis=1)
-        corners = ids[_corners_2d(uv, tolerance)] if len(ids) > 3 or _small_triangle(uv, tolerance) else ids
-        kept.update(corners.tolist())
-        bases.append((u, v))
-        corner_sets.append(corners)
-    polygons = []
-    for ids, (u, v), corners in zip(faces, bases, corner_sets):
-        ids = np.array([i for i in ids.tolist() if i in kept], dtype=np.int64)
-        middle = points[corners].mean(axis=0)
-        d = points[ids] - middle
-        angle = np.arctan2(d @ v, d @ u)
-        polygons.append(ids[np.argsort(angle, kind="stable")])
-    return polygons
-
-
-def _small_triangle(uv, tolerance):
-    """Whether a triangle (3, 2) has a corner within ``tolerance`` [m] of the opposite side."""
-    (ax, ay), (bx, by), (cx, cy) = uv.tolist()
-    twice_area = abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
-    longest = max(np.hypot(bx - ax, by - ay), np.hypot(cx - bx, cy - by), np.hypot(ax - cx, ay - cy))
-    return twice_area <= tolerance * longest
-
-
-def _volume_moments(points, polygons):
-    """Volume [m³], centroid (3,) [m] and second moment ∫ r rᵀ dV (3, 3) [m⁵] about the origin
-    of the closed polyhedron with outward-wound ``polygons``, exactly: signed tetrahedra from a
-    reference point r0 (the mean of the vertices) to each fan triangle of each face."""
-    r0 = points[np.unique(np.concatenate(polygons))].mean(axis=0)
-    tris = []
-    for polygon in polygons:
-        for k in range(1, len(polygon) - 1):
-            tris.append((polygon[0], polygon[k], polygon[k + 1]))
-    tris = np.array(tris, dtype=np.int64)
-    a = points[tris[:, 0]] - r0
-    b = points[tris[:, 1]] - r0
-    c = points[tris[:, 2]] - r0
-    det = np.einsum("ij,ij->i", a, np.cross(b, c))  # 6 × signed volume of (r0, a, b, c)
-    volume = det.sum() / 6.0
-    if volume <= 0.0:
-        return 0.0, r0, np.zeros((3, 3))
-    centroid_rel = (det[:, None] * (a + b + c)).sum(axis=0) / 24.0 / volume
-    # ∫ x xᵀ over the tetrahedron (0, a, b, c) = det/120 · (Σ_i v_i v_iᵀ + (Σ v_i)(Σ v_i)ᵀ)
-    s = a + b + c
-    second_rel = (
-        np.einsum("t,ti,tj->ij", det, a, a)
-        + np.einsum("t,ti,tj->ij", det, b, b)
-        + np.einsum("t,ti,tj->ij", det, c, c)
-        + np.einsum("t,ti,tj->ij", det, s, s)
-    ) / 120.0
-    # shift the second moment from r0 to the origin of the given frame
-    m1 = volume * centroid_rel
-    second = second_rel + np.outer(m1, r0) + np.outer(r0, m1) + volume * np.outer(r0, r0)
-    return float(volume), r0 + centroid_rel, second
-
-
-def _check_convex(points, polygons, normals, field, size):
-    """InputError when some given point lies inside the hull by more than CONVEX_TOLERANCE × size."""
-    offsets = np.array([(points[p] @ n).max() for p, n in zip(polygons, normals)])
-    height = (points @ normals.T - offsets).max(axis=1)  # ≤ 0 inside; 0 on the surface
-    inside = height < -CONVEX_TOLERANCE * size
-    if inside.any():
-        raise InputError(
-            field,
-            f"the points are not convex: {int(inside.sum())} of {len(points)} lie inside "
-            f'their hull; use shape = "mesh" for a static non-convex object',
-        )
-
-
-def _edges(polygons, field):
-    """Unique edges (E, 2) (vertex ids, low first) and the faces (E, 2) each joins."""
-    directed = {}
-    for f, polygon in enumerate(polygons):
-        for k in range(len(polygon)):
-            a, b = int(polygon[k]), int(polygon[(k + 1) % len(polygon)])
-            if (a, b) in directed:
-                raise InputError(
-                    field,
-                    "could not build a consistent hull from these points (an edge is used "
-                    "twice in one direction); they are numerically degenerate",
-                )
-            directed[(a, b)] = f
-    edges, faces = [], []
-    for (a, b), f in directed.items():
-        if (b, a) not in directed:
-            raise InputError(
-                field,
-                "could not build a consistent hull from these points (an edge has no "
-                "neighbouring face); they are numerically degenerate",
-            )
-        if a < b:
-            edges.append((a, b))
-            faces.append((f, directed[(b, a)]))
-    return np.array(edges, dtype=np.int64).reshape(-1, 2), np.array(faces, dtype=np.int64).reshape(-1, 2)
-
-
-def _principal(tensor):
-    """Principal moments (3,) and a proper rotation (3, 3) whose columns are the principal axes.
-
-    An already diagonal tensor keeps the given axes. Otherwise the eigenvectors are
-    permuted and signed to stay as close as possible to the given axes (no gratuitous turn).
-    """
-    scale = np.trace(tensor)
-    off_diagonal = np.abs(tensor - np.diag(np.diag(tensor))).max()
-    if off_diagonal <= 1e-12 * scale:
-        return np.diag(tensor).copy(), np.eye(3)
-    moments, axes = np.linalg.eigh(tensor)
-    best, best_score = None, -1.0
-    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
-        score = sum(abs(axes[i, perm[i]]) for i in range(3))
-        if score > best_score:
-            best, best_score = perm, score
-    axes = axes[:, best]
-    moments = moments[list(best)]
-    for i in range(3):
-        if axes[i, i] < 0.0:
-            axes[:, i] = -axes[:, i]
-    if np.linalg.det(axes) < 0.0:
-        weakest = int(np.argmin(np.abs(np.diag(axes))))
-        axes[:, weakest] = -axes[:, weakest]
-    return moments, axes
-
-
-def _matrix_to_quaternion(R):
-    """Unit quaternion (w, x, y, z), w ≥ 0, of a proper rotation matrix (Shepperd's method)."""
-    trace = np.trace(R)
-    if trace > 0.0:
-        s = 2.0 * np.sqrt(1.0 + trace)
-        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = np.array([(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s])
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = np.array([(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s])
-    else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s])
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0.0 else q
-
-
-def _quaternion_to_matrix(q):
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _quaternion_multiply(p, q):
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return np.array(
-        [
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ]
-    )
+def _solid_mass(mass: float | None, density: float | None, volume: float) -> tuple[float, float]:
+    """(mass [kg], density [kg/m³]) of a uniform solid of ``volume`` [m³] of the given mass or,
+    that None, of the given density (_mass_or_density gives one of the two)."""
+    if mass is not None:
+        return mass, mass / volume
+    assert density is not None  # _mass_or_density defaults it when no mass is given
+    return density * volume, density
 
 
 # ------------------------------------------------------------------------------------------
@@ -648,7 +378,7 @@ def box_as_hull(half_extents: ArrayLike) -> dict[str, np.ndarray]:
             polygons.append(ids[np.argsort(angle)])
             normals.append(n)
             offsets.append(half[k])
-    edges, edge_faces = _edges(polygons, "half_extents")
+    edges, edge_faces = hull_edges(polygons, "half_extents")
     return {
         "vertex_start": np.array([0, 8], dtype=np.int64),
         "vertices": np.ascontiguousarray(vertices),
@@ -661,6 +391,47 @@ def box_as_hull(half_extents: ArrayLike) -> dict[str, np.ndarray]:
         "edge_vertex": edges,
         "edge_face": edge_faces,
         "radius": np.array([float(np.linalg.norm(half))]),
+    }
+
+
+def join_packed(packs: Sequence[Mapping[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Join packed hull dicts (the layout of :func:`pack_hulls`) into one, shifting their start indices."""
+    starts = {
+        "vertex_start": "vertices",
+        "face_start": "face_normal",
+        "edge_start": "edge_vertex",
+        "face_vertex_start": "face_vertex_index",
+    }
+    out: dict[str, list[np.ndarray]] = {key: [] for key in packs[0]}
+    base = {key: 0 for key in starts}
+    for k, hull_pack in enumerate(packs):
+        for key, values in hull_pack.items():
+            if key in starts:
+                shifted = values + base[key]
+                out[key].append(shifted if k == 0 else shifted[1:])
+                base[key] += len(hull_pack[starts[key]])
+            else:
+                out[key].append(values)
+    return {key: np.ascontiguousarray(np.concatenate(values)) for key, values in out.items()}
+
+
+def fan_triangles(packed: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Triangles of every hull's faces, fanned from each face's first corner (built once).
+
+    Returns triangle_start (H+1,) int64 and triangles (T, 3) int64, local vertex indices, wound
+    like the faces (counter-clockwise from outside)."""
+    triangles: list[tuple[int, int, int]] = []
+    counts = []
+    fvs, fvi = packed["face_vertex_start"], packed["face_vertex_index"]
+    for h in range(len(packed["vertex_start"]) - 1):
+        before = len(triangles)
+        for f in range(packed["face_start"][h], packed["face_start"][h + 1]):
+            corners = fvi[fvs[f] : fvs[f + 1]]
+            triangles.extend((corners[0], corners[i], corners[i + 1]) for i in range(1, len(corners) - 1))
+        counts.append(len(triangles) - before)
+    return {
+        "triangle_start": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        "triangles": np.array(triangles, dtype=np.int64).reshape(-1, 3),
     }
 
 

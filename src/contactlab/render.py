@@ -11,7 +11,8 @@ canvas (no pyplot, no display) on 3-D axes, z up:
 * cloths: shaded triangle meshes, both sides lit, one colour per cloth (``Set2``);
 * free particles: dots whose size follows their radius;
 * static obstacles: light grey and semi-transparent; planes (finite squares in the
-  trajectory) are cut to a rectangle around the moving content, and drawn beneath it.
+  trajectory) are cut to a rectangle around the moving content, and drawn beneath it
+  (:mod:`contactlab.scenery` frames them).
 
 The camera is fixed for the whole video: the axis limits enclose everything the drawn samples
 reach, with equal scales on x, y and z. Frames play in real time: frame k of a video
@@ -46,6 +47,7 @@ from tqdm import tqdm
 from . import interrupts, surfaces
 from .errors import InputError
 from .record import atomic_path, checked_times, make_folders, read_trajectory, remove_empty
+from .scenery import axis_limits, scenery, triangle_normals
 from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
@@ -60,7 +62,6 @@ BACKGROUND = "white"
 OBSTACLE_RGBA = (0.72, 0.72, 0.72, 0.3)
 PARTICLE_RGB = (0.15, 0.3, 0.6)
 STILL_SAMPLES = 600  # samples a still reads at most to frame its camera
-MARGIN = 0.15  # planes reach this share of the content's size beyond it
 REQUIRED = (
     "time",
     "body_position",
@@ -327,14 +328,7 @@ def _mp4_writer(path, fps):
     )
 
 
-# -- geometry -----------------------------------------------------------------------------
-
-
-def _normals(faces):
-    """Unit normals (N, 3) of triangles ``faces`` (N, 3, 3), right-handed (counter-clockwise)."""
-    normals = np.cross(faces[:, 1] - faces[:, 0], faces[:, 2] - faces[:, 0])
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.where(length > 0, length, 1.0)
+# -- shading ------------------------------------------------------------------------------
 
 
 def _shade(rgba, normals, light, two_sided):
@@ -353,139 +347,6 @@ def _light_direction(elevation, azimuth):
     elevation = np.radians(min(elevation + 30.0, 80.0))
     azimuth = np.radians(azimuth - 15.0)
     return np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
-
-
-def _obstacle_pieces(triangles):
-    """Label (M,) of the connected piece (one obstacle) each triangle belongs to.
-
-    Every obstacle owns a contiguous range of vertices, so pieces are the runs of triangles
-    whose vertex-index ranges overlap.
-    """
-    if len(triangles) == 0:
-        return np.zeros(0, dtype=np.int64)
-    low, high = triangles.min(axis=1), triangles.max(axis=1)
-    order = np.argsort(low, kind="stable")
-    reach = np.maximum.accumulate(high[order])
-    new = np.concatenate([[True], low[order][1:] > reach[:-1]])
-    labels = np.empty(len(triangles), dtype=np.int64)
-    labels[order] = np.cumsum(new) - 1
-    return labels
-
-
-def _split_obstacles(vertices, triangles):
-    """Static obstacles as (flat, solid): ``flat`` a list of the faces (n, 3, 3) [m] of every
-    flat piece (a plane's square, a flat mesh), ``solid`` the faces (m, 3, 3) [m] of all others."""
-    flat, solid = [], []
-    labels = _obstacle_pieces(triangles)
-    for label in range(labels.max(initial=-1) + 1):
-        faces = vertices[triangles[labels == label]]
-        points = faces.reshape(-1, 3)
-        spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
-        (flat if spread[-1] <= 1e-9 * max(spread[0], 1e-12) else solid).append(faces)
-    return flat, np.concatenate(solid) if solid else np.zeros((0, 3, 3))
-
-
-def _clip(polygon, halfspaces):
-    """The part (k, 3) of the convex polygon (n, 3) where normal · x ≥ offset for every
-    (normal (3,), offset) of ``halfspaces`` (Sutherland–Hodgman)."""
-    for normal, offset in halfspaces:
-        if len(polygon) == 0:
-            break
-        inside = polygon @ normal - offset  # ≥ 0 inside
-        kept = []
-        for i in range(len(polygon)):
-            j = (i + 1) % len(polygon)
-            if inside[i] >= 0:
-                kept.append(polygon[i])
-            if (inside[i] >= 0) != (inside[j] >= 0):
-                kept.append(polygon[i] + (polygon[j] - polygon[i]) * inside[i] / (inside[i] - inside[j]))
-        polygon = np.array(kept).reshape(-1, 3)
-    return polygon
-
-
-def _cut_flat(flat, lower, upper):
-    """The flat obstacles as (polygons, normals): each face cut to the rectangle of its plane
-    that covers the box ``lower``–``upper`` (3,) [m] seen along the plane's normal, and to the
-    free side of every plane (a square of 2 triangles, wound counter-clockwise seen from its
-    free side), so that walls end at the floor. polygons: list of (k, 3) [m]; normals (n, 3)."""
-    corners = np.array(np.meshgrid(*zip(lower, upper))).reshape(3, -1).T
-    normals = [_normals(faces[:1])[0] for faces in flat]
-    planes = [(i, normals[i], normals[i] @ faces[0, 0] - 1e-9) for i, faces in enumerate(flat) if len(faces) == 2]
-    polygons, polygon_normals = [], []
-    for i, (faces, normal) in enumerate(zip(flat, normals)):
-        helper = np.eye(3)[np.argmin(np.abs(normal))]  # the world axis most along the plane
-        u = helper - (helper @ normal) * normal
-        u /= np.linalg.norm(u)
-        halfspaces = [(n, o) for j, n, o in planes if j != i]
-        for direction in (u, np.cross(normal, u)):
-            extent = corners @ direction
-            halfspaces += [(direction, extent.min()), (-direction, -extent.max())]
-        for face in faces:
-            polygon = _clip(face, halfspaces)
-            if len(polygon) >= 3:
-                polygons.append(polygon)
-                polygon_normals.append(normal)
-    return polygons, np.reshape(polygon_normals, (-1, 3))
-
-
-def _content_bounds(arrays, solid_obstacles):
-    """(lower (3,), upper (3,)) [m] of everything but flat obstacles over the whole trajectory:
-    the bodies' surfaces in every sample, particles ± their radius, solid obstacles; None when
-    there is none of these."""
-    points = [solid_obstacles.reshape(-1, 3)]
-    if len(arrays["body_surface_vertices"]):
-        posed = [surfaces.posed_body_vertices(arrays, sample) for sample in range(len(arrays["time"]))]
-        points += [np.array([p.min(axis=0) for p in posed]), np.array([p.max(axis=0) for p in posed])]
-    position, radius = arrays["particle_position"], arrays["particle_radius"][:, None]
-    if position.size:
-        points += [(position - radius).min(axis=1), (position + radius).max(axis=1)]
-    points = np.concatenate(points)
-    if len(points) == 0:
-        return None
-    return points.min(axis=0), points.max(axis=0)
-
-
-def _view_box(content, flat):
-    """(lower, upper) [m] the flat obstacles are cut to: the content's box made at least half
-    as wide as its widest side in every direction, grown by MARGIN of that side."""
-    if content is None:
-        if not flat:
-            return -np.ones(3), np.ones(3)
-        points = np.concatenate([faces.reshape(-1, 3) for faces in flat])
-        return points.min(axis=0), points.max(axis=0)
-    lower, upper = content
-    centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-    size = max(half.max(), 0.05)
-    half = np.maximum(half, 0.5 * size) + MARGIN * size
-    return centre - half, centre + half
-
-
-def _limits(content, flat_polygons):
-    """Axis limits (lower (3,), upper (3,)) [m] around the content and the cut flat obstacles,
-    no side shorter than 5 % of the longest (for the box aspect)."""
-    points = [np.concatenate(flat_polygons)] if flat_polygons else []
-    if content is not None:
-        points.append(np.stack(content))
-    if not points:
-        return -np.ones(3), np.ones(3)
-    points = np.concatenate(points)
-    lower, upper = points.min(axis=0), points.max(axis=0)
-    centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-    half = np.maximum(half, max(0.05 * half.max(), 1e-3))
-    return centre - half, centre + half
-
-
-def scenery(arrays: Mapping[str, Any]) -> tuple[Any, list[np.ndarray], np.ndarray, np.ndarray]:
-    """The static obstacles framed around what moves in the trajectory ``arrays`` (its samples
-    all read: pass the few that frame it), as still(), render() and the viewer draw them:
-    (content: (lower (3,), upper (3,)) [m] of the bodies, particles and solid obstacles over
-    the samples, or None; flat: the plane squares and flat meshes cut to a rectangle around the
-    content, a list of convex polygons (k, 3) [m]; their unit normals (n, 3); solid: the faces
-    (m, 3, 3) [m] of the other obstacles)."""
-    flat, solid = _split_obstacles(arrays["obstacle_vertices"], arrays["obstacle_triangles"])
-    content = _content_bounds(arrays, solid)
-    flat_polygons, flat_normals = _cut_flat(flat, *_view_box(content, flat))
-    return content, flat_polygons, flat_normals, solid
 
 
 # -- the picture --------------------------------------------------------------------------
@@ -519,12 +380,12 @@ class _Picture:
 
         content, flat_polygons, flat_normals, solid = scenery(arrays)
         self.obstacle_faces = solid
-        self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), _normals(solid), self.light, True)
+        self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), triangle_normals(solid), self.light, True)
 
         self.figure = Figure(figsize=(self.width / DPI, self.height / DPI), dpi=DPI, facecolor=BACKGROUND)
         self.canvas = FigureCanvasAgg(self.figure)
         top = 1.0 - 28.0 / self.height if title else 1.0
-        self.axes = self._axes(_limits(content, flat_polygons), elevation, azimuth, top)
+        self.axes = self._axes(axis_limits(content, flat_polygons), elevation, azimuth, top)
         self._add_flat(flat_polygons, flat_normals)
         self.surfaces = None
         if len(self.body_triangles) + len(self.cloth_triangles) + len(solid):
@@ -587,8 +448,8 @@ class _Picture:
         faces = np.concatenate([bodies, cloths, self.obstacle_faces])
         rgba = np.concatenate(
             [
-                _shade(self.body_rgba, _normals(bodies), self.light, False),
-                _shade(self.cloth_rgba, _normals(cloths), self.light, True),
+                _shade(self.body_rgba, triangle_normals(bodies), self.light, False),
+                _shade(self.cloth_rgba, triangle_normals(cloths), self.light, True),
                 self.obstacle_rgba,
             ]
         )

@@ -197,87 +197,53 @@ def simulate(
     ``status`` saying how the run ended.
     """
     with interrupts.deferred():  # compiling or stepping, a signal waits for a step boundary
-        return _simulate(
-            model,
-            method,
-            dt,
-            duration,
-            options,
-            integrator,
-            record_every,
-            state,
-            progress,
-            scene_name,
-            threads,
-            compiled_loop,
-            allow_divergence,
-            memory_limit,
-            trajectory,
+        module, options, dt, duration, steps = _checked_arguments(
+            model, method, dt, duration, options, integrator, record_every, state, scene_name
         )
-
-
-def _simulate(
-    model,
-    method,
-    dt,
-    duration,
-    options,
-    integrator,
-    record_every,
-    state,
-    progress,
-    scene_name,
-    threads,
-    compiled_loop,
-    allow_divergence,
-    memory_limit,
-    trajectory,
-):
-    module, options, dt, duration, steps = _checked_arguments(
-        model, method, dt, duration, options, integrator, record_every, state, scene_name
-    )
-    check_supported(model)
-    chooser = ThreadChooser(threads)
-    state = model.state() if state is None else state.copy()
-    if memory_limit is not None and (
-        isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float)) or not memory_limit > 0
-    ):
-        raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
-    if compiled_loop not in (None, True, False):
-        raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
-    if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
-        raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
-    samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
-    for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
-        warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=3)
-    advice = getattr(module, "divergence_advice", None)
-    health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
-    recorder = (
-        Recorder(model, record_every, samples=samples)
-        if trajectory is None
-        else streaming_recorder(model, record_every, trajectory, samples)
-    )
-    try:
-        return _record_run(
-            model,
-            module,
-            method,
-            dt,
-            steps,
-            options,
-            integrator,
-            recorder,
-            state,
-            progress,
-            scene_name,
-            chooser,
-            compiled_loop,
-            health,
+        check_supported(model)
+        chooser = ThreadChooser(threads)
+        state = model.state() if state is None else state.copy()
+        if memory_limit is not None and (
+            isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float)) or not memory_limit > 0
+        ):
+            raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
+        if compiled_loop not in (None, True, False):
+            raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+        if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
+            raise InputError(
+                "trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}"
+            )
+        samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
+        for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
+            warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=2)
+        advice = getattr(module, "divergence_advice", None)
+        health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
+        recorder = (
+            Recorder(model, record_every, samples=samples)
+            if trajectory is None
+            else streaming_recorder(model, record_every, trajectory, samples)
         )
-    except BaseException:
-        if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
-            recorder.sink.discard()
-        raise
+        try:
+            return _record_run(
+                model,
+                module,
+                method,
+                dt,
+                steps,
+                options,
+                integrator,
+                recorder,
+                state,
+                progress,
+                scene_name,
+                chooser,
+                compiled_loop,
+                health,
+            )
+        except BaseException:
+            if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
+                recorder.sink.discard()
+            raise
 
 
 def _record_run(

@@ -97,10 +97,10 @@ def scene_bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
     for mesh in model.meshes:
         points.append(mesh.vertices)
         radii.append(np.zeros(len(mesh.vertices)))
-    points, radii = np.concatenate(points), np.concatenate(radii)
-    if len(points) == 0:
+    centres, reach = np.concatenate(points), np.concatenate(radii)
+    if len(centres) == 0:
         return -np.ones(3), np.ones(3)
-    return (points - radii[:, None]).min(axis=0), (points + radii[:, None]).max(axis=0)
+    return (centres - reach[:, None]).min(axis=0), (centres + reach[:, None]).max(axis=0)
 
 
 def _plane_surface(params, centre, half_size):

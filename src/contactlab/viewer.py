@@ -14,7 +14,7 @@ What it shows (docs/viewer.md):
 * each run under its own node ``/runI`` (I = 0, 1, …), its runs side by side along x, a label
   above each: bodies ``/runI/bodies/B`` (their surfaces from the trajectory, posed at each sample),
   cloths ``/runI/cloth``, free particles ``/runI/particles``, the static obstacles
-  ``/runI/obstacles`` (planes cut around the content, as :func:`contactlab.render.scenery` frames them);
+  ``/runI/obstacles`` (planes cut around the content, as :func:`contactlab.scenery.scenery` frames them);
 * one clock for all runs (time-locked): each run shows its sample nearest to the clock's time;
   play, pause, scrub, playback speed;
 * on request, for the shown samples: contact points ``/runI/contacts/points``, normals
@@ -25,35 +25,36 @@ What it shows (docs/viewer.md):
   before it. Both need the run's Model, rebuilt from its summary's ``source`` (or its built-in
   scene's name); they are computed only while a toggle needs them, so scrubbing stays smooth;
 * bodies coloured each its own colour, or by penetration (their deepest contact) or by speed.
+
+The runs are opened by :mod:`contactlab.viewed_runs`; a sample's contacts are rebuilt by
+:mod:`contactlab.sample_contacts`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import html
 import io
 import os
 import socket
 import threading
 import time
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib import colormaps
 
 from . import interrupts
 from .errors import InputError
-from .record import TRAJECTORY, load_run, read_trajectory
-from .render import OBSTACLE_RGBA, PARTICLE_RGB, REQUIRED, nearest, scenery, spread_samples
+from .record import read_trajectory
+from .render import OBSTACLE_RGBA, PARTICLE_RGB, REQUIRED, nearest, spread_samples
+from .sample_contacts import contacts_at, state_at
+from .scenery import scenery
 from .trajectory import check_arrays
+from .viewed_runs import Shown, open_runs
 
 if TYPE_CHECKING:
-    from .model import Model
     from .simulation import Run
-    from .state import State
 
 
 HOST = "127.0.0.1"  # the viewer listens on loopback only
@@ -62,15 +63,6 @@ GAP = 0.3  # runs side by side are this share of the widest (or tallest) apart
 SPEEDS = ("0.1×", "0.25×", "0.5×", "1×", "2×", "4×")
 COLOURINGS = ("each body its colour", "penetration", "speed")
 FORCE_SHARE = 0.25  # the heaviest body's weight draws as an arrow of this share of the scene's size
-STATE_SERIES = (
-    "time",
-    "body_position",
-    "body_orientation",
-    "body_velocity",
-    "body_angular_velocity",
-    "particle_position",
-    "particle_velocity",
-)
 POINT_RGB = (220, 30, 30)
 NORMAL_RGB = (30, 90, 220)
 FORCE_RGB = (255, 140, 0)
@@ -78,175 +70,7 @@ SPEED_MAP, PENETRATION_MAP = "viridis", "YlOrRd"
 BODY_SEEN_THROUGH = 0.55  # bodies' opacity while contacts are shown (their arrows are inside them)
 
 
-# -- opening runs -------------------------------------------------------------------------
-
-
-@dataclass(eq=False)
-class Shown:
-    """One run in the viewer: ``label`` ("scene — method"), ``arrays`` (a trajectory: a
-    :class:`contactlab.store.TrajectoryFile` or the dict of a Run), ``summary`` (the run's
-    summary.json, {} unknown), ``model`` (its Model, None when it cannot be rebuilt: no contacts
-    then), ``offset`` (3,) [m] where its origin sits in the viewer. The Viewer adds its drawing
-    state to it: the bodies' scene handles and colours, the colour scales' ranges."""
-
-    label: str
-    arrays: object
-    summary: dict
-    model: object = None
-    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _is_run(directory):
-    return any(os.path.isfile(os.path.join(directory, name)) for name in (TRAJECTORY, "trajectory.npz"))
-
-
-def run_folders(directory: str, field: str = "RUN_DIR") -> list[str]:
-    """The run folders ``directory`` stands for: itself when it holds a trajectory, else its
-    sub-folders that do (a ``contactlab compare`` output: one per method, in the order of
-    :data:`contactlab.methods.AVAILABLE`, then by name). InputError naming the folder otherwise."""
-    from .methods import AVAILABLE
-
-    directory = os.fspath(directory)
-    if not os.path.isdir(directory):
-        raise InputError(
-            field,
-            f"{directory} is not a folder; give the output folder of 'contactlab run' "
-            f"(its --out) or of 'contactlab compare'",
-        )
-    if _is_run(directory):
-        return [directory]
-    names = sorted(
-        (name for name in os.listdir(directory) if _is_run(os.path.join(directory, name))),
-        key=lambda name: (AVAILABLE.index(name) if name in AVAILABLE else len(AVAILABLE), name),
-    )
-    if not names:
-        raise InputError(
-            field,
-            f"found no {TRAJECTORY} in {directory} nor in its sub-folders; give the output "
-            f"folder of 'contactlab run' (its --out) or of 'contactlab compare'",
-        )
-    return [os.path.join(directory, name) for name in names]
-
-
-def model_of(summary: Mapping[str, Any], arrays: Mapping[str, Any]) -> Model | None:
-    """The Model of a run, loaded again from its summary's ``source`` (scene and overrides), or
-    from the built-in scene its summary names; None when neither loads or the model's body and
-    particle counts differ from the trajectory's (the scene file changed since)."""
-    from .scene import load_scene
-
-    source = summary.get("source")
-    attempts = (
-        [(source["scene"], source.get("overrides", []))] if isinstance(source, dict) and "scene" in source else []
-    )
-    if "scene" in summary:
-        attempts.append((summary["scene"], [f"simulation.method={summary.get('method', 'impulse')}"]))
-    shapes = getattr(arrays, "shapes", None) or {
-        key: np.shape(arrays[key]) for key in ("body_position", "particle_position")
-    }
-    for scene, overrides in attempts:
-        try:
-            model = load_scene(scene, overrides).model
-        except (InputError, OSError, TypeError):
-            continue
-        if (model.body_count, model.particle_count) == (shapes["body_position"][1], shapes["particle_position"][1]):
-            return model
-    return None
-
-
-def _label(summary, fallback):
-    return f"{summary['scene']} — {summary['method']}" if "scene" in summary else fallback
-
-
-def open_runs(sources: Iterable[str | os.PathLike[str] | Run], field: str = "RUN_DIR") -> list[Shown]:
-    """A :class:`Shown` for every run of ``sources``: run folders, compare folders (every
-    method's run), or :class:`contactlab.simulation.Run` objects (shown from their arrays,
-    in memory or on disk). InputError for a folder that is not a run."""
-    shown = []
-    for source in sources:
-        if hasattr(source, "arrays") and hasattr(source, "summary"):
-            summary = source.summary
-            model = getattr(source, "model", None) or model_of(summary, source.arrays)
-            shown.append(Shown(_label(summary, "run"), source.arrays, summary, model))
-            continue
-        for directory in run_folders(source, field):
-            arrays, summary = load_run(directory, field)
-            shown.append(
-                Shown(
-                    _label(summary, os.path.basename(os.path.normpath(directory))),
-                    arrays,
-                    summary,
-                    model_of(summary, arrays),
-                )
-            )
-    if not shown:
-        raise InputError(field, "no run given; give a run's output folder")
-    return shown
-
-
-# -- contacts and forces --------------------------------------------------------------------
-
-
-@dataclass
-class ContactView:
-    """What the viewer draws of one sample's contacts. points (C, 3) [m], normals (C, 3) unit
-    (from B into A), depth (C,) [m] (> 0 overlapping), from collide() on the recorded state;
-    force_points (K, 3) [m] and forces (K, 3) [N] from one step of the method: the force on side A,
-    or on side B where A is static geometry (what a moving thing feels);
-    body_depth (B,) [m] the deepest overlap of each body (0 when it touches nothing)."""
-
-    points: np.ndarray
-    normals: np.ndarray
-    depth: np.ndarray
-    force_points: np.ndarray
-    forces: np.ndarray
-    body_depth: np.ndarray
-
-
-def state_at(arrays: Mapping[str, Any], sample: int) -> State:
-    """The :class:`contactlab.state.State` recorded at trajectory sample ``sample``."""
-    from .state import State
-
-    row = read_trajectory(arrays, STATE_SERIES, [sample])
-    return State(float(row["time"][0]), *(np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]))
-
-
-def contacts_at(model: Model, summary: Mapping[str, Any], state: State) -> ContactView:
-    """The :class:`ContactView` of ``state`` for ``model``; forces only when the summary names
-    a method, its options and dt (else none)."""
-    from . import methods
-    from .collision import collide
-
-    found = collide(model, state)
-    depth = np.maximum(found.depth, 0.0)
-    body_depth = np.zeros(model.body_count)
-    for side in (found.body_a, found.body_b):
-        touching = side >= 0
-        np.maximum.at(body_depth, side[touching], depth[touching])
-    force_points, forces = np.zeros((0, 3)), np.zeros((0, 3))
-    if summary.get("method") in methods.AVAILABLE and "dt" in summary:
-        module = methods.get(summary["method"])
-        try:
-            options = methods.make_options(module, summary.get("options") or {}, f"method.{summary['method']}")
-        except InputError:
-            options = module.Options()
-
-        def step(start):
-            return module.step(model, start, summary["dt"], options, summary.get("integrator", "symplectic_euler"))
-
-        warm = step(state)[0].carried  # a first step finds what to warm start from, as the run had
-        _, info = step(dataclasses.replace(state, carried=warm))
-        if info.impulses is not None and info.contacts.count:
-            c = info.contacts
-            push = (
-                info.impulses[:, :1] * c.normal
-                + info.impulses[:, 1:2] * c.tangent1
-                + info.impulses[:, 2:3] * c.tangent2
-            ) / summary["dt"]
-            static_a = (c.body_a < 0) & (c.particles_a[:, 0] < 0)  # the floor's side: show what B feels
-            push[static_a] *= -1.0
-            acting = np.linalg.norm(push, axis=1) > 0.0
-            force_points, forces = c.point[acting], push[acting]
-    return ContactView(found.point, found.normal, found.depth, force_points, forces, body_depth)
+# -- lines and colours for viser --------------------------------------------------------------
 
 
 def _segments(starts, vectors):
@@ -310,7 +134,7 @@ def check_port(port: int | None) -> int:
 
 
 class Viewer:
-    """The viewer of a list of :class:`Shown` runs, serving on 127.0.0.1 from construction on.
+    """The viewer of a list of :class:`~contactlab.viewed_runs.Shown` runs, serving on 127.0.0.1 from construction on.
 
     ``url``: its address; ``server``: the viser.ViserServer (``server.scene`` holds the nodes
     the module docstring names); :meth:`show_time` moves the clock, :meth:`stop` ends it.

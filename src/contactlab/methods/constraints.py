@@ -51,7 +51,8 @@ from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number
 from . import KeptManifoldOptions, StepInfo
-from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from .jacobian_rows import row_products, rows_of
+from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import (
     detect,
     normal_targets,
@@ -65,7 +66,7 @@ from .velocity_level import (
 if TYPE_CHECKING:
     from ..contacts import Contacts
     from ..model import Model
-    from .sequential import ContactRows
+    from .jacobian_rows import ContactRows
 
 SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "newton", "pgs", "redblack", "jacobi", "lemke")
 CONE_ONLY_SOLVERS = ("apgd", "newton")  # they solve the Coulomb cone, not its pyramid

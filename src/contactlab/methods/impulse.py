@@ -41,7 +41,8 @@ from ..errors import InputError
 from ..state import State
 from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
-from .sequential import contact_velocity, rows_of, solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
+from .jacobian_rows import contact_velocity, rows_of
+from .sequential import solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
 from .velocity_level import (
     detect,
     positions_split_at_impact,
@@ -54,7 +55,7 @@ from .velocity_level import (
 
 if TYPE_CHECKING:
     from ..model import Model
-    from .sequential import ContactRows
+    from .jacobian_rows import ContactRows
 
 
 @dataclass

@@ -30,14 +30,8 @@ from ..collision.narrow_phase import generate_contacts
 from ..contacts import ContactArrays
 from ..diagnostics import gravitational, kinetic
 from ..dynamics.integrators import gyroscopic_midpoint
-from .sequential import (
-    PARALLEL_MIN_CONTACTS,
-    SWEEP_GROUPS,
-    ContactRows,
-    contact_rows,
-    solve_sequential_impulses,
-    split_into_slabs,
-)
+from .jacobian_rows import ContactRows, contact_rows
+from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
 
 LoopModel = namedtuple(
     "LoopModel",

@@ -27,6 +27,7 @@ from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import moved
 from .impulse import resolve_collisions
+from .jacobian_rows import ContactRows, row_products
 from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, detect, free_motion, solve, swept_reach
 from .penalty_implicit import free_dofs, implicit_spring_velocities, mass_blocks
 from .penalty_springs import (
@@ -41,7 +42,7 @@ from .penalty_springs import (
     springs_of,
 )
 from .projection import advance, displaced, projection_targets
-from .sequential import ContactRows, contact_order, row_products
+from .sequential import contact_order
 from .velocity_level import earliest_impacts, gravity_along_normals, impact_targets, resting_targets
 
 # ---- impulse and constraints (loop L3) ------------------------------------------------------

@@ -47,6 +47,7 @@ from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
 from . import CollisionOptions, StepInfo
+from .jacobian_rows import ContactRows, row_products, rows_of
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
     GUARD_SWEEPS,
@@ -66,7 +67,7 @@ from .penalty_springs import (
 from .penalty_springs import ContactSprings as ContactSprings  # re-exported: tests and callers build them here
 from .penalty_springs import elastic_energy as elastic_energy  # re-exported: named here since SPEC P3
 from .penalty_springs import spring_forces as spring_forces  # re-exported: named here since SPEC P1
-from .sequential import ContactRows, row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 
 if TYPE_CHECKING:
     import scipy.sparse as sp

@@ -23,8 +23,8 @@ from numba import njit
 from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import factor_symmetric
 from ..rotations import world_tensors
+from .jacobian_rows import ContactRows, along_rows, contact_velocity, row_products
 from .penalty_springs import ContactSprings, SpringSettings
-from .sequential import ContactRows, along_rows, contact_velocity, row_products
 
 # ---- backward Euler -----------------------------------------------------------------------
 #

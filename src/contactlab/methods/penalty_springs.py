@@ -20,7 +20,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .sequential import ContactRows, apply_impulses, contact_velocity, row_products
+from .jacobian_rows import ContactRows, apply_impulses, contact_velocity, row_products
 
 # ---- one spring's step, and ζ from restitution ---------------------------------------------
 

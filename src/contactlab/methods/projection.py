@@ -44,13 +44,14 @@ from ..dynamics.integrators import free_velocities, moved
 from ..state import State
 from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
-from .sequential import row_products, rows_of, solve_order, solve_sequential_impulses, sweep_groups
+from .jacobian_rows import row_products, rows_of
+from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import detect
 
 if TYPE_CHECKING:
     from ..contacts import Contacts
     from ..model import Model
-    from .sequential import ContactRows
+    from .jacobian_rows import ContactRows
 
 
 @dataclass

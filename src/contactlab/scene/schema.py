@@ -24,9 +24,9 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from .. import methods
-from ..builder import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, check_shape_arguments
 from ..dynamics.integrators import INTEGRATORS
 from ..errors import InputError
+from ..shape_arguments import BODY_SHAPE_ARGUMENTS, OBSTACLE_SHAPE_ARGUMENTS, check_shape_arguments
 
 # Shapes the schema knows but the library cannot simulate yet: a clear "not supported yet".
 PLANNED_BODY_SHAPES = ("mesh",)
@@ -246,7 +246,7 @@ class Pinned:
 class Table:
     """A table with the keys of ``keys`` (a dict name -> Key); ``shapes``: for a table whose
     ``shape`` key picks a shape, the builder's table of which shape takes which key
-    (contactlab.builder.BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
+    (contactlab.shape_arguments.BODY_SHAPE_ARGUMENTS or OBSTACLE_SHAPE_ARGUMENTS)."""
 
     def __init__(self, keys: Mapping[str, Key], shapes: Mapping[str, Sequence[str]] | None = None) -> None:
         self.keys, self.shapes = keys, shapes
@@ -331,7 +331,7 @@ class Key:
 
 
 def taking(name: str, table: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
-    """The shapes of ``table`` (contactlab.builder's BODY_ or OBSTACLE_SHAPE_ARGUMENTS) that
+    """The shapes of ``table`` (contactlab.shape_arguments' BODY_ or OBSTACLE_SHAPE_ARGUMENTS) that
     take the argument ``name``: the builder says which shape takes which key, once."""
     return tuple(shape for shape, names in table.items() if name in names)
 
