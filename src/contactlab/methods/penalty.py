@@ -327,7 +327,7 @@ def hold_back(
     A gap may close and a spring engage as deep as it likes short of that; a fast or small body
     that no spring of this stiffness could stop in time stops on the surface instead of passing
     through (normal impulses only, by sequential sweeps). ``velocity`` itself where nothing would;
-    ``rows`` (``sequential.contact_rows``): the step's Jacobian, which tells that."""
+    ``rows`` (``jacobian_rows.contact_rows``): the step's Jacobian, which tells that."""
     slowest, below = slowest_approach(rows, velocity, contacts.depth, pass_through_depths(model, contacts), h)
     if not below:
         return velocity

@@ -9,7 +9,7 @@ chosen. :mod:`contactlab.methods.penalty`'s ``step`` chooses between them; the c
 (:mod:`contactlab.methods.loop_steps`, ``penalty_step``) takes the first.
 
 Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows as
-``sequential.ContactRows``; springs as ``penalty_springs.ContactSprings``.
+``jacobian_rows.ContactRows``; springs as ``penalty_springs.ContactSprings``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from .penalty_springs import ContactSprings, SpringSettings
 #
 # The springs' system (M + h (h K + D)) v⁺ = M v* + h Jᵀ F₀ is solved matrix-free: M as its
 # blocks (body masses (B,), world inertia tensors (B, 3, 3), particle masses (P,)), J and Jᵀ
-# through the contact rows (``sequential.ContactRows``), the springs as a weight (C, 3) per row.
+# through the contact rows (``jacobian_rows.ContactRows``), the springs as a weight (C, 3) per row.
 
 if TYPE_CHECKING:
     from .penalty import Options

@@ -10,7 +10,7 @@ Python and the compiled loop (:mod:`contactlab.methods.loop_steps`, ``penalty_st
 compiled code; the springs by backward Euler are :mod:`contactlab.methods.penalty_implicit`.
 
 Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows as
-``sequential.ContactRows``.
+``jacobian_rows.ContactRows``.
 """
 
 from __future__ import annotations
@@ -318,7 +318,7 @@ def elastic_energy(springs: ContactSprings, depth: np.ndarray, elongation: np.nd
 @njit(cache=True)
 def explicit_velocities(rows: ContactRows, forces: np.ndarray, v_free: np.ndarray, h: float) -> np.ndarray:
     """v* + h M⁻¹ Jᵀ F (N,): the contact forces (C, 3) [N] of ``spring_forces`` over h [s] added to
-    the free velocities, contact by contact through the rows (``sequential.apply_impulses``)."""
+    the free velocities, contact by contact through the rows (``jacobian_rows.apply_impulses``)."""
     v_new = v_free.copy()
     apply_impulses(rows, h * forces, v_new)
     return v_new
