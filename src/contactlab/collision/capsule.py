@@ -128,6 +128,8 @@ def sphere_capsule(
     """
     axis = column(rotation_b, 2)
     s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
+    # closest point, distance and depth as capsule_capsule finds them (deliberately kept apart
+    # from it: a sphere has no segment, so no parallel 2-point patch)
     closest = axpy(center_b, s, axis)
     d = axpy(center_a, -1.0, closest)
     distance = norm(d)
@@ -222,6 +224,9 @@ def capsule_capsule(
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
             slope = dot(normal, axis_a)
+            # the two ends as segment_patch.write_patch_ends writes them in B's frame; here in
+            # world coordinates, deliberately apart: passing through an identity frame could
+            # change the sign of a zero coordinate, and with it the bits of the contacts
             count = 0
             for end in range(2):
                 s_end = lo if end == 0 else hi

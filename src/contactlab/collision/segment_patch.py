@@ -144,6 +144,8 @@ def write_patch_ends(
     [m] from the depth at the closest point s, ends shallower than −margin left out; features
     ``feature`` and ``feature + 1``. Returns how many it wrote from ``slot`` on."""
     origin, direction, _, radius_a = segment
+    # capsule_capsule writes its parallel patch the same way in world coordinates (deliberately
+    # apart: see there)
     count = 0
     for end in range(2):
         s_end = lo if end == 0 else hi
