@@ -110,11 +110,6 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
     return count
 
 
-# ---------------------------------------------------------------------------------------------
-# box against a mesh
-# ---------------------------------------------------------------------------------------------
-
-
 @njit(cache=True)
 def box_mesh(
     center: np.ndarray,
@@ -186,11 +181,6 @@ def box_mesh(
         feature[count] = FEATURES_PER_TRIANGLE * owner[n] + 8 + index[n]
         count += 1
     return write_kept(keep_spread(point[:count], depth[:count], max_contacts, mesh.tolerance), rows, out, slot)
-
-
-# ---------------------------------------------------------------------------------------------
-# convex hull against a mesh
-# ---------------------------------------------------------------------------------------------
 
 
 @njit(cache=True)
