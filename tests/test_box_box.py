@@ -47,10 +47,7 @@ def contacts(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin=
         np.asarray(rotation_b, float),
         np.asarray(half_b, float),
         float(margin),
-        point,
-        normal,
-        depth,
-        feature,
+        (point, normal, depth, feature),
         slot,
     )
     assert 0 <= count <= 4
@@ -532,7 +529,7 @@ def test_dispatcher_and_collide_use_box_box():
     params = np.array([0.5, 0.5, 0.5, 0.0])
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
     count = collide_pair(
-        BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), *out, 0
+        BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), out, 0
     )
     assert count == 4
     np.testing.assert_allclose(out[1][:4], np.tile([0.0, 0.0, 1.0], (4, 1)))

@@ -90,7 +90,7 @@ def run(function, *args, margin=0.0):
     depth = np.full(slot + 4, np.nan)
     feature = np.full(slot + 4, -1, dtype=np.int64)
     args = tuple(_f(a) if isinstance(a, (np.ndarray, list, tuple)) else float(a) for a in args)
-    count = function(*args, float(margin), point, normal, depth, feature, slot)
+    count = function(*args, float(margin), (point, normal, depth, feature), slot)
     assert 0 <= count <= 2
     assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count :]).all()  # nothing outside
     s = slice(slot, slot + count)

@@ -61,12 +61,9 @@ def run(center_a, rotation_a, radius, half_length, center_b, rotation_b, hull, m
         half_length,
         np.asarray(center_b, float),
         rotation_b,
-        *hull,
+        hull,
         margin,
-        point,
-        normal,
-        depth,
-        feature,
+        (point, normal, depth, feature),
         0,
     )
     return count, point[:count], normal[:count], depth[:count], feature[:count]
@@ -176,10 +173,10 @@ def test_box_hulls_agree_with_capsule_box():
         rotation_b = random_rotation(rng)
         margin = 0.2
         count_box = capsule_box(
-            center_a, rotation_a, radius, half_length, center_b, rotation_b, half, margin, p1, n1, d1, f1, 0
+            center_a, rotation_a, radius, half_length, center_b, rotation_b, half, margin, (p1, n1, d1, f1), 0
         )
         count_hull = capsule_convex(
-            center_a, rotation_a, radius, half_length, center_b, rotation_b, *hull, margin, p2, n2, d2, f2, 0
+            center_a, rotation_a, radius, half_length, center_b, rotation_b, hull, margin, (p2, n2, d2, f2), 0
         )
         assert count_box == count_hull
         if count_box == 0:
@@ -291,12 +288,9 @@ def test_random_hulls_against_brute_force():
                 half_length,
                 center_b,
                 rotation_b,
-                *arrays,
+                arrays,
                 margin,
-                point,
-                normal,
-                depth,
-                feature,
+                (point, normal, depth, feature),
                 0,
             )
             origin = rotation_b.T @ (center_a - center_b)

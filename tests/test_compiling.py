@@ -136,7 +136,7 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
             rots[b],
             reach[k],
             model.hull_store,
-            *out,
+            out,
             0,
         )
         rows = everything[4] == k

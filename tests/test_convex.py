@@ -22,6 +22,7 @@ from scipy.spatial import ConvexHull
 
 from contactlab.collision import convex as cx
 from contactlab.collision import convex_convex as cc
+from contactlab.collision import convex_sat
 from contactlab.errors import InputError
 from contactlab.hulls import Hull, box_as_hull, build_hull, hull_arrays, load_hull_points, pack_hulls
 
@@ -89,12 +90,12 @@ def hull_hull(arr_a, R_a, c_a, arr_b, R_b, c_b, margin=0.0, slot=3):
     count = cc.convex_convex(
         np.asarray(c_a, float),
         np.ascontiguousarray(R_a, dtype=float),
-        *arr_a,
+        arr_a,
         np.asarray(c_b, float),
         np.ascontiguousarray(R_b, dtype=float),
-        *arr_b,
+        arr_b,
         float(margin),
-        *out,
+        out,
         slot,
     )
     return _unpack(out, slot, count)
@@ -105,10 +106,10 @@ def hull_plane(arr, R, c, plane, margin=0.0, slot=2):
     count = cx.convex_plane(
         np.asarray(c, float),
         np.ascontiguousarray(R, dtype=float),
-        arr[0],
+        arr,
         np.asarray(plane, float),
         float(margin),
-        *out,
+        out,
         slot,
     )
     return _unpack(out, slot, count)
@@ -121,9 +122,9 @@ def sphere_hull(center, radius, arr, R, c, margin=0.0, slot=1):
         float(radius),
         np.asarray(c, float),
         np.ascontiguousarray(R, dtype=float),
-        *arr[:5],
+        arr,
         float(margin),
-        *out,
+        out,
         slot,
     )
     return _unpack(out, slot, count)
@@ -133,23 +134,13 @@ def sat_depth(arr_a, R_a, c_a, arr_b, R_b, c_b):
     """The SAT minimum overlap [m] (penetration depth when ≥ 0)."""
     result = np.empty(8)
     axis = np.zeros(3)
-    va, na, oa, _, _, eva, efa = arr_a
-    vb, nb, ob, _, _, evb, efb = arr_b
-    cc.convex_convex_sat(
+    convex_sat.convex_convex_sat(
         np.asarray(c_a, float),
         np.ascontiguousarray(R_a),
-        va,
-        na,
-        oa,
-        eva,
-        efa,
+        arr_a,
         np.asarray(c_b, float),
         np.ascontiguousarray(R_b),
-        vb,
-        nb,
-        ob,
-        evb,
-        efb,
+        arr_b,
         np.inf,
         result,
         axis,
@@ -466,7 +457,7 @@ def test_cube_resting_on_plane_gives_four_corners():
     c = np.array([0.0, 0.0, 0.6])  # all 8 corners within the margin
     _, _, hull_depth, hull_feature = hull_plane(hull_arrays(box, 0), R, c, [0, 0, 1, 0], margin=2.0)
     out = buffers(0)
-    count = box_plane(c, R, np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, *out, 0)
+    count = box_plane(c, R, np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, out, 0)
     box_depth, box_feature = out[2][:count], out[3][:count]
     assert len(box_depth) > 4 and len(hull_depth) == 4  # more corners in the margin: reduced
     depth_of_corner = dict(zip(box_feature.tolist(), box_depth.tolist()))

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from contactlab import shapes
-from contactlab.collision.mesh_contacts import capsule_mesh, convex_mesh, shapes_against_mesh
-from contactlab.hulls import box_as_hull
+from contactlab.collision.capsule_mesh import capsule_mesh
+from contactlab.collision.mesh_contacts import shapes_against_mesh
+from contactlab.collision.polytope_mesh import convex_mesh
+from contactlab.hulls import box_as_hull, hull_arrays
 from contactlab.meshes import TriangleMesh, builtin_mesh_path, load_mesh
 
 
@@ -34,10 +36,7 @@ def capsule_contacts(mesh, center, rotation, radius, half_length, margin=0.01, m
         float(half_length),
         mesh.geometry,
         float(margin),
-        P,
-        N,
-        D,
-        F,
+        (P, N, D, F),
         0,
         max_contacts,
     )
@@ -113,17 +112,10 @@ def test_cube_hull_on_a_mesh_floor_gets_its_four_bottom_corners():
     k = convex_mesh(
         np.array([0.05, 0.02, 0.1 - 0.003]),
         np.eye(3),
-        hull["vertices"],
-        hull["face_normal"],
-        hull["face_offset"],
-        hull["face_vertex_start"],
-        hull["face_vertex_index"],
+        hull_arrays(hull, 0),
         mesh.geometry,
         0.01,
-        P,
-        N,
-        D,
-        F,
+        (P, N, D, F),
         0,
         8,
     )

@@ -1,7 +1,7 @@
 """Static triangle meshes: loading, derived normals, and a bounding volume hierarchy.
 
 A :class:`TriangleMesh` is built once (obstacles do not move) and carries everything the
-compiled contact routines of :mod:`contactlab.collision.mesh_contacts` need, as flat arrays:
+compiled contact routines against meshes (:mod:`contactlab.collision.mesh_contacts`) need, as flat arrays:
 
 =========================  ===========  =====================================================
 array                      shape        meaning

@@ -170,6 +170,8 @@ def candidate_pairs(
     return lower, upper, pairs[:count]
 
 
+# collide takes collide_keeping's parameters less the manifolds (deliberately repeated: the
+# public signature says each default where a user reads it)
 def collide(
     model: Model,
     state: State,
@@ -185,6 +187,7 @@ def collide(
     return collide_keeping(model, state, None, 0.0, margin, sweep, granularity, normal, samples, cloth_samples)[0]
 
 
+# the parameters of collide, with the manifolds to reuse and their tolerance (see collide)
 def collide_keeping(
     model: Model,
     state: State,

@@ -67,6 +67,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .contact_output import ContactRows
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 
 FACE_REL_TOL = 0.05  # relative tolerance favouring the reference face's box, and faces over edges
@@ -159,30 +160,14 @@ def _clip(source, source_label, count, coordinate, sign, limit, target, target_l
 
 
 @njit(cache=True)
-def _face_contacts(
-    center_ref,
-    rotation_ref,
-    half_ref,
-    axis,
-    outward_sign,
-    center_inc,
-    rotation_inc,
-    half_inc,
-    owner,
-    contact_normal,
-    margin,
-    scale,
-    real,
-    whole,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _face_contacts(reference, axis, outward_sign, incident, owner, contact_normal, margin, scale, scratch, out, slot):
     """Clip the incident box's face against face ``axis`` of the reference box, whose outward
-    normal is ``outward_sign · contact_normal``. ``real`` (≥ 100 floats) and ``whole`` (≥ 48
-    integers) are scratch."""
+    normal is ``outward_sign · contact_normal``. Each box is (centre (3,) [m], rotation (3, 3),
+    half extents (3,) [m]); ``scratch`` = (≥ 100 floats, ≥ 48 integers)."""
+    center_ref, rotation_ref, half_ref = reference
+    center_inc, rotation_inc, half_inc = incident
+    real, whole = scratch
+    out_point, out_normal, out_depth, out_feature = out
     m0 = outward_sign * contact_normal[0]
     m1 = outward_sign * contact_normal[1]
     m2 = outward_sign * contact_normal[2]
@@ -317,26 +302,10 @@ def _face_contacts(
 
 
 @njit(cache=True)
-def _edge_contact(
-    center_a,
-    rotation_a,
-    half_a,
-    i,
-    center_b,
-    rotation_b,
-    half_b,
-    j,
-    normal,
-    depth,
-    ends,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b, j, normal, depth, ends, out, slot):
     """One contact midway between the closest points of edge ∥a_i of A and edge ∥b_j of B
     (``ends``: (2, 3) scratch)."""
+    out_point, out_normal, out_depth, out_feature = out
     # supporting edges: A's edge furthest along −n, B's furthest along +n
     pa = ends[0]
     pb = ends[1]
@@ -384,18 +353,15 @@ def box_box(
     rotation_b: np.ndarray,
     half_b: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Box A against box B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Parameters: centres (3,) [m], rotations (3, 3) body → world, half extents (3,) [m],
-    ``margin`` [m] (contacts kept down to depth −margin). Outputs: ``out_point`` (·, 3) [m],
-    ``out_normal`` (·, 3) unit from B into A, ``out_depth`` (·,) [m], ``out_feature`` (·,) in
-    0..7 (see the module docstring). Returns 0 when the boxes are further apart than the
+    ``margin`` [m] (contacts kept down to depth −margin). Outputs: the rows ``out`` (point (·, 3)
+    [m], normal (·, 3) unit from B into A, depth (·,) [m], feature (·,) in 0..7, see the module
+    docstring; :data:`.contact_output.ContactRows`). Returns 0 when the boxes are further apart than the
     margin on some separating axis.
     """
     # scratch for the whole call, in two allocations (each small allocation costs ~50 ns)
@@ -437,6 +403,7 @@ def box_box(
             # the edge axis is clearly better than any face
             i = (best_e - 6) // 3
             j = (best_e - 6) % 3
+            ends = work[60:66].reshape((2, 3))
             return _edge_contact(
                 center_a,
                 rotation_a,
@@ -448,57 +415,17 @@ def box_box(
                 j,
                 normal[best_e],
                 over_e,
-                work[60:66].reshape((2, 3)),
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
+                ends,
+                out,
                 slot,
             )
     contact_normal = normal[face]
     owner = int(use_b)
+    box_a = (center_a, rotation_a, half_a)
+    box_b = (center_b, rotation_b, half_b)
+    scratch = (work[60:], np.empty(48, dtype=np.int64))
     if use_b:
         # reference face on B: its outward normal is the contact normal; incident box A
-        return _face_contacts(
-            center_b,
-            rotation_b,
-            half_b,
-            face - 3,
-            1.0,
-            center_a,
-            rotation_a,
-            half_a,
-            owner,
-            contact_normal,
-            margin,
-            scale,
-            work[60:],
-            np.empty(48, dtype=np.int64),
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
+        return _face_contacts(box_b, face - 3, 1.0, box_a, owner, contact_normal, margin, scale, scratch, out, slot)
     # reference face on A: its outward normal points from A towards B; incident box B
-    return _face_contacts(
-        center_a,
-        rotation_a,
-        half_a,
-        face,
-        -1.0,
-        center_b,
-        rotation_b,
-        half_b,
-        owner,
-        contact_normal,
-        margin,
-        scale,
-        work[60:],
-        np.empty(48, dtype=np.int64),
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
+    return _face_contacts(box_a, face, -1.0, box_b, owner, contact_normal, margin, scale, scratch, out, slot)

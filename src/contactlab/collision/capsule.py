@@ -11,9 +11,9 @@ half_length]``; ``half_length = 0`` is a sphere and is handled everywhere.
 Conventions as in :mod:`contactlab.collision.narrow_phase`: shape A is the first argument, the
 unit normal points from B into A, ``depth`` > 0 when overlapping, contacts are kept down to
 ``depth = −margin`` (speculative contacts), each ``point`` lies midway between the two
-surfaces, and every function writes its contacts from index ``slot`` on into ``out_point``
-(N, 3), ``out_normal`` (N, 3), ``out_depth`` (N,), ``out_feature`` (N,) int64 and returns how
-many it wrote (at most 2). ``feature`` (0..255) names the contact within its pair so that it
+surfaces, and every function writes its contacts from index ``slot`` on into ``out`` = (point
+(N, 3), normal (N, 3), depth (N,), feature (N,) int64) (:data:`.contact_output.ContactRows`) and
+returns how many it wrote (at most 2). ``feature`` (0..255) names the contact within its pair so that it
 keeps its number from step to step while it persists; each function documents its encoding.
 
 Exactness
@@ -46,18 +46,8 @@ small temporary arrays.
 import numpy as np
 from numba import njit
 
-from .contact_output import write_contact
-from .geometry import (
-    axpy,
-    clamp,
-    column,
-    cross,
-    dot,
-    midpoint,
-    norm,
-    scaled,
-    segment_closest_parameters,
-)
+from .contact_output import ContactRows, write_contact
+from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters
 
 MAX_CONTACTS = 2  # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
@@ -80,10 +70,7 @@ def capsule_plane(
     half_length: float,
     plane: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Capsule A against the plane B = (n, offset) (solid side n·x < offset; n unit).
@@ -108,7 +95,7 @@ def capsule_plane(
         depth = radius - distance
         if depth >= -margin:
             point = axpy(x, -0.5 * (radius + distance), normal)
-            write_contact(out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth, end)
+            write_contact(out, slot + count, point, normal, depth, end)
             count += 1
     return count
 
@@ -127,10 +114,7 @@ def sphere_capsule(
     radius_b: float,
     half_length_b: float,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Sphere (or particle: a sphere of radius ≥ 0) A against capsule B: at most 1 contact.
@@ -144,6 +128,8 @@ def sphere_capsule(
     """
     axis = column(rotation_b, 2)
     s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
+    # closest point, distance and depth as capsule_capsule finds them (deliberately kept apart
+    # from it: a sphere has no segment, so no parallel 2-point patch)
     closest = axpy(center_b, s, axis)
     d = axpy(center_a, -1.0, closest)
     distance = norm(d)
@@ -155,7 +141,7 @@ def sphere_capsule(
     else:
         normal = column(rotation_b, 0)
     point = midpoint(axpy(center_a, -radius_a, normal), axpy(closest, radius_b, normal))
-    write_contact(out_point, out_normal, out_depth, out_feature, slot, point, normal, depth, np.int64(0))
+    write_contact(out, slot, point, normal, depth, np.int64(0))
     return 1
 
 
@@ -175,10 +161,7 @@ def capsule_capsule(
     radius_b: float,
     half_b: float,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Capsule A against capsule B: 1 contact, or 2 when the axes are (nearly) parallel.
@@ -241,6 +224,9 @@ def capsule_capsule(
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
             slope = dot(normal, axis_a)
+            # the two ends as segment_patch.write_patch_ends writes them in B's frame; here in
+            # world coordinates, deliberately apart: passing through an identity frame could
+            # change the sign of a zero coordinate, and with it the bits of the contacts
             count = 0
             for end in range(2):
                 s_end = lo if end == 0 else hi
@@ -248,22 +234,10 @@ def capsule_capsule(
                 if depth_end >= -margin:
                     surface_a = axpy(axpy(center_a, s_end, axis_a), -radius_a, normal)
                     point = axpy(surface_a, 0.5 * depth_end, normal)
-                    write_contact(
-                        out_point, out_normal, out_depth, out_feature, slot + count, point, normal, depth_end, 1 + end
-                    )
+                    write_contact(out, slot + count, point, normal, depth_end, 1 + end)
                     count += 1
             return count
 
     point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
-    write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-        point,
-        normal,
-        depth,
-        np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE),
-    )
+    write_contact(out, slot, point, normal, depth, np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))
     return 1

@@ -10,20 +10,10 @@ import numpy as np
 from numba import njit
 
 from .capsule import PARALLEL_SIN
-from .contact_output import write_local_contact
-from .geometry import (
-    axpy,
-    clamp,
-    column,
-    dot,
-    midpoint,
-    norm,
-    scaled,
-    segment_closest_parameters,
-    unit_axis,
-    unrotate,
-)
-from .segment_box import face_contact, face_interval, face_patch, segment_box_closest, write_patch_ends
+from .contact_output import ContactRows
+from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
+from .segment_box import face_interval, face_patch, segment_box_closest
+from .segment_patch import dominant_face_contacts, edge_cross_contact, write_patch_ends
 
 BOX_REL_EPS = 1e-9  # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
 CROSS_AXIS_EPS = 1e-8  # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
@@ -41,10 +31,7 @@ def capsule_box(
     box_rotation: np.ndarray,
     half_extents: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Capsule A against box B (static or dynamic): up to 2 contacts.
@@ -95,6 +82,8 @@ def capsule_box(
     """
     origin = unrotate(box_rotation, axpy(center_a, -1.0, box_center))
     direction = unrotate(box_rotation, column(rotation_a, 2))
+    segment = (origin, direction, half_length_a, radius_a)
+    frame = (box_center, box_rotation)
     size = half_length_a + radius_a + half_extents[0] + half_extents[1] + half_extents[2]
     tol = BOX_REL_EPS * size
     s, distance2 = segment_box_closest(origin, direction, half_length_a, half_extents)
@@ -102,65 +91,16 @@ def capsule_box(
     depth = radius_a - distance
     if depth < -margin:
         return 0
-
     if distance > tol:
-        return _segment_outside(
-            origin,
-            direction,
-            s,
-            distance,
-            radius_a,
-            half_length_a,
-            half_extents,
-            margin,
-            tol,
-            box_center,
-            box_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
-    return _segment_inside(
-        origin,
-        direction,
-        radius_a,
-        half_length_a,
-        half_extents,
-        margin,
-        tol,
-        box_center,
-        box_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
+        return _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out, slot)
+    return _segment_inside(segment, half_extents, margin, tol, frame, out, slot)
 
 
 @njit(cache=True)
-def _segment_outside(
-    origin,
-    direction,
-    s,
-    distance,
-    radius_a,
-    half_length_a,
-    half_extents,
-    margin,
-    tol,
-    box_center,
-    box_rotation,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out, slot):
     """Case 1 of :func:`capsule_box` (box frame): the segment is outside the box; ``s`` is its
     closest point's parameter, ``distance`` > 0 the segment–box distance."""
+    origin, direction, half_length_a, radius_a = segment
     depth = radius_a - distance
     p = axpy(origin, s, direction)
     q = np.empty(3)
@@ -177,25 +117,7 @@ def _segment_outside(
             face_axis = k
     face_sign = 1.0 if p[face_axis] > 0.0 else -1.0
     if outside <= 1:
-        return face_patch(
-            origin,
-            direction,
-            half_length_a,
-            radius_a,
-            half_extents,
-            face_axis,
-            face_sign,
-            s,
-            margin,
-            tol,
-            box_center,
-            box_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
+        return face_patch(segment, half_extents, face_axis, face_sign, s, margin, tol, frame, out, slot)
     normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
     point_local = midpoint(axpy(p, -radius_a, normal_local), q)
     slope = dot(normal_local, direction)
@@ -218,91 +140,24 @@ def _segment_outside(
                 if i > j:
                     i, j = j, i
                 edge = 4 * edge_axis + 2 * (1 if p[i] > 0.0 else 0) + (1 if p[j] > 0.0 else 0)
+                feature = CAPSULE_BOX_EDGE_FEATURE + 2 * edge
                 return write_patch_ends(
-                    origin,
-                    direction,
-                    lo,
-                    hi,
-                    s,
-                    depth,
-                    slope,
-                    radius_a,
-                    normal_local,
-                    margin,
-                    CAPSULE_BOX_EDGE_FEATURE + 2 * edge,
-                    box_center,
-                    box_rotation,
-                    out_point,
-                    out_normal,
-                    out_depth,
-                    out_feature,
-                    slot,
+                    segment, lo, hi, s, depth, slope, normal_local, margin, feature, frame, out, slot
                 )
 
     # an edge crossed at an angle, or a corner: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
     face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
     lo, hi = face_interval(origin, direction, half_length_a, half_extents, face_axis, tol)
-    if lo <= hi:
-        end = 1 if s > 0.5 * (lo + hi) else 0
-    else:
-        end = 1 if s > 0.0 else 0
-    write_local_contact(
-        point_local,
-        normal_local,
-        depth,
-        2 * face + end,
-        box_center,
-        box_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
-    count = 1
-    if hi - lo > tol:
-        other = lo if end == 1 else hi
-        if abs(other - s) > tol:
-            count += face_contact(
-                origin,
-                direction,
-                other,
-                radius_a,
-                half_extents,
-                face_axis,
-                face_sign,
-                2 * face + 1 - end,
-                margin,
-                box_center,
-                box_rotation,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot + count,
-            )
-    return count
+    plane = (unit_axis(face_axis, face_sign), half_extents[face_axis])
+    closest = (point_local, normal_local, depth)
+    return dominant_face_contacts(segment, s, lo, hi, closest, plane, face, margin, tol, frame, out, slot)
 
 
 @njit(cache=True)
-def _segment_inside(
-    origin,
-    direction,
-    radius_a,
-    half_length_a,
-    half_extents,
-    margin,
-    tol,
-    box_center,
-    box_rotation,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _segment_inside(segment, half_extents, margin, tol, frame, out, slot):
     """Case 2 of :func:`capsule_box` (box frame): the segment touches or enters the box."""
+    origin, direction, half_length_a, radius_a = segment
     best_face = np.int64(0)
     best_face_overlap = 1e300
     for k in range(3):
@@ -334,25 +189,7 @@ def _segment_inside(
             best_edge_axis = axis
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
         face_sign = 1.0 if origin[best_face] >= 0.0 else -1.0
-        return face_patch(
-            origin,
-            direction,
-            half_length_a,
-            radius_a,
-            half_extents,
-            best_face,
-            face_sign,
-            np.nan,
-            margin,
-            tol,
-            box_center,
-            box_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
+        return face_patch(segment, half_extents, best_face, face_sign, np.nan, margin, tol, frame, out, slot)
 
     depth = radius_a + best_edge_overlap
     if depth < -margin:
@@ -364,22 +201,15 @@ def _segment_inside(
         if j != best_edge:
             edge_center[j] = half_extents[j] if normal_local[j] >= 0.0 else -half_extents[j]
     edge_direction = unit_axis(best_edge, 1.0)
-    s, t = segment_closest_parameters(
-        origin, direction, half_length_a, edge_center, edge_direction, half_extents[best_edge]
-    )
-    p = axpy(origin, s, direction)
-    q = axpy(edge_center, t, edge_direction)
-    write_local_contact(
-        midpoint(axpy(p, -radius_a, normal_local), q),
+    return edge_cross_contact(
+        segment,
+        edge_center,
+        edge_direction,
+        half_extents[best_edge],
         normal_local,
         depth,
         np.int64(CAPSULE_BOX_CROSS_FEATURE),
-        box_center,
-        box_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
+        frame,
+        out,
         slot,
     )
-    return 1

@@ -2,14 +2,14 @@
 
 Conventions as in :mod:`contactlab.collision.capsule` and :mod:`contactlab.collision.convex`:
 capsule A's segment runs along its body z axis (third column of its rotation), ``center ±
-half_length · axis``; hull B is given by its body-frame arrays (``vertices`` (V, 3),
+half_length · axis``; hull B is given by its body-frame arrays, one argument (``vertices`` (V, 3),
 ``face_normal`` (F, 3), ``face_offset`` (F,), ``face_vertex_start`` (F+1,) — global offsets,
 its first entry is subtracted —, ``face_vertex_index`` (K,), ``edge_vertex`` (E, 2),
 ``edge_face`` (E, 2)), a centre and a rotation (body → world). The normal is a unit vector
 from B into A, ``depth`` > 0 when overlapping, contacts kept down to ``depth = −margin``, each
 point midway between the two surfaces.
 
-The routine mirrors :func:`contactlab.collision.capsule.capsule_box` feature by feature, with
+The routine mirrors :func:`contactlab.collision.capsule_box.capsule_box` feature by feature, with
 the box's 6 faces, 12 edges and 8 corners replaced by the hull's; on a hull that is a box
 (:func:`contactlab.hulls.box_as_hull`) it gives the same deepest contact.
 
@@ -64,206 +64,24 @@ from numba import njit
 
 from .capsule import PARALLEL_SIN
 from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
-from .contact_output import write_local_contact
+from .contact_output import ContactRows
+from .convex import HullArrays
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
-from .segment_box import write_patch_ends
+from .hull_faces import projects_into_face, segment_over_face
+from .segment_patch import dominant_face_contacts, edge_cross_contact, face_patch_ends, write_patch_ends
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255
 
 
 @njit(cache=True)
-def _side_normal(vertices, face_vertex_index, start, stop, i, n):
-    """Edge i of a face polygon (its corners ``face_vertex_index[start:stop]``, counter-clockwise
-    seen from outside, face normal ``n`` (3,)): its first corner a (3,) [m] and its outward side
-    normal e × n, not normalized (three floats)."""
-    a = vertices[face_vertex_index[i]]
-    b = vertices[face_vertex_index[i + 1 if i + 1 < stop else start]]
-    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    return a, e1 * n[2] - e2 * n[1], e2 * n[0] - e0 * n[2], e0 * n[1] - e1 * n[0]
-
-
-@njit(cache=True)
-def _face_interval(
-    origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
-):
-    """Parameters ``(lo, hi)`` of the part of the segment over face ``face`` (inside all side
-    planes of its polygon, widened by ``tol``); ``lo > hi`` when there is none."""
-    base = face_vertex_start[0]
-    start = face_vertex_start[face] - base
-    stop = face_vertex_start[face + 1] - base
-    n = face_normal[face]
-    lo = -half_length
-    hi = half_length
-    for i in range(start, stop):
-        a, m0, m1, m2 = _side_normal(vertices, face_vertex_index, start, stop, i, n)
-        length = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-        if length == 0.0:
-            continue
-        m0, m1, m2 = m0 / length, m1 / length, m2 / length
-        limit = m0 * a[0] + m1 * a[1] + m2 * a[2] + tol
-        at_origin = m0 * origin[0] + m1 * origin[1] + m2 * origin[2]
-        rate = m0 * direction[0] + m1 * direction[1] + m2 * direction[2]
-        if rate == 0.0:
-            if at_origin > limit:
-                return 1.0, -1.0
-            continue
-        t = (limit - at_origin) / rate
-        if rate > 0.0:
-            hi = min(hi, t)
-        else:
-            lo = max(lo, t)
-    return lo, hi
-
-
-@njit(cache=True)
-def _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_index, face):
-    """Whether the point ``x`` (3,) projects into face ``face``'s polygon (closed)."""
-    base = face_vertex_start[0]
-    start = face_vertex_start[face] - base
-    stop = face_vertex_start[face + 1] - base
-    n = face_normal[face]
-    for i in range(start, stop):
-        a, m0, m1, m2 = _side_normal(vertices, face_vertex_index, start, stop, i, n)
-        if m0 * (x[0] - a[0]) + m1 * (x[1] - a[1]) + m2 * (x[2] - a[2]) > 0.0:
-            return False
-    return True
-
-
-@njit(cache=True)
-def _face_contact(
-    origin,
-    direction,
-    s,
-    radius,
-    normal,
-    offset,
-    feature,
-    margin,
-    hull_center,
-    hull_rotation,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
-    """One contact of the segment point ``s`` (hull frame) against a face plane (normal, offset):
-    depth ``radius − height``; written if ≥ −margin. Returns 1 if written, else 0."""
-    x = axpy(origin, s, direction)
-    height = dot(normal, x) - offset
-    depth = radius - height
-    if depth < -margin:
-        return 0
-    write_local_contact(
-        axpy(x, -0.5 * (radius + height), normal),
-        normal,
-        depth,
-        feature,
-        hull_center,
-        hull_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
-    return 1
-
-
-@njit(cache=True)
-def _face_patch(
-    origin,
-    direction,
-    half_length,
-    radius,
-    vertices,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    face,
-    s_keep,
-    margin,
-    tol,
-    hull_center,
-    hull_rotation,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
-    """The two ends of the part of the segment over face ``face`` (``s_keep``, unless nan, kept
-    inside that part), each with its own depth; a part shorter than ``tol`` gives 1 contact at
-    its deeper end. Features ``(2 · face + end) mod 256``."""
-    lo, hi = _face_interval(
-        origin, direction, half_length, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
-    )
-    if s_keep == s_keep:
-        lo = min(lo, s_keep)
-        hi = max(hi, s_keep)
-    if lo > hi:
-        lo = clamp(0.5 * (lo + hi), -half_length, half_length)
-        hi = lo
-    normal = face_normal[face]
-    offset = face_offset[face]
-    if hi - lo > tol:
-        count = _face_contact(
-            origin,
-            direction,
-            lo,
-            radius,
-            normal,
-            offset,
-            (2 * face) & 255,
-            margin,
-            hull_center,
-            hull_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
-        count += _face_contact(
-            origin,
-            direction,
-            hi,
-            radius,
-            normal,
-            offset,
-            (2 * face + 1) & 255,
-            margin,
-            hull_center,
-            hull_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot + count,
-        )
-        return count
-    if dot(normal, direction) * (hi - lo) < 0.0:
-        lo = hi
-    end = 1 if lo > 0.0 else 0
-    return _face_contact(
-        origin,
-        direction,
-        lo,
-        radius,
-        normal,
-        offset,
-        (2 * face + end) & 255,
-        margin,
-        hull_center,
-        hull_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
+def _face_patch(segment, hull, face, s_keep, margin, tol, frame, out, slot):
+    """The face patch of the segment over hull face ``face`` (:func:`.segment_patch.face_patch_ends`;
+    ``s_keep``, unless nan, kept inside it). Features ``(2 · face + end) mod 256``."""
+    origin, direction, half_length, _ = segment
+    lo, hi = segment_over_face(origin, direction, half_length, hull, face, tol)
+    plane = (hull[1][face], hull[2][face])
+    return face_patch_ends(segment, lo, hi, s_keep, plane, face, margin, tol, frame, out, slot)
 
 
 @njit(cache=True)
@@ -274,18 +92,9 @@ def capsule_convex(
     half_length_a: float,
     center_b: np.ndarray,
     rotation_b: np.ndarray,
-    vertices: np.ndarray,
-    face_normal: np.ndarray,
-    face_offset: np.ndarray,
-    face_vertex_start: np.ndarray,
-    face_vertex_index: np.ndarray,
-    edge_vertex: np.ndarray,
-    edge_face: np.ndarray,
+    hull: HullArrays,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.
@@ -295,8 +104,11 @@ def capsule_convex(
     arrays (module docstring); margin [m]. Returns the number of contacts written (0..2).
     Algorithm and features: module docstring.
     """
+    vertices, face_normal, face_offset, _, _, edge_vertex, edge_face = hull
     origin = unrotate(rotation_b, axpy(center_a, -1.0, center_b))
     direction = unrotate(rotation_b, column(rotation_a, 2))
+    segment = (origin, direction, half_length_a, radius_a)
+    frame = (center_b, rotation_b)
     face_count = face_offset.shape[0]
     extent = 0.0
     for v in range(vertices.shape[0]):
@@ -364,7 +176,7 @@ def capsule_convex(
                 x = axpy(origin, s, direction)
                 height = dot(n, x) - face_offset[f]
                 if height > 0.0 and height < face_distance:
-                    if _inside_polygon(x, vertices, face_normal, face_vertex_start, face_vertex_index, f):
+                    if projects_into_face(x, hull, f):
                         face_distance = height
                         face_s = s
                         face_id = f
@@ -400,53 +212,9 @@ def capsule_convex(
         if distance > tol:
             if face_id >= 0 and face_distance <= edge_distance + tol:
                 # the closest point lies inside a face: a face patch
-                return _face_patch(
-                    origin,
-                    direction,
-                    half_length_a,
-                    radius_a,
-                    vertices,
-                    face_normal,
-                    face_offset,
-                    face_vertex_start,
-                    face_vertex_index,
-                    face_id,
-                    face_s,
-                    margin,
-                    tol,
-                    center_b,
-                    rotation_b,
-                    out_point,
-                    out_normal,
-                    out_depth,
-                    out_feature,
-                    slot,
-                )
+                return _face_patch(segment, hull, face_id, face_s, margin, tol, frame, out, slot)
             return _apart_edge(
-                origin,
-                direction,
-                edge_s,
-                edge_q,
-                edge_distance,
-                edge_id,
-                edge_at_end,
-                radius_a,
-                half_length_a,
-                vertices,
-                face_normal,
-                face_offset,
-                face_vertex_start,
-                face_vertex_index,
-                edge_vertex,
-                margin,
-                tol,
-                center_b,
-                rotation_b,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot,
+                segment, edge_s, edge_q, edge_distance, edge_id, edge_at_end, hull, margin, tol, frame, out, slot
             )
 
     # touching or overlapping: the separating axis with the least overlap (faces win near ties)
@@ -457,97 +225,38 @@ def capsule_convex(
         slope = dot(face_normal[best_face], direction)
         if slope != 0.0 and half_length_a > 0.0:
             s_deep = -half_length_a if slope > 0.0 else half_length_a
-            lo, hi = _face_interval(
-                origin,
-                direction,
-                half_length_a,
-                vertices,
-                face_normal,
-                face_vertex_start,
-                face_vertex_index,
-                best_face,
-                tol,
-            )
+            lo, hi = segment_over_face(origin, direction, half_length_a, hull, best_face, tol)
             if lo > hi or -slope * (s_deep - clamp(s_deep, lo, hi)) > tol:
                 s_keep = s_deep
-        return _face_patch(
-            origin,
-            direction,
-            half_length_a,
-            radius_a,
-            vertices,
-            face_normal,
-            face_offset,
-            face_vertex_start,
-            face_vertex_index,
-            best_face,
-            s_keep,
-            margin,
-            tol,
-            center_b,
-            rotation_b,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
+        return _face_patch(segment, hull, best_face, s_keep, margin, tol, frame, out, slot)
     depth = radius_a + best_edge_overlap
     if depth < -margin:
         return 0
-    normal_local = best_edge_axis
     a = vertices[edge_vertex[best_edge, 0]]
     b = vertices[edge_vertex[best_edge, 1]]
     span = axpy(b, -1.0, a)
     half = 0.5 * np.sqrt(dot(span, span))
-    s, t = segment_closest_parameters(origin, direction, half_length_a, midpoint(a, b), scaled(0.5 / half, span), half)
-    p = axpy(origin, s, direction)
-    q = axpy(midpoint(a, b), t, scaled(0.5 / half, span))
-    write_local_contact(
-        midpoint(axpy(p, -radius_a, normal_local), q),
-        normal_local,
+    edge_center, edge_direction = midpoint(a, b), scaled(0.5 / half, span)
+    return edge_cross_contact(
+        segment,
+        edge_center,
+        edge_direction,
+        half,
+        best_edge_axis,
         depth,
         CAPSULE_CONVEX_CROSS_FEATURE,
-        center_b,
-        rotation_b,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
+        frame,
+        out,
         slot,
     )
-    return 1
 
 
 @njit(cache=True)
-def _apart_edge(
-    origin,
-    direction,
-    s,
-    q,
-    distance,
-    edge,
-    at_vertex,
-    radius_a,
-    half_length_a,
-    vertices,
-    face_normal,
-    face_offset,
-    face_vertex_start,
-    face_vertex_index,
-    edge_vertex,
-    margin,
-    tol,
-    hull_center,
-    hull_rotation,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, frame, out, slot):
     """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
     (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter."""
+    origin, direction, half_length_a, radius_a = segment
+    vertices, face_normal, face_offset, _, _, edge_vertex, _ = hull
     depth = radius_a - distance
     p = axpy(origin, s, direction)
     normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
@@ -569,25 +278,9 @@ def _apart_edge(
             hi = min(half_length_a, max(t0, t1))
             if hi - lo > tol and lo - tol <= s <= hi + tol:
                 # (2 (F + edge)) mod 256 is even: adding the end (0, 1) commutes with the mod
+                feature = (2 * (face_count + edge)) & 255
                 return write_patch_ends(
-                    origin,
-                    direction,
-                    lo,
-                    hi,
-                    s,
-                    depth,
-                    slope,
-                    radius_a,
-                    normal_local,
-                    margin,
-                    (2 * (face_count + edge)) & 255,
-                    hull_center,
-                    hull_rotation,
-                    out_point,
-                    out_normal,
-                    out_depth,
-                    out_feature,
-                    slot,
+                    segment, lo, hi, s, depth, slope, normal_local, margin, feature, frame, out, slot
                 )
     # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
@@ -598,46 +291,7 @@ def _apart_edge(
         if height > highest:
             highest = height
             face = f
-    lo, hi = _face_interval(
-        origin, direction, half_length_a, vertices, face_normal, face_vertex_start, face_vertex_index, face, tol
-    )
-    if lo <= hi:
-        end = 1 if s > 0.5 * (lo + hi) else 0
-    else:
-        end = 1 if s > 0.0 else 0
-    point_local = midpoint(axpy(p, -radius_a, normal_local), q)
-    write_local_contact(
-        point_local,
-        normal_local,
-        depth,
-        (2 * face + end) & 255,
-        hull_center,
-        hull_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
-    count = 1
-    if hi - lo > tol:
-        other = lo if end == 1 else hi
-        if abs(other - s) > tol:
-            count += _face_contact(
-                origin,
-                direction,
-                other,
-                radius_a,
-                face_normal[face],
-                face_offset[face],
-                (2 * face + 1 - end) & 255,
-                margin,
-                hull_center,
-                hull_rotation,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot + count,
-            )
-    return count
+    lo, hi = segment_over_face(origin, direction, half_length_a, hull, face, tol)
+    closest = (midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth)
+    plane = (face_normal[face], face_offset[face])
+    return dominant_face_contacts(segment, s, lo, hi, closest, plane, face, margin, tol, frame, out, slot)

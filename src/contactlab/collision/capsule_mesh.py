@@ -1,6 +1,6 @@
 """Capsules against static triangle meshes.
 
-Conventions as in :mod:`.mesh_contacts`: the mesh is side B, the normal points from the mesh
+Conventions as in :mod:`.sphere_mesh`: the mesh is side B, the normal points from the mesh
 INTO the capsule A, ``depth`` > 0 when penetrating, contacts with ``depth ≥ −margin`` are
 kept, each ``point`` lies midway between the two surfaces, and ``feature = 16 · triangle +
 local index`` (local index < 16).
@@ -9,7 +9,7 @@ The capsule is the segment ``center + s · axis``, ``|s| ≤ half_length`` (axis
 column of the rotation), swept by a sphere of ``radius``. For every triangle near the
 capsule (BVH query with its bounds grown by radius + margin, + ``max_depth`` for a
 one-sided mesh) two kinds of candidate contacts are made, each a *sphere of the capsule's
-radius at one point x(s) of the segment* judged as :func:`~.mesh_contacts.sphere_mesh` judges a
+radius at one point x(s) of the segment* judged as :func:`~.sphere_mesh.sphere_mesh` judges a
 sphere (the closest feature of the triangle to x(s), its region, signed distance by the
 pseudo-normal, the normal of the face exactly or the direction q → x):
 
@@ -33,7 +33,7 @@ then the lowest triangle; (3) a point x behind its feature (the far side of a th
 gives a contact only if that feature is the nearest to x of all candidates (x inside the
 mesh: out through the nearest feature, depth = radius + distance, as for a sphere).
 If more than ``max_contacts`` remain: the deepest, then repeatedly the one farthest from
-those chosen (as :func:`~.mesh_contacts.box_mesh`).
+those chosen (as :func:`~.polytope_mesh.box_mesh`).
 
 Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
@@ -46,11 +46,11 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
+from .contact_output import ContactRows, contact_rows
 from .mesh_features import (
     EDGE2,
     FACE,
     FEATURES_PER_TRIANGLE,
-    candidate_rows,
     closest_feature,
     closest_point_on_triangle,
     distance_to_triangle,
@@ -76,10 +76,7 @@ def capsule_mesh(
     half_length: float,
     mesh: MeshGeometry,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
     max_contacts: int,
 ) -> int:
@@ -147,7 +144,8 @@ def capsule_mesh(
     keep = np.ones(count, dtype=np.bool_)
     other_distance = np.empty(n)
     other_region = np.zeros(n, dtype=np.int64)
-    point, normal, depth, feature = candidate_rows(count)
+    rows = contact_rows(count)
+    point, normal, depth, feature = rows
     found = 0
     for r in range(count):
         s = rec_s[r]
@@ -220,15 +218,4 @@ def capsule_mesh(
         point[found, 2] = 0.5 * (x[2] - radius * nz + q[2])
         feature[found] = FEATURES_PER_TRIANGLE * t + rec_local[r]
         found += 1
-    return write_kept(
-        keep_spread(point[:found], depth[:found], max_contacts, tol),
-        point,
-        normal,
-        depth,
-        feature,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
+    return write_kept(keep_spread(point[:found], depth[:found], max_contacts, tol), rows, out, slot)

@@ -1,7 +1,9 @@
-"""Where every pair function writes its contacts: one row of the output arrays.
+"""Where every pair function writes its contacts: one row of the output rows.
 
-out_point (N, 3) [m], out_normal (N, 3) unit from B into A, out_depth (N,) [m] (> 0
-overlapping), out_feature (N,) int64 (stable id of the contact within its pair).
+Every pair routine takes its output as one argument ``out``, the tuple :data:`ContactRows`
+(point (N, 3) [m], normal (N, 3) unit from B into A, depth (N,) [m] (> 0 overlapping),
+feature (N,) int64 (stable id of the contact within its pair)), and a row ``slot`` to write
+from: one argument for the four arrays keeps the routines' signatures and call sites short.
 """
 
 from __future__ import annotations
@@ -11,20 +13,22 @@ from numba import njit
 
 from .geometry import axpy, rotate
 
+ContactRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (point, normal, depth, feature)
+Frame = tuple[np.ndarray, np.ndarray]  # (center (3,) [m], rotation (3, 3) body → world) of a collider
+
+
+@njit(cache=True)
+def contact_rows(capacity: int) -> ContactRows:
+    """Empty rows for ``capacity`` contacts: point (n, 3), normal (n, 3), depth (n,), feature (n,) int64."""
+    return (np.empty((capacity, 3)), np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, dtype=np.int64))
+
 
 @njit(cache=True)
 def write_contact(
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
-    slot: int,
-    point: np.ndarray,
-    normal: np.ndarray,
-    depth: float,
-    feature: int,
+    out: ContactRows, slot: int, point: np.ndarray, normal: np.ndarray, depth: float, feature: int
 ) -> None:
-    """Store one contact at row ``slot``."""
+    """Store one contact at row ``slot`` of ``out``."""
+    out_point, out_normal, out_depth, out_feature = out
     for i in range(3):
         out_point[slot, i] = point[i]
         out_normal[slot, i] = normal[i]
@@ -38,24 +42,12 @@ def write_local_contact(
     normal_local: np.ndarray,
     depth: float,
     feature: int,
-    center: np.ndarray,
-    rotation: np.ndarray,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    frame: Frame,
+    out: ContactRows,
     slot: int,
 ) -> None:
     """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal
-    (3,) there, the collider at ``center`` (3,) [m] with ``rotation`` (3, 3) body → world."""
-    write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-        axpy(center, 1.0, rotate(rotation, point_local)),
-        rotate(rotation, normal_local),
-        depth,
-        np.int64(feature),
-    )
+    (3,) there, the collider's ``frame`` = (center (3,) [m], rotation (3, 3) body → world)."""
+    center, rotation = frame
+    point = axpy(center, 1.0, rotate(rotation, point_local))
+    write_contact(out, slot, point, rotate(rotation, normal_local), depth, np.int64(feature))

@@ -4,11 +4,12 @@ Conventions as everywhere in :mod:`contactlab.collision.narrow_phase`: shape A f
 normal is a unit vector from B into A (the direction that separates A), ``depth`` > 0 when
 overlapping, contacts are kept down to ``depth = −margin`` (speculative contacts), each
 ``point`` lies midway between the two surfaces, and every routine writes its contacts from
-``slot`` on into ``out_point`` (N, 3), ``out_normal`` (N, 3), ``out_depth`` (N,),
-``out_feature`` (N,) int64, and returns how many it wrote (at most ``MAX_CONTACTS`` = 4).
+``slot`` on into ``out`` = (point (N, 3), normal (N, 3), depth (N,), feature (N,) int64)
+(:data:`.contact_output.ContactRows`), and returns how many it wrote (at most ``MAX_CONTACTS`` = 4).
 
-A hull is passed as its body-frame arrays (see :mod:`contactlab.hulls`, :func:`hulls.hull_arrays`)
-plus a centre (3,) [m] and a rotation (3, 3) body → world:
+A hull is passed as one argument, its body-frame arrays in this order (:data:`HullArrays`; see
+:mod:`contactlab.hulls`, :func:`hulls.hull_arrays`), plus a centre (3,) [m] and a rotation (3, 3)
+body → world:
 
 ``vertices`` (V, 3) [m]; ``face_normal`` (F, 3) outward unit; ``face_offset`` (F,) [m];
 ``face_vertex_start`` (F+1,) int and ``face_vertex_index`` (K,) int: face f's corners,
@@ -52,10 +53,16 @@ import numpy as np
 from numba import njit
 
 from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
+from .contact_output import ContactRows
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
 SPHERE_FEATURE = 0
+
+# One hull's body-frame arrays, in this order (module docstring): vertices, face_normal,
+# face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face. Every hull routine
+# takes them as this one argument (as :func:`hull_view` and :func:`contactlab.hulls.hull_arrays` give them).
+HullArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 # ------------------------------------------------------------------------------------------
@@ -66,18 +73,17 @@ SPHERE_FEATURE = 0
 def convex_plane(
     center: np.ndarray,
     rotation: np.ndarray,
-    vertices: np.ndarray,
+    hull: HullArrays,
     plane: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
-    """Hull A (centre (3,) [m], rotation (3, 3) body → world, body-frame ``vertices`` (V, 3))
-    against the plane B = (n, offset) (4,): one contact per vertex within the margin, reduced
-    to at most 4. Feature: the vertex index (mod 256, see the module docstring)."""
+    """Hull A (centre (3,) [m], rotation (3, 3) body → world, its arrays ``hull``) against the
+    plane B = (n, offset) (4,): one contact per vertex within the margin, reduced to at most 4.
+    Feature: the vertex index (mod 256, see the module docstring)."""
+    out_point, out_normal, out_depth, out_feature = out
+    vertices = hull[0]
     n0, n1, n2 = plane[0], plane[1], plane[2]
     # the plane normal in the body frame, and the height of the body origin above the plane
     l0 = rotation[0, 0] * n0 + rotation[1, 0] * n1 + rotation[2, 0] * n2
@@ -149,16 +155,9 @@ def sphere_convex(
     radius: float,
     hull_center: np.ndarray,
     hull_rotation: np.ndarray,
-    vertices: np.ndarray,
-    face_normal: np.ndarray,
-    face_offset: np.ndarray,
-    face_vertex_start: np.ndarray,
-    face_vertex_index: np.ndarray,
+    hull: HullArrays,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B: one contact.
@@ -166,6 +165,8 @@ def sphere_convex(
     Inside the hull the centre leaves through the face of least penetration; outside, the
     normal runs from the closest surface point to the centre. Feature: ``SPHERE_FEATURE``.
     """
+    out_point, out_normal, out_depth, out_feature = out
+    vertices, face_normal, face_offset, face_vertex_start, face_vertex_index = hull[:5]
     r = hull_rotation
     d0 = center[0] - hull_center[0]
     d1 = center[1] - hull_center[1]
@@ -265,7 +266,7 @@ def hull_view(
     edge_vertex: np.ndarray,
     edge_face: np.ndarray,
     h: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> HullArrays:
     """Hull ``h``'s arrays out of the packed layout (:func:`contactlab.hulls.pack_hulls`), as views:
     (vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face),
     the argument order of the routines here. The compiled twin of :func:`contactlab.hulls.hull_arrays`."""
@@ -281,3 +282,11 @@ def hull_view(
         edge_vertex[edge_start[h] : edge_start[h + 1]],
         edge_face[edge_start[h] : edge_start[h + 1]],
     )
+
+
+@njit(cache=True)
+def stored_hull(hull_store: tuple, index: float) -> HullArrays:
+    """Hull number ``index`` (a collider's float parameter) out of a model's packed hull store
+    (Model.hull_store: the ten arrays of :func:`contactlab.hulls.pack_hulls` in :func:`hull_view`'s
+    argument order), as :func:`hull_view` gives it."""
+    return hull_view(*hull_store, np.int64(index))

@@ -7,7 +7,7 @@ written from ``slot`` on.
 
 Algorithm
 ---------
-``convex_convex``: the separating axis test over the face normals of A, of B, and the
+``convex_convex``: the separating axis test (:mod:`.convex_sat`) over the face normals of A, of B, and the
 edge pairs that form a face of the Minkowski difference (the Gauss-map arc test of
 D. Gregorius, GDC 2013: only those edge pairs can give the minimum, so the others are
 skipped without projecting anything). The smallest overlap is the exact penetration depth
@@ -57,12 +57,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .contact_output import ContactRows
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear, reduce_to_four
+from .convex import HullArrays
+from .convex_sat import convex_convex_sat
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
 FACE_REL_TOL = 0.05  # relative tolerance favouring faces over edges, and the larger reference face
 FACE_ABS_TOL = 1e-5  # absolute part of that tolerance, × the larger hull radius [-]
-PARALLEL_SIN2 = 1e-12  # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
 DEPTH_TOL = 1e-9  # a nearly straight clipped corner deeper than its neighbours by this × size is kept
 COLLINEAR_TOL = 1e-4  # clipped corners this close to straight (× the shorter face's shortest edge) are dropped
 
@@ -129,38 +131,21 @@ def _face_area(points, face_vertex_start, face_vertex_index, f, normal):
 
 
 @njit(cache=True)
-def _face_contacts(
-    ref_points,
-    ref_normal,
-    ref_offset,
-    ref_fvs,
-    ref_fvi,
-    ref_face,
-    inc_points,
-    inc_normal,
-    inc_fvs,
-    inc_fvi,
-    sign,
-    margin,
-    scale,
-    fallback,
-    center_a,
-    rotation_a,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback, frame_a, out, slot):
     """Clip the incident face against reference face ``ref_face``; everything in A's frame.
 
-    ``ref_points``/``inc_points`` (·, 3): the two hulls' vertices in A's frame; ``ref_normal``
-    (3,) outward of the reference face, ``ref_offset`` its plane offset; ``inc_normal`` (·, 3)
-    the incident hull's face normals in A's frame; ``sign`` = +1 when the reference face is on B
-    (contact normal = ref_normal), −1 when on A. If clipping leaves nothing within the margin,
-    the incident hull's deepest vertex is the one contact when ``fallback``, else nothing.
+    ``reference``, ``incident``: the two hulls in A's frame, each (vertices (·, 3), face normals
+    (·, 3), face offsets (·,), face_vertex_start, face_vertex_index); ``sign`` = +1 when the
+    reference face is on B (contact normal = its outward normal), −1 when on A. If clipping
+    leaves nothing within the margin, the incident hull's deepest vertex is the one contact
+    when ``fallback``, else nothing. ``frame_a`` = (centre (3,) [m], rotation (3, 3)) of A.
     Writes world contacts; returns their count.
     """
+    ref_points, ref_normals, ref_offsets, ref_fvs, ref_fvi = reference
+    ref_normal, ref_offset = ref_normals[ref_face], ref_offsets[ref_face]
+    inc_points, inc_normal, _, inc_fvs, inc_fvi = incident
+    center_a, rotation_a = frame_a
+    out_point, out_normal, out_depth, out_feature = out
     m0, m1, m2 = ref_normal[0], ref_normal[1], ref_normal[2]
     # the incident hull's deepest vertex (its support point along −ref_normal) ...
     deepest = 0
@@ -248,6 +233,8 @@ def _face_contacts(
         point_labels[0] = deepest
         keep[0] = 0
         kept = 1
+    # reduced and written as convex.convex_plane writes its vertices, deliberately apart from it:
+    # here the points are in A's frame, moved halfway to the reference plane, and labelled by faces
     kept = reduce_to_four(points, height, keep, kept, ref_normal, REDUCE_TIE * scale, np.empty(kept))
     used = np.zeros(256, dtype=np.bool_)
     for k in range(kept):
@@ -293,211 +280,29 @@ def _segment_closest(p1, q1, p2, q2, out_1, out_2):
 
 
 @njit(cache=True)
-def _least_face_overlap(normal, offset, faces, points, count, margin, result, at):
-    """The face axes of one hull against the other hull's ``points[:count]`` (both in one frame):
-    each face's overlap is its offset − the least n · x over the points. Keeps the least overlap
-    and its face in ``result[at]``, ``result[at + 1]`` (earliest on a tie); returns False as
-    soon as a face separates the hulls by more than ``margin`` [m]."""
-    for f in range(faces):
-        n0, n1, n2 = normal[f, 0], normal[f, 1], normal[f, 2]
-        lowest = np.inf
-        for j in range(count):
-            lowest = min(lowest, n0 * points[j, 0] + n1 * points[j, 1] + n2 * points[j, 2])
-        overlap = offset[f] - lowest
-        if overlap < -margin:
-            return False
-        if overlap < result[at]:
-            result[at] = overlap
-            result[at + 1] = f
-    return True
-
-
-@njit(cache=True)
-def convex_convex_sat(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
-    vertices_a: np.ndarray,
-    face_normal_a: np.ndarray,
-    face_offset_a: np.ndarray,
-    edge_vertex_a: np.ndarray,
-    edge_face_a: np.ndarray,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
-    vertices_b: np.ndarray,
-    face_normal_b: np.ndarray,
-    face_offset_b: np.ndarray,
-    edge_vertex_b: np.ndarray,
-    edge_face_b: np.ndarray,
-    margin: float,
-    result: np.ndarray,
-    axis: np.ndarray,
-) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
-    """Separating axis test of hull A against hull B, in A's body frame.
-
-    Arguments as for :func:`convex_convex` (without the face corner lists). Fills ``result``
-    (8,) float: [0] the smallest overlap [m] over A's face normals, [1] that face, [2] the
-    smallest over B's faces, [3] that face, [4] the smallest over the Minkowski-face edge pairs
-    (+inf when none), [5] that edge of A, [6] that edge of B, [7] the minimum of the three:
-    the penetration depth when ≥ 0; when < 0, minus a lower bound of the distance. ``axis``
-    (3,): the unit edge axis, A's frame, from A towards B.
-
-    Returns (close, vb, nb, ob): ``close`` False as soon as some axis separates the hulls by
-    more than ``margin`` (``result`` then incomplete); B's vertices (Vb, 3), face normals
-    (Fb, 3) and offsets (Fb,) in A's frame.
-    """
-    Rab = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            Rab[i, j] = (
-                rotation_a[0, i] * rotation_b[0, j]
-                + rotation_a[1, i] * rotation_b[1, j]
-                + rotation_a[2, i] * rotation_b[2, j]
-            )
-    t = np.empty(3)
-    for i in range(3):
-        t[i] = (
-            rotation_a[0, i] * (center_b[0] - center_a[0])
-            + rotation_a[1, i] * (center_b[1] - center_a[1])
-            + rotation_a[2, i] * (center_b[2] - center_a[2])
-        )
-    count_b = vertices_b.shape[0]
-    vb = np.empty((count_b, 3))
-    for j in range(count_b):
-        for i in range(3):
-            vb[j, i] = Rab[i, 0] * vertices_b[j, 0] + Rab[i, 1] * vertices_b[j, 1] + Rab[i, 2] * vertices_b[j, 2] + t[i]
-    faces_b = face_offset_b.shape[0]
-    nb = np.empty((faces_b, 3))
-    ob = np.empty(faces_b)
-    for g in range(faces_b):
-        for i in range(3):
-            nb[g, i] = (
-                Rab[i, 0] * face_normal_b[g, 0] + Rab[i, 1] * face_normal_b[g, 1] + Rab[i, 2] * face_normal_b[g, 2]
-            )
-        ob[g] = face_offset_b[g] + nb[g, 0] * t[0] + nb[g, 1] * t[1] + nb[g, 2] * t[2]
-    for k in range(8):
-        result[k] = np.inf
-    result[5] = -1.0
-    result[6] = -1.0
-    # faces of A, then of B
-    if not _least_face_overlap(face_normal_a, face_offset_a, face_offset_a.shape[0], vb, count_b, margin, result, 0):
-        return False, vb, nb, ob
-    count_a = vertices_a.shape[0]
-    if not _least_face_overlap(nb, ob, faces_b, vertices_a, count_a, margin, result, 2):
-        return False, vb, nb, ob
-    # edge pairs that form a face of the Minkowski difference A − B (Gauss-map arcs cross).
-    # Per edge of B, once: the negated normals c, d of its two faces and d × c (rows of ``arcs``)
-    edges_b = edge_vertex_b.shape[0]
-    arcs = np.empty((edges_b, 9))
-    for eb in range(edges_b):
-        fb0 = edge_face_b[eb, 0]
-        fb1 = edge_face_b[eb, 1]
-        c0, c1, c2 = -nb[fb0, 0], -nb[fb0, 1], -nb[fb0, 2]
-        d0, d1, d2 = -nb[fb1, 0], -nb[fb1, 1], -nb[fb1, 2]
-        arcs[eb, 0], arcs[eb, 1], arcs[eb, 2] = c0, c1, c2
-        arcs[eb, 3], arcs[eb, 4], arcs[eb, 5] = d0, d1, d2
-        arcs[eb, 6] = d1 * c2 - d2 * c1
-        arcs[eb, 7] = d2 * c0 - d0 * c2
-        arcs[eb, 8] = d0 * c1 - d1 * c0
-    for ea in range(edge_vertex_a.shape[0]):
-        fa0 = edge_face_a[ea, 0]
-        fa1 = edge_face_a[ea, 1]
-        a0, a1, a2 = face_normal_a[fa0, 0], face_normal_a[fa0, 1], face_normal_a[fa0, 2]
-        b0, b1, b2 = face_normal_a[fa1, 0], face_normal_a[fa1, 1], face_normal_a[fa1, 2]
-        bxa0 = b1 * a2 - b2 * a1
-        bxa1 = b2 * a0 - b0 * a2
-        bxa2 = b0 * a1 - b1 * a0
-        pa = vertices_a[edge_vertex_a[ea, 0]]
-        qa = vertices_a[edge_vertex_a[ea, 1]]
-        E0, E1, E2 = qa[0] - pa[0], qa[1] - pa[1], qa[2] - pa[2]
-        length_a2 = E0 * E0 + E1 * E1 + E2 * E2
-        for eb in range(edges_b):
-            arc = arcs[eb]
-            cba = arc[0] * bxa0 + arc[1] * bxa1 + arc[2] * bxa2
-            dba = arc[3] * bxa0 + arc[4] * bxa1 + arc[5] * bxa2
-            if cba * dba >= 0.0:
-                continue
-            adc = a0 * arc[6] + a1 * arc[7] + a2 * arc[8]
-            bdc = b0 * arc[6] + b1 * arc[7] + b2 * arc[8]
-            if adc * bdc >= 0.0 or cba * bdc <= 0.0:
-                continue
-            pb = vb[edge_vertex_b[eb, 0]]
-            qb = vb[edge_vertex_b[eb, 1]]
-            F0, F1, F2 = qb[0] - pb[0], qb[1] - pb[1], qb[2] - pb[2]
-            L0 = E1 * F2 - E2 * F1
-            L1 = E2 * F0 - E0 * F2
-            L2 = E0 * F1 - E1 * F0
-            length2 = L0 * L0 + L1 * L1 + L2 * L2
-            if length2 < PARALLEL_SIN2 * length_a2 * (F0 * F0 + F1 * F1 + F2 * F2):
-                continue
-            length = np.sqrt(length2)
-            L0, L1, L2 = L0 / length, L1 / length, L2 / length
-            if L0 * pa[0] + L1 * pa[1] + L2 * pa[2] < 0.0:  # orient from A (origin inside) towards B
-                L0, L1, L2 = -L0, -L1, -L2
-            overlap = -(L0 * (pb[0] - pa[0]) + L1 * (pb[1] - pa[1]) + L2 * (pb[2] - pa[2]))
-            if overlap < -margin:
-                return False, vb, nb, ob
-            if overlap < result[4]:
-                result[4] = overlap
-                result[5] = ea
-                result[6] = eb
-                axis[0], axis[1], axis[2] = L0, L1, L2
-    result[7] = min(result[0], min(result[2], result[4]))
-    return True, vb, nb, ob
-
-
-@njit(cache=True)
 def convex_convex(
     center_a: np.ndarray,
     rotation_a: np.ndarray,
-    vertices_a: np.ndarray,
-    face_normal_a: np.ndarray,
-    face_offset_a: np.ndarray,
-    face_vertex_start_a: np.ndarray,
-    face_vertex_index_a: np.ndarray,
-    edge_vertex_a: np.ndarray,
-    edge_face_a: np.ndarray,
+    hull_a: HullArrays,
     center_b: np.ndarray,
     rotation_b: np.ndarray,
-    vertices_b: np.ndarray,
-    face_normal_b: np.ndarray,
-    face_offset_b: np.ndarray,
-    face_vertex_start_b: np.ndarray,
-    face_vertex_index_b: np.ndarray,
-    edge_vertex_b: np.ndarray,
-    edge_face_b: np.ndarray,
+    hull_b: HullArrays,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
 
-    Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays (module
-    docstring). ``margin`` [m]: contacts kept down to depth −margin. Outputs as in the module
-    docstring; 0 when some axis separates the hulls by more than the margin.
+    Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays
+    (:data:`.convex.HullArrays`). ``margin`` [m]: contacts kept down to depth −margin. Outputs
+    as in the module docstring; 0 when some axis separates the hulls by more than the margin.
     """
+    vertices_a, face_normal_a, face_offset_a, face_vertex_start_a, face_vertex_index_a, edge_vertex_a, _ = hull_a
+    vertices_b, face_normal_b, _, face_vertex_start_b, face_vertex_index_b, edge_vertex_b, _ = hull_b
     result = np.empty(8)
     axis = np.zeros(3)
     close, vb, nb, ob = convex_convex_sat(
-        center_a,
-        rotation_a,
-        vertices_a,
-        face_normal_a,
-        face_offset_a,
-        edge_vertex_a,
-        edge_face_a,
-        center_b,
-        rotation_b,
-        vertices_b,
-        face_normal_b,
-        face_offset_b,
-        edge_vertex_b,
-        edge_face_b,
-        margin,
-        result,
-        axis,
+        center_a, rotation_a, hull_a, center_b, rotation_b, hull_b, margin, result, axis
     )
     if not close:
         return 0
@@ -533,104 +338,36 @@ def convex_convex(
         exact = 2
     # the favoured axis first; should its face clip to nothing (deep or grazing contact), the
     # exact minimum, whose witness points are sure to lie on both surfaces
+    # both hulls in A's frame (vertices, face normals and offsets, face corner lists), and A's pose
+    local_a = (vertices_a, face_normal_a, face_offset_a, face_vertex_start_a, face_vertex_index_a)
+    local_b = (vb, nb, ob, face_vertex_start_b, face_vertex_index_b)
+    frame_a = (center_a, rotation_a)
     for attempt in range(2):
         kind = chosen if attempt == 0 else exact
         if attempt == 1 and exact == chosen:
             break
         fallback = kind == exact
         if kind == 2:
-            return _edge_contact(
-                vertices_a,
-                edge_vertex_a,
-                vb,
-                edge_vertex_b,
-                int(result[5]),
-                int(result[6]),
-                axis,
-                over_e,
-                center_a,
-                rotation_a,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot,
-            )
+            edges = (int(result[5]), int(result[6]))
+            return _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, edges, axis, over_e, frame_a, out, slot)
         if kind == 1:
             # reference face on B (its outward normal is the contact normal); incident hull A
-            count = _face_contacts(
-                vb,
-                nb[face_b],
-                ob[face_b],
-                face_vertex_start_b,
-                face_vertex_index_b,
-                face_b,
-                vertices_a,
-                face_normal_a,
-                face_vertex_start_a,
-                face_vertex_index_a,
-                1.0,
-                margin,
-                scale,
-                fallback,
-                center_a,
-                rotation_a,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot,
-            )
+            count = _face_contacts(local_b, face_b, local_a, 1.0, margin, scale, fallback, frame_a, out, slot)
         else:
             # reference face on A (its outward normal points from A to B); incident hull B
-            count = _face_contacts(
-                vertices_a,
-                face_normal_a[face_a],
-                face_offset_a[face_a],
-                face_vertex_start_a,
-                face_vertex_index_a,
-                face_a,
-                vb,
-                nb,
-                face_vertex_start_b,
-                face_vertex_index_b,
-                -1.0,
-                margin,
-                scale,
-                fallback,
-                center_a,
-                rotation_a,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot,
-            )
+            count = _face_contacts(local_a, face_a, local_b, -1.0, margin, scale, fallback, frame_a, out, slot)
         if count > 0:
             return count
     return 0
 
 
 @njit(cache=True)
-def _edge_contact(
-    vertices_a,
-    edge_vertex_a,
-    vb,
-    edge_vertex_b,
-    ea,
-    eb,
-    axis,
-    overlap,
-    center_a,
-    rotation_a,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    slot,
-):
+def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, edges, axis, overlap, frame_a, out, slot):
     """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B (all in
     A's frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it)."""
+    ea, eb = edges
+    center_a, rotation_a = frame_a
+    out_point, out_normal, out_depth, out_feature = out
     pa = np.empty(3)
     pb = np.empty(3)
     _segment_closest(

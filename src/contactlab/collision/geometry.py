@@ -44,6 +44,8 @@ def column(rotation: np.ndarray, k: int) -> np.ndarray:
     return np.array([rotation[0, k], rotation[1, k], rotation[2, k]])
 
 
+# rotate and unrotate (below) are written out alike (deliberately: one expression per
+# component, no transposed copy)
 @njit(cache=True)
 def rotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rotation @ v for a 3×3 matrix, written out (cheaper to compile than the BLAS product)."""
@@ -56,6 +58,8 @@ def rotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     )
 
 
+# unrotate is rotate with the matrix transposed, written out alike (deliberately: one
+# expression per component, no transposed copy)
 @njit(cache=True)
 def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rotation.T @ v for a 3×3 matrix, written out."""

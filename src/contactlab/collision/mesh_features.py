@@ -4,9 +4,10 @@ what every mesh routine is built on.
 A point's closest point on a triangle comes with its Voronoi region (the face, one of the
 3 edges, one of the 3 vertices); the region's *pseudo-normal* (Bærentzen–Aanæs: exact for a
 closed mesh) tells whether the point is inside a one-sided mesh. The contact routines
-(:mod:`.mesh_contacts`), the static signed distances (:mod:`.signed_distance`) and the swept
-test (:mod:`.mesh_sweep`) all judge a point by these rules, so they agree on what is inside.
-A shape's candidate contacts (:func:`candidate_rows`) are chosen by :func:`keep_deepest` or
+(:mod:`.sphere_mesh`, :mod:`.polytope_mesh`, :mod:`.capsule_mesh`), the static signed
+distances (:mod:`.signed_distance`) and the swept test (:mod:`.mesh_sweep`) all judge a point
+by these rules, so they agree on what is inside. A shape's candidate contacts (rows of
+:func:`.contact_output.contact_rows`) are chosen by :func:`keep_deepest` or
 :func:`keep_spread` when there are more than it may keep, and written by :func:`write_kept`.
 Meshes are :class:`~contactlab.meshes.MeshGeometry` tuples (``TriangleMesh.geometry``).
 
@@ -22,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .contact_output import write_contact
+from .contact_output import ContactRows, write_contact
 from .geometry import segment_closest_parameters
 
 if TYPE_CHECKING:
@@ -277,13 +278,6 @@ def segment_triangle_closest(
 
 
 @njit(cache=True)
-def candidate_rows(capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Empty candidate contacts for a shape against a mesh: point (capacity, 3) [m], normal
-    (capacity, 3), depth (capacity,) [m], feature (capacity,) int64."""
-    return np.empty((capacity, 3)), np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, dtype=np.int64)
-
-
-@njit(cache=True)
 def keep_deepest(depth: np.ndarray, limit: int) -> np.ndarray:
     """Mask (C,) of the ``limit`` deepest of the contacts with ``depth`` (C,) (ties: the earliest)."""
     count = depth.shape[0]
@@ -334,25 +328,13 @@ def keep_spread(points: np.ndarray, depth: np.ndarray, limit: int, tolerance: fl
 
 
 @njit(cache=True)
-def write_kept(
-    chosen: np.ndarray,
-    point: np.ndarray,
-    normal: np.ndarray,
-    depth: np.ndarray,
-    feature: np.ndarray,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
-    slot: int,
-) -> int:
-    """Write the candidates marked in ``chosen`` (C,) — rows of point (C, 3), normal (C, 3),
-    depth (C,) [m], feature (C,) — from ``slot`` on, in their order; returns how many."""
+def write_kept(chosen: np.ndarray, candidates: ContactRows, out: ContactRows, slot: int) -> int:
+    """Write the ``candidates`` (rows as :data:`.contact_output.ContactRows`, C of them) marked in
+    ``chosen`` (C,) into ``out`` from ``slot`` on, in their order; returns how many."""
+    point, normal, depth, feature = candidates
     written = 0
     for i in range(chosen.shape[0]):
         if chosen[i]:
-            write_contact(
-                out_point, out_normal, out_depth, out_feature, slot + written, point[i], normal[i], depth[i], feature[i]
-            )
+            write_contact(out, slot + written, point[i], normal[i], depth[i], feature[i])
             written += 1
     return written

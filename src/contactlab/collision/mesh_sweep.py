@@ -1,7 +1,7 @@
 """The swept test against static triangle meshes: no tunnelling through thin sheets.
 
 A static query cannot tell which side of a thin one-sided sheet a point came from (see
-:mod:`.mesh_contacts`); :func:`sweep_sphere_mesh` finds the first triangle a sphere (radius
+:mod:`.sphere_mesh`); :func:`sweep_sphere_mesh` finds the first triangle a sphere (radius
 ≥ 0) moving on a straight segment touches, by intersecting the segment with each nearby
 triangle inflated by the radius (the Minkowski sum: two offset faces, three edge cylinders,
 three vertex spheres); the time of impact in [0, 1] is exact for that shape.

@@ -26,7 +26,8 @@ from .box_box import box_box
 from .capsule import capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_box import capsule_box
 from .capsule_convex import capsule_convex
-from .convex import convex_plane, hull_view, sphere_convex
+from .contact_output import ContactRows
+from .convex import convex_plane, sphere_convex, stored_hull
 from .convex_convex import convex_convex
 from .families import ALL_FAMILIES, BOX, CAPSULE, CONVEX, FAMILIES, PLANE, POINT, SPHERE
 from .families import families_of as families_of  # re-exported: the narrow phase's callers name them here
@@ -86,52 +87,7 @@ def _rank(kind):
     return 9
 
 
-@njit(cache=True)
-def _hull(hull_store, index):
-    """Hull number ``index`` (a float parameter) out of the store, as collision.convex.hull_view gives it."""
-    (
-        vertex_start,
-        vertices,
-        face_start,
-        face_normal,
-        face_offset,
-        face_vertex_start,
-        face_vertex_index,
-        edge_start,
-        edge_vertex,
-        edge_face,
-    ) = hull_store
-    return hull_view(
-        vertex_start,
-        vertices,
-        face_start,
-        face_normal,
-        face_offset,
-        face_vertex_start,
-        face_vertex_index,
-        edge_start,
-        edge_vertex,
-        edge_face,
-        np.int64(index),
-    )
-
-
-def _pairs_loop(
-    families,
-    pairs,
-    kinds,
-    params,
-    centers,
-    rotations_,
-    reach,
-    hull_store,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    out_owner,
-    slot,
-):
+def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
     """The contacts of every pair k of ``pairs`` (K, 2), reaching gaps down to ``reach[k]``,
     written from row ``slot`` on in pair order, with ``out_owner`` = k; returns how many were
     written. Each pair is taken in canonical order (rank of A ≤ rank of B; computed swapped and
@@ -141,22 +97,7 @@ def _pairs_loop(
 
 
 @overload(_pairs_loop)
-def _pairs_loop_for(
-    families,
-    pairs,
-    kinds,
-    params,
-    centers,
-    rotations_,
-    reach,
-    hull_store,
-    out_point,
-    out_normal,
-    out_depth,
-    out_feature,
-    out_owner,
-    slot,
-):
+def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
     """The loop for one families type. Its ``None`` entries are the constant False here, so
     Numba drops those routines' branches before typing and never compiles them. The loop and
     the dispatch are one function: a call per pair that handed over the arrays (and the hull
@@ -179,22 +120,7 @@ def _pairs_loop_for(
         has_convex_plane,
     ) = (not isinstance(t, types.NoneType) for t in families.types)
 
-    def loop(
-        families,
-        pairs,
-        kinds,
-        params,
-        centers,
-        rotations_,
-        reach,
-        hull_store,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        out_owner,
-        slot,
-    ):
+    def loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
         count = slot
         for k in range(pairs.shape[0]):
             a, b = pairs[k, 0], pairs[k, 1]
@@ -210,54 +136,18 @@ def _pairs_loop_for(
             written = 0
             if has_sphere_sphere:
                 if round_a and round_b:
-                    written = sphere_sphere(
-                        center_a,
-                        params_a[0],
-                        center_b,
-                        params_b[0],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    written = sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin, out, count)
             if has_sphere_capsule:
                 if round_a and kind_b == CAPSULE:
                     written = sphere_capsule(
-                        center_a,
-                        params_a[0],
-                        center_b,
-                        rotation_b,
-                        params_b[0],
-                        params_b[1],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
+                        center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1], margin, out, count
                     )
             if has_sphere_box:
                 if round_a and kind_b == BOX:
-                    written = sphere_box(
-                        center_a,
-                        params_a[0],
-                        center_b,
-                        rotation_b,
-                        params_b[:3],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    written = sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin, out, count)
             if has_sphere_plane:
                 if round_a and kind_b == PLANE:
-                    written = sphere_plane(
-                        center_a, params_a[0], params_b, margin, out_point, out_normal, out_depth, out_feature, count
-                    )
+                    written = sphere_plane(center_a, params_a[0], params_b, margin, out, count)
             if has_capsule_capsule:
                 if kind_a == CAPSULE and kind_b == CAPSULE:
                     written = capsule_capsule(
@@ -270,10 +160,7 @@ def _pairs_loop_for(
                         params_b[0],
                         params_b[1],
                         margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
+                        out,
                         count,
                     )
             if has_capsule_box:
@@ -287,150 +174,45 @@ def _pairs_loop_for(
                         rotation_b,
                         params_b[:3],
                         margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
+                        out,
                         count,
                     )
             if has_capsule_plane:
                 if kind_a == CAPSULE and kind_b == PLANE:
                     written = capsule_plane(
-                        center_a,
-                        rotation_a,
-                        params_a[0],
-                        params_a[1],
-                        params_b,
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
+                        center_a, rotation_a, params_a[0], params_a[1], params_b, margin, out, count
                     )
             if has_box_box:
                 if kind_a == BOX and kind_b == BOX:
                     written = box_box(
-                        center_a,
-                        rotation_a,
-                        params_a[:3],
-                        center_b,
-                        rotation_b,
-                        params_b[:3],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
+                        center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3], margin, out, count
                     )
             if has_box_plane:
                 if kind_a == BOX and kind_b == PLANE:
-                    written = box_plane(
-                        center_a,
-                        rotation_a,
-                        params_a[:3],
-                        params_b,
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    written = box_plane(center_a, rotation_a, params_a[:3], params_b, margin, out, count)
             if has_sphere_convex:
                 if round_a and kind_b == CONVEX:
-                    hb = _hull(hull_store, params_b[0])
-                    written = sphere_convex(
-                        center_a,
-                        params_a[0],
-                        center_b,
-                        rotation_b,
-                        hb[0],
-                        hb[1],
-                        hb[2],
-                        hb[3],
-                        hb[4],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    hb = stored_hull(hull_store, params_b[0])
+                    written = sphere_convex(center_a, params_a[0], center_b, rotation_b, hb, margin, out, count)
             if has_capsule_convex:
                 if kind_a == CAPSULE and kind_b == CONVEX:
-                    hb = _hull(hull_store, params_b[0])
+                    hb = stored_hull(hull_store, params_b[0])
                     written = capsule_convex(
-                        center_a,
-                        rotation_a,
-                        params_a[0],
-                        params_a[1],
-                        center_b,
-                        rotation_b,
-                        hb[0],
-                        hb[1],
-                        hb[2],
-                        hb[3],
-                        hb[4],
-                        hb[5],
-                        hb[6],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
+                        center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, hb, margin, out, count
                     )
             if has_convex_convex:
                 if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
-                    ha = _hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
-                    hb = _hull(hull_store, params_b[0])
-                    written = convex_convex(
-                        center_a,
-                        rotation_a,
-                        ha[0],
-                        ha[1],
-                        ha[2],
-                        ha[3],
-                        ha[4],
-                        ha[5],
-                        ha[6],
-                        center_b,
-                        rotation_b,
-                        hb[0],
-                        hb[1],
-                        hb[2],
-                        hb[3],
-                        hb[4],
-                        hb[5],
-                        hb[6],
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    ha = stored_hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
+                    hb = stored_hull(hull_store, params_b[0])
+                    written = convex_convex(center_a, rotation_a, ha, center_b, rotation_b, hb, margin, out, count)
             if has_convex_plane:
                 if kind_a == CONVEX and kind_b == PLANE:
-                    ha = _hull(hull_store, params_a[0])
-                    written = convex_plane(
-                        center_a,
-                        rotation_a,
-                        ha[0],
-                        params_b,
-                        margin,
-                        out_point,
-                        out_normal,
-                        out_depth,
-                        out_feature,
-                        count,
-                    )
+                    ha = stored_hull(hull_store, params_a[0])
+                    written = convex_plane(center_a, rotation_a, ha, params_b, margin, out, count)
             for c in range(count, count + written):
                 if swapped:  # normals from B into A of the pair as given
                     for i in range(3):
-                        out_normal[c, i] = -out_normal[c, i]
+                        out[1][c, i] = -out[1][c, i]
                 out_owner[c] = k
             count += written
         return count - slot
@@ -450,10 +232,7 @@ def collide_pair(
     rotation_b: np.ndarray,
     margin: float,
     hull_store: tuple,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Contacts of shape A against shape B written from ``slot`` on; returns their count
@@ -463,8 +242,9 @@ def collide_pair(
 
     kind, params (4,), centre (3,) [m] and rotation (3, 3) (body → world) of each shape;
     margin [m]: contacts with gaps down to −margin are kept; hull_store: the model's packed
-    hulls (Model.hull_store, or ``empty_hull_store()``); out_point, out_normal (n, 3),
-    out_depth (n,) [m], out_feature (n,) int64: the rows written from ``slot`` on."""
+    hulls (Model.hull_store, or ``empty_hull_store()``); out: the rows (point (n, 3) [m],
+    normal (n, 3), depth (n,) [m], feature (n,) int64; :data:`.contact_output.ContactRows`)
+    written from ``slot`` on."""
     kinds = np.array([kind_a, kind_b], dtype=np.int64)
     params = np.empty((2, 4))
     centers = np.empty((2, 3))
@@ -475,7 +255,7 @@ def collide_pair(
         centers[0, i], centers[1, i] = center_a[i], center_b[i]
         for j in range(3):
             rotations_[0, i, j], rotations_[1, i, j] = rotation_a[i, j], rotation_b[i, j]
-    owner = np.empty(out_depth.shape[0], dtype=np.int64)
+    owner = np.empty(out[2].shape[0], dtype=np.int64)
     return _pairs_loop(
         ALL_FAMILIES,
         np.array([[0, 1]], dtype=np.int64),
@@ -485,10 +265,7 @@ def collide_pair(
         rotations_,
         np.full(1, margin),
         hull_store,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
+        out,
         owner,
         np.int64(slot),
     )
@@ -530,10 +307,7 @@ def generate_contacts(
         rotations_,
         reach,
         hull_store,
-        point,
-        normal,
-        depth,
-        feature,
+        (point, normal, depth, feature),
         owner,
         np.int64(0),
     )

@@ -3,28 +3,20 @@ sphere–sphere, box–plane and sphere–box (a particle is a sphere of its rad
 
 Conventions as in :mod:`contactlab.collision.narrow_phase`, which dispatches to them: shape A
 is the first argument, the normal points from B into A, ``depth`` > 0 when overlapping,
-contacts down to ``depth = −margin`` are kept, each written from index ``slot`` on into
-``out_point`` (N, 3), ``out_normal`` (N, 3), ``out_depth`` (N,), ``out_feature`` (N,) int64;
-each returns how many it wrote.
+contacts down to ``depth = −margin`` are kept, each written from index ``slot`` on into ``out``
+= (point (N, 3), normal (N, 3), depth (N,), feature (N,) int64)
+(:data:`.contact_output.ContactRows`); each returns how many it wrote.
 """
 
 import numpy as np
 from numba import njit
 
-from .contact_output import write_contact
+from .contact_output import ContactRows, write_contact
 
 
 @njit(cache=True)
 def sphere_plane(
-    center: np.ndarray,
-    radius: float,
-    plane: np.ndarray,
-    margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
-    slot: int,
+    center: np.ndarray, radius: float, plane: np.ndarray, margin: float, out: ContactRows, slot: int
 ) -> int:
     """Sphere (or particle of this radius) A against the plane B = (n, offset).
 
@@ -36,15 +28,7 @@ def sphere_plane(
         return 0
     back = 0.5 * (radius + distance)  # the point midway between the two surfaces
     write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-        (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back),
-        (nx, ny, nz),
-        depth,
-        0,
+        out, slot, (center[0] - nx * back, center[1] - ny * back, center[2] - nz * back), (nx, ny, nz), depth, 0
     )
     return 1
 
@@ -56,10 +40,7 @@ def sphere_sphere(
     center_b: np.ndarray,
     radius_b: float,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
@@ -77,10 +58,7 @@ def sphere_sphere(
     # midway between the surfaces: ½ (centre_a − r_a n + centre_b + r_b n)
     back = 0.5 * (radius_b - radius_a)
     write_contact(
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
+        out,
         slot,
         (
             0.5 * (center_a[0] + center_b[0]) + back * nx,
@@ -101,10 +79,7 @@ def box_plane(
     half_extents: np.ndarray,
     plane: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
@@ -118,17 +93,7 @@ def box_plane(
         x = center + rotation @ local
         distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
         if -distance >= -margin:
-            write_contact(
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot + count,
-                x - normal * (0.5 * distance),
-                normal,
-                -distance,
-                corner,
-            )
+            write_contact(out, slot + count, x - normal * (0.5 * distance), normal, -distance, corner)
             count += 1
     return count
 
@@ -141,10 +106,7 @@ def sphere_box(
     box_rotation: np.ndarray,
     half_extents: np.ndarray,
     margin: float,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    out: ContactRows,
     slot: int,
 ) -> int:
     """Sphere A (or particle) against box B, by the closest point of the box to the centre.
@@ -176,7 +138,5 @@ def sphere_box(
     normal = box_rotation @ normal_local
     surface_b = box_center + box_rotation @ closest
     surface_a = center - normal * radius
-    write_contact(
-        out_point, out_normal, out_depth, out_feature, slot, 0.5 * (surface_a + surface_b), normal, depth, feature
-    )
+    write_contact(out, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
     return 1

@@ -1,21 +1,22 @@
 """A segment against an axis-aligned box, in the box's frame: the closest point of the segment
-(``segment_box_closest``, exact), the part of the segment over a face (``face_interval``), the
-contacts of that part against the face (``face_contact``, ``face_patch``) and of the part alongside
-an edge (``write_patch_ends``). Capsule–box (:mod:`contactlab.collision.capsule_box`) is built on
-them, and capsule–hull (:mod:`contactlab.collision.capsule_convex`) shares ``write_patch_ends``.
+(``segment_box_closest``, exact), the part of the segment over a face (``face_interval``) and
+the contacts of that part against the face (``face_patch``, through the plane routines of
+:mod:`.segment_patch` that capsule–hull shares). Capsule–box (:mod:`contactlab.collision.capsule_box`)
+is built on them.
 
 Conventions as in :mod:`contactlab.collision.capsule`: the segment is ``origin + s · direction``
 (``direction`` a unit (3,), ``|s| ≤ half_length`` [m]), the box centred at the origin with
 ``half_extents`` (3,) [m]; contacts are written in world coordinates through the box's
-``box_center`` (3,) and ``box_rotation`` (3, 3), from index ``slot`` on into ``out_point``
-(N, 3), ``out_normal`` (N, 3), ``out_depth`` (N,), ``out_feature`` (N,) int64.
+``frame`` (centre (3,), rotation (3, 3)), from index ``slot`` on into ``out``
+(:data:`.contact_output.ContactRows`).
 """
 
 import numpy as np
 from numba import njit
 
-from .contact_output import write_contact, write_local_contact
-from .geometry import axpy, clamp, rotate, unit_axis
+from .contact_output import ContactRows, Frame
+from .geometry import clamp, unit_axis
+from .segment_patch import Segment, face_patch_ends
 
 
 @njit(cache=True)
@@ -116,182 +117,27 @@ def face_interval(
 
 
 @njit(cache=True)
-def face_contact(
-    origin: np.ndarray,
-    direction: np.ndarray,
-    s: float,
-    radius: float,
-    half_extents: np.ndarray,
-    face_axis: int,
-    face_sign: float,
-    feature: int,
-    margin: float,
-    box_center: np.ndarray,
-    box_rotation: np.ndarray,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
-    slot: int,
-) -> int:
-    """One contact of the segment point ``s`` (box frame) against the face ``x[face_axis] =
-    face_sign · h``: normal the face's, depth ``radius − height above the face`` (exact over the
-    face: the distance to a face is linear along the segment). Returns 1 if written (depth ≥
-    −margin), else 0."""
-    x = axpy(origin, s, direction)
-    height = face_sign * x[face_axis] - half_extents[face_axis]
-    depth = radius - height
-    if depth < -margin:
-        return 0
-    normal_local = unit_axis(face_axis, face_sign)
-    point = axpy(box_center, 1.0, rotate(box_rotation, axpy(x, -0.5 * (radius + height), normal_local)))
-    write_contact(
-        out_point, out_normal, out_depth, out_feature, slot, point, rotate(box_rotation, normal_local), depth, feature
-    )
-    return 1
-
-
-@njit(cache=True)
 def face_patch(
-    origin: np.ndarray,
-    direction: np.ndarray,
-    half_length: float,
-    radius: float,
+    segment: Segment,
     half_extents: np.ndarray,
     face_axis: int,
     face_sign: float,
     s_keep: float,
     margin: float,
     tol: float,
-    box_center: np.ndarray,
-    box_rotation: np.ndarray,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
+    frame: Frame,
+    out: ContactRows,
     slot: int,
 ) -> int:
-    """Contacts of the segment (box frame) against one box face: the two ends of the part of
-    the segment over the face (``s_keep``, unless nan, is kept inside that part), each with its
-    own depth; a part shorter than ``tol`` gives 1 contact at its deeper end.
+    """Contacts of the segment (``segment``, box frame, :data:`.segment_patch.Segment`) against
+    one box face ``x[face_axis] = face_sign · h``: the two ends of the part of the segment over
+    the face (``s_keep``, unless nan, is kept inside that part), each with its own depth; a part
+    shorter than ``tol`` gives 1 contact at its deeper end (:func:`.segment_patch.face_patch_ends`).
     Features ``2 · face + end``, ``face = 2 · face_axis + (face_sign > 0)``, ``end`` 0 at the
     low ``s`` end, 1 at the high one (a single point: the side of the capsule centre it is on).
     """
+    origin, direction, half_length, _ = segment
     lo, hi = face_interval(origin, direction, half_length, half_extents, face_axis, tol)
-    if s_keep == s_keep:  # not nan
-        lo = min(lo, s_keep)
-        hi = max(hi, s_keep)
-    if lo > hi:  # grazing a side of the face within round-off
-        lo = clamp(0.5 * (lo + hi), -half_length, half_length)
-        hi = lo
     face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
-    if hi - lo > tol:
-        count = face_contact(
-            origin,
-            direction,
-            lo,
-            radius,
-            half_extents,
-            face_axis,
-            face_sign,
-            2 * face,
-            margin,
-            box_center,
-            box_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot,
-        )
-        count += face_contact(
-            origin,
-            direction,
-            hi,
-            radius,
-            half_extents,
-            face_axis,
-            face_sign,
-            2 * face + 1,
-            margin,
-            box_center,
-            box_rotation,
-            out_point,
-            out_normal,
-            out_depth,
-            out_feature,
-            slot + count,
-        )
-        return count
-    # one point: the deeper end
-    if face_sign * direction[face_axis] * (hi - lo) < 0.0:
-        lo = hi
-    end = 1 if lo > 0.0 else 0
-    return face_contact(
-        origin,
-        direction,
-        lo,
-        radius,
-        half_extents,
-        face_axis,
-        face_sign,
-        2 * face + end,
-        margin,
-        box_center,
-        box_rotation,
-        out_point,
-        out_normal,
-        out_depth,
-        out_feature,
-        slot,
-    )
-
-
-@njit(cache=True)
-def write_patch_ends(
-    origin: np.ndarray,
-    direction: np.ndarray,
-    lo: float,
-    hi: float,
-    s: float,
-    depth: float,
-    slope: float,
-    radius_a: float,
-    normal_local: np.ndarray,
-    margin: float,
-    feature: int,
-    center: np.ndarray,
-    rotation: np.ndarray,
-    out_point: np.ndarray,
-    out_normal: np.ndarray,
-    out_depth: np.ndarray,
-    out_feature: np.ndarray,
-    slot: int,
-) -> int:
-    """The two ends s = lo, hi [m] of the part of capsule A's segment ``origin + s · direction``
-    (in the frame of B, at ``center`` (3,) [m] with ``rotation`` (3, 3)) that lies alongside an
-    edge of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end −
-    s)`` [m] from the depth at the closest point s, ends shallower than −margin left out;
-    features ``feature`` and ``feature + 1``. Shared by capsule–box and capsule–hull.
-    Returns how many it wrote from ``slot`` on."""
-    count = 0
-    for end in range(2):
-        s_end = lo if end == 0 else hi
-        depth_end = depth - slope * (s_end - s)
-        if depth_end >= -margin:
-            surface_a = axpy(axpy(origin, s_end, direction), -radius_a, normal_local)
-            write_local_contact(
-                axpy(surface_a, 0.5 * depth_end, normal_local),
-                normal_local,
-                depth_end,
-                feature + end,
-                center,
-                rotation,
-                out_point,
-                out_normal,
-                out_depth,
-                out_feature,
-                slot + count,
-            )
-            count += 1
-    return count
+    plane = (unit_axis(face_axis, face_sign), half_extents[face_axis])
+    return face_patch_ends(segment, lo, hi, s_keep, plane, face, margin, tol, frame, out, slot)
