@@ -191,8 +191,8 @@ def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_i
     assert chosen(4000) is None
     stepper = chosen(10**6)
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
-    assert stepper.flags[2:5] == (None, None, True)  # (velocity, impulse, projection)
-    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (True, True, None)
+    assert stepper.flags[2:5] == (None, None, True)  # (constraints, impulse, projection)
+    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (None, True, None)
     assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
     monkeypatch.undo()
     assert simulate(model, "projection", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]

@@ -154,8 +154,10 @@ def candidate_pairs(
     collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart).
     ``large``: as ``broad_phase.boxes_overlapping`` takes it."""
     lower, upper = _bounds(kinds, params, centers, rots, reach)
-    dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic], large)
     statics = static_pairs(lower, upper, kinds, params, dynamic)
+    if dynamic < 2:  # one body or none: its static pairs are all (no empty sweep, no copy a step)
+        return lower, upper, statics
+    dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic], large)
     pairs = np.empty((dynamic_pairs.shape[0] + statics.shape[0], 2), dtype=np.int64)
     count = 0
     for k in range(dynamic_pairs.shape[0]):

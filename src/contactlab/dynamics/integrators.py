@@ -82,8 +82,8 @@ def gyroscopic_midpoint(
     isotropic inertia, or at rest, keeps its ω (it has no gyroscopic torque); the others take
     ``newton_steps`` Newton steps on I(ω₂ − ω₁) + h ω̄ × Iω̄ = 0 in the body frame."""
     result = angular_velocity.copy()
-    jacobian = np.empty((3, 3))
-    residual = np.empty(3)
+    scratch = np.empty((4, 3))  # the Newton step's Jacobian (rows 0-2) and residual (row 3): one allocation
+    jacobian, residual = scratch[:3], scratch[3]
     for b in range(rotation.shape[0]):
         mean = (inertia[b, 0] + inertia[b, 1] + inertia[b, 2]) / 3.0
         spread = max(abs(inertia[b, 0] - mean), abs(inertia[b, 1] - mean), abs(inertia[b, 2] - mean))

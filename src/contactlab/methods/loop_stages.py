@@ -117,22 +117,53 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------
 
 
-@njit(cache=True)
+# The stages that take the LoopModel or the Motion whole are inlined into their callers (or
+# unpack them there and call a function of plain arrays): a call that passes a named tuple of
+# 17 arrays takes and releases a reference to each, which on a one-ball scene cost more than
+# the stage's arithmetic.
+
+
+@njit(cache=True, inline="always")
 def free_motion(
     model: LoopModel, motion: Motion, rotation: np.ndarray, h: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stage 1: velocities after h [s] under gravity alone, v* = v + h g (the gyroscopic term by the
     midpoint rule; pinned particles held): (body (B, 3), angular (B, 3), particle (P, 3))."""
-    body = motion.body_velocity + h * model.gravity
-    angular = gyroscopic_midpoint(rotation, model.body_inertia, motion.body_angular_velocity, h, 4)
-    particle = motion.particle_velocity + h * model.gravity
+    return _free_motion(
+        model.gravity,
+        model.body_inertia,
+        model.particle_pinned,
+        motion.body_velocity,
+        motion.body_angular_velocity,
+        motion.particle_velocity,
+        rotation,
+        h,
+    )
+
+
+@njit(cache=True)
+def _free_motion(gravity, inertia, pinned, body_velocity, angular_velocity, particle_velocity, rotation, h):
+    # element by element, not v + h g: the array expression allocates h g and broadcasts (the
+    # same sums)
+    body = np.empty_like(body_velocity)
+    _add_gravity(body, body_velocity, gravity, h)
+    angular = gyroscopic_midpoint(rotation, inertia, angular_velocity, h, 4)
+    particle = np.empty_like(particle_velocity)
+    _add_gravity(particle, particle_velocity, gravity, h)
     for p in range(particle.shape[0]):
-        if model.particle_pinned[p]:
+        if pinned[p]:
             particle[p, 0] = particle[p, 1] = particle[p, 2] = 0.0
     return body, angular, particle
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _add_gravity(out, velocity, gravity, h):
+    for n in range(velocity.shape[0]):
+        for i in range(3):
+            out[n, i] = velocity[n, i] + h * gravity[i]
+
+
+@njit(cache=True, inline="always")
 def swept_reach(
     model: LoopModel,
     body_velocity: np.ndarray,
@@ -143,10 +174,15 @@ def swept_reach(
 ) -> np.ndarray:
     """Stage 2: how far each collider reaches this step (N,) [m]: half the contact margin, plus
     for a dynamic one the distance it sweeps, h |v| (+ h |ω| r for a body's farthest point)."""
+    return _swept_reach(model.radius, body_velocity, angular_velocity, particle_velocity, h, margin)
+
+
+@njit(cache=True)
+def _swept_reach(radius, body_velocity, angular_velocity, particle_velocity, h, margin):
     B, P = body_velocity.shape[0], particle_velocity.shape[0]
-    reach = np.full(model.kinds.shape[0], 0.5 * margin)
+    reach = np.full(radius.shape[0], 0.5 * margin)
     for b in range(B):
-        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * model.radius[b])
+        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * radius[b])
     for p in range(P):
         reach[B + p] += h * _norm(particle_velocity[p])
     return reach
@@ -157,7 +193,7 @@ def _norm(v):
     return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def detect(
     model: LoopModel,
     plan: tuple,
@@ -182,18 +218,19 @@ def detect(
     _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
     total = model.kinds.shape[0]
     made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
-    if keeping is None:  # no pair keeps a manifold (reuse_or_generate would find none)
+    if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
+        return no_contacts(), made
+    # a branch of its own on ``keeping is None``: Numba prunes only that form, and the ball's
+    # loop then compiles no manifold reuse
+    if keeping is None:
         found = generate_contacts(
-            pairs,
-            model.kinds,
-            model.params,
-            centers,
-            rots,
-            reach[pairs[:, 0]] + reach[pairs[:, 1]],
-            hull_store,
-            families,
+            pairs, model.kinds, model.params, centers, rots, _pair_reach(pairs, reach), hull_store, families
         )
-    elif tolerance > 0.0:
+    elif not tolerance > 0.0:
+        found = generate_contacts(
+            pairs, model.kinds, model.params, centers, rots, _pair_reach(pairs, reach), hull_store, families
+        )
+    else:
         found, made = reuse_or_generate(
             pairs,
             model.kinds,
@@ -208,18 +245,9 @@ def detect(
             tolerance,
             total,
         )
-    else:
-        found = generate_contacts(
-            pairs,
-            model.kinds,
-            model.params,
-            centers,
-            rots,
-            reach[pairs[:, 0]] + reach[pairs[:, 1]],
-            hull_store,
-            families,
-        )
     point, normal, depth, feature, owner = found
+    if depth.shape[0] == 0:
+        return no_contacts(), made
     contacts = assemble_contacts(
         pairs[owner, 0],
         pairs[owner, 1],
@@ -235,6 +263,25 @@ def detect(
         total,
     )
     return contacts, made
+
+
+@njit(cache=True, inline="always")
+def _pair_reach(pairs, reach):
+    """The gap each pair's contacts may have (K,) [m]: its two colliders' reach summed."""
+    out = np.empty(pairs.shape[0])
+    for k in range(pairs.shape[0]):
+        out[k] = reach[pairs[k, 0]] + reach[pairs[k, 1]]
+    return out
+
+
+@njit(cache=True)
+def no_contacts() -> ContactArrays:
+    """The ContactArrays of no contact, from two empty arrays (every field a view of one): what
+    ``assemble_contacts`` gives for none, without its dozen allocations a step."""
+    real = np.empty((0, 3))
+    whole = np.empty((0, 3), dtype=np.int64)
+    flat, ids = real.reshape(0), whole.reshape(0)
+    return ContactArrays(ids, ids, whole, whole, real, real, real, real, flat, real, real, flat, flat, ids)
 
 
 @njit(cache=True)
@@ -350,7 +397,7 @@ def healthy(motion: Motion, max_speed: float) -> bool:
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def record(
     samples: Samples,
     row: int,
@@ -408,10 +455,15 @@ def record(
         model.cloth_of,
         large,
     )
-    depth = generate_contacts(
-        pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
-    )[2]
-    samples.max_penetration[row] = max(0.0, depth.max()) if depth.shape[0] else 0.0
-    samples.contact_count[row] = depth.shape[0] if contact_count < 0 else contact_count
+    deepest, found = 0.0, 0
+    if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
+        depth = generate_contacts(
+            pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
+        )[2]
+        found = depth.shape[0]
+        if found:
+            deepest = max(0.0, depth.max())
+    samples.max_penetration[row] = deepest
+    samples.contact_count[row] = found if contact_count < 0 else contact_count
     samples.solver_iterations[row] = sweeps
     samples.solver_residual[row] = change

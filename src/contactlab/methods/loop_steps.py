@@ -98,6 +98,7 @@ def targets(
     model: LoopModel,
     settings: LoopSettings,
     impulse: bool | None,
+    constraints: bool | None,
     contacts: ContactArrays,
     rows: ContactRows,
     u: np.ndarray,
@@ -106,7 +107,9 @@ def targets(
     """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
     none). Impulse: the collision waves (``impulse.resolve_collisions``) change u, then every
     contact rests (``resting_target``); constraints: all impacts at once (``normal_targets``).
-    ``impulse``: True for the impulse method, None for constraints (the other is not compiled)."""
+    ``impulse``, ``constraints``: True for that method, None for the other, whose branch is then
+    not compiled (one flag would not do: Numba prunes a branch on a flag typed None, never on one
+    typed bool)."""
     h = settings.dt
     gap_at_start = -contacts.depth
     gravity_normal = gravity_along_normals(
@@ -130,6 +133,8 @@ def targets(
             order,
         )
         return resting_targets(gap_at_start, h, settings.stabilization, settings.slop, settings.max_push_velocity), tau
+    if constraints is None:  # neither: no velocity method (never so; see ``compile_flags``)
+        raise ValueError("targets: neither impulse nor constraints")
     normal_velocity = row_products(rows, u)[:, 0]
     return impact_targets(
         gap_at_start,
@@ -144,7 +149,7 @@ def targets(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # into ``run``: no call that passes the model and the state whole
 def velocity_step(
     model: LoopModel,
     settings: LoopSettings,
@@ -152,6 +157,7 @@ def velocity_step(
     large: bool | None,
     keeping: bool | None,
     impulse: bool | None,
+    constraints: bool | None,
     slabs: bool | None,
     parallel: bool | None,
     motion: Motion,
@@ -160,10 +166,10 @@ def velocity_step(
     """One step of loop L3 with impulses or hard constraints on velocities.
 
     ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
-    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``slabs`` and ``parallel`` (True,
-    or None to leave a stage's branch uncompiled) as ``Stepper`` sets them. Returns (positions, velocities — the
-    state's six arrays, new —, the carried triple
-    for the next step, the ContactArrays, sweeps made, the sweeps' last change [m/s])."""
+    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``constraints``, ``slabs``
+    and ``parallel`` (True, or None to leave a stage's branch uncompiled) as ``Stepper`` sets them.
+    Returns (positions, velocities — the state's six arrays, new —, the carried triple for the
+    next step, the ContactArrays, sweeps made, the sweeps' last change [m/s])."""
     h = settings.dt
     rotation = rotations.matrices(motion.body_orientation)
     # 1. internal forces → free velocities v*
@@ -190,7 +196,7 @@ def velocity_step(
     rows = build_rows(model, contacts, motion, rotation)
     u = stacked(free[0], free[1], free[2])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    target, tau = targets(model, settings, impulse, contacts, rows, u, order)
+    target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
     impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
     # 5. recompute positions from the corrected velocities, split at the time of impact

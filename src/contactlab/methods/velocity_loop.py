@@ -90,7 +90,7 @@ def run(
     plan: tuple,
     large: bool | None,
     keeping: bool | None,
-    velocity: bool | None,
+    constraints: bool | None,
     impulse: bool | None,
     projection: bool | None,
     slabs: bool | None,
@@ -106,9 +106,9 @@ def run(
     samples: Samples,
     max_speed: float,
 ) -> tuple:
-    """``steps`` steps of ``velocity_step`` (``velocity`` True), ``projection_step``
+    """``steps`` steps of ``velocity_step`` (``constraints`` or ``impulse`` True), ``projection_step``
     (``projection`` True) or ``penalty_step`` (``penalty`` a PenaltyLoop) — exactly one of the
-    three flags is not None, and the steps whose flag is None are not compiled — from the state
+    four flags is not None, and the steps whose flag is None are not compiled — from the state
     ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after step i, a
     sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
     ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
@@ -129,9 +129,13 @@ def run(
             positions, velocities, carried, contacts, sweeps, change = projection_step(
                 model, settings, plan, large, keeping, slabs, parallel, motion, carried
             )
-        if velocity is not None:
+        if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
             positions, velocities, carried, contacts, sweeps, change = velocity_step(
-                model, settings, plan, large, keeping, impulse, slabs, parallel, motion, carried
+                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, carried
+            )
+        if impulse is not None:
+            positions, velocities, carried, contacts, sweeps, change = velocity_step(
+                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, carried
             )
         if penalty is not None:
             positions, velocities, carried, contacts, sweeps, change, elastic, implicit, linear = penalty_step(
@@ -160,14 +164,16 @@ KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")  # pai
 
 
 def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple:
-    """(large, keeping, velocity, impulse, projection, slabs, parallel): True, or None where the
+    """(large, keeping, constraints, impulse, projection, slabs, parallel): True, or None where the
     scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
     run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
     nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
     projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
     particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
-    velocity, impulse, projection: the method is impulse or constraints, impulse, projection
-    (penalty: all three None, its PenaltyLoop the flag after these);
+    constraints, impulse, projection: the method is constraints, impulse, projection (two flags
+    for the velocity methods, not one: Numba prunes only a branch whose flag is None, and an
+    impulse run then compiles none of what only constraints takes; penalty: all three None, its
+    PenaltyLoop the flag after these);
     slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
     several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
     from ..threads import available_threads
@@ -178,7 +184,7 @@ def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple
     return (
         True if dynamic >= GRID_FROM else None,
         True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
-        True if method in ("impulse", "constraints") else None,
+        True if method == "constraints" else None,
         True if method == "impulse" else None,
         True if method == "projection" else None,
         True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
