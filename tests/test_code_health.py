@@ -1,6 +1,9 @@
 """Issue 23: the habits of a maintained library, held by the suite — ruff's lint and format clean
-over src/ and tests/ (the settings in pyproject.toml)."""
+over src/ and tests/ (the settings in pyproject.toml), no module over 600 lines, and a module map
+(docs/modules.md) that names every module."""
 
+import fnmatch
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -8,6 +11,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src" / "contactlab"
+LONGEST_MODULE = 600  # lines: a module longer than this holds more than one concern (issue 23)
 
 
 def _ruff(*arguments):
@@ -24,3 +29,33 @@ def test_ruff_finds_nothing_to_lint():
 def test_ruff_finds_nothing_to_format():
     result = _ruff("format", "--check", "--no-cache")
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def _modules():
+    """Every module of the package but empty package markers, as paths relative to it."""
+    paths = (path for path in PACKAGE.rglob("*.py") if path.stat().st_size > 0)
+    return sorted(path.relative_to(PACKAGE).as_posix() for path in paths)
+
+
+def test_no_module_is_longer_than_six_hundred_lines():
+    lengths = {name: len((PACKAGE / name).read_text(encoding="utf-8").splitlines()) for name in _modules()}
+    assert len(lengths) > 100
+    assert {name: n for name, n in lengths.items() if n > LONGEST_MODULE} == {}
+
+
+def test_the_module_map_names_every_module():
+    # a module is named by its path, by its file name in a row about its folder, or by a pattern
+    # (`capsule*.py`) or a folder (`lcp/`) that covers it
+    names = re.findall(r"`([\w*./]+(?:\.py|/))`", (ROOT / "docs" / "modules.md").read_text(encoding="utf-8"))
+    files = [name for name in names if name.endswith(".py")]
+    folders = [name for name in names if name.endswith("/")]
+
+    def named(module):
+        if any(module.startswith(folder) for folder in folders if folder.count("/") == 1 and folder != "collision/"):
+            return True
+        return any(
+            fnmatch.fnmatch(module, pattern) or fnmatch.fnmatch(module.rsplit("/", 1)[-1], pattern) for pattern in files
+        )
+
+    assert len(files) > 50
+    assert [module for module in _modules() if not named(module)] == []
