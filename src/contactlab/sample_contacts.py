@@ -48,7 +48,8 @@ def state_at(arrays: Mapping[str, Any], sample: int) -> State:
     from .state import State
 
     row = read_trajectory(arrays, STATE_SERIES, [sample])
-    return State(float(row["time"][0]), *(np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]))
+    fields: dict[str, Any] = {name: np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]}
+    return State(float(row["time"][0]), **fields)
 
 
 def contacts_at(model: Model, summary: Mapping[str, Any], state: State) -> ContactView:

@@ -107,7 +107,7 @@ def open_runs(sources: Iterable[str | os.PathLike[str] | Run], field: str = "RUN
             model = getattr(source, "model", None) or model_of(summary, source.arrays)
             shown.append(Shown(_label(summary, "run"), source.arrays, summary, model))
             continue
-        for directory in run_folders(source, field):
+        for directory in run_folders(os.fspath(source), field):
             arrays, summary = load_run(directory, field)
             shown.append(
                 Shown(
