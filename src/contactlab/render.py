@@ -46,7 +46,7 @@ from tqdm import tqdm
 
 from . import interrupts, surfaces
 from .errors import InputError
-from .record import atomic_path, checked_times, make_folders, read_trajectory, remove_empty
+from .record import DRAWN, atomic_path, checked_times, make_folders, read_trajectory, remove_empty
 from .scenery import axis_limits, scenery, triangle_normals
 from .trajectory import check_arrays
 
@@ -62,21 +62,6 @@ BACKGROUND = "white"
 OBSTACLE_RGBA = (0.72, 0.72, 0.72, 0.3)
 PARTICLE_RGB = (0.15, 0.3, 0.6)
 STILL_SAMPLES = 600  # samples a still reads at most to frame its camera
-REQUIRED = (
-    "time",
-    "body_position",
-    "body_orientation",
-    "particle_position",
-    "particle_radius",
-    "particle_cloth",
-    "triangles",
-    "body_surface_vertices",
-    "body_surface_vertex_start",
-    "body_surface_triangles",
-    "body_surface_triangle_start",
-    "obstacle_vertices",
-    "obstacle_triangles",
-)
 
 
 # -- public API -------------------------------------------------------------------------
@@ -364,7 +349,7 @@ class _Picture:
         """``samples``: the samples (indices in increasing order) it may draw, the only ones read
         (None: all); draw(i) draws the i-th of them."""
         _, self.width, self.height, elevation, azimuth = check_settings(30, width, height, elevation, azimuth)
-        self.arrays = arrays = read_trajectory(arrays, REQUIRED, samples)
+        self.arrays = arrays = read_trajectory(arrays, DRAWN, samples)
         check_arrays(arrays)
         self.time = arrays["time"]
         self.light = _light_direction(elevation, azimuth)

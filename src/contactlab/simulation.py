@@ -12,7 +12,7 @@ import time
 import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numba.core import event as numba_event
@@ -224,46 +224,33 @@ def simulate(
             else streaming_recorder(model, record_every, trajectory, samples)
         )
         try:
-            return _record_run(
-                model,
-                module,
-                method,
-                dt,
-                steps,
-                options,
-                integrator,
-                recorder,
-                state,
-                progress,
-                scene_name,
-                chooser,
-                compiled_loop,
-                health,
-            )
+            plan = _Plan(model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop)
+            return _record_run(plan, recorder, state, chooser, health)
         except BaseException:
             if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
                 recorder.sink.discard()
             raise
 
 
-def _record_run(
-    model,
-    module,
-    method,
-    dt,
-    steps,
-    options,
-    integrator,
-    recorder,
-    state,
-    progress,
-    scene_name,
-    chooser,
-    compiled_loop,
-    health,
-):
+class _Plan(NamedTuple):
+    """What simulate() settled for the run, gathered so the stepping is handed it in one piece."""
+
+    model: Model
+    module: Any  # the method's module (contactlab.methods)
+    method: str
+    dt: float  # [s]
+    steps: int
+    options: Any  # the method's options dataclass
+    integrator: str
+    scene_name: str
+    progress: bool
+    compiled_loop: bool | None
+
+
+def _record_run(plan, recorder, state, chooser, health):
     """Step and record the run; the Run, or SimulationDiverged or Interrupted carrying it
     (``error.run``), the trajectory up to then included."""
+    model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop = plan
     compiling = numba_event.TimingListener()  # Numba's own clock of its compilations
     notice = FirstCompile()  # one line on stderr at the first compilation
     run_started = time.perf_counter()  # the run: its first sample, the steps, the other samples

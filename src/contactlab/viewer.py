@@ -46,8 +46,8 @@ from matplotlib import colormaps
 
 from . import interrupts
 from .errors import InputError
-from .record import read_trajectory
-from .render import OBSTACLE_RGBA, PARTICLE_RGB, REQUIRED, nearest, spread_samples
+from .record import DRAWN, read_trajectory
+from .render import OBSTACLE_RGBA, PARTICLE_RGB, nearest, spread_samples
 from .sample_contacts import contacts_at, state_at
 from .scenery import scenery
 from .trajectory import check_arrays
@@ -195,7 +195,7 @@ class Viewer:
     def _framing(run, count):
         """(lower (3,), upper (3,)) [m] of a run's content over its ``count`` samples, and its
         obstacles as (vertices (W, 3) [m], triangles (M, 3)), planes cut around the content."""
-        arrays = read_trajectory(run.arrays, REQUIRED, spread_samples(count))
+        arrays = read_trajectory(run.arrays, DRAWN, spread_samples(count))
         check_arrays(arrays)
         content, flat, _, solid = scenery(arrays)
         vertices = np.concatenate([solid.reshape(-1, 3), *flat])

@@ -41,12 +41,19 @@ if TYPE_CHECKING:
 
     from ..model import Model
 
+Springs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # what ``_springs`` gathers
 TINY_LENGTH = 1e-12  # m: a spring shorter than this has no direction; its axis is taken as zero
 
 
 def _axes(model, particle_position):
     """(length (S,) [m], u (S, 3)) of the springs at the given positions (P, 3) [m]."""
     return spring_axes(model.spring_particles, _float_rows(particle_position))
+
+
+def _springs(model):
+    """The model's spring arrays as the compiled kernels take them, gathered once: (particles (S, 2),
+    stiffness k (S,) [N/m], rest length L (S,) [m], damping c (S,) [N s/m])."""
+    return (model.spring_particles, model.spring_stiffness, model.spring_rest_length, model.spring_damping)
 
 
 def _float_rows(array):
@@ -78,9 +85,10 @@ def spring_axes(spring_particles: np.ndarray, particle_position: np.ndarray) -> 
 
 
 @njit(cache=True)
-def _tension(spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s):
-    """(k (l − L) + c (v_j − v_i)·u [N], u (3 floats)) of spring s; without the damping term
-    unless ``damped``."""
+def _tension(springs, particle_position, particle_velocity, damped, s):
+    """(k (l − L) + c (v_j − v_i)·u [N], u (3 floats)) of spring s of ``springs`` (``_springs``);
+    without the damping term unless ``damped``."""
+    spring_particles, stiffness, rest_length, damping = springs
     i, j = spring_particles[s, 0], spring_particles[s, 1]
     length, ux, uy, uz = _axis(particle_position, i, j)
     tension = stiffness[s] * (length - rest_length[s])
@@ -96,45 +104,30 @@ def _tension(spring_particles, stiffness, rest_length, damping, particle_positio
 
 @njit(cache=True)
 def tensions(
-    spring_particles: np.ndarray,
-    stiffness: np.ndarray,
-    rest_length: np.ndarray,
-    damping: np.ndarray,
-    particle_position: np.ndarray,
-    particle_velocity: np.ndarray,
-    damped: bool,
+    springs: Springs, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool
 ) -> np.ndarray:
-    """``spring_tensions`` on the model's spring arrays (S,): k (l − L) + c (v_j − v_i)·u [N]
-    (the damping term only if ``damped``; ``particle_velocity`` (P, 3) is not read otherwise)."""
-    S = spring_particles.shape[0]
+    """``spring_tensions`` on the model's spring arrays ``springs`` (``_springs``), (S,):
+    k (l − L) + c (v_j − v_i)·u [N] (the damping term only if ``damped``; ``particle_velocity``
+    (P, 3) is not read otherwise)."""
+    S = springs[0].shape[0]
     out = np.empty(S)
     for s in range(S):
-        out[s] = _tension(
-            spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s
-        )[0]
+        out[s] = _tension(springs, particle_position, particle_velocity, damped, s)[0]
     return out
 
 
 @njit(cache=True)
-def forces(
-    spring_particles: np.ndarray,
-    stiffness: np.ndarray,
-    rest_length: np.ndarray,
-    damping: np.ndarray,
-    particle_position: np.ndarray,
-    particle_velocity: np.ndarray,
-    damped: bool,
-) -> np.ndarray:
-    """``spring_forces`` on the model's spring arrays: f_i = tension · u on i, −f_i on j, summed
-    into (P, 3) [N] in one pass over the springs. The pulls on the i ends and on the j ends are
-    summed apart, in spring order, and subtracted at the end: a fixed order (reruns give the same
-    bits) that also matches the bincount sums of the NumPy version this replaced."""
+def forces(springs: Springs, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool) -> np.ndarray:
+    """``spring_forces`` on the model's spring arrays ``springs`` (``_springs``): f_i = tension · u
+    on i, −f_i on j, summed into (P, 3) [N] in one pass over the springs. The pulls on the i ends
+    and on the j ends are summed apart, in spring order, and subtracted at the end: a fixed order
+    (reruns give the same bits) that also matches the bincount sums of the NumPy version this
+    replaced."""
     P = particle_position.shape[0]
     on_i, on_j = np.zeros((P, 3)), np.zeros((P, 3))
+    spring_particles = springs[0]
     for s in range(spring_particles.shape[0]):
-        tension, ux, uy, uz = _tension(
-            spring_particles, stiffness, rest_length, damping, particle_position, particle_velocity, damped, s
-        )
+        tension, ux, uy, uz = _tension(springs, particle_position, particle_velocity, damped, s)
         i, j = spring_particles[s, 0], spring_particles[s, 1]
         on_i[i, 0] += tension * ux
         on_i[i, 1] += tension * uy
@@ -152,15 +145,7 @@ def spring_tensions(
     (positive when it pulls its ends together)."""
     x = _float_rows(particle_position)
     v = x if particle_velocity is None else _float_rows(particle_velocity)
-    return tensions(
-        model.spring_particles,
-        model.spring_stiffness,
-        model.spring_rest_length,
-        model.spring_damping,
-        x,
-        v,
-        particle_velocity is not None,
-    )
+    return tensions(_springs(model), x, v, particle_velocity is not None)
 
 
 def spring_forces(
@@ -172,15 +157,7 @@ def spring_forces(
         return np.zeros((len(particle_position), 3))
     x = _float_rows(particle_position)
     v = x if particle_velocity is None else _float_rows(particle_velocity)
-    return forces(
-        model.spring_particles,
-        model.spring_stiffness,
-        model.spring_rest_length,
-        model.spring_damping,
-        x,
-        v,
-        particle_velocity is not None,
-    )
+    return forces(_springs(model), x, v, particle_velocity is not None)
 
 
 @dataclass(frozen=True)
@@ -239,17 +216,12 @@ def pattern_values(slots: np.ndarray, blocks: np.ndarray, nnz: int) -> np.ndarra
 
 
 @njit(cache=True)
-def blocks_of(
-    spring_particles: np.ndarray,
-    stiffness: np.ndarray,
-    rest_length: np.ndarray,
-    damping: np.ndarray,
-    particle_position: np.ndarray,
-    clamp_compressed: bool,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``jacobian_blocks`` on the model's spring arrays (S,): K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ)
-    and D_s = c u uᵀ (S, 3, 3), written as k (u uᵀ + (1 − L/l)(I − u uᵀ)); 1 − L/l is 0 for a
-    spring without direction and clamped at 0 if ``clamp_compressed``."""
+def blocks_of(springs: Springs, particle_position: np.ndarray, clamp_compressed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``jacobian_blocks`` on the model's spring arrays ``springs`` (``_springs``), (S,):
+    K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ) and D_s = c u uᵀ (S, 3, 3), written as
+    k (u uᵀ + (1 − L/l)(I − u uᵀ)); 1 − L/l is 0 for a spring without direction and clamped at 0
+    if ``clamp_compressed``."""
+    spring_particles, stiffness, rest_length, damping = springs
     S = spring_particles.shape[0]
     K, D = np.empty((S, 3, 3)), np.empty((S, 3, 3))
     for s in range(S):
@@ -272,14 +244,7 @@ def jacobian_blocks(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
-    return blocks_of(
-        model.spring_particles,
-        model.spring_stiffness,
-        model.spring_rest_length,
-        model.spring_damping,
-        _float_rows(particle_position),
-        clamp_compressed,
-    )
+    return blocks_of(_springs(model), _float_rows(particle_position), clamp_compressed)
 
 
 @njit(cache=True)
