@@ -352,6 +352,11 @@ class Stepper:
             max_speed,
         )
 
+    @property
+    def parallel(self) -> bool:
+        """Whether this run's loop has a parallel sweep compiled in (``compile_flags``' parallel)."""
+        return self.flags[6] is not None
+
     def compiled_already(self) -> bool:
         """Whether ``run`` has machine code for this run's argument types, in memory or in Numba's
         disk cache: stepping through the loop then costs no compilation (see ``stepper_for``)."""
