@@ -147,6 +147,30 @@ def test_a_fixed_count_is_set_before_every_step_and_never_tried_otherwise(fake):
     assert fake.current == 2  # the process's count put back
 
 
+def test_auto_makes_no_trials_where_nothing_runs_in_parallel(fake):
+    chooser = threads.ThreadChooser("auto", trial_steps=4, hold_steps=10)
+    chooser.nothing_parallel()
+    assert chooser.steps_at_this_count() is None  # no report due: the loop may run the whole run
+    drive(chooser, fake, {1: 0.01, 2: 0.001}, 20)  # two threads "faster": never tried
+    assert fake.history == [1] * 20
+    fixed = threads.ThreadChooser(2)
+    fixed.nothing_parallel()  # a count asked for is kept
+    drive(fixed, fake, {1: 0.01, 2: 0.01}, 3)
+    assert fake.history[20:] == [2] * 3
+
+
+@TWO_THREADS
+def test_a_small_scene_in_the_compiled_loop_runs_on_one_thread_without_trials():
+    from contactlab import ModelBuilder
+
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
+    run = simulate(b.finalize(), "impulse", 0.01, 0.5, compiled_loop=True, threads="auto")
+    assert run.summary["compiled_loop"]
+    assert run.summary["threads"]["steps_at"] == {"1": 50}
+
+
 def test_the_command_line_takes_a_thread_count_and_refuses_a_bad_one(tmp_path):
     from test_cli import contactlab
 

@@ -255,6 +255,8 @@ def _record_run(plan, recorder, state, chooser, health):
     notice = FirstCompile()  # one line on stderr at the first compilation
     run_started = time.perf_counter()  # the run: its first sample, the steps, the other samples
     stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
+    if stepper is not None and not stepper.parallel:
+        chooser.nothing_parallel()  # a small scene's loop: no thread trials, no chunks cut short by them
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
         if stepper is None:
             recorder.sample(state)  # its collide() compiles the collision kernels first
@@ -468,6 +470,10 @@ def _advance(bar, step_index, made):
 
 
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
+# the next chunk at most this many times the last: its pace, measured on few steps, may be off,
+# but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
+# scene (a few µs a step) should reach its full chunk in few calls (1, 1, 16, 256, …)
+CHUNK_GROWTH = 16
 WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
@@ -501,7 +507,7 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
                 recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
             raise _Stopped(violation, state)
         if step_index > 1:  # the next chunk: about CHUNK_SECONDS of steps at this pace
-            chunk = max(1, min(2 * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
+            chunk = max(1, min(CHUNK_GROWTH * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         _advance(bar, step_index, made)
         step_index += made
     tally.take(stepper)

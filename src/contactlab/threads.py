@@ -13,6 +13,8 @@ descheduled at every barrier and two threads run 2–3× *slower* than one (meas
 66–68 steps/s). So the default, ``threads="auto"``, measures: :class:`ThreadChooser` times a
 few steps on all the threads and a few on one, keeps the faster, and checks again later
 (sooner when the verdict changes), so a run follows the load of the machine it runs on.
+A run of the compiled loop with no parallel sweep compiled in (a small scene) makes no trials:
+:meth:`ThreadChooser.nothing_parallel`.
 
 Set the count with ``simulate(..., threads=N)``, ``contactlab run --threads N``, or for every
 run of the process with :func:`set_threads`. The most threads there can be is fixed when
@@ -118,8 +120,18 @@ class ThreadChooser:
         self._current: int = self.most if self.mode == AUTO else self.mode  # type: ignore[assignment]  # an int
         self._verdict = None
         self._saved = numba.get_num_threads()
-        if self.mode == AUTO and self.most > 1:
+        self._auto = self.mode == AUTO and self.most > 1  # trials to run, verdicts to hold
+        if self._auto:
             self._start_trial()
+
+    def nothing_parallel(self) -> None:
+        """Tell the chooser the run has no parallel loop (the compiled loop without one, see
+        ``velocity_loop.compile_flags``): in "auto" mode it then makes no trials, which would time
+        the same code on both counts, and runs every step on one thread; a fixed count is kept."""
+        if self.mode == AUTO:
+            self._auto = False
+            self._plan = []
+            self._current = 1
 
     def _start_trial(self):
         self._plan = [1] * self.trial_steps + [self.most] * self.trial_steps
@@ -138,7 +150,7 @@ class ThreadChooser:
         the hold in "auto" mode, else any number (None)."""
         if self._plan:
             return 1
-        if self.mode == AUTO and self.most > 1:
+        if self._auto:
             return max(1, self._held)
         return None
 
@@ -147,7 +159,7 @@ class ThreadChooser:
         if self._plan or count == 1:
             self.after_step(seconds / count)
             return
-        if self.mode == AUTO and self.most > 1:
+        if self._auto:
             self._held -= count
             if self._held <= 0:
                 self._start_trial()
@@ -162,7 +174,7 @@ class ThreadChooser:
                 self._plan = []
             if not self._plan:
                 self._decide()
-        elif self.mode == AUTO and self.most > 1:
+        elif self._auto:
             self._held -= 1
             if self._held <= 0:
                 self._start_trial()

@@ -323,8 +323,10 @@ class Stepper:
     ) -> tuple[int, bool, dict[str, np.ndarray]]:
         """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
         state blew up — see ``run`` —, the Samples recorded as a dict of the series)."""
-        indices = np.arange(first_index, first_index + steps)
-        count = int(np.count_nonzero((indices % record_every == 0) | (indices == last_index)))
+        end = first_index + steps - 1  # the last index of these steps; indices start at 1
+        count = end // record_every - (first_index - 1) // record_every  # the multiples of record_every
+        if first_index <= last_index <= end and last_index % record_every:
+            count += 1  # the run's last step, sampled too
         samples = self.samples_for(count)
         made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(
             *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
@@ -333,7 +335,10 @@ class Stepper:
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
         self.linear_iterations_made += linear
-        return made, diverged, {name: array[:written] for name, array in samples._asdict().items()}
+        series = samples._asdict()
+        if written < count:  # stopped early: the rows written only
+            series = {name: array[:written] for name, array in series.items()}
+        return made, diverged, series
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
         return (
@@ -351,6 +356,11 @@ class Stepper:
             samples,
             max_speed,
         )
+
+    @property
+    def parallel(self) -> bool:
+        """Whether this run's loop has a parallel sweep compiled in (``compile_flags``' parallel)."""
+        return self.flags[6] is not None
 
     def compiled_already(self) -> bool:
         """Whether ``run`` has machine code for this run's argument types, in memory or in Numba's
