@@ -322,3 +322,32 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
     assert len(calls) >= 3
     assert capsys.readouterr().err.count(NOTICE) == 1
     assert run.summary["compile_seconds"] >= 0.4
+
+
+def test_compiling_in_the_plausibility_check_is_said_and_counted(monkeypatch, capsys):
+    """The plausibility check's collide() on the initial state is the first to need the collision
+    kernels: on an empty cache it compiles them before the first sample. The notice comes then,
+    and compile_seconds and wall_seconds both count it."""
+    import time
+
+    from numba.core import event
+
+    from contactlab import plausibility
+
+    real = plausibility.warnings_for
+
+    def compiling_check(*args):
+        with event.trigger_event("numba:compile", data={}):
+            time.sleep(0.3)
+        return real(*args)
+
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
+    model = b.finalize()
+    simulate(model, "impulse", dt=0.01, duration=0.05)  # compiles or loads the run's kernels
+    capsys.readouterr()
+    monkeypatch.setattr(plausibility, "warnings_for", compiling_check)
+    run = simulate(model, "impulse", dt=0.01, duration=0.05)
+    assert capsys.readouterr().err.count(NOTICE) == 1
+    assert run.summary["compile_seconds"] >= 0.3
+    assert run.summary["wall_seconds"] >= run.summary["compile_seconds"]

@@ -214,8 +214,12 @@ def simulate(
                 "trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}"
             )
         samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
-        for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
-            warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=2)
+        # the run's clock and compile tally start here: the plausibility check's collide() is the
+        # first to need the collision kernels, and compiles them on an empty cache
+        clock = _Clock(numba_event.TimingListener(), FirstCompile(), time.perf_counter())
+        with numba_event.install_listener("numba:compile", clock.compiling), compile_notice(clock.notice):
+            for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
+                warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=2)
         advice = getattr(module, "divergence_advice", None)
         health = Health(model, state, dt, advice(model, dt, options, integrator) if advice else None, allow_divergence)
         recorder = (
@@ -225,11 +229,20 @@ def simulate(
         )
         try:
             plan = _Plan(model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop)
-            return _record_run(plan, recorder, state, chooser, health)
+            return _record_run(plan, recorder, state, chooser, health, clock)
         except BaseException:
             if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
                 recorder.sink.discard()
             raise
+
+
+class _Clock(NamedTuple):
+    """What times a run from its first compilation on: Numba's compile events, the notice they
+    print once, and the wall clock's start [s, time.perf_counter]."""
+
+    compiling: numba_event.TimingListener
+    notice: FirstCompile
+    started: float
 
 
 class _Plan(NamedTuple):
@@ -247,13 +260,12 @@ class _Plan(NamedTuple):
     compiled_loop: bool | None
 
 
-def _record_run(plan, recorder, state, chooser, health):
+def _record_run(plan, recorder, state, chooser, health, clock):
     """Step and record the run; the Run, or SimulationDiverged or Interrupted carrying it
-    (``error.run``), the trajectory up to then included."""
+    (``error.run``), the trajectory up to then included. ``clock``: a ``_Clock`` started
+    before the run's first collision (the plausibility check's)."""
     model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop = plan
-    compiling = numba_event.TimingListener()  # Numba's own clock of its compilations
-    notice = FirstCompile()  # one line on stderr at the first compilation
-    run_started = time.perf_counter()  # the run: its first sample, the steps, the other samples
+    compiling, notice, run_started = clock  # the run: its first sample, the steps, the other samples
     stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
     if stepper is not None and not stepper.parallel:
         chooser.nothing_parallel()  # a small scene's loop: no thread trials, no chunks cut short by them
