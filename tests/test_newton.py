@@ -139,6 +139,18 @@ def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
     np.testing.assert_allclose(u[sliding, 0], 0.0, atol=1e-8 * scale)  # Coulomb: u_N = 0, not μ‖u_T‖
 
 
+@pytest.mark.parametrize("radius", [1e-200, 1e-300, np.finfo(float).tiny])
+def test_a_friction_disk_far_smaller_than_the_pull_gives_the_point_against_it(radius):
+    """μ r_N tiny against ‖b‖ / ‖A‖: the minimizer of ½ xᵀA x + bᵀx over ‖x‖ ≤ radius is
+    −radius b/‖b‖ + O(radius²). The Moré-Sorensen iteration's x ≈ −b/ν underflows there (it
+    divided by zero, which Hypothesis found through μ = 2.2e-308 in a Newton watchdog sweep)."""
+    from contactlab.lcp.friction import _disk_solve
+
+    b = np.array([1.0, -0.5])
+    x = np.array(_disk_solve(2.0, 1.0, 1.0, 2.0, b[0], b[1], radius))
+    np.testing.assert_allclose(x / radius, -b / np.linalg.norm(b), rtol=1e-12)
+
+
 # ------------------------------------------------------------------------------- property
 
 

@@ -184,9 +184,15 @@ def _disk_solve(a00, a01, a10, a11, b1, b2, radius):
         x1 = -(m11 * b1 - a01 * b2) / d
         x2 = -(-a10 * b1 + m00 * b2) / d
         nx = math.sqrt(x1 * x1 + x2 * x2)
-        phi = 1.0 / nx - 1.0 / radius
         if abs(nx - radius) <= 1e-15 * radius:
             break
+        if nx * nx == 0.0:
+            # ν so large that x ≈ −b/ν underflowed (a disk far smaller than ‖b‖ / ‖A‖, say
+            # μ r_N near the smallest normal float): x(ν) → −radius b/‖b‖ as ν → ∞
+            x1 = -radius * b1 / norm_b
+            x2 = -radius * b2 / norm_b
+            break
+        phi = 1.0 / nx - 1.0 / radius
         if phi < 0.0:
             lo = nu
         else:
