@@ -139,12 +139,14 @@ def test_newton_meets_the_coulomb_conditions_on_sliding_contacts(rng):
     np.testing.assert_allclose(u[sliding, 0], 0.0, atol=1e-8 * scale)  # Coulomb: u_N = 0, not μ‖u_T‖
 
 
-@pytest.mark.parametrize("radius", [1e-200, 1e-300, np.finfo(float).tiny])
+@pytest.mark.parametrize("radius", [1e-200, 1e-300, np.finfo(float).tiny, 2.4e-309, 1e-310])
 def test_a_friction_disk_far_smaller_than_the_pull_gives_the_point_against_it(radius):
     """μ r_N tiny against ‖b‖ / ‖A‖: the minimizer of ½ xᵀA x + bᵀx over ‖x‖ ≤ radius is
-    −radius b/‖b‖ + O(radius²). The Moré-Sorensen iteration's x ≈ −b/ν underflows there (it
-    divided by zero, which Hypothesis found through μ = 2.2e-308 in a Newton watchdog sweep)."""
-    from contactlab.lcp.friction import _disk_solve
+    −radius b/‖b‖ + O(radius²). The Moré-Sorensen iteration's x ≈ −b/ν underflowed there (it
+    divided by zero, which Hypothesis found through μ = 2.2e-308 in a Newton watchdog sweep), and
+    for a subnormal radius 1/radius overflowed and it returned NaN. Subnormal radii keep 44 bits
+    or more here, so rtol 1e-12 still holds."""
+    from contactlab.lcp.disk import _disk_solve
 
     b = np.array([1.0, -0.5])
     x = np.array(_disk_solve(2.0, 1.0, 1.0, 2.0, b[0], b[1], radius))
@@ -169,6 +171,48 @@ def test_random_positive_definite_problems_meet_cone_and_complementarity(nc, dat
     assert res.converged, res.message
     violations, scale = coulomb_violations(W, q, mu, res.r)
     assert max(violations.values()) <= 1e-8 * scale, violations
+
+
+def _hypothesis_tiny_mu_problem():
+    """W (9, 9) and q (9,) of the example Hypothesis drew for the property test below (with
+    μ = (2.2e-308, 2.2e-308, 2)). For μ_0 = μ_1 = 0 the answer is r = (1/9, 0, …, 0): contact 0
+    closes (u_N = 9 r_N − 1 = 0), contacts 1 and 2 stay open (u_N = 8/9 and 7/9 − 1/2 > 0)."""
+    G = np.ones((9, 9))
+    G[0, 0] = 0.0
+    G[6, 1] = 0.0
+    return G @ G.T + np.eye(9), np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("method", ["newton", "nsgs"])
+def test_friction_coefficient_at_the_smallest_normal_float_converges(method):
+    # μ r_N was subnormal, the disk solve's 1/(μ r_N) overflowed and it returned NaN: nsgs stalled
+    # at the error 0.94 with contact 0 left at r = 0, and Newton's watchdog sweeps (Newton cycles
+    # between two regimes on this problem, with μ = 0 too) fed it NaN (stopped at 1e-2)
+    W, q = _hypothesis_tiny_mu_problem()
+    mu = np.array([np.finfo(float).tiny, np.finfo(float).tiny, 2.0])
+    res = solve_friction_contact(W, q, mu, method=method, tol=1e-10, max_iterations=500)
+    assert res.converged, res.message
+    violations, scale = coulomb_violations(W, q, mu, res.r)
+    assert max(violations.values()) <= 1e-8 * scale, violations
+    np.testing.assert_allclose(res.r, np.eye(9)[0] / 9.0, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["newton", "nsgs"])
+@pytest.mark.parametrize("tiny", [1e-300, np.finfo(float).tiny, 1e-310, 5e-324])
+def test_a_tiny_friction_coefficient_solves_like_none(rng, method, tiny):
+    """Coulomb's law is continuous in μ: a friction coefficient of 1e-300 (or a subnormal one)
+    gives the frictionless answer to within the tolerance, on the problem above and on a random
+    one with every other contact (nearly) frictionless."""
+    W, q = _hypothesis_tiny_mu_problem()
+    problems = [(W, q, np.array([0.0, 0.0, 2.0]))]
+    W, q, mu = frictional_contacts(rng, 10, 8, 1e-2)
+    mu[::2] = 0.0
+    problems.append((W, q, mu))
+    for W, q, mu in problems:
+        none = solve_friction_contact(W, q, mu, method=method, tol=1e-10, max_iterations=1000)
+        little = solve_friction_contact(W, q, np.where(mu == 0.0, tiny, mu), method=method, tol=1e-10)
+        assert none.converged and little.converged, (none.message, little.message)
+        np.testing.assert_allclose(little.r, none.r, rtol=0, atol=1e-10 * np.abs(none.r).max())
 
 
 # ------------------------------------------------------------------------------- options

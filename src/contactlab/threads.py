@@ -2,9 +2,9 @@
 
 Only one kind of loop in contactlab runs on several threads: a Gauss-Seidel sweep over a
 thousand contacts or more, split into slabs that share no body (``methods.sequential``;
-``lcp.pgs.red_black`` likewise). The split is fixed by the contacts, not by the thread count,
-so a run gives the same numbers, bit for bit, on one thread as on many: the thread count is
-a matter of speed only, and can change at any step.
+``lcp.pgs.projected_sweeps`` likewise). The split is fixed by the contacts, not by the thread
+count, so a run gives the same numbers, bit for bit, on one thread as on many: the thread count
+is a matter of speed only, and can change at any step.
 
 Whether the threads pay depends on the machine *now*. A sweep ends at a barrier, and a step
 makes up to a hundred sweeps; on an idle 2-core machine two threads step the 1000-sphere pile

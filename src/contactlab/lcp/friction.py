@@ -16,7 +16,8 @@ Solvers (all sweeps compiled with Numba, ``cache=True``):
 * ``nsgs`` — non-smooth Gauss-Seidel, SPEC F4a: for each contact in turn, its normal component is
   solved exactly (others fixed) and projected on r_N ≥ 0, then right after its friction is solved
   exactly on the 3×3 diagonal block ``W_αα`` with the new r_N: the 2-D minimization over the disk
-  (by the secular equation ``‖(W_TT + νI)⁻¹ b‖ = μ r_N``, ν ≥ 0) for ``friction_model="cone"``, or
+  (by the secular equation ``‖(W_TT + νI)⁻¹ b‖ = μ r_N``, ν ≥ 0, :mod:`contactlab.lcp.disk`) for
+  ``friction_model="cone"``, or
   over the inscribed square ``|r_Ti| ≤ μ r_N / √2`` (corners on the circle, so it never allows more
   friction than the cone) for ``friction_model="pyramid"``, by projected coordinate steps.
 * ``staggered`` — SPEC F4b: all normal components with the frictions fixed (projected
@@ -56,6 +57,7 @@ from numba import njit
 
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
+from .disk import _disk_solve
 
 FRICTION_METHODS = ("nsgs", "staggered", "apgd", "newton")
 OPERATOR_METHODS = ("apgd",)  # those that need W only as products W x
@@ -142,77 +144,6 @@ def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
     if scale <= 0.0:
         scale = 1.0
     return math.sqrt(total) / scale
-
-
-@njit(cache=True)
-def _disk_solve(a00, a01, a10, a11, b1, b2, radius):
-    """Minimizer of ½ xᵀ A x + bᵀ x over ‖x‖ ≤ radius (A 2×2, symmetric part PSD): returns (x1, x2).
-
-    Unconstrained if that lies in the disk, else (A + νI) x = −b with ν > 0 chosen by safeguarded
-    Newton on 1/‖x(ν)‖ − 1/radius (Moré-Sorensen)."""
-    if radius <= 0.0:
-        return 0.0, 0.0
-    norm_b = math.sqrt(b1 * b1 + b2 * b2)
-    if norm_b == 0.0:
-        return 0.0, 0.0
-    scale = abs(a00) + abs(a11) + abs(a01) + abs(a10)
-    det = a00 * a11 - a01 * a10
-    if det > 1e-13 * scale * scale:
-        x1 = -(a11 * b1 - a01 * b2) / det
-        x2 = -(-a10 * b1 + a00 * b2) / det
-        if x1 * x1 + x2 * x2 <= radius * radius:
-            return x1, x2
-    # smallest eigenvalue of the symmetric part, to bound ν from above
-    s01 = 0.5 * (a01 + a10)
-    half_tr = 0.5 * (a00 + a11)
-    low_eig = half_tr - math.sqrt(0.25 * (a00 - a11) ** 2 + s01 * s01)
-    lo = max(0.0, -low_eig)
-    hi = norm_b / radius + max(0.0, -low_eig) * 2.0 + 1e-300
-    nu = lo
-    x1 = 0.0
-    x2 = 0.0
-    for _ in range(100):
-        if nu <= lo or nu >= hi:
-            nu = 0.5 * (lo + hi)
-        m00 = a00 + nu
-        m11 = a11 + nu
-        d = m00 * m11 - a01 * a10
-        if d <= 0.0:
-            lo = nu
-            nu = 0.5 * (lo + hi)
-            continue
-        x1 = -(m11 * b1 - a01 * b2) / d
-        x2 = -(-a10 * b1 + m00 * b2) / d
-        nx = math.sqrt(x1 * x1 + x2 * x2)
-        if abs(nx - radius) <= 1e-15 * radius:
-            break
-        if nx * nx == 0.0:
-            # ν so large that x ≈ −b/ν underflowed (a disk far smaller than ‖b‖ / ‖A‖, say
-            # μ r_N near the smallest normal float): x(ν) → −radius b/‖b‖ as ν → ∞
-            x1 = -radius * b1 / norm_b
-            x2 = -radius * b2 / norm_b
-            break
-        phi = 1.0 / nx - 1.0 / radius
-        if phi < 0.0:
-            lo = nu
-        else:
-            hi = nu
-        # dx/dν = −(A + νI)⁻¹ x
-        y1 = -(m11 * x1 - a01 * x2) / d
-        y2 = -(-a10 * x1 + m00 * x2) / d
-        dnx = (x1 * y1 + x2 * y2) / nx
-        dphi = -dnx / (nx * nx)
-        if dphi > 0.0:
-            nu = nu - phi / dphi
-        else:
-            nu = 0.5 * (lo + hi)
-        if hi - lo <= 1e-16 * max(hi, 1e-300):
-            break
-    nx = math.sqrt(x1 * x1 + x2 * x2)
-    if nx > radius and nx > 0.0:
-        x1 *= radius / nx
-        x2 *= radius / nx
-    return x1, x2
 
 
 @njit(cache=True)

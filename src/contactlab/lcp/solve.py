@@ -125,7 +125,7 @@ def solve_lcp(
         permuted = csr[order][:, order].tocsr()
         permuted.sort_indices()
         lam_permuted = np.ascontiguousarray(lam[order])
-        iterations, residual = _kernels.red_black(
+        iterations, residual = _kernels.projected_sweeps(
             permuted.indptr.astype(np.int64),
             permuted.indices.astype(np.int64),
             permuted.data,
@@ -135,14 +135,16 @@ def solve_lcp(
             omega,
             tol,
             max_iterations,
-            np.arange(n, dtype=np.int64),
             color_start,
             REDBLACK_MIN_PARALLEL_ROWS,
+            False,
         )
         lam[order] = lam_permuted
     else:
-        iterations, residual = _kernels.gauss_seidel(
-            indptr, indices, data, diag, c, lam, omega, tol, max_iterations, method == "jacobi"
+        # one color of coupled rows, never split across threads: the sequential sweep
+        one_color = np.array([0, n], dtype=np.int64)
+        iterations, residual = _kernels.projected_sweeps(
+            indptr, indices, data, diag, c, lam, omega, tol, max_iterations, one_color, n + 1, method == "jacobi"
         )
     w = csr @ lam - c
     residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))
