@@ -385,70 +385,58 @@ def free_velocities(
     state: State,
     dt: float,
     integrator: str = "symplectic_euler",
-    body_force: np.ndarray | None = None,
-    body_torque: np.ndarray | None = None,
-    particle_force: np.ndarray | None = None,
     linear_solver: str = "cg",
     linear_tolerance: float = 1e-6,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
+    """Velocities after dt under gravity, cloth springs and the scene's external forces, without
+    contacts.
 
-    body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
     Bodies: see ``body_free_velocities``. Particles: explicit and symplectic Euler add
-    h M⁻¹ (m g + f_springs(x, v) + particle_force); backward Euler solves ``particle_system``
+    h M⁻¹ (m g + f_springs(x, v)); backward Euler solves ``particle_system``
     (springs implicit) with ``solve_particle_system`` (``linear_solver`` "cg" or "direct",
     ``linear_tolerance``). Pinned particles get zero velocity. Returns (body_velocity (B,3),
     body_angular_velocity (B,3), particle_velocity (P,3)).
     """
     g = model.gravity
     if model.spring_count and integrator == "backward_euler":
-        system = particle_system(model, state, dt, particle_force)
+        system = particle_system(model, state, dt)
         particle_velocity = state.particle_velocity + solve_particle_system(
             system, model, linear_tolerance, linear_solver
         )
     else:
         particle_velocity = state.particle_velocity + dt * g
-        if particle_force is not None:
-            particle_velocity += dt * particle_force * model.particle_inverse_mass[:, None]
         if model.spring_count:
             springs = spring_forces(model, state.particle_position, state.particle_velocity)
             particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
     if model.particle_pinned.any():
         particle_velocity[model.particle_pinned] = 0.0
-    return (*body_free_velocities(model, state, dt, integrator, body_force, body_torque), particle_velocity)
+    return (*body_free_velocities(model, state, dt, integrator), particle_velocity)
 
 
-# Deliberately free_velocities' first parameters again: this is its rigid-body part, which the
-# constraints method calls alone (its particles are solved with the contacts).
 def body_free_velocities(
-    model: Model,
-    state: State,
-    dt: float,
-    integrator: str = "symplectic_euler",
-    body_force: np.ndarray | None = None,
-    body_torque: np.ndarray | None = None,
+    model: Model, state: State, dt: float, integrator: str = "symplectic_euler"
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rigid bodies' part of ``free_velocities``: (body_velocity (B,3) [m/s],
-    body_angular_velocity (B,3) [rad/s]) after dt under gravity and the optional body_force,
-    body_torque (B, 3) [N], [N m]. The gyroscopic term is explicit under explicit Euler and
-    implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
+    """The rigid bodies' part of ``free_velocities`` (the constraints method calls it alone: its
+    particles are solved with the contacts): (body_velocity (B,3) [m/s], body_angular_velocity
+    (B,3) [rad/s]) after dt under gravity. The gyroscopic term is explicit under explicit Euler
+    and implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
     bodies move as symplectic Euler's.
 
-    A driven model (``model.drive``, contactlab.driving) adds its external forces and torques at
-    the step's start time ``state.time`` to the given ones, and gives each kinematic body the
+    A driven model (``model.drive``, contactlab.driving) adds its external forces and torques
+    [N], [N m] at the step's start time ``state.time``, and gives each kinematic body the
     velocity that carries it onto its path over the step (their inverse mass is 0: gravity and
-    forces do not move them)."""
+    forces do not move them). External forces reach the bodies only this way
+    (``ModelBuilder.add_force``)."""
     drive = model.drive
-    if drive is not None and drive.has_loads:
-        force, torque = drive.loads(state.time)
-        body_force = force if body_force is None else body_force + force
-        body_torque = torque if body_torque is None else body_torque + torque
+    loads = drive is not None and drive.has_loads
+    if loads:
+        body_force, body_torque = drive.loads(state.time)
     body_velocity = state.body_velocity + dt * model.gravity
-    if body_force is not None:
+    if loads:
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
     gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
     angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
-    if body_torque is not None:
+    if loads:
         inv = world_inverse_inertia(model, state.body_orientation)
         angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
     if drive is not None and drive.kinematic.any():
