@@ -255,14 +255,7 @@ def solve_coupled(
     iterations, converged = 0, False
     if solver == "cg":
         delta, iterations, converged = conjugate_gradients(
-            A.indptr.astype(np.int64),
-            A.indices.astype(np.int64),
-            np.ascontiguousarray(A.data, dtype=np.float64),
-            np.ascontiguousarray(rhs, dtype=np.float64),
-            delta,
-            coupled,
-            tolerance,
-            max(100, int(coupled.sum())),
+            A, rhs, delta, coupled, tolerance, max(100, int(coupled.sum()))
         )
     if not converged:
         dofs = np.nonzero(coupled)[0]
@@ -270,24 +263,26 @@ def solve_coupled(
     return delta, iterations
 
 
-@njit(cache=True)
 def conjugate_gradients(
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    data: np.ndarray,
-    rhs: np.ndarray,
-    guess: np.ndarray,
-    active: np.ndarray,
-    tolerance: float,
-    most: int,
+    matrix: sp.spmatrix, rhs: np.ndarray, guess: np.ndarray, active: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, int, bool]:
-    """A x = rhs on the ``active`` (N,) bool rows and columns of the CSR matrix A (``indptr``
-    (N + 1,), ``indices``, ``data`` (nnz,)) by conjugate gradients with the Jacobi preconditioner
-    diag(A), from ``guess`` (N,) (whose other entries are returned as they are), until
-    |r| < tolerance |rhs| over the active rows or ``most`` iterations (the stopping rule of
-    SciPy's ``cg`` with atol = 0), on the active part taken out as a compact CSR matrix once. One
-    thread, sums in index order: the same bits on every rerun. Returns (x (N,), iterations,
-    converged)."""
+    """A x = rhs on the ``active`` (N,) bool rows and columns of the sparse matrix A (N, N) by
+    conjugate gradients with the Jacobi preconditioner diag(A), from ``guess`` (N,) (whose other
+    entries are returned as they are), until |r| < tolerance |rhs| over the active rows or
+    ``most`` iterations (the stopping rule of SciPy's ``cg`` with atol = 0), on the active part
+    taken out as a compact CSR matrix once. One thread, sums in index order: the same bits on
+    every rerun. Returns (x (N,), iterations, converged)."""
+    A = matrix.tocsr()
+    csr = (A.indptr.astype(np.int64), A.indices.astype(np.int64), np.ascontiguousarray(A.data, dtype=np.float64))
+    rhs, guess = np.ascontiguousarray(rhs, dtype=np.float64), np.ascontiguousarray(guess, dtype=np.float64)
+    return _csr_conjugate_gradients(csr, rhs, guess, active, tolerance, most)
+
+
+@njit(cache=True)
+def _csr_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
+    """``conjugate_gradients`` compiled, on A as its CSR arrays ``csr`` = (indptr (N + 1,) int64,
+    indices (nnz,) int64, data (nnz,) float64)."""
+    indptr, indices, data = csr
     x = guess.copy()
     rows = np.nonzero(active)[0]  # the active DOFs, in order: the compact system's rows
     start, column, value = _active_part(indptr, indices, data, active)

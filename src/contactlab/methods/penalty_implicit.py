@@ -378,13 +378,6 @@ def _solve(A, rhs, guess, options):
     if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
         return factor_symmetric(A).solve(rhs), 0
     solution, iterations, _ = sparse_conjugate_gradients(
-        A.indptr.astype(np.int64),
-        A.indices.astype(np.int64),
-        np.ascontiguousarray(A.data, dtype=np.float64),
-        np.ascontiguousarray(rhs, dtype=np.float64),
-        np.ascontiguousarray(guess, dtype=np.float64),
-        np.ones(A.shape[0], dtype=np.bool_),
-        options.linear_tolerance,
-        10 * A.shape[0],
+        A, rhs, guess, np.ones(A.shape[0], dtype=np.bool_), options.linear_tolerance, 10 * A.shape[0]
     )
     return solution, iterations
