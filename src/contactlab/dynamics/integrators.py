@@ -442,38 +442,23 @@ def body_free_velocities(
 
 
 def advance_positions(
-    body_position: np.ndarray,
-    body_orientation: np.ndarray,
-    particle_position: np.ndarray,
-    body_velocity: np.ndarray,
-    body_angular_velocity: np.ndarray,
-    particle_velocity: np.ndarray,
+    positions: tuple[np.ndarray, np.ndarray, np.ndarray],
+    velocities: tuple[np.ndarray, np.ndarray, np.ndarray],
     body_dt: float | np.ndarray,
     particle_dt: float | np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions and orientations moved at constant velocities for a time step.
 
-    body_dt: scalar or (B,) [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the
-    time-of-impact update of the impulse method). Returns (body_position (B,3),
-    body_orientation (B,4), particle_position (P,3)).
+    positions: (body_position (B,3) [m], body_orientation (B,4), particle_position (P,3) [m]),
+    as ``State.positions``; velocities: (body_velocity (B,3) [m/s], body_angular_velocity (B,3)
+    [rad/s], particle_velocity (P,3) [m/s]), as ``State.velocities``. body_dt: scalar or (B,)
+    [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the time-of-impact update of
+    the impulse method). Returns the positions moved, in the same order.
     """
-    body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(body_position),)).copy()
-    particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(particle_position),)).copy()
-    return moved(
-        *(
-            np.ascontiguousarray(a, dtype=float)
-            for a in (
-                body_position,
-                body_orientation,
-                particle_position,
-                body_velocity,
-                body_angular_velocity,
-                particle_velocity,
-            )
-        ),
-        body_dt,
-        particle_dt,
-    )
+    body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(positions[0]),)).copy()
+    particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(positions[2]),)).copy()
+    arrays = (np.ascontiguousarray(a, dtype=float) for a in (*positions, *velocities))
+    return moved(*arrays, body_dt, particle_dt)
 
 
 @njit(cache=True)

@@ -412,7 +412,7 @@ def step(
     if held is not moved_by:
         v_new = v_new + (held - moved_by) if integrator == "explicit_euler" and not implicit else held
         moved_by = held
-    positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)
+    positions = advance_positions(state.positions, unstack(moved_by, model.body_count), h, h)
     # 5. advance dt; the anchors of pressed contacts go on, by contact id
     elongation, offsets, energy = anchors_after(
         springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
