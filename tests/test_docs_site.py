@@ -83,7 +83,7 @@ def test_the_site_builds_strict_and_the_api_page_holds_the_docstrings(site):
     )
     # a Sphinx role that names a documented object became a link to it
     assert 'href="#contactlab.threads.set_threads"' in (site / "api" / "simulation" / "index.html").read_text()
-    # dataclass fields are documented by the comment on their line
+    # dataclass fields are documented by the attribute docstring under them
     methods = _text(site / "api" / "methods" / "index.html")
     assert "iterations: int = 100 sweeps of sequential impulses per step" in methods
 

@@ -61,7 +61,7 @@ def test_quaternions_stay_unit_and_rotate_at_the_right_rate():
     w = np.array([[0, 0, np.pi]])  # half a turn per second about z
     x = np.zeros((1, 3))
     for _ in range(1000):
-        x, q, _ = advance_positions(x, q, np.zeros((0, 3)), np.zeros((1, 3)), w, np.zeros((0, 3)), 0.001, 0.001)
+        x, q, _ = advance_positions((x, q, np.zeros((0, 3))), (np.zeros((1, 3)), w, np.zeros((0, 3))), 0.001, 0.001)
     assert np.linalg.norm(q[0]) == pytest.approx(1.0, abs=1e-14)
     R = rotations.to_matrix(q)[0]
     np.testing.assert_allclose(R @ [1, 0, 0], [-1, 0, 0], atol=1e-9)

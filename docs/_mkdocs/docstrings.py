@@ -2,15 +2,12 @@
 ``help()`` and editors, with Sphinx roles (:func:`contactlab.lcp.solve_lcp`) and reST literal
 blocks ("record::" before an indented example). Markdown knows neither, so at build time each
 role becomes a cross-reference to the object's page when the site documents it (plain code
-otherwise), and "::" ending a paragraph becomes ":". Dataclass fields and constants are
-documented by comments (``iterations: int = 100  # sweeps per step``): the comment on an
-attribute's line, or else the lines continuing it below (``#      (F, 3) int, ...``) or the
-comment lines just above it, becomes the attribute's docstring. The sources are left as they are.
+otherwise), and "::" ending a paragraph becomes ":". The sources are left as they are.
+(Dataclass fields and constants carry attribute docstrings, the string on the line after them,
+which griffe reads itself.)
 """
 
-import io
 import re
-import tokenize
 
 import griffe
 
@@ -24,8 +21,6 @@ class ProseDocstrings(griffe.Extension):
         self._walk(pkg)
 
     def _walk(self, obj):
-        if obj.is_attribute and obj.docstring is None and (comment := trailing_comment(obj)):
-            obj.docstring = griffe.Docstring(comment, parent=obj)
         if obj.docstring is not None:
             obj.docstring.value = self._rewrite(obj, obj.docstring.value)
         for member in obj.members.values():
@@ -59,29 +54,3 @@ class ProseDocstrings(griffe.Extension):
                 return found.path
         return target
 
-
-def trailing_comment(attribute):
-    """The comment that documents an attribute, without its "#": the one ending its first
-    source line; else the comment lines continuing it below (a "#" followed by a run of
-    spaces, aligned under the line's comment column), or those directly above it."""
-    try:
-        tokens = list(tokenize.generate_tokens(io.StringIO(attribute.source).readline))
-    except (tokenize.TokenError, IndentationError, SyntaxError, OSError, ValueError):
-        tokens = []
-    for token in tokens:
-        if token.type == tokenize.COMMENT and token.start[0] == 1:
-            return token.string.lstrip("#").strip()
-    lines, first, last = attribute.module.lines, attribute.lineno - 1, (attribute.endlineno or attribute.lineno) - 1
-    below = []
-    for line in lines[last + 1:]:
-        if not re.match(r"\s*#\s{2,}\S", line):
-            break
-        below.append(line.strip().lstrip("#").strip())
-    if below:
-        return " ".join(below)
-    above = []
-    for line in reversed(lines[:first]):
-        if not line.strip().startswith("#"):
-            break
-        above.insert(0, line.strip().lstrip("#").strip())
-    return " ".join(above)

@@ -202,52 +202,45 @@ def _memory_limit(text):
     return gigabytes * 2**30
 
 
-def _run(
-    scene_source,
-    overrides=(),
-    out=None,
-    record_every=1,
-    as_json=False,
-    video=False,
-    fps=30,
-    exports=(),
-    plots=True,
-    allow_divergence=False,
-    memory_limit=None,
-    yes=False,
-    view=False,
-    port=None,
-):
+def _run(args):
+    """``contactlab run`` with its parsed arguments ``args`` (``demo`` is ``run`` of the default
+    scene with every default): the scene run, its files written, its summary printed; returns
+    the Run."""
     from .closed_form import checks
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, remove_empty, write_summary
     from .scene import load_scene
-    from .validation import run_length
+    from .validation import run_length, whole_number
 
-    if video:  # a bad --fps fails before the run, not after it
+    whole_number(args.record_every, "--record-every", 1)
+    whole_number(args.fps, "--fps", 1)
+    overrides = _scene_overrides(args)
+    exports = _list_option(args.export, "--export", EXPORT_FORMATS)
+    memory_limit = _memory_limit(args.memory_limit)
+    if args.video:  # a bad --fps fails before the run, not after it
         from .render import check_settings
 
-        check_settings(fps)
-    if view:  # and so does a bad or busy --port
+        check_settings(args.fps)
+    if args.view:  # and so does a bad or busy --port
         from .viewer import check_port
 
-        check_port(port)
-    scene = load_scene(scene_source, overrides)
+        check_port(args.port)
+    scene = load_scene(args.scene, overrides)
     steps = run_length(scene.dt, scene.duration)[2]
-    if steps > MANY_STEPS and not yes:
+    if steps > MANY_STEPS and not args.yes:
         raise InputError(
             "--yes",
             f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
             f"{scene.dt:g} s): times are in seconds; add --yes to run it",
         )
-    out = out or os.path.join("out", f"{scene.name}-{scene.method}")
+    out = args.out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
     try:  # the samples stream into trajectory.h5 as the run goes
         result = scene.simulate(
-            record_every=record_every,
+            record_every=args.record_every,
             progress=sys.stderr.isatty(),
-            allow_divergence=allow_divergence,
+            allow_divergence=args.allow_divergence,
             memory_limit=memory_limit,
             trajectory=trajectory,
         )
@@ -267,13 +260,15 @@ def _run(
     result.summary["checks"] = [check.as_record() for check in found]
     result.summary["source"] = scene.origin(overrides)  # how to load the scene again (the viewer's contacts)
     write_summary(out, result.summary)
-    written = _extras(result.arrays, out, f"{scene.name} — {scene.method}", plots, video, fps, exports)
-    if as_json:
+    written = _extras(
+        result.arrays, out, f"{scene.name} — {scene.method}", not args.no_plots, args.video, args.fps, exports
+    )
+    if args.json:
         print(json.dumps(result.summary))
     else:
         print(_plain_summary(result.summary, scene, written, found))
-    if view:  # with --json, standard output holds the JSON alone
-        _view([out], port, sys.stderr if as_json else sys.stdout)
+    if args.view:  # with --json, standard output holds the JSON alone
+        _view([out], args.port, sys.stderr if args.json else sys.stdout)
     return result
 
 
@@ -422,33 +417,14 @@ def _main(argv):
 
             set_threads(args.threads, "--threads")
         if args.command in (None, "demo"):
-            _run(DEFAULT_SCENE)
+            _run(_parser().parse_args(["run", DEFAULT_SCENE]))
         elif args.command == "scenes":
             from .scene import builtin_scenes
 
             for name, description in builtin_scenes():
                 print(f"{name:20s} {description}")
         elif args.command == "run":
-            from .validation import whole_number
-
-            whole_number(args.record_every, "--record-every", 1)
-            whole_number(args.fps, "--fps", 1)
-            _run(
-                args.scene,
-                _scene_overrides(args),
-                args.out,
-                args.record_every,
-                args.json,
-                video=args.video,
-                fps=args.fps,
-                exports=_list_option(args.export, "--export", EXPORT_FORMATS),
-                plots=not args.no_plots,
-                allow_divergence=args.allow_divergence,
-                memory_limit=_memory_limit(args.memory_limit),
-                yes=args.yes,
-                view=args.view,
-                port=args.port,
-            )
+            _run(args)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":

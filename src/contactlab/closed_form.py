@@ -48,11 +48,16 @@ OVERLAP_SHARE = 0.1  # of the smallest radius: the deepest overlap of a pile tha
 
 @dataclass(frozen=True)
 class Check:
-    quantity: str  # what is compared, e.g. "first rebound apex"
-    unit: str  # of expected and measured, e.g. "m"
-    expected: float  # the closed-form value
-    measured: float  # what the run gave (nan when the run never reached it)
-    tolerance: float | None = None  # the largest |measured − expected| the scene's expectation allows, in ``unit``
+    quantity: str
+    """what is compared, e.g. "first rebound apex" """
+    unit: str
+    """of expected and measured, e.g. "m" """
+    expected: float
+    """the closed-form value"""
+    measured: float
+    """what the run gave (nan when the run never reached it)"""
+    tolerance: float | None = None
+    """the largest |measured − expected| the scene's expectation allows, in ``unit``"""
 
     @property
     def passed(self) -> bool | None:

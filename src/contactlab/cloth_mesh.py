@@ -42,25 +42,38 @@ class ClothMesh:
     """A cloth in its local frame, before it is placed: V vertices, F triangles and the vertex
     pairs (local indices) of its three spring families."""
 
-    vertices: np.ndarray  # (V, 3) [m]
-    triangles: np.ndarray  # (F, 3) int64, counter-clockwise seen from +z of a grid
-    stretch: np.ndarray  # (E, 2) int64: grid lines, or every triangle edge of a mesh file
-    shear: np.ndarray  # (H, 2) int64: both diagonals of each grid cell; none for a mesh file
-    bend: np.ndarray  # (G, 2) int64: vertices two apart, or the far corners of triangles sharing an edge
-    named: dict  # vertex set name -> local indices (a grid's PINNED_NAMES; none for a mesh file)
+    vertices: np.ndarray
+    """(V, 3) [m]"""
+    triangles: np.ndarray
+    """(F, 3) int64, counter-clockwise seen from +z of a grid"""
+    stretch: np.ndarray
+    """(E, 2) int64: grid lines, or every triangle edge of a mesh file"""
+    shear: np.ndarray
+    """(H, 2) int64: both diagonals of each grid cell; none for a mesh file"""
+    bend: np.ndarray
+    """(G, 2) int64: vertices two apart, or the far corners of triangles sharing an edge"""
+    named: dict
+    """vertex set name -> local indices (a grid's PINNED_NAMES; none for a mesh file)"""
 
 
 @dataclass
 class LaidOut:
     """A cloth placed in the world: what ``ModelBuilder.add_cloth`` stores of it."""
 
-    position: np.ndarray  # (V, 3) [m] world positions of the vertices
-    triangles: np.ndarray  # (F, 3) int64 local vertex indices
-    springs: np.ndarray  # (S, 2) int64 local vertex pairs: stretch, then shear, then bend
-    stiffness: np.ndarray  # (S,) [N/m]
-    rest: np.ndarray  # (S,) [m] the springs' lengths as built
-    mass: np.ndarray  # (V,) [kg] each vertex's share of the cloth's mass
-    pinned: np.ndarray  # (V,) bool: held in place
+    position: np.ndarray
+    """(V, 3) [m] world positions of the vertices"""
+    triangles: np.ndarray
+    """(F, 3) int64 local vertex indices"""
+    springs: np.ndarray
+    """(S, 2) int64 local vertex pairs: stretch, then shear, then bend"""
+    stiffness: np.ndarray
+    """(S,) [N/m]"""
+    rest: np.ndarray
+    """(S,) [m] the springs' lengths as built"""
+    mass: np.ndarray
+    """(V,) [kg] each vertex's share of the cloth's mass"""
+    pinned: np.ndarray
+    """(V,) bool: held in place"""
 
 
 def grid(size: ArrayLike | None, resolution: Sequence[int] | None) -> ClothMesh:

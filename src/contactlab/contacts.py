@@ -31,20 +31,34 @@ if TYPE_CHECKING:
 
 @dataclass
 class Contacts:
-    body_a: np.ndarray  # (C,) int, −1 when side A is not a rigid body
-    body_b: np.ndarray  # (C,) int
-    particles_a: np.ndarray  # (C, 3) int particle indices carrying side A's point, −1 unused
-    particles_b: np.ndarray  # (C, 3) int
-    weights_a: np.ndarray  # (C, 3) barycentric weights of those particles
-    weights_b: np.ndarray  # (C, 3)
-    point: np.ndarray  # (C, 3) world contact point, midway between the surfaces [m]
-    normal: np.ndarray  # (C, 3) unit, from B into A
-    depth: np.ndarray  # (C,) penetration [m], > 0 overlapping, < 0 a gap
-    tangent1: np.ndarray  # (C, 3) unit, ⟂ normal
-    tangent2: np.ndarray  # (C, 3) unit, normal × tangent1
-    friction: np.ndarray  # (C,) combined Coulomb μ
-    restitution: np.ndarray  # (C,) combined ε
-    feature_id: np.ndarray  # (C,) int64 persistent id: (collider pair, feature), stable while the contact lasts
+    body_a: np.ndarray
+    """(C,) int, −1 when side A is not a rigid body"""
+    body_b: np.ndarray
+    """(C,) int"""
+    particles_a: np.ndarray
+    """(C, 3) int particle indices carrying side A's point, −1 unused"""
+    particles_b: np.ndarray
+    """(C, 3) int"""
+    weights_a: np.ndarray
+    """(C, 3) barycentric weights of those particles"""
+    weights_b: np.ndarray
+    """(C, 3)"""
+    point: np.ndarray
+    """(C, 3) world contact point, midway between the surfaces [m]"""
+    normal: np.ndarray
+    """(C, 3) unit, from B into A"""
+    depth: np.ndarray
+    """(C,) penetration [m], > 0 overlapping, < 0 a gap"""
+    tangent1: np.ndarray
+    """(C, 3) unit, ⟂ normal"""
+    tangent2: np.ndarray
+    """(C, 3) unit, normal × tangent1"""
+    friction: np.ndarray
+    """(C,) combined Coulomb μ"""
+    restitution: np.ndarray
+    """(C,) combined ε"""
+    feature_id: np.ndarray
+    """(C,) int64 persistent id: (collider pair, feature), stable while the contact lasts"""
 
     @property
     def count(self) -> int:

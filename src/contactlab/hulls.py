@@ -84,40 +84,41 @@ DEFAULT_DENSITY = 1000.0  # [kg/m³] when neither mass nor density is given (wat
 
 @dataclass(frozen=True)
 class Hull:
-    """A convex polyhedron in its body frame (principal axes, origin at the centre of mass).
-
-    Attributes
-    ----------
-    vertices: (V, 3) corner positions [m], body frame.
-    face_normal: (F, 3) outward unit normals; face_offset: (F,) [m], ``n · x = offset`` on the face.
-    face_vertex_start: (F+1,) int; face_vertex_index: (K,) int — face f's corners, counter-clockwise
-        seen from outside, are ``face_vertex_index[face_vertex_start[f]:face_vertex_start[f+1]]``.
-    edge_vertex: (E, 2) int vertex indices (low first); edge_face: (E, 2) int the two faces joined.
-    mass [kg], volume [m³], density [kg/m³].
-    inertia: (3,) principal moments [kg m²] about the centre of mass (the body axes).
-    inertia_tensor: (3, 3) [kg m²] about the centre of mass, in the given frame.
-    orientation: (4,) unit quaternion (w, x, y, z), body → given frame.
-    offset: (3,) [m] the centre of mass in the given frame: ``x_given = R x_body + offset``.
-    radius: largest distance [m] of a vertex from the centre of mass.
-    source_indices: (V,) int, the given point each vertex comes from.
-    """
+    """A convex polyhedron in its body frame (principal axes, origin at the centre of mass)."""
 
     vertices: np.ndarray
+    """(V, 3) corner positions [m], body frame."""
     face_normal: np.ndarray
+    """(F, 3) outward unit normals."""
     face_offset: np.ndarray
+    """(F,) [m], ``n · x = offset`` on the face."""
     face_vertex_start: np.ndarray
+    """(F+1,) int: face f's corners, counter-clockwise seen from outside, are
+    ``face_vertex_index[face_vertex_start[f]:face_vertex_start[f+1]]``."""
     face_vertex_index: np.ndarray
+    """(K,) int, the faces' corners (see ``face_vertex_start``)."""
     edge_vertex: np.ndarray
+    """(E, 2) int vertex indices (low first)."""
     edge_face: np.ndarray
+    """(E, 2) int the two faces joined."""
     mass: float
+    """[kg]"""
     volume: float
+    """[m³]"""
     density: float
+    """[kg/m³]"""
     inertia: np.ndarray
+    """(3,) principal moments [kg m²] about the centre of mass (the body axes)."""
     inertia_tensor: np.ndarray
+    """(3, 3) [kg m²] about the centre of mass, in the given frame."""
     orientation: np.ndarray
+    """(4,) unit quaternion (w, x, y, z), body → given frame."""
     offset: np.ndarray
+    """(3,) [m] the centre of mass in the given frame: ``x_given = R x_body + offset``."""
     radius: float
+    """largest distance [m] of a vertex from the centre of mass."""
     source_indices: np.ndarray | None = dataclass_field(default=None, repr=False)
+    """(V,) int, the given point each vertex comes from."""
 
     @property
     def vertex_count(self) -> int:

@@ -27,47 +27,71 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Model:
-    gravity: np.ndarray  # (3,) m/s²
+    gravity: np.ndarray
+    """(3,) m/s²"""
     # materials
-    material_names: tuple[str, ...]  # (M,)
-    material_friction: np.ndarray  # (M,) Coulomb μ
-    material_restitution: np.ndarray  # (M,) ε in [0, 1]
+    material_names: tuple[str, ...]
+    """(M,)"""
+    material_friction: np.ndarray
+    """(M,) Coulomb μ"""
+    material_restitution: np.ndarray
+    """(M,) ε in [0, 1]"""
     # rigid bodies (6 DOF each: linear velocity, world angular velocity)
-    body_names: tuple[str, ...]  # (B,)
-    body_shape: np.ndarray  # (B,) int, a kind from contactlab.shapes
-    body_params: np.ndarray  # (B, 4) shape parameters [m]
-    body_mass: np.ndarray  # (B,) kg
-    body_inertia: np.ndarray  # (B, 3) principal moments in the body frame, kg m²
-    body_material: np.ndarray  # (B,) int index into materials
+    body_names: tuple[str, ...]
+    """(B,)"""
+    body_shape: np.ndarray
+    """(B,) int, a kind from contactlab.shapes"""
+    body_params: np.ndarray
+    """(B, 4) shape parameters [m]"""
+    body_mass: np.ndarray
+    """(B,) kg"""
+    body_inertia: np.ndarray
+    """(B, 3) principal moments in the body frame, kg m²"""
+    body_material: np.ndarray
+    """(B,) int index into materials"""
     # particles (3 DOF each)
-    particle_mass: np.ndarray  # (P,) kg
-    particle_radius: np.ndarray  # (P,) contact radius, m
-    particle_material: np.ndarray  # (P,) int
+    particle_mass: np.ndarray
+    """(P,) kg"""
+    particle_radius: np.ndarray
+    """(P,) contact radius, m"""
+    particle_material: np.ndarray
+    """(P,) int"""
     # static obstacles
-    obstacle_shape: np.ndarray  # (O,) int kind
-    obstacle_params: np.ndarray  # (O, 4) shape parameters (see contactlab.shapes)
-    obstacle_position: np.ndarray  # (O, 3) m (centre; unused for planes)
-    obstacle_orientation: np.ndarray  # (O, 4) unit quaternion (w, x, y, z)
-    obstacle_material: np.ndarray  # (O,) int
-    # convex hulls (of convex shapes and of every box), packed: see contactlab.hulls.pack_hulls
+    obstacle_shape: np.ndarray
+    """(O,) int kind"""
+    obstacle_params: np.ndarray
+    """(O, 4) shape parameters (see contactlab.shapes)"""
+    obstacle_position: np.ndarray
+    """(O, 3) m (centre; unused for planes)"""
+    obstacle_orientation: np.ndarray
+    """(O, 4) unit quaternion (w, x, y, z)"""
+    obstacle_material: np.ndarray
+    """(O,) int"""
     hulls: dict[str, np.ndarray] = field(repr=False, default=None)
-    # static triangle meshes in world coordinates (contactlab.meshes.TriangleMesh), by index
+    """convex hulls (of convex shapes and of every box), packed: see contactlab.hulls.pack_hulls"""
     meshes: tuple[TriangleMesh, ...] = field(repr=False, default=())
-    # the state at time 0
+    """static triangle meshes in world coordinates (contactlab.meshes.TriangleMesh), by index"""
     initial: State = field(repr=False, default=None)
+    """the state at time 0"""
     # cloth (see ModelBuilder.add_cloth): topology and mass-spring network over the particles
-    cloth_names: tuple[str, ...] = ()  # (C,)
+    cloth_names: tuple[str, ...] = ()
+    """(C,)"""
     triangles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
-    #                                   (F, 3) int, particle indices, counter-clockwise seen from the front
-    particle_cloth: np.ndarray = field(repr=False, default=None)  # (P,) int cloth index, −1 if none
-    particle_pinned: np.ndarray = field(repr=False, default=None)  # (P,) bool, held in place
+    """(F, 3) int, particle indices, counter-clockwise seen from the front"""
+    particle_cloth: np.ndarray = field(repr=False, default=None)
+    """(P,) int cloth index, −1 if none"""
+    particle_pinned: np.ndarray = field(repr=False, default=None)
+    """(P,) bool, held in place"""
     spring_particles: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
-    #                                   (S, 2) int, the two particles each spring joins
-    spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) m
-    spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N/m
-    spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))  # (S,) N s/m
-    # external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene
+    """(S, 2) int, the two particles each spring joins"""
+    spring_rest_length: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    """(S,) m"""
+    spring_stiffness: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    """(S,) N/m"""
+    spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    """(S,) N s/m"""
     drive: Drive | None = field(repr=False, default=None)
+    """external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene"""
 
     def __post_init__(self):
         # models built without cloth: no particle belongs to one, none is pinned

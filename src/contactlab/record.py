@@ -93,14 +93,22 @@ def static_arrays(model: Model) -> dict[str, np.ndarray]:
 class Totals:
     """What a run's summary says of all its samples, gathered chunk by chunk."""
 
-    count: int = 0  # samples
-    first_time: float = math.nan  # s
-    last_time: float = math.nan  # s
-    energy_initial: float = math.nan  # J, kinetic + potential + elastic
-    energy_final: float = math.nan  # J
-    energy_max: float = -math.inf  # J, the largest finite one (the initial one if none is)
-    max_penetration: float = 0.0  # m, NaNs skipped
-    final_penetration: float = math.nan  # m
+    count: int = 0
+    """samples"""
+    first_time: float = math.nan
+    """s"""
+    last_time: float = math.nan
+    """s"""
+    energy_initial: float = math.nan
+    """J, kinetic + potential + elastic"""
+    energy_final: float = math.nan
+    """J"""
+    energy_max: float = -math.inf
+    """J, the largest finite one (the initial one if none is)"""
+    max_penetration: float = 0.0
+    """m, NaNs skipped"""
+    final_penetration: float = math.nan
+    """m"""
     max_iterations: int = 0
     max_residual: float = 0.0
 

@@ -26,13 +26,13 @@ if TYPE_CHECKING:
     from .hulls import Hull
     from .meshes import TriangleMesh
 
-# The shape-specific arguments of add_body and add_obstacle that each shape takes.
 BODY_SHAPE_ARGUMENTS = {
     "sphere": ("radius",),
     "box": ("half_extents",),
     "capsule": ("radius", "half_length"),
     "convex": ("points", "file", "scale"),
 }
+"""The shape-specific arguments of add_body that each shape takes."""
 OBSTACLE_SHAPE_ARGUMENTS = {
     "plane": ("normal", "offset"),
     "sphere": ("radius", "position"),
@@ -40,6 +40,7 @@ OBSTACLE_SHAPE_ARGUMENTS = {
     "convex": ("points", "file", "scale", "position", "orientation"),
     "mesh": ("file", "scale", "position", "orientation"),
 }
+"""The shape-specific arguments of add_obstacle that each shape takes."""
 
 
 def check_shape_arguments(shape: str, table: Mapping[str, Sequence[str]], given: Collection[str]) -> None:

@@ -45,10 +45,14 @@ class Run:
     what a run's ``summary.json`` does; docs/trajectory.md describes both. In Jupyter a Run
     shows itself as a compact HTML summary with a picture of its last sample."""
 
-    state: State | None  # the final State (None for a comparison's run read back from its files)
-    arrays: Mapping[str, Any]  # the trajectory (see docs/trajectory.md): name -> array, a dict or a TrajectoryFile
-    summary: dict[str, Any]  # the JSON summary (see docs/trajectory.md)
-    model: Model | None = None  # the Model it ran (None for a run read back from a folder)
+    state: State | None
+    """the final State (None for a comparison's run read back from its files)"""
+    arrays: Mapping[str, Any]
+    """the trajectory (see docs/trajectory.md): name -> array, a dict or a TrajectoryFile"""
+    summary: dict[str, Any]
+    """the JSON summary (see docs/trajectory.md)"""
+    model: Model | None = None
+    """the Model it ran (None for a run read back from a folder)"""
 
     def __repr__(self):
         s = self.summary
@@ -249,11 +253,14 @@ class _Plan(NamedTuple):
     """What simulate() settled for the run, gathered so the stepping is handed it in one piece."""
 
     model: Model
-    module: Any  # the method's module (contactlab.methods)
+    module: Any
+    """the method's module (contactlab.methods)"""
     method: str
-    dt: float  # [s]
+    dt: float
+    """[s]"""
     steps: int
-    options: Any  # the method's options dataclass
+    options: Any
+    """the method's options dataclass"""
     integrator: str
     scene_name: str
     progress: bool
@@ -388,17 +395,26 @@ class _Stopped(Exception):
 class Tally:
     """What the stepping measured, whichever path stepped."""
 
-    first_step_seconds: float = 0.0  # the first step, compiling the kernels on first use
-    stepping_seconds: float = 0.0  # the later steps: stepping only, no Python recording, no compiling
-    later_compile_seconds: float = 0.0  # kernels first needed after the first step (say, at the first contact)
+    first_step_seconds: float = 0.0
+    """the first step, compiling the kernels on first use"""
+    stepping_seconds: float = 0.0
+    """the later steps: stepping only, no Python recording, no compiling"""
+    later_compile_seconds: float = 0.0
+    """kernels first needed after the first step (say, at the first contact)"""
     recording_seconds: float = 0.0
     max_contacts: int = 0
-    sweeps_made: int = 0  # solver sweeps summed over every step (recorded or not)
-    implicit_spring_steps: int = 0  # penalty: steps whose contact springs went implicit (explicit unstable)
-    linear_iterations_made: int = 0  # penalty: conjugate-gradient iterations of the implicit springs, every step
-    state: State | None = None  # the latest State the Python path made
-    window_rates: list[float] = field(default_factory=list)  # steps/s of each WINDOW_SECONDS of stepping
-    window: list[Any] = field(default_factory=lambda: [0, 0.0])  # the window being filled: steps, seconds
+    sweeps_made: int = 0
+    """solver sweeps summed over every step (recorded or not)"""
+    implicit_spring_steps: int = 0
+    """penalty: steps whose contact springs went implicit (explicit unstable)"""
+    linear_iterations_made: int = 0
+    """penalty: conjugate-gradient iterations of the implicit springs, every step"""
+    state: State | None = None
+    """the latest State the Python path made"""
+    window_rates: list[float] = field(default_factory=list)
+    """steps/s of each WINDOW_SECONDS of stepping"""
+    window: list[Any] = field(default_factory=lambda: [0, 0.0])
+    """the window being filled: steps, seconds"""
 
     def take(self, stepper: Any) -> None:
         """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""

@@ -14,14 +14,22 @@ import numpy as np
 
 @dataclass
 class State:
-    time: float  # s
-    body_position: np.ndarray  # (B, 3) centre of mass, m
-    body_orientation: np.ndarray  # (B, 4) unit quaternion (w, x, y, z)
-    body_velocity: np.ndarray  # (B, 3) m/s
-    body_angular_velocity: np.ndarray  # (B, 3) rad/s, world frame
-    particle_position: np.ndarray  # (P, 3) m
-    particle_velocity: np.ndarray  # (P, 3) m/s
-    carried: dict[str, Any] = field(default_factory=dict)  # by name: what a method keeps between steps
+    time: float
+    """s"""
+    body_position: np.ndarray
+    """(B, 3) centre of mass, m"""
+    body_orientation: np.ndarray
+    """(B, 4) unit quaternion (w, x, y, z)"""
+    body_velocity: np.ndarray
+    """(B, 3) m/s"""
+    body_angular_velocity: np.ndarray
+    """(B, 3) rad/s, world frame"""
+    particle_position: np.ndarray
+    """(P, 3) m"""
+    particle_velocity: np.ndarray
+    """(P, 3) m/s"""
+    carried: dict[str, Any] = field(default_factory=dict)
+    """by name: what a method keeps between steps"""
 
     def __repr__(self):
         bodies, particles = len(self.body_position), len(self.particle_position)

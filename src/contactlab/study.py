@@ -62,7 +62,8 @@ class Cell:
 
     scene: str
     method: str
-    settings: tuple  # ((path, value), ...)
+    settings: tuple
+    """((path, value), ...)"""
     record: str
     key: str
 

@@ -36,14 +36,22 @@ from .narrow_phase import MAX_PER_PAIR, generate_contacts
 class Manifolds:
     """Contacts kept per collider pair. K pairs, sorted by ``keys``; S = MAX_PER_PAIR slots."""
 
-    keys: np.ndarray  # (K,) int64, pair (a, b) of global colliders as a · total + b
-    reach: np.ndarray  # (K,) [m] the reach the contacts were computed with
-    center: np.ndarray  # (K, 2, 3) [m] the colliders' centres then
-    rotation: np.ndarray  # (K, 2, 3, 3) their rotations then (collider → world)
-    count: np.ndarray  # (K,) int64 contacts kept (0: near, not touching)
-    witness: np.ndarray  # (K, S, 2, 3) [m] each contact's surface points of A and B, in their own frames
-    normal: np.ndarray  # (K, S, 3) unit, from B into A, in A's frame
-    feature: np.ndarray  # (K, S) int64 feature number within the pair
+    keys: np.ndarray
+    """(K,) int64, pair (a, b) of global colliders as a · total + b"""
+    reach: np.ndarray
+    """(K,) [m] the reach the contacts were computed with"""
+    center: np.ndarray
+    """(K, 2, 3) [m] the colliders' centres then"""
+    rotation: np.ndarray
+    """(K, 2, 3, 3) their rotations then (collider → world)"""
+    count: np.ndarray
+    """(K,) int64 contacts kept (0: near, not touching)"""
+    witness: np.ndarray
+    """(K, S, 2, 3) [m] each contact's surface points of A and B, in their own frames"""
+    normal: np.ndarray
+    """(K, S, 3) unit, from B into A, in A's frame"""
+    feature: np.ndarray
+    """(K, S) int64 feature number within the pair"""
 
     @classmethod
     def empty(cls) -> Manifolds:

@@ -72,10 +72,13 @@ class _Outcome:
     scene: Scene
     run: Run | None = None
     failure: str | None = None
-    failed_run: Run | None = None  # the Run up to the blow-up (its trajectory streamed to disk)
-    failed_at: float | None = None  # s, simulated time of the blow-up when the message says it
+    failed_run: Run | None = None
+    """the Run up to the blow-up (its trajectory streamed to disk)"""
+    failed_at: float | None = None
+    """s, simulated time of the blow-up when the message says it"""
     warnings: list = field(default_factory=list)
-    media: dict = field(default_factory=dict)  # the video, GIF and still drawn of it
+    media: dict = field(default_factory=dict)
+    """the video, GIF and still drawn of it"""
     checks: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
     row: dict = field(default_factory=dict)

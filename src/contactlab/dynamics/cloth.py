@@ -166,11 +166,16 @@ class SpringPattern:
     diagonal: the sparsity of K, D and the backward Euler matrix, fixed by the cloth's topology,
     so a step fills the values and never sorts indices. nnz entries."""
 
-    indptr: np.ndarray  # (3P + 1,) int64
-    indices: np.ndarray  # (nnz,) int64, column of each entry, sorted within a row
-    rows: np.ndarray  # (nnz,) int64, row of each entry
-    slots: np.ndarray  # (S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)
-    diagonal: np.ndarray  # (3P,) int64, entry of each diagonal element
+    indptr: np.ndarray
+    """(3P + 1,) int64"""
+    indices: np.ndarray
+    """(nnz,) int64, column of each entry, sorted within a row"""
+    rows: np.ndarray
+    """(nnz,) int64, row of each entry"""
+    slots: np.ndarray
+    """(S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)"""
+    diagonal: np.ndarray
+    """(3P,) int64, entry of each diagonal element"""
 
     def values(self, blocks: np.ndarray) -> np.ndarray:
         """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on

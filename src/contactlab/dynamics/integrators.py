@@ -255,14 +255,7 @@ def solve_coupled(
     iterations, converged = 0, False
     if solver == "cg":
         delta, iterations, converged = conjugate_gradients(
-            A.indptr.astype(np.int64),
-            A.indices.astype(np.int64),
-            np.ascontiguousarray(A.data, dtype=np.float64),
-            np.ascontiguousarray(rhs, dtype=np.float64),
-            delta,
-            coupled,
-            tolerance,
-            max(100, int(coupled.sum())),
+            A, rhs, delta, coupled, tolerance, max(100, int(coupled.sum()))
         )
     if not converged:
         dofs = np.nonzero(coupled)[0]
@@ -270,24 +263,26 @@ def solve_coupled(
     return delta, iterations
 
 
-@njit(cache=True)
 def conjugate_gradients(
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    data: np.ndarray,
-    rhs: np.ndarray,
-    guess: np.ndarray,
-    active: np.ndarray,
-    tolerance: float,
-    most: int,
+    matrix: sp.spmatrix, rhs: np.ndarray, guess: np.ndarray, active: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, int, bool]:
-    """A x = rhs on the ``active`` (N,) bool rows and columns of the CSR matrix A (``indptr``
-    (N + 1,), ``indices``, ``data`` (nnz,)) by conjugate gradients with the Jacobi preconditioner
-    diag(A), from ``guess`` (N,) (whose other entries are returned as they are), until
-    |r| < tolerance |rhs| over the active rows or ``most`` iterations (the stopping rule of
-    SciPy's ``cg`` with atol = 0), on the active part taken out as a compact CSR matrix once. One
-    thread, sums in index order: the same bits on every rerun. Returns (x (N,), iterations,
-    converged)."""
+    """A x = rhs on the ``active`` (N,) bool rows and columns of the sparse matrix A (N, N) by
+    conjugate gradients with the Jacobi preconditioner diag(A), from ``guess`` (N,) (whose other
+    entries are returned as they are), until |r| < tolerance |rhs| over the active rows or
+    ``most`` iterations (the stopping rule of SciPy's ``cg`` with atol = 0), on the active part
+    taken out as a compact CSR matrix once. One thread, sums in index order: the same bits on
+    every rerun. Returns (x (N,), iterations, converged)."""
+    A = matrix.tocsr()
+    csr = (A.indptr.astype(np.int64), A.indices.astype(np.int64), np.ascontiguousarray(A.data, dtype=np.float64))
+    rhs, guess = np.ascontiguousarray(rhs, dtype=np.float64), np.ascontiguousarray(guess, dtype=np.float64)
+    return _csr_conjugate_gradients(csr, rhs, guess, active, tolerance, most)
+
+
+@njit(cache=True)
+def _csr_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
+    """``conjugate_gradients`` compiled, on A as its CSR arrays ``csr`` = (indptr (N + 1,) int64,
+    indices (nnz,) int64, data (nnz,) float64)."""
+    indptr, indices, data = csr
     x = guess.copy()
     rows = np.nonzero(active)[0]  # the active DOFs, in order: the compact system's rows
     start, column, value = _active_part(indptr, indices, data, active)
@@ -385,70 +380,58 @@ def free_velocities(
     state: State,
     dt: float,
     integrator: str = "symplectic_euler",
-    body_force: np.ndarray | None = None,
-    body_torque: np.ndarray | None = None,
-    particle_force: np.ndarray | None = None,
     linear_solver: str = "cg",
     linear_tolerance: float = 1e-6,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Velocities after dt under gravity, cloth springs and the given forces, without contacts.
+    """Velocities after dt under gravity, cloth springs and the scene's external forces, without
+    contacts.
 
-    body_force, body_torque (B, 3) [N], [N m] and particle_force (P, 3) [N] are optional.
     Bodies: see ``body_free_velocities``. Particles: explicit and symplectic Euler add
-    h M⁻¹ (m g + f_springs(x, v) + particle_force); backward Euler solves ``particle_system``
+    h M⁻¹ (m g + f_springs(x, v)); backward Euler solves ``particle_system``
     (springs implicit) with ``solve_particle_system`` (``linear_solver`` "cg" or "direct",
     ``linear_tolerance``). Pinned particles get zero velocity. Returns (body_velocity (B,3),
     body_angular_velocity (B,3), particle_velocity (P,3)).
     """
     g = model.gravity
     if model.spring_count and integrator == "backward_euler":
-        system = particle_system(model, state, dt, particle_force)
+        system = particle_system(model, state, dt)
         particle_velocity = state.particle_velocity + solve_particle_system(
             system, model, linear_tolerance, linear_solver
         )
     else:
         particle_velocity = state.particle_velocity + dt * g
-        if particle_force is not None:
-            particle_velocity += dt * particle_force * model.particle_inverse_mass[:, None]
         if model.spring_count:
             springs = spring_forces(model, state.particle_position, state.particle_velocity)
             particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
     if model.particle_pinned.any():
         particle_velocity[model.particle_pinned] = 0.0
-    return (*body_free_velocities(model, state, dt, integrator, body_force, body_torque), particle_velocity)
+    return (*body_free_velocities(model, state, dt, integrator), particle_velocity)
 
 
-# Deliberately free_velocities' first parameters again: this is its rigid-body part, which the
-# constraints method calls alone (its particles are solved with the contacts).
 def body_free_velocities(
-    model: Model,
-    state: State,
-    dt: float,
-    integrator: str = "symplectic_euler",
-    body_force: np.ndarray | None = None,
-    body_torque: np.ndarray | None = None,
+    model: Model, state: State, dt: float, integrator: str = "symplectic_euler"
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rigid bodies' part of ``free_velocities``: (body_velocity (B,3) [m/s],
-    body_angular_velocity (B,3) [rad/s]) after dt under gravity and the optional body_force,
-    body_torque (B, 3) [N], [N m]. The gyroscopic term is explicit under explicit Euler and
-    implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
+    """The rigid bodies' part of ``free_velocities`` (the constraints method calls it alone: its
+    particles are solved with the contacts): (body_velocity (B,3) [m/s], body_angular_velocity
+    (B,3) [rad/s]) after dt under gravity. The gyroscopic term is explicit under explicit Euler
+    and implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
     bodies move as symplectic Euler's.
 
-    A driven model (``model.drive``, contactlab.driving) adds its external forces and torques at
-    the step's start time ``state.time`` to the given ones, and gives each kinematic body the
+    A driven model (``model.drive``, contactlab.driving) adds its external forces and torques
+    [N], [N m] at the step's start time ``state.time``, and gives each kinematic body the
     velocity that carries it onto its path over the step (their inverse mass is 0: gravity and
-    forces do not move them)."""
+    forces do not move them). External forces reach the bodies only this way
+    (``ModelBuilder.add_force``)."""
     drive = model.drive
-    if drive is not None and drive.has_loads:
-        force, torque = drive.loads(state.time)
-        body_force = force if body_force is None else body_force + force
-        body_torque = torque if body_torque is None else body_torque + torque
+    loads = drive is not None and drive.has_loads
+    if loads:
+        body_force, body_torque = drive.loads(state.time)
     body_velocity = state.body_velocity + dt * model.gravity
-    if body_force is not None:
+    if loads:
         body_velocity += dt * body_force * model.body_inverse_mass[:, None]
     gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
     angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
-    if body_torque is not None:
+    if loads:
         inv = world_inverse_inertia(model, state.body_orientation)
         angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
     if drive is not None and drive.kinematic.any():
@@ -459,38 +442,23 @@ def body_free_velocities(
 
 
 def advance_positions(
-    body_position: np.ndarray,
-    body_orientation: np.ndarray,
-    particle_position: np.ndarray,
-    body_velocity: np.ndarray,
-    body_angular_velocity: np.ndarray,
-    particle_velocity: np.ndarray,
+    positions: tuple[np.ndarray, np.ndarray, np.ndarray],
+    velocities: tuple[np.ndarray, np.ndarray, np.ndarray],
     body_dt: float | np.ndarray,
     particle_dt: float | np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions and orientations moved at constant velocities for a time step.
 
-    body_dt: scalar or (B,) [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the
-    time-of-impact update of the impulse method). Returns (body_position (B,3),
-    body_orientation (B,4), particle_position (P,3)).
+    positions: (body_position (B,3) [m], body_orientation (B,4), particle_position (P,3) [m]),
+    as ``State.positions``; velocities: (body_velocity (B,3) [m/s], body_angular_velocity (B,3)
+    [rad/s], particle_velocity (P,3) [m/s]), as ``State.velocities``. body_dt: scalar or (B,)
+    [s]; particle_dt: scalar or (P,) [s] (per-entity steps serve the time-of-impact update of
+    the impulse method). Returns the positions moved, in the same order.
     """
-    body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(body_position),)).copy()
-    particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(particle_position),)).copy()
-    return moved(
-        *(
-            np.ascontiguousarray(a, dtype=float)
-            for a in (
-                body_position,
-                body_orientation,
-                particle_position,
-                body_velocity,
-                body_angular_velocity,
-                particle_velocity,
-            )
-        ),
-        body_dt,
-        particle_dt,
-    )
+    body_dt = np.broadcast_to(np.asarray(body_dt, dtype=float), (len(positions[0]),)).copy()
+    particle_dt = np.broadcast_to(np.asarray(particle_dt, dtype=float), (len(positions[2]),)).copy()
+    arrays = (np.ascontiguousarray(a, dtype=float) for a in (*positions, *velocities))
+    return moved(*arrays, body_dt, particle_dt)
 
 
 @njit(cache=True)

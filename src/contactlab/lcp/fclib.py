@@ -30,22 +30,18 @@ _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 @dataclass
 class FrictionProblem:
-    """A 3D Coulomb friction problem in FCLIB local form.
-
-    Attributes
-    ----------
-    W: (3·nc, 3·nc) SciPy CSR Delassus matrix, per contact [N, T1, T2].
-    q: (3·nc,) free relative velocity.
-    mu: (nc,) friction coefficients.
-    name: the file name.
-    source_format: ``"fclib_local"``, ``"fclib_global"``, ``"siconos_dense"`` or ``"siconos_sparse_block"``.
-    """
+    """A 3D Coulomb friction problem in FCLIB local form."""
 
     W: sp.csr_matrix
+    """(3·nc, 3·nc) SciPy CSR Delassus matrix, per contact [N, T1, T2]."""
     q: np.ndarray
+    """(3·nc,) free relative velocity."""
     mu: np.ndarray
+    """(nc,) friction coefficients."""
     name: str
+    """the file name."""
     source_format: str
+    """``"fclib_local"``, ``"fclib_global"``, ``"siconos_dense"`` or ``"siconos_sparse_block"``."""
 
     @property
     def nc(self) -> int:

@@ -67,29 +67,25 @@ _SQRT_HALF = math.sqrt(0.5)
 
 @dataclass
 class FrictionResult:
-    """Answer of :func:`solve_friction_contact`.
-
-    Attributes
-    ----------
-    r: (3·nc,) reactions [N, T1, T2] per contact (impulses, in the units of W's columns).
-    u: (3·nc,) relative velocities ``W r + q``.
-    iterations: sweeps (nsgs), normal/friction rounds (staggered), gradient steps (apgd) or Newton
-       steps (newton; sweeps it ran besides are not counted) done.
-    converged: True when ``error <= tol``.
-    error: normalized natural-map residual (module docstring), at ``r``.
-    method: ``"nsgs"``, ``"staggered"``, ``"apgd"`` or ``"newton"``.
-    friction_model: ``"cone"`` or ``"pyramid"``.
-    message: one sentence on how it ended.
-    """
+    """Answer of :func:`solve_friction_contact`."""
 
     r: np.ndarray
+    """(3·nc,) reactions [N, T1, T2] per contact (impulses, in the units of W's columns)."""
     u: np.ndarray
+    """(3·nc,) relative velocities ``W r + q``."""
     iterations: int
+    """sweeps (nsgs), normal/friction rounds (staggered), gradient steps (apgd) or Newton steps
+    (newton; sweeps it ran besides are not counted) done."""
     converged: bool
+    """True when ``error <= tol``."""
     error: float
+    """normalized natural-map residual (module docstring), at ``r``."""
     method: str
+    """``"nsgs"``, ``"staggered"``, ``"apgd"`` or ``"newton"``."""
     friction_model: str = "cone"
+    """``"cone"`` or ``"pyramid"``."""
     message: str = ""
+    """one sentence on how it ended."""
 
 
 # ----------------------------------------------------------------------------- compiled parts

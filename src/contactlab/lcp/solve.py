@@ -25,28 +25,24 @@ REDBLACK_MIN_PARALLEL_ROWS = 128
 
 @dataclass
 class LCPResult:
-    """Answer of :func:`solve_lcp`.
-
-    Attributes
-    ----------
-    lam: (n,) the multipliers λ ≥ 0 (for contacts: normal impulses or forces).
-    w: (n,) ``B λ − c`` at ``lam`` (for contacts: the constraint velocity / acceleration / gap).
-    iterations: sweeps (pgs, redblack, jacobi) or pivots (lemke) done.
-    residual: ``‖λ − max(0, λ − w)‖₂`` at ``lam``, absolute (units of w); 0 exactly at a solution.
-    converged: True when ``residual <= tol`` (and, for lemke, the pivoting ended on a solution).
-    method: the method used.
-    message: one sentence on how it ended (why it did not converge, when it did not).
-    colors: number of colors used (redblack only, else 0).
-    """
+    """Answer of :func:`solve_lcp`."""
 
     lam: np.ndarray
+    """(n,) the multipliers λ ≥ 0 (for contacts: normal impulses or forces)."""
     w: np.ndarray
+    """(n,) ``B λ − c`` at ``lam`` (for contacts: the constraint velocity / acceleration / gap)."""
     iterations: int
+    """sweeps (pgs, redblack, jacobi) or pivots (lemke) done."""
     residual: float
+    """``‖λ − max(0, λ − w)‖₂`` at ``lam``, absolute (units of w); 0 exactly at a solution."""
     converged: bool
+    """True when ``residual <= tol`` (and, for lemke, the pivoting ended on a solution)."""
     method: str
+    """the method used."""
     message: str = ""
+    """one sentence on how it ended (why it did not converge, when it did not)."""
     colors: int = 0
+    """number of colors used (redblack only, else 0)."""
 
 
 def solve_lcp(

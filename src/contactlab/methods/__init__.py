@@ -34,15 +34,21 @@ if TYPE_CHECKING:
 class StepInfo:
     """What a step reports besides the new state."""
 
-    contacts: Contacts  # the contacts the response acted on
-    solver_iterations: int = 0  # sweeps the solver made (0 where there is none)
-    solver_residual: float = 0.0  # the solver's last change or residual (method-specific units, documented)
-    linear_iterations: int = 0  # conjugate-gradient iterations of the step's linear solves (penalty's implicit springs)
-    energy_elastic: float = 0.0  # energy stored in contact springs [J]
-    # penalty: contact springs stepped by backward Euler, the explicit step being unstable
+    contacts: Contacts
+    """the contacts the response acted on"""
+    solver_iterations: int = 0
+    """sweeps the solver made (0 where there is none)"""
+    solver_residual: float = 0.0
+    """the solver's last change or residual (method-specific units, documented)"""
+    linear_iterations: int = 0
+    """conjugate-gradient iterations of the step's linear solves (penalty's implicit springs)"""
+    energy_elastic: float = 0.0
+    """energy stored in contact springs [J]"""
     implicit_springs: bool = False
-    impulses: np.ndarray | None = None  # (C, 3) [N s] each contact's push on side A over the step, along (normal,
-    #                               tangent1, tangent2) of ``contacts``; None: no contacts (the viewer's arrows)
+    """penalty: contact springs stepped by backward Euler, the explicit step being unstable"""
+    impulses: np.ndarray | None = None
+    """(C, 3) [N s] each contact's push on side A over the step, along (normal, tangent1, tangent2) of ``contacts``;
+    None: no contacts (the viewer's arrows)"""
 
 
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")
@@ -54,11 +60,16 @@ class CollisionOptions:
     checked here once (see docs/collision.md); a method that wants another default declares
     the field again with it."""
 
-    contact_margin: float = 0.002  # m: gaps this small become (speculative) contacts
-    granularity: str = "vertex"  # boxes and hulls on static surfaces: object | vertex | samples (P2)
-    normal: str = "object"  # their contact normal: object (P4) | vertex (P5)
-    samples: int = 2  # samples per triangle edge for granularity = "samples"
-    cloth_samples: int = 0  # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
+    contact_margin: float = 0.002
+    """m: gaps this small become (speculative) contacts"""
+    granularity: str = "vertex"
+    """boxes and hulls on static surfaces: object | vertex | samples (P2)"""
+    normal: str = "object"
+    """their contact normal: object (P4) | vertex (P5)"""
+    samples: int = 2
+    """samples per triangle edge for granularity = "samples" """
+    cloth_samples: int = 0
+    """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
 
     def __post_init__(self):
         self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
@@ -96,7 +107,8 @@ class KeptManifoldOptions(CollisionOptions):
     """CollisionOptions and the tolerance under which a pair's contacts are reused from the last
     step (the methods that step positions once per step: impulse, constraints)."""
 
-    manifold_tolerance: float = 1e-4  # m: box, hull and plane pairs that moved less reuse last contacts (0 = never)
+    manifold_tolerance: float = 1e-4
+    """m: box, hull and plane pairs that moved less reuse last contacts (0 = never)"""
 
     def __post_init__(self):
         super().__post_init__()

@@ -78,22 +78,32 @@ FORMULATIONS = ("velocity", "acceleration")
 class Options(KeptManifoldOptions):
     """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
 
-    # matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke
     solver: str = "matrix_free"
-    formulation: str = "velocity"  # velocity (C5b) | acceleration (C5a)
-    friction_model: str = "cone"  # nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)
-    iterations: int = 100  # solver sweeps per step (at most; newton: Newton steps)
-    # matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
-    # jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1]
-    # (default 1e-6)
+    """matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke"""
+    formulation: str = "velocity"
+    """velocity (C5b) | acceleration (C5a)"""
+    friction_model: str = "cone"
+    """nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)"""
+    iterations: int = 100
+    """solver sweeps per step (at most; newton: Newton steps)"""
     tolerance: float | None = None
-    omega: float = 1.0  # over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)
-    warm_start: float = 1.0  # fraction of last step's λ to start from (by contact id; 0 = cold)
-    restitution_threshold: float = -1.0  # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
-    stabilization: float = 0.2  # fraction of an existing penetration removed per step (0 = none)
-    slop: float = 0.0005  # m of penetration left alone by the stabilization
-    max_push_velocity: float = 1.0  # m/s: the stabilization never pushes apart faster
-    time_of_impact: bool = True  # split the step at the impact (see methods.impulse)
+    """matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
+    jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1] (default
+    1e-6)"""
+    omega: float = 1.0
+    """over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)"""
+    warm_start: float = 1.0
+    """fraction of last step's λ to start from (by contact id; 0 = cold)"""
+    restitution_threshold: float = -1.0
+    """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
+    stabilization: float = 0.2
+    """fraction of an existing penetration removed per step (0 = none)"""
+    slop: float = 0.0005
+    """m of penetration left alone by the stabilization"""
+    max_push_velocity: float = 1.0
+    """m/s: the stabilization never pushes apart faster"""
+    time_of_impact: bool = True
+    """split the step at the impact (see methods.impulse)"""
 
     def __post_init__(self):
         super().__post_init__()

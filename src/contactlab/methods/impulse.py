@@ -63,14 +63,22 @@ class Options(KeptManifoldOptions):
     """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md), after
     the collision settings of KeptManifoldOptions."""
 
-    iterations: int = 100  # sweeps of sequential impulses per step, and collision waves (at most)
-    tolerance: float = 1e-7  # m/s: stop once a sweep changes no contact's velocity more
-    restitution_threshold: float = -1.0  # m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt
-    stabilization: float = 0.2  # fraction of an existing penetration removed per step (0 = none)
-    slop: float = 0.0005  # m of penetration left alone by the stabilization
-    max_push_velocity: float = 1.0  # m/s: the stabilization never pushes apart faster
-    time_of_impact: bool = True  # split the step at the impact (see module docs)
-    warm_start: float = 1.0  # fraction of last step's impulses to start from (0 = cold)
+    iterations: int = 100
+    """sweeps of sequential impulses per step, and collision waves (at most)"""
+    tolerance: float = 1e-7
+    """m/s: stop once a sweep changes no contact's velocity more"""
+    restitution_threshold: float = -1.0
+    """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
+    stabilization: float = 0.2
+    """fraction of an existing penetration removed per step (0 = none)"""
+    slop: float = 0.0005
+    """m of penetration left alone by the stabilization"""
+    max_push_velocity: float = 1.0
+    """m/s: the stabilization never pushes apart faster"""
+    time_of_impact: bool = True
+    """split the step at the impact (see module docs)"""
+    warm_start: float = 1.0
+    """fraction of last step's impulses to start from (0 = cold)"""
 
     def __post_init__(self):
         super().__post_init__()

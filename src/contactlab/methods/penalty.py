@@ -85,15 +85,24 @@ IMPLICIT_SPRINGS = ("auto", "always", "never")
 class Options(CollisionOptions):
     """Settings of ``[method.penalty]`` (after the collision settings of CollisionOptions)."""
 
-    stiffness: object = "auto"  # N/m per contact point, or "auto": each contact's load over allowed_penetration
-    allowed_penetration: float = 0.0003  # m: how deep "auto" stiffness lets each contact sink under the load it carries
-    damping_ratio: object = "restitution"  # ζ of each contact spring, or "restitution": ζ from the material's ε
-    friction_stiffness: object = "auto"  # N/m of the anchor springs (F3), or "auto": the normal stiffness
-    contact_margin: float = 0.001  # m: gaps this small are detected (their springs are slack)
-    linear_solver: str = "cg"  # backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)
-    linear_tolerance: float = 1e-10  # backward Euler with cg: relative residual to reach
-    implicit_iterations: int = 8  # backward Euler: most passes to settle which springs act / slip
-    implicit_springs: str = "auto"  # auto: backward Euler where an explicit step is unstable | always | never
+    stiffness: object = "auto"
+    """N/m per contact point, or "auto": each contact's load over allowed_penetration"""
+    allowed_penetration: float = 0.0003
+    """m: how deep "auto" stiffness lets each contact sink under the load it carries"""
+    damping_ratio: object = "restitution"
+    """ζ of each contact spring, or "restitution": ζ from the material's ε"""
+    friction_stiffness: object = "auto"
+    """N/m of the anchor springs (F3), or "auto": the normal stiffness"""
+    contact_margin: float = 0.001
+    """m: gaps this small are detected (their springs are slack)"""
+    linear_solver: str = "cg"
+    """backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)"""
+    linear_tolerance: float = 1e-10
+    """backward Euler with cg: relative residual to reach"""
+    implicit_iterations: int = 8
+    """backward Euler: most passes to settle which springs act / slip"""
+    implicit_springs: str = "auto"
+    """auto: backward Euler where an explicit step is unstable | always | never"""
 
     def __post_init__(self):
         super().__post_init__()
@@ -126,12 +135,18 @@ def _stiffness(value, name):
 class StiffnessAdvice:
     """What ``suggest_stiffness`` proposes, and why."""
 
-    stiffness: float  # N/m: the proposal
-    needed: float  # N/m: holds the load with the allowed penetration
-    stable_limit: float  # N/m: symplectic Euler diverges above this (h ω = 2) for the contact mass
-    accurate_limit: float  # N/m: h ω = 0.5, about 12 steps per oscillation of a contact spring
-    penetration: float  # m: the resting penetration under the load with the proposal
-    reason: str  # one sentence
+    stiffness: float
+    """N/m: the proposal"""
+    needed: float
+    """N/m: holds the load with the allowed penetration"""
+    stable_limit: float
+    """N/m: symplectic Euler diverges above this (h ω = 2) for the contact mass"""
+    accurate_limit: float
+    """N/m: h ω = 0.5, about 12 steps per oscillation of a contact spring"""
+    penetration: float
+    """m: the resting penetration under the load with the proposal"""
+    reason: str
+    """one sentence"""
 
 
 def suggest_stiffness(
@@ -397,7 +412,7 @@ def step(
     if held is not moved_by:
         v_new = v_new + (held - moved_by) if integrator == "explicit_euler" and not implicit else held
         moved_by = held
-    positions = advance_positions(*state.positions, *unstack(moved_by, model.body_count), h, h)
+    positions = advance_positions(state.positions, unstack(moved_by, model.body_count), h, h)
     # 5. advance dt; the anchors of pressed contacts go on, by contact id
     elongation, offsets, energy = anchors_after(
         springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h

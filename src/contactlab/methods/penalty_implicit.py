@@ -14,7 +14,7 @@ Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -84,19 +84,24 @@ def transpose_product(rows: ContactRows, values: np.ndarray, out: np.ndarray) ->
     return out
 
 
+class SpringSystem(NamedTuple):
+    """A = M + F Jᵀ W J F, the matrix of a backward Euler pass, as compiled code takes it."""
+
+    rows: ContactRows
+    """the contacts' rows of J"""
+    weight: np.ndarray
+    """(C, 3) W: the springs' weights h (h k + c) on the rows (normal, t1, t2), 0 for a spring not acting"""
+    mass: tuple
+    """M's blocks (``mass_blocks``)"""
+    free: np.ndarray
+    """(N,) F = diag(free): 1.0 for a DOF that moves, 0.0 for a pinned particle's or a kinematic body's"""
+
+
 @njit(cache=True)
-def system_product(
-    rows: ContactRows,
-    weight: np.ndarray,
-    mass: tuple,
-    free: np.ndarray,
-    x: np.ndarray,
-    kept: np.ndarray,
-    out: np.ndarray,
-) -> np.ndarray:
-    """out = A x (N,) with A = M + F Jᵀ W J F: the springs' weights W (C, 3) on J's rows,
-    F = diag(free) (N,) (1 for a DOF that moves, 0 for a pinned particle's); ``kept`` (N,) is
-    scratch. Allocates nothing: the conjugate gradients call it every iteration. Returns out."""
+def system_product(system: SpringSystem, x: np.ndarray, kept: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out = A x (N,) for the ``system`` A; ``kept`` (N,) is scratch. Allocates nothing: the
+    conjugate gradients call it every iteration. Returns out."""
+    rows, weight, mass, free = system
     N = x.shape[0]
     for i in range(N):
         kept[i] = free[i] * x[i]
@@ -111,8 +116,9 @@ def system_product(
 
 
 @njit(cache=True)
-def system_diagonal(rows: ContactRows, weight: np.ndarray, mass: tuple, free: np.ndarray) -> np.ndarray:
-    """The diagonal of A (``system_product``) (N,): M's and Σ W (J_row,i)² over the rows."""
+def system_diagonal(system: SpringSystem) -> np.ndarray:
+    """The diagonal of A (``SpringSystem``) (N,): M's and Σ W (J_row,i)² over the rows."""
+    rows, weight, mass, free = system
     body_mass, inertia, particle_mass = mass
     B = body_mass.shape[0]
     diagonal = np.empty(free.shape[0])
@@ -151,22 +157,15 @@ def system_diagonal(rows: ContactRows, weight: np.ndarray, mass: tuple, free: np
 
 @njit(cache=True)
 def conjugate_gradients(
-    rows: ContactRows,
-    weight: np.ndarray,
-    mass: tuple,
-    free: np.ndarray,
-    rhs: np.ndarray,
-    guess: np.ndarray,
-    tolerance: float,
-    most: int,
+    system: SpringSystem, rhs: np.ndarray, guess: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, float, int]:
-    """A v = rhs (``system_product``) by conjugate gradients with the Jacobi preconditioner
+    """A v = rhs (``SpringSystem``) by conjugate gradients with the Jacobi preconditioner
     diag(A), from ``guess`` (N,), until |r| ≤ tolerance |rhs| or ``most`` iterations. Returns
     (v (N,), |A v − rhs| / |rhs|, iterations)."""
     N = rhs.shape[0]
-    diagonal = system_diagonal(rows, weight, mass, free)
+    diagonal = system_diagonal(system)
     x, r, z, p, Ap, kept = guess.copy(), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
-    system_product(rows, weight, mass, free, x, kept, Ap)
+    system_product(system, x, kept, Ap)
     for i in range(N):
         if diagonal[i] == 0.0:  # a DOF with no mass and no spring: left as it is
             diagonal[i] = 1.0
@@ -177,7 +176,7 @@ def conjugate_gradients(
     rz = np.dot(r, z)
     iterations = 0
     while iterations < most and np.sqrt(np.dot(r, r)) > tolerance * scale and rz != 0.0:
-        system_product(rows, weight, mass, free, p, kept, Ap)
+        system_product(system, p, kept, Ap)
         alpha = rz / np.dot(p, Ap)
         for i in range(N):
             x[i] += alpha * p[i]
@@ -189,7 +188,7 @@ def conjugate_gradients(
             p[i] = z[i] + beta * p[i]
         rz = following
         iterations += 1
-    system_product(rows, weight, mass, free, x, kept, Ap)
+    system_product(system, x, kept, Ap)
     for i in range(N):
         Ap[i] -= rhs[i]
     return x, np.sqrt(np.dot(Ap, Ap)) / scale, iterations
@@ -252,7 +251,7 @@ def implicit_spring_velocities(
                 pull[c, 1 + d] = -k_t[c] * springs.elongation[c, d] if sticks[c] else slip_force[c, d]
         rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
         v_new, residual, iterations = conjugate_gradients(
-            rows, weight, mass, free, rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
+            SpringSystem(rows, weight, mass, free), rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
         )
         linear_iterations += iterations
         # the forces at the new state say which springs act
@@ -379,13 +378,6 @@ def _solve(A, rhs, guess, options):
     if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
         return factor_symmetric(A).solve(rhs), 0
     solution, iterations, _ = sparse_conjugate_gradients(
-        A.indptr.astype(np.int64),
-        A.indices.astype(np.int64),
-        np.ascontiguousarray(A.data, dtype=np.float64),
-        np.ascontiguousarray(rhs, dtype=np.float64),
-        np.ascontiguousarray(guess, dtype=np.float64),
-        np.ones(A.shape[0], dtype=np.bool_),
-        options.linear_tolerance,
-        10 * A.shape[0],
+        A, rhs, guess, np.ones(A.shape[0], dtype=np.bool_), options.linear_tolerance, 10 * A.shape[0]
     )
     return solution, iterations

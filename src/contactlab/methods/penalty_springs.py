@@ -15,7 +15,7 @@ Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows 
 
 from __future__ import annotations
 
-from collections import namedtuple
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -150,35 +150,47 @@ def supported_loads(
 
 # ---- the contact springs ------------------------------------------------------------------
 
-ContactSprings = namedtuple(
-    "ContactSprings",
-    (
-        "stiffness",  # (C,) k [N/m]
-        "damping",  # (C,) c [N s/m] along the normal
-        "friction_stiffness",  # (C,) k_t [N/m] of the anchor springs
-        "friction_damping",  # (C,) c_t [N s/m]
-        "friction",  # (C,) μ
-        "elongation",  # (C, 2) s = point − anchor in (t1, t2) components [m]
-        "inverse_effective_mass",  # (C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg] (None: not known)
-    ),
-    defaults=(None,),
-)
-ContactSprings.__doc__ = "The springs of C contacts, as this step sees them (a named tuple: compiled code takes it)."
 
-SpringSettings = namedtuple(
-    "SpringSettings",
-    (
-        "stiffness",  # N/m, or −1: "auto" (each contact's load over allowed_penetration)
-        "allowed_penetration",  # m
-        "damping_ratio",  # ζ, or −1: from the material's restitution
-        "friction_stiffness",  # N/m, or −1: "auto" (the normal stiffness)
-        "implicit",  # 0 never, 1 auto (where the explicit step is unstable), 2 always, 3 backward Euler
-        "integrator",  # 0 symplectic, 1 explicit, 2 backward Euler (``amplification``'s cases)
-        "implicit_iterations",  # passes of the active set, at most
-        "linear_tolerance",  # relative residual of the conjugate gradients
-    ),
-)
-SpringSettings.__doc__ = "The penalty Options and integrator as plain numbers, for the compiled stages."
+class ContactSprings(NamedTuple):
+    """The springs of C contacts, as this step sees them (a named tuple: compiled code takes it)."""
+
+    stiffness: np.ndarray
+    """(C,) k [N/m]"""
+    damping: np.ndarray
+    """(C,) c [N s/m] along the normal"""
+    friction_stiffness: np.ndarray
+    """(C,) k_t [N/m] of the anchor springs"""
+    friction_damping: np.ndarray
+    """(C,) c_t [N s/m]"""
+    friction: np.ndarray
+    """(C,) μ"""
+    elongation: np.ndarray
+    """(C, 2) s = point − anchor in (t1, t2) components [m]"""
+    inverse_effective_mass: np.ndarray | None = None
+    """(C, 3) J M⁻¹ Jᵀ of the normal and tangent rows [1/kg] (None: not known)"""
+
+
+class SpringSettings(NamedTuple):
+    """The penalty Options and integrator as plain numbers, for the compiled stages."""
+
+    stiffness: float
+    """N/m, or −1: "auto" (each contact's load over allowed_penetration)"""
+    allowed_penetration: float
+    """m"""
+    damping_ratio: float
+    """ζ, or −1: from the material's restitution"""
+    friction_stiffness: float
+    """N/m, or −1: "auto" (the normal stiffness)"""
+    implicit: int
+    """0 never, 1 auto (where the explicit step is unstable), 2 always, 3 backward Euler"""
+    integrator: int
+    """0 symplectic, 1 explicit, 2 backward Euler (``amplification``'s cases)"""
+    implicit_iterations: int
+    """passes of the active set, at most"""
+    linear_tolerance: float
+    """relative residual of the conjugate gradients"""
+
+
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
 

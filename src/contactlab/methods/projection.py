@@ -59,13 +59,20 @@ class Options(KeptManifoldOptions):
     """Settings of ``[method.projection]`` (after the collision settings of KeptManifoldOptions:
     the first pass of a step detects at the step's start, keeping box and hull manifolds)."""
 
-    iterations: int = 100  # Gauss-Seidel sweeps per projection (at most)
-    tolerance: float = 1e-10  # m: stop once a sweep moves no contact point more
-    passes: int = 2  # detect-and-project rounds per step
-    contact_margin: float = 0.001  # m: gaps this small are detected too
-    cloth_samples: int = 2  # samples per cloth triangle edge against obstacles (P2c); 0: vertices only
-    slop: float = 0.0005  # m of penetration left alone (the rest is projected out)
-    warm_start: float = 1.0  # fraction of last step's projection λ to start from (by contact id; 0 = cold)
+    iterations: int = 100
+    """Gauss-Seidel sweeps per projection (at most)"""
+    tolerance: float = 1e-10
+    """m: stop once a sweep moves no contact point more"""
+    passes: int = 2
+    """detect-and-project rounds per step"""
+    contact_margin: float = 0.001
+    """m: gaps this small are detected too"""
+    cloth_samples: int = 2
+    """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
+    slop: float = 0.0005
+    """m of penetration left alone (the rest is projected out)"""
+    warm_start: float = 1.0
+    """fraction of last step's projection λ to start from (by contact id; 0 = cold)"""
 
     def __post_init__(self):
         super().__post_init__()

@@ -45,7 +45,7 @@ def predict(
     velocities that move the positions: v*, or the old ones under explicit Euler; the predicted
     positions; each collider's swept distance [m])."""
     move = state.velocities if integrator == "explicit_euler" else free
-    predicted = advance_positions(*state.positions, *move, h, h)
+    predicted = advance_positions(state.positions, move, h, h)
     return move, predicted, swept_distances(model, move[0], free[1], move[2], h)
 
 
@@ -101,8 +101,8 @@ def positions_split_at_impact(
         tau = np.full(contacts.count, -1.0)
     tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
     corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
-    mid = advance_positions(*state.positions, *move, tau_body * h, tau_particle * h)
-    return advance_positions(*mid, *corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
+    mid = advance_positions(state.positions, move, tau_body * h, tau_particle * h)
+    return advance_positions(mid, corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
 
 
 def resting_target(gap_at_start: np.ndarray, dt: float, options: ImpulseOptions | ConstraintsOptions) -> np.ndarray:

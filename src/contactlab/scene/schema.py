@@ -158,7 +158,8 @@ class _ListOf:
     """A non-empty list of values of the kind ``item``, each checked by it (``field[i]``)."""
 
     item: Any
-    noun = ""  # what a message calls the list, followed by its unit
+    noun = ""
+    """what a message calls the list, followed by its unit"""
     noun_says_unit = False
 
     def check(self, value: Any, field: str, unit: str = "") -> Any:
@@ -203,7 +204,8 @@ class Quaternions(_ListOf):
 
     item = Vector(4)
     noun = "[w, x, y, z] quaternions"
-    noun_says_unit = True  # the unit, "quaternion w, x, y, z", would only say it again
+    noun_says_unit = True
+    """the unit, "quaternion w, x, y, z", would only say it again"""
 
     def describe(self) -> str:
         return "[[w, x, y, z], ...]"
@@ -324,10 +326,12 @@ class Key:
     """One key of a table: its kind, unit, default and, for shape-specific keys, the shapes."""
 
     kind: Kind
-    default: object = None  # None: left to the builder (or absent)
+    default: object = None
+    """None: left to the builder (or absent)"""
     unit: str = ""
     required: bool = False
-    shapes: tuple[str, ...] = ()  # non-empty: only these shapes take the key
+    shapes: tuple[str, ...] = ()
+    """non-empty: only these shapes take the key"""
 
 
 def taking(name: str, table: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
