@@ -48,6 +48,7 @@ import numpy as np
 from numba import njit
 
 from .. import shapes
+from ..collision import dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
@@ -214,7 +215,7 @@ def loop_model(model: Model) -> LoopModel:
         copy(obstacle_rotation, dtype=float),
         copy(model.material_friction, dtype=float),
         copy(model.material_restitution, dtype=float),
-        np.full(B + P, -1, dtype=np.int64),
+        np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
     )
 
 
