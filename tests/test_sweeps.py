@@ -167,6 +167,34 @@ def test_sweep_order_is_highest_first_with_ties_scrambled_by_id(rng):
     assert sorted(order.tolist()) == list(range(contacts.count))
 
 
+def test_compiled_order_sorts_heights_by_their_bits_as_numpy_sorts_the_floats(rng):
+    # contact_order sorts int64 keys made of −height's bits: the same order as NumPy's lexsort
+    # of the rounded floats, ties (equal heights, +0 and −0 among them) by scramble then index
+    gravity = np.array([0.0, 0.0, -9.81])
+    for count in (0, 1, 2, 17, 300, 3000):
+        point = rng.normal(size=(count, 3))
+        point[:, 2] = rng.choice(np.r_[0.0, -0.0, 1e-12, -1e-12, rng.uniform(-5, 5, max(1, count // 7))], count)
+        feature_id = rng.integers(0, 1 << 40, count)
+        height = np.round(point[:, 2], 9)
+        scramble = ((feature_id.astype(np.uint64) * np.uint64(2654435761)) % np.uint64(4294967291)).astype(np.int64)
+        expected = np.lexsort((np.arange(count), scramble, -height))
+        np.testing.assert_array_equal(sequential.contact_order(point, feature_id, gravity), expected)
+
+
+def test_argsort_of_ids_is_numpys_for_distinct_keys_and_sorts_repeats(rng):
+    from contactlab.contacts import argsort_keys
+
+    for count in (0, 1, 2, 16, 17, 40, 1000, 5000):
+        keys = rng.choice(1 << 50, count, replace=False).astype(np.int64) - (1 << 49)
+        np.testing.assert_array_equal(argsort_keys(keys), np.argsort(keys, kind="stable"))
+        np.testing.assert_array_equal(argsort_keys(np.sort(keys)), np.arange(count))  # already sorted
+        np.testing.assert_array_equal(argsort_keys(np.sort(keys)[::-1].copy()), np.arange(count)[::-1])
+        repeated = rng.integers(0, 4, count)
+        order = argsort_keys(repeated)
+        assert sorted(order.tolist()) == list(range(count))  # a permutation
+        np.testing.assert_array_equal(repeated[order], np.sort(repeated))
+
+
 def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle():
     """Ten boxes stacked, settled: each box stands on four corners, so the load's split among
     them is not unique, and single updates keep trading impulse between corners long after the

@@ -144,17 +144,23 @@ def candidate_pairs(
     rots: np.ndarray,
     reach: np.ndarray,
     dynamic: int,
-    cloth_of: np.ndarray,
+    cloth_of: np.ndarray | None,
     large: bool | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The broad phase: (lower, upper) bounds (N, 3) [m] of the colliders grown by ``reach``
     (N,) [m], and the candidate pairs (K, 2) int64 — the dynamic pairs (colliders 0 … dynamic−1)
     whose bounds overlap, sorted, then each dynamic collider against the static obstacles
     (``static_pairs``; meshes apart). ``cloth_of`` (dynamic,) int: the cloth of each dynamic
-    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart).
-    ``large``: as ``broad_phase.boxes_overlapping`` takes it."""
+    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart);
+    None for a scene of fewer than two dynamic colliders, which has no dynamic pair: the sweep
+    is then not compiled (``dynamic_pairs_possible``). ``large``: as
+    ``broad_phase.boxes_overlapping`` takes it."""
     lower, upper = _bounds(kinds, params, centers, rots, reach)
     statics = static_pairs(lower, upper, kinds, params, dynamic)
+    # a branch on a None argument: Numba drops the rest before typing (a ball on the floor
+    # compiles no sweep and prune, about 2 s of a cold start)
+    if cloth_of is None:
+        return lower, upper, statics
     if dynamic < 2:  # one body or none: its static pairs are all (no empty sweep, no copy a step)
         return lower, upper, statics
     dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic], large)
@@ -170,6 +176,12 @@ def candidate_pairs(
         pairs[count, 0], pairs[count, 1] = statics[k, 0], statics[k, 1]
         count += 1
     return lower, upper, pairs[:count]
+
+
+def dynamic_pairs_possible(dynamic: int) -> bool:
+    """Whether ``dynamic`` bodies and particles can make a dynamic pair (at least two):
+    otherwise ``candidate_pairs`` takes ``cloth_of`` None and compiles no sweep."""
+    return dynamic >= 2
 
 
 # collide takes collide_keeping's parameters less the manifolds (deliberately repeated: the
@@ -230,7 +242,9 @@ def collide_keeping(
     reach = np.full(dynamic + O, 0.5 * float(margin))
     if sweep is not None:
         reach[:dynamic] += sweep
-    cloth_of = np.concatenate([np.full(B, -1), model.particle_cloth])  # neighbours within one cloth: no contact
+    cloth_of = (  # neighbours within one cloth: no contact; None: no dynamic pair at all
+        np.concatenate([np.full(B, -1), model.particle_cloth]) if dynamic_pairs_possible(dynamic) else None
+    )
     large = True if dynamic >= GRID_FROM else None  # None: the grids are never needed, nor compiled
     lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap

@@ -46,6 +46,8 @@ FAMILIES = (
     "convex_plane",
 )
 HULL_FAMILIES = frozenset(("sphere_convex", "capsule_convex", "convex_convex", "convex_plane"))  # need hull_store
+# the families whose pairs keep manifolds (``manifolds.kept_pairs``: boxes, hulls and planes)
+KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")
 ALL_FAMILIES = (True,) * len(FAMILIES)  # every routine (collide_pair; tests)
 
 _CLASS = {SPHERE: "sphere", POINT: "sphere", CAPSULE: "capsule", BOX: "box", CONVEX: "convex", PLANE: "plane"}
@@ -95,3 +97,9 @@ def scene_families(dynamic_kinds: np.ndarray, static_kinds: np.ndarray) -> tuple
 def needs_hulls(families: tuple) -> bool:
     """Whether a families tuple includes a routine that reads the hull store."""
     return any(flag is not None and name in HULL_FAMILIES for name, flag in zip(FAMILIES, families))
+
+
+def keeps_manifolds(families: tuple) -> bool:
+    """Whether a families tuple includes a pair that keeps manifolds (KEPT_FAMILIES): without
+    one, no manifold is ever kept, and the reuse need not be compiled."""
+    return any(flag is not None and name in KEPT_FAMILIES for name, flag in zip(FAMILIES, families))

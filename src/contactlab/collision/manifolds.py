@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from .. import shapes
+from .families import keeps_manifolds
 from .narrow_phase import MAX_PER_PAIR, generate_contacts
 
 
@@ -311,7 +312,9 @@ def generate_reusing(
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
     kept = manifolds if manifolds is not None else Manifolds.empty()
-    if not kept_pairs(kinds, pairs).any():  # a pile of spheres: no reuse (and its code never compiled)
+    # a pile of spheres: no reuse (and its code never compiled); a scene with no box, hull or
+    # plane pair does not even compile kept_pairs
+    if not keeps_manifolds(families) or not kept_pairs(kinds, pairs).any():
         pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]
         return (
             *generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),

@@ -88,8 +88,9 @@ def contact_rows(
     k = np.zeros((C, 8))
     for c in range(C):
         body[c, 0], body[c, 1] = body_a[c], body_b[c]
-        particle[c] = -1
         used_a = used_b = 0  # a side's particles packed to the front, −1 after
+        for i in range(3):
+            particle[c, 0, i] = particle[c, 1, i] = -1  # not particle[c] = -1: less to compile
         for i in range(3):
             if particles_a[c, i] >= 0:
                 particle[c, 0, used_a], weight[c, 0, used_a] = particles_a[c, i], weights_a[c, i]

@@ -52,7 +52,7 @@ LoopModel = namedtuple(
         "obstacle_rotation",  # (O, 3, 3)
         "material_friction",  # (M,)
         "material_restitution",  # (M,)
-        "cloth_of",  # (B + P,) int, −1: no cloth (always, here)
+        "cloth_of",  # (B + P,) int, −1: no cloth (always, here); None under two bodies and particles
     ),
 )
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit, prange
 
+from ..contacts import argsort_keys
 from .jacobian_rows import ContactRows, apply_impulse, apply_impulses, contact_velocity, rows_in_order
 
 if TYPE_CHECKING:
@@ -328,10 +329,21 @@ def contact_order(point: np.ndarray, feature_id: np.ndarray, gravity: np.ndarray
         return np.arange(C)
     height = np.empty(C)  # along −g, to the nanometre
     scramble = np.empty(C, dtype=np.int64)
+    down = np.empty(C)  # −height, whose bits become the sort keys
     for c in range(C):
         height[c] = np.round(-(point[c, 0] * gravity[0] + point[c, 1] * gravity[1] + point[c, 2] * gravity[2]) / g, 9)
         scramble[c] = np.int64((np.uint64(feature_id[c]) * np.uint64(2654435761)) % np.uint64(4294967291))
-    return _order_ties(np.argsort(-height), height, scramble)
+        down[c] = -height[c]
+    # sort int64 keys, not the floats: the bits of −height with the negatives' magnitude bits
+    # flipped order as the floats do (−0 just before +0; any finite height), so the sort is the
+    # one the warm-start matching (contacts.values_carried) compiles anyway, not a second one
+    # for floats (a cold start compiles one sort, not two); the ties are ordered by
+    # _order_ties whatever the sort left them in, so the order is the one np.argsort gave
+    keys = down.view(np.int64)
+    for c in range(C):
+        if keys[c] < 0:
+            keys[c] ^= np.int64(0x7FFFFFFFFFFFFFFF)
+    return _order_ties(argsort_keys(keys), height, scramble)
 
 
 @njit(cache=True)

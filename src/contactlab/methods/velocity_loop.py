@@ -48,7 +48,9 @@ import numpy as np
 from numba import njit
 
 from .. import shapes
+from ..collision import dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
+from ..collision.families import KEPT_FAMILIES
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
 from ..state import State
@@ -160,7 +162,6 @@ def run(
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
 
 PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
-KEPT_FAMILIES = ("box_box", "box_plane", "convex_convex", "convex_plane")  # pairs that keep manifolds
 
 
 def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple:
@@ -214,7 +215,7 @@ def loop_model(model: Model) -> LoopModel:
         copy(obstacle_rotation, dtype=float),
         copy(model.material_friction, dtype=float),
         copy(model.material_restitution, dtype=float),
-        np.full(B + P, -1, dtype=np.int64),
+        np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
     )
 
 
