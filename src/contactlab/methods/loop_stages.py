@@ -23,13 +23,12 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .. import rotations
-from ..collision import assemble_contacts, candidate_pairs, collider_poses
+from .. import collision, diagnostics, rotations
+from ..collision import assemble_contacts
 from ..collision.manifolds import reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..contacts import ContactArrays
-from ..diagnostics import gravitational, kinetic
-from ..dynamics.integrators import gyroscopic_midpoint
+from ..dynamics import integrators
 from .jacobian_rows import ContactRows, contact_rows
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
 
@@ -116,6 +115,19 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------
 
+# Each array a compiled call passes or returns is a reference taken and released, an atomic
+# operation each, and on a one-ball scene these cost more than the arithmetic (608 a recorded
+# airborne step before this, most of its time; 442 since). So the small kernels a step and its
+# sample call are inlined here: the same Python functions, as dispatchers of their own that Numba
+# inlines (their own dispatchers stay as they are for every other caller), and Numba's
+# reference-count pruning then drops many of the pairs.
+collider_poses = njit(inline="always")(collision.collider_poses.py_func)
+candidate_pairs = njit(inline="always")(collision.candidate_pairs.py_func)
+gyroscopic_midpoint = njit(inline="always")(integrators.gyroscopic_midpoint.py_func)
+moved = njit(inline="always")(integrators.moved.py_func)
+kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
+gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
+
 
 # The stages that take the LoopModel or the Motion whole are inlined into their callers (or
 # unpack them there and call a function of plain arrays): a call that passes a named tuple of
@@ -141,7 +153,7 @@ def free_motion(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _free_motion(gravity, inertia, pinned, body_velocity, angular_velocity, particle_velocity, rotation, h):
     # element by element, not v + h g: the array expression allocates h g and broadcasts (the
     # same sums)
@@ -177,7 +189,7 @@ def swept_reach(
     return _swept_reach(model.radius, body_velocity, angular_velocity, particle_velocity, h, margin)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _swept_reach(radius, body_velocity, angular_velocity, particle_velocity, h, margin):
     B, P = body_velocity.shape[0], particle_velocity.shape[0]
     reach = np.full(radius.shape[0], 0.5 * margin)
@@ -194,27 +206,36 @@ def _norm(v):
 
 
 @njit(cache=True, inline="always")
+def poses(model: LoopModel, motion: Motion, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The colliders' centres (N, 3) [m] and rotations (N, 3, 3) at ``motion``'s positions,
+    the bodies' rotations (B, 3, 3) ``rotation`` (``collision.collider_poses``): what ``detect``
+    and ``record`` take, computed once for a sample and the step after it."""
+    return collider_poses(
+        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
+    )
+
+
+@njit(cache=True, inline="always")
 def detect(
     model: LoopModel,
     plan: tuple,
     large: bool | None,
     keeping: bool | None,
     motion: Motion,
-    rotation: np.ndarray,
+    centers: np.ndarray,
+    rots: np.ndarray,
     reach: np.ndarray,
     kept: tuple,
     tolerance: float,
 ) -> tuple[ContactArrays, tuple]:
     """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
     hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
-    when ``tolerance`` [m] > 0. ``plan`` = (families, hull store) of the narrow phase; ``large``
-    and ``keeping`` None: never a grid broad phase, never a kept manifold (see ``Stepper``).
-    Returns (ContactArrays, the manifolds to keep)."""
+    when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, their centres (N, 3) and
+    rotations (N, 3, 3) ``centers``, ``rots`` (``poses``). ``plan`` = (families, hull store) of
+    the narrow phase; ``large`` and ``keeping`` None: never a grid broad phase, never a kept
+    manifold (see ``Stepper``). Returns (ContactArrays, the manifolds to keep)."""
     families, hull_store = plan
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    centers, rots = collider_poses(
-        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
-    )
     _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
     total = model.kinds.shape[0]
     made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
@@ -354,47 +375,62 @@ def solve(
 # ---- after a step: the state stored, checked and recorded ---------------------------------
 
 
-@njit(cache=True)
+# store and healthy are inlined, and copy or check array by array through inlined helpers, not
+# over a tuple of the arrays: each array a call or a tuple holds is a reference taken and released
+# (an atomic operation each), which on a one-ball scene cost more than the copying itself
+
+
+@njit(cache=True, inline="always")
 def store(motion: Motion, positions: tuple, velocities: tuple) -> None:
     """Copy a step's new positions and velocities into the state's arrays."""
-    for target, source in (
-        (motion.body_position, positions[0]),
-        (motion.body_velocity, velocities[0]),
-        (motion.body_angular_velocity, velocities[1]),
-        (motion.particle_position, positions[2]),
-        (motion.particle_velocity, velocities[2]),
-    ):
-        for n in range(target.shape[0]):
-            for i in range(3):
-                target[n, i] = source[n, i]
-    for b in range(motion.body_orientation.shape[0]):
-        for i in range(4):
-            motion.body_orientation[b, i] = positions[1][b, i]
+    _copy_rows(motion.body_position, positions[0])
+    _copy_rows(motion.body_orientation, positions[1])
+    _copy_rows(motion.particle_position, positions[2])
+    _copy_rows(motion.body_velocity, velocities[0])
+    _copy_rows(motion.body_angular_velocity, velocities[1])
+    _copy_rows(motion.particle_velocity, velocities[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _copy_rows(target, source):
+    """target[n, i] = source[n, i] for every row n and column i of target."""
+    for n in range(target.shape[0]):
+        for i in range(target.shape[1]):
+            target[n, i] = source[n, i]
+
+
+@njit(cache=True, inline="always")
 def healthy(motion: Motion, max_speed: float) -> bool:
     """Every value finite and no body centre or particle faster than max_speed [m/s]."""
-    for array in (
-        motion.body_position,
-        motion.body_velocity,
-        motion.body_angular_velocity,
-        motion.particle_position,
-        motion.particle_velocity,
-    ):
-        for n in range(array.shape[0]):
-            for i in range(3):
-                if not np.isfinite(array[n, i]):
-                    return False
-    for b in range(motion.body_orientation.shape[0]):
-        for i in range(4):
-            if not np.isfinite(motion.body_orientation[b, i]):
-                return False
-    for velocity in (motion.body_velocity, motion.particle_velocity):
-        for n in range(velocity.shape[0]):
-            if _norm(velocity[n]) > max_speed:
-                return False
-    return True
+    # every array checked whole, without returning early: one exit keeps the pruning effective
+    finite = (
+        _finite(motion.body_position)
+        & _finite(motion.body_velocity)
+        & _finite(motion.body_angular_velocity)
+        & _finite(motion.particle_position)
+        & _finite(motion.particle_velocity)
+        & _finite(motion.body_orientation)
+    )
+    return finite and _within(motion.body_velocity, max_speed) & _within(motion.particle_velocity, max_speed)
+
+
+@njit(cache=True, inline="always")
+def _finite(array):
+    """Whether every entry of the 2-D ``array`` is finite."""
+    finite = True
+    for n in range(array.shape[0]):
+        for i in range(array.shape[1]):
+            finite &= np.isfinite(array[n, i])
+    return finite
+
+
+@njit(cache=True, inline="always")
+def _within(velocity, max_speed):
+    """Whether no row of ``velocity`` (n, 3) is longer than max_speed."""
+    within = True
+    for n in range(velocity.shape[0]):
+        within &= _norm(velocity[n]) <= max_speed
+    return within
 
 
 @njit(cache=True, inline="always")
@@ -405,6 +441,7 @@ def record(
     plan: tuple,
     large: bool | None,
     motion: Motion,
+    at: tuple,
     time: float,
     contact_count: int,
     sweeps: int,
@@ -412,22 +449,17 @@ def record(
 ) -> None:
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
     deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does); the
-    step's ``contact_count``, or where it is −1 (no step) that of the fresh pass."""
+    step's ``contact_count``, or where it is −1 (no step) that of the fresh pass. ``at`` = the
+    bodies' rotations (B, 3, 3) and the colliders' centres and rotations at ``motion``'s
+    positions (``poses``), which the next step starts from too."""
+    rotation, centers, rots = at
     samples.time[row] = time
-    for target, source in (
-        (samples.body_position, motion.body_position),
-        (samples.body_velocity, motion.body_velocity),
-        (samples.body_angular_velocity, motion.body_angular_velocity),
-        (samples.particle_position, motion.particle_position),
-        (samples.particle_velocity, motion.particle_velocity),
-    ):
-        for n in range(source.shape[0]):
-            for i in range(3):
-                target[row, n, i] = source[n, i]
-    for b in range(motion.body_orientation.shape[0]):
-        for i in range(4):
-            samples.body_orientation[row, b, i] = motion.body_orientation[b, i]
-    rotation = rotations.matrices(motion.body_orientation)
+    _copy_rows(samples.body_position[row], motion.body_position)
+    _copy_rows(samples.body_orientation[row], motion.body_orientation)
+    _copy_rows(samples.body_velocity[row], motion.body_velocity)
+    _copy_rows(samples.body_angular_velocity[row], motion.body_angular_velocity)
+    _copy_rows(samples.particle_position[row], motion.particle_position)
+    _copy_rows(samples.particle_velocity[row], motion.particle_velocity)
     samples.energy_kinetic[row] = kinetic(
         model.body_mass,
         model.body_inertia,
@@ -441,9 +473,6 @@ def record(
         model.body_mass, motion.body_position, model.particle_mass, motion.particle_position, model.gravity
     )
     samples.energy_elastic[row] = 0.0
-    centers, rots = collider_poses(
-        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
-    )
     touching = np.zeros(model.kinds.shape[0])
     _, _, pairs = candidate_pairs(
         model.kinds,

@@ -25,10 +25,20 @@ from .. import rotations
 from ..collision import half_thickness_sums
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
-from ..dynamics.integrators import moved
 from .impulse import resolve_collisions
 from .jacobian_rows import ContactRows, row_products
-from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, detect, free_motion, solve, swept_reach
+from .loop_stages import (
+    LoopModel,
+    LoopSettings,
+    Motion,
+    build_rows,
+    detect,
+    free_motion,
+    moved,
+    poses,
+    solve,
+    swept_reach,
+)
 from .penalty_implicit import free_dofs, implicit_spring_velocities, mass_blocks
 from .penalty_springs import (
     ContactSprings,
@@ -161,24 +171,28 @@ def velocity_step(
     slabs: bool | None,
     parallel: bool | None,
     motion: Motion,
+    start: tuple,
     carried: tuple,
 ) -> tuple:
     """One step of loop L3 with impulses or hard constraints on velocities.
 
-    ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
-    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``constraints``, ``slabs``
-    and ``parallel`` (True, or None to leave a stage's branch uncompiled) as ``Stepper`` sets them.
-    Returns (positions, velocities — the state's six arrays, new —, the carried triple for the
-    next step, the ContactArrays, sweeps made, the sweeps' last change [m/s])."""
+    ``start`` = the poses at the step's start: the bodies' rotations (B, 3, 3), the colliders'
+    centres (N, 3) and rotations (N, 3, 3) (``poses``; ``run`` computes them once for the sample
+    before and this step); ``carried`` = (the kept manifolds' eight fields, last step's contact
+    ids (K,), their impulses (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``,
+    ``constraints``, ``slabs`` and ``parallel`` (True, or None to leave a stage's branch
+    uncompiled) as ``Stepper`` sets them. Returns (positions, velocities — the state's six
+    arrays, new —, the carried triple for the next step, the ContactArrays, sweeps made, the
+    sweeps' last change [m/s])."""
     h = settings.dt
-    rotation = rotations.matrices(motion.body_orientation)
+    rotation, centers, rots = start
     # 1. internal forces → free velocities v*
     free = free_motion(model, motion, rotation, h)
     # 2. predict: how far each body and particle sweeps this step
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds = detect(
-        model, plan, large, keeping, motion, rotation, reach, carried[0], settings.manifold_tolerance
+        model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -277,7 +291,8 @@ def passes(
             break
         at = displaced_motion(motion, displacement, settings.dt)
         rotation = rotations.matrices(at.body_orientation)
-        contacts, _ = detect(model, plan, large, keeping, at, rotation, reach, kept, 0.0)
+        centers, rots = poses(model, at, rotation)
+        contacts, _ = detect(model, plan, large, keeping, at, centers, rots, reach, kept, 0.0)
         displacement, _, more, change = project(
             model,
             settings,
@@ -306,16 +321,17 @@ def projection_step(
     slabs: bool | None,
     parallel: bool | None,
     motion: Motion,
+    start: tuple,
     carried: tuple,
 ) -> tuple:
     """One step of loop L2 with projection (``projection.step``, stage for stage).
 
-    ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values: last step's
-    first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six arrays, new —,
-    the carried triple for the next step, the last pass's ContactArrays, sweeps made in every
-    pass, the last pass's last correction [m])."""
+    ``start``, ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values:
+    last step's first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six
+    arrays, new —, the carried triple for the next step, the last pass's ContactArrays, sweeps
+    made in every pass, the last pass's last correction [m])."""
     h = settings.dt
-    rotation = rotations.matrices(motion.body_orientation)
+    rotation, centers, rots = start
     # 1. internal forces → free velocities v*
     free = free_motion(model, motion, rotation, h)
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
@@ -324,7 +340,7 @@ def projection_step(
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds = detect(
-        model, plan, large, keeping, motion, rotation, reach, carried[0], settings.manifold_tolerance
+        model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
@@ -379,22 +395,23 @@ def penalty_step(
     parallel: bool | None,
     penalty: PenaltyLoop,
     motion: Motion,
+    start: tuple,
     carried: tuple,
 ) -> tuple:
     """One step of loop L1 with penalty forces (``methods.penalty.step``, stage for stage).
 
     ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
-    (K, 3) [m]); flags as ``velocity_step``'s. Returns (positions, velocities — the state's six
+    (K, 3) [m]); ``start`` and the flags as ``velocity_step``'s. Returns (positions, velocities — the state's six
     arrays, new —, the carried triple, the ContactArrays, active-set passes, the last linear
     solve's relative residual, the elastic energy at the step's end [J], whether the springs
     went implicit under an explicit integrator, the conjugate-gradient iterations of its solves)."""
     h, B = settings.dt, motion.body_position.shape[0]
-    rotation = rotations.matrices(motion.body_orientation)
+    rotation, centers, rots = start
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
         model, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
-    contacts, manifolds = detect(model, plan, large, None, motion, rotation, reach, carried[0], 0.0)
+    contacts, manifolds = detect(model, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
     rows = build_rows(model, contacts, motion, rotation)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)

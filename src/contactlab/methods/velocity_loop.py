@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from .. import shapes
+from .. import rotations, shapes
 from ..collision import dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES
@@ -55,7 +55,7 @@ from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
 from ..state import State
 from . import CollisionOptions
-from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, record, store
+from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, poses, record, store
 from .loop_steps import PenaltyLoop, penalty_step, projection_step, velocity_step
 from .penalty import spring_settings
 from .penalty_springs import GUARD_SWEEPS, GUARD_TOLERANCE
@@ -122,6 +122,10 @@ def run(
     sweeps_made = 0
     implicit_steps = 0
     linear_made = 0
+    # the poses at each step's start, computed once after the step before: its sample takes them too
+    rotation = rotations.matrices(motion.body_orientation)
+    centers, rots = poses(model, motion, rotation)
+    pose = (rotation, centers, rots)
     for s in range(steps):
         index = first_index + s
         elastic, implicit, linear = 0.0, False, 0
@@ -129,21 +133,24 @@ def run(
         # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
             positions, velocities, carried, contacts, sweeps, change = projection_step(
-                model, settings, plan, large, keeping, slabs, parallel, motion, carried
+                model, settings, plan, large, keeping, slabs, parallel, motion, pose, carried
             )
         if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
             positions, velocities, carried, contacts, sweeps, change = velocity_step(
-                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, carried
+                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if impulse is not None:
             positions, velocities, carried, contacts, sweeps, change = velocity_step(
-                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, carried
+                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if penalty is not None:
             positions, velocities, carried, contacts, sweeps, change, elastic, implicit, linear = penalty_step(
-                model, settings, plan, large, slabs, parallel, penalty, motion, carried
+                model, settings, plan, large, slabs, parallel, penalty, motion, pose, carried
             )
         store(motion, positions, velocities)
+        rotation = rotations.matrices(motion.body_orientation)
+        centers, rots = poses(model, motion, rotation)
+        pose = (rotation, centers, rots)
         time += settings.dt
         count = contacts.depth.shape[0]
         most = max(most, count)
@@ -153,7 +160,7 @@ def run(
         if not healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, model, plan, large, motion, time, count, sweeps, change)
+            record(samples, written, model, plan, large, motion, pose, time, count, sweeps, change)
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
@@ -315,8 +322,10 @@ class Stepper:
         """The sample of the state as it stands (no step made: its contacts those of the fresh
         collision pass, 0 sweeps), as a dict of
         the series, recorded by the loop's ``record``: what ``Recorder.sample`` records."""
-        samples = self.samples_for(1)
-        record(samples, 0, self.model.stepping_arrays, self.plan, self.flags[0], self.motion, self.time, -1, 0, 0.0)
+        samples, model, motion = self.samples_for(1), self.model.stepping_arrays, self.motion
+        rotation = rotations.matrices(motion.body_orientation)
+        centers, rots = poses(model, motion, rotation)
+        record(samples, 0, model, self.plan, self.flags[0], motion, (rotation, centers, rots), self.time, -1, 0, 0.0)
         return samples._asdict()
 
     def advance(
