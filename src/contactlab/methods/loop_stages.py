@@ -120,9 +120,12 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 # airborne step before this, most of its time; 442 since). So the small kernels a step and its
 # sample call are inlined here: the same Python functions, as dispatchers of their own that Numba
 # inlines (their own dispatchers stay as they are for every other caller), and Numba's
-# reference-count pruning then drops many of the pairs.
+# reference-count pruning then drops many of the pairs. Not the broad phase: it takes
+# ``cloth_of`` None in a scene that can have no dynamic pair so that Numba drops its sweep
+# before typing, a pruning of arguments that an inlined copy (whose arguments are no longer
+# arguments) does not get.
 collider_poses = njit(inline="always")(collision.collider_poses.py_func)
-candidate_pairs = njit(inline="always")(collision.candidate_pairs.py_func)
+candidate_pairs = collision.candidate_pairs
 gyroscopic_midpoint = njit(inline="always")(integrators.gyroscopic_midpoint.py_func)
 moved = njit(inline="always")(integrators.moved.py_func)
 kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
