@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .contact_output import Frame
 from .convex import HullArrays
 
 PARALLEL_SIN2 = 1e-12  # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
@@ -41,11 +42,9 @@ def _least_face_overlap(normal, offset, faces, points, count, margin, result, at
 
 @njit(cache=True)
 def convex_convex_sat(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     hull_a: HullArrays,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     hull_b: HullArrays,
     margin: float,
     result: np.ndarray,
@@ -64,6 +63,8 @@ def convex_convex_sat(
     more than ``margin`` (``result`` then incomplete); B's vertices (Vb, 3), face normals
     (Fb, 3) and offsets (Fb,) in A's frame.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     vertices_a, face_normal_a, face_offset_a, _, _, edge_vertex_a, edge_face_a = hull_a
     vertices_b, face_normal_b, face_offset_b, _, _, edge_vertex_b, edge_face_b = hull_b
     Rab = np.empty((3, 3))
