@@ -16,6 +16,7 @@ from numba import njit
 
 from .contact_output import Frame
 from .convex import HullArrays
+from .geometry import to_local
 
 PARALLEL_SIN2 = 1e-12  # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
 
@@ -75,13 +76,7 @@ def convex_convex_sat(
                 + rotation_a[1, i] * rotation_b[1, j]
                 + rotation_a[2, i] * rotation_b[2, j]
             )
-    t = np.empty(3)
-    for i in range(3):
-        t[i] = (
-            rotation_a[0, i] * (center_b[0] - center_a[0])
-            + rotation_a[1, i] * (center_b[1] - center_a[1])
-            + rotation_a[2, i] * (center_b[2] - center_a[2])
-        )
+    t = to_local(rotation_a, center_a, center_b)
     count_b = vertices_b.shape[0]
     vb = np.empty((count_b, 3))
     for j in range(count_b):

@@ -73,6 +73,20 @@ def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def to_local(rotation: np.ndarray, center: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """rotation.T @ (x − center): the point x (3,) [m] in the frame of centre (3,) [m] and
+    rotation (3, 3) (frame → world), one sum per component (no difference vector, no transposed copy)."""
+    local = np.empty(3)
+    for a in range(3):
+        local[a] = (
+            rotation[0, a] * (x[0] - center[0])
+            + rotation[1, a] * (x[1] - center[1])
+            + rotation[2, a] * (x[2] - center[2])
+        )
+    return local
+
+
+@njit(cache=True)
 def axpy(x: np.ndarray, scale: float, y: np.ndarray) -> np.ndarray:
     """x + scale · y for (3,) arrays, as a new array (written out: quick to compile, no temporaries)."""
     return np.array([x[0] + scale * y[0], x[1] + scale * y[1], x[2] + scale * y[2]])
