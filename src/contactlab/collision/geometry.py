@@ -73,6 +73,12 @@ def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def row_difference(points: np.ndarray, i: int, j: int) -> tuple[float, float, float]:
+    """points[i] − points[j] of an (n, 3) array, as three scalars (no temporary array)."""
+    return points[i, 0] - points[j, 0], points[i, 1] - points[j, 1], points[i, 2] - points[j, 2]
+
+
+@njit(cache=True)
 def to_local(rotation: np.ndarray, center: np.ndarray, x: np.ndarray) -> np.ndarray:
     """rotation.T @ (x − center): the point x (3,) [m] in the frame of centre (3,) [m] and
     rotation (3, 3) (frame → world), one sum per component (no difference vector, no transposed copy)."""
