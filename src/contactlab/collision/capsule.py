@@ -47,7 +47,7 @@ import numpy as np
 from numba import njit
 
 from .contact_output import ContactRows, Frame, write_contact
-from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters
+from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
 
 MAX_CONTACTS = 2  # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
@@ -122,12 +122,8 @@ def sphere_capsule(
     center_b, rotation_b = frame_b
     axis = column(rotation_b, 2)
     s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
-    # closest point, distance and depth as capsule_capsule finds them (deliberately kept apart
-    # from it: a sphere has no segment, so no parallel 2-point patch)
     closest = axpy(center_b, s, axis)
-    d = axpy(center_a, -1.0, closest)
-    distance = norm(d)
-    depth = radius_a + radius_b - distance
+    d, distance, depth = sphere_gap(center_a, closest, radius_a + radius_b)
     if depth < -margin:
         return 0
     if distance > NORMAL_EPS:
@@ -185,13 +181,9 @@ def capsule_capsule(
     axis_a = column(rotation_a, 2)
     axis_b = column(rotation_b, 2)
     s, t = segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b)
-    # closest points, distance and depth as in sphere_capsule (deliberately kept apart from it:
-    # two segments can lie parallel and get a 2-point patch, a sphere cannot)
     point_a = axpy(center_a, s, axis_a)
     point_b = axpy(center_b, t, axis_b)
-    d = axpy(point_a, -1.0, point_b)
-    distance = norm(d)
-    depth = radius_a + radius_b - distance
+    d, distance, depth = sphere_gap(point_a, point_b, radius_a + radius_b)
     if depth < -margin:
         return 0
     axes_cross = cross(axis_a, axis_b)

@@ -73,6 +73,16 @@ def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def sphere_gap(center_a: np.ndarray, center_b: np.ndarray, radii: float) -> tuple[np.ndarray, float, float]:
+    """Two spheres of radii summing to ``radii`` [m] about center_a and center_b (3,) [m] (a
+    capsule's: the closest points of its segment): (d = center_a − center_b (3,) [m], |d| [m],
+    depth = radii − |d| [m], > 0 overlapping)."""
+    d = axpy(center_a, -1.0, center_b)
+    distance = norm(d)
+    return d, distance, radii - distance
+
+
+@njit(cache=True)
 def row_difference(points: np.ndarray, i: int, j: int) -> tuple[float, float, float]:
     """points[i] − points[j] of an (n, 3) array, as three scalars (no temporary array)."""
     return points[i, 0] - points[j, 0], points[i, 1] - points[j, 1], points[i, 2] - points[j, 2]
