@@ -284,10 +284,7 @@ def _combine(
 
 def generate_reusing(
     pairs: np.ndarray,
-    kinds: np.ndarray,
-    params: np.ndarray,
-    centers: np.ndarray,
-    rots: np.ndarray,
+    colliders: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     reach: np.ndarray,
     hull_store: tuple[np.ndarray, ...] | None,
     families: tuple[bool | None, ...],
@@ -296,12 +293,14 @@ def generate_reusing(
     total: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Manifolds]:
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
-    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
+    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``colliders`` the table (kinds (N,),
+    params (N, 4), centres (N, 3) [m], rotations (N, 3, 3)); ``reach`` (N,) per collider [m]; ``total`` the
     number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
     them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in
     pair order, as from
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
+    kinds, params, centers, rots = colliders
     kept = manifolds if manifolds is not None else Manifolds.empty()
     if not kept_pairs(kinds, pairs).any():  # a pile of spheres: no reuse (and its code never compiled)
         pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]
