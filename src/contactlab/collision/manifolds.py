@@ -74,23 +74,12 @@ def kept_pairs(kinds: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _still_valid(
-    pairs,
-    keys,
-    keeps,
-    pair_reach,
-    radius,
-    centers,
-    rotations_,
-    kept_keys,
-    reach_then,
-    center_then,
-    rotation_then,
-    tolerance,
-):
+def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, kept, tolerance):
     """For each pair k (K,), the row of its kept manifold if that is still valid, else −1 (see
     the module's docstring). ``keeps`` (K,) bool: pairs that keep manifolds; ``radius`` (N,)
-    bounding radii [m]; ``kept_keys`` sorted."""
+    bounding radii [m]; ``kept`` the last manifolds' eight fields (keys sorted), of which the
+    keys, reaches, centres and rotations are read."""
+    kept_keys, reach_then, center_then, rotation_then = kept[0], kept[1], kept[2], kept[3]
     K = pairs.shape[0]
     row = np.full(K, -1, dtype=np.int64)
     if kept_keys.shape[0] == 0:
@@ -164,25 +153,19 @@ def _combine(
     row,
     centers,
     rotations_,
-    point,
-    normal,
-    depth,
-    feature,
-    owner,
-    kept_reach,
-    kept_center,
-    kept_rotation,
-    kept_count,
-    kept_witness,
-    kept_normal,
-    kept_feature,
+    fresh,
+    kept,
 ):
     """The step's contacts in pair order, and the manifolds to keep, sorted by key.
 
     Pair k takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
-    ≥ 0 (the manifold itself is kept as it is), else its fresh contacts (point … owner, as
-    ``generate_contacts`` gave them, owner indexing ``pairs``), recorded as a new manifold when
-    ``keeps[k]``. Contacts deeper in the gap than ``pair_reach`` [m] are left out."""
+    ≥ 0 (the manifold itself is kept as it is), else its ``fresh`` contacts (point, normal,
+    depth, feature, owner, as ``generate_contacts`` gave them, owner indexing ``pairs``),
+    recorded as a new manifold when ``keeps[k]``. ``kept``: the last manifolds, the eight fields
+    as ``reuse_or_generate`` takes them. Contacts deeper in the gap than ``pair_reach`` [m] are
+    left out."""
+    point, normal, depth, feature, owner = fresh
+    _, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
     K, S = pairs.shape[0], MAX_PER_PAIR
     capacity = point.shape[0]
     for k in range(K):
@@ -361,20 +344,7 @@ def reuse_or_generate(
             kept_feature[:0],
         )
         return generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families), empty
-    row = _still_valid(
-        pairs,
-        keys,
-        keeps,
-        pair_reach,
-        radius,
-        centers,
-        rots,
-        kept_keys,
-        kept_reach,
-        kept_center,
-        kept_rotation,
-        tolerance,
-    )
+    row = _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rots, kept, tolerance)
     fresh = np.nonzero(row < 0)[0]
     widened = pair_reach + tolerance * keeps  # a kept manifold reaches a tolerance further
     point, normal, depth, feature, owner = generate_contacts(
@@ -389,16 +359,6 @@ def reuse_or_generate(
         row,
         centers,
         rots,
-        point,
-        normal,
-        depth,
-        feature,
-        fresh[owner],
-        kept_reach,
-        kept_center,
-        kept_rotation,
-        kept_count,
-        kept_witness,
-        kept_normal,
-        kept_feature,
+        (point, normal, depth, feature, fresh[owner]),
+        kept,
     )
