@@ -10,10 +10,10 @@ import numpy as np
 from numba import njit
 
 from .capsule import PARALLEL_SIN
-from .contact_output import ContactRows, Frame
+from .contact_output import ContactRows, Frame, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
 from .segment_box import face_interval, face_patch, segment_box_closest
-from .segment_patch import dominant_face_contacts, edge_cross_contact, write_patch_ends
+from .segment_patch import dominant_face_contacts, edge_cross_point, write_patch_ends
 
 BOX_REL_EPS = 1e-9  # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
 CROSS_AXIS_EPS = 1e-8  # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
@@ -201,15 +201,6 @@ def _segment_inside(segment, half_extents, margin, tol, frame, out, slot):
         if j != best_edge:
             edge_center[j] = half_extents[j] if normal_local[j] >= 0.0 else -half_extents[j]
     edge_direction = unit_axis(best_edge, 1.0)
-    return edge_cross_contact(
-        segment,
-        edge_center,
-        edge_direction,
-        half_extents[best_edge],
-        normal_local,
-        depth,
-        np.int64(CAPSULE_BOX_CROSS_FEATURE),
-        frame,
-        out,
-        slot,
-    )
+    point_local = edge_cross_point(segment, (edge_center, edge_direction, half_extents[best_edge]), normal_local)
+    write_local_contact(point_local, normal_local, depth, np.int64(CAPSULE_BOX_CROSS_FEATURE), frame, out, slot)
+    return 1

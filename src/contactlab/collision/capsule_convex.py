@@ -64,11 +64,11 @@ from numba import njit
 
 from .capsule import PARALLEL_SIN
 from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
-from .contact_output import ContactRows, Frame
+from .contact_output import ContactRows, Frame, write_local_contact
 from .convex import HullArrays
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 from .hull_faces import projects_into_face, segment_over_face
-from .segment_patch import dominant_face_contacts, edge_cross_contact, face_patch_ends, write_patch_ends
+from .segment_patch import dominant_face_contacts, edge_cross_point, face_patch_ends, write_patch_ends
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255
@@ -237,18 +237,9 @@ def capsule_convex(
     span = axpy(b, -1.0, a)
     half = 0.5 * np.sqrt(dot(span, span))
     edge_center, edge_direction = midpoint(a, b), scaled(0.5 / half, span)
-    return edge_cross_contact(
-        segment,
-        edge_center,
-        edge_direction,
-        half,
-        best_edge_axis,
-        depth,
-        CAPSULE_CONVEX_CROSS_FEATURE,
-        frame,
-        out,
-        slot,
-    )
+    point_local = edge_cross_point(segment, (edge_center, edge_direction, half), best_edge_axis)
+    write_local_contact(point_local, best_edge_axis, depth, CAPSULE_CONVEX_CROSS_FEATURE, frame, out, slot)
+    return 1
 
 
 @njit(cache=True)
