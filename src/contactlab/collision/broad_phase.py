@@ -57,20 +57,6 @@ def boxes_overlapping(lower: np.ndarray, upper: np.ndarray, large: bool | None) 
 
 
 @njit(cache=True)
-def boxes_touch(lower: np.ndarray, upper: np.ndarray, a: int, b: int) -> bool:
-    """Whether boxes a and b of ``lower``, ``upper`` (N, 3) [m] overlap or touch on all three axes
-    (the test of the grid searches; the sweep tests y and z only, x being swept)."""
-    return (
-        lower[a, 0] <= upper[b, 0]
-        and lower[b, 0] <= upper[a, 0]
-        and lower[a, 1] <= upper[b, 1]
-        and lower[b, 1] <= upper[a, 1]
-        and lower[a, 2] <= upper[b, 2]
-        and lower[b, 2] <= upper[a, 2]
-    )
-
-
-@njit(cache=True)
 def _append_pair(pairs, found, a, b):
     """``pairs`` (capacity, 2) with (min(a, b), max(a, b)) written in row ``found``: the same
     array, or a copy of twice the capacity when it was full."""
@@ -166,7 +152,14 @@ def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarr
                     c = (x * dims[1] + y) * dims[2] + z
                     for k in range(start[c], start[c + 1]):
                         j = members[k]
-                        if j > i and boxes_touch(lower, upper, j, i):
+                        if j > i and (
+                            lower[j, 0] <= upper[i, 0]
+                            and lower[i, 0] <= upper[j, 0]
+                            and lower[j, 1] <= upper[i, 1]
+                            and lower[i, 1] <= upper[j, 1]
+                            and lower[j, 2] <= upper[i, 2]
+                            and lower[i, 2] <= upper[j, 2]
+                        ):
                             pairs = _append_pair(pairs, found, i, j)
                             found += 1
         for a in range(first + 1, found):  # insertion sort of i's partners: pairs come out sorted
@@ -232,7 +225,14 @@ def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
                     or cells[ep, 2] != cells[eq, 2]
                 ):
                     continue  # the same box twice, or another cell with the same hash
-                if not boxes_touch(lower, upper, a, b):
+                if not (
+                    lower[a, 0] <= upper[b, 0]
+                    and lower[b, 0] <= upper[a, 0]
+                    and lower[a, 1] <= upper[b, 1]
+                    and lower[b, 1] <= upper[a, 1]
+                    and lower[a, 2] <= upper[b, 2]
+                    and lower[b, 2] <= upper[a, 2]
+                ):
                     continue
                 home = True  # the cell of the larger lower corner reports it
                 for d in range(3):
