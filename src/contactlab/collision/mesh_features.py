@@ -45,32 +45,6 @@ def edge_projections(
 
 
 @njit(cache=True)
-def vertex_or_edge(
-    at_a: tuple[float, float],
-    at_vertex: tuple[float, float],
-    a: np.ndarray,
-    edge: tuple[float, float, float],
-    vertex: np.ndarray,
-    vertex_region: int,
-    edge_region: int,
-) -> tuple[float, float, float, int]:
-    """Ericson's test of one vertex region then of the edge joining it to vertex ``a``
-    (``closest_point_on_triangle``): ``at_a`` and ``at_vertex`` are ``edge_projections`` of p
-    at ``a`` and at ``vertex`` (3,) [m], this edge's projection first; ``edge`` (3 scalars, [m])
-    runs from ``a`` to ``vertex``. Returns (qx, qy, qz, region): the vertex, the closest point
-    on the edge, or region −1 when p lies in neither."""
-    near_a, other_a = at_a
-    near_v, other_v = at_vertex
-    if near_v >= 0.0 and other_v <= near_v:
-        return vertex[0], vertex[1], vertex[2], vertex_region
-    area = near_a * other_v - near_v * other_a
-    if area <= 0.0 and near_a >= 0.0 and near_v <= 0.0:
-        t = near_a / (near_a - near_v)
-        return a[0] + t * edge[0], a[1] + t * edge[1], a[2] + t * edge[2], edge_region
-    return 0.0, 0.0, 0.0, -1
-
-
-@njit(cache=True)
 def closest_point_on_triangle(
     p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
 ) -> tuple[float, float, float, int]:
@@ -86,17 +60,20 @@ def closest_point_on_triangle(
     d1, d2 = edge_projections(p, a, ab, ac)
     if d1 <= 0.0 and d2 <= 0.0:
         return a[0], a[1], a[2], VERTEX0
-    # vertex b then edge ab, vertex c then edge ac: one test, the roles of ab and ac swapped
     d3, d4 = edge_projections(p, b, ab, ac)
-    found = vertex_or_edge((d1, d2), (d3, d4), a, ab, b, VERTEX1, EDGE0)
-    if found[3] >= 0:
-        return found
-    d5, d6 = edge_projections(p, c, ab, ac)
-    found = vertex_or_edge((d2, d1), (d6, d5), a, ac, c, VERTEX2, EDGE2)
-    if found[3] >= 0:
-        return found
+    if d3 >= 0.0 and d4 <= d3:
+        return b[0], b[1], b[2], VERTEX1
     vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return a[0] + v * abx, a[1] + v * aby, a[2] + v * abz, EDGE0
+    d5, d6 = edge_projections(p, c, ab, ac)
+    if d6 >= 0.0 and d5 <= d6:
+        return c[0], c[1], c[2], VERTEX2
     vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return a[0] + w * acx, a[1] + w * acy, a[2] + w * acz, EDGE2
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
         w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
