@@ -40,11 +40,9 @@ def contacts(center_a, rotation_a, half_a, center_b, rotation_b, half_b, margin=
     depth = np.full(slot + 8, np.nan)
     feature = np.full(slot + 8, -1, dtype=np.int64)
     count = box_box(
-        np.asarray(center_a, float),
-        np.asarray(rotation_a, float),
+        (np.asarray(center_a, float), np.asarray(rotation_a, float)),
         np.asarray(half_a, float),
-        np.asarray(center_b, float),
-        np.asarray(rotation_b, float),
+        (np.asarray(center_b, float), np.asarray(rotation_b, float)),
         np.asarray(half_b, float),
         float(margin),
         (point, normal, depth, feature),
@@ -112,7 +110,7 @@ def random_pairs(rng, count, reach=1.0):
 
 def sat_minimum(center_a, rotation_a, half_a, center_b, rotation_b, half_b):
     overlap, normal = np.empty(15), np.empty((15, 3))
-    best = sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, overlap, normal)
+    best = sat_overlaps((center_a, rotation_a), half_a, (center_b, rotation_b), half_b, overlap, normal)
     return overlap[best], normal[best], overlap
 
 
@@ -529,7 +527,7 @@ def test_dispatcher_and_collide_use_box_box():
     params = np.array([0.5, 0.5, 0.5, 0.0])
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
     count = collide_pair(
-        BOX, params, np.array([0, 0, 0.999]), I3, BOX, params, np.zeros(3), I3, 0.0, empty_hull_store(), out, 0
+        BOX, params, (np.array([0, 0, 0.999]), I3), BOX, params, (np.zeros(3), I3), 0.0, empty_hull_store(), out, 0
     )
     assert count == 4
     np.testing.assert_allclose(out[1][:4], np.tile([0.0, 0.0, 1.0], (4, 1)))

@@ -82,6 +82,18 @@ def _f(x):
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
+def _frames(args):
+    """The arguments as the pair routines take them: a centre (3,) followed by a rotation (3, 3)
+    is one argument, the shape's frame (centre, rotation)."""
+    grouped = []
+    for a in args:
+        if np.ndim(a) == 2 and grouped and isinstance(grouped[-1], np.ndarray) and grouped[-1].shape == (3,):
+            grouped[-1] = (grouped[-1], a)
+        else:
+            grouped.append(a)
+    return tuple(grouped)
+
+
 def run(function, *args, margin=0.0):
     """Call a pair function into NaN-filled buffers, written from slot 3; return the contacts."""
     slot = 3
@@ -90,6 +102,7 @@ def run(function, *args, margin=0.0):
     depth = np.full(slot + 4, np.nan)
     feature = np.full(slot + 4, -1, dtype=np.int64)
     args = tuple(_f(a) if isinstance(a, (np.ndarray, list, tuple)) else float(a) for a in args)
+    args = _frames(args)
     count = function(*args, float(margin), (point, normal, depth, feature), slot)
     assert 0 <= count <= 2
     assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count :]).all()  # nothing outside

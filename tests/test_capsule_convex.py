@@ -55,12 +55,10 @@ def outputs(n=4):
 def run(center_a, rotation_a, radius, half_length, center_b, rotation_b, hull, margin=0.1):
     point, normal, depth, feature = outputs()
     count = capsule_convex(
-        np.asarray(center_a, float),
-        rotation_a,
+        (np.asarray(center_a, float), rotation_a),
         radius,
         half_length,
-        np.asarray(center_b, float),
-        rotation_b,
+        (np.asarray(center_b, float), rotation_b),
         hull,
         margin,
         (point, normal, depth, feature),
@@ -173,10 +171,10 @@ def test_box_hulls_agree_with_capsule_box():
         rotation_b = random_rotation(rng)
         margin = 0.2
         count_box = capsule_box(
-            center_a, rotation_a, radius, half_length, center_b, rotation_b, half, margin, (p1, n1, d1, f1), 0
+            (center_a, rotation_a), radius, half_length, (center_b, rotation_b), half, margin, (p1, n1, d1, f1), 0
         )
         count_hull = capsule_convex(
-            center_a, rotation_a, radius, half_length, center_b, rotation_b, hull, margin, (p2, n2, d2, f2), 0
+            (center_a, rotation_a), radius, half_length, (center_b, rotation_b), hull, margin, (p2, n2, d2, f2), 0
         )
         assert count_box == count_hull
         if count_box == 0:
@@ -282,12 +280,10 @@ def test_random_hulls_against_brute_force():
             rotation_b = random_rotation(rng)
             margin = 0.3
             count = capsule_convex(
-                center_a,
-                rotation_a,
+                (center_a, rotation_a),
                 radius,
                 half_length,
-                center_b,
-                rotation_b,
+                (center_b, rotation_b),
                 arrays,
                 margin,
                 (point, normal, depth, feature),

@@ -119,8 +119,8 @@ def test_swapping_shapes_flips_the_normal_and_nothing_else():
     for _ in range(200):
         q = rotations.normalize(rng.normal(size=(1, 4)))
         R = rotations.to_matrix(q)[0]
-        box = (shapes.BOX, np.array([0.3, 0.2, 0.1, 0]), rng.normal(scale=0.1, size=3), R)
-        sphere = (shapes.SPHERE, np.array([0.15, 0, 0, 0]), rng.normal(scale=0.2, size=3), np.eye(3))
+        box = (shapes.BOX, np.array([0.3, 0.2, 0.1, 0]), (rng.normal(scale=0.1, size=3), R))
+        sphere = (shapes.SPHERE, np.array([0.15, 0, 0, 0]), (rng.normal(scale=0.2, size=3), np.eye(3)))
         out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
         out2 = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
         n1 = collide_pair(*box, *sphere, 0.0, empty_hull_store(), out, 0)

@@ -88,11 +88,9 @@ def hull_hull(arr_a, R_a, c_a, arr_b, R_b, c_b, margin=0.0, slot=3):
     """convex_convex into fresh buffers, written from ``slot`` (to check the offset)."""
     out = buffers(slot)
     count = cc.convex_convex(
-        np.asarray(c_a, float),
-        np.ascontiguousarray(R_a, dtype=float),
+        (np.asarray(c_a, float), np.ascontiguousarray(R_a, dtype=float)),
         arr_a,
-        np.asarray(c_b, float),
-        np.ascontiguousarray(R_b, dtype=float),
+        (np.asarray(c_b, float), np.ascontiguousarray(R_b, dtype=float)),
         arr_b,
         float(margin),
         out,
@@ -104,8 +102,7 @@ def hull_hull(arr_a, R_a, c_a, arr_b, R_b, c_b, margin=0.0, slot=3):
 def hull_plane(arr, R, c, plane, margin=0.0, slot=2):
     out = buffers(slot)
     count = cx.convex_plane(
-        np.asarray(c, float),
-        np.ascontiguousarray(R, dtype=float),
+        (np.asarray(c, float), np.ascontiguousarray(R, dtype=float)),
         arr,
         np.asarray(plane, float),
         float(margin),
@@ -120,8 +117,7 @@ def sphere_hull(center, radius, arr, R, c, margin=0.0, slot=1):
     count = cx.sphere_convex(
         np.asarray(center, float),
         float(radius),
-        np.asarray(c, float),
-        np.ascontiguousarray(R, dtype=float),
+        (np.asarray(c, float), np.ascontiguousarray(R, dtype=float)),
         arr,
         float(margin),
         out,
@@ -135,11 +131,9 @@ def sat_depth(arr_a, R_a, c_a, arr_b, R_b, c_b):
     result = np.empty(8)
     axis = np.zeros(3)
     convex_sat.convex_convex_sat(
-        np.asarray(c_a, float),
-        np.ascontiguousarray(R_a),
+        (np.asarray(c_a, float), np.ascontiguousarray(R_a)),
         arr_a,
-        np.asarray(c_b, float),
-        np.ascontiguousarray(R_b),
+        (np.asarray(c_b, float), np.ascontiguousarray(R_b)),
         arr_b,
         np.inf,
         result,
@@ -457,7 +451,7 @@ def test_cube_resting_on_plane_gives_four_corners():
     c = np.array([0.0, 0.0, 0.6])  # all 8 corners within the margin
     _, _, hull_depth, hull_feature = hull_plane(hull_arrays(box, 0), R, c, [0, 0, 1, 0], margin=2.0)
     out = buffers(0)
-    count = box_plane(c, R, np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, out, 0)
+    count = box_plane((c, R), np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, out, 0)
     box_depth, box_feature = out[2][:count], out[3][:count]
     assert len(box_depth) > 4 and len(hull_depth) == 4  # more corners in the margin: reduced
     depth_of_corner = dict(zip(box_feature.tolist(), box_depth.tolist()))

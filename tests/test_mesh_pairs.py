@@ -30,8 +30,7 @@ def capsule_contacts(mesh, center, rotation, radius, half_length, margin=0.01, m
     P, N = np.zeros((max_contacts, 3)), np.zeros((max_contacts, 3))
     D, F = np.zeros(max_contacts), np.zeros(max_contacts, dtype=np.int64)
     k = capsule_mesh(
-        np.asarray(center, float),
-        np.ascontiguousarray(rotation, float),
+        (np.asarray(center, float), np.ascontiguousarray(rotation, float)),
         float(radius),
         float(half_length),
         mesh.geometry,
@@ -110,8 +109,7 @@ def test_cube_hull_on_a_mesh_floor_gets_its_four_bottom_corners():
     P, N = np.zeros((8, 3)), np.zeros((8, 3))
     D, F = np.zeros(8), np.zeros(8, dtype=np.int64)
     k = convex_mesh(
-        np.array([0.05, 0.02, 0.1 - 0.003]),
-        np.eye(3),
+        (np.array([0.05, 0.02, 0.1 - 0.003]), np.eye(3)),
         hull_arrays(hull, 0),
         mesh.geometry,
         0.01,

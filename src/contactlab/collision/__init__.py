@@ -268,7 +268,7 @@ def collide_keeping(
     hulls = model.hull_store if needs_hulls(families) else None
     if tolerance > 0.0:
         contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(
-            pairs, kinds, params, centers, rots, reach, hulls, families, manifolds, tolerance, dynamic + O
+            pairs, (kinds, params, centers, rots), reach, hulls, families, manifolds, tolerance, dynamic + O
         )
     else:
         contact_point, contact_normal, depth, feature, owner = generate_contacts(

@@ -67,7 +67,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 
 FACE_REL_TOL = 0.05  # relative tolerance favouring the reference face's box, and faces over edges
@@ -83,14 +83,7 @@ _UP = np.array([0.0, 0.0, 1.0])  # the reference face's normal in its own (u, v,
 
 @njit(cache=True)
 def sat_overlaps(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
-    half_a: np.ndarray,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
-    half_b: np.ndarray,
-    overlap: np.ndarray,
-    normal: np.ndarray,
+    frame_a: Frame, half_a: np.ndarray, frame_b: Frame, half_b: np.ndarray, overlap: np.ndarray, normal: np.ndarray
 ) -> int:
     """Projection overlap on each of the 15 SAT axes.
 
@@ -99,6 +92,8 @@ def sat_overlaps(
     ``a_i × b_j``. A (near-)parallel edge pair gets overlap +inf and a zero normal.
     Returns the index of the smallest overlap.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     d0 = center_a[0] - center_b[0]
     d1 = center_a[1] - center_b[1]
     d2 = center_a[2] - center_b[2]
@@ -346,29 +341,23 @@ def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b,
 
 @njit(cache=True)
 def box_box(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
-    half_a: np.ndarray,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
-    half_b: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
+    frame_a: Frame, half_a: np.ndarray, frame_b: Frame, half_b: np.ndarray, margin: float, out: ContactRows, slot: int
 ) -> int:
     """Box A against box B: up to 4 contacts written from ``slot`` on; returns their count.
 
-    Parameters: centres (3,) [m], rotations (3, 3) body → world, half extents (3,) [m],
+    Parameters: frames (centre (3,) [m], rotation (3, 3) body → world), half extents (3,) [m],
     ``margin`` [m] (contacts kept down to depth −margin). Outputs: the rows ``out`` (point (·, 3)
     [m], normal (·, 3) unit from B into A, depth (·,) [m], feature (·,) in 0..7, see the module
     docstring; :data:`.contact_output.ContactRows`). Returns 0 when the boxes are further apart than the
     margin on some separating axis.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     # scratch for the whole call, in two allocations (each small allocation costs ~50 ns)
     work = np.empty(15 * 4 + 100)
     overlap = work[:15]
     normal = work[15:60].reshape((15, 3))
-    sat_overlaps(center_a, rotation_a, half_a, center_b, rotation_b, half_b, overlap, normal)
+    sat_overlaps(frame_a, half_a, frame_b, half_b, overlap, normal)
     best_a = 0
     best_b = 3
     best_e = _NO_AXIS

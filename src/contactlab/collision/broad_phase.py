@@ -225,6 +225,8 @@ def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
                     or cells[ep, 2] != cells[eq, 2]
                 ):
                     continue  # the same box twice, or another cell with the same hash
+                # the box test of neighbour_cell_pairs, written out again deliberately: through one
+                # compiled helper (even inlined) both grid searches ran ~10 % slower on 10 000 boxes
                 if not (
                     lower[a, 0] <= upper[b, 0]
                     and lower[b, 0] <= upper[a, 0]

@@ -46,8 +46,8 @@ small temporary arrays.
 import numpy as np
 from numba import njit
 
-from .contact_output import ContactRows, write_contact
-from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters
+from .contact_output import ContactRows, Frame, write_contact
+from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
 
 MAX_CONTACTS = 2  # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
@@ -64,18 +64,11 @@ CAPSULE_CAPSULE_SINGLE_FEATURE = 0
 
 @njit(cache=True)
 def capsule_plane(
-    center: np.ndarray,
-    rotation: np.ndarray,
-    radius: float,
-    half_length: float,
-    plane: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
+    frame: Frame, radius: float, half_length: float, plane: np.ndarray, margin: float, out: ContactRows, slot: int
 ) -> int:
     """Capsule A against the plane B = (n, offset) (solid side n·x < offset; n unit).
 
-    center: (3,) [m]; rotation: (3, 3) body → world, the segment along its third column;
+    frame = (center (3,) [m], rotation (3, 3) body → world; the segment along its third column);
     radius, half_length [m]; plane: (4,) (n_x, n_y, n_z, offset [m]); margin [m].
     The signed distance to the plane is linear along the segment, so one contact per segment
     end within the margin is exact and a capsule lying flat gets 2 contacts of equal depth
@@ -84,6 +77,7 @@ def capsule_plane(
     Features: 0 = the −z end (``center − half_length · axis``), 1 = the +z end. A capsule of
     zero half length has only the end 0.
     """
+    center, rotation = frame
     normal = plane[:3]
     axis = column(rotation, 2)
     count = 0
@@ -109,8 +103,7 @@ def capsule_plane(
 def sphere_capsule(
     center_a: np.ndarray,
     radius_a: float,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     radius_b: float,
     half_length_b: float,
     margin: float,
@@ -119,21 +112,18 @@ def sphere_capsule(
 ) -> int:
     """Sphere (or particle: a sphere of radius ≥ 0) A against capsule B: at most 1 contact.
 
-    center_a: (3,) [m]; radius_a [m]; center_b: (3,) [m]; rotation_b: (3, 3) body → world;
+    center_a: (3,) [m]; radius_a [m]; frame_b = (center_b (3,) [m], rotation_b (3, 3) body → world);
     radius_b, half_length_b [m]; margin [m]. The sphere centre's closest point on B's segment
     makes this a sphere–sphere contact. A centre on the segment (no direction) is pushed out
     along B's body x axis, perpendicular to the segment.
 
     Features: 0 (the one contact; it keeps its number as it slides from the side to a cap).
     """
+    center_b, rotation_b = frame_b
     axis = column(rotation_b, 2)
     s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
-    # closest point, distance and depth as capsule_capsule finds them (deliberately kept apart
-    # from it: a sphere has no segment, so no parallel 2-point patch)
     closest = axpy(center_b, s, axis)
-    d = axpy(center_a, -1.0, closest)
-    distance = norm(d)
-    depth = radius_a + radius_b - distance
+    d, distance, depth = sphere_gap(center_a, closest, radius_a + radius_b)
     if depth < -margin:
         return 0
     if distance > NORMAL_EPS:
@@ -152,12 +142,10 @@ def sphere_capsule(
 
 @njit(cache=True)
 def capsule_capsule(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     radius_a: float,
     half_a: float,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     radius_b: float,
     half_b: float,
     margin: float,
@@ -166,7 +154,7 @@ def capsule_capsule(
 ) -> int:
     """Capsule A against capsule B: 1 contact, or 2 when the axes are (nearly) parallel.
 
-    center_*: (3,) [m]; rotation_*: (3, 3) body → world (segment along the third column);
+    frame_* = (center_* (3,) [m], rotation_* (3, 3) body → world; segment along the third column);
     radius_*, half_* (half lengths) [m]; margin [m].
 
     The closest points ``p_A``, ``p_B`` of the two segments (:func:`segment_closest_parameters`)
@@ -188,16 +176,14 @@ def capsule_capsule(
     Features: 0 = the single closest-point contact; 1 = the parallel contact at ``s_lo`` (the
     end of the overlap toward A's −z end), 2 = the one at ``s_hi``.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     axis_a = column(rotation_a, 2)
     axis_b = column(rotation_b, 2)
     s, t = segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b)
-    # closest points, distance and depth as in sphere_capsule (deliberately kept apart from it:
-    # two segments can lie parallel and get a 2-point patch, a sphere cannot)
     point_a = axpy(center_a, s, axis_a)
     point_b = axpy(center_b, t, axis_b)
-    d = axpy(point_a, -1.0, point_b)
-    distance = norm(d)
-    depth = radius_a + radius_b - distance
+    d, distance, depth = sphere_gap(point_a, point_b, radius_a + radius_b)
     if depth < -margin:
         return 0
     axes_cross = cross(axis_a, axis_b)

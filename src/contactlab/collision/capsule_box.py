@@ -10,10 +10,10 @@ import numpy as np
 from numba import njit
 
 from .capsule import PARALLEL_SIN
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
 from .segment_box import face_interval, face_patch, segment_box_closest
-from .segment_patch import dominant_face_contacts, edge_cross_contact, write_patch_ends
+from .segment_patch import dominant_face_contacts, edge_cross_point, write_patch_ends
 
 BOX_REL_EPS = 1e-9  # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
 CROSS_AXIS_EPS = 1e-8  # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
@@ -23,12 +23,10 @@ CAPSULE_BOX_CROSS_FEATURE = 36  # the capsule–box contact of a segment inside 
 
 @njit(cache=True)
 def capsule_box(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     radius_a: float,
     half_length_a: float,
-    box_center: np.ndarray,
-    box_rotation: np.ndarray,
+    box_frame: Frame,
     half_extents: np.ndarray,
     margin: float,
     out: ContactRows,
@@ -36,8 +34,8 @@ def capsule_box(
 ) -> int:
     """Capsule A against box B (static or dynamic): up to 2 contacts.
 
-    center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);
-    radius_a, half_length_a [m]; box_center: (3,) [m]; box_rotation: (3, 3) body → world;
+    frame_a = (center_a (3,) [m], rotation_a (3, 3) body → world; segment along its third column);
+    radius_a, half_length_a [m]; box_frame = (box_center (3,) [m], box_rotation (3, 3) body → world);
     half_extents: (3,) [m]; margin [m]. Work is done in the box's frame.
 
     1. **Segment outside the box** (distance > ``BOX_REL_EPS`` × size): the closest point
@@ -80,10 +78,12 @@ def capsule_box(
     Where two faces are exactly equally far (a capsule end right over a box edge, along the
     diagonal) the dominant face, hence the feature, follows round-off.
     """
+    center_a, rotation_a = frame_a
+    box_center, box_rotation = box_frame
     origin = unrotate(box_rotation, axpy(center_a, -1.0, box_center))
     direction = unrotate(box_rotation, column(rotation_a, 2))
     segment = (origin, direction, half_length_a, radius_a)
-    frame = (box_center, box_rotation)
+    frame = box_frame
     size = half_length_a + radius_a + half_extents[0] + half_extents[1] + half_extents[2]
     tol = BOX_REL_EPS * size
     s, distance2 = segment_box_closest(origin, direction, half_length_a, half_extents)
@@ -201,15 +201,6 @@ def _segment_inside(segment, half_extents, margin, tol, frame, out, slot):
         if j != best_edge:
             edge_center[j] = half_extents[j] if normal_local[j] >= 0.0 else -half_extents[j]
     edge_direction = unit_axis(best_edge, 1.0)
-    return edge_cross_contact(
-        segment,
-        edge_center,
-        edge_direction,
-        half_extents[best_edge],
-        normal_local,
-        depth,
-        np.int64(CAPSULE_BOX_CROSS_FEATURE),
-        frame,
-        out,
-        slot,
-    )
+    point_local = edge_cross_point(segment, (edge_center, edge_direction, half_extents[best_edge]), normal_local)
+    write_local_contact(point_local, normal_local, depth, np.int64(CAPSULE_BOX_CROSS_FEATURE), frame, out, slot)
+    return 1

@@ -64,11 +64,11 @@ from numba import njit
 
 from .capsule import PARALLEL_SIN
 from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame, write_local_contact
 from .convex import HullArrays
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 from .hull_faces import projects_into_face, segment_over_face
-from .segment_patch import dominant_face_contacts, edge_cross_contact, face_patch_ends, write_patch_ends
+from .segment_patch import dominant_face_contacts, edge_cross_point, face_patch_ends, write_patch_ends
 
 MAX_CONTACTS = 2
 CAPSULE_CONVEX_CROSS_FEATURE = 255
@@ -86,12 +86,10 @@ def _face_patch(segment, hull, face, s_keep, margin, tol, frame, out, slot):
 
 @njit(cache=True)
 def capsule_convex(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     radius_a: float,
     half_length_a: float,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     hull: HullArrays,
     margin: float,
     out: ContactRows,
@@ -99,16 +97,18 @@ def capsule_convex(
 ) -> int:
     """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.
 
-    center_a: (3,) [m]; rotation_a: (3, 3) body → world (segment along its third column);
-    radius_a, half_length_a [m]; center_b (3,) [m], rotation_b (3, 3) and the hull's body-frame
+    frame_a = (center_a (3,) [m], rotation_a (3, 3) body → world; segment along its third column);
+    radius_a, half_length_a [m]; frame_b = (center_b (3,) [m], rotation_b (3, 3)) and the hull's body-frame
     arrays (module docstring); margin [m]. Returns the number of contacts written (0..2).
     Algorithm and features: module docstring.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     vertices, face_normal, face_offset, _, _, edge_vertex, edge_face = hull
     origin = unrotate(rotation_b, axpy(center_a, -1.0, center_b))
     direction = unrotate(rotation_b, column(rotation_a, 2))
     segment = (origin, direction, half_length_a, radius_a)
-    frame = (center_b, rotation_b)
+    frame = frame_b
     face_count = face_offset.shape[0]
     extent = 0.0
     for v in range(vertices.shape[0]):
@@ -237,18 +237,9 @@ def capsule_convex(
     span = axpy(b, -1.0, a)
     half = 0.5 * np.sqrt(dot(span, span))
     edge_center, edge_direction = midpoint(a, b), scaled(0.5 / half, span)
-    return edge_cross_contact(
-        segment,
-        edge_center,
-        edge_direction,
-        half,
-        best_edge_axis,
-        depth,
-        CAPSULE_CONVEX_CROSS_FEATURE,
-        frame,
-        out,
-        slot,
-    )
+    point_local = edge_cross_point(segment, (edge_center, edge_direction, half), best_edge_axis)
+    write_local_contact(point_local, best_edge_axis, depth, CAPSULE_CONVEX_CROSS_FEATURE, frame, out, slot)
+    return 1
 
 
 @njit(cache=True)

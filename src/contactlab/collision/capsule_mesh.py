@@ -46,7 +46,7 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .contact_output import ContactRows, contact_rows
+from .contact_output import ContactRows, Frame, contact_rows
 from .mesh_features import (
     EDGE2,
     FACE,
@@ -70,8 +70,7 @@ COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this 
 
 @njit(cache=True)
 def capsule_mesh(
-    center: np.ndarray,
-    rotation: np.ndarray,
+    frame: Frame,
     radius: float,
     half_length: float,
     mesh: MeshGeometry,
@@ -80,13 +79,14 @@ def capsule_mesh(
     slot: int,
     max_contacts: int,
 ) -> int:
-    """Capsule A (centre (3,) [m], rotation (3, 3) body → world, the segment along its third
+    """Capsule A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world), the segment along its third
     column, ``radius``, ``half_length`` [m]) against the static mesh B (module docstring).
 
     Writes at most ``max_contacts`` contacts from ``slot`` on and returns how many;
     ``feature = 16 · triangle + local`` (local: region 0–6 of the closest contact, 7 / 8 the
     −z / +z end over the face).
     """
+    center, rotation = frame
     tol = mesh.tolerance
     reach = radius + margin
     deep = 0.0 if mesh.two_sided else mesh.max_depth

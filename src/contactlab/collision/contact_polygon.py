@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .geometry import row_difference
+
 MAX_POINTS = 4  # points kept of a contact polygon, at most
 REDUCE_TIE = 1e-6  # relative tolerance of a tie in the reduction to 4 points
 
@@ -82,12 +84,8 @@ def drop_collinear(
         for k in range(count):
             prev = (k + count - 1) % count
             nxt = (k + 1) % count
-            c0 = points[nxt, 0] - points[prev, 0]
-            c1 = points[nxt, 1] - points[prev, 1]
-            c2 = points[nxt, 2] - points[prev, 2]
-            k0 = points[k, 0] - points[prev, 0]
-            k1 = points[k, 1] - points[prev, 1]
-            k2 = points[k, 2] - points[prev, 2]
+            c0, c1, c2 = row_difference(points, nxt, prev)
+            k0, k1, k2 = row_difference(points, k, prev)
             chord2 = c0 * c0 + c1 * c1 + c2 * c2
             if chord2 > tolerance * tolerance:
                 x0 = c1 * k2 - c2 * k1
@@ -195,12 +193,8 @@ def reduce_to_four(
         for e in range(3):
             s = tri0 if e == 0 else (tri1 if e == 1 else tri2)
             t = tri1 if e == 0 else (tri2 if e == 1 else tri0)
-            a0 = points[t, 0] - points[s, 0]
-            a1 = points[t, 1] - points[s, 1]
-            a2 = points[t, 2] - points[s, 2]
-            b0 = points[p, 0] - points[s, 0]
-            b1 = points[p, 1] - points[s, 1]
-            b2 = points[p, 2] - points[s, 2]
+            a0, a1, a2 = row_difference(points, t, s)
+            b0, b1, b2 = row_difference(points, p, s)
             twice_area = (a1 * b2 - a2 * b1) * axis[0] + (a2 * b0 - a0 * b2) * axis[1] + (a0 * b1 - a1 * b0) * axis[2]
             outside = max(outside, -orientation * twice_area)
         score[k] = outside

@@ -53,7 +53,7 @@ import numpy as np
 from numba import njit
 
 from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
@@ -70,18 +70,11 @@ HullArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, n
 
 
 @njit(cache=True)
-def convex_plane(
-    center: np.ndarray,
-    rotation: np.ndarray,
-    hull: HullArrays,
-    plane: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
-    """Hull A (centre (3,) [m], rotation (3, 3) body → world, its arrays ``hull``) against the
+def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
+    """Hull A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world), its arrays ``hull``) against the
     plane B = (n, offset) (4,): one contact per vertex within the margin, reduced to at most 4.
     Feature: the vertex index (mod 256, see the module docstring)."""
+    center, rotation = frame
     out_point, out_normal, out_depth, out_feature = out
     vertices = hull[0]
     n0, n1, n2 = plane[0], plane[1], plane[2]
@@ -151,20 +144,15 @@ def _closest_on_segment(px, py, pz, a, b, out):
 
 @njit(cache=True)
 def sphere_convex(
-    center: np.ndarray,
-    radius: float,
-    hull_center: np.ndarray,
-    hull_rotation: np.ndarray,
-    hull: HullArrays,
-    margin: float,
-    out: ContactRows,
-    slot: int,
+    center: np.ndarray, radius: float, hull_frame: Frame, hull: HullArrays, margin: float, out: ContactRows, slot: int
 ) -> int:
-    """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B: one contact.
+    """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B (``hull_frame`` = (centre (3,)
+    [m], rotation (3, 3) body → world), its arrays ``hull``): one contact.
 
     Inside the hull the centre leaves through the face of least penetration; outside, the
     normal runs from the closest surface point to the centre. Feature: ``SPHERE_FEATURE``.
     """
+    hull_center, hull_rotation = hull_frame
     out_point, out_normal, out_depth, out_feature = out
     vertices, face_normal, face_offset, face_vertex_start, face_vertex_index = hull[:5]
     r = hull_rotation

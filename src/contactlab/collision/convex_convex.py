@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear, reduce_to_four
 from .convex import HullArrays
 from .convex_sat import convex_convex_sat
@@ -281,29 +281,21 @@ def _segment_closest(p1, q1, p2, q2, out_1, out_2):
 
 @njit(cache=True)
 def convex_convex(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
-    hull_a: HullArrays,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
-    hull_b: HullArrays,
-    margin: float,
-    out: ContactRows,
-    slot: int,
+    frame_a: Frame, hull_a: HullArrays, frame_b: Frame, hull_b: HullArrays, margin: float, out: ContactRows, slot: int
 ) -> int:
     """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
 
-    Each hull: centre (3,) [m], rotation (3, 3) body → world and its body-frame arrays
+    Each hull: its frame (centre (3,) [m], rotation (3, 3) body → world) and its body-frame arrays
     (:data:`.convex.HullArrays`). ``margin`` [m]: contacts kept down to depth −margin. Outputs
     as in the module docstring; 0 when some axis separates the hulls by more than the margin.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     vertices_a, face_normal_a, face_offset_a, face_vertex_start_a, face_vertex_index_a, edge_vertex_a, _ = hull_a
     vertices_b, face_normal_b, _, face_vertex_start_b, face_vertex_index_b, edge_vertex_b, _ = hull_b
     result = np.empty(8)
     axis = np.zeros(3)
-    close, vb, nb, ob = convex_convex_sat(
-        center_a, rotation_a, hull_a, center_b, rotation_b, hull_b, margin, result, axis
-    )
+    close, vb, nb, ob = convex_convex_sat(frame_a, hull_a, frame_b, hull_b, margin, result, axis)
     if not close:
         return 0
     scale = 0.0

@@ -14,7 +14,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .contact_output import Frame
 from .convex import HullArrays
+from .geometry import to_local
 
 PARALLEL_SIN2 = 1e-12  # |e_a × e_b|² below this × |e_a|²|e_b|² (within 1e-6 rad of parallel): no edge axis
 
@@ -41,11 +43,9 @@ def _least_face_overlap(normal, offset, faces, points, count, margin, result, at
 
 @njit(cache=True)
 def convex_convex_sat(
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     hull_a: HullArrays,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     hull_b: HullArrays,
     margin: float,
     result: np.ndarray,
@@ -64,6 +64,8 @@ def convex_convex_sat(
     more than ``margin`` (``result`` then incomplete); B's vertices (Vb, 3), face normals
     (Fb, 3) and offsets (Fb,) in A's frame.
     """
+    center_a, rotation_a = frame_a
+    center_b, rotation_b = frame_b
     vertices_a, face_normal_a, face_offset_a, _, _, edge_vertex_a, edge_face_a = hull_a
     vertices_b, face_normal_b, face_offset_b, _, _, edge_vertex_b, edge_face_b = hull_b
     Rab = np.empty((3, 3))
@@ -74,13 +76,7 @@ def convex_convex_sat(
                 + rotation_a[1, i] * rotation_b[1, j]
                 + rotation_a[2, i] * rotation_b[2, j]
             )
-    t = np.empty(3)
-    for i in range(3):
-        t[i] = (
-            rotation_a[0, i] * (center_b[0] - center_a[0])
-            + rotation_a[1, i] * (center_b[1] - center_a[1])
-            + rotation_a[2, i] * (center_b[2] - center_a[2])
-        )
+    t = to_local(rotation_a, center_a, center_b)
     count_b = vertices_b.shape[0]
     vb = np.empty((count_b, 3))
     for j in range(count_b):

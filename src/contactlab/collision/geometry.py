@@ -73,6 +73,36 @@ def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def sphere_gap(center_a: np.ndarray, center_b: np.ndarray, radii: float) -> tuple[np.ndarray, float, float]:
+    """Two spheres of radii summing to ``radii`` [m] about center_a and center_b (3,) [m] (a
+    capsule's: the closest points of its segment): (d = center_a − center_b (3,) [m], |d| [m],
+    depth = radii − |d| [m], > 0 overlapping)."""
+    d = axpy(center_a, -1.0, center_b)
+    distance = norm(d)
+    return d, distance, radii - distance
+
+
+@njit(cache=True)
+def row_difference(points: np.ndarray, i: int, j: int) -> tuple[float, float, float]:
+    """points[i] − points[j] of an (n, 3) array, as three scalars (no temporary array)."""
+    return points[i, 0] - points[j, 0], points[i, 1] - points[j, 1], points[i, 2] - points[j, 2]
+
+
+@njit(cache=True)
+def to_local(rotation: np.ndarray, center: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """rotation.T @ (x − center): the point x (3,) [m] in the frame of centre (3,) [m] and
+    rotation (3, 3) (frame → world), one sum per component (no difference vector, no transposed copy)."""
+    local = np.empty(3)
+    for a in range(3):
+        local[a] = (
+            rotation[0, a] * (x[0] - center[0])
+            + rotation[1, a] * (x[1] - center[1])
+            + rotation[2, a] * (x[2] - center[2])
+        )
+    return local
+
+
+@njit(cache=True)
 def axpy(x: np.ndarray, scale: float, y: np.ndarray) -> np.ndarray:
     """x + scale · y for (3,) arrays, as a new array (written out: quick to compile, no temporaries)."""
     return np.array([x[0] + scale * y[0], x[1] + scale * y[1], x[2] + scale * y[2]])

@@ -83,23 +83,12 @@ def kept_pairs(kinds: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _still_valid(
-    pairs,
-    keys,
-    keeps,
-    pair_reach,
-    radius,
-    centers,
-    rotations_,
-    kept_keys,
-    reach_then,
-    center_then,
-    rotation_then,
-    tolerance,
-):
+def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, kept, tolerance):
     """For each pair k (K,), the row of its kept manifold if that is still valid, else −1 (see
     the module's docstring). ``keeps`` (K,) bool: pairs that keep manifolds; ``radius`` (N,)
-    bounding radii [m]; ``kept_keys`` sorted."""
+    bounding radii [m]; ``kept`` the last manifolds' eight fields (keys sorted), of which the
+    keys, reaches, centres and rotations are read."""
+    kept_keys, reach_then, center_then, rotation_then = kept[0], kept[1], kept[2], kept[3]
     K = pairs.shape[0]
     row = np.full(K, -1, dtype=np.int64)
     if kept_keys.shape[0] == 0:
@@ -173,25 +162,19 @@ def _combine(
     row,
     centers,
     rotations_,
-    point,
-    normal,
-    depth,
-    feature,
-    owner,
-    kept_reach,
-    kept_center,
-    kept_rotation,
-    kept_count,
-    kept_witness,
-    kept_normal,
-    kept_feature,
+    fresh,
+    kept,
 ):
     """The step's contacts in pair order, and the manifolds to keep, sorted by key.
 
     Pair k takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
-    ≥ 0 (the manifold itself is kept as it is), else its fresh contacts (point … owner, as
-    ``generate_contacts`` gave them, owner indexing ``pairs``), recorded as a new manifold when
-    ``keeps[k]``. Contacts deeper in the gap than ``pair_reach`` [m] are left out."""
+    ≥ 0 (the manifold itself is kept as it is), else its ``fresh`` contacts (point, normal,
+    depth, feature, owner, as ``generate_contacts`` gave them, owner indexing ``pairs``),
+    recorded as a new manifold when ``keeps[k]``. ``kept``: the last manifolds, the eight fields
+    as ``reuse_or_generate`` takes them. Contacts deeper in the gap than ``pair_reach`` [m] are
+    left out."""
+    point, normal, depth, feature, owner = fresh
+    _, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
     K, S = pairs.shape[0], MAX_PER_PAIR
     capacity = point.shape[0]
     for k in range(K):
@@ -293,10 +276,7 @@ def _combine(
 
 def generate_reusing(
     pairs: np.ndarray,
-    kinds: np.ndarray,
-    params: np.ndarray,
-    centers: np.ndarray,
-    rots: np.ndarray,
+    colliders: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     reach: np.ndarray,
     hull_store: tuple[np.ndarray, ...] | None,
     families: tuple[bool | None, ...],
@@ -305,12 +285,14 @@ def generate_reusing(
     total: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Manifolds]:
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
-    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``reach`` (N,) per collider [m]; ``total`` the
+    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``colliders`` the table (kinds (N,),
+    params (N, 4), centres (N, 3) [m], rotations (N, 3, 3)); ``reach`` (N,) per collider [m]; ``total`` the
     number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
     them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in
     pair order, as from
     ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
     gives it."""
+    kinds, params, centers, rots = colliders
     kept = manifolds if manifolds is not None else Manifolds.empty()
     # a pile of spheres: no reuse (and its code never compiled); a scene with no box, hull or
     # plane pair does not even compile kept_pairs
@@ -373,20 +355,7 @@ def reuse_or_generate(
             kept_feature[:0],
         )
         return generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families), empty
-    row = _still_valid(
-        pairs,
-        keys,
-        keeps,
-        pair_reach,
-        radius,
-        centers,
-        rots,
-        kept_keys,
-        kept_reach,
-        kept_center,
-        kept_rotation,
-        tolerance,
-    )
+    row = _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rots, kept, tolerance)
     fresh = np.nonzero(row < 0)[0]
     widened = pair_reach + tolerance * keeps  # a kept manifold reaches a tolerance further
     point, normal, depth, feature, owner = generate_contacts(
@@ -401,16 +370,6 @@ def reuse_or_generate(
         row,
         centers,
         rots,
-        point,
-        normal,
-        depth,
-        feature,
-        fresh[owner],
-        kept_reach,
-        kept_center,
-        kept_rotation,
-        kept_count,
-        kept_witness,
-        kept_normal,
-        kept_feature,
+        (point, normal, depth, feature, fresh[owner]),
+        kept,
     )

@@ -69,14 +69,14 @@ def shapes_against_mesh(
         if kind == SPHERE or kind == POINT:
             written = sphere_mesh(centers[s], params[s, 0], mesh, margins[s], rows, count, max_per_shape)
         elif kind == BOX:
-            written = box_mesh(centers[s], rotations_[s], params[s, :3], mesh, margins[s], rows, count, max_per_shape)
+            written = box_mesh((centers[s], rotations_[s]), params[s, :3], mesh, margins[s], rows, count, max_per_shape)
         elif kind == CAPSULE:
             written = capsule_mesh(
-                centers[s], rotations_[s], params[s, 0], params[s, 1], mesh, margins[s], rows, count, max_per_shape
+                (centers[s], rotations_[s]), params[s, 0], params[s, 1], mesh, margins[s], rows, count, max_per_shape
             )
         elif kind == CONVEX and hull_store is not None:
             hull = stored_hull(hull_store, params[s, 0])
-            written = convex_mesh(centers[s], rotations_[s], hull, mesh, margins[s], rows, count, max_per_shape)
+            written = convex_mesh((centers[s], rotations_[s]), hull, mesh, margins[s], rows, count, max_per_shape)
         for k in range(count, count + written):
             owner[k] = s
         count += written

@@ -5,7 +5,8 @@ from B into A, ``depth`` > 0 when overlapping (contacts down to ``depth = −mar
 for speculative use), and ``point`` midway between the two surfaces. It returns how many
 contacts it wrote (at most ``MAX_PER_PAIR``) and a feature number for each, which makes the
 contact id persistent. Shapes are described as in :mod:`contactlab.shapes`: a kind, a row of
-4 parameters, a centre and a rotation matrix (body → world).
+4 parameters, and a frame (:data:`.contact_output.Frame`: the centre and the rotation matrix,
+body → world, as one argument: a pair routine's argument list then fits on a line).
 
 This module holds the dispatcher (``generate_contacts`` over a scene's pairs, ``collide_pair``
 for one) and what it needs (``supported``, the hull store); the pair routines live in a module
@@ -26,7 +27,7 @@ from .box_box import box_box
 from .capsule import capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_box import capsule_box
 from .capsule_convex import capsule_convex
-from .contact_output import ContactRows
+from .contact_output import ContactRows, Frame
 from .convex import convex_plane, sphere_convex, stored_hull
 from .convex_convex import convex_convex
 from .families import ALL_FAMILIES, BOX, CAPSULE, CONVEX, FAMILIES, PLANE, POINT, SPHERE
@@ -130,6 +131,7 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
             kind_a, kind_b = kinds[a], kinds[b]
             params_a, center_a, rotation_a = params[a], centers[a], rotations_[a]
             params_b, center_b, rotation_b = params[b], centers[b], rotations_[b]
+            frame_a, frame_b = (center_a, rotation_a), (center_b, rotation_b)  # (centre, rotation): a Frame
             margin = reach[k]
             round_a = kind_a == SPHERE or kind_a == POINT
             round_b = kind_b == SPHERE or kind_b == POINT
@@ -140,75 +142,48 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
             if has_sphere_capsule:
                 if round_a and kind_b == CAPSULE:
                     written = sphere_capsule(
-                        center_a, params_a[0], center_b, rotation_b, params_b[0], params_b[1], margin, out, count
+                        center_a, params_a[0], frame_b, params_b[0], params_b[1], margin, out, count
                     )
             if has_sphere_box:
                 if round_a and kind_b == BOX:
-                    written = sphere_box(center_a, params_a[0], center_b, rotation_b, params_b[:3], margin, out, count)
+                    written = sphere_box(center_a, params_a[0], frame_b, params_b[:3], margin, out, count)
             if has_sphere_plane:
                 if round_a and kind_b == PLANE:
                     written = sphere_plane(center_a, params_a[0], params_b, margin, out, count)
             if has_capsule_capsule:
                 if kind_a == CAPSULE and kind_b == CAPSULE:
                     written = capsule_capsule(
-                        center_a,
-                        rotation_a,
-                        params_a[0],
-                        params_a[1],
-                        center_b,
-                        rotation_b,
-                        params_b[0],
-                        params_b[1],
-                        margin,
-                        out,
-                        count,
+                        frame_a, params_a[0], params_a[1], frame_b, params_b[0], params_b[1], margin, out, count
                     )
             if has_capsule_box:
                 if kind_a == CAPSULE and kind_b == BOX:
-                    written = capsule_box(
-                        center_a,
-                        rotation_a,
-                        params_a[0],
-                        params_a[1],
-                        center_b,
-                        rotation_b,
-                        params_b[:3],
-                        margin,
-                        out,
-                        count,
-                    )
+                    written = capsule_box(frame_a, params_a[0], params_a[1], frame_b, params_b[:3], margin, out, count)
             if has_capsule_plane:
                 if kind_a == CAPSULE and kind_b == PLANE:
-                    written = capsule_plane(
-                        center_a, rotation_a, params_a[0], params_a[1], params_b, margin, out, count
-                    )
+                    written = capsule_plane(frame_a, params_a[0], params_a[1], params_b, margin, out, count)
             if has_box_box:
                 if kind_a == BOX and kind_b == BOX:
-                    written = box_box(
-                        center_a, rotation_a, params_a[:3], center_b, rotation_b, params_b[:3], margin, out, count
-                    )
+                    written = box_box(frame_a, params_a[:3], frame_b, params_b[:3], margin, out, count)
             if has_box_plane:
                 if kind_a == BOX and kind_b == PLANE:
-                    written = box_plane(center_a, rotation_a, params_a[:3], params_b, margin, out, count)
+                    written = box_plane(frame_a, params_a[:3], params_b, margin, out, count)
             if has_sphere_convex:
                 if round_a and kind_b == CONVEX:
                     hb = stored_hull(hull_store, params_b[0])
-                    written = sphere_convex(center_a, params_a[0], center_b, rotation_b, hb, margin, out, count)
+                    written = sphere_convex(center_a, params_a[0], frame_b, hb, margin, out, count)
             if has_capsule_convex:
                 if kind_a == CAPSULE and kind_b == CONVEX:
                     hb = stored_hull(hull_store, params_b[0])
-                    written = capsule_convex(
-                        center_a, rotation_a, params_a[0], params_a[1], center_b, rotation_b, hb, margin, out, count
-                    )
+                    written = capsule_convex(frame_a, params_a[0], params_a[1], frame_b, hb, margin, out, count)
             if has_convex_convex:
                 if (kind_a == BOX or kind_a == CONVEX) and kind_b == CONVEX:
                     ha = stored_hull(hull_store, params_a[0] if kind_a == CONVEX else params_a[3])
                     hb = stored_hull(hull_store, params_b[0])
-                    written = convex_convex(center_a, rotation_a, ha, center_b, rotation_b, hb, margin, out, count)
+                    written = convex_convex(frame_a, ha, frame_b, hb, margin, out, count)
             if has_convex_plane:
                 if kind_a == CONVEX and kind_b == PLANE:
                     ha = stored_hull(hull_store, params_a[0])
-                    written = convex_plane(center_a, rotation_a, ha, params_b, margin, out, count)
+                    written = convex_plane(frame_a, ha, params_b, margin, out, count)
             for c in range(count, count + written):
                 if swapped:  # normals from B into A of the pair as given
                     for i in range(3):
@@ -224,12 +199,10 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
 def collide_pair(
     kind_a: int,
     params_a: np.ndarray,
-    center_a: np.ndarray,
-    rotation_a: np.ndarray,
+    frame_a: Frame,
     kind_b: int,
     params_b: np.ndarray,
-    center_b: np.ndarray,
-    rotation_b: np.ndarray,
+    frame_b: Frame,
     margin: float,
     hull_store: tuple,
     out: ContactRows,
@@ -240,11 +213,13 @@ def collide_pair(
     routine is compiled in: the scene-wide narrow phase (``generate_contacts``) compiles only
     the families it is given.
 
-    kind, params (4,), centre (3,) [m] and rotation (3, 3) (body → world) of each shape;
+    kind, params (4,) and frame (centre (3,) [m], rotation (3, 3) body → world;
+    :data:`.contact_output.Frame`) of each shape;
     margin [m]: contacts with gaps down to −margin are kept; hull_store: the model's packed
     hulls (Model.hull_store, or ``empty_hull_store()``); out: the rows (point (n, 3) [m],
     normal (n, 3), depth (n,) [m], feature (n,) int64; :data:`.contact_output.ContactRows`)
     written from ``slot`` on."""
+    (center_a, rotation_a), (center_b, rotation_b) = frame_a, frame_b
     kinds = np.array([kind_a, kind_b], dtype=np.int64)
     params = np.empty((2, 4))
     centers = np.empty((2, 3))

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .contact_output import ContactRows, contact_rows
+from .contact_output import ContactRows, Frame, contact_rows
 from .convex import HullArrays
 from .mesh_features import FEATURES_PER_TRIANGLE, keep_spread, write_kept
 from .sphere_mesh import sphere_mesh
@@ -112,8 +112,7 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
 
 @njit(cache=True)
 def box_mesh(
-    center: np.ndarray,
-    rotation: np.ndarray,
+    frame: Frame,
     half_extents: np.ndarray,
     mesh: MeshGeometry,
     margin: float,
@@ -121,13 +120,14 @@ def box_mesh(
     slot: int,
     max_contacts: int,
 ) -> int:
-    """Box A (centre (3,), rotation (3,3) body → world, half extents (3,)) against the static mesh B.
+    """Box A (``frame`` = (centre (3,), rotation (3,3) body → world), half extents (3,)) against the static mesh B.
 
     Each corner as a point (a sphere of radius 0: inside/outside and local minima as for
     spheres; at most ``CORNER_CONTACTS`` per corner, the deepest), plus mesh vertices inside
     the box (module docstring). Writes at most ``max_contacts`` contacts from ``slot`` on and
     returns how many.
     """
+    center, rotation = frame
     # mesh triangles near the box (grown by the margin): their vertices may lie inside it
     lower = np.empty(3)
     upper = np.empty(3)
@@ -185,21 +185,15 @@ def box_mesh(
 
 @njit(cache=True)
 def convex_mesh(
-    center: np.ndarray,
-    rotation: np.ndarray,
-    hull: HullArrays,
-    mesh: MeshGeometry,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-    max_contacts: int,
+    frame: Frame, hull: HullArrays, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
 ) -> int:
-    """Convex hull A (centre (3,) [m], rotation (3, 3) body → world; body-frame arrays
+    """Convex hull A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world); body-frame arrays
     :data:`.convex.HullArrays`) against the static mesh B, as :func:`box_mesh` (module docstring).
 
     Writes at most ``max_contacts`` contacts from ``slot`` on and returns how many. The
     vertices and the face planes alone decide what is inside (not the face corner lists or edges).
     """
+    center, rotation = frame
     vertices, face_normal, face_offset = hull[0], hull[1], hull[2]
     vertex_count = vertices.shape[0]
     face_count = face_normal.shape[0]

@@ -11,7 +11,7 @@ contacts down to ``depth = −margin`` are kept, each written from index ``slot`
 import numpy as np
 from numba import njit
 
-from .contact_output import ContactRows, write_contact
+from .contact_output import ContactRows, Frame, write_contact
 
 
 @njit(cache=True)
@@ -74,15 +74,10 @@ def sphere_sphere(
 
 @njit(cache=True)
 def box_plane(
-    center: np.ndarray,
-    rotation: np.ndarray,
-    half_extents: np.ndarray,
-    plane: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
+    frame: Frame, half_extents: np.ndarray, plane: np.ndarray, margin: float, out: ContactRows, slot: int
 ) -> int:
     """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
+    center, rotation = frame
     normal = plane[:3]
     count = 0
     for corner in range(8):
@@ -102,8 +97,7 @@ def box_plane(
 def sphere_box(
     center: np.ndarray,
     radius: float,
-    box_center: np.ndarray,
-    box_rotation: np.ndarray,
+    box_frame: Frame,
     half_extents: np.ndarray,
     margin: float,
     out: ContactRows,
@@ -114,6 +108,7 @@ def sphere_box(
     A centre inside the box is pushed out through the nearest face (feature = 1 + face);
     outside, the feature is 0.
     """
+    box_center, box_rotation = box_frame
     local = box_rotation.T @ (center - box_center)
     closest = np.minimum(np.maximum(local, -half_extents), half_extents)
     delta = local - closest

@@ -13,6 +13,7 @@ Two bundles keep the argument lists short:
   index ``slot`` on into ``out`` (:data:`.contact_output.ContactRows`).
 
 A face is its plane ``normal · x = offset`` (:data:`Plane`: unit outward ``normal`` (3,), ``offset`` [m]).
+An edge is ``(center, direction, half_length)`` (:data:`Edge`), in B's frame.
 Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
@@ -24,6 +25,7 @@ from .geometry import axpy, clamp, dot, midpoint, segment_closest_parameters
 
 Segment = tuple[np.ndarray, np.ndarray, float, float]  # (origin, direction, half_length, radius) in B's frame
 Plane = tuple[np.ndarray, float]  # (unit outward normal (3,), offset [m]) of a face of B, in B's frame
+Edge = tuple[np.ndarray, np.ndarray, float]  # (centre (3,) [m], unit direction (3,), half length [m]) of an edge of B
 
 
 @njit(cache=True)
@@ -159,25 +161,15 @@ def write_patch_ends(
 
 
 @njit(cache=True)
-def edge_cross_contact(
-    segment: Segment,
-    edge_center: np.ndarray,
-    edge_direction: np.ndarray,
-    edge_half: float,
-    normal_local: np.ndarray,
-    depth: float,
-    feature: int,
-    frame: Frame,
-    out: ContactRows,
-    slot: int,
-) -> int:
-    """The one contact of a segment across an edge of B (the separating axis ``normal_local``
-    (3,) is segment × edge): midway between the closest points of the segment and the edge
-    ``edge_center + t · edge_direction`` (3,), ``|t| ≤ edge_half`` [m], with ``depth`` [m] the
-    overlap on that axis. Returns 1."""
+def edge_cross_point(segment: Segment, edge: Edge, normal_local: np.ndarray) -> np.ndarray:
+    """Where a segment crossing an edge of B touches it (the separating axis ``normal_local``
+    (3,) is segment × edge), in B's frame (3,) [m]: midway between the closest points of the
+    capsule's surface and the edge ``edge_center + t · edge_direction`` (3,), ``|t| ≤
+    edge_half`` [m] (:data:`Edge`). The caller writes the one contact there
+    (``write_local_contact``, its depth the overlap on that axis)."""
     origin, direction, half_length, radius = segment
+    edge_center, edge_direction, edge_half = edge
     s, t = segment_closest_parameters(origin, direction, half_length, edge_center, edge_direction, edge_half)
     p = axpy(origin, s, direction)
     q = axpy(edge_center, t, edge_direction)
-    write_local_contact(midpoint(axpy(p, -radius, normal_local), q), normal_local, depth, feature, frame, out, slot)
-    return 1
+    return midpoint(axpy(p, -radius, normal_local), q)

@@ -18,6 +18,7 @@ from numba import njit
 
 from .. import rotations, shapes
 from ..errors import InputError
+from .geometry import to_local
 from .mesh_features import features_near, nearest_feature, signed_normal
 
 if TYPE_CHECKING:
@@ -105,13 +106,7 @@ def shape_signed_distance(
             closest[i] = position[i] + params[0] * normal[i]
         return length - params[0], normal, closest
     # box
-    local = np.empty(3)
-    for a in range(3):
-        local[a] = (
-            rotation[0, a] * (x[0] - position[0])
-            + rotation[1, a] * (x[1] - position[1])
-            + rotation[2, a] * (x[2] - position[2])
-        )
+    local = to_local(rotation, position, x)
     clamped = np.empty(3)
     outside = 0.0
     for a in range(3):
