@@ -138,7 +138,9 @@ def _copy1(destination, source):
 
 
 @njit(cache=True, inline="always")
-def _copy2(destination, source):
+def copy_rows(destination, source):
+    """destination[i, j] = source[i, j] for every row i and column j of destination (2-D
+    arrays): a loop, which compiles no NumPy copy routine and, inlined, passes no array."""
     for i in range(destination.shape[0]):
         for j in range(destination.shape[1]):
             destination[i, j] = source[i, j]
@@ -205,10 +207,10 @@ def _combine(
         m = row[k]
         if m >= 0:  # reused: refreshed from the witness points
             new_keys[r], new_reach[r], new_count[r] = keys[k], kept_reach[m], kept_count[m]
-            _copy2(new_center[r], kept_center[m])
+            copy_rows(new_center[r], kept_center[m])
             _copy3(new_rotation[r], kept_rotation[m])
             _copy3(new_witness[r], kept_witness[m])
-            _copy2(new_normal[r], kept_normal[m])
+            copy_rows(new_normal[r], kept_normal[m])
             _copy1(new_feature[r], kept_feature[m])
             r += 1
             for s in range(kept_count[m]):
@@ -232,8 +234,8 @@ def _combine(
             new_keys[r], new_reach[r] = keys[k], computed_reach[k]
             _copy1(new_center[r, 0], centers[a])
             _copy1(new_center[r, 1], centers[b])
-            _copy2(new_rotation[r, 0], rotations_[a])
-            _copy2(new_rotation[r, 1], rotations_[b])
+            copy_rows(new_rotation[r, 0], rotations_[a])
+            copy_rows(new_rotation[r, 1], rotations_[b])
         while f < owner.shape[0] and owner[f] == k:
             if keeps[k]:
                 s = new_count[r]

@@ -25,7 +25,7 @@ from numba import njit
 
 from .. import collision, diagnostics, rotations
 from ..collision import assemble_contacts
-from ..collision.manifolds import reuse_or_generate
+from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..contacts import ContactArrays
 from ..dynamics import integrators
@@ -386,20 +386,12 @@ def solve(
 @njit(cache=True, inline="always")
 def store(motion: Motion, positions: tuple, velocities: tuple) -> None:
     """Copy a step's new positions and velocities into the state's arrays."""
-    _copy_rows(motion.body_position, positions[0])
-    _copy_rows(motion.body_orientation, positions[1])
-    _copy_rows(motion.particle_position, positions[2])
-    _copy_rows(motion.body_velocity, velocities[0])
-    _copy_rows(motion.body_angular_velocity, velocities[1])
-    _copy_rows(motion.particle_velocity, velocities[2])
-
-
-@njit(cache=True, inline="always")
-def _copy_rows(target, source):
-    """target[n, i] = source[n, i] for every row n and column i of target."""
-    for n in range(target.shape[0]):
-        for i in range(target.shape[1]):
-            target[n, i] = source[n, i]
+    copy_rows(motion.body_position, positions[0])
+    copy_rows(motion.body_orientation, positions[1])
+    copy_rows(motion.particle_position, positions[2])
+    copy_rows(motion.body_velocity, velocities[0])
+    copy_rows(motion.body_angular_velocity, velocities[1])
+    copy_rows(motion.particle_velocity, velocities[2])
 
 
 @njit(cache=True, inline="always")
@@ -457,12 +449,12 @@ def record(
     positions (``poses``), which the next step starts from too."""
     rotation, centers, rots = at
     samples.time[row] = time
-    _copy_rows(samples.body_position[row], motion.body_position)
-    _copy_rows(samples.body_orientation[row], motion.body_orientation)
-    _copy_rows(samples.body_velocity[row], motion.body_velocity)
-    _copy_rows(samples.body_angular_velocity[row], motion.body_angular_velocity)
-    _copy_rows(samples.particle_position[row], motion.particle_position)
-    _copy_rows(samples.particle_velocity[row], motion.particle_velocity)
+    copy_rows(samples.body_position[row], motion.body_position)
+    copy_rows(samples.body_orientation[row], motion.body_orientation)
+    copy_rows(samples.body_velocity[row], motion.body_velocity)
+    copy_rows(samples.body_angular_velocity[row], motion.body_angular_velocity)
+    copy_rows(samples.particle_position[row], motion.particle_position)
+    copy_rows(samples.particle_velocity[row], motion.particle_velocity)
     samples.energy_kinetic[row] = kinetic(
         model.body_mass,
         model.body_inertia,
