@@ -138,7 +138,7 @@ def _copy1(destination, source):
 
 
 @njit(cache=True, inline="always")
-def copy_rows(destination, source):
+def copy_rows(destination: np.ndarray, source: np.ndarray) -> None:
     """destination[i, j] = source[i, j] for every row i and column j of destination (2-D
     arrays): a loop, which compiles no NumPy copy routine and, inlined, passes no array."""
     for i in range(destination.shape[0]):
