@@ -48,6 +48,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from . import rotations
+from .counts import RowCount
 from .errors import InputError, first_line
 
 LEAF_SIZE = 4
@@ -399,13 +400,10 @@ class TriangleMesh:
         arrays = [getattr(self, name) for name in GEOMETRY_ARRAYS]
         self.geometry = MeshGeometry._make([*arrays, float(self.tolerance), self.two_sided, self.max_depth])
 
-    @property
-    def vertex_count(self) -> int:
-        return len(self.vertices)
-
-    @property
-    def triangle_count(self) -> int:
-        return len(self.triangles)
+    vertex_count = RowCount("vertices")
+    """V, the number of vertices."""
+    triangle_count = RowCount("triangles")
+    """T, the number of triangles."""
 
     def transformed(
         self, position: ArrayLike = (0.0, 0.0, 0.0), quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0)
