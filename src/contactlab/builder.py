@@ -133,6 +133,10 @@ class ModelBuilder:
         )
 
     # -- rigid bodies ----------------------------------------------------------------
+    # add_body and add_obstacle spell out the shape arguments they share (radius, half_extents, points,
+    # file, scale, placement, material) one keyword each, on purpose: the public signatures are what
+    # help(), editors and the API docs show, and a shared **kwargs spec would hide them (issue 23's
+    # `duplicates` lists the two as a pair; the checks behind the arguments are shared, in shape_arguments)
     def add_body(
         self,
         shape: str,
@@ -197,6 +201,7 @@ class ModelBuilder:
             self._hulls.append(hull)
         check_dynamic_count(1, "shape", "another body", self._dynamic_count())
         index = len(self._bodies)
+        # one keyword a field, as every record here and compare's Comparison: a shared form, not a shared idea
         self._bodies.append(
             dict(
                 name=str(name) if name is not None else f"body{index}",
@@ -414,6 +419,7 @@ class ModelBuilder:
         return range(start, start + count)
 
     # -- static obstacles ------------------------------------------------------------
+    # the shape arguments spelled out as add_body's, on purpose: see the comment there
     def add_obstacle(
         self,
         shape: str,
@@ -442,7 +448,7 @@ class ModelBuilder:
         shape = checked_shape(
             shape,
             OBSTACLE_SHAPE_ARGUMENTS,
-            dict(
+            dict(  # every shape argument as given (one keyword each, as add_body's record: the same form only)
                 normal=normal,
                 offset=offset,
                 radius=radius,

@@ -62,6 +62,7 @@ from dataclasses import field as dataclass_field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .counts import RowCount
 from .errors import InputError
 from .hull_geometry import (
     check_convex,
@@ -120,17 +121,12 @@ class Hull:
     source_indices: np.ndarray | None = dataclass_field(default=None, repr=False)
     """(V,) int, the given point each vertex comes from."""
 
-    @property
-    def vertex_count(self) -> int:
-        return len(self.vertices)
-
-    @property
-    def face_count(self) -> int:
-        return len(self.face_normal)
-
-    @property
-    def edge_count(self) -> int:
-        return len(self.edge_vertex)
+    vertex_count = RowCount("vertices")
+    """V, the number of corners."""
+    face_count = RowCount("face_normal")
+    """F, the number of faces."""
+    edge_count = RowCount("edge_vertex")
+    """E, the number of edges."""
 
     @property
     def center_of_mass(self) -> np.ndarray:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import rotations, shapes
+from .counts import RowCount
 
 if TYPE_CHECKING:
     from .driving import Drive
@@ -121,17 +122,12 @@ class Model:
             h["edge_face"],
         )
 
-    @property
-    def body_count(self) -> int:
-        return len(self.body_names)
-
-    @property
-    def particle_count(self) -> int:
-        return len(self.particle_mass)
-
-    @property
-    def obstacle_count(self) -> int:
-        return len(self.obstacle_shape)
+    body_count = RowCount("body_names")
+    """B, the number of rigid bodies."""
+    particle_count = RowCount("particle_mass")
+    """P, the number of particles (free ones and cloth vertices)."""
+    obstacle_count = RowCount("obstacle_shape")
+    """O, the number of static obstacles."""
 
     @property
     def body_kinematic(self) -> np.ndarray:
@@ -148,13 +144,10 @@ class Model:
         """(B, 3) inverse principal moments, 1/(kg m²); 0 for kinematic bodies."""
         return np.where(self.body_kinematic[:, None], 0.0, 1.0 / self.body_inertia)
 
-    @property
-    def cloth_count(self) -> int:
-        return len(self.cloth_names)
-
-    @property
-    def spring_count(self) -> int:
-        return len(self.spring_rest_length)
+    cloth_count = RowCount("cloth_names")
+    """C, the number of cloths."""
+    spring_count = RowCount("spring_rest_length")
+    """S, the number of cloth springs."""
 
     @cached_property
     def spring_pattern(self) -> SpringPattern:

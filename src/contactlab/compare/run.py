@@ -349,6 +349,7 @@ def compare(
     except BaseException:
         created.remove()
         raise
+    # one keyword a field: the form of the builder's body records, with nothing else in common
     return Comparison(
         rows=rows,
         out=out,
