@@ -324,7 +324,7 @@ def test_pack_and_slice():
         assert np.array_equal(o, hull.face_offset) and np.array_equal(fvi, hull.face_vertex_index)
         assert np.array_equal(fvs - fvs[0], hull.face_vertex_start)
         assert np.array_equal(ev, hull.edge_vertex) and np.array_equal(ef, hull.edge_face)
-        view = cx.hull_view(
+        store = (
             packed["vertex_start"],
             packed["vertices"],
             packed["face_start"],
@@ -335,8 +335,8 @@ def test_pack_and_slice():
             packed["edge_start"],
             packed["edge_vertex"],
             packed["edge_face"],
-            h,
         )
+        view = cx.hull_view(store, h)
         for x, y in zip(view, (v, n, o, fvs, fvi, ev, ef)):
             assert np.array_equal(x, y)
     assert np.allclose(packed["radius"][0], np.sqrt(0.75))

@@ -152,6 +152,8 @@ def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarr
                     c = (x * dims[1] + y) * dims[2] + z
                     for k in range(start[c], start[c + 1]):
                         j = members[k]
+                        # the box test is written out again in grid_pairs, deliberately
+                        # (through one compiled helper, even inlined, both ran ~10 % slower)
                         if j > i and (
                             lower[j, 0] <= upper[i, 0]
                             and lower[i, 0] <= upper[j, 0]

@@ -48,6 +48,7 @@ from numba import njit
 
 from .contact_output import ContactRows, Frame, write_contact
 from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
+from .segment_patch import write_patch_ends
 
 MAX_CONTACTS = 2  # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
@@ -210,19 +211,9 @@ def capsule_capsule(
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
             slope = dot(normal, axis_a)
-            # the two ends as segment_patch.write_patch_ends writes them in B's frame; here in
-            # world coordinates, deliberately apart: passing through an identity frame could
-            # change the sign of a zero coordinate, and with it the bits of the contacts
-            count = 0
-            for end in range(2):
-                s_end = lo if end == 0 else hi
-                depth_end = depth - slope * (s_end - s)
-                if depth_end >= -margin:
-                    surface_a = axpy(axpy(center_a, s_end, axis_a), -radius_a, normal)
-                    point = axpy(surface_a, 0.5 * depth_end, normal)
-                    write_contact(out, slot + count, point, normal, depth_end, 1 + end)
-                    count += 1
-            return count
+            # A's segment against B's, in world coordinates (no frame): features 1 and 2
+            segment_a = (center_a, axis_a, half_a, radius_a)
+            return write_patch_ends(segment_a, lo, hi, s, depth, slope, normal, margin, 1, None, out, slot)
 
     point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
     write_contact(out, slot, point, normal, depth, np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))

@@ -42,12 +42,17 @@ def write_local_contact(
     normal_local: np.ndarray,
     depth: float,
     feature: int,
-    frame: Frame,
+    frame: Frame | None,
     out: ContactRows,
     slot: int,
 ) -> None:
     """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal
-    (3,) there, the collider's ``frame`` = (center (3,) [m], rotation (3, 3) body → world)."""
+    (3,) there, the collider's ``frame`` = (center (3,) [m], rotation (3, 3) body → world); None:
+    they are in world coordinates already and stored as given (not through an identity frame,
+    which could turn a −0.0 coordinate into +0.0)."""
+    if frame is None:  # Numba compiles only the branch of the argument's type
+        write_contact(out, slot, point_local, normal_local, depth, np.int64(feature))
+        return
     center, rotation = frame
     point = axpy(center, 1.0, rotate(rotation, point_local))
     write_contact(out, slot, point, rotate(rotation, normal_local), depth, np.int64(feature))

@@ -242,22 +242,25 @@ def sphere_convex(
 
 
 @njit(cache=True)
-def hull_view(
-    vertex_start: np.ndarray,
-    vertices: np.ndarray,
-    face_start: np.ndarray,
-    face_normal: np.ndarray,
-    face_offset: np.ndarray,
-    face_vertex_start: np.ndarray,
-    face_vertex_index: np.ndarray,
-    edge_start: np.ndarray,
-    edge_vertex: np.ndarray,
-    edge_face: np.ndarray,
-    h: int,
-) -> HullArrays:
-    """Hull ``h``'s arrays out of the packed layout (:func:`contactlab.hulls.pack_hulls`), as views:
-    (vertices, face_normal, face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face),
-    the argument order of the routines here. The compiled twin of :func:`contactlab.hulls.hull_arrays`."""
+def hull_view(hull_store: tuple, h: int) -> HullArrays:
+    """Hull ``h``'s arrays out of a packed hull store, as views: (vertices, face_normal,
+    face_offset, face_vertex_start, face_vertex_index, edge_vertex, edge_face), the argument
+    order of the routines here. ``hull_store``: the ten arrays of
+    :func:`contactlab.hulls.pack_hulls` as ``Model.hull_store`` orders them (vertex_start,
+    vertices, face_start, face_normal, face_offset, face_vertex_start, face_vertex_index,
+    edge_start, edge_vertex, edge_face). The compiled twin of :func:`contactlab.hulls.hull_arrays`."""
+    (
+        vertex_start,
+        vertices,
+        face_start,
+        face_normal,
+        face_offset,
+        face_vertex_start,
+        face_vertex_index,
+        edge_start,
+        edge_vertex,
+        edge_face,
+    ) = hull_store
     f0 = face_start[h]
     f1 = face_start[h + 1]
     fvs = face_vertex_start[f0 : f1 + 1]
@@ -275,6 +278,5 @@ def hull_view(
 @njit(cache=True)
 def stored_hull(hull_store: tuple, index: float) -> HullArrays:
     """Hull number ``index`` (a collider's float parameter) out of a model's packed hull store
-    (Model.hull_store: the ten arrays of :func:`contactlab.hulls.pack_hulls` in :func:`hull_view`'s
-    argument order), as :func:`hull_view` gives it."""
-    return hull_view(*hull_store, np.int64(index))
+    (Model.hull_store), as :func:`hull_view` gives it."""
+    return hull_view(hull_store, np.int64(index))

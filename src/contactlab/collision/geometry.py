@@ -44,8 +44,6 @@ def column(rotation: np.ndarray, k: int) -> np.ndarray:
     return np.array([rotation[0, k], rotation[1, k], rotation[2, k]])
 
 
-# rotate and unrotate (below) are written out alike (deliberately: one expression per
-# component, no transposed copy)
 @njit(cache=True)
 def rotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rotation @ v for a 3×3 matrix, written out (cheaper to compile than the BLAS product)."""
@@ -58,18 +56,11 @@ def rotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
     )
 
 
-# unrotate is rotate with the matrix transposed, written out alike (deliberately: one
-# expression per component, no transposed copy)
 @njit(cache=True)
 def unrotate(rotation: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """rotation.T @ v for a 3×3 matrix, written out."""
-    return np.array(
-        [
-            rotation[0, 0] * v[0] + rotation[1, 0] * v[1] + rotation[2, 0] * v[2],
-            rotation[0, 1] * v[0] + rotation[1, 1] * v[1] + rotation[2, 1] * v[2],
-            rotation[0, 2] * v[0] + rotation[1, 2] * v[1] + rotation[2, 2] * v[2],
-        ]
-    )
+    """rotation.T @ v for a 3×3 matrix: :func:`rotate` through the transposed view (no copy;
+    the same products summed in the same order)."""
+    return rotate(rotation.T, v)
 
 
 @njit(cache=True)

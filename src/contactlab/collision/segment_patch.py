@@ -137,17 +137,17 @@ def write_patch_ends(
     normal_local: np.ndarray,
     margin: float,
     feature: int,
-    frame: Frame,
+    frame: Frame | None,
     out: ContactRows,
     slot: int,
 ) -> int:
     """The two ends s = lo, hi [m] of the part of capsule A's segment that lies alongside an edge
     of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end − s)``
     [m] from the depth at the closest point s, ends shallower than −margin left out; features
-    ``feature`` and ``feature + 1``. Returns how many it wrote from ``slot`` on."""
+    ``feature`` and ``feature + 1``. Returns how many it wrote from ``slot`` on. ``frame`` None:
+    segment and normal are in world coordinates, and so written (the parallel patch of
+    :func:`.capsule.capsule_capsule`)."""
     origin, direction, _, radius_a = segment
-    # capsule_capsule writes its parallel patch the same way in world coordinates (deliberately
-    # apart: see there)
     count = 0
     for end in range(2):
         s_end = lo if end == 0 else hi
