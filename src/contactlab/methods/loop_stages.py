@@ -230,20 +230,21 @@ def detect(
     reach: np.ndarray,
     kept: tuple,
     tolerance: float,
-) -> tuple[ContactArrays, tuple]:
+) -> tuple[ContactArrays, tuple, bool]:
     """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
     hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
     when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, their centres (N, 3) and
     rotations (N, 3, 3) ``centers``, ``rots`` (``poses``). ``plan`` = (families, hull store) of
     the narrow phase; ``large`` and ``keeping`` None: never a grid broad phase, never a kept
-    manifold (see ``Stepper``). Returns (ContactArrays, the manifolds to keep)."""
+    manifold (see ``Stepper``). Returns (ContactArrays, the manifolds to keep, whether the broad
+    phase found any pair within reach)."""
     families, hull_store = plan
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
     _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
     total = model.kinds.shape[0]
     made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
     if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
-        return no_contacts(), made
+        return no_contacts(), made, False
     # a branch of its own on ``keeping is None``: Numba prunes only that form, and the ball's
     # loop then compiles no manifold reuse
     if keeping is None:
@@ -271,7 +272,7 @@ def detect(
         )
     point, normal, depth, feature, owner = found
     if depth.shape[0] == 0:
-        return no_contacts(), made
+        return no_contacts(), made, True
     contacts = assemble_contacts(
         pairs[owner, 0],
         pairs[owner, 1],
@@ -286,7 +287,18 @@ def detect(
         model.material_restitution,
         total,
     )
-    return contacts, made
+    return contacts, made, True
+
+
+@njit(cache=True, inline="always")
+def swept_clear(near: bool, margin: float) -> bool:
+    """Whether a step whose ``detect`` found no pair (``near`` False) leaves every collider clear
+    of every other at its end: true where the step then moves them by the free velocities its
+    ``swept_reach`` took (impulse, constraints, projection; not penalty, whose reach is taken
+    before gravity) and the contact ``margin`` [m] > 0 — each collider's bounds at the end lie
+    within its swept bounds by half the margin, far beyond rounding, so the zero-reach broad
+    phase of ``record`` would find no pair either."""
+    return not near and margin > 0.0
 
 
 @njit(cache=True, inline="always")
@@ -441,12 +453,15 @@ def record(
     contact_count: int,
     sweeps: int,
     change: float,
+    clear: bool,
 ) -> None:
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
     deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does); the
     step's ``contact_count``, or where it is −1 (no step) that of the fresh pass. ``at`` = the
     bodies' rotations (B, 3, 3) and the colliders' centres and rotations at ``motion``'s
-    positions (``poses``), which the next step starts from too."""
+    positions (``poses``), which the next step starts from too. ``clear``: the step before
+    found nothing within its swept reach (``swept_clear``), so nothing overlaps here and the
+    fresh pass, which would find no pair, is not made."""
     rotation, centers, rots = at
     samples.time[row] = time
     copy_rows(samples.body_position[row], motion.body_position)
@@ -468,25 +483,28 @@ def record(
         model.body_mass, motion.body_position, model.particle_mass, motion.particle_position, model.gravity
     )
     samples.energy_elastic[row] = 0.0
-    touching = np.zeros(model.kinds.shape[0])
-    _, _, pairs = candidate_pairs(
-        model.kinds,
-        model.params,
-        centers,
-        rots,
-        touching,
-        motion.body_position.shape[0] + motion.particle_position.shape[0],
-        model.cloth_of,
-        large,
-    )
     deepest, found = 0.0, 0
-    if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
-        depth = generate_contacts(
-            pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
-        )[2]
-        found = depth.shape[0]
-        if found:
-            deepest = max(0.0, depth.max())
+    # after a step that found nothing within its swept reach nothing overlaps (the fresh pass
+    # would find no pair): on an airborne ball the pass was a quarter of a sampled step
+    if not clear:
+        touching = np.zeros(model.kinds.shape[0])
+        _, _, pairs = candidate_pairs(
+            model.kinds,
+            model.params,
+            centers,
+            rots,
+            touching,
+            motion.body_position.shape[0] + motion.particle_position.shape[0],
+            model.cloth_of,
+            large,
+        )
+        if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
+            depth = generate_contacts(
+                pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
+            )[2]
+            found = depth.shape[0]
+            if found:
+                deepest = max(0.0, depth.max())
     samples.max_penetration[row] = deepest
     samples.contact_count[row] = found if contact_count < 0 else contact_count
     samples.solver_iterations[row] = sweeps

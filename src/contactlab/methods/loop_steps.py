@@ -37,6 +37,7 @@ from .loop_stages import (
     moved,
     poses,
     solve,
+    swept_clear,
     swept_reach,
 )
 from .penalty_implicit import free_dofs, implicit_spring_velocities, mass_blocks
@@ -191,7 +192,7 @@ def velocity_step(
     # 2. predict: how far each body and particle sweeps this step
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
-    contacts, manifolds = detect(
+    contacts, manifolds, near = detect(
         model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     if contacts.depth.shape[0] == 0:
@@ -205,7 +206,8 @@ def velocity_step(
             np.full(free[0].shape[0], h),
             np.full(free[2].shape[0], h),
         )
-        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0
+        clear = swept_clear(near, settings.margin)
+        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0, clear
     # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
     rows = build_rows(model, contacts, motion, rotation)
     u = stacked(free[0], free[1], free[2])
@@ -216,7 +218,7 @@ def velocity_step(
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
     velocities = unstacked(u, free[0].shape[0])
-    return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change
+    return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change, False
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
@@ -292,7 +294,7 @@ def passes(
         at = displaced_motion(motion, displacement, settings.dt)
         rotation = rotations.matrices(at.body_orientation)
         centers, rots = poses(model, at, rotation)
-        contacts, _ = detect(model, plan, large, keeping, at, centers, rots, reach, kept, 0.0)
+        contacts, _, _ = detect(model, plan, large, keeping, at, centers, rots, reach, kept, 0.0)
         displacement, _, more, change = project(
             model,
             settings,
@@ -339,7 +341,7 @@ def projection_step(
     predicted = h * v_free
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
-    contacts, manifolds = detect(
+    contacts, manifolds, near = detect(
         model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
@@ -368,7 +370,8 @@ def projection_step(
     positions, velocities = advance(
         motion.body_position, motion.body_orientation, motion.particle_position, v_free, displacement, predicted, h
     )
-    return positions, velocities, (manifolds, contacts.feature_id, lam), last, sweeps, change
+    clear = swept_clear(near, settings.margin)
+    return positions, velocities, (manifolds, contacts.feature_id, lam), last, sweeps, change, clear
 
 
 # ---- penalty (loop L1): the stages of methods.penalty_springs and penalty_implicit ---------
@@ -411,7 +414,7 @@ def penalty_step(
     reach = swept_reach(
         model, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
-    contacts, manifolds = detect(model, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
+    contacts, manifolds, _ = detect(model, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
     rows = build_rows(model, contacts, motion, rotation)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)

@@ -128,19 +128,19 @@ def run(
     pose = (rotation, centers, rots)
     for s in range(steps):
         index = first_index + s
-        elastic, implicit, linear = 0.0, False, 0
+        elastic, implicit, linear, clear = 0.0, False, 0, False  # clear: penalty's steps never are
         # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
         # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
-            positions, velocities, carried, contacts, sweeps, change = projection_step(
+            positions, velocities, carried, contacts, sweeps, change, clear = projection_step(
                 model, settings, plan, large, keeping, slabs, parallel, motion, pose, carried
             )
         if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
-            positions, velocities, carried, contacts, sweeps, change = velocity_step(
+            positions, velocities, carried, contacts, sweeps, change, clear = velocity_step(
                 model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if impulse is not None:
-            positions, velocities, carried, contacts, sweeps, change = velocity_step(
+            positions, velocities, carried, contacts, sweeps, change, clear = velocity_step(
                 model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if penalty is not None:
@@ -160,7 +160,7 @@ def run(
         if not healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, model, plan, large, motion, pose, time, count, sweeps, change)
+            record(samples, written, model, plan, large, motion, pose, time, count, sweeps, change, clear)
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
@@ -325,7 +325,9 @@ class Stepper:
         samples, model, motion = self.samples_for(1), self.model.stepping_arrays, self.motion
         rotation = rotations.matrices(motion.body_orientation)
         centers, rots = poses(model, motion, rotation)
-        record(samples, 0, model, self.plan, self.flags[0], motion, (rotation, centers, rots), self.time, -1, 0, 0.0)
+        record(
+            samples, 0, model, self.plan, self.flags[0], motion, (rotation, centers, rots), self.time, -1, 0, 0.0, False
+        )
         return samples._asdict()
 
     def advance(
