@@ -29,6 +29,8 @@ from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..contacts import ContactArrays
 from ..dynamics import integrators
+from ..record import SERIES
+from ..state import ARRAYS as STATE_ARRAYS
 from .jacobian_rows import ContactRows, contact_rows
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
 
@@ -78,38 +80,10 @@ LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, t
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
 detect-and-project passes. What a method's Options lack is 0 (False, 1 pass): see ``loop_settings``."""
 
-Motion = namedtuple(
-    "Motion",
-    (
-        "body_position",
-        "body_orientation",
-        "body_velocity",
-        "body_angular_velocity",
-        "particle_position",
-        "particle_velocity",
-    ),
-)
+Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
 
-Samples = namedtuple(
-    "Samples",
-    (
-        "time",
-        "body_position",
-        "body_orientation",
-        "body_velocity",
-        "body_angular_velocity",
-        "particle_position",
-        "particle_velocity",
-        "energy_kinetic",
-        "energy_potential",
-        "energy_elastic",
-        "max_penetration",
-        "contact_count",
-        "solver_iterations",
-        "solver_residual",
-    ),
-)
+Samples = namedtuple("Samples", SERIES)
 Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
 
 
