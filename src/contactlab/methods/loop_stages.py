@@ -31,7 +31,7 @@ from ..contacts import ContactArrays
 from ..dynamics import integrators
 from ..record import SERIES
 from ..state import ARRAYS as STATE_ARRAYS
-from .jacobian_rows import ContactRows, contact_rows
+from .jacobian_rows import ContactRows, rows_at
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
 
 LoopModel = namedtuple(
@@ -286,21 +286,8 @@ def no_contacts() -> ContactArrays:
 def build_rows(model: LoopModel, contacts: ContactArrays, motion: Motion, rotation: np.ndarray) -> ContactRows:
     """Stage 4a: the contacts' rows of J (a ContactRows) at the step's start."""
     inverse_inertia = rotations.world_tensors(rotation, model.body_inverse_inertia)
-    return contact_rows(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        contacts.weights_a,
-        contacts.weights_b,
-        contacts.point,
-        motion.body_position,
-        contacts.normal,
-        contacts.tangent1,
-        contacts.tangent2,
-        model.body_inverse_mass,
-        inverse_inertia,
-        model.particle_inverse_mass,
+    return rows_at(
+        contacts, motion.body_position, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass
     )
 
 
