@@ -490,16 +490,7 @@ def contact_springs(
         model.gravity,
     )
     offsets = values_carried(carried[1], carried[2], contacts.feature_id)[0]
-    springs = springs_of(
-        penalty.springs,
-        stiffness,
-        rows.k[:, :3],
-        contacts.restitution,
-        contacts.friction,
-        offsets,
-        contacts.tangent1,
-        contacts.tangent2,
-    )
+    springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)
     return springs, (side_a, side_b, B + P)
 
 
