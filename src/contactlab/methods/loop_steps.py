@@ -494,6 +494,12 @@ def contact_springs(
     return springs, (side_a, side_b, B + P)
 
 
+# Where friction stands among a ContactArrays' fields: ``hold_back`` copies the others around it
+# (two constants, as Numba slices a tuple only by constants, not by a sum of them).
+_FRICTION = ContactArrays._fields.index("friction")
+_AFTER_FRICTION = _FRICTION + 1
+
+
 @njit(cache=True)
 def hold_back(
     model: LoopModel,
@@ -521,22 +527,7 @@ def hold_back(
     if not below:
         return velocity
     held = velocity.copy()
-    frictionless = ContactArrays(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        contacts.weights_a,
-        contacts.weights_b,
-        contacts.point,
-        contacts.normal,
-        contacts.depth,
-        contacts.tangent1,
-        contacts.tangent2,
-        np.zeros(C),
-        contacts.restitution,
-        contacts.feature_id,
-    )
+    frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
     solve(
         penalty.guard,
         slabs,
