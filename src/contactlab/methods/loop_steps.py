@@ -263,6 +263,9 @@ def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Moti
     )
 
 
+# ``passes`` repeats the head of ``projection_step``'s signature (and so does ``velocity_step``'s):
+# deliberately, the flags one by one, not gathered into one tuple, for Numba drops a branch
+# whose flag is None only where that flag is an argument of its own.
 @njit(cache=True)
 def passes(
     model: LoopModel,
@@ -311,6 +314,8 @@ def passes(
     return displacement, contacts, sweeps, change
 
 
+# The steps' one signature (module docstring): the flags one by one, as in ``passes`` and
+# ``velocity_step`` — not a tuple of them, for Numba prunes only on an argument typed None.
 @njit(cache=True)
 def projection_step(
     model: LoopModel,
