@@ -69,6 +69,10 @@ class Contacts:
         """The Contacts of a ``ContactArrays`` (what compiled code builds)."""
         return cls(*arrays)
 
+    def arrays(self) -> ContactArrays:
+        """These contacts as a ``ContactArrays`` (the same arrays, not copied): what compiled code takes."""
+        return ContactArrays(*(getattr(self, f.name) for f in fields(self)))
+
     @classmethod
     def empty(cls) -> Contacts:
         return cls.concatenate([])

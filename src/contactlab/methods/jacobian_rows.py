@@ -29,7 +29,7 @@ than by memory: 45 ns per update on the 1000-sphere pile, against 54 ns before.
 from __future__ import annotations
 
 from collections import namedtuple
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -274,11 +274,18 @@ def rows_in_order(rows: ContactRows, order: np.ndarray) -> ContactRows:
     )
 
 
-def rows_of(model: Model, contacts: Contacts, body_position: np.ndarray, body_orientation: np.ndarray) -> ContactRows:
-    """``contact_rows`` of a Contacts at the given body positions (B, 3) and orientations (B, 4)
-    (the state the contacts were detected at)."""
-    from ..dynamics.integrators import world_inverse_inertia
-
+@njit(cache=True, inline="always")  # into the compiled loop's ``build_rows``: no call more than before
+def rows_at(
+    contacts: Any,  # a ContactArrays, whose fields (Contacts') mypy cannot see: they are named at run time
+    body_position: np.ndarray,
+    body_inverse_mass: np.ndarray,
+    body_inverse_inertia_world: np.ndarray,
+    particle_inverse_mass: np.ndarray,
+) -> ContactRows:
+    """``contact_rows`` of a ``ContactArrays`` at body positions (B, 3) [m], with the bodies' inverse
+    masses (B,) [1/kg] and world inverse inertias (B, 3, 3) [1/(kg m²)] there, and the particles'
+    inverse masses (P,) [1/kg]: the one place that hands the contacts' fields to it, for the
+    methods' steps (``rows_of``) and the compiled loop's (``loop_stages.build_rows``) alike."""
     return contact_rows(
         contacts.body_a,
         contacts.body_b,
@@ -291,6 +298,20 @@ def rows_of(model: Model, contacts: Contacts, body_position: np.ndarray, body_or
         contacts.normal,
         contacts.tangent1,
         contacts.tangent2,
+        body_inverse_mass,
+        body_inverse_inertia_world,
+        particle_inverse_mass,
+    )
+
+
+def rows_of(model: Model, contacts: Contacts, body_position: np.ndarray, body_orientation: np.ndarray) -> ContactRows:
+    """``contact_rows`` of a Contacts at the given body positions (B, 3) and orientations (B, 4)
+    (the state the contacts were detected at)."""
+    from ..dynamics.integrators import world_inverse_inertia
+
+    return rows_at(
+        contacts.arrays(),
+        body_position,
         model.body_inverse_mass,
         world_inverse_inertia(model, body_orientation),
         model.particle_inverse_mass,

@@ -29,7 +29,9 @@ from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..contacts import ContactArrays
 from ..dynamics import integrators
-from .jacobian_rows import ContactRows, contact_rows
+from ..record import SERIES
+from ..state import ARRAYS as STATE_ARRAYS
+from .jacobian_rows import ContactRows, rows_at
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
 
 LoopModel = namedtuple(
@@ -78,38 +80,10 @@ LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, t
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
 detect-and-project passes. What a method's Options lack is 0 (False, 1 pass): see ``loop_settings``."""
 
-Motion = namedtuple(
-    "Motion",
-    (
-        "body_position",
-        "body_orientation",
-        "body_velocity",
-        "body_angular_velocity",
-        "particle_position",
-        "particle_velocity",
-    ),
-)
+Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
 
-Samples = namedtuple(
-    "Samples",
-    (
-        "time",
-        "body_position",
-        "body_orientation",
-        "body_velocity",
-        "body_angular_velocity",
-        "particle_position",
-        "particle_velocity",
-        "energy_kinetic",
-        "energy_potential",
-        "energy_elastic",
-        "max_penetration",
-        "contact_count",
-        "solver_iterations",
-        "solver_residual",
-    ),
-)
+Samples = namedtuple("Samples", SERIES)
 Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
 
 
@@ -324,21 +298,8 @@ def no_contacts() -> ContactArrays:
 def build_rows(model: LoopModel, contacts: ContactArrays, motion: Motion, rotation: np.ndarray) -> ContactRows:
     """Stage 4a: the contacts' rows of J (a ContactRows) at the step's start."""
     inverse_inertia = rotations.world_tensors(rotation, model.body_inverse_inertia)
-    return contact_rows(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        contacts.weights_a,
-        contacts.weights_b,
-        contacts.point,
-        motion.body_position,
-        contacts.normal,
-        contacts.tangent1,
-        contacts.tangent2,
-        model.body_inverse_mass,
-        inverse_inertia,
-        model.particle_inverse_mass,
+    return rows_at(
+        contacts, motion.body_position, model.body_inverse_mass, inverse_inertia, model.particle_inverse_mass
     )
 
 

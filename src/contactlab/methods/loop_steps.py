@@ -265,6 +265,9 @@ def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Moti
     )
 
 
+# ``passes`` repeats the head of ``projection_step``'s signature (and so does ``velocity_step``'s):
+# deliberately, the flags one by one, not gathered into one tuple, for Numba drops a branch
+# whose flag is None only where that flag is an argument of its own.
 @njit(cache=True)
 def passes(
     model: LoopModel,
@@ -313,6 +316,8 @@ def passes(
     return displacement, contacts, sweeps, change
 
 
+# The steps' one signature (module docstring): the flags one by one, as in ``passes`` and
+# ``velocity_step`` — not a tuple of them, for Numba prunes only on an argument typed None.
 @njit(cache=True)
 def projection_step(
     model: LoopModel,
@@ -493,17 +498,14 @@ def contact_springs(
         model.gravity,
     )
     offsets = values_carried(carried[1], carried[2], contacts.feature_id)[0]
-    springs = springs_of(
-        penalty.springs,
-        stiffness,
-        rows.k[:, :3],
-        contacts.restitution,
-        contacts.friction,
-        offsets,
-        contacts.tangent1,
-        contacts.tangent2,
-    )
+    springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)
     return springs, (side_a, side_b, B + P)
+
+
+# Where friction stands among a ContactArrays' fields: ``hold_back`` copies the others around it
+# (two constants, as Numba slices a tuple only by constants, not by a sum of them).
+_FRICTION = ContactArrays._fields.index("friction")
+_AFTER_FRICTION = _FRICTION + 1
 
 
 @njit(cache=True)
@@ -533,22 +535,7 @@ def hold_back(
     if not below:
         return velocity
     held = velocity.copy()
-    frictionless = ContactArrays(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        contacts.weights_a,
-        contacts.weights_b,
-        contacts.point,
-        contacts.normal,
-        contacts.depth,
-        contacts.tangent1,
-        contacts.tangent2,
-        np.zeros(C),
-        contacts.restitution,
-        contacts.feature_id,
-    )
+    frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
     solve(
         penalty.guard,
         slabs,

@@ -310,16 +310,7 @@ def contact_springs(
     inverse_effective = np.asarray((J @ inverse_mass).multiply(J).sum(axis=1)).ravel().reshape(C, 3)
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
     offsets, _ = values_by_id(carried.get("anchor_ids"), carried.get("anchor_offsets"), contacts.feature_id, 3)
-    return springs_of(
-        spring_settings(options, "symplectic_euler"),
-        k,
-        inverse_effective,
-        contacts.restitution,
-        contacts.friction,
-        offsets,
-        contacts.tangent1,
-        contacts.tangent2,
-    )
+    return springs_of(spring_settings(options, "symplectic_euler"), k, inverse_effective, contacts.arrays(), offsets)
 
 
 def distribute(J: sp.spmatrix, inverse_mass: sp.spmatrix, forces: np.ndarray, dt: float) -> np.ndarray:
@@ -379,14 +370,7 @@ def step(
         state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"), contacts.feature_id, 3
     )
     springs = springs_of(
-        settings,
-        contact_stiffness(model, state, contacts, options),
-        rows.k[:, :3],
-        contacts.restitution,
-        contacts.friction,
-        offsets,
-        contacts.tangent1,
-        contacts.tangent2,
+        settings, contact_stiffness(model, state, contacts, options), rows.k[:, :3], contacts.arrays(), offsets
     )
     v = stack(*state.velocities)
     # 2. collision forces F = k δ n and anchor springs (P1, F3), at the current state

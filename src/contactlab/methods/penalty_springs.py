@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..contacts import ContactArrays
 from .jacobian_rows import ContactRows, apply_impulses, contact_velocity, row_products
 
 # ---- one spring's step, and ζ from restitution ---------------------------------------------
@@ -73,6 +74,8 @@ def entities_of(body: np.ndarray, particles: np.ndarray, body_count: int) -> np.
     return out
 
 
+# A list of arrays as long as ``projection.displaced``'s and of its form (duplicates pairs them by
+# shape): two unrelated kernels taking the state's arrays one by one, with no logic in common.
 @njit(cache=True)
 def supported_loads(
     entity_a: np.ndarray,
@@ -210,18 +213,22 @@ def springs_of(
     settings: SpringSettings,
     stiffness: np.ndarray,
     inverse_effective: np.ndarray,
-    restitution: np.ndarray,
-    friction: np.ndarray,
+    contacts: ContactArrays,
     offsets: np.ndarray,
-    tangent1: np.ndarray,
-    tangent2: np.ndarray,
 ) -> ContactSprings:
-    """The springs of C contacts: normal stiffness ``stiffness`` (C,) [N/m] (``normal_stiffness``),
-    damping c = 2 ζ √(k m_eff) with each contact's effective mass m_eff = 1 / (J M⁻¹ Jᵀ) along its
-    normal (and tangent) from ``inverse_effective`` (C, 3) [1/kg] (ζ the option's or from the
-    restitution (C,)), friction stiffness the normal one where "auto", μ = ``friction`` (C,), and
-    the anchor elongations ``offsets`` (C, 3) [m] carried from the last step turned into the
-    current tangent plane (t1, t2 (C, 3)), their length kept (the plane may have turned)."""
+    """The springs of C ``contacts`` (a ContactArrays: ``Contacts.arrays()`` in a method's step):
+    normal stiffness ``stiffness`` (C,) [N/m] (``normal_stiffness``), damping c = 2 ζ √(k m_eff)
+    with each contact's effective mass m_eff = 1 / (J M⁻¹ Jᵀ) along its normal (and tangent) from
+    ``inverse_effective`` (C, 3) [1/kg] (ζ the option's or from their restitution (C,)), friction
+    stiffness the normal one where "auto", μ their friction (C,), and the anchor elongations
+    ``offsets`` (C, 3) [m] carried from the last step turned into their tangent plane now (t1, t2
+    (C, 3)), their length kept (the plane may have turned)."""
+    restitution, friction, tangent1, tangent2 = (
+        contacts.restitution,
+        contacts.friction,
+        contacts.tangent1,
+        contacts.tangent2,
+    )
     C = stiffness.shape[0]
     zeta = damping_ratios(restitution) if settings.damping_ratio < 0.0 else np.full(C, settings.damping_ratio)
     k_t = stiffness.copy() if settings.friction_stiffness < 0.0 else np.full(C, settings.friction_stiffness)

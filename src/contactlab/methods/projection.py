@@ -202,6 +202,8 @@ def projection_targets(rows: ContactRows, offset: np.ndarray, depth: np.ndarray,
     return target
 
 
+# A list of arrays of the same form as ``penalty_springs.supported_loads``' (duplicates pairs them
+# by shape): two unrelated kernels taking the state's arrays one by one, with no logic in common.
 @njit(cache=True)
 def displaced(
     body_position: np.ndarray,

@@ -393,17 +393,11 @@ class Stepper:
         carried["manifolds"] = Manifolds(*made) if self.keep_manifolds else None
         if len(ids) or self.carries_empty:
             carried[self.prefix + "ids"], carried[self.prefix + "values"] = ids, values
-        m = self.motion
-        return State(
-            self.time,
-            m.body_position.copy(),
-            m.body_orientation.copy(),
-            m.body_velocity.copy(),
-            m.body_angular_velocity.copy(),
-            m.particle_position.copy(),
-            m.particle_velocity.copy(),
-            carried,
-        )
+        return self._state_carrying(carried)
+
+    def _state_carrying(self, carried: dict) -> State:
+        """The State reached: the time, copies of the Motion's six arrays, and ``carried``."""
+        return State(self.time, *(array.copy() for array in self.motion), carried)
 
 
 class PenaltyStepper(Stepper):
@@ -440,17 +434,7 @@ class PenaltyStepper(Stepper):
     def state(self) -> State:
         """The State reached (copies), its anchors under the keys ``penalty.step`` carries them by."""
         _, ids, offsets = self.carried
-        m = self.motion
-        return State(
-            self.time,
-            m.body_position.copy(),
-            m.body_orientation.copy(),
-            m.body_velocity.copy(),
-            m.body_angular_velocity.copy(),
-            m.particle_position.copy(),
-            m.particle_velocity.copy(),
-            dict(self.other, anchor_ids=ids, anchor_offsets=offsets),
-        )
+        return self._state_carrying(dict(self.other, anchor_ids=ids, anchor_offsets=offsets))
 
 
 def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None) -> tuple:
