@@ -183,13 +183,16 @@ def _norm(v):
 
 
 @njit(cache=True, inline="always")
-def poses(model: LoopModel, motion: Motion, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The colliders' centres (N, 3) [m] and rotations (N, 3, 3) at ``motion``'s positions,
-    the bodies' rotations (B, 3, 3) ``rotation`` (``collision.collider_poses``): what ``detect``
-    and ``record`` take, computed once for a sample and the step after it."""
-    return collider_poses(
+def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The poses at ``motion``'s positions: the bodies' rotation matrices (B, 3, 3), and the
+    colliders' centres (N, 3) [m] and rotations (N, 3, 3) (``collision.collider_poses``): what a
+    step (``start``), ``detect`` and ``record`` take, computed once for a sample and the step
+    after it."""
+    rotation = rotations.matrices(motion.body_orientation)
+    centers, rots = collider_poses(
         motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
     )
+    return rotation, centers, rots
 
 
 @njit(cache=True, inline="always")

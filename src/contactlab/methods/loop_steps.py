@@ -21,7 +21,6 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .. import rotations
 from ..collision import half_thickness_sums
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
@@ -295,8 +294,7 @@ def passes(
         if contacts.depth.shape[0] == 0:
             break
         at = displaced_motion(motion, displacement, settings.dt)
-        rotation = rotations.matrices(at.body_orientation)
-        centers, rots = poses(model, at, rotation)
+        rotation, centers, rots = poses(model, at)
         contacts, _, _ = detect(model, plan, large, keeping, at, centers, rots, reach, kept, 0.0)
         displacement, _, more, change = project(
             model,

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from .. import rotations, shapes
+from .. import shapes
 from ..collision import dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES
@@ -123,9 +123,7 @@ def run(
     implicit_steps = 0
     linear_made = 0
     # the poses at each step's start, computed once after the step before: its sample takes them too
-    rotation = rotations.matrices(motion.body_orientation)
-    centers, rots = poses(model, motion, rotation)
-    pose = (rotation, centers, rots)
+    pose = poses(model, motion)
     for s in range(steps):
         index = first_index + s
         elastic, implicit, linear, clear = 0.0, False, 0, False  # clear: penalty's steps never are
@@ -148,9 +146,7 @@ def run(
                 model, settings, plan, large, slabs, parallel, penalty, motion, pose, carried
             )
         store(motion, positions, velocities)
-        rotation = rotations.matrices(motion.body_orientation)
-        centers, rots = poses(model, motion, rotation)
-        pose = (rotation, centers, rots)
+        pose = poses(model, motion)
         time += settings.dt
         count = contacts.depth.shape[0]
         most = max(most, count)
@@ -323,11 +319,7 @@ class Stepper:
         collision pass, 0 sweeps), as a dict of
         the series, recorded by the loop's ``record``: what ``Recorder.sample`` records."""
         samples, model, motion = self.samples_for(1), self.model.stepping_arrays, self.motion
-        rotation = rotations.matrices(motion.body_orientation)
-        centers, rots = poses(model, motion, rotation)
-        record(
-            samples, 0, model, self.plan, self.flags[0], motion, (rotation, centers, rots), self.time, -1, 0, 0.0, False
-        )
+        record(samples, 0, model, self.plan, self.flags[0], motion, poses(model, motion), self.time, -1, 0, 0.0, False)
         return samples._asdict()
 
     def advance(
