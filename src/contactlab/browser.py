@@ -15,6 +15,7 @@ import base64
 import json
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -38,6 +39,7 @@ FLAGS = (
     "--remote-debugging-port=0",
 )
 START_SECONDS = 30  # s: Chromium's DevTools server is up within this, or it failed
+STOP_SECONDS = 10  # s: Chromium's processes are gone and its profile removed within this
 
 
 def chromium() -> str | None:
@@ -57,11 +59,14 @@ class Page:
         browser = chromium()
         if browser is None:
             raise RuntimeError("no chromium, chromium-browser or google-chrome on PATH (apt-get install chromium)")
-        self.profile = tempfile.TemporaryDirectory(prefix="contactlab-chromium-")
+        self.profile = tempfile.mkdtemp(prefix="contactlab-chromium-")
+        # A session of its own: Chromium's helpers (renderer, GPU, crash handler) join its
+        # process group, so closing the page can stop them all, not just the first.
         self.process = subprocess.Popen(
-            [browser, *FLAGS, f"--window-size={width},{height}", f"--user-data-dir={self.profile.name}", "about:blank"],
+            [browser, *FLAGS, f"--window-size={width},{height}", f"--user-data-dir={self.profile}", "about:blank"],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
+            start_new_session=True,
         )
         try:
             self.socket = connect(self._page_socket(), max_size=None)
@@ -96,7 +101,7 @@ class Page:
 
     def _page_socket(self):
         """The DevTools websocket address of the page, once Chromium has written its port."""
-        port_file = os.path.join(self.profile.name, "DevToolsActivePort")
+        port_file = os.path.join(self.profile, "DevToolsActivePort")
         deadline = time.monotonic() + START_SECONDS
         while True:
             if time.monotonic() > deadline or self.process.poll() is not None:
@@ -143,9 +148,39 @@ class Page:
             time.sleep(0.5)
 
     def _end_process(self):
-        self.process.terminate()
-        self.process.wait(timeout=10)
-        self.profile.cleanup()
+        """Stop Chromium and its helpers, then remove the profile folder. A helper that outlives
+        the main process can still be writing into the profile (CI once saw ``Directory not empty:
+        'Default'``), so the whole process group is killed and the removal retried until it holds."""
+        group = self.process.pid  # the session leader's pid is its group's id
+        self._signal(group, signal.SIGTERM)
+        try:
+            self.process.wait(timeout=STOP_SECONDS)
+        except subprocess.TimeoutExpired:
+            self._signal(group, signal.SIGKILL)
+            self.process.wait(timeout=STOP_SECONDS)
+        deadline = time.monotonic() + STOP_SECONDS
+        while self._signal(group, signal.SIGKILL) and time.monotonic() < deadline:
+            time.sleep(0.05)  # a helper still running, or killed and not yet reaped
+        while True:
+            try:
+                shutil.rmtree(self.profile)
+                return
+            except FileNotFoundError:
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+
+    @staticmethod
+    def _signal(group, number):
+        """Send signal ``number`` to process group ``group``; returns whether any process of the
+        group was there to receive it."""
+        try:
+            os.killpg(group, number)
+        except ProcessLookupError:
+            return False
+        return True
 
     def close(self) -> None:
         self.socket.close()
