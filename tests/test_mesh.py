@@ -179,40 +179,11 @@ def test_bvh_query_equals_brute_force():
     for _ in range(1500):
         lower = rng.uniform(-1.2, 1.0, 3)
         upper = lower + rng.uniform(0.0, 0.5, 3)
-        found = triangles_near(
-            mesh.node_lower,
-            mesh.node_upper,
-            mesh.node_left,
-            mesh.node_right,
-            mesh.node_start,
-            mesh.node_count,
-            mesh.node_order,
-            mesh.triangle_lower,
-            mesh.triangle_upper,
-            lower,
-            upper,
-            out,
-        )
+        found = triangles_near(mesh.geometry, lower, upper, out)
         brute = np.nonzero(np.all((mesh.triangle_lower <= upper) & (mesh.triangle_upper >= lower), axis=1))[0]
         assert np.array_equal(np.sort(out[:found]), brute)
         # a too small buffer still reports the full count
-        assert (
-            triangles_near(
-                mesh.node_lower,
-                mesh.node_upper,
-                mesh.node_left,
-                mesh.node_right,
-                mesh.node_start,
-                mesh.node_count,
-                mesh.node_order,
-                mesh.triangle_lower,
-                mesh.triangle_upper,
-                lower,
-                upper,
-                small,
-            )
-            == found
-        )
+        assert triangles_near(mesh.geometry, lower, upper, small) == found
 
 
 # ---------------------------------------------------------------------------------------------

@@ -244,21 +244,9 @@ def _boxes_overlap(lowers: np.ndarray, uppers: np.ndarray, row: int, lower: np.n
 
 
 @njit(cache=True)
-def triangles_near(
-    node_lower: np.ndarray,
-    node_upper: np.ndarray,
-    node_left: np.ndarray,
-    node_right: np.ndarray,
-    node_start: np.ndarray,
-    node_count: np.ndarray,
-    node_order: np.ndarray,
-    triangle_lower: np.ndarray,
-    triangle_upper: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    out: np.ndarray,
-) -> int:
-    """Triangles whose boxes overlap the box [lower, upper] (3,) [m] (closed intervals).
+def triangles_near(mesh: MeshGeometry, lower: np.ndarray, upper: np.ndarray, out: np.ndarray) -> int:
+    """Triangles of ``mesh`` whose boxes overlap the box [lower, upper] (3,) [m] (closed intervals),
+    found down the mesh's bounding-volume hierarchy (its ``node_*`` arrays).
 
     Writes their indices into ``out`` (int64) and returns how many there are. When there
     are more than ``len(out)`` only the first ``len(out)`` are written and the full count is
@@ -272,44 +260,31 @@ def triangles_near(
     while top > 0:
         top -= 1
         node = stack[top]
-        if not _boxes_overlap(node_lower, node_upper, node, lower, upper):
+        if not _boxes_overlap(mesh.node_lower, mesh.node_upper, node, lower, upper):
             continue
-        if node_count[node] > 0:
-            for k in range(node_start[node], node_start[node] + node_count[node]):
-                t = node_order[k]
-                if not _boxes_overlap(triangle_lower, triangle_upper, t, lower, upper):
+        if mesh.node_count[node] > 0:
+            for k in range(mesh.node_start[node], mesh.node_start[node] + mesh.node_count[node]):
+                t = mesh.node_order[k]
+                if not _boxes_overlap(mesh.triangle_lower, mesh.triangle_upper, t, lower, upper):
                     continue
                 if found < capacity:
                     out[found] = t
                 found += 1
         else:
-            stack[top] = node_right[node]
-            stack[top + 1] = node_left[node]
+            stack[top] = mesh.node_right[node]
+            stack[top + 1] = mesh.node_left[node]
             top += 2
     return found
 
 
 @njit(cache=True)
 def mesh_triangles_near(mesh: MeshGeometry, lower: np.ndarray, upper: np.ndarray, buffer: np.ndarray) -> np.ndarray:
-    """:func:`triangles_near` on a :class:`MeshGeometry`, growing ``buffer`` when it is too small.
+    """:func:`triangles_near`, growing ``buffer`` when it is too small.
 
     Returns the candidate indices (a view of the buffer, or of a larger new array).
     """
     while True:  # at most twice: a second query into a buffer of the size the first found
-        found = triangles_near(
-            mesh.node_lower,
-            mesh.node_upper,
-            mesh.node_left,
-            mesh.node_right,
-            mesh.node_start,
-            mesh.node_count,
-            mesh.node_order,
-            mesh.triangle_lower,
-            mesh.triangle_upper,
-            lower,
-            upper,
-            buffer,
-        )
+        found = triangles_near(mesh, lower, upper, buffer)
         if found <= buffer.shape[0]:
             return buffer[:found]
         buffer = np.empty(found, dtype=np.int64)

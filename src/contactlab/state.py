@@ -11,6 +11,10 @@ from typing import Any
 
 import numpy as np
 
+Positions = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""A state's positions as one value: (body_position (B, 3) [m], body_orientation (B, 4) unit
+quaternions, particle_position (P, 3) [m]), the order of :attr:`State.positions`."""
+
 
 @dataclass
 class State:

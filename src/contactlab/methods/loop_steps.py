@@ -257,7 +257,7 @@ def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Moti
     """The Motion at the positions a generalized displacement (N,) [m, rad] reaches from
     ``motion``'s over h [s] (``projection.displaced``; its velocities are ``motion``'s)."""
     position, orientation, particle = displaced(
-        motion.body_position, motion.body_orientation, motion.particle_position, displacement, h
+        (motion.body_position, motion.body_orientation, motion.particle_position), displacement, h
     )
     return Motion(
         position, orientation, motion.body_velocity, motion.body_angular_velocity, particle, motion.particle_velocity
@@ -370,9 +370,8 @@ def projection_step(
         change,
     )
     # 5. advance dt, velocities from the projected positions
-    positions, velocities = advance(
-        motion.body_position, motion.body_orientation, motion.particle_position, v_free, displacement, predicted, h
-    )
+    start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)
+    positions, velocities = advance(start_positions, v_free, displacement, predicted, h)
     clear = swept_clear(near, settings.margin)
     return positions, velocities, (manifolds, contacts.feature_id, lam), last, sweeps, change, clear
 

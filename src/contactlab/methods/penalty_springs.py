@@ -74,8 +74,6 @@ def entities_of(body: np.ndarray, particles: np.ndarray, body_count: int) -> np.
     return out
 
 
-# A list of arrays as long as ``projection.displaced``'s and of its form (duplicates pairs them by
-# shape): two unrelated kernels taking the state's arrays one by one, with no logic in common.
 @njit(cache=True)
 def supported_loads(
     entity_a: np.ndarray,

@@ -41,7 +41,7 @@ from ..collision import swept_distances
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
-from ..state import State
+from ..state import Positions, State
 from ..validation import check_counts, number
 from . import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products, rows_of
@@ -162,7 +162,7 @@ def step(
     for _ in range(options.passes - 1):
         if contacts.count == 0:
             break
-        projected = State.assemble(state.time + h, displaced(*_positions(state), displacement, h), state.velocities)
+        projected = State.assemble(state.time + h, displaced(_positions(state), displacement, h), state.velocities)
         ids = contacts.feature_id
         displacement, contacts, more, sweeps, change = project(
             model, projected, displacement, displacement, options, sweep
@@ -172,7 +172,7 @@ def step(
         if sweeps <= 1 and change <= options.tolerance:
             break
     # 5. advance dt, velocities from the projected positions
-    positions, velocities = advance(*_positions(state), v_free, displacement, predicted_displacement, h)
+    positions, velocities = advance(_positions(state), v_free, displacement, predicted_displacement, h)
     new = State.assemble(state.time + h, positions, velocities, carried)
     return new, StepInfo(
         contacts, solver_iterations=total_sweeps, solver_residual=change, impulses=pushed / h
@@ -202,19 +202,13 @@ def projection_targets(rows: ContactRows, offset: np.ndarray, depth: np.ndarray,
     return target
 
 
-# A list of arrays of the same form as ``penalty_springs.supported_loads``' (duplicates pairs them
-# by shape): two unrelated kernels taking the state's arrays one by one, with no logic in common.
 @njit(cache=True)
-def displaced(
-    body_position: np.ndarray,
-    body_orientation: np.ndarray,
-    particle_position: np.ndarray,
-    displacement: np.ndarray,
-    h: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions (B, 3), orientations (B, 4) and particle positions (P, 3) moved over h [s] by a
-    generalized displacement (N,) [m, rad]: translations added, rotation vectors applied by the
-    exponential map (as velocities displacement / h for h, ``integrators.moved``)."""
+def displaced(positions: Positions, displacement: np.ndarray, h: float) -> Positions:
+    """``positions`` (body positions (B, 3) [m], orientations (B, 4), particle positions (P, 3)
+    [m], as ``State.positions``) moved over h [s] by a generalized displacement (N,) [m, rad]:
+    translations added, rotation vectors applied by the exponential map (as velocities
+    displacement / h for h, ``integrators.moved``)."""
+    body_position, body_orientation, particle_position = positions
     rate = unstacked(displacement / h, body_position.shape[0])
     return moved(
         body_position,
@@ -230,18 +224,11 @@ def displaced(
 
 @njit(cache=True)
 def advance(
-    body_position: np.ndarray,
-    body_orientation: np.ndarray,
-    particle_position: np.ndarray,
-    free: np.ndarray,
-    displacement: np.ndarray,
-    predicted: np.ndarray,
-    h: float,
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Stage 5: the step's end from its start positions ((B, 3), (B, 4), (P, 3)): positions moved by
-    the projected displacement (N,) [m, rad], velocities v = v* + (u − h v*) / h from the free ones
-    ``free`` (N,) and the ``predicted`` displacement h v* (N,). Returns (positions, velocities
-    ((B, 3), (B, 3), (P, 3)) [m/s, rad/s])."""
+    positions: Positions, free: np.ndarray, displacement: np.ndarray, predicted: np.ndarray, h: float
+) -> tuple[Positions, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Stage 5: the step's end from its start ``positions`` (as :func:`displaced` takes them):
+    positions moved by the projected displacement (N,) [m, rad], velocities v = v* + (u − h v*) / h
+    from the free ones ``free`` (N,) and the ``predicted`` displacement h v* (N,). Returns
+    (positions, velocities ((B, 3), (B, 3), (P, 3)) [m/s, rad/s])."""
     velocity = free + (displacement - predicted) / h
-    positions = displaced(body_position, body_orientation, particle_position, displacement, h)
-    return positions, unstacked(velocity, body_position.shape[0])
+    return displaced(positions, displacement, h), unstacked(velocity, positions[0].shape[0])
