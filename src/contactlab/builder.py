@@ -201,7 +201,6 @@ class ModelBuilder:
             self._hulls.append(hull)
         check_dynamic_count(1, "shape", "another body", self._dynamic_count())
         index = len(self._bodies)
-        # one keyword a field, as every record here and compare's Comparison: a shared form, not a shared idea
         self._bodies.append(
             dict(
                 name=str(name) if name is not None else f"body{index}",
@@ -448,7 +447,7 @@ class ModelBuilder:
         shape = checked_shape(
             shape,
             OBSTACLE_SHAPE_ARGUMENTS,
-            dict(  # every shape argument as given (one keyword each, as add_body's record: the same form only)
+            dict(  # every shape argument as given
                 normal=normal,
                 offset=offset,
                 radius=radius,

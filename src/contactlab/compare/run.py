@@ -341,24 +341,21 @@ def compare(
             plot_paths = write_comparison_plots(ran, os.path.join(out, "plots"), title=scene.name)
             created.add(*plot_paths.values())
         rows = [outcome.row for outcome in outcomes]
-        table = report.table_cells(outcomes)
-        csv_path = created.text(os.path.join(out, "comparison.csv"), report.csv_text(rows))
-        markdown, html = report.report_texts(scene, outcomes, summary_text, table, plot_paths, out)
-        md_path = created.text(os.path.join(out, "report.md"), markdown)
-        html_path = created.text(os.path.join(out, "report.html"), html)
+        markdown, html = report.report_texts(
+            scene, outcomes, summary_text, report.table_cells(outcomes), plot_paths, out
+        )
+        return Comparison(  # the three reports are written as the result names them
+            rows=rows,
+            out=out,
+            report_html=created.text(os.path.join(out, "report.html"), html),
+            report_md=created.text(os.path.join(out, "report.md"), markdown),
+            csv=created.text(os.path.join(out, "comparison.csv"), report.csv_text(rows)),
+            summary_text=summary_text,
+            scene=scene.name,
+            skipped=skipped,
+            checks={outcome.method: outcome.checks for outcome in outcomes},
+            files={outcome.method: outcome.files for outcome in outcomes},
+        )
     except BaseException:
         created.remove()
         raise
-    # one keyword a field: the form of the builder's body records, with nothing else in common
-    return Comparison(
-        rows=rows,
-        out=out,
-        report_html=html_path,
-        report_md=md_path,
-        csv=csv_path,
-        summary_text=summary_text,
-        scene=scene.name,
-        skipped=skipped,
-        checks={outcome.method: outcome.checks for outcome in outcomes},
-        files={outcome.method: outcome.files for outcome in outcomes},
-    )
