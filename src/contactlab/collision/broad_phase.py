@@ -96,6 +96,21 @@ def sweep_and_prune(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     return pairs[:found]
 
 
+# the grids' one box test: an axis loop with early returns, a plain compiled call (LLVM inlines it). It times
+# as the six-term test written out in each grid did (10 000 boxes, best of 30); inline="always" counted the
+# references of lower and upper on every call (2x slower on a dense pile), returning the `and` chain 1.8x
+@njit(cache=True)
+def _boxes_overlap(lower: np.ndarray, upper: np.ndarray, i: int, j: int) -> bool:
+    """Whether boxes i and j of ``lower``, ``upper`` (N, 3) [m] overlap (closed intervals; not
+    where a bound is NaN)."""
+    for d in range(3):
+        if not lower[j, d] <= upper[i, d]:
+            return False
+        if not lower[i, d] <= upper[j, d]:
+            return False
+    return True
+
+
 @njit(cache=True)
 def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
     """(pairs (K, 2) sorted by (i, j), True) of the overlapping boxes by the neighbour-cell grid
@@ -152,16 +167,7 @@ def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarr
                     c = (x * dims[1] + y) * dims[2] + z
                     for k in range(start[c], start[c + 1]):
                         j = members[k]
-                        # the box test is written out again in grid_pairs, deliberately
-                        # (through one compiled helper, even inlined, both ran ~10 % slower)
-                        if j > i and (
-                            lower[j, 0] <= upper[i, 0]
-                            and lower[i, 0] <= upper[j, 0]
-                            and lower[j, 1] <= upper[i, 1]
-                            and lower[i, 1] <= upper[j, 1]
-                            and lower[j, 2] <= upper[i, 2]
-                            and lower[i, 2] <= upper[j, 2]
-                        ):
+                        if j > i and _boxes_overlap(lower, upper, i, j):
                             pairs = _append_pair(pairs, found, i, j)
                             found += 1
         for a in range(first + 1, found):  # insertion sort of i's partners: pairs come out sorted
@@ -227,16 +233,7 @@ def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
                     or cells[ep, 2] != cells[eq, 2]
                 ):
                     continue  # the same box twice, or another cell with the same hash
-                # the box test of neighbour_cell_pairs, written out again deliberately: through one
-                # compiled helper (even inlined) both grid searches ran ~10 % slower on 10 000 boxes
-                if not (
-                    lower[a, 0] <= upper[b, 0]
-                    and lower[b, 0] <= upper[a, 0]
-                    and lower[a, 1] <= upper[b, 1]
-                    and lower[b, 1] <= upper[a, 1]
-                    and lower[a, 2] <= upper[b, 2]
-                    and lower[b, 2] <= upper[a, 2]
-                ):
+                if not _boxes_overlap(lower, upper, a, b):
                     continue
                 home = True  # the cell of the larger lower corner reports it
                 for d in range(3):

@@ -68,6 +68,8 @@ END_FEATURE = 7  # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
 COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this are coplanar
 
 
+# the parameter list ends as box_mesh's does (polytope_mesh): the mesh routines' calling convention, kept
+# as it is (mesh_contacts and the tests call these public routines positionally); a deliberate pair
 @njit(cache=True)
 def capsule_mesh(
     frame: Frame,

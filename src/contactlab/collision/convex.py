@@ -65,6 +65,49 @@ SPHERE_FEATURE = 0
 HullArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
+@njit(cache=True)
+def write_reduced(
+    frame: Frame,
+    points: np.ndarray,
+    height: np.ndarray,
+    keep: np.ndarray,
+    count: int,
+    axis: np.ndarray,
+    tie: float,
+    direction: np.ndarray,
+    sign: float,
+    out: ContactRows,
+    slot: int,
+) -> int:
+    """The contacts of a hull on a plane (``convex_plane``) or on a face (hull–hull,
+    :func:`.convex_convex._face_contacts`): of the candidates ``keep[:count]``, rows of ``points``
+    (·, 3) [m] in ``frame`` = (centre (3,) [m], rotation (3, 3) → world) at ``height`` (·,) [m]
+    above the plane (unit normal ``axis`` (3,) in that frame), at most 4 (``reduce_to_four``;
+    depth ties within ``tie`` [m]), written from ``slot`` on and moved halfway down to the plane:
+    point = frame point − height / 2 · ``direction`` (the plane normal in the world, (3,)),
+    normal = ``sign`` · direction, depth = −height. Returns how many; ``keep[:n]`` names them
+    (the caller writes their features)."""
+    center, rotation = frame
+    out_point, out_normal, out_depth, _ = out
+    if count > MAX_CONTACTS:
+        count = reduce_to_four(points, height, keep, count, axis, tie, np.empty(count))
+    for k in range(count):
+        p = keep[k]
+        h = height[p]
+        row = slot + k
+        for c in range(3):
+            x = (
+                center[c]
+                + rotation[c, 0] * points[p, 0]
+                + rotation[c, 1] * points[p, 1]
+                + rotation[c, 2] * points[p, 2]
+            )
+            out_point[row, c] = x - 0.5 * h * direction[c]
+            out_normal[row, c] = sign * direction[c]
+        out_depth[row] = -h
+    return count
+
+
 # ------------------------------------------------------------------------------------------
 # hull against plane
 
@@ -75,7 +118,7 @@ def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: floa
     plane B = (n, offset) (4,): one contact per vertex within the margin, reduced to at most 4.
     Feature: the vertex index (mod 256, see the module docstring)."""
     center, rotation = frame
-    out_point, out_normal, out_depth, out_feature = out
+    out_feature = out[3]
     vertices = hull[0]
     n0, n1, n2 = plane[0], plane[1], plane[2]
     # the plane normal in the body frame, and the height of the body origin above the plane
@@ -97,28 +140,13 @@ def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: floa
             count += 1
     if count == 0:
         return 0
-    # reduced and written as hull–hull writes its clipped points (convex_convex._face_contacts),
-    # deliberately apart from it: here the frame is the hull's own and the features are vertices
-    if count > MAX_CONTACTS:
-        # reduce in the hull's own frame (the plane normal there is l)
-        axis = np.array([l0, l1, l2])
-        count = reduce_to_four(vertices, height, keep, count, axis, REDUCE_TIE * extent, np.empty(count))
+    # reduced in the hull's frame (the plane normal there is l), as hull–hull reduces its clipped points
+    count = write_reduced(
+        frame, vertices, height, keep, count, np.array([l0, l1, l2]), REDUCE_TIE * extent, plane[:3], 1.0, out, slot
+    )
     used = np.zeros(256, dtype=np.bool_)
     for k in range(count):
-        v = keep[k]
-        h = height[v]
-        row = slot + k
-        for c in range(3):
-            x = (
-                center[c]
-                + rotation[c, 0] * vertices[v, 0]
-                + rotation[c, 1] * vertices[v, 1]
-                + rotation[c, 2] * vertices[v, 2]
-            )
-            out_point[row, c] = x - 0.5 * h * plane[c]
-            out_normal[row, c] = plane[c]
-        out_depth[row] = -h
-        out_feature[row] = claim_feature(v, used)
+        out_feature[slot + k] = claim_feature(keep[k], used)
     return count
 
 

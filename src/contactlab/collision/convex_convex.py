@@ -58,8 +58,8 @@ import numpy as np
 from numba import njit
 
 from .contact_output import ContactRows, Frame
-from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear, reduce_to_four
-from .convex import HullArrays
+from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear
+from .convex import HullArrays, write_reduced
 from .convex_sat import convex_convex_sat
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
@@ -144,8 +144,7 @@ def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback,
     ref_points, ref_normals, ref_offsets, ref_fvs, ref_fvi = reference
     ref_normal, ref_offset = ref_normals[ref_face], ref_offsets[ref_face]
     inc_points, inc_normal, _, inc_fvs, inc_fvi = incident
-    center_a, rotation_a = frame_a
-    out_point, out_normal, out_depth, out_feature = out
+    rotation_a = frame_a[1]
     m0, m1, m2 = ref_normal[0], ref_normal[1], ref_normal[2]
     # the incident hull's deepest vertex (its support point along −ref_normal) ...
     deepest = 0
@@ -233,23 +232,17 @@ def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback,
         point_labels[0] = deepest
         keep[0] = 0
         kept = 1
-    # reduced and written as convex.convex_plane writes its vertices, deliberately apart from it:
-    # here the points are in A's frame, moved halfway to the reference plane, and labelled by faces
-    kept = reduce_to_four(points, height, keep, kept, ref_normal, REDUCE_TIE * scale, np.empty(kept))
+    # reduced and written as convex_plane's vertices: moved halfway down to the reference plane,
+    # whose normal in the world is ``direction``
+    direction = np.empty(3)
+    for c in range(3):
+        direction[c] = rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2
+    kept = write_reduced(
+        frame_a, points, height, keep, kept, ref_normal, REDUCE_TIE * scale, direction, sign, out, slot
+    )
     used = np.zeros(256, dtype=np.bool_)
     for k in range(kept):
-        p = keep[k]
-        h = height[p]
-        row = slot + k
-        # the incident point moved halfway to the reference plane (A's frame), then to the world
-        l0 = points[p, 0] - 0.5 * h * m0
-        l1 = points[p, 1] - 0.5 * h * m1
-        l2 = points[p, 2] - 0.5 * h * m2
-        for c in range(3):
-            out_point[row, c] = center_a[c] + rotation_a[c, 0] * l0 + rotation_a[c, 1] * l1 + rotation_a[c, 2] * l2
-            out_normal[row, c] = sign * (rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2)
-        out_depth[row] = -h
-        out_feature[row] = claim_feature(_feature_of(ref_face, inc_face, point_labels[p]), used)
+        out[3][slot + k] = claim_feature(_feature_of(ref_face, inc_face, point_labels[keep[k]]), used)
     return kept
 
 

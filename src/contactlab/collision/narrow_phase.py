@@ -195,6 +195,8 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
     return loop
 
 
+# one parameter a line, shaped like box_mesh's head (polytope_mesh): alike in form only, two public
+# signatures that the tests call positionally, kept as they are; a deliberate pair
 @njit(cache=True)
 def collide_pair(
     kind_a: int,
