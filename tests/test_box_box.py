@@ -527,7 +527,7 @@ def test_dispatcher_and_collide_use_box_box():
     params = np.array([0.5, 0.5, 0.5, 0.0])
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
     count = collide_pair(
-        BOX, params, (np.array([0, 0, 0.999]), I3), BOX, params, (np.zeros(3), I3), 0.0, empty_hull_store(), out, 0
+        (BOX, params, (np.array([0, 0, 0.999]), I3)), (BOX, params, (np.zeros(3), I3)), 0.0, empty_hull_store(), out, 0
     )
     assert count == 4
     np.testing.assert_allclose(out[1][:4], np.tile([0.0, 0.0, 1.0], (4, 1)))

@@ -123,8 +123,8 @@ def test_swapping_shapes_flips_the_normal_and_nothing_else():
         sphere = (shapes.SPHERE, np.array([0.15, 0, 0, 0]), (rng.normal(scale=0.2, size=3), np.eye(3)))
         out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
         out2 = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
-        n1 = collide_pair(*box, *sphere, 0.0, empty_hull_store(), out, 0)
-        n2 = collide_pair(*sphere, *box, 0.0, empty_hull_store(), out2, 0)
+        n1 = collide_pair(box, sphere, 0.0, empty_hull_store(), out, 0)
+        n2 = collide_pair(sphere, box, 0.0, empty_hull_store(), out2, 0)
         assert n1 == n2
         np.testing.assert_allclose(out[1][:n1], -out2[1][:n2])
         np.testing.assert_allclose(out[0][:n1], out2[0][:n2])

@@ -126,12 +126,8 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
     out = (np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8, dtype=np.int64))
     for k, (a, b) in enumerate(pairs):
         count = collide_pair(
-            kinds[a],
-            params[a],
-            (centers[a], rots[a]),
-            kinds[b],
-            params[b],
-            (centers[b], rots[b]),
+            (kinds[a], params[a], (centers[a], rots[a])),
+            (kinds[b], params[b], (centers[b], rots[b])),
             reach[k],
             model.hull_store,
             out,

@@ -195,33 +195,24 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
     return loop
 
 
-# one parameter a line, shaped like box_mesh's head (polytope_mesh): alike in form only, two public
-# signatures that the tests call positionally, kept as they are; a deliberate pair
-@njit(cache=True)
-def collide_pair(
-    kind_a: int,
-    params_a: np.ndarray,
-    frame_a: Frame,
-    kind_b: int,
-    params_b: np.ndarray,
-    frame_b: Frame,
-    margin: float,
-    hull_store: tuple,
-    out: ContactRows,
-    slot: int,
-) -> int:
-    """Contacts of shape A against shape B written from ``slot`` on; returns their count
-    (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and nothing else. Every
-    routine is compiled in: the scene-wide narrow phase (``generate_contacts``) compiles only
-    the families it is given.
+Collider = tuple[int, np.ndarray, Frame]
+"""One shape where it stands: (kind (``shapes.SPHERE``…), params (4,) as ``Model.body_params``,
+frame (centre (3,) [m], rotation (3, 3) body → world; :data:`.contact_output.Frame`))."""
 
-    kind, params (4,) and frame (centre (3,) [m], rotation (3, 3) body → world;
-    :data:`.contact_output.Frame`) of each shape;
+
+@njit(cache=True)
+def collide_pair(a: Collider, b: Collider, margin: float, hull_store: tuple, out: ContactRows, slot: int) -> int:
+    """Contacts of shape A against shape B (each a :data:`Collider`) written from ``slot`` on;
+    returns their count (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and
+    nothing else. Every routine is compiled in: the scene-wide narrow phase
+    (``generate_contacts``) compiles only the families it is given.
+
     margin [m]: contacts with gaps down to −margin are kept; hull_store: the model's packed
     hulls (Model.hull_store, or ``empty_hull_store()``); out: the rows (point (n, 3) [m],
     normal (n, 3), depth (n,) [m], feature (n,) int64; :data:`.contact_output.ContactRows`)
     written from ``slot`` on."""
-    (center_a, rotation_a), (center_b, rotation_b) = frame_a, frame_b
+    kind_a, params_a, (center_a, rotation_a) = a
+    kind_b, params_b, (center_b, rotation_b) = b
     kinds = np.array([kind_a, kind_b], dtype=np.int64)
     params = np.empty((2, 4))
     centers = np.empty((2, 3))

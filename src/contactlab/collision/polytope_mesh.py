@@ -111,9 +111,8 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
 
 
 # box_mesh's and capsule_mesh's parameter lists end alike (mesh, margin, out, slot, max_contacts, one a
-# line), and box_mesh's head is shaped like collide_pair's (narrow_phase): the calling convention of public
-# routines that mesh_contacts and the tests call positionally, kept as it is (grouping those arguments
-# would change every call); deliberate pairs of the `duplicates` report
+# line): the calling convention of public routines that mesh_contacts and the tests call positionally,
+# kept as it is (grouping those arguments would change every call); a deliberate pair of `duplicates`
 @njit(cache=True)
 def box_mesh(
     frame: Frame,
