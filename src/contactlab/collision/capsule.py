@@ -210,10 +210,9 @@ def capsule_capsule(
         size = half_a + half_b + radius_a + radius_b
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
-            slope = dot(normal, axis_a)
             # A's segment against B's, in world coordinates (no frame): features 1 and 2
             segment_a = (center_a, axis_a, half_a, radius_a)
-            return write_patch_ends(segment_a, lo, hi, s, depth, slope, normal, margin, 1, None, out, slot)
+            return write_patch_ends(segment_a, (lo, hi), s, depth, normal, 1, (margin, None, out), slot)
 
     point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
     write_contact(out, slot, point, normal, depth, np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))
