@@ -9,9 +9,10 @@ says how capsule–box is exact); the segment–box geometry is
 import numpy as np
 from numba import njit
 
-from .capsule import PARALLEL_SIN
-from .contact_output import ContactRows, Frame, write_local_contact
+from .capsule import PARALLEL_SIN, Capsule
+from .contact_output import ContactRows, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
+from .primitive_pairs import Box
 from .segment_box import face_interval, face_patch, segment_box_closest
 from .segment_patch import dominant_face_contacts, edge_cross_point, write_patch_ends
 
@@ -22,21 +23,11 @@ CAPSULE_BOX_CROSS_FEATURE = 36  # the capsule–box contact of a segment inside 
 
 
 @njit(cache=True)
-def capsule_box(
-    frame_a: Frame,
-    radius_a: float,
-    half_length_a: float,
-    box_frame: Frame,
-    half_extents: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def capsule_box(capsule: Capsule, box: Box, margin: float, out: ContactRows, slot: int) -> int:
     """Capsule A against box B (static or dynamic): up to 2 contacts.
 
-    frame_a = (center_a (3,) [m], rotation_a (3, 3) body → world; segment along its third column);
-    radius_a, half_length_a [m]; box_frame = (box_center (3,) [m], box_rotation (3, 3) body → world);
-    half_extents: (3,) [m]; margin [m]. Work is done in the box's frame.
+    capsule = (frame, radius, half_length) (:data:`.capsule.Capsule`); box = (frame, half_extents)
+    (:data:`.primitive_pairs.Box`); margin [m]. Work is done in the box's frame.
 
     1. **Segment outside the box** (distance > ``BOX_REL_EPS`` × size): the closest point
        ``p`` of the segment (:func:`segment_box_closest`, exact) and its box point ``q``
@@ -78,6 +69,8 @@ def capsule_box(
     Where two faces are exactly equally far (a capsule end right over a box edge, along the
     diagonal) the dominant face, hence the feature, follows round-off.
     """
+    frame_a, radius_a, half_length_a = capsule
+    box_frame, half_extents = box
     center_a, rotation_a = frame_a
     box_center, box_rotation = box_frame
     origin = unrotate(box_rotation, axpy(center_a, -1.0, box_center))
