@@ -82,16 +82,27 @@ def _f(x):
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def _frames(args):
-    """The arguments as the pair routines take them: a centre (3,) followed by a rotation (3, 3)
-    is one argument, the shape's frame (centre, rotation)."""
-    grouped = []
-    for a in args:
-        if np.ndim(a) == 2 and grouped and isinstance(grouped[-1], np.ndarray) and grouped[-1].shape == (3,):
-            grouped[-1] = (grouped[-1], a)
-        else:
-            grouped.append(a)
-    return tuple(grouped)
+SHAPE_ARGUMENTS = {"sphere": 2, "capsule": 4, "box": 3, "plane": 1}  # run's flat arguments per shape
+
+
+def _shape(kind, args):
+    """One shape as the pair routines take it, from run's flat arguments: a sphere (centre,
+    radius), a capsule ((centre, rotation), radius, half length), a box ((centre, rotation),
+    half extents), a plane its (4,) array."""
+    if kind == "capsule":
+        return ((args[0], args[1]), args[2], args[3])
+    if kind == "box":
+        return ((args[0], args[1]), args[2])
+    if kind == "sphere":
+        return (args[0], args[1])
+    return args[0]
+
+
+def _shapes(function, args):
+    """The arguments of pair routine ``function`` (named ``shapeA_shapeB``) as its two shapes."""
+    kind_a, kind_b = function.__name__.split("_")
+    split = SHAPE_ARGUMENTS[kind_a]
+    return _shape(kind_a, args[:split]), _shape(kind_b, args[split:])
 
 
 def run(function, *args, margin=0.0):
@@ -102,7 +113,7 @@ def run(function, *args, margin=0.0):
     depth = np.full(slot + 4, np.nan)
     feature = np.full(slot + 4, -1, dtype=np.int64)
     args = tuple(_f(a) if isinstance(a, (np.ndarray, list, tuple)) else float(a) for a in args)
-    args = _frames(args)
+    args = _shapes(function, args)
     count = function(*args, float(margin), (point, normal, depth, feature), slot)
     assert 0 <= count <= 2
     assert np.isnan(depth[:slot]).all() and np.isnan(depth[slot + count :]).all()  # nothing outside

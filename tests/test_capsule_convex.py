@@ -171,7 +171,7 @@ def test_box_hulls_agree_with_capsule_box():
         rotation_b = random_rotation(rng)
         margin = 0.2
         count_box = capsule_box(
-            (center_a, rotation_a), radius, half_length, (center_b, rotation_b), half, margin, (p1, n1, d1, f1), 0
+            ((center_a, rotation_a), radius, half_length), ((center_b, rotation_b), half), margin, (p1, n1, d1, f1), 0
         )
         count_hull = capsule_convex(
             (center_a, rotation_a), radius, half_length, (center_b, rotation_b), hull, margin, (p2, n2, d2, f2), 0

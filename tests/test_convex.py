@@ -451,7 +451,7 @@ def test_cube_resting_on_plane_gives_four_corners():
     c = np.array([0.0, 0.0, 0.6])  # all 8 corners within the margin
     _, _, hull_depth, hull_feature = hull_plane(hull_arrays(box, 0), R, c, [0, 0, 1, 0], margin=2.0)
     out = buffers(0)
-    count = box_plane((c, R), np.array([0.5, 0.5, 0.5]), np.array([0, 0, 1, 0.0]), 2.0, out, 0)
+    count = box_plane(((c, R), np.array([0.5, 0.5, 0.5])), np.array([0, 0, 1, 0.0]), 2.0, out, 0)
     box_depth, box_feature = out[2][:count], out[3][:count]
     assert len(box_depth) > 4 and len(hull_depth) == 4  # more corners in the margin: reduced
     depth_of_corner = dict(zip(box_feature.tolist(), box_depth.tolist()))

@@ -13,7 +13,8 @@ unit normal points from B into A, ``depth`` > 0 when overlapping, contacts are k
 ``depth = −margin`` (speculative contacts), each ``point`` lies midway between the two
 surfaces, and every function writes its contacts from index ``slot`` on into ``out`` = (point
 (N, 3), normal (N, 3), depth (N,), feature (N,) int64) (:data:`.contact_output.ContactRows`) and
-returns how many it wrote (at most 2). ``feature`` (0..255) names the contact within its pair so that it
+returns how many it wrote (at most 2). A capsule is passed as one argument, :data:`Capsule`,
+a sphere as :data:`.primitive_pairs.Sphere`. ``feature`` (0..255) names the contact within its pair so that it
 keeps its number from step to step while it persists; each function documents its encoding.
 
 Exactness
@@ -48,7 +49,11 @@ from numba import njit
 
 from .contact_output import ContactRows, Frame, write_contact
 from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
+from .primitive_pairs import Sphere
 from .segment_patch import write_patch_ends
+
+# (frame: centre (3,) [m], rotation (3, 3) body → world, the segment along its third column; radius, half length [m])
+Capsule = tuple[Frame, float, float]
 
 MAX_CONTACTS = 2  # contacts written per capsule pair, at most
 PARALLEL_SIN = 1e-3  # capsule axes with |sin angle| below this are "parallel" (2-point contact)
@@ -64,13 +69,11 @@ CAPSULE_CAPSULE_SINGLE_FEATURE = 0
 
 
 @njit(cache=True)
-def capsule_plane(
-    frame: Frame, radius: float, half_length: float, plane: np.ndarray, margin: float, out: ContactRows, slot: int
-) -> int:
+def capsule_plane(capsule: Capsule, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
     """Capsule A against the plane B = (n, offset) (solid side n·x < offset; n unit).
 
-    frame = (center (3,) [m], rotation (3, 3) body → world; the segment along its third column);
-    radius, half_length [m]; plane: (4,) (n_x, n_y, n_z, offset [m]); margin [m].
+    capsule = (frame, radius, half_length) (:data:`Capsule`; the segment along the frame's third
+    column); plane: (4,) (n_x, n_y, n_z, offset [m]); margin [m].
     The signed distance to the plane is linear along the segment, so one contact per segment
     end within the margin is exact and a capsule lying flat gets 2 contacts of equal depth
     (it does not rock); the normal is the plane's.
@@ -78,6 +81,7 @@ def capsule_plane(
     Features: 0 = the −z end (``center − half_length · axis``), 1 = the +z end. A capsule of
     zero half length has only the end 0.
     """
+    frame, radius, half_length = capsule
     center, rotation = frame
     normal = plane[:3]
     axis = column(rotation, 2)
@@ -101,25 +105,18 @@ def capsule_plane(
 
 
 @njit(cache=True)
-def sphere_capsule(
-    center_a: np.ndarray,
-    radius_a: float,
-    frame_b: Frame,
-    radius_b: float,
-    half_length_b: float,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def sphere_capsule(sphere: Sphere, capsule: Capsule, margin: float, out: ContactRows, slot: int) -> int:
     """Sphere (or particle: a sphere of radius ≥ 0) A against capsule B: at most 1 contact.
 
-    center_a: (3,) [m]; radius_a [m]; frame_b = (center_b (3,) [m], rotation_b (3, 3) body → world);
-    radius_b, half_length_b [m]; margin [m]. The sphere centre's closest point on B's segment
+    sphere = (center_a (3,) [m], radius_a [m]); capsule = (frame_b, radius_b, half_length_b)
+    (:data:`Capsule`); margin [m]. The sphere centre's closest point on B's segment
     makes this a sphere–sphere contact. A centre on the segment (no direction) is pushed out
     along B's body x axis, perpendicular to the segment.
 
     Features: 0 (the one contact; it keeps its number as it slides from the side to a cap).
     """
+    center_a, radius_a = sphere
+    frame_b, radius_b, half_length_b = capsule
     center_b, rotation_b = frame_b
     axis = column(rotation_b, 2)
     s = clamp(dot(axpy(center_a, -1.0, center_b), axis), -half_length_b, half_length_b)
@@ -142,21 +139,11 @@ def sphere_capsule(
 
 
 @njit(cache=True)
-def capsule_capsule(
-    frame_a: Frame,
-    radius_a: float,
-    half_a: float,
-    frame_b: Frame,
-    radius_b: float,
-    half_b: float,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def capsule_capsule(capsule_a: Capsule, capsule_b: Capsule, margin: float, out: ContactRows, slot: int) -> int:
     """Capsule A against capsule B: 1 contact, or 2 when the axes are (nearly) parallel.
 
-    frame_* = (center_* (3,) [m], rotation_* (3, 3) body → world; segment along the third column);
-    radius_*, half_* (half lengths) [m]; margin [m].
+    capsule_* = (frame_*, radius_*, half_*) (:data:`Capsule`: segment along the frame's third
+    column, half_* its half length [m]); margin [m].
 
     The closest points ``p_A``, ``p_B`` of the two segments (:func:`segment_closest_parameters`)
     give the normal ``n = (p_A − p_B)/|p_A − p_B|`` and the depth ``r_A + r_B − |p_A − p_B|``.
@@ -177,6 +164,8 @@ def capsule_capsule(
     Features: 0 = the single closest-point contact; 1 = the parallel contact at ``s_lo`` (the
     end of the overlap toward A's −z end), 2 = the one at ``s_hi``.
     """
+    frame_a, radius_a, half_a = capsule_a
+    frame_b, radius_b, half_b = capsule_b
     center_a, rotation_a = frame_a
     center_b, rotation_b = frame_b
     axis_a = column(rotation_a, 2)
@@ -210,10 +199,9 @@ def capsule_capsule(
         size = half_a + half_b + radius_a + radius_b
         tol = OVERLAP_REL * size
         if hi - lo > tol and lo - tol <= s <= hi + tol:
-            slope = dot(normal, axis_a)
             # A's segment against B's, in world coordinates (no frame): features 1 and 2
             segment_a = (center_a, axis_a, half_a, radius_a)
-            return write_patch_ends(segment_a, lo, hi, s, depth, slope, normal, margin, 1, None, out, slot)
+            return write_patch_ends(segment_a, (lo, hi), s, depth, normal, 1, (margin, None, out), slot)
 
     point = midpoint(axpy(point_a, -radius_a, normal), axpy(point_b, radius_b, normal))
     write_contact(out, slot, point, normal, depth, np.int64(CAPSULE_CAPSULE_SINGLE_FEATURE))

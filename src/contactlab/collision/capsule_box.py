@@ -9,9 +9,10 @@ says how capsule–box is exact); the segment–box geometry is
 import numpy as np
 from numba import njit
 
-from .capsule import PARALLEL_SIN
-from .contact_output import ContactRows, Frame, write_local_contact
+from .capsule import PARALLEL_SIN, Capsule
+from .contact_output import ContactRows, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
+from .primitive_pairs import Box
 from .segment_box import face_interval, face_patch, segment_box_closest
 from .segment_patch import dominant_face_contacts, edge_cross_point, write_patch_ends
 
@@ -22,21 +23,11 @@ CAPSULE_BOX_CROSS_FEATURE = 36  # the capsule–box contact of a segment inside 
 
 
 @njit(cache=True)
-def capsule_box(
-    frame_a: Frame,
-    radius_a: float,
-    half_length_a: float,
-    box_frame: Frame,
-    half_extents: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def capsule_box(capsule: Capsule, box: Box, margin: float, out: ContactRows, slot: int) -> int:
     """Capsule A against box B (static or dynamic): up to 2 contacts.
 
-    frame_a = (center_a (3,) [m], rotation_a (3, 3) body → world; segment along its third column);
-    radius_a, half_length_a [m]; box_frame = (box_center (3,) [m], box_rotation (3, 3) body → world);
-    half_extents: (3,) [m]; margin [m]. Work is done in the box's frame.
+    capsule = (frame, radius, half_length) (:data:`.capsule.Capsule`); box = (frame, half_extents)
+    (:data:`.primitive_pairs.Box`); margin [m]. Work is done in the box's frame.
 
     1. **Segment outside the box** (distance > ``BOX_REL_EPS`` × size): the closest point
        ``p`` of the segment (:func:`segment_box_closest`, exact) and its box point ``q``
@@ -78,12 +69,13 @@ def capsule_box(
     Where two faces are exactly equally far (a capsule end right over a box edge, along the
     diagonal) the dominant face, hence the feature, follows round-off.
     """
+    frame_a, radius_a, half_length_a = capsule
+    box_frame, half_extents = box
     center_a, rotation_a = frame_a
     box_center, box_rotation = box_frame
     origin = unrotate(box_rotation, axpy(center_a, -1.0, box_center))
     direction = unrotate(box_rotation, column(rotation_a, 2))
     segment = (origin, direction, half_length_a, radius_a)
-    frame = box_frame
     size = half_length_a + radius_a + half_extents[0] + half_extents[1] + half_extents[2]
     tol = BOX_REL_EPS * size
     s, distance2 = segment_box_closest(origin, direction, half_length_a, half_extents)
@@ -91,15 +83,17 @@ def capsule_box(
     depth = radius_a - distance
     if depth < -margin:
         return 0
+    sink = (margin, box_frame, out)  # contacts kept and written through the box's frame
     if distance > tol:
-        return _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out, slot)
-    return _segment_inside(segment, half_extents, margin, tol, frame, out, slot)
+        return _segment_outside(segment, s, distance, half_extents, tol, sink, slot)
+    return _segment_inside(segment, half_extents, tol, sink, slot)
 
 
 @njit(cache=True)
-def _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out, slot):
+def _segment_outside(segment, s, distance, half_extents, tol, sink, slot):
     """Case 1 of :func:`capsule_box` (box frame): the segment is outside the box; ``s`` is its
-    closest point's parameter, ``distance`` > 0 the segment–box distance."""
+    closest point's parameter, ``distance`` > 0 the segment–box distance; ``sink`` as in
+    :mod:`.segment_patch`."""
     origin, direction, half_length_a, radius_a = segment
     depth = radius_a - distance
     p = axpy(origin, s, direction)
@@ -116,11 +110,11 @@ def _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out
             largest = excess
             face_axis = k
     face_sign = 1.0 if p[face_axis] > 0.0 else -1.0
+    face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
     if outside <= 1:
-        return face_patch(segment, half_extents, face_axis, face_sign, s, margin, tol, frame, out, slot)
+        return face_patch(segment, half_extents, face, s, tol, sink, slot)
     normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
     point_local = midpoint(axpy(p, -radius_a, normal_local), q)
-    slope = dot(normal_local, direction)
 
     if outside == 2:
         edge_axis = np.int64(0)
@@ -141,23 +135,21 @@ def _segment_outside(segment, s, distance, half_extents, margin, tol, frame, out
                     i, j = j, i
                 edge = 4 * edge_axis + 2 * (1 if p[i] > 0.0 else 0) + (1 if p[j] > 0.0 else 0)
                 feature = CAPSULE_BOX_EDGE_FEATURE + 2 * edge
-                return write_patch_ends(
-                    segment, lo, hi, s, depth, slope, normal_local, margin, feature, frame, out, slot
-                )
+                return write_patch_ends(segment, (lo, hi), s, depth, normal_local, feature, sink, slot)
 
     # an edge crossed at an angle, or a corner: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
-    face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
-    lo, hi = face_interval(origin, direction, half_length_a, half_extents, face_axis, tol)
+    part = face_interval(origin, direction, half_length_a, half_extents, face_axis, tol)
     plane = (unit_axis(face_axis, face_sign), half_extents[face_axis])
     closest = (point_local, normal_local, depth)
-    return dominant_face_contacts(segment, s, lo, hi, closest, plane, face, margin, tol, frame, out, slot)
+    return dominant_face_contacts(segment, s, part, closest, plane, face, tol, sink, slot)
 
 
 @njit(cache=True)
-def _segment_inside(segment, half_extents, margin, tol, frame, out, slot):
+def _segment_inside(segment, half_extents, tol, sink, slot):
     """Case 2 of :func:`capsule_box` (box frame): the segment touches or enters the box."""
     origin, direction, half_length_a, radius_a = segment
+    margin, frame, out = sink
     best_face = np.int64(0)
     best_face_overlap = 1e300
     for k in range(3):
@@ -188,8 +180,8 @@ def _segment_inside(segment, half_extents, margin, tol, frame, out, slot):
             best_edge = k
             best_edge_axis = axis
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
-        face_sign = 1.0 if origin[best_face] >= 0.0 else -1.0
-        return face_patch(segment, half_extents, best_face, face_sign, np.nan, margin, tol, frame, out, slot)
+        face = 2 * best_face + (1 if origin[best_face] >= 0.0 else 0)
+        return face_patch(segment, half_extents, face, np.nan, tol, sink, slot)
 
     depth = radius_a + best_edge_overlap
     if depth < -margin:

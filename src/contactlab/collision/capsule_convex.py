@@ -81,7 +81,7 @@ def _face_patch(segment, hull, face, s_keep, margin, tol, frame, out, slot):
     origin, direction, half_length, _ = segment
     lo, hi = segment_over_face(origin, direction, half_length, hull, face, tol)
     plane = (hull[1][face], hull[2][face])
-    return face_patch_ends(segment, lo, hi, s_keep, plane, face, margin, tol, frame, out, slot)
+    return face_patch_ends(segment, (lo, hi), s_keep, plane, face, tol, (margin, frame, out), slot)
 
 
 @njit(cache=True)
@@ -251,7 +251,6 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, fra
     depth = radius_a - distance
     p = axpy(origin, s, direction)
     normal_local = scaled(1.0 / distance, axpy(p, -1.0, q))
-    slope = dot(normal_local, direction)
     face_count = face_offset.shape[0]
     if not at_vertex:
         a = vertices[edge_vertex[edge, 0]]
@@ -270,9 +269,7 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, fra
             if hi - lo > tol and lo - tol <= s <= hi + tol:
                 # (2 (F + edge)) mod 256 is even: adding the end (0, 1) commutes with the mod
                 feature = (2 * (face_count + edge)) & 255
-                return write_patch_ends(
-                    segment, lo, hi, s, depth, slope, normal_local, margin, feature, frame, out, slot
-                )
+                return write_patch_ends(segment, (lo, hi), s, depth, normal_local, feature, (margin, frame, out), slot)
     # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
     face = 0
@@ -285,4 +282,4 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, fra
     lo, hi = segment_over_face(origin, direction, half_length_a, hull, face, tol)
     closest = (midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth)
     plane = (face_normal[face], face_offset[face])
-    return dominant_face_contacts(segment, s, lo, hi, closest, plane, face, margin, tol, frame, out, slot)
+    return dominant_face_contacts(segment, s, (lo, hi), closest, plane, face, tol, (margin, frame, out), slot)

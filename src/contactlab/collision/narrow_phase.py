@@ -138,35 +138,37 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
             written = 0
             if has_sphere_sphere:
                 if round_a and round_b:
-                    written = sphere_sphere(center_a, params_a[0], center_b, params_b[0], margin, out, count)
+                    written = sphere_sphere((center_a, params_a[0]), (center_b, params_b[0]), margin, out, count)
             if has_sphere_capsule:
                 if round_a and kind_b == CAPSULE:
                     written = sphere_capsule(
-                        center_a, params_a[0], frame_b, params_b[0], params_b[1], margin, out, count
+                        (center_a, params_a[0]), (frame_b, params_b[0], params_b[1]), margin, out, count
                     )
             if has_sphere_box:
                 if round_a and kind_b == BOX:
-                    written = sphere_box(center_a, params_a[0], frame_b, params_b[:3], margin, out, count)
+                    written = sphere_box((center_a, params_a[0]), (frame_b, params_b[:3]), margin, out, count)
             if has_sphere_plane:
                 if round_a and kind_b == PLANE:
-                    written = sphere_plane(center_a, params_a[0], params_b, margin, out, count)
+                    written = sphere_plane((center_a, params_a[0]), params_b, margin, out, count)
             if has_capsule_capsule:
                 if kind_a == CAPSULE and kind_b == CAPSULE:
                     written = capsule_capsule(
-                        frame_a, params_a[0], params_a[1], frame_b, params_b[0], params_b[1], margin, out, count
+                        (frame_a, params_a[0], params_a[1]), (frame_b, params_b[0], params_b[1]), margin, out, count
                     )
             if has_capsule_box:
                 if kind_a == CAPSULE and kind_b == BOX:
-                    written = capsule_box(frame_a, params_a[0], params_a[1], frame_b, params_b[:3], margin, out, count)
+                    written = capsule_box(
+                        (frame_a, params_a[0], params_a[1]), (frame_b, params_b[:3]), margin, out, count
+                    )
             if has_capsule_plane:
                 if kind_a == CAPSULE and kind_b == PLANE:
-                    written = capsule_plane(frame_a, params_a[0], params_a[1], params_b, margin, out, count)
+                    written = capsule_plane((frame_a, params_a[0], params_a[1]), params_b, margin, out, count)
             if has_box_box:
                 if kind_a == BOX and kind_b == BOX:
                     written = box_box(frame_a, params_a[:3], frame_b, params_b[:3], margin, out, count)
             if has_box_plane:
                 if kind_a == BOX and kind_b == PLANE:
-                    written = box_plane(frame_a, params_a[:3], params_b, margin, out, count)
+                    written = box_plane((frame_a, params_a[:3]), params_b, margin, out, count)
             if has_sphere_convex:
                 if round_a and kind_b == CONVEX:
                     hb = stored_hull(hull_store, params_b[0])

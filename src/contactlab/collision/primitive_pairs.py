@@ -5,7 +5,10 @@ Conventions as in :mod:`contactlab.collision.narrow_phase`, which dispatches to 
 is the first argument, the normal points from B into A, ``depth`` > 0 when overlapping,
 contacts down to ``depth = −margin`` are kept, each written from index ``slot`` on into ``out``
 = (point (N, 3), normal (N, 3), depth (N,), feature (N,) int64)
-(:data:`.contact_output.ContactRows`); each returns how many it wrote.
+(:data:`.contact_output.ContactRows`); each returns how many it wrote. A shape is passed as
+one argument, the tuple of what places and sizes it: a sphere as :data:`Sphere`, a box as
+:data:`Box`, a plane as its (4,) array (n_x, n_y, n_z, offset [m]), unit n, solid side
+n · x < offset.
 """
 
 import numpy as np
@@ -13,14 +16,16 @@ from numba import njit
 
 from .contact_output import ContactRows, Frame, write_contact
 
+Sphere = tuple[np.ndarray, float]  # (centre (3,) [m], radius [m] ≥ 0) of a sphere or a particle
+Box = tuple[Frame, np.ndarray]  # (frame: centre (3,) [m], rotation (3, 3) body → world; half extents (3,) [m])
+
 
 @njit(cache=True)
-def sphere_plane(
-    center: np.ndarray, radius: float, plane: np.ndarray, margin: float, out: ContactRows, slot: int
-) -> int:
+def sphere_plane(sphere: Sphere, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
     """Sphere (or particle of this radius) A against the plane B = (n, offset).
 
     Written in scalars (no temporary arrays): it runs once per sphere and wall every step."""
+    center, radius = sphere
     nx, ny, nz = plane[0], plane[1], plane[2]
     distance = center[0] * nx + center[1] * ny + center[2] * nz - plane[3]
     depth = radius - distance
@@ -34,18 +39,12 @@ def sphere_plane(
 
 
 @njit(cache=True)
-def sphere_sphere(
-    center_a: np.ndarray,
-    radius_a: float,
-    center_b: np.ndarray,
-    radius_b: float,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def sphere_sphere(sphere_a: Sphere, sphere_b: Sphere, margin: float, out: ContactRows, slot: int) -> int:
     """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
 
     Written in scalars (no temporary arrays): a pile makes thousands of these pairs a step."""
+    center_a, radius_a = sphere_a
+    center_b, radius_b = sphere_b
     dx, dy, dz = center_a[0] - center_b[0], center_a[1] - center_b[1], center_a[2] - center_b[2]
     distance = np.sqrt(dx * dx + dy * dy + dz * dz)
     depth = radius_a + radius_b - distance
@@ -73,10 +72,9 @@ def sphere_sphere(
 
 
 @njit(cache=True)
-def box_plane(
-    frame: Frame, half_extents: np.ndarray, plane: np.ndarray, margin: float, out: ContactRows, slot: int
-) -> int:
+def box_plane(box: Box, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
     """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
+    frame, half_extents = box
     center, rotation = frame
     normal = plane[:3]
     count = 0
@@ -94,20 +92,14 @@ def box_plane(
 
 
 @njit(cache=True)
-def sphere_box(
-    center: np.ndarray,
-    radius: float,
-    box_frame: Frame,
-    half_extents: np.ndarray,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-) -> int:
+def sphere_box(sphere: Sphere, box: Box, margin: float, out: ContactRows, slot: int) -> int:
     """Sphere A (or particle) against box B, by the closest point of the box to the centre.
 
     A centre inside the box is pushed out through the nearest face (feature = 1 + face);
     outside, the feature is 0.
     """
+    center, radius = sphere
+    box_frame, half_extents = box
     box_center, box_rotation = box_frame
     local = box_rotation.T @ (center - box_center)
     closest = np.minimum(np.maximum(local, -half_extents), half_extents)

@@ -6,17 +6,15 @@ is built on them.
 
 Conventions as in :mod:`contactlab.collision.capsule`: the segment is ``origin + s · direction``
 (``direction`` a unit (3,), ``|s| ≤ half_length`` [m]), the box centred at the origin with
-``half_extents`` (3,) [m]; contacts are written in world coordinates through the box's
-``frame`` (centre (3,), rotation (3, 3)), from index ``slot`` on into ``out``
-(:data:`.contact_output.ContactRows`).
+``half_extents`` (3,) [m]; contacts are written in world coordinates through the box's frame,
+from index ``slot`` on, as the ``sink`` (:data:`.segment_patch.Sink`) says.
 """
 
 import numpy as np
 from numba import njit
 
-from .contact_output import ContactRows, Frame
 from .geometry import clamp, unit_axis
-from .segment_patch import Segment, face_patch_ends
+from .segment_patch import Segment, Sink, face_patch_ends
 
 
 @njit(cache=True)
@@ -118,26 +116,19 @@ def face_interval(
 
 @njit(cache=True)
 def face_patch(
-    segment: Segment,
-    half_extents: np.ndarray,
-    face_axis: int,
-    face_sign: float,
-    s_keep: float,
-    margin: float,
-    tol: float,
-    frame: Frame,
-    out: ContactRows,
-    slot: int,
+    segment: Segment, half_extents: np.ndarray, face: int, s_keep: float, tol: float, sink: Sink, slot: int
 ) -> int:
     """Contacts of the segment (``segment``, box frame, :data:`.segment_patch.Segment`) against
-    one box face ``x[face_axis] = face_sign · h``: the two ends of the part of the segment over
-    the face (``s_keep``, unless nan, is kept inside that part), each with its own depth; a part
-    shorter than ``tol`` gives 1 contact at its deeper end (:func:`.segment_patch.face_patch_ends`).
-    Features ``2 · face + end``, ``face = 2 · face_axis + (face_sign > 0)``, ``end`` 0 at the
-    low ``s`` end, 1 at the high one (a single point: the side of the capsule centre it is on).
+    box face ``face`` = ``2 · k + (1 if on the box's +k side else 0)`` (k = box axis), the plane
+    ``x[k] = ±h[k]``: the two ends of the part of the segment over the face (``s_keep``, unless
+    nan, is kept inside that part), each with its own depth; a part shorter than ``tol`` gives 1
+    contact at its deeper end (:func:`.segment_patch.face_patch_ends`). Features ``2 · face +
+    end``, ``end`` 0 at the low ``s`` end, 1 at the high one (a single point: the side of the
+    capsule centre it is on). ``sink`` as in :mod:`.segment_patch`.
     """
     origin, direction, half_length, _ = segment
-    lo, hi = face_interval(origin, direction, half_length, half_extents, face_axis, tol)
-    face = 2 * face_axis + (1 if face_sign > 0.0 else 0)
+    face_axis = face // 2
+    face_sign = 1.0 if face & 1 else -1.0
+    part = face_interval(origin, direction, half_length, half_extents, face_axis, tol)
     plane = (unit_axis(face_axis, face_sign), half_extents[face_axis])
-    return face_patch_ends(segment, lo, hi, s_keep, plane, face, margin, tol, frame, out, slot)
+    return face_patch_ends(segment, part, s_keep, plane, face, tol, sink, slot)

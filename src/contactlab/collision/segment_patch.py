@@ -3,14 +3,17 @@ shape's frame: the contacts of the capsule–box (:mod:`.capsule_box`, :mod:`.se
 capsule–hull (:mod:`.capsule_convex`) routines, which find the part of the segment over a face
 or alongside an edge each in their own way and write its ends here.
 
-Two bundles keep the argument lists short:
+Three bundles keep the argument lists short:
 
 * ``segment`` (:data:`Segment`): ``(origin, direction, half_length, radius)``, capsule A in B's
   frame: its segment ``origin + s · direction`` (origin (3,) [m], ``direction`` a unit (3,),
   ``|s| ≤ half_length`` [m]) and its radius [m];
-* ``frame`` (:data:`.contact_output.Frame`): ``(center, rotation)`` of B, centre (3,) [m] and
-  rotation (3, 3) body → world, through which contacts are written in world coordinates from
-  index ``slot`` on into ``out`` (:data:`.contact_output.ContactRows`).
+* ``part`` (:data:`Part`): ``(lo, hi)`` [m], the part ``lo ≤ s ≤ hi`` of that segment over a
+  face or alongside an edge (``lo > hi``: none);
+* ``sink`` (:data:`Sink`): ``(margin, frame, out)``, which contacts are written and where: those
+  with depth ≥ −margin [m], through B's ``frame`` (:data:`.contact_output.Frame`: centre (3,)
+  [m], rotation (3, 3) body → world; None: given in world coordinates already) into ``out``
+  (:data:`.contact_output.ContactRows`), from index ``slot`` on.
 
 A face is its plane ``normal · x = offset`` (:data:`Plane`: unit outward ``normal`` (3,), ``offset`` [m]).
 An edge is ``(center, direction, half_length)`` (:data:`Edge`), in B's frame.
@@ -26,17 +29,19 @@ from .geometry import axpy, clamp, dot, midpoint, segment_closest_parameters
 Segment = tuple[np.ndarray, np.ndarray, float, float]  # (origin, direction, half_length, radius) in B's frame
 Plane = tuple[np.ndarray, float]  # (unit outward normal (3,), offset [m]) of a face of B, in B's frame
 Edge = tuple[np.ndarray, np.ndarray, float]  # (centre (3,) [m], unit direction (3,), half length [m]) of an edge of B
+Part = tuple[float, float]  # (lo, hi) [m]: the part lo ≤ s ≤ hi of the segment
+Sink = tuple[float, Frame | None, ContactRows]  # (margin [m], B's frame or None, out): contacts kept and where
+Closest = tuple[np.ndarray, np.ndarray, float]  # (point (3,) [m], unit normal (3,), depth [m]), B's frame
 
 
 @njit(cache=True)
-def plane_contact(
-    segment: Segment, s: float, plane: Plane, feature: int, margin: float, frame: Frame, out: ContactRows, slot: int
-) -> int:
+def plane_contact(segment: Segment, s: float, plane: Plane, feature: int, sink: Sink, slot: int) -> int:
     """One contact of the segment point ``s`` [m] against the face ``plane`` = (normal, offset):
     normal the face's, depth ``radius − height above the plane`` [m] (exact over the face: the
     distance to a plane is linear along the segment), the point midway between the capsule's
     surface and the plane. Returns 1 if written (depth ≥ −margin), else 0."""
     origin, direction, _, radius = segment
+    margin, frame, out = sink
     normal, offset = plane
     x = axpy(origin, s, direction)
     height = dot(normal, x) - offset
@@ -49,25 +54,16 @@ def plane_contact(
 
 @njit(cache=True)
 def face_patch_ends(
-    segment: Segment,
-    lo: float,
-    hi: float,
-    s_keep: float,
-    plane: Plane,
-    face: int,
-    margin: float,
-    tol: float,
-    frame: Frame,
-    out: ContactRows,
-    slot: int,
+    segment: Segment, part: Part, s_keep: float, plane: Plane, face: int, tol: float, sink: Sink, slot: int
 ) -> int:
-    """The contacts of a *face patch*: the two ends of the part ``[lo, hi]`` [m] of the segment
-    over face number ``face`` (its ``plane``), each with its own depth
+    """The contacts of a *face patch*: the two ends of the ``part`` ``(lo, hi)`` [m] of the
+    segment over face number ``face`` (its ``plane``), each with its own depth
     (:func:`plane_contact`); ``s_keep`` [m], unless nan, is kept inside the part; a part shorter
     than ``tol`` [m] (or none, ``lo > hi``: grazing a side of the face within round-off) gives 1
     contact at its deeper end. Features ``(2 · face + end) mod 256``, ``end`` 0 at the low ``s``
     end, 1 at the high one (a single point: the side of the capsule centre it is on). Returns
     how many it wrote from ``slot`` on."""
+    lo, hi = part
     direction, half_length = segment[1], segment[2]
     if s_keep == s_keep:  # not nan
         lo = min(lo, s_keep)
@@ -80,38 +76,29 @@ def face_patch_ends(
         for end in range(2):
             s_end = lo if end == 0 else hi
             feature = (2 * face + end) & 255
-            count += plane_contact(segment, s_end, plane, feature, margin, frame, out, slot + count)
+            count += plane_contact(segment, s_end, plane, feature, sink, slot + count)
         return count
     # one point: the deeper end
     if dot(plane[0], direction) * (hi - lo) < 0.0:
         lo = hi
     end = 1 if lo > 0.0 else 0
-    return plane_contact(segment, lo, plane, (2 * face + end) & 255, margin, frame, out, slot)
+    return plane_contact(segment, lo, plane, (2 * face + end) & 255, sink, slot)
 
 
 @njit(cache=True)
 def dominant_face_contacts(
-    segment: Segment,
-    s: float,
-    lo: float,
-    hi: float,
-    closest: tuple[np.ndarray, np.ndarray, float],
-    plane: Plane,
-    face: int,
-    margin: float,
-    tol: float,
-    frame: Frame,
-    out: ContactRows,
-    slot: int,
+    segment: Segment, s: float, part: Part, closest: Closest, plane: Plane, face: int, tol: float, sink: Sink, slot: int
 ) -> int:
     """The closest-point contact of a segment crossing an edge at an angle or passing a corner
-    (``closest`` = (point (3,) [m], normal (3,), depth [m]) in B's frame, at the segment's
-    closest parameter ``s`` [m]), standing for the end on its side of the patch ``[lo, hi]`` [m]
-    of the *dominant face* (number ``face``, its ``plane``), and that patch's other end
+    (``closest``, :data:`Closest`, in B's frame, at the segment's closest parameter ``s`` [m]),
+    standing for the end on its side of the ``part`` ``(lo, hi)`` [m] of the segment over the
+    *dominant face* (number ``face``, its ``plane``), and that part's other end
     (:func:`plane_contact`) when it is longer than ``tol`` and apart from ``s``. Features as
     :func:`face_patch_ends` gives them, so contacts keep their numbers while a capsule slides
     over a face and tips over its edge. Returns how many it wrote from ``slot`` on."""
     point_local, normal_local, depth = closest
+    lo, hi = part
+    _, frame, out = sink
     if lo <= hi:
         end = 1 if s > 0.5 * (lo + hi) else 0
     else:
@@ -122,32 +109,25 @@ def dominant_face_contacts(
         other = lo if end == 1 else hi
         if abs(other - s) > tol:
             feature = (2 * face + 1 - end) & 255
-            count += plane_contact(segment, other, plane, feature, margin, frame, out, slot + count)
+            count += plane_contact(segment, other, plane, feature, sink, slot + count)
     return count
 
 
 @njit(cache=True)
 def write_patch_ends(
-    segment: Segment,
-    lo: float,
-    hi: float,
-    s: float,
-    depth: float,
-    slope: float,
-    normal_local: np.ndarray,
-    margin: float,
-    feature: int,
-    frame: Frame | None,
-    out: ContactRows,
-    slot: int,
+    segment: Segment, part: Part, s: float, depth: float, normal_local: np.ndarray, feature: int, sink: Sink, slot: int
 ) -> int:
-    """The two ends s = lo, hi [m] of the part of capsule A's segment that lies alongside an edge
-    of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end − s)``
-    [m] from the depth at the closest point s, ends shallower than −margin left out; features
-    ``feature`` and ``feature + 1``. Returns how many it wrote from ``slot`` on. ``frame`` None:
-    segment and normal are in world coordinates, and so written (the parallel patch of
+    """The two ends s = lo, hi [m] of the ``part`` of capsule A's segment that lies alongside an
+    edge of B, as contacts with normal ``normal_local`` (3,): depth ``depth − slope · (s_end − s)``
+    [m] from the depth at the closest point s, ``slope = normal_local · direction`` (the depth
+    measured along that normal), ends shallower than −margin left out; features ``feature`` and
+    ``feature + 1``. Returns how many it wrote from ``slot`` on. A sink's frame None: segment and
+    normal are in world coordinates, and so written (the parallel patch of
     :func:`.capsule.capsule_capsule`)."""
     origin, direction, _, radius_a = segment
+    lo, hi = part
+    margin, frame, out = sink
+    slope = dot(normal_local, direction)
     count = 0
     for end in range(2):
         s_end = lo if end == 0 else hi
