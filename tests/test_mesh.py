@@ -51,7 +51,7 @@ def buffers(size=64):
 
 def sphere_contacts(mesh, center, radius, margin=0.0, max_contacts=8):
     P, N, D, F = buffers()
-    k = sphere_mesh(np.asarray(center, float), radius, mesh.geometry, margin, (P, N, D, F), 0, max_contacts)
+    k = sphere_mesh((np.asarray(center, float), radius), mesh.geometry, margin, (P, N, D, F), 0, max_contacts)
     return P[:k], N[:k], D[:k], F[:k]
 
 
@@ -254,7 +254,7 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
         c, s = np.cos(yaw), np.sin(yaw)
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         for sink in (0.0, 0.002):
-            k = box_mesh((np.array([0.1, -0.05, 0.2 - sink]), R), half, mesh.geometry, 0.01, (P, N, D, F), 0, 8)
+            k = box_mesh(((np.array([0.1, -0.05, 0.2 - sink]), R), half), mesh.geometry, 0.01, (P, N, D, F), 0, 8)
             assert k == 4, (yaw, sink, F[:k])
             np.testing.assert_allclose(N[:k], np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
             np.testing.assert_allclose(D[:k], sink, atol=1e-12)
@@ -263,14 +263,14 @@ def test_box_resting_on_a_mesh_floor_gets_its_four_corners():
     # a finely meshed floor: mesh vertices under the box add contacts, reduced to at most 8
     V, T = grid(11)
     fine = TriangleMesh(V, T)
-    k = box_mesh((np.array([0.05, 0.03, 0.199]), np.eye(3)), half, fine.geometry, 0.01, (P, N, D, F), 0, 8)
+    k = box_mesh(((np.array([0.05, 0.03, 0.199]), np.eye(3)), half), fine.geometry, 0.01, (P, N, D, F), 0, 8)
     assert 4 <= k <= 8
     np.testing.assert_allclose(N[:k], np.tile([0.0, 0.0, 1.0], (k, 1)), atol=1e-12)
     np.testing.assert_allclose(D[:k], 0.001, atol=1e-12)
     corners_xy = {(round(x, 9), round(y, 9)) for x in (-0.25, 0.35) for y in (-0.27, 0.33)}
     assert corners_xy <= {(round(x, 9), round(y, 9)) for x, y in P[:k, :2]}
     # a box hovering beyond the margin: nothing
-    assert box_mesh((np.array([0.0, 0.0, 0.25]), np.eye(3)), half, mesh.geometry, 0.01, (P, N, D, F), 0, 8) == 0
+    assert box_mesh(((np.array([0.0, 0.0, 0.25]), np.eye(3)), half), mesh.geometry, 0.01, (P, N, D, F), 0, 8) == 0
 
 
 def test_box_on_a_mesh_peak_gets_vertex_contact():
@@ -280,8 +280,7 @@ def test_box_on_a_mesh_peak_gets_vertex_contact():
     mesh = TriangleMesh(V, T)
     P, N, D, F = buffers()
     k = box_mesh(
-        (np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3)),
-        np.array([0.3, 0.3, 0.2]),
+        ((np.array([0.0, 0.0, 0.5 + 0.2 - 0.01]), np.eye(3)), np.array([0.3, 0.3, 0.2])),
         mesh.geometry,
         0.0,
         (P, N, D, F),

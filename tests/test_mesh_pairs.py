@@ -30,9 +30,7 @@ def capsule_contacts(mesh, center, rotation, radius, half_length, margin=0.01, m
     P, N = np.zeros((max_contacts, 3)), np.zeros((max_contacts, 3))
     D, F = np.zeros(max_contacts), np.zeros(max_contacts, dtype=np.int64)
     k = capsule_mesh(
-        (np.asarray(center, float), np.ascontiguousarray(rotation, float)),
-        float(radius),
-        float(half_length),
+        ((np.asarray(center, float), np.ascontiguousarray(rotation, float)), float(radius), float(half_length)),
         mesh.geometry,
         float(margin),
         (P, N, D, F),

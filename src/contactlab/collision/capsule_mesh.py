@@ -46,7 +46,8 @@ import numpy as np
 from numba import njit
 
 from ..meshes import mesh_triangles_near
-from .contact_output import ContactRows, Frame, contact_rows
+from .capsule import Capsule
+from .contact_output import ContactRows, contact_rows
 from .mesh_features import (
     EDGE2,
     FACE,
@@ -68,27 +69,19 @@ END_FEATURE = 7  # capsule end contacts: 16 t + 7 (−z end), 16 t + 8 (+z end)
 COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this are coplanar
 
 
-# the parameter list ends as box_mesh's does (polytope_mesh): the mesh routines' calling convention, kept
-# as it is (mesh_contacts and the tests call these public routines positionally); a deliberate pair
 @njit(cache=True)
 def capsule_mesh(
-    frame: Frame,
-    radius: float,
-    half_length: float,
-    mesh: MeshGeometry,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-    max_contacts: int,
+    capsule: Capsule, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
 ) -> int:
-    """Capsule A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world), the segment along its third
-    column, ``radius``, ``half_length`` [m]) against the static mesh B (module docstring).
+    """Capsule A (a :data:`.capsule.Capsule`: frame = (centre (3,) [m], rotation (3, 3) body →
+    world), the segment along its third column, radius, half length [m]) against the static
+    mesh B (module docstring).
 
     Writes at most ``max_contacts`` contacts from ``slot`` on and returns how many;
     ``feature = 16 · triangle + local`` (local: region 0–6 of the closest contact, 7 / 8 the
     −z / +z end over the face).
     """
-    center, rotation = frame
+    (center, rotation), radius, half_length = capsule
     tol = mesh.tolerance
     reach = radius + margin
     deep = 0.0 if mesh.two_sided else mesh.max_depth

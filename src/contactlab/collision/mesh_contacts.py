@@ -67,13 +67,14 @@ def shapes_against_mesh(
         kind = kinds[s]
         written = 0
         if kind == SPHERE or kind == POINT:
-            written = sphere_mesh(centers[s], params[s, 0], mesh, margins[s], rows, count, max_per_shape)
+            written = sphere_mesh((centers[s], params[s, 0]), mesh, margins[s], rows, count, max_per_shape)
         elif kind == BOX:
-            written = box_mesh((centers[s], rotations_[s]), params[s, :3], mesh, margins[s], rows, count, max_per_shape)
-        elif kind == CAPSULE:
-            written = capsule_mesh(
-                (centers[s], rotations_[s]), params[s, 0], params[s, 1], mesh, margins[s], rows, count, max_per_shape
+            written = box_mesh(
+                ((centers[s], rotations_[s]), params[s, :3]), mesh, margins[s], rows, count, max_per_shape
             )
+        elif kind == CAPSULE:
+            capsule = ((centers[s], rotations_[s]), params[s, 0], params[s, 1])
+            written = capsule_mesh(capsule, mesh, margins[s], rows, count, max_per_shape)
         elif kind == CONVEX and hull_store is not None:
             hull = stored_hull(hull_store, params[s, 0])
             written = convex_mesh((centers[s], rotations_[s]), hull, mesh, margins[s], rows, count, max_per_shape)

@@ -39,6 +39,7 @@ from ..meshes import mesh_triangles_near
 from .contact_output import ContactRows, Frame, contact_rows
 from .convex import HullArrays
 from .mesh_features import FEATURES_PER_TRIANGLE, keep_spread, write_kept
+from .primitive_pairs import Box
 from .sphere_mesh import sphere_mesh
 
 if TYPE_CHECKING:
@@ -98,7 +99,7 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
     corner_rows = contact_rows(CORNER_CONTACTS)
     corner_point, corner_normal, corner_depth, corner_feature = corner_rows
     for v in range(corners.shape[0]):
-        found = sphere_mesh(corners[v], 0.0, mesh, margin, corner_rows, count * 0, corner_limit)
+        found = sphere_mesh((corners[v], 0.0), mesh, margin, corner_rows, count * 0, corner_limit)
         for k in range(found):
             for i in range(3):
                 point[count, i] = corner_point[k, i]
@@ -110,27 +111,17 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
     return count
 
 
-# box_mesh's and capsule_mesh's parameter lists end alike (mesh, margin, out, slot, max_contacts, one a
-# line): the calling convention of public routines that mesh_contacts and the tests call positionally,
-# kept as it is (grouping those arguments would change every call); a deliberate pair of `duplicates`
 @njit(cache=True)
-def box_mesh(
-    frame: Frame,
-    half_extents: np.ndarray,
-    mesh: MeshGeometry,
-    margin: float,
-    out: ContactRows,
-    slot: int,
-    max_contacts: int,
-) -> int:
-    """Box A (``frame`` = (centre (3,), rotation (3,3) body → world), half extents (3,)) against the static mesh B.
+def box_mesh(box: Box, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int) -> int:
+    """Box A (a :data:`.primitive_pairs.Box`: frame = (centre (3,) [m], rotation (3, 3) body →
+    world), half extents (3,) [m]) against the static mesh B.
 
     Each corner as a point (a sphere of radius 0: inside/outside and local minima as for
     spheres; at most ``CORNER_CONTACTS`` per corner, the deepest), plus mesh vertices inside
     the box (module docstring). Writes at most ``max_contacts`` contacts from ``slot`` on and
     returns how many.
     """
-    center, rotation = frame
+    (center, rotation), half_extents = box
     # mesh triangles near the box (grown by the margin): their vertices may lie inside it
     lower = np.empty(3)
     upper = np.empty(3)

@@ -67,6 +67,7 @@ from .mesh_features import (
     signed_normal,
     write_kept,
 )
+from .primitive_pairs import Sphere
 
 if TYPE_CHECKING:
     from ..meshes import MeshGeometry
@@ -74,15 +75,17 @@ if TYPE_CHECKING:
 
 @njit(cache=True)
 def sphere_mesh(
-    center: np.ndarray, radius: float, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
+    sphere: Sphere, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
 ) -> int:
-    """Sphere (or particle) A of ``radius`` [m] at ``center`` (3,) against the static mesh B.
+    """Sphere (or particle) A (a :data:`.primitive_pairs.Sphere`: centre (3,) [m], radius [m] ≥ 0)
+    against the static mesh B.
 
     Writes at most ``max_contacts`` contacts (the deepest) from ``slot`` on and returns how
     many; ``feature = 16 · triangle + region``. Rules (module docstring): a centre inside a
     one-sided mesh gets one contact, through the nearest feature; a centre outside gets one
     per local minimum of the distance within ``radius + margin``.
     """
+    center, radius = sphere
     out_point, out_normal, out_depth, out_feature = out
     reach = radius + margin
     tol = mesh.tolerance
