@@ -75,13 +75,14 @@ CAPSULE_CONVEX_CROSS_FEATURE = 255
 
 
 @njit(cache=True)
-def _face_patch(segment, hull, face, s_keep, margin, tol, frame, out, slot):
+def _face_patch(segment, hull, face, s_keep, tol, sink, slot):
     """The face patch of the segment over hull face ``face`` (:func:`.segment_patch.face_patch_ends`;
-    ``s_keep``, unless nan, kept inside it). Features ``(2 · face + end) mod 256``."""
+    ``s_keep``, unless nan, kept inside it; ``sink`` as in :mod:`.segment_patch`). Features
+    ``(2 · face + end) mod 256``."""
     origin, direction, half_length, _ = segment
-    lo, hi = segment_over_face(origin, direction, half_length, hull, face, tol)
+    part = segment_over_face(origin, direction, half_length, hull, face, tol)
     plane = (hull[1][face], hull[2][face])
-    return face_patch_ends(segment, (lo, hi), s_keep, plane, face, tol, (margin, frame, out), slot)
+    return face_patch_ends(segment, part, s_keep, plane, face, tol, sink, slot)
 
 
 @njit(cache=True)
@@ -109,6 +110,7 @@ def capsule_convex(
     direction = unrotate(rotation_b, column(rotation_a, 2))
     segment = (origin, direction, half_length_a, radius_a)
     frame = frame_b
+    sink = (margin, frame, out)  # contacts kept and written through the hull's frame
     face_count = face_offset.shape[0]
     extent = 0.0
     for v in range(vertices.shape[0]):
@@ -212,10 +214,8 @@ def capsule_convex(
         if distance > tol:
             if face_id >= 0 and face_distance <= edge_distance + tol:
                 # the closest point lies inside a face: a face patch
-                return _face_patch(segment, hull, face_id, face_s, margin, tol, frame, out, slot)
-            return _apart_edge(
-                segment, edge_s, edge_q, edge_distance, edge_id, edge_at_end, hull, margin, tol, frame, out, slot
-            )
+                return _face_patch(segment, hull, face_id, face_s, tol, sink, slot)
+            return _apart_edge(segment, edge_s, edge_q, edge_distance, edge_id, edge_at_end, hull, tol, sink, slot)
 
     # touching or overlapping: the separating axis with the least overlap (faces win near ties)
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
@@ -228,7 +228,7 @@ def capsule_convex(
             lo, hi = segment_over_face(origin, direction, half_length_a, hull, best_face, tol)
             if lo > hi or -slope * (s_deep - clamp(s_deep, lo, hi)) > tol:
                 s_keep = s_deep
-        return _face_patch(segment, hull, best_face, s_keep, margin, tol, frame, out, slot)
+        return _face_patch(segment, hull, best_face, s_keep, tol, sink, slot)
     depth = radius_a + best_edge_overlap
     if depth < -margin:
         return 0
@@ -243,9 +243,10 @@ def capsule_convex(
 
 
 @njit(cache=True)
-def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, frame, out, slot):
+def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, tol, sink, slot):
     """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
-    (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter."""
+    (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter; ``sink`` as in
+    :mod:`.segment_patch`."""
     origin, direction, half_length_a, radius_a = segment
     vertices, face_normal, face_offset, _, _, edge_vertex, _ = hull
     depth = radius_a - distance
@@ -269,7 +270,7 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, fra
             if hi - lo > tol and lo - tol <= s <= hi + tol:
                 # (2 (F + edge)) mod 256 is even: adding the end (0, 1) commutes with the mod
                 feature = (2 * (face_count + edge)) & 255
-                return write_patch_ends(segment, (lo, hi), s, depth, normal_local, feature, (margin, frame, out), slot)
+                return write_patch_ends(segment, (lo, hi), s, depth, normal_local, feature, sink, slot)
     # an edge crossed at an angle, or a vertex: the closest point stands for the end of the
     # dominant face's patch on its side; the other end of that patch is kept too
     face = 0
@@ -279,7 +280,7 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, margin, tol, fra
         if height > highest:
             highest = height
             face = f
-    lo, hi = segment_over_face(origin, direction, half_length_a, hull, face, tol)
+    part = segment_over_face(origin, direction, half_length_a, hull, face, tol)
     closest = (midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth)
     plane = (face_normal[face], face_offset[face])
-    return dominant_face_contacts(segment, s, (lo, hi), closest, plane, face, tol, (margin, frame, out), slot)
+    return dominant_face_contacts(segment, s, part, closest, plane, face, tol, sink, slot)
