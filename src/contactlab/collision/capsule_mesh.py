@@ -138,7 +138,7 @@ def capsule_mesh(
         count += 1
     keep = np.ones(count, dtype=np.bool_)
     other_distance = np.empty(n)
-    other_region = np.zeros(n, dtype=np.int64)
+    other_region = np.full(n, FACE, dtype=np.int64)
     rows = contact_rows(count)
     point, normal, depth, feature = rows
     found = 0
@@ -148,16 +148,18 @@ def capsule_mesh(
         for i in range(3):
             x[i] = center[i] + s * axis[i]
         q = rec_q[r]
-        # the sphere at x: the distances of all candidates from x
         nt = mesh.triangle_normals[t]
-        for c in range(n):
-            other_distance[c] = distance_to_triangle(mesh, candidates[c], x)
-            other_region[c] = FACE
         interior = abs(s - half_length) > tol and abs(s + half_length) > tol
-        # (1) not a local minimum
+        # (1) not a local minimum. Only a candidate whose box reaches q (grown by twice the
+        # tolerance, far beyond rounding) can contain q: the others are passed over before the
+        # distance from x and the closest point to q are computed, which made this pass
+        # quadratic in the candidates (a capsule lying in a fine mesh meets hundreds)
         for c in range(n):
             j = candidates[c]
-            if j == t or other_distance[c] == np.inf:
+            if j == t or not _box_reaches(mesh.triangle_lower[j], mesh.triangle_upper[j], q, 2.0 * tol):
+                continue
+            other_distance[c] = distance_to_triangle(mesh, j, x)
+            if other_distance[c] == np.inf:
                 continue
             other = mesh.triangles[j]
             px, py, pz, _ = closest_point_on_triangle(
@@ -194,7 +196,9 @@ def capsule_mesh(
             continue
         # (3) sign, normal, depth
         signed, nx, ny, nz = signed_normal(mesh, t, rec_region[r], x, q[0], q[1], q[2], rec_distance[r])
-        if signed < 0.0:
+        if signed < 0.0:  # the sphere at x: the distances of all candidates from x
+            for c in range(n):
+                other_distance[c] = distance_to_triangle(mesh, candidates[c], x)
             nearest = nearest_feature(candidates, other_distance, other_region)
             if nearest < 0 or candidates[nearest] != t or other_distance[nearest] < rec_distance[r] - tol:
                 keep[r] = False
@@ -214,3 +218,13 @@ def capsule_mesh(
         feature[found] = FEATURES_PER_TRIANGLE * t + rec_local[r]
         found += 1
     return write_kept(keep_spread(point[:found], depth[:found], max_contacts, tol), rows, out, slot)
+
+
+@njit(cache=True, inline="always")
+def _box_reaches(lower: np.ndarray, upper: np.ndarray, q: np.ndarray, grow: float) -> bool:
+    """Whether the point q (3,) [m] lies in the box lower–upper (3,), (3,) grown by ``grow`` [m]."""
+    return (
+        lower[0] - grow <= q[0] <= upper[0] + grow
+        and lower[1] - grow <= q[1] <= upper[1] + grow
+        and lower[2] - grow <= q[2] <= upper[2] + grow
+    )
