@@ -282,6 +282,46 @@ def test_warm_starting_carries_impulses_by_contact_id_and_steadies_a_pyramid():
     assert moved_cold.max() > 10 * moved.max()  # what warm starting buys
 
 
+def _two_box_stack(top_mass, bottom_mass=1.0):
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5, restitution=0.0)
+    b.add_body("box", half_extents=(0.05,) * 3, mass=bottom_mass, position=(0, 0, 0.05), material="m")
+    b.add_body("box", half_extents=(0.05,) * 3, mass=top_mass, position=(0, 0, 0.15), material="m")
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    return b.finalize()
+
+
+def test_a_new_contact_starts_from_the_weight_it_bears():
+    """Two boxes stacked, touching, no impulse carried: the warm start of each of the four corners
+    between them is a quarter of the top box's weight over the step, m_top g h / 4, and of each
+    corner on the floor a quarter of both, (m_top + m_bottom) g h / 4, along the normal; times
+    warm_start; nothing at all at warm_start 0."""
+    from contactlab.methods.velocity_level import first_impulses
+
+    model, h = _two_box_stack(3.0, 1.0), 1 / 240
+    state = model.state()
+    contacts = collide(model, state)
+    between = (contacts.body_a >= 0) & (contacts.body_b >= 0)
+    assert between.sum() == 4 and (~between).sum() == 4
+    for fraction in (1.0, 0.5):
+        warm = first_impulses(model, state, contacts, "impulse_", fraction, h)
+        np.testing.assert_allclose(warm[between, 0], fraction * 3.0 * G * h / 4, rtol=1e-12)
+        np.testing.assert_allclose(warm[~between, 0], fraction * 4.0 * G * h / 4, rtol=1e-12)
+        assert np.all(warm[:, 1:] == 0.0)  # no friction guessed
+    assert np.all(first_impulses(model, state, contacts, "impulse_", 0.0, h) == 0.0)
+
+
+@pytest.mark.parametrize("method", ["impulse", "constraints"])
+def test_a_box_a_thousand_times_heavier_stands_on_a_light_one(method):
+    """1:1000 at the defaults: the light box carries the heavy one for 5 s, the top box within
+    1 mm of where it started, nothing deeper than 1 mm. Started from zero impulses, the sweeps
+    built the heavy box's load path too slowly and it crushed the light one out sideways."""
+    run = simulate(_two_box_stack(1000.0), method, 1 / 240, 5.0)
+    moved = np.linalg.norm(run.arrays["body_position"][-1] - run.arrays["body_position"][0], axis=1)
+    assert moved.max() < 1e-3
+    assert run.arrays["max_penetration"].max() < 1e-3
+
+
 def test_capsules_come_to_rest_lying_flat_stacked_and_on_a_box():
     b = ModelBuilder()
     b.add_material("m", friction=0.5)

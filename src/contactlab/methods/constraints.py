@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..contacts import jacobian, values_by_id
+from ..contacts import jacobian
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
 from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_velocities
 from ..errors import InputError
@@ -55,6 +55,7 @@ from .jacobian_rows import row_products, rows_of
 from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import (
     detect,
+    first_impulses,
     normal_targets,
     positions_split_at_impact,
     predict,
@@ -93,7 +94,8 @@ class Options(KeptManifoldOptions):
     omega: float = 1.0
     """over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)"""
     warm_start: float = 1.0
-    """fraction of last step's λ to start from (by contact id; 0 = cold)"""
+    """fraction of last step's λ to start from (by contact id), and of a new contact's weight over
+    the step (``velocity_level.guess_new_impulses``); 0 = cold"""
     restitution_threshold: float = -1.0
     """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
     stabilization: float = 0.2
@@ -362,9 +364,7 @@ def step(
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     rows = rows_of(model, contacts, state.body_position, state.body_orientation)
     target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)
-    warm, _ = values_by_id(
-        state.carried.get("constraint_ids"), state.carried.get("constraint_values"), contacts.feature_id, 3
-    )
+    warm = first_impulses(model, state, contacts, "constraint_", options.warm_start, h)
     lam, v_new, iterations, residual = solve_constraints(
         model,
         state,
@@ -372,7 +372,7 @@ def step(
         rows,
         v_free,
         target,
-        warm * options.warm_start,
+        warm,
         options,
         inverse if implicit_cloth else None,
     )

@@ -16,7 +16,8 @@ One step, stage by stage as on the slide:
       at λ ≥ 0 and friction clamped to μ λ, until no impulse changes a velocity by more than
       the tolerance — this is projected Gauss-Seidel on velocities, the matrix-free twin of
       the constraints method — swept from the highest contact down along gravity (see
-      ``solve_order``) and warm-started from last step's impulses;
+      ``solve_order``) and warm-started from last step's impulses (a new contact from the
+      weight it bears, ``guess_new_impulses``);
 5. recompute velocities and positions: x = x₀ + h v⁺ — so a body at rest stays put — with the
    time-of-impact correction below; advance time.
 
@@ -34,7 +35,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import free_velocities
 from ..errors import InputError
@@ -45,6 +45,7 @@ from .jacobian_rows import contact_velocity, rows_of
 from .sequential import solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
 from .velocity_level import (
     detect,
+    first_impulses,
     positions_split_at_impact,
     predict,
     relative_gravity,
@@ -78,7 +79,8 @@ class Options(KeptManifoldOptions):
     time_of_impact: bool = True
     """split the step at the impact (see module docs)"""
     warm_start: float = 1.0
-    """fraction of last step's impulses to start from (0 = cold)"""
+    """fraction of last step's impulses to start from, and of a new contact's weight over the step
+    (``velocity_level.guess_new_impulses``); 0 = cold"""
 
     def __post_init__(self):
         super().__post_init__()
@@ -195,7 +197,7 @@ def step(
         tau,
         order,
     )
-    warm = warm_start_impulses(state.carried, contacts.feature_id, options.warm_start)
+    warm = first_impulses(model, state, contacts, "impulse_", options.warm_start, h)
     impulses, sweeps, change = solve_sequential_impulses(
         rows,
         contacts.friction,
@@ -212,12 +214,3 @@ def step(
     carried = dict(state.carried, manifolds=manifolds, impulse_ids=contacts.feature_id, impulse_values=impulses)
     new = State.assemble(state.time + h, positions, solved, carried)
     return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change, impulses=impulses)
-
-
-def warm_start_impulses(carried: dict, feature_id: np.ndarray, fraction: float) -> np.ndarray:
-    """Last step's resting-contact impulses (C, 3) for the contacts that persist, by id, times
-    ``fraction``; 0 for new ones."""
-    if fraction <= 0.0:
-        return np.zeros((len(feature_id), 3))
-    values, _ = values_by_id(carried.get("impulse_ids"), carried.get("impulse_values"), feature_id, 3)
-    return fraction * values

@@ -53,7 +53,13 @@ from .penalty_springs import (
 )
 from .projection import advance, displaced, projection_targets
 from .sequential import contact_order
-from .velocity_level import earliest_impacts, gravity_along_normals, impact_targets, resting_targets
+from .velocity_level import (
+    earliest_impacts,
+    gravity_along_normals,
+    guess_new_impulses,
+    impact_targets,
+    resting_targets,
+)
 
 # ---- impulse and constraints (loop L3) ------------------------------------------------------
 
@@ -212,7 +218,20 @@ def velocity_step(
     u = stacked(free[0], free[1], free[2])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
     target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
-    warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
+    carried_values, found = values_carried(carried[1], carried[2], contacts.feature_id)
+    warm = settings.warm_start * carried_values
+    masses = (model.body_mass, model.particle_mass)
+    guess_new_impulses(
+        warm,
+        found,
+        settings.warm_start,
+        contacts,
+        motion.body_position,
+        motion.particle_position,
+        masses,
+        model.gravity,
+        h,
+    )
     impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
     # 5. recompute positions from the corrected velocities, split at the time of impact
     positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
