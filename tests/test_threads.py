@@ -138,6 +138,30 @@ def test_auto_follows_the_load_and_holds_a_repeated_verdict_longer(fake):
     assert fake.history[-4:] == [2] * 4
 
 
+def test_a_verdict_is_tried_again_once_the_steps_cost_more_than_in_its_trial(fake):
+    """A pile timed while it falls (both counts alike, one thread wins by a hair) lands: its steps
+    cost 20× more, and a new trial starts at the first such step instead of after the hold; then
+    two threads win. Steps within the factor keep the verdict for its hold."""
+    chooser = threads.ThreadChooser("auto", trial_steps=2, hold_steps=50, retry_at=2.0)
+    falling, landed = {1: 0.00036, 2: 0.00037}, {1: 0.0106, 2: 0.0068}
+    drive(chooser, fake, falling, 4)  # trial: one thread wins
+    assert fake.history == [1, 1, 2, 2] and chooser.hold == 50
+    drive(chooser, fake, {1: 0.0005, 2: 0.0005}, 10)  # 1.4×: the verdict holds
+    assert fake.history[4:] == [1] * 10
+    drive(chooser, fake, landed, 1)  # 29× the trial's step: a new trial at once
+    drive(chooser, fake, landed, 4)
+    assert fake.history[15:] == [1, 1, 2, 2]
+    drive(chooser, fake, landed, 5)
+    assert fake.history[-5:] == [2] * 5
+    # chunks of held steps report per step alike (the compiled loop)
+    chooser.before_step(5)
+    chooser.after_steps(5, 5 * 0.0068)
+    assert chooser.steps_at_this_count() > 1  # same cost: still held
+    chooser.before_step(5)
+    chooser.after_steps(5, 5 * 0.03)
+    assert chooser.steps_at_this_count() == 1  # 4.4×: trial
+
+
 def test_a_fixed_count_is_set_before_every_step_and_never_tried_otherwise(fake):
     chooser = threads.ThreadChooser(1)
     drive(chooser, fake, {1: 0.01, 2: 0.001}, 20)

@@ -93,7 +93,13 @@ class ThreadChooser:
     wins): on a busy machine such steps cost whole seconds. A verdict that stays the same
     doubles the hold (up to ``longest_hold``), one that changes sets it back. Where every
     trial step is shorter than ``too_short_to_matter`` [s] (a scene too small for any parallel
-    loop) the hold is at its longest. ``counts`` tallies the steps run at each count.
+    loop) the hold is at its longest. A verdict holds only while the steps cost what they cost
+    in its trial: a held step (or chunk of steps, per step) ``retry_at`` times as long as the
+    winner's median, or that fraction of it, starts a new trial at once — a pile timed in the
+    air, where both counts step alike, is timed again when it lands, instead of keeping a coin
+    toss for the whole hold; the compiled loop reports held steps in chunks of at most
+    ``held_chunk`` (``steps_at_this_count``), so the change is seen within that many steps.
+    ``counts`` tallies the steps run at each count.
     """
 
     def __init__(
@@ -104,6 +110,8 @@ class ThreadChooser:
         longest_hold: int = 3200,
         give_up: float = 1.5,
         too_short_to_matter: float = 2e-4,
+        retry_at: float = 2.0,
+        held_chunk: int = 16,
     ) -> None:
         self.mode = check_threads(threads)
         self.most = available_threads()
@@ -113,6 +121,9 @@ class ThreadChooser:
         self.longest_hold = longest_hold
         self.give_up = give_up
         self.too_short = too_short_to_matter
+        self.retry_at = retry_at
+        self.held_chunk = held_chunk
+        self._step_seconds = 0.0  # the verdict's median step in its trial [s]
         self.counts: dict[int, int] = {}
         self._plan: list[int] = []  # thread counts of the steps to come (a trial), in order
         self._timed: dict[int, list[float]] = {}  # thread count -> step times of the running trial
@@ -147,11 +158,11 @@ class ThreadChooser:
 
     def steps_at_this_count(self) -> int | None:
         """How many steps may run before the next report is due: 1 during a trial, the rest of
-        the hold in "auto" mode, else any number (None)."""
+        the hold in "auto" mode (at most ``held_chunk``), else any number (None)."""
         if self._plan:
             return 1
-        if self._auto:
-            return max(1, self._held)
+        if self._auto:  # in chunks of at most held_chunk: a change of cost is seen within them
+            return max(1, min(self._held, self.held_chunk))
         return None
 
     def after_steps(self, count: int, seconds: float) -> None:
@@ -160,9 +171,7 @@ class ThreadChooser:
             self.after_step(seconds / count)
             return
         if self._auto:
-            self._held -= count
-            if self._held <= 0:
-                self._start_trial()
+            self._hold_for(count, seconds / count)
 
     def after_step(self, seconds: float) -> None:
         """Report the step just made: ``seconds`` [s] of stepping."""
@@ -175,9 +184,15 @@ class ThreadChooser:
             if not self._plan:
                 self._decide()
         elif self._auto:
-            self._held -= 1
-            if self._held <= 0:
-                self._start_trial()
+            self._hold_for(1, seconds)
+
+    def _hold_for(self, count, step_seconds):
+        """``count`` held steps made, ``step_seconds`` [s] each: a new trial once the hold is
+        over, or at once where the steps no longer cost what they cost in the trial."""
+        self._held -= count
+        ratio = step_seconds / self._step_seconds if self._step_seconds > 0.0 else 1.0
+        if self._held <= 0 or not 1.0 / self.retry_at < ratio < self.retry_at:
+            self._start_trial()
 
     def _decide(self):
         many, one = _median(self._timed[self.most]), _median(self._timed[1])
@@ -190,6 +205,7 @@ class ThreadChooser:
             self.hold = self.shortest_hold
         self._verdict = self._current = verdict
         self._held = self.hold
+        self._step_seconds = min(many, one)
 
     def __enter__(self):
         return self
