@@ -1,3 +1,5 @@
+import signal
+
 import numpy as np
 import pytest
 
@@ -105,3 +107,11 @@ def box_column(count=8, size=0.1, friction=0.6):
         )
     b.add_obstacle("plane", normal=(0, 0, 1), material="wood")
     return b.finalize()
+
+
+def interruptible():
+    """A ``preexec_fn`` for a child process a test interrupts with SIGINT: Ctrl-C's default
+    action restored in the child. A shell runs a background job with SIGINT ignored, and a child
+    inherits that: a ``.ci/run`` started with ``&`` would otherwise send a signal the command
+    line rightly ignores (as under nohup), and read exit 0 for 130."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

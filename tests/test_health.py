@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import ball_on_plane
+from conftest import ball_on_plane, interruptible
 
 from contactlab import ModelBuilder, SimulationDiverged, health, simulate
 from contactlab.scene import builtin_scenes, load_scene
@@ -114,6 +114,7 @@ def _interrupted_run(tmp_path, delay, signum, method):
         [sys.executable, "-m", "contactlab", "run", "box_pyramid", "--duration", "2", "--method", method],
         cwd=tmp_path,
         env=env,
+        preexec_fn=interruptible,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

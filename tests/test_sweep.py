@@ -12,6 +12,7 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import interruptible
 
 from contactlab import InputError, closed_form, simulate
 from contactlab.scene import load_scene
@@ -385,10 +386,19 @@ def test_a_local_cluster_takes_one_worker_per_idle_core():
 
 
 def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rerun(tmp_path):
-    write(tmp_path, BALL_STUDY.replace('name = "ball"', 'name = "stopped"'))
+    # 60 s cells (15,000-30,000 steps each), not 1 s: the signal must find cells still to run,
+    # and 1 s cells of a ball finish in milliseconds once compiled (the six left could all end
+    # between the second cell's file and the signal, and the sweep exit 0)
+    write(
+        tmp_path,
+        BALL_STUDY.replace('name = "ball"', 'name = "stopped"').replace(
+            '"simulation.duration" = [1.0]', '"simulation.duration" = [60.0]'
+        ),
+    )
     process = subprocess.Popen(
         [sys.executable, "-m", "contactlab", "sweep", "study.toml", "--workers", "1"],
         cwd=tmp_path,
+        preexec_fn=interruptible,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
