@@ -230,12 +230,13 @@ def build_bvh(
     return node_lower, node_upper, node_left, node_right, node_start, node_count, order
 
 
-# the BVH query's one box test, for its nodes and its triangles. Keep it an axis loop with early returns,
-# inlined: returning one six-term `not (a or b or ...)` expression made the query 3.8 times slower
+# the BVH query's one box test, for its nodes and its triangles (capsule_mesh's ghost test takes it too).
+# Keep it an axis loop with early returns, inlined: returning one six-term `not (a or b or ...)`
+# expression made the query 3.8 times slower
 # (Numba 0.68, boxes about the mesh_bowl scene's bowl), while this form compiles to the machine code of the
 # test written out twice (the same instructions, registers aside) and times the same
 @njit(cache=True, inline="always")
-def _boxes_overlap(lowers: np.ndarray, uppers: np.ndarray, row: int, lower: np.ndarray, upper: np.ndarray) -> bool:
+def boxes_overlap(lowers: np.ndarray, uppers: np.ndarray, row: int, lower: np.ndarray, upper: np.ndarray) -> bool:
     """Whether box ``row`` of ``lowers``, ``uppers`` (N, 3) [m] overlaps [lower, upper] (3,) (closed intervals)."""
     for axis in range(3):
         if lowers[row, axis] > upper[axis] or uppers[row, axis] < lower[axis]:
@@ -260,12 +261,12 @@ def triangles_near(mesh: MeshGeometry, lower: np.ndarray, upper: np.ndarray, out
     while top > 0:
         top -= 1
         node = stack[top]
-        if not _boxes_overlap(mesh.node_lower, mesh.node_upper, node, lower, upper):
+        if not boxes_overlap(mesh.node_lower, mesh.node_upper, node, lower, upper):
             continue
         if mesh.node_count[node] > 0:
             for k in range(mesh.node_start[node], mesh.node_start[node] + mesh.node_count[node]):
                 t = mesh.node_order[k]
-                if not _boxes_overlap(mesh.triangle_lower, mesh.triangle_upper, t, lower, upper):
+                if not boxes_overlap(mesh.triangle_lower, mesh.triangle_upper, t, lower, upper):
                     continue
                 if found < capacity:
                     out[found] = t

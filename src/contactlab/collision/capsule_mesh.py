@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from ..meshes import mesh_triangles_near
+from ..meshes import boxes_overlap, mesh_triangles_near
 from .capsule import Capsule
 from .contact_output import ContactRows, contact_rows
 from .mesh_features import (
@@ -138,6 +138,7 @@ def capsule_mesh(
         count += 1
     keep = np.ones(count, dtype=np.bool_)
     other_distance = np.empty(n)
+    near_lower, near_upper = np.empty(3), np.empty(3)  # the box about a record's q, ± twice the tolerance
     other_region = np.full(n, FACE, dtype=np.int64)
     rows = contact_rows(count)
     point, normal, depth, feature = rows
@@ -148,6 +149,8 @@ def capsule_mesh(
         for i in range(3):
             x[i] = center[i] + s * axis[i]
         q = rec_q[r]
+        for i in range(3):
+            near_lower[i], near_upper[i] = q[i] - 2.0 * tol, q[i] + 2.0 * tol
         nt = mesh.triangle_normals[t]
         interior = abs(s - half_length) > tol and abs(s + half_length) > tol
         # (1) not a local minimum. Only a candidate whose box reaches q (grown by twice the
@@ -156,7 +159,7 @@ def capsule_mesh(
         # quadratic in the candidates (a capsule lying in a fine mesh meets hundreds)
         for c in range(n):
             j = candidates[c]
-            if j == t or not _box_reaches(mesh.triangle_lower[j], mesh.triangle_upper[j], q, 2.0 * tol):
+            if j == t or not boxes_overlap(mesh.triangle_lower, mesh.triangle_upper, j, near_lower, near_upper):
                 continue
             other_distance[c] = distance_to_triangle(mesh, j, x)
             if other_distance[c] == np.inf:
@@ -218,13 +221,3 @@ def capsule_mesh(
         feature[found] = FEATURES_PER_TRIANGLE * t + rec_local[r]
         found += 1
     return write_kept(keep_spread(point[:found], depth[:found], max_contacts, tol), rows, out, slot)
-
-
-@njit(cache=True, inline="always")
-def _box_reaches(lower: np.ndarray, upper: np.ndarray, q: np.ndarray, grow: float) -> bool:
-    """Whether the point q (3,) [m] lies in the box lower–upper (3,), (3,) grown by ``grow`` [m]."""
-    return (
-        lower[0] - grow <= q[0] <= upper[0] + grow
-        and lower[1] - grow <= q[1] <= upper[1] + grow
-        and lower[2] - grow <= q[2] <= upper[2] + grow
-    )
