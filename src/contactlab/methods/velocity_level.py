@@ -111,8 +111,9 @@ def guess_new_impulses(
     unchanged: a guess too large (an impact, a contact about to open) is taken back by the
     accumulated clamping like any warm start."""
     B = body_position.shape[0]
-    if fraction <= 0.0 or found.all() or B + particle_position.shape[0] < LOAD_PATH_FROM:
-        return
+    g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
+    if fraction <= 0.0 or g == 0.0 or found.all() or B + particle_position.shape[0] < LOAD_PATH_FROM:
+        return  # weightless, or nothing new to guess: the carried values as they are
     loads = supported_loads(
         entities_of(contacts.body_a, contacts.particles_a, B),
         entities_of(contacts.body_b, contacts.particles_b, B),
@@ -123,9 +124,8 @@ def guess_new_impulses(
         masses[1],
         gravity,
     )
-    g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     for c in range(found.shape[0]):
-        if found[c] or g == 0.0:
+        if found[c]:
             continue
         normal = contacts.normal[c]
         along = (normal[0] * gravity[0] + normal[1] * gravity[1] + normal[2] * gravity[2]) / g
