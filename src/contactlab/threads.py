@@ -111,7 +111,7 @@ class ThreadChooser:
         give_up: float = 1.5,
         too_short_to_matter: float = 2e-4,
         retry_at: float = 2.0,
-        held_chunk: int = 16,
+        held_chunk: int = 64,
     ) -> None:
         self.mode = check_threads(threads)
         self.most = available_threads()
