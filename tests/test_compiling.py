@@ -345,3 +345,61 @@ def test_compiling_in_the_plausibility_check_is_said_and_counted(monkeypatch, ca
     assert capsys.readouterr().err.count(NOTICE) == 1
     assert run.summary["compile_seconds"] >= 0.3
     assert run.summary["wall_seconds"] >= run.summary["compile_seconds"]
+
+
+# A caller in one file, its callee in another: the shape of the stepping loop and its stages.
+CALLEE = "{njit}\n\n\n@njit(cache=True)\ndef value():\n    return {answer}\n"
+CALLER = "{njit}\nfrom .callee import value\n\n\n@njit(cache=True)\ndef total():\n    return value() + 0\n"
+STAMPED = "from contactlab.compiling import njit"
+PLAIN = "from numba import njit"
+STAMP_INIT = "from contactlab.compiling import PackageStampedLocator as L\n\nL.stamp_package(__path__[0])\n"
+
+
+@pytest.mark.parametrize("where", ["beside the sources", "NUMBA_CACHE_DIR"])
+def test_an_edited_callee_in_another_file_makes_the_callers_cache_stale(tmp_path, where):
+    """The CI failure of stop 35, in small: a cached caller whose callee, in another file, changed
+    (a newer contactlab pip-installed over an older one, or another commit checked out). Numba
+    stamps an entry with its own file alone and loads the caller's old machine code, old callee
+    and all (the package "plain", Numba's documented limit); a package stamped as contactlab's
+    kernels are (PackageStampedLocator) compiles the caller afresh."""
+    for package, njit_line in (("stamped", STAMPED), ("plain", PLAIN)):
+        folder = tmp_path / "packages" / package
+        folder.mkdir(parents=True)
+        (folder / "__init__.py").write_text(STAMP_INIT if package == "stamped" else "")
+        (folder / "callee.py").write_text(CALLEE.format(njit=njit_line, answer=1))
+        (folder / "caller.py").write_text(CALLER.format(njit=njit_line))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "packages"), *sys.path])}
+    env.pop("NUMBA_CACHE_DIR", None)
+    if where == "NUMBA_CACHE_DIR":
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")
+    script = "import stamped.caller, plain.caller; print(stamped.caller.total(), plain.caller.total())"
+
+    def totals():
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split()
+
+    assert totals() == ["1", "1"]
+    for package, njit_line in (("stamped", STAMPED), ("plain", PLAIN)):
+        (tmp_path / "packages" / package / "callee.py").write_text(CALLEE.format(njit=njit_line, answer=2))
+    assert totals() == ["2", "1"]  # the stamped caller sees its callee's edit; Numba alone keeps 1
+    assert totals() == ["2", "1"]  # and the fresh entry is the one the next process loads
+
+
+def test_every_kernel_is_stamped_with_the_whole_package():
+    """Every module of contactlab takes njit from contactlab.compiling, and its kernels' cache
+    entries carry the digest of all the package's sources."""
+    from contactlab import compiling
+    from contactlab.methods import velocity_loop
+
+    package = os.path.dirname(compiling.__file__)
+    for folder, _, files in os.walk(package):
+        for name in files:
+            if name.endswith(".py") and name != "compiling.py":
+                text = open(os.path.join(folder, name), encoding="utf-8").read()
+                assert "from numba import njit" not in text, f"{name}: take njit from contactlab.compiling"
+    for kernel in (velocity_loop.run, generate_contacts):
+        locator = kernel._cache._impl.locator
+        assert isinstance(locator, compiling.PackageStampedLocator)
+        assert locator.get_source_stamp() == ("package sources", compiling.sources_digest(package))
+        assert locator.get_cache_path() == kernel._cache._cache_path

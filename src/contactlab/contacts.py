@@ -23,7 +23,8 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
+
+from .compiling import njit
 
 if TYPE_CHECKING:
     from scipy.sparse import csr_matrix

@@ -5,10 +5,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
 from . import rotations
+from .compiling import njit
 from .dynamics.cloth import spring_energy
 
 if TYPE_CHECKING:

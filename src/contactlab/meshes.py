@@ -44,10 +44,10 @@ import os
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
 from . import rotations
+from .compiling import njit
 from .counts import RowCount
 from .errors import InputError, first_line
 

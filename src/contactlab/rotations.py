@@ -7,8 +7,9 @@ Angular velocities are in the world frame [rad/s].
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
+
+from .compiling import njit
 
 
 def normalize(q: np.ndarray) -> np.ndarray:

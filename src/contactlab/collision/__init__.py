@@ -10,9 +10,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from .. import rotations, shapes
+from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs

@@ -65,8 +65,8 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import ContactRows, Frame
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 

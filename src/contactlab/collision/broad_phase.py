@@ -18,9 +18,9 @@ Three algorithms, one answer (``overlapping_pairs`` picks):
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .. import shapes
+from ..compiling import njit
 
 GRID_FROM = 1000  # boxes: from this many on, the hash grid (equal speed at 1000, 7x faster at 10000)
 

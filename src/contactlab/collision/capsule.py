@@ -45,8 +45,8 @@ small temporary arrays.
 """
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import ContactRows, Frame, write_contact
 from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
 from .primitive_pairs import Sphere

@@ -7,8 +7,8 @@ says how capsule–box is exact); the segment–box geometry is
 """
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .capsule import PARALLEL_SIN, Capsule
 from .contact_output import ContactRows, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate

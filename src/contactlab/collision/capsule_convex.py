@@ -60,8 +60,8 @@ Everything is compiled (``@njit(cache=True)``), float64, no fastmath.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .capsule import PARALLEL_SIN
 from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
 from .contact_output import ContactRows, Frame, write_local_contact

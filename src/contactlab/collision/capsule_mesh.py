@@ -43,8 +43,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..meshes import boxes_overlap, mesh_triangles_near
 from .capsule import Capsule
 from .contact_output import ContactRows, contact_rows

@@ -9,8 +9,8 @@ from: one argument for the four arrays keeps the routines' signatures and call s
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .geometry import axpy, rotate
 
 ContactRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (point, normal, depth, feature)

@@ -15,8 +15,8 @@ Compiled (``@njit(cache=True)``), float64, no fastmath; no allocation.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .geometry import row_difference
 
 MAX_POINTS = 4  # points kept of a contact polygon, at most

@@ -50,8 +50,8 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
 from .contact_output import ContactRows, Frame
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four

@@ -12,8 +12,8 @@ float64, without fastmath.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import Frame
 from .convex import HullArrays
 from .geometry import to_local

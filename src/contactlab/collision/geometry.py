@@ -9,7 +9,8 @@ no BLAS); float64, no fastmath. Used by the capsule pairs (:mod:`.capsule`,
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..compiling import njit
 
 LINE_SIN2 = 1e-20  # |a × b|² below this: lines treated as exactly parallel in closest points
 

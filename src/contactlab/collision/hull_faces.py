@@ -9,8 +9,8 @@ face. Hull arrays as in :mod:`.convex` (:data:`.convex.HullArrays`). Compiled
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .convex import HullArrays
 
 

@@ -26,9 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from .. import shapes
+from ..compiling import njit
 from .families import keeps_manifolds
 from .narrow_phase import MAX_PER_PAIR, generate_contacts
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from .. import shapes
+from ..compiling import njit
 from .capsule_mesh import capsule_mesh
 from .contact_output import contact_rows
 from .convex import stored_hull

@@ -20,8 +20,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..meshes import mesh_triangles_near
 from .contact_output import ContactRows, write_contact
 from .geometry import segment_closest_parameters

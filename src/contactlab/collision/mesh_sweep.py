@@ -14,8 +14,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..meshes import mesh_triangles_near
 from .mesh_features import FACE, closest_point_on_triangle
 

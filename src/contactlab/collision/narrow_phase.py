@@ -18,11 +18,12 @@ which of them a scene needs in :mod:`~contactlab.collision.families`.
 """
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.core.errors import TypingError
 from numba.extending import overload
 
 from .. import shapes
+from ..compiling import njit
 from .box_box import box_box
 from .capsule import capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_box import capsule_box

@@ -12,8 +12,8 @@ n · x < offset.
 """
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import ContactRows, Frame, write_contact
 
 Sphere = tuple[np.ndarray, float]  # (centre (3,) [m], radius [m] ≥ 0) of a sphere or a particle

@@ -11,8 +11,8 @@ from index ``slot`` on, as the ``sink`` (:data:`.segment_patch.Sink`) says.
 """
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .geometry import clamp, unit_axis
 from .segment_patch import Segment, Sink, face_patch_ends
 

@@ -21,8 +21,8 @@ Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import ContactRows, Frame, write_local_contact
 from .geometry import axpy, clamp, dot, midpoint, segment_closest_parameters
 

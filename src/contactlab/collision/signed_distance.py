@@ -14,9 +14,9 @@ from collections import namedtuple
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from .. import rotations, shapes
+from ..compiling import njit
 from ..errors import InputError
 from .geometry import to_local
 from .mesh_features import features_near, nearest_feature, signed_normal

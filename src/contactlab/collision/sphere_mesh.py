@@ -53,8 +53,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from .contact_output import ContactRows, contact_rows
 from .mesh_features import (
     EDGE2,

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
+
+from ..compiling import njit
 
 if TYPE_CHECKING:
     import scipy.sparse as sp

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
 from .. import rotations
+from ..compiling import njit
 from .integrators import particle_system
 
 if TYPE_CHECKING:

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from .. import rotations
+from ..compiling import njit
 from .cloth import block_product, jacobian_blocks, spring_forces
 
 if TYPE_CHECKING:

@@ -17,8 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
+from ..compiling import njit
 from ..errors import InputError
 from ._checks import square_csr
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from ..compiling import njit
 
 
 @njit(cache=True)

@@ -53,8 +53,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from ..compiling import njit
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
 from .disk import _disk_solve

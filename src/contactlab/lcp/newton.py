@@ -91,8 +91,8 @@ import math
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from ..compiling import njit
 from .friction import _diagonal_blocks, _error, _nsgs
 
 NONMONOTONE_WEIGHT = 0.9  # η of Zhang & Hager's reference (0: monotone Armijo)

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..dynamics.generalized import stack, unstack
 from ..dynamics.integrators import free_velocities
 from ..errors import InputError

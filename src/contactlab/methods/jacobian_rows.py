@@ -32,7 +32,8 @@ from collections import namedtuple
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
+
+from ..compiling import njit
 
 if TYPE_CHECKING:
     from ..contacts import Contacts

@@ -21,12 +21,12 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from .. import collision, diagnostics, rotations
 from ..collision import assemble_contacts
 from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
+from ..compiling import njit
 from ..contacts import ContactArrays
 from ..dynamics import integrators
 from ..record import SERIES

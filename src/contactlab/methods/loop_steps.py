@@ -19,9 +19,9 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from ..collision import half_thickness_sums
+from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
 from .impulse import resolve_collisions

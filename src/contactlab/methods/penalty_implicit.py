@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
+from ..compiling import njit
 from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import factor_symmetric
 from ..rotations import world_tensors

@@ -18,8 +18,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from ..compiling import njit
 from ..contacts import ContactArrays
 from .jacobian_rows import ContactRows, apply_impulses, contact_velocity, row_products
 

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from ..collision import swept_distances
+from ..compiling import njit
 from ..contacts import values_by_id
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved

@@ -19,8 +19,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from ..compiling import njit
 from ..contacts import argsort_keys
 from .jacobian_rows import ContactRows, apply_impulse, apply_impulses, contact_velocity, rows_in_order
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
 from ..collision import swept_distances
+from ..compiling import njit
 from ..contacts import ContactArrays, values_by_id
 from ..dynamics.integrators import advance_positions
 from ..state import State

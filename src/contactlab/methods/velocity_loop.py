@@ -45,7 +45,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from .. import shapes
 from ..collision import dynamic_pairs_possible
@@ -53,6 +52,7 @@ from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
+from ..compiling import njit
 from ..state import State
 from . import CollisionOptions
 from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, poses, record, store
