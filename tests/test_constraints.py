@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 from conftest import ball_on_plane, cube_on_plane
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from contactlab import ModelBuilder, simulate
 from contactlab.collision import collide
@@ -281,6 +283,33 @@ def test_carried_values_follow_their_contact_ids():
     np.testing.assert_array_equal(values, [[1.2, 0.12], [0, 0], [5.0, 0.5], [0.7, 0.07], [0, 0]])
     empty, none = values_by_id(None, None, np.array([3, 4]), 3)
     assert empty.shape == (2, 3) and not empty.any() and not none.any()
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    ids=st.lists(st.integers(0, 10**12), unique=True, max_size=40),
+    kept=st.lists(st.booleans(), min_size=40, max_size=40),
+    new=st.lists(st.integers(-5, 10**12), max_size=10),
+    shuffle=st.randoms(use_true_random=False),
+    shuffled=st.booleans(),
+)
+def test_carried_values_match_a_lookup_by_id_in_any_order(ids, kept, new, shuffle, shuffled):
+    """Contacts as they come step to step: last step's in order with some gone and some new
+    ones between them (the in-order path), or in any order (the sorted lookup): each value is
+    the one its id had, whichever path found it."""
+    from contactlab.contacts import values_by_id
+
+    previous_ids = np.array(ids, dtype=np.int64)
+    previous = np.arange(3 * len(ids), dtype=float).reshape(-1, 3) + 0.5
+    now = [i for i, keep in zip(ids, kept) if keep]
+    for position, fresh in enumerate(new):
+        now.insert(position * 7 % (len(now) + 1), fresh)
+    if shuffled:
+        shuffle.shuffle(now)
+    values, found = values_by_id(previous_ids, previous, np.array(now, dtype=np.int64), 3)
+    lookup = dict(zip(ids, previous))
+    assert found.tolist() == [i in lookup for i in now]
+    np.testing.assert_array_equal(values, np.reshape([lookup.get(i, np.zeros(3)) for i in now], (-1, 3)))
 
 
 def test_each_body_moves_to_its_earliest_impact_first():

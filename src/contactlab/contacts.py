@@ -135,28 +135,50 @@ def values_by_id(
 def values_carried(
     previous_ids: np.ndarray, previous_values: np.ndarray, feature_id: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``values_by_id``, compiled: one sort of last step's ids, one binary search per contact
-    (it runs every step; in NumPy its masks and gathers cost 0.27 ms for 3 300 contacts).
-    previous_ids (K,) int64 (K may be 0), previous_values (K, width); feature_id (C,) int64."""
-    order = argsort_keys(previous_ids)
-    K = order.shape[0]
-    sorted_ids = np.empty(K, dtype=np.int64)
-    for i in range(K):  # a loop, and the bisection below by hand: less to compile than NumPy's
-        sorted_ids[i] = previous_ids[order[i]]  # gather and searchsorted, the same result
-    values = np.zeros((feature_id.shape[0], previous_values.shape[1]))
-    found = np.zeros(feature_id.shape[0], dtype=np.bool_)
-    for c in range(feature_id.shape[0]):
-        p, high = 0, K  # the first place whose id is ≥ the contact's (searchsorted, side "left")
-        while p < high:
-            middle = (p + high) >> 1
-            if sorted_ids[middle] < feature_id[c]:
-                p = middle + 1
-            else:
-                high = middle
-        if p < K and sorted_ids[p] == feature_id[c]:
+    """``values_by_id``, compiled. previous_ids (K,) int64 (K may be 0; distinct, as contact ids
+    are), previous_values (K, width); feature_id (C,) int64.
+
+    Contacts mostly come in last step's order (kept manifolds, pairs in broad-phase order), so
+    each contact first tries the id just after the last one matched; a contact that misses
+    there is looked up by bisection in last step's ids sorted, and the sort is made only when
+    some contact would miss. A settled 20-level pyramid (1 600 contacts, all in order) then
+    takes no sort and no search: 41 → 6 µs a step alone, and about a tenth of the step's time
+    inside it (the arrays come out of the cache after the stages before)."""
+    K, width, C = previous_ids.shape[0], previous_values.shape[1], feature_id.shape[0]
+    in_order = True  # whether every contact finds its id just after the last one matched
+    hint = 0
+    for c in range(C):
+        if hint < K and previous_ids[hint] == feature_id[c]:
+            hint += 1
+        else:
+            in_order = False
+            break
+    order = np.arange(K) if in_order else argsort_keys(previous_ids)
+    sorted_ids = np.empty(0 if in_order else K, dtype=np.int64)
+    for i in range(sorted_ids.shape[0]):  # a loop, and the bisection below by hand: less to
+        sorted_ids[i] = previous_ids[order[i]]  # compile than NumPy's gather and searchsorted
+    values = np.zeros((C, width))
+    found = np.zeros(C, dtype=np.bool_)
+    hint = 0
+    for c in range(C):
+        place = -1
+        if hint < K and previous_ids[hint] == feature_id[c]:
+            place = hint
+        elif not in_order:
+            p, high = 0, K  # the first place whose id is ≥ the contact's (searchsorted, side "left")
+            while p < high:
+                middle = (p + high) >> 1
+                if sorted_ids[middle] < feature_id[c]:
+                    p = middle + 1
+                else:
+                    high = middle
+            if p < K and sorted_ids[p] == feature_id[c]:
+                place = order[p]
+        if place >= 0:
             found[c] = True
-            for j in range(previous_values.shape[1]):  # not values[c, :] = …: a slice assignment
-                values[c, j] = previous_values[order[p], j]  # compiles Numba's shape-mismatch message
+            hint = place + 1
+            for j in range(width):  # not values[c, :] = …: a slice assignment
+                values[c, j] = previous_values[place, j]  # compiles Numba's shape-mismatch message
     return values, found
 
 
