@@ -290,13 +290,15 @@ def test_carried_values_follow_their_contact_ids():
     ids=st.lists(st.integers(0, 10**12), unique=True, max_size=40),
     kept=st.lists(st.booleans(), min_size=40, max_size=40),
     new=st.lists(st.integers(-5, 10**12), max_size=10),
+    swaps=st.lists(st.integers(0, 45), max_size=6),
     shuffle=st.randoms(use_true_random=False),
     shuffled=st.booleans(),
 )
-def test_carried_values_match_a_lookup_by_id_in_any_order(ids, kept, new, shuffle, shuffled):
-    """Contacts as they come step to step: last step's in order with some gone and some new
-    ones between them (the in-order path), or in any order (the sorted lookup): each value is
-    the one its id had, whichever path found it."""
+def test_carried_values_match_a_lookup_by_id_in_any_order(ids, kept, new, swaps, shuffle, shuffled):
+    """Contacts as they come step to step: last step's in order with some gone, some new ones
+    between them and a few swapped a place or more (found at or near their expected place), or
+    in any order (the sorted lookup): each value is the one its id had, whichever way it was
+    found."""
     from contactlab.contacts import values_by_id
 
     previous_ids = np.array(ids, dtype=np.int64)
@@ -304,6 +306,9 @@ def test_carried_values_match_a_lookup_by_id_in_any_order(ids, kept, new, shuffl
     now = [i for i, keep in zip(ids, kept) if keep]
     for position, fresh in enumerate(new):
         now.insert(position * 7 % (len(now) + 1), fresh)
+    for i in swaps:
+        if i + 3 < len(now):
+            now[i], now[i + 3] = now[i + 3], now[i]
     if shuffled:
         shuffle.shuffle(now)
     values, found = values_by_id(previous_ids, previous, np.array(now, dtype=np.int64), 3)
