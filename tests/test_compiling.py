@@ -396,7 +396,8 @@ def test_every_kernel_is_stamped_with_the_whole_package():
     for folder, _, files in os.walk(package):
         for name in files:
             if name.endswith(".py") and name != "compiling.py":
-                text = open(os.path.join(folder, name), encoding="utf-8").read()
+                with open(os.path.join(folder, name), encoding="utf-8") as source:
+                    text = source.read()
                 assert "from numba import njit" not in text, f"{name}: take njit from contactlab.compiling"
     for kernel in (velocity_loop.run, generate_contacts):
         locator = kernel._cache._impl.locator

@@ -159,10 +159,7 @@ def values_carried(
         if hint < K and previous_ids[hint] == feature_id[c]:
             place[c] = hint
         else:
-            for q in range(max(0, hint - NEARBY), min(K, hint + NEARBY + 1)):
-                if previous_ids[q] == feature_id[c]:
-                    place[c] = q
-                    break
+            place[c] = _index_in(previous_ids, feature_id[c], max(0, hint - NEARBY), min(K, hint + NEARBY + 1))
         if place[c] >= 0:
             hint = place[c] + 1
         else:
@@ -170,10 +167,7 @@ def values_carried(
     if 0 < unmatched <= SCANNED:  # a few: one pass over last step's ids each
         for c in range(C):
             if place[c] < 0:
-                for q in range(K):
-                    if previous_ids[q] == feature_id[c]:
-                        place[c] = q
-                        break
+                place[c] = _index_in(previous_ids, feature_id[c], 0, K)
     elif unmatched > 0 and K > 0:
         order = argsort_keys(previous_ids)
         sorted_ids = np.empty(K, dtype=np.int64)
@@ -199,6 +193,15 @@ def values_carried(
             for j in range(width):  # not values[c, :] = …: a slice assignment
                 values[c, j] = previous_values[place[c], j]  # compiles Numba's shape-mismatch message
     return values, found
+
+
+@njit(cache=True, inline="always")
+def _index_in(ids: np.ndarray, wanted: int, low: int, high: int) -> int:
+    """The first place q in [low, high) with ids[q] == wanted, −1 if none (a linear search)."""
+    for q in range(low, high):
+        if ids[q] == wanted:
+            return q
+    return -1
 
 
 @njit(cache=True)
