@@ -47,6 +47,9 @@ import contextlib  # noqa: E402  (after the thread pinning)
 import json  # noqa: E402
 import multiprocessing  # noqa: E402
 import platform  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from datetime import date  # noqa: E402
 
@@ -447,6 +450,9 @@ SETTINGS = {  # durations [s] of the full run and of --quick
 
 
 def record(results, key, row, path):
+    """Keep ``row`` under ``key``, with the 1-minute load average when it was taken (unless the
+    row brings its own, as the ball's rounds do), and save the results at once."""
+    row.setdefault("load", [round(os.getloadavg()[0], 2)])
     results.setdefault("runs", {})[key] = row
     print(
         f"  {key}: "
@@ -458,32 +464,63 @@ def record(results, key, row, path):
     save(results, path)
 
 
+PILE_METHODS = {  # contactlab's methods on each pile (the target is about constraints)
+    1000: ("constraints", "impulse", "projection", "penalty"),
+    4000: ("constraints",),
+}
+
+
+def contactlab_rows(results, scene, model, methods, duration, sample_every, path, measures, warmup=3 * DT):
+    """Run each of contactlab's ``methods`` on ``model`` and record its row under
+    ``{scene}/contactlab-{method}``: the rate, sweeps a step and threads, with what
+    ``measures(summary, arrays)`` returns (a dict of the scene's own measures). A method that
+    fails gets a row with its error: a diverging method is a result too."""
+    steps = int(round(duration / DT))
+    for method in methods:
+        key = f"{scene}/contactlab-{method}"
+        try:
+            summary, arrays = run_contactlab(model, method, duration, sample_every, warmup=warmup)
+        except Exception as error:
+            record(results, key, dict(scene=scene, engine="contactlab", method=method, error=repr(error)[:200]), path)
+            continue
+        row = dict(
+            scene=scene,
+            engine="contactlab",
+            method=method,
+            bodies=model.body_count,
+            duration=duration,
+            steps=steps,
+            steps_per_second=summary["steps_per_second"],
+            sweeps_per_step=summary["solver"]["mean_iterations"],
+            threads=summary["threads"],
+        )
+        record(results, key, dict(row, **measures(summary, arrays)), path)
+
+
 def pile_runs(results, count, duration, sample_every, path):
     steps = int(round(duration / DT))
     scene = f"pile{count}"
     model, half_width = contactlab_pile(count)
-    summary, arrays = run_contactlab(model, "constraints", duration, sample_every, warmup=PILE_WARMUP)
-    frames, times = list(arrays["body_position"]), list(arrays["time"])
-    penetration, drift = pile_measures(frames, times, half_width)
-    record(
-        results,
-        f"{scene}/contactlab-constraints",
-        dict(
-            scene=scene,
-            engine="contactlab",
-            method="constraints",
-            bodies=count,
-            duration=duration,
-            steps=steps,
-            steps_per_second=summary["steps_per_second"],
+
+    def measures(summary, arrays):
+        penetration, drift = pile_measures(list(arrays["body_position"]), list(arrays["time"]), half_width)
+        return dict(
             max_penetration=penetration,
             drift=drift,
             engine_penetration=summary["max_penetration"],
             max_contacts=summary["max_contacts"],
-            sweeps_per_step=summary["solver"]["mean_iterations"],
-            threads=summary["threads"],
-        ),
+        )
+
+    contactlab_rows(
+        results,
+        scene,
+        model,
+        PILE_METHODS.get(count, ("constraints",)),
+        duration,
+        sample_every,
         path,
+        measures,
+        warmup=PILE_WARMUP,
     )
     if pybullet is not None:
         world, half_width = bullet_pile(count)
@@ -627,38 +664,26 @@ def _pyramid_rounds(model, steps, sample_every, results, first_bullet_rate, path
 def pyramid_runs(results, duration, sample_every, path):
     steps = int(round(duration / DT))
     model = contactlab_pyramid()
-    for method in ("constraints", "impulse", "penalty", "projection"):
-        try:
-            summary, arrays = run_contactlab(model, method, duration, sample_every)
-        except Exception as error:  # a diverging method is a result too
-            record(
-                results,
-                f"pyramid/contactlab-{method}",
-                dict(scene="pyramid", engine="contactlab", method=method, error=repr(error)[:200]),
-                path,
-            )
-            continue
+
+    def measures(summary, arrays):
         travel = moved(list(arrays["body_position"]))
-        record(
-            results,
-            f"pyramid/contactlab-{method}",
-            dict(
-                scene="pyramid",
-                engine="contactlab",
-                method=method,
-                bodies=model.body_count,
-                duration=duration,
-                steps=steps,
-                steps_per_second=summary["steps_per_second"],
-                max_penetration=summary["max_penetration"],
-                drift=float(travel.max()),
-                moved_over_1mm=int((travel > 1e-3).sum()),
-                moved_over_1cm=int((travel > 1e-2).sum()),
-                sweeps_per_step=summary["solver"]["mean_iterations"],
-                threads=summary["threads"],
-            ),
-            path,
+        return dict(
+            max_penetration=summary["max_penetration"],
+            drift=float(travel.max()),
+            moved_over_1mm=int((travel > 1e-3).sum()),
+            moved_over_1cm=int((travel > 1e-2).sum()),
         )
+
+    contactlab_rows(
+        results,
+        "pyramid",
+        model,
+        ("constraints", "impulse", "penalty", "projection"),
+        duration,
+        sample_every,
+        path,
+        measures,
+    )
     if pybullet is not None:
         world = bullet_pyramid()
         worst = [0.0]
@@ -816,6 +841,62 @@ def scaling_runs(results, sizes, duration, path):
             ),
             path,
         )
+
+
+COMPILE_NOTICE = "compiling contact kernels for first use"
+
+
+def _timed_process(command, env, cwd):
+    """(wall seconds, CPU seconds of the process, return code, standard error) of one run of
+    ``command``: the wall clock follows whatever else the cores do, the CPU time hardly does."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    done = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, done.returncode, done.stderr
+
+
+def cold_start_runs(results, path, imports=5):
+    """Issue 18's start-up targets as a user meets them, each in a process of its own:
+    ``python -m contactlab demo`` on an empty compile cache (a new ``NUMBA_CACHE_DIR``, as a
+    fresh install has), the same again on the cache the first run left, and ``import
+    contactlab`` timed inside a bare interpreter (best of ``imports``). Each demo runs in an
+    empty folder, where it writes its outputs."""
+    probe = "import time; t = time.perf_counter(); import contactlab; print(time.perf_counter() - t)"
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as folder:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        demo = [sys.executable, "-m", "contactlab", "demo"]
+        load_before = os.getloadavg()[0]
+        runs = [_timed_process(demo, env, folder) for _ in range(2)]
+        import_seconds = []
+        for _ in range(imports):
+            out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True)
+            import_seconds.append(float(out.stdout.strip().splitlines()[-1]))
+        load_after = os.getloadavg()[0]
+    (first_wall, first_cpu, first_rc, first_err), (second_wall, second_cpu, second_rc, second_err) = runs
+    record(
+        results,
+        "coldstart/contactlab",
+        dict(
+            scene="coldstart",
+            engine="contactlab",
+            method="demo",
+            first_wall=first_wall,
+            first_cpu=first_cpu,
+            first_returncode=first_rc,
+            first_says_compiling=COMPILE_NOTICE in first_err,
+            second_wall=second_wall,
+            second_cpu=second_cpu,
+            second_returncode=second_rc,
+            second_says_compiling=COMPILE_NOTICE in second_err,
+            import_seconds=min(import_seconds),
+            import_rounds=[round(t, 3) for t in import_seconds],
+            load=[round(load_before, 2), round(load_after, 2)],
+        ),
+        path,
+    )
 
 
 def assembled_pile_lcp(count=4000, settle=0.5):
@@ -1002,7 +1083,7 @@ def main():
         "--only",
         nargs="*",
         default=None,
-        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp"],
+        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp", "coldstart"],
         help="run only these (default: all)",
     )
     parser.add_argument("--scaling-sizes", type=int, nargs="*", default=None)
@@ -1047,7 +1128,17 @@ def main():
         global mujoco
         if args.no_mujoco:
             mujoco = None
-        todo = args.only or ["ball", "pile1000", "pyramid", "cloth64", "lcp", "scaling", "pile4000", "cloth128"]
+        todo = args.only or [
+            "coldstart",
+            "ball",
+            "pile1000",
+            "pyramid",
+            "cloth64",
+            "lcp",
+            "scaling",
+            "pile4000",
+            "cloth128",
+        ]
         every = settings["sample_every"]
         for item in todo:
             print(f"{item} ...", flush=True)
@@ -1070,6 +1161,8 @@ def main():
                 )
             elif item == "lcp":
                 lcp_runs(results, args.results, args.quick)
+            elif item == "coldstart":
+                cold_start_runs(results, args.results)
             print(f"{item} done in {time.perf_counter() - started:.0f} s", flush=True)
     from report import write_report  # benchmarks/report.py
 

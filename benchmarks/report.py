@@ -26,6 +26,23 @@ def _mm(value):
     return "–" if value is None else f"{1e3 * value:.2f}"
 
 
+def _load(row):
+    """The 1-minute load average(s) recorded with a row, or – for rows measured before loads were kept."""
+    return "–".join(f"{value:.2f}" for value in row.get("load", [])) or "–"
+
+
+def _threads_cell(row):
+    """The threads a run stepped on: a peer's 1; contactlab's setting and how many steps ran on
+    each thread count (``auto`` chooses as it goes), e.g. "auto: 1 × 19, 2 × 701"."""
+    threads = row.get("threads")
+    if row["engine"] != "contactlab":
+        return "1"
+    if not isinstance(threads, dict):
+        return "–" if threads is None else str(threads)
+    steps = ", ".join(f"{count} × {n}" for count, n in sorted(threads.get("steps_at", {}).items()))
+    return f"{threads.get('setting')}: {steps}" if steps else str(threads.get("setting"))
+
+
 def _runs(results, scene):
     return [(k, v) for k, v in sorted(results.get("runs", {}).items()) if v.get("scene") == scene]
 
@@ -97,6 +114,8 @@ def targets(results):
         )
     else:
         out.append(("pyramid: constraints ≥ 5× pybullet", "not measured", "missing"))
+    out.append(_methods_target(results))
+    out.append(_cold_start_target(runs.get("coldstart/contactlab")))
     threads = _threads(results)
     if threads:
         loaded = [row for row in threads["rows"] if row["load"] != "idle"]
@@ -154,6 +173,47 @@ def targets(results):
     return out
 
 
+METHODS = ("constraints", "impulse", "projection", "penalty")
+
+
+def _methods_target(results):
+    """(target, measured, status) of "every method runs compiled, reported on the pile and the
+    pyramid": each method's steps/s on both scenes, or how it failed."""
+    runs = results.get("runs", {})
+    cells = []
+    for scene in ("pile1000", "pyramid"):
+        for method in METHODS:
+            row = runs.get(f"{scene}/contactlab-{method}")
+            if row is None:
+                return ("every method on the pile and the pyramid", f"{scene} {method}: not measured", "missing")
+            rate = row.get("steps_per_second")
+            cells.append(f"{scene} {method} " + (f"{rate:.1f}" if rate else "failed (see its table)"))
+    return ("penalty, projection, impulse and constraints on the pile and the pyramid", "; ".join(cells), "reported")
+
+
+def _cold_start_target(row):
+    """(target, measured, status) of the start-up targets from the ``coldstart`` row."""
+    target = "first `contactlab demo` on an empty cache ≤ 15 s and says it compiles; second ≤ 3 s; import ≤ 0.5 s"
+    if row is None:
+        return (target, "not measured (peers.py --only coldstart)", "missing")
+    ok = (
+        row["first_returncode"] == 0
+        and row["second_returncode"] == 0
+        and row["first_says_compiling"]
+        and not row["second_says_compiling"]
+        and row["first_wall"] <= 15.0
+        and row["second_wall"] <= 3.0
+        and row["import_seconds"] <= 0.5
+    )
+    measured = (
+        f"first {row['first_wall']:.1f} s wall ({row['first_cpu']:.1f} s CPU), "
+        f"{'says' if row['first_says_compiling'] else 'does NOT say'} it compiles; second {row['second_wall']:.1f} s"
+        f"{' (compiled again!)' if row['second_says_compiling'] else ''}; import {1e3 * row['import_seconds']:.1f} ms; "
+        f"load {'–'.join(f'{x:.2f}' for x in row['load'])}"
+    )
+    return (target, measured, "met" if ok else "NOT met")
+
+
 def _threads(results):
     """benchmarks/results/threads.json (written by benchmarks/threads.py), or None."""
     path = os.path.join(HERE, "results", "threads.json")
@@ -180,7 +240,7 @@ def write_report(results, md_path, plot_dir):
 
     header = (
         "| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm "
-        "| sweeps per step |"
+        "| sweeps per step | threads | load |"
     )
     rows = _runs(results, "ball")
     if rows:
@@ -197,9 +257,9 @@ def write_report(results, md_path, plot_dir):
             "first apex m (closed form) |",
             "|---|---|---|---|---|---|---|---|",
         ]
-        for key, r in rows:
+        for _key, r in rows:
             rounds = ", ".join(f"{rate:,}" for rate in r.get("round_rates", []))
-            load = "–".join(f"{value:.2f}" for value in r.get("load", []))
+            load = _load(r)
             lines.append(
                 f"| {r['engine']} | {r['method']} | {r['duration']} | {r['steps_per_second']:,.0f} | "
                 f"{1e6 / r['steps_per_second']:.1f} | {rounds} | {load} | {_fmt(r.get('first_apex'), 4)} "
@@ -215,16 +275,17 @@ def write_report(results, md_path, plot_dir):
             continue
         bullet, mj = _rate(results, f"{scene}/pybullet"), _rate(results, f"{scene}/mujoco")
         extra = " boxes > 1 mm | boxes > 1 cm |" if scene == "pyramid" else ""
-        lines += ["", f"## {title}", "", header + extra, "|---" * (10 + (2 if extra else 0)) + "|"]
-        for key, r in rows:
+        lines += ["", f"## {title}", "", header + extra, "|---" * (12 + (2 if extra else 0)) + "|"]
+        for _key, r in rows:
             if "error" in r:
-                lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} |" + " |" * 7)
+                lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} |" + " |" * (9 + bool(extra) * 2))
                 continue
             rate = r["steps_per_second"]
             row = (
                 f"| {r['engine']} | {r['method']} | {r.get('bodies')} | {r.get('duration')} | {rate:.1f} | "
                 f"{_fmt(rate / bullet) if bullet else '–'} | {_fmt(rate / mj) if mj else '–'} | "
-                f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} | {_fmt(r.get('sweeps_per_step'))} |"
+                f"{_mm(r.get('max_penetration'))} | {_mm(r.get('drift'))} | {_fmt(r.get('sweeps_per_step'))} | "
+                f"{_threads_cell(r)} | {_load(r)} |"
             )
             if extra:
                 row += f" {r.get('moved_over_1mm', '–')} | {r.get('moved_over_1cm', '–')} |"
@@ -241,7 +302,7 @@ def write_report(results, md_path, plot_dir):
             "| run | method | sim s | steps/s | × MuJoCo | max penetration mm | lowest vertex z mm |",
             "|---|---|---|---|---|---|---|",
         ]
-        for key, r in rows:
+        for _key, r in rows:
             if "error" in r:
                 lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} | | | | |")
                 continue
