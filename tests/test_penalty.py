@@ -177,7 +177,7 @@ def test_a_frictional_pile_on_stiff_springs_never_flings_a_sphere(solver):
     model = poured_pile(grid=4, layers=10)
     run = simulate(model, "penalty", dt=1 / 240, duration=0.6, options={"linear_solver": solver})
     assert run.summary["implicit_spring_steps"] > 0  # the path under test
-    assert run.summary["solver"]["max_iterations"] > 8  # and slip forces that did not settle in 8 passes
+    assert run.summary["solver"]["max_iterations"] > 8  # and a step with slipping contacts that did not settle in 8
     highest = run.arrays["body_position"][0, :, 2].max()
     speeds = np.linalg.norm(run.arrays["body_velocity"], axis=2)
     assert speeds.max() < np.sqrt(2 * G * highest)

@@ -101,7 +101,7 @@ class Options(CollisionOptions):
     """backward Euler with cg: relative residual to reach"""
     implicit_iterations: int = 8
     """backward Euler: most passes to settle which springs act / slip (as many again, the slip forces
-    held at μ k δ, where they did not settle)"""
+    held at μ k δ, where a step with slipping contacts did not settle)"""
     implicit_springs: str = "auto"
     """auto: backward Euler where an explicit step is unstable | always | never"""
 

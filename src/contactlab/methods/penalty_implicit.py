@@ -220,10 +220,11 @@ def implicit_spring_velocities(
     latest pass. Then the engaged normal springs (F_n⁺ > 0) and the slip forces are found by
     repeating the solve (``conjugate_gradients``) until they stop changing (an active-set
     iteration; for convex energies such as a plane's, and no friction, it is the exact backward
-    Euler step, which never adds energy). Where the slip forces have not settled after
-    ``implicit_iterations`` passes, they are taken as μ k δ, the normal springs' force at the
-    step's start, and the engaged springs are settled again from the first guess (as many
-    passes again at most): with stiff springs the slip forces need not settle at all, as a
+    Euler step, which never adds energy). Where the passes have not settled after
+    ``implicit_iterations`` and some contact slips, the slip forces are taken as μ k δ, the
+    normal springs' force at the step's start, and the engaged springs are settled again from
+    the first guess (as many passes again at most): with stiff springs the slip forces need
+    not settle at all, as a
     slip force moves the bodies, which presses the neighbours' springs by about μ k h² / m
     times as much again, and each pass multiplied them (a 1000-sphere pile at dt = 1/240 s
     flung spheres at 100 m/s). Returns (v⁺ (N,), forces (C, 3) [N], elongation
@@ -250,7 +251,7 @@ def implicit_spring_velocities(
     normal, trial, elongation = np.zeros(C), np.zeros((C, 2)), np.zeros((C, 2))
     base = mass_product(mass, v_free, np.empty(v_free.shape[0]))
     v_new, residual, passes, linear_iterations = v_free, 0.0, 0, 0
-    held = False  # whether the slip forces are held at μ k δ (they did not settle)
+    held = False  # whether the slip forces are held at μ k δ (the step did not settle)
     while passes < 2 * settings.implicit_iterations:
         passes += 1
         for c in range(C):
@@ -349,7 +350,8 @@ def implicit_velocities(
     slip_force = np.zeros((C, 2))
     keep = sp.diags(free.astype(float))
     v_new, residual, linear_iterations = v_free, 0.0, 0
-    held = False  # whether the slip forces are held at μ k δ (they did not settle)
+    held = False  # whether the slip forces are held at μ k δ (the step did not settle)
+    held_limit = springs.friction * k * np.maximum(depth, 0.0)  # μ k δ, the normal springs' force at the start
     for passes in range(1, 2 * options.implicit_iterations + 1):
         weight = np.column_stack(
             [engaged * h * (h * k + c), np.repeat((sticks * h * (h * k_t + c_t))[:, None], 2, axis=1)]
@@ -378,8 +380,7 @@ def implicit_velocities(
         else:
             now_sticks = sticks & now_engaged
         # μ F_n⁺ along it, F_n⁺ of this pass (held: μ k δ while engaged)
-        held_force = np.where(now_engaged, springs.friction * k * np.maximum(depth, 0.0), 0.0)
-        new_slip_force = slip_direction * (held_force if held else limit)[:, None]
+        new_slip_force = slip_direction * (np.where(now_engaged, held_limit, 0.0) if held else limit)[:, None]
         settled = (
             np.array_equal(now_engaged, engaged)
             and np.array_equal(now_sticks, sticks)
@@ -393,7 +394,7 @@ def implicit_velocities(
                 break
             held = True  # unsettled slip forces: hold them, and settle the engaged springs afresh
             engaged, sticks = guess, guess & (springs.friction > 0.0) & ~slips
-            slip_force = slip_direction * np.where(guess, springs.friction * k * np.maximum(depth, 0.0), 0.0)[:, None]
+            slip_force = slip_direction * np.where(guess, held_limit, 0.0)[:, None]
     # return mapping: an anchor spring never pulls harder than μ F_n at the end of the step
     tangential = np.where(sticks[:, None], trial, slip_force)
     size, limit = np.linalg.norm(tangential, axis=1), springs.friction * normal
