@@ -464,10 +464,8 @@ def record(results, key, row, path):
     save(results, path)
 
 
-PILE_METHODS = {  # contactlab's methods on each pile (the target is about constraints)
-    1000: ("constraints", "impulse", "projection", "penalty"),
-    4000: ("constraints",),
-}
+METHODS = ("constraints", "impulse", "projection", "penalty")  # contactlab's, on the pile and the pyramid
+PILE_METHODS = {1000: METHODS, 4000: ("constraints",)}  # the 4000 pile's target is about constraints
 
 
 def contactlab_rows(results, scene, model, methods, duration, sample_every, path, measures, warmup=3 * DT):
@@ -678,7 +676,7 @@ def pyramid_runs(results, duration, sample_every, path):
         results,
         "pyramid",
         model,
-        ("constraints", "impulse", "penalty", "projection"),
+        METHODS,
         duration,
         sample_every,
         path,
