@@ -897,6 +897,126 @@ def cold_start_runs(results, path, imports=5):
     )
 
 
+SHORT_RUN = 3.0  # s of the ball at DT: 720 steps, issue 36's short run
+MANY_RUNS = 200  # runs of it in one process (a study's cells)
+
+_SHORT_CHILD = """
+import json, sys, time
+sys.path.insert(0, {here!r})
+engine = {engine!r}
+started = time.perf_counter()
+if engine == "contactlab":
+    import peers
+    from contactlab.simulation import simulate
+    model = peers.contactlab_ball()
+    run_started = time.perf_counter()
+    summary = simulate(model, "impulse", dt=peers.DT, duration={duration!r}).summary
+    run_wall = time.perf_counter() - run_started
+    out = dict(steps_per_second=summary["steps_per_second"], compiled_loop=summary["compiled_loop"],
+               threads=summary["threads"])
+else:
+    import mujoco, peers
+    peers.mujoco = mujoco
+    m, d = peers.mujoco_ball()
+    steps = int(round({duration!r} / peers.DT))
+    run_started = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(m, d)
+    run_wall = time.perf_counter() - run_started
+    out = dict(steps_per_second=steps / run_wall)
+out.update(run_wall=run_wall, process_wall=time.perf_counter() - started)
+print(json.dumps(out))
+"""
+
+
+def _short_child(engine, env):
+    """One 720-step ball run in a fresh process of ``engine``: its JSON line as a dict."""
+    code = _SHORT_CHILD.format(here=HERE, engine=engine, duration=SHORT_RUN)
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def short_runs(results, path, runs=MANY_RUNS):
+    """Issue 36's short runs, as a user and a study meet them.
+
+    * ``shortrun``: the 720-step ball (``impulse``, dt 1/240) in a fresh process, on an empty
+      compile cache and then again on the cache the first left; MuJoCo's same ball in a fresh
+      process. The second run's steps/s is the target: a user's every later run.
+    * ``manyruns``: ``runs`` such runs through ``simulate()`` in one process (after one that
+      loads the kernels) against MuJoCo resetting (``mj_resetData``) and stepping its ball as
+      often: runs/s of each, per-run milliseconds."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        load_before = os.getloadavg()[0]
+        first, second = _short_child("contactlab", env), _short_child("contactlab", env)
+        peer = _short_child("mujoco", env) if mujoco is not None else None
+        load_after = os.getloadavg()[0]
+    record(
+        results,
+        "shortrun/contactlab",
+        dict(
+            scene="shortrun",
+            engine="contactlab",
+            method="impulse",
+            steps=int(round(SHORT_RUN / DT)),
+            first=first,
+            second=second,
+            steps_per_second=second["steps_per_second"],
+            load=[round(load_before, 2), round(load_after, 2)],
+        ),
+        path,
+    )
+    if peer is not None:
+        record(results, "shortrun/mujoco", dict(scene="shortrun", engine="mujoco", method=MUJOCO_LABEL, **peer), path)
+    from contactlab.simulation import simulate
+
+    model = contactlab_ball()
+    simulate(model, "impulse", dt=DT, duration=SHORT_RUN)  # loads (or compiles) the kernels
+    load_before = os.getloadavg()[0]
+    started = time.perf_counter()
+    for _ in range(runs):
+        summary = simulate(model, "impulse", dt=DT, duration=SHORT_RUN).summary
+    ours = runs / (time.perf_counter() - started)
+    record(
+        results,
+        "manyruns/contactlab",
+        dict(
+            scene="manyruns",
+            engine="contactlab",
+            method="impulse",
+            runs=runs,
+            runs_per_second=ours,
+            ms_per_run=1e3 / ours,
+            compiled_loop=summary["compiled_loop"],
+            threads=summary["threads"],
+            load=[round(load_before, 2), round(os.getloadavg()[0], 2)],
+        ),
+        path,
+    )
+    if mujoco is not None:
+        m, d = mujoco_ball()
+        steps = int(round(SHORT_RUN / DT))
+        started = time.perf_counter()
+        for _ in range(runs):
+            mujoco.mj_resetData(m, d)
+            for _ in range(steps):
+                mujoco.mj_step(m, d)
+        theirs = runs / (time.perf_counter() - started)
+        record(
+            results,
+            "manyruns/mujoco",
+            dict(
+                scene="manyruns",
+                engine="mujoco",
+                method=MUJOCO_LABEL,
+                runs=runs,
+                runs_per_second=theirs,
+                ms_per_run=1e3 / theirs,
+            ),
+            path,
+        )
+
+
 def assembled_pile_lcp(count=4000, settle=0.5):
     """The frictionless LCP (B_nn, c_n) that the constraints method forms for the pile after
     ``settle`` seconds, assembled the way methods.constraints.step does (stages 1–4)."""
@@ -1081,7 +1201,18 @@ def main():
         "--only",
         nargs="*",
         default=None,
-        choices=["ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128", "scaling", "lcp", "coldstart"],
+        choices=[
+            "ball",
+            "shortruns",
+            "pile1000",
+            "pile4000",
+            "pyramid",
+            "cloth64",
+            "cloth128",
+            "scaling",
+            "lcp",
+            "coldstart",
+        ],
         help="run only these (default: all)",
     )
     parser.add_argument("--scaling-sizes", type=int, nargs="*", default=None)
@@ -1128,6 +1259,7 @@ def main():
             mujoco = None
         todo = args.only or [
             "coldstart",
+            "shortruns",
             "ball",
             "pile1000",
             "pyramid",
@@ -1161,6 +1293,8 @@ def main():
                 lcp_runs(results, args.results, args.quick)
             elif item == "coldstart":
                 cold_start_runs(results, args.results)
+            elif item == "shortruns":
+                short_runs(results, args.results)
             print(f"{item} done in {time.perf_counter() - started:.0f} s", flush=True)
     from report import write_report  # benchmarks/report.py
 

@@ -214,6 +214,83 @@ def _cold_start_target(row):
     return (target, measured, "met" if ok else "NOT met")
 
 
+def _package_lines():
+    """(lines of src/contactlab/methods, lines of src/contactlab): issue 36's size targets."""
+    src = os.path.join(os.path.dirname(HERE), "src", "contactlab")
+
+    def lines(folder):
+        total = 0
+        for root, _, names in os.walk(folder):
+            for name in names:
+                if name.endswith(".py"):
+                    with open(os.path.join(root, name)) as stream:
+                        total += sum(1 for _ in stream)
+        return total
+
+    return lines(os.path.join(src, "methods")), lines(src)
+
+
+def issue36_targets(results):
+    """Lines of (target, measured, status) for issue 36's targets (short runs, one process's many
+    runs, the cold start, the code's size)."""
+    runs = results.get("runs", {})
+    out = []
+    ours, theirs = runs.get("shortrun/contactlab"), runs.get("shortrun/mujoco")
+    target = "720-step ball (impulse), second run in a fresh process ≥ MuJoCo's steps/s"
+    if ours and theirs:
+        second, first = ours["second"], ours["first"]
+        out.append(
+            (
+                target,
+                f"{second['steps_per_second'] / theirs['steps_per_second']:.2f}× MuJoCo "
+                f"({second['steps_per_second']:,.0f} vs {theirs['steps_per_second']:,.0f} steps/s; compiled loop "
+                f"{second['compiled_loop']}; first run on an empty cache {first['steps_per_second']:,.0f} steps/s, "
+                f"compiled loop {first['compiled_loop']}, {first['process_wall']:.1f} s in all); load "
+                f"{'–'.join(f'{x:.2f}' for x in ours['load'])}",
+                "met" if second["steps_per_second"] >= theirs["steps_per_second"] else "NOT met",
+            )
+        )
+    else:
+        out.append((target, "not measured (peers.py --only shortruns)", "missing"))
+    ours, theirs = runs.get("manyruns/contactlab"), runs.get("manyruns/mujoco")
+    target = "200 such runs through simulate() in one process ≥ ½ MuJoCo's reset-and-step throughput"
+    if ours and theirs:
+        ratio = ours["runs_per_second"] / theirs["runs_per_second"]
+        out.append(
+            (
+                target,
+                f"{ratio:.2f}× ({ours['ms_per_run']:.2f} vs {theirs['ms_per_run']:.2f} ms a run; compiled loop "
+                f"{ours['compiled_loop']}; load {'–'.join(f'{x:.2f}' for x in ours['load'])})",
+                "met" if ratio >= 0.5 else "NOT met",
+            )
+        )
+    else:
+        out.append((target, "not measured (peers.py --only shortruns)", "missing"))
+    row = runs.get("coldstart/contactlab")
+    target = "first `contactlab demo` on an empty cache ≤ 12 s, the second ≤ 2 s"
+    if row:
+        ok = row["first_wall"] <= 12.0 and row["second_wall"] <= 2.0
+        out.append(
+            (
+                target,
+                f"first {row['first_wall']:.1f} s wall ({row['first_cpu']:.1f} s CPU), second "
+                f"{row['second_wall']:.1f} s",
+                "met" if ok else "NOT met",
+            )
+        )
+    else:
+        out.append((target, "not measured (peers.py --only coldstart)", "missing"))
+    methods, package = _package_lines()
+    out.append(
+        (
+            "methods/ ≤ 3,600 lines; the package ≤ 27,700",
+            f"methods/ {methods:,}; the package {package:,} (counted when this report was written)",
+            "met" if methods <= 3600 and package <= 27700 else "NOT met",
+        )
+    )
+    return out
+
+
 def _threads(results):
     """benchmarks/results/threads.json (written by benchmarks/threads.py), or None."""
     path = os.path.join(HERE, "results", "threads.json")
@@ -237,6 +314,8 @@ def write_report(results, md_path, plot_dir):
     )
     lines += ["", "## Targets of issue 18", "", "| target | measured | status |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in targets(results)]
+    lines += ["", "## Targets of issue 36", "", "| target | measured | status |", "|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} |" for a, b, c in issue36_targets(results)]
 
     header = (
         "| run | method | bodies | sim s | steps/s | × pybullet | × MuJoCo | max penetration mm | drift mm "

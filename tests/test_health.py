@@ -14,6 +14,7 @@ import pytest
 from conftest import ball_on_plane, interruptible
 
 from contactlab import ModelBuilder, SimulationDiverged, health, simulate
+from contactlab.collision import collide
 from contactlab.scene import builtin_scenes, load_scene
 
 
@@ -221,3 +222,61 @@ def test_a_model_too_large_is_refused_before_it_is_built(tmp_path):
     assert time.perf_counter() - started < 1.0 and MAX_DYNAMIC == 200_000
     with pytest.raises(InputError, match="resolution: a cloth of 3000 x 3000 vertices"):
         ModelBuilder().add_cloth(size=(1, 1), resolution=(3000, 3000), mass=1.0)
+
+
+def _overlapping_spheres(gap):
+    """Two spheres (r 0.1 m and 0.02 m) on a floor, the small one ``gap`` [m] above the large one
+    (negative: sunk into it): the deepest overlap is −gap where gap < 0."""
+    builder = ModelBuilder()
+    builder.add_material("m", friction=0.5, restitution=0.0)
+    builder.add_body("sphere", radius=0.1, mass=1.0, position=(0.0, 0.0, 0.1), material="m")
+    builder.add_body("sphere", radius=0.02, mass=0.1, position=(0.0, 0.0, 0.22 + gap), material="m")
+    builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="m")
+    return builder.finalize()
+
+
+@pytest.mark.parametrize("gap", [0.01, -0.001, -0.0149, -0.0151, -0.03])
+def test_the_depth_check_told_the_deepest_overlap_decides_as_the_full_collision_pass(gap):
+    # The compiled loop's chunks hand the depth check their last sample's deepest overlap, and it
+    # makes the collision pass only where that overlap could fail it (within 0.75 of the thinnest
+    # half thickness, 2 cm here: 15 mm). Either way the verdict is the full pass's: around the
+    # 15 mm bound (the pass-through depth of this pair is 12 cm: nothing fails below 90 mm) and
+    # past it, where the full pass is made.
+    model = _overlapping_spheres(gap)
+    state = model.state()
+    deepest = max(0.0, -gap)
+    full, told, unknown = (health.Health(model, state, 1e-3) for _ in range(3))
+    expected = full.check_contacts(state, collide(model, state))
+    assert told.check_depth(state, deepest) == expected
+    assert unknown.check_depth(state, None) == expected
+    assert expected is None  # 30 mm into a 12 cm pass-through depth is no violation
+
+
+def test_the_depth_check_told_the_deepest_overlap_still_stops_a_pass_through():
+    # a small sphere 95 mm into the large one: past 0.75 of their 120 mm pass-through depth
+    model = _overlapping_spheres(-0.095)
+    state = model.state()
+    violation = health.Health(model, state, 1e-3).check_depth(state, 0.095)
+    assert violation is not None and violation.check == "depth"
+    assert health.Health(model, state, 1e-3).check_contacts(state, collide(model, state)) == violation
+
+
+def test_energy_checks_report_the_first_row_that_fails_as_the_row_by_row_scan_did():
+    model = ball_on_plane()
+    state = model.state()
+    checks = health.Health(model, state, 1e-3)
+    scale = checks.energy_scale
+    time = np.arange(6.0)
+    zero = np.zeros(6)
+    # a gain past the limit at row 2, a NaN at row 4: the gain is met first
+    kinetic = np.array([0.0, 0.0, 2 * scale, 0.0, np.nan, 0.0])
+    series = {"time": time, "energy_kinetic": kinetic, "energy_potential": zero, "energy_elastic": zero}
+    found = checks.check_samples(series)
+    assert found.check == "energy" and found.time == 2.0
+    # allowed to diverge: the gain is recorded and the NaN, which always stops, is the answer
+    allowed = health.Health(model, state, 1e-3, allow_divergence=True)
+    found = allowed.check_samples(series)
+    assert found.check == "finite" and found.time == 4.0
+    assert [v.check for v in allowed.violations] == ["energy"]
+    # rows before ``first`` are not looked at
+    assert health.Health(model, state, 1e-3).check_samples(series, first=5) is None

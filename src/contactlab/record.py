@@ -13,9 +13,11 @@ half-written file). The arrays are documented in ``docs/trajectory.md``.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
+import weakref
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -66,27 +68,51 @@ TRAJECTORY = "trajectory.h5"  # the file name of a run's trajectory in its outpu
 
 def series_rows(model: Model) -> dict[str, tuple[tuple[int, ...], type]]:
     """name -> (shape of one sample, dtype) of every series of a run of ``model``."""
-    shapes = array_shapes(model.body_count, model.particle_count)
-    return {name: (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64) for name in SERIES}
+    return dict(_series_rows(model.body_count, model.particle_count))
 
 
 def sample_bytes(model: Model) -> int:
     """Bytes one sample of a run of ``model`` takes (every series of :func:`series_rows`)."""
+    return _sample_bytes(model.body_count, model.particle_count)
+
+
+@functools.lru_cache(maxsize=64)
+def _series_rows(body_count: int, particle_count: int) -> tuple[tuple[str, tuple[tuple[int, ...], type]], ...]:
+    """``series_rows`` of B bodies and P particles, as pairs (kept: a run asks it three times)."""
+    shapes = array_shapes(body_count, particle_count)
+    return tuple((name, (shapes.get(name, ()), np.int64 if name in WHOLE_SERIES else np.float64)) for name in SERIES)
+
+
+@functools.lru_cache(maxsize=64)
+def _sample_bytes(body_count: int, particle_count: int) -> int:
+    """``sample_bytes`` of B bodies and P particles."""
     return sum(
-        int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize for shape, dtype in series_rows(model).values()
+        int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+        for _, (shape, dtype) in _series_rows(body_count, particle_count)
     )
 
 
 def static_arrays(model: Model) -> dict[str, np.ndarray]:
     """What does not change during a run of ``model``: body_names (B,), the cloth topology
     triangles (F, 3) and particle_cloth (P,), and the shapes' surfaces for drawing and export
-    (contactlab.surfaces)."""
-    return {
-        "body_names": np.array(model.body_names, dtype=str),
-        "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
-        "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
-        **surfaces.surface_arrays(model),
-    }
+    (contactlab.surfaces). Built once a model and kept while it lives (read-only arrays): a study
+    runs one model many times, and the surfaces cost a tiny run a tenth of its time."""
+    key = id(model)
+    if key not in _STATIC:
+        arrays = {
+            "body_names": np.array(model.body_names, dtype=str),
+            "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
+            "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
+            **surfaces.surface_arrays(model),
+        }
+        for array in arrays.values():
+            array.flags.writeable = False
+        _STATIC[key] = arrays
+        weakref.finalize(model, _STATIC.pop, key, None)
+    return dict(_STATIC[key])
+
+
+_STATIC: dict[int, dict[str, np.ndarray]] = {}  # id of a live Model -> its static_arrays
 
 
 @dataclass

@@ -283,7 +283,8 @@ def _record_run(plan, recorder, state, chooser, health, clock):
             recorder.extend(stepper.sample())  # the loop's own recording, which the steps use too
     setup_compile_seconds = _seconds(compiling)
     health.check_samples(recorder.latest(ENERGY_SERIES), 0)  # the energy to hold the run to
-    health.start(state)  # and how deep it starts
+    # and how deep it starts, from the loop's first sample where there is one (no collision pass)
+    health.start(state, float(recorder.latest(("max_penetration",))["max_penetration"][0]) if stepper else None)
     tally = Tally()
     stopped = interrupted = None
     with (
@@ -509,7 +510,6 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
     """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
     about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside; the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
-    from .collision import collide
 
     speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
     step_index, chunk = 1, 1
@@ -525,10 +525,10 @@ def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, hea
             chooser.after_steps(made, elapsed)
         recorder.extend(samples)
         state = stepper.state()
-        violation = health.check_state(state) if diverged else None
-        violation = (
-            violation or health.check_samples(samples, 0) or health.check_contacts(state, collide(stepper.model, state))
-        )
+        violation = (health.check_state(state) if diverged else None) or health.check_samples(samples, 0)
+        if violation is None:  # the depth check, told the deepest overlap where the last sample is at this state
+            sampled = len(samples["time"]) and samples["time"][-1] == state.time
+            violation = health.check_depth(state, float(samples["max_penetration"][-1]) if sampled else None)
         if violation is not None:
             tally.take(stepper)
             if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
