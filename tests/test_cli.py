@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from contactlab import simulate
 from contactlab.compiling import NOTICE
 from contactlab.record import write_outputs
 from contactlab.store import open_trajectory
@@ -382,6 +383,28 @@ def test_the_summary_line_says_where_the_time_went():
     assert _where_time_went(first) == "20.00 s compiling or loading kernels, 0.40 s recording, 6003 steps/s stepping"
     cached = {"compile_seconds": 0.02, "recording_seconds": 0.01, "steps_per_second": 6003.2}
     assert _where_time_went(cached) == "6003 steps/s stepping"
+
+
+def test_a_short_first_run_says_why_it_steps_slowly(monkeypatch):
+    # issue 37: the demo printed 8,314 steps/s where the README says ~353,000 for the ball, and
+    # nothing said why. A run the compiled loop serves, too short to compile it, says so; one the
+    # loop does not serve (explicit Euler here) or that took it says nothing of it.
+    from conftest import ball_on_plane
+
+    from contactlab.cli import _where_time_went
+    from contactlab.methods import velocity_loop
+    from contactlab.simulation import SHORT_FIRST_RUN
+
+    model = ball_on_plane()
+    looped = simulate(model, "impulse", 1e-3, 0.01, compiled_loop=True).summary
+    unserved = simulate(model, "impulse", 1e-3, 0.01, integrator="explicit_euler").summary
+    assert looped["stepping"] == "compiled loop" and unserved["stepping"] == "python"
+    assert "loop" not in _where_time_went(looped) and "loop" not in _where_time_went(unserved)
+    # as on an empty compile cache: the loop's machine code is nowhere, and 10 steps do not repay it
+    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    short = simulate(model, "impulse", 1e-3, 0.01).summary
+    assert not short["compiled_loop"] and short["stepping"] == SHORT_FIRST_RUN
+    assert "does not compile the stepping loop" in _where_time_went(short)
 
 
 @pytest.mark.parametrize("compiled_loop", [True, False])

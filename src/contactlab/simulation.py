@@ -342,6 +342,13 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         ),
         "recording_seconds": tally.recording_seconds,
         "compiled_loop": stepper is not None,
+        "stepping": (
+            "compiled loop"
+            if stepper is not None
+            else SHORT_FIRST_RUN
+            if compiled_loop is None and velocity_loop.applies(model, method, options, integrator)
+            else "python"
+        ),
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         "steps_per_second": (
@@ -498,6 +505,9 @@ def _advance(bar, step_index, made):
     bar.update(made)
 
 
+# the summary's "stepping" of a run the compiled loop serves but which stepped from Python: too short to
+# repay compiling the loop, whose machine code no earlier run had cached (velocity_loop.stepper_for)
+SHORT_FIRST_RUN = "python, too short to compile the loop"
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 # the next chunk at most this many times the last: its pace, measured on few steps, may be off,
 # but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
