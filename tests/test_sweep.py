@@ -144,8 +144,10 @@ def test_a_series_that_stalls_gets_no_order_but_the_dt_it_stalls_from():
     assert stalled_from(dt, error) == 0.002
     assert observed_order(dt, error) is None
     assert convergence_words(dt, error) == "stalls from dt = 0.002 s"
-    growing = np.array([0.01, 0.02, 0.04])  # dt 4, 2, 1 ms: the error grows as dt falls
-    assert stalled_from(np.array([0.004, 0.002, 0.001]), growing) == 0.004
+    three = np.array([0.004, 0.002, 0.001])
+    assert stalled_from(three, np.array([0.01, 0.02, 0.04])) == 0.004  # the error grows as dt falls
+    plateau = np.array([6.6e-5, 4.7e-5, 1.8e-6])  # a plateau, then convergence again: no stall
+    assert stalled_from(three, plateau) is None and observed_order(three, plateau) is not None
     power = np.array([0.004, 0.002, 0.001, 0.0005])
     assert stalled_from(power, 3.0 * power**2) is None
     assert convergence_words(power, 3.0 * power**2) == "order 2.00"

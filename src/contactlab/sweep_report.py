@@ -7,8 +7,8 @@
 * ``<scene>-convergence.png`` (where ``simulation.dt`` is an axis): that error against dt on
   log-log axes, one line per method and per setting of the other axes, the observed order of
   convergence — the slope of a least-squares line through log error against log dt — in its
-  legend, or, for a series that stalls (halving dt no longer reduces the error: a local order
-  below STALL_ORDER), "stalls from dt = …" and no order.
+  legend, or, for a series that stalls (its finest refinements of dt no longer reduce the
+  error: local orders below STALL_ORDER), "stalls from dt = …" and no order.
 * ``<scene>-iterations.png`` (where an axis ends in ``.iterations``): sweeps per step and the
   largest solver residual against the iteration limit, one line per method.
 
@@ -71,14 +71,19 @@ def _usable(dt, error):
 
 
 def stalled_from(dt: ArrayLike, error: ArrayLike) -> float | None:
-    """The dt [s] from which refining the step stops paying: the larger dt of the first pair of
-    neighbouring dt (going down) across which the local order log(e₁/e₂) / log(dt₁/dt₂) is below
-    STALL_ORDER (the error barely falls, or grows); None when every refinement converges."""
+    """The dt [s] from which refining the step stops paying: going down in dt, each refinement
+    from there on has a local order log(e₁/e₂) / log(dt₁/dt₂) below STALL_ORDER (the error
+    barely falls, or grows); None when the finest refinement still converges. A plateau the
+    series leaves again at a finer dt is no stall."""
     dt, error = _usable(dt, error)
-    for i in range(len(dt) - 1):
-        if dt[i + 1] < dt[i] and np.log(error[i] / error[i + 1]) < STALL_ORDER * np.log(dt[i] / dt[i + 1]):
-            return float(dt[i])
-    return None
+    stall = None
+    for i in range(len(dt) - 2, -1, -1):  # the finest pair first
+        if dt[i + 1] == dt[i]:
+            continue
+        if np.log(error[i] / error[i + 1]) >= STALL_ORDER * np.log(dt[i] / dt[i + 1]):
+            break
+        stall = float(dt[i])
+    return stall
 
 
 def observed_order(dt: ArrayLike, error: ArrayLike) -> float | None:
