@@ -410,7 +410,7 @@ def test_a_short_first_run_says_why_it_steps_slowly(monkeypatch):
 @pytest.mark.parametrize("compiled_loop", [True, False])
 def test_the_progress_bar_starts_its_clock_after_the_first_step(monkeypatch, compiled_loop):
     """The first step compiles (or loads) the kernels; the bar's rate and time left must be the
-    stepping's, so it is reset after that step and before any other progress (issue 22)."""
+    stepping's, so it is restarted after that step and before any other progress (issue 22)."""
     from conftest import ball_on_plane
 
     from contactlab import simulation
@@ -418,8 +418,8 @@ def test_the_progress_bar_starts_its_clock_after_the_first_step(monkeypatch, com
     events = []
 
     class Bar:
-        def __init__(self, **keywords):
-            events.append(("total", keywords["total"]))
+        def __init__(self, total, description, unit, show):
+            events.append(("total", total))
 
         def __enter__(self):
             return self
@@ -427,13 +427,13 @@ def test_the_progress_bar_starts_its_clock_after_the_first_step(monkeypatch, com
         def __exit__(self, *exception):
             return False
 
-        def reset(self):
-            events.append(("reset",))
+        def restart(self):
+            events.append(("restart",))
 
         def update(self, count):
             events.append(("update", count))
 
-    monkeypatch.setattr(simulation, "tqdm", Bar)
+    monkeypatch.setattr(simulation, "progress_bar", Bar)
     simulation.simulate(ball_on_plane(), "impulse", 0.01, 0.5, progress=True, compiled_loop=compiled_loop)
-    assert events[:3] == [("total", 50), ("reset",), ("update", 1)]
-    assert events.count(("reset",)) == 1 and sum(event[1] for event in events if event[0] == "update") == 50
+    assert events[:3] == [("total", 50), ("restart",), ("update", 1)]
+    assert events.count(("restart",)) == 1 and sum(event[1] for event in events if event[0] == "update") == 50

@@ -226,6 +226,51 @@ def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
     )
 
 
+def _drift_outcome(name, drift):
+    made = run._Outcome(name, None)
+    made.row = {"energy_drift_J": drift}
+    return made
+
+
+def test_energy_drifts_within_noise_are_not_ranked():
+    """Issue 37: box_pushed's drifts of 0.125 J (three methods) and 0.126 J (penalty) were
+    ranked best and worst; 1.5 mJ apart is within 2 % of the larger."""
+    exact = [_drift_outcome(name, -0.12500000054) for name in ("projection", "impulse", "constraints")]
+    assert report._energy_sentence([*exact, _drift_outcome("penalty", -0.12645946)]) == (
+        "Energy kept: all within noise of one another (total energy changed by 0.125 J to 0.126 J)."
+    )
+    rounding = [_drift_outcome("impulse", 1e-12), _drift_outcome("projection", -3e-10)]  # under 1 µJ apart
+    assert report._energy_sentence(rounding).startswith("Energy kept: all within noise of one another")
+    apart = [_drift_outcome("a", -0.125), _drift_outcome("b", 0.1262), _drift_outcome("c", -0.2)]
+    assert report._energy_sentence(apart) == (
+        "Energy kept best: a and b (total energy changed by 0.125 J to 0.126 J); "
+        "worst: c (total energy changed by 0.2 J)."
+    )
+    assert report._energy_sentence([apart[2]]) == "Energy kept best: c (total energy changed by 0.2 J)."
+
+
+def test_the_energy_scale_leaves_the_contact_springs_out():
+    """Issue 37: penalty's drift was divided by its own springs' peak (1.01 J on box_pushed), the
+    other methods' by the scene's 0.25 J. The scale is the most kinetic + potential energy
+    above the lowest potential energy: here 2 J + 1 J − (−1 J) = 4 J, whatever the springs held."""
+    from contactlab import ModelBuilder
+    from contactlab.compare import energy_scale
+
+    builder = ModelBuilder(gravity=(0, 0, -9.81))
+    builder.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
+    model = builder.finalize()
+    arrays = {
+        "energy_kinetic": np.array([0.0, 2.0, 1.0]),
+        "energy_potential": np.array([1.0, 1.0, -1.0]),
+        "energy_elastic": np.array([0.0, 0.0, 0.0]),
+        "body_position": np.zeros((3, 1, 3)),
+        "particle_position": np.zeros((3, 0, 3)),
+    }
+    assert energy_scale(model, arrays) == 4.0
+    arrays["energy_elastic"] = np.array([0.0, 10.0, 0.0])  # a spring's peak: no other scale
+    assert energy_scale(model, arrays) == 4.0
+
+
 def test_a_run_measures_its_rate_in_windows_and_gives_median_and_quartiles(cradle):
     from contactlab.simulation import WINDOW_SECONDS, Tally
 

@@ -163,6 +163,66 @@ def test_pushed_box_moves_with_the_pusher_against_mu_m_g(method):
     assert np.isclose(force.expected, 0.3 * 9.81)
 
 
+def _forces_on_box(info, dt):
+    """Per contact: (on the paddle?, force on the box (3,) [N], (F_n, F_t1, F_t2) [N], depth [m]),
+    from a penalty step's contacts and impulses (the box is body 0, the paddle body 1)."""
+    from contactlab.methods.penalty import contact_entities
+
+    contacts = info.contacts
+    a, b = contact_entities(contacts, 2)
+    found = []
+    for c in range(contacts.count):
+        f_n, f_1, f_2 = info.impulses[c] / dt
+        force = f_n * contacts.normal[c] + f_1 * contacts.tangent1[c] + f_2 * contacts.tangent2[c]
+        found.append((1 in (a[c], b[c]), force if a[c] == 0 else -force, info.impulses[c] / dt, contacts.depth[c]))
+    return found
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])  # the compiled matrix-free solve, and SciPy's
+@pytest.mark.parametrize("friction", [0.3, 0.0])
+def test_penalty_springs_push_the_box_with_what_it_needs_against_a_moving_paddle(friction, solver):
+    """Issue 37: under penalty, box_pushed's box sat 7.9 mm inside the paddle (26 x the 0.3 mm
+    its stiffness aims at), energy_elastic read 1.01 J, and each step reported 257 N of push
+    while the box went on at 0.5 m/s: the backward Euler springs took the moving paddle for one
+    at rest (penalty_implicit: both solves). Pushed at constant speed, the box
+    balances: the forces a step reports are the ones that moved it (m Δv = h (Σ F + m g)); the
+    paddle's push in x is the floor's sliding friction μ N, N = m g plus the paddle's vertical
+    drag on the box, so μ m g where there is none; each spring holds ½ k δ² = F² / (2 k) of
+    the k δ it pushes with; and a push below the box's weight per floor contact (the load
+    "auto" stiffness is set for) sinks less than allowed_penetration. Without friction nothing
+    needs pushing, and the paddle's springs hold nothing."""
+    from contactlab.methods import penalty
+
+    settings = [f"materials.0.friction={friction}", f"method.penalty.linear_solver={solver}"]
+    scene = load_scene("box_pushed", ["simulation.method=penalty", *settings])
+    model, dt, options = scene.model, scene.dt, scene.options["penalty"]
+    mass, g, state = 1.0, 9.81, model.state()
+    for _ in range(int(round(0.6 / dt))):  # the paddle meets the box at 0.26 s; the push settles
+        state, info = penalty.step(model, state, dt, options, scene.integrator)
+    for _ in range(int(round(0.3 / dt))):  # up to 0.9 s, still pushed (the path ends at 1 s)
+        before = state.body_velocity[0].copy()
+        state, info = penalty.step(model, state, dt, options, scene.integrator)
+        found = _forces_on_box(info, dt)
+        total = sum(force for _, force, _, _ in found)
+        np.testing.assert_allclose(mass * (state.body_velocity[0] - before) / dt, total + [0, 0, -mass * g], atol=1e-6)
+        paddle = [(force, f_n, depth) for on_paddle, force, f_n, depth in found if on_paddle]
+        push = sum(force[0] for force, _, _ in paddle)
+        drag = -sum(force[2] for force, _, _ in paddle)  # the paddle's pull down on the box [N]
+        assert abs(push - friction * (mass * g + drag)) <= 1e-3 * mass * g, (push, drag)
+        assert abs(drag) <= 0.1 * mass * g
+        assert max((depth for _, _, depth in paddle), default=0.0) <= options.allowed_penetration
+        if friction == 0.0:
+            assert push == pytest.approx(0.0, abs=1e-6) and all(f[0] <= 1e-6 for _, f, _ in paddle)
+    stiffness = mass * g / 4 / options.allowed_penetration  # "auto": the box's weight per floor contact
+    np.testing.assert_allclose(penalty.contact_stiffness(model, state, info.contacts, options), stiffness)
+    # k_t = k ("auto"): each spring, normal and anchor, holds F² / (2 k) of the force F it exerts
+    # (steady: no spring moves, so no damping in F)
+    energy = sum(f @ f / (2 * stiffness) for _, _, f, _ in _forces_on_box(info, dt))
+    assert info.energy_elastic == pytest.approx(energy, rel=1e-6)
+    if friction == 0.0:  # the floor's four springs alone, each holding m g / 4
+        assert info.energy_elastic == pytest.approx(4 * (mass * g / 4) ** 2 / (2 * stiffness), rel=1e-6)
+
+
 # ---- bad input ------------------------------------------------------------------------------------
 
 

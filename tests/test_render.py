@@ -2,6 +2,7 @@
 
 import dataclasses
 import os
+import re
 import subprocess
 import sys
 
@@ -268,10 +269,13 @@ def test_bad_sample_or_trajectory(box_run, tmp_path):
 # -- running ------------------------------------------------------------------------------
 
 
-def test_progress_bar_goes_to_stderr(box_run, tmp_path, capsys):
+def test_progress_goes_to_stderr(box_run, tmp_path, capsys, monkeypatch):
+    from contactlab import progress
+
+    monkeypatch.setattr(progress, "PLAIN_SECONDS", 0.0)  # stderr is no terminal here: a line per frame
     render.render(box_run, tmp_path, fps=10, formats=("gif",), progress=True, **SMALL)
     captured = capsys.readouterr()
-    assert "video" in captured.err and captured.out == ""
+    assert re.search(r"^video: (\d+)/\1 frames \(100 %\) after \d+ s$", captured.err, re.M) and captured.out == ""
 
 
 def test_drawing_never_touches_pyplot(tmp_path):

@@ -19,7 +19,7 @@ from contactlab.scene import load_scene
 from contactlab.scene.loader import read_source
 from contactlab.study import load_study, toml_value
 from contactlab.sweep import TIMING_COLUMNS
-from contactlab.sweep_report import observed_order, pareto_front
+from contactlab.sweep_report import convergence_words, observed_order, pareto_front, stalled_from
 
 BALL_STUDY = """
 [study]
@@ -134,6 +134,24 @@ def test_the_observed_order_of_a_power_law_is_its_exponent():
     assert observed_order(dt, 3.0 * dt**2) == pytest.approx(2.0, abs=1e-12)
     assert observed_order(dt, 0.5 * dt) == pytest.approx(1.0, abs=1e-12)
     assert observed_order(dt[:1], dt[:1]) is None and observed_order(dt, np.zeros(4)) is None
+
+
+def test_a_series_that_stalls_gets_no_order_but_the_dt_it_stalls_from():
+    """Issue 37: errors 0.99 -> 0.044 -> 0.042 were fitted "order 2.27"; halving dt from 2 ms
+    to 1 ms bought a local order of log(0.044/0.042)/log 2 = 0.07, below STALL_ORDER."""
+    dt = np.array([0.001, 0.004, 0.002])  # any order: the series is read by decreasing dt
+    error = np.array([0.042, 0.99, 0.044])
+    assert stalled_from(dt, error) == 0.002
+    assert observed_order(dt, error) is None
+    assert convergence_words(dt, error) == "stalls from dt = 0.002 s"
+    three = np.array([0.004, 0.002, 0.001])
+    assert stalled_from(three, np.array([0.01, 0.02, 0.04])) == 0.004  # the error grows as dt falls
+    plateau = np.array([6.6e-5, 4.7e-5, 1.8e-6])  # a plateau, then convergence again: no stall
+    assert stalled_from(three, plateau) is None and observed_order(three, plateau) is not None
+    power = np.array([0.004, 0.002, 0.001, 0.0005])
+    assert stalled_from(power, 3.0 * power**2) is None
+    assert convergence_words(power, 3.0 * power**2) == "order 2.00"
+    assert convergence_words(power[:1], power[:1]) == ""
 
 
 def test_the_pareto_front_holds_exactly_the_cells_nothing_beats():

@@ -239,7 +239,7 @@ def _run(args):
     try:  # the samples stream into trajectory.h5 as the run goes
         result = scene.simulate(
             record_every=args.record_every,
-            progress=sys.stderr.isatty(),
+            progress=True,
             allow_divergence=args.allow_divergence,
             memory_limit=memory_limit,
             trajectory=trajectory,
@@ -274,7 +274,6 @@ def _run(args):
 
 def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), every=1):
     """Plots, video and exports of a run written into ``out``; returns the paths written."""
-    progress = sys.stderr.isatty()
     written = []
     if plots:
         from .plots import write_plots
@@ -283,7 +282,7 @@ def _extras(arrays, out, title, plots=False, video=False, fps=30, exports=(), ev
     if video:
         from .render import render
 
-        written += list(render(arrays, out, fps=fps, title=title, progress=progress).values())
+        written += list(render(arrays, out, fps=fps, title=title, progress=True).values())
     if "usd" in exports:
         from .export import write_usd
 
@@ -320,7 +319,7 @@ def _compare(args):
         args.out,
         overrides=_scene_overrides(args),
         video=not args.no_video,
-        progress=sys.stderr.isatty(),
+        progress=True,
         fps=args.fps,
         allow_divergence=args.allow_divergence,
         workers=args.workers,
@@ -344,7 +343,7 @@ def _sweep(args):
         out,
         scheduler=args.scheduler,
         workers=args.workers,
-        progress=sys.stderr.isatty(),
+        progress=True,
         log=lambda line: print(line, file=sys.stderr),
     )
     counts = ", ".join(f"{count} {status}" for status, count in table["status"].value_counts().items())
@@ -449,7 +448,7 @@ def _main(argv):
                 workers=args.workers,
                 tol=args.tol,
                 repeats=args.repeats,
-                progress=sys.stderr.isatty(),
+                progress=True,
             )
             solved = result.table.groupby("solver", sort=False)["converged"].sum()
             problems = result.table["problem"].nunique()
@@ -474,7 +473,7 @@ def _main(argv):
                 elevation=args.elevation,
                 azimuth=args.azimuth,
                 title=title,
-                progress=sys.stderr.isatty(),
+                progress=True,
             )
             print("Wrote " + ", ".join(paths.values()))
         elif args.command == "view":

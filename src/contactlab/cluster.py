@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 from . import interrupts
 from .errors import InputError, first_line
+from .progress import bar as progress_bar
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -148,7 +149,8 @@ def run_tasks(
 ) -> Iterator[tuple[Any, Any]]:
     """Run ``function(job)`` for every ``(key, job)`` of ``jobs`` on ``client``'s workers;
     yield ``(key, result)`` as each finishes — the exception in place of the result when one
-    escaped the function or its workers kept dying. ``progress``: a tqdm bar on stderr. A
+    escaped the function or its workers kept dying. ``progress``: progress over the jobs on
+    stderr (contactlab.progress: a bar on a terminal, else a line every few seconds). A
     signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`, and the jobs not
     finished are cancelled."""
     from distributed import wait
@@ -158,17 +160,14 @@ def run_tasks(
     for key, job in jobs:
         future = client.submit(function, job, key=f"contactlab-{key}-{token}", pure=False)
         futures[future] = key
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(futures), desc=description, unit="job", leave=False)
+    bar = progress_bar(len(futures), description, "job", progress)
     try:
         while futures:
             interrupts.check()
             try:
                 finished = wait(list(futures), timeout=POLL_SECONDS, return_when="FIRST_COMPLETED").done
             except TimeoutError:
+                bar.tick()  # no job finished: a line where stderr is no terminal, every few seconds still
                 continue
             for future in finished:
                 key = futures.pop(future)
@@ -177,14 +176,12 @@ def run_tasks(
                 except Exception as error:  # escaped the job function, or its workers died
                     result = error
                 future.release()
-                if bar is not None:
-                    bar.update(1)
+                bar.update(1)
                 yield key, result
     finally:
         for future in futures:  # stopped early (a signal, the caller): cancel the rest
             future.cancel()
-        if bar is not None:
-            bar.close()
+        bar.close()
 
 
 def worker_address() -> str:

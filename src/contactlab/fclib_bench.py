@@ -280,7 +280,7 @@ def bench(
     error (dimensionless); a row is converged when its error ≤ tol. ``max_iterations``: one
     cap for every solver, or None for MAX_ITERATIONS (newton 1000 Newton steps, the others
     10 000 sweeps, rounds or steps). ``repeats``: timed solves per job, after an untimed one;
-    the best time is kept. ``progress``: a progress bar on stderr.
+    the best time is kept. ``progress``: progress on stderr (contactlab.progress).
 
     Every argument is checked before any work: InputError naming the field ("DIR",
     "--solvers", "--tol", "--max-iterations", "--repeats", "--out", "--workers", "--scheduler").

@@ -42,10 +42,10 @@ from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from numpy.typing import ArrayLike
 from PIL import Image
-from tqdm import tqdm
 
 from . import interrupts, surfaces
 from .errors import InputError
+from .progress import bar as progress_bar
 from .record import DRAWN, atomic_path, checked_times, make_folders, read_trajectory, remove_empty
 from .scenery import axis_limits, scenery, triangle_normals
 from .trajectory import check_arrays
@@ -87,7 +87,8 @@ def render(
     width, height [px] from MIN_SIZE to MAX_SIZE (the MP4's are rounded up to even numbers, the GIF is scaled down
     to at most ``GIF_MAX_HEIGHT`` px high); elevation, azimuth [degrees]: the camera, as in
     matplotlib's ``view_init``; title: a line above the picture (e.g. "box_pyramid — impulse");
-    progress: a tqdm bar over the frames on stderr. The still is the last sample.
+    progress: progress over the frames on stderr (contactlab.progress: a bar on a terminal, else a
+    line every few seconds). The still is the last sample.
     All files appear together or not at all: on failure nothing is left behind.
     """
     fps = check_settings(fps, width, height, elevation, azimuth)[0]
@@ -156,15 +157,18 @@ def _write_videos(picture, paths, fps, progress):
     mp4_count = Counter(nearest(time, mp4_times).tolist() if "mp4" in paths else [])
     gif_count = Counter(nearest(time, gif_times).tolist() if "gif" in paths else [])
     gif_frames = []
-    with _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4:
-        for sample in tqdm(
-            sorted(mp4_count | gif_count), desc="video", unit="frame", leave=False, disable=not progress
-        ):
+    samples = sorted(mp4_count | gif_count)
+    with (
+        _mp4_writer(paths["mp4"], fps) if "mp4" in paths else contextlib.nullcontext() as mp4,
+        progress_bar(len(samples), "video", "frame", progress) as shown,
+    ):
+        for sample in samples:
             interrupts.check()  # Ctrl-C or SIGTERM: between frames
             image = picture.draw(sample)
             for _ in range(mp4_count[sample]):
                 mp4.append_data(_even(image))
             gif_frames += [_shrink(image, GIF_MAX_HEIGHT)] * gif_count[sample]
+            shown.update(1)
     if gif_frames:
         imageio.v3.imwrite(paths["gif"], np.stack(gif_frames), plugin="pillow", duration=10 * gif_delay, loop=0)
 

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numba.core import event as numba_event
-from tqdm import tqdm
 
 from . import budget, interrupts, methods, plausibility
 from .collision import check_supported
@@ -26,6 +25,7 @@ from .errors import InputError, SimulationDiverged
 from .health import ENERGY_SERIES, HARD_SPEED, Health
 from .methods import velocity_loop
 from .model import Model
+from .progress import bar as progress_bar
 from .record import Recorder, streaming_recorder
 from .state import State, array_shapes
 from .store import TrajectoryFile
@@ -179,7 +179,8 @@ def simulate(
     were checked when built, as ``load_scene`` builds ``scene.options``), or a dict or None, built
     into them here; dt [s] > 0 and no longer than duration [s] (at most 10⁹ steps,
     :func:`contactlab.validation.run_length`); the model must hold a body or particle; record_every:
-    sample every K steps (the first and last states are always sampled); threads: "auto" (the
+    sample every K steps (the first and last states are always sampled); progress: the steps
+    shown on stderr (:mod:`contactlab.progress`: a bar on a terminal, else a line every 5 s); threads: "auto" (the
     default, see :func:`contactlab.threads.set_threads`: all cores, or one while that steps faster
     on a busy machine) or a whole number — results are bit for bit the same on any count;
     compiled_loop: for every method on the scenes the compiled stepping loop serves, None
@@ -290,9 +291,7 @@ def _record_run(plan, recorder, state, chooser, health, clock):
     with (
         numba_event.install_listener("numba:compile", compiling),
         compile_notice(notice),
-        tqdm(
-            total=steps, delay=1.0, disable=not progress, unit="step", leave=False, desc=f"{scene_name} ({method})"
-        ) as bar,
+        progress_bar(steps, f"{scene_name} ({method})", "step", progress) as bar,
         chooser,
     ):
         try:
@@ -501,7 +500,7 @@ def _advance(bar, step_index, made):
     """Move the progress bar by ``made`` steps; after the first step, which compiled the kernels
     (or loaded them), its clock starts again, so its rate and time left are the stepping's."""
     if step_index == 1:
-        bar.reset()
+        bar.restart()
     bar.update(made)
 
 

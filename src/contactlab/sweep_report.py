@@ -7,7 +7,8 @@
 * ``<scene>-convergence.png`` (where ``simulation.dt`` is an axis): that error against dt on
   log-log axes, one line per method and per setting of the other axes, the observed order of
   convergence — the slope of a least-squares line through log error against log dt — in its
-  legend.
+  legend, or, for a series that stalls (its finest refinements of dt no longer reduce the
+  error: local orders below STALL_ORDER), "stalls from dt = …" and no order.
 * ``<scene>-iterations.png`` (where an axis ends in ``.iterations``): sweeps per step and the
   largest solver residual against the iteration limit, one line per method.
 
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 METHOD_COLOURS = {"penalty": "tab:blue", "projection": "tab:orange", "impulse": "tab:green", "constraints": "tab:red"}
 METHOD_MARKERS = {"penalty": "o", "projection": "s", "impulse": "^", "constraints": "v"}  # coinciding runs show
 DT_AXIS = "simulation.dt"
+STALL_ORDER = 0.5  # a local order of convergence below this: refining dt no longer reduces the error
 
 
 def accuracy(table: pd.DataFrame) -> tuple[str, pd.Series]:
@@ -60,13 +62,47 @@ def pareto_front(cost: ArrayLike, error: ArrayLike) -> list[int]:
     return front
 
 
-def observed_order(dt: ArrayLike, error: ArrayLike) -> float | None:
-    """The slope of log(error) against log(dt) by least squares (None under two usable points)."""
+def _usable(dt, error):
+    """The points (dt, error) a log-log fit can use (both finite and > 0), as float arrays by decreasing dt."""
     dt, error = np.asarray(dt, dtype=float), np.asarray(error, dtype=float)
     usable = np.isfinite(dt) & np.isfinite(error) & (dt > 0) & (error > 0)
-    if np.count_nonzero(usable) < 2 or len(np.unique(dt[usable])) < 2:
+    order = np.argsort(-dt[usable], kind="stable")
+    return dt[usable][order], error[usable][order]
+
+
+def stalled_from(dt: ArrayLike, error: ArrayLike) -> float | None:
+    """The dt [s] from which refining the step stops paying: going down in dt, each refinement
+    from there on has a local order log(e₁/e₂) / log(dt₁/dt₂) below STALL_ORDER (the error
+    barely falls, or grows); None when the finest refinement still converges. A plateau the
+    series leaves again at a finer dt is no stall."""
+    dt, error = _usable(dt, error)
+    stall = None
+    for i in range(len(dt) - 2, -1, -1):  # the finest pair first
+        if dt[i + 1] == dt[i]:
+            continue
+        if np.log(error[i] / error[i + 1]) >= STALL_ORDER * np.log(dt[i] / dt[i + 1]):
+            break
+        stall = float(dt[i])
+    return stall
+
+
+def observed_order(dt: ArrayLike, error: ArrayLike) -> float | None:
+    """The slope of log(error) against log(dt) by least squares; None under two usable points,
+    and None for a series that stalls (stalled_from): no order describes it."""
+    dt, error = _usable(dt, error)
+    if len(dt) < 2 or len(np.unique(dt)) < 2 or stalled_from(dt, error) is not None:
         return None
-    return float(np.polyfit(np.log(dt[usable]), np.log(error[usable]), 1)[0])
+    return float(np.polyfit(np.log(dt), np.log(error), 1)[0])
+
+
+def convergence_words(dt: ArrayLike, error: ArrayLike) -> str:
+    """What a convergence plot's legend says of one series: "order 1.98", "stalls from dt = 0.002 s",
+    or "" (too few points)."""
+    stall = stalled_from(dt, error)
+    if stall is not None:
+        return f"stalls from dt = {stall:g} s"
+    order = observed_order(dt, error)
+    return f"order {order:.2f}" if order is not None else ""
 
 
 def _ok(table):
@@ -106,9 +142,9 @@ def _convergence_figure(scene, rows, axes):
     styles = {}
     for (method, *setting), group in rows.groupby(["method", *others], sort=False, dropna=False):
         group = group.sort_values(DT_AXIS)
-        order = observed_order(group[DT_AXIS], error[group.index])
+        words = convergence_words(group[DT_AXIS], error[group.index])
         shown = ", ".join(f"{axis.split('.')[-1]} = {value}" for axis, value in zip(others, setting))
-        name = f"{method}{f' ({shown})' if shown else ''}" + (f": order {order:.2f}" if order is not None else "")
+        name = f"{method}{f' ({shown})' if shown else ''}" + (f": {words}" if words else "")
         style = styles.setdefault(tuple(setting), STYLES[len(styles) % len(STYLES)])
         ax.plot(
             *_finite(group[DT_AXIS], error[group.index]),

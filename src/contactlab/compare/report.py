@@ -174,26 +174,65 @@ def _html_table(headings, cells):
 # ---- words ------------------------------------------------------------------------------------
 
 
-def _leaders(outcomes, value, lowest):
-    """Methods sharing the best ``value`` (to the 3 significant digits the report shows)."""
-    values = {outcome.method: value(outcome) for outcome in outcomes}
-    best = min(values.values()) if lowest else max(values.values())
-    return [name for name, v in values.items() if f"{v:.3g}" == f"{best:.3g}"], best
+ENERGY_NOISE_SHARE = 0.02  # two energy drifts closer than this share of the larger are not ranked ...
+ENERGY_NOISE_FLOOR = 1e-6  # J ... nor those closer than this (rounding: drifts near 0)
+
+
+def _same_shown(one, other):
+    """Whether two values read the same to the 3 significant digits the report shows."""
+    return f"{one:.3g}" == f"{other:.3g}"
+
+
+def _energy_alike(one: float, other: float) -> bool:
+    """Whether two energy drifts' magnitudes [J] are within noise of each other: apart by at
+    most ENERGY_NOISE_SHARE of the larger, or by at most ENERGY_NOISE_FLOOR."""
+    one, other = abs(one), abs(other)
+    return abs(one - other) <= max(ENERGY_NOISE_SHARE * max(one, other), ENERGY_NOISE_FLOOR)
+
+
+def _group(values, leader, alike):
+    """The names whose value is ``alike`` the ``leader`` value, in their order."""
+    return [name for name, v in values.items() if alike(v, leader)]
 
 
 def _names(names):
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
-def _ranking(ran, labels, value, lowest, show):
-    """ "<best label>: <methods> (<value>); <worst label>: <methods> (<value>)", or, when all
-    share the best value, that they do."""
-    best, best_value = _leaders(ran, value, lowest)
+def _span(values, names, show):
+    """``show`` of the values of ``names``: one value, or "<lowest> to <highest>" when they read differently."""
+    low, high = min(values[name] for name in names), max(values[name] for name in names)
+    return show(low) if show(low) == show(high) else f"{show(low)} to {show(high)}"
+
+
+def _ranking(ran, labels, value, lowest, show, alike=_same_shown, lead=""):
+    """ "<best label>: <methods> (<value>); <worst label>: <methods> (<value>)", each group
+    the methods whose value is ``alike`` its leader's (the same to the digits shown, or within
+    the noise band ``alike`` states); when every method is alike the best, ``labels[2]`` and
+    their values (each group's in brackets, after ``lead``): nothing is ranked inside the noise."""
+    values = {outcome.method: value(outcome) for outcome in ran}
+    best_value = min(values.values()) if lowest else max(values.values())
+    worst_value = max(values.values()) if lowest else min(values.values())
+    best = _group(values, best_value, alike)
     if len(ran) > 1 and len(best) == len(ran):
-        return f"{labels[0]}: all the same ({show(best_value)})."
-    worst, worst_value = _leaders(ran, value, not lowest)
-    tail = f"; {labels[1]}: {_names(worst)} ({show(worst_value)})" if len(ran) > 1 else ""
-    return f"{labels[0]}: {_names(best)} ({show(best_value)}){tail}."
+        return f"{labels[2]} ({lead}{_span(values, best, show)})."
+    worst = [name for name in _group(values, worst_value, alike) if name not in best]
+    tail = f"; {labels[1]}: {_names(worst)} ({lead}{_span(values, worst, show)})" if len(ran) > 1 else ""
+    return f"{labels[0]}: {_names(best)} ({lead}{_span(values, best, show)}){tail}."
+
+
+def _energy_sentence(ran):
+    """Who kept the total energy best and worst by |drift|, naming together the methods whose
+    drifts are within noise (_energy_alike), and nobody best or worst when all are."""
+    return _ranking(
+        ran,
+        ("Energy kept best", "worst", "Energy kept: all within noise of one another"),
+        lambda o: abs(o.row["energy_drift_J"]),
+        True,
+        lambda v: f"{v:.3g} J",
+        _energy_alike,
+        "total energy changed by ",
+    )
 
 
 def _alike(one, other):
@@ -276,21 +315,13 @@ def paragraph(scene: Scene, outcomes: Sequence[_Outcome], skipped: Mapping[str, 
         sentences.append(
             _ranking(
                 ran,
-                ("Least penetration", "deepest"),
+                ("Least penetration", "deepest", "Least penetration: all the same"),
                 lambda o: o.row["max_penetration_mm"],
                 True,
                 lambda v: f"{v:.3g} mm",
             )
         )
-        sentences.append(
-            _ranking(
-                ran,
-                ("Energy kept best", "worst"),
-                lambda o: abs(o.row["energy_drift_J"]),
-                True,
-                lambda v: f"total energy changed by {v:.3g} J",
-            )
-        )
+        sentences.append(_energy_sentence(ran))
         if dissipative(scene.model):
             sentences.append(
                 "Restitution below 1 or friction makes this scene lose energy by design, "
@@ -314,9 +345,13 @@ def _notes(outcomes):
     """Caveats worth printing under the table, as plain sentences."""
     notes = [
         "Energy drift is the total energy (kinetic + potential + elastic) at the end minus at "
-        "the start; its % is of the run's energy scale: the larger of the most energy it held above "
-        "the lowest potential energy it reached, and the initial potential energy above the lowest "
-        "mass.",
+        "the start; its % is of the run's energy scale: the larger of the most kinetic plus potential "
+        "energy it held above the lowest potential energy it reached (the contact springs' elastic "
+        "energy left out: it depends on the method), and the initial potential energy above the "
+        "lowest mass.",
+        f"Energy drifts are ranked only when they differ by more than {ENERGY_NOISE_SHARE:.0%} of the "
+        f"larger and by more than {ENERGY_NOISE_FLOOR * 1e6:g} µJ; closer drifts are named together, "
+        "within noise of one another.",
         "Solver residuals are in each method's own unit (impulse, constraints: m/s of the last "
         "sweep; projection: m; penalty with backward Euler: relative linear residual), so compare "
         "them within a method, not across.",

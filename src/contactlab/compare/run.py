@@ -313,11 +313,11 @@ def compare(
     methods: names (a list, or one comma-separated string); None: every method of
     contactlab.methods.AVAILABLE that supports the scene. overrides: "dotted.key=value"
     strings as the command line's --set; duration [s]: overrides simulation.duration;
-    video: render each run (contactlab.render) at ``fps`` frames per second; progress: tqdm
-    bars on stderr; allow_divergence: each run's (see ``simulate``); workers, scheduler: where the
-    runs go — one after another here, or on a Dask cluster, local (``workers`` processes) or at
-    the address ``scheduler`` (contactlab.cluster); None: a local cluster when it pays (see
-    docs/compare.md). Raises InputError for a bad
+    video: render each run (contactlab.render) at ``fps`` frames per second; progress:
+    progress on stderr (contactlab.progress); allow_divergence: each run's (see ``simulate``);
+    workers, scheduler: where the runs go — one after another here, or on a Dask cluster, local
+    (``workers`` processes) or at the address ``scheduler`` (contactlab.cluster); None: a local
+    cluster when it pays (see docs/compare.md). Raises InputError for a bad
     scene, an unknown method or bad options, before anything is written. A method that blows up
     (a failed health check) is reported, not raised.
     """
