@@ -21,6 +21,10 @@ One step, stage by stage as on the slide:
 5. recompute velocities and positions: x = x₀ + h v⁺ — so a body at rest stays put — with the
    time-of-impact correction below; advance time.
 
+Friction (F2) is not written here: both phases sweep contacts with
+:func:`contactlab.methods.sequential.sweep_contacts`, whose per-contact update clamps the
+tangential impulse to the friction cone μ λ (the same sweep serves ``constraints``).
+
 Time of impact. A contact that was open at the start of the step (gap d₀ > 0) closes at the
 fraction τ = d₀ / (−h v_n*) of it. The body travels with v* until then and with v⁺ after, so
 its position is x₀ + h(τ v* + (1 − τ) v⁺) (orientation likewise). This is what makes bounce
