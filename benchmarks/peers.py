@@ -903,118 +903,97 @@ MANY_RUNS = 200  # runs of it in one process (a study's cells)
 _SHORT_CHILD = """
 import json, sys, time
 sys.path.insert(0, {here!r})
-engine = {engine!r}
+engine, runs, warm_loop = {engine!r}, {runs!r}, {warm_loop!r}
 started = time.perf_counter()
+import peers
+steps = int(round({duration!r} / peers.DT))
 if engine == "contactlab":
-    import peers
     from contactlab.simulation import simulate
     model = peers.contactlab_ball()
+    if runs > 1:  # a study's runs: one that loads (or compiles) the kernels, then the timed ones
+        simulate(model, "impulse", dt=peers.DT, duration={duration!r}, compiled_loop=warm_loop or None)
     run_started = time.perf_counter()
-    summary = simulate(model, "impulse", dt=peers.DT, duration={duration!r}).summary
+    for _ in range(runs):
+        summary = simulate(model, "impulse", dt=peers.DT, duration={duration!r}).summary
     run_wall = time.perf_counter() - run_started
     out = dict(steps_per_second=summary["steps_per_second"], compiled_loop=summary["compiled_loop"],
-               threads=summary["threads"])
+               stepping=summary["stepping"], threads=summary["threads"])
 else:
-    import mujoco, peers
+    import mujoco
     peers.mujoco = mujoco
     m, d = peers.mujoco_ball()
-    steps = int(round({duration!r} / peers.DT))
     run_started = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(m, d)
+    for _ in range(runs):
+        mujoco.mj_resetData(m, d)
+        for _ in range(steps):
+            mujoco.mj_step(m, d)
     run_wall = time.perf_counter() - run_started
-    out = dict(steps_per_second=steps / run_wall)
-out.update(run_wall=run_wall, process_wall=time.perf_counter() - started)
+    out = dict(steps_per_second=runs * steps / run_wall)
+out.update(runs=runs, run_wall=run_wall, ms_per_run=1e3 * run_wall / runs, process_wall=time.perf_counter() - started)
 print(json.dumps(out))
 """
 
 
-def _short_child(engine, env):
-    """One 720-step ball run in a fresh process of ``engine``: its JSON line as a dict."""
-    code = _SHORT_CHILD.format(here=HERE, engine=engine, duration=SHORT_RUN)
+def _short_child(engine, env, runs=1, warm_loop=False):
+    """``runs`` 720-step ball runs in a fresh process of ``engine`` (after one untimed where
+    ``runs`` > 1, through the compiled loop where ``warm_loop``): its JSON line as a dict."""
+    code = _SHORT_CHILD.format(here=HERE, engine=engine, duration=SHORT_RUN, runs=runs, warm_loop=warm_loop)
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def short_runs(results, path, runs=MANY_RUNS):
-    """Issue 36's short runs, as a user and a study meet them.
+    """Issue 36's short runs, as a user and a study meet them, each engine in processes of its own
+    sharing one new compile cache.
 
-    * ``shortrun``: the 720-step ball (``impulse``, dt 1/240) in a fresh process, on an empty
-      compile cache and then again on the cache the first left; MuJoCo's same ball in a fresh
+    * ``shortrun``: the 720-step ball (``impulse``, dt 1/240) in a fresh process on the empty
+      cache, then again in another on the cache the first left; MuJoCo's same ball in a fresh
       process. The second run's steps/s is the target: a user's every later run.
-    * ``manyruns``: ``runs`` such runs through ``simulate()`` in one process (after one that
-      loads the kernels) against MuJoCo resetting (``mj_resetData``) and stepping its ball as
-      often: runs/s of each, per-run milliseconds."""
+    * ``manyruns``: ``runs`` such runs through ``simulate()`` in one process after one untimed
+      run, at the defaults (on the cache the short runs left) and again after one run through
+      the compiled loop (``compiled_loop=True``, which caches it); MuJoCo resetting
+      (``mj_resetData``) and stepping its ball as often: ms a run."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         load_before = os.getloadavg()[0]
         first, second = _short_child("contactlab", env), _short_child("contactlab", env)
         peer = _short_child("mujoco", env) if mujoco is not None else None
+        load_between = os.getloadavg()[0]
+        many = _short_child("contactlab", env, runs)
+        many_loop = _short_child("contactlab", env, runs, warm_loop=True)
+        many_peer = _short_child("mujoco", env, runs) if mujoco is not None else None
         load_after = os.getloadavg()[0]
+    shared = dict(method="impulse", steps=int(round(SHORT_RUN / DT)))
     record(
         results,
         "shortrun/contactlab",
         dict(
             scene="shortrun",
             engine="contactlab",
-            method="impulse",
-            steps=int(round(SHORT_RUN / DT)),
             first=first,
             second=second,
             steps_per_second=second["steps_per_second"],
-            load=[round(load_before, 2), round(load_after, 2)],
+            load=[round(load_before, 2), round(load_between, 2)],
+            **shared,
         ),
         path,
     )
-    if peer is not None:
-        record(results, "shortrun/mujoco", dict(scene="shortrun", engine="mujoco", method=MUJOCO_LABEL, **peer), path)
-    from contactlab.simulation import simulate
-
-    model = contactlab_ball()
-    simulate(model, "impulse", dt=DT, duration=SHORT_RUN)  # loads (or compiles) the kernels
-    load_before = os.getloadavg()[0]
-    started = time.perf_counter()
-    for _ in range(runs):
-        summary = simulate(model, "impulse", dt=DT, duration=SHORT_RUN).summary
-    ours = runs / (time.perf_counter() - started)
     record(
         results,
         "manyruns/contactlab",
         dict(
             scene="manyruns",
             engine="contactlab",
-            method="impulse",
-            runs=runs,
-            runs_per_second=ours,
-            ms_per_run=1e3 / ours,
-            compiled_loop=summary["compiled_loop"],
-            threads=summary["threads"],
-            load=[round(load_before, 2), round(os.getloadavg()[0], 2)],
+            defaults=many,
+            loop_compiled=many_loop,
+            load=[round(load_between, 2), round(load_after, 2)],
+            **shared,
         ),
         path,
     )
-    if mujoco is not None:
-        m, d = mujoco_ball()
-        steps = int(round(SHORT_RUN / DT))
-        started = time.perf_counter()
-        for _ in range(runs):
-            mujoco.mj_resetData(m, d)
-            for _ in range(steps):
-                mujoco.mj_step(m, d)
-        theirs = runs / (time.perf_counter() - started)
-        record(
-            results,
-            "manyruns/mujoco",
-            dict(
-                scene="manyruns",
-                engine="mujoco",
-                method=MUJOCO_LABEL,
-                runs=runs,
-                runs_per_second=theirs,
-                ms_per_run=1e3 / theirs,
-            ),
-            path,
-        )
+    if peer is not None:
+        record(results, "shortrun/mujoco", dict(scene="shortrun", engine="mujoco", **peer), path)
+        record(results, "manyruns/mujoco", dict(scene="manyruns", engine="mujoco", **many_peer), path)
 
 
 def assembled_pile_lcp(count=4000, settle=0.5):

@@ -255,13 +255,16 @@ def issue36_targets(results):
     ours, theirs = runs.get("manyruns/contactlab"), runs.get("manyruns/mujoco")
     target = "200 such runs through simulate() in one process ≥ ½ MuJoCo's reset-and-step throughput"
     if ours and theirs:
-        ratio = ours["runs_per_second"] / theirs["runs_per_second"]
+        defaults, looped = ours["defaults"], ours["loop_compiled"]
+        ratio = theirs["ms_per_run"] / defaults["ms_per_run"]
         out.append(
             (
                 target,
-                f"{ratio:.2f}× ({ours['ms_per_run']:.2f} vs {theirs['ms_per_run']:.2f} ms a run; compiled loop "
-                f"{ours['compiled_loop']}; load {'–'.join(f'{x:.2f}' for x in ours['load'])})",
-                "met" if ratio >= 0.5 else "NOT met",
+                f"at the defaults on the short runs' cache {ratio:.3f}× ({defaults['ms_per_run']:.2f} vs "
+                f"{theirs['ms_per_run']:.2f} ms a run, stepping: {defaults['stepping']}); once the loop is "
+                f"compiled {theirs['ms_per_run'] / looped['ms_per_run']:.2f}× ({looped['ms_per_run']:.2f} ms a "
+                f"run, stepping: {looped['stepping']}); load {'–'.join(f'{x:.2f}' for x in ours['load'])}",
+                "met" if ratio >= 0.5 else "NOT met at the defaults",
             )
         )
     else:
