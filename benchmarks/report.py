@@ -444,7 +444,7 @@ def plots(results, plot_dir):
     runs = [
         (k, r)
         for k, r in sorted(results.get("runs", {}).items())
-        if r.get("scene") not in ("scaling", "lcp") and "steps_per_second" in r
+        if r.get("scene") not in ("scaling", "lcp", "shortrun", "manyruns") and "steps_per_second" in r
     ]
     if runs:
         scenes = sorted(
