@@ -1,6 +1,6 @@
 """Solver benchmarks over a folder of FCLIB problems, run through Dask (``contactlab fclib bench``).
 
-    result = bench("../shared/data/fclib", solvers=["nsgs", "newton"], out="out/fclib-bench")
+    result = bench("data/fclib", solvers=["nsgs", "newton"], out="out/fclib-bench")
     result.table            # one row per (problem, solver)
 
 Every problem file of a folder (FCLIB ``.hdf5`` / ``.h5``, Siconos ``.dat``) is solved by every
