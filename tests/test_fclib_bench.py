@@ -192,6 +192,9 @@ def test_other_settings(tmp_path):
         (dict(tol=-1.0), "--tol"),
         (dict(max_iterations=0), "--max-iterations"),
         (dict(out=tmp_path / "file"), "--out"),
+        (dict(scheduler="http://127.0.0.1:8786"), "--scheduler"),
+        (dict(scheduler="tcp://127.0.0.1:65536"), "--scheduler"),
+        (dict(workers=0), "--workers"),
     ):
         with pytest.raises(InputError) as caught:
             bench(tmp_path, **{"out": tmp_path / "out", **keywords})

@@ -355,6 +355,49 @@ def test_a_bad_study_on_the_command_line_is_one_line_exit_2_and_nothing_written(
     assert sorted(os.listdir(tmp_path)) == ["study.toml"]
 
 
+@pytest.mark.parametrize(
+    "address, words",
+    [
+        ("tcp://127.0.0.1:99999", "must be a whole number from 1 to 65535, found '99999'"),
+        ("tcp://127.0.0.1:0", "from 1 to 65535, found '0'"),
+        ("tcp://127.0.0.1:-5", "from 1 to 65535, found '-5'"),
+        ("tcp://127.0.0.1:http", "from 1 to 65535, found 'http'"),
+        ("tcp://127.0.0.1", "expected tcp://HOST:PORT"),
+        ("tcp://:8786", "expected tcp://HOST:PORT"),
+        ("http://127.0.0.1:8786", "expected a Dask scheduler's tcp://HOST:PORT address"),
+        ("127.0.0.1:8786", "expected a Dask scheduler's tcp://HOST:PORT address"),
+    ],
+)
+def test_a_malformed_scheduler_address_is_refused_before_anything_runs(tmp_path, address, words):
+    # issue 37: these went to Dask, which waited out its timeout (or advised 'dask worker http://…')
+    from contactlab import sweep
+
+    lines = []
+    started = time.monotonic()
+    with pytest.raises(InputError) as refused:
+        sweep.run(write(tmp_path, BALL_STUDY), tmp_path / "out", scheduler=address, log=lines.append)
+    assert time.monotonic() - started < 1.0
+    assert refused.value.field == "--scheduler" and words in refused.value.message, refused.value
+    assert "dask worker" not in refused.value.message and lines == []
+    assert os.listdir(tmp_path) == ["study.toml"]
+
+
+def test_a_scheduler_nobody_listens_at_fails_at_once_in_one_line(tmp_path):
+    # issue 37: a refused connection waited Dask's 10 s, after a "N cells: … to run" line
+    write(tmp_path, BALL_STUDY)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    started = time.monotonic()
+    result = _sweep_command("study.toml", "--scheduler", address, cwd=tmp_path)
+    seconds = time.monotonic() - started
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.splitlines() == [
+        f"error: study.toml: --scheduler: could not reach a Dask scheduler at {address} (connection refused); "
+        f"start one with 'dask scheduler' and workers with 'dask worker {address}'"
+    ]
+    assert seconds < 8.0, seconds  # python and contactlab's imports, then one refused connection
+    assert os.listdir(tmp_path) == ["study.toml"]
+
+
 def _spin(stop):
     while not stop.is_set():
         pass

@@ -289,6 +289,7 @@ def bench(
     caps = _caps(max_iterations, solvers)
     out = Path(DEFAULT_OUT if out is None else out)
     _check_settings(tol, repeats, out)
+    cluster.check_cluster(scheduler, workers)
     repeats = int(repeats)
     files = problem_files(directory)
     jobs = {

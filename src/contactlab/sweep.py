@@ -58,6 +58,8 @@ def run(
     import pandas as pd
 
     study = study if isinstance(study, Study) else load_study(study)
+    if client is None:
+        cluster.check_cluster(scheduler, workers)  # a malformed address fails before anything runs
     out = os.fspath(out) if out is not None else os.path.join("out", f"{study.name}-sweep")
     cells_folder = os.path.join(out, "cells")
     made = make_folders(cells_folder)
@@ -67,14 +69,14 @@ def run(
         done = {name[: -len(".parquet")] for name in os.listdir(cells_folder) if name.endswith(".parquet")}
         todo = [cell for cell in study.cells if cell.key not in done]
         say = log or (lambda line: None)
-        say(f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run")
-        if todo:
-            jobs = [(cell.key, _job(cell, study, out)) for cell in todo]
-            if client is not None:
-                _run_jobs(client, jobs, cells_folder, progress, say)
-            else:
-                with cluster.connect(scheduler, workers) as connected:
-                    _run_jobs(connected, jobs, cells_folder, progress, say)
+        counts = f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run"
+        if not todo:
+            say(counts)
+        elif client is not None:
+            _run_jobs(client, _jobs(todo, study, out), cells_folder, progress, say, counts)
+        else:
+            with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
+                _run_jobs(connected, _jobs(todo, study, out), cells_folder, progress, say, counts)
     except BaseException:
         remove_empty(made)  # nothing finished: no folder left (finished cells stay)
         raise
@@ -85,6 +87,10 @@ def run(
 
     write_report(study, table, out)
     return table
+
+
+def _jobs(cells, study, out):
+    return [(cell.key, _job(cell, study, out)) for cell in cells]
 
 
 def _job(cell, study, out):
@@ -103,7 +109,8 @@ def _job(cell, study, out):
     }
 
 
-def _run_jobs(client, jobs, cells_folder, progress, say):
+def _run_jobs(client, jobs, cells_folder, progress, say, counts):
+    say(counts)
     say(f"Dask dashboard: {cluster.dashboard(client)}")
     settings = {key: job for key, job in jobs}
     for key, row in cluster.run_tasks(client, run_cell, jobs, progress=progress, description="cells"):
