@@ -119,6 +119,55 @@ def test_a_wrong_study_is_one_input_error_naming_the_field(tmp_path, text, field
     assert refused.value.field == field and words in refused.value.message, refused.value
 
 
+@pytest.mark.parametrize(
+    "settings, field, words",
+    [
+        (
+            '"simulation.dt" = [1e-300]\n"simulation.duration" = [1e308]',
+            'grid.set."simulation.dt"',
+            "expected a time of at least 1e-09 s, found 1e-300 s",
+        ),
+        (
+            '"simulation.dt" = [1e-9]\n"simulation.duration" = [1e9]',
+            'grid.set."simulation.dt"',
+            "duration / dt = 1e+18 steps, more than the 1e+09 a run may make",
+        ),
+        (
+            '"simulation.dt" = [2.0]\n"simulation.duration" = [1.0]',
+            'grid.set."simulation.dt"',
+            "dt = 2 s is longer than duration = 1 s",
+        ),
+        ('"simulation.duration" = [0.001]', 'grid.set."simulation.duration"', "is longer than duration = 0.001 s"),
+        (  # 9 × 10⁸ samples of the pyramid held in memory: terabytes
+            '"simulation.dt" = [1e-6]\n"simulation.duration" = [900.0]',
+            'grid.set."simulation.duration"',
+            "over its limit of",
+        ),
+    ],
+)
+def test_a_cell_over_the_limits_of_a_run_is_refused_when_the_study_is_read(tmp_path, settings, field, words):
+    # issue 37: these cells started a cluster and came back as errors, where `run` refuses them
+    text = f'[grid]\nscenes = ["box_pyramid"]\nmethods = ["constraints"]\n[grid.set]\n{settings}\n'
+    with pytest.raises(InputError) as refused:
+        load_study(write(tmp_path, text))
+    assert refused.value.field == field and words in refused.value.message, refused.value
+    assert refused.value.message.startswith("box_pyramid with constraints (simulation.")
+
+
+def test_a_cell_too_big_for_memory_is_advised_what_a_study_offers(tmp_path):
+    text = '[grid]\nscenes = ["box_pyramid"]\nmethods = ["constraints"]\n[grid.set]\n'
+    text += '"simulation.dt" = [1e-6]\n"simulation.duration" = [900.0]\n'
+    with pytest.raises(InputError) as refused:
+        load_study(write(tmp_path, text))
+    message = refused.value.message
+    assert "900,000,002 samples" in message
+    assert "shorter simulation.duration or a longer simulation.dt" in message
+    assert 'record = "trajectory" under [study]' in message  # what the study file offers, and
+    assert "--memory-limit" not in message and "trajectory=" not in message  # not what sweep has not
+    streamed = load_study(write(tmp_path, '[study]\nrecord = "trajectory"\n' + text))  # the advice taken
+    assert len(streamed.cells) == 1
+
+
 def test_toml_value_reads_back_as_the_value():
     from contactlab.scene.overrides import parse_value
 
@@ -396,6 +445,18 @@ def test_a_scheduler_nobody_listens_at_fails_at_once_in_one_line(tmp_path):
     ]
     assert seconds < 8.0, seconds  # python and contactlab's imports, then one refused connection
     assert os.listdir(tmp_path) == ["study.toml"]
+
+
+def test_a_study_over_the_limits_of_a_run_stops_in_one_line_before_a_cluster_starts(tmp_path):
+    write(tmp_path, BALL_STUDY.replace('"simulation.duration" = [1.0]', '"simulation.duration" = [1.0, 0.003]'))
+    result = _sweep_command("study.toml", cwd=tmp_path)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.splitlines() == [
+        'error: study.toml: grid.set."simulation.dt": bouncing_ball with impulse (simulation.dt = 0.004, '
+        "simulation.duration = 0.003, materials.0.restitution = 0.8): dt = 0.004 s is longer than duration = "
+        "0.003 s, so the run would make one whole step of 0.004 s; give a dt no longer than the duration"
+    ]
+    assert result.stdout == "" and os.listdir(tmp_path) == ["study.toml"]  # no out/ball-sweep, no dashboard line
 
 
 def _spin(stop):

@@ -72,9 +72,7 @@ def series_rows(model: Model) -> dict[str, tuple[tuple[int, ...], type]]:
 
 def sample_bytes(model: Model) -> int:
     """Bytes one sample of a run of ``model`` takes (every series of :func:`series_rows`)."""
-    return sum(
-        int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize for shape, dtype in series_rows(model).values()
-    )
+    return sum(math.prod(shape) * np.dtype(dtype).itemsize for shape, dtype in series_rows(model).values())
 
 
 def static_arrays(model: Model) -> dict[str, np.ndarray]:
