@@ -294,6 +294,25 @@ def test_a_rerun_recomputes_nothing(ball_sweep):
     assert {path.name: path.stat().st_mtime_ns for path in cells.iterdir()} == stamps
 
 
+def test_a_cell_file_cut_short_is_said_and_its_cell_runs_again(ball_sweep, tmp_path):
+    # issue 37: a truncated cell file counted as done, then failed the table's reading for good
+    import shutil
+
+    from contactlab import sweep
+
+    folder, study, table, _ = ball_sweep
+    out = tmp_path / "out"
+    shutil.copytree(folder / "out", out)
+    cut = out / "cells" / f"{table['key'][3]}.parquet"
+    cut.write_bytes(cut.read_bytes()[: cut.stat().st_size // 2])
+    lines = []
+    again = sweep.run(study, out, workers=1, log=lines.append)
+    assert lines[0].startswith(f"{cut} could not be read (") and lines[0].endswith("); that cell runs again")
+    assert lines[1] == "9 cells: 8 done already, 1 to run"
+    pd.testing.assert_frame_equal(_numbers(again), _numbers(table))
+    assert pd.read_parquet(cut)["key"].tolist() == [table["key"][3]]  # written again, whole
+
+
 # ---- a separately started scheduler and workers ------------------------------------------------------
 
 
