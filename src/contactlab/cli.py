@@ -304,7 +304,8 @@ def _view(sources, port=None, stream=None):
 
     viewer = view(*sources, port=port)
     print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", file=stream or sys.stdout, flush=True)
-    viewer.wait()
+    if viewer.wait() == signal.SIGTERM:  # Ctrl-C is how a viewer is closed (exit 0); SIGTERM is a stop (143)
+        raise Interrupted(signal.SIGTERM)
 
 
 def _compare(args):
