@@ -85,7 +85,8 @@ class Scene:
 
         return check_run(*self._run_arguments(), scene_name=self.name, **keywords)
 
-    def _run_arguments(self) -> tuple:
+    def _run_arguments(self) -> tuple[Model, str, float, float, Any, str]:
+        """simulate's first six: model, method, dt, duration, the method's options, integrator."""
         return self.model, self.method, self.dt, self.duration, self.options[self.method], self.integrator
 
 
