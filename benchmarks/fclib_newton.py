@@ -1,6 +1,6 @@
 """The FCLIB problems under `newton`, against `nsgs` and `apgd` (issue 19) — `python benchmarks/fclib_newton.py`.
 
-Every problem of ../shared/data/fclib (read with `contactlab.lcp.read_problem`) is solved from
+Every problem of data/fclib (the repository's copy; read with `contactlab.lcp.read_problem`) is solved from
 r = 0 to the same tolerance (default 1e-8 on the normalized natural-map error,
 `contactlab.lcp.natural_map_error`) by
 
@@ -19,7 +19,7 @@ pinned before NumPy loads, as in the other benchmarks: BLAS (used by SuperLU) on
 Writes benchmarks/results/fclib_newton.md (machine, thread counts, load, the table).
 
     python benchmarks/fclib_newton.py
-    python benchmarks/fclib_newton.py --tol 1e-10 --repeats 5 --data ../shared/data/fclib
+    python benchmarks/fclib_newton.py --tol 1e-10 --repeats 5 --data data/fclib
 """
 
 import os
@@ -46,7 +46,7 @@ from contactlab.lcp import natural_map_error, read_problem, solve_friction_conta
 from contactlab.fclib_bench import MAX_ITERATIONS as CAPS, PROBLEM_SUFFIXES  # noqa: E402  (one table of caps)
 
 HERE = Path(__file__).resolve().parent
-DATA = HERE.parent.parent / "shared" / "data" / "fclib"
+DATA = HERE.parent / "data" / "fclib"
 
 
 def machine():

@@ -1,9 +1,14 @@
 import signal
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from contactlab import ModelBuilder
+
+FCLIB = Path(__file__).resolve().parents[1] / "data" / "fclib"
+"""The FCLIB-format problems kept in the repository (provenance and licence: data/fclib/README.md)."""
+FCLIB_FILES = sorted(path.name for path in FCLIB.glob("*") if path.suffix in (".dat", ".hdf5"))
 
 
 @pytest.fixture

@@ -437,3 +437,58 @@ def test_the_progress_bar_starts_its_clock_after_the_first_step(monkeypatch, com
     simulation.simulate(ball_on_plane(), "impulse", 0.01, 0.5, progress=True, compiled_loop=compiled_loop)
     assert events[:3] == [("total", 50), ("restart",), ("update", 1)]
     assert events.count(("restart",)) == 1 and sum(event[1] for event in events if event[0] == "update") == 50
+
+
+def test_a_second_run_into_a_folder_being_written_is_refused_and_a_stale_lock_is_not(tmp_path):
+    # issue 37: two runs into one --out both exited 0 and both listed the same outputs, of which the
+    # folder held the last finisher's; now the second is refused while the first writes
+    import signal
+    import time
+
+    from conftest import interruptible
+
+    from contactlab.folder_lock import LOCK_NAME
+
+    out = tmp_path / "shared"
+    first = subprocess.Popen(  # long enough to be still running when the second one starts
+        [
+            sys.executable,
+            "-m",
+            "contactlab",
+            "run",
+            "box_pyramid",
+            "--duration",
+            "120",
+            "--no-plots",
+            "--out",
+            "shared",
+        ],
+        cwd=tmp_path,
+        preexec_fn=interruptible,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / LOCK_NAME).exists() and time.monotonic() < deadline and first.poll() is None:
+            time.sleep(0.05)
+        second = contactlab("run", "bouncing_ball", "--duration", "0.1", "--no-plots", "--out", "shared", cwd=tmp_path)
+        assert first.poll() is None, first.stderr.read()  # still writing while the second was refused
+        first.send_signal(signal.SIGINT)
+        _, stderr = first.communicate(timeout=120)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert second.returncode == 2 and second.stdout == "" and "Traceback" not in second.stderr
+    assert second.stderr.startswith(
+        f"error: bouncing_ball: --out: shared is being written by another contactlab command (process {first.pid} on "
+    ), second.stderr
+    assert second.stderr.count("\n") == 1
+    assert first.returncode == 130 and "written before it: shared" in stderr
+    assert sorted(os.listdir(out)) == ["summary.json", "trajectory.h5"]  # the first run's, and no lock left
+    # a lock file whose process is gone (a run killed with SIGKILL) does not hold the folder
+    (out / LOCK_NAME).write_text("process 999999999 on nowhere, since 00:00:00\n")
+    again = contactlab("run", "bouncing_ball", "--duration", "0.1", "--no-plots", "--out", "shared", cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert not (out / LOCK_NAME).exists()

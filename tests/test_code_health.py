@@ -6,6 +6,7 @@ import fnmatch
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -59,3 +60,31 @@ def test_the_module_map_names_every_module():
 
     assert len(files) > 50
     assert [module for module in _modules() if not named(module)] == []
+
+
+def test_the_suite_says_why_it_skipped_a_test(tmp_path):
+    # issue 37: a summary line "25 skipped" hid that the FCLIB tests had no data; pytest's options
+    # in pyproject.toml must list each skip with its reason
+    (tmp_path / "test_skips.py").write_text(
+        'import pytest\n\n\ndef test_needs_something():\n    pytest.skip("the widget is absent")\n'
+    )
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-c",
+            str(ROOT / "pyproject.toml"),
+            "--rootdir",
+            str(tmp_path),
+            "-n0",
+            "-p",
+            "no:cacheprovider",
+            str(tmp_path),
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "SKIPPED" in result.stdout and "the widget is absent" in result.stdout

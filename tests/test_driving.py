@@ -6,7 +6,7 @@ import pytest
 
 from contactlab import ModelBuilder, simulate
 from contactlab.closed_form import checks
-from contactlab.errors import InputError
+from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import velocity_loop
 from contactlab.scene import load_scene
 
@@ -331,3 +331,43 @@ def test_a_path_through_the_floor_is_kept_and_not_called_a_divergence(method):
     run = simulate(builder.finalize(), method=method, dt=0.01, duration=0.3)
     assert np.allclose(run.state.body_position[0], [0, 0, -0.3], atol=1e-12)
     assert run.summary["health"]["violations"] == []
+
+
+# ---- the advice when a driven run goes wrong -------------------------------------------------------
+
+
+def _stopped(model, **keywords):
+    """The message of the SimulationDiverged that stops ``simulate(model, **keywords)``."""
+    with pytest.raises(SimulationDiverged) as stopped:
+        simulate(model, **keywords)
+    return str(stopped.value)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_force_far_too_large_is_named_as_the_problem_not_the_dt(method):
+    # issue 37: a 10¹² N push was answered "use a smaller dt"
+    builder = _ball(gravity=(0.0, 0.0, -9.81))
+    builder.add_obstacle("plane", normal=(0, 0, 1), offset=-0.1)
+    builder.add_force("ball", force=(1e12, 0.0, 0.0))
+    message = _stopped(builder.finalize(), method=method, dt=0.004, duration=1.0)
+    assert "the force on 'ball', 1e+12 N on 2 kg, alone would speed it to 2e+09 m/s by then" in message, message
+    assert message.endswith("the force is the likely problem (its values, units or times), not the time step")
+
+
+def test_a_path_that_jumps_a_thousand_kilometres_in_a_nanosecond_is_named_not_the_dt():
+    scene = load_scene("box_pushed", ["bodies.1.path={times=[0.0, 1e-9], positions=[[-0.2, 0, 0.06], [1e6, 0, 0.06]]}"])
+    message = _stopped(scene.model, method="impulse", dt=scene.dt, duration=scene.duration)
+    assert message.startswith("the run went wrong at t = 0.004 s: ")
+    assert "the path of 'paddle' moves it at 2.5e+08 m/s then" in message, message
+    assert message.endswith("the path is the likely problem (its values, units or times), not the time step")
+
+
+def test_a_driven_run_that_goes_wrong_for_its_method_keeps_the_methods_advice():
+    """A gentle push on a ball whose penalty springs are far too stiff for the step: the springs
+    are the problem, and the advice says so (penalty's), not the push."""
+    builder = _ball(gravity=(0.0, 0.0, -9.81))
+    builder.add_obstacle("plane", normal=(0, 0, 1), offset=-0.2)
+    builder.add_force("ball", force=(1.0, 0.0, 0.0))
+    options = {"stiffness": 1e9, "implicit_springs": "never"}
+    message = _stopped(builder.finalize(), method="penalty", dt=0.01, duration=2.0, options=options)
+    assert "a stiffness below" in message and "the force" not in message and "not the time step" not in message, message

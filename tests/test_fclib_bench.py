@@ -3,18 +3,17 @@ and the argument checks."""
 
 import contextlib
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import FCLIB
 
 from contactlab import fclib_bench
 from contactlab.errors import InputError
 from contactlab.fclib_bench import COLUMNS, MAX_ITERATIONS, Job, bench, performance_profile, run_job
 from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
 SOLVERS = ["nsgs", "newton"]
 TOL = 1e-8
 GARBAGE = "garbage.dat"
@@ -55,12 +54,8 @@ def test_profile_checks_its_input():
 
 
 def smallest_problems(count=3):
-    """The ``count`` smallest problem files of the shared data (by bytes); skip if there is none."""
-    if not DATA.is_dir():
-        reason = f"no FCLIB data folder at {DATA}"
-        print(reason)
-        pytest.skip(reason)
-    files = [path for path in DATA.iterdir() if path.suffix in fclib_bench.PROBLEM_SUFFIXES]
+    """The ``count`` smallest problem files of the repository's data/fclib (by bytes)."""
+    files = [path for path in FCLIB.iterdir() if path.suffix in fclib_bench.PROBLEM_SUFFIXES]
     return sorted(files, key=lambda path: (path.stat().st_size, path.name))[:count]
 
 
@@ -197,6 +192,9 @@ def test_other_settings(tmp_path):
         (dict(tol=-1.0), "--tol"),
         (dict(max_iterations=0), "--max-iterations"),
         (dict(out=tmp_path / "file"), "--out"),
+        (dict(scheduler="http://127.0.0.1:8786"), "--scheduler"),
+        (dict(scheduler="tcp://127.0.0.1:65536"), "--scheduler"),
+        (dict(workers=0), "--workers"),
     ):
         with pytest.raises(InputError) as caught:
             bench(tmp_path, **{"out": tmp_path / "out", **keywords})

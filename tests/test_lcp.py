@@ -1,12 +1,13 @@
 """contactlab.lcp: LCP solvers (SPEC C6-C9), Coulomb friction (F4, F4a, F4b), FCLIB/Siconos reader."""
 
-from pathlib import Path
+import hashlib
+import re
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from conftest import frictional_contacts
+from conftest import FCLIB, FCLIB_FILES, frictional_contacts
 
 import contactlab.lcp.solve as lcp_solve
 from contactlab.errors import InputError
@@ -21,8 +22,6 @@ from contactlab.lcp import (
 )
 from contactlab.lcp.friction import largest_eigenvalue
 
-FCLIB = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
-FCLIB_FILES = sorted(p.name for p in FCLIB.iterdir() if p.suffix in (".dat", ".hdf5")) if FCLIB.is_dir() else []
 HARD = {"BoxesStack1-i100000-32.hdf5.dat", "local_problem_test.hdf5"}  # marked hard in the data README
 SMALL = [
     "FC3D_Example1.dat",
@@ -31,7 +30,6 @@ SMALL = [
     "Rover1039.dat",
     "LMGC_GlobalFrictionContactProblem00046.hdf5",
 ]
-needs_data = pytest.mark.skipif(not FCLIB.is_dir(), reason=f"FCLIB test data folder {FCLIB} is absent")
 
 
 def contact_lcp(rng, n, bodies=None):
@@ -231,7 +229,6 @@ def test_pyramid_keeps_friction_in_the_inscribed_square():
     assert np.linalg.norm(res.r[1:]) <= 0.5 * res.r[0] + 1e-12  # the square's corners lie on the circle
 
 
-@needs_data
 @pytest.mark.parametrize("name", FCLIB_FILES)
 def test_nsgs_on_fclib_problem(name):
     problem = read_problem(FCLIB / name)
@@ -246,7 +243,6 @@ def test_nsgs_on_fclib_problem(name):
         assert res.error <= 1e-6
 
 
-@needs_data
 @pytest.mark.parametrize("name", SMALL)
 def test_staggered_on_small_fclib_problems(name):
     problem = read_problem(FCLIB / name)
@@ -255,7 +251,6 @@ def test_staggered_on_small_fclib_problems(name):
     assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= 1e-6
 
 
-@needs_data
 @pytest.mark.parametrize("name", SMALL + ["Capsules-i125-1213.hdf5", "OneObject-i1028-138.hdf5.dat"])
 def test_apgd_on_fclib_problems(name):
     problem = read_problem(FCLIB / name)
@@ -265,7 +260,6 @@ def test_apgd_on_fclib_problems(name):
     assert res.error <= 1e-6
 
 
-@needs_data
 @pytest.mark.parametrize(
     "name, tol, cap",
     [
@@ -359,7 +353,17 @@ def test_apgd_with_a_zero_operator_returns_no_reactions():
 # ------------------------------------------------------------------------------- reader
 
 
-@needs_data
+def test_fclib_problems_are_in_the_repository_as_their_readme_lists_them():
+    # a clone runs every FCLIB test: the files live in data/fclib, byte-identical to the sources
+    # the README names (its table gives each file's sha256 prefix)
+    readme = (FCLIB / "README.md").read_text()
+    listed = dict(re.findall(r"^\| (\S+\.(?:dat|hdf5)) \|.*\| ([0-9a-f]{12}) \|$", readme, flags=re.MULTILINE))
+    assert len(listed) == 15 and sorted(listed) == FCLIB_FILES
+    for name, prefix in listed.items():
+        assert hashlib.sha256((FCLIB / name).read_bytes()).hexdigest()[:12] == prefix, name
+    assert "Apache License" in (FCLIB / "LICENSE").read_text()
+
+
 @pytest.mark.parametrize("name", FCLIB_FILES)
 def test_read_problem_shapes_and_symmetric_psd(name):
     problem = read_problem(FCLIB / name)
@@ -374,7 +378,6 @@ def test_read_problem_shapes_and_symmetric_psd(name):
     np.linalg.cholesky(0.5 * (W + W.T) + 1e-7 * np.trace(W) * np.eye(3 * nc))
 
 
-@needs_data
 def test_read_problem_known_sizes():
     assert read_problem(FCLIB / "Capsules-i125-1213.hdf5").nc == 286
     box = read_problem(FCLIB / "Box_Stacks-i0122-82-5.hdf5")
@@ -407,7 +410,6 @@ def test_read_problem_errors(tmp_path):
         read_problem(empty)
 
 
-@needs_data
 def test_read_problem_truncated_real_file(tmp_path):
     source = (FCLIB / "Confeti-ex13-4contact-Fc3D-SBM.dat").read_text()
     cut = tmp_path / "cut.dat"

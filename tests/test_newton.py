@@ -4,22 +4,16 @@ Every FCLIB file to 1e-8; closed forms for one contact (a block pushed below and
 weight); frictionless problems against Lemke; a property test of the Coulomb conditions on random
 small positive-definite W."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import frictional_contacts
+from conftest import FCLIB, FCLIB_FILES, frictional_contacts
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from contactlab.errors import InputError
 from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
-
-FCLIB = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
-FCLIB_FILES = sorted(p.name for p in FCLIB.iterdir() if p.suffix in (".dat", ".hdf5")) if FCLIB.is_dir() else []
-needs_data = pytest.mark.skipif(not FCLIB.is_dir(), reason=f"FCLIB test data folder {FCLIB} is absent")
 
 
 def norm(x):
@@ -52,7 +46,6 @@ def coulomb_violations(W, q, mu, r):
 # ------------------------------------------------------------------------------- FCLIB
 
 
-@needs_data
 @pytest.mark.parametrize("name", FCLIB_FILES)
 def test_newton_solves_fclib_problem_to_1e_8(name):
     problem = read_problem(FCLIB / name)

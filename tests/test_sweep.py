@@ -119,6 +119,55 @@ def test_a_wrong_study_is_one_input_error_naming_the_field(tmp_path, text, field
     assert refused.value.field == field and words in refused.value.message, refused.value
 
 
+@pytest.mark.parametrize(
+    "settings, field, words",
+    [
+        (
+            '"simulation.dt" = [1e-300]\n"simulation.duration" = [1e308]',
+            'grid.set."simulation.dt"',
+            "expected a time of at least 1e-09 s, found 1e-300 s",
+        ),
+        (
+            '"simulation.dt" = [1e-9]\n"simulation.duration" = [1e9]',
+            'grid.set."simulation.dt"',
+            "duration / dt = 1e+18 steps, more than the 1e+09 a run may make",
+        ),
+        (
+            '"simulation.dt" = [2.0]\n"simulation.duration" = [1.0]',
+            'grid.set."simulation.dt"',
+            "dt = 2 s is longer than duration = 1 s",
+        ),
+        ('"simulation.duration" = [0.001]', 'grid.set."simulation.duration"', "is longer than duration = 0.001 s"),
+        (  # 9 × 10⁸ samples of the pyramid held in memory: terabytes
+            '"simulation.dt" = [1e-6]\n"simulation.duration" = [900.0]',
+            'grid.set."simulation.duration"',
+            "over its limit of",
+        ),
+    ],
+)
+def test_a_cell_over_the_limits_of_a_run_is_refused_when_the_study_is_read(tmp_path, settings, field, words):
+    # issue 37: these cells started a cluster and came back as errors, where `run` refuses them
+    text = f'[grid]\nscenes = ["box_pyramid"]\nmethods = ["constraints"]\n[grid.set]\n{settings}\n'
+    with pytest.raises(InputError) as refused:
+        load_study(write(tmp_path, text))
+    assert refused.value.field == field and words in refused.value.message, refused.value
+    assert refused.value.message.startswith("box_pyramid with constraints (simulation.")
+
+
+def test_a_cell_too_big_for_memory_is_advised_what_a_study_offers(tmp_path):
+    text = '[grid]\nscenes = ["box_pyramid"]\nmethods = ["constraints"]\n[grid.set]\n'
+    text += '"simulation.dt" = [1e-6]\n"simulation.duration" = [900.0]\n'
+    with pytest.raises(InputError) as refused:
+        load_study(write(tmp_path, text))
+    message = refused.value.message
+    assert "900,000,002 samples" in message
+    assert "shorter simulation.duration or a longer simulation.dt" in message
+    assert 'record = "trajectory" under [study]' in message  # what the study file offers, and
+    assert "--memory-limit" not in message and "trajectory=" not in message  # not what sweep has not
+    streamed = load_study(write(tmp_path, '[study]\nrecord = "trajectory"\n' + text))  # the advice taken
+    assert len(streamed.cells) == 1
+
+
 def test_toml_value_reads_back_as_the_value():
     from contactlab.scene.overrides import parse_value
 
@@ -263,6 +312,25 @@ def test_a_rerun_recomputes_nothing(ball_sweep):
     assert {path.name: path.stat().st_mtime_ns for path in cells.iterdir()} == stamps
 
 
+def test_a_cell_file_cut_short_is_said_and_its_cell_runs_again(ball_sweep, tmp_path):
+    # issue 37: a truncated cell file counted as done, then failed the table's reading for good
+    import shutil
+
+    from contactlab import sweep
+
+    folder, study, table, _ = ball_sweep
+    out = tmp_path / "out"
+    shutil.copytree(folder / "out", out)
+    cut = out / "cells" / f"{table['key'][3]}.parquet"
+    cut.write_bytes(cut.read_bytes()[: cut.stat().st_size // 2])
+    lines = []
+    again = sweep.run(study, out, workers=1, log=lines.append)
+    assert lines[0].startswith(f"{cut} could not be read (") and lines[0].endswith("); that cell runs again")
+    assert lines[1] == "9 cells: 8 done already, 1 to run"
+    pd.testing.assert_frame_equal(_numbers(again), _numbers(table))
+    assert pd.read_parquet(cut)["key"].tolist() == [table["key"][3]]  # written again, whole
+
+
 # ---- a separately started scheduler and workers ------------------------------------------------------
 
 
@@ -371,6 +439,61 @@ def test_a_bad_study_on_the_command_line_is_one_line_exit_2_and_nothing_written(
     result = _sweep_command(write(tmp_path, BALL_STUDY), "--scheduler", f"tcp://127.0.0.1:{_free_port()}", cwd=tmp_path)
     assert result.returncode == 2 and "could not reach a Dask scheduler" in result.stderr.splitlines()[-1]
     assert sorted(os.listdir(tmp_path)) == ["study.toml"]
+
+
+@pytest.mark.parametrize(
+    "address, words",
+    [
+        ("tcp://127.0.0.1:99999", "must be a whole number from 1 to 65535, found '99999'"),
+        ("tcp://127.0.0.1:0", "from 1 to 65535, found '0'"),
+        ("tcp://127.0.0.1:-5", "from 1 to 65535, found '-5'"),
+        ("tcp://127.0.0.1:http", "from 1 to 65535, found 'http'"),
+        ("tcp://127.0.0.1", "expected tcp://HOST:PORT"),
+        ("tcp://:8786", "expected tcp://HOST:PORT"),
+        ("http://127.0.0.1:8786", "expected a Dask scheduler's tcp://HOST:PORT address"),
+        ("127.0.0.1:8786", "expected a Dask scheduler's tcp://HOST:PORT address"),
+    ],
+)
+def test_a_malformed_scheduler_address_is_refused_before_anything_runs(tmp_path, address, words):
+    # issue 37: these went to Dask, which waited out its timeout (or advised 'dask worker http://…')
+    from contactlab import sweep
+
+    lines = []
+    started = time.monotonic()
+    with pytest.raises(InputError) as refused:
+        sweep.run(write(tmp_path, BALL_STUDY), tmp_path / "out", scheduler=address, log=lines.append)
+    assert time.monotonic() - started < 1.0
+    assert refused.value.field == "--scheduler" and words in refused.value.message, refused.value
+    assert "dask worker" not in refused.value.message and lines == []
+    assert os.listdir(tmp_path) == ["study.toml"]
+
+
+def test_a_scheduler_nobody_listens_at_fails_at_once_in_one_line(tmp_path):
+    # issue 37: a refused connection waited Dask's 10 s, after a "N cells: … to run" line
+    write(tmp_path, BALL_STUDY)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    started = time.monotonic()
+    result = _sweep_command("study.toml", "--scheduler", address, cwd=tmp_path)
+    seconds = time.monotonic() - started
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.splitlines() == [
+        f"error: study.toml: --scheduler: could not reach a Dask scheduler at {address} (connection refused); "
+        f"start one with 'dask scheduler' and workers with 'dask worker {address}'"
+    ]
+    assert seconds < 8.0, seconds  # python and contactlab's imports, then one refused connection
+    assert os.listdir(tmp_path) == ["study.toml"]
+
+
+def test_a_study_over_the_limits_of_a_run_stops_in_one_line_before_a_cluster_starts(tmp_path):
+    write(tmp_path, BALL_STUDY.replace('"simulation.duration" = [1.0]', '"simulation.duration" = [1.0, 0.003]'))
+    result = _sweep_command("study.toml", cwd=tmp_path)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.splitlines() == [
+        'error: study.toml: grid.set."simulation.dt": bouncing_ball with impulse (simulation.dt = 0.004, '
+        "simulation.duration = 0.003, materials.0.restitution = 0.8): dt = 0.004 s is longer than duration = "
+        "0.003 s, so the run would make one whole step of 0.004 s; give a dt no longer than the duration"
+    ]
+    assert result.stdout == "" and os.listdir(tmp_path) == ["study.toml"]  # no out/ball-sweep, no dashboard line
 
 
 def _spin(stop):

@@ -4,12 +4,16 @@ its clock, compare folders side by side, its errors, and the page drawn in headl
 import json
 import os
 import shutil
+import signal
 import socket
+import subprocess
+import sys
 import time
 import urllib.request
 
 import numpy as np
 import pytest
+from conftest import interruptible
 
 from contactlab import ModelBuilder, browser, cli, simulate
 from contactlab.compare import compare
@@ -189,6 +193,49 @@ def test_a_folder_that_is_not_a_run_is_one_line_and_exit_code_2(tmp_path, capsys
     assert "is not a folder" in capsys.readouterr().err
     with pytest.raises(InputError, match="found no trajectory.h5"):
         view(str(tmp_path))
+
+
+@pytest.mark.parametrize("damage", ["a position not a number", "time going backwards", "no body_position"])
+def test_a_damaged_run_beside_a_good_one_is_named_by_its_folder(pyramid, tmp_path, capsys, damage):
+    # issue 37: `view good bad` said "error: arrays: …", naming no folder (render names it)
+    import h5py
+
+    bad = tmp_path / "bad"
+    shutil.copytree(pyramid, bad)
+    with h5py.File(bad / "trajectory.h5", "a") as stored:
+        if damage == "a position not a number":
+            stored["body_position"][1, 0, 0] = np.nan
+        elif damage == "time going backwards":
+            stored["time"][2] = -1.0
+        else:
+            del stored["body_position"]
+    assert cli.main(["view", pyramid, str(bad)]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith(f"error: {bad}: ") and error.count("\n") == 1 and "Traceback" not in error
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 0)])
+def test_sigterm_stops_the_viewer_with_exit_code_143_and_ctrl_c_with_0(pyramid, signum, code):
+    # issue 37: the viewer exited 0 on SIGTERM too; Ctrl-C is how it is closed (docs/cli.md)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "contactlab", "view", pyramid],
+        preexec_fn=interruptible,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stdout.readline().startswith("Viewer: http://127.0.0.1:")
+        process.send_signal(signum)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == code, err
+    if signum == signal.SIGTERM:
+        assert err == "interrupted (SIGTERM); no output written\n"
+    else:
+        assert err == ""
 
 
 def test_a_port_in_use_is_refused(pyramid, capsys):

@@ -9,14 +9,16 @@ while it is turned into arrays — or, for a run that streams it to a file, two 
 particle or cloth vertex (contacts, their rows, the broad phase: about 11 KB measured on the
 4000-sphere pile). ``simulate(..., memory_limit=…)`` (``--memory-limit`` on the command line)
 sets another limit in bytes; ``math.inf`` none. A streamed trajectory must also fit on its
-disk: a run whose file would outgrow the free space there is refused the same way.
+disk: a run whose file would outgrow the free space there is refused the same way. What the
+refusal advises depends on what the caller offers (:class:`Remedies`): ``simulate``'s own
+keywords and options by default, a study's settings for a sweep's cells.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from . import record, store
 from .errors import InputError
@@ -28,6 +30,25 @@ if TYPE_CHECKING:
 MEMORY_SHARE = 0.5  # of the physical memory, for one run
 WORKING_BYTES = 16 * 1024  # per body, particle or cloth vertex, a step's working arrays
 FALLBACK_MEMORY = 8 * 2**30  # where the machine does not say
+
+
+class Remedies(NamedTuple):
+    """The advice closing a refusal, by what does not fit: ``disk`` (a streamed trajectory's file),
+    ``memory`` (the samples held in memory) and ``model`` (a step's working arrays alone). In
+    ``disk`` and ``memory``, ``{fewer}`` stands for the smallest record_every that would fit."""
+
+    disk: str
+    memory: str
+    model: str
+
+
+SIMULATE = Remedies(
+    disk="record every {fewer:,} steps or more, or run shorter",
+    memory="record every {fewer:,} steps or more, run shorter, stream the trajectory to a file (trajectory=…), "
+    "or raise memory_limit (--memory-limit)",
+    model="simulate fewer, or raise memory_limit (--memory-limit)",
+)
+"""What ``simulate`` (and ``contactlab run``) offer."""
 
 
 def physical_memory() -> int:
@@ -63,11 +84,17 @@ def check(
     record_every: int,
     memory_limit: float | None = None,
     trajectory: str | os.PathLike[str] | None = None,
+    *,
+    streamed: bool | None = None,
+    remedies: Remedies = SIMULATE,
 ) -> dict[str, int]:
-    """InputError, one sentence with the estimate and the limit, when the run cannot fit: in
-    memory, and for a run streaming to the file ``trajectory``, on that file's disk."""
+    """InputError, one sentence with the estimate, the limit and ``remedies``' advice, when the
+    run cannot fit: in memory, and for a run streaming to the file ``trajectory``, on that
+    file's disk. ``streamed``: whether the samples go to a file (default: when ``trajectory``
+    is given); True without a ``trajectory`` checks the memory of a streamed run only."""
+    streamed = trajectory is not None if streamed is None else streamed
     limit = MEMORY_SHARE * physical_memory() if memory_limit is None else memory_limit
-    needed = estimate(model, steps, record_every, streamed=trajectory is not None)
+    needed = estimate(model, steps, record_every, streamed=streamed)
     dynamic = model.body_count + model.particle_count
     per_sample = needed["per_sample"]
     if trajectory is not None:
@@ -78,26 +105,24 @@ def check(
                 "record_every",
                 f"the trajectory would take {_size(needed['file'])}: "
                 f"{needed['samples']:,} samples of {dynamic:,} bodies and particles, "
-                f"more than the {_size(free)} free on the disk of {trajectory}; "
-                f"record every {fewer:,} steps or more, or run shorter",
+                f"more than the {_size(free)} free on the disk of {trajectory}; " + remedies.disk.format(fewer=fewer),
             )
     if needed["total"] <= limit:
         return needed
     affordable = int((limit - needed["working"]) / (2 * per_sample)) - 2  # samples that would fit
-    if trajectory is None and affordable >= 1:  # the trajectory is what does not fit: record less often
+    if not streamed and affordable >= 1:  # the trajectory is what does not fit: record less often
         fewer = max(record_every + 1, -(-steps // affordable))
         raise InputError(
             "record_every",
             f"the run would hold {_size(needed['total'])}: {needed['samples']:,} samples "
             f"of {dynamic:,} bodies and particles, over its limit of {_size(limit)}; "
-            f"record every {fewer:,} steps or more, run shorter, stream the "
-            f"trajectory to a file (trajectory=…), or raise memory_limit (--memory-limit)",
+            + remedies.memory.format(fewer=fewer),
         )
     raise InputError(
         "model",
         f"the run would need about {_size(needed['working'] + 6 * per_sample)} for "
         f"{dynamic:,} bodies, particles and cloth vertices at the fewest samples, over its "
-        f"limit of {_size(limit)}; simulate fewer, or raise memory_limit (--memory-limit)",
+        f"limit of {_size(limit)}; " + remedies.model,
     )
 
 

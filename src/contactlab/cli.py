@@ -207,8 +207,9 @@ def _run(args):
     scene with every default): the scene run, its files written, its summary printed; returns
     the Run."""
     from .closed_form import checks
+    from .folder_lock import held
     from .plausibility import MANY_STEPS
-    from .record import TRAJECTORY, make_folders, remove_empty, write_summary
+    from .record import TRAJECTORY, make_folders, write_summary
     from .scene import load_scene
     from .validation import run_length, whole_number
 
@@ -236,33 +237,29 @@ def _run(args):
     out = args.out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
-    try:  # the samples stream into trajectory.h5 as the run goes
-        result = scene.simulate(
-            record_every=args.record_every,
-            progress=True,
-            allow_divergence=args.allow_divergence,
-            memory_limit=memory_limit,
-            trajectory=trajectory,
+    with held(out, "--out", made):  # one run at a time writes a folder; one left empty is removed
+        try:  # the samples stream into trajectory.h5 as the run goes
+            result = scene.simulate(
+                record_every=args.record_every,
+                progress=True,
+                allow_divergence=args.allow_divergence,
+                memory_limit=memory_limit,
+                trajectory=trajectory,
+            )
+        except (SimulationDiverged, KeyboardInterrupt) as error:  # the run up to then is kept, its summary marked
+            if getattr(error, "run", None) is not None:
+                error.run.summary.update(trajectory=trajectory, source=scene.origin(overrides))
+                write_summary(out, error.run.summary)
+                error.written = out
+            raise
+        result.summary["trajectory"] = trajectory
+        found = checks(scene.name, scene.model, result.arrays)  # the scene's stated expectations
+        result.summary["checks"] = [check.as_record() for check in found]
+        result.summary["source"] = scene.origin(overrides)  # how to load the scene again (the viewer's contacts)
+        write_summary(out, result.summary)
+        written = _extras(
+            result.arrays, out, f"{scene.name} — {scene.method}", not args.no_plots, args.video, args.fps, exports
         )
-    except (SimulationDiverged, KeyboardInterrupt) as error:  # the run up to then is kept, its summary marked
-        if getattr(error, "run", None) is not None:
-            error.run.summary.update(trajectory=trajectory, source=scene.origin(overrides))
-            write_summary(out, error.run.summary)
-            error.written = out
-        else:
-            remove_empty(made)
-        raise
-    except BaseException:  # an input error before the run: nothing written, no folder
-        remove_empty(made)
-        raise
-    result.summary["trajectory"] = trajectory
-    found = checks(scene.name, scene.model, result.arrays)  # the scene's stated expectations
-    result.summary["checks"] = [check.as_record() for check in found]
-    result.summary["source"] = scene.origin(overrides)  # how to load the scene again (the viewer's contacts)
-    write_summary(out, result.summary)
-    written = _extras(
-        result.arrays, out, f"{scene.name} — {scene.method}", not args.no_plots, args.video, args.fps, exports
-    )
     if args.json:
         print(json.dumps(result.summary))
     else:
@@ -303,7 +300,8 @@ def _view(sources, port=None, stream=None):
 
     viewer = view(*sources, port=port)
     print(f"Viewer: {viewer.url} (open it in a web browser; Ctrl-C stops it)", file=stream or sys.stdout, flush=True)
-    viewer.wait()
+    if viewer.wait() == signal.SIGTERM:  # Ctrl-C is how a viewer is closed (exit 0); SIGTERM is a stop (143)
+        raise Interrupted(signal.SIGTERM)
 
 
 def _compare(args):

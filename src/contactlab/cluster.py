@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import socket
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
@@ -39,7 +40,8 @@ if TYPE_CHECKING:
     from distributed import Client
 
 
-CONNECT_TIMEOUT = 10.0  # s: how long connecting to a scheduler may take
+CONNECT_TIMEOUT = 10.0  # s: how long Dask's handshake with a scheduler that answered may take
+REACH_TIMEOUT = 3.0  # s: how long a scheduler's host may take to accept a connection at all
 POLL_SECONDS = 0.5  # s: how often the wait for results looks for a signal
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 
@@ -84,18 +86,79 @@ def default_workers() -> int:
     return max(1, min(cores(), usable))
 
 
+def check_cluster(scheduler: str | None, workers: int | None = None, field: str = "--scheduler") -> None:
+    """Refuse, before anything starts, what :func:`connect` could not use: a ``scheduler`` that
+    is not ``tcp://HOST:PORT`` (PORT a whole number from 1 to 65535; an IPv6 HOST in brackets),
+    ``workers`` that is not a whole number ≥ 1, or ``workers`` given with a ``scheduler``.
+    InputError naming ``field`` (the address) or "--workers"."""
+    if scheduler is None:
+        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+            raise InputError("--workers", f"expected a whole number of worker processes ≥ 1, found {workers!r}")
+        return
+    if workers is not None:
+        raise InputError(
+            "--workers",
+            "sets the workers of a local cluster; an existing cluster (--scheduler) has "
+            "the workers started for it ('dask worker ADDRESS')",
+        )
+    _host_and_port(scheduler, field)
+
+
+def _host_and_port(scheduler: object, field: str) -> tuple[str, int]:
+    """(HOST, PORT) of ``tcp://HOST:PORT``; InputError naming ``field`` for anything else."""
+    example = "such as tcp://127.0.0.1:8786 (what 'dask scheduler' prints)"
+    if not isinstance(scheduler, str) or not scheduler.startswith("tcp://"):
+        raise InputError(field, f"expected a Dask scheduler's tcp://HOST:PORT address {example}, found {scheduler!r}")
+    location = scheduler[len("tcp://") :]
+    if location.startswith("["):  # an IPv6 host: tcp://[::1]:8786
+        host, _, rest = location[1:].partition("]")
+        port = rest[1:] if rest.startswith(":") else ""
+    else:
+        host, _, port = location.rpartition(":")
+    if not host or "/" in host or not port:
+        raise InputError(field, f"expected tcp://HOST:PORT {example}, found {scheduler!r}")
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        raise InputError(field, f"the port of {scheduler} must be a whole number from 1 to 65535, found {port!r}")
+    return host, int(port)
+
+
+def _reach(scheduler: str, field: str) -> None:
+    """Open and close one TCP connection to the scheduler's host and port, so that an address
+    nobody listens on fails at once (Dask retries a refused connection until its timeout).
+    InputError naming ``field`` when the host refuses, is unknown or takes over
+    :data:`REACH_TIMEOUT` to answer. The scheduler logs the connection as closed before its
+    handshake (an INFO line)."""
+    host, port = _host_and_port(scheduler, field)
+    try:
+        with socket.create_connection((host, port), timeout=REACH_TIMEOUT):
+            return
+    except TimeoutError:
+        reason = f"no answer within {REACH_TIMEOUT:g} s"
+    except socket.gaierror as error:
+        reason = f"unknown host {host!r}: {error.strerror or error}"
+    except OSError as error:
+        reason = (error.strerror or first_line(error)).lower()
+    raise InputError(field, _unreachable(scheduler, reason))
+
+
+def _unreachable(scheduler: str, reason: str) -> str:
+    return (
+        f"could not reach a Dask scheduler at {scheduler} ({reason}); "
+        f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'"
+    )
+
+
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None, field: str = "--scheduler") -> Iterator[Client]:
     """Yield a ``distributed.Client``: to the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
     or, when None, to a new local cluster of ``workers`` single-threaded worker processes
     (default :func:`default_workers`) listening on 127.0.0.1 only, closed on exit.
-    InputError naming ``field`` when the scheduler cannot be reached, "--workers" when
-    ``workers`` is given with a ``scheduler``."""
+    InputError naming ``field`` when the address is malformed or the scheduler cannot be
+    reached, "--workers" for a bad ``workers`` (:func:`check_cluster`)."""
     from distributed import Client, LocalCluster
 
+    check_cluster(scheduler, workers, field)
     if scheduler is None:
-        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-            raise InputError("--workers", f"expected a whole number of worker processes ≥ 1, found {workers!r}")
         cluster = LocalCluster(
             n_workers=workers or default_workers(),
             threads_per_worker=1,
@@ -110,22 +173,11 @@ def connect(scheduler: str | None = None, workers: int | None = None, field: str
         finally:
             cluster.close()
         return
-    if workers is not None:
-        raise InputError(
-            "--workers",
-            "sets the workers of a local cluster; an existing cluster (--scheduler) has "
-            "the workers started for it ('dask worker ADDRESS')",
-        )
-    if not isinstance(scheduler, str) or "://" not in scheduler:
-        raise InputError(field, f"expected a scheduler address such as tcp://127.0.0.1:8786, found {scheduler!r}")
+    _reach(scheduler, field)
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as error:
-        raise InputError(
-            field,
-            f"could not reach a Dask scheduler at {scheduler} ({first_line(error)}); "
-            f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'",
-        ) from None
+        raise InputError(field, _unreachable(scheduler, first_line(error))) from None
     with client:
         yield client
 

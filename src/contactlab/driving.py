@@ -33,6 +33,7 @@ from .errors import InputError
 from .validation import DIRECTION, FORCE, LENGTH, TORQUE, unit_quaternion, vector
 
 if TYPE_CHECKING:
+    from .model import Model
     from .state import State
     from .validation import Quantity
 
@@ -371,6 +372,49 @@ def pack(body_count: int, forces: Sequence[Mapping[str, Any]], paths: Sequence[M
         path_positions=path_positions,
         path_orientations=path_orientations,
         path_functions=tuple((p["body"], p["function"]) for p in paths if p["function"] is not None),
+    )
+
+
+def too_fast(model: Model, t: float, dt: float, speed_limit: float) -> str | None:
+    """When a run of ``model`` went wrong at time ``t`` [s] (step ``dt`` [s]): a clause naming
+    the driving input that alone carries a body past ``speed_limit`` [m/s] by then, or None.
+
+    Candidates: a kinematic body's path, at the speed it moves over the step before ``t``; an
+    external force, at the speed |f| t / m it would give its body alone by ``t``; a torque, at
+    the speed |I⁻¹ τ| t r it would spin the body's surface to (r its bounding radius). The
+    largest past the limit is named: a 10¹² N push, or a path that jumps 10⁶ m in a nanosecond,
+    is the input's fault, which no smaller dt mends."""
+    drive = model.drive
+    if drive is None:
+        return None
+    found = []  # (speed [m/s], clause)
+    before = max(t - dt, 0.0)
+    try:  # a callable is asked again here; what it says cannot hide the run's own error
+        bodies, now, _ = drive.poses(t)
+        _, earlier, _ = drive.poses(before)
+        span = t - before if t > before else dt
+        for body, speed in zip(bodies, np.linalg.norm(now - earlier, axis=1) / span):
+            found.append((speed, f"the path of {model.body_names[body]!r} moves it at {speed:.3g} m/s then"))
+        loads = [drive.loads(time) for time in (before, t)]
+    except Exception:
+        return None
+    force = np.max([np.linalg.norm(f, axis=1) for f, _ in loads], axis=0)  # (B,) [N]
+    torque = np.max([np.linalg.norm(tau, axis=1) for _, tau in loads], axis=0)  # (B,) [N m]
+    elapsed = max(t, dt)
+    spin = torque * model.body_inverse_inertia.max(axis=1) * elapsed * model.body_radii  # [m/s]
+    for body in np.flatnonzero(~drive.kinematic & ((force > 0) | (torque > 0))):
+        name, mass, speed = model.body_names[body], model.body_mass[body], force[body] / model.body_mass[body] * elapsed
+        pushed = f"{force[body]:.3g} N on {mass:.3g} kg, alone would speed it to {speed:.3g} m/s by then"
+        found.append((speed, f"the force on {name!r}, {pushed}"))
+        spun = f"{torque[body]:.3g} N m, alone would spin its surface to {spin[body]:.3g} m/s by then"
+        found.append((spin[body], f"the torque on {name!r}, {spun}"))
+    speed, clause = max(found, default=(0.0, ""), key=lambda pair: pair[0])
+    if not speed > speed_limit:
+        return None
+    kind = "path" if clause.startswith("the path") else clause.split()[1]
+    return (
+        f"{clause}, past the {speed_limit:.3g} m/s this scene allows: the {kind} is the likely problem "
+        f"(its values, units or times), not the time step"
     )
 
 

@@ -1,6 +1,6 @@
 """Solver benchmarks over a folder of FCLIB problems, run through Dask (``contactlab fclib bench``).
 
-    result = bench("../shared/data/fclib", solvers=["nsgs", "newton"], out="out/fclib-bench")
+    result = bench("data/fclib", solvers=["nsgs", "newton"], out="out/fclib-bench")
     result.table            # one row per (problem, solver)
 
 Every problem file of a folder (FCLIB ``.hdf5`` / ``.h5``, Siconos ``.dat``) is solved by every
@@ -289,6 +289,7 @@ def bench(
     caps = _caps(max_iterations, solvers)
     out = Path(DEFAULT_OUT if out is None else out)
     _check_settings(tol, repeats, out)
+    cluster.check_cluster(scheduler, workers)
     repeats = int(repeats)
     files = problem_files(directory)
     jobs = {

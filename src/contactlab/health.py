@@ -36,6 +36,7 @@ import numpy as np
 
 from . import shapes
 from .collision import collide, pass_through_depths
+from .driving import too_fast
 
 if TYPE_CHECKING:
     from .contacts import Contacts
@@ -239,8 +240,11 @@ class Health:
         return None
 
     def message(self, violation: Violation) -> str:
-        """The one sentence a stopped run reports."""
-        return f"the run went wrong at t = {violation.time:.4g} s: {violation.what}; {self.advice}"
+        """The one sentence a stopped run reports: what went wrong, then the likely fix — a
+        driving input that alone is too fast for the scene (:func:`contactlab.driving.too_fast`),
+        else the method's advice."""
+        culprit = too_fast(self.model, violation.time, self.dt, min(self.speed_limit, HARD_SPEED))
+        return f"the run went wrong at t = {violation.time:.4g} s: {violation.what}; {culprit or self.advice}"
 
     def summary(self) -> dict[str, Any]:
         """The summary's ``health`` entry: the checks' limits and what was let pass."""

@@ -76,6 +76,54 @@ class Run:
         return run_html(self)
 
 
+class Checked(NamedTuple):
+    """A run's arguments as :func:`check_run` settled them: the method's module and options
+    dataclass, dt and duration [s], the steps and the samples the run will record."""
+
+    module: Any
+    options: Any
+    dt: float
+    duration: float
+    steps: int
+    samples: int
+
+
+def check_run(
+    model: Model,
+    method: str = "impulse",
+    dt: float = 0.004,
+    duration: float = 1.0,
+    options: Any = None,
+    integrator: str = "symplectic_euler",
+    record_every: int = 1,
+    *,
+    state: State | None = None,
+    scene_name: str = "custom",
+    memory_limit: float | None = None,
+    trajectory: str | os.PathLike[str] | None = None,
+    streamed: bool | None = None,
+    remedies: budget.Remedies = budget.SIMULATE,
+) -> Checked:
+    """Every check :func:`simulate` makes of its arguments before its first step, without
+    stepping: the same InputError, naming the first bad one, for the same arguments (dt [s] > 0
+    and finite, no longer than the duration [s], at most 10⁹ steps; the model something to move
+    that the collision code supports; the method, its options and the integrator; the memory and,
+    for a ``trajectory`` file, the disk the run needs by :func:`contactlab.budget.check`).
+    ``streamed`` and ``remedies`` as there: a sweep checks its cells with its own advice."""
+    module, options, dt, duration, steps = _checked_arguments(
+        model, method, dt, duration, options, integrator, record_every, state, scene_name
+    )
+    check_supported(model)
+    if memory_limit is not None and (
+        isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float)) or not memory_limit > 0
+    ):
+        raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
+    if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
+        raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
+    needed = budget.check(model, steps, record_every, memory_limit, trajectory, streamed=streamed, remedies=remedies)
+    return Checked(module, options, dt, duration, steps, needed["samples"])
+
+
 def _checked_arguments(model, method, dt, duration, options, integrator, record_every, state, scene_name):
     """simulate()'s arguments checked, an InputError naming the first bad one; returns (the
     method's module, its Options, dt [s], duration [s], steps). dt and duration by
@@ -202,23 +250,23 @@ def simulate(
     ``status`` saying how the run ended.
     """
     with interrupts.deferred():  # compiling or stepping, a signal waits for a step boundary
-        module, options, dt, duration, steps = _checked_arguments(
-            model, method, dt, duration, options, integrator, record_every, state, scene_name
+        module, options, dt, duration, steps, samples = check_run(
+            model,
+            method,
+            dt,
+            duration,
+            options,
+            integrator,
+            record_every,
+            state=state,
+            scene_name=scene_name,
+            memory_limit=memory_limit,
+            trajectory=trajectory,
         )
-        check_supported(model)
         chooser = ThreadChooser(threads)
         state = model.state() if state is None else state.copy()
-        if memory_limit is not None and (
-            isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, float)) or not memory_limit > 0
-        ):
-            raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
         if compiled_loop not in (None, True, False):
             raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
-        if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
-            raise InputError(
-                "trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}"
-            )
-        samples = budget.check(model, steps, record_every, memory_limit, trajectory)["samples"]
         # the run's clock and compile tally start here: the plausibility check's collide() is the
         # first to need the collision kernels, and compiles them on an empty cache
         clock = _Clock(numba_event.TimingListener(), FirstCompile(), time.perf_counter())

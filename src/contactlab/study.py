@@ -38,7 +38,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import __version__
+from . import __version__, budget
 from .errors import InputError
 from .methods import AVAILABLE
 from .scene import load_scene
@@ -47,6 +47,18 @@ from .scene.schema import _did_you_mean, show
 from .scene.toml import parse_toml
 
 RECORD = ("summary", "trajectory")
+RUN_FIELDS = {  # a run-level refusal (contactlab.simulation.check_run) -> the scene settings behind it
+    "dt": ("simulation.dt",),
+    "duration": ("simulation.duration",),
+    "": ("simulation.dt", "simulation.duration"),  # dt longer than the duration
+    "record_every": ("simulation.duration", "simulation.dt"),  # the samples would not fit in memory
+}
+REMEDIES = budget.Remedies(  # what a study offers a cell that would not fit (it records every step)
+    disk="give the cell a shorter simulation.duration or a longer simulation.dt",
+    memory="give the cell a shorter simulation.duration or a longer simulation.dt, or stream each cell's "
+    'samples to a file with record = "trajectory" under [study]',
+    model="simulate fewer bodies, particles or cloth vertices in the cell",
+)
 MAX_CELLS = 100_000  # cells a study may have
 KEYS = {
     "study": ("name", "record", "description"),
@@ -192,17 +204,32 @@ def _checked_cells(specs, base, record):
                 raise InputError(_field(where, "scene"), error.message) from None
         cell = Cell(source, method, settings, record, _key(texts[source], method, settings, record))
         try:
-            load_scene(source, cell.overrides())
-        except InputError as error:  # named by the setting it came from, where it did
-            paths = {path.replace("[", ".").replace("]", ""): path for path, _ in settings}
-            setting = paths.get((error.field or "").replace("[", ".").replace("]", ""))
-            place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
-            inner = f"{error.field}: " if error.field and not setting else ""
-            raise InputError(place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}") from None
+            loaded = load_scene(source, cell.overrides())
+        except InputError as error:
+            raise _cell_error(error, (error.field or "",), where, scene, method, settings) from None
+        try:  # the limits simulate holds a run to (contactlab run's), before a cluster starts
+            loaded.check(streamed=record == "trajectory", remedies=REMEDIES)
+        except InputError as error:
+            fields = RUN_FIELDS.get(error.field or "", (error.field or "",))
+            raise _cell_error(error, fields, where, scene, method, settings) from None
         if cell.key not in seen:  # the same cell twice (grid and list) runs once
             seen.add(cell.key)
             cells.append(cell)
     return cells
+
+
+def _cell_error(error, fields, where, scene, method, settings):
+    """``error`` of one cell as one InputError, placed at the first of ``fields`` (scene setting
+    paths) that the cell's settings give, or at the cell with the first field named."""
+    paths = {_dotted(path): path for path, _ in settings}
+    setting = next((paths[_dotted(name)] for name in fields if _dotted(name) in paths), None)
+    place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
+    inner = f"{fields[0]}: " if fields[0] and not setting else ""
+    return InputError(place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}")
+
+
+def _dotted(path):
+    return path.replace("[", ".").replace("]", "")
 
 
 def _key(scene_text, method, settings, record):

@@ -58,33 +58,39 @@ def run(
     import pandas as pd
 
     study = study if isinstance(study, Study) else load_study(study)
+    if client is None:
+        cluster.check_cluster(scheduler, workers)  # a malformed address fails before anything runs
     out = os.fspath(out) if out is not None else os.path.join("out", f"{study.name}-sweep")
     cells_folder = os.path.join(out, "cells")
     made = make_folders(cells_folder)
     try:
         if study.record == "trajectory":
             made += make_folders(os.path.join(out, "trajectories"))
-        done = {name[: -len(".parquet")] for name in os.listdir(cells_folder) if name.endswith(".parquet")}
-        todo = [cell for cell in study.cells if cell.key not in done]
         say = log or (lambda line: None)
-        say(f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run")
-        if todo:
-            jobs = [(cell.key, _job(cell, study, out)) for cell in todo]
-            if client is not None:
-                _run_jobs(client, jobs, cells_folder, progress, say)
-            else:
-                with cluster.connect(scheduler, workers) as connected:
-                    _run_jobs(connected, jobs, cells_folder, progress, say)
+        done = _finished_rows(cells_folder, study.cells, say)
+        todo = [cell for cell in study.cells if cell.key not in done]
+        counts = f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run"
+        if not todo:
+            say(counts)
+        elif client is not None:
+            _run_jobs(client, _jobs(todo, study, out), cells_folder, progress, say, counts)
+        else:
+            with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
+                _run_jobs(connected, _jobs(todo, study, out), cells_folder, progress, say, counts)
     except BaseException:
         remove_empty(made)  # nothing finished: no folder left (finished cells stay)
         raise
-    table = pd.DataFrame([_read_row(cells_folder, cell.key) for cell in study.cells])
+    table = pd.DataFrame([done.get(cell.key) or _read_row(cells_folder, cell.key) for cell in study.cells])
     table = table.reindex(columns=_columns(study, table))
     _write_table(table, out)
     from .sweep_report import write_report
 
     write_report(study, table, out)
     return table
+
+
+def _jobs(cells, study, out):
+    return [(cell.key, _job(cell, study, out)) for cell in cells]
 
 
 def _job(cell, study, out):
@@ -103,7 +109,8 @@ def _job(cell, study, out):
     }
 
 
-def _run_jobs(client, jobs, cells_folder, progress, say):
+def _run_jobs(client, jobs, cells_folder, progress, say, counts):
+    say(counts)
     say(f"Dask dashboard: {cluster.dashboard(client)}")
     settings = {key: job for key, job in jobs}
     for key, row in cluster.run_tasks(client, run_cell, jobs, progress=progress, description="cells"):
@@ -191,12 +198,41 @@ def _write_row(folder, key, row):
         interrupts.note_written(folder)
 
 
-def _read_row(folder, key) -> dict:
+def _finished_rows(folder, cells, say) -> dict[str, dict]:
+    """key -> row of each of ``cells`` whose file an earlier sweep left in ``folder``. A file
+    that cannot be read (cut short by a crash or a full disk, damaged since) does not count:
+    its cell runs again and overwrites it, and ``say`` is told so in one line."""
+    names = set(os.listdir(folder))
+    rows, damaged = {}, []
+    for cell in cells:
+        name = f"{cell.key}.parquet"
+        if name not in names:
+            continue
+        try:
+            rows[cell.key] = _row(os.path.join(folder, name))
+        except Exception as error:  # pyarrow's errors, an empty table: not a finished cell
+            damaged.append((name, _one_line(error)))
+    if len(damaged) == 1:
+        name, reason = damaged[0]
+        say(f"{os.path.join(folder, name)} could not be read ({reason}); that cell runs again")
+    elif damaged:
+        some = "; ".join(f"{name}: {reason}" for name, reason in damaged[:2])
+        more = f"; and {len(damaged) - 2} more" if len(damaged) > 2 else ""
+        say(f"{len(damaged)} cell files in {folder} could not be read ({some}{more}); those cells run again")
+    return rows
+
+
+def _row(path) -> dict:
+    """The row of the cell file ``path`` (pyarrow's error when it cannot be read)."""
     import pandas as pd
 
+    return pd.read_parquet(path).iloc[0].to_dict()
+
+
+def _read_row(folder, key) -> dict:
     path = os.path.join(folder, f"{key}.parquet")
     try:
-        return pd.read_parquet(path).iloc[0].to_dict()
+        return _row(path)
     except Exception as error:  # a file damaged since: that cell runs again next time
         os.unlink(path)
         raise InputError(

@@ -25,14 +25,16 @@ class Shown:
     """One run in the viewer: ``label`` ("scene — method"), ``arrays`` (a trajectory: a
     :class:`contactlab.store.TrajectoryFile` or the dict of a Run), ``summary`` (the run's
     summary.json, {} unknown), ``model`` (its Model, None when it cannot be rebuilt: no contacts
-    then), ``offset`` (3,) [m] where its origin sits in the viewer. The Viewer adds its drawing
-    state to it: the bodies' scene handles and colours, the colour scales' ranges."""
+    then), ``offset`` (3,) [m] where its origin sits in the viewer, ``source`` what names it in
+    an error (its folder; "arrays" for a Run). The Viewer adds its drawing state to it: the
+    bodies' scene handles and colours, the colour scales' ranges."""
 
     label: str
     arrays: object
     summary: dict
     model: object = None
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    source: str = "arrays"
 
 
 def _is_run(directory):
@@ -79,6 +81,8 @@ def model_of(summary: Mapping[str, Any], arrays: Mapping[str, Any]) -> Model | N
     )
     if "scene" in summary:
         attempts.append((summary["scene"], [f"simulation.method={summary.get('method', 'impulse')}"]))
+    if any(key not in arrays for key in ("body_position", "particle_position")):
+        return None  # not a whole trajectory: the viewer says so, naming its folder
     shapes = getattr(arrays, "shapes", None) or {
         key: np.shape(arrays[key]) for key in ("body_position", "particle_position")
     }
@@ -115,6 +119,7 @@ def open_runs(sources: Iterable[str | os.PathLike[str] | Run], field: str = "RUN
                     arrays,
                     summary,
                     model_of(summary, arrays),
+                    source=directory,
                 )
             )
     if not shown:

@@ -36,6 +36,7 @@ import contextlib
 import html
 import io
 import os
+import signal
 import socket
 import threading
 import time
@@ -195,8 +196,11 @@ class Viewer:
     def _framing(run, count):
         """(lower (3,), upper (3,)) [m] of a run's content over its ``count`` samples, and its
         obstacles as (vertices (W, 3) [m], triangles (M, 3)), planes cut around the content."""
-        arrays = read_trajectory(run.arrays, DRAWN, spread_samples(count))
-        check_arrays(arrays)
+        try:
+            arrays = read_trajectory(run.arrays, DRAWN, spread_samples(count))
+            check_arrays(arrays)
+        except InputError as error:  # named by the run's folder (as render names its OUT_DIR)
+            raise InputError(run.source, error.message) from None
         content, flat, _, solid = scenery(arrays)
         vertices = np.concatenate([solid.reshape(-1, 3), *flat])
         counts = np.array([len(polygon) for polygon in flat], dtype=np.int64)
@@ -462,14 +466,16 @@ class Viewer:
         with _quiet():
             self.server.stop()
 
-    def wait(self) -> None:
-        """Serve until Ctrl-C (or SIGTERM), then stop."""
+    def wait(self) -> int:
+        """Serve until Ctrl-C (or SIGTERM), then stop; returns the signal's number
+        (``signal.SIGINT`` or ``signal.SIGTERM``): the command line exits 0 after Ctrl-C, the
+        way to close the viewer, and 143 after SIGTERM."""
         try:
             while True:
                 interrupts.check()
                 time.sleep(0.2)
-        except KeyboardInterrupt:
-            pass
+        except KeyboardInterrupt as stopped:
+            return getattr(stopped, "signum", signal.SIGINT)
         finally:
             self.stop()
 

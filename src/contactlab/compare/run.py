@@ -322,6 +322,7 @@ def compare(
     (a failed health check) is reported, not raised.
     """
     names, named = _method_names(methods)
+    cluster.check_cluster(scheduler, workers)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
     video = _video_fps(video, fps)  # a missing renderer or a bad fps fails before the runs
     created = _Created()

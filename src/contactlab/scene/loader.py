@@ -29,7 +29,7 @@ from .schema import show, validate
 from .toml import parse_toml
 
 if TYPE_CHECKING:
-    from ..simulation import Run
+    from ..simulation import Checked, Run
 
 BUILTIN_PACKAGE = __package__  # scene files live in <this package>/builtin/*.toml
 MAX_SCENE_BYTES = 16 * 2**20  # bytes: a larger scene file is refused unread (built-in ones are under 2 kB)
@@ -75,16 +75,19 @@ class Scene:
         sweep each run."""
         from ..simulation import simulate  # here: loading a scene does not load the stepping code
 
-        return simulate(
-            self.model,
-            self.method,
-            self.dt,
-            self.duration,
-            self.options[self.method],
-            self.integrator,
-            scene_name=self.name,
-            **keywords,
-        )
+        return simulate(*self._run_arguments(), scene_name=self.name, **keywords)
+
+    def check(self, **keywords: Any) -> Checked:
+        """Every check :meth:`simulate` would make before its first step, with the same
+        ``keywords`` (record_every, memory_limit, trajectory), plus ``streamed`` and ``remedies``
+        (:func:`contactlab.simulation.check_run`): InputError for a run that would be refused."""
+        from ..simulation import check_run
+
+        return check_run(*self._run_arguments(), scene_name=self.name, **keywords)
+
+    def _run_arguments(self) -> tuple[Model, str, float, float, Any, str]:
+        """simulate's first six: model, method, dt, duration, the method's options, integrator."""
+        return self.model, self.method, self.dt, self.duration, self.options[self.method], self.integrator
 
 
 def _builtin_dir():
