@@ -1,5 +1,5 @@
 """Issue 23: the habits of a maintained library, held by the suite — ruff's lint and format clean
-over src/ and tests/ (the settings in pyproject.toml), no module over 600 lines, and a module map
+over src/ and tests/ (the settings in pyproject.toml), no module over 1,000 lines, and a module map
 (docs/modules.md) that names every module."""
 
 import fnmatch
@@ -13,7 +13,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "src" / "contactlab"
-LONGEST_MODULE = 600  # lines: a module longer than this holds more than one concern (issue 23)
+# lines: a module longer than this holds more than one concern (issue 23's 600, made "one concern a
+# file, at most about 1,000 lines" by issue 36: a split at a line count cut concerns in two)
+LONGEST_MODULE = 1000
 
 
 def _ruff(*arguments):
@@ -38,7 +40,7 @@ def _modules():
     return sorted(path.relative_to(PACKAGE).as_posix() for path in paths)
 
 
-def test_no_module_is_longer_than_six_hundred_lines():
+def test_no_module_is_longer_than_a_thousand_lines():
     lengths = {name: len((PACKAGE / name).read_text(encoding="utf-8").splitlines()) for name in _modules()}
     assert len(lengths) > 100
     assert {name: n for name, n in lengths.items() if n > LONGEST_MODULE} == {}
