@@ -24,8 +24,8 @@ import numpy as np
 
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
+from .diagnostics import SERIES
 from .errors import InputError
-from .state import ARRAYS as STATE_ARRAYS
 from .state import array_shapes
 from .trajectory import check_arrays, check_shapes
 
@@ -34,17 +34,6 @@ if TYPE_CHECKING:
     from .model import Model
     from .state import State
 
-SERIES = (
-    "time",
-    *STATE_ARRAYS,
-    "energy_kinetic",
-    "energy_potential",
-    "energy_elastic",
-    "max_penetration",
-    "contact_count",
-    "solver_iterations",
-    "solver_residual",
-)
 WHOLE_SERIES = ("contact_count", "solver_iterations")  # 64-bit whole numbers; the rest are floats
 DRAWN = (  # what a picture of a run reads (render, viewer, export): its time, poses and surfaces
     "time",

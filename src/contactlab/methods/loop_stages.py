@@ -28,8 +28,8 @@ from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..compiling import njit
 from ..contacts import ContactArrays
+from ..diagnostics import SERIES
 from ..dynamics import integrators
-from ..record import SERIES
 from ..state import ARRAYS as STATE_ARRAYS
 from .jacobian_rows import ContactRows, rows_at
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
@@ -84,7 +84,7 @@ Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
 
 Samples = namedtuple("Samples", SERIES)
-Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
+Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.diagnostics.SERIES."
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------
