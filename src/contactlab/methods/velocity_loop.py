@@ -52,7 +52,7 @@ from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
-from ..compiling import njit
+from ..compiling import available_threads, njit
 from ..state import State
 from . import CollisionOptions
 from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, poses, record, store
@@ -180,8 +180,6 @@ def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple
     PenaltyLoop the flag after these);
     slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
     several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
-    from ..threads import available_threads
-
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
     present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
