@@ -215,11 +215,6 @@ class Model:
     def __repr__(self):
         return f"Model({self.describe()})"
 
-    def _repr_html_(self):  # Jupyter (contactlab.notebook)
-        from .notebook import model_html
-
-        return model_html(self)
-
     def describe(self) -> str:
         kinds: dict[str, int] = {}
         for k in self.body_shape:
