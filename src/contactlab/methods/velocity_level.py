@@ -27,7 +27,7 @@ from ..compiling import njit
 from ..contacts import ContactArrays, values_by_id
 from ..dynamics.integrators import advance_positions
 from ..state import State
-from . import StepInfo
+from .base import StepInfo
 from .loop_stages import loop_model
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
 
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
     from ..contacts import Contacts
     from ..model import Model
-    from . import KeptManifoldOptions
+    from .base import KeptManifoldOptions
     from .constraints import Options as ConstraintsOptions
     from .impulse import Options as ImpulseOptions
 

@@ -53,7 +53,7 @@ from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
 from ..compiling import available_threads, njit
 from ..state import State
-from . import CollisionOptions
+from .base import CollisionOptions
 from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, loop_model, poses, record, store
 from .loop_steps import PenaltyLoop, penalty_step, projection_step, velocity_step
 from .penalty import spring_settings
