@@ -10,12 +10,12 @@ from conftest import frictional_contacts
 
 import contactlab.lcp.solve as lcp_solve
 from contactlab.errors import InputError
+from contactlab.fclib import read_problem
 from contactlab.lcp import (
     color_contacts,
     color_rows,
     coloring_is_valid,
     natural_map_error,
-    read_problem,
     solve_friction_contact,
     solve_lcp,
 )

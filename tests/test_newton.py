@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from contactlab.errors import InputError
-from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
+from contactlab.fclib import read_problem
+from contactlab.lcp import natural_map_error, solve_friction_contact, solve_lcp
 
 FCLIB = Path(__file__).resolve().parents[2] / "shared" / "data" / "fclib"
 FCLIB_FILES = sorted(p.name for p in FCLIB.iterdir() if p.suffix in (".dat", ".hdf5")) if FCLIB.is_dir() else []
