@@ -1,6 +1,6 @@
 """The FCLIB problems under `newton`, against `nsgs` and `apgd` (issue 19) — `python benchmarks/fclib_newton.py`.
 
-Every problem of data/fclib (the repository's copy; read with `contactlab.lcp.read_problem`) is solved from
+Every problem of data/fclib (the repository's copy; read with `contactlab.fclib.read_problem`) is solved from
 r = 0 to the same tolerance (default 1e-8 on the normalized natural-map error,
 `contactlab.lcp.natural_map_error`) by
 
@@ -41,7 +41,8 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import contactlab  # noqa: E402
-from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact  # noqa: E402
+from contactlab.fclib import read_problem  # noqa: E402
+from contactlab.lcp import natural_map_error, solve_friction_contact  # noqa: E402
 
 from contactlab.fclib_bench import MAX_ITERATIONS as CAPS, PROBLEM_SUFFIXES  # noqa: E402  (one table of caps)
 

@@ -14,6 +14,7 @@ import pytest
 from contactlab import ModelBuilder, collide, simulate
 from contactlab.collision import _colliders
 from contactlab.collision.broad_phase import brute_force_pairs
+from contactlab.collision.families import pair_families
 from contactlab.collision.narrow_phase import (
     ALL_FAMILIES,
     FAMILIES,
@@ -37,8 +38,8 @@ def test_a_ball_on_the_floor_needs_sphere_plane_alone():
     b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 1))
     b.add_obstacle("plane", normal=(0, 0, 1))
     model = b.finalize()
-    assert present(model.pair_families) == {"sphere_plane"}
-    assert not needs_hulls(model.pair_families)
+    assert present(pair_families(model)) == {"sphere_plane"}
+    assert not needs_hulls(pair_families(model))
 
 
 def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacles():
@@ -51,7 +52,7 @@ def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacl
     b.add_obstacle("convex", points=OCTAHEDRON, position=(5, 0, 0))
     model = b.finalize()
     # sphere and particle are both round: sphere_sphere; one sphere-like kind meets the boxes and so on
-    assert present(model.pair_families) == {
+    assert present(pair_families(model)) == {
         "sphere_sphere",
         "sphere_box",
         "box_box",
@@ -60,7 +61,7 @@ def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacl
         "sphere_convex",
         "convex_convex",
     }
-    assert needs_hulls(model.pair_families)
+    assert needs_hulls(pair_families(model))
     assert family(1, 5) == family(5, 1) == "convex_convex" and family(2, 2) is None and family(0, 6) is None
 
 
@@ -99,7 +100,7 @@ def mixed_model():
 
 def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
     model = mixed_model()
-    assert present(model.pair_families) == set(FAMILIES)
+    assert present(pair_families(model)) == set(FAMILIES)
     kinds, params, centers, rots = _colliders(model, model.state())
     pairs = brute_force_pairs(np.full((len(kinds), 3), -1.0), np.full((len(kinds), 3), 1.0))  # every pair
     dynamic = model.body_count + model.particle_count
@@ -119,7 +120,7 @@ def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
         rows = np.isin(everything[4], np.nonzero(mine)[0])
         for column, expected in zip(got[:4], everything[:4]):
             np.testing.assert_array_equal(column, expected[rows])
-    scene = generate_contacts(pairs, kinds, params, centers, rots, reach, model.hull_store, model.pair_families)
+    scene = generate_contacts(pairs, kinds, params, centers, rots, reach, model.hull_store, pair_families(model))
     for column, expected in zip(scene, everything):
         np.testing.assert_array_equal(column, expected)
     # and pair by pair, as collide_pair computes them (either order)
@@ -147,7 +148,7 @@ def test_a_family_left_out_is_not_compiled_in():
     model = b.finalize()
     kinds, params, centers, rots = _colliders(model, model.state())
     pairs = np.array([[0, 1]], dtype=np.int64)
-    point, *_ = fresh(pairs, kinds, params, centers, rots, np.zeros(1), None, model.pair_families)
+    point, *_ = fresh(pairs, kinds, params, centers, rots, np.zeros(1), None, pair_families(model))
     assert len(point) == 1
     code = "".join(fresh.inspect_llvm().values())
     assert "sphere_plane" in code
@@ -172,7 +173,7 @@ def test_collide_gives_the_same_contacts_whatever_the_shapes_around():
         return b.finalize()
 
     plain, extended = scene(False), scene(True)
-    assert plain.pair_families != extended.pair_families
+    assert pair_families(plain) != pair_families(extended)
     a, b = collide(plain, plain.state(), margin=0.01), collide(extended, extended.state(), margin=0.01)
     assert a.count == b.count > 0
     for name in ("point", "normal", "depth", "body_a", "body_b"):

@@ -11,8 +11,9 @@ from conftest import FCLIB
 
 from contactlab import fclib_bench
 from contactlab.errors import InputError
+from contactlab.fclib import read_problem
 from contactlab.fclib_bench import COLUMNS, MAX_ITERATIONS, Job, bench, performance_profile, run_job
-from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact
+from contactlab.lcp import natural_map_error, solve_friction_contact
 
 SOLVERS = ["nsgs", "newton"]
 TOL = 1e-8

@@ -11,12 +11,12 @@ from conftest import FCLIB, FCLIB_FILES, frictional_contacts
 
 import contactlab.lcp.solve as lcp_solve
 from contactlab.errors import InputError
+from contactlab.fclib import read_problem
 from contactlab.lcp import (
     color_contacts,
     color_rows,
     coloring_is_valid,
     natural_map_error,
-    read_problem,
     solve_friction_contact,
     solve_lcp,
 )

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from contactlab.errors import InputError
-from contactlab.lcp import natural_map_error, read_problem, solve_friction_contact, solve_lcp
+from contactlab.fclib import read_problem
+from contactlab.lcp import natural_map_error, solve_friction_contact, solve_lcp
 
 
 def norm(x):

@@ -105,6 +105,7 @@ def drive(chooser, fake, step_seconds, steps):
 def fake(monkeypatch):
     stand_in = FakeNumba(2)
     monkeypatch.setattr(threads, "numba", stand_in)
+    monkeypatch.setattr(threads, "available_threads", lambda: stand_in.config.NUMBA_NUM_THREADS)
     return stand_in
 
 

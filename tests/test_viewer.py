@@ -129,12 +129,12 @@ def test_a_compare_folder_opens_its_methods_side_by_side(compared):
         shown.stop()
 
 
-def test_run_show_returns_a_server_with_stop_and_forces_from_the_method():
+def test_viewing_a_run_returns_a_server_with_stop_and_forces_from_the_method():
     builder = ModelBuilder(gravity=(0, 0, -9.81))
     builder.add_body("sphere", radius=0.1, mass=2.0, position=(0, 0, 0.1))
     builder.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
     run = simulate(builder.finalize(), method="impulse", dt=0.002, duration=0.2)
-    shown = run.show()
+    shown = view(run)
     assert shown.url in shown._repr_html_()
     try:
         shown.gui["forces"].value = True

@@ -10,10 +10,16 @@ Build a model, step it with a method of the lecture, record it::
     run = simulate(builder.finalize(), method="impulse", dt=0.001, duration=2.0)
 """
 
+import sys
 from importlib import import_module
 from typing import Any
 
 from .errors import InputError, SimulationDiverged
+
+if "IPython" in sys.modules:  # in IPython or a notebook: a Model and a Run show as HTML
+    from .notebook import register as _register_html
+
+    _register_html()
 
 # the rest is imported on first use (PEP 562), so that ``python -m contactlab`` and the
 # ``contactlab`` command install their signal handlers before Numba and NumPy load

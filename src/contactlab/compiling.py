@@ -1,4 +1,4 @@
-"""Saying so when kernels compile.
+"""Saying so when kernels compile, and how many threads they may use.
 
 contactlab's kernels are compiled by Numba on first use and kept in its on-disk cache
 (``cache=True``, in the ``__pycache__`` folders beside the sources, or ``NUMBA_CACHE_DIR``).
@@ -20,6 +20,9 @@ loop ran the old stages. Every kernel of contactlab therefore takes :func:`njit`
 module, whose cache entries are stamped with :func:`sources_digest` of the whole package
 (:class:`PackageStampedLocator`): any change to any of contactlab's sources makes every entry
 stale, and the next run compiles afresh (and says so).
+
+The most threads the kernels may use is Numba's, fixed when it starts: :func:`available_threads`
+(:mod:`contactlab.threads` chooses how many of them a run takes).
 """
 
 from __future__ import annotations
@@ -32,12 +35,26 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
 
+import numba
 from numba import njit
 from numba.core import caching, event
 
-__all__ = ["NOTICE", "FirstCompile", "PackageStampedLocator", "compile_notice", "njit", "sources_digest"]
+__all__ = [
+    "NOTICE",
+    "FirstCompile",
+    "PackageStampedLocator",
+    "available_threads",
+    "compile_notice",
+    "njit",
+    "sources_digest",
+]
 
 NOTICE = "compiling contact kernels for first use… (once: later runs load them from Numba's cache)"
+
+
+def available_threads() -> int:
+    """The most threads the compiled kernels can use in this process (NUMBA_NUM_THREADS)."""
+    return int(numba.config.NUMBA_NUM_THREADS)
 
 
 class FirstCompile(event.Listener):

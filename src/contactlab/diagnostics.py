@@ -1,4 +1,8 @@
-"""Quantities that judge a run: energies, penetration, momentum. Pure functions of a state."""
+"""Quantities that judge a run: energies, penetration, momentum. Pure functions of a state.
+
+``SERIES`` names what every sample of a run holds: its time, the state's arrays and these
+quantities with the solver's figures — the compiled loop's ``Samples`` and the Recorder's
+series (``contactlab.record``) alike."""
 
 from __future__ import annotations
 
@@ -10,11 +14,24 @@ from numpy.typing import ArrayLike
 from . import rotations
 from .compiling import njit
 from .dynamics.cloth import spring_energy
+from .state import ARRAYS as STATE_ARRAYS
 
 if TYPE_CHECKING:
     from .contacts import Contacts
     from .model import Model
     from .state import State
+
+SERIES = (
+    "time",
+    *STATE_ARRAYS,
+    "energy_kinetic",
+    "energy_potential",
+    "energy_elastic",
+    "max_penetration",
+    "contact_count",
+    "solver_iterations",
+    "solver_residual",
+)
 
 
 def kinetic_energy(model: Model, state: State) -> float:

@@ -34,7 +34,8 @@ import pandas as pd
 
 from . import cluster
 from .errors import InputError, first_line, shorten
-from .lcp import natural_map_error, read_problem, solve_friction_contact
+from .fclib import read_problem
+from .lcp import natural_map_error, solve_friction_contact
 from .plots import DPI, STYLES, _figure
 from .record import atomic_path, make_folders, undo_written
 from .threads import available_threads

@@ -10,9 +10,11 @@ free ones and the vertices of every cloth, in the order they were added.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -21,9 +23,10 @@ from .counts import RowCount
 
 if TYPE_CHECKING:
     from .driving import Drive
-    from .dynamics.cloth import SpringPattern
     from .meshes import TriangleMesh
     from .state import State
+
+Built = TypeVar("Built")
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,8 @@ class Model:
     """(S,) N s/m"""
     drive: Drive | None = field(repr=False, default=None)
     """external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene"""
+    _derived: dict[Callable[[Model], Any], Any] = field(init=False, repr=False, compare=False, default_factory=dict)
+    """what higher layers built from this model, by the function that built it (:func:`derived`)"""
 
     def __post_init__(self):
         # models built without cloth: no particle belongs to one, none is pinned
@@ -150,14 +155,6 @@ class Model:
     """S, the number of cloth springs."""
 
     @cached_property
-    def spring_pattern(self) -> SpringPattern:
-        """Where the springs' Jacobian blocks sit in a (3P, 3P) CSR matrix
-        (``dynamics.cloth.SpringPattern``): fixed by the topology, built on first use and kept."""
-        from .dynamics.cloth import spring_pattern
-
-        return spring_pattern(self.spring_particles, self.particle_count)
-
-    @cached_property
     def body_radii(self) -> np.ndarray:
         """(B,) [m] radii of the spheres about the bodies' centres that enclose them
         (``shapes.bounding_radii``): fixed by the shapes, computed on first use and kept."""
@@ -195,25 +192,6 @@ class Model:
             thickness[g] = self.meshes[int(params[g, 0])].max_depth
         return thickness
 
-    @cached_property
-    def pair_families(self) -> tuple:
-        """Which narrow-phase pair routines this model's colliders can need (the families tuple
-        of ``collision.narrow_phase.scene_families``): the compiled narrow phase is specialised
-        on it, so only those routines are compiled; built on first use and kept."""
-        from .collision.narrow_phase import scene_families
-
-        B, P = self.body_count, self.particle_count
-        kinds = self.collider_table[0]
-        return scene_families(kinds[: B + P], kinds[B + P :])
-
-    @cached_property
-    def stepping_arrays(self) -> Any:
-        """The arrays the compiled stepping loop reads (``methods.velocity_loop.LoopModel``):
-        built on first use and kept."""
-        from .methods.velocity_loop import loop_model
-
-        return loop_model(self)
-
     @property
     def particle_inverse_mass(self) -> np.ndarray:
         """(P,) 1/kg; 0 for pinned particles, so every solver treats them as immovable."""
@@ -237,11 +215,6 @@ class Model:
     def __repr__(self):
         return f"Model({self.describe()})"
 
-    def _repr_html_(self):  # Jupyter (contactlab.notebook)
-        from .notebook import model_html
-
-        return model_html(self)
-
     def describe(self) -> str:
         kinds: dict[str, int] = {}
         for k in self.body_shape:
@@ -262,3 +235,22 @@ class Model:
                 )
             )
         return ", ".join(parts)
+
+
+def derived(build: Callable[[Model], Built]) -> Callable[[Model], Built]:
+    """``build``, a function of a Model, made to build its value once per Model and keep it.
+
+    For what a higher layer builds from a Model's arrays alone — the collision's pair families
+    (``collision.families.pair_families``), the cloth's sparse pattern
+    (``dynamics.cloth.spring_pattern``), the compiled loop's arrays
+    (``methods.loop_stages.loop_model``): a Model never changes, so each is built on first use and
+    kept with the Model, which itself knows nothing of them (it imports no higher layer)."""
+
+    @functools.wraps(build)
+    def kept(model: Model) -> Built:
+        values = model._derived
+        if kept not in values:
+            values[kept] = build(model)
+        return values[kept]
+
+    return kept

@@ -1,4 +1,4 @@
-"""How a Model, a Run and a comparison show themselves in Jupyter (their ``_repr_html_``).
+"""How a Model, a Run and a comparison show themselves in Jupyter (as HTML).
 
 In a notebook, a cell ending in ``model``, ``run`` or ``compare(...)`` shows a compact HTML
 summary instead of a dump of arrays: a model its parts; a run what it did (steps, where the time
@@ -7,7 +7,12 @@ an MP4 of 320 × 240 at up to PLAYER_FPS frames per second and at most PLAYER_FR
 drawn when shown, in real time, with the browser's play, pause and scrub controls; the last
 sample as a still where no video can be drawn); a comparison its table, with a link to its
 report. Everything is escaped; videos and pictures are inline, so the notebook needs no file
-beside it. For an interactive 3D view, ``run.show()`` opens the viewer.
+beside it. For an interactive 3D view, ``contactlab.viewer.view(run)`` opens the viewer.
+
+A Model and a Run belong to lower layers, which know nothing of presentation: :func:`register`
+tells IPython's HTML formatter how to show them, by their classes' names. ``import contactlab``
+calls it when IPython is loaded (a notebook's kernel), and ``%load_ext contactlab.notebook``
+does it by hand. A comparison, of this layer, has its own ``_repr_html_``.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ import base64
 import html
 import os
 import tempfile
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from .compare import Comparison
@@ -26,6 +31,24 @@ if TYPE_CHECKING:
 
 PLAYER_FPS = 12  # frames per second of the inline player at most
 PLAYER_FRAMES = 120  # frames of it at most (a long run plays at fewer frames per second)
+
+
+def register(shell: Any = None) -> None:
+    """Show a Model (:func:`model_html`) and a Run (:func:`run_html`) as HTML in ``shell``, an
+    IPython shell (default: the running one; none running: nothing happens). Registered by the
+    classes' module and name, so nothing of contactlab is imported for it."""
+    if shell is None:
+        from IPython import get_ipython
+
+        shell = get_ipython()
+    if shell is None:
+        return
+    html = shell.display_formatter.formatters["text/html"]
+    html.for_type_by_name("contactlab.model", "Model", model_html)
+    html.for_type_by_name("contactlab.simulation", "Run", run_html)
+
+
+load_ipython_extension = register  # %load_ext contactlab.notebook
 
 
 def _table(rows) -> str:

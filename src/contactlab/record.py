@@ -17,7 +17,6 @@ import functools
 import json
 import math
 import os
-import weakref
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -26,8 +25,9 @@ import numpy as np
 
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
+from .diagnostics import SERIES
 from .errors import InputError
-from .state import ARRAYS as STATE_ARRAYS
+from .model import derived
 from .state import array_shapes
 from .trajectory import check_arrays, check_shapes
 
@@ -36,17 +36,6 @@ if TYPE_CHECKING:
     from .model import Model
     from .state import State
 
-SERIES = (
-    "time",
-    *STATE_ARRAYS,
-    "energy_kinetic",
-    "energy_potential",
-    "energy_elastic",
-    "max_penetration",
-    "contact_count",
-    "solver_iterations",
-    "solver_residual",
-)
 WHOLE_SERIES = ("contact_count", "solver_iterations")  # 64-bit whole numbers; the rest are floats
 DRAWN = (  # what a picture of a run reads (render, viewer, export): its time, poses and surfaces
     "time",
@@ -95,24 +84,23 @@ def _sample_bytes(body_count: int, particle_count: int) -> int:
 def static_arrays(model: Model) -> dict[str, np.ndarray]:
     """What does not change during a run of ``model``: body_names (B,), the cloth topology
     triangles (F, 3) and particle_cloth (P,), and the shapes' surfaces for drawing and export
-    (contactlab.surfaces). Built once a model and kept while it lives (read-only arrays): a study
-    runs one model many times, and the surfaces cost a tiny run a tenth of its time."""
-    key = id(model)
-    if key not in _STATIC:
-        arrays = {
-            "body_names": np.array(model.body_names, dtype=str),
-            "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
-            "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
-            **surfaces.surface_arrays(model),
-        }
-        for array in arrays.values():
-            array.flags.writeable = False
-        _STATIC[key] = arrays
-        weakref.finalize(model, _STATIC.pop, key, None)
-    return dict(_STATIC[key])
+    (contactlab.surfaces). Built once a model (read-only arrays): a study runs one model many
+    times, and the surfaces cost a tiny run a tenth of its time."""
+    return dict(_static_arrays(model))
 
 
-_STATIC: dict[int, dict[str, np.ndarray]] = {}  # id of a live Model -> its static_arrays
+@derived
+def _static_arrays(model: Model) -> dict[str, np.ndarray]:
+    """``static_arrays``, built once and kept with the Model (``model.derived``)."""
+    arrays = {
+        "body_names": np.array(model.body_names, dtype=str),
+        "triangles": np.array(model.triangles, dtype=np.int64).reshape(-1, 3),
+        "particle_cloth": np.array(model.particle_cloth, dtype=np.int64),
+        **surfaces.surface_arrays(model),
+    }
+    for array in arrays.values():
+        array.flags.writeable = False
+    return arrays
 
 
 @dataclass

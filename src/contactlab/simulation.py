@@ -12,7 +12,7 @@ import time
 import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba.core import event as numba_event
@@ -32,9 +32,6 @@ from .store import TrajectoryFile
 from .threads import ThreadChooser
 from .validation import MAX_STEPS, one_of, run_length
 
-if TYPE_CHECKING:
-    from .viewer import Viewer
-
 
 @dataclass
 class Run:
@@ -43,7 +40,8 @@ class Run:
     ``arrays`` holds the arrays of a trajectory file, in memory or, when the run streamed to a
     path, that file read back (a :class:`contactlab.store.TrajectoryFile`); ``summary`` holds
     what a run's ``summary.json`` does; docs/trajectory.md describes both. In Jupyter a Run
-    shows itself as a compact HTML summary with a picture of its last sample."""
+    shows itself as a compact HTML summary with a player of the run (contactlab.notebook);
+    ``contactlab.viewer.view(run)`` opens it in the interactive viewer."""
 
     state: State | None
     """the final State (None for a comparison's run read back from its files)"""
@@ -60,20 +58,6 @@ class Run:
             f"Run({s.get('scene', '?')!r} with {s.get('method', '?')}: {s.get('steps', '?')} steps of "
             f"{s.get('dt', float('nan')):g} s, {s.get('samples', '?')} samples, final {self.state!r})"
         )
-
-    def show(self, port: int | None = None) -> Viewer:
-        """Open this run in the interactive viewer (contactlab.viewer, docs/viewer.md), served on
-        127.0.0.1 in the background, a free port unless ``port``: returns the Viewer (its ``url``;
-        ``.stop()`` ends it), so a notebook goes on. Its trajectory is shown where it is, in memory
-        or in its trajectory.h5; contacts and forces use the run's Model."""
-        from .viewer import view
-
-        return view(self, port=port)
-
-    def _repr_html_(self):  # Jupyter (contactlab.notebook): the summary and the last sample drawn
-        from .notebook import run_html
-
-        return run_html(self)
 
 
 class Checked(NamedTuple):

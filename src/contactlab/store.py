@@ -8,7 +8,7 @@ temporary name beside its path (``.partial-…``) and is renamed to it when the 
 ends — completed, diverged or interrupted, which its ``status`` attribute says; a run that fails
 otherwise (a bug, a full disk) leaves nothing.
 
-Layout (docs/trajectory.md): one dataset per array of ``record.SERIES``, T rows, resizable
+Layout (docs/trajectory.md): one dataset per array of ``diagnostics.SERIES``, T rows, resizable
 along T and chunked by samples; the static arrays (names, cloth triangles, surfaces) as plain
 datasets; attributes ``format`` (:data:`FORMAT`), ``version`` (:data:`VERSION`), ``status``,
 ``record_every``. Every chunk of numbers carries a Fletcher-32 checksum, so a damaged file is refused

@@ -28,6 +28,7 @@ from typing import Any
 
 import numba
 
+from .compiling import available_threads
 from .errors import InputError
 
 # OpenMP's workers (Numba's default threading layer where GNU OpenMP is found) spin for about
@@ -42,11 +43,6 @@ if "OMP_WAIT_POLICY" not in os.environ:
 
 AUTO = "auto"
 _default: int | str = AUTO  # what ``threads=None`` means: set_threads changes it
-
-
-def available_threads() -> int:
-    """The most threads the compiled kernels can use in this process (NUMBA_NUM_THREADS)."""
-    return int(numba.config.NUMBA_NUM_THREADS)
 
 
 def check_threads(threads: int | str | None, field: str = "threads") -> int | str:

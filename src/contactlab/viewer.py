@@ -5,7 +5,7 @@
     viewer.stop()
 
 ``contactlab view RUN_DIR…`` and ``contactlab run … --view`` serve it until Ctrl-C;
-:meth:`contactlab.simulation.Run.show` returns it, serving in the background (a notebook goes on).
+:func:`view` returns it, serving in the background (a notebook goes on).
 viser (https://viser.studio) draws the scene with three.js in the page and gives the orbit
 camera; its built web client ships in its wheel, so nothing is fetched from the network.
 

@@ -17,6 +17,7 @@ from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
+from .families import pair_families
 from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
 from .granularity import NORMALS as NORMALS
 from .granularity import polytope_contacts
@@ -264,7 +265,7 @@ def collide_keeping(
             tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))] for column in part)
             for part in mesh_parts
         ] + surface_parts
-    families = model.pair_families  # only these pair routines are compiled (narrow_phase.FAMILIES)
+    families = pair_families(model)  # only these pair routines are compiled (narrow_phase.FAMILIES)
     hulls = model.hull_store if needs_hulls(families) else None
     if tolerance > 0.0:
         contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(

@@ -3,11 +3,18 @@ shape kinds, and the families tuple of a scene that the compiled narrow phase
 (:mod:`contactlab.collision.narrow_phase`, ``generate_contacts``) is specialised on.
 """
 
+from __future__ import annotations
+
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import shapes
+from ..model import derived
+
+if TYPE_CHECKING:
+    from ..model import Model
 
 SPHERE, BOX, PLANE, POINT, CAPSULE, CONVEX = (
     shapes.SPHERE,
@@ -92,6 +99,16 @@ def scene_families(dynamic_kinds: np.ndarray, static_kinds: np.ndarray) -> tuple
     pairs = [(a, b) for i, a in enumerate(kinds.tolist()) for b in kinds[i:].tolist() if a != b or counts[i] > 1]
     pairs += [(a, b) for a in kinds.tolist() for b in statics]
     return families_of(pairs)
+
+
+@derived
+def pair_families(model: Model) -> tuple:
+    """Which pair routines ``model``'s colliders can need (its families tuple, :func:`scene_families`
+    of its bodies' and particles' kinds and its obstacles'): the compiled narrow phase is
+    specialised on it, so only those routines are compiled; built on first use and kept with the model."""
+    B, P = model.body_count, model.particle_count
+    kinds = model.collider_table[0]
+    return scene_families(kinds[: B + P], kinds[B + P :])
 
 
 def needs_hulls(families: tuple) -> bool:

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..compiling import njit
+from ..model import derived
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -191,10 +192,12 @@ class SpringPattern:
         return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
 
 
-def spring_pattern(spring_particles: np.ndarray, count: int) -> SpringPattern:
-    """The ``SpringPattern`` of springs joining ``spring_particles`` (S, 2) among ``count`` particles."""
-    n = 3 * count
-    i, j = spring_particles[:, 0], spring_particles[:, 1]
+@derived
+def spring_pattern(model: Model) -> SpringPattern:
+    """The ``SpringPattern`` of ``model``'s springs (``spring_particles`` (S, 2) among its P
+    particles): fixed by the topology, built on first use and kept with the model."""
+    n = 3 * model.particle_count
+    i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
     dof = np.arange(3)
     first = 3 * np.stack([i, j, i, j], axis=1)[:, :, None, None] + dof[None, None, :, None]
     second = 3 * np.stack([i, j, j, i], axis=1)[:, :, None, None] + dof[None, None, None, :]
@@ -284,7 +287,7 @@ def spring_jacobians(
 ) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """(K, D): the Jacobians ∂f/∂x [N/m] and ∂f/∂v [N s/m] of ``spring_forces``, SciPy CSR
     matrices (3P, 3P), symmetric, with the blocks of the module docstring (on the pattern of
-    ``model.spring_pattern``, whose diagonal is always stored).
+    ``spring_pattern(model)``, whose diagonal is always stored).
 
     K leaves out the position derivative of the damping force (exact when the damping is 0 or
     the velocities are equal along each spring). ``clamp_compressed``: drop the negative
@@ -299,7 +302,7 @@ def spring_jacobians(
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
     stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)
-    pattern = model.spring_pattern
+    pattern = spring_pattern(model)
     return pattern.matrix(pattern.values(stiffness)), pattern.matrix(pattern.values(damping))
 
 

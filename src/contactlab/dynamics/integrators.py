@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import rotations
 from ..compiling import njit
-from .cloth import block_product, jacobian_blocks, spring_forces
+from .cloth import block_product, jacobian_blocks, spring_forces, spring_pattern
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -200,7 +200,7 @@ def particle_system(
     if particle_force is not None:
         force = force + particle_force
     stiffness, damping = jacobian_blocks(model, x, clamp_compressed)
-    pattern = model.spring_pattern
+    pattern = spring_pattern(model)
     values = pattern.values(-h * damping - h * h * stiffness)  # − h D − h² K
     values[pattern.diagonal] += np.repeat(model.particle_mass, 3)  # + M
     free = np.repeat(~model.particle_pinned, 3)

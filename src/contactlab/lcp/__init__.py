@@ -8,14 +8,15 @@
   non-smooth Gauss-Seidel (``nsgs``, F4a), normal/friction alternation (``staggered``, F4b),
   accelerated projected gradient (``apgd``) or semi-smooth Newton on the Alart–Curnier function
   (``newton``, :mod:`contactlab.lcp.newton`);
-  :func:`natural_map_error` — its error measure;
-* :func:`read_problem` — FCLIB HDF5 and Siconos ``.dat`` friction problems.
+  :func:`natural_map_error` — its error measure.
+
+Reading FCLIB HDF5 and Siconos ``.dat`` friction problems is a file's business:
+:func:`contactlab.fclib.read_problem`.
 
 See ``docs/lcp.md``.
 """
 
 from .coloring import color_contacts, color_rows, coloring_is_valid
-from .fclib import FrictionProblem, read_problem
 from .friction import FrictionResult, natural_map_error, solve_friction_contact
 from .solve import LCP_METHODS, LCPResult, solve_lcp
 
@@ -29,6 +30,4 @@ __all__ = [
     "FrictionResult",
     "solve_friction_contact",
     "natural_map_error",
-    "FrictionProblem",
-    "read_problem",
 ]

@@ -11,7 +11,7 @@ Equivalently, per contact: ``0 ≤ u_N ⊥ r_N ≥ 0`` and, given r_N, the frict
 tangential work ``½ r_Tᵀ W_TT r_T + b_Tᵀ r_T`` over the disk ``‖r_T‖ ≤ μ r_N`` (maximal
 dissipation: a sliding contact's friction opposes its slip velocity, a sticking one has u_T = 0).
 
-Solvers (all sweeps compiled with Numba, ``cache=True``):
+Solvers (all sweeps compiled with Numba, ``cache=True``, in :mod:`contactlab.lcp.friction_sweeps`):
 
 * ``nsgs`` — non-smooth Gauss-Seidel, SPEC F4a: for each contact in turn, its normal component is
   solved exactly (others fixed) and projected on r_N ≥ 0, then right after its friction is solved
@@ -54,15 +54,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..compiling import njit
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
-from .disk import _disk_solve
+from .friction_sweeps import _diagonal_blocks, _nsgs, _staggered
+from .newton import solve_newton
 
 FRICTION_METHODS = ("nsgs", "staggered", "apgd", "newton")
 OPERATOR_METHODS = ("apgd",)  # those that need W only as products W x
 FRICTION_MODELS = ("cone", "pyramid")
-_SQRT_HALF = math.sqrt(0.5)
 
 
 @dataclass
@@ -88,170 +87,6 @@ class FrictionResult:
     """one sentence on how it ended."""
 
 
-# ----------------------------------------------------------------------------- compiled parts
-
-
-@njit(cache=True)
-def _row_dot(indptr, indices, data, r, i):
-    acc = 0.0
-    for k in range(indptr[i], indptr[i + 1]):
-        acc += data[k] * r[indices[k]]
-    return acc
-
-
-@njit(cache=True)
-def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
-    """Fill ``u = W r + q`` and return the normalized residual (cone natural map, or box split form)."""
-    m = q.shape[0]
-    for i in range(m):
-        u[i] = _row_dot(indptr, indices, data, r, i) + q[i]
-    total = 0.0
-    norm_r = 0.0
-    norm_u = 0.0
-    for a in range(m // 3):
-        i = 3 * a
-        rn, rt1, rt2 = r[i], r[i + 1], r[i + 2]
-        un, ut1, ut2 = u[i], u[i + 1], u[i + 2]
-        norm_r += rn * rn + rt1 * rt1 + rt2 * rt2
-        norm_u += un * un + ut1 * ut1 + ut2 * ut2
-        m_a = mu[a]
-        if pyramid:
-            fn = rn - max(0.0, rn - un)
-            bound = m_a * max(rn, 0.0) * _SQRT_HALF
-            f1 = rt1 - min(max(rt1 - ut1, -bound), bound)
-            f2 = rt2 - min(max(rt2 - ut2, -bound), bound)
-        else:
-            # z = r − û, û = u + [μ‖u_T‖, 0, 0]; F = r − P_K(z)
-            zn = rn - un - m_a * math.sqrt(ut1 * ut1 + ut2 * ut2)
-            z1 = rt1 - ut1
-            z2 = rt2 - ut2
-            zt = math.sqrt(z1 * z1 + z2 * z2)
-            if m_a * zt <= -zn:
-                pn, p1, p2 = 0.0, 0.0, 0.0
-            elif zt <= m_a * zn:
-                pn, p1, p2 = zn, z1, z2
-            else:
-                pn = (m_a * zt + zn) / (1.0 + m_a * m_a)
-                scale = m_a * pn / zt
-                p1, p2 = scale * z1, scale * z2
-            fn, f1, f2 = rn - pn, rt1 - p1, rt2 - p2
-        total += fn * fn + f1 * f1 + f2 * f2
-    scale = max(norm_q, math.sqrt(norm_r), math.sqrt(norm_u))
-    if scale <= 0.0:
-        scale = 1.0
-    return math.sqrt(total) / scale
-
-
-@njit(cache=True)
-def _friction_update(blocks, a, r, i, ut1, ut2, m_a, pyramid):
-    """Solve contact a's friction exactly with its normal fixed (u_T given at the current r)."""
-    rn = r[i]
-    a00 = blocks[a, 1, 1]
-    a01 = blocks[a, 1, 2]
-    a10 = blocks[a, 2, 1]
-    a11 = blocks[a, 2, 2]
-    if pyramid:
-        bound = m_a * rn * _SQRT_HALF
-        # projected coordinate steps, exact per component; two passes couple T1 and T2
-        for _ in range(2):
-            for k in (1, 2):  # T1, then T2: its diagonal entry, and its column moves u_T
-                diagonal = blocks[a, k, k]
-                if diagonal > 0.0:
-                    new = min(max(r[i + k] - (ut1 if k == 1 else ut2) / diagonal, -bound), bound)
-                    delta = new - r[i + k]
-                    r[i + k] = new
-                    ut1 += blocks[a, 1, k] * delta
-                    ut2 += blocks[a, 2, k] * delta
-        return
-    # b = u_T − W_TT r_T: the part of u_T that does not come from this contact's own friction
-    b1 = ut1 - a00 * r[i + 1] - a01 * r[i + 2]
-    b2 = ut2 - a10 * r[i + 1] - a11 * r[i + 2]
-    x1, x2 = _disk_solve(a00, a01, a10, a11, b1, b2, m_a * rn)
-    r[i + 1] = x1
-    r[i + 2] = x2
-
-
-@njit(cache=True)
-def _start(indptr, indices, data, q, mu, r, pyramid):
-    """What both sweeps start from: (contact count nc, u (m,) holding W r + q, |q|, the error
-    of r) for r (m,), q (m,) with m = 3 nc."""
-    m = q.shape[0]
-    u = np.empty(m)
-    norm_q = math.sqrt(np.sum(q * q))
-    return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
-
-
-@njit(cache=True)
-def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid):
-    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
-    nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
-    if error <= tol:
-        return 0, error
-    for sweep in range(1, max_iterations + 1):
-        for a in range(nc):
-            i = 3 * a
-            un = _row_dot(indptr, indices, data, r, i) + q[i]
-            ut1 = _row_dot(indptr, indices, data, r, i + 1) + q[i + 1]
-            ut2 = _row_dot(indptr, indices, data, r, i + 2) + q[i + 2]
-            wnn = blocks[a, 0, 0]
-            if wnn > 0.0:
-                new = max(0.0, r[i] - un / wnn)
-                delta = new - r[i]
-                r[i] = new
-                ut1 += blocks[a, 1, 0] * delta
-                ut2 += blocks[a, 2, 0] * delta
-            _friction_update(blocks, a, r, i, ut1, ut2, mu[a], pyramid)
-        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
-        if error <= tol:
-            return sweep, error
-    return max_iterations, error
-
-
-@njit(cache=True)
-def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid, inner):
-    """Staggered normal/friction iteration (SPEC F4b) on r (m,), in place. Returns (rounds, error).
-
-    Each round: up to ``inner`` projected Gauss-Seidel sweeps over all normal rows (frictions
-    fixed), then up to ``inner`` sweeps of exact friction solves over all contacts (normals
-    fixed); a phase stops early when its largest change is below ``tol/10`` of the largest r."""
-    nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
-    if error <= tol:
-        return 0, error
-    for rnd in range(1, max_iterations + 1):
-        for _ in range(inner):
-            change = 0.0
-            size = 0.0
-            for a in range(nc):
-                i = 3 * a
-                wnn = blocks[a, 0, 0]
-                if wnn > 0.0:
-                    un = _row_dot(indptr, indices, data, r, i) + q[i]
-                    new = max(0.0, r[i] - un / wnn)
-                    change = max(change, abs(new - r[i]))
-                    r[i] = new
-                size = max(size, abs(r[i]))
-            if change <= 0.1 * tol * size:
-                break
-        for _ in range(inner):
-            change = 0.0
-            size = 0.0
-            for a in range(nc):
-                i = 3 * a
-                old1 = r[i + 1]
-                old2 = r[i + 2]
-                ut1 = _row_dot(indptr, indices, data, r, i + 1) + q[i + 1]
-                ut2 = _row_dot(indptr, indices, data, r, i + 2) + q[i + 2]
-                _friction_update(blocks, a, r, i, ut1, ut2, mu[a], pyramid)
-                change = max(change, abs(r[i + 1] - old1), abs(r[i + 2] - old2))
-                size = max(size, abs(r[i]))
-            if change <= 0.1 * tol * size:
-                break
-        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
-        if error <= tol:
-            return rnd, error
-    return max_iterations, error
-
-
 # ----------------------------------------------------------------------------- public API
 
 
@@ -271,17 +106,6 @@ def _check_problem(W, q, mu):
     if np.any(mu < 0.0):
         raise InputError("mu", "friction coefficients must be non-negative.")
     return csr, q, mu
-
-
-def _diagonal_blocks(csr, nc):
-    """The 3×3 diagonal blocks W_αα, shape (nc, 3, 3)."""
-    base = 3 * np.arange(nc)
-    rows = (base[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), dtype=np.int64)
-    cols = (base[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), dtype=np.int64)
-    if nc == 0:
-        return np.zeros((0, 3, 3))
-    values = np.asarray(csr[rows.ravel(), cols.ravel()]).ravel()
-    return values.reshape(nc, 3, 3).astype(np.float64)
 
 
 def natural_map_error(
@@ -487,8 +311,6 @@ def solve_friction_contact(
             r[:] = 0.0
         r, Wr, iterations, error = _apgd(product, q, mu, r, tol, max_iterations, lipschitz)
     elif method == "newton":
-        from .newton import solve_newton  # here, not at the top: newton.py builds on this module
-
         r, iterations, error, restarts = solve_newton(csr, q, mu, r, tol, max_iterations, int(warm_sweeps))
     else:
         blocks = _diagonal_blocks(csr, nc)

@@ -59,7 +59,7 @@ watchdog below deals with the stall.
 Alart–Curnier function can also cycle between regimes: a single ill-conditioned contact with
 μ = 1.7 does). If the best natural-map error has not fallen by 10 % in 30 iterations, the solver
 returns to its best iterate, runs non-smooth Gauss–Seidel sweeps from it
-(:func:`contactlab.lcp.friction._nsgs`; 20 the first time, twice as many at each later restart,
+(:func:`contactlab.lcp.friction_sweeps._nsgs`; 20 the first time, twice as many at each later restart,
 at most 5120), multiplies ρ by the next factor of (10, 0.1, 1) (another ρ, another merit
 landscape, the same zeros), and restarts the non-monotone reference. The doubling makes the
 method at least as robust as nsgs given enough iterations. On 9000 random small SPD problems
@@ -93,7 +93,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..compiling import njit
-from .friction import _diagonal_blocks, _error, _nsgs
+from .friction_sweeps import _diagonal_blocks, _error, _nsgs
 
 NONMONOTONE_WEIGHT = 0.9  # η of Zhang & Hager's reference (0: monotone Armijo)
 ARMIJO_SLOPE = 1e-4  # ψ must fall by ARMIJO_SLOPE · t · ψ (a Newton step predicts 2 t ψ)

@@ -50,7 +50,7 @@ from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_
 from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number
-from . import KeptManifoldOptions, StepInfo
+from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products, rows_of
 from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import (

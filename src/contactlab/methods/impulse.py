@@ -44,7 +44,7 @@ from ..dynamics.integrators import free_velocities
 from ..errors import InputError
 from ..state import State
 from ..validation import check_counts, number
-from . import KeptManifoldOptions, StepInfo
+from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import contact_velocity, rows_of
 from .sequential import solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
 from .velocity_level import (

@@ -19,20 +19,25 @@ contactlab.contacts.
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import collision, diagnostics, rotations
-from ..collision import assemble_contacts
+from .. import collision, diagnostics, rotations, shapes
+from ..collision import assemble_contacts, dynamic_pairs_possible
 from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import generate_contacts
 from ..compiling import njit
 from ..contacts import ContactArrays
+from ..diagnostics import SERIES
 from ..dynamics import integrators
-from ..record import SERIES
+from ..model import derived
 from ..state import ARRAYS as STATE_ARRAYS
 from .jacobian_rows import ContactRows, rows_at
 from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
+
+if TYPE_CHECKING:
+    from ..model import Model
 
 LoopModel = namedtuple(
     "LoopModel",
@@ -57,6 +62,35 @@ LoopModel = namedtuple(
     ),
 )
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
+
+
+@derived
+def loop_model(model: Model) -> LoopModel:
+    """The LoopModel of a Model (writable copies of its arrays): built on first use and kept with
+    the model (``contactlab.model.derived``)."""
+    kinds, params, materials, obstacle_rotation = model.collider_table
+    B, P = model.body_count, model.particle_count
+    copy = np.array  # np.array copies: a writable, contiguous array
+    return LoopModel(
+        copy(model.gravity, dtype=float),
+        copy(model.body_inverse_mass, dtype=float),
+        copy(model.body_inertia, dtype=float),
+        copy(model.body_inverse_inertia, dtype=float),
+        copy(model.body_mass, dtype=float),
+        copy(model.particle_mass, dtype=float),
+        copy(model.particle_inverse_mass, dtype=float),
+        copy(model.particle_pinned, dtype=np.bool_),
+        copy(kinds, dtype=np.int64),
+        copy(params, dtype=float),
+        copy(shapes.bounding_radii(kinds, params), dtype=float),
+        copy(materials, dtype=np.int64),
+        copy(model.obstacle_position, dtype=float),
+        copy(obstacle_rotation, dtype=float),
+        copy(model.material_friction, dtype=float),
+        copy(model.material_restitution, dtype=float),
+        np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
+    )
+
 
 LoopSettings = namedtuple(
     "LoopSettings",
@@ -84,7 +118,7 @@ Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
 
 Samples = namedtuple("Samples", SERIES)
-Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.record.SERIES."
+Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.diagnostics.SERIES."
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------

@@ -46,7 +46,7 @@ from ..dynamics.integrators import advance_positions, free_velocities
 from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
-from . import CollisionOptions, StepInfo
+from .base import CollisionOptions, StepInfo
 from .jacobian_rows import ContactRows, row_products, rows_of
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (

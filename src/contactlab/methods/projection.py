@@ -43,7 +43,7 @@ from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
 from ..state import Positions, State
 from ..validation import check_counts, number
-from . import KeptManifoldOptions, StepInfo
+from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products, rows_of
 from .sequential import solve_order, solve_sequential_impulses, sweep_groups
 from .velocity_level import detect

@@ -27,14 +27,15 @@ from ..compiling import njit
 from ..contacts import ContactArrays, values_by_id
 from ..dynamics.integrators import advance_positions
 from ..state import State
-from . import StepInfo
+from .base import StepInfo
+from .loop_stages import loop_model
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
 
 if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
     from ..contacts import Contacts
     from ..model import Model
-    from . import KeptManifoldOptions
+    from .base import KeptManifoldOptions
     from .constraints import Options as ConstraintsOptions
     from .impulse import Options as ImpulseOptions
 
@@ -148,7 +149,7 @@ def first_impulses(
     warm = fraction * values
     if model.body_count + model.particle_count < LOAD_PATH_FROM:
         return warm  # nothing to guess (guess_new_impulses), and nothing compiled for it
-    arrays = model.stepping_arrays  # the masses and gravity as the compiled loop takes them
+    arrays = loop_model(model)  # the masses and gravity as the compiled loop takes them
     guess_new_impulses(
         warm,
         found,

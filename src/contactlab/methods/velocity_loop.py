@@ -42,21 +42,20 @@ contactlab.contacts.
 
 from __future__ import annotations
 
-import weakref
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import shapes
-from ..collision import dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
-from ..collision.families import KEPT_FAMILIES
+from ..collision.families import KEPT_FAMILIES, pair_families
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
-from ..compiling import njit
+from ..compiling import available_threads, njit
+from ..model import derived
 from ..state import State
-from . import CollisionOptions
-from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, poses, record, store
+from .base import CollisionOptions
+from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, loop_model, poses, record, store
 from .loop_steps import PenaltyLoop, penalty_step, projection_step, velocity_step
 from .penalty import spring_settings
 from .penalty_springs import GUARD_SWEEPS, GUARD_TOLERANCE
@@ -181,10 +180,8 @@ def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple
     PenaltyLoop the flag after these);
     slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
     several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
-    from ..threads import available_threads
-
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
-    present = {name for name, flag in zip(FAMILIES, model.pair_families) if flag is not None}
+    present = {name for name, flag in zip(FAMILIES, pair_families(model)) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
     return (
         True if dynamic >= GRID_FROM else None,
@@ -194,32 +191,6 @@ def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple
         True if method == "projection" else None,
         True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
         True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,
-    )
-
-
-def loop_model(model: Model) -> LoopModel:
-    """The LoopModel of a Model (writable copies of its arrays; see Model.stepping_arrays)."""
-    kinds, params, materials, obstacle_rotation = model.collider_table
-    B, P = model.body_count, model.particle_count
-    copy = np.array  # np.array copies: a writable, contiguous array
-    return LoopModel(
-        copy(model.gravity, dtype=float),
-        copy(model.body_inverse_mass, dtype=float),
-        copy(model.body_inertia, dtype=float),
-        copy(model.body_inverse_inertia, dtype=float),
-        copy(model.body_mass, dtype=float),
-        copy(model.particle_mass, dtype=float),
-        copy(model.particle_inverse_mass, dtype=float),
-        copy(model.particle_pinned, dtype=np.bool_),
-        copy(kinds, dtype=np.int64),
-        copy(params, dtype=float),
-        copy(shapes.bounding_radii(kinds, params), dtype=float),
-        copy(materials, dtype=np.int64),
-        copy(model.obstacle_position, dtype=float),
-        copy(obstacle_rotation, dtype=float),
-        copy(model.material_friction, dtype=float),
-        copy(model.material_restitution, dtype=float),
-        np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
     )
 
 
@@ -273,7 +244,7 @@ class Stepper:
         """What every Stepper holds: the model, the narrow phase's plan, the state's time and
         arrays (copies), the tallies."""
         self.model = model
-        families = model.pair_families
+        families = pair_families(model)
         self.plan = (families, model.hull_store if needs_hulls(families) else None)
         self.time = float(state.time)
         self.motion = Motion(
@@ -319,7 +290,7 @@ class Stepper:
         """The sample of the state as it stands (no step made: its contacts those of the fresh
         collision pass, 0 sweeps), as a dict of
         the series, recorded by the loop's ``record``: what ``Recorder.sample`` records."""
-        samples, model, motion = self.samples_for(1), self.model.stepping_arrays, self.motion
+        samples, model, motion = self.samples_for(1), loop_model(self.model), self.motion
         record(samples, 0, model, self.plan, self.flags[0], motion, poses(model, motion), self.time, -1, 0, 0.0, False)
         return samples._asdict()
 
@@ -347,7 +318,7 @@ class Stepper:
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
         return (
-            self.model.stepping_arrays,
+            loop_model(self.model),
             self.settings,
             self.plan,
             *self.flags,
@@ -372,13 +343,12 @@ class Stepper:
         disk cache: stepping through the loop then costs no compilation (see ``stepper_for``).
         Known once for this model and these flags, for the rest of the process (typing the
         arguments cost a 720-step ball's run a third of its time)."""
-        key = (id(self.model), self.flags[:-1], None if self.flags[-1] is None else "penalty")
-        if key in _COMPILED:
+        known, key = _compiled_for(self.model), (self.flags[:-1], None if self.flags[-1] is None else "penalty")
+        if key in known:
             return True
         types = tuple(run.typeof_pyval(a) for a in self._run_arguments(1, 1, 1, 1, self.samples_for(1), 1.0))
         if types in run.overloads or self._cached(types):
-            _COMPILED.add(key)
-            weakref.finalize(self.model, _COMPILED.discard, key)
+            known.add(key)
             return True
         return False
 
@@ -453,7 +423,13 @@ def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None)
     )
 
 
-_COMPILED: set[tuple] = set()  # (id of a Model, its flags): run's machine code is there (compiled_already)
+@derived
+def _compiled_for(model: Model) -> set[tuple]:
+    """The flags of the runs of ``model`` whose machine code ``run`` has (``Stepper.compiled_already``),
+    kept with the Model."""
+    return set()
+
+
 LOOP_COMPILE_SECONDS = 30.0  # s: about what compiling ``run`` costs on an empty cache (2-core machine)
 GLUE_SECONDS = (1e-4, 8e-6)  # s a step, and s a body or particle a step: the Python the loop saves
 

@@ -1,7 +1,7 @@
 """Reading 3D frictional-contact problems: FCLIB HDF5 (local and global) and Siconos ``.dat`` text.
 
 :func:`read_problem` returns a :class:`FrictionProblem` in local form ``u = W r + q`` (see
-:mod:`contactlab.lcp.friction`), whatever the file held:
+:mod:`contactlab.lcp.friction`, whose solvers take it), whatever the file held:
 
 * FCLIB HDF5 ``/fclib_local``: W, q, μ as stored.
 * FCLIB HDF5 ``/fclib_global`` (``M v = H r + f``, ``u = Hᵀ v + w``): reduced to local form with
@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import InputError
+from .errors import InputError
 
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 

@@ -1,0 +1,103 @@
+"""What every method module builds on: the collision settings its Options start with
+(:class:`CollisionOptions`, :class:`KeptManifoldOptions`) and the :class:`StepInfo` its ``step``
+returns beside the new State. Re-exported by :mod:`contactlab.methods`, which finds the methods
+by name; the method modules import them from here, below it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..collision import GRANULARITIES, NORMALS, collide_keeping
+from ..contacts import Contacts
+from ..validation import check_choices, check_counts, number
+
+if TYPE_CHECKING:
+    from ..collision.manifolds import Manifolds
+    from ..model import Model
+    from ..state import State
+
+
+@dataclass
+class StepInfo:
+    """What a step reports besides the new state."""
+
+    contacts: Contacts
+    """the contacts the response acted on"""
+    solver_iterations: int = 0
+    """sweeps the solver made (0 where there is none)"""
+    solver_residual: float = 0.0
+    """the solver's last change or residual (method-specific units, documented)"""
+    linear_iterations: int = 0
+    """conjugate-gradient iterations of the step's linear solves (penalty's implicit springs)"""
+    energy_elastic: float = 0.0
+    """energy stored in contact springs [J]"""
+    implicit_springs: bool = False
+    """penalty: contact springs stepped by backward Euler, the explicit step being unstable"""
+    impulses: np.ndarray | None = None
+    """(C, 3) [N s] each contact's push on side A over the step, along (normal, tangent1, tangent2) of ``contacts``;
+    None: no contacts (the viewer's arrows)"""
+
+
+@dataclass
+class CollisionOptions:
+    """The collision-detection settings every method's Options starts with, declared and
+    checked here once (see docs/collision.md); a method that wants another default declares
+    the field again with it."""
+
+    contact_margin: float = 0.002
+    """m: gaps this small become (speculative) contacts"""
+    granularity: str = "vertex"
+    """boxes and hulls on static surfaces: object | vertex | samples (P2)"""
+    normal: str = "object"
+    """their contact normal: object (P4) | vertex (P5)"""
+    samples: int = 2
+    """samples per triangle edge for granularity = "samples" """
+    cloth_samples: int = 0
+    """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
+
+    def __post_init__(self):
+        self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
+        check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
+        check_counts(self, {"samples": 1, "cloth_samples": 0})
+
+    def collide(
+        self,
+        model: Model,
+        state: State,
+        sweep: np.ndarray | None,
+        manifolds: Manifolds | None = None,
+        tolerance: float = 0.0,
+    ) -> tuple[Contacts, Manifolds | None]:
+        """``collide_keeping`` with these settings: the contacts of ``state`` down to gaps of
+        ``contact_margin`` [m], or each collider's ``sweep`` (B + P,) [m] where larger, and the
+        manifolds to carry; pairs that moved less than ``tolerance`` [m] keep theirs from
+        ``manifolds`` (last step's; None or 0: nothing kept, as ``collide``)."""
+        return collide_keeping(
+            model,
+            state,
+            manifolds,
+            tolerance,
+            self.contact_margin,
+            sweep,
+            self.granularity,
+            self.normal,
+            self.samples,
+            self.cloth_samples,
+        )
+
+
+@dataclass
+class KeptManifoldOptions(CollisionOptions):
+    """CollisionOptions and the tolerance under which a pair's contacts are reused from the last
+    step (the methods that step positions once per step: impulse, constraints)."""
+
+    manifold_tolerance: float = 1e-4
+    """m: box, hull and plane pairs that moved less reuse last contacts (0 = never)"""
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.manifold_tolerance = number(self.manifold_tolerance, "manifold_tolerance", 0.0)
