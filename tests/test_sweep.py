@@ -559,3 +559,23 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     assert not any(name.startswith(".partial-") for name in os.listdir(cells))
     again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr
+
+
+def test_a_study_of_many_short_runs_steps_its_cells_through_the_compiled_loop():
+    # issue 36: one 720-step ball run repays nothing, so it steps from Python (about 300 ms a run
+    # against 3 ms through the loop); a study's cells of one scene and method together repay
+    # compiling the loop once, so each cell takes it however short it is
+    from types import SimpleNamespace
+
+    from contactlab.methods.velocity_loop import repays_compiling
+    from contactlab.study import Cell
+    from contactlab.sweep import _jobs, run_cell
+
+    model = load_scene("bouncing_ball").model
+    assert not repays_compiling(model, 720) and repays_compiling(model, 720, runs=1000)
+    cells = [Cell("bouncing_ball", "impulse", (("simulation.duration", 0.05),), "summary", f"k{n}") for n in range(3)]
+    cells.append(Cell("bouncing_ball", "penalty", (), "summary", "p"))
+    jobs = _jobs(cells, SimpleNamespace(record="summary"), ".")
+    assert [job["alike"] for _, job in jobs] == [3, 3, 3, 1]  # the cells of one scene and method
+    row = run_cell(dict(jobs[0][1], alike=10**6))  # as many as would repay compiling the loop
+    assert row["status"] == "ok" and row["stepping"] == "compiled loop"

@@ -23,6 +23,7 @@ import json
 import math
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -90,13 +91,16 @@ def run(
 
 
 def _jobs(cells, study, out):
-    return [(cell.key, _job(cell, study, out)) for cell in cells]
+    alike = Counter((cell.scene, cell.method) for cell in cells)  # the runs each worker's loop may serve
+    return [(cell.key, _job(cell, study, out, alike[cell.scene, cell.method])) for cell in cells]
 
 
-def _job(cell, study, out):
-    """What a worker needs to run ``cell``: plain data, so it pickles anywhere."""
+def _job(cell, study, out, alike=1):
+    """What a worker needs to run ``cell``: plain data, so it pickles anywhere. ``alike``: the
+    cells to run of the same scene and method (whether compiling the stepping loop repays)."""
     return {
         "key": cell.key,
+        "alike": alike,
         "scene": cell.scene,
         "method": cell.method,
         "overrides": cell.overrides(),
@@ -124,15 +128,19 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     row; never raises for the run's own failure (status "diverged" or "error")."""
     from .closed_form import checks as closed_form_checks
     from .compare import metrics
+    from .methods.velocity_loop import repays_compiling
     from .scene import load_scene
+    from .validation import run_length
 
     started = time.perf_counter()
     try:
         scene = load_scene(job["scene"], job["overrides"])
-        run = scene.simulate(
-            threads=1,
-            trajectory=job["trajectory"],
-        )
+        # the study's cells of this scene and method together may repay compiling the stepping loop
+        # where one cell alone would not (a study is thousands of short runs): then it is compiled
+        # once and serves them all, cached for every worker (velocity_loop.repays_compiling)
+        steps = run_length(scene.dt, scene.duration)[2]
+        compile_loop = repays_compiling(scene.model, steps, job.get("alike", 1)) or None
+        run = scene.simulate(threads=1, trajectory=job["trajectory"], compiled_loop=compile_loop)
     except SimulationDiverged as error:
         return _failed_row(job, "diverged", str(error), started, diverged_at=error.time)
     except Exception as error:  # InputError included: a study checked cannot fail that way
@@ -152,6 +160,7 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     row["closed_form_checks"] = json.dumps([check.as_record() for check in found]) if found else None
     row["diverged_at_s"] = None
     row["trajectory"] = job["trajectory"]
+    row["stepping"] = run.summary["stepping"]
     row["cell_seconds"] = time.perf_counter() - started
     return row
 

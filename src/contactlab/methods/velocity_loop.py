@@ -434,12 +434,13 @@ LOOP_COMPILE_SECONDS = 30.0  # s: about what compiling ``run`` costs on an empty
 GLUE_SECONDS = (1e-4, 8e-6)  # s a step, and s a body or particle a step: the Python the loop saves
 
 
-def repays_compiling(model: Model, steps: int) -> bool:
-    """Whether ``steps`` steps of ``model`` through the methods' ``step`` would spend more time in
-    Python glue between kernels (measured: about 0.1 ms a step plus 8 µs a body, see
-    benchmarks/profile_methods.py) than compiling the loop costs on an empty cache."""
+def repays_compiling(model: Model, steps: int, runs: int = 1) -> bool:
+    """Whether ``runs`` runs of ``steps`` steps of ``model`` through the methods' ``step`` would
+    spend more time in Python glue between kernels (measured: about 0.1 ms a step plus 8 µs a
+    body, see benchmarks/profile_methods.py) than compiling the loop costs on an empty cache
+    (a study's cells of one scene and method: ``contactlab.sweep``)."""
     per_step = GLUE_SECONDS[0] + GLUE_SECONDS[1] * (model.body_count + model.particle_count)
-    return steps * per_step > LOOP_COMPILE_SECONDS
+    return runs * steps * per_step > LOOP_COMPILE_SECONDS
 
 
 def stepper_for(
