@@ -19,13 +19,26 @@ worker dies, the scheduler hands its jobs to the others (up to ``distributed``'s
 ``worker_address()``. A job's own failure is the job function's to report: it should return
 a row saying so rather than raise; an exception that escapes (or a job whose workers keep
 dying) comes back from :func:`run_tasks` as the exception, in place of a result.
+
+Stopping (Ctrl-C, SIGTERM, the caller): :func:`run_tasks` cancels the jobs not finished, and a
+job already running stops at its next step, frame or file (``interrupts.check``; the job sees
+its task cancelled or its worker closing), as it would in this process — a run keeps its
+trajectory up to then — so the workers are idle within a fraction of a second and a local
+cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C
+(a terminal sends it to every process of the command): the command stops them itself. While an
+interrupted command closes its cluster, distributed's log (closed connections, cancelled
+tasks) is silenced: the command's one line says what happened.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import logging
 import os
+import signal
+import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
@@ -39,7 +52,8 @@ if TYPE_CHECKING:
 
 
 CONNECT_TIMEOUT = 10.0  # s: how long connecting to a scheduler may take
-POLL_SECONDS = 0.5  # s: how often the wait for results looks for a signal
+POLL_SECONDS = 0.1  # s: how often the wait for results looks for a signal
+STOP_SECONDS = 1.0  # s: how long an interrupted command waits for a local worker to end its job and exit
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 
 
@@ -101,13 +115,11 @@ def connect(scheduler: str | None = None, workers: int | None = None, field: str
             processes=True,
             host="127.0.0.1",
             dashboard_address="127.0.0.1:0",
-            silence_logs=logging.ERROR,
-        )  # a cancelled task's warning is no news
-        try:
-            with Client(cluster) as client:
-                yield client
-        finally:
-            cluster.close()
+            silence_logs=logging.ERROR,  # a cancelled task's warning is no news
+            preload=[__name__],  # dask_setup: each worker ignores Ctrl-C
+        )
+        with _closing(cluster, Client(cluster)) as client:
+            yield client
         return
     if workers is not None:
         raise InputError(
@@ -125,8 +137,79 @@ def connect(scheduler: str | None = None, workers: int | None = None, field: str
             f"could not reach a Dask scheduler at {scheduler} ({first_line(error)}); "
             f"start one with 'dask scheduler' and workers with 'dask worker {scheduler}'",
         ) from None
-    with client:
+    with _closing(None, client):
         yield client
+
+
+@contextlib.contextmanager
+def _closing(cluster, client: Client) -> Iterator[Client]:
+    """Yield ``client``; close it and ``cluster`` (a local one, or None) at the end, with
+    distributed's log silenced when the end is an exception (a signal's, most often)."""
+    try:
+        yield client
+    except BaseException:
+        with _silenced():
+            client.close()
+            if cluster is not None:
+                cluster.sync(_close_workers, cluster, STOP_SECONDS)
+                cluster.close()
+        raise
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+async def _close_workers(cluster, seconds: float) -> None:
+    """Close the worker processes of the local ``cluster``, killing those still there after
+    ``seconds`` (one stuck in a compilation, which no signal interrupts)."""
+    import asyncio
+
+    await asyncio.gather(*(nanny.close(timeout=seconds / 0.8) for nanny in list(cluster.workers.values())))
+
+
+@contextlib.contextmanager
+def _silenced() -> Iterator[None]:
+    """No log record of any level while this is open (distributed logs from several threads)."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+def dask_setup(worker) -> None:
+    """Run by Dask in each worker process of a local cluster as it starts (the ``preload`` of
+    :func:`connect`). Ctrl-C is ignored there: a terminal sends it to every process of the
+    command in front, and a worker would die of it with a traceback, while the command stops
+    its jobs and closes its workers itself. And tqdm (the bars of ``simulate`` and ``render``,
+    off on a worker) locks with a thread lock, not its default multiprocessing one: a semaphore
+    that a worker killed while stuck (in a compilation, say) would leave to multiprocessing's
+    ``resource_tracker``, which warns of it when the command exits."""
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+    with contextlib.suppress(ValueError):  # not the main thread (a worker started some other way)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def dask_teardown(worker) -> None:
+    """Run by Dask as a local cluster's worker closes (its jobs ended). Its log has no news from
+    here on (a heartbeat cut short by the closing connections is an ERROR to distributed), and
+    once the interpreter starts to exit, multiprocessing's own clean-up done, the process ends
+    without tearing down every module: most of a second with NumPy, Numba and pandas loaded,
+    while the command waits for it."""
+    logging.disable(logging.CRITICAL)
+    atexit.register(_exit_now)
+
+
+def _exit_now() -> None:
+    """The last exit handler registered, so the first run: flush the log and end the process."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(0)
 
 
 def dashboard(client: Client) -> str:
@@ -149,28 +232,34 @@ def run_tasks(
     """Run ``function(job)`` for every ``(key, job)`` of ``jobs`` on ``client``'s workers;
     yield ``(key, result)`` as each finishes — the exception in place of the result when one
     escaped the function or its workers kept dying. ``progress``: a tqdm bar on stderr. A
-    signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`, and the jobs not
-    finished are cancelled."""
-    from distributed import wait
+    signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`; then, as when the
+    caller stops early, the jobs not finished are cancelled, and those running stop at their
+    next ``interrupts.check`` (:func:`_run_job`)."""
+    from distributed import as_completed
 
     token = uuid.uuid4().hex[:8]  # task keys of this call only, on a scheduler others may share
-    futures = {}
+    keys, arguments = [], []
     for key, job in jobs:
-        future = client.submit(function, job, key=f"contactlab-{key}-{token}", pure=False)
-        futures[future] = key
+        keys.append(key)
+        arguments.append(job)
+    submitted = client.map(
+        _run_job, [function] * len(arguments), arguments, key=[f"contactlab-{key}-{token}" for key in keys], pure=False
+    )  # one message to the scheduler, however many jobs
+    futures = dict(zip(submitted, keys))
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(futures), desc=description, unit="job", leave=False)
     try:
+        finished = as_completed(futures)
         while futures:
             interrupts.check()
-            try:
-                finished = wait(list(futures), timeout=POLL_SECONDS, return_when="FIRST_COMPLETED").done
-            except TimeoutError:
+            batch = finished.next_batch(block=False)
+            if not batch:
+                time.sleep(POLL_SECONDS)
                 continue
-            for future in finished:
+            for future in batch:
                 key = futures.pop(future)
                 try:
                     result = future.result()
@@ -181,10 +270,33 @@ def run_tasks(
                     bar.update(1)
                 yield key, result
     finally:
-        for future in futures:  # stopped early (a signal, the caller): cancel the rest
-            future.cancel()
+        if futures:  # stopped early (a signal, the caller): cancel the rest, all in one message
+            with _silenced():
+                client.cancel(list(futures))
         if bar is not None:
             bar.close()
+
+
+def _run_job(function: Callable[[Any], Any], job: Any) -> Any:
+    """``function(job)`` on a Dask worker, stopped at its next ``interrupts.check`` once its task
+    is cancelled or its worker is closing (then None: nobody waits for the result)."""
+    from distributed import get_worker
+    from distributed.core import Status
+
+    worker = get_worker()
+    key = worker.get_current_task()
+
+    def asked() -> bool:
+        task = worker.state.tasks.get(key)
+        return (
+            worker.status in (Status.closing, Status.closed, Status.failed) or task is None or task.state == "cancelled"
+        )
+
+    with interrupts.stoppable(asked):
+        try:
+            return function(job)
+        except interrupts.Interrupted:
+            return None
 
 
 def worker_address() -> str:
