@@ -119,6 +119,39 @@ def test_a_wrong_study_is_one_input_error_naming_the_field(tmp_path, text, field
     assert refused.value.field == field and words in refused.value.message, refused.value
 
 
+def test_the_largest_study_is_checked_a_setting_at_a_time_with_news_of_a_long_check(tmp_path, monkeypatch):
+    """Issue 37: the documented maximum, 100,000 cells, took 70 s to check, one scene load per
+    cell, in silence. Each method and each distinct setting is checked once now (4 + 51 loads
+    here), each value still with its field named, and a long check says how far it got."""
+    from contactlab import study as study_module
+    from contactlab.scene import loader
+
+    def values(count, low, high):
+        return ", ".join(repr(round(low + (high - low) * i / count, 6)) for i in range(count))
+
+    text = (
+        '[grid]\nscenes = ["bouncing_ball"]\n[grid.set]\n'
+        f'"simulation.duration" = [{values(10, 0.1, 0.5)}]\n'
+        f'"materials.0.restitution" = [{values(25, 0.1, 0.9)}]\n'
+        f'"materials.0.friction" = [{values(10, 0.1, 0.9)}]\n'
+        f'"simulation.dt" = [{values(10, 0.001, 0.004)}]\n'
+    )
+    validated = []
+    validate = loader.validate
+    monkeypatch.setattr(loader, "validate", lambda raw: validated.append(1) or validate(raw))
+    monkeypatch.setattr(study_module, "CHECK_NEWS_SECONDS", 0.0)
+    news = []
+    started = time.monotonic()
+    study = load_study(write(tmp_path, text), log=news.append)
+    assert len(study.cells) == study_module.MAX_CELLS and time.monotonic() - started < 30
+    assert len(validated) == 4 + (10 - 1) + (25 - 1) + (10 - 1) + (10 - 1)
+    assert news and news[0].startswith("checking the study: ") and news[0].endswith(" s so far")
+    bad = text[: text.rindex(", ")] + ", -0.5]\n"  # the last value of the last axis
+    with pytest.raises(InputError) as refused:  # a bad value deep in an axis, named
+        load_study(write(tmp_path, bad))
+    assert refused.value.field == 'grid.set."simulation.dt"' and "found -0.5" in refused.value.message
+
+
 def test_toml_value_reads_back_as_the_value():
     from contactlab.scene.overrides import parse_value
 

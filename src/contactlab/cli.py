@@ -338,7 +338,7 @@ def _sweep(args):
     from . import sweep
     from .study import load_study
 
-    study = load_study(args.study)
+    study = load_study(args.study, log=lambda line: print(line, file=sys.stderr))
     out = args.out or os.path.join("out", f"{study.name}-sweep")
     table = sweep.run(
         study,
