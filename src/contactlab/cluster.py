@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import itertools
 import logging
+import math
 import os
 import signal
 import sys
@@ -53,6 +55,7 @@ if TYPE_CHECKING:
 
 CONNECT_TIMEOUT = 10.0  # s: how long connecting to a scheduler may take
 POLL_SECONDS = 0.1  # s: how often the wait for results looks for a signal
+MIN_WINDOW = 32  # jobs in flight at least (run_tasks)
 STOP_SECONDS = 1.0  # s: how long an interrupted command waits for a local worker to end its job and exit
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 
@@ -233,26 +236,37 @@ def run_tasks(
     yield ``(key, result)`` as each finishes — the exception in place of the result when one
     escaped the function or its workers kept dying. ``progress``: a tqdm bar on stderr. A
     signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`; then, as when the
-    caller stops early, the jobs not finished are cancelled, and those running stop at their
-    next ``interrupts.check`` (:func:`_run_job`)."""
+    caller stops early, the jobs in flight (a few per thread of the cluster, :class:`_Window`)
+    are cancelled, and those running stop at their next ``interrupts.check`` (:func:`_run_job`)."""
     from distributed import as_completed
 
     token = uuid.uuid4().hex[:8]  # task keys of this call only, on a scheduler others may share
-    keys, arguments = [], []
-    for key, job in jobs:
-        keys.append(key)
-        arguments.append(job)
-    submitted = client.map(
-        _run_job, [function] * len(arguments), arguments, key=[f"contactlab-{key}-{token}" for key in keys], pure=False
-    )  # one message to the scheduler, however many jobs
-    futures = dict(zip(submitted, keys))
+    jobs = list(jobs)
+    waiting = iter(jobs)
+    futures: dict = {}  # submitted, not finished -> its key
+    finished = as_completed()
+    window = _Window(client)
+
+    def submit():  # up to the window's size in flight, in one message to the scheduler
+        batch = list(itertools.islice(waiting, max(0, window.size() - len(futures))))
+        if batch:
+            submitted = client.map(
+                _run_job,
+                [function] * len(batch),
+                [job for _, job in batch],
+                key=[f"contactlab-{key}-{token}" for key, _ in batch],
+                pure=False,
+            )
+            futures.update(zip(submitted, (key for key, _ in batch)))
+            finished.update(submitted)
+
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(futures), desc=description, unit="job", leave=False)
+        bar = tqdm(total=len(jobs), desc=description, unit="job", leave=False)
     try:
-        finished = as_completed(futures)
+        submit()
         while futures:
             interrupts.check()
             batch = finished.next_batch(block=False)
@@ -269,12 +283,30 @@ def run_tasks(
                 if bar is not None:
                     bar.update(1)
                 yield key, result
+            submit()
     finally:
-        if futures:  # stopped early (a signal, the caller): cancel the rest, all in one message
+        if futures:  # stopped early (a signal, the caller): cancel those in flight, in one message
             with _silenced():
                 client.cancel(list(futures))
         if bar is not None:
             bar.close()
+
+
+class _Window:
+    """How many jobs :func:`run_tasks` keeps submitted at once: twice the cluster's threads (at
+    least :data:`MIN_WINDOW`), looked up again every few seconds as workers come and go. The
+    scheduler then holds a few jobs per thread, not all of a 100,000-cell study (a graph of
+    tens of MB to send, and as many tasks to cancel when it is stopped)."""
+
+    def __init__(self, client):
+        self.client, self.known, self.checked = client, MIN_WINDOW, -math.inf
+
+    def size(self) -> int:
+        if time.monotonic() - self.checked > 5.0:
+            self.checked = time.monotonic()
+            with contextlib.suppress(Exception):  # no answer: the last size
+                self.known = max(MIN_WINDOW, 2 * sum(self.client.nthreads().values()))
+        return self.known
 
 
 def _run_job(function: Callable[[Any], Any], job: Any) -> Any:

@@ -185,7 +185,7 @@ def _checked_cells(specs, base, record, log=None):
     clash together (a body's material with a materials list another setting shortened, say)
     fail when their cell runs, recorded as an ``error`` row. ``log``: a function given a line
     every few seconds while checking lasts more than :data:`CHECK_NEWS_SECONDS`."""
-    cells, seen, scenes, checked = [], set(), {}, set()
+    cells, seen, scenes, checked, loads = [], set(), {}, set(), 0
     started = time.monotonic()
     news = started + CHECK_NEWS_SECONDS  # when to say how far the check got
     for where, scene, method, settings in specs:
@@ -220,6 +220,7 @@ def _checked_cells(specs, base, record, log=None):
                 checked.add((source, path, toml_value(value)))
                 trials.append(tuple((p, v) for p, v in first if p != path) + ((path, value),))
         for trial in trials:
+            loads += 1
             try:
                 scene_from_raw(name, copy.deepcopy(raw), origin, Cell(source, method, trial, record, "").overrides())
             except InputError as error:  # named by the setting it came from, where it did
@@ -232,8 +233,8 @@ def _checked_cells(specs, base, record, log=None):
                 ) from None
         if log is not None and time.monotonic() > news:
             log(
-                f"checking the study: {len(seen):,} of {len(specs):,} cells, "
-                f"{len(checked):,} settings, {time.monotonic() - started:.0f} s so far"
+                f"checking the study: {len(seen):,} of {len(specs):,} cells ({loads:,} scene loads), "
+                f"{time.monotonic() - started:.0f} s so far"
             )
             news = time.monotonic() + 5.0
     return cells
