@@ -458,3 +458,17 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     assert not alive_in_group(process.pid, 1.0)
     again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr
+
+
+def test_a_cluster_holds_a_few_jobs_per_thread_not_the_whole_study():
+    """Issue 37: a 100,000-cell study went to the scheduler at once (a 28 MB graph), and stopped,
+    had 100,000 tasks to cancel, which timed out after 60 s. Jobs are submitted as others finish."""
+    from contactlab import cluster
+
+    held = []
+    with cluster.connect(workers=1) as client:
+        jobs = ((str(index), f"/jobs/{index}") for index in range(300))
+        for key, result in cluster.run_tasks(client, os.path.basename, jobs):
+            assert result == key
+            held.append(len(client.cluster.scheduler.tasks))
+    assert len(held) == 300 and max(held) <= cluster.MIN_WINDOW
