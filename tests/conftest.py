@@ -1,4 +1,6 @@
+import os
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -120,3 +122,22 @@ def interruptible():
     inherits that: a ``.ci/run`` started with ``&`` would otherwise send a signal the command
     line rightly ignores (as under nohup), and read exit 0 for 130."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def alive_in_group(group, seconds):
+    """The processes of the process group ``group`` still running (zombies aside: an orphan's
+    exit status waits for an init that reaps it) after waiting up to ``seconds`` for them."""
+    deadline = time.monotonic() + seconds
+    while True:
+        alive = []
+        for entry in os.listdir("/proc"):
+            try:
+                with open(f"/proc/{entry}/stat", encoding="ascii", errors="replace") as stream:
+                    fields = stream.read().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if entry.isdigit() and int(fields[2]) == group and fields[0] != "Z":
+                alive.append(int(entry))
+        if not alive or time.monotonic() > deadline:
+            return alive
+        time.sleep(0.1)

@@ -4,12 +4,16 @@ import csv
 import json
 import os
 import shutil
+import signal
 import subprocess
+import sys
+import time
 from html.parser import HTMLParser
 from urllib.parse import unquote, urlparse
 
 import numpy as np
 import pytest
+from conftest import alive_in_group, interruptible
 from matplotlib.image import imread
 
 from contactlab import compare as compare_module
@@ -498,3 +502,59 @@ def test_methods_that_computed_the_same_trajectory_are_said_to_be_one_result(tmp
         f"{apart:.2g} m at most)"
     ) in report
     assert "penalty computed the same" not in report and "and penalty computed" not in report
+
+
+def _streaming(folder):
+    """Whether a run in ``folder``'s method folders is stepping: a trajectory growing under its
+    temporary name (past its compilation, which no signal interrupts)."""
+    sizes = {}
+    for _ in range(2):
+        for root, _, names in os.walk(folder):
+            for name in names:
+                if name.startswith(".partial-") and name.endswith("trajectory.h5"):
+                    path = os.path.join(root, name)
+                    size = os.path.getsize(path)
+                    if sizes.get(path, size) < size:
+                        return True
+                    sizes[path] = size
+        time.sleep(0.2)
+    return False
+
+
+@pytest.mark.parametrize("workers, signum", [(1, signal.SIGTERM), (2, signal.SIGINT)])
+def test_a_stopped_compare_lists_exactly_what_it_left_on_either_path(tmp_path, workers, signum):
+    """Issue 37: one after another (workers 1) or on a local cluster's workers (2, stopped by a
+    terminal's Ctrl-C, which reaches the workers too): within a second and in one line, the
+    command names every file it left — each run's trajectory up to the signal — and nothing else
+    is there (no temporary file, summary, plot or report)."""
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "contactlab", "compare", "bouncing_ball", "--methods", "impulse,constraints"]
+    process = subprocess.Popen(
+        [*command, "--duration", "60", "--no-video", "--workers", str(workers), "--out", str(out)],
+        cwd=tmp_path,
+        preexec_fn=interruptible,
+        start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and process.poll() is None and not _streaming(out):
+        pass
+    if workers == 1:
+        process.send_signal(signum)  # as kill PID does
+    else:
+        os.killpg(process.pid, signum)  # as a terminal's Ctrl-C: to the command and its workers
+    sent = time.monotonic()
+    _, stderr = process.communicate(timeout=60)
+    took = time.monotonic() - sent
+    name = signal.Signals(signum).name
+    assert process.returncode == 128 + signum and took < 2.0, (took, stderr)
+    lines = [line for line in stderr.splitlines() if not line.startswith("compiling contact kernels")]
+    assert len(lines) == 1 and lines[0].startswith(f"interrupted ({name}); written before it: "), stderr
+    listed = set(lines[0].split("written before it: ")[1].split(", "))
+    left = {os.path.join(root, name) for root, _, names in os.walk(out) for name in names}
+    assert listed == left and listed, (listed, left)
+    for path in listed:
+        assert os.path.basename(path) == "trajectory.h5" and open_trajectory(path).status == "interrupted"
+    assert not alive_in_group(process.pid, 1.0)  # no worker outlived the command

@@ -19,14 +19,29 @@ worker dies, the scheduler hands its jobs to the others (up to ``distributed``'s
 ``worker_address()``. A job's own failure is the job function's to report: it should return
 a row saying so rather than raise; an exception that escapes (or a job whose workers keep
 dying) comes back from :func:`run_tasks` as the exception, in place of a result.
+
+Stopping (Ctrl-C, SIGTERM, the caller): :func:`run_tasks` cancels the jobs not finished, and a
+job already running stops at its next step, frame or file (``interrupts.check``; the job sees
+its task cancelled or its worker closing), as it would in this process — a run keeps its
+trajectory up to then — so the workers are idle within a fraction of a second and a local
+cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C
+(a terminal sends it to every process of the command): the command stops them itself. While an
+interrupted command closes its cluster, distributed's log (closed connections, cancelled
+tasks) is silenced: the command's one line says what happened.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import itertools
 import logging
+import math
 import os
+import signal
 import socket
+import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
@@ -42,7 +57,9 @@ if TYPE_CHECKING:
 
 CONNECT_TIMEOUT = 10.0  # s: how long Dask's handshake with a scheduler that answered may take
 REACH_TIMEOUT = 3.0  # s: how long a scheduler's host may take to accept a connection at all
-POLL_SECONDS = 0.5  # s: how often the wait for results looks for a signal
+POLL_SECONDS = 0.1  # s: how often the wait for results looks for a signal
+MIN_WINDOW = 32  # jobs in flight at least (run_tasks)
+STOP_SECONDS = 1.0  # s: how long an interrupted command waits for a local worker to end its job and exit
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 
 
@@ -165,21 +182,90 @@ def connect(scheduler: str | None = None, workers: int | None = None, field: str
             processes=True,
             host="127.0.0.1",
             dashboard_address="127.0.0.1:0",
-            silence_logs=logging.ERROR,
-        )  # a cancelled task's warning is no news
-        try:
-            with Client(cluster) as client:
-                yield client
-        finally:
-            cluster.close()
+            silence_logs=logging.ERROR,  # a cancelled task's warning is no news
+            preload=[__name__],  # dask_setup: each worker ignores Ctrl-C
+        )
+        with _closing(cluster, Client(cluster)) as client:
+            yield client
         return
     _reach(scheduler, field)
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as error:
         raise InputError(field, _unreachable(scheduler, first_line(error))) from None
-    with client:
+    with _closing(None, client):
         yield client
+
+
+@contextlib.contextmanager
+def _closing(cluster, client: Client) -> Iterator[Client]:
+    """Yield ``client``; close it and ``cluster`` (a local one, or None) at the end, with
+    distributed's log silenced when the end is an exception (a signal's, most often)."""
+    try:
+        yield client
+    except BaseException:
+        with _silenced():
+            client.close()
+            if cluster is not None:
+                cluster.sync(_close_workers, cluster, STOP_SECONDS)
+                cluster.close()
+        raise
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+async def _close_workers(cluster, seconds: float) -> None:
+    """Close the worker processes of the local ``cluster``, killing those still there after
+    ``seconds`` (one stuck in a compilation, which no signal interrupts)."""
+    import asyncio
+
+    await asyncio.gather(*(nanny.close(timeout=seconds / 0.8) for nanny in list(cluster.workers.values())))
+
+
+@contextlib.contextmanager
+def _silenced() -> Iterator[None]:
+    """No log record of any level while this is open (distributed logs from several threads)."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+def dask_setup(worker) -> None:
+    """Run by Dask in each worker process of a local cluster as it starts (the ``preload`` of
+    :func:`connect`). Ctrl-C is ignored there: a terminal sends it to every process of the
+    command in front, and a worker would die of it with a traceback, while the command stops
+    its jobs and closes its workers itself. And tqdm (the bars of ``simulate`` and ``render``,
+    off on a worker) locks with a thread lock, not its default multiprocessing one: a semaphore
+    that a worker killed while stuck (in a compilation, say) would leave to multiprocessing's
+    ``resource_tracker``, which warns of it when the command exits."""
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+    with contextlib.suppress(ValueError):  # not the main thread (a worker started some other way)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def dask_teardown(worker) -> None:
+    """Run by Dask as a local cluster's worker closes (its jobs ended). Its log has no news from
+    here on (a heartbeat cut short by the closing connections is an ERROR to distributed), and
+    once the interpreter starts to exit, multiprocessing's own clean-up done, the process ends
+    without tearing down every module: most of a second with NumPy, Numba and pandas loaded,
+    while the command waits for it."""
+    logging.disable(logging.CRITICAL)
+    atexit.register(_exit_now)
+
+
+def _exit_now() -> None:
+    """The last exit handler registered, so the first run: flush the log and end the process."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(0)
 
 
 def dashboard(client: Client) -> str:
@@ -203,25 +289,42 @@ def run_tasks(
     yield ``(key, result)`` as each finishes — the exception in place of the result when one
     escaped the function or its workers kept dying. ``progress``: progress over the jobs on
     stderr (contactlab.progress: a bar on a terminal, else a line every few seconds). A
-    signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`, and the jobs not
-    finished are cancelled."""
-    from distributed import wait
+    signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`; then, as when the
+    caller stops early, the jobs in flight (a few per thread of the cluster, :class:`_Window`)
+    are cancelled, and those running stop at their next ``interrupts.check`` (:func:`_run_job`)."""
+    from distributed import as_completed
 
     token = uuid.uuid4().hex[:8]  # task keys of this call only, on a scheduler others may share
-    futures = {}
-    for key, job in jobs:
-        future = client.submit(function, job, key=f"contactlab-{key}-{token}", pure=False)
-        futures[future] = key
-    bar = progress_bar(len(futures), description, "job", progress)
+    jobs = list(jobs)
+    waiting = iter(jobs)
+    futures: dict = {}  # submitted, not finished -> its key
+    finished = as_completed()
+    window = _Window(client)
+
+    def submit():  # up to the window's size in flight, in one message to the scheduler
+        batch = list(itertools.islice(waiting, max(0, window.size() - len(futures))))
+        if batch:
+            submitted = client.map(
+                _run_job,
+                [function] * len(batch),
+                [job for _, job in batch],
+                key=[f"contactlab-{key}-{token}" for key, _ in batch],
+                pure=False,
+            )
+            futures.update(zip(submitted, (key for key, _ in batch)))
+            finished.update(submitted)
+
+    bar = progress_bar(len(jobs), description, "job", progress)
     try:
+        submit()
         while futures:
             interrupts.check()
-            try:
-                finished = wait(list(futures), timeout=POLL_SECONDS, return_when="FIRST_COMPLETED").done
-            except TimeoutError:
+            batch = finished.next_batch(block=False)
+            if not batch:
                 bar.tick()  # no job finished: a line where stderr is no terminal, every few seconds still
+                time.sleep(POLL_SECONDS)
                 continue
-            for future in finished:
+            for future in batch:
                 key = futures.pop(future)
                 try:
                     result = future.result()
@@ -230,10 +333,51 @@ def run_tasks(
                 future.release()
                 bar.update(1)
                 yield key, result
+            submit()
     finally:
-        for future in futures:  # stopped early (a signal, the caller): cancel the rest
-            future.cancel()
+        if futures:  # stopped early (a signal, the caller): cancel those in flight, in one message
+            with _silenced():
+                client.cancel(list(futures))
         bar.close()
+
+
+class _Window:
+    """How many jobs :func:`run_tasks` keeps submitted at once: twice the cluster's threads (at
+    least :data:`MIN_WINDOW`), looked up again every few seconds as workers come and go. The
+    scheduler then holds a few jobs per thread, not all of a 100,000-cell study (a graph of
+    tens of MB to send, and as many tasks to cancel when it is stopped)."""
+
+    def __init__(self, client):
+        self.client, self.known, self.checked = client, MIN_WINDOW, -math.inf
+
+    def size(self) -> int:
+        if time.monotonic() - self.checked > 5.0:
+            self.checked = time.monotonic()
+            with contextlib.suppress(Exception):  # no answer: the last size
+                self.known = max(MIN_WINDOW, 2 * sum(self.client.nthreads().values()))
+        return self.known
+
+
+def _run_job(function: Callable[[Any], Any], job: Any) -> Any:
+    """``function(job)`` on a Dask worker, stopped at its next ``interrupts.check`` once its task
+    is cancelled or its worker is closing (then None: nobody waits for the result)."""
+    from distributed import get_worker
+    from distributed.core import Status
+
+    worker = get_worker()
+    key = worker.get_current_task()
+
+    def asked() -> bool:
+        task = worker.state.tasks.get(key)
+        return (
+            worker.status in (Status.closing, Status.closed, Status.failed) or task is None or task.state == "cancelled"
+        )
+
+    with interrupts.stoppable(asked):
+        try:
+            return function(job)
+        except interrupts.Interrupted:
+            return None
 
 
 def worker_address() -> str:

@@ -9,6 +9,11 @@ installs :func:`handled` and runs the whole command deferred, so a signal also w
 end of the current picture, video or export frame, or file (the places that call ``check``),
 and their temporary files are removed on the way out (``record.atomic_path``). Outside any
 deferred block, with :func:`handled` installed, a signal raises at once.
+
+A job running in another thread — on a Dask worker (contactlab.cluster) — has no signal of its
+own to stop it: it runs inside :func:`stoppable`, and ``check`` in that thread raises
+:class:`Interrupted` as soon as the job's ``asked`` function says it should stop (its task was
+cancelled, its worker is closing), at the same step, frame and file boundaries.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 EXIT_CODES: dict[int, int] = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
 
@@ -100,11 +105,32 @@ def deferred() -> Iterator[None]:
 
 
 def check() -> None:
-    """Raise :class:`Interrupted` if a signal arrived while deferred (and forget it)."""
+    """Raise :class:`Interrupted` if a signal arrived while deferred (and forget it), or, in a
+    thread inside :func:`stoppable`, if its job was asked to stop."""
     global _pending
     if _pending is not None:
         signum, _pending = _pending, None
         raise Interrupted(signum)
+    if _stop_asked:
+        asked = _stop_asked.get(threading.get_ident())
+        if asked is not None and asked():
+            raise Interrupted(signal.SIGTERM)
+
+
+_stop_asked: dict = {}  # thread ident -> a function saying whether the job in that thread should stop
+
+
+@contextlib.contextmanager
+def stoppable(asked: Callable[[], bool]) -> Iterator[None]:
+    """While this is open, :func:`check` in this thread raises :class:`Interrupted` (as for
+    SIGTERM) once ``asked()`` is true: how a job on a worker thread stops at its next step,
+    frame or file when whoever started it no longer wants it (contactlab.cluster)."""
+    ident = threading.get_ident()
+    _stop_asked[ident] = asked
+    try:
+        yield
+    finally:
+        _stop_asked.pop(ident, None)
 
 
 # ---- what an interrupted command wrote ------------------------------------------------------

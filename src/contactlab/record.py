@@ -316,6 +316,27 @@ def undo_written(paths: Iterable[str], folders: Sequence[str] = ()) -> None:
     remove_empty(folders)
 
 
+def stamps(paths: Iterable[str]) -> dict[str, tuple[int, int, int] | None]:
+    """Each of ``paths`` with its file's identity now (inode, size, modification time [ns]), or
+    None where there is none; :func:`replaced` says which files were written since."""
+    found = {}
+    for path in paths:
+        try:
+            status = os.stat(path)
+        except OSError:
+            found[path] = None
+        else:
+            found[path] = (status.st_ino, status.st_size, status.st_mtime_ns)
+    return found
+
+
+def replaced(before: Mapping[str, tuple[int, int, int] | None]) -> list[str]:
+    """Those paths of ``before`` (:func:`stamps`) whose file is new or replaced since: what another
+    process (a Dask worker) completed, every file being renamed into place when complete."""
+    now = stamps(before)
+    return [path for path, stamp in now.items() if stamp is not None and stamp != before[path]]
+
+
 def read_trajectory(
     arrays: Mapping[str, Any], keys: Iterable[str], samples: slice | Sequence[int] | np.ndarray | None = None
 ) -> dict[str, np.ndarray]:

@@ -99,8 +99,7 @@ def render(
         int(k) for times in (mp4_times, gif_times) if times is not None for k in nearest(time, times)
     }
     picture = _Picture(arrays, width, height, elevation, azimuth, title, np.array(sorted(drawn)))
-    paths = {name: os.path.join(directory, f"video.{name}") for name in formats}
-    paths["still"] = os.path.join(directory, "still.png")
+    paths = output_paths(directory, formats)
     made = make_folders(os.fspath(directory))
     try:
         with contextlib.ExitStack() as stack:  # renames every file at the end, or removes them all
@@ -110,6 +109,14 @@ def render(
     except BaseException:
         remove_empty(made)
         raise
+    return paths
+
+
+def output_paths(directory: str, formats: Sequence[str] = ("mp4", "gif")) -> dict[str, str]:
+    """What :func:`render` writes into ``directory`` for ``formats``: {"mp4": path, "gif": path,
+    "still": path} (whichever formats are named; the still always)."""
+    paths = {name: os.path.join(directory, f"video.{name}") for name in _formats(formats)}
+    paths["still"] = os.path.join(directory, "still.png")
     return paths
 
 

@@ -30,19 +30,21 @@ is recorded and the contactlab version, which is how a rerun knows a cell is don
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import itertools
 import json
 import math
 import os
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__, budget
 from .errors import InputError
 from .methods import AVAILABLE
-from .scene import load_scene
-from .scene.loader import read_source
+from .scene.loader import read_source, scene_from_raw
 from .scene.schema import _did_you_mean, show
 from .scene.toml import parse_toml
 
@@ -60,6 +62,7 @@ REMEDIES = budget.Remedies(  # what a study offers a cell that would not fit (it
     model="simulate fewer bodies, particles or cloth vertices in the cell",
 )
 MAX_CELLS = 100_000  # cells a study may have
+CHECK_NEWS_SECONDS = 2.0  # s: checking a study longer than this says how far it got (then every 5 s)
 KEYS = {
     "study": ("name", "record", "description"),
     "grid": ("scenes", "methods", "set"),
@@ -114,8 +117,9 @@ def toml_value(value: object) -> str:
     raise InputError("set", f"a value of a kind TOML has no spelling for: {show(value)}")
 
 
-def load_study(path: str | os.PathLike[str]) -> Study:
-    """Read, check and expand the study file ``path``; InputError with the field path of any mistake."""
+def load_study(path: str | os.PathLike[str], log: Callable[[str], object] | None = None) -> Study:
+    """Read, check and expand the study file ``path``; InputError with the field path of any
+    mistake. ``log``: a function given a line of news every few seconds of a long check."""
     name, text, origin = read_source(path)
     raw = parse_toml(text)
     _check_keys(raw, ("study", "grid", "cells"), "")
@@ -152,7 +156,7 @@ def load_study(path: str | os.PathLike[str]) -> Study:
         study_name,
         origin,
         record,
-        _checked_cells(specs, base, record),
+        _checked_cells(specs, base, record, log),
         axes=list(dict.fromkeys(path for *_, settings in specs for path, _ in settings)),
         description=head.get("description", ""),
     )
@@ -184,9 +188,19 @@ def _field(where, key):
     )
 
 
-def _checked_cells(specs, base, record):
-    """The Cells of ``specs``, each scene loaded once with each cell's settings (the check)."""
-    cells, seen, texts = [], set(), {}
+def _checked_cells(specs, base, record, log=None):
+    """The Cells of ``specs``, checked by loading their scenes as a run would, though not once
+    per cell (a millisecond each; 100,000 cells took 70 s): each scene with each method once, on
+    the settings of a cell that has that method, and each distinct setting (path = value) once,
+    on the settings of the scene's first cell with that one changed. Every method and every
+    value is so checked, and a mistake named by its field; settings that are each valid but
+    clash together (a body's material with a materials list another setting shortened, say)
+    fail when their cell runs, recorded as an ``error`` row. ``log``: a function given a line
+    every few seconds while checking lasts more than :data:`CHECK_NEWS_SECONDS`."""
+    cells, seen, scenes, checked, loads = [], set(), {}, set(), 0
+    plain, limited = {}, set()  # each (scene, method) as its file has it; the run limits checked
+    started = time.monotonic()
+    news = started + CHECK_NEWS_SECONDS  # when to say how far the check got
     for where, scene, method, settings in specs:
         if not isinstance(scene, str) or not scene:
             raise InputError(
@@ -197,25 +211,82 @@ def _checked_cells(specs, base, record):
                 _field(where, "method"), f"unknown method {show(method)}{_did_you_mean(method, AVAILABLE)}"
             )
         source = scene if not scene.endswith(".toml") or os.path.isabs(scene) else str(base / scene)
-        if source not in texts:
+        if source not in scenes:
             try:
-                texts[source] = read_source(source)[1]
+                name, text, origin = read_source(source)
+                scenes[source] = (name, text, origin, parse_toml(text), settings)
             except InputError as error:
                 raise InputError(_field(where, "scene"), error.message) from None
-        cell = Cell(source, method, settings, record, _key(texts[source], method, settings, record))
-        try:
-            loaded = load_scene(source, cell.overrides())
-        except InputError as error:
-            raise _cell_error(error, (error.field or "",), where, scene, method, settings) from None
-        try:  # the limits simulate holds a run to (contactlab run's), before a cluster starts
-            loaded.check(streamed=record == "trajectory", remedies=REMEDIES)
-        except InputError as error:
-            fields = RUN_FIELDS.get(error.field or "", (error.field or "",))
-            raise _cell_error(error, fields, where, scene, method, settings) from None
-        if cell.key not in seen:  # the same cell twice (grid and list) runs once
-            seen.add(cell.key)
-            cells.append(cell)
+        name, text, origin, raw, first = scenes[source]
+        cell = Cell(source, method, settings, record, _key(text, method, settings, record))
+        if cell.key in seen:  # the same cell twice (grid and list) runs once
+            continue
+        seen.add(cell.key)
+        cells.append(cell)
+        trials = []  # the settings to load the scene with: the cell's, or the first cell's with one changed
+        if (source, method) not in checked:
+            checked.add((source, method))
+            checked.update((source, path, toml_value(value)) for path, value in settings)
+            trials.append(settings)
+        for path, value in settings:
+            if (source, path, toml_value(value)) not in checked:
+                checked.add((source, path, toml_value(value)))
+                trials.append(tuple((p, v) for p, v in first if p != path) + ((path, value),))
+        for trial in trials:
+            loads += 1
+            try:
+                scene_from_raw(name, copy.deepcopy(raw), origin, Cell(source, method, trial, record, "").overrides())
+                if (source, method) not in plain:  # the scene as its file has it: what a cell's run is held to
+                    plain[source, method] = scene_from_raw(
+                        name, copy.deepcopy(raw), origin, Cell(source, method, (), record, "").overrides()
+                    )
+            except InputError as error:  # named by the setting it came from, where it did
+                paths = {path.replace("[", ".").replace("]", ""): path for path, _ in trial}
+                setting = paths.get((error.field or "").replace("[", ".").replace("]", ""))
+                place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
+                inner = f"{error.field}: " if error.field and not setting else ""
+                raise InputError(
+                    place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}"
+                ) from None
+        _check_limits(plain[source, method], settings, record, limited, where, scene)
+        if log is not None and time.monotonic() > news:
+            log(
+                f"checking the study: {len(seen):,} of {len(specs):,} cells ({loads:,} scene loads), "
+                f"{time.monotonic() - started:.0f} s so far"
+            )
+            news = time.monotonic() + 5.0
     return cells
+
+
+def _check_limits(loaded, settings, record, limited, where, scene):
+    """The limits ``simulate`` holds a run to (:func:`contactlab.simulation.check_run`: dt,
+    duration, steps, memory), for a cell of ``loaded`` (its scene and method as the file has them)
+    with ``settings``' dt and duration where it sets them; each distinct (scene, method, dt,
+    duration) once (``limited``, the ones checked). The memory is the file's model's: a setting
+    that changes the model's size is held to it when its cell runs."""
+    from .simulation import check_run
+
+    given = {_dotted(path): value for path, value in settings}
+    dt, duration = given.get("simulation.dt", loaded.dt), given.get("simulation.duration", loaded.duration)
+    key = (id(loaded), repr(dt), repr(duration))
+    if key in limited:
+        return
+    limited.add(key)
+    try:  # the limits simulate holds a run to (contactlab run's), before a cluster starts
+        check_run(
+            loaded.model,
+            loaded.method,
+            dt,
+            duration,
+            loaded.options[loaded.method],
+            loaded.integrator,
+            scene_name=loaded.name,
+            streamed=record == "trajectory",
+            remedies=REMEDIES,
+        )
+    except InputError as error:
+        fields = RUN_FIELDS.get(error.field or "", (error.field or "",))
+        raise _cell_error(error, fields, where, scene, loaded.method, settings) from None
 
 
 def _cell_error(error, fields, where, scene, method, settings):

@@ -19,12 +19,21 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from .. import cluster
+from .. import cluster, interrupts
 from ..closed_form import Check
 from ..errors import InputError, SimulationDiverged
 from ..methods import AVAILABLE
 from ..plots import write_comparison_plots, write_plots
-from ..record import TRAJECTORY, atomic_path, make_folders, remove_empty, undo_written, write_summary
+from ..record import (
+    TRAJECTORY,
+    atomic_path,
+    make_folders,
+    remove_empty,
+    replaced,
+    stamps,
+    undo_written,
+    write_summary,
+)
 from ..scene import Scene, load_scene
 from ..simulation import Run
 from ..store import open_trajectory
@@ -196,10 +205,16 @@ def _run_all(
             )
         )
     if _parallel(workers, scheduler, scenes, video is not None):
-        with cluster.connect(scheduler, workers) as client:
-            for job in jobs:
-                job[1]["progress"] = False  # the bar is over the methods
-            results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
+        before = stamps(_outputs(jobs))
+        try:
+            with cluster.connect(scheduler, workers) as client:
+                for job in jobs:
+                    job[1]["progress"] = False  # the bar is over the methods
+                results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
+        except BaseException:  # the workers have stopped: what they completed, as a run here notes it
+            for path in replaced(before):
+                interrupts.note_written(path)
+            raise
     else:
         results = {name: run_method(job) for name, job in jobs}
     outcomes, first_error = [], None
@@ -231,6 +246,17 @@ def _run_all(
     if not outcomes:
         raise first_error or InputError("--methods", "no method supports this scene")
     return outcomes, skipped, out
+
+
+def _outputs(jobs):
+    """The files the jobs write (:func:`run_method`): each trajectory, and the video, GIF and
+    still drawn beside it."""
+    from ..render import output_paths
+
+    for _, job in jobs:
+        yield job["trajectory"]
+        if job["video"] is not None:
+            yield from output_paths(os.path.dirname(job["trajectory"])).values()
 
 
 # ---- writing ----------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ available → build the Model. Every mistake is an InputError.
 from __future__ import annotations
 
 import difflib
+import functools
 import os
 import stat
 from collections.abc import Sequence
@@ -94,8 +95,11 @@ def _builtin_dir():
     return resources.files(BUILTIN_PACKAGE).joinpath("builtin")
 
 
+@functools.cache
 def _builtin_names():
-    return sorted(entry.name[: -len(".toml")] for entry in _builtin_dir().iterdir() if entry.name.endswith(".toml"))
+    return tuple(
+        sorted(entry.name[: -len(".toml")] for entry in _builtin_dir().iterdir() if entry.name.endswith(".toml"))
+    )
 
 
 def builtin_scenes() -> list[tuple[str, str]]:
@@ -207,7 +211,14 @@ def load_scene(source: str | os.PathLike[str], overrides: str | Sequence[str] = 
     Raises InputError, with the field path of the mistake, for anything wrong.
     """
     name, text, origin = read_source(source)
-    raw = apply_overrides(parse_toml(text), overrides)
+    return scene_from_raw(name, parse_toml(text), origin, overrides)
+
+
+def scene_from_raw(name: str, raw: dict, origin: str, overrides: str | Sequence[str] = ()) -> Scene:
+    """:func:`load_scene` of a scene file already read and parsed (``read_source`` and the TOML
+    dict ``raw``, which the overrides change in place): how a study checks many settings of one
+    scene without reading it again for each."""
+    raw = apply_overrides(raw, overrides)
     scene = validate(raw)
     options = _method_options(scene)
     simulation = scene["simulation"]
