@@ -4,6 +4,7 @@ is no terminal (a log, CI), and a terminal bar erased before the command's summa
 import io
 import re
 import sys
+import time
 
 from conftest import ball_on_plane
 
@@ -86,3 +87,23 @@ def test_the_command_line_shows_progress_without_a_terminal(tmp_path, monkeypatc
     out = str(tmp_path / "run")
     assert cli.main(["run", "bouncing_ball", "--duration", "0.05", "--out", out, "--no-plots"]) == 0
     assert re.search(r"^bouncing_ball \(impulse\): 50/50 steps \(100 %\) after \d+ s$", capsys.readouterr().err, re.M)
+
+
+def test_plain_lines_start_their_clock_again_on_restart(monkeypatch):
+    # a run restarts its progress after the first step, which compiles: the first plain line then
+    # comes a period after the restart, not at once (a compile of 5 s printed "1/50 steps after 5 s"
+    # just before a one-line error, which then was two lines)
+    import io
+
+    from contactlab import progress
+
+    monkeypatch.setattr(progress, "PLAIN_SECONDS", 0.2)
+    stream = io.StringIO()
+    lines = progress.bar(10, "run", "step", True, stream)
+    time.sleep(0.25)  # the first step, compiling
+    lines.restart()
+    lines.update(1)
+    assert stream.getvalue() == ""
+    time.sleep(0.25)
+    lines.update(1)
+    assert stream.getvalue().startswith("run: 2/10 steps (20 %) after 0 s")

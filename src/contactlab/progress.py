@@ -88,6 +88,7 @@ class _Lines(_Progress):
 
     def restart(self) -> None:
         self._done = 0
+        self._started = self._printed = time.monotonic()  # the clock anew: the next line comes a period on
 
     def tick(self) -> None:
         now = time.monotonic()
