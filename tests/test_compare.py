@@ -253,6 +253,35 @@ def test_energy_drifts_within_noise_are_not_ranked():
     assert report._energy_sentence([apart[2]]) == "Energy kept best: c (total energy changed by 0.2 J)."
 
 
+def test_penetrations_of_rounding_size_are_not_ranked():
+    """Issue 37: on box_pushed the report named projection (9.4e-8 mm) least penetrating and
+    impulse (3.4e-7 mm) behind it: both are no overlap at all. Depths under 0.001 mm are alike."""
+
+    def outcome(name, depth):
+        made = run._Outcome(name, None)
+        made.row = {"max_penetration_mm": depth}
+        return made
+
+    def sentence(outcomes):
+        return report._ranking(
+            outcomes,
+            ("Least penetration", "deepest", "Least penetration: all the same"),
+            lambda o: o.row["max_penetration_mm"],
+            True,
+            lambda v: f"{v:.3g} mm",
+            report._penetration_alike,
+        )
+
+    rounding = [outcome("projection", 9.4e-8), outcome("impulse", 3.4e-7), outcome("constraints", 2e-7)]
+    assert sentence(rounding) == "Least penetration: all the same (9.4e-08 mm to 3.4e-07 mm)."
+    with_penalty = sentence([*rounding, outcome("penalty", 0.3)])
+    assert with_penalty == (
+        "Least penetration: projection, impulse and constraints (9.4e-08 mm to 3.4e-07 mm); deepest: penalty (0.3 mm)."
+    )
+    apart = sentence([outcome("a", 0.002), outcome("b", 0.003)])  # past the floor: ranked as shown
+    assert apart == "Least penetration: a (0.002 mm); deepest: b (0.003 mm)."
+
+
 def test_the_energy_scale_leaves_the_contact_springs_out():
     """Issue 37: penalty's drift was divided by its own springs' peak (1.01 J on box_pushed), the
     other methods' by the scene's 0.25 J. The scale is the most kinetic + potential energy

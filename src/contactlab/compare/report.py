@@ -176,6 +176,7 @@ def _html_table(headings, cells):
 
 ENERGY_NOISE_SHARE = 0.02  # two energy drifts closer than this share of the larger are not ranked ...
 ENERGY_NOISE_FLOOR = 1e-6  # J ... nor those closer than this (rounding: drifts near 0)
+PENETRATION_NOISE_MM = 1e-3  # mm: overlaps this shallow are none (rounding), and are not ranked
 
 
 def _same_shown(one, other):
@@ -188,6 +189,12 @@ def _energy_alike(one: float, other: float) -> bool:
     most ENERGY_NOISE_SHARE of the larger, or by at most ENERGY_NOISE_FLOOR."""
     one, other = abs(one), abs(other)
     return abs(one - other) <= max(ENERGY_NOISE_SHARE * max(one, other), ENERGY_NOISE_FLOOR)
+
+
+def _penetration_alike(one: float, other: float) -> bool:
+    """Whether two deepest overlaps [mm] are alike: the same to the digits shown, or both within
+    PENETRATION_NOISE_MM (projection's 9.4e-8 mm and impulse's 3.4e-7 mm are both none)."""
+    return _same_shown(one, other) or max(one, other) <= PENETRATION_NOISE_MM
 
 
 def _group(values, leader, alike):
@@ -319,6 +326,7 @@ def paragraph(scene: Scene, outcomes: Sequence[_Outcome], skipped: Mapping[str, 
                 lambda o: o.row["max_penetration_mm"],
                 True,
                 lambda v: f"{v:.3g} mm",
+                _penetration_alike,
             )
         )
         sentences.append(_energy_sentence(ran))
