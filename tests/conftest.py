@@ -1,4 +1,5 @@
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -141,3 +142,12 @@ def alive_in_group(group, seconds):
         if not alive or time.monotonic() > deadline:
             return alive
         time.sleep(0.1)
+
+
+# contactlab.progress's plain line, printed every few seconds of long work where stderr is no terminal
+PROGRESS_LINE = re.compile(r"^.+: [\d,]+/[\d,]+ \w+s(?: \(\d+ %\))? after \d+ s$")
+
+
+def messages(stderr):
+    """The lines of a command's ``stderr`` that say something: its progress lines left out."""
+    return [line for line in stderr.splitlines() if not PROGRESS_LINE.match(line)]

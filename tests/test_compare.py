@@ -13,7 +13,7 @@ from urllib.parse import unquote, urlparse
 
 import numpy as np
 import pytest
-from conftest import alive_in_group, interruptible
+from conftest import alive_in_group, interruptible, messages
 from matplotlib.image import imread
 
 from contactlab import compare as compare_module
@@ -579,7 +579,7 @@ def test_a_stopped_compare_lists_exactly_what_it_left_on_either_path(tmp_path, w
     took = time.monotonic() - sent
     name = signal.Signals(signum).name
     assert process.returncode == 128 + signum and took < 2.0, (took, stderr)
-    lines = [line for line in stderr.splitlines() if not line.startswith("compiling contact kernels")]
+    lines = [line for line in messages(stderr) if not line.startswith("compiling contact kernels")]
     assert len(lines) == 1 and lines[0].startswith(f"interrupted ({name}); written before it: "), stderr
     listed = set(lines[0].split("written before it: ")[1].split(", "))
     left = {os.path.join(root, name) for root, _, names in os.walk(out) for name in names}

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import alive_in_group, interruptible
+from conftest import alive_in_group, interruptible, messages
 
 from contactlab import InputError, closed_form, simulate
 from contactlab.scene import load_scene
@@ -593,7 +593,7 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     kept = len(os.listdir(cells))
     assert process.returncode == 130 and 2 <= kept < 8 and took < 2.0, (took, stderr)
     news = ("8 cells: 0 done already, 8 to run", "Dask dashboard: ", "compiling contact kernels")
-    assert [line for line in stderr.splitlines() if not line.startswith(news)] == [
+    assert [line for line in messages(stderr) if not line.startswith(news)] == [
         f"interrupted (SIGINT); written before it: {os.path.join('out', 'stopped-sweep', 'cells')}"
     ], stderr
     assert not any(name.startswith(".partial-") for name in os.listdir(cells))

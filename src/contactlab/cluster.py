@@ -234,7 +234,7 @@ def _silenced() -> Iterator[None]:
         logging.disable(previous)
 
 
-def dask_setup(worker) -> None:
+def dask_setup(worker: Any) -> None:
     """Run by Dask in each worker process of a local cluster as it starts (the ``preload`` of
     :func:`connect`). Ctrl-C is ignored there: a terminal sends it to every process of the
     command in front, and a worker would die of it with a traceback, while the command stops
@@ -249,7 +249,7 @@ def dask_setup(worker) -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def dask_teardown(worker) -> None:
+def dask_teardown(worker: Any) -> None:
     """Run by Dask as a local cluster's worker closes (its jobs ended). Its log has no news from
     here on (a heartbeat cut short by the closing connections is an ERROR to distributed), and
     once the interpreter starts to exit, multiprocessing's own clean-up done, the process ends

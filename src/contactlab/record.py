@@ -319,7 +319,7 @@ def undo_written(paths: Iterable[str], folders: Sequence[str] = ()) -> None:
 def stamps(paths: Iterable[str]) -> dict[str, tuple[int, int, int] | None]:
     """Each of ``paths`` with its file's identity now (inode, size, modification time [ns]), or
     None where there is none; :func:`replaced` says which files were written since."""
-    found = {}
+    found: dict[str, tuple[int, int, int] | None] = {}
     for path in paths:
         try:
             status = os.stat(path)
