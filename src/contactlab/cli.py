@@ -366,9 +366,8 @@ def _where_time_went(summary):
     parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping")
     if summary.get("stepping") == SHORT_FIRST_RUN:
         parts[-1] += (
-            " the stages from Python: a run this short does not compile the stepping loop (about 30 s, once), "
-            "whose machine code no run has cached yet; a run long enough to repay it, or "
-            "simulate(..., compiled_loop=True), compiles it, and later runs step through it many times faster"
+            " its stages from Python: a run this short does not compile the stepping loop (about 30 s, once); "
+            "a longer run or compiled_loop=True does, and later runs step through it"
         )
     return ", ".join(parts)
 
