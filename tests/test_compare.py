@@ -559,7 +559,9 @@ def test_a_stopped_compare_lists_exactly_what_it_left_on_either_path(tmp_path, w
     out = tmp_path / "out"
     command = [sys.executable, "-m", "contactlab", "compare", "bouncing_ball", "--methods", "impulse,constraints"]
     process = subprocess.Popen(
-        [*command, "--duration", "60", "--no-video", "--workers", str(workers), "--out", str(out)],
+        # an hour: through the compiled loop (where an earlier run cached it) 864,000 steps take
+        # seconds, where 60 s of the ball ended before the signal and was kept "complete"
+        [*command, "--duration", "3600", "--no-video", "--workers", str(workers), "--out", str(out)],
         cwd=tmp_path,
         preexec_fn=interruptible,
         start_new_session=True,
