@@ -241,13 +241,7 @@ def _checked_cells(specs, base, record, log=None):
                         name, copy.deepcopy(raw), origin, Cell(source, method, (), record, "").overrides()
                     )
             except InputError as error:  # named by the setting it came from, where it did
-                paths = {path.replace("[", ".").replace("]", ""): path for path, _ in trial}
-                setting = paths.get((error.field or "").replace("[", ".").replace("]", ""))
-                place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
-                inner = f"{error.field}: " if error.field and not setting else ""
-                raise InputError(
-                    place, f"{scene} with {method} {_described(settings)}: {inner}{error.message}"
-                ) from None
+                raise _cell_error(error, (error.field or "",), where, scene, method, settings, trial) from None
         _check_limits(plain[source, method], settings, record, limited, where, scene)
         if log is not None and time.monotonic() > news:
             log(
@@ -289,10 +283,11 @@ def _check_limits(loaded, settings, record, limited, where, scene):
         raise _cell_error(error, fields, where, scene, loaded.method, settings) from None
 
 
-def _cell_error(error, fields, where, scene, method, settings):
+def _cell_error(error, fields, where, scene, method, settings, loaded_with=None):
     """``error`` of one cell as one InputError, placed at the first of ``fields`` (scene setting
-    paths) that the cell's settings give, or at the cell with the first field named."""
-    paths = {_dotted(path): path for path, _ in settings}
+    paths) that the settings the scene was loaded with (``loaded_with``; default the cell's
+    ``settings``) give, or at the cell with the first field named."""
+    paths = {_dotted(path): path for path, _ in (settings if loaded_with is None else loaded_with)}
     setting = next((paths[_dotted(name)] for name in fields if _dotted(name) in paths), None)
     place = f"{_field(where, 'set')}.{toml_value(setting)}" if setting else where
     inner = f"{fields[0]}: " if fields[0] and not setting else ""
