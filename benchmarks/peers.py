@@ -1004,7 +1004,7 @@ def assembled_pile_lcp(count=4000, settle=0.5):
     from contactlab.dynamics.generalized import inverse_mass_matrix, stack
     from contactlab.dynamics.integrators import free_velocities
     from contactlab.methods import constraints as cm
-    from contactlab.methods.velocity_level import normal_targets, relative_gravity
+    from contactlab.methods.jacobian_rows import rows_of
 
     model, _ = contactlab_pile(count)
     options = cm.Options(iterations=ITERATIONS)
@@ -1023,16 +1023,8 @@ def assembled_pile_lcp(count=4000, settle=0.5):
         cloth_samples=options.cloth_samples,
     )
     J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
-    threshold = 2.0 * np.linalg.norm(model.gravity) * DT
-    target, _ = normal_targets(
-        -contacts.depth,
-        (J @ v_free)[0::3],
-        relative_gravity(model, contacts),
-        contacts.restitution,
-        DT,
-        threshold,
-        options,
-    )
+    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
+    target, _ = cm.normal_row_targets(model, state, contacts, rows, v_free, DT, options)
     targets = np.zeros((contacts.count, 3))
     targets[:, 0] = target
     inverse = cm.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))

@@ -318,16 +318,18 @@ def test_carried_values_match_a_lookup_by_id_in_any_order(ids, kept, new, swaps,
 
 
 def test_each_body_moves_to_its_earliest_impact_first():
-    from contactlab.methods.velocity_level import entity_impact_fractions
+    from contactlab.methods.velocity_level import earliest_impacts
 
     model, _ = cube_on_plane()
     contacts = collide(model, model.state(), 0.01)
     assert contacts.count == 4
+    sides = (contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b)
     tau = np.array([-1.0, 0.6, 0.25, -1.0])
-    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
+    tau_body, tau_particle = earliest_impacts(*sides, tau, model.body_count, model.particle_count)
     np.testing.assert_array_equal(tau_body, [0.25])
     assert tau_particle.shape == (0,)
-    np.testing.assert_array_equal(entity_impact_fractions(model, contacts, np.full(4, -1.0))[0], [0.0])
+    no_impact = earliest_impacts(*sides, np.full(4, -1.0), model.body_count, model.particle_count)
+    np.testing.assert_array_equal(no_impact[0], [0.0])
 
 
 def draped_cloth(n=8):

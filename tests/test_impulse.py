@@ -8,7 +8,7 @@ from contactlab import ModelBuilder, collide, simulate
 from contactlab.contacts import jacobian
 from contactlab.dynamics.generalized import stack, unstack
 from contactlab.dynamics.integrators import free_velocities, world_inverse_inertia
-from contactlab.methods import impulse, jacobian_rows
+from contactlab.methods import impulse, jacobian_rows, velocity_level
 
 G = 9.81
 
@@ -296,19 +296,26 @@ def test_a_new_contact_starts_from_the_weight_it_bears():
     between them is a quarter of the top box's weight over the step, m_top g h / 4, and of each
     corner on the floor a quarter of both, (m_top + m_bottom) g h / 4, along the normal; times
     warm_start; nothing at all at warm_start 0."""
-    from contactlab.methods.velocity_level import first_impulses
+    from contactlab.methods.loop_stages import loop_inputs
+    from contactlab.methods.velocity_level import warm_impulses
 
     model, h = _two_box_stack(3.0, 1.0), 1 / 240
     state = model.state()
     contacts = collide(model, state)
     between = (contacts.body_a >= 0) & (contacts.body_b >= 0)
     assert between.sum() == 4 and (~between).sum() == 4
+
+    def first_impulses(fraction):
+        options = impulse.Options(warm_start=fraction)
+        arrays, settings, motion, _, carried = loop_inputs(model, state, "impulse", options, h)
+        return warm_impulses(arrays, settings, contacts.arrays(), motion, *carried)
+
     for fraction in (1.0, 0.5):
-        warm = first_impulses(model, state, contacts, "impulse_", fraction, h)
+        warm = first_impulses(fraction)
         np.testing.assert_allclose(warm[between, 0], fraction * 3.0 * G * h / 4, rtol=1e-12)
         np.testing.assert_allclose(warm[~between, 0], fraction * 4.0 * G * h / 4, rtol=1e-12)
         assert np.all(warm[:, 1:] == 0.0)  # no friction guessed
-    assert np.all(first_impulses(model, state, contacts, "impulse_", 0.0, h) == 0.0)
+    assert np.all(first_impulses(0.0) == 0.0)
 
 
 @pytest.mark.parametrize("method", ["impulse", "constraints"])
@@ -483,7 +490,7 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         if n @ v_rel >= 0:
             continue
         tau = np.empty(1)
-        impulse.resolve_collisions(
+        velocity_level.resolve_collisions(
             rows,
             np.zeros(1),
             np.array([eps]),

@@ -50,18 +50,19 @@ from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_
 from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number
+from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
-from .jacobian_rows import row_products, rows_of
-from .sequential import solve_order, solve_sequential_impulses, sweep_groups
+from .jacobian_rows import row_products
+from .loop_stages import build_rows, compile_flags, loop_inputs, restitution_threshold, solve
+from .sequential import contact_order
 from .velocity_level import (
     detect,
-    first_impulses,
-    normal_targets,
-    positions_split_at_impact,
+    gravity_along_normals,
+    impact_targets,
     predict,
-    relative_gravity,
-    restitution_threshold,
+    split_at_impact,
     step_without_contacts,
+    warm_impulses,
 )
 
 if TYPE_CHECKING:
@@ -278,21 +279,32 @@ def implicit_free_velocities(
 
 
 def normal_row_targets(
-    model: Model, state: State, contacts: Contacts, rows: ContactRows, v_free: np.ndarray, h: float, options: Options
+    model: Model,
+    state: State,
+    contacts: Contacts,
+    rows: ContactRows,
+    v_free: np.ndarray,
+    h: float,
+    options: Options,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stage 4a: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
-    none) — on velocities (C5b, ``normal_targets``) or on accelerations (C5a)."""
-    normal_velocity = row_products(rows, v_free)[:, 0]
+    none) — on velocities (C5b, ``velocity_level.impact_targets``) or on accelerations (C5a)."""
     gap_at_start = -contacts.depth
+    normal_velocity = row_products(rows, v_free)[:, 0]
     if options.formulation == "velocity":
-        return normal_targets(
+        arrays = contacts.arrays()
+        return impact_targets(
             gap_at_start,
             normal_velocity,
-            relative_gravity(model, contacts),
-            contacts.restitution,
+            gravity_along_normals(
+                arrays.body_a, arrays.body_b, arrays.particles_a, arrays.particles_b, arrays.normal, model.gravity
+            ),
+            arrays.restitution,
             h,
             restitution_threshold(model, h, options),
-            options,
+            options.stabilization,
+            options.slop,
+            options.max_push_velocity,
         )
     current = row_products(rows, stack(*state.velocities))[:, 0]
     return (acceleration_target(current, normal_velocity, gap_at_start, h, options), np.full(contacts.count, -1.0))
@@ -302,30 +314,16 @@ def solve_constraints(
     model: Model,
     state: State,
     contacts: Contacts,
-    rows: ContactRows,
     v_free: np.ndarray,
     target: np.ndarray,
     warm: np.ndarray,
     options: Options,
     implicit_inverse: SystemInverse | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, float]:
-    """Stage 4b: the reactions λ (C, 3) [N s] and v⁺ = v* + A⁻¹ Jᵀ λ (N,), with the solver's sweeps
-    and residual. "matrix_free" sweeps the rows (sequential impulses on v); the other solvers,
-    and any solver on implicit cloth (``implicit_inverse``: the SystemInverse of stage 1),
-    solve the assembled problem."""
-    if options.solver == "matrix_free" and implicit_inverse is None:
-        u = v_free.copy()
-        lam, iterations, residual = solve_sequential_impulses(
-            rows,
-            contacts.friction,
-            target,
-            u,
-            options.iterations,
-            options.tolerance,
-            warm,
-            *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
-        )
-        return lam, u, iterations, residual
+    """Stage 4b with an assembled problem: the reactions λ (C, 3) [N s] and v⁺ = v* + A⁻¹ Jᵀ λ
+    (N,), with the solver's sweeps and residual, for the solvers other than "matrix_free"
+    (which sweeps the rows, ``loop_stages.solve``), and for any solver on implicit cloth
+    (``implicit_inverse``: the SystemInverse of stage 1)."""
     inverse_mass = inverse_mass_matrix(model, state.body_orientation)
     # A = M, or with implicit cloth the A factored in stage 1
     inverse = SystemInverse(inverse_mass=inverse_mass) if implicit_inverse is None else implicit_inverse
@@ -344,12 +342,17 @@ def solve_constraints(
 def step(
     model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
 ) -> tuple[State, StepInfo]:
-    """One step of loop L3 with hard constraints; returns (new State, StepInfo). Its compiled
-    stages are called one by one from Python; ``simulate`` steps the scenes the compiled loop
-    serves (methods.velocity_loop) through that loop instead, which gives the very same numbers."""
+    """One step of loop L3 with hard constraints; returns (new State, StepInfo). On velocities
+    with the matrix-free solver (the default) and no implicit cloth this is
+    ``velocity_level.step``, whose stages 4–5 are the compiled loop's own; the accelerations
+    formulation, the assembled solvers and implicit cloth take the stages below, with the same
+    compiled rows, warm start and split at the time of impact."""
+    implicit_cloth = integrator == "backward_euler" and model.spring_count > 0
+    if options.solver == "matrix_free" and options.formulation == "velocity" and not implicit_cloth:
+        return velocity_level.step("constraints", model, state, dt, options, integrator)
     h = dt
     # 1. internal forces → free velocities v* (A v* = b)
-    implicit_cloth = integrator == "backward_euler" and model.spring_count > 0
+    inverse = None
     if implicit_cloth:
         free, inverse = implicit_free_velocities(model, state, h)
     else:
@@ -362,23 +365,23 @@ def step(
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, "constraint_")
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
-    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
+    arrays, settings, motion, rotation, carried = loop_inputs(model, state, "constraints", options, dt)
+    found = contacts.arrays()
+    rows = build_rows(arrays, found, motion, rotation)
     target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)
-    warm = first_impulses(model, state, contacts, "constraint_", options.warm_start, h)
-    lam, v_new, iterations, residual = solve_constraints(
-        model,
-        state,
-        contacts,
-        rows,
-        v_free,
-        target,
-        warm,
-        options,
-        inverse if implicit_cloth else None,
-    )
+    warm = warm_impulses(arrays, settings, found, motion, carried[0], carried[1])
+    if options.solver == "matrix_free" and inverse is None:  # the accelerations formulation, swept
+        v_new = v_free.copy()
+        order = contact_order(found.point, found.feature_id, arrays.gravity)
+        _, _, _, _, _, slabs, parallel = compile_flags(model, "constraints", options)
+        lam, iterations, residual = solve(settings, slabs, parallel, rows, found, motion, v_new, target, warm, order)
+    else:
+        lam, v_new, iterations, residual = solve_constraints(
+            model, state, contacts, v_free, target, warm, options, inverse
+        )
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
-    solved = unstack(v_new, model.body_count)
-    positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
-    carried = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
-    new = State.assemble(state.time + h, positions, solved, carried)
+    floats = tuple(np.ascontiguousarray(v, dtype=float) for v in (*move, *free))
+    positions = split_at_impact(arrays, found, motion, tau, floats[:3], floats[3:], v_new, h, settings.time_of_impact)
+    carried_on = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
+    new = State.assemble(state.time + h, positions, unstack(v_new, model.body_count), carried_on)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual), impulses=lam)

@@ -21,6 +21,11 @@ One step, stage by stage as on the slide:
 5. recompute velocities and positions: x = x₀ + h v⁺ — so a body at rest stays put — with the
    time-of-impact correction below; advance time.
 
+Where each stage is written: 1–3 in ``velocity_level.step`` (from Python, every scene) and
+``loop_steps.velocity_step`` (the compiled loop), 4–5 once, in ``velocity_level.respond``, which
+both call — the collision waves of 4a are ``velocity_level.resolve_collisions``. This module holds
+the method's Options and its ``step``.
+
 Friction (F2) is not written here: both phases sweep contacts with
 :func:`contactlab.methods.sequential.sweep_contacts`, whose per-contact update clamps the
 tangential impulse to the friction cone μ λ (the same sweep serves ``constraints``).
@@ -36,31 +41,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from ..compiling import njit
-from ..dynamics.generalized import stack, unstack
-from ..dynamics.integrators import free_velocities
 from ..errors import InputError
-from ..state import State
 from ..validation import check_counts, number
+from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
-from .jacobian_rows import contact_velocity, rows_of
-from .sequential import solve_order, solve_sequential_impulses, sweep_contacts, sweep_groups
-from .velocity_level import (
-    detect,
-    first_impulses,
-    positions_split_at_impact,
-    predict,
-    relative_gravity,
-    resting_target,
-    restitution_threshold,
-    step_without_contacts,
-)
 
 if TYPE_CHECKING:
     from ..model import Model
-    from .jacobian_rows import ContactRows
+    from ..state import State
 
 
 @dataclass
@@ -99,122 +87,9 @@ class Options(KeptManifoldOptions):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
 
-@njit(cache=True)
-def resolve_collisions(
-    rows: ContactRows,
-    friction: np.ndarray,
-    restitution: np.ndarray,
-    gravity_normal: np.ndarray,
-    gap_at_start: np.ndarray,
-    dt: float,
-    threshold: float,
-    u: np.ndarray,
-    max_waves: int,
-    sweeps: int,
-    tolerance: float,
-    tau: np.ndarray,
-    order: np.ndarray,
-) -> int:
-    """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
-
-    A wave is every contact that is approaching now: at the current velocities it would be
-    closed by the end of the step, and its impact velocity u_n = v_n + g_n (τ − ½) h is below
-    −threshold (τ: where in the step it closes, d₀ / (−h v_n) for a gap d₀ > 0 at the start,
-    else 0). The wave's impulses are solved together — accumulated, λ ≥ 0 — so that each
-    member leaves at −ε u_n + g_n (½ − τ) h (restitution; see ``relative_gravity``), with
-    friction of at most μ λ (F2). A single contact gets j = −(1 + ε) u_n / k in one update
-    (R4 with k = J M⁻¹ Jᵀ). Simultaneous impacts (a box landing flat on four corners) are
-    thus one wave and stay symmetric, while an impact passed along a chain of touching
-    bodies makes one wave per link (Newton's cradle: one ball in, one ball out).
-
-    ``rows`` as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
-    generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
-    it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
-    ``solve_order``). Returns the number of waves.
-    """
-    k = rows.k
-    C = k.shape[0]
-    target = np.empty(C)
-    closes = np.empty(C)
-    impulses = np.zeros((C, 3))
-    members = np.empty(C, dtype=np.int64)
-    for c in range(C):
-        tau[c] = -1.0
-    for wave in range(max_waves):
-        count = np.int64(0)  # not a literal 0, which would compile sweep_contacts twice
-        for o in range(C):
-            c = order[o]
-            if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
-                continue
-            vn = contact_velocity(c, rows, u)[0]
-            if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:  # separating, or still open at the end
-                continue
-            closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
-            impact = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
-            if impact < -threshold:
-                target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes[c]) * dt
-                tau[c] = closes[c] if tau[c] < 0.0 else min(tau[c], closes[c])
-                impulses[c, 0] = impulses[c, 1] = impulses[c, 2] = 0.0
-                members[count] = c
-                count += 1
-        if count == 0:
-            return wave
-        for _sweep in range(sweeps):
-            if sweep_contacts(members, count, target, impulses, rows, friction, u) <= tolerance:
-                break
-    return max_waves
-
-
 def step(
     model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
 ) -> tuple[State, StepInfo]:
-    """One step of loop L3 with impulses; returns (new State, StepInfo). Its compiled stages are
-    called one by one from Python; ``simulate`` steps the scenes the compiled loop serves
-    (methods.velocity_loop) through that loop instead, which gives the very same numbers."""
-    h = dt
-    # 1. internal forces → free velocities v*
-    free = free_velocities(model, state, h, integrator)
-    # 2. integrate positions (a prediction): how far each body and particle sweeps this step
-    move, predicted, sweep = predict(model, state, free, integrator, h)
-    # 3. collision detection over the swept step
-    contacts, manifolds = detect(model, state, options, sweep)
-    if contacts.count == 0:
-        return step_without_contacts(state, h, predicted, free, contacts, manifolds, "impulse_")
-    # 4. formulate the impulses and solve them: collisions first (I2, F2), then resting contacts (M2)
-    gap_at_start = -contacts.depth  # d₀
-    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    u = stack(*free)
-    order = solve_order(contacts, model.gravity)
-    tau = np.empty(contacts.count)
-    resolve_collisions(
-        rows,
-        contacts.friction,
-        contacts.restitution,
-        relative_gravity(model, contacts),
-        gap_at_start,
-        h,
-        restitution_threshold(model, h, options),
-        u,
-        options.iterations,
-        options.iterations,
-        options.tolerance,
-        tau,
-        order,
-    )
-    warm = first_impulses(model, state, contacts, "impulse_", options.warm_start, h)
-    impulses, sweeps, change = solve_sequential_impulses(
-        rows,
-        contacts.friction,
-        resting_target(gap_at_start, h, options),
-        u,
-        options.iterations,
-        options.tolerance,
-        warm,
-        *sweep_groups(rows, contacts, state, order),
-    )
-    solved = unstack(u, model.body_count)
-    # 5. recompute positions from the corrected velocities, split at the time of impact
-    positions = positions_split_at_impact(model, state, contacts, tau, move, free, solved, h, options.time_of_impact)
-    carried = dict(state.carried, manifolds=manifolds, impulse_ids=contacts.feature_id, impulse_values=impulses)
-    new = State.assemble(state.time + h, positions, solved, carried)
-    return new, StepInfo(contacts, solver_iterations=sweeps, solver_residual=change, impulses=impulses)
+    """One step of loop L3 with impulses; returns (new State, StepInfo): stages 1–3 from Python,
+    4–5 the compiled stages the compiled loop runs (``velocity_level.step``)."""
+    return velocity_level.step("impulse", model, state, dt, options, integrator)

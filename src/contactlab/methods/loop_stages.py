@@ -25,9 +25,11 @@ import numpy as np
 
 from .. import collision, diagnostics, rotations, shapes
 from ..collision import assemble_contacts, dynamic_pairs_possible
+from ..collision.broad_phase import GRID_FROM
+from ..collision.families import KEPT_FAMILIES, pair_families
 from ..collision.manifolds import copy_rows, reuse_or_generate
-from ..collision.narrow_phase import generate_contacts
-from ..compiling import njit
+from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts
+from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
 from ..dynamics import integrators
@@ -38,6 +40,8 @@ from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_im
 
 if TYPE_CHECKING:
     from ..model import Model
+    from ..state import State
+    from .base import CollisionOptions
 
 LoopModel = namedtuple(
     "LoopModel",
@@ -119,6 +123,92 @@ Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3)
 
 Samples = namedtuple("Samples", SERIES)
 Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series of contactlab.diagnostics.SERIES."
+
+
+# ---- the Options and the scene as the loop's settings and flags ----------------------------
+
+PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
+
+
+def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple:
+    """(large, keeping, constraints, impulse, projection, slabs, parallel): True, or None where the
+    scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
+    run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
+    nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
+    projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
+    particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
+    constraints, impulse, projection: the method is constraints, impulse, projection (two flags
+    for the velocity methods, not one: Numba prunes only a branch whose flag is None, and an
+    impulse run then compiles none of what only constraints takes; penalty: all three None, its
+    PenaltyLoop the flag after these);
+    slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
+    several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
+    dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
+    present = {name for name, flag in zip(FAMILIES, pair_families(model)) if flag is not None}
+    most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
+    return (
+        True if dynamic >= GRID_FROM else None,
+        True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
+        True if method == "constraints" else None,
+        True if method == "impulse" else None,
+        True if method == "projection" else None,
+        True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
+        True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,
+    )
+
+
+def restitution_threshold(model: Model, h: float, options: CollisionOptions) -> float:
+    """Approaches slower than this [m/s] get no bounce (impulse, constraints): the Options'
+    ``restitution_threshold``, or 2 |g| h where it is < 0, for steps of h [s]."""
+    if options.restitution_threshold >= 0:
+        return float(options.restitution_threshold)
+    return float(2.0 * np.linalg.norm(model.gravity) * h)
+
+
+def loop_settings(model: Model, method: str, options: CollisionOptions, dt: float) -> LoopSettings:
+    """The LoopSettings of ``method``'s Options for steps of dt [s], the restitution threshold
+    resolved (``restitution_threshold``). Projection has no threshold, stabilization, push limit
+    or time of impact (0, False there); the velocity methods make 1 pass."""
+    velocity = method != "projection"
+    return LoopSettings(
+        float(dt),
+        int(options.iterations),
+        float(options.tolerance),
+        float(restitution_threshold(model, dt, options)) if velocity else 0.0,
+        float(options.stabilization) if velocity else 0.0,
+        float(options.slop),
+        float(options.max_push_velocity) if velocity else 0.0,
+        bool(options.time_of_impact) if velocity else False,
+        float(options.warm_start),
+        float(options.contact_margin),
+        float(options.manifold_tolerance),
+        1 if velocity else int(options.passes),
+    )
+
+
+CARRIED_PREFIX = {"impulse": "impulse_", "constraints": "constraint_", "projection": "projection_"}
+"""Each method's keys in ``State.carried``: PREFIX + "ids" (K,) and PREFIX + "values" (K, 3), last
+step's contact ids and warm-start values (impulses [N s], projection λ [kg m])."""
+
+
+def loop_inputs(
+    model: Model, state: State, method: str, options: CollisionOptions, dt: float
+) -> tuple[LoopModel, LoopSettings, Motion, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """What the compiled stages take in a method's step from Python (``velocity_level.step``,
+    ``projection.step``): (LoopModel, LoopSettings, the state's arrays as a Motion, the bodies'
+    rotations (B, 3, 3), (last step's contact ids (K,), their warm-start values (K, 3)) as
+    carried under ``method``'s keys)."""
+    motion = Motion(*(np.ascontiguousarray(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
+    ids, values = (
+        state.carried.get(CARRIED_PREFIX[method] + "ids"),
+        state.carried.get(CARRIED_PREFIX[method] + "values"),
+    )
+    carried = (
+        np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
+        np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3),
+    )
+    settings = loop_settings(model, method, options, dt)
+    return loop_model(model), settings, motion, rotations.matrices(motion.body_orientation), carried
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------

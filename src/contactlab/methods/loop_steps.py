@@ -23,8 +23,7 @@ import numpy as np
 from ..collision import half_thickness_sums
 from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
-from ..dynamics.generalized import stacked, unstacked
-from .impulse import resolve_collisions
+from ..dynamics.generalized import stacked
 from .jacobian_rows import ContactRows, row_products
 from .loop_stages import (
     LoopModel,
@@ -53,116 +52,9 @@ from .penalty_springs import (
 )
 from .projection import advance, displaced, projection_targets
 from .sequential import contact_order
-from .velocity_level import (
-    earliest_impacts,
-    gravity_along_normals,
-    guess_new_impulses,
-    impact_targets,
-    resting_targets,
-)
+from .velocity_level import respond
 
 # ---- impulse and constraints (loop L3) ------------------------------------------------------
-
-
-@njit(cache=True)
-def split_at_impact(
-    model: LoopModel,
-    contacts: ContactArrays,
-    motion: Motion,
-    tau: np.ndarray,
-    move: tuple,
-    solved: np.ndarray,
-    h: float,
-    time_of_impact: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Stage 5: positions x₀ + h(τ v* + (1 − τ) v⁺) per body and particle, τ its earliest
-    impact (``velocity_level.positions_split_at_impact``; no split unless ``time_of_impact``)."""
-    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    if not time_of_impact:
-        tau = np.full(tau.shape[0], -1.0)
-    tau_body, tau_particle = earliest_impacts(
-        contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, tau, B, P
-    )
-    after = (solved[: 6 * B].reshape(B, 6), solved[6 * B :].reshape(P, 3))
-    corrected_body = move[0] + (after[0][:, :3] - move[0])
-    corrected_angular = move[1] + (after[0][:, 3:] - move[1])
-    corrected_particle = move[2] + (after[1] - move[2])
-    mid = moved(
-        motion.body_position,
-        motion.body_orientation,
-        motion.particle_position,
-        move[0],
-        move[1],
-        move[2],
-        tau_body * h,
-        tau_particle * h,
-    )
-    return moved(
-        mid[0],
-        mid[1],
-        mid[2],
-        corrected_body,
-        corrected_angular,
-        corrected_particle,
-        (1 - tau_body) * h,
-        (1 - tau_particle) * h,
-    )
-
-
-@njit(cache=True)
-def targets(
-    model: LoopModel,
-    settings: LoopSettings,
-    impulse: bool | None,
-    constraints: bool | None,
-    contacts: ContactArrays,
-    rows: ContactRows,
-    u: np.ndarray,
-    order: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
-    none). Impulse: the collision waves (``impulse.resolve_collisions``) change u, then every
-    contact rests (``resting_target``); constraints: all impacts at once (``normal_targets``).
-    ``impulse``, ``constraints``: True for that method, None for the other, whose branch is then
-    not compiled (one flag would not do: Numba prunes a branch on a flag typed None, never on one
-    typed bool)."""
-    h = settings.dt
-    gap_at_start = -contacts.depth
-    gravity_normal = gravity_along_normals(
-        contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, contacts.normal, model.gravity
-    )
-    if impulse is not None:
-        tau = np.empty(gap_at_start.shape[0])
-        resolve_collisions(
-            rows,
-            contacts.friction,
-            contacts.restitution,
-            gravity_normal,
-            gap_at_start,
-            h,
-            settings.threshold,
-            u,
-            settings.iterations,
-            settings.iterations,
-            settings.tolerance,
-            tau,
-            order,
-        )
-        return resting_targets(gap_at_start, h, settings.stabilization, settings.slop, settings.max_push_velocity), tau
-    if constraints is None:  # neither: no velocity method (never so; see ``compile_flags``)
-        raise ValueError("targets: neither impulse nor constraints")
-    normal_velocity = row_products(rows, u)[:, 0]
-    return impact_targets(
-        gap_at_start,
-        normal_velocity,
-        gravity_normal,
-        contacts.restitution,
-        h,
-        settings.threshold,
-        settings.stabilization,
-        settings.slop,
-        settings.max_push_velocity,
-    )
 
 
 @njit(cache=True, inline="always")  # into ``run``: no call that passes the model and the state whole
@@ -213,29 +105,21 @@ def velocity_step(
         )
         clear = swept_clear(near, settings.margin)
         return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0, clear
-    # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
-    rows = build_rows(model, contacts, motion, rotation)
-    u = stacked(free[0], free[1], free[2])
-    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
-    carried_values, found = values_carried(carried[1], carried[2], contacts.feature_id)
-    warm = settings.warm_start * carried_values
-    masses = (model.body_mass, model.particle_mass)
-    guess_new_impulses(
-        warm,
-        found,
-        settings.warm_start,
+    # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
+    positions, velocities, impulses, sweeps, change = respond(
+        model,
+        settings,
+        impulse,
+        constraints,
+        slabs,
+        parallel,
         contacts,
-        motion.body_position,
-        motion.particle_position,
-        masses,
-        model.gravity,
-        h,
+        motion,
+        rotation,
+        free,
+        free,
+        (carried[1], carried[2]),
     )
-    impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
-    # 5. recompute positions from the corrected velocities, split at the time of impact
-    positions = split_at_impact(model, contacts, motion, tau, free, u, h, settings.time_of_impact)
-    velocities = unstacked(u, free[0].shape[0])
     return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change, False
 
 

@@ -1,18 +1,24 @@
-"""What the velocity-level methods share (SPEC M2: constraints on velocities are impulses).
+"""Loop L3, written once for the two velocity-level methods (SPEC M2: constraints on
+velocities are impulses): impulses (methods.impulse) and hard constraints on velocities swept
+matrix-free (methods.constraints, C5b).
 
-The stages of loop L3 both steps are made of, named as on the slide: ``predict`` (positions
-moved with the free velocities: how far everything sweeps), ``detect`` (contacts over the
-swept step), ``step_without_contacts``, and ``positions_split_at_impact`` (x = x₀ + h v⁺, the
-motion before the moment of impact taken with v*).
+Stages 1–3 from Python for every scene (``predict``: positions moved with the free velocities,
+how far everything sweeps; ``detect``: contacts over the swept step; ``step_without_contacts``);
+stages 4–5 compiled, in ``respond`` — the contacts' rows, the targets of their normal rows
+(``targets``: impulses' collision waves, ``resolve_collisions``, then resting targets;
+constraints' simultaneous ``impact_targets``), the warm start (``warm_impulses``), the sweeps
+(``loop_stages.solve``) and the positions split at the time of impact (``split_at_impact``).
+``respond`` is what the compiled loop's step (``loop_steps.velocity_step``) runs and what
+``step`` calls from Python for the scenes the loop does not serve (cloth, meshes, driven
+bodies, explicit Euler): each stage exists once.
 
-Impulses (methods.impulse) and hard constraints on velocities (methods.constraints, C5b) both
-ask each contact's normal relative velocity after the step to reach a target, and both move
-the positions with the corrected velocities, split at the moment of impact. The targets:
+Both methods ask each contact's normal relative velocity after the step to reach a target,
+and both move the positions with the corrected velocities, split at the moment of impact:
 
 * a contact that closes during the step with impact velocity u_n below −threshold leaves at
-  −ε u_n (restitution, I1/R3), measured at the moment of impact (``relative_gravity``);
+  −ε u_n (restitution, I1/R3), measured at the moment of impact (``gravity_along_normals``);
 * any other contact must not end the step overlapping: v_n ≥ −d₀/h for a gap d₀ (speculative
-  contacts), or pushes out a fraction of an existing overlap (``resting_target``).
+  contacts), or pushes out a fraction of an existing overlap (``resting_targets``).
 """
 
 from __future__ import annotations
@@ -20,16 +26,27 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ..collision import swept_distances
 from ..compiling import njit
-from ..contacts import ContactArrays, values_by_id
-from ..dynamics.integrators import advance_positions
+from ..contacts import ContactArrays, values_carried
+from ..dynamics.generalized import stacked, unstacked
+from ..dynamics.integrators import advance_positions, free_velocities, moved
 from ..state import State
 from .base import StepInfo
-from .loop_stages import loop_model
+from .jacobian_rows import ContactRows, contact_velocity, row_products
+from .loop_stages import (
+    CARRIED_PREFIX,
+    LoopModel,
+    LoopSettings,
+    Motion,
+    build_rows,
+    compile_flags,
+    loop_inputs,
+    solve,
+)
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
+from .sequential import contact_order, sweep_contacts
 
 if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
@@ -103,7 +120,7 @@ def guess_new_impulses(
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
     one body's contacts find its weight in a sweep or two): nothing is guessed there, and
-    ``first_impulses`` does not call this, so a ball's first run does not compile it.
+    ``warm_impulses`` makes no guess there.
 
     Why: started from zero, a stack must build its load path sweep by sweep, the weight of the
     top box reaching the floor only after as many sweeps as there are levels; started from the
@@ -134,85 +151,18 @@ def guess_new_impulses(
             warm[c, 0] = fraction * loads[c] * h
 
 
-def first_impulses(
-    model: Model, state: State, contacts: Contacts, prefix: str, fraction: float, h: float
-) -> np.ndarray:
-    """The solve's first impulses (C, 3) [N s] (warm start): last step's, carried under the keys
-    ``prefix`` + "ids" / "values", for the contacts that persist (by id), times ``fraction``;
-    a new contact's weight over the step h [s] (``guess_new_impulses``); zeros when ``fraction``
-    is 0."""
-    if fraction <= 0.0:
-        return np.zeros((contacts.count, 3))
-    values, found = values_by_id(
-        state.carried.get(prefix + "ids"), state.carried.get(prefix + "values"), contacts.feature_id, 3
-    )
-    warm = fraction * values
-    if model.body_count + model.particle_count < LOAD_PATH_FROM:
-        return warm  # nothing to guess (guess_new_impulses), and nothing compiled for it
-    arrays = loop_model(model)  # the masses and gravity as the compiled loop takes them
-    guess_new_impulses(
-        warm,
-        found,
-        fraction,
-        contacts.arrays(),
-        np.ascontiguousarray(state.body_position, dtype=float),
-        np.ascontiguousarray(state.particle_position, dtype=float),
-        (arrays.body_mass, arrays.particle_mass),
-        arrays.gravity,
-        h,
-    )
-    return warm
-
-
-def restitution_threshold(model: Model, h: float, options: ImpulseOptions | ConstraintsOptions) -> float:
-    """Approaches slower than this [m/s] get no bounce: the option, or 2 |g| h where it is < 0."""
-    if options.restitution_threshold >= 0:
-        return options.restitution_threshold
-    return 2.0 * np.linalg.norm(model.gravity) * h
-
-
-def positions_split_at_impact(
-    model: Model,
-    state: State,
-    contacts: Contacts,
-    tau: np.ndarray,
-    move: tuple[np.ndarray, np.ndarray, np.ndarray],
-    free: tuple[np.ndarray, np.ndarray, np.ndarray],
-    solved: tuple[np.ndarray, np.ndarray, np.ndarray],
-    h: float,
-    time_of_impact: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Stage 5: positions x = x₀ + h v⁺, with the part of the step before each body's earliest
-    impact (τ (C,) per contact, −1 where none; see ``entity_impact_fractions``) travelled with
-    the velocities that moved the prediction (``move``) and the rest with them corrected by the
-    solve (``solved`` − ``free``). ``time_of_impact`` False: no split (τ = −1 everywhere)."""
-    if not time_of_impact:
-        tau = np.full(contacts.count, -1.0)
-    tau_body, tau_particle = entity_impact_fractions(model, contacts, tau)
-    corrected = tuple(m + (after - before) for m, after, before in zip(move, solved, free))
-    mid = advance_positions(state.positions, move, tau_body * h, tau_particle * h)
-    return advance_positions(mid, corrected, (1 - tau_body) * h, (1 - tau_particle) * h)
-
-
-def resting_target(gap_at_start: np.ndarray, dt: float, options: ImpulseOptions | ConstraintsOptions) -> np.ndarray:
-    """The least normal relative velocity each contact may end the step with (C,) [m/s].
-
-    Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
-    be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
-    speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
-    ``stabilization`` of its depth beyond ``slop`` per step, never faster than
-    ``max_push_velocity`` (a deep overlap must not turn into a launch).
-    """
-    return resting_targets(
-        np.asarray(gap_at_start, dtype=float), dt, options.stabilization, options.slop, options.max_push_velocity
-    )
-
-
 @njit(cache=True)
 def resting_targets(
     gap_at_start: np.ndarray, dt: float, stabilization: float, slop: float, max_push_velocity: float
 ) -> np.ndarray:
-    """``resting_target``, compiled, with the options' three numbers [1, m, m/s]."""
+    """The least normal relative velocity each contact may end the step with (C,) [m/s], from
+    each gap at the step's start d₀ (C,) [m] (> 0 open, < 0 overlapping).
+
+    Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
+    be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
+    speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
+    ``stabilization`` of its depth beyond ``slop`` [m] per step, never faster than
+    ``max_push_velocity`` [m/s] (a deep overlap must not turn into a launch)."""
     target = np.empty_like(gap_at_start)
     for c in range(gap_at_start.shape[0]):
         target[c] = _resting(gap_at_start[c], dt, stabilization, slop, max_push_velocity)
@@ -221,27 +171,10 @@ def resting_targets(
 
 @njit(cache=True, inline="always")
 def _resting(gap, dt, stabilization, slop, max_push_velocity):
-    """One contact's ``resting_target`` [m/s]."""
+    """One contact's ``resting_targets`` [m/s]."""
     if gap >= 0.0:
         return -gap / dt
     return min(stabilization * max(-gap - slop, 0.0) / dt, max_push_velocity)
-
-
-def relative_gravity(model: Model, contacts: Contacts) -> np.ndarray:
-    """g_n per contact (C,) [m/s²]: the normal component of the gravity of A relative to B.
-
-    Symplectic Euler carries velocities at the middle of the step (it is leapfrog), so the
-    velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
-    gravity acts over the rest of the step (see ``resolve_collisions``).
-    """
-    return gravity_along_normals(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        np.ascontiguousarray(contacts.normal, dtype=float),
-        np.asarray(model.gravity, dtype=float),
-    )
 
 
 @njit(cache=True)
@@ -253,7 +186,12 @@ def gravity_along_normals(
     normal: np.ndarray,
     gravity: np.ndarray,
 ) -> np.ndarray:
-    """``relative_gravity``, compiled: (dynamic A − dynamic B) n · g per contact (C,) [m/s²]."""
+    """g_n per contact (C,) [m/s²]: the normal component of the gravity of A relative to B,
+    (dynamic A − dynamic B) n · g.
+
+    Symplectic Euler carries velocities at the middle of the step (it is leapfrog), so the
+    velocity at the moment of impact is u = v_n* + g_n (τ − ½) h. Restitution reverses u and
+    gravity acts over the rest of the step (see ``resolve_collisions``)."""
     out = np.empty(normal.shape[0])
     for c in range(normal.shape[0]):
         dynamic_a = 1.0 if body_a[c] >= 0 or particles_a[c, 0] >= 0 else 0.0
@@ -262,21 +200,6 @@ def gravity_along_normals(
             normal[c, 0] * gravity[0] + normal[c, 1] * gravity[1] + normal[c, 2] * gravity[2]
         )
     return out
-
-
-def entity_impact_fractions(model: Model, contacts: Contacts, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,),
-    −1 where a contact had none); 0 for an entity with no impact, whose velocity change then
-    acts over the whole step."""
-    return earliest_impacts(
-        contacts.body_a,
-        contacts.body_b,
-        contacts.particles_a,
-        contacts.particles_b,
-        np.asarray(tau, dtype=float),
-        model.body_count,
-        model.particle_count,
-    )
 
 
 @njit(cache=True)
@@ -289,7 +212,9 @@ def earliest_impacts(
     body_count: int,
     particle_count: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``entity_impact_fractions``, compiled (one pass over the contacts' sides)."""
+    """τ per body (B,) and particle (P,): the earliest impact among its contacts (tau (C,), −1
+    where a contact had none); 0 for an entity with no impact, whose velocity change then acts
+    over the whole step."""
     tau_body = np.ones(body_count)
     tau_particle = np.ones(particle_count)
     for c in range(tau.shape[0]):
@@ -310,34 +235,6 @@ def earliest_impacts(
     return tau_body, tau_particle
 
 
-def normal_targets(
-    gap_at_start: ArrayLike,  # array-likes: converted to float arrays for ``impact_targets``
-    normal_velocity: ArrayLike,
-    gravity_normal: ArrayLike,
-    restitution: ArrayLike,
-    dt: float,
-    threshold: float,
-    options: ImpulseOptions | ConstraintsOptions,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Every contact's target normal velocity, all contacts at once (a simultaneous impact).
-
-    gap_at_start d₀ (C,) [m]; normal_velocity v_n* (C,) [m/s] without contact forces;
-    gravity_normal g_n (C,) [m/s²]; restitution ε (C,); threshold [m/s]. A contact that closes
-    within the step (v_n* < 0, d₀ + h v_n* ≤ 0) does so at the fraction τ = d₀ / (−h v_n*) of it,
-    with the impact velocity u = v_n* + g_n (τ − ½) h (symplectic Euler is leapfrog); if u <
-    −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
-    ``resting_target``. Returns (target (C,) [m/s], τ (C,), −1 where there was no impact).
-    """
-    return impact_targets(
-        *(np.asarray(a, dtype=float) for a in (gap_at_start, normal_velocity, gravity_normal, restitution)),
-        dt,
-        threshold,
-        options.stabilization,
-        options.slop,
-        options.max_push_velocity,
-    )
-
-
 @njit(cache=True)
 def impact_targets(
     gap_at_start: np.ndarray,
@@ -350,7 +247,16 @@ def impact_targets(
     slop: float,
     max_push_velocity: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``normal_targets``, compiled, with the options' stabilization, slop and max push velocity."""
+    """Every contact's target normal velocity, all contacts at once (a simultaneous impact: the
+    constraints method, C5b).
+
+    gap_at_start d₀ (C,) [m]; normal_velocity v_n* (C,) [m/s] without contact forces;
+    gravity_normal g_n (C,) [m/s²]; restitution ε (C,); threshold [m/s]. A contact that closes
+    within the step (v_n* < 0, d₀ + h v_n* ≤ 0) does so at the fraction τ = d₀ / (−h v_n*) of it,
+    with the impact velocity u = v_n* + g_n (τ − ½) h (symplectic Euler is leapfrog); if u <
+    −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
+    ``resting_targets`` (stabilization, slop [m], max push velocity [m/s]). Returns (target (C,)
+    [m/s], τ (C,), −1 where there was no impact)."""
     h = dt
     C = gap_at_start.shape[0]
     target = np.empty(C)
@@ -367,3 +273,300 @@ def impact_targets(
             target[c] = _resting(gap, dt, stabilization, slop, max_push_velocity)
             tau[c] = -1.0
     return target, tau
+
+
+# ---- stages 4–5, compiled: what the compiled loop and the methods' step both run ------------
+
+
+@njit(cache=True)
+def resolve_collisions(
+    rows: ContactRows,
+    friction: np.ndarray,
+    restitution: np.ndarray,
+    gravity_normal: np.ndarray,
+    gap_at_start: np.ndarray,
+    dt: float,
+    threshold: float,
+    u: np.ndarray,
+    max_waves: int,
+    sweeps: int,
+    tolerance: float,
+    tau: np.ndarray,
+    order: np.ndarray,
+) -> int:
+    """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
+
+    A wave is every contact that is approaching now: at the current velocities it would be
+    closed by the end of the step, and its impact velocity u_n = v_n + g_n (τ − ½) h is below
+    −threshold (τ: where in the step it closes, d₀ / (−h v_n) for a gap d₀ > 0 at the start,
+    else 0). The wave's impulses are solved together — accumulated, λ ≥ 0 — so that each
+    member leaves at −ε u_n + g_n (½ − τ) h (restitution; see ``gravity_along_normals``), with
+    friction of at most μ λ (F2). A single contact gets j = −(1 + ε) u_n / k in one update
+    (R4 with k = J M⁻¹ Jᵀ). Simultaneous impacts (a box landing flat on four corners) are
+    thus one wave and stay symmetric, while an impact passed along a chain of touching
+    bodies makes one wave per link (Newton's cradle: one ball in, one ball out).
+
+    ``rows`` as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
+    generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
+    it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
+    ``solve_order``). Returns the number of waves.
+    """
+    k = rows.k
+    C = k.shape[0]
+    target = np.empty(C)
+    closes = np.empty(C)
+    impulses = np.zeros((C, 3))
+    members = np.empty(C, dtype=np.int64)
+    for c in range(C):
+        tau[c] = -1.0
+    for wave in range(max_waves):
+        count = np.int64(0)  # not a literal 0, which would compile sweep_contacts twice
+        for o in range(C):
+            c = order[o]
+            if restitution[c] <= 0.0 or k[c, 0] <= 0.0:
+                continue
+            vn = contact_velocity(c, rows, u)[0]
+            if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:  # separating, or still open at the end
+                continue
+            closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
+            impact = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
+            if impact < -threshold:
+                target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes[c]) * dt
+                tau[c] = closes[c] if tau[c] < 0.0 else min(tau[c], closes[c])
+                impulses[c, 0] = impulses[c, 1] = impulses[c, 2] = 0.0
+                members[count] = c
+                count += 1
+        if count == 0:
+            return wave
+        for _sweep in range(sweeps):
+            if sweep_contacts(members, count, target, impulses, rows, friction, u) <= tolerance:
+                break
+    return max_waves
+
+
+@njit(cache=True)
+def targets(
+    model: LoopModel,
+    settings: LoopSettings,
+    impulse: bool | None,
+    constraints: bool | None,
+    contacts: ContactArrays,
+    rows: ContactRows,
+    u: np.ndarray,
+    order: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
+    none). Impulse: the collision waves (``resolve_collisions``) change u, then every
+    contact rests (``resting_targets``); constraints: all impacts at once (``impact_targets``).
+    ``impulse``, ``constraints``: True for that method, None for the other, whose branch is then
+    not compiled (one flag would not do: Numba prunes a branch on a flag typed None, never on one
+    typed bool)."""
+    h = settings.dt
+    gap_at_start = -contacts.depth
+    gravity_normal = gravity_along_normals(
+        contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, contacts.normal, model.gravity
+    )
+    if impulse is not None:
+        tau = np.empty(gap_at_start.shape[0])
+        resolve_collisions(
+            rows,
+            contacts.friction,
+            contacts.restitution,
+            gravity_normal,
+            gap_at_start,
+            h,
+            settings.threshold,
+            u,
+            settings.iterations,
+            settings.iterations,
+            settings.tolerance,
+            tau,
+            order,
+        )
+        return resting_targets(gap_at_start, h, settings.stabilization, settings.slop, settings.max_push_velocity), tau
+    if constraints is None:  # neither: no velocity method (never so; see ``compile_flags``)
+        raise ValueError("targets: neither impulse nor constraints")
+    normal_velocity = row_products(rows, u)[:, 0]
+    return impact_targets(
+        gap_at_start,
+        normal_velocity,
+        gravity_normal,
+        contacts.restitution,
+        h,
+        settings.threshold,
+        settings.stabilization,
+        settings.slop,
+        settings.max_push_velocity,
+    )
+
+
+@njit(cache=True, inline="always")
+def warm_impulses(
+    model: LoopModel,
+    settings: LoopSettings,
+    contacts: ContactArrays,
+    motion: Motion,
+    carried_ids: np.ndarray,
+    carried_values: np.ndarray,
+) -> np.ndarray:
+    """The solve's first impulses (C, 3) [N s] (warm start): last step's impulses ``carried_values``
+    (K, 3) of the contacts ``carried_ids`` (K,) that persist (by id), times the warm-start
+    fraction; a new contact's weight over the step (``guess_new_impulses``); zeros at fraction 0."""
+    values, found = values_carried(carried_ids, carried_values, contacts.feature_id)
+    warm = settings.warm_start * values
+    masses = (model.body_mass, model.particle_mass)
+    guess_new_impulses(
+        warm,
+        found,
+        settings.warm_start,
+        contacts,
+        motion.body_position,
+        motion.particle_position,
+        masses,
+        model.gravity,
+        settings.dt,
+    )
+    return warm
+
+
+@njit(cache=True)
+def split_at_impact(
+    model: LoopModel,
+    contacts: ContactArrays,
+    motion: Motion,
+    tau: np.ndarray,
+    move: tuple,
+    free: tuple,
+    solved: np.ndarray,
+    h: float,
+    time_of_impact: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage 5: positions x = x₀ + h v⁺, with the part of the step before each body's and
+    particle's earliest impact (τ (C,) per contact, −1 where none; ``earliest_impacts``)
+    travelled with the velocities that moved the prediction (``move``: v*, or the old velocities
+    under explicit Euler) and the rest with them corrected by the solve, move + (v⁺ − v*), v⁺ the
+    generalized velocity ``solved`` (N,) and v* the ``free`` velocities; ``time_of_impact``
+    False: no split (τ = −1 everywhere). Returns (body positions (B, 3) [m], orientations (B, 4),
+    particle positions (P, 3) [m])."""
+    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
+    if not time_of_impact:
+        tau = np.full(tau.shape[0], -1.0)
+    tau_body, tau_particle = earliest_impacts(
+        contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, tau, B, P
+    )
+    after = (solved[: 6 * B].reshape(B, 6), solved[6 * B :].reshape(P, 3))
+    corrected_body = move[0] + (after[0][:, :3] - free[0])
+    corrected_angular = move[1] + (after[0][:, 3:] - free[1])
+    corrected_particle = move[2] + (after[1] - free[2])
+    mid = moved(
+        motion.body_position,
+        motion.body_orientation,
+        motion.particle_position,
+        move[0],
+        move[1],
+        move[2],
+        tau_body * h,
+        tau_particle * h,
+    )
+    return moved(
+        mid[0],
+        mid[1],
+        mid[2],
+        corrected_body,
+        corrected_angular,
+        corrected_particle,
+        (1 - tau_body) * h,
+        (1 - tau_particle) * h,
+    )
+
+
+# inlined into the compiled loop's step, where a call that passes the model and the state whole
+# costs more than a ball's arithmetic; from Python (``step``) a dispatcher of its own
+@njit(cache=True, inline="always")
+def respond(
+    model: LoopModel,
+    settings: LoopSettings,
+    impulse: bool | None,
+    constraints: bool | None,
+    slabs: bool | None,
+    parallel: bool | None,
+    contacts: ContactArrays,
+    motion: Motion,
+    rotation: np.ndarray,
+    move: tuple,
+    free: tuple,
+    carried: tuple,
+) -> tuple:
+    """Stages 4–5 of loop L3 for the contacts detected at ``motion``'s positions (the bodies'
+    rotations (B, 3, 3) ``rotation``): their rows, the targets of the normal rows (impulses: the
+    collision waves first; constraints: all impacts at once), the warm-started sweeps of
+    sequential impulses (projected Gauss-Seidel on velocities, C7) from the ``free`` velocities
+    v*, and the positions split at the time of impact (``move``: what moved the prediction).
+    ``impulse``, ``constraints``, ``slabs``, ``parallel``: the flags of ``compile_flags`` (True,
+    or None to leave a branch uncompiled); ``carried`` = (last step's contact ids (K,), their
+    impulses (K, 3)). Returns (positions, velocities v⁺ ((B, 3), (B, 3), (P, 3)), impulses (C, 3)
+    [N s], sweeps made, the sweeps' last change [m/s])."""
+    h = settings.dt
+    # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
+    rows = build_rows(model, contacts, motion, rotation)
+    u = stacked(free[0], free[1], free[2])
+    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
+    target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
+    warm = warm_impulses(model, settings, contacts, motion, carried[0], carried[1])
+    impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
+    # 5. recompute positions from the corrected velocities, split at the time of impact
+    positions = split_at_impact(model, contacts, motion, tau, move, free, u, h, settings.time_of_impact)
+    return positions, unstacked(u, free[0].shape[0]), impulses, sweeps, change
+
+
+# ---- the step from Python: stages 1–3 for any scene, 4–5 compiled ---------------------------
+
+
+def step(
+    method: str,
+    model: Model,
+    state: State,
+    dt: float,
+    options: ImpulseOptions | ConstraintsOptions,
+    integrator: str = "symplectic_euler",
+) -> tuple[State, StepInfo]:
+    """One step of loop L3 with impulses (``method`` "impulse") or hard constraints on velocities
+    swept matrix-free ("constraints"); returns (new State, StepInfo). Stages 1–3 run here, for
+    every scene (cloth springs, meshes, driven bodies, every integrator); stages 4–5 are
+    ``respond``, the very code the compiled loop (methods.velocity_loop) runs."""
+    h = dt
+    # 1. internal forces → free velocities v*
+    free = _floats(free_velocities(model, state, h, integrator))
+    # 2. integrate positions (a prediction): how far each body and particle sweeps this step
+    move, predicted, sweep = predict(model, state, free, integrator, h)
+    # 3. collision detection over the swept step
+    contacts, manifolds = detect(model, state, options, sweep)
+    prefix = CARRIED_PREFIX[method]
+    if contacts.count == 0:
+        return step_without_contacts(state, h, predicted, free, contacts, manifolds, prefix)
+    # 4–5. the contacts' response, and the positions after it
+    arrays, settings, motion, rotation, carried = loop_inputs(model, state, method, options, dt)
+    _, _, constraints, impulse, _, slabs, parallel = compile_flags(model, method, options)
+    positions, velocities, impulses, sweeps, change = respond(
+        arrays,
+        settings,
+        impulse,
+        constraints,
+        slabs,
+        parallel,
+        contacts.arrays(),
+        motion,
+        rotation,
+        _floats(move),
+        free,
+        carried,
+    )
+    kept = dict(state.carried, manifolds=manifolds)
+    kept[prefix + "ids"], kept[prefix + "values"] = contacts.feature_id, impulses
+    new = State.assemble(state.time + h, positions, velocities, kept)
+    return new, StepInfo(contacts, solver_iterations=int(sweeps), solver_residual=float(change), impulses=impulses)
+
+
+def _floats(arrays: tuple) -> tuple:
+    """Each array as a C-contiguous float64 array (no copy where it is one already)."""
+    return tuple(np.ascontiguousarray(a, dtype=float) for a in arrays)

@@ -47,20 +47,30 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import shapes
-from ..collision.broad_phase import GRID_FROM
-from ..collision.families import KEPT_FAMILIES, pair_families
+from ..collision.families import pair_families
 from ..collision.manifolds import Manifolds
-from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, needs_hulls
-from ..compiling import available_threads, njit
+from ..collision.narrow_phase import needs_hulls
+from ..compiling import njit
 from ..model import derived
 from ..state import State
 from .base import CollisionOptions
-from .loop_stages import LoopModel, LoopSettings, Motion, Samples, healthy, loop_model, poses, record, store
+from .loop_stages import (
+    CARRIED_PREFIX,
+    LoopModel,
+    LoopSettings,
+    Motion,
+    Samples,
+    compile_flags,
+    healthy,
+    loop_model,
+    loop_settings,
+    poses,
+    record,
+    store,
+)
 from .loop_steps import PenaltyLoop, penalty_step, projection_step, velocity_step
 from .penalty import spring_settings
 from .penalty_springs import GUARD_SWEEPS, GUARD_TOLERANCE
-from .sequential import PARALLEL_MIN_CONTACTS
-from .velocity_level import restitution_threshold
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -164,56 +174,6 @@ def run(
 
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
 
-PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
-
-
-def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple:
-    """(large, keeping, constraints, impulse, projection, slabs, parallel): True, or None where the
-    scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
-    run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
-    nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
-    projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
-    particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
-    constraints, impulse, projection: the method is constraints, impulse, projection (two flags
-    for the velocity methods, not one: Numba prunes only a branch whose flag is None, and an
-    impulse run then compiles none of what only constraints takes; penalty: all three None, its
-    PenaltyLoop the flag after these);
-    slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
-    several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
-    dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
-    present = {name for name, flag in zip(FAMILIES, pair_families(model)) if flag is not None}
-    most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
-    return (
-        True if dynamic >= GRID_FROM else None,
-        True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
-        True if method == "constraints" else None,
-        True if method == "impulse" else None,
-        True if method == "projection" else None,
-        True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
-        True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,
-    )
-
-
-def loop_settings(model: Model, method: str, options: CollisionOptions, dt: float) -> LoopSettings:
-    """The LoopSettings of ``method``'s Options for steps of dt [s], the restitution threshold
-    resolved (``restitution_threshold``). Projection has no threshold, stabilization, push limit
-    or time of impact (0, False there); the velocity methods make 1 pass."""
-    velocity = method != "projection"
-    return LoopSettings(
-        float(dt),
-        int(options.iterations),
-        float(options.tolerance),
-        float(restitution_threshold(model, dt, options)) if velocity else 0.0,
-        float(options.stabilization) if velocity else 0.0,
-        float(options.slop),
-        float(options.max_push_velocity) if velocity else 0.0,
-        bool(options.time_of_impact) if velocity else False,
-        float(options.warm_start),
-        float(options.contact_margin),
-        float(options.manifold_tolerance),
-        1 if velocity else int(options.passes),
-    )
-
 
 class Stepper:
     """Steps one run of ``method`` on ``model`` through the compiled loop.
@@ -227,7 +187,7 @@ class Stepper:
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
     ) -> None:
         self._start(model, state)
-        self.prefix = {"impulse": "impulse_", "constraints": "constraint_", "projection": "projection_"}[method]
+        self.prefix = CARRIED_PREFIX[method]
         # projection.step carries its λ every step, none included; the velocity methods drop theirs then
         self.carries_empty = method == "projection"
         self.keep_manifolds = options.manifold_tolerance > 0.0
