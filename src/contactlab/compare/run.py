@@ -225,7 +225,7 @@ def _run_all(
     for name, scene in scenes.items():
         if name in peer_names:
             created.folder(os.path.join(out, name))
-            job = {
+            peer_job = {
                 **scene.origin(overrides),
                 "peer": name,
                 "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)),
@@ -233,7 +233,7 @@ def _run_all(
                 "allow_divergence": allow_divergence,
                 "progress": progress,
             }
-            jobs.append((name, job))
+            jobs.append((name, peer_job))
             continue
         if not supports(name, scene):
             if named:

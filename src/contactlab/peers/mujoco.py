@@ -49,7 +49,8 @@ class World:
         bodies, obstacles = translate.solids(model)
         self.notes: list[str] = []
         friction, damping = self._materials(model)
-        assets, world = [], []
+        assets: list[str] = []
+        world: list[str] = []
         for index, solid in enumerate(obstacles):
             world.append(self._geom(solid, f"obstacle{index}", friction, damping, assets))
         for solid in bodies:
@@ -142,7 +143,7 @@ class World:
     def step(self, force: np.ndarray | None = None, torque: np.ndarray | None = None) -> None:
         """One time step, with the external ``force`` (B, 3) [N] and ``torque`` (B, 3) [N m]
         (world frame, at the centres of mass) held over it; None: none."""
-        if force is not None:
+        if force is not None and torque is not None:
             self.data.xfrc_applied[1:, :3] = force
             self.data.xfrc_applied[1:, 3:] = torque
         mujoco.mj_step(self.mj_model, self.data)

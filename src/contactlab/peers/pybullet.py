@@ -174,7 +174,7 @@ class World:
         """One time step, with the external ``force`` (B, 3) [N] and ``torque`` (B, 3) [N m]
         (world frame, at the centres of mass) over it (pybullet forgets them after the step)."""
         p, c = pybullet, self.client
-        if force is not None:
+        if force is not None and torque is not None:
             for b, body in enumerate(self.bodies):
                 if force[b].any():
                     at = p.getBasePositionAndOrientation(body, physicsClientId=c)[0]

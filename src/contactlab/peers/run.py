@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -28,7 +29,10 @@ from ..store import TrajectoryFile
 from ..validation import run_length
 
 
-class _Counted(NamedTuple):
+@dataclass(frozen=True)
+class _Counted:
+    """The contacts of a step, as a method's Contacts shows their number."""
+
     count: int
 
 
