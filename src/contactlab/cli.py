@@ -84,6 +84,10 @@ def _parser():
     compare = commands.add_parser("compare", help="run a scene with several methods and write a side-by-side report")
     _scene_arguments(compare)
     compare.add_argument("--methods", help="comma-separated methods (default: every method that supports the scene)")
+    compare.add_argument(
+        "--peers",
+        help="also run the scene in these engines, comma-separated: mujoco, pybullet (pip install 'contactlab[peers]')",
+    )
     compare.add_argument("--out", help="output folder (default: out/<scene>-compare/)")
     compare.add_argument("--no-video", action="store_true", help="skip the videos (faster)")
     compare.add_argument("--fps", type=int, default=30, help="frames per second of the videos (default 30)")
@@ -323,6 +327,7 @@ def _compare(args):
         allow_divergence=args.allow_divergence,
         workers=args.workers,
         scheduler=args.scheduler,
+        peers=args.peers,
     )
     print(comparison.summary_text)
     print(

@@ -10,6 +10,7 @@ or both::
     [grid]
     scenes = ["bouncing_ball", "my_scene.toml"]      # built-in names, or files beside the study
     methods = ["impulse", "penalty"]                 # default: all four
+    peers = ["mujoco", "pybullet"]                   # engines beside them (contactlab.peers; default none)
     [grid.set]                                       # axes: a --set path -> its values
     "simulation.dt" = [0.01, 0.005, 0.0025]
     "materials.0.friction" = [0.2, 0.5]
@@ -44,6 +45,7 @@ from pathlib import Path
 from . import __version__, budget
 from .errors import InputError
 from .methods import AVAILABLE
+from .peers import PEERS, engine
 from .scene.loader import read_source, scene_from_raw
 from .scene.schema import _did_you_mean, show
 from .scene.toml import parse_toml
@@ -65,7 +67,7 @@ MAX_CELLS = 100_000  # cells a study may have
 CHECK_NEWS_SECONDS = 2.0  # s: checking a study longer than this says how far it got (then every 5 s)
 KEYS = {
     "study": ("name", "record", "description"),
-    "grid": ("scenes", "methods", "set"),
+    "grid": ("scenes", "methods", "peers", "set"),
     "cells": ("scene", "method", "set"),
 }
 
@@ -83,8 +85,10 @@ class Cell:
     key: str
 
     def overrides(self) -> list:
-        """The settings as ``--set`` strings, the method last: ``["simulation.dt=0.01", ...]``."""
-        return [f"{path}={toml_value(value)}" for path, value in self.settings] + [f"simulation.method={self.method}"]
+        """The settings as ``--set`` strings, the method last: ``["simulation.dt=0.01", ...]``; a
+        peer's cell (contactlab.peers) loads the scene with the method its file names."""
+        method = [] if self.method in PEERS else [f"simulation.method={self.method}"]
+        return [f"{path}={toml_value(value)}" for path, value in self.settings] + method
 
 
 @dataclass
@@ -166,6 +170,11 @@ def _grid_cells(grid):
     _check_keys(grid, KEYS["grid"], "grid")
     scenes = _list(grid.get("scenes"), "grid.scenes")
     methods = _list(grid.get("methods", list(AVAILABLE)), "grid.methods")
+    peers = _list(grid["peers"], "grid.peers") if "peers" in grid else []
+    for peer in peers:
+        if not isinstance(peer, str) or peer not in PEERS:
+            raise InputError("grid.peers", f"unknown peer {show(peer)}{_did_you_mean(peer, PEERS)}")
+        engine(peer, "grid.peers")  # installed, or the one line that says what to install
     axes = _table(grid.get("set", {}), "grid.set")
     values = []
     for path, options in axes.items():
@@ -174,7 +183,7 @@ def _grid_cells(grid):
     return [
         ("grid", scene, method, tuple(chosen))
         for scene in scenes
-        for method in methods
+        for method in [*methods, *peers]
         for chosen in itertools.product(*values)
     ]
 
@@ -206,10 +215,13 @@ def _checked_cells(specs, base, record, log=None):
             raise InputError(
                 _field(where, "scene"), f"expected a built-in scene name or a .toml file, found {show(scene)}"
             )
-        if not isinstance(method, str) or method not in AVAILABLE:
+        if not isinstance(method, str) or method not in (*AVAILABLE, *PEERS):
             raise InputError(
-                _field(where, "method"), f"unknown method {show(method)}{_did_you_mean(method, AVAILABLE)}"
+                _field(where, "method"),
+                f"unknown method {show(method)}{_did_you_mean(method, (*AVAILABLE, *PEERS))}",
             )
+        if method in PEERS:
+            engine(method, _field(where, "method") if where != "grid" else "grid.peers")
         source = scene if not scene.endswith(".toml") or os.path.isabs(scene) else str(base / scene)
         if source not in scenes:
             try:

@@ -132,6 +132,7 @@ def _run_jobs(client, jobs, cells_folder, progress, say, counts):
 def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     """One cell, on a worker: load its scene with its settings, simulate, measure. Returns its
     row; never raises for the run's own failure (status "diverged" or "error")."""
+    from . import peers
     from .closed_form import checks as closed_form_checks
     from .compare import metrics
     from .methods.velocity_loop import repays_compiling
@@ -141,18 +142,30 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     started = time.perf_counter()
     try:
         scene = load_scene(job["scene"], job["overrides"])
-        # the study's cells of this scene and method together may repay compiling the stepping loop
-        # where one cell alone would not (a study is thousands of short runs): then it is compiled
-        # once and serves them all, cached for every worker (velocity_loop.repays_compiling)
-        steps = run_length(scene.dt, scene.duration)[2]
-        compile_loop = repays_compiling(scene.model, steps, job.get("alike", 1)) or None
-        run = scene.simulate(threads=1, trajectory=job["trajectory"], compiled_loop=compile_loop)
+        if job["method"] in peers.PEERS:  # the scene in a peer engine (contactlab.peers)
+            run = peers.simulate(
+                scene.model,
+                job["method"],
+                scene.dt,
+                scene.duration,
+                trajectory=job["trajectory"],
+                scene_name=scene.name,
+            )
+        else:
+            # the study's cells of this scene and method together may repay compiling the stepping loop
+            # where one cell alone would not (a study is thousands of short runs): then it is compiled
+            # once and serves them all, cached for every worker (velocity_loop.repays_compiling)
+            steps = run_length(scene.dt, scene.duration)[2]
+            compile_loop = repays_compiling(scene.model, steps, job.get("alike", 1)) or None
+            run = scene.simulate(threads=1, trajectory=job["trajectory"], compiled_loop=compile_loop)
+    except peers.Inexpressible as gap:
+        return _failed_row(job, "not run", gap.sentence, started)
     except SimulationDiverged as error:
         return _failed_row(job, "diverged", str(error), started, diverged_at=error.time)
     except Exception as error:  # InputError included: a study checked cannot fail that way
         return _failed_row(job, "error", f"{type(error).__name__}: {_one_line(error)}", started)
     row = _identity(job)
-    row.update(status="ok", message="", integrator=scene.integrator, dt_s=scene.dt, duration_s=scene.duration)
+    row.update(status="ok", message="", integrator=run.summary["integrator"], dt_s=scene.dt, duration_s=scene.duration)
     measured = metrics(scene.model, run.arrays, run.summary)
     if measured["momentum_drift_Ns"] == "n/a":
         measured["momentum_drift_Ns"] = None  # one type per column

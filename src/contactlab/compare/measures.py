@@ -122,7 +122,7 @@ def metrics(model: Model, arrays: Mapping[str, Any], summary: Mapping[str, Any])
         "momentum_drift_Ns": "n/a" if momentum is None else momentum,
         "max_solver_iterations": iterations,
         "mean_solver_iterations": summary["solver"]["mean_iterations"],
-        "max_solver_residual": summary["solver"]["max_residual"] if iterations > 0 else None,
+        "max_solver_residual": summary["solver"]["max_residual"] if iterations else None,
     }
 
 
@@ -148,8 +148,8 @@ def fill_rows(outcomes: Sequence[_Outcome]) -> None:
         scene = outcome.scene
         row = {
             "method": outcome.method,
-            "status": "ok" if outcome.run else blew_up(outcome),
-            "integrator": scene.integrator,
+            "status": "ok" if outcome.run else f"not run: {outcome.gap}" if outcome.gap else blew_up(outcome),
+            "integrator": outcome.integrator or scene.integrator,
             "dt_s": scene.dt,
         }
         if outcome.run:

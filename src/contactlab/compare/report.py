@@ -61,7 +61,8 @@ COLUMNS = tuple((key, *SHOWN[key]) for key in ROW_KEYS)  # (row key, heading, sh
 
 # what each column means, printed in the report itself so it reads without docs/compare.md
 MEANINGS = {
-    "status": "ok, or blew up at t = … s (a health check stopped the run)",
+    "status": "ok, or blew up at t = … s (a health check stopped the run), or for a peer engine "
+    "not run: what of the scene it cannot express, and why",
     "expectations": "how many of the scene's stated expectations (the checks below the table: a closed form, "
     "a structure that must stand, nothing inside an obstacle) the run met; n/a: it states none",
     "dt_s": "the time step",
@@ -76,7 +77,8 @@ MEANINGS = {
     "energy_drift_J": "total energy (kinetic + potential + elastic in contact springs) at the end minus at the start",
     "energy_drift_relative": "that drift as a share of the run's energy scale (see the notes)",
     "momentum_drift_Ns": "‖P(T) − P(0) − M g T‖: a conservation check where nothing static acts (n/a otherwise)",
-    "max_solver_iterations": "the most sweeps the contact solver made in one step (0: it has none)",
+    "max_solver_iterations": "the most sweeps the contact solver made in one step (0: it has none; "
+    "–: a peer engine that does not report them)",
     "mean_solver_iterations": "the solver's sweeps per step, over every step: what the run paid",
     "max_solver_residual": "the solver's largest last change, in the method's own unit (see the notes)",
 }
@@ -339,6 +341,8 @@ def paragraph(scene: Scene, outcomes: Sequence[_Outcome], skipped: Mapping[str, 
     else:
         sentences.append(f"No method finished {scene.name}.")
     for outcome in outcomes:
+        if outcome.gap:
+            sentences.append(f"{outcome.gap}, so it was not run.")
         if outcome.failure:
             sentences.append(
                 f"{outcome.method} {blew_up(outcome)} ({outcome.scene.integrator}, "
@@ -381,6 +385,7 @@ def _notes(outcomes):
             f"so their numbers are one result, not {len(group)} that agree (their speeds still differ)."
         )
     for outcome in outcomes:
+        notes += [f"{outcome.method}: {text}" for text in outcome.notes]
         notes += [f"{outcome.method}: warning: {text}" for text in outcome.warnings]
     return notes
 
@@ -439,6 +444,9 @@ def _markdown_text(scene, outcomes, summary_text, table, plot_paths, out):
     relative to ``out``."""
     files_lines = []
     for outcome in outcomes:
+        if outcome.gap:
+            files_lines.append(f"- **{outcome.method}**: not run: {outcome.gap}")
+            continue
         if not outcome.run:
             files_lines.append(f"- **{outcome.method}**: {blew_up(outcome)}: {outcome.failure}")
             continue
@@ -509,13 +517,14 @@ def _media(outcome, out):
 def _card(outcome, out):
     name = f'<span class="name">{html.escape(outcome.method)}</span>'
     if not outcome.run:
+        status, why = ("not run", outcome.gap) if outcome.gap else (blew_up(outcome), outcome.failure)
         return (
-            f'<figure class="card"><div class="failed">{html.escape(blew_up(outcome))}</div>'
-            f"<figcaption>{name}<br>{html.escape(outcome.failure)}</figcaption></figure>"
+            f'<figure class="card"><div class="failed">{html.escape(status)}</div>'
+            f"<figcaption>{name}<br>{html.escape(why or '')}</figcaption></figure>"
         )
     return (
         f'<figure class="card">{_media(outcome, out)}<figcaption>{name} '
-        f"({html.escape(outcome.scene.integrator)}, dt = {outcome.scene.dt * 1000:.4g} ms)<br>"
+        f"({html.escape(outcome.row['integrator'])}, dt = {outcome.scene.dt * 1000:.4g} ms)<br>"
         f"{html.escape(_key_numbers(outcome.row))}</figcaption></figure>"
     )
 

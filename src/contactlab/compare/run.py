@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .. import cluster, interrupts
+from .. import peers as peers_package
 from ..closed_form import Check
 from ..errors import InputError, SimulationDiverged
 from ..methods import AVAILABLE
@@ -91,6 +92,12 @@ class _Outcome:
     checks: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
     row: dict = field(default_factory=dict)
+    gap: str | None = None
+    """a peer that was not run: the sentence saying what of the scene it cannot express and why"""
+    notes: list = field(default_factory=list)
+    """a peer's: its engine and settings, and how the scene's materials were mapped to it"""
+    integrator: str | None = None
+    """a peer's integrator (a method's is its scene's)"""
 
 
 # ---- choosing and running the methods ----------------------------------------------------------
@@ -124,22 +131,38 @@ def supports(method: str, scene: Scene) -> bool:
 def run_method(job: Mapping[str, Any]) -> dict[str, Any]:
     """One method's run, here or on a Dask worker: load the scene for the method, simulate it
     streaming its trajectory to ``job["trajectory"]``, and (``job["video"]``: fps) render it
-    beside that. Returns plain data: ``summary``, ``warnings`` [(category, message)], and
+    beside that. A job with a ``peer`` runs the scene in that engine instead (contactlab.peers).
+    Returns plain data: ``summary``, ``warnings`` [(category, message)], and
     ``failure``, ``failed_at`` [s] for a run a health check stopped, or ``media`` (name -> path)
-    for a rendered one; ``input_error`` [field, message] for a scene the method refuses."""
+    for a rendered one; ``input_error`` [field, message] for a scene the method refuses; ``gap``
+    (one sentence) for a scene the peer cannot express."""
     from ..render import render
 
     result: dict[str, Any] = {"warnings": []}
+    peer = job.get("peer")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             scene = load_scene(job["scene"], job["overrides"])
-            run = scene.simulate(
-                progress=job["progress"],
-                allow_divergence=job["allow_divergence"],
-                trajectory=job["trajectory"],
-            )
+            if peer:
+                run = peers_package.simulate(
+                    scene.model,
+                    peer,
+                    scene.dt,
+                    scene.duration,
+                    trajectory=job["trajectory"],
+                    scene_name=scene.name,
+                    progress=job["progress"],
+                )
+            else:
+                run = scene.simulate(
+                    progress=job["progress"],
+                    allow_divergence=job["allow_divergence"],
+                    trajectory=job["trajectory"],
+                )
             result["summary"] = run.summary
+        except peers_package.Inexpressible as gap:
+            return {"gap": gap.sentence, "warnings": []}
         except SimulationDiverged as error:
             result.update(summary=error.run.summary, failure=str(error), failed_at=error.time)  # type: ignore[union-attr]
         except InputError as error:
@@ -151,7 +174,7 @@ def run_method(job: Mapping[str, Any]) -> dict[str, Any]:
             open_trajectory(job["trajectory"]),
             os.path.dirname(job["trajectory"]),
             fps=job["video"],
-            title=f"{scene.name} — {scene.method}",
+            title=f"{scene.name} — {peer or scene.method}",
             progress=job["progress"],
         )
     return result
@@ -176,16 +199,42 @@ def _parallel(workers, scheduler, scenes, video) -> bool:
 
 
 def _run_all(
-    scene_source, names, named, overrides, progress, allow_divergence, out, created, video, workers=None, scheduler=None
+    scene_source,
+    names,
+    named,
+    overrides,
+    progress,
+    allow_divergence,
+    out,
+    created,
+    video,
+    workers=None,
+    scheduler=None,
+    peer_names=(),
 ) -> tuple[list[_Outcome], dict[str, str], str]:
-    """Load the scene for every method, then run it with each, streaming each trajectory to
-    out/<method>/trajectory.h5 and rendering it (``video``: fps, or None), one after another
-    or on a Dask cluster (:func:`_parallel`); folders and files noted in ``created``.
-    Returns (outcomes, skipped {method: why}, out)."""
+    """Load the scene for every method, then run it with each and in each of ``peer_names``
+    (contactlab.peers), streaming each trajectory to out/<method>/trajectory.h5 and rendering it
+    (``video``: fps, or None), one after another or on a Dask cluster (:func:`_parallel`);
+    folders and files noted in ``created``. Returns (outcomes, skipped {method: why}, out)."""
     scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
+    if peer_names:  # the peers run the scene as its file has it: its method is not theirs
+        as_written = load_scene(scene_source, overrides)
+        scenes.update({peer: as_written for peer in peer_names})
     out = os.fspath(out) if out is not None else os.path.join("out", f"{next(iter(scenes.values())).name}-compare")
     skipped, jobs = {}, []
     for name, scene in scenes.items():
+        if name in peer_names:
+            created.folder(os.path.join(out, name))
+            peer_job = {
+                **scene.origin(overrides),
+                "peer": name,
+                "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)),
+                "video": video,
+                "allow_divergence": allow_divergence,
+                "progress": progress,
+            }
+            jobs.append((name, peer_job))
+            continue
         if not supports(name, scene):
             if named:
                 raise InputError("--methods", f"{name} does not support the scene {scene.name}")
@@ -224,6 +273,10 @@ def _run_all(
             raise result
         for category, message in result["warnings"]:
             warnings.warn(message, category, stacklevel=2)
+        if "gap" in result:  # a peer that cannot express the scene: its row says why
+            outcomes.append(_Outcome(name, scenes[name], gap=result["gap"]))
+            remove_empty([os.path.join(out, name)])
+            continue
         if "input_error" in result:
             error = InputError(*result["input_error"])
             if named:
@@ -238,6 +291,9 @@ def _run_all(
         outcome = _Outcome(
             name, scenes[name], warnings=[message for _, message in result["warnings"]], media=result.get("media", {})
         )
+        if name in peer_names:
+            outcome.integrator = result["summary"]["integrator"]
+            outcome.notes = [peers_package.describe(result["summary"]["options"]), *result["summary"]["engine_notes"]]
         if "failure" in result:
             outcome.failure, outcome.failed_at, outcome.failed_run = result["failure"], result["failed_at"], run
         else:
@@ -332,6 +388,7 @@ def compare(
     allow_divergence: bool = False,
     workers: int | None = None,
     scheduler: str | None = None,
+    peers: str | Sequence[str] | None = None,
 ) -> Comparison:
     """Run ``scene_source`` (a built-in name or a .toml path) with each of ``methods`` and write
     the comparison into ``out`` (default ``out/<scene>-compare/``).
@@ -343,18 +400,33 @@ def compare(
     progress on stderr (contactlab.progress); allow_divergence: each run's (see ``simulate``);
     workers, scheduler: where the runs go — one after another here, or on a Dask cluster, local
     (``workers`` processes) or at the address ``scheduler`` (contactlab.cluster); None: a local
-    cluster when it pays (see docs/compare.md). Raises InputError for a bad
+    cluster when it pays (see docs/compare.md); peers: engines to run the scene in beside the
+    methods, "mujoco" and "pybullet" (a list, or one comma-separated string; contactlab.peers,
+    docs/peers.md), each with its row, trajectory and files as a method's, or a row saying what
+    of the scene it cannot express. Raises InputError for a bad
     scene, an unknown method or bad options, before anything is written. A method that blows up
     (a failed health check) is reported, not raised.
     """
     names, named = _method_names(methods)
+    peer_names = peers_package.peer_names(peers)  # a name that is no peer, or one not installed: before anything
     cluster.check_cluster(scheduler, workers)
     overrides = [*overrides] + ([f"simulation.duration={duration}"] if duration is not None else [])
     video = _video_fps(video, fps)  # a missing renderer or a bad fps fails before the runs
     created = _Created()
     try:
         outcomes, skipped, out = _run_all(
-            scene_source, names, named, overrides, progress, allow_divergence, out, created, video, workers, scheduler
+            scene_source,
+            names,
+            named,
+            overrides,
+            progress,
+            allow_divergence,
+            out,
+            created,
+            video,
+            workers,
+            scheduler,
+            peer_names,
         )
         scene = outcomes[0].scene
         fill_rows(outcomes)

@@ -1,0 +1,156 @@
+"""Stepping a peer engine's world and recording it as contactlab records a method's run.
+
+The engine's world (contactlab.peers.mujoco.World or contactlab.peers.pybullet.World) steps;
+this module times its step calls alone (contactlab.simulation.Tally: the first step left out,
+the rate over ~0.1 s windows), applies the scene's external forces at each step's start time,
+reads the state back every ``record_every`` steps into contactlab's Recorder (positions,
+energies by contactlab.diagnostics from the model's masses and inertias, the deepest overlap by
+contactlab's own collision pass on the engine's positions, the engine's contact count and
+solver iterations) and writes the summary :func:`contactlab.simulate` writes, with the
+engine's settings as its ``options``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .. import budget
+from ..errors import SimulationDiverged
+from ..model import Model
+from ..progress import bar as progress_bar
+from ..record import Recorder, streaming_recorder
+from ..simulation import Run, Tally
+from ..store import TrajectoryFile
+from ..validation import run_length
+
+
+@dataclass(frozen=True)
+class _Counted:
+    """The contacts of a step, as a method's Contacts shows their number."""
+
+    count: int
+
+
+class _Info(NamedTuple):
+    """What the Recorder reads of a step besides the state (a method's StepInfo's fields)."""
+
+    contacts: _Counted
+    solver_iterations: int
+    solver_residual: float = 0.0
+    energy_elastic: float = 0.0
+
+
+def run_world(
+    module: Any,
+    model: Model,
+    dt: float,
+    duration: float,
+    record_every: int,
+    trajectory: str | os.PathLike[str] | None,
+    scene_name: str,
+    progress: bool,
+) -> Run:
+    """Build ``module.World(model, dt)``, step it ``duration`` / ``dt`` times and record it (see
+    contactlab.peers.simulate, which checks the scene first)."""
+    dt, duration, steps = run_length(dt, duration)
+    samples = budget.check(model, steps, record_every, None, trajectory)["samples"]
+    recorder = (
+        Recorder(model, record_every, samples=samples)
+        if trajectory is None
+        else streaming_recorder(model, record_every, trajectory, samples)
+    )
+    try:
+        world = module.World(model, dt)
+        try:
+            return _stepped(world, model, dt, steps, recorder, scene_name, progress)
+        finally:
+            world.close()
+    except SimulationDiverged:
+        raise
+    except BaseException:
+        if recorder.sink is not None:
+            recorder.sink.discard()
+        raise
+
+
+def _stepped(world, model, dt, steps, recorder, scene_name, progress):
+    started = time.perf_counter()
+    state = model.state()
+    recorder.sample(state, _Info(_Counted(0), 0))
+    tally, iterations, most = Tally(), [], 0
+    loads = model.drive is not None and model.drive.has_loads
+    failed = None
+    with progress_bar(steps, f"{scene_name} ({world.name})", "step", progress) as bar:
+        for step in range(1, steps + 1):
+            force, torque = model.drive.loads((step - 1) * dt) if loads else (None, None)
+            began = time.perf_counter()
+            world.step(force, torque)
+            tally.timed(step, time.perf_counter() - began, 0.0)
+            count, sweeps = world.contacts(), world.iterations()
+            tally.max_contacts = max(tally.max_contacts, count)
+            if sweeps is not None:
+                iterations.append(sweeps)
+            if step % recorder.record_every == 0 or step == steps:
+                began = time.perf_counter()
+                state = world.state(step * dt)
+                state.time = step * dt
+                recorder.sample(state, _Info(_Counted(count), sweeps or 0))
+                tally.recording_seconds += time.perf_counter() - began
+                if not state.is_finite():
+                    failed = step * dt
+                    break
+            if step == 1:
+                bar.restart()
+            bar.update(1)
+    most = max(iterations, default=0)
+    recorder.flush()
+    status = "complete" if failed is None else "diverged"
+    arrays = recorder.arrays() if recorder.sink is None else TrajectoryFile(recorder.sink.finish(status))
+    totals = recorder.totals
+    made = int(round(state.time / dt))
+    summary = {
+        "scene": scene_name,
+        "method": world.name,
+        "integrator": world.settings["integrator"],
+        "dt": dt,
+        "steps": steps,
+        "options": world.settings,
+        "engine_notes": list(world.notes),
+        "wall_seconds": time.perf_counter() - started,
+        "first_step_seconds": tally.first_step_seconds,
+        "compile_seconds": 0.0,
+        "recording_seconds": tally.recording_seconds,
+        "compiled_loop": False,
+        "stepping": world.name,
+        "steps_per_second": (
+            (made - 1) / tally.stepping_seconds
+            if made > 1 and tally.stepping_seconds > 0
+            else 1.0 / max(tally.first_step_seconds, 1e-9)
+        ),
+        "steps_per_second_spread": tally.rate_spread(),
+        "bodies": model.body_count,
+        "particles": model.particle_count,
+        "max_contacts": tally.max_contacts,
+        "max_penetration": totals.max_penetration,
+        "final_penetration": totals.final_penetration,
+        "energy": totals.energy(),
+        "solver": {
+            "max_iterations": most if iterations else None,
+            "mean_iterations": float(np.mean(iterations)) if iterations else None,
+            "max_residual": None,
+        },
+        "samples": totals.count,
+        "diverged": None,
+        "interrupted": None,
+    }
+    run = Run(state, arrays, summary, model)
+    if failed is not None:
+        message = f"{world.name}'s state stopped being finite at t = {failed:.4g} s"
+        summary["diverged"] = {"check": "finite", "time": failed, "message": message, "steps_made": made}
+        raise SimulationDiverged(message, time=failed, run=run)
+    return run

@@ -1,0 +1,269 @@
+"""The engine-neutral half of translating a contactlab Model for a peer engine (MuJoCo, pybullet).
+
+What every peer is given of a finalized :class:`~contactlab.model.Model`, and what no peer can
+be given, so that contactlab.peers.mujoco and contactlab.peers.pybullet each only spell it in
+their engine's terms:
+
+* :func:`solids`: each body's and each static obstacle's collision shape as a :class:`Solid`
+  (kind, sizes [m], pose, material, a convex body's hull corners, a mesh's triangles);
+* :func:`gaps`: one sentence for each thing in the model a peer cannot express (cloth,
+  particles, a kinematic path, a non-convex mesh for MuJoCo), so the caller reports it instead
+  of running a different scene;
+* :func:`pair_targets` and :func:`fit`: contactlab's contact materials (μ = √(μ_a μ_b),
+  ε = max(ε_a, ε_b) of the two colliders' materials) against an engine that keeps one value per
+  shape and combines two by its own rule (pybullet multiplies, MuJoCo takes the larger friction
+  and the mean of the damping): the per-material values that meet contactlab's pairs, and a
+  sentence for each pair of this scene that the rule cannot meet;
+* :func:`damping_ratio`: the damping ratio of a linear spring-damper contact whose bounce
+  keeps the share ε of the speed, what MuJoCo is given for a restitution coefficient it lacks.
+
+The mapping is written out per engine in docs/peers.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import shapes
+from ..model import Model
+
+PEERS = ("mujoco", "pybullet")  # the engines contactlab.peers can run a scene in
+MATCHED = 1e-9  # a combined value this close to contactlab's is the same
+
+
+@dataclass(frozen=True)
+class Solid:
+    """One collision shape a peer is given, in SI units.
+
+    kind: "sphere", "box", "capsule", "convex", "mesh" or "plane"; size: sphere (radius,), box
+    (half_x, half_y, half_z), capsule (radius, half_length) along its local z axis, otherwise ();
+    position (3,) [m] and orientation (4,) unit quaternion (w, x, y, z): a body's centre of mass
+    and principal frame, an obstacle's pose (a plane: its point nearest the origin, and a
+    rotation taking z onto its normal); normal (3,): a plane's outward unit normal (the solid
+    side is behind it); vertices (V, 3) [m]: a convex shape's hull corners in its own frame, a
+    mesh's vertices in the world frame; triangles (T, 3) int: a mesh's, counter-clockwise seen
+    from outside; material: index into the model's materials; body: the body's index, −1 for an
+    obstacle."""
+
+    kind: str
+    size: tuple[float, ...]
+    position: np.ndarray
+    orientation: np.ndarray
+    material: int
+    body: int = -1
+    normal: np.ndarray | None = None
+    vertices: np.ndarray | None = None
+    triangles: np.ndarray | None = None
+
+
+def hull_vertices(model: Model, hull: int) -> np.ndarray:
+    """(V, 3) [m] the corners of the model's packed hull ``hull``, in its shape's own frame."""
+    start, end = model.hulls["vertex_start"][hull], model.hulls["vertex_start"][hull + 1]
+    return np.array(model.hulls["vertices"][start:end])
+
+
+def _sized(kind: int, params: np.ndarray) -> tuple[str, tuple[float, ...]]:
+    name = shapes.NAMES[int(kind)]
+    if kind == shapes.SPHERE:
+        return name, (float(params[0]),)
+    if kind == shapes.BOX:
+        return name, tuple(float(x) for x in params[:3])
+    if kind == shapes.CAPSULE:
+        return name, (float(params[0]), float(params[1]))
+    return name, ()
+
+
+def solids(model: Model) -> tuple[list[Solid], list[Solid]]:
+    """(bodies, obstacles): the collision shape of every body (index order) and static obstacle,
+    posed as the model's initial state has them."""
+    state = model.initial
+    bodies = []
+    for b in range(model.body_count):
+        kind, size = _sized(model.body_shape[b], model.body_params[b])
+        vertices = hull_vertices(model, int(model.body_params[b, 0])) if kind == "convex" else None
+        bodies.append(
+            Solid(
+                kind,
+                size,
+                np.array(state.body_position[b]),
+                np.array(state.body_orientation[b]),
+                int(model.body_material[b]),
+                body=b,
+                vertices=vertices,
+            )
+        )
+    obstacles = []
+    for o in range(model.obstacle_count):
+        kind, size = _sized(model.obstacle_shape[o], model.obstacle_params[o])
+        params, material = model.obstacle_params[o], int(model.obstacle_material[o])
+        if kind == "plane":
+            normal = np.array(params[:3])
+            obstacles.append(Solid(kind, (), normal * params[3], _z_onto(normal), material, normal=normal))
+        elif kind == "mesh":
+            mesh = model.meshes[int(params[0])]
+            obstacles.append(
+                Solid(
+                    kind,
+                    (),
+                    np.zeros(3),
+                    np.array([1.0, 0.0, 0.0, 0.0]),
+                    material,
+                    vertices=np.array(mesh.vertices),
+                    triangles=np.array(mesh.triangles),
+                )
+            )
+        else:
+            vertices = hull_vertices(model, int(params[0])) if kind == "convex" else None
+            obstacles.append(
+                Solid(
+                    kind,
+                    size,
+                    np.array(model.obstacle_position[o]),
+                    np.array(model.obstacle_orientation[o]),
+                    material,
+                    vertices=vertices,
+                )
+            )
+    return bodies, obstacles
+
+
+def _z_onto(normal: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) of the shortest rotation taking +z onto ``normal`` (unit)."""
+    z = np.array([0.0, 0.0, 1.0])
+    w = 1.0 + float(normal @ z)
+    if w < 1e-12:  # normal = −z: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    q = np.concatenate([[w], np.cross(z, normal)])
+    return q / np.linalg.norm(q)
+
+
+def convex_mesh(vertices: np.ndarray, triangles: np.ndarray) -> bool:
+    """Whether the closed triangle mesh (vertices (V, 3) [m], triangles (T, 3)) is convex: no
+    vertex in front of any triangle's plane by more than 1e-9 of its size."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    normals = np.cross(b - a, c - a)
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 0
+    normals, a = normals[keep] / lengths[keep, None], a[keep]
+    size = float(np.ptp(vertices, axis=0).max()) or 1.0
+    ahead = np.einsum("tk,tvk->tv", normals, vertices[None, :, :] - a[:, None, :])
+    return bool(ahead.max(initial=0.0) <= 1e-9 * size)
+
+
+def gaps(model: Model, peer: str) -> list[str]:
+    """One sentence for each thing of ``model`` the engine ``peer`` (one of PEERS) cannot be
+    given; [] when the whole scene translates. A scene with a gap is not run by that peer: a run
+    of a scene with a part left out would be a run of another scene."""
+    found = []
+    cloth = int(np.count_nonzero(model.particle_cloth >= 0))
+    free = model.particle_count - cloth
+    if model.cloth_count:
+        found.append(
+            f"contactlab's mass-spring cloth ({model.cloth_count} cloth, {cloth} vertices) has no counterpart in "
+            f"{peer}'s rigid bodies that contactlab translates"
+        )
+    if free:
+        found.append(
+            f"{free} free particles (3 degrees of freedom each, a contact radius that may be 0) are no rigid "
+            f"body {peer} is given"
+        )
+    kinematic = np.flatnonzero(model.body_kinematic)
+    if kinematic.size:
+        names = ", ".join(repr(model.body_names[b]) for b in kinematic[:3])
+        found.append(
+            f"the body {names} follows a kinematic path (add_path), which the translation does not drive in {peer}"
+        )
+    if peer == "mujoco":
+        for o in np.flatnonzero(model.obstacle_shape == shapes.MESH):
+            mesh = model.meshes[int(model.obstacle_params[o, 0])]
+            if mesh.two_sided or not convex_mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles)):
+                found.append(
+                    f"obstacle {o} is a non-convex triangle mesh, and MuJoCo collides a mesh as its convex hull, "
+                    "which would fill its hollows"
+                )
+    return found
+
+
+def pair_targets(model: Model) -> dict[tuple[int, int], tuple[float, float]]:
+    """(material a, material b), a ≤ b -> (μ, ε) contactlab gives their contacts, for every pair
+    of materials that can meet in this scene: two bodies' (a material with itself only when two
+    bodies have it), and a body's with an obstacle's (obstacles never meet)."""
+    body = [int(m) for m in model.body_material]
+    pairs = set()
+    for i, a in enumerate(sorted(set(body))):
+        for b in sorted(set(body))[i:]:
+            if a != b or body.count(a) > 1:
+                pairs.add((a, b))
+    for a in set(body):
+        for b in {int(m) for m in model.obstacle_material}:
+            pairs.add((min(a, b), max(a, b)))
+    targets = {}
+    for a, b in sorted(pairs):
+        friction, restitution = model.pair_materials(a, b)
+        targets[(a, b)] = (float(friction), float(restitution))
+    return targets
+
+
+def fit(
+    targets: dict[tuple[int, int], float],
+    combine: Callable[[float, float], float],
+    candidates: Sequence[np.ndarray],
+) -> tuple[np.ndarray, dict[tuple[int, int], tuple[float, float]]]:
+    """The per-material values (M,), among ``candidates``, whose pairs' ``combine`` (the
+    engine's rule for two shapes' values) comes closest to ``targets`` ((a, b) -> the value
+    contactlab's pair has, in the engine's terms) — the first of the closest —, and the pairs it
+    misses: (a, b) -> (the engine's value, the target)."""
+    best, best_error = candidates[0], math.inf
+    for values in candidates:
+        error = max((abs(combine(values[a], values[b]) - t) for (a, b), t in targets.items()), default=0.0)
+        if error < best_error - MATCHED:
+            best, best_error = values, error
+    missed = {
+        pair: (float(combine(best[pair[0]], best[pair[1]])), float(t))
+        for pair, t in targets.items()
+        if abs(combine(best[pair[0]], best[pair[1]]) - t) > MATCHED
+    }
+    return np.asarray(best, dtype=float), missed
+
+
+def uniform(targets: dict[tuple[int, int], float], count: int, value: Callable[[float], float]) -> list[np.ndarray]:
+    """[every material given ``value(t)``] when every pair's target is the same t, else []: the
+    candidate that meets any combining rule where the scene has one kind of contact."""
+    distinct = {round(t, 12) for t in targets.values()}
+    if len(distinct) != 1:
+        return []
+    return [np.full(count, value(next(iter(targets.values()))))]
+
+
+def static_only(model: Model) -> np.ndarray:
+    """(M,) bool: the materials only static obstacles use (no body has them)."""
+    only = np.zeros(len(model.material_names), dtype=bool)
+    only[np.asarray(model.obstacle_material, dtype=int)] = True
+    only[np.asarray(model.body_material, dtype=int)] = False
+    return only
+
+
+def damping_ratio(restitution: float) -> float:
+    """ζ of a linear spring-damper contact whose bounce returns the share ``restitution`` (ε) of
+    the approach speed: ε = exp(−ζ π / √(1 − ζ²)), so ζ = −ln ε / √(π² + ln² ε); ε = 0: ζ = 1
+    (critical damping, no bounce)."""
+    if restitution <= 0.0:
+        return 1.0
+    if restitution >= 1.0:
+        return 0.0
+    log = math.log(restitution)
+    return -log / math.sqrt(math.pi**2 + log**2)
+
+
+def missed_sentence(engine: str, quantity: str, rule: str, missed: dict, names: Sequence[str]) -> str:
+    """One sentence naming the material pairs whose ``quantity`` ``engine``'s ``rule`` cannot meet."""
+    pairs = list(missed.items())
+    shown = "; ".join(f"{names[a]}–{names[b]} {got:.3g} instead of {want:.3g}" for (a, b), (got, want) in pairs[:4])
+    more = f" and {len(pairs) - 4} more pairs" if len(pairs) > 4 else ""
+    return (
+        f"{engine} combines two shapes' {quantity} by {rule}, which cannot give every pair contactlab's: {shown}{more}."
+    )

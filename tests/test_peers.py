@@ -1,0 +1,299 @@
+"""Issue 39: MuJoCo and pybullet beside the methods (contactlab.peers): the translation of a Model
+round-trips into each engine, a dropped box lands when the closed form says in every engine, the
+peers' rows carry the scene's expectations, a scene a peer cannot express is reported, and a
+missing extra is one line and exit 2."""
+
+import csv
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from contactlab import ModelBuilder, peers, simulate
+from contactlab.cli import main
+from contactlab.closed_form import checks
+from contactlab.compare import compare
+from contactlab.record import DRAWN, load_run, read_trajectory
+from contactlab.scene import load_scene
+from contactlab.viewed_runs import run_folders
+
+REASON = "the peers are the optional extra contactlab[peers] (pip install 'contactlab[peers]')"
+TILTED = np.array([np.cos(0.3), np.sin(0.3) * 0.6, 0.0, np.sin(0.3) * 0.8])  # (w, x, y, z), unit
+
+
+def _mixed_scene():
+    """Every shape a body or an obstacle can have, posed off the axes and moving."""
+    b = ModelBuilder()
+    b.add_material("wood", friction=0.6, restitution=0.0)
+    b.add_material("rubber", friction=0.9, restitution=0.5)
+    b.add_body("sphere", radius=0.1, mass=2.0, position=(0, 0, 1), velocity=(1, 0, 0), material="rubber")
+    b.add_body(
+        "box",
+        half_extents=(0.1, 0.2, 0.05),
+        mass=3.0,
+        position=(1, 0, 1),
+        orientation=TILTED,
+        angular_velocity=(0.5, -1.0, 2.0),
+        material="wood",
+    )
+    b.add_body("capsule", radius=0.05, half_length=0.2, mass=1.5, position=(2, 0, 1), orientation=TILTED)
+    corners = np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.2, 0], [0, 0, 0.1], [0.3, 0.2, 0.1]], dtype=float)
+    b.add_body("convex", points=corners, mass=1.0, position=(3, 0, 1), velocity=(0, 0, -1), angular_velocity=(1, 2, 3))
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="wood")
+    b.add_obstacle("box", half_extents=(0.5, 0.5, 0.1), position=(0, 3, 0.1), orientation=TILTED)
+    b.add_obstacle("sphere", radius=0.3, position=(2, 3, 0.3))
+    b.add_obstacle("convex", points=corners, position=(4, 3, 0.0), orientation=TILTED)
+    return b.finalize()
+
+
+def _same_rotation(q, p):
+    return min(np.abs(q - p).max(), np.abs(q + p).max())
+
+
+def _assert_state(model, state):
+    start = model.initial
+    np.testing.assert_allclose(state.body_position, start.body_position, atol=1e-12)
+    for q, p in zip(state.body_orientation, start.body_orientation):
+        assert _same_rotation(q, p) < 1e-9
+    np.testing.assert_allclose(state.body_velocity, start.body_velocity, atol=1e-12)
+    np.testing.assert_allclose(state.body_angular_velocity, start.body_angular_velocity, atol=1e-9)
+
+
+def test_the_translation_round_trips_into_mujoco():
+    pytest.importorskip("mujoco", reason=REASON)
+    import mujoco
+
+    from contactlab.peers import mujoco as peer
+
+    model = _mixed_scene()
+    world = peer.World(model, 0.002)
+    m, d = world.mj_model, world.data
+    assert m.nbody == model.body_count + 1 and m.ngeom == model.body_count + model.obstacle_count
+    np.testing.assert_allclose(m.body_mass[1:], model.body_mass)
+    np.testing.assert_allclose(m.body_inertia[1:], model.body_inertia)
+    np.testing.assert_allclose(m.body_ipos[1:], 0.0)
+    np.testing.assert_allclose(m.opt.gravity, model.gravity)
+    assert m.opt.timestep == 0.002
+    _assert_state(model, world.state())
+    # the shapes where contactlab has them: sizes, and the convex body's corners in the world
+    kinds = [mujoco.mjtGeom(t).name for t in m.geom_type]
+    assert kinds == ["mjGEOM_PLANE", "mjGEOM_BOX", "mjGEOM_SPHERE", "mjGEOM_MESH"] + [
+        "mjGEOM_SPHERE",
+        "mjGEOM_BOX",
+        "mjGEOM_CAPSULE",
+        "mjGEOM_MESH",
+    ]
+    np.testing.assert_allclose(m.geom_size[5], model.body_params[1, :3])
+    np.testing.assert_allclose(m.geom_size[6, :2], model.body_params[2, :2])
+    from contactlab.peers.translate import hull_vertices
+    from contactlab.rotations import to_matrix
+
+    convex = 7
+    start = m.mesh_vertadr[m.geom_dataid[convex]]
+    corners = m.mesh_vert[start : start + m.mesh_vertnum[m.geom_dataid[convex]]]
+    in_world = d.geom_xpos[convex] + corners @ d.geom_xmat[convex].reshape(3, 3).T
+    expected = (
+        model.initial.body_position[3]
+        + hull_vertices(model, int(model.body_params[3, 0])) @ to_matrix(model.initial.body_orientation[3]).T
+    )
+    assert max(np.min(np.linalg.norm(expected - point, axis=1)) for point in in_world) < 1e-6
+    # friction: MuJoCo takes the larger of two geoms', and here the scene has two pairs it cannot both meet
+    assert any("friction" in note for note in world.notes)
+
+
+def test_the_translation_round_trips_into_pybullet():
+    pytest.importorskip("pybullet", reason=REASON)
+    import pybullet
+
+    from contactlab.peers import pybullet as peer
+
+    model = _mixed_scene()
+    world = peer.World(model, 0.002)
+    try:
+        c = world.client
+        assert pybullet.getNumBodies(physicsClientId=c) == model.body_count + model.obstacle_count
+        for b, body in enumerate(world.bodies):
+            info = pybullet.getDynamicsInfo(body, -1, physicsClientId=c)
+            assert info[0] == pytest.approx(model.body_mass[b])
+            np.testing.assert_allclose(info[2], model.body_inertia[b], rtol=1e-12)
+        _assert_state(model, world.state())
+        # the capsule reaches half length + radius along its tilted axis, and its radius across it
+        from contactlab.rotations import to_matrix
+
+        centre, frame = model.initial.body_position[2], to_matrix(TILTED)
+        for direction, reach in ((frame[:, 2], 0.25), (-frame[:, 2], 0.25), (frame[:, 0], 0.05)):
+            hit = pybullet.rayTest(list(centre + direction), list(centre), physicsClientId=c)[0]
+            assert hit[0] == world.bodies[2]
+            assert np.linalg.norm(np.subtract(hit[3], centre)) == pytest.approx(reach, abs=1e-6)
+        # friction √μ a shape: Bullet's product gives every pair contactlab's geometric mean
+        sphere, box = (pybullet.getDynamicsInfo(world.bodies[k], -1, physicsClientId=c)[1] for k in (0, 1))
+        assert sphere * box == pytest.approx(float(model.pair_materials(1, 0)[0]))
+    finally:
+        world.close()
+
+
+@pytest.mark.parametrize("height", [0.5, 1.2])
+def test_a_dropped_box_lands_when_the_closed_form_says_in_every_engine(height):
+    """A box whose bottom starts ``height`` up lands at t = √(2 h / g): the first sample whose
+    vertical velocity stops falling faster, within two steps, in contactlab and in each peer."""
+    pytest.importorskip("mujoco", reason=REASON)
+    pytest.importorskip("pybullet", reason=REASON)
+    dt, g = 0.002, 9.81
+    b = ModelBuilder()
+    b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, position=(0, 0, height + 0.1))
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0)
+    model = b.finalize()
+    landing = np.sqrt(2 * height / g)
+    runs = {"impulse": simulate(model, "impulse", dt, landing + 0.1)}
+    runs.update({peer: peers.simulate(model, peer, dt, landing + 0.1) for peer in peers.PEERS})
+    for name, run in runs.items():
+        vz = run.arrays["body_velocity"][:, 0, 2]
+        landed = np.flatnonzero(np.diff(vz) > -0.5 * g * dt)
+        assert landed.size, name
+        assert abs(run.arrays["time"][landed[0] + 1] - landing) <= 2 * dt, name
+
+
+def test_compare_with_peers_gives_their_rows_the_methods_columns_and_expectations(tmp_path, capsys):
+    """The command line's compare --peers: each peer a row of comparison.csv with the same
+    columns, the scene's closed-form checks evaluated on its trajectory, and its folder a run
+    that the viewer, render and export read."""
+    pytest.importorskip("mujoco", reason=REASON)
+    pytest.importorskip("pybullet", reason=REASON)
+    out = tmp_path / "rolling"
+    code = main(
+        [
+            "compare",
+            "rolling_sphere",
+            "--methods",
+            "impulse",
+            "--peers",
+            "mujoco,pybullet",
+            "--no-video",
+            "--out",
+            str(out),
+            "--set",
+            "simulation.duration=0.6",
+        ]
+    )
+    assert code == 0
+    with open(out / "comparison.csv", newline="", encoding="utf-8") as stream:
+        rows = {row["method"]: row for row in csv.DictReader(stream)}
+    assert list(rows) == ["impulse", "mujoco", "pybullet"]
+    scene = load_scene("rolling_sphere", ["simulation.duration=0.6"])
+    for peer in peers.PEERS:
+        row = rows[peer]
+        assert row["status"] == "ok" and float(row["steps_per_second"]) > 0 and row["steps"] == "300"
+        arrays, summary = load_run(str(out / peer))
+        assert summary["method"] == peer and summary["options"]["engine"] == peer
+        found = checks(scene.name, scene.model, arrays)
+        assert len(found) == 2
+        assert row["expectations"] == f"{'pass' if all(c.passed for c in found) else 'FAIL'} " + (
+            f"({sum(c.passed for c in found)} of 2)"
+        )
+        for check in found:
+            assert float(row[f"{check.quantity} error ({check.unit})"]) == pytest.approx(check.error)
+        read_trajectory(arrays, DRAWN)  # what render, view and export read
+    assert [os.path.basename(folder) for folder in run_folders(str(out))] == ["impulse", "mujoco", "pybullet"]
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert "MuJoCo " in report and "pybullet " in report and "docs/peers.md" in report
+
+
+def test_a_scene_a_peer_cannot_express_gets_a_row_saying_why_and_the_comparison_goes_on(tmp_path):
+    pytest.importorskip("mujoco", reason=REASON)
+    result = compare(
+        "particles_box",
+        ["projection"],
+        str(tmp_path / "particles"),
+        duration=0.01,
+        video=False,
+        peers=["mujoco"],
+    )
+    rows = {row["method"]: row for row in result.rows}
+    assert rows["projection"]["status"] == "ok"
+    status = rows["mujoco"]["status"]
+    assert status.startswith("not run: mujoco cannot express this scene: ") and "particles" in status
+    assert "mujoco cannot express this scene" in result.summary_text
+    assert not (tmp_path / "particles" / "mujoco").exists()
+    assert "not run" in open(result.report_html, encoding="utf-8").read()
+
+
+def test_a_non_convex_mesh_is_a_gap_for_mujoco_alone_and_holds_a_ball_in_pybullet():
+    """The bowl of mesh_bowl: MuJoCo would collide its convex hull (a filled bowl), so it is not
+    run there; pybullet is given the triangles, and a ball dropped into it stays inside."""
+    bowl = os.path.join(os.path.dirname(peers.__file__), "..", "scene", "meshes", "bowl.obj")
+    b = ModelBuilder()
+    b.add_body("sphere", radius=0.05, mass=1.0, position=(0.2, 0.0, 0.6))
+    b.add_obstacle("mesh", file=bowl)
+    model = b.finalize()
+    assert any("convex hull" in reason for reason in peers.gaps(model, "mujoco"))
+    with pytest.raises(peers.Inexpressible, match="mujoco cannot express this scene"):
+        peers.simulate(model, "mujoco", 0.004, 0.1)
+    assert peers.gaps(model, "pybullet") == []
+    pytest.importorskip("pybullet", reason=REASON)
+    run = peers.simulate(model, "pybullet", 0.004, 1.5)
+    lowest = float(np.min(model.meshes[0].vertices[:, 2]))
+    assert run.arrays["body_position"][:, 0, 2].min() > lowest + 0.05  # resting on the inside, not through
+    assert np.abs(run.arrays["body_velocity"][-1, 0]).max() < 1.0
+
+
+def test_the_damping_ratio_returns_the_restitution_of_a_linear_spring_damper():
+    from contactlab.peers.translate import damping_ratio
+
+    for epsilon in (0.1, 0.5, 0.8, 0.95):
+        zeta = damping_ratio(epsilon)
+        assert np.exp(-zeta * np.pi / np.sqrt(1 - zeta**2)) == pytest.approx(epsilon)
+    assert damping_ratio(0.0) == 1.0
+
+
+def test_without_the_extra_peers_is_one_line_naming_what_to_install_and_exit_2(tmp_path):
+    code = textwrap.dedent(
+        f"""
+        import sys
+        sys.modules["mujoco"] = None  # as if the extra were not installed
+        from contactlab.cli import main
+        out = {str(tmp_path / "out")!r}
+        sys.exit(main(["compare", "bouncing_ball", "--peers", "mujoco", "--no-video", "--out", out]))
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "pip install 'contactlab[peers]'" in lines[0] and "--peers" in lines[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_study_sweeps_the_peers_beside_the_methods(tmp_path):
+    pytest.importorskip("mujoco", reason=REASON)
+    from contactlab import sweep
+    from contactlab.study import load_study
+
+    study = tmp_path / "study.toml"
+    study.write_text(
+        textwrap.dedent(
+            """
+            [grid]
+            scenes = ["bouncing_ball"]
+            methods = ["impulse"]
+            peers = ["mujoco"]
+            [grid.set]
+            "simulation.duration" = [0.5]
+            [[cells]]
+            scene = "particles_box"
+            method = "mujoco"
+            """
+        ),
+        encoding="utf-8",
+    )
+    cells = load_study(study).cells
+    assert [cell.method for cell in cells] == ["impulse", "mujoco", "mujoco"]
+    assert cells[1].overrides() == ["simulation.duration=0.5"]  # the scene's own method: a peer has none
+    table = sweep.run(study, tmp_path / "out", workers=1)
+    rows = {(row["scene"], row["method"]): row for row in table.to_dict("records")}
+    ball = rows[("bouncing_ball", "mujoco")]
+    assert ball["status"] == "ok" and ball["integrator"].startswith("MuJoCo") and ball["steps"] == 500
+    assert ball["closed_form_checks"]  # the rebound apexes, measured on MuJoCo's trajectory
+    gap = rows[("particles_box", "mujoco")]
+    assert gap["status"] == "not run" and "particles" in gap["message"]
