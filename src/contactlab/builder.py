@@ -29,10 +29,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import cloth_mesh, shapes
+from .body_inertia import checked_tensor, principal
 from .driving import force_record, pack, path_record, start_on_paths
 from .errors import InputError
+from .hull_geometry import matrix_to_quaternion
 from .model import Model
 from .particle_arguments import particle_positions, particle_values
+from .rotations import multiply
 from .shape_arguments import (
     BODY_SHAPE_ARGUMENTS,
     OBSTACLE_SHAPE_ARGUMENTS,
@@ -71,6 +74,24 @@ DEFAULT_MATERIAL = ("default", 0.5, 0.0)  # name, friction μ, restitution ε
 MaterialRef = int | str | None
 BodyRef = int | str
 DriveValue = ArrayLike | Callable[[float], tuple] | None
+
+
+def _principal_frame(shape: str, tensor: np.ndarray, orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(principal moments (3,) [kg m²], the body's orientation) of a sphere, box or capsule given
+    the inertia ``tensor`` (3, 3) in its frame, placed at ``orientation``: a sphere's frame turns
+    onto the tensor's principal axes (its geometry is the same in any frame); a box's and a
+    capsule's cannot (their geometry is fixed to their axes), so their tensor must be diagonal."""
+    moments, axes = principal(tensor)
+    if np.allclose(axes, np.eye(3)):
+        return moments, orientation
+    if shape != "sphere":
+        raise InputError(
+            "inertia",
+            f"a {shape}'s inertia must be diagonal in its own axes (its frame is its principal frame); "
+            "give [Ixx, Iyy, Izz], or the shape as convex points, whose frame turns onto the tensor's axes",
+        )
+    turned = multiply(orientation, matrix_to_quaternion(axes))
+    return moments, turned if turned[0] >= 0.0 else -turned
 
 
 class ModelBuilder:
@@ -149,6 +170,7 @@ class ModelBuilder:
         scale: float | None = None,
         mass: float | None = None,
         density: float | None = None,
+        inertia: ArrayLike | None = None,
         position: ArrayLike = (0, 0, 0),
         orientation: ArrayLike = (1, 0, 0, 0),
         velocity: ArrayLike = (0, 0, 0),
@@ -163,7 +185,13 @@ class ModelBuilder:
         "convex" (the hull of ``points`` (n, 3) [m], or of the vertices of a mesh ``file``
         (OBJ/STL/PLY), times ``scale`` (default 1); the points must be convex); a shape given an
         argument of another (a sphere's half_extents) is an InputError. Give exactly one of mass
-        [kg] or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid.
+        [kg] or density [kg/m³]; the inertia tensor follows from the shape as a uniform solid,
+        unless ``inertia`` [kg m²] gives it (:mod:`contactlab.body_inertia`): three principal moments
+        [Ixx, Iyy, Izz] along the shape's own axes, or a symmetric 3×3 tensor in that frame (for a
+        convex shape, the frame its points are given in), about the centre of mass. The body's frame
+        is always principal: a tensor with off-diagonal terms turns it onto the tensor's principal
+        axes, which a sphere and a convex shape take (a sphere's orientation, a hull's vertices turn
+        with it) and a box or capsule, whose geometry is fixed to its frame, refuse.
         position and orientation place the body's frame (for a convex shape, the frame its points
         are given in; the centre of mass follows). angular_velocity is world frame [rad/s].
         Magnitudes are checked against :data:`~contactlab.validation.LIMITS` (the mass a density gives too).
@@ -184,8 +212,11 @@ class ModelBuilder:
             density = number(density, "density", 0.0, strict=True, quantity=DENSITY)
         position = vector(position, "position", quantity=LENGTH)
         orientation = unit_quaternion(orientation, "orientation")
+        tensor = None if inertia is None else checked_tensor(inertia, "inertia")
         if shape == "convex":
             hull = convex_hull(points, file, scale, mass=mass, density=density)
+            if tensor is not None:
+                hull = hull.with_inertia(tensor)
             kind, params = shapes.CONVEX, np.array([len(self._hulls), hull.radius, 0.0, 0.0])
             mass, inertia = hull.mass, hull.inertia
             position, orientation = hull.body_pose(position, orientation)
@@ -193,8 +224,10 @@ class ModelBuilder:
             kind, params = solid_shape(shape, radius, half_extents, shapes.BODY_SHAPES, half_length)
             if density is not None:
                 mass = density * shapes.volume(kind, params)
-            # mass: given, or derived from density just above (exactly one of the two, checked above)
-            inertia = shapes.principal_inertia(kind, params, mass)  # type: ignore[arg-type]
+            if tensor is None:  # mass: given, or derived from density just above (exactly one, checked above)
+                inertia = shapes.principal_inertia(kind, params, mass)  # type: ignore[arg-type]
+            else:
+                inertia, orientation = _principal_frame(shape, tensor, orientation)
         if density is not None:
             derived_mass(mass, "density")  # type: ignore[arg-type]  # mass was just derived from density
         if shape == "convex":

@@ -8,6 +8,8 @@ contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's traject
 contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
 contactlab view RUN_DIR... the runs in an interactive 3-D viewer in the web browser
 contactlab sweep STUDY     every cell of a study on a Dask cluster; results.parquet, report.html
+contactlab validate SCENE MEASURED.h5...  every method against measured motion; validation.csv, report.md
+contactlab fit SCENE MEASURED.h5... --vary PATH=LO:HI  each method's settings fitted to it on Dask; fit.json
 contactlab fclib bench DIR every FCLIB problem of a folder with every solver; a table, profiles
 """
 
@@ -110,6 +112,27 @@ def _parser():
     sweep.add_argument("--out", help="output folder (default: out/<study>-sweep/)")
     _cluster_arguments(sweep)
 
+    validate = commands.add_parser("validate", help="run every method from measured motion and say how far each drifts")
+    _measured_arguments(validate)
+    validate.add_argument("--out", help="output folder (default: out/<scene>-validate/)")
+    validate.add_argument("--json", action="store_true", help="print the rows and medians as one JSON object")
+
+    fit = commands.add_parser("fit", help="fit each method's settings to measured motion on a Dask cluster")
+    _measured_arguments(fit)
+    fit.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="PATH=LO:HI",
+        help="a setting to fit within a range, by its --set path, e.g. materials.0.friction=0.05:0.6 (repeatable)",
+    )
+    fit.add_argument("--holdout", type=float, default=0.25, help="fraction of the files held out (default 0.25)")
+    fit.add_argument(
+        "--evaluations", type=int, help="points each method's fit evaluates at most (default 10 + 15 a setting)"
+    )
+    fit.add_argument("--out", help="output folder (default: out/<scene>-fit/)")
+    _cluster_arguments(fit)
+
     fclib = commands.add_parser("fclib", help="FCLIB frictional-contact problems")
     fclib_commands = fclib.add_subparsers(dest="fclib_command", parser_class=_Parser, required=True)
     bench = fclib_commands.add_parser(
@@ -147,6 +170,21 @@ def _cluster_arguments(command, workers="one per idle core"):
     )
     command.add_argument(
         "--workers", type=int, metavar="N", help=f"worker processes of the local cluster (default: {workers})"
+    )
+
+
+def _measured_arguments(command):
+    """SCENE MEASURED.h5... --methods --set: what validate and fit share."""
+    command.add_argument("scene", help="a built-in scene name or a path to a .toml file")
+    command.add_argument("measured", nargs="+", metavar="MEASURED.h5", help="measured-motion files (docs/validate.md)")
+    command.add_argument("--methods", help="comma-separated methods (default: all four)")
+    command.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override any scene field by dotted path, e.g. materials.0.friction=0.3",
     )
 
 
@@ -357,6 +395,44 @@ def _sweep(args):
     )
 
 
+def _validate(args):
+    from .prediction import validate
+    from .prediction_report import table_text
+
+    result = validate(args.scene, args.measured, args.methods, args.out, overrides=args.overrides)
+    if args.json:
+        print(json.dumps(result.as_json()))
+        return
+    print(table_text(result.rows))
+    medians = ", ".join(f"{method} {values['position_error_pct']:.3g} %" for method, values in result.medians.items())
+    print(f"Median position error: {medians}" + (f"; best: {result.best}." if result.best else "."))
+    print(f"Table: {result.csv}; report: {result.report}")
+
+
+def _fit(args):
+    from .fitting import fit
+
+    result = fit(
+        args.scene,
+        args.measured,
+        args.vary,
+        args.methods,
+        args.holdout,
+        args.out,
+        overrides=args.overrides,
+        evaluations=args.evaluations,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=True,
+        log=lambda line: print(line, file=sys.stderr),
+    )
+    for method, entry in result.methods.items():
+        values = ", ".join(f"{path} = {value:.4g}" for path, value in entry["values"].items())
+        held = f", held out {entry['holdout_error']:.3g} %" if entry["holdout_error"] is not None else ""
+        print(f"{method}: {values} (training error {entry['train_error']:.3g} %{held})")
+    print(f"Fit: {result.json}; plots in {os.path.join(result.out, 'plots')}")
+
+
 def _where_time_went(summary):
     """Where the run's wall time went: compiling kernels or loading them from the cache, and
     recording (each when it took a tenth of a second or more), and the stepping's speed, with why
@@ -440,6 +516,10 @@ def _main(argv):
             _compare(args)
         elif args.command == "sweep":
             _sweep(args)
+        elif args.command == "validate":
+            _validate(args)
+        elif args.command == "fit":
+            _fit(args)
         elif args.command == "fclib":
             from .fclib_bench import bench
 

@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from dataclasses import field as dataclass_field
 
 import numpy as np
@@ -159,6 +159,23 @@ class Hull:
         if body_orientation[0] < 0.0:
             body_orientation = -body_orientation
         return body_position, body_orientation
+
+    def with_inertia(self, tensor: np.ndarray) -> Hull:
+        """This hull with the inertia ``tensor`` (3, 3) [kg m²] about its centre of mass, in the
+        frame its points were given in, in place of the uniform solid's: the body frame turned onto
+        that tensor's principal axes (:func:`~contactlab.hull_geometry.principal_frame`: the given
+        axes themselves for a diagonal tensor), the vertices and normals with it; the mass, centre
+        of mass and shape are unchanged."""
+        moments, axes = principal_frame(tensor)
+        turn = axes.T @ self.principal_axes  # old body frame -> new body frame
+        return replace(
+            self,
+            vertices=np.ascontiguousarray(self.vertices @ turn.T),
+            face_normal=np.ascontiguousarray(self.face_normal @ turn.T),
+            inertia=moments,
+            inertia_tensor=np.array(tensor, dtype=float),
+            orientation=matrix_to_quaternion(axes),
+        )
 
     def __repr__(self):
         return (

@@ -225,6 +225,24 @@ class VectorOrKeyframes:
         return "[x, y, z] or [[x, y, z], ...]"
 
 
+class Inertia:
+    """A body's inertia: three principal moments [Ixx, Iyy, Izz] or a 3×3 tensor (three rows of
+    three); the builder checks the values (symmetry, positive definite, triangle inequality)."""
+
+    vector = Vector(3)
+
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
+        if isinstance(value, list) and len(value) == 3 and all(isinstance(row, list) for row in value):
+            return [self.vector.check(row, f"{field}[{i}]", unit) for i, row in enumerate(value)]
+        if isinstance(value, list) and any(isinstance(row, list) for row in value):
+            what = f"[Ixx, Iyy, Izz] or three rows of three numbers{_unit(unit)}"
+            raise InputError(field, f"expected {what}, found {show(value)}")
+        return self.vector.check(value, field, unit)
+
+    def describe(self) -> str:
+        return "[Ixx, Iyy, Izz] or [[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]"
+
+
 class Pinned:
     """Cloth vertices: a list of whole numbers ≥ 0 (vertex indices) and names, or one of them."""
 
@@ -381,6 +399,7 @@ BODY = {
     "scale": Key(Number(positive=True), 1.0, shapes=taking("scale", BODY_SHAPE_ARGUMENTS)),
     "mass": Key(Number(), unit="kg"),
     "density": Key(Number(), unit="kg/m^3"),
+    "inertia": Key(Inertia(), unit="kg m^2"),
     "position": Key(Vector(3), [0.0, 0.0, 0.0], "m"),
     "orientation": Key(Vector(4), [1.0, 0.0, 0.0, 0.0], "quaternion w, x, y, z"),
     "velocity": Key(Vector(3), [0.0, 0.0, 0.0], "m/s"),
