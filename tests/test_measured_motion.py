@@ -203,3 +203,28 @@ def test_the_validate_command_prints_one_json_object(tmp_path):
     assert found["rows"][0]["measurement"] == "own" and found["rows"][0]["position_error_pct"] < 1e-6
     assert found["medians"]["impulse"]["failed"] == 0 and found["best"] == "impulse"
     assert (tmp_path / "out" / "cube_toss-validate" / "validation.csv").is_file()
+
+
+def test_validate_starts_the_peers_from_the_measurement_and_finds_no_error_in_their_own_toss(tmp_path):
+    """A toss recorded by MuJoCo itself, from the same start: validate's MuJoCo row drifts from it
+    by nothing (the peer is started from the measured state, not the scene's), and pybullet and
+    a method, which model the contact otherwise, land elsewhere."""
+    pytest.importorskip("mujoco", reason="MuJoCo not installed (pip install 'contactlab[peers]')")
+    pytest.importorskip("pybullet", reason="pybullet not installed (pip install 'contactlab[peers]')")
+    from dataclasses import replace
+
+    from contactlab import peers
+
+    scene = load_scene(SCENE, [*COARSE, "simulation.duration=0.4"])
+    start = scene.model.state()
+    start.body_position[0] += [0.05, -0.02, 0.1]  # not the scene's own start
+    start.body_velocity[0] = [1.0, 0.2, 0.6]
+    start.body_angular_velocity[0] = [4.0, -3.0, 6.0]
+    own = peers.simulate(replace(scene.model, initial=start), "mujoco", scene.dt, scene.duration)
+    measured = write_synthetic(tmp_path / "mujoco_toss.h5", own.arrays, velocities=True)
+    result = validate(SCENE, [measured], ["impulse"], tmp_path / "out", overrides=COARSE, peers="mujoco,pybullet")
+    rows = {row["method"]: row for row in result.rows}
+    assert set(rows) == {"impulse", "mujoco", "pybullet"} and all(r["status"] == "ok" for r in rows.values())
+    assert rows["mujoco"]["position_error_pct"] < 1e-6 and rows["mujoco"]["rotation_error_deg"] < 1e-4
+    assert rows["pybullet"]["position_error_pct"] > 0.1 and rows["impulse"]["position_error_pct"] > 0.1
+    assert result.best == "mujoco"

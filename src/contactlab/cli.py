@@ -114,6 +114,11 @@ def _parser():
 
     validate = commands.add_parser("validate", help="run every method from measured motion and say how far each drifts")
     _measured_arguments(validate)
+    validate.add_argument(
+        "--peers",
+        help="also start these engines from each measurement, comma-separated: mujoco, pybullet "
+        "(pip install 'contactlab[peers]')",
+    )
     validate.add_argument("--out", help="output folder (default: out/<scene>-validate/)")
     validate.add_argument("--json", action="store_true", help="print the rows and medians as one JSON object")
 
@@ -399,7 +404,7 @@ def _validate(args):
     from .prediction import validate
     from .prediction_report import table_text
 
-    result = validate(args.scene, args.measured, args.methods, args.out, overrides=args.overrides)
+    result = validate(args.scene, args.measured, args.methods, args.out, overrides=args.overrides, peers=args.peers)
     if args.json:
         print(json.dumps(result.as_json()))
         return

@@ -36,7 +36,7 @@ import math
 import os
 import time as clock
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -45,6 +45,7 @@ from . import rotations, shapes
 from .errors import InputError, SimulationDiverged, first_line
 from .measured import Measurement, read_measurement
 from .methods import AVAILABLE
+from .peers import PEERS, Inexpressible
 
 if TYPE_CHECKING:
     from .model import Model
@@ -150,13 +151,17 @@ def _rotation_vectors(q: np.ndarray) -> np.ndarray:
 
 
 def scene_overrides(method: str, measurement: Measurement, settings: Sequence[str] = ()) -> list[str]:
-    """The ``--set`` strings of a run of ``method`` over ``measurement``'s duration, after ``settings``."""
-    return [*settings, f"simulation.method={method}", f"simulation.duration={measurement.duration!r}"]
+    """The ``--set`` strings of a run of ``method`` over ``measurement``'s duration, after ``settings``
+    (a peer engine's run keeps the scene's method: it is not one of contactlab's)."""
+    chosen = [] if method in PEERS else [f"simulation.method={method}"]
+    return [*settings, *chosen, f"simulation.duration={measurement.duration!r}"]
 
 
 def predict(job: Mapping[str, Any]) -> dict[str, Any]:
     """One measurement with one method, here or on a Dask worker. ``job``: ``scene`` (a
-    built-in name or a file's absolute path), ``settings`` (``--set`` strings), ``method``,
+    built-in name or a file's absolute path), ``settings`` (``--set`` strings), ``method`` (one
+    of the four, or a peer engine, "mujoco" or "pybullet": contactlab.peers, started from the
+    same measured state),
     ``measurement`` (the file's path), ``paths`` (whether to return the simulated path),
     ``compiled_loop`` (as ``simulate`` takes it). Returns the row (:data:`COLUMNS`; with
     ``paths``, also ``simulated``: positions (T, B, 3) [m] at the measured times); a run that
@@ -171,9 +176,17 @@ def predict(job: Mapping[str, Any]) -> dict[str, Any]:
         scene = load_scene(job["scene"], scene_overrides(job["method"], measurement, job.get("settings", ())))
         indices = matched_bodies(scene.model, measurement)
         state, row["velocities"] = start_state(scene.model, measurement, indices)
-        run = scene.simulate(state=state, threads=1, compiled_loop=job.get("compiled_loop"))
+        if job["method"] in PEERS:
+            from . import peers
+
+            started_there = replace(scene.model, initial=state)  # a peer starts from its model's state
+            run = peers.simulate(started_there, job["method"], scene.dt, scene.duration, scene_name=scene.name)
+        else:
+            run = scene.simulate(state=state, threads=1, compiled_loop=job.get("compiled_loop"))
     except SimulationDiverged as error:
         return _failed(row, "diverged", first_line(error), started)
+    except Inexpressible as error:  # a peer that cannot be given the scene: said, not failed
+        return _failed(row, "not run", str(error), started)
     except Exception as error:  # a setting the scene refuses, a bug: the row says so, the others go on
         return _failed(row, "error", f"{type(error).__name__}: {first_line(error)}", started)
     sizes = np.array([body_size(scene.model, i) for i in indices])
@@ -317,14 +330,20 @@ def validate(
     out: str | os.PathLike[str] | None = None,
     *,
     overrides: Sequence[str] = (),
+    peers: str | Sequence[str] | None = None,
 ) -> Validation:
     """Run every method of ``methods`` (default: all four) from each measurement of ``measured``
     (measured-motion files) on ``scene`` (a built-in name or a .toml file, with the ``--set``
     strings ``overrides``) and write the rows, report and plots into ``out`` (default
-    ``out/<scene>-validate``). Every input is checked before anything runs or is written."""
+    ``out/<scene>-validate``), with the engines ``peers`` ("mujoco", "pybullet"; a list or a
+    comma-separated string) started from the same measured states beside them (their rows
+    named by the engine; one a scene it cannot express is "not run", saying why). Every input
+    is checked before anything runs or is written."""
+    from .peers import peer_names
     from .prediction_report import write_validation
 
     loaded, source, measurements, names = checked_inputs(scene, measured, methods, overrides)
+    names += peer_names(peers)
     out = os.fspath(out) if out is not None else os.path.join("out", f"{loaded.name}-validate")
     rows = []
     for measurement in measurements:
