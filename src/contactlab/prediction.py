@@ -278,7 +278,10 @@ def method_names(methods: str | Sequence[str] | None, option: str = "--methods")
 
 
 def checked_inputs(
-    scene: str | os.PathLike[str], measured: Sequence[str | os.PathLike[str]], methods, settings: Sequence[str]
+    scene: str | os.PathLike[str],
+    measured: Sequence[str | os.PathLike[str]],
+    methods: str | Sequence[str] | None,
+    settings: Sequence[str],
 ) -> tuple[Scene, str, list[Measurement], list[str]]:
     """(the scene as given, the source a worker loads it from, the measurements, the methods),
     every one checked as a run would use it: each file read, its bodies matched, the scene

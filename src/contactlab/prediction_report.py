@@ -177,7 +177,10 @@ def _path_plot(path: str, measurement: Measurement, rows: Sequence[Mapping[str, 
 
 
 def write_fit_plots(
-    folder: str, paths: Sequence[str], evaluated: Mapping[str, Sequence[tuple[Sequence[float], float]]], fitted
+    folder: str,
+    paths: Sequence[str],
+    evaluated: Mapping[str, Sequence[tuple[Sequence[float], float]]],
+    fitted: Mapping[str, Sequence[float]],
 ) -> list[str]:
     """``folder/fit_<setting>.png`` for each varied setting of ``paths``: the training error (%)
     of every point a method's fit evaluated (``evaluated``: method -> [(values, error)]) against

@@ -380,7 +380,7 @@ def step(
             model, state, contacts, v_free, target, warm, options, inverse
         )
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
-    floats = tuple(np.ascontiguousarray(v, dtype=float) for v in (*move, *free))
+    floats = tuple(np.array(v, dtype=float) for v in (*move, *free))  # as velocity_level._floats
     positions = split_at_impact(arrays, found, motion, tau, floats[:3], floats[3:], v_new, h, settings.time_of_impact)
     carried_on = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, unstack(v_new, model.body_count), carried_on)

@@ -198,14 +198,16 @@ def loop_inputs(
     ``projection.step``): (LoopModel, LoopSettings, the state's arrays as a Motion, the bodies'
     rotations (B, 3, 3), (last step's contact ids (K,), their warm-start values (K, 3)) as
     carried under ``method``'s keys)."""
-    motion = Motion(*(np.ascontiguousarray(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
+    # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
+    # stage typed anew mid-run compiles again (a State's arrays may be views, or the Model's own)
+    motion = Motion(*(np.array(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
     ids, values = (
         state.carried.get(CARRIED_PREFIX[method] + "ids"),
         state.carried.get(CARRIED_PREFIX[method] + "values"),
     )
     carried = (
-        np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
-        np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3),
+        np.zeros(0, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64),
+        np.zeros((0, 3)) if values is None else np.array(values, dtype=float).reshape(-1, 3),
     )
     settings = loop_settings(model, method, options, dt)
     return loop_model(model), settings, motion, rotations.matrices(motion.body_orientation), carried

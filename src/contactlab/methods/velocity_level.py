@@ -568,5 +568,6 @@ def step(
 
 
 def _floats(arrays: tuple) -> tuple:
-    """Each array as a C-contiguous float64 array (no copy where it is one already)."""
-    return tuple(np.ascontiguousarray(a, dtype=float) for a in arrays)
+    """Each array as a writable, C-contiguous float64 copy: the one type the compiled stages are
+    compiled for (a read-only or strided array would compile them again)."""
+    return tuple(np.array(a, dtype=float) for a in arrays)
