@@ -53,7 +53,7 @@ from ..validation import check_choices, check_counts, number
 from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
-from .loop_stages import build_rows, compile_flags, loop_inputs, restitution_threshold, solve
+from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_settings, restitution_threshold, solve
 from .sequential import contact_order
 from .velocity_level import (
     detect,
@@ -363,9 +363,10 @@ def step(
     # 3. collision detection over the swept step
     contacts, manifolds = detect(model, state, options, sweep)
     if contacts.count == 0:
-        return step_without_contacts(state, h, predicted, free, contacts, manifolds, "constraint_")
+        return step_without_contacts(state, h, predicted, free, contacts, manifolds, CARRIED["constraints"])
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
-    arrays, settings, motion, rotation, carried = loop_inputs(model, state, "constraints", options, dt)
+    arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
+    settings = loop_settings(model, "constraints", options, dt)
     found = contacts.arrays()
     rows = build_rows(arrays, found, motion, rotation)
     target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)

@@ -186,31 +186,30 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
     )
 
 
-CARRIED_PREFIX = {"impulse": "impulse_", "constraints": "constraint_", "projection": "projection_"}
-"""Each method's keys in ``State.carried``: PREFIX + "ids" (K,) and PREFIX + "values" (K, 3), last
-step's contact ids and warm-start values (impulses [N s], projection λ [kg m])."""
+CARRIED = {
+    "impulse": ("impulse_ids", "impulse_values"),
+    "constraints": ("constraint_ids", "constraint_values"),
+    "projection": ("projection_ids", "projection_values"),
+    "penalty": ("anchor_ids", "anchor_offsets"),
+}
+"""Each method's two keys in ``State.carried``: last step's contact ids (K,) and the values
+carried by id (K, 3): impulses [N s], projection λ [kg m], penalty's anchor offsets [m]."""
 
 
-def loop_inputs(
-    model: Model, state: State, method: str, options: CollisionOptions, dt: float
-) -> tuple[LoopModel, LoopSettings, Motion, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Motion, np.ndarray, tuple]:
     """What the compiled stages take in a method's step from Python (``velocity_level.step``,
-    ``projection.step``): (LoopModel, LoopSettings, the state's arrays as a Motion, the bodies'
-    rotations (B, 3, 3), (last step's contact ids (K,), their warm-start values (K, 3)) as
-    carried under ``method``'s keys)."""
+    ``projection.step``, ``penalty.step``): (LoopModel, the state's arrays as a Motion, the
+    bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) as carried
+    under ``method``'s keys, ``CARRIED``)."""
     # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
     # stage typed anew mid-run compiles again (a State's arrays may be views, or the Model's own)
     motion = Motion(*(np.array(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
-    ids, values = (
-        state.carried.get(CARRIED_PREFIX[method] + "ids"),
-        state.carried.get(CARRIED_PREFIX[method] + "values"),
-    )
+    ids, values = (state.carried.get(key) for key in CARRIED[method])
     carried = (
         np.zeros(0, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64),
         np.zeros((0, 3)) if values is None else np.array(values, dtype=float).reshape(-1, 3),
     )
-    settings = loop_settings(model, method, options, dt)
-    return loop_model(model), settings, motion, rotations.matrices(motion.body_orientation), carried
+    return loop_model(model), motion, rotations.matrices(motion.body_orientation), carried
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------

@@ -1,30 +1,25 @@
-"""Each method's compiled step, stage for stage as its Python ``step``: impulse and constraints
-(``velocity_step``, loop L3), projection (``projection_step``, loop L2) and penalty
-(``penalty_step``, loop L1).
+"""Each method's compiled step, the one ``run`` (:mod:`contactlab.methods.velocity_loop`) calls:
+impulse and constraints (``velocity_step``, loop L3), projection (``projection_step``, loop L2)
+and penalty (``penalty_step``, loop L1).
 
-``run`` (:mod:`contactlab.methods.velocity_loop`) calls the one step its flags choose; each is
-built from the shared stages of :mod:`contactlab.methods.loop_stages` and the stages its
-method's module names (:mod:`contactlab.methods.impulse`, :mod:`~contactlab.methods.velocity_level`,
-:mod:`~contactlab.methods.projection`, :mod:`~contactlab.methods.penalty_springs`,
-:mod:`~contactlab.methods.penalty_implicit`). The three steps share one module because they
-share one signature and one convention: a flag that is None leaves its branch uncompiled.
-``tests/test_velocity_loop.py`` holds each equal, bit for bit, to its method's ``step``.
-
-Numba's cache of ``run`` is refreshed only when ``velocity_loop.py`` changes: after editing a
-step here, delete the caches (README, "For developers").
+Each compiles stages 1–3 (free motion, how far each collider sweeps, detection with kept
+manifolds: :mod:`contactlab.methods.loop_stages`) and calls for the rest the compiled stages its
+method's step from Python calls too, each written once: ``velocity_level.respond`` (stages 4–5
+of L3), ``projection.project`` (stage 4 of L2, with the further passes here), and
+``penalty.springs_at``, ``integrate`` and ``finish`` (stages 2, 4 and 4b–5 of L1). What stays
+twice is stages 1–3, which the step from Python runs for every scene (cloth springs, meshes,
+driven bodies, every integrator) and this loop for the rigid ones; ``tests/test_velocity_loop.py``
+holds the two paths equal, bit for bit. The three steps share one module because they share one
+signature and one convention: a flag that is None leaves its branch uncompiled.
 """
 
 from __future__ import annotations
 
-from collections import namedtuple
-
 import numpy as np
 
-from ..collision import half_thickness_sums
 from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked
-from .jacobian_rows import ContactRows, row_products
 from .loop_stages import (
     LoopModel,
     LoopSettings,
@@ -34,24 +29,11 @@ from .loop_stages import (
     free_motion,
     moved,
     poses,
-    solve,
     swept_clear,
     swept_reach,
 )
-from .penalty_implicit import free_dofs, implicit_spring_velocities, mass_blocks
-from .penalty_springs import (
-    ContactSprings,
-    anchors_after,
-    entities_of,
-    explicit_velocities,
-    normal_stiffness,
-    slowest_approach,
-    spring_forces,
-    springs_implicit,
-    springs_of,
-)
-from .projection import advance, displaced, projection_targets
-from .sequential import contact_order
+from .penalty import PenaltyLoop, finish, integrate, springs_at
+from .projection import advance, displaced_motion, project
 from .velocity_level import respond
 
 # ---- impulse and constraints (loop L3) ------------------------------------------------------
@@ -124,47 +106,6 @@ def velocity_step(
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
-
-
-@njit(cache=True)
-def project(
-    model: LoopModel,
-    settings: LoopSettings,
-    slabs: bool | None,
-    parallel: bool | None,
-    contacts: ContactArrays,
-    at: Motion,
-    rotation: np.ndarray,
-    offset: np.ndarray,
-    displacement: np.ndarray,
-    warm: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, int, float]:
-    """Stage 4 of loop L2 (``projection.project``): the step's displacement (N,) [m, rad]
-    corrected, a copy, so that no contact detected at the positions ``at`` (a Motion, with
-    rotation (B, 3, 3)), which the displacement ``offset`` (N,) reached from the step's start,
-    ends deeper than its slop: J_n u ≥ J_n offset + δ (``projection_targets``), by the sweeps of
-    ``solve`` on displacements from the warm start ``warm`` (C, 3) [kg m]. Returns (the corrected
-    displacement, λ (C, 3) [kg m], sweeps, last correction [m]); no contact, no sweep."""
-    if contacts.depth.shape[0] == 0:
-        return displacement, np.zeros((0, 3)), 0, 0.0
-    rows = build_rows(model, contacts, at, rotation)
-    target = projection_targets(rows, offset, contacts.depth, settings.slop)
-    corrected = displacement.copy()
-    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order)
-    return corrected, lam, sweeps, change
-
-
-@njit(cache=True)
-def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Motion:
-    """The Motion at the positions a generalized displacement (N,) [m, rad] reaches from
-    ``motion``'s over h [s] (``projection.displaced``; its velocities are ``motion``'s)."""
-    position, orientation, particle = displaced(
-        (motion.body_position, motion.body_orientation, motion.particle_position), displacement, h
-    )
-    return Motion(
-        position, orientation, motion.body_velocity, motion.body_angular_velocity, particle, motion.particle_velocity
-    )
 
 
 # ``passes`` repeats the head of ``projection_step``'s signature (and so does ``velocity_step``'s):
@@ -281,17 +222,6 @@ def projection_step(
 
 # ---- penalty (loop L1): the stages of methods.penalty_springs and penalty_implicit ---------
 
-PenaltyLoop = namedtuple(
-    "PenaltyLoop",
-    (
-        "springs",  # methods.penalty_springs.SpringSettings
-        "thickness",  # (N,) [m] Model.collider_half_thickness
-        "particle_radius",  # (P,) [m]
-        "guard",  # LoopSettings of hold_back's sweeps (GUARD_SWEEPS, GUARD_TOLERANCE)
-    ),
-)
-PenaltyLoop.__doc__ = "What a penalty run adds to LoopModel and LoopSettings (``run``'s ``penalty`` flag)."
-
 
 @njit(cache=True)
 def penalty_step(
@@ -306,14 +236,17 @@ def penalty_step(
     start: tuple,
     carried: tuple,
 ) -> tuple:
-    """One step of loop L1 with penalty forces (``methods.penalty.step``, stage for stage).
+    """One step of loop L1 with penalty forces: detection and the free velocities compiled here,
+    the springs, their integration, the guard and the anchors the stages of
+    :mod:`contactlab.methods.penalty` that its ``step`` from Python calls too.
 
     ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
-    (K, 3) [m]); ``start`` and the flags as ``velocity_step``'s. Returns (positions, velocities — the state's six
-    arrays, new —, the carried triple, the ContactArrays, active-set passes, the last linear
-    solve's relative residual, the elastic energy at the step's end [J], whether the springs
-    went implicit under an explicit integrator, the conjugate-gradient iterations of its solves)."""
-    h, B = settings.dt, motion.body_position.shape[0]
+    (K, 3) [m]); ``settings`` the guard's (``penalty.penalty_loop``); ``start`` and the flags as
+    ``velocity_step``'s. Returns (positions, velocities — the state's six arrays, new —, the
+    carried triple, the ContactArrays, active-set passes, the last linear solve's relative
+    residual, the elastic energy at the step's end [J], whether the springs went implicit under
+    an explicit integrator, the conjugate-gradient iterations of its solves)."""
+    h = settings.dt
     rotation, centers, rots = start
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
@@ -321,47 +254,21 @@ def penalty_step(
     )
     contacts, manifolds, _ = detect(model, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
     rows = build_rows(model, contacts, motion, rotation)
-    v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
-    springs, sides = contact_springs(model, penalty, contacts, rows, motion, carried)
-    forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
+    v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
+    springs, forces, elongation, implicit = springs_at(
+        model, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
+    )
     # 3. internal forces (gravity) → free velocities v*
     free = free_motion(model, motion, rotation, h)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
-    implicit = springs_implicit(penalty.springs, springs, sides[0], sides[1], sides[2], h)
-    passes, residual, linear_iterations = 0, 0.0, 0
-    if implicit:
-        mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
-        v_new, forces, elongation, passes, residual, linear_iterations = implicit_spring_velocities(
-            penalty.springs,
-            springs,
-            rows,
-            contacts.depth,
-            v_free,
-            mass,
-            free_dofs(model.particle_pinned, np.zeros(B, dtype=np.bool_)),
-            h,
-        )
-    else:
-        v_new = explicit_velocities(rows, forces, v_free, h)
-    # 4b. over the swept step: no contact carried past half its pass-through depth
-    v_new = hold_back(model, penalty, slabs, parallel, contacts, rows, motion, v_new, h)
-    bodies = v_new[: 6 * B].reshape(B, 6)
-    velocities = (bodies[:, :3].copy(), bodies[:, 3:].copy(), v_new[6 * B :].reshape(-1, 3).copy())
-    positions = moved(
-        motion.body_position,
-        motion.body_orientation,
-        motion.particle_position,
-        velocities[0],
-        velocities[1],
-        velocities[2],
-        np.full(B, h),
-        np.full(velocities[2].shape[0], h),
+    v_new, forces, elongation, passes, residual, linear_iterations = integrate(
+        model, penalty, contacts, rows, rotation, springs, (forces, elongation, implicit), v_free, h
     )
-    # 5. advance the anchors of pressed contacts, by contact id
-    elongation, offsets, energy = anchors_after(
-        springs, rows, contacts.depth, v_new, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
+    # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
+    positions, velocities, offsets, energy = finish(
+        model, settings, penalty, slabs, parallel, contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
     return (
         positions,
@@ -374,78 +281,3 @@ def penalty_step(
         implicit and penalty.springs.implicit != 3,
         linear_iterations,
     )
-
-
-@njit(cache=True)
-def contact_springs(
-    model: LoopModel, penalty: PenaltyLoop, contacts: ContactArrays, rows: ContactRows, motion: Motion, carried: tuple
-) -> tuple[ContactSprings, tuple]:
-    """Stage 2a: the contacts' springs (``methods.penalty_springs.springs_of``): stiffness by the option
-    or by the load each carries, the anchors of last step's contacts by id. Returns (ContactSprings,
-    (side A (C,), side B (C,), B + P) as ``penalty.contact_entities``)."""
-    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    side_a = entities_of(contacts.body_a, contacts.particles_a, B)
-    side_b = entities_of(contacts.body_b, contacts.particles_b, B)
-    stiffness = normal_stiffness(
-        penalty.springs,
-        side_a,
-        side_b,
-        contacts.normal,
-        motion.body_position,
-        motion.particle_position,
-        model.body_mass,
-        model.particle_mass,
-        model.gravity,
-    )
-    offsets = values_carried(carried[1], carried[2], contacts.feature_id)[0]
-    springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)
-    return springs, (side_a, side_b, B + P)
-
-
-# Where friction stands among a ContactArrays' fields: ``hold_back`` copies the others around it
-# (two constants, as Numba slices a tuple only by constants, not by a sum of them).
-_FRICTION = ContactArrays._fields.index("friction")
-_AFTER_FRICTION = _FRICTION + 1
-
-
-@njit(cache=True)
-def hold_back(
-    model: LoopModel,
-    penalty: PenaltyLoop,
-    slabs: bool | None,
-    parallel: bool | None,
-    contacts: ContactArrays,
-    rows: ContactRows,
-    motion: Motion,
-    velocity: np.ndarray,
-    h: float,
-) -> np.ndarray:
-    """Stage 4b (``methods.penalty.hold_back``): ``velocity`` (N,), or where it would carry a
-    contact past half its pass-through depth, a copy held back by frictionless sweeps
-    (``solve`` with the guard's settings) to v_n ≥ −(D/2 − δ) / h."""
-    C = contacts.depth.shape[0]
-    pass_through = half_thickness_sums(
-        contacts.feature_id,
-        contacts.particles_a,
-        penalty.thickness,
-        penalty.particle_radius,
-        motion.body_position.shape[0] + motion.particle_position.shape[0],
-    )
-    slowest, below = slowest_approach(rows, velocity, contacts.depth, pass_through, h)
-    if not below:
-        return velocity
-    held = velocity.copy()
-    frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
-    solve(
-        penalty.guard,
-        slabs,
-        parallel,
-        rows,
-        frictionless,
-        motion,
-        held,
-        slowest,
-        np.zeros((C, 3)),
-        contact_order(contacts.point, contacts.feature_id, model.gravity),
-    )
-    return held

@@ -33,21 +33,23 @@ loop (:mod:`contactlab.methods.loop_steps`, ``penalty_step``) calls too.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import rotations
-from ..collision import pass_through_depths, swept_distances
-from ..contacts import Contacts, jacobian, values_by_id
-from ..dynamics.generalized import implicit_base, stack, unstack
-from ..dynamics.integrators import advance_positions, free_velocities
+from ..collision import half_thickness_sums, swept_distances
+from ..compiling import njit
+from ..contacts import ContactArrays, Contacts, jacobian, values_by_id, values_carried
+from ..dynamics.generalized import implicit_base, stack, stacked, unstacked
+from ..dynamics.integrators import free_velocities, moved
 from ..errors import InputError
 from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
 from .base import CollisionOptions, StepInfo
-from .jacobian_rows import ContactRows, row_products, rows_of
+from .jacobian_rows import ContactRows, row_products
+from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
     GUARD_SWEEPS,
@@ -67,7 +69,7 @@ from .penalty_springs import (
 from .penalty_springs import ContactSprings as ContactSprings  # re-exported: tests and callers build them here
 from .penalty_springs import elastic_energy as elastic_energy  # re-exported: named here since SPEC P3
 from .penalty_springs import spring_forces as spring_forces  # re-exported: named here since SPEC P1
-from .sequential import solve_order, solve_sequential_impulses, sweep_groups
+from .sequential import contact_order
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -297,7 +299,7 @@ def contact_stiffness(model: Model, state: State, contacts: Contacts, options: O
     )
 
 
-def contact_springs(
+def assembled_springs(
     contacts: Contacts,
     J: sp.spmatrix,
     inverse_mass: sp.spmatrix,
@@ -305,8 +307,9 @@ def contact_springs(
     options: Options,
     stiffness: np.ndarray | None = None,
 ) -> ContactSprings:
-    """The springs of the contacts from the Jacobian J (3C, N) and M⁻¹ (N, N) (sparse), the
-    anchors ``carried`` from the last step; ``springs_of`` says how."""
+    """The springs of the contacts from the assembled Jacobian J (3C, N) and M⁻¹ (N, N) (sparse),
+    the anchors ``carried`` from the last step (``springs_of`` says how): the matrix form the
+    tests hold the step's matrix-free springs (``springs_at``, from the rows) against."""
     C = contacts.count
     inverse_effective = np.asarray((J @ inverse_mass).multiply(J).sum(axis=1)).ravel().reshape(C, 3)
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
@@ -322,120 +325,236 @@ def distribute(J: sp.spmatrix, inverse_mass: sp.spmatrix, forces: np.ndarray, dt
     return dt * (inverse_mass @ (J.T @ forces.ravel()))
 
 
-# ---- the swept step: nothing passes through ----------------------------------------------
-
-
-def hold_back(
-    model: Model, state: State, contacts: Contacts, rows: ContactRows, velocity: np.ndarray, h: float
-) -> np.ndarray:
-    """The generalized velocity (N,) with which the step moves, held back where it would carry a
-    contact past half its pass-through depth D (``collision.pass_through_depths``): every contact
-    found over the swept step, open or closed, keeps v_n ≥ −(D/2 − δ) / h, δ its depth now [m].
-    A gap may close and a spring engage as deep as it likes short of that; a fast or small body
-    that no spring of this stiffness could stop in time stops on the surface instead of passing
-    through (normal impulses only, by sequential sweeps). ``velocity`` itself where nothing would;
-    ``rows`` (``jacobian_rows.contact_rows``): the step's Jacobian, which tells that."""
-    slowest, below = slowest_approach(rows, velocity, contacts.depth, pass_through_depths(model, contacts), h)
-    if not below:
-        return velocity
-    held = velocity.copy()
-    solve_sequential_impulses(
-        rows,
-        np.zeros(contacts.count),
-        slowest,
-        held,
-        GUARD_SWEEPS,
-        GUARD_TOLERANCE,
-        np.zeros((contacts.count, 3)),
-        *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
-    )
-    return held
-
-
 # ---- the step: loop L1 --------------------------------------------------------------------
 
 
 def step(
     model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
 ) -> tuple[State, StepInfo]:
-    """One step of loop L1 with penalty forces; returns (new State, StepInfo). Its compiled stages
-    are called one by one from Python; ``simulate`` steps the scenes the compiled loop serves
-    (methods.loop_steps, ``penalty_step``) through that loop instead, which gives the very
-    same numbers."""
-    h, settings = dt, spring_settings(options, integrator)
+    """One step of loop L1 with penalty forces; returns (new State, StepInfo). Detection and the
+    free velocities run here, for every scene (cloth, meshes, driven bodies, every integrator);
+    the springs (``springs_at``), their integration (``integrate``, or SciPy's on an assembled
+    system, ``implicit_velocities``) and the guard and anchors (``finish``) are the compiled
+    stages the compiled loop's step (``loop_steps.penalty_step``) runs."""
+    h = dt
+    guard, penalty = penalty_loop(model, options, integrator, dt)
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
     contacts, _ = options.collide(model, state, sweep)
-    rows = rows_of(model, contacts, state.body_position, state.body_orientation)
-    offsets, _ = values_by_id(
-        state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"), contacts.feature_id, 3
-    )
-    springs = springs_of(
-        settings, contact_stiffness(model, state, contacts, options), rows.k[:, :3], contacts.arrays(), offsets
-    )
-    v = stack(*state.velocities)
+    arrays, motion, rotation, carried = loop_inputs(model, state, "penalty")
+    found = contacts.arrays()
+    rows = build_rows(arrays, found, motion, rotation)
     # 2. collision forces F = k δ n and anchor springs (P1, F3), at the current state
-    forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
-    # 3. internal forces (gravity) → free velocities v* = v + h M⁻¹ f
+    v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
+    springs, forces, elongation, implicit = springs_at(arrays, penalty, found, rows, motion, v, carried, h)
+    # 3. internal forces (gravity, cloth springs, external forces) → free velocities v* = v + h M⁻¹ f
     v_free = stack(*free_velocities(model, state, h, integrator))
-    # 4. integrate velocities and positions, the contact forces distributed as Jᵀ F (D1); the
-    # springs by backward Euler (M1) under that integrator, or where an explicit step would grow
-    passes, residual, linear_iterations = 0, 0.0, 0
-    implicit = springs_implicit(
-        settings, springs, *contact_entities(contacts, model.body_count), model.body_count + model.particle_count, h
-    )
-    if implicit:
-        v_new, forces, elongation, passes, residual, linear_iterations = _implicit(
-            model, state, contacts, springs, rows, v_free, h, options, integrator
-        )
-        moved_by = v_new
+    # 4. integrate velocities, the contact forces distributed as Jᵀ F (D1); the springs by
+    # backward Euler (M1) under that integrator, or where an explicit step would grow
+    if implicit and (options.linear_solver != "cg" or (model.spring_count and integrator == "backward_euler")):
+        J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+        A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
+        integrated = implicit_velocities(springs, J, A0, b0, free, v_free, contacts.depth, h, options)
     else:
-        v_new = explicit_velocities(rows, forces, v_free, h)
-        moved_by = v if integrator == "explicit_euler" else v_new
-    # 4b. over the swept step: no contact carried past half its pass-through depth
-    held = hold_back(model, state, contacts, rows, moved_by, h) if contacts.count else moved_by
-    if held is not moved_by:
-        v_new = v_new + (held - moved_by) if integrator == "explicit_euler" and not implicit else held
-        moved_by = held
-    positions = advance_positions(state.positions, unstack(moved_by, model.body_count), h, h)
-    # 5. advance dt; the anchors of pressed contacts go on, by contact id
-    elongation, offsets, energy = anchors_after(
-        springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
+        at_start = (forces, elongation, implicit)
+        integrated = integrate(arrays, penalty, found, rows, rotation, springs, at_start, v_free, h)
+    v_new, forces, elongation, passes, residual, linear_iterations = integrated
+    # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
+    _, _, slabs, parallel = compile_flags(model, "penalty", options)[3:]
+    positions, velocities, offsets, energy = finish(
+        arrays, guard, penalty, slabs, parallel, found, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
-    carried = dict(state.carried, anchor_ids=contacts.feature_id, anchor_offsets=offsets)
-    new = State.assemble(state.time + dt, positions, unstack(v_new, model.body_count), carried)
+    carried_on = dict(state.carried, anchor_ids=contacts.feature_id, anchor_offsets=offsets)
+    new = State.assemble(state.time + dt, positions, velocities, carried_on)
     return new, StepInfo(
         contacts,
-        solver_iterations=passes,
-        solver_residual=residual,
-        linear_iterations=linear_iterations,
-        energy_elastic=energy,
-        implicit_springs=implicit and integrator != "backward_euler",
+        solver_iterations=int(passes),
+        solver_residual=float(residual),
+        linear_iterations=int(linear_iterations),
+        energy_elastic=float(energy),
+        implicit_springs=bool(implicit) and integrator != "backward_euler",
         impulses=h * forces,
     )
 
 
-def _implicit(model, state, contacts, springs, rows, v_free, h, options, integrator):
-    """The springs by backward Euler: the compiled matrix-free solve where the system without
-    contacts is M (no cloth stepped implicitly) and the solver is "cg"; else with SciPy on the
-    assembled system (``implicit_velocities``)."""
-    if options.linear_solver == "cg" and not (model.spring_count and integrator == "backward_euler"):
-        mass = mass_blocks(
-            np.asarray(model.body_mass, dtype=float),
-            np.asarray(model.body_inertia, dtype=float),
-            rotations.matrices(np.ascontiguousarray(state.body_orientation, dtype=float)),
-            np.asarray(model.particle_mass, dtype=float),
-        )
-        return implicit_spring_velocities(
-            spring_settings(options, integrator),
-            springs,
-            rows,
-            contacts.depth,
-            v_free,
-            mass,
-            free_dofs(model.particle_pinned, np.asarray(model.body_kinematic, dtype=np.bool_)),
-            h,
-        )
-    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
-    A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
-    return implicit_velocities(springs, J, A0, b0, free, v_free, contacts.depth, h, options)
+# ---- the compiled stages the step from Python and the compiled loop share ------------------
+
+PenaltyLoop = namedtuple(
+    "PenaltyLoop",
+    (
+        "springs",  # methods.penalty_springs.SpringSettings
+        "thickness",  # (N,) [m] Model.collider_half_thickness
+        "particle_radius",  # (P,) [m]
+        "fixed",  # (B,) bool: kinematic bodies (moved by their paths: no spring moves them, none rests its weight)
+    ),
+)
+PenaltyLoop.__doc__ = "What a penalty step adds to LoopModel: its SpringSettings and what its guard reads."
+
+
+def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> tuple[LoopSettings, PenaltyLoop]:
+    """(the LoopSettings of ``hold_back``'s sweeps — GUARD_SWEEPS, GUARD_TOLERANCE, steps of dt
+    [s], the contact margin —, the PenaltyLoop of these Options and integrator)."""
+    guard = LoopSettings(
+        float(dt), GUARD_SWEEPS, GUARD_TOLERANCE, 0.0, 0.0, 0.0, 0.0, False, 0.0, float(options.contact_margin), 0.0, 1
+    )
+    penalty = PenaltyLoop(
+        spring_settings(options, integrator),
+        np.array(model.collider_half_thickness, dtype=float),
+        np.array(model.particle_radius, dtype=float),
+        np.array(model.body_kinematic, dtype=np.bool_),
+    )
+    return guard, penalty
+
+
+@njit(cache=True)
+def springs_at(
+    model: LoopModel,
+    penalty: PenaltyLoop,
+    contacts: ContactArrays,
+    rows: ContactRows,
+    motion: Motion,
+    v: np.ndarray,
+    carried: tuple,
+    h: float,
+) -> tuple[ContactSprings, np.ndarray, np.ndarray, bool]:
+    """Stage 2: the contacts' springs (``penalty_springs.springs_of``: the stiffness of the option
+    or of the load each carries, ``normal_stiffness``; the anchors of last step's contacts,
+    ``carried`` = (ids (K,), offsets (K, 3) [m])), their forces at the velocity ``v`` (N,) —
+    (C, 3) [N] and the anchors' elongations (C, 2) [m], ``spring_forces`` — and whether the step
+    integrates them by backward Euler (``springs_implicit``, over h [s])."""
+    B = motion.body_position.shape[0]
+    side_a = entities_of(contacts.body_a, contacts.particles_a, B)
+    side_b = entities_of(contacts.body_b, contacts.particles_b, B)
+    loads = np.where(penalty.fixed, 0.0, model.body_mass)  # a kinematic body rests its weight on nothing
+    stiffness = normal_stiffness(
+        penalty.springs,
+        side_a,
+        side_b,
+        contacts.normal,
+        motion.body_position,
+        motion.particle_position,
+        loads,
+        model.particle_mass,
+        model.gravity,
+    )
+    offsets = values_carried(carried[0], carried[1], contacts.feature_id)[0]
+    springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)
+    forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
+    dynamic = B + motion.particle_position.shape[0]
+    return springs, forces, elongation, springs_implicit(penalty.springs, springs, side_a, side_b, dynamic, h)
+
+
+@njit(cache=True)
+def integrate(
+    model: LoopModel,
+    penalty: PenaltyLoop,
+    contacts: ContactArrays,
+    rows: ContactRows,
+    rotation: np.ndarray,
+    springs: ContactSprings,
+    at_start: tuple,
+    v_free: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, int]:
+    """Stage 4: the velocities after the step (N,) from the free ones ``v_free``: the spring forces
+    ``at_start`` = (forces (C, 3) [N], elongations (C, 2) [m], implicit) applied as h M⁻¹ Jᵀ F
+    (``explicit_velocities``), or where implicit the springs by backward Euler on the rows
+    (``implicit_spring_velocities``: matrix-free conjugate gradients, the bodies' mass blocks at
+    the rotations (B, 3, 3) ``rotation``), over h [s]. Returns (v⁺, forces, elongations,
+    active-set passes, the last linear solve's relative residual, conjugate-gradient iterations)."""
+    forces, elongation, implicit = at_start
+    if not implicit:
+        return explicit_velocities(rows, forces, v_free, h), forces, elongation, 0, 0.0, 0
+    mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
+    dofs = free_dofs(model.particle_pinned, penalty.fixed)
+    return implicit_spring_velocities(penalty.springs, springs, rows, contacts.depth, v_free, mass, dofs, h)
+
+
+@njit(cache=True)
+def finish(
+    model: LoopModel,
+    guard: LoopSettings,
+    penalty: PenaltyLoop,
+    slabs: bool | None,
+    parallel: bool | None,
+    contacts: ContactArrays,
+    rows: ContactRows,
+    motion: Motion,
+    velocities: tuple,
+    spring_state: tuple,
+) -> tuple:
+    """Stages 4b–5: ``velocities`` = (v at the step's start, v⁺ of ``integrate``) (N,) each;
+    ``spring_state`` = (ContactSprings, elongations (C, 2) [m], implicit). The velocity that moves
+    the step — v⁺, or v under explicit Euler with explicit springs — held back where it would
+    carry a contact past half its pass-through depth (``hold_back``), the positions moved by it
+    over ``guard.dt``, and the anchors of pressed contacts moved on (``anchors_after``). Returns
+    (positions, velocities ((B, 3), (B, 3), (P, 3)), anchor offsets (C, 3) [m], the springs'
+    elastic energy at the step's end [J])."""
+    v, v_new = velocities
+    springs, elongation, implicit = spring_state
+    h, B = guard.dt, motion.body_position.shape[0]
+    explicit_euler = penalty.springs.integrator == EXPLICIT_EULER and not implicit
+    moved_by = v if explicit_euler else v_new
+    held, changed = hold_back(model, guard, penalty, slabs, parallel, contacts, rows, motion, moved_by)
+    if changed:
+        v_new = v_new + (held - moved_by) if explicit_euler else held
+        moved_by = held
+    by = unstacked(moved_by, B)
+    positions = moved(
+        motion.body_position,
+        motion.body_orientation,
+        motion.particle_position,
+        by[0],
+        by[1],
+        by[2],
+        np.full(B, h),
+        np.full(by[2].shape[0], h),
+    )
+    elongation, offsets, energy = anchors_after(
+        springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
+    )
+    return positions, unstacked(v_new, B), offsets, energy
+
+
+# Where friction stands among a ContactArrays' fields: ``hold_back`` copies the others around it
+# (two constants, as Numba slices a tuple only by constants, not by a sum of them).
+_FRICTION = ContactArrays._fields.index("friction")
+_AFTER_FRICTION = _FRICTION + 1
+EXPLICIT_EULER = INTEGRATORS.index("explicit_euler")  # SpringSettings.integrator of explicit Euler
+
+
+@njit(cache=True)
+def hold_back(
+    model: LoopModel,
+    guard: LoopSettings,
+    penalty: PenaltyLoop,
+    slabs: bool | None,
+    parallel: bool | None,
+    contacts: ContactArrays,
+    rows: ContactRows,
+    motion: Motion,
+    velocity: np.ndarray,
+) -> tuple[np.ndarray, bool]:
+    """Stage 4b: the generalized velocity (N,) with which the step moves, held back where it would
+    carry a contact past half its pass-through depth D (``collision.half_thickness_sums``): every
+    contact found over the swept step, open or closed, keeps v_n ≥ −(D/2 − δ) / h, δ its depth now
+    [m]. A gap may close and a spring engage as deep as it likes short of that; a fast or small
+    body that no spring of this stiffness could stop in time stops on the surface instead of
+    passing through (normal impulses only, by frictionless sweeps: ``solve`` with the ``guard``'s
+    settings). Returns (``velocity`` itself, False, where nothing would; else a held copy, True)."""
+    C = contacts.depth.shape[0]
+    pass_through = half_thickness_sums(
+        contacts.feature_id,
+        contacts.particles_a,
+        penalty.thickness,
+        penalty.particle_radius,
+        motion.body_position.shape[0] + motion.particle_position.shape[0],
+    )
+    slowest, below = slowest_approach(rows, velocity, contacts.depth, pass_through, guard.dt)
+    if not below:
+        return velocity, False
+    held = velocity.copy()
+    frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
+    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
+    solve(guard, slabs, parallel, rows, frictionless, motion, held, slowest, np.zeros((C, 3)), order)
+    return held, True

@@ -36,20 +36,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .. import rotations
 from ..collision import swept_distances
 from ..compiling import njit
-from ..contacts import values_by_id
+from ..contacts import ContactArrays, values_by_id, values_carried
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
 from ..state import Positions, State
 from ..validation import check_counts, number
 from .base import KeptManifoldOptions, StepInfo
-from .jacobian_rows import row_products, rows_of
-from .sequential import solve_order, solve_sequential_impulses, sweep_groups
+from .jacobian_rows import row_products
+from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, loop_settings, solve
+from .sequential import contact_order
 from .velocity_level import detect
 
 if TYPE_CHECKING:
-    from ..contacts import Contacts
     from ..model import Model
     from .jacobian_rows import ContactRows
 
@@ -82,60 +83,12 @@ class Options(KeptManifoldOptions):
         self.slop = number(self.slop, "slop", 0.0)
 
 
-def project(
-    model: Model,
-    at: State,
-    offset: np.ndarray,
-    displacement: np.ndarray,
-    options: Options,
-    sweep: np.ndarray | None = None,
-    carried: dict | None = None,
-    contacts: Contacts | None = None,
-) -> tuple[np.ndarray, Contacts, np.ndarray, int, float]:
-    """Project the colliding points of the state ``at`` onto the surfaces.
-
-    at: the State where contacts are detected, reached from the step's start by the
-    generalized displacement ``offset`` (N,) [m, rad] (0: the start itself); displacement u
-    (N,): the step's displacement to correct (body i: entries 6i..6i+6 = translation and
-    rotation vector; particle j: 6B+3j..). sweep (B + P,) [m]: how far each body and particle
-    may move; gaps that small are detected too, as open constraints (λ = 0 while they stay
-    open), so no push drives a point through a surface nobody was watching. A contact of depth
-    δ at ``at`` is kept from going deeper than 0: δ − J_n (u − offset) ≤ 0. carried: a State's
-    ``carried`` to warm start from (the λ of last step's first pass, by contact id, times
-    ``options.warm_start``); None starts from λ = 0. contacts: those of ``at``, when detected
-    already (else ``collide`` finds them). Returns (corrected displacement (N,), the
-    contacts, λ (C, 3) [kg m], sweeps, last correction [m]).
-    """
-    if contacts is None:
-        contacts, _ = options.collide(model, at, sweep)
-    if contacts.count == 0:
-        return displacement, contacts, np.zeros((0, 3)), 0, 0.0
-    warm = np.zeros((contacts.count, 3))
-    if carried is not None and options.warm_start > 0.0:
-        warm = (
-            options.warm_start
-            * values_by_id(carried.get("projection_ids"), carried.get("projection_values"), contacts.feature_id, 3)[0]
-        )
-    rows = rows_of(model, contacts, at.body_position, at.body_orientation)
-    target = projection_targets(rows, offset, contacts.depth, options.slop)  # J_n u ≥ J_n offset + δ
-    corrected = displacement.copy()
-    lam, sweeps, change = solve_sequential_impulses(
-        rows,
-        contacts.friction,
-        target,
-        corrected,
-        options.iterations,
-        options.tolerance,
-        warm,
-        *sweep_groups(rows, contacts, at, solve_order(contacts, model.gravity)),
-    )
-    return corrected, contacts, lam, sweeps, change
-
-
 def step(
     model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
 ) -> tuple[State, StepInfo]:
-    """One step of loop L2 with projection; returns (new State, StepInfo)."""
+    """One step of loop L2 with projection; returns (new State, StepInfo). Stages 1–3 and the
+    passes' detection run here, for every scene; each projection is ``project``, the compiled
+    stage the compiled loop's step (``loop_steps.projection_step``) runs."""
     h = dt
     # 1. internal forces → free velocities v*
     v_free = stack(*free_velocities(model, state, h, integrator))
@@ -147,41 +100,49 @@ def step(
     # (speculative: a gap may close, never be crossed), projected — nothing passes through
     # anything, however fast; then at the projected positions, for what the linearization missed
     contacts, manifolds = detect(model, state, options, sweep)
-    displacement, contacts, lam, total_sweeps, change = project(
-        model,
-        state,
-        np.zeros_like(predicted_displacement),
-        predicted_displacement,
-        options,
-        sweep,
-        state.carried,
-        contacts,
+    arrays, motion, rotation, carried = loop_inputs(model, state, "projection")
+    settings = loop_settings(model, "projection", options, dt)
+    _, _, _, _, _, slabs, parallel = compile_flags(model, "projection", options)
+    found = contacts.arrays()
+    warm = settings.warm_start * values_carried(carried[0], carried[1], found.feature_id)[0]
+    zero = np.zeros_like(predicted_displacement)
+    displacement, lam, total_sweeps, change = project(
+        arrays, settings, slabs, parallel, found, motion, rotation, zero, predicted_displacement, warm
     )
-    carried = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
+    carried_on = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
     pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
     for _ in range(options.passes - 1):
         if contacts.count == 0:
             break
-        projected = State.assemble(state.time + h, displaced(_positions(state), displacement, h), state.velocities)
+        at = displaced_motion(motion, displacement, h)
+        projected = State.assemble(
+            state.time + h, (at.body_position, at.body_orientation, at.particle_position), state.velocities
+        )
         ids = contacts.feature_id
-        displacement, contacts, more, sweeps, change = project(
-            model, projected, displacement, displacement, options, sweep
+        contacts, _ = options.collide(model, projected, sweep)
+        displacement, more, sweeps, change = project(
+            arrays,
+            settings,
+            slabs,
+            parallel,
+            contacts.arrays(),
+            at,
+            rotations.matrices(at.body_orientation),
+            displacement,
+            displacement,
+            np.zeros((contacts.count, 3)),
         )
         pushed = values_by_id(ids, pushed, contacts.feature_id, 3)[0] + more
         total_sweeps += sweeps
         if sweeps <= 1 and change <= options.tolerance:
             break
     # 5. advance dt, velocities from the projected positions
-    positions, velocities = advance(_positions(state), v_free, displacement, predicted_displacement, h)
-    new = State.assemble(state.time + h, positions, velocities, carried)
+    start = (motion.body_position, motion.body_orientation, motion.particle_position)
+    positions, velocities = advance(start, v_free, displacement, predicted_displacement, h)
+    new = State.assemble(state.time + h, positions, velocities, carried_on)
     return new, StepInfo(
         contacts, solver_iterations=total_sweeps, solver_residual=change, impulses=pushed / h
     )  # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
-
-
-def _positions(state):
-    """A State's positions as the compiled stages take them (C-contiguous float arrays)."""
-    return tuple(np.ascontiguousarray(a, dtype=float) for a in state.positions)
 
 
 # ---- the compiled stages the Python step and the compiled loop (methods.velocity_loop) share ----
@@ -232,3 +193,44 @@ def advance(
     (positions, velocities ((B, 3), (B, 3), (P, 3)) [m/s, rad/s])."""
     velocity = free + (displacement - predicted) / h
     return displaced(positions, displacement, h), unstacked(velocity, positions[0].shape[0])
+
+
+@njit(cache=True)
+def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Motion:
+    """The Motion at the positions a generalized displacement (N,) [m, rad] reaches from
+    ``motion``'s over h [s] (``projection.displaced``; its velocities are ``motion``'s)."""
+    position, orientation, particle = displaced(
+        (motion.body_position, motion.body_orientation, motion.particle_position), displacement, h
+    )
+    return Motion(
+        position, orientation, motion.body_velocity, motion.body_angular_velocity, particle, motion.particle_velocity
+    )
+
+
+@njit(cache=True)
+def project(
+    model: LoopModel,
+    settings: LoopSettings,
+    slabs: bool | None,
+    parallel: bool | None,
+    contacts: ContactArrays,
+    at: Motion,
+    rotation: np.ndarray,
+    offset: np.ndarray,
+    displacement: np.ndarray,
+    warm: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """Stage 4 of loop L2: the step's displacement (N,) [m, rad]
+    corrected, a copy, so that no contact detected at the positions ``at`` (a Motion, with
+    rotation (B, 3, 3)), which the displacement ``offset`` (N,) reached from the step's start,
+    ends deeper than its slop: J_n u ≥ J_n offset + δ (``projection_targets``), by the sweeps of
+    ``solve`` on displacements from the warm start ``warm`` (C, 3) [kg m]. Returns (the corrected
+    displacement, λ (C, 3) [kg m], sweeps, last correction [m]); no contact, no sweep."""
+    if contacts.depth.shape[0] == 0:
+        return displacement, np.zeros((0, 3)), 0, 0.0
+    rows = build_rows(model, contacts, at, rotation)
+    target = projection_targets(rows, offset, contacts.depth, settings.slop)
+    corrected = displacement.copy()
+    order = contact_order(contacts.point, contacts.feature_id, model.gravity)
+    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order)
+    return corrected, lam, sweeps, change

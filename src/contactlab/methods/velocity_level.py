@@ -36,13 +36,14 @@ from ..state import State
 from .base import StepInfo
 from .jacobian_rows import ContactRows, contact_velocity, row_products
 from .loop_stages import (
-    CARRIED_PREFIX,
+    CARRIED,
     LoopModel,
     LoopSettings,
     Motion,
     build_rows,
     compile_flags,
     loop_inputs,
+    loop_settings,
     solve,
 )
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
@@ -86,11 +87,11 @@ def step_without_contacts(
     free: tuple[np.ndarray, np.ndarray, np.ndarray],
     contacts: Contacts,
     manifolds: Manifolds | None,
-    warm_prefix: str,
+    warm_keys: tuple[str, str],
 ) -> tuple[State, StepInfo]:
     """The step when nothing touches: the prediction stands; the warm-start values carried under
-    keys starting with ``warm_prefix`` are dropped (no contact persists). Returns (State, StepInfo)."""
-    carried = {key: value for key, value in state.carried.items() if not key.startswith(warm_prefix)}
+    under ``warm_keys`` (``loop_stages.CARRIED``) are dropped (no contact persists). Returns (State, StepInfo)."""
+    carried = {key: value for key, value in state.carried.items() if key not in warm_keys}
     carried["manifolds"] = manifolds
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
@@ -541,11 +542,12 @@ def step(
     move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
     contacts, manifolds = detect(model, state, options, sweep)
-    prefix = CARRIED_PREFIX[method]
+    keys = CARRIED[method]
     if contacts.count == 0:
-        return step_without_contacts(state, h, predicted, free, contacts, manifolds, prefix)
+        return step_without_contacts(state, h, predicted, free, contacts, manifolds, keys)
     # 4–5. the contacts' response, and the positions after it
-    arrays, settings, motion, rotation, carried = loop_inputs(model, state, method, options, dt)
+    arrays, motion, rotation, carried = loop_inputs(model, state, method)
+    settings = loop_settings(model, method, options, dt)
     _, _, constraints, impulse, _, slabs, parallel = compile_flags(model, method, options)
     positions, velocities, impulses, sweeps, change = respond(
         arrays,
@@ -562,7 +564,7 @@ def step(
         carried,
     )
     kept = dict(state.carried, manifolds=manifolds)
-    kept[prefix + "ids"], kept[prefix + "values"] = contacts.feature_id, impulses
+    kept[keys[0]], kept[keys[1]] = contacts.feature_id, impulses
     new = State.assemble(state.time + h, positions, velocities, kept)
     return new, StepInfo(contacts, solver_iterations=int(sweeps), solver_residual=float(change), impulses=impulses)
 

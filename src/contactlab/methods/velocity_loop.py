@@ -55,7 +55,7 @@ from ..model import derived
 from ..state import State
 from .base import CollisionOptions
 from .loop_stages import (
-    CARRIED_PREFIX,
+    CARRIED,
     LoopModel,
     LoopSettings,
     Motion,
@@ -68,9 +68,8 @@ from .loop_stages import (
     record,
     store,
 )
-from .loop_steps import PenaltyLoop, penalty_step, projection_step, velocity_step
-from .penalty import spring_settings
-from .penalty_springs import GUARD_SWEEPS, GUARD_TOLERANCE
+from .loop_steps import penalty_step, projection_step, velocity_step
+from .penalty import PenaltyLoop, penalty_loop
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -187,7 +186,7 @@ class Stepper:
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
     ) -> None:
         self._start(model, state)
-        self.prefix = CARRIED_PREFIX[method]
+        self.keys = CARRIED[method]
         # projection.step carries its λ every step, none included; the velocity methods drop theirs then
         self.carries_empty = method == "projection"
         self.keep_manifolds = options.manifold_tolerance > 0.0
@@ -195,10 +194,10 @@ class Stepper:
         self.flags = compile_flags(model, method, options) + (None,)  # penalty: None (PenaltyStepper)
         self.carried = _carried(
             state.carried.get("manifolds") or Manifolds.empty(),
-            state.carried.get(self.prefix + "ids"),
-            state.carried.get(self.prefix + "values"),
+            state.carried.get(self.keys[0]),
+            state.carried.get(self.keys[1]),
         )
-        self.other = {k: v for k, v in state.carried.items() if k != "manifolds" and not k.startswith(self.prefix)}
+        self.other = {k: v for k, v in state.carried.items() if k != "manifolds" and k not in self.keys}
 
     def _start(self, model, state):
         """What every Stepper holds: the model, the narrow phase's plan, the state's time and
@@ -327,7 +326,7 @@ class Stepper:
         carried = dict(self.other)
         carried["manifolds"] = Manifolds(*made) if self.keep_manifolds else None
         if len(ids) or self.carries_empty:
-            carried[self.prefix + "ids"], carried[self.prefix + "values"] = ids, values
+            carried[self.keys[0]], carried[self.keys[1]] = ids, values
         return self._state_carrying(carried)
 
     def _state_carrying(self, carried: dict) -> State:
@@ -341,28 +340,8 @@ class PenaltyStepper(Stepper):
 
     def __init__(self, model: Model, options: PenaltyOptions, integrator: str, dt: float, state: State) -> None:
         self._start(model, state)
-        self.settings = LoopSettings(
-            float(dt),
-            GUARD_SWEEPS,
-            GUARD_TOLERANCE,
-            0.0,
-            0.0,
-            0.0,
-            0.0,
-            False,
-            0.0,
-            float(options.contact_margin),
-            0.0,
-            1,
-        )  # hold_back's sweeps
-        self.flags = compile_flags(model, "penalty", options) + (
-            PenaltyLoop(
-                spring_settings(options, integrator),
-                np.array(model.collider_half_thickness, dtype=float),
-                np.array(model.particle_radius, dtype=float),
-                self.settings,
-            ),
-        )
+        self.settings, penalty = penalty_loop(model, options, integrator, dt)  # settings: hold_back's sweeps
+        self.flags = compile_flags(model, "penalty", options) + (penalty,)
         self.carried = _carried(Manifolds.empty(), state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"))
         self.other = {k: v for k, v in state.carried.items() if k not in ("anchor_ids", "anchor_offsets")}
 
