@@ -296,7 +296,7 @@ def test_a_new_contact_starts_from_the_weight_it_bears():
     between them is a quarter of the top box's weight over the step, m_top g h / 4, and of each
     corner on the floor a quarter of both, (m_top + m_bottom) g h / 4, along the normal; times
     warm_start; nothing at all at warm_start 0."""
-    from contactlab.methods.loop_stages import loop_inputs
+    from contactlab.methods.loop_stages import loop_inputs, loop_settings
     from contactlab.methods.velocity_level import warm_impulses
 
     model, h = _two_box_stack(3.0, 1.0), 1 / 240
@@ -306,8 +306,8 @@ def test_a_new_contact_starts_from_the_weight_it_bears():
     assert between.sum() == 4 and (~between).sum() == 4
 
     def first_impulses(fraction):
-        options = impulse.Options(warm_start=fraction)
-        arrays, settings, motion, _, carried = loop_inputs(model, state, "impulse", options, h)
+        settings = loop_settings(model, "impulse", impulse.Options(warm_start=fraction), h)
+        arrays, motion, _, carried = loop_inputs(model, state, "impulse")
         return warm_impulses(arrays, settings, contacts.arrays(), motion, *carried)
 
     for fraction in (1.0, 0.5):
