@@ -67,7 +67,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, Frame
+from .contact_output import Frame, PairOutput
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, clip_polygon, drop_collinear, reduce_to_four
 
 FACE_REL_TOL = 0.05  # relative tolerance favouring the reference face's box, and faces over edges
@@ -341,14 +341,14 @@ def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b,
 
 @njit(cache=True)
 def box_box(
-    frame_a: Frame, half_a: np.ndarray, frame_b: Frame, half_b: np.ndarray, margin: float, out: ContactRows, slot: int
+    frame_a: Frame, half_a: np.ndarray, frame_b: Frame, half_b: np.ndarray, margin: float, out: PairOutput, slot: int
 ) -> int:
     """Box A against box B: up to 4 contacts written from ``slot`` on; returns their count.
 
     Parameters: frames (centre (3,) [m], rotation (3, 3) body → world), half extents (3,) [m],
     ``margin`` [m] (contacts kept down to depth −margin). Outputs: the rows ``out`` (point (·, 3)
     [m], normal (·, 3) unit from B into A, depth (·,) [m], feature (·,) in 0..7, see the module
-    docstring; :data:`.contact_output.ContactRows`). Returns 0 when the boxes are further apart than the
+    docstring; :data:`.contact_output.PairOutput`). Returns 0 when the boxes are further apart than the
     margin on some separating axis.
     """
     center_a, rotation_a = frame_a

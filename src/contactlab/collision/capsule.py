@@ -12,7 +12,7 @@ Conventions as in :mod:`contactlab.collision.narrow_phase`: shape A is the first
 unit normal points from B into A, ``depth`` > 0 when overlapping, contacts are kept down to
 ``depth = −margin`` (speculative contacts), each ``point`` lies midway between the two
 surfaces, and every function writes its contacts from index ``slot`` on into ``out`` = (point
-(N, 3), normal (N, 3), depth (N,), feature (N,) int64) (:data:`.contact_output.ContactRows`) and
+(N, 3), normal (N, 3), depth (N,), feature (N,) int64) (:data:`.contact_output.PairOutput`) and
 returns how many it wrote (at most 2). A capsule is passed as one argument, :data:`Capsule`,
 a sphere as :data:`.primitive_pairs.Sphere`. ``feature`` (0..255) names the contact within its pair so that it
 keeps its number from step to step while it persists; each function documents its encoding.
@@ -47,7 +47,7 @@ small temporary arrays.
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, Frame, write_contact
+from .contact_output import Frame, PairOutput, write_contact
 from .geometry import axpy, clamp, column, cross, dot, midpoint, norm, scaled, segment_closest_parameters, sphere_gap
 from .primitive_pairs import Sphere
 from .segment_patch import write_patch_ends
@@ -69,7 +69,7 @@ CAPSULE_CAPSULE_SINGLE_FEATURE = 0
 
 
 @njit(cache=True)
-def capsule_plane(capsule: Capsule, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
+def capsule_plane(capsule: Capsule, plane: np.ndarray, margin: float, out: PairOutput, slot: int) -> int:
     """Capsule A against the plane B = (n, offset) (solid side n·x < offset; n unit).
 
     capsule = (frame, radius, half_length) (:data:`Capsule`; the segment along the frame's third
@@ -105,7 +105,7 @@ def capsule_plane(capsule: Capsule, plane: np.ndarray, margin: float, out: Conta
 
 
 @njit(cache=True)
-def sphere_capsule(sphere: Sphere, capsule: Capsule, margin: float, out: ContactRows, slot: int) -> int:
+def sphere_capsule(sphere: Sphere, capsule: Capsule, margin: float, out: PairOutput, slot: int) -> int:
     """Sphere (or particle: a sphere of radius ≥ 0) A against capsule B: at most 1 contact.
 
     sphere = (center_a (3,) [m], radius_a [m]); capsule = (frame_b, radius_b, half_length_b)
@@ -139,7 +139,7 @@ def sphere_capsule(sphere: Sphere, capsule: Capsule, margin: float, out: Contact
 
 
 @njit(cache=True)
-def capsule_capsule(capsule_a: Capsule, capsule_b: Capsule, margin: float, out: ContactRows, slot: int) -> int:
+def capsule_capsule(capsule_a: Capsule, capsule_b: Capsule, margin: float, out: PairOutput, slot: int) -> int:
     """Capsule A against capsule B: 1 contact, or 2 when the axes are (nearly) parallel.
 
     capsule_* = (frame_*, radius_*, half_*) (:data:`Capsule`: segment along the frame's third

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..compiling import njit
 from .capsule import PARALLEL_SIN, Capsule
-from .contact_output import ContactRows, write_local_contact
+from .contact_output import PairOutput, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
 from .primitive_pairs import Box
 from .segment_box import face_interval, face_patch, segment_box_closest
@@ -23,7 +23,7 @@ CAPSULE_BOX_CROSS_FEATURE = 36  # the capsule–box contact of a segment inside 
 
 
 @njit(cache=True)
-def capsule_box(capsule: Capsule, box: Box, margin: float, out: ContactRows, slot: int) -> int:
+def capsule_box(capsule: Capsule, box: Box, margin: float, out: PairOutput, slot: int) -> int:
     """Capsule A against box B (static or dynamic): up to 2 contacts.
 
     capsule = (frame, radius, half_length) (:data:`.capsule.Capsule`); box = (frame, half_extents)

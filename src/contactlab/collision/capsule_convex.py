@@ -64,7 +64,7 @@ import numpy as np
 from ..compiling import njit
 from .capsule import PARALLEL_SIN
 from .capsule_box import BOX_REL_EPS, CROSS_AXIS_EPS
-from .contact_output import ContactRows, Frame, write_local_contact
+from .contact_output import Frame, PairOutput, write_local_contact
 from .convex import HullArrays
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 from .hull_faces import projects_into_face, segment_over_face
@@ -93,7 +93,7 @@ def capsule_convex(
     frame_b: Frame,
     hull: HullArrays,
     margin: float,
-    out: ContactRows,
+    out: PairOutput,
     slot: int,
 ) -> int:
     """Capsule A against hull B (static or dynamic): up to 2 contacts from ``slot`` on.

@@ -47,7 +47,7 @@ import numpy as np
 from ..compiling import njit
 from ..meshes import boxes_overlap, mesh_triangles_near
 from .capsule import Capsule
-from .contact_output import ContactRows, contact_rows
+from .contact_output import PairOutput, pair_output
 from .mesh_features import (
     EDGE2,
     FACE,
@@ -71,7 +71,7 @@ COPLANAR_COS = 1.0 - 1e-9  # two triangle normals with a dot product above this 
 
 @njit(cache=True)
 def capsule_mesh(
-    capsule: Capsule, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
+    capsule: Capsule, mesh: MeshGeometry, margin: float, out: PairOutput, slot: int, max_contacts: int
 ) -> int:
     """Capsule A (a :data:`.capsule.Capsule`: frame = (centre (3,) [m], rotation (3, 3) body →
     world), the segment along its third column, radius, half length [m]) against the static
@@ -140,7 +140,7 @@ def capsule_mesh(
     other_distance = np.empty(n)
     near_lower, near_upper = np.empty(3), np.empty(3)  # the box about a record's q, ± twice the tolerance
     other_region = np.full(n, FACE, dtype=np.int64)
-    rows = contact_rows(count)
+    rows = pair_output(count)
     point, normal, depth, feature = rows
     found = 0
     for r in range(count):

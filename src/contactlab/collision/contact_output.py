@@ -1,6 +1,6 @@
 """Where every pair function writes its contacts: one row of the output rows.
 
-Every pair routine takes its output as one argument ``out``, the tuple :data:`ContactRows`
+Every pair routine takes its output as one argument ``out``, the tuple :data:`PairOutput`
 (point (N, 3) [m], normal (N, 3) unit from B into A, depth (N,) [m] (> 0 overlapping),
 feature (N,) int64 (stable id of the contact within its pair)), and a row ``slot`` to write
 from: one argument for the four arrays keeps the routines' signatures and call sites short.
@@ -13,19 +13,19 @@ import numpy as np
 from ..compiling import njit
 from .geometry import axpy, rotate
 
-ContactRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (point, normal, depth, feature)
+PairOutput = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (point, normal, depth, feature)
 Frame = tuple[np.ndarray, np.ndarray]  # (center (3,) [m], rotation (3, 3) body → world) of a collider
 
 
 @njit(cache=True)
-def contact_rows(capacity: int) -> ContactRows:
+def pair_output(capacity: int) -> PairOutput:
     """Empty rows for ``capacity`` contacts: point (n, 3), normal (n, 3), depth (n,), feature (n,) int64."""
     return (np.empty((capacity, 3)), np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, dtype=np.int64))
 
 
 @njit(cache=True)
 def write_contact(
-    out: ContactRows, slot: int, point: np.ndarray, normal: np.ndarray, depth: float, feature: int
+    out: PairOutput, slot: int, point: np.ndarray, normal: np.ndarray, depth: float, feature: int
 ) -> None:
     """Store one contact at row ``slot`` of ``out``."""
     out_point, out_normal, out_depth, out_feature = out
@@ -43,7 +43,7 @@ def write_local_contact(
     depth: float,
     feature: int,
     frame: Frame | None,
-    out: ContactRows,
+    out: PairOutput,
     slot: int,
 ) -> None:
     """Store at row ``slot`` one contact given in a collider's frame: point (3,) [m] and normal

@@ -5,7 +5,7 @@ normal is a unit vector from B into A (the direction that separates A), ``depth`
 overlapping, contacts are kept down to ``depth = −margin`` (speculative contacts), each
 ``point`` lies midway between the two surfaces, and every routine writes its contacts from
 ``slot`` on into ``out`` = (point (N, 3), normal (N, 3), depth (N,), feature (N,) int64)
-(:data:`.contact_output.ContactRows`), and returns how many it wrote (at most ``MAX_CONTACTS`` = 4).
+(:data:`.contact_output.PairOutput`), and returns how many it wrote (at most ``MAX_CONTACTS`` = 4).
 
 A hull is passed as one argument, its body-frame arrays in this order (:data:`HullArrays`; see
 :mod:`contactlab.hulls`, :func:`hulls.hull_arrays`), plus a centre (3,) [m] and a rotation (3, 3)
@@ -53,7 +53,7 @@ import numpy as np
 
 from ..compiling import njit
 from ..hulls import box_as_hull  # noqa: F401  (re-exported while branches that import it from here merge)
-from .contact_output import ContactRows, Frame
+from .contact_output import Frame, PairOutput
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, reduce_to_four
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
@@ -76,7 +76,7 @@ def write_reduced(
     tie: float,
     direction: np.ndarray,
     sign: float,
-    out: ContactRows,
+    out: PairOutput,
     slot: int,
 ) -> int:
     """The contacts of a hull on a plane (``convex_plane``) or on a face (hull–hull,
@@ -113,7 +113,7 @@ def write_reduced(
 
 
 @njit(cache=True)
-def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
+def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: float, out: PairOutput, slot: int) -> int:
     """Hull A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world), its arrays ``hull``) against the
     plane B = (n, offset) (4,): one contact per vertex within the margin, reduced to at most 4.
     Feature: the vertex index (mod 256, see the module docstring)."""
@@ -172,7 +172,7 @@ def _closest_on_segment(px, py, pz, a, b, out):
 
 @njit(cache=True)
 def sphere_convex(
-    center: np.ndarray, radius: float, hull_frame: Frame, hull: HullArrays, margin: float, out: ContactRows, slot: int
+    center: np.ndarray, radius: float, hull_frame: Frame, hull: HullArrays, margin: float, out: PairOutput, slot: int
 ) -> int:
     """Sphere (or particle: radius ≥ 0) A, centre (3,) [m], against hull B (``hull_frame`` = (centre (3,)
     [m], rotation (3, 3) body → world), its arrays ``hull``): one contact.

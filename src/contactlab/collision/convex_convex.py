@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, Frame
+from .contact_output import Frame, PairOutput
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear
 from .convex import HullArrays, write_reduced
 from .convex_sat import convex_convex_sat
@@ -274,7 +274,7 @@ def _segment_closest(p1, q1, p2, q2, out_1, out_2):
 
 @njit(cache=True)
 def convex_convex(
-    frame_a: Frame, hull_a: HullArrays, frame_b: Frame, hull_b: HullArrays, margin: float, out: ContactRows, slot: int
+    frame_a: Frame, hull_a: HullArrays, frame_b: Frame, hull_b: HullArrays, margin: float, out: PairOutput, slot: int
 ) -> int:
     """Hull A against hull B: up to 4 contacts written from ``slot`` on; returns their count.
 

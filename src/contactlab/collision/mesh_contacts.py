@@ -22,7 +22,7 @@ import numpy as np
 from .. import shapes
 from ..compiling import njit
 from .capsule_mesh import capsule_mesh
-from .contact_output import contact_rows
+from .contact_output import pair_output
 from .convex import stored_hull
 from .polytope_mesh import box_mesh, convex_mesh
 from .sphere_mesh import sphere_mesh
@@ -59,7 +59,7 @@ def shapes_against_mesh(
     """
     count_shapes = kinds.shape[0]
     capacity = max(1, count_shapes * max_per_shape)
-    rows = contact_rows(capacity)
+    rows = pair_output(capacity)
     point, normal, depth, feature = rows
     owner = np.empty(capacity, dtype=np.int64)
     count = np.int64(capacity) * 0  # (not the literal 0: that would compile the callees twice)

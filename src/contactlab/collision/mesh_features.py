@@ -7,7 +7,7 @@ closed mesh) tells whether the point is inside a one-sided mesh. The contact rou
 (:mod:`.sphere_mesh`, :mod:`.polytope_mesh`, :mod:`.capsule_mesh`), the static signed
 distances (:mod:`.signed_distance`) and the swept test (:mod:`.mesh_sweep`) all judge a point
 by these rules, so they agree on what is inside. A shape's candidate contacts (rows of
-:func:`.contact_output.contact_rows`) are chosen by :func:`keep_deepest` or
+:func:`.contact_output.pair_output`) are chosen by :func:`keep_deepest` or
 :func:`keep_spread` when there are more than it may keep, and written by :func:`write_kept`.
 Meshes are :class:`~contactlab.meshes.MeshGeometry` tuples (``TriangleMesh.geometry``).
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..compiling import njit
 from ..meshes import mesh_triangles_near
-from .contact_output import ContactRows, write_contact
+from .contact_output import PairOutput, write_contact
 from .geometry import segment_closest_parameters
 
 if TYPE_CHECKING:
@@ -360,8 +360,8 @@ def keep_spread(points: np.ndarray, depth: np.ndarray, limit: int, tolerance: fl
 
 
 @njit(cache=True)
-def write_kept(chosen: np.ndarray, candidates: ContactRows, out: ContactRows, slot: int) -> int:
-    """Write the ``candidates`` (rows as :data:`.contact_output.ContactRows`, C of them) marked in
+def write_kept(chosen: np.ndarray, candidates: PairOutput, out: PairOutput, slot: int) -> int:
+    """Write the ``candidates`` (rows as :data:`.contact_output.PairOutput`, C of them) marked in
     ``chosen`` (C,) into ``out`` from ``slot`` on, in their order; returns how many."""
     point, normal, depth, feature = candidates
     written = 0

@@ -28,7 +28,7 @@ from .box_box import box_box
 from .capsule import capsule_capsule, capsule_plane, sphere_capsule
 from .capsule_box import capsule_box
 from .capsule_convex import capsule_convex
-from .contact_output import ContactRows, Frame
+from .contact_output import Frame, PairOutput
 from .convex import convex_plane, sphere_convex, stored_hull
 from .convex_convex import convex_convex
 from .families import ALL_FAMILIES, BOX, CAPSULE, CONVEX, FAMILIES, PLANE, POINT, SPHERE
@@ -204,7 +204,7 @@ frame (centre (3,) [m], rotation (3, 3) body → world; :data:`.contact_output.F
 
 
 @njit(cache=True)
-def collide_pair(a: Collider, b: Collider, margin: float, hull_store: tuple, out: ContactRows, slot: int) -> int:
+def collide_pair(a: Collider, b: Collider, margin: float, hull_store: tuple, out: PairOutput, slot: int) -> int:
     """Contacts of shape A against shape B (each a :data:`Collider`) written from ``slot`` on;
     returns their count (at most MAX_PER_PAIR). Swapping the two shapes flips the normal and
     nothing else. Every routine is compiled in: the scene-wide narrow phase
@@ -212,7 +212,7 @@ def collide_pair(a: Collider, b: Collider, margin: float, hull_store: tuple, out
 
     margin [m]: contacts with gaps down to −margin are kept; hull_store: the model's packed
     hulls (Model.hull_store, or ``empty_hull_store()``); out: the rows (point (n, 3) [m],
-    normal (n, 3), depth (n,) [m], feature (n,) int64; :data:`.contact_output.ContactRows`)
+    normal (n, 3), depth (n,) [m], feature (n,) int64; :data:`.contact_output.PairOutput`)
     written from ``slot`` on."""
     kind_a, params_a, (center_a, rotation_a) = a
     kind_b, params_b, (center_b, rotation_b) = b

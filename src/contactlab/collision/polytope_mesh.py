@@ -36,7 +36,7 @@ import numpy as np
 
 from ..compiling import njit
 from ..meshes import mesh_triangles_near
-from .contact_output import ContactRows, Frame, contact_rows
+from .contact_output import Frame, PairOutput, pair_output
 from .convex import HullArrays
 from .mesh_features import FEATURES_PER_TRIANGLE, keep_spread, write_kept
 from .primitive_pairs import Box
@@ -92,11 +92,11 @@ def _mesh_vertices_near(mesh, candidates, center, rotation):
 def _corners_against_mesh(corners, local, mesh, margin, rows, count):
     """Each of a polytope's corners (V, 3) [m] as a point (a sphere of radius 0) against the
     mesh, with the sphere rules: at most ``CORNER_CONTACTS`` each, the deepest. Appends them to
-    the candidate ``rows`` (:data:`.contact_output.ContactRows`) from ``count`` on, with feature
+    the candidate ``rows`` (:data:`.contact_output.PairOutput`) from ``count`` on, with feature
     ``16 · triangle + local[v]`` for corner v (local (V,) < 16); returns the new count."""
     point, normal, depth, feature = rows
     corner_limit = count * 0 + CORNER_CONTACTS  # (an int64 variable, not a literal)
-    corner_rows = contact_rows(CORNER_CONTACTS)
+    corner_rows = pair_output(CORNER_CONTACTS)
     corner_point, corner_normal, corner_depth, corner_feature = corner_rows
     for v in range(corners.shape[0]):
         found = sphere_mesh((corners[v], 0.0), mesh, margin, corner_rows, count * 0, corner_limit)
@@ -112,7 +112,7 @@ def _corners_against_mesh(corners, local, mesh, margin, rows, count):
 
 
 @njit(cache=True)
-def box_mesh(box: Box, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int) -> int:
+def box_mesh(box: Box, mesh: MeshGeometry, margin: float, out: PairOutput, slot: int, max_contacts: int) -> int:
     """Box A (a :data:`.primitive_pairs.Box`: frame = (centre (3,) [m], rotation (3, 3) body →
     world), half extents (3,) [m]) against the static mesh B.
 
@@ -136,7 +136,7 @@ def box_mesh(box: Box, mesh: MeshGeometry, margin: float, out: ContactRows, slot
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
     # all candidate contacts: corners (at most CORNER_CONTACTS each), then mesh vertices
     capacity = 8 * CORNER_CONTACTS + 3 * candidates.shape[0]
-    rows = contact_rows(capacity)
+    rows = pair_output(capacity)
     point, normal, depth, feature = rows
     corners = np.empty((8, 3))
     for corner in range(8):  # local index: the corner, numbered as in box_plane
@@ -179,7 +179,7 @@ def box_mesh(box: Box, mesh: MeshGeometry, margin: float, out: ContactRows, slot
 
 @njit(cache=True)
 def convex_mesh(
-    frame: Frame, hull: HullArrays, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
+    frame: Frame, hull: HullArrays, mesh: MeshGeometry, margin: float, out: PairOutput, slot: int, max_contacts: int
 ) -> int:
     """Convex hull A (``frame`` = (centre (3,) [m], rotation (3, 3) body → world); body-frame arrays
     :data:`.convex.HullArrays`) against the static mesh B, as :func:`box_mesh` (module docstring).
@@ -209,7 +209,7 @@ def convex_mesh(
         upper[i] += margin
     candidates = mesh_triangles_near(mesh, lower, upper, np.empty(32, dtype=np.int64))
     capacity = vertex_count * CORNER_CONTACTS + 3 * candidates.shape[0]
-    rows = contact_rows(capacity)
+    rows = pair_output(capacity)
     point, normal, depth, feature = rows
     count = _corners_against_mesh(world, np.arange(vertex_count) % HULL_VERTEX_FEATURES, mesh, margin, rows, slot * 0)
     # mesh vertices inside the hull (its face planes moved out by the margin), each once

@@ -5,7 +5,7 @@ Conventions as in :mod:`contactlab.collision.narrow_phase`, which dispatches to 
 is the first argument, the normal points from B into A, ``depth`` > 0 when overlapping,
 contacts down to ``depth = −margin`` are kept, each written from index ``slot`` on into ``out``
 = (point (N, 3), normal (N, 3), depth (N,), feature (N,) int64)
-(:data:`.contact_output.ContactRows`); each returns how many it wrote. A shape is passed as
+(:data:`.contact_output.PairOutput`); each returns how many it wrote. A shape is passed as
 one argument, the tuple of what places and sizes it: a sphere as :data:`Sphere`, a box as
 :data:`Box`, a plane as its (4,) array (n_x, n_y, n_z, offset [m]), unit n, solid side
 n · x < offset.
@@ -14,14 +14,14 @@ n · x < offset.
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, Frame, write_contact
+from .contact_output import Frame, PairOutput, write_contact
 
 Sphere = tuple[np.ndarray, float]  # (centre (3,) [m], radius [m] ≥ 0) of a sphere or a particle
 Box = tuple[Frame, np.ndarray]  # (frame: centre (3,) [m], rotation (3, 3) body → world; half extents (3,) [m])
 
 
 @njit(cache=True)
-def sphere_plane(sphere: Sphere, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
+def sphere_plane(sphere: Sphere, plane: np.ndarray, margin: float, out: PairOutput, slot: int) -> int:
     """Sphere (or particle of this radius) A against the plane B = (n, offset).
 
     Written in scalars (no temporary arrays): it runs once per sphere and wall every step."""
@@ -39,7 +39,7 @@ def sphere_plane(sphere: Sphere, plane: np.ndarray, margin: float, out: ContactR
 
 
 @njit(cache=True)
-def sphere_sphere(sphere_a: Sphere, sphere_b: Sphere, margin: float, out: ContactRows, slot: int) -> int:
+def sphere_sphere(sphere_a: Sphere, sphere_b: Sphere, margin: float, out: PairOutput, slot: int) -> int:
     """Sphere A against sphere B (either may be a particle: a sphere of radius ≥ 0).
 
     Written in scalars (no temporary arrays): a pile makes thousands of these pairs a step."""
@@ -72,7 +72,7 @@ def sphere_sphere(sphere_a: Sphere, sphere_b: Sphere, margin: float, out: Contac
 
 
 @njit(cache=True)
-def box_plane(box: Box, plane: np.ndarray, margin: float, out: ContactRows, slot: int) -> int:
+def box_plane(box: Box, plane: np.ndarray, margin: float, out: PairOutput, slot: int) -> int:
     """Box A against plane B: one contact per corner within the margin (feature = corner 0..7)."""
     frame, half_extents = box
     center, rotation = frame
@@ -92,7 +92,7 @@ def box_plane(box: Box, plane: np.ndarray, margin: float, out: ContactRows, slot
 
 
 @njit(cache=True)
-def sphere_box(sphere: Sphere, box: Box, margin: float, out: ContactRows, slot: int) -> int:
+def sphere_box(sphere: Sphere, box: Box, margin: float, out: PairOutput, slot: int) -> int:
     """Sphere A (or particle) against box B, by the closest point of the box to the centre.
 
     A centre inside the box is pushed out through the nearest face (feature = 1 + face);

@@ -13,7 +13,7 @@ Three bundles keep the argument lists short:
 * ``sink`` (:data:`Sink`): ``(margin, frame, out)``, which contacts are written and where: those
   with depth ≥ −margin [m], through B's ``frame`` (:data:`.contact_output.Frame`: centre (3,)
   [m], rotation (3, 3) body → world; None: given in world coordinates already) into ``out``
-  (:data:`.contact_output.ContactRows`), from index ``slot`` on.
+  (:data:`.contact_output.PairOutput`), from index ``slot`` on.
 
 A face is its plane ``normal · x = offset`` (:data:`Plane`: unit outward ``normal`` (3,), ``offset`` [m]).
 An edge is ``(center, direction, half_length)`` (:data:`Edge`), in B's frame.
@@ -23,14 +23,14 @@ Compiled (``@njit(cache=True)``), float64, no fastmath.
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, Frame, write_local_contact
+from .contact_output import Frame, PairOutput, write_local_contact
 from .geometry import axpy, clamp, dot, midpoint, segment_closest_parameters
 
 Segment = tuple[np.ndarray, np.ndarray, float, float]  # (origin, direction, half_length, radius) in B's frame
 Plane = tuple[np.ndarray, float]  # (unit outward normal (3,), offset [m]) of a face of B, in B's frame
 Edge = tuple[np.ndarray, np.ndarray, float]  # (centre (3,) [m], unit direction (3,), half length [m]) of an edge of B
 Part = tuple[float, float]  # (lo, hi) [m]: the part lo ≤ s ≤ hi of the segment
-Sink = tuple[float, Frame | None, ContactRows]  # (margin [m], B's frame or None, out): contacts kept and where
+Sink = tuple[float, Frame | None, PairOutput]  # (margin [m], B's frame or None, out): contacts kept and where
 Closest = tuple[np.ndarray, np.ndarray, float]  # (point (3,) [m], unit normal (3,), depth [m]), B's frame
 
 

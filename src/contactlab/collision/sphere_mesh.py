@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..compiling import njit
-from .contact_output import ContactRows, contact_rows
+from .contact_output import PairOutput, pair_output
 from .mesh_features import (
     EDGE2,
     FACE,
@@ -75,7 +75,7 @@ if TYPE_CHECKING:
 
 @njit(cache=True)
 def sphere_mesh(
-    sphere: Sphere, mesh: MeshGeometry, margin: float, out: ContactRows, slot: int, max_contacts: int
+    sphere: Sphere, mesh: MeshGeometry, margin: float, out: PairOutput, slot: int, max_contacts: int
 ) -> int:
     """Sphere (or particle) A (a :data:`.primitive_pairs.Sphere`: centre (3,) [m], radius [m] ≥ 0)
     against the static mesh B.
@@ -155,7 +155,7 @@ def sphere_mesh(
                 break
     # 3. normal, signed distance, depth; features the centre is behind (the far side of a
     #    thin solid) are dropped: the centre is outside
-    rows = contact_rows(n)
+    rows = pair_output(n)
     point, normal, depth, feature = rows
     count = 0
     for i in range(n):

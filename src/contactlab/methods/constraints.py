@@ -56,12 +56,12 @@ from .jacobian_rows import row_products
 from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_settings, restitution_threshold, solve
 from .sequential import contact_order
 from .velocity_level import (
-    detect,
     gravity_along_normals,
     impact_targets,
     predict,
     split_at_impact,
     step_without_contacts,
+    swept_contacts,
     warm_impulses,
 )
 
@@ -361,7 +361,7 @@ def step(
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
-    contacts, manifolds = detect(model, state, options, sweep)
+    contacts, manifolds = swept_contacts(model, state, options, sweep)
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, CARRIED["constraints"])
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve

@@ -171,18 +171,18 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
     or time of impact (0, False there); the velocity methods make 1 pass."""
     velocity = method != "projection"
     return LoopSettings(
-        float(dt),
-        int(options.iterations),
-        float(options.tolerance),
-        float(restitution_threshold(model, dt, options)) if velocity else 0.0,
-        float(options.stabilization) if velocity else 0.0,
-        float(options.slop),
-        float(options.max_push_velocity) if velocity else 0.0,
-        bool(options.time_of_impact) if velocity else False,
-        float(options.warm_start),
-        float(options.contact_margin),
-        float(options.manifold_tolerance),
-        1 if velocity else int(options.passes),
+        dt=float(dt),
+        iterations=int(options.iterations),
+        tolerance=float(options.tolerance),
+        threshold=restitution_threshold(model, dt, options) if velocity else 0.0,
+        stabilization=float(options.stabilization) if velocity else 0.0,
+        slop=float(options.slop),
+        max_push_velocity=float(options.max_push_velocity) if velocity else 0.0,
+        time_of_impact=bool(options.time_of_impact) if velocity else False,
+        warm_start=float(options.warm_start),
+        margin=float(options.contact_margin),
+        manifold_tolerance=float(options.manifold_tolerance),
+        passes=1 if velocity else int(options.passes),
     )
 
 

@@ -33,6 +33,7 @@ from .loop_stages import (
     swept_reach,
 )
 from .penalty import PenaltyLoop, finish, integrate, springs_at
+from .penalty_springs import IMPLICIT_BY_INTEGRATOR
 from .projection import advance, displaced_motion, project
 from .velocity_level import respond
 
@@ -278,6 +279,6 @@ def penalty_step(
         passes,
         residual,
         energy,
-        implicit and penalty.springs.implicit != 3,
+        implicit and penalty.springs.implicit != IMPLICIT_BY_INTEGRATOR,
         linear_iterations,
     )

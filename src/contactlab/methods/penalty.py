@@ -52,8 +52,11 @@ from .jacobian_rows import ContactRows, row_products
 from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
+    EXPLICIT_EULER,
     GUARD_SWEEPS,
     GUARD_TOLERANCE,
+    IMPLICIT_BY_INTEGRATOR,
+    IMPLICIT_MODES,
     INTEGRATORS,
     SpringSettings,
     anchors_after,
@@ -270,16 +273,17 @@ def spring_settings(options: Options, integrator: str) -> SpringSettings:
     def number(value):
         return -1.0 if isinstance(value, str) else float(value)
 
-    implicit = 3 if integrator == "backward_euler" else {"never": 0, "auto": 1, "always": 2}[options.implicit_springs]
+    by_integrator = integrator == "backward_euler"
+    implicit = IMPLICIT_BY_INTEGRATOR if by_integrator else IMPLICIT_MODES[options.implicit_springs]
     return SpringSettings(
-        number(options.stiffness),
-        float(options.allowed_penetration),
-        number(options.damping_ratio),
-        number(options.friction_stiffness),
-        implicit,
-        INTEGRATORS.index(integrator),
-        int(options.implicit_iterations),
-        float(options.linear_tolerance),
+        stiffness=number(options.stiffness),
+        allowed_penetration=float(options.allowed_penetration),
+        damping_ratio=number(options.damping_ratio),
+        friction_stiffness=number(options.friction_stiffness),
+        implicit=implicit,
+        integrator=INTEGRATORS.index(integrator),
+        implicit_iterations=int(options.implicit_iterations),
+        linear_tolerance=float(options.linear_tolerance),
     )
 
 
@@ -395,13 +399,24 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
     """(the LoopSettings of ``hold_back``'s sweeps — GUARD_SWEEPS, GUARD_TOLERANCE, steps of dt
     [s], the contact margin —, the PenaltyLoop of these Options and integrator)."""
     guard = LoopSettings(
-        float(dt), GUARD_SWEEPS, GUARD_TOLERANCE, 0.0, 0.0, 0.0, 0.0, False, 0.0, float(options.contact_margin), 0.0, 1
+        dt=float(dt),
+        iterations=GUARD_SWEEPS,
+        tolerance=GUARD_TOLERANCE,
+        threshold=0.0,
+        stabilization=0.0,
+        slop=0.0,
+        max_push_velocity=0.0,
+        time_of_impact=False,
+        warm_start=0.0,
+        margin=float(options.contact_margin),
+        manifold_tolerance=0.0,
+        passes=1,
     )
     penalty = PenaltyLoop(
-        spring_settings(options, integrator),
-        np.array(model.collider_half_thickness, dtype=float),
-        np.array(model.particle_radius, dtype=float),
-        np.array(model.body_kinematic, dtype=np.bool_),
+        springs=spring_settings(options, integrator),
+        thickness=np.array(model.collider_half_thickness, dtype=float),
+        particle_radius=np.array(model.particle_radius, dtype=float),
+        fixed=np.array(model.body_kinematic, dtype=np.bool_),
     )
     return guard, penalty
 
@@ -520,7 +535,6 @@ def finish(
 # (two constants, as Numba slices a tuple only by constants, not by a sum of them).
 _FRICTION = ContactArrays._fields.index("friction")
 _AFTER_FRICTION = _FRICTION + 1
-EXPLICIT_EULER = INTEGRATORS.index("explicit_euler")  # SpringSettings.integrator of explicit Euler
 
 
 @njit(cache=True)

@@ -156,7 +156,7 @@ def system_diagonal(system: SpringSystem) -> np.ndarray:
 
 
 @njit(cache=True)
-def conjugate_gradients(
+def spring_conjugate_gradients(
     system: SpringSystem, rhs: np.ndarray, guess: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, float, int]:
     """A v = rhs (``SpringSystem``) by conjugate gradients with the Jacobi preconditioner
@@ -224,7 +224,7 @@ def implicit_spring_velocities(
     contact sticking (the elastic predictor) says which anchor springs would pull harder than
     μ F_n; those contacts slip in the direction of that pull, with the force μ F_n⁺ of the
     latest pass. Then the engaged normal springs (F_n⁺ > 0) and the slip forces are found by
-    repeating the solve (``conjugate_gradients``) until they stop changing (an active-set
+    repeating the solve (``spring_conjugate_gradients``) until they stop changing (an active-set
     iteration; for convex energies such as a plane's, and no friction, it is the exact backward
     Euler step, which never adds energy). Where the passes have not settled after
     ``implicit_iterations`` and some contact slips, the slip forces are taken as μ k δ, the
@@ -273,7 +273,7 @@ def implicit_spring_velocities(
         rhs = base + free * (h * transpose_product(rows, pull, np.zeros(v_free.shape[0])))
         if is_driven:
             rhs -= free * transpose_product(rows, weight * driven, np.zeros(v_free.shape[0]))
-        v_new, residual, iterations = conjugate_gradients(
+        v_new, residual, iterations = spring_conjugate_gradients(
             SpringSystem(rows, weight, mass, free), rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
         )
         linear_iterations += iterations

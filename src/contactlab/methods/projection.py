@@ -48,7 +48,7 @@ from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
 from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, loop_settings, solve
 from .sequential import contact_order
-from .velocity_level import detect
+from .velocity_level import swept_contacts
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -99,7 +99,7 @@ def step(
     # 3–4, over the swept step: the contacts at the start within reach of the step's motion
     # (speculative: a gap may close, never be crossed), projected — nothing passes through
     # anything, however fast; then at the projected positions, for what the linearization missed
-    contacts, manifolds = detect(model, state, options, sweep)
+    contacts, manifolds = swept_contacts(model, state, options, sweep)
     arrays, motion, rotation, carried = loop_inputs(model, state, "projection")
     settings = loop_settings(model, "projection", options, dt)
     _, _, _, _, _, slabs, parallel = compile_flags(model, "projection", options)

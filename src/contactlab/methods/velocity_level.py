@@ -3,7 +3,7 @@ velocities are impulses): impulses (methods.impulse) and hard constraints on vel
 matrix-free (methods.constraints, C5b).
 
 Stages 1–3 from Python for every scene (``predict``: positions moved with the free velocities,
-how far everything sweeps; ``detect``: contacts over the swept step; ``step_without_contacts``);
+how far everything sweeps; ``swept_contacts``: contacts over the swept step; ``step_without_contacts``);
 stages 4–5 compiled, in ``respond`` — the contacts' rows, the targets of their normal rows
 (``targets``: impulses' collision waves, ``resolve_collisions``, then resting targets;
 constraints' simultaneous ``impact_targets``), the warm start (``warm_impulses``), the sweeps
@@ -70,7 +70,7 @@ def predict(
     return move, predicted, swept_distances(model, move[0], free[1], move[2], h)
 
 
-def detect(
+def swept_contacts(
     model: Model, state: State, options: KeptManifoldOptions, sweep: np.ndarray
 ) -> tuple[Contacts, Manifolds | None]:
     """Stage 3: collision detection over the swept step — contacts at the start positions with
@@ -541,7 +541,7 @@ def step(
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
-    contacts, manifolds = detect(model, state, options, sweep)
+    contacts, manifolds = swept_contacts(model, state, options, sweep)
     keys = CARRIED[method]
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, keys)
