@@ -110,6 +110,7 @@ def guess_new_impulses(
     masses: tuple[np.ndarray, np.ndarray],
     gravity: np.ndarray,
     h: float,
+    pairs: np.ndarray | None,
 ) -> None:
     """The warm start of the contacts that carry nothing from the last step (``found`` (C,) False):
     the weight each would bear at rest, over the step. ``warm`` (C, 3) [N s] holds the carried
@@ -120,8 +121,9 @@ def guess_new_impulses(
     particle masses (P,)) [kg], positions (B, 3), (P, 3) [m], ``gravity`` (3,) [m/s²].
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
-    one body's contacts find its weight in a sweep or two): nothing is guessed there, and
-    ``warm_impulses`` makes no guess there.
+    one body's contacts find its weight in a sweep or two): nothing is guessed there. ``pairs``
+    is ``LoopModel.cloth_of``, None in exactly such a scene (no dynamic pair possible), and as an
+    argument typed None it leaves the load path uncompiled there (2 s of a ball's first run).
 
     Why: started from zero, a stack must build its load path sweep by sweep, the weight of the
     top box reaching the floor only after as many sweeps as there are levels; started from the
@@ -129,6 +131,8 @@ def guess_new_impulses(
     of it in the first second. The solve itself, and so its answer to the tolerance, is
     unchanged: a guess too large (an impact, a contact about to open) is taken back by the
     accumulated clamping like any warm start."""
+    if pairs is None:  # typed None: a scene with no dynamic pair, whose load path Numba leaves uncompiled
+        return
     B = body_position.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     if fraction <= 0.0 or g == 0.0 or found.all() or B + particle_position.shape[0] < LOAD_PATH_FROM:
@@ -426,6 +430,7 @@ def warm_impulses(
         masses,
         model.gravity,
         settings.dt,
+        model.cloth_of,
     )
     return warm
 
