@@ -228,3 +228,41 @@ def test_validate_starts_the_peers_from_the_measurement_and_finds_no_error_in_th
     assert rows["mujoco"]["position_error_pct"] < 1e-6 and rows["mujoco"]["rotation_error_deg"] < 1e-4
     assert rows["pybullet"]["position_error_pct"] > 0.1 and rows["impulse"]["position_error_pct"] > 0.1
     assert result.best == "mujoco"
+
+
+def test_a_fit_whose_runs_together_repay_compiling_takes_the_compiled_loop(tmp_path, monkeypatch):
+    """A method's runs in a fit are one scene of one size: as a sweep's alike cells, they take the
+    compiled loop where all of them together (evaluations × training files + the held-out ones,
+    each as long as the longest measurement) repay compiling it, and leave it to each run's own
+    length otherwise. The cluster is replaced by a recorder of the jobs: what runs is not the
+    question here, only what each job asks simulate for."""
+    from contactlab import fitting
+
+    files = [_toss(tmp_path / f"toss_{k}.h5", duration=0.2, velocities=True, seed=k) for k in range(2)]
+    asked, jobs = [], []
+
+    def recorded(client, function, pending, progress=False, description=""):
+        for key, job in pending:
+            jobs.append(job)
+            yield key, {"status": "ok", "position_error_pct": 1.0 + abs(hash(key)) % 7}
+
+    monkeypatch.setattr(fitting.cluster, "run_tasks", recorded)
+    for repays, expected in ((False, None), (True, True)):
+        monkeypatch.setattr(
+            fitting, "repays_compiling", lambda model, steps, runs, answer=repays: asked.append((steps, runs)) or answer
+        )
+        jobs.clear()
+        vary = ["materials.0.friction=0.1:0.5"]
+        fitting.fit(
+            SCENE,
+            files,
+            vary,
+            ["impulse"],
+            0.5,
+            tmp_path / f"fit_{repays}",
+            overrides=COARSE,
+            evaluations=3,
+            client=object(),
+        )
+        assert jobs and {job["compiled_loop"] for job in jobs} == {expected}
+    assert asked == [(50, 3 * 1 + 1)] * 2  # 0.2 s at dt 0.004; 3 evaluations of 1 training file, 1 held out
