@@ -41,8 +41,10 @@ For item 2 of the issue the per-contact velocity change of the methods' own orde
 sweep at which the method stops is kept with each contact's height, its bodies' contact
 count and whether it was carried from the last step (warm) or is new.
 
-Results: ``benchmarks/results/convergence.json`` and ``convergence_<scene>.png`` (residual vs
-sweeps), ``convergence_<scene>_contacts.png`` (where the last sweeps' changes are).
+Results: ``benchmarks/results/convergence.json`` and, in ``--figures`` (default
+benchmarks/results; ``docs/make_figures.py`` writes the constraints guide's with it),
+``convergence_pile.png`` / ``convergence_pyramid.png`` (residual vs sweeps) and
+``convergence_pile_contacts.png`` (where the last sweeps' changes are).
 """
 
 import argparse
@@ -72,7 +74,7 @@ from contactlab.methods.sequential import (  # noqa: E402
     solve_sequential_impulses,
     split_into_slabs,
 )
-from contactlab.methods.velocity_level import detect, predict, warm_impulses  # noqa: E402
+from contactlab.methods.velocity_level import predict, swept_contacts, warm_impulses  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS_DIR = os.path.join(HERE, "results")
@@ -93,7 +95,7 @@ def capture(model, state, options):
     free = free_velocities(model, state, h, "symplectic_euler")
     v_free = np.array(stack(*free), dtype=float)
     _, _, sweep = predict(model, state, free, "symplectic_euler", h)
-    contacts, _ = detect(model, state, options, sweep)
+    contacts, _ = swept_contacts(model, state, options, sweep)
     arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
     settings = loop_settings(model, "constraints", options, h)
     found = contacts.arrays()
@@ -293,7 +295,7 @@ def plot_contacts(label, problem, delta, stop, path):
     plt.close(fig)
 
 
-def run_scene(name, label, model, duration, sweeps, newton_steps, assembled):
+def run_scene(name, label, model, duration, sweeps, newton_steps, assembled, figures=RESULTS_DIR):
     t0 = time.perf_counter()
     state, summary = settle(model, duration)
     mean = summary["solver"]["mean_iterations"]
@@ -328,8 +330,9 @@ def run_scene(name, label, model, duration, sweeps, newton_steps, assembled):
     r = methods_history[stop].reshape(-1, 3)
     sliding = np.hypot(r[:, 1], r[:, 2]) >= 0.999 * problem["friction"] * r[:, 0]
     problem["sliding"] = sliding & (r[:, 0] > 0)
-    plot_scene(name, label, curves, problem["tolerance"], os.path.join(RESULTS_DIR, f"convergence_{name}.png"))
-    plot_contacts(label, problem, delta, stop, os.path.join(RESULTS_DIR, f"convergence_{name}_contacts.png"))
+    kind = name.rstrip("0123456789")  # pile, pyramid: the figures' names hold no size, so the docs' links stay
+    plot_scene(name, label, curves, problem["tolerance"], os.path.join(figures, f"convergence_{kind}.png"))
+    plot_contacts(label, problem, delta, stop, os.path.join(figures, f"convergence_{kind}_contacts.png"))
     top = np.argsort(delta)[::-1][: max(1, C // 100)]
     facts = dict(
         contacts=C,
@@ -373,9 +376,14 @@ def main(argv=None):
     parser.add_argument("--only", nargs="*", choices=("pile", "pyramid"), default=("pile", "pyramid"))
     parser.add_argument("--assembled", nargs="*", default=("nsgs", "pgs", "redblack", "newton"))
     parser.add_argument("--numba-threads", type=int, default=2, help="(pinned before NumPy loads)")
+    parser.add_argument(
+        "--figures", default=RESULTS_DIR, help="folder of the PNGs (docs/make_figures.py: docs/figures/constraints)"
+    )
+    parser.add_argument("--results", default=RESULTS_DIR, help="folder of convergence.json (merged run by run)")
     args = parser.parse_args(argv)
-    os.makedirs(RESULTS_DIR, exist_ok=True)
-    path = os.path.join(RESULTS_DIR, "convergence.json")
+    os.makedirs(args.results, exist_ok=True)
+    os.makedirs(args.figures, exist_ok=True)
+    path = os.path.join(args.results, "convergence.json")
     results = {}
     if os.path.exists(path):
         with open(path) as f:
@@ -384,7 +392,14 @@ def main(argv=None):
         model, _ = contactlab_pile(args.pile)
         key = f"pile{args.pile}"
         results[key] = run_scene(
-            key, f"pile of {args.pile} spheres", model, args.settle_pile, args.sweeps, args.newton_steps, args.assembled
+            key,
+            f"pile of {args.pile} spheres",
+            model,
+            args.settle_pile,
+            args.sweeps,
+            args.newton_steps,
+            args.assembled,
+            args.figures,
         )
     if "pyramid" in args.only:
         key = f"pyramid{args.levels}"
@@ -396,6 +411,7 @@ def main(argv=None):
             args.sweeps,
             args.newton_steps,
             args.assembled,
+            args.figures,
         )
     with open(path, "w") as f:
         json.dump(results, f, indent=1)

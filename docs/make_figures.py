@@ -173,6 +173,23 @@ def viewer_picture(out, scale):
     print(f"viewer picture → {path}")
 
 
+def convergence_figures(out, scale):
+    """The constraints guide's residual-against-sweeps figures: ``benchmarks/convergence.py``
+    (its own process, which pins the threads before NumPy loads) on the benchmark's 1000-sphere
+    pile and 20-level pyramid; at a small scale a 100-sphere pile and a 5-level pyramid, briefly
+    settled, to test the script."""
+    import subprocess
+    import sys
+
+    script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "convergence.py")
+    folder = os.path.join(out, "constraints")
+    small = ["--pile", "100", "--levels", "5", "--settle-pile", "0.2", "--settle-pyramid", "0.1", "--sweeps", "10"]
+    # a test's short runs keep their numbers beside their figures, not in benchmarks/results
+    quick = [*small, "--newton-steps", "1", "--assembled", "nsgs", "--results", folder] if scale < 1.0 else []
+    subprocess.run([sys.executable, script, "--figures", folder, *quick], check=True)
+    print(f"constraints: residual against sweeps → {folder}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures"))
@@ -184,6 +201,7 @@ def main():
     guide_figures(args.out, scale)
     penalty_sinking(args.out, scale)
     viewer_picture(args.out, scale)
+    convergence_figures(args.out, scale)
 
 
 if __name__ == "__main__":
