@@ -382,25 +382,13 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         ),
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
-        "steps_per_second": (
-            (steps - 1) / stepping_seconds
-            if steps > 1 and stepping_seconds > 0
-            else 1.0 / max(first_step_seconds, 1e-9)
-        ),
-        "steps_per_second_spread": tally.rate_spread(),
-        "bodies": model.body_count,
-        "particles": model.particle_count,
-        "max_contacts": tally.max_contacts,
-        "max_penetration": totals.max_penetration,
-        "final_penetration": totals.final_penetration,
-        "energy": totals.energy(),
+        **run_measures(model, tally, totals, steps),
         "solver": {
             "max_iterations": totals.max_iterations,
             "mean_iterations": tally.sweeps_made / steps,
             "cg_iterations_per_step": tally.linear_iterations_made / steps,
             "max_residual": totals.max_residual,
         },
-        "samples": totals.count,
         "health": health.summary(),
         "diverged": None,
         "interrupted": None,
@@ -420,6 +408,28 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         interrupted.run = Run(state, arrays, summary, model)
         raise interrupted
     return Run(state, arrays, summary, model)
+
+
+def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[str, Any]:
+    """What a run's summary measures, alike for a method's run and a peer engine's
+    (contactlab.peers): steps/s over the ``steps`` made after the first (which compiles; with its
+    spread, ``Tally``), the model's bodies and particles, the most contacts, the deepest and the
+    final overlap [m], the energy, and the samples recorded (``totals``, the Recorder's)."""
+    return {
+        "steps_per_second": (
+            (steps - 1) / tally.stepping_seconds
+            if steps > 1 and tally.stepping_seconds > 0
+            else 1.0 / max(tally.first_step_seconds, 1e-9)
+        ),
+        "steps_per_second_spread": tally.rate_spread(),
+        "bodies": model.body_count,
+        "particles": model.particle_count,
+        "max_contacts": tally.max_contacts,
+        "max_penetration": totals.max_penetration,
+        "final_penetration": totals.final_penetration,
+        "energy": totals.energy(),
+        "samples": totals.count,
+    }
 
 
 class _Stopped(Exception):

@@ -24,7 +24,7 @@ from ..errors import SimulationDiverged
 from ..model import Model
 from ..progress import bar as progress_bar
 from ..record import Recorder, streaming_recorder
-from ..simulation import Run, Tally
+from ..simulation import Run, Tally, run_measures
 from ..store import TrajectoryFile
 from ..validation import run_length
 
@@ -127,24 +127,12 @@ def _stepped(world, model, dt, steps, recorder, scene_name, progress):
         "recording_seconds": tally.recording_seconds,
         "compiled_loop": False,
         "stepping": world.name,
-        "steps_per_second": (
-            (made - 1) / tally.stepping_seconds
-            if made > 1 and tally.stepping_seconds > 0
-            else 1.0 / max(tally.first_step_seconds, 1e-9)
-        ),
-        "steps_per_second_spread": tally.rate_spread(),
-        "bodies": model.body_count,
-        "particles": model.particle_count,
-        "max_contacts": tally.max_contacts,
-        "max_penetration": totals.max_penetration,
-        "final_penetration": totals.final_penetration,
-        "energy": totals.energy(),
+        **run_measures(model, tally, totals, made),
         "solver": {
             "max_iterations": most if iterations else None,
             "mean_iterations": float(np.mean(iterations)) if iterations else None,
             "max_residual": None,
         },
-        "samples": totals.count,
         "diverged": None,
         "interrupted": None,
     }
