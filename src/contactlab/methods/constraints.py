@@ -53,15 +53,14 @@ from ..validation import check_choices, check_counts, number
 from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
-from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_settings, restitution_threshold, solve
+from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_model, loop_settings, solve
 from .sequential import contact_order
 from .velocity_level import (
-    gravity_along_normals,
-    impact_targets,
     predict,
     split_at_impact,
     step_without_contacts,
     swept_contacts,
+    targets,
     warm_impulses,
 )
 
@@ -288,24 +287,14 @@ def normal_row_targets(
     options: Options,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stage 4a: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
-    none) — on velocities (C5b, ``velocity_level.impact_targets``) or on accelerations (C5a)."""
+    none) — on velocities (C5b: ``velocity_level.targets``, what the matrix-free step and the
+    compiled loop compute) or on accelerations (C5a)."""
+    if options.formulation == "velocity":  # the sweep order is impulse's alone: any order does
+        settings = loop_settings(model, "constraints", options, h)
+        order = np.arange(contacts.count)
+        return targets(loop_model(model), settings, None, True, contacts.arrays(), rows, v_free, order)
     gap_at_start = -contacts.depth
     normal_velocity = row_products(rows, v_free)[:, 0]
-    if options.formulation == "velocity":
-        arrays = contacts.arrays()
-        return impact_targets(
-            gap_at_start,
-            normal_velocity,
-            gravity_along_normals(
-                arrays.body_a, arrays.body_b, arrays.particles_a, arrays.particles_b, arrays.normal, model.gravity
-            ),
-            arrays.restitution,
-            h,
-            restitution_threshold(model, h, options),
-            options.stabilization,
-            options.slop,
-            options.max_push_velocity,
-        )
     current = row_products(rows, stack(*state.velocities))[:, 0]
     return (acceleration_target(current, normal_velocity, gap_at_start, h, options), np.full(contacts.count, -1.0))
 
