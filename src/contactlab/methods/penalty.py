@@ -49,7 +49,7 @@ from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
 from .base import CollisionOptions, StepInfo
 from .jacobian_rows import ContactRows, row_products
-from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
+from .loop_stages import CARRIED, LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
     EXPLICIT_EULER,
@@ -368,7 +368,8 @@ def step(
     positions, velocities, offsets, energy = finish(
         arrays, guard, penalty, slabs, parallel, found, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
-    carried_on = dict(state.carried, anchor_ids=contacts.feature_id, anchor_offsets=offsets)
+    ids_key, offsets_key = CARRIED["penalty"]
+    carried_on = {**state.carried, ids_key: contacts.feature_id, offsets_key: offsets}
     new = State.assemble(state.time + dt, positions, velocities, carried_on)
     return new, StepInfo(
         contacts,

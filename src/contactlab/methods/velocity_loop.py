@@ -342,13 +342,14 @@ class PenaltyStepper(Stepper):
         self._start(model, state)
         self.settings, penalty = penalty_loop(model, options, integrator, dt)  # settings: hold_back's sweeps
         self.flags = compile_flags(model, "penalty", options) + (penalty,)
-        self.carried = _carried(Manifolds.empty(), state.carried.get("anchor_ids"), state.carried.get("anchor_offsets"))
-        self.other = {k: v for k, v in state.carried.items() if k not in ("anchor_ids", "anchor_offsets")}
+        self.keys = CARRIED["penalty"]
+        self.carried = _carried(Manifolds.empty(), state.carried.get(self.keys[0]), state.carried.get(self.keys[1]))
+        self.other = {k: v for k, v in state.carried.items() if k not in self.keys}
 
     def state(self) -> State:
         """The State reached (copies), its anchors under the keys ``penalty.step`` carries them by."""
         _, ids, offsets = self.carried
-        return self._state_carrying(dict(self.other, anchor_ids=ids, anchor_offsets=offsets))
+        return self._state_carrying({**self.other, self.keys[0]: ids, self.keys[1]: offsets})
 
 
 def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None) -> tuple:
