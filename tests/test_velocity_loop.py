@@ -11,6 +11,7 @@ from contactlab import SimulationDiverged, simulate
 from contactlab.methods import get, impulse, velocity_loop
 from contactlab.record import SERIES
 from contactlab.scene import builtin_scenes, load_scene
+from contactlab.simulation import SHORT_FIRST_RUN
 
 STEPS = 60
 
@@ -144,9 +145,12 @@ def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
     assert run.arrays["time"][-1] == pytest.approx(steps * dt)
 
 
-def test_a_short_first_run_steps_from_python_and_a_long_one_compiles_the_loop(monkeypatch):
-    """compiled_loop=None: the loop where its machine code exists (a first short run on an empty
-    cache would spend more compiling it than it saves), or where the run repays compiling it."""
+def test_a_short_first_run_calls_the_loops_compiled_steps_from_python_and_a_long_one_compiles_the_loop(
+    monkeypatch,
+):
+    """compiled_loop=None: the loop compiled where its machine code exists, or where the run repays
+    compiling it; else the loop's own body run from Python, calling the same compiled steps — a
+    short first run on an empty cache would spend more compiling the loop than it saves."""
     scene = load_scene("bouncing_ball")
     model, options = scene.model, impulse.Options()
 
@@ -156,16 +160,41 @@ def test_a_short_first_run_steps_from_python_and_a_long_one_compiles_the_loop(mo
         )
 
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    assert chosen(4000) is None  # 4000 steps save < 1 s of Python
+    assert not chosen(4000).compiled  # 4000 steps save < 1 s of Python
     assert velocity_loop.repays_compiling(model, 10**6)  # a million save about 100 s
-    assert isinstance(chosen(10**6), velocity_loop.Stepper)
-    assert isinstance(chosen(10, compiled_loop=True), velocity_loop.Stepper)
-    assert chosen(10**6, compiled_loop=False) is None
+    assert chosen(10**6).compiled
+    assert chosen(10, compiled_loop=True).compiled
+    assert chosen(10**6, compiled_loop=False) is None  # the method's own step
+    stepped = simulate(model, "impulse", scene.dt, 90 * scene.dt, record_every=7)
+    assert not stepped.summary["compiled_loop"] and stepped.summary["stepping"] == SHORT_FIRST_RUN
     monkeypatch.undo()
-    assert simulate(model, "impulse", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
+    looped = simulate(model, "impulse", scene.dt, 90 * scene.dt, record_every=7, compiled_loop=True)
+    assert looped.summary["compiled_loop"]
+    for name, series in looped.arrays.items():  # one body of the loop, compiled or not: the same numbers
+        np.testing.assert_array_equal(series, stepped.arrays[name], err_msg=name)
     assert chosen(10).compiled_already()  # compiled now (or cached before)
     assert simulate(model, "impulse", scene.dt, 10 * scene.dt).summary["compiled_loop"]
-    assert isinstance(chosen(10), velocity_loop.Stepper)
+    assert chosen(10).compiled
+
+
+def test_runs_stepped_from_python_compile_the_loop_once_they_have_cost_what_compiling_it_costs(monkeypatch):
+    """The rule of renting before buying: the runs of one kind (shape families, method) step from
+    Python until, summed over the process, that stepping has cost what compiling the loop would
+    (``LOOP_COMPILE_SECONDS``); from the next chunk of steps on, the loop is compiled."""
+    scene = load_scene("bouncing_ball")
+    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})
+    first = simulate(scene.model, "impulse", scene.dt, 30 * scene.dt)
+    assert first.summary["stepping"] == SHORT_FIRST_RUN
+    spent = sum(velocity_loop._seconds_from_python.values())
+    assert spent > 0.0
+    # reached after the second run's first chunk (one step, a thirtieth of the first run): its next compiles
+    monkeypatch.setattr(velocity_loop, "LOOP_COMPILE_SECONDS", 1.001 * spent)
+    second = simulate(scene.model, "impulse", scene.dt, 200 * scene.dt)
+    assert second.summary["compiled_loop"]
+    whole = simulate(scene.model, "impulse", scene.dt, 200 * scene.dt, compiled_loop=True)
+    for name, series in whole.arrays.items():
+        np.testing.assert_array_equal(series, second.arrays[name], err_msg=name)
 
 
 def test_compiled_loop_must_be_a_yes_or_no():
@@ -188,7 +217,7 @@ def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_i
         )
 
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    assert chosen(4000) is None
+    assert not chosen(4000).compiled
     stepper = chosen(10**6)
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
     assert stepper.flags[2:5] == (None, None, True)  # (constraints, impulse, projection)

@@ -452,8 +452,8 @@ def _where_time_went(summary):
     parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping")
     if summary.get("stepping") == SHORT_FIRST_RUN:
         parts[-1] += (
-            " its stages from Python: a run this short does not compile the stepping loop (about 30 s, once); "
-            "a longer run or compiled_loop=True does, and later runs step through it"
+            ", its compiled steps called from Python: a run this short does not compile the stepping loop "
+            "(about 20 s, once); a longer run or compiled_loop=True does, and later runs step through it"
         )
     return ", ".join(parts)
 

@@ -344,7 +344,7 @@ def _record_run(plan, recorder, state, chooser, health, clock):
                     health,
                 )
             else:
-                state = _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health)
+                state = _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
         except _Stopped as stop:
             stopped, state = stop.violation, stop.state
         except interrupts.Interrupted as signal_stop:
@@ -372,14 +372,8 @@ def _record_run(plan, recorder, state, chooser, health, clock):
             setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step) + tally.later_compile_seconds
         ),
         "recording_seconds": tally.recording_seconds,
-        "compiled_loop": stepper is not None,
-        "stepping": (
-            "compiled loop"
-            if stepper is not None
-            else SHORT_FIRST_RUN
-            if compiled_loop is None and velocity_loop.applies(model, method, options, integrator)
-            else "python"
-        ),
+        "compiled_loop": stepper is not None and stepper.compiled,
+        "stepping": "python" if stepper is None else "compiled loop" if stepper.compiled else SHORT_FIRST_RUN,
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         **run_measures(model, tally, totals, steps),
@@ -546,9 +540,10 @@ def _advance(bar, step_index, made):
     bar.update(made)
 
 
-# the summary's "stepping" of a run the compiled loop serves but which stepped from Python: too short to
-# repay compiling the loop, whose machine code no earlier run had cached (velocity_loop.stepper_for)
-SHORT_FIRST_RUN = "python, too short to compile the loop"
+# the summary's "stepping" of a run the compiled loop serves that ran the loop's body from Python, its
+# compiled steps called one by one: too short to repay compiling the loop, whose machine code no
+# earlier run had cached (velocity_loop.stepper_for)
+SHORT_FIRST_RUN = "compiled steps from python, too short to compile the loop"
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 # the next chunk at most this many times the last: its pace, measured on few steps, may be off,
 # but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
@@ -557,8 +552,9 @@ CHUNK_GROWTH = 16
 WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
-def _step_compiled(stepper, steps, recorder, chooser, compiling, tally, bar, health):
-    """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
+def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health):
+    """Step through the loop (methods.velocity_loop: compiled, or its body from Python calling the
+    same compiled steps), in chunks of steps that each take
     about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside; the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
 

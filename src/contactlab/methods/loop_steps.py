@@ -40,7 +40,7 @@ from .velocity_level import respond
 # ---- impulse and constraints (loop L3) ------------------------------------------------------
 
 
-@njit(cache=True, inline="always")  # into ``run``: no call that passes the model and the state whole
+@njit(cache=True)
 def velocity_step(
     model: LoopModel,
     settings: LoopSettings,

@@ -11,6 +11,16 @@ compiled code, with no Python between steps. The stages are the ones
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 A method's step is compiled only for the runs of that method (``compile_flags``).
 
+**One loop, compiled or not.** ``run`` is written once and runs two ways: compiled (one call for
+thousands of steps), or — for a run too short to repay compiling it, on a cache that does not
+hold it yet — its own body run by Python (``run.py_func``), which calls the very same compiled
+step (``velocity_step``, ``projection_step`` or ``penalty_step``), ``store``, ``poses``,
+``healthy`` and ``record``, so both give the same numbers bit for bit by construction. From
+Python each step costs the calls' unboxing (tens of µs); compiled, a ball's step costs a few µs.
+Steps from Python of one kind of run are summed over the process, and once they have cost what
+compiling ``run`` costs (``LOOP_COMPILE_SECONDS``), the next chunk of steps compiles it: renting
+stops once it has cost the price of buying.
+
 This module holds ``run`` — the one compiled dispatcher, whose Numba cache ``Stepper`` consults
 — and the Python side (the model and settings in the loop's form, the Steppers,
 ``stepper_for``); the stages every step shares and the loop's data are in
@@ -42,9 +52,11 @@ contactlab.contacts.
 
 from __future__ import annotations
 
+import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba.core import event
 
 from .. import shapes
 from ..collision.families import pair_families
@@ -219,6 +231,7 @@ class Stepper:
                 )
             )
         )
+        self.compiled = True  # ``advance`` runs ``run`` compiled; False: its body from Python (``stepper_for``)
         self.max_contacts = 0
         self.sweeps_made = 0
         self.last_contacts = 0
@@ -263,9 +276,18 @@ class Stepper:
         if first_index <= last_index <= end and last_index % record_every:
             count += 1  # the run's last step, sampled too
         samples = self.samples_for(count)
-        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(
-            *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
-        )
+        key = (self.plan[0], self.flags[:-1], self.flags[-1] is None)
+        if not self.compiled and _seconds_from_python.get(key, 0.0) >= LOOP_COMPILE_SECONDS:
+            self.compiled = True  # stepping from Python has cost this process what compiling would have
+        compiling = []  # seconds of each compile in this call (a first call compiles the stages)
+        loop, started = run if self.compiled else run.py_func, time.perf_counter()
+        with event.install_timer("numba:compile", compiling.append):
+            made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = loop(
+                *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
+            )
+        if not self.compiled:
+            stepped = time.perf_counter() - started - sum(compiling)
+            _seconds_from_python[key] = _seconds_from_python.get(key, 0.0) + stepped
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
@@ -370,6 +392,9 @@ def _compiled_for(model: Model) -> set[tuple]:
     return set()
 
 
+# seconds each kind of run (its shape families and compile flags) has stepped ``run``'s body from
+# Python in this process: once they reach what compiling ``run`` costs, its runs compile it
+_seconds_from_python: dict[tuple, float] = {}
 LOOP_COMPILE_SECONDS = 30.0  # s: about what compiling ``run`` costs on an empty cache (2-core machine)
 GLUE_SECONDS = (1e-4, 8e-6)  # s a step, and s a body or particle a step: the Python the loop saves
 
@@ -396,11 +421,12 @@ def stepper_for(
     """A Stepper for this run of ``steps`` steps, or None to step through the methods' ``step``.
 
     None where the loop does not serve the scene (``applies``) or ``compiled_loop`` is False.
-    Where ``compiled_loop`` is None (the default), the loop is taken when its machine code is
-    already compiled or cached for this scene's types, or when the run is long enough to repay
-    compiling it (``repays_compiling``): a first, short run on an empty cache compiles only the
-    kernels (seconds) and steps them from Python; both paths give the same numbers bit for bit.
-    True: the loop wherever it serves, compiling it if need be."""
+    Where ``compiled_loop`` is None (the default), the loop runs compiled when its machine code
+    is already compiled or cached for this scene's types, or when the run is long enough to
+    repay compiling it (``repays_compiling``); else its body runs from Python, calling the
+    compiled step (``Stepper.compiled`` False), until such runs have cost what compiling it
+    costs. True: compiled wherever it serves, compiling it if need be. The numbers are the same
+    bit for bit on every path."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return None
     stepper = (
@@ -408,6 +434,5 @@ def stepper_for(
         if method == "penalty"
         else Stepper(model, method, options, integrator, dt, state)
     )
-    if compiled_loop or repays_compiling(model, steps) or stepper.compiled_already():
-        return stepper
-    return None
+    stepper.compiled = bool(compiled_loop) or repays_compiling(model, steps) or stepper.compiled_already()
+    return stepper
