@@ -22,7 +22,14 @@ from contactlab.lcp import (
 )
 from contactlab.lcp.friction import largest_eigenvalue
 
-HARD = {"BoxesStack1-i100000-32.hdf5.dat", "local_problem_test.hdf5"}  # marked hard in the data README
+# nsgs leaves these above 1e-6 in 3000 sweeps: the two BoxesStack ones (marked hard in the data README), the rock
+# pile (3.4e-5) and the spheres in a box (1.0e-5); newton solves all four (tests/test_newton.py)
+HARD = {
+    "BoxesStack1-i100000-32.hdf5.dat",
+    "local_problem_test.hdf5",
+    "RockPile_tob1.dat",
+    "spheres-in-a-box-98-i10000-256-10.hdf5",
+}
 SMALL = [
     "FC3D_Example1.dat",
     "FrictionContact3D_1c.dat",
@@ -358,7 +365,7 @@ def test_fclib_problems_are_in_the_repository_as_their_readme_lists_them():
     # the README names (its table gives each file's sha256 prefix)
     readme = (FCLIB / "README.md").read_text()
     listed = dict(re.findall(r"^\| (\S+\.(?:dat|hdf5)) \|.*\| ([0-9a-f]{12}) \|$", readme, flags=re.MULTILINE))
-    assert len(listed) == 15 and sorted(listed) == FCLIB_FILES
+    assert len(listed) == 17 and sorted(listed) == FCLIB_FILES
     for name, prefix in listed.items():
         assert hashlib.sha256((FCLIB / name).read_bytes()).hexdigest()[:12] == prefix, name
     assert "Apache License" in (FCLIB / "LICENSE").read_text()
@@ -372,7 +379,9 @@ def test_read_problem_shapes_and_symmetric_psd(name):
     assert problem.q.shape == (3 * nc,) and problem.mu.shape == (nc,)
     W = problem.W.toarray()
     scale = np.abs(W).max()
-    assert np.abs(W - W.T).max() <= 1.5e-3 * scale  # Capsules files: up to 1.3e-3 (README), others ~1e-15..1e-4
+    # as stored (README): RockPile_tob1 2.5e-3, the Capsules files up to 1.3e-3, the others ~1e-15..1e-4
+    asymmetry = 2.5e-3 if name == "RockPile_tob1.dat" else 1.5e-3
+    assert np.abs(W - W.T).max() <= asymmetry * scale
     # PSD to the round-off of the stored values (Confeti's have 7 digits: min eigenvalue −3.4e-8·max):
     # the symmetric part plus 1e-7·trace (≥ 1e-7·λmax) has a Cholesky factor
     np.linalg.cholesky(0.5 * (W + W.T) + 1e-7 * np.trace(W) * np.eye(3 * nc))
