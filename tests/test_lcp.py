@@ -419,6 +419,21 @@ def test_read_problem_errors(tmp_path):
         read_problem(empty)
 
 
+def test_a_siconos_global_problem_is_refused_not_read_as_a_local_one(tmp_path):
+    # Siconos' GFC3D text begins like a local problem (dimension 3, nc 1, a dense 3×3 M), then goes on with H, q,
+    # b, μ: it was read as W = M, q = (0, 3, 3) (H's header), μ = 3 and "solved" at error 0
+    local = "3\n1\n0\n3 3\n3 3\n1 0 0 0 1 0 0 0 1\n-1 0 0\n0.5\n"
+    ok = tmp_path / "local.dat"
+    ok.write_text(local + "0\n")  # one trailing flag, as Siconos writes it
+    np.testing.assert_array_equal(read_problem(ok).q, [-1.0, 0.0, 0.0])
+    global_ = tmp_path / "global.dat"
+    identity = "3 3\n3 3\n1 0 0 0 1 0 0 0 1\n"
+    global_.write_text("3\n1\n0\n" + identity + "0\n" + identity + "-1 -1 -1\n0 0 0\n0.1\n0\n")  # M, H, q, b, μ
+    with pytest.raises(InputError, match="global problem") as info:
+        read_problem(global_)
+    assert info.value.field == str(global_)
+
+
 def test_read_problem_truncated_real_file(tmp_path):
     source = (FCLIB / "Confeti-ex13-4contact-Fc3D-SBM.dat").read_text()
     cut = tmp_path / "cut.dat"
