@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import contactlab  # noqa: E402
+from contactlab.errors import InputError  # noqa: E402
 from contactlab.fclib import read_problem  # noqa: E402
 from contactlab.lcp import natural_map_error, solve_friction_contact  # noqa: E402
 
@@ -110,9 +111,11 @@ def cell(entry):
     return f"{entry['iterations']} | {entry['error']:.1e}{mark} | {1e3 * entry['seconds']:.1f}"
 
 
-def write_markdown(path, rows, methods, tol, repeats, info, load):
+def write_markdown(path, rows, methods, tol, repeats, info, load, data, unread=()):
     lines = [
-        "# FCLIB problems: `newton` against `nsgs` and `apgd`",
+        "# FCLIB problems: " + ", ".join(f"`{m}`" for m in methods),
+        "",
+        f"Problems: every file of `{data}` that `read_problem` reads (the others are listed at the end).",
         "",
         f"Written by `python benchmarks/fclib_newton.py` on {info['date']}: {info['cpu']}, {info['cores']} cores, "
         f"Python {info['python']}, NumPy {info['numpy']}, SciPy {info['scipy']}, Numba {info['numba']} "
@@ -137,8 +140,16 @@ def write_markdown(path, rows, methods, tol, repeats, info, load):
         "Solved to tol: " + ", ".join(f"{m} {solved[m]} of {len(rows)}" for m in methods) + ".",
         "Total time: " + ", ".join(f"{m} {1e3 * sum(row[m]['seconds'] for row in rows):.0f} ms" for m in methods) + ".",
     ]
+    if unread:
+        lines += ["", f"Not read ({len(unread)}): " + "; ".join(unread) + "."]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
+
+
+def shown(folder):
+    """The folder as the results name it: relative to the repository when inside it."""
+    relative = os.path.relpath(folder.resolve(), HERE.parent)
+    return folder if relative.startswith("..") else relative
 
 
 def main():
@@ -153,11 +164,17 @@ def main():
     if not args.data.is_dir():
         sys.exit(f"no FCLIB data folder at {args.data}")
     files = sorted(p for p in args.data.iterdir() if p.suffix.lower() in PROBLEM_SUFFIXES)
-    problems = [read_problem(p) for p in files]
+    problems, unread = [], []
+    for path in files:  # a folder such as Siconos' test data also holds 2D and global problems
+        try:
+            problems.append(read_problem(path))
+        except InputError as failure:
+            unread.append(f"{path.name} ({failure.message})")
     before = os.getloadavg()[0]
     rows = measure(problems, args.methods, args.tol, args.repeats)
     after = os.getloadavg()[0]
-    write_markdown(args.out, rows, args.methods, args.tol, args.repeats, machine(), (before, after))
+    info, load = machine(), (before, after)
+    write_markdown(args.out, rows, args.methods, args.tol, args.repeats, info, load, shown(args.data), unread)
     print(f"wrote {args.out}")
 
 

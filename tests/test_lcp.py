@@ -22,7 +22,14 @@ from contactlab.lcp import (
 )
 from contactlab.lcp.friction import largest_eigenvalue
 
-HARD = {"BoxesStack1-i100000-32.hdf5.dat", "local_problem_test.hdf5"}  # marked hard in the data README
+# nsgs leaves these above 1e-6 in 3000 sweeps: the two BoxesStack ones (marked hard in the data README), the rock
+# pile (3.4e-5) and the spheres in a box (1.0e-5); newton solves all four (tests/test_newton.py)
+HARD = {
+    "BoxesStack1-i100000-32.hdf5.dat",
+    "local_problem_test.hdf5",
+    "RockPile_tob1.dat",
+    "spheres-in-a-box-98-i10000-256-10.hdf5",
+}
 SMALL = [
     "FC3D_Example1.dat",
     "FrictionContact3D_1c.dat",
@@ -358,7 +365,7 @@ def test_fclib_problems_are_in_the_repository_as_their_readme_lists_them():
     # the README names (its table gives each file's sha256 prefix)
     readme = (FCLIB / "README.md").read_text()
     listed = dict(re.findall(r"^\| (\S+\.(?:dat|hdf5)) \|.*\| ([0-9a-f]{12}) \|$", readme, flags=re.MULTILINE))
-    assert len(listed) == 15 and sorted(listed) == FCLIB_FILES
+    assert len(listed) == 17 and sorted(listed) == FCLIB_FILES
     for name, prefix in listed.items():
         assert hashlib.sha256((FCLIB / name).read_bytes()).hexdigest()[:12] == prefix, name
     assert "Apache License" in (FCLIB / "LICENSE").read_text()
@@ -372,7 +379,9 @@ def test_read_problem_shapes_and_symmetric_psd(name):
     assert problem.q.shape == (3 * nc,) and problem.mu.shape == (nc,)
     W = problem.W.toarray()
     scale = np.abs(W).max()
-    assert np.abs(W - W.T).max() <= 1.5e-3 * scale  # Capsules files: up to 1.3e-3 (README), others ~1e-15..1e-4
+    # as stored (README): RockPile_tob1 2.5e-3, the Capsules files up to 1.3e-3, the others ~1e-15..1e-4
+    asymmetry = 2.5e-3 if name == "RockPile_tob1.dat" else 1.5e-3
+    assert np.abs(W - W.T).max() <= asymmetry * scale
     # PSD to the round-off of the stored values (Confeti's have 7 digits: min eigenvalue −3.4e-8·max):
     # the symmetric part plus 1e-7·trace (≥ 1e-7·λmax) has a Cholesky factor
     np.linalg.cholesky(0.5 * (W + W.T) + 1e-7 * np.trace(W) * np.eye(3 * nc))
@@ -408,6 +417,21 @@ def test_read_problem_errors(tmp_path):
         handle.create_group("something")
     with pytest.raises(InputError, match="fclib_local"):
         read_problem(empty)
+
+
+def test_a_siconos_global_problem_is_refused_not_read_as_a_local_one(tmp_path):
+    # Siconos' GFC3D text begins like a local problem (dimension 3, nc 1, a dense 3×3 M), then goes on with H, q,
+    # b, μ: it was read as W = M, q = (0, 3, 3) (H's header), μ = 3 and "solved" at error 0
+    local = "3\n1\n0\n3 3\n3 3\n1 0 0 0 1 0 0 0 1\n-1 0 0\n0.5\n"
+    ok = tmp_path / "local.dat"
+    ok.write_text(local + "0\n")  # one trailing flag, as Siconos writes it
+    np.testing.assert_array_equal(read_problem(ok).q, [-1.0, 0.0, 0.0])
+    global_ = tmp_path / "global.dat"
+    identity = "3 3\n3 3\n1 0 0 0 1 0 0 0 1\n"
+    global_.write_text("3\n1\n0\n" + identity + "0\n" + identity + "-1 -1 -1\n0 0 0\n0.1\n0\n")  # M, H, q, b, μ
+    with pytest.raises(InputError, match="global problem") as info:
+        read_problem(global_)
+    assert info.value.field == str(global_)
 
 
 def test_read_problem_truncated_real_file(tmp_path):

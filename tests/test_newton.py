@@ -62,6 +62,29 @@ def test_newton_solves_fclib_problem_to_1e_8(name):
     assert res.error <= max(1e-8, nsgs.error)
 
 
+@pytest.mark.parametrize("name", FCLIB_FILES)
+def test_newton_at_its_defaults_reaches_1e_6_and_the_coulomb_conditions_on_every_fclib_problem(name):
+    # issue 38: every readable FCLIB problem to 1e-6 at the default cap (1000 steps), judged from the returned
+    # r alone: the natural-map error recomputed, and each Coulomb condition to the same relative 1e-6
+    problem = read_problem(FCLIB / name)
+    res = solve_friction_contact(problem.W, problem.q, problem.mu, method="newton", tol=1e-6)
+    assert res.converged, res.message
+    assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= 1e-6
+    violations, scale = coulomb_violations(problem.W, problem.q, problem.mu, res.r)
+    assert max(violations.values()) <= 1e-6 * scale, violations
+
+
+def test_the_watchdog_lets_newton_leave_the_rock_pile_basin():
+    # Siconos' rock pile (463 contacts, μ = 1, W of rank 743 for 1389 rows): the error falls to 1e-4 by step 23,
+    # then roams; sent back to that iterate, the watchdog kept it there (3.3e-6 after 1000 steps and 30 restarts).
+    # Restarting from where it stands, it solves the pile, and it is the watchdog that acted.
+    problem = read_problem(FCLIB / "RockPile_tob1.dat")
+    res = solve_friction_contact(problem.W, problem.q, problem.mu, method="newton", tol=1e-8, max_iterations=300)
+    assert res.converged, res.message
+    assert "watchdog restarted it" in res.message
+    assert natural_map_error(problem.W, problem.q, problem.mu, res.r) <= 1e-8
+
+
 # ------------------------------------------------------------------------------- closed forms
 
 
@@ -181,10 +204,11 @@ def _hypothesis_tiny_mu_problem():
 def test_friction_coefficient_at_the_smallest_normal_float_converges(method):
     # μ r_N was subnormal, the disk solve's 1/(μ r_N) overflowed and it returned NaN: nsgs stalled
     # at the error 0.94 with contact 0 left at r = 0, and Newton's watchdog sweeps (Newton cycles
-    # between two regimes on this problem, with μ = 0 too) fed it NaN (stopped at 1e-2)
+    # between two regimes on this problem, with μ = 0 too) fed it NaN (stopped at 1e-2). tol 1e-12, since r is
+    # checked to 1e-12 below (at tol 1e-10 Newton may stop with r_N off by 4e-12, its error 1.6e-11)
     W, q = _hypothesis_tiny_mu_problem()
     mu = np.array([np.finfo(float).tiny, np.finfo(float).tiny, 2.0])
-    res = solve_friction_contact(W, q, mu, method=method, tol=1e-10, max_iterations=500)
+    res = solve_friction_contact(W, q, mu, method=method, tol=1e-12, max_iterations=500)
     assert res.converged, res.message
     violations, scale = coulomb_violations(W, q, mu, res.r)
     assert max(violations.values()) <= 1e-8 * scale, violations

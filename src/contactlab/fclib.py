@@ -7,7 +7,8 @@
 * FCLIB HDF5 ``/fclib_global`` (``M v = H r + f``, ``u = Hᵀ v + w``): reduced to local form with
   ``W = Hᵀ M⁻¹ H`` and ``q = Hᵀ M⁻¹ f + w`` (M factorized by sparse LU).
 * Siconos text (``frictionContact_printInFile``): dimension, nc, storage (0 dense, 1 sparse
-  block), the matrix (column-major values), q, μ.
+  block), the matrix (column-major values), q, μ, and at most one trailing flag (more values:
+  a Siconos global problem's text, which is refused rather than misread).
 
 FCLIB matrices follow the CSparse ``cs`` convention: ``nz ≥ 0`` triplets (``i`` rows, ``p``
 columns), ``nz = −1`` compressed columns, ``nz = −2`` compressed rows; indices 0-based.
@@ -242,6 +243,12 @@ def _read_siconos_text(path):
         raise _Bad(f"the matrix storage type {storage} is not supported (0 dense, 1 sparse block)")
     q = tokens.floats(size0, "q")
     mu = tokens.floats(nc, "mu")
+    left = len(tokens.words) - tokens.at
+    if left > 1:  # a local problem may end with one flag; a global one (GFC3D) goes on with H, q, b, μ
+        raise _Bad(
+            f"{left} values follow μ, where a local problem has at most one flag: a Siconos global problem "
+            "(GFC3D text) is not read, only local ones and FCLIB HDF5"
+        )
     return W, q, mu, kind
 
 
