@@ -11,9 +11,10 @@ along z), a convex body or obstacle as a convex hull of its corners (``GEOM_MESH
 a static concave triangle mesh. The time step and gravity are set; the rest is pybullet's
 default (the sequential-impulse solver, 50 iterations, split impulse, restitution below 0.2 m/s
 ignored), with two exceptions that make it the scene's physics rather than a setting: no
-velocity damping (Bullet damps every body by 0.04 a second by default; contactlab's scenes have
-no damping) and no sleeping (Bullet freezes a body that rests for 2 s; contactlab never does).
-benchmarks/peers.py builds its worlds here too.
+velocity damping (pybullet damps its reduced-coordinate bodies by 0.04 a second by default; the
+maximal-coordinate bodies built here have none, and it is set to 0 to say so) and no sleeping
+(Bullet freezes a body that rests for 2 s; contactlab never does). benchmarks/peers.py builds
+its worlds here too.
 
 Materials: Bullet gives a contact the product of its two bodies' friction coefficients and the
 product of their restitutions. Each shape gets √μ of its material, so every pair gets
