@@ -399,8 +399,8 @@ def _ball_round(duration):
         )
     }
     steps = int(round(duration / DT))
-    for peer in PEERS:  # timed sampling only the last step: a sample between two steps of a few µs costs them
-        # their caches (a third to a half of the rate here); the apex from a run sampled every step
+    for peer in PEERS:  # timed sampling only the last step: a sample between two steps of 2 µs costs the next
+        # its caches (57–195k steps/s against 470–530k here); the apex from a run sampled every step
         summary = run_peer(contactlab_ball(), peer, duration, steps, "ball")[0]
         apex = first_apex(run_peer(contactlab_ball(), peer, duration, 1, "ball")[1]["body_position"][:, 0, 2])
         out[f"ball/{peer}"] = (summary["steps_per_second"], apex, dict(method=peer_label(summary), threads=1))
