@@ -375,26 +375,40 @@ def test_the_benchmark_steps_the_world_the_comparison_steps(peer, monkeypatch, t
             assert combine(body, other) == pytest.approx(mu)  # two boxes
 
 
+@pytest.mark.parametrize("on_a_body", [False, True])
 @pytest.mark.parametrize("degrees, slides", [(27.0, False), (35.0, True)])
-def test_pybullet_slides_a_block_iff_the_slope_is_steeper_than_the_scenes_mu(degrees, slides):
-    """Two materials (μ 0.4 on the block, 0.9 on the floor: contactlab's contact μ = √(0.36) = 0.6,
-    a slope of 30.96°): pybullet holds the block on a 27° slope, and on 35° it slides with the
-    acceleration a = g (sin θ − μ cos θ) of μ within 3 % (the slope is gravity turned by θ; a
-    product of the materials' own μ would be 0.36, and hold nothing below 19.8°)."""
+def test_pybullet_slides_a_block_iff_the_slope_is_steeper_than_the_scenes_mu(degrees, slides, on_a_body):
+    """A block of μ 0.4 on a surface of μ 0.9 (contactlab's contact μ = √(0.36) = 0.6, a slope of
+    30.96°), the surface the floor or a 1000 kg box on it (a body: Bullet multiplies the two
+    bodies' friction as it does a body's and the floor's): pybullet holds the block on a 27°
+    slope, and on 35° it slides with the acceleration a = g (sin θ − μ cos θ) of μ within 3 % on
+    the floor and 10 % on the box (the slope is gravity turned by θ; a product of the materials'
+    own μ would be 0.36, and hold nothing steeper than 19.8°). The box's margin is pybullet's:
+    the product of the two bodies' friction it reads back is 0.6 exactly (the test above), but its
+    box-on-box contact holds the block as if μ were 0.61–0.66 (over bases of 1–1000 kg, 0.2–1 m
+    thick), where its box-on-plane contact gives 0.588."""
     pytest.importorskip("pybullet", reason=REASON)
     theta, g, mu = np.radians(degrees), 9.81, 0.6
     b = ModelBuilder(gravity=(g * np.sin(theta), 0.0, -g * np.cos(theta)))
     b.add_material("block", friction=0.4, restitution=0.0)
-    b.add_material("floor", friction=0.9, restitution=0.0)
-    b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=(0, 0, 0.05), material="block")
-    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="floor")
+    b.add_material("rough", friction=0.9, restitution=0.0)
+    base = 0.0
+    if on_a_body:  # μ 0.9 with the floor as well: it holds on 35° (tan 35° = 0.70)
+        b.add_body("box", half_extents=(1.0, 1.0, 0.1), mass=1000.0, position=(0, 0, 0.1), material="rough")
+        base = 0.2
+    b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=(0, 0, base + 0.05), material="block")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="rough")
     model = b.finalize()
+    block = model.body_count - 1
     assert model.pair_materials(0, 1)[0] == pytest.approx(mu)
     run = peers.simulate(model, "pybullet", 1.0 / 240.0, 1.0, record_every=12)
-    t, x = run.arrays["time"], run.arrays["body_position"][:, 0, 0]
+    t, x = run.arrays["time"], run.arrays["body_position"][:, block, 0]
+    if on_a_body:
+        assert np.abs(run.arrays["body_position"][:, 0, 0]).max() < 1e-3  # the heavy box holds
     if slides:
         acceleration = 2.0 * np.polyfit(t, x, 2)[0]
-        assert (g * np.sin(theta) - acceleration) / (g * np.cos(theta)) == pytest.approx(mu, rel=0.03)
+        held = (g * np.sin(theta) - acceleration) / (g * np.cos(theta))
+        assert held == pytest.approx(mu, rel=0.10 if on_a_body else 0.03)
     else:
         assert np.abs(x).max() < 1e-3
 
