@@ -6,23 +6,27 @@
 
 Every engine steps the same scene in this one process, with dt = 1/240 s, each at its own
 defaults (issue 18): contactlab's methods with their Options as shipped (``constraints``: up to
-100 sweeps, stopping at their tolerance), pybullet with maximal coordinates in ``p.DIRECT`` mode
-and its default 50 solver iterations, MuJoCo with its default Newton solver (100 iterations at
-most, pyramidal cones). ``--matched`` runs the issue-8 setting instead: 50 iterations in every
-engine, MuJoCo's CG solver. A peer that is not installed is skipped (``pip install -e .[bench]``
-installs both and matplotlib).
+100 sweeps, stopping at their tolerance), and the peers as ``contactlab compare --peers`` runs
+them: each scene is a contactlab Model, and every pybullet and MuJoCo world is built from it
+by contactlab.peers (its translation of shapes, masses, inertias, poses, gravity, friction and
+restitution; docs/peers.md), so the benchmark and the comparison measure the same world. The
+peers' engines run at their defaults (pybullet: maximal coordinates, ``p.DIRECT``, 50
+iterations; MuJoCo: Newton, at most 100 iterations, pyramidal cones). A peer that is not
+installed is skipped (``pip install -e .[bench]`` installs both and matplotlib). The ``scenes``
+item runs built-in scenes (box_pyramid, bouncing_ball, sliding_block, rolling_sphere) at their
+own dt and duration, with the measures and closed-form verdicts of ``contactlab compare``.
 
 Measured for each run:
 
-* steps/s — the stepping loop only: a short warm-up (contactlab: a separate 3-step run that
-  compiles its kernels; the peers: 5 steps) is excluded, and so is reading the state back
-  for the measures below (the peers' clock runs around their step call only; contactlab's
-  ``summary["steps_per_second"]`` leaves out its first step, which compiles);
+* steps/s — the stepping loop only: contactlab after a separate 3-step run that compiles its
+  kernels; every engine's ``summary["steps_per_second"]`` leaves out the run's first step and
+  reading the state back for the measures below (a peer's clock runs around its step call
+  only, contactlab.peers.run);
 * max penetration [m] — spheres: measured the same way for every engine from the sampled
-  positions (largest overlap of two spheres or of a sphere and a wall); boxes: what each
-  engine's contacts report (contactlab's ``max_penetration``, pybullet's contact distance,
-  MuJoCo's ``contact.dist``); cloth: largest overlap of a vertex (thickness 5 mm) with the
-  sphere or the floor;
+  positions (largest overlap of two spheres or of a sphere and a wall); boxes: the summary's
+  ``max_penetration``, contactlab's own collision pass on each engine's sampled poses (the
+  peers' rows included); cloth: largest overlap of a vertex (thickness 5 mm) with the sphere or
+  the floor;
 * drift [m] — the largest displacement of a body that should stay put: every box of the
   pyramid from its start, over the whole run; for the piles, every sphere over the last
   0.5 s (when the pile should be at rest).
@@ -58,25 +62,30 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 import contactlab  # noqa: E402
 from contactlab import ModelBuilder, simulate  # noqa: E402
+from contactlab import peers as engines  # noqa: E402  (the peers' worlds: one translation, compare's)
+from contactlab.closed_form import checks as closed_form_checks  # noqa: E402
+from contactlab.compare.measures import expectation_verdict, metrics  # noqa: E402
+from contactlab.errors import InputError  # noqa: E402
+from contactlab.scene import load_scene  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS_DIR = os.path.join(HERE, "results")
 DT = 1.0 / 240.0
-ITERATIONS = 50  # --matched: every engine's iteration count; the LCP row's assembly
-MATCHED = "--matched" in sys.argv
+ITERATIONS = 50  # the LCP row's assembly: the constraints method's sweeps
 RADIUS = 0.05
-WARMUP_STEPS = 5
 BALL_ROUNDS = 5  # interleaved rounds of the ball scene; each engine's best is its figure
 PYRAMID_ROUNDS = 3  # interleaved rounds of the pyramid's constraints run and pybullet's (the target's pair)
 
-try:
-    import pybullet
-except ImportError:  # the extra "bench" is not installed
-    pybullet = None
-try:
-    import mujoco
-except ImportError:
-    mujoco = None
+
+def _installed(peer):
+    try:
+        engines.engine(peer)
+    except InputError:  # the extra "bench" (or "peers") is not installed
+        return False
+    return True
+
+
+PEERS = [peer for peer in ("pybullet", "mujoco") if _installed(peer)]  # run beside contactlab, in this order
 
 
 # ---- scene descriptions (engine-neutral) ----------------------------------------------------
@@ -206,18 +215,7 @@ def contactlab_cloth(n):
     return b.finalize()
 
 
-CONTACTLAB_OPTIONS = (
-    {
-        "constraints": {"iterations": ITERATIONS},
-        "impulse": {"iterations": ITERATIONS},
-        "projection": {"iterations": ITERATIONS},
-        "penalty": {},
-    }
-    if MATCHED
-    else {"constraints": {}, "impulse": {}, "projection": {}, "penalty": {}}
-)
-BULLET_LABEL = "maximal, SI 50" if MATCHED else "maximal, defaults (SI 50)"
-MUJOCO_LABEL = "CG 50" if MATCHED else "defaults (Newton ≤ 100)"
+CONTACTLAB_OPTIONS = {"constraints": {}, "impulse": {}, "projection": {}, "penalty": {}}  # as shipped
 
 
 PILE_WARMUP = 0.25  # s: the lowest layer (0.2 m up) lands after 0.17 s
@@ -236,189 +234,44 @@ def run_contactlab(model, method, duration, record_every, integrator="symplectic
     return run.summary, run.arrays
 
 
-# ---- pybullet ------------------------------------------------------------------------------------
+# ---- the peers: worlds built by contactlab.peers ------------------------------------------------
 
 
-class Bullet:
-    """One pybullet world in DIRECT mode, maximal-coordinate bodies, 50 solver iterations (its default)."""
-
-    def __init__(self):
-        self.client = pybullet.connect(pybullet.DIRECT)
-        p = pybullet
-        p.resetSimulation(physicsClientId=self.client)
-        p.setGravity(0, 0, -9.81, physicsClientId=self.client)
-        p.setPhysicsEngineParameter(fixedTimeStep=DT, numSubSteps=0, physicsClientId=self.client)
-        if MATCHED:
-            p.setPhysicsEngineParameter(numSolverIterations=ITERATIONS, physicsClientId=self.client)
-        self.bodies = []
-
-    def plane(self, normal, point, friction, restitution=0.0):
-        p = pybullet
-        shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=normal, physicsClientId=self.client)
-        body = p.createMultiBody(0, shape, basePosition=point, physicsClientId=self.client)
-        p.changeDynamics(body, -1, lateralFriction=friction, restitution=restitution, physicsClientId=self.client)
-
-    def body(self, shape, position, friction, restitution=0.0):
-        p = pybullet
-        body = p.createMultiBody(
-            1.0, shape, basePosition=list(position), useMaximalCoordinates=True, physicsClientId=self.client
-        )
-        p.changeDynamics(
-            body,
-            -1,
-            lateralFriction=friction,
-            restitution=restitution,
-            activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING,
-            physicsClientId=self.client,
-        )
-        self.bodies.append(body)
-
-    def positions(self):
-        get = pybullet.getBasePositionAndOrientation
-        return np.array([get(b, physicsClientId=self.client)[0] for b in self.bodies])
-
-    def penetration(self):
-        points = pybullet.getContactPoints(physicsClientId=self.client)
-        return max([0.0] + [-pt[8] for pt in points])
-
-    def close(self):
-        pybullet.disconnect(self.client)
+def run_peer(model, peer, duration, record_every, scene, dt=DT):
+    """(summary, arrays) of ``model`` run in ``peer`` ("pybullet" or "mujoco") for ``duration``
+    [s] at ``dt`` [s], sampled every ``record_every`` steps: contactlab.peers.simulate, the world
+    and the stepping ``contactlab compare --peers`` uses. Raises contactlab.peers.Inexpressible
+    for a scene the engine cannot be given."""
+    run = engines.simulate(model, peer, dt, duration, record_every=record_every, scene_name=scene)
+    return run.summary, run.arrays
 
 
-def bullet_pile(count):
-    world = Bullet()
-    centres, half_width = pile_layout(count)
-    world.plane((0, 0, 1), (0, 0, 0), 0.5)
-    for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
-        world.plane(normal, tuple(-half_width * np.array(normal)), 0.5)
-    shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=RADIUS, physicsClientId=world.client)
-    for c in centres:
-        world.body(shape, c, 0.5)
-    return world, half_width
+def peer_label(summary):
+    """The row's method cell of a peer's run: the engine's solver and iterations as it ran."""
+    options = summary["options"]
+    if options["engine"] == "mujoco":
+        return f"defaults ({options['solver']} ≤ {options['iterations']})"
+    return f"{options['coordinates']}, defaults (SI {options['iterations']})"
 
 
-def bullet_ball():
-    world = Bullet()
-    world.plane((0, 0, 1), (0, 0, 0), 0.5, restitution=1.0)  # pybullet multiplies the two
-    shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=BALL["radius"], physicsClientId=world.client)
-    world.body(shape, (0, 0, BALL["height"]), 0.5, restitution=BALL["restitution"])
-    return world
-
-
-def bullet_pyramid(levels=20):
-    world = Bullet()
-    world.plane((0, 0, 1), (0, 0, 0), 0.6)
-    shape = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[0.05] * 3, physicsClientId=world.client)
-    for c in pyramid_layout(levels):
-        world.body(shape, c, 0.6)
-    return world
-
-
-def step_peer(step, steps, sample, sample_every):
-    """Time ``steps`` calls of step() (after WARMUP_STEPS untimed ones); sample() every
-    ``sample_every`` steps outside the clock. Returns (steps/s, samples, sample times)."""
-    for _ in range(WARMUP_STEPS):
-        step()
-    samples, times, elapsed = [sample()], [0.0], 0.0
-    for k in range(1, steps + 1):
-        t0 = time.perf_counter()
-        step()
-        elapsed += time.perf_counter() - t0
-        if k % sample_every == 0 or k == steps:
-            samples.append(sample())
-            times.append(k * DT)
-    return steps / elapsed, samples, times
-
-
-# ---- MuJoCo ----------------------------------------------------------------------------------------
-
-
-def _mj_header(extra=""):
-    solver = f' solver="CG" iterations="{ITERATIONS}"' if MATCHED else ""
-    return f'<mujoco><option timestep="{DT!r}"{solver} gravity="0 0 -9.81"/>{extra}<worldbody>'
-
-
-def _mj_plane(normal, point, friction):
-    return (
-        f'<geom type="plane" size="5 5 0.1" pos="{point[0]} {point[1]} {point[2]}" '
-        f'zaxis="{normal[0]} {normal[1]} {normal[2]}" friction="{friction} 0.005 0.0001"/>'
+def peer_row(scene, peer, summary, duration, **measures):
+    """A peer's row: its rate (steps/s as the summary has it) and threads (one), with ``measures``."""
+    return dict(
+        scene=scene,
+        engine=peer,
+        method=peer_label(summary),
+        bodies=summary["bodies"],
+        duration=duration,
+        steps=summary["steps"],
+        steps_per_second=summary["steps_per_second"],
+        threads=1,
+        **measures,
     )
 
 
-def mujoco_pile(count):
-    centres, half_width = pile_layout(count)
-    parts = [_mj_header(), _mj_plane((0, 0, 1), (0, 0, 0), 0.5)]
-    for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
-        parts.append(_mj_plane(normal, -half_width * np.array(normal), 0.5))
-    for k, c in enumerate(centres):
-        parts.append(
-            f'<body name="s{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="sphere" '
-            f'size="{RADIUS}" mass="1" friction="0.5 0.005 0.0001"/></body>'
-        )
-    parts.append("</worldbody></mujoco>")
-    model = mujoco.MjModel.from_xml_string("".join(parts))
-    return model, mujoco.MjData(model), half_width
-
-
-def mujoco_ball():
-    """MuJoCo has no restitution coefficient: at its defaults the ball lands and stays (its
-    soft contact can be tuned to bounce, which is not its default): a speed comparison only."""
-    xml = (
-        _mj_header()
-        + _mj_plane((0, 0, 1), (0, 0, 0), 0.5)
-        + f'<body pos="0 0 {BALL["height"]}"><freejoint/><geom type="sphere" size="{BALL["radius"]}" '
-        f'mass="1" friction="0.5 0.005 0.0001"/></body></worldbody></mujoco>'
-    )
-    model = mujoco.MjModel.from_xml_string(xml)
-    return model, mujoco.MjData(model)
-
-
-def mujoco_pyramid(levels=20):
-    parts = [_mj_header(), _mj_plane((0, 0, 1), (0, 0, 0), 0.6)]
-    for k, c in enumerate(pyramid_layout(levels)):
-        parts.append(
-            f'<body name="b{k}" pos="{c[0]} {c[1]} {c[2]}"><freejoint/><geom type="box" '
-            f'size="0.05 0.05 0.05" mass="1" friction="0.6 0.005 0.0001"/></body>'
-        )
-    parts.append("</worldbody></mujoco>")
-    model = mujoco.MjModel.from_xml_string("".join(parts))
-    return model, mujoco.MjData(model)
-
-
-def mujoco_cloth(n):
-    """MuJoCo's flex cloth: a flexcomp grid of n × n vertices (1 m square, 0.3 kg), edges held
-    by equality constraints (MuJoCo's usual cloth), vertex radius = the 5 mm thickness."""
-    spacing = CLOTH["size"] / (n - 1)
-    radius = min(CLOTH["thickness"], 0.45 * spacing)  # MuJoCo needs the spacing > 2 × the vertex radius
-    f = CLOTH["friction"]
-    xml = (
-        _mj_header()
-        + _mj_plane((0, 0, 1), (0, 0, 0), f)
-        + f'<geom type="sphere" size="{CLOTH["sphere_radius"]}" pos="0 0 {CLOTH["sphere_z"]}" '
-        f'friction="{f} 0.005 0.0001"/>'
-        + f'<flexcomp name="cloth" type="grid" count="{n} {n} 1" spacing="{spacing} {spacing} {spacing}" '
-        f'pos="0 0 {CLOTH["height"]}" radius="{radius}" dim="2" mass="{CLOTH["mass"]}">'
-        f'<edge equality="true" damping="0.02"/><contact condim="3" friction="{f} 0.005 0.0001" '
-        f'selfcollide="none"/></flexcomp></worldbody></mujoco>'
-    )
-    model = mujoco.MjModel.from_xml_string(xml)
-    return model, mujoco.MjData(model), radius
-
-
-def mujoco_body_positions(model, data):
-    return data.xpos[1 : model.nbody].copy()
-
-
-def mujoco_penetration(data):
-    return max(0.0, -float(np.min(data.contact.dist[: data.ncon]))) if data.ncon else 0.0
-
-
-def mujoco_version():
-    return mujoco.__version__ if mujoco is not None else None
-
-
-def mujoco_supports_flex():
-    return mujoco is not None and hasattr(mujoco.MjModel, "nflex") if mujoco is not None else False
+def not_run_row(scene, peer, gap):
+    """The row of a peer that cannot be given the scene: contactlab.peers' sentence why."""
+    return dict(scene=scene, engine=peer, method="not run", error=gap.sentence)
 
 
 # ---- the benchmark runs ------------------------------------------------------------------------------
@@ -496,7 +349,6 @@ def contactlab_rows(results, scene, model, methods, duration, sample_every, path
 
 
 def pile_runs(results, count, duration, sample_every, path):
-    steps = int(round(duration / DT))
     scene = f"pile{count}"
     model, half_width = contactlab_pile(count)
 
@@ -520,56 +372,19 @@ def pile_runs(results, count, duration, sample_every, path):
         measures,
         warmup=PILE_WARMUP,
     )
-    if pybullet is not None:
-        world, half_width = bullet_pile(count)
-        rate, frames, times = step_peer(
-            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, world.positions, sample_every
-        )
-        penetration, drift = pile_measures(frames, times, half_width)
-        world.close()
+    for peer in PEERS:
+        summary, arrays = run_peer(model, peer, duration, sample_every, scene)
+        penetration, drift = pile_measures(list(arrays["body_position"]), list(arrays["time"]), half_width)
         record(
             results,
-            f"{scene}/pybullet",
-            dict(
-                scene=scene,
-                engine="pybullet",
-                method=BULLET_LABEL,
-                bodies=count,
-                duration=duration,
-                steps=steps,
-                steps_per_second=rate,
-                max_penetration=penetration,
-                drift=drift,
-            ),
-            path,
-        )
-    if mujoco is not None:
-        m, d, half_width = mujoco_pile(count)
-        rate, frames, times = step_peer(
-            lambda: mujoco.mj_step(m, d), steps, lambda: mujoco_body_positions(m, d), sample_every
-        )
-        penetration, drift = pile_measures(frames, times, half_width)
-        record(
-            results,
-            f"{scene}/mujoco",
-            dict(
-                scene=scene,
-                engine="mujoco",
-                method=MUJOCO_LABEL,
-                bodies=count,
-                duration=duration,
-                steps=steps,
-                steps_per_second=rate,
-                max_penetration=penetration,
-                drift=drift,
-            ),
+            f"{scene}/{peer}",
+            peer_row(scene, peer, summary, duration, max_penetration=penetration, drift=drift),
             path,
         )
 
 
 def _ball_round(duration):
     """One timed ball run of each engine, back to back: {row key: (steps/s, first apex, extra)}."""
-    steps = int(round(duration / DT))
     summary, arrays = run_contactlab(contactlab_ball(), "impulse", duration, 1)
     out = {
         "ball/contactlab-impulse": (
@@ -583,17 +398,12 @@ def _ball_round(duration):
             ),
         )
     }
-    if pybullet is not None:
-        world = bullet_ball()
-        rate, frames, _ = step_peer(
-            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, world.positions, 1
-        )
-        world.close()
-        out["ball/pybullet"] = (rate, first_apex([f[0, 2] for f in frames]), dict(method=BULLET_LABEL))
-    if mujoco is not None:
-        m, d = mujoco_ball()
-        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: mujoco_body_positions(m, d), 1)
-        out["ball/mujoco"] = (rate, first_apex([f[0, 2] for f in frames]), dict(method=MUJOCO_LABEL))
+    steps = int(round(duration / DT))
+    for peer in PEERS:  # timed sampling only the last step: a sample between two steps of 2 µs costs the next
+        # its caches (57–195k steps/s against 470–530k here); the apex from a run sampled every step
+        summary = run_peer(contactlab_ball(), peer, duration, steps, "ball")[0]
+        apex = first_apex(run_peer(contactlab_ball(), peer, duration, 1, "ball")[1]["body_position"][:, 0, 2])
+        out[f"ball/{peer}"] = (summary["steps_per_second"], apex, dict(method=peer_label(summary), threads=1))
     return out
 
 
@@ -645,11 +455,7 @@ def _pyramid_rounds(model, steps, sample_every, results, first_bullet_rate, path
     ours, theirs = [row["steps_per_second"]], [first_bullet_rate]
     for _ in range(rounds - 1):
         ours.append(run_contactlab(model, "constraints", steps * DT, sample_every)[0]["steps_per_second"])
-        world = bullet_pyramid()
-        theirs.append(
-            step_peer(lambda w=world: pybullet.stepSimulation(physicsClientId=w.client), steps, lambda: None, steps)[0]
-        )
-        world.close()
+        theirs.append(run_peer(model, "pybullet", steps * DT, steps, "pyramid")[0]["steps_per_second"])
     record(
         results,
         "pyramid/contactlab-constraints",
@@ -682,67 +488,13 @@ def pyramid_runs(results, duration, sample_every, path):
         path,
         measures,
     )
-    if pybullet is not None:
-        world = bullet_pyramid()
-        worst = [0.0]
-
-        def sample():
-            worst[0] = max(worst[0], world.penetration())
-            return world.positions()
-
-        rate, frames, _ = step_peer(
-            lambda: pybullet.stepSimulation(physicsClientId=world.client), steps, sample, sample_every
-        )
-        world.close()
-        travel = moved(frames)
-        rounds = _pyramid_rounds(model, steps, sample_every, results, rate, path)
-        record(
-            results,
-            "pyramid/pybullet",
-            dict(
-                scene="pyramid",
-                engine="pybullet",
-                method=BULLET_LABEL,
-                bodies=len(travel),
-                duration=duration,
-                steps=steps,
-                steps_per_second=max(rounds),
-                round_rates=[round(r, 1) for r in rounds],
-                max_penetration=worst[0],
-                drift=float(travel.max()),
-                moved_over_1mm=int((travel > 1e-3).sum()),
-                moved_over_1cm=int((travel > 1e-2).sum()),
-            ),
-            path,
-        )
-    if mujoco is not None:
-        m, d = mujoco_pyramid()
-        worst = [0.0]
-
-        def sample():
-            worst[0] = max(worst[0], mujoco_penetration(d))
-            return mujoco_body_positions(m, d)
-
-        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, sample, sample_every)
-        travel = moved(frames)
-        record(
-            results,
-            "pyramid/mujoco",
-            dict(
-                scene="pyramid",
-                engine="mujoco",
-                method=MUJOCO_LABEL,
-                bodies=len(travel),
-                duration=duration,
-                steps=steps,
-                steps_per_second=rate,
-                max_penetration=worst[0],
-                drift=float(travel.max()),
-                moved_over_1mm=int((travel > 1e-3).sum()),
-                moved_over_1cm=int((travel > 1e-2).sum()),
-            ),
-            path,
-        )
+    for peer in PEERS:
+        summary, arrays = run_peer(model, peer, duration, sample_every, "pyramid")
+        row = peer_row("pyramid", peer, summary, duration, **measures(summary, arrays))
+        if peer == "pybullet":  # the target's pair: best of interleaved rounds with constraints
+            rounds = _pyramid_rounds(model, steps, sample_every, results, row["steps_per_second"], path)
+            row.update(steps_per_second=max(rounds), round_rates=[round(r, 1) for r in rounds])
+        record(results, f"pyramid/{peer}", row, path)
 
 
 def cloth_runs(results, n, duration, sample_every, path, methods=("projection", "constraints"), peers=True):
@@ -778,40 +530,12 @@ def cloth_runs(results, n, duration, sample_every, path, methods=("projection", 
             ),
             path,
         )
-    if mujoco is not None and peers:
-        try:
-            m, d, radius = mujoco_cloth(n)
-        except Exception as error:  # a MuJoCo without flex, or a model it refuses
-            record(
-                results,
-                f"{scene}/mujoco",
-                dict(
-                    scene=scene,
-                    engine="mujoco",
-                    method="flex",
-                    error=f"MuJoCo {mujoco.__version__} could not build the flex cloth: {repr(error)[:150]}",
-                ),
-                path,
-            )
-            return
-        rate, frames, _ = step_peer(lambda: mujoco.mj_step(m, d), steps, lambda: d.flexvert_xpos.copy(), sample_every)
-        penetration = max(cloth_penetration(f, radius) for f in frames)
-        record(
-            results,
-            f"{scene}/mujoco",
-            dict(
-                scene=scene,
-                engine="mujoco",
-                method=f"flex ({MUJOCO_LABEL}, vertex radius {1e3 * radius:.1f} mm)",
-                vertices=n * n,
-                duration=duration,
-                steps=steps,
-                steps_per_second=rate,
-                max_penetration=penetration,
-                lowest_vertex=float(min(f[:, 2].min() for f in frames)),
-            ),
-            path,
-        )
+    for peer in PEERS if peers else ():
+        try:  # contactlab.peers translates rigid bodies only: the row says so (the flex cloth MuJoCo was
+            # given by hand until the twentieth round was another model than contactlab's springs)
+            run_peer(model, peer, duration, sample_every, scene)
+        except engines.Inexpressible as gap:
+            record(results, f"{scene}/{peer}", not_run_row(scene, peer, gap), path)
 
 
 def scaling_runs(results, sizes, duration, path):
@@ -839,6 +563,62 @@ def scaling_runs(results, sizes, duration, path):
             ),
             path,
         )
+
+
+BUILTIN = ("box_pyramid", "bouncing_ball", "sliding_block", "rolling_sphere")  # issue 39's acceptance scenes
+
+
+def scene_measures(name, model, summary, arrays):
+    """What ``contactlab compare`` puts in a row (contactlab.compare.measures.metrics: penetration,
+    energy and momentum drift, contacts, iterations) and its closed-form checks of scene ``name``
+    (contactlab.closed_form), each as plain data."""
+    found = metrics(model, arrays, summary)
+    checks = closed_form_checks(name, model, arrays)
+    return dict(
+        max_penetration=summary["max_penetration"],
+        energy_drift=found["energy_drift_J"],
+        momentum_drift=found["momentum_drift_Ns"],
+        max_contacts=found["max_contacts"],
+        max_iterations=found["max_solver_iterations"],
+        expectations=expectation_verdict(checks),
+        checks=[check.as_record() for check in checks],
+    )
+
+
+def scene_runs(results, path, quick, names=BUILTIN):
+    """The built-in scenes as ``contactlab compare SCENE --peers pybullet,mujoco`` runs them: at
+    the scene's own dt and duration (``--quick``: at most 1 s), sampled every step; the scene's
+    method at its defaults (after a 3-step run that compiles it) and each peer through
+    contactlab.peers, with compare's measures and verdicts (:func:`scene_measures`), under
+    ``builtin-{scene}/{engine}``."""
+    for name in names:
+        scene = load_scene(name)
+        duration = min(scene.duration, 1.0) if quick else scene.duration
+        key = f"builtin-{name}"
+        options = scene.options[scene.method]
+        simulate(scene.model, scene.method, scene.dt, 3 * scene.dt, options, scene.integrator)  # compiles
+        run = simulate(scene.model, scene.method, scene.dt, duration, options, scene.integrator)
+        record(
+            results,
+            f"{key}/contactlab-{scene.method}",
+            dict(
+                scene=key,
+                engine="contactlab",
+                method=scene.method,
+                bodies=scene.model.body_count,
+                dt=scene.dt,
+                duration=duration,
+                steps=run.summary["steps"],
+                steps_per_second=run.summary["steps_per_second"],
+                threads=run.summary["threads"],
+                **scene_measures(name, scene.model, run.summary, run.arrays),
+            ),
+            path,
+        )
+        for peer in PEERS:
+            summary, arrays = run_peer(scene.model, peer, duration, 1, name, dt=scene.dt)
+            row = peer_row(key, peer, summary, duration, **scene_measures(name, scene.model, summary, arrays))
+            record(results, f"{key}/{peer}", dict(row, dt=scene.dt, engine_notes=summary["engine_notes"]), path)
 
 
 COMPILE_NOTICE = "compiling contact kernels for first use"
@@ -920,8 +700,9 @@ if engine == "contactlab":
                stepping=summary["stepping"], threads=summary["threads"])
 else:
     import mujoco
-    peers.mujoco = mujoco
-    m, d = peers.mujoco_ball()
+    from contactlab.peers.mujoco import World
+    world = World(peers.contactlab_ball(), peers.DT)  # the ball as contactlab.peers gives it to MuJoCo
+    m, d = world.mj_model, world.data
     run_started = time.perf_counter()
     for _ in range(runs):
         mujoco.mj_resetData(m, d)
@@ -957,11 +738,11 @@ def short_runs(results, path, runs=MANY_RUNS):
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         load_before = os.getloadavg()[0]
         first, second = _short_child("contactlab", env), _short_child("contactlab", env)
-        peer = _short_child("mujoco", env) if mujoco is not None else None
+        peer = _short_child("mujoco", env) if "mujoco" in PEERS else None
         load_between = os.getloadavg()[0]
         many = _short_child("contactlab", env, runs)
         many_loop = _short_child("contactlab", env, runs, warm_loop=True)
-        many_peer = _short_child("mujoco", env, runs) if mujoco is not None else None
+        many_peer = _short_child("mujoco", env, runs) if "mujoco" in PEERS else None
         load_after = os.getloadavg()[0]
     shared = dict(method="impulse", steps=int(round(SHORT_RUN / DT)))
     record(
@@ -1116,16 +897,10 @@ def machine():
         blas_threads=os.environ["OPENBLAS_NUM_THREADS"],
         date=date.today().isoformat(),
     )
-    if pybullet is not None:
-        info["pybullet"] = str(pybullet.getAPIVersion())
-        try:
-            from importlib.metadata import version
+    from importlib.metadata import version
 
-            info["pybullet"] = version("pybullet")
-        except Exception:
-            pass
-    if mujoco is not None:
-        info["mujoco"] = mujoco.__version__
+    for peer in PEERS:
+        info[peer] = version(peer)
     return info
 
 
@@ -1183,6 +958,7 @@ def main():
             "scaling",
             "lcp",
             "coldstart",
+            "scenes",
         ],
         help="run only these (default: all)",
     )
@@ -1200,11 +976,6 @@ def main():
         action="store_true",
         help="leave MuJoCo out (at its default Newton solver a 1000-sphere pile takes it over ten "
         "minutes here); its rows of the scenes run are dropped, not kept from another setting",
-    )
-    parser.add_argument(
-        "--matched",
-        action="store_true",
-        help="issue 8's setting: 50 iterations in every engine, MuJoCo's CG (default: each engine's defaults)",
     )
     parser.add_argument("--results", default=os.path.join(RESULTS_DIR, "results.json"))
     parser.add_argument("--fresh", action="store_true", help="start a new results.json instead of merging")
@@ -1224,10 +995,9 @@ def main():
             k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()
         }
         results["mode"] = "quick" if args.quick else "full"
-        results["settings_mode"] = "matched 50 iterations" if MATCHED else "each engine's defaults"
-        global mujoco
-        if args.no_mujoco:
-            mujoco = None
+        results["settings_mode"] = "each engine's defaults; the peers' worlds built by contactlab.peers"
+        if args.no_mujoco and "mujoco" in PEERS:
+            PEERS.remove("mujoco")
         todo = args.only or [
             "coldstart",
             "shortruns",
@@ -1239,6 +1009,7 @@ def main():
             "scaling",
             "pile4000",
             "cloth128",
+            "scenes",
         ]
         every = settings["sample_every"]
         for item in todo:
@@ -1266,6 +1037,8 @@ def main():
                 cold_start_runs(results, args.results)
             elif item == "shortruns":
                 short_runs(results, args.results)
+            elif item == "scenes":
+                scene_runs(results, args.results, args.quick)
             print(f"{item} done in {time.perf_counter() - started:.0f} s", flush=True)
     from report import write_report  # benchmarks/report.py
 

@@ -159,12 +159,13 @@ def targets(results):
         out.append(("redblack ≥ 1.6× pgs", "not measured", "missing"))
     for n in (64, 128):
         mine = [_rate(results, f"cloth{n}/contactlab-{m}") for m in ("projection", "constraints")]
-        peer = _rate(results, f"cloth{n}/mujoco")
+        peer = runs.get(f"cloth{n}/mujoco", {})
         if any(mine) and peer:
+            theirs = f"{peer['steps_per_second']:.1f} steps/s" if "steps_per_second" in peer else peer.get("error")
             out.append(
                 (
-                    f"cloth {n}×{n}: report steps/s against MuJoCo flex",
-                    f"projection {_fmt(mine[0])}, constraints {_fmt(mine[1])} vs MuJoCo {peer:.1f} steps/s",
+                    f"cloth {n}×{n}: report steps/s against MuJoCo",
+                    f"projection {_fmt(mine[0])}, constraints {_fmt(mine[1])} steps/s; MuJoCo: {theirs}",
                     "reported",
                 )
             )
@@ -332,8 +333,9 @@ def write_report(results, md_path, plot_dir):
             "",
             "Each engine's best of interleaved rounds (a run is milliseconds: one round says more about"
             " the machine's other work than about the engine); every round's rate and the 1-minute load"
-            " average before and after the rounds beside it. MuJoCo has no restitution: its ball lands and"
-            " stays, so its apex is the resting height.",
+            " average before and after the rounds beside it. MuJoCo has no restitution coefficient:"
+            " contactlab.peers gives it the contact damping ratio at which its contact returns ε on average"
+            " (docs/peers.md).",
             "",
             "| run | method | sim s | steps/s (best) | µs per step | every round, steps/s | load | "
             "first apex m (closed form) |",
@@ -386,7 +388,8 @@ def write_report(results, md_path, plot_dir):
         ]
         for _key, r in rows:
             if "error" in r:
-                lines.append(f"| {r['engine']} | {r['method']} | failed: {r['error']} | | | | |")
+                said = r["error"] if r["method"] == "not run" else f"failed: {r['error']}"
+                lines.append(f"| {r['engine']} | {r['method']} | {said} | | | | |")
                 continue
             rate = r["steps_per_second"]
             lines.append(
@@ -394,6 +397,7 @@ def write_report(results, md_path, plot_dir):
                 f"{_fmt(rate / mj) if mj else '–'} | {_mm(r['max_penetration'])} | "
                 f"{_mm(r.get('lowest_vertex'))} |"
             )
+    lines += _builtin_scenes(results)
     rows, fit = scaling_fit(results)
     if rows:
         lines += [
@@ -432,6 +436,43 @@ def write_report(results, md_path, plot_dir):
     plots(results, plot_dir)
 
 
+def _builtin_scenes(results):
+    """The built-in scenes' section: each engine's row as ``contactlab compare --peers`` reports
+    it (steps/s, penetration, energy drift, the scene's expectations with their numbers)."""
+    scenes = sorted({r["scene"] for r in results.get("runs", {}).values() if r.get("scene", "").startswith("builtin-")})
+    if not scenes:
+        return []
+    lines = [
+        "",
+        "## Built-in scenes as `contactlab compare SCENE --peers pybullet,mujoco` runs them",
+        "",
+        "Each at its own dt and duration, sampled every step; contactlab at the scene's method and"
+        " defaults, the peers through contactlab.peers (the comparison's own worlds); the measures and"
+        " verdicts are the comparison's (contactlab.compare.measures, contactlab.closed_form).",
+        "",
+        "| scene | run | method | dt s | sim s | steps/s | × contactlab | max penetration mm | energy drift J "
+        "| expectations | measured (expected) | threads | load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for scene in scenes:
+        rows = _runs(results, scene)
+        ours = next((r["steps_per_second"] for _, r in rows if r["engine"] == "contactlab"), None)
+        for _key, r in rows:
+            said = "; ".join(
+                f"{c['quantity']} {_fmt(c['measured'], 4)} ({_fmt(c['expected'], 4)})"
+                f"{'' if c['passed'] is None else ' pass' if c['passed'] else ' FAIL'}"
+                for c in r.get("checks", [])
+            )
+            rate, name = r["steps_per_second"], scene.removeprefix("builtin-")
+            lines.append(
+                f"| {name} | {r['engine']} | {r['method']} | {r['dt']:.4g} | {r['duration']} | {rate:,.0f} | "
+                f"{_fmt(rate / ours) if ours else '–'} | {_fmt(1e3 * r['max_penetration'], 3)} | "
+                f"{_fmt(r['energy_drift'], 3)} | {r['expectations']} | {said or '–'} | {_threads_cell(r)} | "
+                f"{_load(r)} |"
+            )
+    return lines
+
+
 def plots(results, plot_dir):
     try:
         import matplotlib
@@ -444,7 +485,8 @@ def plots(results, plot_dir):
     runs = [
         (k, r)
         for k, r in sorted(results.get("runs", {}).items())
-        if r.get("scene") not in ("scaling", "lcp", "shortrun", "manyruns") and "steps_per_second" in r
+        if r.get("scene") in ("ball", "pile1000", "pile4000", "pyramid", "cloth64", "cloth128")
+        and "steps_per_second" in r
     ]
     if runs:
         scenes = sorted(

@@ -239,15 +239,6 @@ def test_a_non_convex_mesh_is_a_gap_for_mujoco_alone_and_holds_a_ball_in_pybulle
     assert np.abs(run.arrays["body_velocity"][-1, 0]).max() < 1.0
 
 
-def test_the_damping_ratio_returns_the_restitution_of_a_linear_spring_damper():
-    from contactlab.peers.translate import damping_ratio
-
-    for epsilon in (0.1, 0.5, 0.8, 0.95):
-        zeta = damping_ratio(epsilon)
-        assert np.exp(-zeta * np.pi / np.sqrt(1 - zeta**2)) == pytest.approx(epsilon)
-    assert damping_ratio(0.0) == 1.0
-
-
 def test_without_the_extra_peers_is_one_line_naming_what_to_install_and_exit_2(tmp_path):
     code = textwrap.dedent(
         f"""
@@ -297,3 +288,164 @@ def test_a_study_sweeps_the_peers_beside_the_methods(tmp_path):
     assert ball["closed_form_checks"]  # the rebound apexes, measured on MuJoCo's trajectory
     gap = rows[("particles_box", "mujoco")]
     assert gap["status"] == "not run" and "particles" in gap["message"]
+
+
+def _benchmark(monkeypatch):
+    """benchmarks/peers.py as a module (it pins thread variables on import: put back after the test)."""
+    import importlib.util
+
+    folder = os.path.join(os.path.dirname(__file__), os.pardir, "benchmarks")
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
+        monkeypatch.setenv(name, os.environ.get(name, ""))
+    monkeypatch.setenv("NUMEXPR_NUM_THREADS", os.environ.get("NUMEXPR_NUM_THREADS", ""))
+    monkeypatch.setenv("NUMBA_NUM_THREADS", os.environ.get("NUMBA_NUM_THREADS", ""))
+    monkeypatch.syspath_prepend(folder)
+    spec = importlib.util.spec_from_file_location("benchmark_peers", os.path.join(folder, "peers.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _read_back(peer, world):
+    """What the engine holds of a built world, read from the engine: per body its mass and
+    friction, per obstacle its friction, and the time step; pybullet's restitution too."""
+    if peer == "mujoco":
+        m = world.mj_model
+        bodies = [int(m.geom_bodyid[g]) for g in range(m.ngeom)]
+        return {
+            "masses": [float(x) for x in m.body_mass[1:]],
+            "inertias": np.asarray(m.body_inertia[1:]).round(12).tolist(),
+            "body friction": [float(m.geom_friction[g, 0]) for g in range(m.ngeom) if bodies[g] > 0],
+            "obstacle friction": [float(m.geom_friction[g, 0]) for g in range(m.ngeom) if bodies[g] == 0],
+            "solref": np.asarray(m.geom_solref).round(12).tolist(),
+            "dt": float(m.opt.timestep),
+        }
+    import pybullet
+
+    ids = [
+        pybullet.getBodyUniqueId(k, physicsClientId=world.client) for k in range(pybullet.getNumBodies(world.client))
+    ]
+    info = {i: pybullet.getDynamicsInfo(i, -1, physicsClientId=world.client) for i in ids}
+    static = [i for i in ids if i not in world.bodies]
+    return {
+        "masses": [info[i][0] for i in world.bodies],
+        "inertias": [list(info[i][2]) for i in world.bodies],
+        "body friction": [info[i][1] for i in world.bodies],
+        "obstacle friction": [info[i][1] for i in static],
+        "restitution": [info[i][5] for i in ids],
+        "dt": pybullet.getPhysicsEngineParameters(physicsClientId=world.client)["fixedTimeStep"],
+    }
+
+
+@pytest.mark.parametrize("peer", ["pybullet", "mujoco"])
+def test_the_benchmark_steps_the_world_the_comparison_steps(peer, monkeypatch, tmp_path):
+    """benchmarks/peers.py and `contactlab compare --peers` give the engine the same world: the
+    same bodies, masses, inertias, friction and time step as the engine reads them back, and on
+    the benchmark's own pyramid every box meets the floor with the scene's μ (pybullet
+    multiplies two bodies' friction: the benchmark once gave both 0.6, a contact 0.36)."""
+    pytest.importorskip(peer, reason=REASON)
+    from contactlab.compare.run import run_method
+
+    bench = _benchmark(monkeypatch)
+    World = peers.engine(peer).World
+    built = []
+    original = World.__init__
+
+    def recording(self, *arguments, **keywords):
+        original(self, *arguments, **keywords)
+        built.append(_read_back(peer, self))
+
+    monkeypatch.setattr(World, "__init__", recording)
+    scene = load_scene("sliding_block", ["simulation.duration=0.02"])
+    bench.run_peer(scene.model, peer, scene.duration, 1, scene.name, dt=scene.dt)
+    job = {**scene.origin(["simulation.duration=0.02"]), "peer": peer, "video": None, "progress": False}
+    result = run_method({**job, "trajectory": str(tmp_path / "run.h5"), "allow_divergence": False})
+    assert "summary" in result and len(built) == 2
+    assert built[0] == built[1]
+
+    pyramid = bench.contactlab_pyramid(3)
+    bench.run_peer(pyramid, peer, 2 * bench.DT, 1, "pyramid")
+    world = built[-1]
+    assert world["masses"] == pytest.approx(list(pyramid.body_mass)) and world["dt"] == pytest.approx(bench.DT)
+    mu = pyramid.pair_materials(0, 0)[0]
+    combine = (lambda a, b: a * b) if peer == "pybullet" else max
+    for body in world["body friction"]:
+        assert combine(body, world["obstacle friction"][0]) == pytest.approx(mu)  # a box on the floor
+        for other in world["body friction"]:
+            assert combine(body, other) == pytest.approx(mu)  # two boxes
+
+
+@pytest.mark.parametrize("on_a_body", [False, True])
+@pytest.mark.parametrize("degrees, slides", [(27.0, False), (35.0, True)])
+def test_pybullet_slides_a_block_iff_the_slope_is_steeper_than_the_scenes_mu(degrees, slides, on_a_body):
+    """A block of μ 0.4 on a surface of μ 0.9 (contactlab's contact μ = √(0.36) = 0.6, a slope of
+    30.96°), the surface the floor or a 1000 kg box on it (a body: Bullet multiplies the two
+    bodies' friction as it does a body's and the floor's): pybullet holds the block on a 27°
+    slope, and on 35° it slides with the acceleration a = g (sin θ − μ cos θ) of μ within 3 % on
+    the floor and 10 % on the box (the slope is gravity turned by θ; a product of the materials'
+    own μ would be 0.36, and hold nothing steeper than 19.8°). The box's margin is pybullet's:
+    the product of the two bodies' friction it reads back is 0.6 exactly (the test above), but its
+    box-on-box contact holds the block as if μ were 0.61–0.66 (over bases of 1–1000 kg, 0.2–1 m
+    thick), where its box-on-plane contact gives 0.588."""
+    pytest.importorskip("pybullet", reason=REASON)
+    theta, g, mu = np.radians(degrees), 9.81, 0.6
+    b = ModelBuilder(gravity=(g * np.sin(theta), 0.0, -g * np.cos(theta)))
+    b.add_material("block", friction=0.4, restitution=0.0)
+    b.add_material("rough", friction=0.9, restitution=0.0)
+    base = 0.0
+    if on_a_body:  # μ 0.9 with the floor as well: it holds on 35° (tan 35° = 0.70)
+        b.add_body("box", half_extents=(1.0, 1.0, 0.1), mass=1000.0, position=(0, 0, 0.1), material="rough")
+        base = 0.2
+    b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=(0, 0, base + 0.05), material="block")
+    b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="rough")
+    model = b.finalize()
+    block = model.body_count - 1
+    assert model.pair_materials(0, 1)[0] == pytest.approx(mu)
+    run = peers.simulate(model, "pybullet", 1.0 / 240.0, 1.0, record_every=12)
+    t, x = run.arrays["time"], run.arrays["body_position"][:, block, 0]
+    if on_a_body:
+        assert np.abs(run.arrays["body_position"][:, 0, 0]).max() < 1e-3  # the heavy box holds
+    if slides:
+        acceleration = 2.0 * np.polyfit(t, x, 2)[0]
+        held = (g * np.sin(theta) - acceleration) / (g * np.cos(theta))
+        assert held == pytest.approx(mu, rel=0.10 if on_a_body else 0.03)
+    else:
+        assert np.abs(x).max() < 1e-3
+
+
+@pytest.mark.parametrize("dt", [0.001, 1.0 / 240.0])
+def test_mujoco_bounces_the_ball_back_with_the_scenes_restitution(dt):
+    """MuJoCo has no restitution coefficient: contactlab.peers gives it the damping ratio at
+    which its own contact returns ε. The ball's first three bounces each return ε = 0.8 of the
+    speed to within 12 % (MuJoCo's soft contact varies with the depth its first touching step
+    reaches) and 4 % on average; the continuous spring-damper's ζ gave 0.85–0.87 at dt = 1 ms
+    and flung the ball up eightfold at 1/240 s."""
+    pytest.importorskip("mujoco", reason=REASON)
+    scene = load_scene("bouncing_ball", [f"simulation.dt={dt!r}", "simulation.duration=2.5"])
+    run = peers.simulate(scene.model, "mujoco", scene.dt, scene.duration)
+    height = run.arrays["body_position"][:, 0, 2] - 0.1  # the ball's bottom
+    apexes = [height[0]]
+    rising = np.flatnonzero((height[1:-1] > height[:-2]) & (height[1:-1] >= height[2:])) + 1
+    apexes += [height[k] for k in rising if height[k] > 0.05][:3]
+    assert len(apexes) == 4
+    ratios = np.sqrt(np.array(apexes[1:]) / np.array(apexes[:-1]))
+    assert np.all(np.abs(ratios - 0.8) < 0.12 * 0.8), ratios
+    assert abs(ratios.mean() - 0.8) < 0.04 * 0.8, ratios
+
+
+@pytest.mark.parametrize("peer", ["pybullet", "mujoco"])
+def test_a_wall_whose_normal_is_not_up_holds_a_ball_in_every_engine(peer):
+    """Gravity along −x onto the plane x = 0 (normal +x), and along a tilted normal onto a tilted
+    plane: the ball comes to rest on each, its centre one radius out along the normal (the
+    translation once turned a wall's normal twice in pybullet, by its own normal and by the
+    body's rotation taking z onto it: every sphere of the benchmark's boxed pile sat inside a
+    wall and was thrown out, 0.74 m of overlap)."""
+    pytest.importorskip(peer, reason=REASON)
+    for normal in (np.array([1.0, 0.0, 0.0]), np.array([0.3, -0.4, np.sqrt(0.75)])):
+        b = ModelBuilder(gravity=-9.81 * normal)
+        b.add_body("sphere", radius=0.1, mass=1.0, position=0.3 * normal + np.array([0.0, 0.0, 0.05]))
+        b.add_obstacle("plane", normal=normal, offset=0.0)
+        model = b.finalize()
+        run = peers.simulate(model, peer, 0.002, 1.0, record_every=50)
+        height = run.arrays["body_position"][:, 0] @ normal
+        assert height.min() > 0.09 and height[-1] == pytest.approx(0.1, abs=2e-3), (normal, height)

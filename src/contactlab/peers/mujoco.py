@@ -12,12 +12,19 @@ pyramidal friction cone, Euler integration, soft contacts with solimp 0.9 0.95 0
 Materials: MuJoCo gives a contact the larger of its two geoms' friction coefficients and the
 mean of their ``solref``. It has no restitution coefficient: a contact is a spring-damper of
 time constant 0.02 s (its default) and damping ratio ζ, critically damped (ζ = 1, no bounce) by
-default; contactlab's ε becomes ζ = −ln ε / √(π² + ln² ε) (:func:`~.translate.damping_ratio`),
-the ratio at which a linear spring-damper returns ε of the approach speed. Where the scene's
-material pairs cannot all be met by those rules, the run says which (docs/peers.md).
+default, which a material with ε = 0 keeps. A material with ε > 0 gets the time constant
+0.02 s or 20 time steps, the longer (:func:`bouncing_time_constant`), and the ζ at which
+MuJoCo's own discrete contact then returns ε of the approach speed on average
+(:func:`damping_for`: a sphere meets a plane at 1 m/s without gravity in a probe model, at five
+depths within a step, ζ bisected). The continuous spring-damper's ζ = −ln ε / √(π² + ln² ε) is
+not it: MuJoCo resolves such a contact in a few steps, and that ζ returned 0.86 of the speed for
+ε = 0.8 at dt = 1 ms and flung the ball up to eight times as fast at dt = 1/240 s. Where the
+scene's material pairs cannot all be met by those rules, the run says which (docs/peers.md).
 """
 
 from __future__ import annotations
+
+import functools
 
 import mujoco
 import numpy as np
@@ -27,8 +34,11 @@ from ..state import State
 from . import translate
 
 NAME = "mujoco"
-TIME_CONSTANT = 0.02  # s: MuJoCo's default solref time constant, kept; only the damping ratio carries ε
+TIME_CONSTANT = 0.02  # s: MuJoCo's default solref time constant, kept for a material that does not bounce
+BOUNCE_STEPS = 20  # time steps a bouncing material's time constant spans at least (the default's at dt = 1 ms)
 TORSION, ROLLING = 0.005, 0.0001  # MuJoCo's default torsional and rolling friction (unused at condim 3)
+PROBE_SPEED = 1.0  # m/s: the approach speed at which damping_for measures MuJoCo's bounce
+BISECTIONS = 30  # halvings of the damping ratio's interval (0, 1]: ζ to 1e-9
 
 
 def _numbers(values) -> str:
@@ -48,7 +58,7 @@ class World:
         self.model = model
         bodies, obstacles = translate.solids(model)
         self.notes: list[str] = []
-        friction, damping = self._materials(model)
+        friction, damping = self._materials(model, dt)
         assets: list[str] = []
         world: list[str] = []
         for index, solid in enumerate(obstacles):
@@ -79,19 +89,20 @@ class World:
             + _spelt(mujoco.mjtIntegrator(self.mj_model.opt.integrator).name.removeprefix("mjINT_")),
         }
 
-    def _materials(self, model):
+    def _materials(self, model, dt):
         """Per material: the geoms' friction and solref damping ratio (see the module docstring)."""
         targets = translate.pair_targets(model)
         count = len(model.material_names)
         mu = {pair: value[0] for pair, value in targets.items()}
-        zeta = {pair: translate.damping_ratio(value[1]) for pair, value in targets.items()}
+        zeta = {pair: damping_for(value[1], dt) for pair, value in targets.items()}
         own_mu = np.asarray(model.material_friction, dtype=float)
-        own_zeta = np.array([translate.damping_ratio(e) for e in model.material_restitution])
+        own_zeta = np.array([damping_for(e, dt) for e in model.material_restitution])
         friction, missed = translate.fit(mu, max, [*translate.uniform(mu, count, float), own_mu])
         if missed:
             self.notes.append(
                 translate.missed_sentence("MuJoCo", "friction", "the larger", missed, model.material_names)
             )
+        self.time_constant = bouncing_time_constant(dt)
         damping, missed = translate.fit(
             zeta, lambda a, b: (a + b) / 2, [*translate.uniform(zeta, count, float), own_zeta]
         )
@@ -102,8 +113,10 @@ class World:
         if any(value[1] > 0 for value in targets.values()):
             names = model.material_names
             self.notes.append(
-                "MuJoCo has no restitution coefficient: ε is given as the damping ratio ζ = −ln ε / √(π² + ln² ε) "
-                f"of its contact spring-damper (solref time constant {TIME_CONSTANT} s, its default): "
+                "MuJoCo has no restitution coefficient: ε is given as the damping ratio ζ of its contact "
+                f"spring-damper, with the solref time constant {self.time_constant:.3g} s (its default "
+                f"{TIME_CONSTANT} s or {BOUNCE_STEPS} time steps, the longer), at which its own contact at "
+                f"dt = {dt:g} s returns ε of a {PROBE_SPEED:g} m/s approach without gravity, on average: "
                 + ", ".join(
                     f"{names[a]}–{names[b]} ε {value[1]:.3g} → ζ {(damping[a] + damping[b]) / 2:.3g}"
                     for (a, b), value in targets.items()
@@ -116,7 +129,8 @@ class World:
         """The MJCF geom of ``solid`` (its pose written where ``placed``: an obstacle's; a body's
         geom sits at its body's frame), adding a mesh asset where it needs one."""
         m = solid.material
-        common = f'friction="{float(friction[m])!r} {TORSION} {ROLLING}" solref="{TIME_CONSTANT} {float(damping[m])!r}"'
+        constant = TIME_CONSTANT if damping[m] >= 1.0 else self.time_constant  # a bouncing material's
+        common = f'friction="{float(friction[m])!r} {TORSION} {ROLLING}" solref="{constant!r} {float(damping[m])!r}"'
         pose = f' pos="{_numbers(solid.position)}" quat="{_numbers(solid.orientation)}"' if placed else ""
         if solid.kind == "plane":
             return f'<geom name="{name}" type="plane" size="0 0 1"{pose} {common}/>'
@@ -175,6 +189,78 @@ class World:
 
     def close(self) -> None:
         """Nothing to release (the model and data are freed with the object)."""
+
+
+@functools.lru_cache(maxsize=256)
+def damping_for(restitution: float, dt: float) -> float:
+    """The solref damping ratio ζ (0, 1] at which MuJoCo's contact at time step ``dt`` [s]
+    returns, on average, the share ``restitution`` (ε) of the approach speed (:func:`_bounce`:
+    a sphere meets a plane at PROBE_SPEED without gravity), bisected (the bounce falls as ζ
+    grows). ε ≤ 0: 1, MuJoCo's default (no bounce); an ε that ζ = 1 still exceeds: 1."""
+    if restitution <= 0.0:
+        return 1.0
+    probe = _Probe(dt, bouncing_time_constant(dt))
+    low, high = 0.0, 1.0  # the bounce at low exceeds ε, at high it does not
+    if probe.bounce(high) >= restitution:
+        return high
+    for _ in range(BISECTIONS):
+        middle = 0.5 * (low + high)
+        if probe.bounce(middle) > restitution:
+            low = middle
+        else:
+            high = middle
+    return 0.5 * (low + high)
+
+
+def bouncing_time_constant(dt: float) -> float:
+    """The solref time constant [s] of a material that bounces at time step ``dt`` [s]: MuJoCo's
+    default 0.02 s, or BOUNCE_STEPS steps where that is longer. A contact of damping ratio ζ
+    lasts about π ζ time constants; MuJoCo's default at dt = 1 ms resolves a bounce of ε = 0.8 in
+    4–5 steps, and the same time constant at dt = 1/240 s in one or two, where some impacts
+    gain energy (up to 1.47 of the approach speed): 20 steps keep every dt at the default's 1 ms
+    resolution."""
+    return max(TIME_CONSTANT, BOUNCE_STEPS * float(dt))
+
+
+class _Probe:
+    """A 1 kg sphere (r = 0.1 m) over a plane in MuJoCo at time step ``dt`` [s] and solref time
+    constant ``constant`` [s] (both geoms), no gravity."""
+
+    RADIUS = 0.1
+    PHASES = (0.1, 0.3, 0.5, 0.7, 0.9)  # where within a step the sphere reaches the plane, in steps
+
+    def __init__(self, dt: float, constant: float) -> None:
+        xml = (
+            f'<mujoco><option timestep="{float(dt)!r}" gravity="0 0 0"/><worldbody>'
+            f'<geom type="plane" size="0 0 1" solref="{constant!r} 1"/><body><freejoint/>'
+            f'<geom type="sphere" size="{self.RADIUS}" mass="1" solref="{constant!r} 1"/></body>'
+            "</worldbody></mujoco>"
+        )
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.data = mujoco.MjData(self.model)
+        self.dt = float(dt)
+
+    def bounce(self, zeta: float) -> float:
+        """The share of PROBE_SPEED the sphere leaves with at damping ratio ``zeta`` (both geoms),
+        the mean over PHASES: a discrete contact's bounce depends on how deep the first step
+        that touches goes (by up to 10 % at 4–5 steps a contact), which a falling body meets at
+        any depth."""
+        m, d = self.model, self.data
+        m.geom_solref[:, 1] = zeta
+        shares = []
+        for phase in self.PHASES:
+            mujoco.mj_resetData(m, d)
+            d.qpos[2] = self.RADIUS + phase * PROBE_SPEED * self.dt
+            d.qvel[2] = -PROBE_SPEED
+            touched, share = False, 0.0
+            for _ in range(max(100, int(round(1.0 / self.dt)))):  # a contact lasts a few time constants
+                mujoco.mj_step(m, d)
+                touched = touched or d.ncon > 0
+                if touched and d.ncon == 0:
+                    share = max(float(d.qvel[2]), 0.0) / PROBE_SPEED
+                    break
+            shares.append(share)
+        return float(np.mean(shares))
 
 
 def _spelt(name: str) -> str:

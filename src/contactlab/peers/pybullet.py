@@ -7,12 +7,14 @@ axes, its mass and principal moments set (``localInertiaDiagonal``: Bullet would
 convex hull's by its bounding box), its initial velocities set; shapes: sphere, box (half
 extents), capsule (radius, and the distance between its caps' centres, twice the half length,
 along z), a convex body or obstacle as a convex hull of its corners (``GEOM_MESH``), a plane as
-``GEOM_PLANE``, a triangle-mesh obstacle as a static concave triangle mesh. The time step and
-gravity are set; the rest is pybullet's default (the sequential-impulse solver, 50 iterations,
-split impulse, restitution below 0.2 m/s ignored), with two exceptions that make it the scene's
-physics rather than a setting: no velocity damping (Bullet damps every body by 0.04 a second by
-default; contactlab's scenes have no damping) and no sleeping (Bullet freezes a body that rests
-for 2 s; contactlab never does), as benchmarks/peers.py does.
+``GEOM_PLANE`` of normal z in a body turned onto the plane's normal, a triangle-mesh obstacle as
+a static concave triangle mesh. The time step and gravity are set; the rest is pybullet's
+default (the sequential-impulse solver, 50 iterations, split impulse, restitution below 0.2 m/s
+ignored), with two exceptions that make it the scene's physics rather than a setting: no
+velocity damping (pybullet damps its reduced-coordinate bodies by 0.04 a second by default; the
+maximal-coordinate bodies built here have none, and it is set to 0 to say so) and no sleeping
+(Bullet freezes a body that rests for 2 s; contactlab never does). benchmarks/peers.py builds
+its worlds here too.
 
 Materials: Bullet gives a contact the product of its two bodies' friction coefficients and the
 product of their restitutions. Each shape gets √μ of its material, so every pair gets
@@ -160,7 +162,8 @@ class World:
             radius, half_length = solid.size
             return p.createCollisionShape(p.GEOM_CAPSULE, radius=radius, height=2 * half_length, physicsClientId=c)
         if solid.kind == "plane":
-            return p.createCollisionShape(p.GEOM_PLANE, planeNormal=list(map(float, solid.normal)), physicsClientId=c)
+            # the plane's own normal is z: the body's orientation (translate.solids: z onto the normal) turns it
+            return p.createCollisionShape(p.GEOM_PLANE, planeNormal=[0.0, 0.0, 1.0], physicsClientId=c)
         if solid.kind == "convex":
             return p.createCollisionShape(p.GEOM_MESH, vertices=solid.vertices.tolist(), physicsClientId=c)
         return p.createCollisionShape(  # a static triangle mesh, concave

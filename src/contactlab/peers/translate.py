@@ -13,9 +13,8 @@ their engine's terms:
   ε = max(ε_a, ε_b) of the two colliders' materials) against an engine that keeps one value per
   shape and combines two by its own rule (pybullet multiplies, MuJoCo takes the larger friction
   and the mean of the damping): the per-material values that meet contactlab's pairs, and a
-  sentence for each pair of this scene that the rule cannot meet;
-* :func:`damping_ratio`: the damping ratio of a linear spring-damper contact whose bounce
-  keeps the share ε of the speed, what MuJoCo is given for a restitution coefficient it lacks.
+  sentence for each pair of this scene that the rule cannot meet (MuJoCo's stand-in for a
+  restitution coefficient it lacks is its own: contactlab.peers.mujoco.damping_for).
 
 The mapping is written out per engine in docs/peers.md.
 """
@@ -245,18 +244,6 @@ def static_only(model: Model) -> np.ndarray:
     only[np.asarray(model.obstacle_material, dtype=int)] = True
     only[np.asarray(model.body_material, dtype=int)] = False
     return only
-
-
-def damping_ratio(restitution: float) -> float:
-    """ζ of a linear spring-damper contact whose bounce returns the share ``restitution`` (ε) of
-    the approach speed: ε = exp(−ζ π / √(1 − ζ²)), so ζ = −ln ε / √(π² + ln² ε); ε = 0: ζ = 1
-    (critical damping, no bounce)."""
-    if restitution <= 0.0:
-        return 1.0
-    if restitution >= 1.0:
-        return 0.0
-    log = math.log(restitution)
-    return -log / math.sqrt(math.pi**2 + log**2)
 
 
 def missed_sentence(engine: str, quantity: str, rule: str, missed: dict, names: Sequence[str]) -> str:
