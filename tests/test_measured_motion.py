@@ -249,7 +249,7 @@ def test_a_fit_whose_runs_together_repay_compiling_takes_the_compiled_loop(tmp_p
     monkeypatch.setattr(fitting.cluster, "run_tasks", recorded)
     for repays, expected in ((False, None), (True, True)):
         monkeypatch.setattr(
-            fitting, "repays_compiling", lambda model, steps, runs, answer=repays: asked.append((steps, runs)) or answer
+            fitting, "repays_compiling", lambda steps, runs, answer=repays: asked.append((steps, runs)) or answer
         )
         jobs.clear()
         vary = ["materials.0.friction=0.1:0.5"]

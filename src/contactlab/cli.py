@@ -453,7 +453,7 @@ def _where_time_went(summary):
     if summary.get("stepping") == SHORT_FIRST_RUN:
         parts[-1] += (
             ", its compiled steps called from Python: a run this short does not compile the stepping loop "
-            "(about 20 s, once); a longer run or compiled_loop=True does, and later runs step through it"
+            "(about 12 s more, once); a longer run or compiled_loop=True does, and later runs step through it"
         )
     return ", ".join(parts)
 

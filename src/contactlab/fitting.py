@@ -195,7 +195,7 @@ def fit(
             # of one size: where together they repay compiling the loop, each takes it (a worker
             # compiles it once, cached for the others), as a sweep's alike cells do
             steps = max(int(round(m.duration / loaded.dt)) for m in measurements)
-            runs.compiled_loop = repays_compiling(loaded.model, steps, budget * len(train) + len(held)) or None
+            runs.compiled_loop = repays_compiling(steps, budget * len(train) + len(held)) or None
             result = {}
             evaluated = {}
             for method in names:

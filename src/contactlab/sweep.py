@@ -156,7 +156,7 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
             # where one cell alone would not (a study is thousands of short runs): then it is compiled
             # once and serves them all, cached for every worker (velocity_loop.repays_compiling)
             steps = run_length(scene.dt, scene.duration)[2]
-            compile_loop = repays_compiling(scene.model, steps, job.get("alike", 1)) or None
+            compile_loop = repays_compiling(steps, job.get("alike", 1)) or None
             run = scene.simulate(threads=1, trajectory=job["trajectory"], compiled_loop=compile_loop)
     except peers.Inexpressible as gap:
         return _failed_row(job, "not run", gap.sentence, started)

@@ -395,17 +395,18 @@ def _compiled_for(model: Model) -> set[tuple]:
 # seconds each kind of run (its shape families and compile flags) has stepped ``run``'s body from
 # Python in this process: once they reach what compiling ``run`` costs, its runs compile it
 _seconds_from_python: dict[tuple, float] = {}
-LOOP_COMPILE_SECONDS = 30.0  # s: about what compiling ``run`` costs on an empty cache (2-core machine)
-GLUE_SECONDS = (1e-4, 8e-6)  # s a step, and s a body or particle a step: the Python the loop saves
+# s: what compiling ``run`` costs once its step is compiled (which a run from Python compiles too):
+# 10–14 s of CPU for the ball and the pyramid on the 2-core benchmark machine
+LOOP_COMPILE_SECONDS = 12.0
+GLUE_SECONDS = 3.5e-5  # s a step: the Python of ``run``'s body from Python (its calls' unboxing), 33 µs measured
 
 
-def repays_compiling(model: Model, steps: int, runs: int = 1) -> bool:
-    """Whether ``runs`` runs of ``steps`` steps of ``model`` through the methods' ``step`` would
-    spend more time in Python glue between kernels (measured: about 0.1 ms a step plus 8 µs a
-    body, see benchmarks/profile_methods.py) than compiling the loop costs on an empty cache
-    (a study's cells of one scene and method: ``contactlab.sweep``)."""
-    per_step = GLUE_SECONDS[0] + GLUE_SECONDS[1] * (model.body_count + model.particle_count)
-    return runs * steps * per_step > LOOP_COMPILE_SECONDS
+def repays_compiling(steps: int, runs: int = 1) -> bool:
+    """Whether ``runs`` runs of ``steps`` steps would spend more time stepping
+    ``run``'s body from Python (about 35 µs a step more than compiled, on a ball as on a
+    210-box pyramid: the calls' unboxing, whatever the scene's size) than compiling ``run``
+    costs (a study's cells of one scene and method: ``contactlab.sweep``)."""
+    return runs * steps * GLUE_SECONDS > LOOP_COMPILE_SECONDS
 
 
 def stepper_for(
@@ -434,5 +435,5 @@ def stepper_for(
         if method == "penalty"
         else Stepper(model, method, options, integrator, dt, state)
     )
-    stepper.compiled = bool(compiled_loop) or repays_compiling(model, steps) or stepper.compiled_already()
+    stepper.compiled = bool(compiled_loop) or repays_compiling(steps) or stepper.compiled_already()
     return stepper
