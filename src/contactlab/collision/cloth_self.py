@@ -1,0 +1,470 @@
+"""Contacts of cloth with itself and with other cloths: vertex–triangle and edge–edge (issue 41).
+
+A cloth's vertices are particles of radius ``thickness``, but two vertices of one cloth make
+no particle contact (their springs keep them apart), and a vertex may pass between the
+vertices of a triangle. Here the cloths whose ``self_collision`` is on meet as surfaces, after
+Bridson, Fedkiw and Anderson (2002):
+
+* **vertex–triangle**: a vertex v and a triangle f that does not have v as a corner, when the
+  vertex's distance d to the triangle's closest point q (with barycentric weights w) is within
+  the two thicknesses r_v + r_f and the reach. Side A is the vertex (weight 1), side B the
+  triangle's three vertices with weights w (SPEC D1: a point carried by three particles); the
+  normal is (x_v − q)/d, the face normal on the vertex's side where the vertex lies over the
+  triangle's inside;
+* **edge–edge**: two edges with no corner in common whose closest points p (on the first,
+  weights 1 − s, s) and q (on the second, 1 − t, t) are both strictly inside them, within
+  the two thicknesses and the reach. Side A is the first edge, side B the second; the normal
+  is (p − q)/|p − q|. A closest point at an edge's end is a vertex near an edge, which the
+  vertex–triangle contacts of that edge's triangles already find.
+
+Depth counts from the thicknesses: δ = r_A + r_B − d, > 0 closer than the cloth's thickness
+(r of a side: the largest radius of its particles). **Over the swept step**: like every other
+pair (``collide_keeping``), a pair is a contact when its gap d − r_A − r_B is at most the
+reach of its two sides, each side's largest sweep (the distance its particles may travel in
+the coming step) plus half the margin. Any two elements that could meet during the step are
+so found at its start, and each method keeps their gap from closing past zero (speculative
+contacts): a fast fold does not tunnel.
+
+The broad phase is ``broad_phase.boxes_overlapping`` (a hashed grid for a thousand boxes and
+more) over the elements' boxes grown by their thickness and reach, once for vertices and
+triangles, once for edges: the cost grows with the number of vertices and of near pairs.
+
+Contact ids: a self-contact names two of its particles as its collider pair, so that
+``half_thickness_sums`` reads its pass-through depth r_A + r_B from them, and its element in
+the feature: vertex–triangle (vertex, the triangle's first corner) with feature 2 f + 1 (f
+the triangle's index in ``Model.triangles``), edge–edge (the first edge's two ends, which
+never make a particle pair: they are one cloth's) with feature 2 e + 2 (e the second edge's
+index in ``ClothElements.edges``). Particle–particle contacts have feature 0: no id is shared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..compiling import njit
+from ..contacts import ContactArrays, Contacts, tangent_frames
+from ..model import derived
+from .broad_phase import boxes_overlapping
+from .contact_output import FEATURE_BITS
+
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
+
+
+@dataclass(frozen=True)
+class ClothElements:
+    """The elements of the cloths whose ``self_collision`` is on (global particle indices)."""
+
+    triangles: np.ndarray
+    """(F', 3) int64, the corners of each triangle"""
+    triangle_index: np.ndarray
+    """(F',) int64, each one's index in ``Model.triangles``"""
+    edges: np.ndarray
+    """(E, 2) int64, the triangles' edges, each once, lower index first, sorted"""
+    vertices: np.ndarray
+    """(V,) int64, the particles that are corners of those triangles, sorted"""
+
+    @property
+    def empty(self) -> bool:
+        return len(self.triangles) == 0
+
+
+@derived
+def cloth_elements(model: Model) -> ClothElements:
+    """The ClothElements of ``model``, built once and kept with it."""
+    triangles = np.asarray(model.triangles, dtype=np.int64).reshape(-1, 3)
+    cloth = model.particle_cloth[triangles[:, 0]] if len(triangles) else np.zeros(0, dtype=np.int64)
+    chosen = np.nonzero(np.asarray(model.cloth_self_collision, dtype=bool)[cloth])[0] if len(triangles) else cloth
+    kept = triangles[chosen]
+    edges = np.sort(kept[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.unique(edges, axis=0) if len(edges) else np.zeros((0, 2), dtype=np.int64)
+    return ClothElements(
+        triangles=kept,
+        triangle_index=chosen.astype(np.int64),
+        edges=edges.astype(np.int64),
+        vertices=np.unique(kept).astype(np.int64),
+    )
+
+
+def cloth_self_contacts(model: Model, state: State, margin: float, sweep: np.ndarray | None) -> Contacts:
+    """The vertex–triangle and edge–edge contacts of the self-colliding cloths at ``state``.
+
+    margin [m]: gaps down to this are kept (besides the sweep); sweep (B + P,) [m]: how far each
+    body and particle may travel in the coming step (None: standing still). See the module."""
+    elements = cloth_elements(model)
+    if elements.empty:
+        return Contacts.empty()
+    P = model.particle_count
+    reach = np.full(P, 0.5 * float(margin))
+    if sweep is not None:
+        reach += sweep[model.body_count :]
+    return Contacts.from_arrays(
+        self_contact_arrays(
+            np.ascontiguousarray(state.particle_position, dtype=float),
+            np.asarray(model.particle_radius, dtype=float),
+            reach,
+            np.asarray(model.particle_material, dtype=np.int64),
+            np.asarray(model.material_friction, dtype=float),
+            np.asarray(model.material_restitution, dtype=float),
+            elements.triangles,
+            elements.triangle_index,
+            elements.edges,
+            elements.vertices,
+            model.body_count,
+            model.body_count + P + model.obstacle_count,
+        )
+    )
+
+
+def is_self_contact(contacts: Contacts) -> np.ndarray:
+    """(C,) bool: the contacts made here — the only ones whose side B is carried by two
+    particles or more (a triangle or an edge)."""
+    return np.asarray(contacts.particles_b)[:, 1] >= 0
+
+
+# ---- the compiled detection ----------------------------------------------------------------------
+
+
+@njit(cache=True)
+def element_boxes(
+    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray, first: int
+) -> None:
+    """Write into rows ``first``… of ``lower``, ``upper`` (N, 3) [m] the boxes of the elements
+    ``corners`` (K, k) int (vertices: k = 1, edges 2, triangles 3) about their particles'
+    ``position`` (P, 3) [m], grown by the largest ``grow`` (P,) [m] of their corners."""
+    for e in range(corners.shape[0]):
+        g = 0.0
+        for m in range(corners.shape[1]):
+            g = max(g, grow[corners[e, m]])
+        for d in range(3):
+            low = high = position[corners[e, 0], d]
+            for m in range(1, corners.shape[1]):
+                low = min(low, position[corners[e, m], d])
+                high = max(high, position[corners[e, m], d])
+            lower[first + e, d] = low - g
+            upper[first + e, d] = high + g
+
+
+@njit(cache=True)
+def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
+    """The point of triangle (a, b, c) (3,) [m] closest to x (3,) [m], as its barycentric weights
+    (w_a, w_b, w_c), and whether it lies strictly inside the triangle (not on an edge or a
+    corner). Ericson, *Real-Time Collision Detection*, 5.1.5; a degenerate triangle gives a corner
+    or an edge point."""
+    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    ap0, ap1, ap2 = x[0] - a[0], x[1] - a[1], x[2] - a[2]
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0, False
+    bp0, bp1, bp2 = x[0] - b[0], x[1] - b[1], x[2] - b[2]
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0, False
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 1.0 - v, v, 0.0, False
+    cp0, cp1, cp2 = x[0] - c[0], x[1] - c[1], x[2] - c[2]
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0, False
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 1.0 - w, 0.0, w, False
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - w, w, False
+    denominator = 1.0 / (va + vb + vc)
+    v = vb * denominator
+    w = vc * denominator
+    return 1.0 - v - w, v, w, True
+
+
+@njit(cache=True)
+def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> tuple[float, float]:
+    """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2)
+    of two segments (3,) [m] each; an end where clamped (exactly 0 or 1), and for parallel
+    segments s = 0. Ericson, *Real-Time Collision Detection*, 5.1.9."""
+    d1 = q1 - p1
+    d2 = q2 - p2
+    r = p1 - p2
+    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
+    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
+    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
+    tiny = 1e-30
+    if a <= tiny and e <= tiny:
+        return 0.0, 0.0
+    if a <= tiny:
+        return 0.0, min(max(f / e, 0.0), 1.0)
+    c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
+    if e <= tiny:
+        return min(max(-c / a, 0.0), 1.0), 0.0
+    b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+    denominator = a * e - b * b
+    s = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 1e-12 * a * e else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((b - c) / a, 0.0), 1.0)
+    return s, t
+
+
+@njit(cache=True)
+def vertex_triangle(
+    position: np.ndarray, radius: np.ndarray, reach: np.ndarray, v: int, corners: np.ndarray
+) -> tuple[bool, float, float, float, float, np.ndarray, np.ndarray]:
+    """The vertex–triangle test of particle ``v`` against the triangle of particles ``corners``
+    (3,) (see the module). Returns (a contact?, depth [m], the weights w (3), the normal from
+    the triangle to the vertex (3,), the contact point (3,) [m], midway between the surfaces)."""
+    a, b, c = position[corners[0]], position[corners[1]], position[corners[2]]
+    x = position[v]
+    wa, wb, wc, inside = closest_on_triangle(x, a, b, c)
+    q = wa * a + wb * b + wc * c
+    gap = x - q
+    distance = np.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
+    side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
+    side_reach = max(reach[corners[0]], reach[corners[1]], reach[corners[2]])
+    depth = radius[v] + side_radius - distance
+    normal = np.zeros(3)
+    if depth < -(reach[v] + side_reach):
+        return False, depth, wa, wb, wc, normal, q
+    face = np.cross(b - a, c - a)
+    area = np.sqrt(face[0] ** 2 + face[1] ** 2 + face[2] ** 2)
+    if inside and area > 0.0:  # over the inside: the face normal, on the vertex's side
+        face /= area
+        side = 1.0 if face[0] * gap[0] + face[1] * gap[1] + face[2] * gap[2] >= 0.0 else -1.0
+        normal[:] = side * face
+    elif distance > 0.0:
+        normal[:] = gap / distance
+    elif area > 0.0:
+        normal[:] = face / area
+    else:  # a vertex on the corner of a degenerate triangle: no direction to push along
+        return False, depth, wa, wb, wc, normal, q
+    point = q + (side_radius - 0.5 * depth) * normal
+    return True, depth, wa, wb, wc, normal, point
+
+
+@njit(cache=True)
+def edge_edge(
+    position: np.ndarray, radius: np.ndarray, reach: np.ndarray, first: np.ndarray, second: np.ndarray
+) -> tuple[bool, float, float, float, np.ndarray, np.ndarray]:
+    """The edge–edge test of the edges of particles ``first`` (2,) and ``second`` (2,) (see the
+    module). Returns (a contact?, depth [m], s, t, the normal from the second edge to the first
+    (3,), the contact point (3,) [m])."""
+    p1, q1, p2, q2 = position[first[0]], position[first[1]], position[second[0]], position[second[1]]
+    s, t = closest_on_segments(p1, q1, p2, q2)
+    normal = np.zeros(3)
+    if not (0.0 < s < 1.0 and 0.0 < t < 1.0):
+        return False, 0.0, s, t, normal, normal
+    p = p1 + s * (q1 - p1)
+    q = p2 + t * (q2 - p2)
+    gap = p - q
+    distance = np.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
+    radius_a = max(radius[first[0]], radius[first[1]])
+    radius_b = max(radius[second[0]], radius[second[1]])
+    depth = radius_a + radius_b - distance
+    if depth < -(max(reach[first[0]], reach[first[1]]) + max(reach[second[0]], reach[second[1]])):
+        return False, depth, s, t, normal, q
+    if distance > 0.0:
+        normal[:] = gap / distance
+    else:  # the edges cross: the normal of the plane of the two
+        across = np.cross(q1 - p1, q2 - p2)
+        length = np.sqrt(across[0] ** 2 + across[1] ** 2 + across[2] ** 2)
+        if length == 0.0:
+            return False, depth, s, t, normal, q
+        normal[:] = across / length
+    point = q + (radius_b - 0.5 * depth) * normal
+    return True, depth, s, t, normal, point
+
+
+@njit(cache=True)
+def self_contact_arrays(
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: np.ndarray,
+    material: np.ndarray,
+    material_friction: np.ndarray,
+    material_restitution: np.ndarray,
+    triangles: np.ndarray,
+    triangle_index: np.ndarray,
+    edges: np.ndarray,
+    vertices: np.ndarray,
+    body_count: int,
+    total: int,
+) -> ContactArrays:
+    """``cloth_self_contacts``, compiled: the ContactArrays of the vertex–triangle contacts, then
+    the edge–edge ones, each in the broad phase's (sorted) pair order.
+
+    position (P, 3) [m]; radius (P,) [m]; reach (P,) [m], each particle's sweep plus half the
+    margin; material (P,) int and the materials' friction and restitution (M,); the elements
+    (``ClothElements``): triangles (F', 3), triangle_index (F',), edges (E, 2), vertices (V,);
+    body_count B and total N = B + P + O, the collider count of the contact ids."""
+    V, F, E = vertices.shape[0], triangles.shape[0], edges.shape[0]
+    grow = radius + reach
+    lower = np.empty((V + F, 3))
+    upper = np.empty((V + F, 3))
+    element_boxes(position, grow, vertices.reshape(V, 1), lower, upper, 0)
+    element_boxes(position, grow, triangles, lower, upper, V)
+    near = boxes_overlapping(lower, upper, True)
+    edge_lower = np.empty((E, 3))
+    edge_upper = np.empty((E, 3))
+    element_boxes(position, grow, edges, edge_lower, edge_upper, 0)
+    edge_pairs = boxes_overlapping(edge_lower, edge_upper, True)
+    capacity = near.shape[0] + edge_pairs.shape[0]
+    particles = np.full((2, capacity, 3), -1, dtype=np.int64)
+    weights = np.zeros((2, capacity, 3))
+    point = np.empty((capacity, 3))
+    normal = np.empty((capacity, 3))
+    depth = np.empty(capacity)
+    friction = np.empty(capacity)
+    restitution = np.empty(capacity)
+    feature_id = np.empty(capacity, dtype=np.int64)
+    count = 0
+    for k in range(near.shape[0]):
+        i, j = near[k, 0], near[k, 1]
+        if i >= V or j < V:  # vertex–vertex or triangle–triangle
+            continue
+        v, f = vertices[i], j - V
+        corners = triangles[f]
+        if v == corners[0] or v == corners[1] or v == corners[2]:
+            continue
+        found, d, wa, wb, wc, n, p = vertex_triangle(position, radius, reach, v, corners)
+        if not found:
+            continue
+        particles[0, count, 0] = v
+        weights[0, count, 0] = 1.0
+        for m in range(3):
+            particles[1, count, m] = corners[m]
+        weights[1, count, 0], weights[1, count, 1], weights[1, count, 2] = wa, wb, wc
+        pair = (body_count + v) * total + body_count + corners[0]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * triangle_index[f] + 1)
+        point[count], normal[count], depth[count] = p, n, d
+        friction[count], restitution[count] = _materials(
+            material[v], material[corners[0]], material_friction, material_restitution
+        )
+        count += 1
+    for k in range(edge_pairs.shape[0]):
+        first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
+        if first[0] == second[0] or first[0] == second[1] or first[1] == second[0] or first[1] == second[1]:
+            continue
+        found, d, s, t, n, p = edge_edge(position, radius, reach, first, second)
+        if not found:
+            continue
+        particles[0, count, 0], particles[0, count, 1] = first[0], first[1]
+        weights[0, count, 0], weights[0, count, 1] = 1.0 - s, s
+        particles[1, count, 0], particles[1, count, 1] = second[0], second[1]
+        weights[1, count, 0], weights[1, count, 1] = 1.0 - t, t
+        pair = (body_count + first[0]) * total + body_count + first[1]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * edge_pairs[k, 1] + 2)
+        point[count], normal[count], depth[count] = p, n, d
+        friction[count], restitution[count] = _materials(
+            material[first[0]], material[second[0]], material_friction, material_restitution
+        )
+        count += 1
+    unit = np.ascontiguousarray(normal[:count])
+    t1, t2 = tangent_frames(unit)
+    nobody = np.full(count, -1, dtype=np.int64)
+    return ContactArrays(
+        nobody,
+        nobody.copy(),
+        particles[0, :count].copy(),
+        particles[1, :count].copy(),
+        weights[0, :count].copy(),
+        weights[1, :count].copy(),
+        point[:count].copy(),
+        unit,
+        depth[:count].copy(),
+        t1,
+        t2,
+        friction[:count].copy(),
+        restitution[:count].copy(),
+        feature_id[:count].copy(),
+    )
+
+
+@njit(cache=True, inline="always")
+def _materials(a: int, b: int, material_friction: np.ndarray, material_restitution: np.ndarray) -> tuple[float, float]:
+    """(μ, ε) of materials a and b combined as ``Model.pair_materials`` does."""
+    return np.sqrt(material_friction[a] * material_friction[b]), max(material_restitution[a], material_restitution[b])
+
+
+# ---- crossings: the health check's test --------------------------------------------------------
+
+
+def crossings(model: Model, particle_position: np.ndarray) -> np.ndarray:
+    """The (edge, triangle) pairs (K, 2) of the self-colliding cloths at ``particle_position``
+    (P, 3) [m] where an edge passes through a triangle it has no corner of: indices into
+    ``cloth_elements(model).edges`` and ``.triangles``. None is the goal of self-contact."""
+    elements = cloth_elements(model)
+    if elements.empty:
+        return np.zeros((0, 2), dtype=np.int64)
+    return edge_triangle_crossings(
+        np.ascontiguousarray(particle_position, dtype=float), elements.triangles, elements.edges
+    )
+
+
+@njit(cache=True)
+def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``crossings``, compiled: the broad phase over the edges' and triangles' boxes, then for
+    each (edge, triangle) pair with no shared corner whether the segment's ends lie strictly on
+    the two sides of the triangle's plane and the point where it meets the plane inside the
+    triangle (closed; an edge lying in the plane is not counted). position (P, 3) [m], triangles
+    (F', 3), edges (E, 2). Returns (K, 2) int64 (edge, triangle)."""
+    E, F = edges.shape[0], triangles.shape[0]
+    lower = np.empty((E + F, 3))
+    upper = np.empty((E + F, 3))
+    zero = np.zeros(position.shape[0])
+    element_boxes(position, zero, edges, lower, upper, 0)
+    element_boxes(position, zero, triangles, lower, upper, E)
+    near = boxes_overlapping(lower, upper, True)
+    out = np.empty((near.shape[0], 2), dtype=np.int64)
+    count = 0
+    for k in range(near.shape[0]):
+        e, f = near[k, 0], near[k, 1] - E
+        if e >= E or f < 0:
+            continue
+        a, b = edges[e, 0], edges[e, 1]
+        corners = triangles[f]
+        if a == corners[0] or a == corners[1] or a == corners[2] or b == corners[0] or b == corners[1]:
+            continue
+        if b == corners[2]:
+            continue
+        if segment_crosses_triangle(
+            position[a], position[b], position[corners[0]], position[corners[1]], position[corners[2]]
+        ):
+            out[count, 0], out[count, 1] = e, f
+            count += 1
+    return out[:count].copy()
+
+
+@njit(cache=True)
+def segment_crosses_triangle(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
+    """Whether segment p–q (3,) [m] passes through triangle (a, b, c): p and q strictly on
+    opposite sides of its plane and the crossing point inside it (edges included)."""
+    n = np.cross(b - a, c - a)
+    dp = n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2])
+    dq = n[0] * (q[0] - a[0]) + n[1] * (q[1] - a[1]) + n[2] * (q[2] - a[2])
+    if not ((dp > 0.0 and dq < 0.0) or (dp < 0.0 and dq > 0.0)):
+        return False
+    x = p + (dp / (dp - dq)) * (q - p)
+    # inside: x on the inner side of each edge, measured along the normal
+    for i in range(3):
+        u = (a, b, c)[i]
+        w = (b, c, a)[i]
+        side = np.cross(w - u, x - u)
+        if side[0] * n[0] + side[1] * n[1] + side[2] * n[2] < 0.0:
+            return False
+    return True
