@@ -213,6 +213,7 @@ def collide_keeping(
     normal: str = "object",
     samples: int = 2,
     cloth_samples: int = 0,
+    particle_motion: np.ndarray | None = None,
 ) -> tuple[Contacts, Manifolds | None]:
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
     to keep for the next step: (Contacts, Manifolds or None).
@@ -235,7 +236,9 @@ def collide_keeping(
     against the static obstacles (P2c, see collision.cloth); 0: vertices only. The vertices of
     one cloth make no particle contacts with each other (their springs keep them apart); the
     cloths whose ``self_collision`` is on meet themselves and each other as surfaces instead,
-    vertex–triangle and edge–edge (collision.cloth_self).
+    vertex–triangle and edge–edge (collision.cloth_self); particle_motion (P, 3) [m], each
+    particle's predicted displacement over the step, lets those reach only as far as the
+    particles move relative to each other (None: as far as the sweep).
     """
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
@@ -290,7 +293,7 @@ def collide_keeping(
             [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
         )
     if len(model.triangles) and model.cloth_self_collision.any():
-        found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep)])
+        found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep, particle_motion)])
     return found, manifolds
 
 

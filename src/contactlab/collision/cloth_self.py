@@ -18,16 +18,22 @@ Bridson, Fedkiw and Anderson (2002):
   vertex–triangle contacts of that edge's triangles already find.
 
 Depth counts from the thicknesses: δ = r_A + r_B − d, > 0 closer than the cloth's thickness
-(r of a side: the largest radius of its particles). **Over the swept step**: like every other
-pair (``collide_keeping``), a pair is a contact when its gap d − r_A − r_B is at most the
-reach of its two sides, each side's largest sweep (the distance its particles may travel in
-the coming step) plus half the margin. Any two elements that could meet during the step are
-so found at its start, and each method keeps their gap from closing past zero (speculative
-contacts): a fast fold does not tunnel.
+(r of a side: the largest radius of its particles). **Over the swept step**: a pair is a
+contact when its gap d − r_A − r_B is at most the margin plus how far its two sides may move
+relative to each other in the coming step, max |Δx_i − Δx_j| over a particle i of one side and
+j of the other (Δx: each particle's predicted displacement; a point of a side moves by a convex
+combination of its particles', so no two points of the sides approach more). Any two elements
+that could meet during the step are so found at its start, and each method keeps their gap
+from closing past zero (speculative contacts): a fast fold does not tunnel. Relative motion,
+not each particle's own: a sheet falling flat at 3 m/s makes no contact with itself. Where only
+each particle's swept distance is known (``collide`` called with ``sweep`` alone), the bound is
+the sum of the two sides' largest sweeps.
 
 The broad phase is ``broad_phase.boxes_overlapping`` (a hashed grid for a thousand boxes and
-more) over the elements' boxes grown by their thickness and reach, once for vertices and
-triangles, once for edges: the cost grows with the number of vertices and of near pairs.
+more) over the elements' boxes at the step's start, grown by their thickness, half the margin
+and how far they move relative to the particles' mean displacement (``reach_growth``), once for
+vertices and triangles, once for edges: the cost grows with the number of vertices and of near
+pairs.
 
 Contact ids: a self-contact names two of its particles as its collider pair, so that
 ``half_thickness_sums`` reads its pass-through depth r_A + r_B from them, and its element in
@@ -90,23 +96,29 @@ def cloth_elements(model: Model) -> ClothElements:
     )
 
 
-def cloth_self_contacts(model: Model, state: State, margin: float, sweep: np.ndarray | None) -> Contacts:
+def cloth_self_contacts(
+    model: Model, state: State, margin: float, sweep: np.ndarray | None, particle_motion: np.ndarray | None = None
+) -> Contacts:
     """The vertex–triangle and edge–edge contacts of the self-colliding cloths at ``state``.
 
-    margin [m]: gaps down to this are kept (besides the sweep); sweep (B + P,) [m]: how far each
-    body and particle may travel in the coming step (None: standing still). See the module."""
+    margin [m]: gaps down to this are kept; particle_motion (P, 3) [m]: each particle's
+    predicted displacement over the coming step, whose relative part widens the reach (see the
+    module); None: the sweep (B + P,) [m] of each body and particle bounds it instead (None too:
+    standing still)."""
     elements = cloth_elements(model)
     if elements.empty:
         return Contacts.empty()
     P = model.particle_count
-    reach = np.full(P, 0.5 * float(margin))
-    if sweep is not None:
-        reach += sweep[model.body_count :]
+    if particle_motion is not None:
+        motion, spare = np.ascontiguousarray(particle_motion, dtype=float).reshape(P, 3), np.zeros(P)
+    else:
+        motion = np.zeros((P, 3))
+        spare = np.array(sweep[model.body_count :], dtype=float) if sweep is not None else np.zeros(P)
     return Contacts.from_arrays(
         self_contact_arrays(
             np.ascontiguousarray(state.particle_position, dtype=float),
             np.asarray(model.particle_radius, dtype=float),
-            reach,
+            (motion, spare, float(margin)),
             np.asarray(model.particle_material, dtype=np.int64),
             np.asarray(model.material_friction, dtype=float),
             np.asarray(model.material_restitution, dtype=float),
@@ -129,13 +141,18 @@ def is_self_contact(contacts: Contacts) -> np.ndarray:
 # ---- the compiled detection ----------------------------------------------------------------------
 
 
+Reach = tuple[np.ndarray, np.ndarray, float]
+"""What widens a pair's reach beyond the thicknesses: (motion (P, 3) [m], each particle's
+predicted displacement; spare (P,) [m], a distance each particle may move besides; margin [m])."""
+
+
 @njit(cache=True)
 def element_boxes(
-    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray, first: int
+    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray
 ) -> None:
-    """Write into rows ``first``… of ``lower``, ``upper`` (N, 3) [m] the boxes of the elements
-    ``corners`` (K, k) int (vertices: k = 1, edges 2, triangles 3) about their particles'
-    ``position`` (P, 3) [m], grown by the largest ``grow`` (P,) [m] of their corners."""
+    """Write into ``lower``, ``upper`` (K, 3) [m] the boxes of the elements ``corners`` (K, k)
+    int (vertices: k = 1, edges 2, triangles 3) about their particles' ``position`` (P, 3) [m],
+    grown by the largest ``grow`` (P,) [m] of their corners."""
     for e in range(corners.shape[0]):
         g = 0.0
         for m in range(corners.shape[1]):
@@ -145,8 +162,25 @@ def element_boxes(
             for m in range(1, corners.shape[1]):
                 low = min(low, position[corners[e, m], d])
                 high = max(high, position[corners[e, m], d])
-            lower[first + e, d] = low - g
-            upper[first + e, d] = high + g
+            lower[e, d] = low - g
+            upper[e, d] = high + g
+
+
+@njit(cache=True)
+def allowed_gap(reach: Reach, side_a: np.ndarray, side_b: np.ndarray) -> float:
+    """The largest gap [m] at which the particles ``side_a`` and ``side_b`` (int arrays) make a
+    contact: the margin, the most any particle of one side moves relative to one of the other,
+    and each side's largest spare distance (see ``Reach``)."""
+    motion, spare, margin = reach
+    most = spare_a = spare_b = 0.0
+    for i in side_a:
+        spare_a = max(spare_a, spare[i])
+        for j in side_b:
+            dx, dy, dz = motion[i, 0] - motion[j, 0], motion[i, 1] - motion[j, 1], motion[i, 2] - motion[j, 2]
+            most = max(most, dx * dx + dy * dy + dz * dz)
+    for j in side_b:
+        spare_b = max(spare_b, spare[j])
+    return margin + np.sqrt(most) + spare_a + spare_b
 
 
 @njit(cache=True)
@@ -224,11 +258,13 @@ def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.n
 
 @njit(cache=True)
 def vertex_triangle(
-    position: np.ndarray, radius: np.ndarray, reach: np.ndarray, v: int, corners: np.ndarray
+    position: np.ndarray, radius: np.ndarray, reach: Reach, vertex: np.ndarray, corners: np.ndarray
 ) -> tuple[bool, float, float, float, float, np.ndarray, np.ndarray]:
-    """The vertex–triangle test of particle ``v`` against the triangle of particles ``corners``
-    (3,) (see the module). Returns (a contact?, depth [m], the weights w (3), the normal from
-    the triangle to the vertex (3,), the contact point (3,) [m], midway between the surfaces)."""
+    """The vertex–triangle test of the particle ``vertex`` (1,) against the triangle of particles
+    ``corners`` (3,) (see the module), ``reach`` as ``allowed_gap`` takes it. Returns (a
+    contact?, depth [m], the weights w (3), the normal from the triangle to the vertex (3,), the
+    contact point (3,) [m], midway between the surfaces)."""
+    v = vertex[0]
     a, b, c = position[corners[0]], position[corners[1]], position[corners[2]]
     x = position[v]
     wa, wb, wc, inside = closest_on_triangle(x, a, b, c)
@@ -236,10 +272,9 @@ def vertex_triangle(
     gap = x - q
     distance = np.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
     side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
-    side_reach = max(reach[corners[0]], reach[corners[1]], reach[corners[2]])
     depth = radius[v] + side_radius - distance
     normal = np.zeros(3)
-    if depth < -(reach[v] + side_reach):
+    if depth < -allowed_gap(reach, vertex, corners):
         return False, depth, wa, wb, wc, normal, q
     face = np.cross(b - a, c - a)
     area = np.sqrt(face[0] ** 2 + face[1] ** 2 + face[2] ** 2)
@@ -259,11 +294,11 @@ def vertex_triangle(
 
 @njit(cache=True)
 def edge_edge(
-    position: np.ndarray, radius: np.ndarray, reach: np.ndarray, first: np.ndarray, second: np.ndarray
+    position: np.ndarray, radius: np.ndarray, reach: Reach, first: np.ndarray, second: np.ndarray
 ) -> tuple[bool, float, float, float, np.ndarray, np.ndarray]:
     """The edge–edge test of the edges of particles ``first`` (2,) and ``second`` (2,) (see the
-    module). Returns (a contact?, depth [m], s, t, the normal from the second edge to the first
-    (3,), the contact point (3,) [m])."""
+    module), ``reach`` as ``allowed_gap`` takes it. Returns (a contact?, depth [m], s, t, the
+    normal from the second edge to the first (3,), the contact point (3,) [m])."""
     p1, q1, p2, q2 = position[first[0]], position[first[1]], position[second[0]], position[second[1]]
     s, t = closest_on_segments(p1, q1, p2, q2)
     normal = np.zeros(3)
@@ -276,7 +311,7 @@ def edge_edge(
     radius_a = max(radius[first[0]], radius[first[1]])
     radius_b = max(radius[second[0]], radius[second[1]])
     depth = radius_a + radius_b - distance
-    if depth < -(max(reach[first[0]], reach[first[1]]) + max(reach[second[0]], reach[second[1]])):
+    if depth < -allowed_gap(reach, first, second):
         return False, depth, s, t, normal, q
     if distance > 0.0:
         normal[:] = gap / distance
@@ -294,7 +329,7 @@ def edge_edge(
 def self_contact_arrays(
     position: np.ndarray,
     radius: np.ndarray,
-    reach: np.ndarray,
+    reach: Reach,
     material: np.ndarray,
     material_friction: np.ndarray,
     material_restitution: np.ndarray,
@@ -308,20 +343,20 @@ def self_contact_arrays(
     """``cloth_self_contacts``, compiled: the ContactArrays of the vertex–triangle contacts, then
     the edge–edge ones, each in the broad phase's (sorted) pair order.
 
-    position (P, 3) [m]; radius (P,) [m]; reach (P,) [m], each particle's sweep plus half the
-    margin; material (P,) int and the materials' friction and restitution (M,); the elements
-    (``ClothElements``): triangles (F', 3), triangle_index (F',), edges (E, 2), vertices (V,);
-    body_count B and total N = B + P + O, the collider count of the contact ids."""
+    position (P, 3) [m]; radius (P,) [m]; reach, a ``Reach``; material (P,) int and the
+    materials' friction and restitution (M,); the elements (``ClothElements``): triangles
+    (F', 3), triangle_index (F',), edges (E, 2), vertices (V,); body_count B and total
+    N = B + P + O, the collider count of the contact ids."""
     V, F, E = vertices.shape[0], triangles.shape[0], edges.shape[0]
-    grow = radius + reach
+    grow = reach_growth(radius, reach, vertices)
     lower = np.empty((V + F, 3))
     upper = np.empty((V + F, 3))
-    element_boxes(position, grow, vertices.reshape(V, 1), lower, upper, 0)
-    element_boxes(position, grow, triangles, lower, upper, V)
+    element_boxes(position, grow, vertices.reshape(V, 1), lower[:V], upper[:V])
+    element_boxes(position, grow, triangles, lower[V:], upper[V:])
     near = boxes_overlapping(lower, upper, True)
     edge_lower = np.empty((E, 3))
     edge_upper = np.empty((E, 3))
-    element_boxes(position, grow, edges, edge_lower, edge_upper, 0)
+    element_boxes(position, grow, edges, edge_lower, edge_upper)
     edge_pairs = boxes_overlapping(edge_lower, edge_upper, True)
     capacity = near.shape[0] + edge_pairs.shape[0]
     particles = np.full((2, capacity, 3), -1, dtype=np.int64)
@@ -341,7 +376,7 @@ def self_contact_arrays(
         corners = triangles[f]
         if v == corners[0] or v == corners[1] or v == corners[2]:
             continue
-        found, d, wa, wb, wc, n, p = vertex_triangle(position, radius, reach, v, corners)
+        found, d, wa, wb, wc, n, p = vertex_triangle(position, radius, reach, vertices[i : i + 1], corners)
         if not found:
             continue
         particles[0, count, 0] = v
@@ -395,6 +430,25 @@ def self_contact_arrays(
     )
 
 
+@njit(cache=True)
+def reach_growth(radius: np.ndarray, reach: Reach, vertices: np.ndarray) -> np.ndarray:
+    """How far (P,) [m] the broad phase grows each particle's box about its start position: its
+    radius, spare distance and half the margin, and how far it moves relative to ū, the mean
+    displacement of ``vertices`` (V,). As |Δx_i − Δx_j| ≤ |Δx_i − ū| + |Δx_j − ū|, every pair
+    ``allowed_gap`` lets make a contact has overlapping boxes so grown: the broad phase of
+    ``self_contact_arrays`` misses none of the pairs a test of every pair would find."""
+    motion, spare, margin = reach
+    mean = np.zeros(3)
+    for p in vertices:
+        for d in range(3):
+            mean[d] += motion[p, d] / max(vertices.shape[0], 1)
+    grow = np.empty(radius.shape[0])
+    for p in range(radius.shape[0]):
+        dx, dy, dz = motion[p, 0] - mean[0], motion[p, 1] - mean[1], motion[p, 2] - mean[2]
+        grow[p] = radius[p] + spare[p] + 0.5 * margin + np.sqrt(dx * dx + dy * dy + dz * dz)
+    return grow
+
+
 @njit(cache=True, inline="always")
 def _materials(a: int, b: int, material_friction: np.ndarray, material_restitution: np.ndarray) -> tuple[float, float]:
     """(μ, ε) of materials a and b combined as ``Model.pair_materials`` does."""
@@ -427,8 +481,8 @@ def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: 
     lower = np.empty((E + F, 3))
     upper = np.empty((E + F, 3))
     zero = np.zeros(position.shape[0])
-    element_boxes(position, zero, edges, lower, upper, 0)
-    element_boxes(position, zero, triangles, lower, upper, E)
+    element_boxes(position, zero, edges, lower[:E], upper[:E])
+    element_boxes(position, zero, triangles, lower[E:], upper[E:])
     near = boxes_overlapping(lower, upper, True)
     out = np.empty((near.shape[0], 2), dtype=np.int64)
     count = 0
