@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from contactlab import ModelBuilder, simulate
 from contactlab.collision import collide
+from contactlab.collision.broad_phase import boxes_between
 from contactlab.collision.cloth_self import (
     closest_on_segments,
     closest_on_triangle,
@@ -144,11 +145,12 @@ def brute_force(model, position, reach):
     radius = model.particle_radius
     total = model.body_count + model.particle_count + model.obstacle_count
     found = {}
+    point, normal = np.empty((1, 3)), np.empty((1, 3))
     for f, corners in enumerate(elements.triangles):
         for v in elements.vertices:
             if v in corners:
                 continue
-            hit, depth, *_ = vertex_triangle(position, radius, reach, np.array([v]), corners)
+            hit, depth, *_ = vertex_triangle(position, radius, reach, np.array([v]), corners, point, normal, 0)
             if hit:
                 found[(((v * total + corners[0]) << 24) | (2 * elements.triangle_index[f] + 1))] = depth
     edges = elements.edges
@@ -156,7 +158,7 @@ def brute_force(model, position, reach):
         for j in range(i + 1, len(edges)):
             if set(edges[i]) & set(edges[j]):
                 continue
-            hit, depth, *_ = edge_edge(position, radius, reach, edges[i], edges[j])
+            hit, depth, *_ = edge_edge(position, radius, reach, edges[i], edges[j], point, normal, 0)
             if hit:
                 found[(((edges[i][0] * total + edges[i][1]) << 24) | (2 * j + 2))] = depth
     return found
@@ -208,6 +210,21 @@ def test_a_sheet_falling_flat_makes_no_contact_with_itself():
     assert cloth_self_contacts(model, model.state(), 0.001, None, motion).count == 0
     sweep = np.full(P, 0.025)
     assert cloth_self_contacts(model, model.state(), 0.001, sweep).count > 10 * P
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), count_a=st.integers(0, 60), count_b=st.integers(0, 60), same=st.booleans())
+def test_boxes_between_two_sets_are_those_a_test_of_every_pair_finds(seed, count_a, count_b, same):
+    rng = np.random.default_rng(seed)
+    sizes = np.exp(rng.normal(-3.0, 1.0, size=(count_a + count_b, 1)))  # sizes over two orders of magnitude
+    lower = rng.random((count_a + count_b, 3))
+    upper = lower + sizes * rng.random((count_a + count_b, 3))
+    a, b = (slice(0, count_a), slice(0, count_a)) if same else (slice(0, count_a), slice(count_a, None))
+    found = boxes_between(lower[a], upper[a], lower[b], upper[b], same)
+    overlap = ((lower[a][:, None] <= upper[b][None]) & (lower[b][None] <= upper[a][:, None])).all(axis=2)
+    if same:
+        overlap = np.triu(overlap, k=1)
+    assert sorted(map(tuple, found.tolist())) == sorted(zip(*(index.tolist() for index in np.nonzero(overlap))))
 
 
 @settings(max_examples=50, deadline=None)

@@ -29,11 +29,11 @@ not each particle's own: a sheet falling flat at 3 m/s makes no contact with its
 each particle's swept distance is known (``collide`` called with ``sweep`` alone), the bound is
 the sum of the two sides' largest sweeps.
 
-The broad phase is ``broad_phase.boxes_overlapping`` (a hashed grid for a thousand boxes and
-more) over the elements' boxes at the step's start, grown by their thickness, half the margin
-and how far they move relative to the particles' mean displacement (``reach_growth``), once for
-vertices and triangles, once for edges: the cost grows with the number of vertices and of near
-pairs.
+The broad phase is ``broad_phase.boxes_between``: a hashed grid of the triangles' boxes that
+the vertices' boxes look up, and one of the edges' boxes that they look up themselves (no
+triangle is tested against a triangle). Each box is an element's at the step's start, grown by
+its thickness, half the margin and how far its particles move relative to their mean
+displacement (``reach_growth``): the cost grows with the number of vertices and of near pairs.
 
 Contact ids: a self-contact names two of its particles as its collider pair, so that
 ``half_thickness_sums`` reads its pass-through depth r_A + r_B from them, and its element in
@@ -53,7 +53,7 @@ import numpy as np
 from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..model import derived
-from .broad_phase import boxes_overlapping
+from .broad_phase import boxes_between
 from .contact_output import FEATURE_BITS
 
 if TYPE_CHECKING:
@@ -229,21 +229,21 @@ def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.n
     """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2)
     of two segments (3,) [m] each; an end where clamped (exactly 0 or 1), and for parallel
     segments s = 0. Ericson, *Real-Time Collision Detection*, 5.1.9."""
-    d1 = q1 - p1
-    d2 = q2 - p2
-    r = p1 - p2
-    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
-    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
-    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
+    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    f = d20 * r0 + d21 * r1 + d22 * r2
     tiny = 1e-30
     if a <= tiny and e <= tiny:
         return 0.0, 0.0
     if a <= tiny:
         return 0.0, min(max(f / e, 0.0), 1.0)
-    c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
+    c = d10 * r0 + d11 * r1 + d12 * r2
     if e <= tiny:
         return min(max(-c / a, 0.0), 1.0), 0.0
-    b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+    b = d10 * d20 + d11 * d21 + d12 * d22
     denominator = a * e - b * b
     s = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 1e-12 * a * e else 0.0
     t = (b * s + f) / e
@@ -258,71 +258,96 @@ def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.n
 
 @njit(cache=True)
 def vertex_triangle(
-    position: np.ndarray, radius: np.ndarray, reach: Reach, vertex: np.ndarray, corners: np.ndarray
-) -> tuple[bool, float, float, float, float, np.ndarray, np.ndarray]:
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: Reach,
+    vertex: np.ndarray,
+    corners: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    row: int,
+) -> tuple[bool, float, float, float, float]:
     """The vertex–triangle test of the particle ``vertex`` (1,) against the triangle of particles
     ``corners`` (3,) (see the module), ``reach`` as ``allowed_gap`` takes it. Returns (a
-    contact?, depth [m], the weights w (3), the normal from the triangle to the vertex (3,), the
-    contact point (3,) [m], midway between the surfaces)."""
+    contact?, depth [m], the weights (w_a, w_b, w_c)); a contact's point, midway between the
+    surfaces [m], and normal, from the triangle to the vertex, go to row ``row`` of ``point``
+    and ``normal`` (n, 3). In scalars: most candidate pairs are too far apart, and leave having
+    allocated nothing."""
     v = vertex[0]
     a, b, c = position[corners[0]], position[corners[1]], position[corners[2]]
     x = position[v]
     wa, wb, wc, inside = closest_on_triangle(x, a, b, c)
-    q = wa * a + wb * b + wc * c
-    gap = x - q
-    distance = np.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
+    g0 = x[0] - (wa * a[0] + wb * b[0] + wc * c[0])
+    g1 = x[1] - (wa * a[1] + wb * b[1] + wc * c[1])
+    g2 = x[2] - (wa * a[2] + wb * b[2] + wc * c[2])
+    distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
     side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
     depth = radius[v] + side_radius - distance
-    normal = np.zeros(3)
     if depth < -allowed_gap(reach, vertex, corners):
-        return False, depth, wa, wb, wc, normal, q
-    face = np.cross(b - a, c - a)
-    area = np.sqrt(face[0] ** 2 + face[1] ** 2 + face[2] ** 2)
+        return False, depth, wa, wb, wc
+    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    f0, f1, f2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
+    area = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
     if inside and area > 0.0:  # over the inside: the face normal, on the vertex's side
-        face /= area
-        side = 1.0 if face[0] * gap[0] + face[1] * gap[1] + face[2] * gap[2] >= 0.0 else -1.0
-        normal[:] = side * face
+        side = 1.0 if n0 * g0 + n1 * g1 + n2 * g2 >= 0.0 else -1.0
+        n0, n1, n2 = side * n0 / area, side * n1 / area, side * n2 / area
     elif distance > 0.0:
-        normal[:] = gap / distance
+        n0, n1, n2 = g0 / distance, g1 / distance, g2 / distance
     elif area > 0.0:
-        normal[:] = face / area
+        n0, n1, n2 = n0 / area, n1 / area, n2 / area
     else:  # a vertex on the corner of a degenerate triangle: no direction to push along
-        return False, depth, wa, wb, wc, normal, q
-    point = q + (side_radius - 0.5 * depth) * normal
-    return True, depth, wa, wb, wc, normal, point
+        return False, depth, wa, wb, wc
+    lift = side_radius - 0.5 * depth  # from the triangle's closest point to midway
+    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+    point[row, 0] = x[0] - g0 + lift * n0
+    point[row, 1] = x[1] - g1 + lift * n1
+    point[row, 2] = x[2] - g2 + lift * n2
+    return True, depth, wa, wb, wc
 
 
 @njit(cache=True)
 def edge_edge(
-    position: np.ndarray, radius: np.ndarray, reach: Reach, first: np.ndarray, second: np.ndarray
-) -> tuple[bool, float, float, float, np.ndarray, np.ndarray]:
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: Reach,
+    first: np.ndarray,
+    second: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    row: int,
+) -> tuple[bool, float, float, float]:
     """The edge–edge test of the edges of particles ``first`` (2,) and ``second`` (2,) (see the
-    module), ``reach`` as ``allowed_gap`` takes it. Returns (a contact?, depth [m], s, t, the
-    normal from the second edge to the first (3,), the contact point (3,) [m])."""
+    module), ``reach`` as ``allowed_gap`` takes it. Returns (a contact?, depth [m], s, t); a
+    contact's point [m] and normal, from the second edge to the first, go to row ``row`` of
+    ``point`` and ``normal`` (n, 3), as ``vertex_triangle``'s."""
     p1, q1, p2, q2 = position[first[0]], position[first[1]], position[second[0]], position[second[1]]
     s, t = closest_on_segments(p1, q1, p2, q2)
-    normal = np.zeros(3)
     if not (0.0 < s < 1.0 and 0.0 < t < 1.0):
-        return False, 0.0, s, t, normal, normal
-    p = p1 + s * (q1 - p1)
-    q = p2 + t * (q2 - p2)
-    gap = p - q
-    distance = np.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
-    radius_a = max(radius[first[0]], radius[first[1]])
+        return False, 0.0, s, t
+    y0, y1, y2 = p2[0] + t * (q2[0] - p2[0]), p2[1] + t * (q2[1] - p2[1]), p2[2] + t * (q2[2] - p2[2])
+    g0 = p1[0] + s * (q1[0] - p1[0]) - y0
+    g1 = p1[1] + s * (q1[1] - p1[1]) - y1
+    g2 = p1[2] + s * (q1[2] - p1[2]) - y2
+    distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
     radius_b = max(radius[second[0]], radius[second[1]])
-    depth = radius_a + radius_b - distance
+    depth = max(radius[first[0]], radius[first[1]]) + radius_b - distance
     if depth < -allowed_gap(reach, first, second):
-        return False, depth, s, t, normal, q
+        return False, depth, s, t
     if distance > 0.0:
-        normal[:] = gap / distance
+        n0, n1, n2 = g0 / distance, g1 / distance, g2 / distance
     else:  # the edges cross: the normal of the plane of the two
-        across = np.cross(q1 - p1, q2 - p2)
-        length = np.sqrt(across[0] ** 2 + across[1] ** 2 + across[2] ** 2)
+        e0, e1, e2 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+        f0, f1, f2 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+        n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
+        length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         if length == 0.0:
-            return False, depth, s, t, normal, q
-        normal[:] = across / length
-    point = q + (radius_b - 0.5 * depth) * normal
-    return True, depth, s, t, normal, point
+            return False, depth, s, t
+        n0, n1, n2 = n0 / length, n1 / length, n2 / length
+    lift = radius_b - 0.5 * depth
+    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+    point[row, 0], point[row, 1], point[row, 2] = y0 + lift * n0, y1 + lift * n1, y2 + lift * n2
+    return True, depth, s, t
 
 
 @njit(cache=True)
@@ -349,15 +374,14 @@ def self_contact_arrays(
     N = B + P + O, the collider count of the contact ids."""
     V, F, E = vertices.shape[0], triangles.shape[0], edges.shape[0]
     grow = reach_growth(radius, reach, vertices)
-    lower = np.empty((V + F, 3))
-    upper = np.empty((V + F, 3))
-    element_boxes(position, grow, vertices.reshape(V, 1), lower[:V], upper[:V])
-    element_boxes(position, grow, triangles, lower[V:], upper[V:])
-    near = boxes_overlapping(lower, upper, True)
-    edge_lower = np.empty((E, 3))
-    edge_upper = np.empty((E, 3))
+    vertex_lower, vertex_upper = np.empty((V, 3)), np.empty((V, 3))
+    element_boxes(position, grow, vertices.reshape(V, 1), vertex_lower, vertex_upper)
+    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
+    element_boxes(position, grow, triangles, triangle_lower, triangle_upper)
+    near = boxes_between(vertex_lower, vertex_upper, triangle_lower, triangle_upper, False)
+    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
     element_boxes(position, grow, edges, edge_lower, edge_upper)
-    edge_pairs = boxes_overlapping(edge_lower, edge_upper, True)
+    edge_pairs = boxes_between(edge_lower, edge_upper, edge_lower, edge_upper, True)
     capacity = near.shape[0] + edge_pairs.shape[0]
     particles = np.full((2, capacity, 3), -1, dtype=np.int64)
     weights = np.zeros((2, capacity, 3))
@@ -369,14 +393,14 @@ def self_contact_arrays(
     feature_id = np.empty(capacity, dtype=np.int64)
     count = 0
     for k in range(near.shape[0]):
-        i, j = near[k, 0], near[k, 1]
-        if i >= V or j < V:  # vertex–vertex or triangle–triangle
-            continue
-        v, f = vertices[i], j - V
+        i, f = near[k, 0], near[k, 1]
+        v = vertices[i]
         corners = triangles[f]
         if v == corners[0] or v == corners[1] or v == corners[2]:
             continue
-        found, d, wa, wb, wc, n, p = vertex_triangle(position, radius, reach, vertices[i : i + 1], corners)
+        found, d, wa, wb, wc = vertex_triangle(
+            position, radius, reach, vertices[i : i + 1], corners, point, normal, count
+        )
         if not found:
             continue
         particles[0, count, 0] = v
@@ -386,7 +410,7 @@ def self_contact_arrays(
         weights[1, count, 0], weights[1, count, 1], weights[1, count, 2] = wa, wb, wc
         pair = (body_count + v) * total + body_count + corners[0]
         feature_id[count] = (pair << FEATURE_BITS) | (2 * triangle_index[f] + 1)
-        point[count], normal[count], depth[count] = p, n, d
+        depth[count] = d
         friction[count], restitution[count] = _materials(
             material[v], material[corners[0]], material_friction, material_restitution
         )
@@ -395,7 +419,7 @@ def self_contact_arrays(
         first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
         if first[0] == second[0] or first[0] == second[1] or first[1] == second[0] or first[1] == second[1]:
             continue
-        found, d, s, t, n, p = edge_edge(position, radius, reach, first, second)
+        found, d, s, t = edge_edge(position, radius, reach, first, second, point, normal, count)
         if not found:
             continue
         particles[0, count, 0], particles[0, count, 1] = first[0], first[1]
@@ -404,7 +428,7 @@ def self_contact_arrays(
         weights[1, count, 0], weights[1, count, 1] = 1.0 - t, t
         pair = (body_count + first[0]) * total + body_count + first[1]
         feature_id[count] = (pair << FEATURE_BITS) | (2 * edge_pairs[k, 1] + 2)
-        point[count], normal[count], depth[count] = p, n, d
+        depth[count] = d
         friction[count], restitution[count] = _materials(
             material[first[0]], material[second[0]], material_friction, material_restitution
         )
@@ -478,18 +502,16 @@ def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: 
     triangle (closed; an edge lying in the plane is not counted). position (P, 3) [m], triangles
     (F', 3), edges (E, 2). Returns (K, 2) int64 (edge, triangle)."""
     E, F = edges.shape[0], triangles.shape[0]
-    lower = np.empty((E + F, 3))
-    upper = np.empty((E + F, 3))
     zero = np.zeros(position.shape[0])
-    element_boxes(position, zero, edges, lower[:E], upper[:E])
-    element_boxes(position, zero, triangles, lower[E:], upper[E:])
-    near = boxes_overlapping(lower, upper, True)
+    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
+    element_boxes(position, zero, edges, edge_lower, edge_upper)
+    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
+    element_boxes(position, zero, triangles, triangle_lower, triangle_upper)
+    near = boxes_between(edge_lower, edge_upper, triangle_lower, triangle_upper, False)
     out = np.empty((near.shape[0], 2), dtype=np.int64)
     count = 0
     for k in range(near.shape[0]):
-        e, f = near[k, 0], near[k, 1] - E
-        if e >= E or f < 0:
-            continue
+        e, f = near[k, 0], near[k, 1]
         a, b = edges[e, 0], edges[e, 1]
         corners = triangles[f]
         if a == corners[0] or a == corners[1] or a == corners[2] or b == corners[0] or b == corners[1]:
