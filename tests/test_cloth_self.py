@@ -21,6 +21,7 @@ from contactlab.collision.cloth_self import (
     vertex_triangle,
 )
 from contactlab.errors import InputError
+from contactlab.health import Health
 
 UPRIGHT = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)  # 90° about x: the grid's y axis points up
 THICKNESS = 0.004
@@ -136,6 +137,27 @@ def test_two_layers_resting_flat_stay_put(method):
     np.testing.assert_allclose(final[:36, 2], THICKNESS, atol=0.6e-3)
     np.testing.assert_allclose(final[36:, 2], 3.0 * THICKNESS, atol=0.6e-3)
     np.testing.assert_allclose(final[:, :2], start[:, :2], atol=0.5e-3)
+
+
+def test_the_summary_counts_self_contacts():
+    resting = dict(height=2.0 * THICKNESS, shift=(0.011, 0.006), upper_size=0.16)
+    on = run(two_sheets(**resting), "projection", 0.05).summary["self_contacts"]
+    off = run(two_sheets(self_collision=False, **resting), "projection", 0.05).summary["self_contacts"]
+    assert on > 36 and off == 0  # every vertex of the upper sheet over a triangle of the lower, and more
+
+
+def test_the_health_check_stops_a_run_at_an_edge_through_a_triangle_but_not_at_those_it_started_with():
+    model = two_sheets(0.01, n=2, shift=(0.03, 0.05))
+    state = model.state()
+    health = Health(model, state, 0.01)
+    assert health.check_contacts(state, collide(model, state)) is None
+    through = model.state()
+    through.particle_position[4, 2] = 0.0  # a corner of the upper sheet pulled down through the lower, to the floor
+    violation = health.check_contacts(through, collide(model, through))
+    assert violation is not None and violation.check == "crossing", violation
+    assert Health(model, through, 0.01).check_contacts(through, collide(model, through)) is None  # it began so
+    unchecked = two_sheets(0.01, self_collision=False, n=2, shift=(0.03, 0.05))
+    assert Health(unchecked, unchecked.state(), 0.01).check_contacts(through, collide(unchecked, through)) is None
 
 
 # -- detection ---------------------------------------------------------------------------------------
