@@ -71,13 +71,18 @@ def predict(
 
 
 def swept_contacts(
-    model: Model, state: State, options: KeptManifoldOptions, sweep: np.ndarray, particle_motion: np.ndarray
+    model: Model,
+    state: State,
+    options: KeptManifoldOptions,
+    sweep: np.ndarray,
+    particle_motion: np.ndarray | None = None,
 ) -> tuple[Contacts, Manifolds | None]:
     """Stage 3: collision detection over the swept step — contacts at the start positions with
     gaps down to what the motion could close (speculative contacts, so nothing tunnels: each
     collider's ``sweep`` (B + P,) [m]; for cloth self-contact, the particles' relative
-    displacements, from ``particle_motion`` (P, 3) [m]), box, hull and plane pairs that barely
-    moved keeping last step's manifolds. Returns (Contacts, the manifolds to carry)."""
+    displacements, from ``particle_motion`` (P, 3) [m], None: the sweep), box, hull and plane
+    pairs that barely moved keeping last step's manifolds. Returns (Contacts, the manifolds to
+    carry)."""
     return options.collide(
         model, state, sweep, state.carried.get("manifolds"), options.manifold_tolerance, particle_motion
     )
