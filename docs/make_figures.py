@@ -33,8 +33,8 @@ README_SCENE, README_SECONDS = "cloth_drape", 2.5
 README_METHODS = ("projection", "constraints")
 
 
-def run(scene_name, method, seconds):
-    scene = load_scene(scene_name, [f"simulation.method={method}"])
+def run(scene_name, method, seconds, overrides=()):
+    scene = load_scene(scene_name, [f"simulation.method={method}", *overrides])
     return simulate(
         scene.model,
         method,
@@ -69,6 +69,25 @@ def readme_picture(out, scale):
         os.unlink(path)
     Image.fromarray(np.concatenate(pictures, axis=1)).save(os.path.join(out, "readme.png"))
     print(f"README picture → {os.path.join(out, 'readme.png')}")
+
+
+# cloth self-contact (docs/collision.md): the cloth_fold strip folding as it piles up, with and without it
+FOLD_SECONDS = 0.45
+
+
+def cloth_fold_figure(out, scale):
+    """docs/figures/cloth_fold.png: the built-in cloth_fold strip after FOLD_SECONDS with
+    projection, self-contact on (left) and off (right), side by side, seen from low down."""
+    pictures = []
+    for on in ("true", "false"):
+        result = run("cloth_fold", "projection", FOLD_SECONDS * scale, [f"cloth[0].self_collision={on}"])
+        path = os.path.join(out, f"cloth_fold-{on}.png")
+        title = f"cloth_fold — self_collision = {on}, t = {FOLD_SECONDS * scale:g} s"
+        still(result.arrays, path, elevation=10.0, azimuth=-20.0, title=title)
+        pictures.append(np.asarray(Image.open(path).convert("RGB")))
+        os.unlink(path)
+    Image.fromarray(np.concatenate(pictures, axis=1)).save(os.path.join(out, "cloth_fold.png"))
+    print(f"cloth self-contact → {os.path.join(out, 'cloth_fold.png')}")
 
 
 # penalty's price: how far the top of an 8-box stack sinks against the contact stiffness k
@@ -199,6 +218,7 @@ def main():
     scale = 0.05 if args.quick else 1.0
     readme_picture(args.out, scale)
     guide_figures(args.out, scale)
+    cloth_fold_figure(args.out, scale)
     penalty_sinking(args.out, scale)
     viewer_picture(args.out, scale)
     convergence_figures(args.out, scale)

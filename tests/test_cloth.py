@@ -363,6 +363,8 @@ CLOTH_ERRORS = [
     ("size = [0.4, 0.4]", "size = [0.0, 0.4]", "cloth[0].size", "greater than 0"),
     ("size = [0.4, 0.4]", "size = [0.4]", "cloth[0].size", "list of 2"),
     ("thickness = 0.01", "stifness = 5.0", "cloth[0].stifness", "unknown key"),
+    ("thickness = 0.01", 'self_collision = "yes"', "cloth[0].self_collision", "expected true or false"),
+    ("thickness = 0.01", "thickness = 0.05", "cloth[0].thickness", "shortest triangle height"),
     ("resolution = [5, 5]", 'resolution = [5, 5]\nfile = "x.obj"', "cloth[0].size", "exactly one"),
 ]
 

@@ -748,6 +748,7 @@ CLOTH_VALUES = {
     ),
     "thickness": sometimes(st.floats(0.0, 0.02)),
     "stretch_stiffness": sometimes(st.floats(0.0, 1e4)),
+    "self_collision": sometimes(st.booleans()),
 }
 # the keys each shape needs besides "shape" (a body needs a mass or a density too)
 BODY_NEEDS = {

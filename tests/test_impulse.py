@@ -569,11 +569,14 @@ def builtin_names():
         strict=True,
         reason=(
             "impulses see M⁻¹ while backward Euler cloth springs see A = M − hD − h²K: the split stores "
-            "energy in the springs of a cloth caught on the table's edge (known limitation, see "
-            "docs/methods/impulse.md); the constraints method solves both together"
+            "energy in the springs of a cloth caught on the table's edge, or of a strip pressed upright on "
+            "the floor by its own weight (cloth_fold: 0.150 J to 0.214 J in 0.25 s, self-contact on or off alike; "
+            "0.1500 J at a quarter of its dt) (known limitation, see docs/methods/impulse.md); the constraints "
+            "method solves both together"
         ),
     )
-    return [pytest.param(name, marks=known_gain) if name == "cloth_table" else name for name, _ in builtin_scenes()]
+    gaining = ("cloth_table", "cloth_fold")
+    return [pytest.param(name, marks=known_gain) if name in gaining else name for name, _ in builtin_scenes()]
 
 
 @pytest.mark.parametrize("name", builtin_names())

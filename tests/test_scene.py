@@ -18,6 +18,7 @@ BUILTIN = [
     "capsule_pile",
     "card_house",
     "cloth_drape",
+    "cloth_fold",
     "cloth_table",
     "domino_chain",
     "incline",
@@ -33,6 +34,7 @@ BUILTIN = [
 ]
 CLOTH_AND_POURING = {
     "cloth_drape": "backward_euler",
+    "cloth_fold": "backward_euler",
     "cloth_table": "backward_euler",
     "particles_bowl": "symplectic_euler",
 }

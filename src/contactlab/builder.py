@@ -362,6 +362,7 @@ class ModelBuilder:
         damping: float = 0.0,
         pinned: int | str | Sequence[int | str] = (),
         thickness: float = 0.005,
+        self_collision: bool = True,
         material: MaterialRef = None,
         name: str | None = None,
     ) -> range:
@@ -394,6 +395,12 @@ class ModelBuilder:
         "corners" (the four corners), "top_corners" (the two at y = +h/2), "top_edge" (the
         row at y = +h/2), "bottom_edge" (y = −h/2), "left_edge" (x = −w/2), "right_edge"
         (x = +w/2); one name or index alone is accepted too.
+
+        self_collision: the cloth meets itself and the other self-colliding cloths as surfaces
+        (vertex–triangle and edge–edge contacts kept ``thickness`` apart, see
+        :mod:`contactlab.collision.cloth_self`); False: only its vertices meet other cloths'
+        vertices, and it passes through itself. On, twice the thickness must be less than its
+        triangles' shortest height, or neighbouring elements would touch at rest.
         """
         if (mass is None) == (density is None):
             found = "neither" if mass is None else "both"
@@ -419,6 +426,10 @@ class ModelBuilder:
         cloth = cloth_mesh.lay_out(
             mesh, file is not None, position, orientation, mass, density, tuple(stiffness.values()), pinned
         )
+        if not isinstance(self_collision, (bool, np.bool_)):
+            raise InputError("self_collision", f"expected true or false, found {self_collision!r}")
+        if self_collision:
+            cloth_mesh.check_self_thickness(cloth.position, cloth.triangles, thickness)
         count = len(cloth.position)
         vertex_velocity = np.where(cloth.pinned[:, None], 0.0, velocity[None, :])
         check_dynamic_count(
@@ -446,6 +457,7 @@ class ModelBuilder:
                 stiffness=cloth.stiffness,
                 rest=cloth.rest,
                 damping=np.full(len(cloth.springs), damping),
+                self_collision=bool(self_collision),
             )
         )
         return range(start, start + count)
@@ -614,4 +626,5 @@ class ModelBuilder:
             spring_rest_length=cloth_cat("rest", (-1,)),
             spring_stiffness=cloth_cat("stiffness", (-1,)),
             spring_damping=cloth_cat("damping", (-1,)),
+            cloth_self_collision=np.array([c["self_collision"] for c in cloths], dtype=bool),
         )

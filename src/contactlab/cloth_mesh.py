@@ -184,6 +184,24 @@ def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
 
 
+def check_self_thickness(vertices: np.ndarray, triangles: np.ndarray, thickness: float) -> None:
+    """InputError naming "thickness" unless twice ``thickness`` [m] is less than the shortest
+    height of the triangles (F, 3) over vertices (V, 3) [m] (of those of positive area): a
+    self-colliding cloth (collision.cloth_self) keeps its elements 2 × thickness apart, and a
+    vertex nearer than that to a neighbouring element at rest would push it away."""
+    corners = vertices[triangles]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    area = triangle_areas(vertices, triangles)
+    useful = area > 0.0
+    height = float((2.0 * area[useful] / longest[useful]).min(initial=np.inf))
+    if not 2.0 * thickness < height:
+        raise InputError(
+            "thickness",
+            f"twice the thickness ({2.0 * thickness:.3g} m) must be less than the cloth's shortest triangle "
+            f"height ({height:.3g} m) when it collides with itself; make it thinner, or set self_collision = false",
+        )
+
+
 def pinned_vertices(
     pinned: int | str | Sequence[int | str] | None, count: int, named: Mapping[str, Sequence[int]]
 ) -> np.ndarray:

@@ -17,7 +17,10 @@ of steps of the compiled loop:
 - **depth**: no contact is deeper than ``DEPTH_FRACTION`` of its pass-through depth (the two
   sides' half thicknesses, ``collision.pass_through_depths``: deeper, one side has reached the
   other's middle), and no body or particle centre lies behind a static plane by more than its
-  own half thickness (it went through the floor).
+  own half thickness (it went through the floor);
+- **crossing**: no edge of a cloth whose ``self_collision`` is on passes through a triangle of
+  its own or of another such cloth (``collision.cloth_self.crossings``), beyond those it
+  started with: self-contact is there to keep cloth from ever passing through itself.
 
 A violation stops the run with :class:`contactlab.errors.SimulationDiverged`: one sentence
 naming the check, the time and the likely fix, with the run up to that point in its ``run``
@@ -36,6 +39,7 @@ import numpy as np
 
 from . import shapes
 from .collision import collide, pass_through_depths
+from .collision.cloth_self import cloth_elements, crossings
 from .driving import too_fast
 
 if TYPE_CHECKING:
@@ -53,7 +57,7 @@ ENERGY_SERIES = ("time", "energy_kinetic", "energy_potential", "energy_elastic")
 
 @dataclass
 class Violation:
-    """What a check found: ``check`` (finite | speed | energy | depth), at ``time`` [s], in one
+    """What a check found: ``check`` (finite | speed | energy | depth | crossing), at ``time`` [s], in one
     sentence ``what`` (no fix: see ``Health.message``)."""
 
     check: str
@@ -98,6 +102,9 @@ class Health:
         self.initial_depth_ratio = 0.0  # see start()
         # the least pass-through depth a contact can have: a dynamic collider's half thickness
         self.thinnest = float(model.collider_half_thickness[:dynamic].min(initial=np.inf))
+        self.self_colliding = not cloth_elements(model).empty
+        # a cloth may start through itself (a mesh file so folded): only more crossings than that are flagged
+        self.initial_crossings = len(crossings(model, state.particle_position)) if self.self_colliding else 0
 
     # ---- the checks --------------------------------------------------------------------------
 
@@ -183,7 +190,7 @@ class Health:
         return np.where(movable, contacts.depth / (DEPTH_FRACTION * through), 0.0), through
 
     def check_contacts(self, state: State, contacts: Contacts) -> Violation | None:
-        """Depth, on a State and the contacts of its own positions (a collision pass)."""
+        """Depth and crossing, on a State and the contacts of its own positions (a collision pass)."""
         if contacts.count:
             ratio, through = self._depth_ratios(contacts)
             worst = int(np.argmax(ratio))
@@ -198,7 +205,23 @@ class Health:
                         f"({through[worst] * 1000:.3g} mm)",
                     )
                 )
-        return self._behind_planes(state)
+        return self._behind_planes(state) or self._crossing(state)
+
+    def _crossing(self, state):
+        """The crossing check (see the module): an edge of a self-colliding cloth through a triangle."""
+        if not self.self_colliding:
+            return None
+        found = len(crossings(self.model, state.particle_position))
+        if found <= self.initial_crossings:
+            return None
+        return self._found(
+            Violation(
+                "crossing",
+                state.time,
+                f"{found - self.initial_crossings} edge{'s' if found - self.initial_crossings > 1 else ''} "
+                "of a cloth passed through its triangles, though the cloth collides with itself",
+            )
+        )
 
     def check_depth(self, state: State, deepest: float | None) -> Violation | None:
         """``check_contacts`` on the contacts of ``state``'s own positions, where ``deepest`` [m],
@@ -207,7 +230,7 @@ class Health:
         thinnest dynamic collider's half thickness (a lower bound of every pass-through depth),
         so the collision pass is made only past that, or where ``deepest`` is not known."""
         if deepest is not None and deepest <= DEPTH_FRACTION * self.thinnest * max(1.0, 1.1 * self.initial_depth_ratio):
-            return self._behind_planes(state)
+            return self._behind_planes(state) or self._crossing(state)
         return self.check_contacts(state, collide(self.model, state))
 
     def _behind_planes(self, state):

@@ -94,6 +94,8 @@ class Model:
     """(S,) N/m"""
     spring_damping: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     """(S,) N s/m"""
+    cloth_self_collision: np.ndarray = field(repr=False, default=None)
+    """(C,) bool, the cloth meets itself and the other such cloths as surfaces (collision.cloth_self)"""
     drive: Drive | None = field(repr=False, default=None)
     """external forces and kinematic paths (contactlab.driving.Drive); None: nothing drives the scene"""
     _derived: dict[Callable[[Model], Any], Any] = field(init=False, repr=False, compare=False, default_factory=dict)
@@ -105,6 +107,8 @@ class Model:
             object.__setattr__(self, "particle_cloth", np.full(len(self.particle_mass), -1, dtype=np.int64))
         if self.particle_pinned is None:
             object.__setattr__(self, "particle_pinned", np.zeros(len(self.particle_mass), dtype=bool))
+        if self.cloth_self_collision is None:  # on by default, as ModelBuilder.add_cloth has it
+            object.__setattr__(self, "cloth_self_collision", np.ones(len(self.cloth_names), dtype=bool))
         for _name, value in vars(self).items():
             for array in value.values() if isinstance(value, dict) else [value]:
                 if isinstance(array, np.ndarray):

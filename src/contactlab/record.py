@@ -25,6 +25,7 @@ import numpy as np
 
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
+from .collision.cloth_self import is_self_contact
 from .diagnostics import SERIES
 from .errors import InputError
 from .model import derived
@@ -125,6 +126,8 @@ class Totals:
     """m"""
     max_iterations: int = 0
     max_residual: float = 0.0
+    max_self_contacts: int = 0
+    """the most cloth self-contacts (collision.cloth_self) in one sample the Python path recorded"""
 
     def add(self, chunk: Mapping[str, np.ndarray]) -> None:
         """Take in the samples of ``chunk`` (name -> array of n rows)."""
@@ -185,6 +188,7 @@ class Recorder:
         Contacts it returns."""
         model = self.model
         contacts = collide(model, state)
+        self.totals.max_self_contacts = max(self.totals.max_self_contacts, int(is_self_contact(contacts).sum()))
         values = dict(
             time=state.time,
             body_position=state.body_position,

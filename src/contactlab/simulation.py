@@ -407,8 +407,9 @@ def _record_run(plan, recorder, state, chooser, health, clock):
 def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[str, Any]:
     """What a run's summary measures, alike for a method's run and a peer engine's
     (contactlab.peers): steps/s over the ``steps`` made after the first (which compiles; with its
-    spread, ``Tally``), the model's bodies and particles, the most contacts, the deepest and the
-    final overlap [m], the energy, and the samples recorded (``totals``, the Recorder's)."""
+    spread, ``Tally``), the model's bodies and particles, the most contacts, the most cloth
+    self-contacts in a sample, the deepest and the final overlap [m], the energy, and the
+    samples recorded (``totals``, the Recorder's)."""
     return {
         "steps_per_second": (
             (steps - 1) / tally.stepping_seconds
@@ -419,6 +420,7 @@ def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[st
         "bodies": model.body_count,
         "particles": model.particle_count,
         "max_contacts": tally.max_contacts,
+        "self_contacts": totals.max_self_contacts,
         "max_penetration": totals.max_penetration,
         "final_penetration": totals.final_penetration,
         "energy": totals.energy(),

@@ -17,6 +17,8 @@ from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
+from .cloth_self import cloth_self_contacts
+from .contact_output import FEATURE_BITS as FEATURE_BITS  # re-exported: contact ids are (pair << it) | feature
 from .families import pair_families
 from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
 from .granularity import NORMALS as NORMALS
@@ -46,9 +48,6 @@ def check_supported(model: Model) -> None:
                     f"contact between a {shapes.NAMES[a]} and a {shapes.NAMES[b]} "
                     "is not supported yet; change the shape of one of them",
                 )
-
-
-FEATURE_BITS = 24  # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
 def swept_distances(
@@ -214,6 +213,7 @@ def collide_keeping(
     normal: str = "object",
     samples: int = 2,
     cloth_samples: int = 0,
+    particle_motion: np.ndarray | None = None,
 ) -> tuple[Contacts, Manifolds | None]:
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
     to keep for the next step: (Contacts, Manifolds or None).
@@ -234,7 +234,11 @@ def collide_keeping(
 
     cloth_samples: besides its vertices (particles), sample every cloth triangle k × k times
     against the static obstacles (P2c, see collision.cloth); 0: vertices only. The vertices of
-    one cloth never collide with each other here (their springs keep them apart).
+    one cloth make no particle contacts with each other (their springs keep them apart); the
+    cloths whose ``self_collision`` is on meet themselves and each other as surfaces instead,
+    vertex–triangle and edge–edge (collision.cloth_self); particle_motion (P, 3) [m], each
+    particle's predicted displacement over the step, lets those reach only as far as the
+    particles move relative to each other (None: as far as the sweep).
     """
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
@@ -288,6 +292,8 @@ def collide_keeping(
         found = Contacts.concatenate(
             [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
         )
+    if len(model.triangles) and model.cloth_self_collision.any():
+        found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep, particle_motion)])
     return found, manifolds
 
 

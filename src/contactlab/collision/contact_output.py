@@ -15,6 +15,7 @@ from .geometry import axpy, rotate
 
 PairOutput = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (point, normal, depth, feature)
 Frame = tuple[np.ndarray, np.ndarray]  # (center (3,) [m], rotation (3, 3) body → world) of a collider
+FEATURE_BITS = 24  # contact id = (collider pair) << FEATURE_BITS | feature within the pair
 
 
 @njit(cache=True)

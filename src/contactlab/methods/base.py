@@ -71,11 +71,13 @@ class CollisionOptions:
         sweep: np.ndarray | None,
         manifolds: Manifolds | None = None,
         tolerance: float = 0.0,
+        particle_motion: np.ndarray | None = None,
     ) -> tuple[Contacts, Manifolds | None]:
         """``collide_keeping`` with these settings: the contacts of ``state`` down to gaps of
         ``contact_margin`` [m], or each collider's ``sweep`` (B + P,) [m] where larger, and the
         manifolds to carry; pairs that moved less than ``tolerance`` [m] keep theirs from
-        ``manifolds`` (last step's; None or 0: nothing kept, as ``collide``)."""
+        ``manifolds`` (last step's; None or 0: nothing kept, as ``collide``); particle_motion
+        (P, 3) [m]: the particles' predicted displacements, for cloth self-contact (None: the sweep)."""
         return collide_keeping(
             model,
             state,
@@ -87,6 +89,7 @@ class CollisionOptions:
             self.normal,
             self.samples,
             self.cloth_samples,
+            particle_motion,
         )
 
 

@@ -350,7 +350,7 @@ def step(
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
-    contacts, manifolds = swept_contacts(model, state, options, sweep)
+    contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, CARRIED["constraints"])
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve

@@ -344,7 +344,7 @@ def step(
     guard, penalty = penalty_loop(model, options, integrator, dt)
     # 1. collision detection, with the gaps this step's motion could close
     sweep = swept_distances(model, *state.velocities, h)
-    contacts, _ = options.collide(model, state, sweep)
+    contacts, _ = options.collide(model, state, sweep, particle_motion=h * state.particle_velocity)
     arrays, motion, rotation, carried = loop_inputs(model, state, "penalty")
     found = contacts.arrays()
     rows = build_rows(arrays, found, motion, rotation)

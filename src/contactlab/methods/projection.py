@@ -99,7 +99,8 @@ def step(
     # 3–4, over the swept step: the contacts at the start within reach of the step's motion
     # (speculative: a gap may close, never be crossed), projected — nothing passes through
     # anything, however fast; then at the projected positions, for what the linearization missed
-    contacts, manifolds = swept_contacts(model, state, options, sweep)
+    particle_motion = unstack(predicted_displacement, model.body_count)[2]
+    contacts, manifolds = swept_contacts(model, state, options, sweep, particle_motion)
     arrays, motion, rotation, carried = loop_inputs(model, state, "projection")
     settings = loop_settings(model, "projection", options, dt)
     _, _, _, _, _, slabs, parallel = compile_flags(model, "projection", options)
@@ -119,7 +120,7 @@ def step(
             state.time + h, (at.body_position, at.body_orientation, at.particle_position), state.velocities
         )
         ids = contacts.feature_id
-        contacts, _ = options.collide(model, projected, sweep)
+        contacts, _ = options.collide(model, projected, sweep, particle_motion=particle_motion)
         displacement, more, sweeps, change = project(
             arrays,
             settings,

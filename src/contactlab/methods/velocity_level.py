@@ -71,13 +71,21 @@ def predict(
 
 
 def swept_contacts(
-    model: Model, state: State, options: KeptManifoldOptions, sweep: np.ndarray
+    model: Model,
+    state: State,
+    options: KeptManifoldOptions,
+    sweep: np.ndarray,
+    particle_motion: np.ndarray | None = None,
 ) -> tuple[Contacts, Manifolds | None]:
     """Stage 3: collision detection over the swept step — contacts at the start positions with
-    gaps down to what the motion could close (speculative contacts, so nothing tunnels), box,
-    hull and plane pairs that barely moved keeping last step's manifolds. Returns (Contacts,
-    the manifolds to carry)."""
-    return options.collide(model, state, sweep, state.carried.get("manifolds"), options.manifold_tolerance)
+    gaps down to what the motion could close (speculative contacts, so nothing tunnels: each
+    collider's ``sweep`` (B + P,) [m]; for cloth self-contact, the particles' relative
+    displacements, from ``particle_motion`` (P, 3) [m], None: the sweep), box, hull and plane
+    pairs that barely moved keeping last step's manifolds. Returns (Contacts, the manifolds to
+    carry)."""
+    return options.collide(
+        model, state, sweep, state.carried.get("manifolds"), options.manifold_tolerance, particle_motion
+    )
 
 
 def step_without_contacts(
@@ -546,7 +554,7 @@ def step(
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
     move, predicted, sweep = predict(model, state, free, integrator, h)
     # 3. collision detection over the swept step
-    contacts, manifolds = swept_contacts(model, state, options, sweep)
+    contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
     keys = CARRIED[method]
     if contacts.count == 0:
         return step_without_contacts(state, h, predicted, free, contacts, manifolds, keys)

@@ -105,6 +105,18 @@ class Text:
         return "string"
 
 
+class Switch:
+    """true or false (a TOML boolean, not a number or a string)."""
+
+    def check(self, value: Any, field: str, unit: str = "") -> Any:
+        if not isinstance(value, bool):
+            raise InputError(field, f"expected true or false, found {show(value)}")
+        return value
+
+    def describe(self) -> str:
+        return "true | false"
+
+
 class Choice:
     """One of ``values``; names in ``planned`` get a "not supported yet" error."""
 
@@ -442,6 +454,7 @@ CLOTH = {
     "damping": Key(Number(), 0.0, "N s/m"),
     "pinned": Key(Pinned(), []),
     "thickness": Key(Number(), 0.005, "m"),
+    "self_collision": Key(Switch(), True),
     "material": Key(Text()),
 }
 

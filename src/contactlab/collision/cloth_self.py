@@ -1,0 +1,546 @@
+"""Contacts of cloth with itself and with other cloths: vertex–triangle and edge–edge (issue 41).
+
+A cloth's vertices are particles of radius ``thickness``, but two vertices of one cloth make
+no particle contact (their springs keep them apart), and a vertex may pass between the
+vertices of a triangle. Here the cloths whose ``self_collision`` is on meet as surfaces, after
+Bridson, Fedkiw and Anderson (2002):
+
+* **vertex–triangle**: a vertex v and a triangle f that does not have v as a corner, when the
+  vertex's distance d to the triangle's closest point q (with barycentric weights w) is within
+  the two thicknesses r_v + r_f and the reach. Side A is the vertex (weight 1), side B the
+  triangle's three vertices with weights w (SPEC D1: a point carried by three particles); the
+  normal is (x_v − q)/d, the face normal on the vertex's side where the vertex lies over the
+  triangle's inside;
+* **edge–edge**: two edges with no corner in common whose closest points p (on the first,
+  weights 1 − s, s) and q (on the second, 1 − t, t) are both strictly inside them, within
+  the two thicknesses and the reach. Side A is the first edge, side B the second; the normal
+  is (p − q)/|p − q|. A closest point at an edge's end is a vertex near an edge, which the
+  vertex–triangle contacts of that edge's triangles already find.
+
+Depth counts from the thicknesses: δ = r_A + r_B − d, > 0 closer than the cloth's thickness
+(r of a side: the largest radius of its particles). **Over the swept step**: a pair is a
+contact when its gap d − r_A − r_B is at most the margin plus how far its two sides may move
+relative to each other in the coming step, max |Δx_i − Δx_j| over a particle i of one side and
+j of the other (Δx: each particle's predicted displacement; a point of a side moves by a convex
+combination of its particles', so no two points of the sides approach more). Any two elements
+that could meet during the step are so found at its start, and each method keeps their gap
+from closing past zero (speculative contacts): a fast fold does not tunnel. Relative motion,
+not each particle's own: a sheet falling flat at 3 m/s makes no contact with itself. Where only
+each particle's swept distance is known (``collide`` called with ``sweep`` alone), the bound is
+the sum of the two sides' largest sweeps.
+
+The broad phase is ``broad_phase.boxes_between``: a hashed grid of the triangles' boxes that
+the vertices' boxes look up, and one of the edges' boxes that they look up themselves (no
+triangle is tested against a triangle). Each box is an element's at the step's start, grown by
+its thickness, half the margin and how far its particles move relative to their mean
+displacement (``reach_growth``): the cost grows with the number of vertices and of near pairs.
+
+Contact ids: a self-contact names two of its particles as its collider pair, so that
+``half_thickness_sums`` reads its pass-through depth r_A + r_B from them, and its element in
+the feature: vertex–triangle (vertex, the triangle's first corner) with feature 2 f + 1 (f
+the triangle's index in ``Model.triangles``), edge–edge (the first edge's two ends, which
+never make a particle pair: they are one cloth's) with feature 2 e + 2 (e the second edge's
+index in ``ClothElements.edges``). Particle–particle contacts have feature 0: no id is shared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..compiling import njit
+from ..contacts import ContactArrays, Contacts, tangent_frames
+from ..model import derived
+from .broad_phase import boxes_between
+from .contact_output import FEATURE_BITS
+
+if TYPE_CHECKING:
+    from ..model import Model
+    from ..state import State
+
+
+@dataclass(frozen=True)
+class ClothElements:
+    """The elements of the cloths whose ``self_collision`` is on (global particle indices)."""
+
+    triangles: np.ndarray
+    """(F', 3) int64, the corners of each triangle"""
+    triangle_index: np.ndarray
+    """(F',) int64, each one's index in ``Model.triangles``"""
+    edges: np.ndarray
+    """(E, 2) int64, the triangles' edges, each once, lower index first, sorted"""
+    vertices: np.ndarray
+    """(V,) int64, the particles that are corners of those triangles, sorted"""
+
+    @property
+    def empty(self) -> bool:
+        return len(self.triangles) == 0
+
+
+@derived
+def cloth_elements(model: Model) -> ClothElements:
+    """The ClothElements of ``model``, built once and kept with it."""
+    triangles = np.asarray(model.triangles, dtype=np.int64).reshape(-1, 3)
+    cloth = model.particle_cloth[triangles[:, 0]] if len(triangles) else np.zeros(0, dtype=np.int64)
+    chosen = np.nonzero(np.asarray(model.cloth_self_collision, dtype=bool)[cloth])[0] if len(triangles) else cloth
+    kept = triangles[chosen]
+    edges = np.sort(kept[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.unique(edges, axis=0) if len(edges) else np.zeros((0, 2), dtype=np.int64)
+    return ClothElements(
+        triangles=kept,
+        triangle_index=chosen.astype(np.int64),
+        edges=edges.astype(np.int64),
+        vertices=np.unique(kept).astype(np.int64),
+    )
+
+
+def cloth_self_contacts(
+    model: Model, state: State, margin: float, sweep: np.ndarray | None, particle_motion: np.ndarray | None = None
+) -> Contacts:
+    """The vertex–triangle and edge–edge contacts of the self-colliding cloths at ``state``.
+
+    margin [m]: gaps down to this are kept; particle_motion (P, 3) [m]: each particle's
+    predicted displacement over the coming step, whose relative part widens the reach (see the
+    module); None: the sweep (B + P,) [m] of each body and particle bounds it instead (None too:
+    standing still)."""
+    elements = cloth_elements(model)
+    if elements.empty:
+        return Contacts.empty()
+    P = model.particle_count
+    if particle_motion is not None:
+        motion, spare = np.ascontiguousarray(particle_motion, dtype=float).reshape(P, 3), np.zeros(P)
+    else:
+        motion = np.zeros((P, 3))
+        spare = np.array(sweep[model.body_count :], dtype=float) if sweep is not None else np.zeros(P)
+    return Contacts.from_arrays(
+        self_contact_arrays(
+            np.ascontiguousarray(state.particle_position, dtype=float),
+            np.asarray(model.particle_radius, dtype=float),
+            (motion, spare, float(margin)),
+            np.asarray(model.particle_material, dtype=np.int64),
+            np.asarray(model.material_friction, dtype=float),
+            np.asarray(model.material_restitution, dtype=float),
+            elements.triangles,
+            elements.triangle_index,
+            elements.edges,
+            elements.vertices,
+            model.body_count,
+            model.body_count + P + model.obstacle_count,
+        )
+    )
+
+
+def is_self_contact(contacts: Contacts) -> np.ndarray:
+    """(C,) bool: the contacts made here — the only ones whose side B is carried by two
+    particles or more (a triangle or an edge)."""
+    return np.asarray(contacts.particles_b)[:, 1] >= 0
+
+
+# ---- the compiled detection ----------------------------------------------------------------------
+
+
+Reach = tuple[np.ndarray, np.ndarray, float]
+"""What widens a pair's reach beyond the thicknesses: (motion (P, 3) [m], each particle's
+predicted displacement; spare (P,) [m], a distance each particle may move besides; margin [m])."""
+
+
+@njit(cache=True)
+def element_boxes(
+    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> None:
+    """Write into ``lower``, ``upper`` (K, 3) [m] the boxes of the elements ``corners`` (K, k)
+    int (vertices: k = 1, edges 2, triangles 3) about their particles' ``position`` (P, 3) [m],
+    grown by the largest ``grow`` (P,) [m] of their corners."""
+    for e in range(corners.shape[0]):
+        g = 0.0
+        for m in range(corners.shape[1]):
+            g = max(g, grow[corners[e, m]])
+        for d in range(3):
+            low = high = position[corners[e, 0], d]
+            for m in range(1, corners.shape[1]):
+                low = min(low, position[corners[e, m], d])
+                high = max(high, position[corners[e, m], d])
+            lower[e, d] = low - g
+            upper[e, d] = high + g
+
+
+@njit(cache=True)
+def allowed_gap(reach: Reach, side_a: np.ndarray, side_b: np.ndarray) -> float:
+    """The largest gap [m] at which the particles ``side_a`` and ``side_b`` (int arrays) make a
+    contact: the margin, the most any particle of one side moves relative to one of the other,
+    and each side's largest spare distance (see ``Reach``)."""
+    motion, spare, margin = reach
+    most = spare_a = spare_b = 0.0
+    for i in side_a:
+        spare_a = max(spare_a, spare[i])
+        for j in side_b:
+            dx, dy, dz = motion[i, 0] - motion[j, 0], motion[i, 1] - motion[j, 1], motion[i, 2] - motion[j, 2]
+            most = max(most, dx * dx + dy * dy + dz * dz)
+    for j in side_b:
+        spare_b = max(spare_b, spare[j])
+    return margin + np.sqrt(most) + spare_a + spare_b
+
+
+@njit(cache=True)
+def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
+    """The point of triangle (a, b, c) (3,) [m] closest to x (3,) [m], as its barycentric weights
+    (w_a, w_b, w_c), and whether it lies strictly inside the triangle (not on an edge or a
+    corner). Ericson, *Real-Time Collision Detection*, 5.1.5; a degenerate triangle gives a corner
+    or an edge point."""
+    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    ap0, ap1, ap2 = x[0] - a[0], x[1] - a[1], x[2] - a[2]
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0, False
+    bp0, bp1, bp2 = x[0] - b[0], x[1] - b[1], x[2] - b[2]
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0, False
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 1.0 - v, v, 0.0, False
+    cp0, cp1, cp2 = x[0] - c[0], x[1] - c[1], x[2] - c[2]
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0, False
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 1.0 - w, 0.0, w, False
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - w, w, False
+    denominator = 1.0 / (va + vb + vc)
+    v = vb * denominator
+    w = vc * denominator
+    return 1.0 - v - w, v, w, True
+
+
+@njit(cache=True)
+def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> tuple[float, float]:
+    """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2)
+    of two segments (3,) [m] each; an end where clamped (exactly 0 or 1), and for parallel
+    segments s = 0. Ericson, *Real-Time Collision Detection*, 5.1.9."""
+    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    tiny = 1e-30
+    if a <= tiny and e <= tiny:
+        return 0.0, 0.0
+    if a <= tiny:
+        return 0.0, min(max(f / e, 0.0), 1.0)
+    c = d10 * r0 + d11 * r1 + d12 * r2
+    if e <= tiny:
+        return min(max(-c / a, 0.0), 1.0), 0.0
+    b = d10 * d20 + d11 * d21 + d12 * d22
+    denominator = a * e - b * b
+    s = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 1e-12 * a * e else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((b - c) / a, 0.0), 1.0)
+    return s, t
+
+
+@njit(cache=True)
+def vertex_triangle(
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: Reach,
+    vertex: np.ndarray,
+    corners: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    row: int,
+) -> tuple[bool, float, float, float, float]:
+    """The vertex–triangle test of the particle ``vertex`` (1,) against the triangle of particles
+    ``corners`` (3,) (see the module), ``reach`` as ``allowed_gap`` takes it. Returns (a
+    contact?, depth [m], the weights (w_a, w_b, w_c)); a contact's point, midway between the
+    surfaces [m], and normal, from the triangle to the vertex, go to row ``row`` of ``point``
+    and ``normal`` (n, 3). In scalars: most candidate pairs are too far apart, and leave having
+    allocated nothing."""
+    v = vertex[0]
+    a, b, c = position[corners[0]], position[corners[1]], position[corners[2]]
+    x = position[v]
+    wa, wb, wc, inside = closest_on_triangle(x, a, b, c)
+    g0 = x[0] - (wa * a[0] + wb * b[0] + wc * c[0])
+    g1 = x[1] - (wa * a[1] + wb * b[1] + wc * c[1])
+    g2 = x[2] - (wa * a[2] + wb * b[2] + wc * c[2])
+    distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
+    depth = radius[v] + side_radius - distance
+    if depth < -allowed_gap(reach, vertex, corners):
+        return False, depth, wa, wb, wc
+    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    f0, f1, f2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
+    area = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if inside and area > 0.0:  # over the inside: the face normal, on the vertex's side
+        side = 1.0 if n0 * g0 + n1 * g1 + n2 * g2 >= 0.0 else -1.0
+        n0, n1, n2 = side * n0 / area, side * n1 / area, side * n2 / area
+    elif distance > 0.0:
+        n0, n1, n2 = g0 / distance, g1 / distance, g2 / distance
+    elif area > 0.0:
+        n0, n1, n2 = n0 / area, n1 / area, n2 / area
+    else:  # a vertex on the corner of a degenerate triangle: no direction to push along
+        return False, depth, wa, wb, wc
+    lift = side_radius - 0.5 * depth  # from the triangle's closest point to midway
+    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+    point[row, 0] = x[0] - g0 + lift * n0
+    point[row, 1] = x[1] - g1 + lift * n1
+    point[row, 2] = x[2] - g2 + lift * n2
+    return True, depth, wa, wb, wc
+
+
+@njit(cache=True)
+def edge_edge(
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: Reach,
+    first: np.ndarray,
+    second: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    row: int,
+) -> tuple[bool, float, float, float]:
+    """The edge–edge test of the edges of particles ``first`` (2,) and ``second`` (2,) (see the
+    module), ``reach`` as ``allowed_gap`` takes it. Returns (a contact?, depth [m], s, t); a
+    contact's point [m] and normal, from the second edge to the first, go to row ``row`` of
+    ``point`` and ``normal`` (n, 3), as ``vertex_triangle``'s."""
+    p1, q1, p2, q2 = position[first[0]], position[first[1]], position[second[0]], position[second[1]]
+    s, t = closest_on_segments(p1, q1, p2, q2)
+    if not (0.0 < s < 1.0 and 0.0 < t < 1.0):
+        return False, 0.0, s, t
+    y0, y1, y2 = p2[0] + t * (q2[0] - p2[0]), p2[1] + t * (q2[1] - p2[1]), p2[2] + t * (q2[2] - p2[2])
+    g0 = p1[0] + s * (q1[0] - p1[0]) - y0
+    g1 = p1[1] + s * (q1[1] - p1[1]) - y1
+    g2 = p1[2] + s * (q1[2] - p1[2]) - y2
+    distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    radius_b = max(radius[second[0]], radius[second[1]])
+    depth = max(radius[first[0]], radius[first[1]]) + radius_b - distance
+    if depth < -allowed_gap(reach, first, second):
+        return False, depth, s, t
+    if distance > 0.0:
+        n0, n1, n2 = g0 / distance, g1 / distance, g2 / distance
+    else:  # the edges cross: the normal of the plane of the two
+        e0, e1, e2 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+        f0, f1, f2 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+        n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
+        length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if length == 0.0:
+            return False, depth, s, t
+        n0, n1, n2 = n0 / length, n1 / length, n2 / length
+    lift = radius_b - 0.5 * depth
+    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+    point[row, 0], point[row, 1], point[row, 2] = y0 + lift * n0, y1 + lift * n1, y2 + lift * n2
+    return True, depth, s, t
+
+
+@njit(cache=True)
+def self_contact_arrays(
+    position: np.ndarray,
+    radius: np.ndarray,
+    reach: Reach,
+    material: np.ndarray,
+    material_friction: np.ndarray,
+    material_restitution: np.ndarray,
+    triangles: np.ndarray,
+    triangle_index: np.ndarray,
+    edges: np.ndarray,
+    vertices: np.ndarray,
+    body_count: int,
+    total: int,
+) -> ContactArrays:
+    """``cloth_self_contacts``, compiled: the ContactArrays of the vertex–triangle contacts, then
+    the edge–edge ones, each in the broad phase's (sorted) pair order.
+
+    position (P, 3) [m]; radius (P,) [m]; reach, a ``Reach``; material (P,) int and the
+    materials' friction and restitution (M,); the elements (``ClothElements``): triangles
+    (F', 3), triangle_index (F',), edges (E, 2), vertices (V,); body_count B and total
+    N = B + P + O, the collider count of the contact ids."""
+    V, F, E = vertices.shape[0], triangles.shape[0], edges.shape[0]
+    grow = reach_growth(radius, reach, vertices)
+    vertex_lower, vertex_upper = np.empty((V, 3)), np.empty((V, 3))
+    element_boxes(position, grow, vertices.reshape(V, 1), vertex_lower, vertex_upper)
+    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
+    element_boxes(position, grow, triangles, triangle_lower, triangle_upper)
+    near = boxes_between(vertex_lower, vertex_upper, triangle_lower, triangle_upper, False)
+    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
+    element_boxes(position, grow, edges, edge_lower, edge_upper)
+    edge_pairs = boxes_between(edge_lower, edge_upper, edge_lower, edge_upper, True)
+    capacity = near.shape[0] + edge_pairs.shape[0]
+    particles = np.full((2, capacity, 3), -1, dtype=np.int64)
+    weights = np.zeros((2, capacity, 3))
+    point = np.empty((capacity, 3))
+    normal = np.empty((capacity, 3))
+    depth = np.empty(capacity)
+    friction = np.empty(capacity)
+    restitution = np.empty(capacity)
+    feature_id = np.empty(capacity, dtype=np.int64)
+    count = 0
+    for k in range(near.shape[0]):
+        i, f = near[k, 0], near[k, 1]
+        v = vertices[i]
+        corners = triangles[f]
+        if v == corners[0] or v == corners[1] or v == corners[2]:
+            continue
+        found, d, wa, wb, wc = vertex_triangle(
+            position, radius, reach, vertices[i : i + 1], corners, point, normal, count
+        )
+        if not found:
+            continue
+        particles[0, count, 0] = v
+        weights[0, count, 0] = 1.0
+        for m in range(3):
+            particles[1, count, m] = corners[m]
+        weights[1, count, 0], weights[1, count, 1], weights[1, count, 2] = wa, wb, wc
+        pair = (body_count + v) * total + body_count + corners[0]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * triangle_index[f] + 1)
+        depth[count] = d
+        friction[count], restitution[count] = _materials(
+            material[v], material[corners[0]], material_friction, material_restitution
+        )
+        count += 1
+    for k in range(edge_pairs.shape[0]):
+        first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
+        if first[0] == second[0] or first[0] == second[1] or first[1] == second[0] or first[1] == second[1]:
+            continue
+        found, d, s, t = edge_edge(position, radius, reach, first, second, point, normal, count)
+        if not found:
+            continue
+        particles[0, count, 0], particles[0, count, 1] = first[0], first[1]
+        weights[0, count, 0], weights[0, count, 1] = 1.0 - s, s
+        particles[1, count, 0], particles[1, count, 1] = second[0], second[1]
+        weights[1, count, 0], weights[1, count, 1] = 1.0 - t, t
+        pair = (body_count + first[0]) * total + body_count + first[1]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * edge_pairs[k, 1] + 2)
+        depth[count] = d
+        friction[count], restitution[count] = _materials(
+            material[first[0]], material[second[0]], material_friction, material_restitution
+        )
+        count += 1
+    unit = np.ascontiguousarray(normal[:count])
+    t1, t2 = tangent_frames(unit)
+    nobody = np.full(count, -1, dtype=np.int64)
+    return ContactArrays(
+        nobody,
+        nobody.copy(),
+        particles[0, :count].copy(),
+        particles[1, :count].copy(),
+        weights[0, :count].copy(),
+        weights[1, :count].copy(),
+        point[:count].copy(),
+        unit,
+        depth[:count].copy(),
+        t1,
+        t2,
+        friction[:count].copy(),
+        restitution[:count].copy(),
+        feature_id[:count].copy(),
+    )
+
+
+@njit(cache=True)
+def reach_growth(radius: np.ndarray, reach: Reach, vertices: np.ndarray) -> np.ndarray:
+    """How far (P,) [m] the broad phase grows each particle's box about its start position: its
+    radius, spare distance and half the margin, and how far it moves relative to ū, the mean
+    displacement of ``vertices`` (V,). As |Δx_i − Δx_j| ≤ |Δx_i − ū| + |Δx_j − ū|, every pair
+    ``allowed_gap`` lets make a contact has overlapping boxes so grown: the broad phase of
+    ``self_contact_arrays`` misses none of the pairs a test of every pair would find."""
+    motion, spare, margin = reach
+    mean = np.zeros(3)
+    for p in vertices:
+        for d in range(3):
+            mean[d] += motion[p, d] / max(vertices.shape[0], 1)
+    grow = np.empty(radius.shape[0])
+    for p in range(radius.shape[0]):
+        dx, dy, dz = motion[p, 0] - mean[0], motion[p, 1] - mean[1], motion[p, 2] - mean[2]
+        grow[p] = radius[p] + spare[p] + 0.5 * margin + np.sqrt(dx * dx + dy * dy + dz * dz)
+    return grow
+
+
+@njit(cache=True, inline="always")
+def _materials(a: int, b: int, material_friction: np.ndarray, material_restitution: np.ndarray) -> tuple[float, float]:
+    """(μ, ε) of materials a and b combined as ``Model.pair_materials`` does."""
+    return np.sqrt(material_friction[a] * material_friction[b]), max(material_restitution[a], material_restitution[b])
+
+
+# ---- crossings: the health check's test --------------------------------------------------------
+
+
+def crossings(model: Model, particle_position: np.ndarray) -> np.ndarray:
+    """The (edge, triangle) pairs (K, 2) of the self-colliding cloths at ``particle_position``
+    (P, 3) [m] where an edge passes through a triangle it has no corner of: indices into
+    ``cloth_elements(model).edges`` and ``.triangles``. None is the goal of self-contact."""
+    elements = cloth_elements(model)
+    if elements.empty:
+        return np.zeros((0, 2), dtype=np.int64)
+    return edge_triangle_crossings(
+        np.ascontiguousarray(particle_position, dtype=float), elements.triangles, elements.edges
+    )
+
+
+@njit(cache=True)
+def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``crossings``, compiled: the broad phase over the edges' and triangles' boxes, then for
+    each (edge, triangle) pair with no shared corner whether the segment's ends lie strictly on
+    the two sides of the triangle's plane and the point where it meets the plane inside the
+    triangle (closed; an edge lying in the plane is not counted). position (P, 3) [m], triangles
+    (F', 3), edges (E, 2). Returns (K, 2) int64 (edge, triangle)."""
+    E, F = edges.shape[0], triangles.shape[0]
+    zero = np.zeros(position.shape[0])
+    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
+    element_boxes(position, zero, edges, edge_lower, edge_upper)
+    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
+    element_boxes(position, zero, triangles, triangle_lower, triangle_upper)
+    near = boxes_between(edge_lower, edge_upper, triangle_lower, triangle_upper, False)
+    out = np.empty((near.shape[0], 2), dtype=np.int64)
+    count = 0
+    for k in range(near.shape[0]):
+        e, f = near[k, 0], near[k, 1]
+        a, b = edges[e, 0], edges[e, 1]
+        corners = triangles[f]
+        if a == corners[0] or a == corners[1] or a == corners[2] or b == corners[0] or b == corners[1]:
+            continue
+        if b == corners[2]:
+            continue
+        if segment_crosses_triangle(
+            position[a], position[b], position[corners[0]], position[corners[1]], position[corners[2]]
+        ):
+            out[count, 0], out[count, 1] = e, f
+            count += 1
+    return out[:count].copy()
+
+
+@njit(cache=True)
+def segment_crosses_triangle(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
+    """Whether segment p–q (3,) [m] passes through triangle (a, b, c): p and q strictly on
+    opposite sides of its plane and the crossing point inside it (edges included)."""
+    n = np.cross(b - a, c - a)
+    dp = n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2])
+    dq = n[0] * (q[0] - a[0]) + n[1] * (q[1] - a[1]) + n[2] * (q[2] - a[2])
+    if not ((dp > 0.0 and dq < 0.0) or (dp < 0.0 and dq > 0.0)):
+        return False
+    x = p + (dp / (dp - dq)) * (q - p)
+    # inside: x on the inner side of each edge, measured along the normal
+    for i in range(3):
+        u = (a, b, c)[i]
+        w = (b, c, a)[i]
+        side = np.cross(w - u, x - u)
+        if side[0] * n[0] + side[1] * n[1] + side[2] * n[2] < 0.0:
+            return False
+    return True
