@@ -63,7 +63,7 @@ def velocity_step(
     ids (K,), their impulses (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``,
     ``constraints``, ``slabs`` and ``parallel`` (True, or None to leave a stage's branch
     uncompiled) as ``Stepper`` sets them. Returns (positions, velocities — the state's six
-    arrays, new —, the carried triple for the next step, the ContactArrays, sweeps made, the
+    arrays, new —, the carried triple for the next step, the contacts' count, sweeps made, the
     sweeps' last change [m/s])."""
     h = settings.dt
     rotation, centers, rots = start
@@ -87,7 +87,7 @@ def velocity_step(
             np.full(free[2].shape[0], h),
         )
         clear = swept_clear(near, settings.margin)
-        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), contacts, 0, 0.0, clear
+        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear
     # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
     positions, velocities, impulses, sweeps, change = respond(
         model,
@@ -103,7 +103,8 @@ def velocity_step(
         free,
         (carried[1], carried[2]),
     )
-    return positions, velocities, (manifolds, contacts.feature_id, impulses), contacts, sweeps, change, False
+    count = contacts.depth.shape[0]
+    return positions, velocities, (manifolds, contacts.feature_id, impulses), count, sweeps, change, False
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
@@ -178,7 +179,7 @@ def projection_step(
 
     ``start``, ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values:
     last step's first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six
-    arrays, new —, the carried triple for the next step, the last pass's ContactArrays, sweeps
+    arrays, new —, the carried triple for the next step, the last pass's contact count, sweeps
     made in every pass, the last pass's last correction [m])."""
     h = settings.dt
     rotation, centers, rots = start
@@ -218,7 +219,7 @@ def projection_step(
     start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)
     positions, velocities = advance(start_positions, v_free, displacement, predicted, h)
     clear = swept_clear(near, settings.margin)
-    return positions, velocities, (manifolds, contacts.feature_id, lam), last, sweeps, change, clear
+    return positions, velocities, (manifolds, contacts.feature_id, lam), last.depth.shape[0], sweeps, change, clear
 
 
 # ---- penalty (loop L1): the stages of methods.penalty_springs and penalty_implicit ---------
@@ -244,7 +245,7 @@ def penalty_step(
     ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
     (K, 3) [m]); ``settings`` the guard's (``penalty.penalty_loop``); ``start`` and the flags as
     ``velocity_step``'s. Returns (positions, velocities — the state's six arrays, new —, the
-    carried triple, the ContactArrays, active-set passes, the last linear solve's relative
+    carried triple, the contacts' count, active-set passes, the last linear solve's relative
     residual, the elastic energy at the step's end [J], whether the springs went implicit under
     an explicit integrator, the conjugate-gradient iterations of its solves)."""
     h = settings.dt
@@ -275,7 +276,7 @@ def penalty_step(
         positions,
         velocities,
         (manifolds, contacts.feature_id, offsets),
-        contacts,
+        contacts.depth.shape[0],
         passes,
         residual,
         energy,

@@ -151,25 +151,24 @@ def run(
         # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
         # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
-            positions, velocities, carried, contacts, sweeps, change, clear = projection_step(
+            positions, velocities, carried, count, sweeps, change, clear = projection_step(
                 model, settings, plan, large, keeping, slabs, parallel, motion, pose, carried
             )
         if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
-            positions, velocities, carried, contacts, sweeps, change, clear = velocity_step(
+            positions, velocities, carried, count, sweeps, change, clear = velocity_step(
                 model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if impulse is not None:
-            positions, velocities, carried, contacts, sweeps, change, clear = velocity_step(
+            positions, velocities, carried, count, sweeps, change, clear = velocity_step(
                 model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
             )
         if penalty is not None:
-            positions, velocities, carried, contacts, sweeps, change, elastic, implicit, linear = penalty_step(
+            positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = penalty_step(
                 model, settings, plan, large, slabs, parallel, penalty, motion, pose, carried
             )
         store(motion, positions, velocities)
         pose = poses(model, motion)
         time += settings.dt
-        count = contacts.depth.shape[0]
         most = max(most, count)
         sweeps_made += sweeps
         implicit_steps += implicit
