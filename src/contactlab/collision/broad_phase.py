@@ -181,13 +181,11 @@ def neighbour_cell_pairs(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarr
 
 
 @njit(cache=True)
-def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Pairs (i, j), i < j, whose boxes overlap, by a uniform hash grid (see the module).
-
-    The cell edge is twice the median of the boxes' largest extents, so a typical box touches
-    at most 2 cells per axis; a larger box is entered in every cell it touches. A pair is
-    reported only from the cell holding the larger of its two lower corners, so once.
-    """
+def _grid_cells(lower: np.ndarray, upper: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, int]:
+    """The hash grid's cells of boxes (N, 3) [m]: cells of edge twice the median of the boxes'
+    largest extents (so a typical box touches at most 2 cells per axis). Returns the cell's edge
+    [m], the cell indices of each box's lower and upper corner (N, 3) int64 and the number of
+    (box, cell) entries."""
     n = lower.shape[0]
     extent = np.empty(n)
     for i in range(n):
@@ -200,6 +198,19 @@ def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     count = 0
     for i in range(n):
         count += (high[i, 0] - low[i, 0] + 1) * (high[i, 1] - low[i, 1] + 1) * (high[i, 2] - low[i, 2] + 1)
+    return cell, low, high, count
+
+
+@njit(cache=True)
+def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Pairs (i, j), i < j, whose boxes overlap, by a uniform hash grid (see the module).
+
+    The cell edge is twice the median of the boxes' largest extents, so a typical box touches
+    at most 2 cells per axis; a larger box is entered in every cell it touches. A pair is
+    reported only from the cell holding the larger of its two lower corners, so once.
+    """
+    n = lower.shape[0]
+    _, low, high, count = _grid_cells(lower, upper)
     keys = np.empty(count, dtype=np.int64)
     boxes = np.empty(count, dtype=np.int64)
     cells = np.empty((count, 3), dtype=np.int64)
@@ -263,17 +274,7 @@ def boxes_between(
     pairs = np.empty((max(16, 4 * max(na, nb)), 2), dtype=np.int64)
     if na == 0 or nb == 0:
         return pairs[:0]
-    extent = np.empty(nb)
-    for j in range(nb):
-        extent[j] = max(upper_b[j, 0] - lower_b[j, 0], upper_b[j, 1] - lower_b[j, 1], upper_b[j, 2] - lower_b[j, 2])
-    cell = 2.0 * np.median(extent)
-    if not cell > 0.0:
-        cell = max(1e-9, extent.max())
-    low = np.floor(lower_b / cell).astype(np.int64)
-    high = np.floor(upper_b / cell).astype(np.int64)
-    count = 0
-    for j in range(nb):
-        count += (high[j, 0] - low[j, 0] + 1) * (high[j, 1] - low[j, 1] + 1) * (high[j, 2] - low[j, 2] + 1)
+    cell, low, high, count = _grid_cells(lower_b, upper_b)
     slots = 1
     while slots < 2 * count:
         slots *= 2
