@@ -403,6 +403,7 @@ def test_a_short_first_run_says_why_it_steps_slowly(monkeypatch):
     assert "loop" not in _where_time_went(looped) and "loop" not in _where_time_went(unserved)
     # as on an empty compile cache: the loop's machine code is nowhere, and 10 steps do not repay it
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
     short = simulate(model, "impulse", 1e-3, 0.01).summary
     assert not short["compiled_loop"] and short["stepping"] == SHORT_FIRST_RUN
     assert "does not compile the stepping loop" in _where_time_went(short)

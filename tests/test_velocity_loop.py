@@ -160,6 +160,7 @@ def test_a_short_first_run_calls_the_loops_compiled_steps_from_python_and_a_long
         )
 
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
     assert not chosen(4000).compiled  # 4000 steps save < 1 s of Python
     assert velocity_loop.repays_compiling(10**6)  # a million save about 35 s
     assert chosen(10**6).compiled
@@ -183,7 +184,7 @@ def test_runs_stepped_from_python_compile_the_loop_once_they_have_cost_what_comp
     (``LOOP_COMPILE_SECONDS``); from the next chunk of steps on, the loop is compiled."""
     scene = load_scene("bouncing_ball")
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})
+    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
     first = simulate(scene.model, "impulse", scene.dt, 30 * scene.dt)
     assert first.summary["stepping"] == SHORT_FIRST_RUN
     spent = sum(velocity_loop._seconds_from_python.values())
@@ -217,6 +218,7 @@ def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_i
         )
 
     monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
+    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
     assert not chosen(4000).compiled
     stepper = chosen(10**6)
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
