@@ -26,9 +26,6 @@ from contactlab.health import Health
 UPRIGHT = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)  # 90° about x: the grid's y axis points up
 THICKNESS = 0.004
 METHODS = ("projection", "constraints", "impulse", "penalty")
-# penalty's default allowed_penetration (0.3 mm) lets the landing strip's foot sink through the floor, self-contact
-# or not (the load-based "auto" stiffness counts what rests on a vertex through contacts, not along the springs)
-PENALTY = {"allowed_penetration": 1e-4}
 
 
 def strip(self_collision=True):
@@ -99,8 +96,6 @@ def sheet_on_a_rod(self_collision=True):
 
 
 def run(model, method, duration, dt=1 / 240, **options):
-    if method == "penalty":
-        options = {**PENALTY, **options}
     return simulate(model, method, dt, duration, options, "backward_euler", record_every=4)
 
 

@@ -85,6 +85,36 @@ def entities_of(body: np.ndarray, particles: np.ndarray, body_count: int) -> np.
 
 
 @njit(cache=True)
+def along_springs(weight: np.ndarray, upper: np.ndarray, lower: np.ndarray, cloth_of: np.ndarray) -> np.ndarray:
+    """The weight [N] (B + P,) each body and particle hands down of its own, ``weight`` (B + P,)
+    moved along each cloth's springs: the cloth's whole weight in equal shares to its vertices
+    that rest on something other than that cloth (contact c: ``upper`` (C,) rests on ``lower``
+    (C,), −1 static; −1 in ``upper``: no support), nothing to its others (the springs carry
+    theirs), and as it was where the cloth rests on nothing else. ``cloth_of`` (B + P,) int, −1
+    not a cloth. The springs are taken stiff enough to carry it, so a contact at the foot of a
+    hanging or standing cloth is as stiff as the weight on it asks."""
+    out = weight.copy()
+    clothes = cloth_of.max() + 1
+    if clothes <= 0:
+        return out
+    held = np.zeros(weight.shape[0], dtype=np.bool_)
+    for c in range(upper.shape[0]):
+        e = upper[c]
+        if e >= 0 and cloth_of[e] >= 0 and (lower[c] < 0 or cloth_of[lower[c]] != cloth_of[e]):
+            held[e] = True
+    total, holders = np.zeros(clothes), np.zeros(clothes)
+    for e in range(weight.shape[0]):
+        if cloth_of[e] >= 0:
+            total[cloth_of[e]] += weight[e]
+            holders[cloth_of[e]] += 1.0 if held[e] else 0.0
+    for e in range(weight.shape[0]):
+        k = cloth_of[e]
+        if k >= 0 and holders[k] > 0:
+            out[e] = total[k] / holders[k] if held[e] else 0.0
+    return out
+
+
+@njit(cache=True)
 def supported_loads(
     entity_a: np.ndarray,
     entity_b: np.ndarray,
@@ -94,6 +124,7 @@ def supported_loads(
     body_mass: np.ndarray,
     particle_mass: np.ndarray,
     gravity: np.ndarray,
+    cloth_of: np.ndarray,
 ) -> np.ndarray:
     """The weight each contact carries [N] (C,): every body and free particle, from the highest
     down, hands its own weight and what rests on it to the contacts it rests on (normals within
@@ -101,7 +132,14 @@ def supported_loads(
     or particle below; a static side takes it out. Contacts that support nothing carry the
     lighter side's weight per supporting contact. A kinematic body is given weight 0: it hands
     nothing down and, like a static side, does not count as the lighter side. Sides as ``contact_entities`` gives them.
-    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
+    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State.
+
+    A cloth's vertices also carry one another's weight along its springs: ``cloth_of`` (B + P,)
+    int, the cloth of each body and particle (−1: none). The whole weight of a cloth that rests
+    on something other than itself goes, in equal shares, to the vertices that rest on it (the
+    foot of a strip standing on the floor carries the strip; a sheet lying flat, each vertex its
+    own); its other vertices hand down only what rests on them, and a contact with the same
+    cloth (a fold lying on itself) carries at least its vertex's own weight."""
     C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     loads = np.zeros(C)
@@ -127,7 +165,7 @@ def supported_loads(
         weight[e] = g * (body_mass[e] if e < B else particle_mass[e - B])
         height[e] = position[0] * up[0] + position[1] * up[1] + position[2] * up[2]
     own_share = weight / np.maximum(supports, 1)
-    carried = weight.copy()  # own weight plus everything handed down so far
+    carried = along_springs(weight, upper, lower, cloth_of)  # what each hands down of its own weight
     start = np.zeros(B + P + 1, dtype=np.int64)  # the contacts each entity rests on, grouped
     for c in range(C):
         if upper[c] >= 0:
@@ -146,7 +184,7 @@ def supported_loads(
         share = carried[e] / supports[e]
         for i in range(start[e], start[e + 1]):
             c = resting_on[i]
-            loads[c] = share
+            loads[c] = max(share, own_share[e])  # a fold resting on its own cloth: at least its own weight
             if lower[c] >= 0:
                 carried[lower[c]] += share
     for c in range(C):
@@ -205,9 +243,9 @@ class SpringSettings(NamedTuple):
 @njit(cache=True)
 def normal_stiffness(settings: SpringSettings, *loads_of: np.ndarray) -> np.ndarray:
     """``contact_stiffness``, compiled: each contact's normal stiffness (C,) [N/m], the fixed one
-    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the eight
+    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the nine
     arguments of ``supported_loads`` (entity_a, entity_b, normal, body_position,
-    particle_position, body_mass, particle_mass, gravity), in its order."""
+    particle_position, body_mass, particle_mass, gravity, cloth_of), in its order."""
     if settings.stiffness >= 0.0:
         return np.full(loads_of[0].shape[0], settings.stiffness)
     return supported_loads(*loads_of) / settings.allowed_penetration
