@@ -479,6 +479,58 @@ def test_auto_stiffness_is_each_contacts_load_over_the_allowed_penetration():
     assert run.summary["implicit_spring_steps"] == run.summary["steps"]
 
 
+def _standing_strip(rows, bend_stiffness=0.5):
+    """A 0.1 m square of cloth (4 × ``rows`` vertices, 50 g, 4 mm thick) stood upright on the
+    floor, its foot row just touching it."""
+    b = ModelBuilder()
+    b.add_material("cotton", friction=0.4, restitution=0.0)
+    b.add_cloth(
+        size=(0.1, 0.1),
+        resolution=(4, rows),
+        mass=0.05,
+        position=(0, 0, 0.004 + 0.05),
+        orientation=(np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0),  # 90° about x: the grid's y axis up
+        stretch_stiffness=500.0,
+        shear_stiffness=50.0,
+        bend_stiffness=bend_stiffness,
+        damping=0.01,
+        thickness=0.004,
+        material="cotton",
+    )
+    b.add_obstacle("plane", normal=(0, 0, 1), material="cotton")
+    return b.finalize()
+
+
+def test_auto_stiffness_counts_the_weight_a_cloths_springs_bring_to_the_vertices_it_stands_on():
+    """A cloth standing on its foot row: its springs carry the whole 50 g down to the four foot
+    vertices, so under "auto" their contacts share m g, Σ k δ_allowed = m g, and the strip sinks
+    δ_allowed (and no more) under its weight, however many rows stand above the foot. A sheet
+    lying flat rests each vertex on its own contact: each carries the mean vertex weight, or that
+    vertex's own where it is more (never less than its own)."""
+    options = penalty.Options()
+    delta = options.allowed_penetration
+    model = _standing_strip(rows=8)
+    state = model.state()
+    contacts = collide(model, state, 1e-6)
+    loads = penalty.contact_stiffness(model, state, contacts, options) * delta
+    np.testing.assert_allclose(loads, np.full(4, 0.05 * G / 4), rtol=1e-12)
+    run = simulate(model, "penalty", 1 / 240, 0.25, integrator="backward_euler", record_every=6)
+    times, heights = run.arrays["time"], run.arrays["particle_position"][:, :, 2]
+    sunk = 0.004 - heights[times > 0.1].min(axis=1)  # settled, still upright (it topples later)
+    assert heights[-1].max() > 0.1  # standing
+    assert sunk.max() <= 1.1 * delta
+    assert sunk.min() >= 0.8 * delta  # on its springs, not floating
+    b = ModelBuilder()
+    b.add_material("cotton", friction=0.4, restitution=0.0)
+    b.add_cloth(size=(0.1, 0.1), resolution=(4, 4), mass=0.05, position=(0, 0, 0.004), thickness=0.004)
+    b.add_obstacle("plane", normal=(0, 0, 1), material="cotton")
+    flat = b.finalize()
+    contacts = collide(flat, flat.state(), 1e-6)
+    loads = penalty.contact_stiffness(flat, flat.state(), contacts, options) * delta
+    resting = flat.particle_mass[contacts.particles_a[:, 0]]
+    np.testing.assert_allclose(loads, np.maximum(resting, flat.particle_mass.mean()) * G, rtol=1e-12)
+
+
 def _largest_motion(run):
     positions = run.arrays["body_position"]
     return np.linalg.norm(positions - positions[0], axis=2).max()

@@ -160,6 +160,39 @@ def test_every_method_gives_the_forces_that_hold_a_resting_box(method):
     np.testing.assert_allclose(contacts.forces.sum(axis=0), [0.0, 0.0, 2.0 * 9.81], atol=1e-3)
 
 
+def _folded_cloth(self_collision):
+    """A 0.1 × 0.2 m cloth (5 × 12 vertices, 4 mm thick) folded in half in the air: its upper
+    half lies flat 7 mm over its lower half, 1 mm closer than its two thicknesses."""
+    builder = ModelBuilder()
+    builder.add_cloth(
+        size=(0.1, 0.2),
+        resolution=(5, 12),
+        mass=0.02,
+        position=(0, 0, 0.1),
+        thickness=0.004,
+        self_collision=self_collision,
+    )
+    model = builder.finalize()
+    state = model.state()
+    rows = state.particle_position.reshape(12, 5, 3)
+    rows[6:] = rows[5::-1] + (0.0, 0.0, 0.007)
+    return model, state
+
+
+def test_the_contacts_shown_of_a_folded_cloth_are_its_self_contacts():
+    """Nothing but the cloth is there: every contact the viewer draws is between its two layers,
+    pressing them apart, most along the vertical 1 mm deep (the fold's triangles tilt the rest);
+    with self-collision off there are none."""
+    model, state = _folded_cloth(self_collision=True)
+    shown = contacts_at(model, {}, state)
+    assert len(shown.points) >= 30  # at least each vertex of the upper half over a triangle of the lower
+    assert np.all((shown.points[:, 2] > 0.1) & (shown.points[:, 2] < 0.107))
+    assert np.all(np.abs(shown.normals[:, 2]) > 0.9)  # vertical, tilted only by the fold's own triangles
+    assert np.all(shown.depth > 0.0) and np.median(shown.depth) == pytest.approx(0.001, abs=1e-9)  # flat layers
+    model, state = _folded_cloth(self_collision=False)
+    assert len(contacts_at(model, {}, state).points) == 0
+
+
 def test_run_view_opens_the_viewer_after_the_run(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(Viewer, "wait", Viewer.stop)  # Ctrl-C at once
     out = str(tmp_path / "ball")

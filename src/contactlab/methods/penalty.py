@@ -300,7 +300,14 @@ def contact_stiffness(model: Model, state: State, contacts: Contacts, options: O
         np.where(model.body_kinematic, 0.0, model.body_mass),
         np.asarray(model.particle_mass, dtype=float),
         np.asarray(model.gravity, dtype=float),
+        entity_cloth(model),
     )
+
+
+def entity_cloth(model: Model) -> np.ndarray:
+    """The cloth of each body and particle (B + P,) int, −1 none (bodies never): whose vertices
+    carry one another's weight along its springs (``penalty_springs.along_springs``)."""
+    return np.concatenate((np.full(model.body_count, -1, dtype=np.int64), np.asarray(model.particle_cloth, np.int64)))
 
 
 def assembled_springs(
@@ -391,6 +398,7 @@ PenaltyLoop = namedtuple(
         "thickness",  # (N,) [m] Model.collider_half_thickness
         "particle_radius",  # (P,) [m]
         "fixed",  # (B,) bool: kinematic bodies (moved by their paths: no spring moves them, none rests its weight)
+        "cloth",  # (B + P,) int: the cloth of each body and particle, −1 none (its springs carry its weight)
     ),
 )
 PenaltyLoop.__doc__ = "What a penalty step adds to LoopModel: its SpringSettings and what its guard reads."
@@ -418,6 +426,7 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         thickness=np.array(model.collider_half_thickness, dtype=float),
         particle_radius=np.array(model.particle_radius, dtype=float),
         fixed=np.array(model.body_kinematic, dtype=np.bool_),
+        cloth=entity_cloth(model),
     )
     return guard, penalty
 
@@ -452,6 +461,7 @@ def springs_at(
         loads,
         model.particle_mass,
         model.gravity,
+        penalty.cloth,
     )
     offsets = values_carried(carried[0], carried[1], contacts.feature_id)[0]
     springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)

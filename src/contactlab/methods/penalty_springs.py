@@ -94,6 +94,7 @@ def supported_loads(
     body_mass: np.ndarray,
     particle_mass: np.ndarray,
     gravity: np.ndarray,
+    cloth_of: np.ndarray,
 ) -> np.ndarray:
     """The weight each contact carries [N] (C,): every body and free particle, from the highest
     down, hands its own weight and what rests on it to the contacts it rests on (normals within
@@ -101,7 +102,16 @@ def supported_loads(
     or particle below; a static side takes it out. Contacts that support nothing carry the
     lighter side's weight per supporting contact. A kinematic body is given weight 0: it hands
     nothing down and, like a static side, does not count as the lighter side. Sides as ``contact_entities`` gives them.
-    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State."""
+    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State.
+
+    A cloth's vertices also carry one another's weight along its springs: ``cloth_of`` (B + P,)
+    int, the cloth of each body and particle (−1: none). A cloth is one step of the load path,
+    like a body: its whole weight and what rests on any of its vertices go, in equal shares, to
+    the contacts by which it rests on something other than itself (the foot of a strip standing
+    on the floor carries the strip; a cloth lying on another hands its weight to the whole lower
+    one), each at least its vertex's own weight (a sheet lying flat: the mean vertex weight, or its own); it
+    comes in that order at the mean height of those resting vertices. A contact of a cloth with
+    itself (a fold lying on the cloth) carries its vertex's own weight and hands nothing down."""
     C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     loads = np.zeros(C)
@@ -127,28 +137,56 @@ def supported_loads(
         weight[e] = g * (body_mass[e] if e < B else particle_mass[e - B])
         height[e] = position[0] * up[0] + position[1] * up[1] + position[2] * up[2]
     own_share = weight / np.maximum(supports, 1)
-    carried = weight.copy()  # own weight plus everything handed down so far
-    start = np.zeros(B + P + 1, dtype=np.int64)  # the contacts each entity rests on, grouped
-    for c in range(C):
-        if upper[c] >= 0:
-            start[upper[c] + 1] += 1
+    # the load path's nodes: each body and particle, but a cloth's vertices one node, B + P + its index
+    K = max(cloth_of.max() + 1, 0)
+    node = np.arange(B + P)
     for e in range(B + P):
-        start[e + 1] += start[e]
+        if cloth_of[e] >= 0:
+            node[e] = B + P + cloth_of[e]
+    N = B + P + K
+    external = np.zeros(C, dtype=np.bool_)  # resting on another node (not a cloth on itself)
+    node_supports = np.zeros(N, dtype=np.int64)
+    carried = np.zeros(N)  # own weight plus everything handed down so far
+    members, node_height = np.zeros(N), np.zeros(N)
+    for e in range(B + P):
+        carried[node[e]] += weight[e]
+        node_height[node[e]] += height[e]
+        members[node[e]] += 1.0
+    node_height /= np.maximum(members, 1.0)  # a body's or particle's height; a cloth's mean height, or
+    resting_height, resting = np.zeros(N), np.zeros(N)  # where it rests on something, its resting vertices'
+    for c in range(C):
+        if upper[c] >= 0 and (lower[c] < 0 or node[lower[c]] != node[upper[c]]):
+            external[c] = True
+            node_supports[node[upper[c]]] += 1
+            resting_height[node[upper[c]]] += height[upper[c]]
+            resting[node[upper[c]]] += 1.0
+    for n in range(B + P, N):
+        if resting[n] > 0.0:
+            node_height[n] = resting_height[n] / resting[n]
+    start = np.zeros(N + 1, dtype=np.int64)  # the contacts each node rests on, grouped
+    for c in range(C):
+        if external[c]:
+            start[node[upper[c]] + 1] += 1
+    for n in range(N):
+        start[n + 1] += start[n]
     filled = start[:-1].copy()
     resting_on = np.empty(start[-1], dtype=np.int64)
     for c in range(C):
-        if upper[c] >= 0:
-            resting_on[filled[upper[c]]] = c
-            filled[upper[c]] += 1
-    for e in np.argsort(-height):
-        if supports[e] == 0:
+        if external[c]:
+            resting_on[filled[node[upper[c]]]] = c
+            filled[node[upper[c]]] += 1
+    for n in np.argsort(-node_height):
+        if node_supports[n] == 0:
             continue
-        share = carried[e] / supports[e]
-        for i in range(start[e], start[e + 1]):
+        share = carried[n] / node_supports[n]
+        for i in range(start[n], start[n + 1]):
             c = resting_on[i]
-            loads[c] = share
+            loads[c] = max(share, own_share[upper[c]])  # a cloth's vertex: at least its own weight
             if lower[c] >= 0:
-                carried[lower[c]] += share
+                carried[node[lower[c]]] += share
+    for c in range(C):
+        if upper[c] >= 0 and not external[c]:  # a fold resting on its own cloth: its vertex's own weight
+            loads[c] = own_share[upper[c]]
     for c in range(C):
         if upper[c] < 0:  # a side contact: the lighter dynamic side's share
             least = np.inf
@@ -205,9 +243,9 @@ class SpringSettings(NamedTuple):
 @njit(cache=True)
 def normal_stiffness(settings: SpringSettings, *loads_of: np.ndarray) -> np.ndarray:
     """``contact_stiffness``, compiled: each contact's normal stiffness (C,) [N/m], the fixed one
-    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the eight
+    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the nine
     arguments of ``supported_loads`` (entity_a, entity_b, normal, body_position,
-    particle_position, body_mass, particle_mass, gravity), in its order."""
+    particle_position, body_mass, particle_mass, gravity, cloth_of), in its order."""
     if settings.stiffness >= 0.0:
         return np.full(loads_of[0].shape[0], settings.stiffness)
     return supported_loads(*loads_of) / settings.allowed_penetration

@@ -130,7 +130,8 @@ def guess_new_impulses(
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
     one body's contacts find its weight in a sweep or two): nothing is guessed there. ``pairs``
-    is ``LoopModel.cloth_of``, None in exactly such a scene (no dynamic pair possible), and as an
+    is ``LoopModel.cloth_of`` (the cloth of each body and particle, whose springs carry its weight
+    in the load path), None in exactly such a scene (no dynamic pair possible), and as an
     argument typed None it leaves the load path uncompiled there (2 s of a ball's first run).
 
     Why: started from zero, a stack must build its load path sweep by sweep, the weight of the
@@ -154,6 +155,7 @@ def guess_new_impulses(
         masses[0],
         masses[1],
         gravity,
+        pairs,
     )
     for c in range(found.shape[0]):
         if found[c]:
