@@ -215,10 +215,11 @@ def simulate(
     shown on stderr (:mod:`contactlab.progress`: a bar on a terminal, else a line every 5 s); threads: "auto" (the
     default, see :func:`contactlab.threads.set_threads`: all cores, or one while that steps faster
     on a busy machine) or a whole number — results are bit for bit the same on any count;
-    compiled_loop: for every method on the scenes the compiled stepping loop serves, None
-    (the default) takes it when it is compiled or cached already or the run is long enough to repay
-    compiling it, True always, False never (:func:`contactlab.methods.velocity_loop.stepper_for`) —
-    the numbers are the same bit for bit either way; allow_divergence: keep going when a health
+    compiled_loop: for every method on the scenes the stepping loop serves, None (the default)
+    runs it compiled when it is compiled or cached already or the run is long enough to repay
+    compiling it, and else its body from Python calling the same compiled steps; True compiled
+    always, False never: the method's own ``step`` (:func:`contactlab.methods.velocity_loop.stepper_for`)
+    — the numbers are the same bit for bit every way; allow_divergence: keep going when a health
     check fails (:mod:`contactlab.health`), recording it in the summary, instead of stopping;
     memory_limit [bytes]: the most the run may need by its estimate (:mod:`contactlab.budget`; None:
     half this machine's memory, ``math.inf`` none); trajectory: None (the default) keeps the samples
