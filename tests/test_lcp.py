@@ -431,7 +431,7 @@ def test_a_siconos_global_problem_is_refused_not_read_as_a_local_one(tmp_path):
     global_.write_text("3\n1\n0\n" + identity + "0\n" + identity + "-1 -1 -1\n0 0 0\n0.1\n0\n")  # M, H, q, b, μ
     with pytest.raises(InputError, match="global problem") as info:
         read_problem(global_)
-    assert info.value.field == str(global_)
+    assert info.value.field.endswith("global.dat")  # names the file (a long path is shortened in the middle)
 
 
 def test_read_problem_truncated_real_file(tmp_path):
