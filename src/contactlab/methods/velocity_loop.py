@@ -275,7 +275,7 @@ class Stepper:
         if first_index <= last_index <= end and last_index % record_every:
             count += 1  # the run's last step, sampled too
         samples = self.samples_for(count)
-        key = (self.plan[0], self.flags[:-1], self.flags[-1] is None)
+        key = self.kind
         if not self.compiled and _seconds_from_python.get(key, 0.0) >= LOOP_COMPILE_SECONDS:
             self.compiled = True  # stepping from Python has cost this process what compiling would have
         compiling = []  # seconds of each compile in this call (a first call compiles the stages)
@@ -314,6 +314,12 @@ class Stepper:
         )
 
     @property
+    def kind(self) -> tuple:
+        """What sets ``run``'s machine code for this run apart: the scene's shape families, the
+        compile flags, and whether it is penalty's (its PenaltyLoop's values do not count)."""
+        return self.plan[0], self.flags[:-1], self.flags[-1] is not None
+
+    @property
     def parallel(self) -> bool:
         """Whether this run's loop has a parallel sweep compiled in (``compile_flags``' parallel)."""
         return self.flags[6] is not None
@@ -323,7 +329,7 @@ class Stepper:
         disk cache: stepping through the loop then costs no compilation (see ``stepper_for``).
         Known once for this model and these flags, for the rest of the process (typing the
         arguments cost a 720-step ball's run a third of its time)."""
-        known, key = _compiled_for(self.model), (self.flags[:-1], None if self.flags[-1] is None else "penalty")
+        known, key = _compiled_for(self.model), self.kind
         if key in known:
             return True
         types = tuple(run.typeof_pyval(a) for a in self._run_arguments(1, 1, 1, 1, self.samples_for(1), 1.0))
@@ -386,13 +392,13 @@ def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None)
 
 @derived
 def _compiled_for(model: Model) -> set[tuple]:
-    """The flags of the runs of ``model`` whose machine code ``run`` has (``Stepper.compiled_already``),
-    kept with the Model."""
+    """The kinds (``Stepper.kind``) of the runs of ``model`` whose machine code ``run`` has
+    (``Stepper.compiled_already``), kept with the Model."""
     return set()
 
 
-# seconds each kind of run (its shape families and compile flags) has stepped ``run``'s body from
-# Python in this process: once they reach what compiling ``run`` costs, its runs compile it
+# seconds each kind of run (``Stepper.kind``) has stepped ``run``'s body from Python in this
+# process: once they reach what compiling ``run`` costs, its runs compile it
 _seconds_from_python: dict[tuple, float] = {}
 # s: what compiling ``run`` costs once its step is compiled (which a run from Python compiles too):
 # 10–14 s of CPU for the ball and the pyramid on the 2-core benchmark machine
