@@ -19,6 +19,10 @@ from contactlab.scene import builtin_scenes, load_scene
 
 G = 9.81
 HALF = 0.05
+# every step solved in small steps (sequential.solve_in_substeps), the contacts detected once: the
+# closed forms below hold for it as for the whole-step solve (issue 38)
+SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
+WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize("options", [{}, SUBSTEPPED], ids=["whole", "substepped"])
 
 
 def apexes(height, velocity):
@@ -26,12 +30,13 @@ def apexes(height, velocity):
     return np.array([height[i : i + 2].max() for i in turning])
 
 
+@WHOLE_OR_SUBSTEPPED
 @pytest.mark.parametrize("restitution", [0.0, 0.5, 0.8])
-def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution):
+def test_bounce_apexes_follow_h0_eps_to_the_2n(restitution, options):
     model = ball_on_plane(restitution=restitution, height=1.0)
     fall = np.sqrt(2 / G)
     duration = fall * (1 + 2 * sum(restitution**k for k in range(1, 5)) + restitution**5) + 0.1
-    run = simulate(model, "constraints", dt=0.001, duration=duration)
+    run = simulate(model, "constraints", dt=0.001, duration=duration, options=options)
     z = run.arrays["body_position"][:, 0, 2] - 0.1
     found = apexes(z, run.arrays["body_velocity"][:, 0, 2])
     if restitution == 0.0:
@@ -70,22 +75,27 @@ def test_acceleration_formulation_holds_a_resting_box():
     np.testing.assert_allclose(run.arrays["body_position"][:, 0, 2], HALF, atol=1e-6)
 
 
-@pytest.mark.parametrize("solver", ["matrix_free", "nsgs", "staggered", "apgd", "newton"])
-def test_sliding_block_stops_at_v2_over_2_mu_g(solver):
+@pytest.mark.parametrize(
+    "options",
+    [{"solver": solver} for solver in ("matrix_free", "nsgs", "staggered", "apgd", "newton")] + [SUBSTEPPED],
+    ids=["matrix_free", "nsgs", "staggered", "apgd", "newton", "substepped"],
+)
+def test_sliding_block_stops_at_v2_over_2_mu_g(options):
     v0, mu = 3.0, 0.3
     model, _ = cube_on_plane(friction=mu, velocity=(v0, 0, 0))
-    run = simulate(model, "constraints", dt=0.004, duration=1.2, options={"solver": solver})
+    run = simulate(model, "constraints", dt=0.004, duration=1.2, options=options)
     x, vx = run.arrays["body_position"][:, 0, 0], run.arrays["body_velocity"][:, 0, 0]
     stopped = np.argmax(np.abs(vx) < 1e-6)
     np.testing.assert_allclose(run.arrays["time"][stopped], v0 / (mu * G), rtol=0.03)
     np.testing.assert_allclose(x[-1], v0**2 / (2 * mu * G), rtol=0.03)
 
 
+@WHOLE_OR_SUBSTEPPED
 @pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
-def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, sticks):
+def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, sticks, options):
     theta = np.radians(20.0)
     model, downhill = cube_on_plane(20.0, friction)
-    run = simulate(model, "constraints", dt=0.004, duration=2.0)
+    run = simulate(model, "constraints", dt=0.004, duration=2.0, options=options)
     t = run.arrays["time"]
     along = (run.arrays["body_position"][:, 0] - run.arrays["body_position"][0, 0]) @ downhill
     if sticks:
@@ -95,10 +105,11 @@ def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, stic
         np.testing.assert_allclose(acceleration, G * (np.sin(theta) - friction * np.cos(theta)), rtol=0.03)
 
 
-def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths():
+@WHOLE_OR_SUBSTEPPED
+def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths(options):
     v0, mu = 3.0, 0.3
     model = ball_on_plane(height=0.0, friction=mu, velocity=(v0, 0, 0))
-    run = simulate(model, "constraints", dt=0.002, duration=0.6)
+    run = simulate(model, "constraints", dt=0.002, duration=0.6, options=options)
     t, v = run.arrays["time"], run.arrays["body_velocity"][:, 0, 0]
     rolling_at = 2 * v0 / (7 * mu * G)
     np.testing.assert_allclose(v[t > rolling_at + 0.01], 5 / 7 * v0, rtol=1e-3)
@@ -106,10 +117,11 @@ def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths():
     np.testing.assert_allclose(np.diff(v[sliding]) / np.diff(t[sliding]), -mu * G, rtol=1e-3)
 
 
+@WHOLE_OR_SUBSTEPPED
 @pytest.mark.parametrize("name", ["box_stack", "box_pyramid"])
-def test_stacks_stand_for_ten_seconds(name):
+def test_stacks_stand_for_ten_seconds(name, options):
     scene = load_scene(name)
-    run = simulate(scene.model, "constraints", scene.dt, 10.0, record_every=20)
+    run = simulate(scene.model, "constraints", scene.dt, 10.0, options, record_every=20)
     moved = np.linalg.norm(run.arrays["body_position"] - run.arrays["body_position"][0], axis=2)
     assert moved.max() < 0.01
     assert run.summary["max_penetration"] < 0.005
@@ -430,6 +442,11 @@ def test_delassus_bound_lies_above_the_largest_eigenvalue_of_j_a_inverse_jt():
         ({"omega": 2.5}, "omega"),
         ({"iterations": 0}, "iterations"),
         ({"friction_model": "disk"}, "friction_model"),
+        ({"substeps": 0}, "substeps"),
+        ({"substep_sweeps": 0}, "substep_sweeps"),
+        ({"substep_when": "never"}, "substep_when"),
+        ({"substeps": 4, "solver": "nsgs"}, "substeps"),
+        ({"substeps": 4, "formulation": "acceleration"}, "substeps"),
     ],
 )
 def test_bad_options_name_the_field(table, field):
