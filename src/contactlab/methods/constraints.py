@@ -88,8 +88,12 @@ class Options(KeptManifoldOptions):
     """nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)"""
     iterations: int = 100
     """solver sweeps per step (at most; newton: Newton steps)"""
-    substeps: int = 1
-    """matrix_free: a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
+    substeps: int = 16
+    """matrix_free on velocities (else unused): a step left unconverged is solved again in this many substeps,
+    contacts detected once (1 = never)"""
+    substep_after: int = 12
+    """matrix_free: with substeps > 1, the whole-step sweeps stop after this many (and iterations) and a step
+    still above the tolerance goes on in substeps"""
     substep_sweeps: int = 1
     """matrix_free: sweeps per substep (at most)"""
     substep_when: str = "unconverged"
@@ -125,13 +129,7 @@ class Options(KeptManifoldOptions):
                 "substep_when": SUBSTEP_WHEN,
             },
         )
-        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1})
-        if self.substeps > 1 and (self.solver != "matrix_free" or self.formulation != "velocity"):
-            raise InputError(
-                "substeps",
-                f"substeps split the matrix-free solve on velocities only; use substeps = 1 with solver "
-                f"{self.solver!r} and formulation {self.formulation!r}",
-            )
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
         if self.solver in CONE_ONLY_SOLVERS and self.friction_model != "cone":
             raise InputError(
                 "friction_model",

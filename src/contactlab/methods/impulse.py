@@ -59,8 +59,11 @@ class Options(KeptManifoldOptions):
 
     iterations: int = 100
     """sweeps of sequential impulses per step, and collision waves (at most)"""
-    substeps: int = 1
+    substeps: int = 16
     """a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
+    substep_after: int = 12
+    """with substeps > 1, the resting sweeps stop after this many (and iterations) and a step still above the
+    tolerance goes on in substeps"""
     substep_sweeps: int = 1
     """sweeps per substep (at most)"""
     substep_when: str = "unconverged"
@@ -83,7 +86,7 @@ class Options(KeptManifoldOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1})
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
         check_choices(self, {"substep_when": SUBSTEP_WHEN})
         self.tolerance = number(self.tolerance, "tolerance", 0.0)
         self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")

@@ -120,14 +120,16 @@ LoopSettings = namedtuple(
         "substeps",
         "substep_sweeps",
         "always_substep",
+        "whole_sweeps",
     ),
 )
 LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
 ([m/s]; projection: [m]), restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s],
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
 detect-and-project passes, the velocity methods' substeps, sweeps a substep and whether every step is
-substepped (else only an unconverged one). What a method's Options lack is 0 (False, 1 pass, 1 substep):
-see ``loop_settings``."""
+substepped (else only an unconverged one), and the most sweeps of a whole-step solve (``iterations``, or
+fewer where an unconverged step goes on in substeps: ``substep_after``). What a method's Options lack is 0
+(False, 1 pass, 1 substep): see ``loop_settings``."""
 
 Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
@@ -197,7 +199,16 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
         substeps=int(getattr(options, "substeps", 1)),
         substep_sweeps=int(getattr(options, "substep_sweeps", 1)),
         always_substep=getattr(options, "substep_when", "unconverged") == "always",
+        whole_sweeps=whole_sweeps(options),
     )
+
+
+def whole_sweeps(options: CollisionOptions) -> int:
+    """The most sweeps of one whole-step solve: ``iterations``, and no more than ``substep_after``
+    where a step they leave unconverged goes on in substeps (``substeps`` > 1)."""
+    if getattr(options, "substeps", 1) > 1:
+        return int(min(options.iterations, options.substep_after))
+    return int(options.iterations)
 
 
 CARRIED = {
@@ -493,7 +504,7 @@ def _solve_grouped(settings, rows, contacts, u, target, warm, order, starts, sub
     """``solve``'s sweeps in ``order`` with the groups ``starts`` (None: serial): in one solve, or in substeps."""
     if substepping is None:
         return solve_sequential_impulses(
-            rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, order, starts
+            rows, contacts.friction, target, u, settings.whole_sweeps, settings.tolerance, warm, order, starts
         )
     fixed, gap, increment, travelled = substepping
     return solve_in_substeps(

@@ -423,6 +423,7 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         substeps=1,
         substep_sweeps=1,
         always_substep=False,
+        whole_sweeps=GUARD_SWEEPS,
     )
     penalty = PenaltyLoop(
         springs=spring_settings(options, integrator),

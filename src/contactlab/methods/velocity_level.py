@@ -520,7 +520,7 @@ def respond(
     [N s], sweeps made, the sweeps' last change [m/s]).
 
     With ``settings.substeps`` n > 1 (small steps): a step whose solve ends above the tolerance
-    (capped at ``settings.iterations`` sweeps), or every step where ``settings.always_substep``,
+    (capped at ``settings.whole_sweeps`` sweeps), or every step where ``settings.always_substep``,
     is solved again in n substeps of h/n (``sequential.solve_in_substeps``) from the velocity at
     the step's start, gravity added a substep at a time, warm-started from that answer; the
     positions then move with the substeps' mean velocity. A step that converges is the plain
