@@ -65,10 +65,15 @@ def test_a_two_group_sweep_is_bit_for_bit_the_same_on_one_thread_and_on_two():
 
 
 @TWO_THREADS
-def test_a_run_is_bit_for_bit_the_same_on_any_thread_setting():
-    """A lattice of 512 spheres makes over 1000 contacts, so the sweeps run in two groups."""
+@pytest.mark.parametrize("options", [{}, {"substeps": 4, "substep_when": "always"}], ids=["whole", "substepped"])
+def test_a_run_is_bit_for_bit_the_same_on_any_thread_setting(options):
+    """A lattice of 512 spheres makes over 1000 contacts, so the sweeps run in two groups (in each
+    substep too, ``sequential.solve_in_substeps``)."""
     model = sphere_lattice(side=8, layers=8, friction=0.5)
-    runs = {setting: simulate(model, "constraints", 1 / 240, 8 / 240, threads=setting) for setting in (1, 2, "auto")}
+    runs = {
+        setting: simulate(model, "constraints", 1 / 240, 8 / 240, options, threads=setting)
+        for setting in (1, 2, "auto")
+    }
     assert runs[1].summary["max_contacts"] >= sequential.PARALLEL_MIN_CONTACTS
     assert runs[1].summary["threads"] == {"setting": 1, "available": threads.available_threads(), "steps_at": {"1": 8}}
     assert runs[2].summary["threads"]["steps_at"] == {"2": 8}

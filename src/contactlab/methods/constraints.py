@@ -56,6 +56,7 @@ from .jacobian_rows import row_products
 from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_model, loop_settings, solve
 from .sequential import contact_order
 from .velocity_level import (
+    SUBSTEP_WHEN,
     predict,
     split_at_impact,
     step_without_contacts,
@@ -87,6 +88,16 @@ class Options(KeptManifoldOptions):
     """nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)"""
     iterations: int = 100
     """solver sweeps per step (at most; newton: Newton steps)"""
+    substeps: int = 16
+    """matrix_free on velocities (else unused): a step left unconverged is solved again in this many substeps,
+    contacts detected once (1 = never)"""
+    substep_after: int = 12
+    """matrix_free: with substeps > 1, the whole-step sweeps stop after this many (and iterations) and a step
+    still above the tolerance goes on in substeps"""
+    substep_sweeps: int = 1
+    """matrix_free: sweeps per substep (at most)"""
+    substep_when: str = "unconverged"
+    """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
     tolerance: float | None = None
     """matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
     jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1] (default
@@ -109,8 +120,16 @@ class Options(KeptManifoldOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid")})
-        check_counts(self, {"iterations": 1})
+        check_choices(
+            self,
+            {
+                "solver": SOLVERS,
+                "formulation": FORMULATIONS,
+                "friction_model": ("cone", "pyramid"),
+                "substep_when": SUBSTEP_WHEN,
+            },
+        )
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
         if self.solver in CONE_ONLY_SOLVERS and self.friction_model != "cone":
             raise InputError(
                 "friction_model",
@@ -364,7 +383,9 @@ def step(
         v_new = v_free.copy()
         order = contact_order(found.point, found.feature_id, arrays.gravity)
         _, _, _, _, _, slabs, parallel = compile_flags(model, "constraints", options)
-        lam, iterations, residual = solve(settings, slabs, parallel, rows, found, motion, v_new, target, warm, order)
+        lam, iterations, residual = solve(
+            settings, slabs, parallel, rows, found, motion, v_new, target, warm, order, None
+        )
     else:
         lam, v_new, iterations, residual = solve_constraints(
             model, state, contacts, v_free, target, warm, options, inverse

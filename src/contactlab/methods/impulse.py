@@ -42,9 +42,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from ..validation import check_counts, number
+from ..validation import check_choices, check_counts, number
 from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
+from .velocity_level import SUBSTEP_WHEN
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -58,6 +59,15 @@ class Options(KeptManifoldOptions):
 
     iterations: int = 100
     """sweeps of sequential impulses per step, and collision waves (at most)"""
+    substeps: int = 16
+    """a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
+    substep_after: int = 12
+    """with substeps > 1, the resting sweeps stop after this many (and iterations) and a step still above the
+    tolerance goes on in substeps"""
+    substep_sweeps: int = 1
+    """sweeps per substep (at most)"""
+    substep_when: str = "unconverged"
+    """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
     tolerance: float = 1e-7
     """m/s: stop once a sweep changes no contact's velocity more"""
     restitution_threshold: float = -1.0
@@ -76,7 +86,8 @@ class Options(KeptManifoldOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        check_counts(self, {"iterations": 1})
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
+        check_choices(self, {"substep_when": SUBSTEP_WHEN})
         self.tolerance = number(self.tolerance, "tolerance", 0.0)
         self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")
         self.stabilization = number(self.stabilization, "stabilization", 0.0, maximum=1.0)

@@ -36,7 +36,13 @@ from ..dynamics import integrators
 from ..model import derived
 from ..state import ARRAYS as STATE_ARRAYS
 from .jacobian_rows import ContactRows, rows_at
-from .sequential import PARALLEL_MIN_CONTACTS, SWEEP_GROUPS, solve_sequential_impulses, split_into_slabs
+from .sequential import (
+    PARALLEL_MIN_CONTACTS,
+    SWEEP_GROUPS,
+    solve_in_substeps,
+    solve_sequential_impulses,
+    split_into_slabs,
+)
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -111,12 +117,19 @@ LoopSettings = namedtuple(
         "margin",
         "manifold_tolerance",
         "passes",
+        "substeps",
+        "substep_sweeps",
+        "always_substep",
+        "whole_sweeps",
     ),
 )
 LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
 ([m/s]; projection: [m]), restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s],
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
-detect-and-project passes. What a method's Options lack is 0 (False, 1 pass): see ``loop_settings``."""
+detect-and-project passes, the velocity methods' substeps, sweeps a substep and whether every step is
+substepped (else only an unconverged one), and the most sweeps of a whole-step solve (``iterations``, or
+fewer where an unconverged step goes on in substeps: ``substep_after``). What a method's Options lack is 0
+(False, 1 pass, 1 substep): see ``loop_settings``."""
 
 Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
@@ -183,7 +196,19 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
         margin=float(options.contact_margin),
         manifold_tolerance=float(options.manifold_tolerance),
         passes=1 if velocity else int(options.passes),
+        substeps=int(getattr(options, "substeps", 1)),
+        substep_sweeps=int(getattr(options, "substep_sweeps", 1)),
+        always_substep=getattr(options, "substep_when", "unconverged") == "always",
+        whole_sweeps=whole_sweeps(options),
     )
+
+
+def whole_sweeps(options: CollisionOptions) -> int:
+    """The most sweeps of one whole-step solve: ``iterations``, and no more than ``substep_after``
+    where a step they leave unconverged goes on in substeps (``substeps`` > 1)."""
+    if getattr(options, "substeps", 1) > 1:
+        return int(min(options.iterations, options.substep_after))
+    return int(options.iterations)
 
 
 CARRIED = {
@@ -443,18 +468,20 @@ def solve(
     target: np.ndarray,
     warm: np.ndarray,
     order: np.ndarray,
+    substepping: tuple | None,
 ) -> tuple[np.ndarray, int, float]:
     """Stage 4c: the warm-started sweeps of sequential impulses on u (changed in place), the
     contacts grouped for threads as ``sequential.sweep_groups`` does (``slabs`` None: never
     PARALLEL_MIN_CONTACTS contacts, never grouped); ``parallel`` None compiles no parallel sweep
-    (the groups are then swept one after the other: the same numbers). Returns (impulses (C, 3)
+    (the groups are then swept one after the other: the same numbers). ``substepping`` None: one
+    solve over the step; else (fixed (C,) bool, gaps at the start (C,) [m], the free motion's
+    increment a substep (N,), the mean velocity over the substeps (N,), filled) for
+    ``sequential.solve_in_substeps`` in ``settings.substeps`` substeps. Returns (impulses (C, 3)
     [N s], sweeps, last change [m/s])."""
     C = order.shape[0]
     grouped, starts = order, np.array([0, C, C])
     if slabs is None:
-        return solve_sequential_impulses(
-            rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, None
-        )
+        return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, None, substepping)
     if C >= PARALLEL_MIN_CONTACTS:
         grouped, starts = split_into_slabs(
             order,
@@ -468,11 +495,20 @@ def solve(
             SWEEP_GROUPS,
         )
     if parallel is None:
+        return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, None, substepping)
+    return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, starts, substepping)
+
+
+@njit(cache=True, inline="always")
+def _solve_grouped(settings, rows, contacts, u, target, warm, order, starts, substepping):
+    """``solve``'s sweeps in ``order`` with the groups ``starts`` (None: serial): in one solve, or in substeps."""
+    if substepping is None:
         return solve_sequential_impulses(
-            rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, None
+            rows, contacts.friction, target, u, settings.whole_sweeps, settings.tolerance, warm, order, starts
         )
-    return solve_sequential_impulses(
-        rows, contacts.friction, target, u, settings.iterations, settings.tolerance, warm, grouped, starts
+    fixed, gap, increment, travelled = substepping
+    return solve_in_substeps(
+        rows, contacts.friction, target, fixed, gap, u, increment, travelled, settings, warm, order, starts
     )
 
 

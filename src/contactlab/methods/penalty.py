@@ -420,6 +420,10 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         margin=float(options.contact_margin),
         manifold_tolerance=0.0,
         passes=1,
+        substeps=1,
+        substep_sweeps=1,
+        always_substep=False,
+        whole_sweeps=GUARD_SWEEPS,
     )
     penalty = PenaltyLoop(
         springs=spring_settings(options, integrator),
@@ -581,5 +585,5 @@ def hold_back(
     held = velocity.copy()
     frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    solve(guard, slabs, parallel, rows, frictionless, motion, held, slowest, np.zeros((C, 3)), order)
+    solve(guard, slabs, parallel, rows, frictionless, motion, held, slowest, np.zeros((C, 3)), order, None)
     return held, True

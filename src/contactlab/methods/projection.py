@@ -233,5 +233,5 @@ def project(
     target = projection_targets(rows, offset, contacts.depth, settings.slop)
     corrected = displacement.copy()
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order)
+    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order, None)
     return corrected, lam, sweeps, change

@@ -47,7 +47,7 @@ from .loop_stages import (
     solve,
 )
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
-from .sequential import contact_order, sweep_contacts
+from .sequential import contact_order, resting_target, sweep_contacts
 
 if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
@@ -103,6 +103,10 @@ def step_without_contacts(
     carried["manifolds"] = manifolds
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
+
+SUBSTEP_WHEN = ("unconverged", "always")
+"""When a velocity method's step is solved in substeps (Options ``substep_when``): only where the
+whole-step sweeps leave it above the tolerance, or every step."""
 
 LOAD_PATH_FROM = 2  # bodies and particles: fewer cannot rest on one another (guess_new_impulses)
 
@@ -180,16 +184,8 @@ def resting_targets(
     ``max_push_velocity`` [m/s] (a deep overlap must not turn into a launch)."""
     target = np.empty_like(gap_at_start)
     for c in range(gap_at_start.shape[0]):
-        target[c] = _resting(gap_at_start[c], dt, stabilization, slop, max_push_velocity)
+        target[c] = resting_target(gap_at_start[c], dt, stabilization, slop, max_push_velocity)
     return target
-
-
-@njit(cache=True, inline="always")
-def _resting(gap, dt, stabilization, slop, max_push_velocity):
-    """One contact's ``resting_targets`` [m/s]."""
-    if gap >= 0.0:
-        return -gap / dt
-    return min(stabilization * max(-gap - slop, 0.0) / dt, max_push_velocity)
 
 
 @njit(cache=True)
@@ -285,7 +281,7 @@ def impact_targets(
             target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes) * h
             tau[c] = closes
         else:
-            target[c] = _resting(gap, dt, stabilization, slop, max_push_velocity)
+            target[c] = resting_target(gap, dt, stabilization, slop, max_push_velocity)
             tau[c] = -1.0
     return target, tau
 
@@ -521,17 +517,92 @@ def respond(
     ``impulse``, ``constraints``, ``slabs``, ``parallel``: the flags of ``compile_flags`` (True,
     or None to leave a branch uncompiled); ``carried`` = (last step's contact ids (K,), their
     impulses (K, 3)). Returns (positions, velocities v⁺ ((B, 3), (B, 3), (P, 3)), impulses (C, 3)
-    [N s], sweeps made, the sweeps' last change [m/s])."""
-    h = settings.dt
+    [N s], sweeps made, the sweeps' last change [m/s]).
+
+    With ``settings.substeps`` n > 1 (small steps): a step whose solve ends above the tolerance
+    (capped at ``settings.whole_sweeps`` sweeps), or every step where ``settings.always_substep``,
+    is solved again in n substeps of h/n (``sequential.solve_in_substeps``) from the velocity at
+    the step's start, gravity added a substep at a time, warm-started from that answer; the
+    positions then move with the substeps' mean velocity. A step that converges is the plain
+    solve's, bit for bit."""
     # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
     rows = build_rows(model, contacts, motion, rotation)
     u = stacked(free[0], free[1], free[2])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
     target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
     warm = warm_impulses(model, settings, contacts, motion, carried[0], carried[1])
-    impulses, sweeps, change = solve(settings, slabs, parallel, rows, contacts, motion, u, target, warm, order)
-    # 5. recompute positions from the corrected velocities, split at the time of impact
-    positions = split_at_impact(model, contacts, motion, tau, move, free, u, h, settings.time_of_impact)
+    if settings.substeps <= 1:
+        impulses, sweeps, change = solve(
+            settings, slabs, parallel, rows, contacts, motion, u, target, warm, order, None
+        )
+        return _respond_end(model, settings, contacts, motion, tau, move, free, u, u, impulses, sweeps, change)
+    # small steps (settings.substeps > 1): the whole step's solve first, unless always substepped; a step it
+    # leaves unconverged is solved again in substeps from the velocity at the start, warm-started from its answer
+    entry = u.copy()
+    impulses, sweeps, change = warm, 0, np.inf
+    if not settings.always_substep:
+        impulses, sweeps, change = solve(
+            settings, slabs, parallel, rows, contacts, motion, u, target, warm, order, None
+        )
+    if change <= settings.tolerance:
+        return _respond_end(model, settings, contacts, motion, tau, move, free, u, u, impulses, sweeps, change)
+    n = settings.substeps
+    start = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
+    free_u = stacked(free[0], free[1], free[2])
+    increment = np.empty_like(u)
+    for i in range(u.shape[0]):  # gravity a substep at a time; the collision waves' impulses (impulse) at once
+        increment[i] = (free_u[i] - start[i]) / n
+        u[i] = entry[i] - (free_u[i] - start[i])
+    fixed = tau >= 0.0  # constraints' bounces keep their targets; impulse's were its waves
+    if impulse is not None:
+        fixed[:] = False
+    travelled = np.empty_like(u)
+    substepping = (fixed, -contacts.depth, increment, travelled)
+    impulses, more, change = solve(
+        settings, slabs, parallel, rows, contacts, motion, u, target, impulses, order, substepping
+    )
+    sweeps += more
+    as_before_where_unpushed(contacts, impulses, free[0].shape[0], entry, u, travelled)
+    return _respond_end(model, settings, contacts, motion, tau, move, free, u, travelled, impulses, sweeps, change)
+
+
+@njit(cache=True)
+def as_before_where_unpushed(
+    contacts: ContactArrays, impulses: np.ndarray, B: int, entry: np.ndarray, u: np.ndarray, travelled: np.ndarray
+) -> None:
+    """After a substepped solve: every body and particle that no contact pushed (each of its
+    contacts' normal impulses (C, 3) summed over the substeps is 0) gets back the velocity it
+    entered the solve with, ``entry`` (N,) — v*, and for impulse the collision waves' — as its
+    final velocity u and the one it travels with (``travelled``), both (N,) and changed in
+    place: it moves as in a step without that contact, the symplectic Euler step whose flight
+    the bounce heights' closed form holds to (substeps of gravity alone would move it by
+    h² g (n − 1) / 2n more each step it has a speculative contact). ``B`` bodies."""
+    pushed = np.zeros(u.shape[0], dtype=np.bool_)
+    for c in range(impulses.shape[0]):
+        if impulses[c, 0] == 0.0:  # a normal impulse ≥ 0 in every substep: none in any
+            continue
+        for b in (contacts.body_a[c], contacts.body_b[c]):
+            if b >= 0:
+                for i in range(6):
+                    pushed[6 * b + i] = True
+        for k in range(3):
+            for p in (contacts.particles_a[c, k], contacts.particles_b[c, k]):
+                if p >= 0:
+                    for i in range(3):
+                        pushed[6 * B + 3 * p + i] = True
+    for i in range(u.shape[0]):
+        if not pushed[i]:
+            u[i] = entry[i]
+            travelled[i] = entry[i]
+
+
+@njit(cache=True, inline="always")
+def _respond_end(model, settings, contacts, motion, tau, move, free, u, travelled, impulses, sweeps, change):
+    """``respond``'s stage 5 and its result: the positions moved with ``travelled`` (N,) — the
+    solved velocity u, or its mean over the substeps —, split at the time of impact."""
+    h = settings.dt
+    # 5. recompute positions from the corrected velocities (their mean over the substeps), split at the time of impact
+    positions = split_at_impact(model, contacts, motion, tau, move, free, travelled, h, settings.time_of_impact)
     return positions, unstacked(u, free[0].shape[0]), impulses, sweeps, change
 
 
