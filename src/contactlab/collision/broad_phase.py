@@ -306,11 +306,10 @@ def boxes_between(
             for y in range(lo1, hi1 + 1):
                 for z in range(lo2, hi2 + 1):
                     h = _slot(x, y, z, slots)
-                    first = _first_after(members, start[h], start[h + 1], i) if same else start[h]
-                    for k in range(first, start[h + 1]):
+                    for k in range(start[h], start[h + 1]):
                         j = members[k]
-                        if cells[k, 0] != x or cells[k, 1] != y or cells[k, 2] != z:
-                            continue  # another cell of the same hash
+                        if (same and j <= i) or cells[k, 0] != x or cells[k, 1] != y or cells[k, 2] != z:
+                            continue  # the pair's other order, or another cell of the same hash
                         if not (
                             lower_b[j, 0] <= upper_a[i, 0]
                             and lower_a[i, 0] <= upper_b[j, 0]
@@ -330,20 +329,6 @@ def boxes_between(
                         pairs[found, 0], pairs[found, 1] = i, j
                         found += 1
     return pairs[:found]
-
-
-@njit(cache=True)
-def _first_after(members: np.ndarray, first: int, stop: int, i: int) -> int:
-    """The first position in members[first:stop] (rising) holding a box after ``i``, by bisection:
-    a slot's members are entered in box order, so with A = B the boxes up to i (each pair's
-    other order) are passed over without a test."""
-    while first < stop:
-        middle = (first + stop) // 2
-        if members[middle] <= i:
-            first = middle + 1
-        else:
-            stop = middle
-    return first
 
 
 @njit(cache=True, inline="always")
