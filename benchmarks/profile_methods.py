@@ -2,14 +2,24 @@
 
     python3 benchmarks/profile_methods.py            # 1000-sphere pile and 20-level pyramid
     python3 benchmarks/profile_methods.py --quick    # 300 spheres, 8 levels
+    python3 benchmarks/profile_methods.py --cloth [--duration=S] [--threads=N]   # cloth_drape
 
 Each run is warmed up (kernels compiled and cached) and then profiled for a fixed number of
 steps; the functions with the largest own time are written to benchmarks/profiles.md.
 
 Projection, impulse and constraints step these scenes in one compiled loop
-(methods/velocity_loop.py), which cProfile cannot look into: their table is that of the methods' ``step``, the same compiled
-stages called one by one from Python (bit-identical results), and the line above it gives the
-loop's own time per step beside the stitched one — the difference is the Python between stages.
+(methods/velocity_loop.py), which cProfile cannot look into: their table is that of the methods'
+``step``, the same compiled stages called one by one from Python (bit-identical results), and the
+line above it gives the loop's own time per step beside the stitched one — the difference is the
+Python between stages.
+
+``--cloth``: the built-in ``cloth_drape`` (25 × 25 vertices, backward Euler at 1/120 s, self-contact
+on), which steps from Python, under ``projection`` and ``constraints`` (issue 36's cloth target):
+each warmed up by a 3-step run (kernels compiled or loaded), then its steps/s over ``--duration``
+simulated seconds (default the scene's 3 s: falling, draping, resting; the summary's figure,
+stepping only), then a profile of 40 steps from the draped state at 1.5 s. Written to
+``benchmarks/results/cloth_drape.md`` with the threads and the load average (on a shared
+machine the figures move by ±20 % with the load).
 """
 
 import cProfile
@@ -18,6 +28,7 @@ import os
 import pstats
 import sys
 import time
+from functools import partial
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -97,5 +108,68 @@ def main(quick):
     print("wrote", path)
 
 
+def _cloth_run(scene, method, options, seconds, state=None, every=1):
+    """One run of the scene's model under ``method`` for ``seconds``, from ``state``."""
+    return simulate(scene.model, method, scene.dt, seconds, options, scene.integrator, state=state, record_every=every)
+
+
+def cloth(duration, threads):
+    """steps/s and profiles of ``cloth_drape`` under projection and constraints (see the module),
+    on ``threads`` ("auto" or a count)."""
+    from contactlab.scene import load_scene
+    from contactlab.threads import set_threads
+
+    set_threads(threads)
+    scene = load_scene("cloth_drape")
+    duration = duration or scene.duration
+    rows, tables = [], []
+    for method in ("projection", "constraints"):
+        options = scene.options.get(method)
+        run = partial(_cloth_run, scene, method, options)
+
+        run(3 * scene.dt)  # compiles, or loads the cached kernels
+        timed = run(duration)
+        rows.append((method, timed.summary["steps_per_second"], timed.summary["max_contacts"]))
+        print(f"cloth_drape {method:12s} {rows[-1][1]:8.1f} steps/s", flush=True)
+        draped = run(1.5, every=1000).state
+        profiler = cProfile.Profile()
+        started = time.perf_counter()
+        profiler.enable()
+        run(40 * scene.dt, state=draped, every=40)
+        profiler.disable()
+        total = time.perf_counter() - started
+        stats = pstats.Stats(profiler, stream=io.StringIO())
+        top = sorted(((value[2], key, value[1]) for key, value in stats.stats.items()), reverse=True)[:TOP]
+        tables.append((method, total / 40, top, total))
+    load = os.getloadavg()
+    lines = [
+        f"`python3 benchmarks/profile_methods.py --cloth --duration={duration:g} --threads={threads}`, "
+        f"{time.strftime('%Y-%m-%d %H:%M')}, "
+        f"threads {threads}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min) "
+        f"on {os.cpu_count()} cores",
+        "",
+        "| method | steps/s (warm, stepping only) | most contacts in a step |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {method} | {speed:.1f} | {contacts} |" for method, speed, contacts in rows]
+    for method, per_step, top, total in tables:
+        lines += ["", f"### `{method}`, 40 steps from the draped state at 1.5 s: {1000 * per_step:.1f} ms a step", ""]
+        lines += ["| function | calls | own time [s] | share |", "|---|---|---|---|"]
+        lines += [
+            f"| `{os.path.basename(key[0])}:{key[2]}` | {calls} | {own:.3f} | {100 * own / total:.0f} % |"
+            for own, key, calls in top
+        ]
+    text = "\n".join(lines) + "\n"
+    print(text)
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "cloth_drape.md")
+    with open(path, "w", encoding="utf-8") as out:
+        out.write(text)
+    print("wrote", path)
+
+
 if __name__ == "__main__":
-    main("--quick" in sys.argv)
+    if "--cloth" in sys.argv:
+        given = dict(a[2:].split("=", 1) for a in sys.argv[1:] if a.startswith("--") and "=" in a)
+        cloth(float(given["duration"]) if "duration" in given else None, given.get("threads", "auto"))
+    else:
+        main("--quick" in sys.argv)

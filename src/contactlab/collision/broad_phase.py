@@ -299,11 +299,12 @@ def boxes_between(
                     fill[h] += 1
     found = 0
     for i in range(na):
-        lo = np.floor(lower_a[i] / cell).astype(np.int64)
-        hi = np.floor(upper_a[i] / cell).astype(np.int64)
-        for x in range(lo[0], hi[0] + 1):
-            for y in range(lo[1], hi[1] + 1):
-                for z in range(lo[2], hi[2] + 1):
+        lo0, hi0 = np.int64(np.floor(lower_a[i, 0] / cell)), np.int64(np.floor(upper_a[i, 0] / cell))
+        lo1, hi1 = np.int64(np.floor(lower_a[i, 1] / cell)), np.int64(np.floor(upper_a[i, 1] / cell))
+        lo2, hi2 = np.int64(np.floor(lower_a[i, 2] / cell)), np.int64(np.floor(upper_a[i, 2] / cell))
+        for x in range(lo0, hi0 + 1):
+            for y in range(lo1, hi1 + 1):
+                for z in range(lo2, hi2 + 1):
                     h = _slot(x, y, z, slots)
                     for k in range(start[h], start[h + 1]):
                         j = members[k]
@@ -318,7 +319,7 @@ def boxes_between(
                             and lower_a[i, 2] <= upper_b[j, 2]
                         ):
                             continue
-                        if max(lo[0], low[j, 0]) != x or max(lo[1], low[j, 1]) != y or max(lo[2], low[j, 2]) != z:
+                        if max(lo0, low[j, 0]) != x or max(lo1, low[j, 1]) != y or max(lo2, low[j, 2]) != z:
                             continue  # reported from the cell of the larger lower corner
                         if found == pairs.shape[0]:
                             grown = np.empty((2 * found, 2), dtype=np.int64)

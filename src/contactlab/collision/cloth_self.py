@@ -382,7 +382,25 @@ def self_contact_arrays(
     edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
     element_boxes(position, grow, edges, edge_lower, edge_upper)
     edge_pairs = boxes_between(edge_lower, edge_upper, edge_lower, edge_upper, True)
-    capacity = near.shape[0] + edge_pairs.shape[0]
+    # pairs sharing a particle never make a contact (most of what the boxes find: neighbours):
+    # passed over before anything is allocated for them
+    near_kept = np.empty(near.shape[0], dtype=np.int64)
+    kept = 0
+    for k in range(near.shape[0]):
+        v, corners = vertices[near[k, 0]], triangles[near[k, 1]]
+        if v != corners[0] and v != corners[1] and v != corners[2]:
+            near_kept[kept] = k
+            kept += 1
+    near_kept = near_kept[:kept]
+    edges_kept = np.empty(edge_pairs.shape[0], dtype=np.int64)
+    kept = 0
+    for k in range(edge_pairs.shape[0]):
+        first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
+        if first[0] != second[0] and first[0] != second[1] and first[1] != second[0] and first[1] != second[1]:
+            edges_kept[kept] = k
+            kept += 1
+    edges_kept = edges_kept[:kept]
+    capacity = near_kept.shape[0] + edges_kept.shape[0]
     particles = np.full((2, capacity, 3), -1, dtype=np.int64)
     weights = np.zeros((2, capacity, 3))
     point = np.empty((capacity, 3))
@@ -392,12 +410,10 @@ def self_contact_arrays(
     restitution = np.empty(capacity)
     feature_id = np.empty(capacity, dtype=np.int64)
     count = 0
-    for k in range(near.shape[0]):
+    for k in near_kept:
         i, f = near[k, 0], near[k, 1]
         v = vertices[i]
         corners = triangles[f]
-        if v == corners[0] or v == corners[1] or v == corners[2]:
-            continue
         found, d, wa, wb, wc = vertex_triangle(
             position, radius, reach, vertices[i : i + 1], corners, point, normal, count
         )
@@ -415,10 +431,8 @@ def self_contact_arrays(
             material[v], material[corners[0]], material_friction, material_restitution
         )
         count += 1
-    for k in range(edge_pairs.shape[0]):
+    for k in edges_kept:
         first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
-        if first[0] == second[0] or first[0] == second[1] or first[1] == second[0] or first[1] == second[1]:
-            continue
         found, d, s, t = edge_edge(position, radius, reach, first, second, point, normal, count)
         if not found:
             continue
@@ -529,18 +543,26 @@ def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: 
 @njit(cache=True)
 def segment_crosses_triangle(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
     """Whether segment p–q (3,) [m] passes through triangle (a, b, c): p and q strictly on
-    opposite sides of its plane and the crossing point inside it (edges included)."""
-    n = np.cross(b - a, c - a)
-    dp = n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2])
-    dq = n[0] * (q[0] - a[0]) + n[1] * (q[1] - a[1]) + n[2] * (q[2] - a[2])
+    opposite sides of its plane and the crossing point inside it (edges included). In scalars
+    (most candidate pairs leave at the first test, having allocated nothing)."""
+    n0, n1, n2 = _cross(b[0] - a[0], b[1] - a[1], b[2] - a[2], c[0] - a[0], c[1] - a[1], c[2] - a[2])
+    dp = n0 * (p[0] - a[0]) + n1 * (p[1] - a[1]) + n2 * (p[2] - a[2])
+    dq = n0 * (q[0] - a[0]) + n1 * (q[1] - a[1]) + n2 * (q[2] - a[2])
     if not ((dp > 0.0 and dq < 0.0) or (dp < 0.0 and dq > 0.0)):
         return False
-    x = p + (dp / (dp - dq)) * (q - p)
-    # inside: x on the inner side of each edge, measured along the normal
+    along = dp / (dp - dq)
+    x0, x1, x2 = p[0] + along * (q[0] - p[0]), p[1] + along * (q[1] - p[1]), p[2] + along * (q[2] - p[2])
+    # inside: x on the inner side of each edge (u → w), measured along the normal
     for i in range(3):
-        u = (a, b, c)[i]
-        w = (b, c, a)[i]
-        side = np.cross(w - u, x - u)
-        if side[0] * n[0] + side[1] * n[1] + side[2] * n[2] < 0.0:
+        u = a if i == 0 else (b if i == 1 else c)
+        w = b if i == 0 else (c if i == 1 else a)
+        s0, s1, s2 = _cross(w[0] - u[0], w[1] - u[1], w[2] - u[2], x0 - u[0], x1 - u[1], x2 - u[2])
+        if s0 * n0 + s1 * n1 + s2 * n2 < 0.0:
             return False
     return True
+
+
+@njit(cache=True, inline="always")
+def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple[float, float, float]:
+    """a × b of two vectors given by their components, as np.cross computes it."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0

@@ -14,7 +14,7 @@ One step, stage by stage as on the slide:
    fraction of an existing overlap removed — see methods.velocity_level; the same law as the
    impulse method, M2). Eliminating v⁺ gives the LCP (C6) B λ ≥ c with B = J A⁻¹ Jᵀ and
    c = t − J A⁻¹ b: assembled sparse, A⁻¹ applied block by block when A = M (block diagonal)
-   and through a sparse LU factorization when cloth is implicit. With friction each contact
+   and through a sparse factorization when cloth is implicit. With friction each contact
    has three rows (normal, two tangents) and the problem is FCLIB's local frictional contact
    problem u = W r + q, W = B, q = J v* − t, solved with ``contactlab.lcp``;
 5. recompute velocities v⁺ = v* + A⁻¹ Jᵀ λ and positions x = x₀ + h v⁺ (split at the moment of
@@ -153,7 +153,7 @@ class Options(KeptManifoldOptions):
 
 
 class SystemInverse:
-    """Applies A⁻¹ for the MLCP's A: M⁻¹ block by block when A = M, a sparse LU of A (with the
+    """Applies A⁻¹ for the MLCP's A: M⁻¹ block by block when A = M, a sparse factor of A (with the
     pinned degrees of freedom held) when the cloth is integrated implicitly (M4)."""
 
     def __init__(

@@ -101,7 +101,7 @@ class Options(CollisionOptions):
     contact_margin: float = 0.001
     """m: gaps this small are detected (their springs are slack)"""
     linear_solver: str = "cg"
-    """backward Euler: cg (conjugate gradients, Jacobi-preconditioned) | direct (sparse LU)"""
+    """backward Euler: cg (conjugate gradients, block-Jacobi-preconditioned) | direct (sparse Cholesky)"""
     linear_tolerance: float = 1e-10
     """backward Euler with cg: relative residual to reach"""
     implicit_iterations: int = 8

@@ -421,7 +421,7 @@ def implicit_velocities(
 
 
 def _solve(A, rhs, guess, options):
-    """(x, conjugate-gradient iterations) of A x = rhs: compiled Jacobi-preconditioned conjugate
+    """(x, conjugate-gradient iterations) of A x = rhs: compiled block-Jacobi-preconditioned conjugate
     gradients (``integrators.conjugate_gradients``) from ``guess``, or the sparse direct solve."""
     if options.linear_solver == "direct":  # A is symmetric positive definite (conjugate gradients need it too)
         return factor_symmetric(A).solve(rhs), 0
