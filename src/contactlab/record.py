@@ -250,6 +250,11 @@ class Recorder:
         end = self.filled + count
         return {name: values[self.filled : end] for name, values in self.buffer.items()}
 
+    def steps_that_fit(self) -> int:
+        """The most steps in a row whose samples the buffer holds at once, at least 1 (``count``
+        steps make at most ``count // record_every + 1`` samples)."""
+        return max(1, (self.chunk_samples - 1) * self.record_every)
+
     def commit(self, count: int) -> None:
         """Take in the first ``count`` samples of the rows ``reserve`` gave last, written by now."""
         if self.apart is not None:

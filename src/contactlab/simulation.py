@@ -571,14 +571,14 @@ def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
     """Step through the loop (methods.velocity_loop: compiled, or its body from Python calling the
     same compiled steps), in chunks of steps that each take
     about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside, into
-    the recorder's buffer; the loop stops itself past the health's speed limit, and the rest is
-    checked after each chunk."""
+    the recorder's buffer (a chunk no longer than its samples fit there: memory stays flat); the
+    loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
 
     speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
     step_index, chunk = 1, 1
     while step_index <= steps:
         interrupts.check()
-        count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps)
+        count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps, recorder.steps_that_fit())
         compiled_before = _seconds(compiling)
         chooser.before_step(count)
         started = time.perf_counter()
