@@ -1,7 +1,8 @@
 """Recorder: samples states and diagnostics every K steps, in memory or streamed to disk.
 
-The simulation never does I/O itself: it hands states to :meth:`Recorder.sample` (or the
-compiled loop's samples to :meth:`Recorder.extend`). The Recorder gathers them in chunks of
+The simulation never does I/O itself: it hands states to :meth:`Recorder.sample`, or the
+compiled loop records into rows of the Recorder's buffer (:meth:`Recorder.reserve`, then
+:meth:`Recorder.commit`). The Recorder gathers them in chunks of
 about ``store.CHUNK_BYTES``; each chunk is kept in memory (``simulate(...).arrays``) or, when
 the run streams (``simulate(..., trajectory=path)``), handed to a ``store.TrajectoryWriter`` and
 forgotten, so a long run's memory stays flat. Either way :class:`Totals` keeps what the summary
