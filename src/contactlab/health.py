@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from . import shapes
 from .collision import collide, pass_through_depths
 from .collision.cloth_self import cloth_elements, crossings
 from .driving import too_fast
+from .model import derived
 
 if TYPE_CHECKING:
     from .contacts import Contacts
@@ -80,29 +81,18 @@ class Health:
         self.allow_divergence = allow_divergence
         self.advice = advice or f"use a smaller dt than {dt:g} s"
         self.violations: list[Violation] = []
-        g = float(np.linalg.norm(model.gravity))
-        size = max(_scene_size(model, state), 0.1)
+        scales = _model_scales(model)
+        g = scales.gravity
+        size = max(_scene_size(scales, state), 0.1)
         speeds = np.linalg.norm(np.concatenate([state.body_velocity, state.particle_velocity]), axis=1)
         self.speed_limit = SPEED_FACTOR * float(max(1.0, speeds.max(initial=0.0), np.sqrt(2.0 * g * size)))
-        mass = float(np.sum(model.body_mass) + np.sum(model.particle_mass))
         self.initial_energy: float | None = None  # the first recorded sample's, once there is one
-        self.energy_scale = _kinetic(model, state) + mass * g * size
-        kinds = model.collider_table[0]
-        dynamic = model.body_count + model.particle_count
-        params = model.collider_table[1][dynamic:][kinds[dynamic:] == shapes.PLANE]
-        length = np.linalg.norm(params[:, :3], axis=1)
-        self.plane_normals = params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3))  # (Pl, 3)
-        self.plane_offsets = params[:, 3] / length if len(params) else np.zeros(0)
-        self.half_thickness = (
-            model.collider_half_thickness[:dynamic]
-            + np.r_[  # pinned, kinematic: never checked
-                np.where(model.body_kinematic, np.inf, 0.0), np.where(model.particle_pinned, np.inf, 0.0)
-            ]
-        )
+        self.energy_scale = _kinetic(model, state) + scales.mass * g * size
+        self.plane_normals, self.plane_offsets = scales.plane_normals, scales.plane_offsets
+        self.half_thickness = scales.half_thickness
         self.initial_depth_ratio = 0.0  # see start()
-        # the least pass-through depth a contact can have: a dynamic collider's half thickness
-        self.thinnest = float(model.collider_half_thickness[:dynamic].min(initial=np.inf))
-        self.self_colliding = not cloth_elements(model).empty
+        self.thinnest = scales.thinnest
+        self.self_colliding = scales.self_colliding
         # a cloth may start through itself (a mesh file so folded): only more crossings than that are flagged
         self.initial_crossings = len(crossings(model, state.particle_position)) if self.self_colliding else 0
 
@@ -141,9 +131,13 @@ class Health:
                 return None  # no sample yet: nothing to check, nothing to start from
             self.initial_energy = float(energy[0])
         initial = self.initial_energy
+        energy = energy[first:]
+        if not len(energy) or (
+            (energy - initial).max() <= ENERGY_GAIN * self.energy_scale + 1e-9 and energy.min() > -np.inf
+        ):
+            return None  # every row finite and within the gain: the usual case, in three reductions
         # the first row that is not finite and the first that gained too much, found at once (a
         # Python loop over rows cost a 720-step ball's run about a fifth of its time)
-        energy = energy[first:]
         unfinite = _first(~np.isfinite(energy))
         gained = _first(energy - initial > ENERGY_GAIN * self.energy_scale + 1e-9)  # NaN: False
         if gained is not None and (unfinite is None or gained < unfinite):
@@ -236,8 +230,14 @@ class Health:
     def _behind_planes(self, state):
         if not len(self.plane_offsets) or not len(self.half_thickness):
             return None
-        centres = np.concatenate([state.body_position, state.particle_position])
+        centres = (
+            np.concatenate([state.body_position, state.particle_position])
+            if len(state.particle_position)
+            else state.body_position
+        )
         behind = self.plane_offsets[None, :] - centres @ self.plane_normals.T - self.half_thickness[:, None]
+        if not behind.max() > 1e-9:  # nothing behind (NaN: as argmax finds it first, nothing said)
+            return None
         worst = np.unravel_index(np.argmax(behind), behind.shape)
         if behind[worst] > 1e-9:
             return self._found(
@@ -281,17 +281,61 @@ class Health:
         }
 
 
-def _scene_size(model, state):
+class _Scales(NamedTuple):
+    """What the checks take from a Model alone, built once a model (a study runs one many times)."""
+
+    gravity: float
+    """|g| [m/s²]"""
+    mass: float
+    """the bodies' and particles' total [kg]"""
+    plane_normals: np.ndarray
+    """(Pl, 3) the static planes' unit normals"""
+    plane_offsets: np.ndarray
+    """(Pl,) [m] their offsets along them"""
+    half_thickness: np.ndarray
+    """(B + P,) [m] each body's and particle's, inf where pinned or kinematic (never checked)"""
+    thinnest: float
+    """[m] the least half thickness of a dynamic collider: the least pass-through depth"""
+    self_colliding: bool
+    """a cloth collides with itself (the crossing check)"""
+    planes: tuple
+    """the static planes as ``_scene_size`` reads them: (normal (3,), offset [m], |normal|) each"""
+    solids: np.ndarray
+    """(S, 3) [m] the centres of the obstacles that are not planes"""
+
+
+@derived
+def _model_scales(model: Model) -> _Scales:
+    """The _Scales of ``model``, kept with it (``model.derived``)."""
+    kinds = model.collider_table[0]
+    dynamic = model.body_count + model.particle_count
+    params = model.collider_table[1][dynamic:][kinds[dynamic:] == shapes.PLANE]
+    length = np.linalg.norm(params[:, :3], axis=1)
+    return _Scales(
+        gravity=float(np.linalg.norm(model.gravity)),
+        mass=float(np.sum(model.body_mass) + np.sum(model.particle_mass)),
+        plane_normals=params[:, :3] / length[:, None] if len(params) else np.zeros((0, 3)),
+        plane_offsets=params[:, 3] / length if len(params) else np.zeros(0),
+        half_thickness=(
+            model.collider_half_thickness[:dynamic]
+            + np.r_[np.where(model.body_kinematic, np.inf, 0.0), np.where(model.particle_pinned, np.inf, 0.0)]
+        ),
+        thinnest=float(model.collider_half_thickness[:dynamic].min(initial=np.inf)),
+        self_colliding=not cloth_elements(model).empty,
+        planes=tuple((normal, offset, np.linalg.norm(normal)) for normal, offset in zip(params[:, :3], params[:, 3])),
+        solids=np.asarray(model.obstacle_position)[kinds[dynamic:] != shapes.PLANE],
+    )
+
+
+def _scene_size(scales, state):
     """L [m]: the largest extent of the dynamic centres and the finite obstacles together, or
     the greatest height of a dynamic centre above a static plane, whichever is larger."""
-    dynamic = model.body_count + model.particle_count
-    kinds, params = model.collider_table[0][dynamic:], model.collider_table[1][dynamic:]
     centres = np.concatenate([state.body_position, state.particle_position])
-    points = np.concatenate([centres, np.asarray(model.obstacle_position)[kinds != shapes.PLANE]])
+    points = np.concatenate([centres, scales.solids]) if len(scales.solids) else centres
     size = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
-    for normal, offset in zip(params[kinds == shapes.PLANE, :3], params[kinds == shapes.PLANE, 3]):
-        if len(centres):
-            size = max(size, float((centres @ normal - offset).max() / np.linalg.norm(normal)))
+    if len(centres):
+        for normal, offset, length in scales.planes:
+            size = max(size, float((centres @ normal - offset).max() / length))
     return size
 
 

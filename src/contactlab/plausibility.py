@@ -25,6 +25,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .collision import collide
+from .model import derived
+
 if TYPE_CHECKING:
     from .model import Model
     from .state import State
@@ -67,8 +70,22 @@ def _sizes(model):
 
 
 def _start_depths(model, state):
-    from .collision import collide
+    """The sentences of the start-depth check: a collision pass, made once a model for its own
+    initial positions (a study runs one model from there many times) and kept with it."""
+    if all(a.tobytes() == b.tobytes() for a, b in zip(state.positions, model.initial.positions)):
+        return list(_initial_start_depths(model))
+    return _depth_sentences(model, state)
 
+
+@derived
+def _initial_start_depths(model):
+    """``_depth_sentences`` at ``model``'s initial state, kept with the model."""
+    return tuple(_depth_sentences(model, model.initial))
+
+
+def _depth_sentences(model, state):
+    """A sentence for each of up to three bodies starting deeper than START_DEPTH_FRACTION of
+    its radius inside what it touches at ``state`` (a collision pass)."""
     contacts = collide(model, state)
     if not contacts.count:
         return []

@@ -1,7 +1,8 @@
 """Recorder: samples states and diagnostics every K steps, in memory or streamed to disk.
 
-The simulation never does I/O itself: it hands states to :meth:`Recorder.sample` (or the
-compiled loop's samples to :meth:`Recorder.extend`). The Recorder gathers them in chunks of
+The simulation never does I/O itself: it hands states to :meth:`Recorder.sample`, or the
+compiled loop records into rows of the Recorder's buffer (:meth:`Recorder.reserve`, then
+:meth:`Recorder.commit`). The Recorder gathers them in chunks of
 about ``store.CHUNK_BYTES``; each chunk is kept in memory (``simulate(...).arrays``) or, when
 the run streams (``simulate(..., trajectory=path)``), handed to a ``store.TrajectoryWriter`` and
 forgotten, so a long run's memory stays flat. Either way :class:`Totals` keeps what the summary
@@ -139,9 +140,17 @@ class Totals:
             self.first_time, self.energy_initial = float(chunk["time"][0]), float(energy[0])
         self.count += n
         self.last_time, self.energy_final = float(chunk["time"][-1]), float(energy[-1])
-        finite = energy[np.isfinite(energy)]
-        self.energy_max = max(self.energy_max, float(finite.max()) if finite.size else -math.inf)
-        self.max_penetration = float(np.nanmax(np.append(chunk["max_penetration"], self.max_penetration)))
+        top = float(energy.max())  # the largest finite one where finite (NaN and +inf would show)
+        if not math.isfinite(top):
+            finite = energy[np.isfinite(energy)]
+            top = float(finite.max()) if finite.size else -math.inf
+        self.energy_max = max(self.energy_max, top)
+        deepest = chunk["max_penetration"].max()  # NaN where one is
+        self.max_penetration = float(
+            max(self.max_penetration, deepest)
+            if deepest == deepest
+            else np.nanmax(np.append(chunk["max_penetration"], self.max_penetration))
+        )
         self.final_penetration = float(chunk["max_penetration"][-1])
         self.max_iterations = max(self.max_iterations, int(np.max(chunk["solver_iterations"])))
         self.max_residual = float(max(self.max_residual, np.max(chunk["solver_residual"])))
@@ -158,7 +167,12 @@ class Totals:
 class Recorder:
     """Collects the samples (T of them) of a run of ``model``, every ``record_every`` steps;
     with a ``sink`` (store.TrajectoryWriter) they go to it in chunks instead of staying in memory.
-    ``samples``: about how many there will be (a buffer no longer than that)."""
+    ``samples``: about how many there will be (a buffer no longer than that).
+
+    Samples come in three ways, all through the buffer: a State (``sample``), arrays recorded
+    elsewhere (``extend``), or rows handed out by ``reserve`` that a writer fills in place and
+    ``commit`` takes in — the compiled loop records straight into the buffer, with no arrays of
+    its own to allocate and copy each chunk of steps."""
 
     def __init__(
         self,
@@ -174,11 +188,11 @@ class Recorder:
         self.chunk_samples: int = max(  # type: ignore[assignment]  # min(n, inf) is n
             1, min(store.CHUNK_BYTES // max(1, sample_bytes(model)), samples or math.inf)
         )
-        self.buffer: dict[str, np.ndarray] = {
-            name: np.empty((self.chunk_samples, *shape), dtype=dtype)  # the chunk being filled
-            for name, (shape, dtype) in self.rows.items()
-        }
+        # the chunk being filled, name -> (chunk_samples, ...); None until a sample needs it (a
+        # full one kept in memory is passed on whole, not copied, and a new one made)
+        self.buffer: dict[str, np.ndarray] | None = None
         self.filled = 0  # samples in the buffer
+        self.apart: dict[str, np.ndarray] | None = None  # reserve's rows for more than a buffer holds
         self.kept: list[dict[str, np.ndarray]] = []  # without a sink: the chunks passed on, in order
         self.last: dict[str, np.ndarray] = None  # type: ignore[assignment]  # set by the first flush; name -> the last sample passed on (one row)
         self.totals = Totals()
@@ -205,25 +219,53 @@ class Recorder:
             solver_iterations=info.solver_iterations if info else 0,
             solver_residual=info.solver_residual if info else 0.0,
         )
+        rows = self.reserve(1)
         for name, value in values.items():
-            self.buffer[name][self.filled] = value
-        self.filled += 1
-        if self.filled == self.chunk_samples:
-            self.flush()
+            rows[name][0] = value
+        self.commit(1)
         return contacts
 
     def extend(self, samples: Mapping[str, np.ndarray]) -> None:
-        """Add samples recorded elsewhere (the compiled loop): ``samples`` maps each name of SERIES
-        to an array with one row per sample."""
-        count, done = len(samples["time"]), 0
-        while done < count:
-            take = min(count - done, self.chunk_samples - self.filled)
-            for name in SERIES:
-                self.buffer[name][self.filled : self.filled + take] = samples[name][done : done + take]
-            self.filled += take
-            done += take
-            if self.filled == self.chunk_samples:
-                self.flush()
+        """Add samples recorded elsewhere: ``samples`` maps each name of SERIES to an array with
+        one row per sample."""
+        count = len(samples["time"])
+        rows = self.reserve(count)
+        for name in SERIES:
+            rows[name][...] = samples[name]
+        self.commit(count)
+
+    def reserve(self, count: int) -> dict[str, np.ndarray]:
+        """Rows for the next ``count`` samples, name -> an array (count, ...) of each series of
+        SERIES, in that order, to be written in place and then taken in by ``commit``: the
+        buffer's next rows (passed on first where it has no room for them), or arrays of their
+        own where there are more than a buffer holds."""
+        if self.filled + count > self.chunk_samples:
+            self.flush()
+        if count > self.chunk_samples:
+            self.apart = {name: np.empty((count, *shape), dtype=dtype) for name, (shape, dtype) in self.rows.items()}
+            return self.apart
+        if self.buffer is None:
+            self.buffer = {
+                name: np.empty((self.chunk_samples, *shape), dtype=dtype) for name, (shape, dtype) in self.rows.items()
+            }
+        end = self.filled + count
+        return {name: values[self.filled : end] for name, values in self.buffer.items()}
+
+    def steps_that_fit(self) -> int:
+        """The most steps in a row whose samples the buffer holds at once, at least 1 (``count``
+        steps make at most ``count // record_every + 1`` samples)."""
+        return max(1, (self.chunk_samples - 1) * self.record_every)
+
+    def commit(self, count: int) -> None:
+        """Take in the first ``count`` samples of the rows ``reserve`` gave last, written by now."""
+        if self.apart is not None:
+            apart, self.apart = self.apart, None
+            if count:
+                self._pass_on({name: values[:count] for name, values in apart.items()}, reused=False)
+            return
+        self.filled += count
+        if self.filled == self.chunk_samples:
+            self.flush()
 
     def latest(self, names: Iterable[str] = SERIES) -> dict[str, np.ndarray]:
         """The last sample of the series ``names``, as arrays of one row."""
@@ -236,13 +278,23 @@ class Recorder:
         if not self.filled:
             return
         chunk = {name: values[: self.filled] for name, values in self.buffer.items()}
-        self.totals.add(chunk)
-        self.last = {name: values[-1:].copy() for name, values in chunk.items()}
-        if self.sink is not None:
-            self.sink.append(chunk)  # written at once: the buffer can be filled again
-        else:
-            self.kept.append({name: values.copy() for name, values in chunk.items()})
+        if self.sink is None and self.filled == self.chunk_samples:
+            self.buffer = None  # kept whole: the next sample makes a new one
         self.filled = 0
+        self._pass_on(chunk, reused=self.buffer is not None)
+
+    def _pass_on(self, chunk: dict[str, np.ndarray], reused: bool) -> None:
+        """Hand the samples ``chunk`` (name -> rows) on: to the sink, written at once, or to the
+        chunks kept in memory, copied where ``reused`` (rows of the buffer, to be filled again)."""
+        self.totals.add(chunk)
+        if self.sink is not None:
+            self.sink.append(chunk)
+            self.last = {name: values[-1:].copy() for name, values in chunk.items()}
+            return
+        if reused:
+            chunk = {name: values.copy() for name, values in chunk.items()}
+        self.kept.append(chunk)
+        self.last = {name: values[-1:] for name, values in chunk.items()}
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The trajectory held in memory, as arrays: time (T,), body_position (T,B,3), … and
@@ -250,7 +302,7 @@ class Recorder:
         self.flush()
         out = {
             name: (
-                np.concatenate([chunk[name] for chunk in self.kept])
+                (self.kept[0][name] if len(self.kept) == 1 else np.concatenate([chunk[name] for chunk in self.kept]))
                 if self.kept
                 else np.zeros((0, *shape), dtype=dtype)
             )

@@ -11,7 +11,7 @@ import os
 import time
 import warnings
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -314,7 +314,8 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         if stepper is None:
             recorder.sample(state)  # its collide() compiles the collision kernels first
         else:
-            recorder.extend(stepper.sample())  # the loop's own recording, which the steps use too
+            stepper.sample(recorder.reserve)  # the loop's own recording, which the steps use too
+            recorder.commit(1)
     setup_compile_seconds = _seconds(compiling)
     health.check_samples(recorder.latest(ENERGY_SERIES), 0)  # the energy to hold the run to
     # and how deep it starts, from the loop's first sample where there is one (no collision pass)
@@ -366,7 +367,7 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         "integrator": integrator,
         "dt": dt,
         "steps": steps,
-        "options": asdict(options),
+        "options": _options_table(options),
         "wall_seconds": wall,
         "first_step_seconds": first_step_seconds,
         "compile_seconds": (
@@ -403,6 +404,15 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         interrupted.run = Run(state, arrays, summary, model)
         raise interrupted
     return Run(state, arrays, summary, model)
+
+
+def _options_table(options: Any) -> dict[str, Any]:
+    """The summary's ``options``: ``asdict(options)``, without its deep copies where every field
+    is a number, a string or None (as every method's Options are: 15 µs of a tiny run)."""
+    table = {f.name: getattr(options, f.name) for f in fields(options)}
+    if all(isinstance(value, (int, float, str, type(None))) for value in table.values()):
+        return table
+    return asdict(options)
 
 
 def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[str, Any]:
@@ -493,7 +503,8 @@ class Tally:
             rates.append(self.window[0] / self.window[1])
         if not rates:
             return None
-        low, median, high = np.percentile(rates, [25, 50, 75])
+        # one rate (a tiny run's one window) is every quartile: np.percentile's answer, without its 50 µs
+        low, median, high = rates * 3 if len(rates) == 1 else np.percentile(rates, [25, 50, 75])
         return {"median": float(median), "low": float(low), "high": float(high), "windows": len(rates)}
 
 
@@ -550,7 +561,8 @@ SHORT_FIRST_RUN = "compiled steps from python, too short to compile the loop"
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 # the next chunk at most this many times the last: its pace, measured on few steps, may be off,
 # but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
-# scene (a few µs a step) should reach its full chunk in few calls (1, 1, 16, 256, …)
+# scene (a few µs a step) should reach its full chunk in few calls (1, 16, 256, …: the first
+# step's pace counts where it compiled nothing)
 CHUNK_GROWTH = 16
 WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
@@ -558,33 +570,37 @@ WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "step
 def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health):
     """Step through the loop (methods.velocity_loop: compiled, or its body from Python calling the
     same compiled steps), in chunks of steps that each take
-    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside; the
+    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside, into
+    the recorder's buffer (a chunk no longer than its samples fit there: memory stays flat); the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
 
     speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
     step_index, chunk = 1, 1
     while step_index <= steps:
         interrupts.check()
-        count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps)
+        count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps, recorder.steps_that_fit())
         compiled_before = _seconds(compiling)
         chooser.before_step(count)
         started = time.perf_counter()
-        made, diverged, samples = stepper.advance(count, step_index, steps, recorder.record_every, speed_limit)
+        made, diverged, samples = stepper.advance(
+            count, step_index, steps, recorder.record_every, speed_limit, recorder.reserve
+        )  # recorded into the recorder's buffer
         elapsed = time.perf_counter() - started
-        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before, made):
+        compiled = _seconds(compiling) - compiled_before
+        if tally.timed(step_index, elapsed, compiled, made):
             chooser.after_steps(made, elapsed)
-        recorder.extend(samples)
-        state = stepper.state()
-        violation = (health.check_state(state) if diverged else None) or health.check_samples(samples, 0)
+        recorder.commit(len(samples["time"]))
+        reached = stepper.reached()  # checked, not kept: no copies
+        violation = (health.check_state(reached) if diverged else None) or health.check_samples(samples, 0)
         if violation is None:  # the depth check, told the deepest overlap where the last sample is at this state
-            sampled = len(samples["time"]) and samples["time"][-1] == state.time
-            violation = health.check_depth(state, float(samples["max_penetration"][-1]) if sampled else None)
+            sampled = len(samples["time"]) and samples["time"][-1] == reached.time
+            violation = health.check_depth(reached, float(samples["max_penetration"][-1]) if sampled else None)
         if violation is not None:
             tally.take(stepper)
-            if len(samples["time"]) == 0 or samples["time"][-1] != state.time:
+            if len(samples["time"]) == 0 or samples["time"][-1] != reached.time:
                 recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
-            raise _Stopped(violation, state)
-        if step_index > 1:  # the next chunk: about CHUNK_SECONDS of steps at this pace
+            raise _Stopped(violation, stepper.state())
+        if step_index > 1 or compiled == 0.0:  # the next chunk: about CHUNK_SECONDS of steps at this pace
             chunk = max(1, min(CHUNK_GROWTH * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
         _advance(bar, step_index, made)
         step_index += made

@@ -12,6 +12,7 @@ run would report NaN energies (see Limits in docs/scene-format.md).
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
@@ -40,18 +41,24 @@ class Quantity:
     def check(self, values: ArrayLike, name: str, positive: bool = False) -> None:
         """InputError naming ``name`` unless every one of ``values`` (a number or an array of
         finite numbers) is within the bounds (``smallest`` only where ``positive``)."""
-        magnitudes = np.abs(np.asarray(values, dtype=float))
-        if magnitudes.size and magnitudes.max() > self.largest:
+        if isinstance(values, float):  # one number (from ``number``): no array to build
+            largest = smallest = abs(values)
+        else:
+            magnitudes = np.abs(np.asarray(values, dtype=float))
+            if not magnitudes.size:
+                return
+            largest, smallest = magnitudes.max(), magnitudes.min()
+        if largest > self.largest:
             raise InputError(
                 name,
                 f"expected a {self.what} of at most {self.largest:g}{self._unit}, found "
-                f"{magnitudes.max():g}{self._unit} (see Limits in docs/scene-format.md)",
+                f"{largest:g}{self._unit} (see Limits in docs/scene-format.md)",
             )
-        if positive and magnitudes.size and magnitudes.min() < self.smallest:
+        if positive and smallest < self.smallest:
             raise InputError(
                 name,
                 f"expected a {self.what} of at least {self.smallest:g}{self._unit}, found "
-                f"{magnitudes.min():g}{self._unit} (see Limits in docs/scene-format.md)",
+                f"{smallest:g}{self._unit} (see Limits in docs/scene-format.md)",
             )
 
     @property
@@ -118,7 +125,7 @@ def number(
         value = float(value)
     except OverflowError:  # a Python int beyond the float range
         value = float("inf")
-    if not np.isfinite(value):
+    if not math.isfinite(value):
         raise InputError(name, f"expected a finite number, found {value!r}")
     if minimum is not None and (value <= minimum if strict else value < minimum):
         bound = "greater than" if strict else "at least"

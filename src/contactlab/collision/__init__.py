@@ -15,6 +15,7 @@ from .. import rotations, shapes
 from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
+from ..model import derived
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
 from .cloth_self import cloth_self_contacts
@@ -33,8 +34,10 @@ if TYPE_CHECKING:
     from .manifolds import Manifolds
 
 
+@derived
 def check_supported(model: Model) -> None:
-    """Raise InputError naming the first pair of shapes in the model with no contact routine."""
+    """Raise InputError naming the first pair of shapes in the model with no contact routine
+    (checked once a model: kept with it once it passes)."""
     kinds = np.concatenate([model.body_shape, np.full(model.particle_count, shapes.POINT)])
     dynamic, counts = np.unique(kinds, return_counts=True)
     count_of = dict(zip(dynamic.tolist(), counts.tolist()))

@@ -53,6 +53,7 @@ contactlab.contacts.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -88,6 +89,7 @@ if TYPE_CHECKING:
     from .penalty import Options as PenaltyOptions
 
 METHODS = ("projection", "impulse", "constraints", "penalty")  # the methods the loop steps
+Rows = Callable[[int], Mapping[str, np.ndarray]]  # a count of samples -> arrays to record them into
 
 
 def applies(model: Model, method: str, options: CollisionOptions, integrator: str) -> bool:
@@ -257,34 +259,50 @@ class Stepper:
             np.empty(count),
         )
 
-    def sample(self) -> dict[str, np.ndarray]:
+    def _samples(self, count: int, rows: Rows | None) -> Samples:
+        """Samples for ``count`` samples: the arrays ``rows(count)`` gives (name -> (count, ...),
+        in the order of SERIES: the Recorder's ``reserve``, recorded into in place), or empty
+        ones of their own where ``rows`` is None."""
+        return self.samples_for(count) if rows is None else Samples(**rows(count))
+
+    def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
         """The sample of the state as it stands (no step made: its contacts those of the fresh
         collision pass, 0 sweeps), as a dict of
-        the series, recorded by the loop's ``record``: what ``Recorder.sample`` records."""
-        samples, model, motion = self.samples_for(1), loop_model(self.model), self.motion
+        the series, recorded by the loop's ``record``: what ``Recorder.sample`` records.
+        ``rows``: where it is recorded (see ``advance``)."""
+        samples, model, motion = self._samples(1, rows), loop_model(self.model), self.motion
         record(samples, 0, model, self.plan, self.flags[0], motion, poses(model, motion), self.time, -1, 0, 0.0, False)
         return samples._asdict()
 
     def advance(
-        self, steps: int, first_index: int, last_index: int, record_every: int, max_speed: float
+        self,
+        steps: int,
+        first_index: int,
+        last_index: int,
+        record_every: int,
+        max_speed: float,
+        rows: Rows | None = None,
     ) -> tuple[int, bool, dict[str, np.ndarray]]:
         """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
-        state blew up — see ``run`` —, the Samples recorded as a dict of the series)."""
+        state blew up — see ``run`` —, the samples recorded as a dict of the series). ``rows``: a
+        function of a count of samples giving the arrays to record them into (the Recorder's
+        ``reserve``: its buffer's rows, no copy made); None: arrays of their own."""
         end = first_index + steps - 1  # the last index of these steps; indices start at 1
         count = end // record_every - (first_index - 1) // record_every  # the multiples of record_every
         if first_index <= last_index <= end and last_index % record_every:
             count += 1  # the run's last step, sampled too
-        samples = self.samples_for(count)
-        key = self.kind
-        if not self.compiled and _seconds_from_python.get(key, 0.0) >= LOOP_COMPILE_SECONDS:
+        samples = self._samples(count, rows)
+        arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
+        if not self.compiled and _seconds_from_python.get(self.kind, 0.0) >= LOOP_COMPILE_SECONDS:
             self.compiled = True  # stepping from Python has cost this process what compiling would have
-        compiling = []  # seconds of each compile in this call (a first call compiles the stages)
-        loop, started = run if self.compiled else run.py_func, time.perf_counter()
-        with event.install_timer("numba:compile", compiling.append):
-            made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = loop(
-                *self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
-            )
-        if not self.compiled:
+        if self.compiled:
+            made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(*arguments)
+        else:  # its body from Python, timed without what it compiles (a first call compiles the stages)
+            key, compiling, started = self.kind, [], time.perf_counter()
+            with event.install_timer("numba:compile", compiling.append):
+                made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run.py_func(
+                    *arguments
+                )
             stepped = time.perf_counter() - started - sum(compiling)
             _seconds_from_python[key] = _seconds_from_python.get(key, 0.0) + stepped
         self.max_contacts = max(self.max_contacts, most)
@@ -355,6 +373,12 @@ class Stepper:
         if len(ids) or self.carries_empty:
             carried[self.keys[0]], carried[self.keys[1]] = ids, values
         return self._state_carrying(carried)
+
+    def reached(self) -> State:
+        """The State reached as the loop holds it, for a look (the health checks): its arrays
+        the loop's own, which the next ``advance`` changes, and nothing carried; ``state()``
+        for one to keep."""
+        return State(self.time, *self.motion)
 
     def _state_carrying(self, carried: dict) -> State:
         """The State reached: the time, copies of the Motion's six arrays, and ``carried``."""
