@@ -293,10 +293,10 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
 
         return sample
 
-    def compiling_on_the_third_call(real):
+    def compiling_on_a_later_call(real, number):
         def call(*args):
             calls.append(1)
-            if len(calls) == 3:
+            if len(calls) == number:
                 with event.trigger_event("numba:compile", data={}):
                     time.sleep(0.2)
             return real(*args)
@@ -306,15 +306,15 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
     if path == "loop":
         monkeypatch.setattr(velocity_loop.Stepper, "sample", compiling_first(velocity_loop.Stepper.sample))
         monkeypatch.setattr(
-            velocity_loop.Stepper, "advance", compiling_on_the_third_call(velocity_loop.Stepper.advance)
+            velocity_loop.Stepper, "advance", compiling_on_a_later_call(velocity_loop.Stepper.advance, 2)
         )
     else:
         monkeypatch.setattr(record.Recorder, "sample", compiling_first(record.Recorder.sample))
-        monkeypatch.setattr(impulse, "step", compiling_on_the_third_call(impulse.step))
+        monkeypatch.setattr(impulse, "step", compiling_on_a_later_call(impulse.step, 3))
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
     run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1, compiled_loop=path == "loop")
-    assert len(calls) >= 3
+    assert len(calls) >= (2 if path == "loop" else 3)  # the loop: chunks of 1 step, then the other 9
     assert capsys.readouterr().err.count(NOTICE) == 1
     assert run.summary["compile_seconds"] >= 0.4
 

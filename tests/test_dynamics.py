@@ -130,13 +130,13 @@ def test_compilation_during_the_run_is_timed_apart_from_the_steps(path, monkeypa
         return call
 
     if path == "loop":
-        monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_call(3, velocity_loop.Stepper.advance))
+        monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_call(2, velocity_loop.Stepper.advance))
     else:
         monkeypatch.setattr(impulse, "step", compiling_on_call(5, impulse.step))
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
     run = simulate(b.finalize(), "impulse", dt=0.01, duration=0.1, compiled_loop=path == "loop")
-    assert len(calls) == 10 if path == "stitched" else len(calls) >= 3  # ten steps, or chunks 1, 1, 2, …
+    assert len(calls) == 10 if path == "stitched" else len(calls) >= 2  # ten steps, or chunks 1, then 9
     assert run.summary["compile_seconds"] >= 0.3
     assert run.summary["steps_per_second"] > 9 / 0.3  # the 0.3 s is not in the 9 steps' time
     assert run.summary["wall_seconds"] >= 0.3

@@ -269,13 +269,14 @@ class Recorder:
 
     def latest(self, names: Iterable[str] = SERIES) -> dict[str, np.ndarray]:
         """The last sample of the series ``names``, as arrays of one row."""
-        if self.filled:
-            return {name: self.buffer[name][self.filled - 1 : self.filled].copy() for name in names}
+        if self.filled and self.buffer is not None:
+            buffer = self.buffer
+            return {name: buffer[name][self.filled - 1 : self.filled].copy() for name in names}
         return {name: self.last[name].copy() for name in names}
 
     def flush(self) -> None:
         """Pass the samples in the buffer on: to the sink, or to the chunks kept in memory."""
-        if not self.filled:
+        if not self.filled or self.buffer is None:
             return
         chunk = {name: values[: self.filled] for name, values in self.buffer.items()}
         if self.sink is None and self.filled == self.chunk_samples:
