@@ -25,7 +25,6 @@ Writes benchmarks/results/fclib_newton.md (machine, thread counts, load, the tab
 import os
 import sys
 
-
 from pinning import pin_threads  # the script's own folder is on sys.path
 
 pin_threads(sys.argv)
@@ -43,9 +42,9 @@ import scipy  # noqa: E402
 import contactlab  # noqa: E402
 from contactlab.errors import InputError  # noqa: E402
 from contactlab.fclib import read_problem  # noqa: E402
+from contactlab.fclib_bench import MAX_ITERATIONS as CAPS  # noqa: E402  (one table of caps)
+from contactlab.fclib_bench import PROBLEM_SUFFIXES  # noqa: E402
 from contactlab.lcp import natural_map_error, solve_friction_contact  # noqa: E402
-
-from contactlab.fclib_bench import MAX_ITERATIONS as CAPS, PROBLEM_SUFFIXES  # noqa: E402  (one table of caps)
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parent / "data" / "fclib"

@@ -22,7 +22,6 @@ import json  # noqa: E402
 import os  # noqa: E402
 import time  # noqa: E402
 
-import numpy as np  # noqa: E402
 from peers import DT, PILE_WARMUP, contactlab_pile, contactlab_pyramid, moved, pile_measures  # noqa: E402
 
 from contactlab import simulate  # noqa: E402

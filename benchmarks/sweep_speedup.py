@@ -101,7 +101,8 @@ def main():
         f"{machine()['cpu']}, {machine()['cores']} cores; each cell on one thread (simulate(threads=1)), "
         f"one thread per worker.",
         "",
-        "| load | workers | in series (s) | sweep, cells only (s) | speed-up | sweep with cluster start and report (s) | "
+        "| load | workers | in series (s) | sweep, cells only (s) | speed-up | "
+        "sweep with cluster start and report (s) | "
         "speed-up | engine overhead per cell (ms) | Σ cell time on workers (s) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]

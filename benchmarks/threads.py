@@ -22,7 +22,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-import peers  # noqa: E402  (the scenes; pins BLAS threads before NumPy loads)
+import peers  # noqa: E402, I001  (the scenes; pins BLAS threads before NumPy loads, so first)
 import numba  # noqa: E402
 from contactlab import simulate  # noqa: E402
 from contactlab.scene import load_scene  # noqa: E402
