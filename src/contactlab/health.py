@@ -236,9 +236,7 @@ class Health:
             else state.body_position
         )
         behind = self.plane_offsets[None, :] - centres @ self.plane_normals.T - self.half_thickness[:, None]
-        if not behind.max() > 1e-9:  # nothing behind (NaN: as argmax finds it first, nothing said)
-            return None
-        worst = np.unravel_index(np.argmax(behind), behind.shape)
+        worst = np.unravel_index(np.argmax(behind), behind.shape)  # a NaN first: it is not > 1e-9, nothing said
         if behind[worst] > 1e-9:
             return self._found(
                 Violation(
