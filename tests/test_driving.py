@@ -133,10 +133,19 @@ def test_path_function_and_fixed_pose():
     assert np.all(model.body_inverse_mass[1:] == 0) and np.all(model.body_inverse_inertia[1:] == 0)
 
 
-def test_driven_models_step_outside_the_compiled_loop():
-    model = _paddle_and_ball()
+def test_keyframed_drives_step_in_the_compiled_loop_and_python_functions_outside_it():
+    """Keyframes are evaluated by compiled code (driving.drive_velocities) in the loop and in the
+    methods' steps alike (tests/test_velocity_loop.py holds the two equal on box_pushed); a force
+    or a path given as a Python function can only be called from the methods' steps."""
     options = __import__("contactlab.methods.impulse", fromlist=["Options"]).Options()
-    assert not velocity_loop.applies(model, "impulse", options, "symplectic_euler")
+    assert velocity_loop.applies(_paddle_and_ball(), "impulse", options, "symplectic_euler")
+    for add in (
+        lambda builder: builder.add_force("ball", lambda t: ((1.0, 0.0, 0.0), (0.0, 0.0, 0.0))),
+        lambda builder: builder.add_path("ball", lambda t: ((t, 0.0, 0.1), (1.0, 0.0, 0.0, 0.0))),
+    ):
+        builder = _ball(gravity=(0.0, 0.0, -9.81))
+        add(builder)
+        assert not velocity_loop.applies(builder.finalize(), "impulse", options, "symplectic_euler")
 
 
 # ---- the pushed box: closed form under every method ---------------------------------------------

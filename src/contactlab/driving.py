@@ -21,14 +21,16 @@ keyframe list); callables are called once each per step.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import rotations
+from .compiling import njit
 from .errors import InputError
 from .validation import DIRECTION, FORCE, LENGTH, TORQUE, unit_quaternion, vector
 
@@ -171,49 +173,155 @@ def pad_keyframes(
     return times, values
 
 
-def bracket(times: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """For padded keyframe times (K, T) and a time t [s]: (index i (K,) of the segment
-    [t_i, t_i+1] holding t, fraction w (K,) in [0, 1] of the way along it); clamped at the ends."""
-    K, T = times.shape
-    index = np.clip((times <= t).sum(axis=1) - 1, 0, T - 2)
-    rows = np.arange(K)
-    start, end = times[rows, index], times[rows, index + 1]
-    return index, np.clip((t - start) / (end - start), 0.0, 1.0)
+DriveTable = namedtuple(
+    "DriveTable",
+    (
+        "constant_force",  # (B, 3) N: the constant forces summed per body
+        "constant_torque",  # (B, 3) N m
+        "keyed_body",  # (K,) int: the body of each keyframed load
+        "keyed_times",  # (K, T) s, padded (pad_keyframes)
+        "keyed_loads",  # (K, T, 6) N, N m: force then torque
+        "path_body",  # (Q,) int: the body of each keyframed path
+        "path_times",  # (Q, T) s, padded
+        "path_positions",  # (Q, T, 3) m
+        "path_orientations",  # (Q, T, 4) unit quaternions
+    ),
+)
+DriveTable.__doc__ = """A Drive's keyframes and constant loads as the compiled kernels take them (writable
+copies): what both the methods' steps and the compiled loop evaluate, with the same functions."""
 
 
-def interpolate(times: np.ndarray, values: np.ndarray, t: float) -> np.ndarray:
-    """Linear interpolation (K, d) of padded keyframes (``pad_keyframes``) at time t [s]."""
-    index, w = bracket(times, t)
-    rows = np.arange(len(index))
-    return (1.0 - w)[:, None] * values[rows, index] + w[:, None] * values[rows, index + 1]
+@njit(cache=True)
+def keyed_value(times: np.ndarray, values: np.ndarray, k: int, t: float) -> np.ndarray:
+    """Row k of padded keyframes (times (K, T) [s], values (K, T, d)) at time t [s], linearly
+    interpolated within the segment holding t, held at the first and last value outside them:
+    (d,)."""
+    count = 0
+    for j in range(times.shape[1]):
+        if times[k, j] <= t:
+            count += 1
+    i = min(max(count - 1, 0), times.shape[1] - 2)
+    w = min(max((t - times[k, i]) / (times[k, i + 1] - times[k, i]), 0.0), 1.0)
+    return (1.0 - w) * values[k, i] + w * values[k, i + 1]
 
 
-def slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Spherical linear interpolation (K, 4) from unit quaternions q0 to q1 (K, 4) by fractions
-    w (K,), along the shorter arc."""
-    dot = np.sum(q0 * q1, axis=1)
-    q1 = np.where(dot[:, None] < 0.0, -q1, q1)
-    dot = np.abs(dot)
-    angle = np.arccos(np.clip(dot, -1.0, 1.0))
-    sine = np.sin(angle)
-    near = sine < 1e-9  # (nearly) the same rotation: linear, then normalized
-    safe = np.where(near, 1.0, sine)
-    a = np.where(near, 1.0 - w, np.sin((1.0 - w) * angle) / safe)
-    b = np.where(near, w, np.sin(w * angle) / safe)
-    return rotations.normalize(a[:, None] * q0 + b[:, None] * q1)
+@njit(cache=True)
+def keyed_loads(table: DriveTable, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The constant and keyframed external (force (B, 3) [N], torque (B, 3) [N m]) at time t [s],
+    world frame, summed per body."""
+    force, torque = table.constant_force.copy(), table.constant_torque.copy()
+    for k in range(table.keyed_body.shape[0]):
+        value = keyed_value(table.keyed_times, table.keyed_loads, k, t)
+        force[table.keyed_body[k]] += value[:3]
+        torque[table.keyed_body[k]] += value[3:]
+    return force, torque
 
 
-def rotation_vectors(q_from: np.ndarray, q_to: np.ndarray) -> np.ndarray:
-    """The world rotation vectors φ (K, 3) [rad] with exp(φ) ⊗ q_from = q_to (the shorter way),
-    for unit quaternions (K, 4): the inverse of ``rotations.integrate`` over one step."""
-    conjugate = q_from * np.array([1.0, -1.0, -1.0, -1.0])
-    relative = rotations.multiply(q_to, conjugate)
-    relative = np.where(relative[:, :1] < 0.0, -relative, relative)
-    vector = relative[:, 1:]
-    sine = np.linalg.norm(vector, axis=1)
-    angle = 2.0 * np.arctan2(sine, relative[:, 0])
-    scale = np.where(sine > 1e-12, angle / np.where(sine > 1e-12, sine, 1.0), 2.0 / relative[:, 0])
-    return vector * scale[:, None]
+@njit(cache=True)
+def path_poses(table: DriveTable, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the keyframed paths are at time t [s]: positions (Q, 3) [m] interpolated linearly,
+    orientations (Q, 4) by spherical linear interpolation along the shorter arc (within 1e-9 rad
+    of the same rotation: linearly, then normalized)."""
+    Q = table.path_body.shape[0]
+    positions, orientations = np.empty((Q, 3)), np.empty((Q, 4))
+    times = table.path_times
+    for q in range(Q):
+        positions[q] = keyed_value(times, table.path_positions, q, t)
+        count = 0
+        for j in range(times.shape[1]):
+            if times[q, j] <= t:
+                count += 1
+        i = min(max(count - 1, 0), times.shape[1] - 2)
+        w = min(max((t - times[q, i]) / (times[q, i + 1] - times[q, i]), 0.0), 1.0)
+        q0, q1 = table.path_orientations[q, i], table.path_orientations[q, i + 1]
+        dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+        sign = -1.0 if dot < 0.0 else 1.0
+        angle = np.arccos(min(abs(dot), 1.0))
+        sine = np.sin(angle)
+        if sine < 1e-9:
+            a, b = 1.0 - w, w
+        else:
+            a, b = np.sin((1.0 - w) * angle) / sine, np.sin(w * angle) / sine
+        blend = a * q0 + (b * sign) * q1
+        orientations[q] = blend / np.sqrt(blend[0] ** 2 + blend[1] ** 2 + blend[2] ** 2 + blend[3] ** 2)
+    return positions, orientations
+
+
+@njit(cache=True)
+def rotation_vector(q_from: np.ndarray, q_to: np.ndarray) -> np.ndarray:
+    """The world rotation vector φ (3,) [rad] with exp(φ) ⊗ q_from = q_to, the shorter way, for
+    unit quaternions (4,): the inverse of ``rotations.integrate`` over one step."""
+    w0, x0, y0, z0 = q_from[0], -q_from[1], -q_from[2], -q_from[3]  # the conjugate of q_from
+    w1, x1, y1, z1 = q_to[0], q_to[1], q_to[2], q_to[3]
+    w = w1 * w0 - x1 * x0 - y1 * y0 - z1 * z0  # q_to ⊗ conjugate
+    x = w1 * x0 + x1 * w0 + y1 * z0 - z1 * y0
+    y = w1 * y0 - x1 * z0 + y1 * w0 + z1 * x0
+    z = w1 * z0 + x1 * y0 - y1 * x0 + z1 * w0
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    sine = np.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * np.arctan2(sine, w) / sine if sine > 1e-12 else 2.0 / w
+    return np.array([x * scale, y * scale, z * scale])
+
+
+@njit(cache=True)
+def path_velocities(
+    table: DriveTable, body_position: np.ndarray, body_orientation: np.ndarray, t: float, h: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The keyframed kinematic bodies' velocities over the step from t to t + h [s]: those that
+    carry their present pose (body_position (B, 3) [m], body_orientation (B, 4)) onto the path's
+    pose at t + h: (velocity (Q, 3) [m/s], angular velocity (Q, 3) [rad/s]), world frame."""
+    positions, orientations = path_poses(table, t + h)
+    Q = positions.shape[0]
+    velocity, angular = np.empty((Q, 3)), np.empty((Q, 3))
+    for q in range(Q):
+        b = table.path_body[q]
+        velocity[q] = (positions[q] - body_position[b]) / h
+        angular[q] = rotation_vector(body_orientation[b], orientations[q]) / h
+    return velocity, angular
+
+
+@njit(cache=True)
+def drive_velocities(
+    table: DriveTable | None,
+    t: float,
+    h: float,
+    inverse: tuple[np.ndarray, np.ndarray],
+    pose: tuple[np.ndarray, np.ndarray, np.ndarray],
+    extra: tuple[np.ndarray, np.ndarray] | None,
+    velocity: np.ndarray,
+    angular: np.ndarray,
+) -> None:
+    """A drive's part of the bodies' free velocities (loops L1–L3, stage 1), in place: the
+    external loads at the step's start t [s] (the table's, plus ``extra`` (force (B, 3) [N],
+    torque (B, 3) [N m]), a Python force function's, or None) added as v* += h m⁻¹ f and
+    ω* += h I⁻¹ τ (I⁻¹ in the world frame), then each keyframed kinematic body given the
+    velocity that carries it onto its path over the step, h [s]. ``inverse`` = the bodies'
+    (inverse masses (B,) [1/kg], principal inverse inertias (B, 3) [1/(kg m²)]); ``pose`` = their
+    (rotations (B, 3, 3), positions (B, 3) [m], orientations (B, 4)) at the step's start;
+    ``velocity``, ``angular`` (B, 3) [m/s], [rad/s]. ``table`` None (a scene nothing drives, an
+    argument typed None): nothing, and nothing of this is compiled."""
+    if table is None:
+        return
+    force, torque = keyed_loads(table, t)
+    if extra is not None:
+        force += extra[0]
+        torque += extra[1]
+    inverse_mass, inverse_inertia = inverse
+    rotation, position, orientation = pose
+    for b in range(velocity.shape[0]):
+        R = rotation[b]
+        for i in range(3):
+            velocity[b, i] += h * force[b, i] * inverse_mass[b]
+            change = 0.0  # (R diag(I⁻¹) Rᵀ τ)_i
+            for k in range(3):
+                along = R[0, k] * torque[b, 0] + R[1, k] * torque[b, 1] + R[2, k] * torque[b, 2]  # (Rᵀ τ)_k
+                change += R[i, k] * inverse_inertia[b, k] * along
+            angular[b, i] += h * change
+    moving, turning = path_velocities(table, position, orientation, t, h)
+    for q in range(table.path_body.shape[0]):
+        velocity[table.path_body[q]] = moving[q]
+        angular[table.path_body[q]] = turning[q]
 
 
 # ---- the drive of a model ---------------------------------------------------------------------
@@ -254,27 +362,42 @@ class Drive:
             self.constant_force.any() or self.constant_torque.any() or len(self.keyed_body) or self.force_functions
         )
 
-    def loads(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The external (force (B, 3) [N], torque (B, 3) [N m]) at time t [s], world frame."""
-        force, torque = self.constant_force.copy(), self.constant_torque.copy()
-        if len(self.keyed_body):
-            values = interpolate(self.keyed_times, self.keyed_loads, t)
-            np.add.at(force, self.keyed_body, values[:, :3])
-            np.add.at(torque, self.keyed_body, values[:, 3:])
+    @property
+    def has_functions(self) -> bool:
+        """Whether a force or a path is a Python function (which compiled code cannot call)."""
+        return bool(self.force_functions or self.path_functions)
+
+    @cached_property
+    def table(self) -> DriveTable:
+        """The keyframes and constant loads as the compiled kernels take them (writable copies)."""
+        return DriveTable(*(np.array(getattr(self, name)) for name in DriveTable._fields))
+
+    def function_loads(self, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The Python force functions' (force (B, 3) [N], torque (B, 3) [N m]) at time t [s]
+        summed per body, None where there are none."""
+        if not self.force_functions:
+            return None
+        force, torque = np.zeros(self.constant_force.shape), np.zeros(self.constant_torque.shape)
         for body, function in self.force_functions:
             f, tau = called_load(function, t)
             force[body] += f
             torque[body] += tau
         return force, torque
 
+    def loads(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The external (force (B, 3) [N], torque (B, 3) [N m]) at time t [s], world frame."""
+        force, torque = keyed_loads(self.table, float(t))
+        extra = self.function_loads(t)
+        if extra is not None:
+            force += extra[0]
+            torque += extra[1]
+        return force, torque
+
     def poses(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where the kinematic bodies' paths are at time t [s]: (bodies (Q,) int, positions
-        (Q, 3) [m], orientations (Q, 4) unit quaternions)."""
-        bodies = [self.path_body]
-        positions = [interpolate(self.path_times, self.path_positions, t)]
-        index, w = bracket(self.path_times, t)
-        rows = np.arange(len(index))
-        orientations = [slerp(self.path_orientations[rows, index], self.path_orientations[rows, index + 1], w)]
+        (Q, 3) [m], orientations (Q, 4) unit quaternions), the keyframed paths' first."""
+        position, orientation = path_poses(self.table, float(t))
+        bodies, positions, orientations = [self.path_body], [position], [orientation]
         for body, function in self.path_functions:
             position, orientation = called_pose(function, t)
             bodies.append(np.array([body]))
@@ -288,10 +411,16 @@ class Drive:
         """The kinematic bodies' velocities over the step from t to t + h [s]: those that carry
         their present pose (body_position (B, 3), body_orientation (B, 4)) onto the path's pose
         at t + h. Returns (bodies (Q,), velocity (Q, 3) [m/s], angular velocity (Q, 3) [rad/s],
-        world frame)."""
-        bodies, position, orientation = self.poses(t + h)
-        velocity = (position - body_position[bodies]) / h
-        return bodies, velocity, rotation_vectors(body_orientation[bodies], orientation) / h
+        world frame), the keyframed paths' first (``path_velocities``, compiled)."""
+        position, orientation = np.array(body_position, dtype=float), np.array(body_orientation, dtype=float)
+        velocity, angular = path_velocities(self.table, position, orientation, float(t), float(h))
+        bodies, velocities, angulars = [self.path_body], [velocity], [angular]
+        for body, function in self.path_functions:
+            target, turned = called_pose(function, t + h)
+            bodies.append(np.array([body]))
+            velocities.append(((target - position[body]) / h)[None])
+            angulars.append((rotation_vector(orientation[body], turned) / h)[None])
+        return np.concatenate(bodies), np.concatenate(velocities), np.concatenate(angulars)
 
 
 def called_load(function: Callable[[float], Any], t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -574,7 +574,8 @@ def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
     the recorder's buffer (a chunk no longer than its samples fit there: memory stays flat); the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
 
-    speed_limit = HARD_SPEED if health.allow_divergence else health.speed_limit
+    # the loop stops where check_state would: past the scene's speed limit, and always past HARD_SPEED
+    speed_limit = HARD_SPEED if health.allow_divergence else min(health.speed_limit, HARD_SPEED)
     step_index, chunk = 1, 1
     while step_index <= steps:
         interrupts.check()

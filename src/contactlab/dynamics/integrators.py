@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import rotations
 from ..compiling import njit
+from ..driving import drive_velocities
 from .cloth import block_product, jacobian_blocks, spring_forces, spring_pattern
 from .sparse_cholesky import CholeskyFactor, cholesky
 
@@ -521,22 +522,19 @@ def body_free_velocities(
     velocity that carries it onto its path over the step (their inverse mass is 0: gravity and
     forces do not move them). External forces reach the bodies only this way
     (``ModelBuilder.add_force``)."""
-    drive = model.drive
-    loads = drive is not None and drive.has_loads
-    if loads:
-        body_force, body_torque = drive.loads(state.time)
     body_velocity = state.body_velocity + dt * model.gravity
-    if loads:
-        body_velocity += dt * body_force * model.body_inverse_mass[:, None]
     gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
     angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
-    if loads:
-        inv = world_inverse_inertia(model, state.body_orientation)
-        angular += dt * np.einsum("bij,bj->bi", inv, body_torque)
-    if drive is not None and drive.kinematic.any():
-        bodies, body_velocity[bodies], angular[bodies] = drive.path_velocities(
-            state.body_position, state.body_orientation, state.time, dt
-        )
+    drive = model.drive
+    if drive is not None:  # the compiled stage the compiled loop runs too, then any Python functions' paths
+        t = float(state.time)
+        position, orientation = (np.array(a, dtype=float) for a in (state.body_position, state.body_orientation))
+        inverse = (np.array(model.body_inverse_mass, dtype=float), np.array(model.body_inverse_inertia, dtype=float))
+        pose = (rotations.matrices(orientation), position, orientation)
+        drive_velocities(drive.table, t, float(dt), inverse, pose, drive.function_loads(t), body_velocity, angular)
+        if drive.path_functions:
+            bodies, velocity, turning = drive.path_velocities(position, orientation, t, dt)
+            body_velocity[bodies], angular[bodies] = velocity, turning
     return body_velocity, angular
 
 

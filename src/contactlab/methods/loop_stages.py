@@ -32,6 +32,7 @@ from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts
 from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
+from ..driving import drive_velocities
 from ..dynamics import integrators
 from ..model import derived
 from ..state import ARRAYS as STATE_ARRAYS
@@ -69,6 +70,7 @@ LoopModel = namedtuple(
         "material_friction",  # (M,)
         "material_restitution",  # (M,)
         "cloth_of",  # (B + P,) int, −1: no cloth (always, here); None under two bodies and particles
+        "drive",  # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the scene
     ),
 )
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
@@ -99,6 +101,7 @@ def loop_model(model: Model) -> LoopModel:
         copy(model.material_friction, dtype=float),
         copy(model.material_restitution, dtype=float),
         np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
+        None if model.drive is None else model.drive.table,
     )
 
 
@@ -264,11 +267,13 @@ gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
 
 @njit(cache=True, inline="always")
 def free_motion(
-    model: LoopModel, motion: Motion, rotation: np.ndarray, h: float
+    model: LoopModel, motion: Motion, rotation: np.ndarray, h: float, t: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Stage 1: velocities after h [s] under gravity alone, v* = v + h g (the gyroscopic term by the
-    midpoint rule; pinned particles held): (body (B, 3), angular (B, 3), particle (P, 3))."""
-    return _free_motion(
+    """Stage 1: velocities after h [s] under gravity, v* = v + h g (the gyroscopic term by the
+    midpoint rule; pinned particles held), and in a driven scene the external loads at the step's
+    start t [s] and the kinematic bodies' path velocities (``driving.drive_velocities``, which the
+    methods' steps call too): (body (B, 3), angular (B, 3), particle (P, 3))."""
+    body, angular, particle = _free_motion(
         model.gravity,
         model.body_inertia,
         model.particle_pinned,
@@ -278,6 +283,10 @@ def free_motion(
         rotation,
         h,
     )
+    inverse = (model.body_inverse_mass, model.body_inverse_inertia)
+    pose = (rotation, motion.body_position, motion.body_orientation)
+    drive_velocities(model.drive, t, h, inverse, pose, None, body, angular)
+    return body, angular, particle
 
 
 @njit(cache=True, inline="always")

@@ -8,7 +8,8 @@ method's step from Python calls too, each written once: ``velocity_level.respond
 of L3), ``projection.project`` (stage 4 of L2, with the further passes here), and
 ``penalty.springs_at``, ``integrate`` and ``finish`` (stages 2, 4 and 4b–5 of L1). What stays
 twice is stages 1–3, which the step from Python runs for every scene (cloth springs, meshes,
-driven bodies, every integrator) and this loop for the rigid ones; ``tests/test_velocity_loop.py``
+every integrator) and this loop for the rigid ones (a driven scene's loads and paths are
+``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py``
 holds the two paths equal, bit for bit. The three steps share one module because they share one
 signature and one convention: a flag that is None leaves its branch uncompiled.
 """
@@ -53,22 +54,23 @@ def velocity_step(
     parallel: bool | None,
     motion: Motion,
     start: tuple,
+    time: float,
     carried: tuple,
 ) -> tuple:
     """One step of loop L3 with impulses or hard constraints on velocities.
 
     ``start`` = the poses at the step's start: the bodies' rotations (B, 3, 3), the colliders'
     centres (N, 3) and rotations (N, 3, 3) (``poses``; ``run`` computes them once for the sample
-    before and this step); ``carried`` = (the kept manifolds' eight fields, last step's contact
-    ids (K,), their impulses (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``,
-    ``constraints``, ``slabs`` and ``parallel`` (True, or None to leave a stage's branch
-    uncompiled) as ``Stepper`` sets them. Returns (positions, velocities — the state's six
-    arrays, new —, the carried triple for the next step, the contacts' count, sweeps made, the
-    sweeps' last change [m/s])."""
+    before and this step); ``time`` = the step's start [s] (a driven scene's loads and paths);
+    ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
+    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``constraints``, ``slabs``
+    and ``parallel`` (True, or None to leave a stage's branch uncompiled) as ``Stepper`` sets them.
+    Returns (positions, velocities — the state's six arrays, new —, the carried triple for the next
+    step, the contacts' count, sweeps made, the sweeps' last change [m/s])."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
-    free = free_motion(model, motion, rotation, h)
+    free = free_motion(model, motion, rotation, h, time)
     # 2. predict: how far each body and particle sweeps this step
     reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
@@ -173,6 +175,7 @@ def projection_step(
     parallel: bool | None,
     motion: Motion,
     start: tuple,
+    time: float,
     carried: tuple,
 ) -> tuple:
     """One step of loop L2 with projection (``projection.step``, stage for stage).
@@ -184,7 +187,7 @@ def projection_step(
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
-    free = free_motion(model, motion, rotation, h)
+    free = free_motion(model, motion, rotation, h, time)
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
     v_free = stacked(free[0], free[1], free[2])
     predicted = h * v_free
@@ -236,6 +239,7 @@ def penalty_step(
     penalty: PenaltyLoop,
     motion: Motion,
     start: tuple,
+    time: float,
     carried: tuple,
 ) -> tuple:
     """One step of loop L1 with penalty forces: detection and the free velocities compiled here,
@@ -262,7 +266,7 @@ def penalty_step(
         model, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
     )
     # 3. internal forces (gravity) → free velocities v*
-    free = free_motion(model, motion, rotation, h)
+    free = free_motion(model, motion, rotation, h, time)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
     v_new, forces, elongation, passes, residual, linear_iterations = integrate(

@@ -39,11 +39,12 @@ contact short of passing through, and the anchors moved on — the compiled stag
 It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
 convex shapes against planes and convex obstacles, the default contact granularity and normal
 (vertex, object), symplectic or backward Euler (the same motion without cloth), for
-constraints the matrix-free solver on velocities and for penalty the "cg" linear solver. A scene
-with cloth or meshes, another
-granularity, explicit Euler, or an assembled solver steps through the methods' ``step``, and
-so does a driven scene (external forces or kinematic bodies, contactlab.driving): a force or path
-given as a Python function cannot run in compiled code.
+constraints the matrix-free solver on velocities and for penalty the "cg" linear solver, driven
+or not (external forces and kinematic paths given as constants or keyframes, contactlab.driving:
+the loop and the methods' steps evaluate them with the same compiled ``drive_velocities``). A
+scene with cloth or meshes, another granularity, explicit Euler, or an assembled solver steps
+through the methods' ``step``, and so does a scene with a force or a path given as a Python
+function, which compiled code cannot call.
 
 Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
 colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
@@ -99,7 +100,7 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
         return False
     if model.spring_count or len(model.triangles) or (model.obstacle_shape == shapes.MESH).any():
         return False
-    if model.drive is not None:  # external forces or kinematic paths: the methods' step applies them
+    if model.drive is not None and model.drive.has_functions:  # Python functions: only the methods' step calls them
         return False
     if options.granularity != "vertex" or options.normal != "object":
         return False
@@ -154,19 +155,43 @@ def run(
         # argument typed None), and exactly one flag is not None (compile_flags)
         if projection is not None:
             positions, velocities, carried, count, sweeps, change, clear = projection_step(
-                model, settings, plan, large, keeping, slabs, parallel, motion, pose, carried
+                model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried
             )
         if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
             positions, velocities, carried, count, sweeps, change, clear = velocity_step(
-                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
+                model,
+                settings,
+                plan,
+                large,
+                keeping,
+                impulse,
+                constraints,
+                slabs,
+                parallel,
+                motion,
+                pose,
+                time,
+                carried,
             )
         if impulse is not None:
             positions, velocities, carried, count, sweeps, change, clear = velocity_step(
-                model, settings, plan, large, keeping, impulse, constraints, slabs, parallel, motion, pose, carried
+                model,
+                settings,
+                plan,
+                large,
+                keeping,
+                impulse,
+                constraints,
+                slabs,
+                parallel,
+                motion,
+                pose,
+                time,
+                carried,
             )
         if penalty is not None:
             positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = penalty_step(
-                model, settings, plan, large, slabs, parallel, penalty, motion, pose, carried
+                model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried
             )
         store(motion, positions, velocities)
         pose = poses(model, motion)
