@@ -7,6 +7,7 @@ broad phase; each dynamic collider is tested against the obstacles its bounds re
 
 from __future__ import annotations
 
+from collections import namedtuple
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -256,11 +257,10 @@ def collide_keeping(
     large = True if dynamic >= GRID_FROM else None  # None: the grids are never needed, nor compiled
     lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
-    mesh_parts = [
-        _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic)
-        for g in range(dynamic, dynamic + O)
-        if kinds[g] == shapes.MESH
-    ]
+    meshes = mesh_table(model)
+    mesh_parts = (
+        [] if meshes is None else [mesh_contacts(meshes, kinds, params, centers, rots, reach, (lower, upper), dynamic)]
+    )
     if granularity != "vertex" or normal != "object":
         reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
         surface_parts, bodies, obstacles = polytope_contacts(
@@ -335,24 +335,100 @@ def half_thickness_sums(
     return out
 
 
-def _against_mesh(model, g, kinds, params, centers, rots, reach, lower, upper, dynamic):
-    """Contacts of the dynamic colliders near mesh obstacle ``g`` (global index) with it."""
-    mesh = model.meshes[int(params[g, 0])]
-    grow = mesh.max_depth + reach[g]
-    near = ((lower[:dynamic] <= mesh.bounds[1] + grow) & (mesh.bounds[0] - grow <= upper[:dynamic])).all(axis=1)
-    near &= np.isin(kinds[:dynamic], MESH_PARTNERS)
-    chosen = np.nonzero(near)[0]
-    point, normal, depth, feature, owner = shapes_against_mesh(
-        kinds[chosen],
-        params[chosen],
-        centers[chosen],
-        rots[chosen],
-        reach[chosen] + reach[g],
-        mesh.geometry,
-        MAX_PER_SHAPE,
+MeshTable = namedtuple("MeshTable", ("obstacle", "lower", "upper", "max_depth", "geometry", "hull_store"))
+MeshTable.__doc__ = """A model's static meshes as ``mesh_contacts`` takes them: the global collider index of each
+mesh obstacle (M,) int64, its bounds (M, 3), (M, 3) [m], its max_depth (M,) [m], the MeshGeometry of each (a
+tuple of M) and the model's hull store (for hulls against a mesh)."""
+
+
+@derived
+def mesh_table(model: Model) -> MeshTable | None:
+    """The MeshTable of ``model``, None where it has no mesh obstacle; built once per Model."""
+    dynamic = model.body_count + model.particle_count
+    found = [o for o in range(model.obstacle_count) if model.obstacle_shape[o] == shapes.MESH]
+    if not found:
+        return None
+    kinds, params, _, _ = model.collider_table
+    meshes = [model.meshes[int(params[dynamic + o, 0])] for o in found]
+    return MeshTable(
+        np.array([dynamic + o for o in found], dtype=np.int64),
+        np.array([mesh.bounds[0] for mesh in meshes], dtype=float),
+        np.array([mesh.bounds[1] for mesh in meshes], dtype=float),
+        np.array([mesh.max_depth for mesh in meshes], dtype=float),
+        tuple(mesh.geometry for mesh in meshes),
         model.hull_store,
     )
-    return chosen[owner], np.full(len(owner), g), point, normal, depth, feature
+
+
+@njit(cache=True)
+def mesh_contacts(
+    meshes: MeshTable | None,
+    kinds: np.ndarray,
+    params: np.ndarray,
+    centers: np.ndarray,
+    rots: np.ndarray,
+    reach: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    dynamic: int,
+) -> tuple:
+    """The contacts of the dynamic colliders (the first ``dynamic`` of kinds (N,), params (N, 4),
+    centers (N, 3) [m], rots (N, 3, 3)) with the static meshes of ``meshes``, mesh after mesh:
+    each collider whose broad-phase ``bounds`` (lower, upper (N, 3) [m], grown by ``reach`` (N,))
+    overlap a mesh's bounds grown by its max_depth and reach, and that has a routine against
+    meshes (MESH_PARTNERS), against that mesh (``shapes_against_mesh``). Returns (a, b) global
+    collider indices (C,) int64 (b the mesh), point, normal (C, 3), depth (C,) [m], feature (C,)
+    int64. ``meshes`` None (no mesh in the scene, an argument typed None): none, and nothing of
+    this compiled."""
+    if meshes is None:
+        return (
+            np.zeros(0, dtype=np.int64),
+            np.zeros(0, dtype=np.int64),
+            np.zeros((0, 3)),
+            np.zeros((0, 3)),
+            np.zeros(0),
+            np.zeros(0, dtype=np.int64),
+        )
+    lower, upper = bounds
+    parts = []
+    for m in range(meshes.obstacle.shape[0]):
+        g = meshes.obstacle[m]
+        grow = meshes.max_depth[m] + reach[g]
+        chosen = np.zeros(dynamic, dtype=np.int64)
+        count = 0
+        for n in range(dynamic):
+            near = False
+            for kind in MESH_PARTNERS:
+                near |= kinds[n] == kind
+            for i in range(3):
+                near &= lower[n, i] <= meshes.upper[m, i] + grow and meshes.lower[m, i] - grow <= upper[n, i]
+            if near:
+                chosen[count] = n
+                count += 1
+        chosen = chosen[:count]
+        point, normal, depth, feature, owner = shapes_against_mesh(
+            kinds[chosen],
+            params[chosen],
+            centers[chosen],
+            rots[chosen],
+            reach[chosen] + reach[g],
+            meshes.geometry[m],
+            MAX_PER_SHAPE,
+            meshes.hull_store,
+        )
+        parts.append((chosen[owner], np.full(owner.shape[0], g, dtype=np.int64), point, normal, depth, feature))
+    total = 0
+    for part in parts:
+        total += part[0].shape[0]
+    a, b = np.empty(total, dtype=np.int64), np.empty(total, dtype=np.int64)
+    point, normal = np.empty((total, 3)), np.empty((total, 3))
+    depth, feature = np.empty(total), np.empty(total, dtype=np.int64)
+    start = 0
+    for part in parts:
+        end = start + part[0].shape[0]
+        a[start:end], b[start:end], point[start:end], normal[start:end] = part[0], part[1], part[2], part[3]
+        depth[start:end], feature[start:end] = part[4], part[5]
+        start = end
+    return a, b, point, normal, depth, feature
 
 
 def _assemble(model, a, b, point, normal, depth, feature, total):
