@@ -12,7 +12,7 @@ from contactlab.dynamics.integrators import (
     particle_system,
     solve_particle_system,
 )
-from contactlab.dynamics.sparse_cholesky import cholesky
+from contactlab.dynamics.sparse_cholesky import ancestors, cholesky, cholesky_solve_within
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.scene import load_scene
 
@@ -280,6 +280,27 @@ def test_block_cholesky_solves_the_draped_system_as_a_dense_solve(rng):
     np.testing.assert_allclose(factor.solve(system.rhs), np.linalg.solve(dense, system.rhs), rtol=1e-9, atol=1e-14)
     # the pattern is analysed once: the next matrix of that pattern reuses it
     assert cholesky(2.0 * A).analysis is factor.analysis
+
+
+def test_block_cholesky_solve_within_the_ancestors_matches_the_full_solve_there(rng):
+    # a right-hand side on a few particles: the solve over their elimination-tree ancestors alone
+    # gives the full solve's values on them (what W x = J A⁻¹ Jᵀ x reads), and skips the rest
+    A = draped_system().matrix.tocsr()
+    factor = cholesky(A)
+    a = factor.analysis
+    touched = np.sort(rng.choice(A.shape[0] // 3, size=6, replace=False)).astype(np.int64)
+    reach = ancestors(a.order, a.column_start, a.column_rows, touched)
+    position = np.argsort(a.order)
+    assert set(position[touched]) <= set(reach) and len(reach) < len(a.order)
+    for j in reach:  # closed under the elimination tree's parent (first row below the diagonal)
+        rows = a.column_rows[a.column_start[j] + 1 : a.column_start[j + 1]]
+        assert rows.size == 0 or rows[0] in reach
+    rhs = np.zeros((A.shape[0], 2))
+    dofs = (3 * touched[:, None] + np.arange(3)).ravel()
+    rhs[dofs] = rng.normal(size=(len(dofs), 2))
+    within = cholesky_solve_within(a.order, a.column_start, a.column_rows, factor.values, reach, rhs)
+    np.testing.assert_array_equal(within[dofs], factor.solve(rhs)[dofs])
+    np.testing.assert_allclose(within[dofs], np.linalg.solve(A.toarray(), rhs)[dofs], rtol=1e-9, atol=1e-12)
 
 
 def test_block_cholesky_declines_what_it_cannot_factor():

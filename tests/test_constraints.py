@@ -421,6 +421,19 @@ def test_implicit_cloth_whose_only_contact_is_a_pinned_vertex_runs():
     np.testing.assert_array_equal(run.state.particle_position[0], model.initial.particle_position[0])
 
 
+def test_compiled_delassus_product_gives_the_bits_of_the_sparse_solves():
+    # apgd's product W x = J A⁻¹ Jᵀ x in one compiled call, against SciPy's products around the
+    # factor's own solve (SystemInverse.solve, pinned DOFs held): the same sums in the same order
+    model, state = draped_cloth()
+    contacts = collide(model, state, constraints.Options().contact_margin)
+    _, inverse = constraints.implicit_free_velocities(model, state, 1 / 120)
+    J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
+    assert isinstance(inverse.factor, constraints.CholeskyFactor)  # so the compiled product serves
+    operator = constraints.delassus_operator(J, inverse)
+    x = np.random.default_rng(3).normal(size=J.shape[0])
+    np.testing.assert_array_equal(operator @ x, J @ inverse.solve(J.T @ x))
+
+
 def test_delassus_bound_lies_above_the_largest_eigenvalue_of_j_a_inverse_jt():
     model, state = draped_cloth()
     contacts = collide(model, state, constraints.Options().contact_margin)

@@ -21,6 +21,7 @@ from contactlab.lcp import (
     solve_lcp,
 )
 from contactlab.lcp.friction import largest_eigenvalue
+from contactlab.lcp.friction_sweeps import _project_cone
 
 # nsgs leaves these above 1e-6 in 3000 sweeps: the two BoxesStack ones (marked hard in the data README), the rock
 # pile (3.4e-5) and the spheres in a box (1.0e-5); newton solves all four (tests/test_newton.py)
@@ -325,6 +326,25 @@ def test_largest_eigenvalue_by_power_iteration(rng):
     estimate = largest_eigenvalue(lambda x: W @ x, W.shape[0], iterations=500, rtol=1e-10)
     assert estimate == pytest.approx(exact, rel=1e-4)
     assert largest_eigenvalue(lambda x: W @ x, W.shape[0], iterations=3) <= exact * (1 + 1e-12)
+
+
+def test_cone_projection_is_the_moreau_split(rng):
+    # apgd's compiled projection on K_μ: z = P_K(z) + P_K°(z), the two parts orthogonal, P_K(z) in
+    # the cone and z − P_K(z) in its polar cone {‖t‖ ≤ −n/μ}; checked contact by contact against
+    # these conditions, not against another implementation
+    nc = 400
+    mu = rng.uniform(0.0, 1.5, nc)
+    mu[:20] = 0.0
+    z = rng.normal(size=3 * nc) * rng.uniform(0.1, 10.0, 3 * nc)
+    p = _project_cone(z, mu).reshape(-1, 3)
+    rest = z.reshape(-1, 3) - p
+    eps = 1e-12 * np.abs(z).max()
+    assert np.all(np.linalg.norm(p[:, 1:], axis=1) <= mu * p[:, 0] + eps)
+    assert np.all(mu * np.linalg.norm(rest[:, 1:], axis=1) <= -rest[:, 0] + eps)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", p, rest), 0.0, atol=eps * np.abs(z).max())
+    inside = np.linalg.norm(z.reshape(-1, 3)[:, 1:], axis=1) <= mu * z.reshape(-1, 3)[:, 0]
+    assert inside.any() and (~inside).any()
+    np.testing.assert_array_equal(p[inside], z.reshape(-1, 3)[inside])
 
 
 def test_friction_input_errors():

@@ -8,7 +8,7 @@ python-fcl's GJK distance.
 import numpy as np
 import pytest
 
-from contactlab.collision.granularity import surface_contacts, triangle_samples
+from contactlab.collision.granularity import sample_points, surface_contacts, triangle_samples
 from contactlab.collision.mesh_contacts import shapes_against_mesh
 from contactlab.collision.mesh_sweep import sweep_sphere_mesh
 from contactlab.collision.polytope_mesh import box_mesh
@@ -431,6 +431,19 @@ def test_p2_granularities_on_a_plane(samples):
     for bad in (dict(granularity="triangle"), dict(normal="average"), dict(granularity="samples", samples=0)):
         with pytest.raises(InputError):
             surface_contacts(V, T, plane, **bad)
+
+
+@pytest.mark.parametrize("samples", [1, 2, 3])
+def test_compiled_samples_are_the_barycentric_sums_in_order(samples):
+    # sample t · S + s of the compiled sampling is Σ_k w_sk x_tk, the same bits as the NumPy sum
+    # it replaced; surface_contacts then makes carriers and weights for the chosen samples alone
+    V, T = cloth_pushed_into_plane()
+    pattern = triangle_samples(samples)
+    expected = np.einsum("sk,tkd->tsd", pattern, V[T]).reshape(-1, 3)
+    np.testing.assert_array_equal(sample_points(V, T.astype(np.int64), pattern), expected)
+    sampled = surface_contacts(V, T, plane_obstacle((0.0, 0.0, 1.0), 0.0), granularity="samples", samples=samples)
+    np.testing.assert_array_equal(sampled.weights, pattern[sampled.feature % len(pattern)])
+    np.testing.assert_array_equal(sampled.point[:, :2], expected[sampled.feature, :2])
 
 
 def test_p2b_against_sphere_and_mesh_obstacles():

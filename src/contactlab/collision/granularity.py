@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import rotations, shapes
+from ..compiling import njit
 from ..errors import InputError
 from ..meshes import TriangleMesh, vertex_normals
 from .signed_distance import ShapeObstacle, model_obstacle, points_against_mesh, points_against_shape
@@ -113,20 +114,10 @@ def surface_contacts(
     if granularity == "samples" and k < 1:
         raise InputError("samples", f"the samples per triangle edge must be ≥ 1, found {samples}")
     if granularity == "samples":
-        weights_pattern = triangle_samples(k)  # (S, 3)
-        S = len(weights_pattern)
-        corner_positions = vertices[triangles]  # (T, 3, 3)
-        points = np.einsum("sk,tkd->tsd", weights_pattern, corner_positions).reshape(-1, 3)
-        carriers = np.repeat(triangles, S, axis=0)  # (T·S, 3)
-        weights = np.tile(weights_pattern, (len(triangles), 1))
-        features = np.arange(len(points), dtype=np.int64)  # t · k² + s
+        pattern = triangle_samples(k)  # (S, 3)
+        points = sample_points(vertices, triangles, pattern)  # (T·S, 3), sample t · S + s
     else:
         points = vertices
-        carriers = np.full((len(vertices), 3), -1, dtype=np.int64)
-        carriers[:, 0] = np.arange(len(vertices))
-        weights = np.zeros((len(vertices), 3))
-        weights[:, 0] = 1.0
-        features = np.arange(len(vertices), dtype=np.int64)
     if isinstance(obstacle, TriangleMesh):
         if max_depth is None:
             max_depth = obstacle.max_depth
@@ -146,6 +137,15 @@ def surface_contacts(
         chosen = np.array([int(np.argmax(depth))]) if len(depth) and depth.max() >= -margin else np.zeros(0, int)
     else:
         chosen = np.nonzero(depth >= -margin)[0]
+    # the chosen points' carriers, barycentric weights and features (only theirs are made)
+    if granularity == "samples":
+        carriers, weights, features = triangles[chosen // len(pattern)], pattern[chosen % len(pattern)], chosen
+    else:
+        carriers = np.full((len(chosen), 3), -1, dtype=np.int64)
+        carriers[:, 0] = chosen
+        weights = np.zeros((len(chosen), 3))
+        weights[:, 0] = 1.0
+        features = chosen.astype(np.int64)
     if normal == "object":
         normals = obstacle_normal[chosen]
     else:
@@ -154,17 +154,34 @@ def surface_contacts(
             if object_vertex_normals is None
             else np.asarray(object_vertex_normals, dtype=float)
         )
-        blended = np.einsum("ck,ckd->cd", weights[chosen], own[np.maximum(carriers[chosen], 0)])
+        blended = np.einsum("ck,ckd->cd", weights, own[np.maximum(carriers, 0)])
         length = np.linalg.norm(blended, axis=1, keepdims=True)
         normals = -blended / np.where(length > 0.0, length, 1.0)
     return SurfaceContacts(
         point=0.5 * (points[chosen] + closest[chosen]),
         normal=normals,
         depth=depth[chosen],
-        vertices=carriers[chosen],
-        weights=weights[chosen],
-        feature=np.zeros(len(chosen), dtype=np.int64) if granularity == "object" else features[chosen],
+        vertices=carriers,
+        weights=weights,
+        feature=np.zeros(len(chosen), dtype=np.int64) if granularity == "object" else features,
     )
+
+
+@njit(cache=True)
+def sample_points(vertices: np.ndarray, triangles: np.ndarray, pattern: np.ndarray) -> np.ndarray:
+    """The samples (T·S, 3) [m] of every triangle (T, 3) of ``vertices`` (V, 3) [m] at the
+    barycentric weights ``pattern`` (S, 3) (``triangle_samples``): sample t · S + s is
+    Σ_k pattern[s, k] x[triangles[t, k]], summed over k in order."""
+    S = pattern.shape[0]
+    points = np.empty((triangles.shape[0] * S, 3))
+    for t in range(triangles.shape[0]):
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        for s in range(S):
+            for d in range(3):
+                points[t * S + s, d] = (
+                    pattern[s, 0] * vertices[a, d] + pattern[s, 1] * vertices[b, d] + pattern[s, 2] * vertices[c, d]
+                )
+    return points
 
 
 def _soup(model, state, bodies):

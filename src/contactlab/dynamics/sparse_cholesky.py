@@ -332,40 +332,88 @@ def cholesky_solve(
     """x (N, m) with A x = rhs (N, m) from A's block factor L (``cholesky_values``) and its
     analysis' ``order``, ``column_start``, ``column_rows``: L y = P b forward, Lᵀ z = y backward,
     x = Pᵀ z."""
-    t = order.shape[0]
     out = np.empty_like(rhs)
-    y = np.empty((t, 3))
+    y = np.empty((order.shape[0], 3))
+    every = np.arange(order.shape[0])
     for m in range(rhs.shape[1]):
-        for k in range(t):
-            for a in range(3):
-                y[k, a] = rhs[3 * order[k] + a, m]
-        for j in range(t):  # forward: y_j = L_jj⁻¹ y_j, then y_r −= L_rj y_j below
-            d = values[column_start[j]]
-            y0 = y[j, 0] / d[0, 0]
-            y1 = (y[j, 1] - d[1, 0] * y0) / d[1, 1]
-            y2 = (y[j, 2] - d[2, 0] * y0 - d[2, 1] * y1) / d[2, 2]
-            y[j, 0], y[j, 1], y[j, 2] = y0, y1, y2
-            for p in range(column_start[j] + 1, column_start[j + 1]):
-                r = column_rows[p]
-                for a in range(3):
-                    y[r, a] -= values[p, a, 0] * y0 + values[p, a, 1] * y1 + values[p, a, 2] * y2
-        for j in range(t - 1, -1, -1):  # backward: z_j = L_jjᵀ⁻¹ (y_j − Σ L_rjᵀ z_r)
-            s0, s1, s2 = y[j, 0], y[j, 1], y[j, 2]
-            for p in range(column_start[j] + 1, column_start[j + 1]):
-                r = column_rows[p]
-                z0, z1, z2 = y[r, 0], y[r, 1], y[r, 2]
-                s0 -= values[p, 0, 0] * z0 + values[p, 1, 0] * z1 + values[p, 2, 0] * z2
-                s1 -= values[p, 0, 1] * z0 + values[p, 1, 1] * z1 + values[p, 2, 1] * z2
-                s2 -= values[p, 0, 2] * z0 + values[p, 1, 2] * z1 + values[p, 2, 2] * z2
-            d = values[column_start[j]]
-            z2 = s2 / d[2, 2]
-            z1 = (s1 - d[2, 1] * z2) / d[1, 1]
-            z0 = (s0 - d[1, 0] * z1 - d[2, 0] * z2) / d[0, 0]
-            y[j, 0], y[j, 1], y[j, 2] = z0, z1, z2
-        for k in range(t):
-            for a in range(3):
-                out[3 * order[k] + a, m] = y[k, a]
+        _solve_on(order, column_start, column_rows, values, every, rhs, m, out, y)
     return out
+
+
+@njit(cache=True)
+def cholesky_solve_within(
+    order: np.ndarray,
+    column_start: np.ndarray,
+    column_rows: np.ndarray,
+    values: np.ndarray,
+    reach: np.ndarray,
+    rhs: np.ndarray,
+) -> np.ndarray:
+    """``cholesky_solve`` for a right-hand side (N, m) that is zero outside the blocks whose
+    positions in the factor's order ``reach`` (``ancestors``) holds, x read only there: the
+    triangular solves visit those positions alone (the rest of y stays 0, and Lᵀ z = y reads
+    only ancestors). Returns x (N, m), right on the reach's blocks (the same values as
+    ``cholesky_solve``'s there, up to the sign of a zero) and 0 elsewhere."""
+    out = np.zeros_like(rhs)
+    y = np.empty((order.shape[0], 3))
+    for m in range(rhs.shape[1]):
+        _solve_on(order, column_start, column_rows, values, reach, rhs, m, out, y)
+    return out
+
+
+@njit(cache=True)
+def ancestors(order: np.ndarray, column_start: np.ndarray, column_rows: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """The positions (rising) in the factor's order of ``blocks`` (original block numbers, repeats
+    allowed) and of all their ancestors in the elimination tree, whose parent of a column is its
+    first row below the diagonal: where L y = P b can be nonzero when b is zero off ``blocks``,
+    and all that Lᵀ z = y reads to give z on them."""
+    t = order.shape[0]
+    position = np.empty(t, dtype=np.int64)
+    for k in range(t):
+        position[order[k]] = k
+    mark = np.zeros(t, dtype=np.bool_)
+    for block in blocks:
+        j = position[block]
+        while j >= 0 and not mark[j]:
+            mark[j] = True
+            j = column_rows[column_start[j] + 1] if column_start[j + 1] - column_start[j] > 1 else -1
+    return np.nonzero(mark)[0].astype(np.int64)
+
+
+@njit(cache=True)
+def _solve_on(order, column_start, column_rows, values, reach, rhs, m, out, y):
+    """Column m of rhs (N, m) solved into out's column m, visiting the positions ``reach``
+    (rising; all of them for a full solve), y (t, 3) the work array."""
+    for k in reach:
+        for a in range(3):
+            y[k, a] = rhs[3 * order[k] + a, m]
+    for j in reach:  # forward: y_j = L_jj⁻¹ y_j, then y_r −= L_rj y_j below
+        d = values[column_start[j]]
+        y0 = y[j, 0] / d[0, 0]
+        y1 = (y[j, 1] - d[1, 0] * y0) / d[1, 1]
+        y2 = (y[j, 2] - d[2, 0] * y0 - d[2, 1] * y1) / d[2, 2]
+        y[j, 0], y[j, 1], y[j, 2] = y0, y1, y2
+        for p in range(column_start[j] + 1, column_start[j + 1]):
+            r = column_rows[p]
+            for a in range(3):
+                y[r, a] -= values[p, a, 0] * y0 + values[p, a, 1] * y1 + values[p, a, 2] * y2
+    for q in range(reach.shape[0] - 1, -1, -1):  # backward: z_j = L_jjᵀ⁻¹ (y_j − Σ L_rjᵀ z_r)
+        j = reach[q]
+        s0, s1, s2 = y[j, 0], y[j, 1], y[j, 2]
+        for p in range(column_start[j] + 1, column_start[j + 1]):
+            r = column_rows[p]
+            z0, z1, z2 = y[r, 0], y[r, 1], y[r, 2]
+            s0 -= values[p, 0, 0] * z0 + values[p, 1, 0] * z1 + values[p, 2, 0] * z2
+            s1 -= values[p, 0, 1] * z0 + values[p, 1, 1] * z1 + values[p, 2, 1] * z2
+            s2 -= values[p, 0, 2] * z0 + values[p, 1, 2] * z1 + values[p, 2, 2] * z2
+        d = values[column_start[j]]
+        z2 = s2 / d[2, 2]
+        z1 = (s1 - d[2, 1] * z2) / d[1, 1]
+        z0 = (s0 - d[1, 0] * z1 - d[2, 0] * z2) / d[0, 0]
+        y[j, 0], y[j, 1], y[j, 2] = z0, z1, z2
+    for k in reach:
+        for a in range(3):
+            out[3 * order[k] + a, m] = y[k, a]
 
 
 class CholeskyFactor:

@@ -56,7 +56,16 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError
 from ._checks import choice, positive_float, positive_int, square_csr, vector
-from .friction_sweeps import _diagonal_blocks, _nsgs, _staggered
+from .friction_sweeps import (
+    _apgd_step,
+    _diagonal_blocks,
+    _extrapolate,
+    _natural_map_norms,
+    _nsgs,
+    _project_cone,
+    _residual,
+    _staggered,
+)
 from .newton import solve_newton
 
 FRICTION_METHODS = ("nsgs", "staggered", "apgd", "newton")
@@ -123,42 +132,16 @@ def natural_map_error(
     r = vector(r, q.shape[0], "r")
     normalization = choice(normalization, ("max", "q", "fclib", "none"), "normalization")
     u = csr @ r + q
-    absolute = _natural_map_norm(r, u, mu)
+    absolute, norm_r, norm_u = _natural_map_norms(mu, r, u, False)
     norm_q = float(np.linalg.norm(q))
     if normalization == "max":
-        scale = max(norm_q, float(np.linalg.norm(r)), float(np.linalg.norm(u)))
+        scale = max(norm_q, norm_r, norm_u)
         return absolute / scale if scale > 0 else absolute
     if normalization == "q":
         return absolute / norm_q if norm_q > 0 else absolute
     if normalization == "fclib":
         return absolute / (1.0 + np.sqrt(norm_q))
     return absolute
-
-
-def _natural_map_norm(r, u, mu) -> float:
-    """‖F(r)‖₂ of the natural map at reactions r and velocities u (both (3·nc,)), unnormalized."""
-    z = r.reshape(-1, 3) - _de_saxce(u, mu).reshape(-1, 3)
-    return float(np.linalg.norm(r - _project_cone(z.ravel(), mu)))
-
-
-def _de_saxce(u, mu):
-    """û = u + [μ‖u_T‖, 0, 0] per contact, (3·nc,)."""
-    uu = u.reshape(-1, 3).copy()
-    uu[:, 0] += mu * np.linalg.norm(uu[:, 1:], axis=1)
-    return uu.ravel()
-
-
-def _project_cone(r, mu):
-    """Each contact's (r_N, r_T) (3·nc,) projected on its cone ‖r_T‖ ≤ μ r_N (Euclidean)."""
-    rr = r.reshape(-1, 3).copy()
-    rn, rt = rr[:, 0], np.linalg.norm(rr[:, 1:], axis=1)
-    dual = mu * rt <= -rn
-    outside = ~dual & (rt > mu * rn)
-    pn = (mu[outside] * rt[outside] + rn[outside]) / (1.0 + mu[outside] ** 2)
-    rr[outside, 1:] *= (mu[outside] * pn / rt[outside])[:, None]
-    rr[outside, 0] = pn
-    rr[dual] = 0.0
-    return rr.ravel()
 
 
 def largest_eigenvalue(
@@ -206,12 +189,10 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
       Without this test apgd oscillates for ever between 4.3e-5 and about 5e-4 on Capsules-i100,
       and stalls at 3.9e-6 on Capsules-i101; with it both reach 1e-8 (docs/lcp.md).
     """
-    norm_q = float(np.linalg.norm(q))
+    norm_q = math.sqrt(float(q @ q))
 
     def error_of(r, Wr):
-        u = Wr + q
-        scale = max(norm_q, float(np.linalg.norm(r)), float(np.linalg.norm(u)))
-        return _natural_map_norm(r, u, mu) / (scale if scale > 0 else 1.0)
+        return _residual(mu, r, Wr + q, False, norm_q)
 
     Wr = product(r)
     best, best_W, best_error = r.copy(), Wr, error_of(r, Wr)
@@ -221,22 +202,21 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     y, Wy, theta = r.copy(), Wr.copy(), 1.0
     phase_lowest = math.inf  # lowest error since the last restart
     for iteration in range(1, max_iterations + 1):
-        gradient = _de_saxce(Wy + q, mu)
-        new = _project_cone(y - step * gradient, mu)
+        new = np.empty_like(r)
+        uphill = _apgd_step(y, Wy, q, mu, step, r, new)  # new = P_K(y − step û(W y + q))
         W_new = product(new)
         error = error_of(new, W_new)
         if error < best_error:
-            best, best_W, best_error = new.copy(), W_new, error
+            best, best_W, best_error = new, W_new, error
             if error <= tol:
                 return best, best_W, iteration, best_error
         phase_lowest = min(phase_lowest, error)
         next_theta = 0.5 * theta * (math.sqrt(theta * theta + 4.0) - theta)
         beta = theta * (1.0 - theta) / (theta * theta + next_theta)
-        if gradient @ (new - r) > 0.0 or error > RESTART_RISE * phase_lowest:
+        if uphill > 0.0 or error > RESTART_RISE * phase_lowest:
             beta, next_theta = 0.0, 1.0  # restart the momentum
             phase_lowest = error
-        y = new + beta * (new - r)
-        Wy = W_new + beta * (W_new - Wr)
+        y, Wy = _extrapolate(new, r, beta), _extrapolate(W_new, Wr, beta)
         r, Wr, theta = new, W_new, next_theta
     return best, best_W, max_iterations, best_error
 

@@ -2,8 +2,10 @@
 non-smooth Gauss-Seidel (``_nsgs``, SPEC F4a) and the normal/friction alternation
 (``_staggered``, SPEC F4b) on the reactions r (m,) = (3·nc,) in place, W in CSR arrays
 (``indptr``, ``indices``, ``data``) and its 3×3 diagonal blocks (``_diagonal_blocks``), and the
-normalized natural-map error they stop on (``_error``). ``solve_friction_contact`` runs them;
-the semi-smooth Newton solver (:mod:`contactlab.lcp.newton`) warm starts and restarts with NSGS.
+normalized natural-map error they stop on (``_error``), with the pieces of apgd's step: one
+contact's cone projection (``_cone_point``, which the error's natural map uses too), the gradient
+step (``_apgd_step``) and the extrapolation. ``solve_friction_contact`` runs them; the
+semi-smooth Newton solver (:mod:`contactlab.lcp.newton`) warm starts and restarts with NSGS.
 """
 
 from __future__ import annotations
@@ -27,15 +29,27 @@ def _row_dot(indptr, indices, data, r, i):
 
 
 @njit(cache=True)
-def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
-    """Fill ``u = W r + q`` and return the normalized residual (cone natural map, or box split form)."""
-    m = q.shape[0]
-    for i in range(m):
-        u[i] = _row_dot(indptr, indices, data, r, i) + q[i]
+def _cone_point(m_a, zn, z1, z2):
+    """(zn, z1, z2), one contact's [N, T1, T2], projected (Euclidean) on its cone ‖t‖ ≤ μ n of
+    friction coefficient ``m_a``: 0 in the dual cone, itself inside, else onto the cone's side."""
+    zt = math.sqrt(z1 * z1 + z2 * z2)
+    if m_a * zt <= -zn:
+        return 0.0, 0.0, 0.0
+    if zt <= m_a * zn:
+        return zn, z1, z2
+    pn = (m_a * zt + zn) / (1.0 + m_a * m_a)
+    scale = m_a * pn / zt
+    return pn, scale * z1, scale * z2
+
+
+@njit(cache=True)
+def _natural_map_norms(mu, r, u, pyramid):
+    """(‖F(r)‖, ‖r‖, ‖u‖) for reactions r (m,) and velocities u (m,) = W r + q: F the cone's
+    natural map, or the box split form for the pyramid (:mod:`contactlab.lcp.friction`)."""
     total = 0.0
     norm_r = 0.0
     norm_u = 0.0
-    for a in range(m // 3):
+    for a in range(r.shape[0] // 3):
         i = 3 * a
         rn, rt1, rt2 = r[i], r[i + 1], r[i + 2]
         un, ut1, ut2 = u[i], u[i + 1], u[i + 2]
@@ -49,24 +63,67 @@ def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
             f2 = rt2 - min(max(rt2 - ut2, -bound), bound)
         else:
             # z = r − û, û = u + [μ‖u_T‖, 0, 0]; F = r − P_K(z)
-            zn = rn - un - m_a * math.sqrt(ut1 * ut1 + ut2 * ut2)
-            z1 = rt1 - ut1
-            z2 = rt2 - ut2
-            zt = math.sqrt(z1 * z1 + z2 * z2)
-            if m_a * zt <= -zn:
-                pn, p1, p2 = 0.0, 0.0, 0.0
-            elif zt <= m_a * zn:
-                pn, p1, p2 = zn, z1, z2
-            else:
-                pn = (m_a * zt + zn) / (1.0 + m_a * m_a)
-                scale = m_a * pn / zt
-                p1, p2 = scale * z1, scale * z2
+            pn, p1, p2 = _cone_point(m_a, rn - un - m_a * math.sqrt(ut1 * ut1 + ut2 * ut2), rt1 - ut1, rt2 - ut2)
             fn, f1, f2 = rn - pn, rt1 - p1, rt2 - p2
         total += fn * fn + f1 * f1 + f2 * f2
-    scale = max(norm_q, math.sqrt(norm_r), math.sqrt(norm_u))
+    return math.sqrt(total), math.sqrt(norm_r), math.sqrt(norm_u)
+
+
+@njit(cache=True)
+def _residual(mu, r, u, pyramid, norm_q):
+    """The normalized natural-map error ‖F(r)‖ / max(|q|, ‖r‖, ‖u‖) (1 for a zero maximum) of r
+    (m,) at u (m,) = W r + q, |q| given."""
+    absolute, norm_r, norm_u = _natural_map_norms(mu, r, u, pyramid)
+    scale = max(norm_q, norm_r, norm_u)
     if scale <= 0.0:
         scale = 1.0
-    return math.sqrt(total) / scale
+    return absolute / scale
+
+
+@njit(cache=True)
+def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
+    """Fill ``u = W r + q`` and return the normalized residual (cone natural map, or box split form)."""
+    m = q.shape[0]
+    for i in range(m):
+        u[i] = _row_dot(indptr, indices, data, r, i) + q[i]
+    return _residual(mu, r, u, pyramid, norm_q)
+
+
+@njit(cache=True)
+def _project_cone(r, mu):
+    """Each contact's (r_N, r_T) of r (3·nc,) projected on its cone ‖r_T‖ ≤ μ r_N (Euclidean), a
+    new (3·nc,)."""
+    out = np.empty_like(r)
+    for a in range(r.shape[0] // 3):
+        i = 3 * a
+        out[i], out[i + 1], out[i + 2] = _cone_point(mu[a], r[i], r[i + 1], r[i + 2])
+    return out
+
+
+@njit(cache=True)
+def _apgd_step(y, Wy, q, mu, step, r, new):
+    """One projected gradient step of apgd (:func:`contactlab.lcp.friction._apgd`) from y (m,)
+    with W y (m,): ``new = P_K(y − step · û)``, û = W y + q + [μ‖u_T‖, 0, 0] (De Saxcé's
+    velocity, the gradient), written into ``new`` (m,). Returns ûᵀ (new − r) for the last
+    iterate r (m,): above 0, the step went uphill (apgd's gradient restart)."""
+    uphill = 0.0
+    for a in range(q.shape[0] // 3):
+        i = 3 * a
+        u1, u2 = Wy[i + 1] + q[i + 1], Wy[i + 2] + q[i + 2]
+        gn = Wy[i] + q[i] + mu[a] * math.sqrt(u1 * u1 + u2 * u2)
+        pn, p1, p2 = _cone_point(mu[a], y[i] - step * gn, y[i + 1] - step * u1, y[i + 2] - step * u2)
+        new[i], new[i + 1], new[i + 2] = pn, p1, p2
+        uphill += gn * (pn - r[i]) + u1 * (p1 - r[i + 1]) + u2 * (p2 - r[i + 2])
+    return uphill
+
+
+@njit(cache=True)
+def _extrapolate(new, old, beta):
+    """Nesterov's extrapolation new + β (new − old), a new array (m,)."""
+    out = np.empty_like(new)
+    for i in range(new.shape[0]):
+        out[i] = new[i] + beta * (new[i] - old[i])
+    return out
 
 
 @njit(cache=True)
