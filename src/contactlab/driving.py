@@ -192,16 +192,23 @@ copies): what both the methods' steps and the compiled loop evaluate, with the s
 
 
 @njit(cache=True)
-def keyed_value(times: np.ndarray, values: np.ndarray, k: int, t: float) -> np.ndarray:
-    """Row k of padded keyframes (times (K, T) [s], values (K, T, d)) at time t [s], linearly
-    interpolated within the segment holding t, held at the first and last value outside them:
-    (d,)."""
+def segment(times: np.ndarray, k: int, t: float) -> tuple[int, float]:
+    """For row k of padded keyframe times (K, T) [s] and a time t [s]: (index i of the segment
+    [t_i, t_i+1] holding t, fraction w in [0, 1] of the way along it), clamped at the ends."""
     count = 0
     for j in range(times.shape[1]):
         if times[k, j] <= t:
             count += 1
     i = min(max(count - 1, 0), times.shape[1] - 2)
-    w = min(max((t - times[k, i]) / (times[k, i + 1] - times[k, i]), 0.0), 1.0)
+    return i, min(max((t - times[k, i]) / (times[k, i + 1] - times[k, i]), 0.0), 1.0)
+
+
+@njit(cache=True)
+def keyed_value(times: np.ndarray, values: np.ndarray, k: int, t: float) -> np.ndarray:
+    """Row k of padded keyframes (times (K, T) [s], values (K, T, d)) at time t [s], linearly
+    interpolated within the segment holding t, held at the first and last value outside them:
+    (d,)."""
+    i, w = segment(times, k, t)
     return (1.0 - w) * values[k, i] + w * values[k, i + 1]
 
 
@@ -227,12 +234,7 @@ def path_poses(table: DriveTable, t: float) -> tuple[np.ndarray, np.ndarray]:
     times = table.path_times
     for q in range(Q):
         positions[q] = keyed_value(times, table.path_positions, q, t)
-        count = 0
-        for j in range(times.shape[1]):
-            if times[q, j] <= t:
-                count += 1
-        i = min(max(count - 1, 0), times.shape[1] - 2)
-        w = min(max((t - times[q, i]) / (times[q, i + 1] - times[q, i]), 0.0), 1.0)
+        i, w = segment(times, q, t)
         q0, q1 = table.path_orientations[q, i], table.path_orientations[q, i + 1]
         dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
         sign = -1.0 if dot < 0.0 else 1.0
