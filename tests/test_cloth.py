@@ -211,8 +211,10 @@ def test_backward_euler_system_pins_and_matches_its_definition(rng):
     assert np.all(velocities[pinned] == 0.0)
 
 
+@pytest.fixture(scope="module")
 def draped_system():
-    """The backward Euler system of the built-in cloth_drape 0.6 s in (625 vertices over a sphere)."""
+    """The backward Euler system of the built-in cloth_drape 0.6 s in (625 vertices over a sphere):
+    simulated once for the module (the tests only read it)."""
     scene = load_scene("cloth_drape")
     state = simulate(scene.model, "impulse", scene.dt, 0.6, integrator=scene.integrator, record_every=72).state
     return particle_system(scene.model, state, scene.dt)
@@ -238,10 +240,10 @@ def jacobi_iterations(matrix, rhs, tolerance):
     raise AssertionError("point Jacobi did not converge")
 
 
-def test_block_jacobi_conjugate_gradients_converge_in_fewer_iterations_to_the_same_solution():
+def test_block_jacobi_conjugate_gradients_converge_in_fewer_iterations_to_the_same_solution(draped_system):
     # a cloth's springs couple a vertex's x, y and z: inverting each vertex's 3 × 3 diagonal block
     # is a better preconditioner than its diagonal alone, for the same answer
-    system = draped_system()
+    system = draped_system
     A, b = system.matrix.tocsr(), system.rhs
     everything = np.ones(len(b), dtype=bool)
     x, iterations, converged = conjugate_gradients(A, b, b / A.diagonal(), everything, 1e-10, 10 * len(b))
@@ -269,8 +271,8 @@ def test_conjugate_gradients_on_part_of_a_triple_solve_its_active_part_alone(rng
     np.testing.assert_allclose(x[active], np.linalg.solve(compact, b[active]), rtol=1e-9, atol=1e-12)
 
 
-def test_block_cholesky_solves_the_draped_system_as_a_dense_solve(rng):
-    system = draped_system()
+def test_block_cholesky_solves_the_draped_system_as_a_dense_solve(draped_system, rng):
+    system = draped_system
     A = system.matrix.tocsr()
     factor = cholesky(A)
     assert factor is not None

@@ -110,11 +110,14 @@ def test_no_built_in_scene_trips_a_check_at_its_defaults(name):
 
 # ---- signals ------------------------------------------------------------------------------------
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# the folder holding the contactlab these tests import: the command line runs that same copy, so it
+# loads the kernels the tests compiled into Numba's cache (a cache entry belongs to its source file's
+# path: a pip-installed contactlab and the checkout's src/ are two copies, compiled twice)
+PACKAGES = os.path.dirname(os.path.dirname(os.path.abspath(health.__file__)))
 
 
 def _interrupted_run(tmp_path, delay, signum, method):
-    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "src"))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([PACKAGES, os.environ.get("PYTHONPATH", "")]))
     process = subprocess.Popen(
         [sys.executable, "-m", "contactlab", "run", "box_pyramid", "--duration", "2", "--method", method],
         cwd=tmp_path,
