@@ -1,12 +1,11 @@
 """Issue 36, item 1: the built-in scenes that joined the compiled loop, on each path.
 
-    python3 benchmarks/loop_scenes.py                  # box_pushed and mesh_bowl, impulse and projection
+    python3 benchmarks/loop_scenes.py                  # box_pushed, impulse and projection
     python3 benchmarks/loop_scenes.py --first-run      # also each path's first run on an empty cache
 
-``box_pushed`` (a kinematic paddle on keyframes pushes a box) and ``mesh_bowl`` (a sphere, a box
-and 49 particles in a static triangle-mesh bowl) stepped through the methods' ``step`` until
-their drive and their meshes became compiled stages (``driving.drive_velocities``,
-``collision.mesh_contacts``) that the loop and the methods' steps share. For each scene and
+``box_pushed`` (a kinematic paddle on keyframes pushes a box) stepped through the methods' ``step``
+until its drive became a compiled stage (``driving.drive_velocities``) that the loop and the
+methods' steps share. For each scene and
 method: the whole scene's steps/s (the summary's figure: stepping only) and the process CPU time
 of the run, through the compiled loop (``compiled_loop=True``, after a run that compiles it)
 and through the methods' step (``compiled_loop=False``). ``--first-run``: each path's first run
@@ -21,7 +20,7 @@ import sys
 import tempfile
 import time
 
-SCENES = ("box_pushed", "mesh_bowl")
+SCENES = ("box_pushed",)
 METHODS = ("impulse", "projection")
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -70,7 +69,7 @@ def main(argv):
     from contactlab.compiling import available_threads
 
     lines = [
-        "# Driven and mesh scenes: compiled loop against the methods' step",
+        "# Driven scenes: compiled loop against the methods' step",
         "",
         f"Numba threads {available_threads()}, load average {os.getloadavg()[0]:.2f} at the start.",
         "",

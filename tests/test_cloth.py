@@ -284,10 +284,10 @@ def test_block_cholesky_solves_the_draped_system_as_a_dense_solve(draped_system,
     assert cholesky(2.0 * A).analysis is factor.analysis
 
 
-def test_block_cholesky_solve_within_the_ancestors_matches_the_full_solve_there(rng):
+def test_block_cholesky_solve_within_the_ancestors_matches_the_full_solve_there(draped_system, rng):
     # a right-hand side on a few particles: the solve over their elimination-tree ancestors alone
     # gives the full solve's values on them (what W x = J A⁻¹ Jᵀ x reads), and skips the rest
-    A = draped_system().matrix.tocsr()
+    A = draped_system.matrix.tocsr()
     factor = cholesky(A)
     a = factor.analysis
     touched = np.sort(rng.choice(A.shape[0] // 3, size=6, replace=False)).astype(np.int64)

@@ -223,7 +223,13 @@ def _csr_arrays(matrix: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 @njit(cache=True)
-def delassus_product(rows, columns, free, factor, x):
+def delassus_product(
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    columns: tuple[np.ndarray, np.ndarray, np.ndarray],
+    free: np.ndarray,
+    factor: tuple,
+    x: np.ndarray,
+) -> np.ndarray:
     """W x = J A⁻¹ Jᵀ x (3C,) for x (3C,), as ``SystemInverse.solve`` applies A⁻¹ (pinned
     degrees of freedom held at 0): ``rows`` J (3C, N) and ``columns`` Jᵀ (N, 3C) as CSR arrays
     (indptr, indices, data), ``free`` (N,) bool, ``factor`` A's block Cholesky factor as

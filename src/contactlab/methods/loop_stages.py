@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import collision, diagnostics, rotations, shapes
-from ..collision import assemble_contacts, dynamic_pairs_possible, mesh_contacts, mesh_table
+from ..collision import assemble_contacts, dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES, pair_families
 from ..collision.manifolds import copy_rows, reuse_or_generate
@@ -71,7 +71,6 @@ LoopModel = namedtuple(
         "material_restitution",  # (M,)
         "cloth_of",  # (B + P,) int, −1: no cloth (always, here); None under two bodies and particles
         "drive",  # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the scene
-        "meshes",  # the static meshes (collision.MeshTable); None: the scene has none
     ),
 )
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
@@ -103,7 +102,6 @@ def loop_model(model: Model) -> LoopModel:
         copy(model.material_restitution, dtype=float),
         np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
         None if model.drive is None else model.drive.table,
-        mesh_table(model),
     )
 
 
@@ -378,11 +376,10 @@ def detect(
     phase found any pair within reach)."""
     families, hull_store = plan
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    lower, upper, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
     total = model.kinds.shape[0]
     made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
-    meshed = mesh_contacts(model.meshes, model.kinds, model.params, centers, rots, reach, (lower, upper), B + P)
-    if pairs.shape[0] == 0 and meshed[0].shape[0] == 0:  # nothing near: no narrow phase, nothing to assemble
+    if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
         return no_contacts(), made, False
     # a branch of its own on ``keeping is None``: Numba prunes only that form, and the ball's
     # loop then compiles no manifold reuse
@@ -410,16 +407,11 @@ def detect(
             total,
         )
     point, normal, depth, feature, owner = found
-    a, b = pairs[owner, 0], pairs[owner, 1]
-    if meshed[0].shape[0]:  # then the meshes' contacts, after the pairs' (as collision.collide_keeping orders them)
-        a, b = np.concatenate((a, meshed[0])), np.concatenate((b, meshed[1]))
-        point, normal = np.concatenate((point, meshed[2])), np.concatenate((normal, meshed[3]))
-        depth, feature = np.concatenate((depth, meshed[4])), np.concatenate((feature, meshed[5]))
     if depth.shape[0] == 0:
         return no_contacts(), made, True
     contacts = assemble_contacts(
-        a,
-        b,
+        pairs[owner, 0],
+        pairs[owner, 1],
         point,
         normal,
         depth,
@@ -630,9 +622,15 @@ def record(
     # would find no pair): on an airborne ball the pass was a quarter of a sampled step
     if not clear:
         touching = np.zeros(model.kinds.shape[0])
-        dynamic = motion.body_position.shape[0] + motion.particle_position.shape[0]
-        lower, upper, pairs = candidate_pairs(
-            model.kinds, model.params, centers, rots, touching, dynamic, model.cloth_of, large
+        _, _, pairs = candidate_pairs(
+            model.kinds,
+            model.params,
+            centers,
+            rots,
+            touching,
+            motion.body_position.shape[0] + motion.particle_position.shape[0],
+            model.cloth_of,
+            large,
         )
         if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
             depth = generate_contacts(
@@ -641,11 +639,6 @@ def record(
             found = depth.shape[0]
             if found:
                 deepest = max(0.0, depth.max())
-        bounds = (lower, upper)
-        meshed = mesh_contacts(model.meshes, model.kinds, model.params, centers, rots, touching, bounds, dynamic)
-        if meshed[4].shape[0]:
-            found += meshed[4].shape[0]
-            deepest = max(deepest, meshed[4].max())
     samples.max_penetration[row] = deepest
     samples.contact_count[row] = found if contact_count < 0 else contact_count
     samples.solver_iterations[row] = sweeps

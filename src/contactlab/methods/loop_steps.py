@@ -7,11 +7,10 @@ manifolds: :mod:`contactlab.methods.loop_stages`) and calls for the rest the com
 method's step from Python calls too, each written once: ``velocity_level.respond`` (stages 4–5
 of L3), ``projection.project`` (stage 4 of L2, with the further passes here), and
 ``penalty.springs_at``, ``integrate`` and ``finish`` (stages 2, 4 and 4b–5 of L1). What stays
-twice is stages 1–3, which the step from Python runs for every scene (cloth springs, every
-integrator) and this loop for the rigid ones (a driven scene's loads and paths are
-``driving.drive_velocities`` in both, and the meshes' contacts ``collision.mesh_contacts``);
-``tests/test_velocity_loop.py`` holds the two paths equal, bit for bit. The three steps share one
-module because they share one
+twice is stages 1–3, which the step from Python runs for every scene (cloth springs, meshes,
+every integrator) and this loop for the rigid ones (a driven scene's loads and paths are
+``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py``
+holds the two paths equal, bit for bit. The three steps share one module because they share one
 signature and one convention: a flag that is None leaves its branch uncompiled.
 """
 

@@ -9,7 +9,7 @@ stages 4–5 compiled, in ``respond`` — the contacts' rows, the targets of the
 constraints' simultaneous ``impact_targets``), the warm start (``warm_impulses``), the sweeps
 (``loop_stages.solve``) and the positions split at the time of impact (``split_at_impact``).
 ``respond`` is what the compiled loop's step (``loop_steps.velocity_step``) runs and what
-``step`` calls from Python for the scenes the loop does not serve (cloth, a force or
+``step`` calls from Python for the scenes the loop does not serve (cloth, meshes, a force or
 path given as a Python function, explicit Euler): each stage exists once.
 
 Both methods ask each contact's normal relative velocity after the step to reach a target,

@@ -37,13 +37,12 @@ contact short of passing through, and the anchors moved on — the compiled stag
 :mod:`contactlab.methods.penalty`'s ``step`` calls one by one.
 
 It serves the scenes it can (``applies``): rigid bodies and free particles of the primitive and
-convex shapes against planes, convex obstacles and static triangle meshes (the meshes' contacts
-by ``collision.mesh_contacts``, which the methods' detection calls too), the default contact granularity and normal
+convex shapes against planes and convex obstacles, the default contact granularity and normal
 (vertex, object), symplectic or backward Euler (the same motion without cloth), for
 constraints the matrix-free solver on velocities and for penalty the "cg" linear solver, driven
 or not (external forces and kinematic paths given as constants or keyframes, contactlab.driving:
 the loop and the methods' steps evaluate them with the same compiled ``drive_velocities``). A
-scene with cloth, another granularity, explicit Euler, or an assembled solver steps
+scene with cloth or meshes, another granularity, explicit Euler, or an assembled solver steps
 through the methods' ``step``, and so does a scene with a force or a path given as a Python
 function, which compiled code cannot call.
 
@@ -61,6 +60,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba.core import event
 
+from .. import shapes
 from ..collision.families import pair_families
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import needs_hulls
@@ -98,7 +98,7 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
     "constraints") with these Options and integrator (see the module docstring for what it serves)."""
     if method not in METHODS or integrator not in ("symplectic_euler", "backward_euler"):
         return False
-    if model.spring_count or len(model.triangles):
+    if model.spring_count or len(model.triangles) or (model.obstacle_shape == shapes.MESH).any():
         return False
     if model.drive is not None and model.drive.has_functions:  # Python functions: only the methods' step calls them
         return False
