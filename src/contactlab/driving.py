@@ -413,16 +413,29 @@ class Drive:
         """The kinematic bodies' velocities over the step from t to t + h [s]: those that carry
         their present pose (body_position (B, 3), body_orientation (B, 4)) onto the path's pose
         at t + h. Returns (bodies (Q,), velocity (Q, 3) [m/s], angular velocity (Q, 3) [rad/s],
-        world frame), the keyframed paths' first (``path_velocities``, compiled)."""
+        world frame), the keyframed paths' first (``path_velocities``, compiled), then the
+        functions' (``function_path_velocities``)."""
         position, orientation = np.array(body_position, dtype=float), np.array(body_orientation, dtype=float)
         velocity, angular = path_velocities(self.table, position, orientation, float(t), float(h))
-        bodies, velocities, angulars = [self.path_body], [velocity], [angular]
-        for body, function in self.path_functions:
+        bodies, velocities, angulars = self.function_path_velocities(position, orientation, t, h)
+        return (
+            np.concatenate([self.path_body, bodies]),
+            np.concatenate([velocity, velocities]),
+            np.concatenate([angular, angulars]),
+        )
+
+    def function_path_velocities(
+        self, body_position: np.ndarray, body_orientation: np.ndarray, t: float, h: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``path_velocities`` of the paths given as Python functions alone (each called at t + h):
+        (bodies (F,), velocity (F, 3) [m/s], angular velocity (F, 3) [rad/s]); F = 0 without any."""
+        bodies, velocity, angular = [], np.zeros((len(self.path_functions), 3)), np.zeros((len(self.path_functions), 3))
+        for f, (body, function) in enumerate(self.path_functions):
             target, turned = called_pose(function, t + h)
-            bodies.append(np.array([body]))
-            velocities.append(((target - position[body]) / h)[None])
-            angulars.append((rotation_vector(orientation[body], turned) / h)[None])
-        return np.concatenate(bodies), np.concatenate(velocities), np.concatenate(angulars)
+            bodies.append(body)
+            velocity[f] = (target - body_position[body]) / h
+            angular[f] = rotation_vector(np.ascontiguousarray(body_orientation[body], dtype=float), turned) / h
+        return np.array(bodies, dtype=np.int64), velocity, angular
 
 
 def called_load(function: Callable[[float], Any], t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -362,7 +362,7 @@ def mesh_table(model: Model) -> MeshTable | None:
 
 @njit(cache=True)
 def mesh_contacts(
-    meshes: MeshTable | None,
+    meshes: MeshTable,
     kinds: np.ndarray,
     params: np.ndarray,
     centers: np.ndarray,
@@ -377,17 +377,7 @@ def mesh_contacts(
     overlap a mesh's bounds grown by its max_depth and reach, and that has a routine against
     meshes (MESH_PARTNERS), against that mesh (``shapes_against_mesh``). Returns (a, b) global
     collider indices (C,) int64 (b the mesh), point, normal (C, 3), depth (C,) [m], feature (C,)
-    int64. ``meshes`` None (no mesh in the scene, an argument typed None): none, and nothing of
-    this compiled."""
-    if meshes is None:
-        return (
-            np.zeros(0, dtype=np.int64),
-            np.zeros(0, dtype=np.int64),
-            np.zeros((0, 3)),
-            np.zeros((0, 3)),
-            np.zeros(0),
-            np.zeros(0, dtype=np.int64),
-        )
+    int64."""
     lower, upper = bounds
     parts = []
     for m in range(meshes.obstacle.shape[0]):

@@ -532,9 +532,8 @@ def body_free_velocities(
         inverse = (np.array(model.body_inverse_mass, dtype=float), np.array(model.body_inverse_inertia, dtype=float))
         pose = (rotations.matrices(orientation), position, orientation)
         drive_velocities(drive.table, t, float(dt), inverse, pose, drive.function_loads(t), body_velocity, angular)
-        if drive.path_functions:
-            bodies, velocity, turning = drive.path_velocities(position, orientation, t, dt)
-            body_velocity[bodies], angular[bodies] = velocity, turning
+        bodies, velocity, turning = drive.function_path_velocities(position, orientation, t, dt)
+        body_velocity[bodies], angular[bodies] = velocity, turning
     return body_velocity, angular
 
 
