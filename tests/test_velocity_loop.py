@@ -8,10 +8,9 @@ import pytest
 from conftest import ball_on_plane
 
 from contactlab import SimulationDiverged, simulate
-from contactlab.methods import get, impulse, velocity_loop
+from contactlab.methods import get, impulse, loop_steps, velocity_loop
 from contactlab.record import SERIES
 from contactlab.scene import builtin_scenes, load_scene
-from contactlab.simulation import SHORT_FIRST_RUN
 
 STEPS = 60
 
@@ -155,57 +154,40 @@ def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
     assert run.arrays["time"][-1] == pytest.approx(steps * dt)
 
 
-def test_a_short_first_run_calls_the_loops_compiled_steps_from_python_and_a_long_one_compiles_the_loop(
-    monkeypatch,
-):
-    """compiled_loop=None: the loop compiled where its machine code exists, or where the run repays
-    compiling it; else the loop's own body run from Python, calling the same compiled steps — a
-    short first run on an empty cache would spend more compiling the loop than it saves."""
+def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_steps_own_machine_code():
+    """Issue 36: a short run on an empty cache stepped the loop's body from Python (about 30 ms a
+    720-step ball run against 3 ms compiled), because compiling ``run`` linked its step in and
+    cost 10–14 s more. ``run`` now calls the step by address (compiling.call_entry): its machine
+    code holds no copy of the step, so every run takes it, however short, and the loop run from
+    Python calls the same machine code, giving the same numbers."""
     scene = load_scene("bouncing_ball")
     model, options = scene.model, impulse.Options()
 
-    def chosen(steps, compiled_loop=None):
+    def stepper(compiled_loop=None):
         return velocity_loop.stepper_for(
-            model, "impulse", options, scene.integrator, scene.dt, model.state(), steps, compiled_loop
+            model, "impulse", options, scene.integrator, scene.dt, model.state(), compiled_loop
         )
 
-    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
-    assert not chosen(4000).compiled  # 4000 steps save < 1 s of Python
-    assert velocity_loop.repays_compiling(10**6)  # a million save about 35 s
-    assert chosen(10**6).compiled
-    assert chosen(10, compiled_loop=True).compiled
-    assert chosen(10**6, compiled_loop=False) is None  # the method's own step
-    stepped = simulate(model, "impulse", scene.dt, 90 * scene.dt, record_every=7)
-    assert not stepped.summary["compiled_loop"] and stepped.summary["stepping"] == SHORT_FIRST_RUN
-    monkeypatch.undo()
-    looped = simulate(model, "impulse", scene.dt, 90 * scene.dt, record_every=7, compiled_loop=True)
-    assert looped.summary["compiled_loop"]
-    for name, series in looped.arrays.items():  # one body of the loop, compiled or not: the same numbers
-        np.testing.assert_array_equal(series, stepped.arrays[name], err_msg=name)
-    assert chosen(10).compiled_already()  # compiled now (or cached before)
-    assert simulate(model, "impulse", scene.dt, 10 * scene.dt).summary["compiled_loop"]
-    assert chosen(10).compiled
+    short = simulate(model, "impulse", scene.dt, 10 * scene.dt)
+    assert short.summary["compiled_loop"] and short.summary["stepping"] == "compiled loop"
+    assert stepper(compiled_loop=False) is None  # the method's own step
+    entry = stepper().entry_point()
+    assert entry.function is loop_steps.velocity_step and entry.numba_type.arguments in entry.function.overloads
+    (machine_code,) = [velocity_loop.run.overloads[t] for t in velocity_loop.run.overloads if entry.numba_type in t]
+    assert "velocity_step" not in machine_code.library.get_llvm_str()  # the step is not compiled into run
 
+    def advanced(through):  # the loop's body from Python: call_entry calls the step's dispatcher
+        twin = stepper()
+        samples = twin.samples_for(13)  # steps 1–90 sampled every 7th and the last: 7, 14, …, 84, 90
+        made, diverged, _, time, written, *_ = through(*twin._run_arguments(90, 1, 90, 7, samples, 1e6))
+        return (made, diverged, time, written), samples, twin.motion
 
-def test_runs_stepped_from_python_compile_the_loop_once_they_have_cost_what_compiling_it_costs(monkeypatch):
-    """The rule of renting before buying: the runs of one kind (shape families, method) step from
-    Python until, summed over the process, that stepping has cost what compiling the loop would
-    (``LOOP_COMPILE_SECONDS``); from the next chunk of steps on, the loop is compiled."""
-    scene = load_scene("bouncing_ball")
-    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
-    first = simulate(scene.model, "impulse", scene.dt, 30 * scene.dt)
-    assert first.summary["stepping"] == SHORT_FIRST_RUN
-    spent = sum(velocity_loop._seconds_from_python.values())
-    assert spent > 0.0
-    # reached after the second run's first chunk (one step, a thirtieth of the first run): its next compiles
-    monkeypatch.setattr(velocity_loop, "LOOP_COMPILE_SECONDS", 1.001 * spent)
-    second = simulate(scene.model, "impulse", scene.dt, 200 * scene.dt)
-    assert second.summary["compiled_loop"]
-    whole = simulate(scene.model, "impulse", scene.dt, 200 * scene.dt, compiled_loop=True)
-    for name, series in whole.arrays.items():
-        np.testing.assert_array_equal(series, second.arrays[name], err_msg=name)
+    from_python, compiled = advanced(velocity_loop.run.py_func), advanced(velocity_loop.run)
+    assert from_python[0] == compiled[0] and from_python[0][3] == 13
+    for name, series in from_python[1]._asdict().items():
+        np.testing.assert_array_equal(series, getattr(compiled[1], name), err_msg=name)
+    for python_array, compiled_array in zip(from_python[2], compiled[2]):
+        np.testing.assert_array_equal(python_array, compiled_array)
 
 
 def test_compiled_loop_must_be_a_yes_or_no():
@@ -215,26 +197,16 @@ def test_compiled_loop_must_be_a_yes_or_no():
         simulate(load_scene("bouncing_ball").model, "impulse", 0.01, 0.1, compiled_loop="yes")
 
 
-def test_projection_takes_the_loop_where_it_repays_compiling_and_compiles_only_its_own_step(monkeypatch):
-    """simulate(method="projection") chooses its path as the velocity methods do; the loop is
-    told the method by flags that are None for the steps it does not take (Numba then leaves
-    them uncompiled), and takes the projection's passes."""
+def test_projection_takes_the_loop_and_compiles_only_its_own_step():
+    """simulate(method="projection") takes the loop as the velocity methods do; the loop is told
+    the method by flags that are None for the steps it does not take (Numba then leaves them
+    uncompiled), and calls the projection's step."""
     scene = load_scene("box_stack")
     model, options = scene.model, get("projection").Options(passes=3)
-
-    def chosen(steps, compiled_loop=None):
-        return velocity_loop.stepper_for(
-            model, "projection", options, scene.integrator, scene.dt, model.state(), steps, compiled_loop
-        )
-
-    monkeypatch.setattr(velocity_loop.Stepper, "compiled_already", lambda self: False)
-    monkeypatch.setattr(velocity_loop, "_seconds_from_python", {})  # as in a fresh process: nothing rented yet
-    assert not chosen(4000).compiled
-    stepper = chosen(10**6)
+    stepper = velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state())
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
     assert stepper.flags[2:5] == (None, None, True)  # (constraints, impulse, projection)
+    assert stepper.entry_point().function is loop_steps.projection_step
     assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (None, True, None)
     assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
-    monkeypatch.undo()
-    assert simulate(model, "projection", scene.dt, 10 * scene.dt, compiled_loop=True).summary["compiled_loop"]
-    assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]  # compiled now
+    assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]

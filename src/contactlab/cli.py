@@ -440,21 +440,13 @@ def _fit(args):
 
 def _where_time_went(summary):
     """Where the run's wall time went: compiling kernels or loading them from the cache, and
-    recording (each when it took a tenth of a second or more), and the stepping's speed, with why
-    it is slow where a short first run stepped from Python."""
-    from .simulation import SHORT_FIRST_RUN
-
+    recording (each when it took a tenth of a second or more), and the stepping's speed."""
     parts = []
     if summary["compile_seconds"] >= 0.1:
         parts.append(f"{summary['compile_seconds']:.2f} s compiling or loading kernels")
     if summary["recording_seconds"] >= 0.1:
         parts.append(f"{summary['recording_seconds']:.2f} s recording")
     parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping")
-    if summary.get("stepping") == SHORT_FIRST_RUN:
-        parts[-1] += (
-            ", its compiled steps called from Python: a run this short does not compile the stepping loop "
-            "(about 12 s more, once); a longer run or compiled_loop=True does, and later runs step through it"
-        )
     return ", ".join(parts)
 
 

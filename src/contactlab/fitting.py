@@ -44,7 +44,6 @@ import numpy as np
 
 from . import __version__, cluster, interrupts
 from .errors import InputError
-from .methods.velocity_loop import repays_compiling
 from .prediction import checked_inputs, method_names, predict
 from .record import atomic_path, make_folders, remove_empty
 
@@ -191,11 +190,6 @@ def fit(
         with context as connected:
             say(f"Dask dashboard: {cluster.dashboard(connected)}")
             runs = _Runs(connected, source, overrides, os.path.join(out, "evaluations"), progress)
-            # a method's every run (budget × training files, then the held-out ones) is one scene
-            # of one size: where together they repay compiling the loop, each takes it (a worker
-            # compiles it once, cached for the others), as a sweep's alike cells do
-            steps = max(int(round(m.duration / loaded.dt)) for m in measurements)
-            runs.compiled_loop = repays_compiling(steps, budget * len(train) + len(held)) or None
             result = {}
             evaluated = {}
             for method in names:
@@ -263,7 +257,6 @@ class _Runs:
             progress,
         )
         self.scene_text = _digest_text(source)
-        self.compiled_loop: bool | None = None  # as simulate takes it: None, the run's length decides
         self.file_digests: dict[str, str] = {}
 
     def rows(self, method: str, varied: Sequence[Vary], values: Mapping[str, float], measurements) -> list[dict]:
@@ -282,7 +275,6 @@ class _Runs:
                     "settings": settings,
                     "method": method,
                     "measurement": os.path.abspath(measurement.path),
-                    "compiled_loop": self.compiled_loop,
                 }
                 jobs.append((key, job))
         for key, row in cluster.run_tasks(self.client, predict, jobs, progress=self.progress, description="runs"):

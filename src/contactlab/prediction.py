@@ -162,10 +162,10 @@ def predict(job: Mapping[str, Any]) -> dict[str, Any]:
     built-in name or a file's absolute path), ``settings`` (``--set`` strings), ``method`` (one
     of the four, or a peer engine, "mujoco" or "pybullet": contactlab.peers, started from the
     same measured state),
-    ``measurement`` (the file's path), ``paths`` (whether to return the simulated path),
-    ``compiled_loop`` (as ``simulate`` takes it). Returns the row (:data:`COLUMNS`; with
-    ``paths``, also ``simulated``: positions (T, B, 3) [m] at the measured times); a run that
-    diverges or fails gives its status and message, never an exception."""
+    ``measurement`` (the file's path), ``paths`` (whether to return the simulated path).
+    Returns the row (:data:`COLUMNS`; with ``paths``, also ``simulated``: positions (T, B, 3)
+    [m] at the measured times); a run that diverges or fails gives its status and message,
+    never an exception."""
     from .scene import load_scene
 
     started = clock.perf_counter()
@@ -182,7 +182,7 @@ def predict(job: Mapping[str, Any]) -> dict[str, Any]:
             started_there = replace(scene.model, initial=state)  # a peer starts from its model's state
             run = peers.simulate(started_there, job["method"], scene.dt, scene.duration, scene_name=scene.name)
         else:
-            run = scene.simulate(state=state, threads=1, compiled_loop=job.get("compiled_loop"))
+            run = scene.simulate(state=state, threads=1)
     except SimulationDiverged as error:
         return _failed(row, "diverged", first_line(error), started)
     except Inexpressible as error:  # a peer that cannot be given the scene: said, not failed

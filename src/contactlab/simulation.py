@@ -215,11 +215,10 @@ def simulate(
     shown on stderr (:mod:`contactlab.progress`: a bar on a terminal, else a line every 5 s); threads: "auto" (the
     default, see :func:`contactlab.threads.set_threads`: all cores, or one while that steps faster
     on a busy machine) or a whole number — results are bit for bit the same on any count;
-    compiled_loop: for every method on the scenes the stepping loop serves, None (the default)
-    runs it compiled when it is compiled or cached already or the run is long enough to repay
-    compiling it, and else its body from Python calling the same compiled steps; True compiled
-    always, False never: the method's own ``step`` (:func:`contactlab.methods.velocity_loop.stepper_for`)
-    — the numbers are the same bit for bit every way; allow_divergence: keep going when a health
+    compiled_loop: for every method on the scenes the stepping loop serves, None (the default) or
+    True runs them through the compiled loop, whatever the run's length, False through the
+    method's own ``step`` (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are
+    the same bit for bit either way; allow_divergence: keep going when a health
     check fails (:mod:`contactlab.health`), recording it in the summary, instead of stopping;
     memory_limit [bytes]: the most the run may need by its estimate (:mod:`contactlab.budget`; None:
     half this machine's memory, ``math.inf`` none); trajectory: None (the default) keeps the samples
@@ -307,7 +306,7 @@ def _record_run(plan, recorder, state, chooser, health, clock):
     before the run's first collision (the plausibility check's)."""
     model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop = plan
     compiling, notice, run_started = clock  # the run: its first sample, the steps, the other samples
-    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, steps, compiled_loop)
+    stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, compiled_loop)
     if stepper is not None and not stepper.parallel:
         chooser.nothing_parallel()  # a small scene's loop: no thread trials, no chunks cut short by them
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
@@ -374,8 +373,8 @@ def _record_run(plan, recorder, state, chooser, health, clock):
             setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step) + tally.later_compile_seconds
         ),
         "recording_seconds": tally.recording_seconds,
-        "compiled_loop": stepper is not None and stepper.compiled,
-        "stepping": "python" if stepper is None else "compiled loop" if stepper.compiled else SHORT_FIRST_RUN,
+        "compiled_loop": stepper is not None,
+        "stepping": "python" if stepper is None else "compiled loop",
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         **run_measures(model, tally, totals, steps),
@@ -554,10 +553,6 @@ def _advance(bar, step_index, made):
     bar.update(made)
 
 
-# the summary's "stepping" of a run the compiled loop serves that ran the loop's body from Python, its
-# compiled steps called one by one: too short to repay compiling the loop, whose machine code no
-# earlier run had cached (velocity_loop.stepper_for)
-SHORT_FIRST_RUN = "compiled steps from python, too short to compile the loop"
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 # the next chunk at most this many times the last: its pace, measured on few steps, may be off,
 # but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
@@ -568,8 +563,7 @@ WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "step
 
 
 def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health):
-    """Step through the loop (methods.velocity_loop: compiled, or its body from Python calling the
-    same compiled steps), in chunks of steps that each take
+    """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
     about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside, into
     the recorder's buffer (a chunk no longer than its samples fit there: memory stays flat); the
     loop stops itself past the health's speed limit, and the rest is checked after each chunk."""

@@ -23,7 +23,6 @@ import json
 import math
 import os
 import time
-from collections import Counter
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -97,16 +96,13 @@ def run(
 
 
 def _jobs(cells, study, out):
-    alike = Counter((cell.scene, cell.method) for cell in cells)  # the runs each worker's loop may serve
-    return [(cell.key, _job(cell, study, out, alike[cell.scene, cell.method])) for cell in cells]
+    return [(cell.key, _job(cell, study, out)) for cell in cells]
 
 
-def _job(cell, study, out, alike=1):
-    """What a worker needs to run ``cell``: plain data, so it pickles anywhere. ``alike``: the
-    cells to run of the same scene and method (whether compiling the stepping loop repays)."""
+def _job(cell, study, out):
+    """What a worker needs to run ``cell``: plain data, so it pickles anywhere."""
     return {
         "key": cell.key,
-        "alike": alike,
         "scene": cell.scene,
         "method": cell.method,
         "overrides": cell.overrides(),
@@ -135,9 +131,7 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     from . import peers
     from .closed_form import checks as closed_form_checks
     from .compare import metrics
-    from .methods.velocity_loop import repays_compiling
     from .scene import load_scene
-    from .validation import run_length
 
     started = time.perf_counter()
     try:
@@ -151,13 +145,8 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
                 trajectory=job["trajectory"],
                 scene_name=scene.name,
             )
-        else:
-            # the study's cells of this scene and method together may repay compiling the stepping loop
-            # where one cell alone would not (a study is thousands of short runs): then it is compiled
-            # once and serves them all, cached for every worker (velocity_loop.repays_compiling)
-            steps = run_length(scene.dt, scene.duration)[2]
-            compile_loop = repays_compiling(steps, job.get("alike", 1)) or None
-            run = scene.simulate(threads=1, trajectory=job["trajectory"], compiled_loop=compile_loop)
+        else:  # the compiled loop wherever it serves, short cells included: compiled once, cached for every worker
+            run = scene.simulate(threads=1, trajectory=job["trajectory"])
     except peers.Inexpressible as gap:
         return _failed_row(job, "not run", gap.sentence, started)
     except SimulationDiverged as error:

@@ -341,7 +341,7 @@ def _norm(v):
     return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The poses at ``motion``'s positions: the bodies' rotation matrices (B, 3, 3), and the
     colliders' centres (N, 3) [m] and rotations (N, 3, 3) (``collision.collider_poses``): what a
@@ -529,7 +529,7 @@ def _solve_grouped(settings, rows, contacts, u, target, warm, order, starts, sub
 # (an atomic operation each), which on a one-ball scene cost more than the copying itself
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def store(motion: Motion, positions: tuple, velocities: tuple) -> None:
     """Copy a step's new positions and velocities into the state's arrays."""
     copy_rows(motion.body_position, positions[0])
@@ -540,7 +540,7 @@ def store(motion: Motion, positions: tuple, velocities: tuple) -> None:
     copy_rows(motion.particle_velocity, velocities[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def healthy(motion: Motion, max_speed: float) -> bool:
     """Every value finite and no body centre or particle faster than max_speed [m/s]."""
     # every array checked whole, without returning early: one exit keeps the pruning effective
@@ -574,7 +574,7 @@ def _within(velocity, max_speed):
     return within
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def record(
     samples: Samples,
     row: int,

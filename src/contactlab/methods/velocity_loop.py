@@ -11,18 +11,16 @@ compiled code, with no Python between steps. The stages are the ones
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 A method's step is compiled only for the runs of that method (``compile_flags``).
 
-**One loop, compiled or not.** ``run`` is written once and runs two ways: compiled (one call for
-thousands of steps), or — for a run too short to repay compiling it, on a cache that does not
-hold it yet — its own body run by Python (``run.py_func``), which calls the very same compiled
-step (``velocity_step``, ``projection_step`` or ``penalty_step``), ``store``, ``poses``,
-``healthy`` and ``record``, so both give the same numbers bit for bit by construction. From
-Python each step costs the calls' unboxing (tens of µs); compiled, a ball's step costs a few µs.
-Steps from Python of one kind of run are summed over the process, and once they have cost what
-compiling ``run`` costs (``LOOP_COMPILE_SECONDS``), the next chunk of steps compiles it: renting
-stops once it has cost the price of buying.
+**Every run compiled, short ones included.** ``run`` calls its method's step by address
+(:func:`contactlab.compiling.call_entry`): the step's machine code, compiled once for the run's
+types (``Stepper.entry_point``), is not compiled again inside ``run``, whose own machine code is
+the loop, the state stored, checked and recorded — 2–3 s to compile where linking the step in
+cost 10–14 s. So every run the loop serves runs compiled from its first step, and its next run
+in a fresh process loads it from the cache. The price is the call's boundary: each step passes
+its arrays across a call the optimizer cannot see into, their references counted at each
+crossing, about 0.5 µs a step (a quarter of a one-ball step, nothing on a pile).
 
-This module holds ``run`` — the one compiled dispatcher, whose Numba cache ``Stepper`` consults
-— and the Python side (the model and settings in the loop's form, the Steppers,
+This module holds ``run`` and the Python side (the model and settings in the loop's form, the Steppers,
 ``stepper_for``); the stages every step shares and the loop's data are in
 :mod:`contactlab.methods.loop_stages`, each method's compiled step in
 :mod:`contactlab.methods.loop_steps`.
@@ -53,18 +51,16 @@ contactlab.contacts.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba.core import event
 
 from .. import shapes
 from ..collision.families import pair_families
 from ..collision.manifolds import Manifolds
 from ..collision.narrow_phase import needs_hulls
-from ..compiling import njit
+from ..compiling import EntryPoint, call_entry, njit
 from ..model import derived
 from ..state import State
 from .base import CollisionOptions
@@ -122,6 +118,7 @@ def run(
     slabs: bool | None,
     parallel: bool | None,
     penalty: PenaltyLoop | None,
+    step: EntryPoint,
     motion: Motion,
     carried: tuple,
     time: float,
@@ -141,7 +138,7 @@ def run(
     ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
     written, most contacts, sweeps made, steps whose contact springs went implicit, penalty's
     conjugate-gradient iterations made)."""
-    written = 0
+    written = np.int64(0)  # int64, not the literal 0: record is compiled once for run and for Stepper.sample
     most = 0
     sweeps_made = 0
     implicit_steps = 0
@@ -152,46 +149,27 @@ def run(
         index = first_index + s
         elastic, implicit, linear, clear = 0.0, False, 0, False  # clear: penalty's steps never are
         # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
-        # argument typed None), and exactly one flag is not None (compile_flags)
+        # argument typed None), and exactly one flag is not None (compile_flags); ``step`` is the
+        # live branch's step, whose argument types its EntryPoint's type names
         if projection is not None:
-            positions, velocities, carried, count, sweeps, change, clear = projection_step(
-                model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
+                step, (model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried)
             )
-        if constraints is not None:  # its own branch, impulse's below: each drops the other's targets
-            positions, velocities, carried, count, sweeps, change, clear = velocity_step(
-                model,
-                settings,
-                plan,
-                large,
-                keeping,
-                impulse,
-                constraints,
-                slabs,
-                parallel,
-                motion,
-                pose,
-                time,
-                carried,
+        if constraints is not None:  # its own branch, impulse's below: the two flags' types differ
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
+                step,
+                (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
+                + (motion, pose, time, carried),
             )
         if impulse is not None:
-            positions, velocities, carried, count, sweeps, change, clear = velocity_step(
-                model,
-                settings,
-                plan,
-                large,
-                keeping,
-                impulse,
-                constraints,
-                slabs,
-                parallel,
-                motion,
-                pose,
-                time,
-                carried,
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
+                step,
+                (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
+                + (motion, pose, time, carried),
             )
         if penalty is not None:
-            positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = penalty_step(
-                model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried
+            positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = call_entry(
+                step, (model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried)
             )
         store(motion, positions, velocities)
         pose = poses(model, motion)
@@ -241,6 +219,7 @@ class Stepper:
         """What every Stepper holds: the model, the narrow phase's plan, the state's time and
         arrays (copies), the tallies."""
         self.model = model
+        self._entry: EntryPoint | None = None
         families = pair_families(model)
         self.plan = (families, model.hull_store if needs_hulls(families) else None)
         self.time = float(state.time)
@@ -257,7 +236,6 @@ class Stepper:
                 )
             )
         )
-        self.compiled = True  # ``advance`` runs ``run`` compiled; False: its body from Python (``stepper_for``)
         self.max_contacts = 0
         self.sweeps_made = 0
         self.last_contacts = 0
@@ -318,18 +296,7 @@ class Stepper:
             count += 1  # the run's last step, sampled too
         samples = self._samples(count, rows)
         arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
-        if not self.compiled and _seconds_from_python.get(self.kind, 0.0) >= LOOP_COMPILE_SECONDS:
-            self.compiled = True  # stepping from Python has cost this process what compiling would have
-        if self.compiled:
-            made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(*arguments)
-        else:  # its body from Python, timed without what it compiles (a first call compiles the stages)
-            key, compiling, started = self.kind, [], time.perf_counter()
-            with event.install_timer("numba:compile", compiling.append):
-                made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run.py_func(
-                    *arguments
-                )
-            stepped = time.perf_counter() - started - sum(compiling)
-            _seconds_from_python[key] = _seconds_from_python.get(key, 0.0) + stepped
+        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(*arguments)
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
@@ -345,6 +312,7 @@ class Stepper:
             self.settings,
             self.plan,
             *self.flags,
+            self.entry_point(),
             self.motion,
             self.carried,
             self.time,
@@ -356,6 +324,27 @@ class Stepper:
             max_speed,
         )
 
+    def entry_point(self) -> EntryPoint:
+        """This run's step (``velocity_step``, ``projection_step`` or ``penalty_step``) compiled
+        for its arguments' types, which ``run`` calls by address (contactlab.compiling): once a
+        Stepper, the same machine code whether ``run`` runs compiled or from Python."""
+        if self._entry is None:
+            self._entry = _entry_points(self.model).get(self.kind)
+        if self._entry is None:
+            model, settings, plan, motion = loop_model(self.model), self.settings, self.plan, self.motion
+            large, keeping, constraints, impulse, projection, slabs, parallel, penalty = self.flags
+            pose = poses(model, motion)
+            if penalty is not None:
+                function, arguments = penalty_step, (model, settings, plan, large, slabs, parallel, penalty)
+            elif projection is not None:
+                function, arguments = projection_step, (model, settings, plan, large, keeping, slabs, parallel)
+            else:
+                function = velocity_step
+                arguments = (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
+            self._entry = EntryPoint(function, (*arguments, motion, pose, self.time, self.carried))
+            _entry_points(self.model)[self.kind] = self._entry
+        return self._entry
+
     @property
     def kind(self) -> tuple:
         """What sets ``run``'s machine code for this run apart: the scene's shape families, the
@@ -366,29 +355,6 @@ class Stepper:
     def parallel(self) -> bool:
         """Whether this run's loop has a parallel sweep compiled in (``compile_flags``' parallel)."""
         return self.flags[6] is not None
-
-    def compiled_already(self) -> bool:
-        """Whether ``run`` has machine code for this run's argument types, in memory or in Numba's
-        disk cache: stepping through the loop then costs no compilation (see ``stepper_for``).
-        Known once for this model and these flags, for the rest of the process (typing the
-        arguments cost a 720-step ball's run a third of its time)."""
-        known, key = _compiled_for(self.model), self.kind
-        if key in known:
-            return True
-        types = tuple(run.typeof_pyval(a) for a in self._run_arguments(1, 1, 1, 1, self.samples_for(1), 1.0))
-        if types in run.overloads or self._cached(types):
-            known.add(key)
-            return True
-        return False
-
-    @staticmethod
-    def _cached(types: tuple) -> bool:
-        """Whether Numba's disk cache holds ``run`` for these argument types."""
-        try:  # Numba's cache index, as Dispatcher.compile consults it (internal API: any change → no)
-            key = run._cache._index_key(types, run.targetctx.codegen())
-            return key in run._cache._cache_file._load_index()
-        except Exception:  # noqa: BLE001 — a Numba without this internal layout: assume not cached
-            return False
 
     def state(self) -> State:
         """The State reached (copies), with the carried data under the method's keys."""
@@ -440,27 +406,10 @@ def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None)
 
 
 @derived
-def _compiled_for(model: Model) -> set[tuple]:
-    """The kinds (``Stepper.kind``) of the runs of ``model`` whose machine code ``run`` has
-    (``Stepper.compiled_already``), kept with the Model."""
-    return set()
-
-
-# seconds each kind of run (``Stepper.kind``) has stepped ``run``'s body from Python in this
-# process: once they reach what compiling ``run`` costs, its runs compile it
-_seconds_from_python: dict[tuple, float] = {}
-# s: what compiling ``run`` costs once its step is compiled (which a run from Python compiles too):
-# 10–14 s of CPU for the ball and the pyramid on the 2-core benchmark machine
-LOOP_COMPILE_SECONDS = 12.0
-GLUE_SECONDS = 3.5e-5  # s a step: the Python of ``run``'s body from Python (its calls' unboxing), 33 µs measured
-
-
-def repays_compiling(steps: int, runs: int = 1) -> bool:
-    """Whether ``runs`` runs of ``steps`` steps would spend more time stepping
-    ``run``'s body from Python (about 35 µs a step more than compiled, on a ball as on a
-    210-box pyramid: the calls' unboxing, whatever the scene's size) than compiling ``run``
-    costs (a study's cells of one scene and method: ``contactlab.sweep``)."""
-    return runs * steps * GLUE_SECONDS > LOOP_COMPILE_SECONDS
+def _entry_points(model: Model) -> dict[tuple, EntryPoint]:
+    """The steps' machine code (``Stepper.entry_point``) by the kind of run (``Stepper.kind``),
+    kept with the Model: the arguments' types are the same for every run of one kind."""
+    return {}
 
 
 def stepper_for(
@@ -470,18 +419,11 @@ def stepper_for(
     integrator: str,
     dt: float,
     state: State,
-    steps: int,
     compiled_loop: bool | None = None,
 ) -> Stepper | None:
-    """A Stepper for this run of ``steps`` steps, or None to step through the methods' ``step``.
-
-    None where the loop does not serve the scene (``applies``) or ``compiled_loop`` is False.
-    Where ``compiled_loop`` is None (the default), the loop runs compiled when its machine code
-    is already compiled or cached for this scene's types, or when the run is long enough to
-    repay compiling it (``repays_compiling``); else its body runs from Python, calling the
-    compiled step (``Stepper.compiled`` False), until such runs have cost what compiling it
-    costs. True: compiled wherever it serves, compiling it if need be. The numbers are the same
-    bit for bit on every path."""
+    """A Stepper for this run, or None to step through the methods' ``step``: None where the
+    loop does not serve the scene (``applies``) or ``compiled_loop`` is False (None and True:
+    the loop wherever it serves)."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return None
     stepper = (
@@ -489,5 +431,4 @@ def stepper_for(
         if method == "penalty"
         else Stepper(model, method, options, integrator, dt, state)
     )
-    stepper.compiled = bool(compiled_loop) or repays_compiling(steps) or stepper.compiled_already()
     return stepper
