@@ -4,6 +4,7 @@ gives the contacts of the full dispatch, and a compilation says so on stderr."""
 import io
 import json
 import os
+import pickle
 import subprocess
 import sys
 
@@ -446,3 +447,7 @@ def test_a_call_by_address_runs_the_same_machine_code_compiled_or_from_python_an
         _oscillated(entry, np.full(5, np.nan), velocity.copy(), 0.01, 4.0, 1)
     with pytest.raises(numba.TypingError, match="called with"):
         _oscillated(entry, position.copy(), velocity.copy(), 0.01, 4, 1)  # stiffness an int: other types
+    # pickled (a Model keeps its loop's entry points), it is found again by name and types
+    again = pickle.loads(pickle.dumps(entry))
+    assert again.numba_type == entry.numba_type and again.address == entry.address
+    assert _oscillated(again, position.copy(), velocity.copy(), 0.01, 4.0, 300) == compiled

@@ -37,6 +37,7 @@ typing error, never a jump to code made for other arguments.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import os
 import sys
 from collections.abc import Iterator
@@ -176,10 +177,18 @@ PackageStampedLocator.stamp_package(Path(__file__).parent)
 class EntryPoint:
     """The machine code of ``function`` (a compiled dispatcher) for the types of ``arguments``
     (a tuple of values as the caller will pass them): compiled or loaded from the cache here,
-    held by its address, for :func:`call_entry`."""
+    held by its address, for :func:`call_entry`. Pickled, it is its function's name and the
+    types, and unpickled it finds the machine code in the new process (an address is no more
+    than a number elsewhere)."""
 
     def __init__(self, function: Any, arguments: tuple) -> None:
-        argument_types = tuple(typeof(a) for a in arguments)
+        self._start(function, tuple(typeof(a) for a in arguments))
+
+    def __reduce__(self) -> tuple:
+        code = self.function.py_func
+        return _entry_point_of, (code.__module__, code.__qualname__, self.numba_type.arguments)
+
+    def _start(self, function: Any, argument_types: tuple) -> None:
         function.compile(argument_types)
         result = function.overloads[argument_types]
         self.function = function
@@ -189,6 +198,13 @@ class EntryPoint:
             argument_types,
             result.signature.return_type,
         )
+
+
+def _entry_point_of(module: str, name: str, argument_types: tuple) -> EntryPoint:
+    """The EntryPoint of the function ``name`` of ``module`` for ``argument_types`` (unpickling)."""
+    entry = EntryPoint.__new__(EntryPoint)
+    entry._start(getattr(importlib.import_module(module), name), argument_types)
+    return entry
 
 
 class EntryPointType(types.Type):
@@ -227,7 +243,7 @@ def call_entry(entry: EntryPoint, arguments: tuple) -> Any:
 
 
 @intrinsic
-def _call_address(typingctx: Any, entry: EntryPointType, arguments: types.BaseTuple) -> Any:
+def _call_address(typingctx: Any, entry: EntryPointType, arguments: Any) -> Any:
     if tuple(arguments.types) != entry.arguments:
         raise TypingError(f"{entry} called with {tuple(arguments.types)}")
 
