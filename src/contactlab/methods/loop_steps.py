@@ -30,7 +30,6 @@ from .loop_stages import (
     free_motion,
     moved,
     poses,
-    store,
     swept_clear,
     swept_reach,
 )
@@ -66,11 +65,8 @@ def velocity_step(
     ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
     (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``constraints``, ``slabs``
     and ``parallel`` (True, or None to leave a stage's branch uncompiled) as ``Stepper`` sets them.
-    Advances ``motion`` (its six arrays, in place) by the step; returns (the carried triple for the
-    next step, the contacts' count, sweeps made, the sweeps' last change [m/s], whether nothing
-    came within the swept reach: ``swept_clear``). The step's new arrays are copied into
-    ``motion`` here, not returned: each array a call by address returns is a reference counted
-    twice, which on a one-ball scene costs a share of the step."""
+    Returns (positions, velocities — the state's six arrays, new —, the carried triple for the next
+    step, the contacts' count, sweeps made, the sweeps' last change [m/s])."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
@@ -92,8 +88,8 @@ def velocity_step(
             np.full(free[0].shape[0], h),
             np.full(free[2].shape[0], h),
         )
-        store(motion, positions, free)
-        return (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, swept_clear(near, settings.margin)
+        clear = swept_clear(near, settings.margin)
+        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear
     # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
     positions, velocities, impulses, sweeps, change = respond(
         model,
@@ -109,8 +105,8 @@ def velocity_step(
         free,
         (carried[1], carried[2]),
     )
-    store(motion, positions, velocities)
-    return (manifolds, contacts.feature_id, impulses), contacts.depth.shape[0], sweeps, change, False
+    count = contacts.depth.shape[0]
+    return positions, velocities, (manifolds, contacts.feature_id, impulses), count, sweeps, change, False
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
@@ -185,9 +181,9 @@ def projection_step(
     """One step of loop L2 with projection (``projection.step``, stage for stage).
 
     ``start``, ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values:
-    last step's first-pass λ (K, 3) [kg m]). Advances ``motion`` in place; returns (the carried
-    triple for the next step, the last pass's contact count, sweeps made in every pass, the last
-    pass's last correction [m], whether nothing came within the swept reach)."""
+    last step's first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six
+    arrays, new —, the carried triple for the next step, the last pass's contact count, sweeps
+    made in every pass, the last pass's last correction [m])."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
@@ -225,9 +221,8 @@ def projection_step(
     # 5. advance dt, velocities from the projected positions
     start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)
     positions, velocities = advance(start_positions, v_free, displacement, predicted, h)
-    store(motion, positions, velocities)
     clear = swept_clear(near, settings.margin)
-    return (manifolds, contacts.feature_id, lam), last.depth.shape[0], sweeps, change, clear
+    return positions, velocities, (manifolds, contacts.feature_id, lam), last.depth.shape[0], sweeps, change, clear
 
 
 # ---- penalty (loop L1): the stages of methods.penalty_springs and penalty_implicit ---------
@@ -253,10 +248,10 @@ def penalty_step(
 
     ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
     (K, 3) [m]); ``settings`` the guard's (``penalty.penalty_loop``); ``start`` and the flags as
-    ``velocity_step``'s. Advances ``motion`` in place; returns (the carried triple, the contacts'
-    count, active-set passes, the last linear solve's relative residual, the elastic energy at
-    the step's end [J], whether the springs went implicit under an explicit integrator, the
-    conjugate-gradient iterations of its solves)."""
+    ``velocity_step``'s. Returns (positions, velocities — the state's six arrays, new —, the
+    carried triple, the contacts' count, active-set passes, the last linear solve's relative
+    residual, the elastic energy at the step's end [J], whether the springs went implicit under
+    an explicit integrator, the conjugate-gradient iterations of its solves)."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. collision detection, with the gaps this step's motion could close
@@ -281,8 +276,9 @@ def penalty_step(
     positions, velocities, offsets, energy = finish(
         model, settings, penalty, slabs, parallel, contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
-    store(motion, positions, velocities)
     return (
+        positions,
+        velocities,
         (manifolds, contacts.feature_id, offsets),
         contacts.depth.shape[0],
         passes,

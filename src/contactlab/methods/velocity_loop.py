@@ -76,6 +76,7 @@ from .loop_stages import (
     loop_settings,
     poses,
     record,
+    store,
 )
 from .loop_steps import penalty_step, projection_step, velocity_step
 from .penalty import PenaltyLoop, penalty_loop
@@ -151,25 +152,26 @@ def run(
         # argument typed None), and exactly one flag is not None (compile_flags); ``step`` is the
         # live branch's step, whose argument types its EntryPoint's type names
         if projection is not None:
-            carried, count, sweeps, change, clear = call_entry(
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
                 step, (model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried)
             )
         if constraints is not None:  # its own branch, impulse's below: the two flags' types differ
-            carried, count, sweeps, change, clear = call_entry(
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
                 step,
                 (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
                 + (motion, pose, time, carried),
             )
         if impulse is not None:
-            carried, count, sweeps, change, clear = call_entry(
+            positions, velocities, carried, count, sweeps, change, clear = call_entry(
                 step,
                 (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
                 + (motion, pose, time, carried),
             )
         if penalty is not None:
-            carried, count, sweeps, change, elastic, implicit, linear = call_entry(
+            positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = call_entry(
                 step, (model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried)
             )
+        store(motion, positions, velocities)
         pose = poses(model, motion)
         time += settings.dt
         most = max(most, count)
