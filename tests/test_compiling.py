@@ -434,7 +434,7 @@ def test_a_call_by_address_runs_the_same_machine_code_compiled_or_from_python_an
     bit; an exception the callee raises reaches the caller; arguments of other types than the
     entry point was made for are a typing error, not a jump into code made for others."""
     position, velocity = np.linspace(-1.0, 1.0, 5), np.zeros(5)
-    entry = EntryPoint(_accelerated, (position, velocity, 0.01, 4.0))
+    entry = EntryPoint.for_arguments(_accelerated, (position, velocity, 0.01, 4.0))
     assert entry.numba_type.arguments in _accelerated.overloads and entry.address > 0
     compiled = _oscillated(entry, position.copy(), velocity.copy(), 0.01, 4.0, 300)
     from_python = _oscillated.py_func(entry, position.copy(), velocity.copy(), 0.01, 4.0, 300)

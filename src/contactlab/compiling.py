@@ -175,20 +175,13 @@ PackageStampedLocator.stamp_package(Path(__file__).parent)
 
 
 class EntryPoint:
-    """The machine code of ``function`` (a compiled dispatcher) for the types of ``arguments``
-    (a tuple of values as the caller will pass them): compiled or loaded from the cache here,
-    held by its address, for :func:`call_entry`. Pickled, it is its function's name and the
-    types, and unpickled it finds the machine code in the new process (an address is no more
-    than a number elsewhere)."""
+    """The machine code of ``function`` (a compiled dispatcher) for ``argument_types`` (Numba
+    types, as the caller will pass them): compiled or loaded from the cache here, held by its
+    address, for :func:`call_entry`. Pickled, it is its function's name and the types, and
+    unpickled it finds the machine code in the new process (an address is no more than a number
+    elsewhere)."""
 
-    def __init__(self, function: Any, arguments: tuple) -> None:
-        self._start(function, tuple(typeof(a) for a in arguments))
-
-    def __reduce__(self) -> tuple:
-        code = self.function.py_func
-        return _entry_point_of, (code.__module__, code.__qualname__, self.numba_type.arguments)
-
-    def _start(self, function: Any, argument_types: tuple) -> None:
+    def __init__(self, function: Any, argument_types: tuple) -> None:
         function.compile(argument_types)
         result = function.overloads[argument_types]
         self.function = function
@@ -199,12 +192,20 @@ class EntryPoint:
             result.signature.return_type,
         )
 
+    @classmethod
+    def for_arguments(cls, function: Any, arguments: tuple) -> EntryPoint:
+        """The EntryPoint of ``function`` for the types of ``arguments`` (values, as the caller
+        will pass them)."""
+        return cls(function, tuple(typeof(a) for a in arguments))
+
+    def __reduce__(self) -> tuple:
+        code = self.function.py_func
+        return _entry_point_of, (code.__module__, code.__qualname__, self.numba_type.arguments)
+
 
 def _entry_point_of(module: str, name: str, argument_types: tuple) -> EntryPoint:
     """The EntryPoint of the function ``name`` of ``module`` for ``argument_types`` (unpickling)."""
-    entry = EntryPoint.__new__(EntryPoint)
-    entry._start(getattr(importlib.import_module(module), name), argument_types)
-    return entry
+    return EntryPoint(getattr(importlib.import_module(module), name), argument_types)
 
 
 class EntryPointType(types.Type):

@@ -259,10 +259,12 @@ kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
 gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
 
 
-# The stages that take the LoopModel or the Motion whole are inlined into their callers (or
-# unpack them there and call a function of plain arrays): a call that passes a named tuple of
-# 17 arrays takes and releases a reference to each, which on a one-ball scene cost more than
-# the stage's arithmetic.
+# The stages a step runs that take the LoopModel or the Motion whole are inlined into their
+# callers (or unpack them there and call a function of plain arrays): a call that passes a named
+# tuple of 17 arrays takes and releases a reference to each, which on a one-ball scene cost more
+# than the stage's arithmetic. (``poses``, ``store``, ``healthy`` and ``record``, which ``run``
+# calls between steps, are not: linked into ``run``, they measured as fast, and inlining them
+# cost about 5 s of ``run``'s compile.)
 
 
 @njit(cache=True, inline="always")
@@ -524,9 +526,9 @@ def _solve_grouped(settings, rows, contacts, u, target, warm, order, starts, sub
 # ---- after a step: the state stored, checked and recorded ---------------------------------
 
 
-# store and healthy are inlined, and copy or check array by array through inlined helpers, not
-# over a tuple of the arrays: each array a call or a tuple holds is a reference taken and released
-# (an atomic operation each), which on a one-ball scene cost more than the copying itself
+# store and healthy copy or check array by array through inlined helpers, not over a tuple of
+# the arrays: each array a call or a tuple holds is a reference taken and released (an atomic
+# operation each), which on a one-ball scene cost more than the copying itself
 
 
 @njit(cache=True)

@@ -18,7 +18,7 @@ the loop, the state stored, checked and recorded — 2–3 s to compile where li
 cost 10–14 s. So every run the loop serves runs compiled from its first step, and its next run
 in a fresh process loads it from the cache. The price is the call's boundary: each step passes
 its arrays across a call the optimizer cannot see into, their references counted at each
-crossing, about 0.5 µs a step (a quarter of a one-ball step, nothing on a pile).
+crossing, about 0.6 µs a step (a quarter of a one-ball step, nothing on a pile).
 
 This module holds ``run`` and the Python side (the model and settings in the loop's form, the Steppers,
 ``stepper_for``); the stages every step shares and the loop's data are in
@@ -155,7 +155,7 @@ def run(
             positions, velocities, carried, count, sweeps, change, clear = call_entry(
                 step, (model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried)
             )
-        if constraints is not None:  # its own branch, impulse's below: the two flags' types differ
+        if constraints is not None:  # its own branch, impulse's below: each flag prunes only its own
             positions, velocities, carried, count, sweeps, change, clear = call_entry(
                 step,
                 (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
@@ -219,7 +219,6 @@ class Stepper:
         """What every Stepper holds: the model, the narrow phase's plan, the state's time and
         arrays (copies), the tallies."""
         self.model = model
-        self._entry: EntryPoint | None = None
         families = pair_families(model)
         self.plan = (families, model.hull_store if needs_hulls(families) else None)
         self.time = float(state.time)
@@ -326,11 +325,11 @@ class Stepper:
 
     def entry_point(self) -> EntryPoint:
         """This run's step (``velocity_step``, ``projection_step`` or ``penalty_step``) compiled
-        for its arguments' types, which ``run`` calls by address (contactlab.compiling): once a
-        Stepper, the same machine code whether ``run`` runs compiled or from Python."""
-        if self._entry is None:
-            self._entry = _entry_points(self.model).get(self.kind)
-        if self._entry is None:
+        for its arguments' types, which ``run`` calls by address (contactlab.compiling): built once
+        for each kind of run of a Model, the same machine code whether ``run`` runs compiled or
+        from Python."""
+        known = _entry_points(self.model)
+        if self.kind not in known:
             model, settings, plan, motion = loop_model(self.model), self.settings, self.plan, self.motion
             large, keeping, constraints, impulse, projection, slabs, parallel, penalty = self.flags
             pose = poses(model, motion)
@@ -341,9 +340,8 @@ class Stepper:
             else:
                 function = velocity_step
                 arguments = (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
-            self._entry = EntryPoint(function, (*arguments, motion, pose, self.time, self.carried))
-            _entry_points(self.model)[self.kind] = self._entry
-        return self._entry
+            known[self.kind] = EntryPoint.for_arguments(function, (*arguments, motion, pose, self.time, self.carried))
+        return known[self.kind]
 
     @property
     def kind(self) -> tuple:
@@ -426,9 +424,6 @@ def stepper_for(
     the loop wherever it serves)."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return None
-    stepper = (
-        PenaltyStepper(model, options, integrator, dt, state)
-        if method == "penalty"
-        else Stepper(model, method, options, integrator, dt, state)
-    )
-    return stepper
+    if method == "penalty":
+        return PenaltyStepper(model, options, integrator, dt, state)
+    return Stepper(model, method, options, integrator, dt, state)
