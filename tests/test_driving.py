@@ -3,11 +3,12 @@ checked against closed forms under every method."""
 
 import numpy as np
 import pytest
+from numba import njit
 
 from contactlab import ModelBuilder, simulate
 from contactlab.closed_form import checks
 from contactlab.errors import InputError, SimulationDiverged
-from contactlab.methods import velocity_loop
+from contactlab.methods import loop_stages, velocity_loop
 from contactlab.scene import load_scene
 
 METHODS = ("penalty", "projection", "impulse", "constraints")
@@ -146,6 +147,26 @@ def test_keyframed_drives_step_in_the_compiled_loop_and_python_functions_outside
         builder = _ball(gravity=(0.0, 0.0, -9.81))
         add(builder)
         assert not velocity_loop.applies(builder.finalize(), "impulse", options, "symplectic_euler")
+
+
+def test_every_stage_after_free_motion_takes_the_model_without_its_drive():
+    """Only free motion reads the drive (loop_stages.without_drive): the stages after it take the
+    same arrays with the drive None, compiled or from Python, so a driven scene's contacts, rows and
+    sweeps run the machine code of the same scene undriven (its first run compiles its step, not
+    those stages again: benchmarks/README.md, twenty-fifth round)."""
+    model = loop_stages.loop_model(load_scene("box_pushed").model)
+    assert model.drive is not None
+
+    @njit
+    def compiled(model):
+        return loop_stages.without_drive(model)
+
+    for plain in (loop_stages.without_drive(model), compiled(model)):
+        assert plain.drive is None
+        assert all(a is b or np.shares_memory(a, b) for a, b in zip(plain[:-1], model[:-1]) if a is not None)
+    undriven = loop_stages.loop_model(load_scene("sliding_block").model)
+    assert loop_stages.without_drive(undriven) is undriven
+    assert compiled(undriven).drive is None
 
 
 # ---- the pushed box: closed form under every method ---------------------------------------------

@@ -55,7 +55,16 @@ from ..validation import check_choices, check_counts, number
 from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
-from .loop_stages import CARRIED, build_rows, compile_flags, loop_inputs, loop_model, loop_settings, solve
+from .loop_stages import (
+    CARRIED,
+    build_rows,
+    compile_flags,
+    loop_inputs,
+    loop_model,
+    loop_settings,
+    solve,
+    without_drive,
+)
 from .sequential import contact_order
 from .velocity_level import (
     SUBSTEP_WHEN,
@@ -376,7 +385,7 @@ def normal_row_targets(
     if options.formulation == "velocity":  # the sweep order is impulse's alone: any order does
         settings = loop_settings(model, "constraints", options, h)
         order = np.arange(contacts.count)
-        return targets(loop_model(model), settings, None, True, contacts.arrays(), rows, v_free, order)
+        return targets(without_drive(loop_model(model)), settings, None, True, contacts.arrays(), rows, v_free, order)
     gap_at_start = -contacts.depth
     normal_velocity = row_products(rows, v_free)[:, 0]
     current = row_products(rows, stack(*state.velocities))[:, 0]

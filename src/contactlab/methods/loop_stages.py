@@ -22,6 +22,8 @@ from collections import namedtuple
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 from .. import collision, diagnostics, rotations, shapes
 from ..collision import assemble_contacts, dynamic_pairs_possible
@@ -70,7 +72,9 @@ LoopModel = namedtuple(
         "material_friction",  # (M,)
         "material_restitution",  # (M,)
         "cloth_of",  # (B + P,) int, −1: no cloth (always, here); None under two bodies and particles
-        "drive",  # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the scene
+        # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the
+        # scene. Last, for ``without_drive``
+        "drive",
     ),
 )
 LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
@@ -103,6 +107,23 @@ def loop_model(model: Model) -> LoopModel:
         np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
         None if model.drive is None else model.drive.table,
     )
+
+
+def without_drive(model: LoopModel) -> LoopModel:
+    """``model`` with no drive (its ``drive`` None): what every stage but ``free_motion`` takes,
+    so a driven scene's contacts, rows and sweeps run the very machine code an undriven scene's
+    do, and only its step, where ``free_motion`` reads the drive, is compiled for the drive's
+    type."""
+    return model if model.drive is None else model._replace(drive=None)
+
+
+# the body chosen by the drive's type: the same LoopModel where it is None, else a new tuple of
+# the same arrays (no copy) with None in its place
+@overload(without_drive, inline="always")
+def _without_drive_compiled(model):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
+    if isinstance(model.types[LoopModel._fields.index("drive")], types.NoneType):
+        return lambda model: model
+    return lambda model: LoopModel(*model[:-1], None)
 
 
 LoopSettings = namedtuple(
@@ -226,7 +247,8 @@ carried by id (K, 3): impulses [N s], projection λ [kg m], penalty's anchor off
 
 def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Motion, np.ndarray, tuple]:
     """What the compiled stages take in a method's step from Python (``velocity_level.step``,
-    ``projection.step``, ``penalty.step``): (LoopModel, the state's arrays as a Motion, the
+    ``projection.step``, ``penalty.step``): (LoopModel without its drive, which the methods'
+    steps apply in Python (``integrators.free_velocities``), the state's arrays as a Motion, the
     bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) as carried
     under ``method``'s keys, ``CARRIED``)."""
     # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
@@ -237,7 +259,7 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
         np.zeros(0, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64),
         np.zeros((0, 3)) if values is None else np.array(values, dtype=float).reshape(-1, 3),
     )
-    return loop_model(model), motion, rotations.matrices(motion.body_orientation), carried
+    return without_drive(loop_model(model)), motion, rotations.matrices(motion.body_orientation), carried
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------

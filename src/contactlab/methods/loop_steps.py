@@ -32,6 +32,7 @@ from .loop_stages import (
     poses,
     swept_clear,
     swept_reach,
+    without_drive,
 )
 from .penalty import PenaltyLoop, finish, integrate, springs_at
 from .penalty_springs import IMPLICIT_BY_INTEGRATOR
@@ -71,11 +72,12 @@ def velocity_step(
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
     free = free_motion(model, motion, rotation, h, time)
+    plain = without_drive(model)  # every later stage: the same machine code driven or not
     # 2. predict: how far each body and particle sweeps this step
-    reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
-        model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
+        plain, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -92,7 +94,7 @@ def velocity_step(
         return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear
     # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
     positions, velocities, impulses, sweeps, change = respond(
-        model,
+        plain,
         settings,
         impulse,
         constraints,
@@ -188,22 +190,23 @@ def projection_step(
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
     free = free_motion(model, motion, rotation, h, time)
+    plain = without_drive(model)  # every later stage: the same machine code driven or not
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
     v_free = stacked(free[0], free[1], free[2])
     predicted = h * v_free
-    reach = swept_reach(model, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
-        model, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
+        plain, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
     displacement, lam, sweeps, change = project(
-        model, settings, slabs, parallel, contacts, motion, rotation, np.zeros_like(predicted), predicted, warm
+        plain, settings, slabs, parallel, contacts, motion, rotation, np.zeros_like(predicted), predicted, warm
     )
     #    and again at the projected positions
     displacement, last, sweeps, change = passes(
-        model,
+        plain,
         settings,
         plan,
         large,
@@ -254,27 +257,28 @@ def penalty_step(
     an explicit integrator, the conjugate-gradient iterations of its solves)."""
     h = settings.dt
     rotation, centers, rots = start
+    plain = without_drive(model)  # every stage but free motion: the same machine code driven or not
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
-        model, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
+        plain, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
-    contacts, manifolds, _ = detect(model, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
-    rows = build_rows(model, contacts, motion, rotation)
+    contacts, manifolds, _ = detect(plain, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
+    rows = build_rows(plain, contacts, motion, rotation)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     springs, forces, elongation, implicit = springs_at(
-        model, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
+        plain, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
     )
     # 3. internal forces (gravity) → free velocities v*
     free = free_motion(model, motion, rotation, h, time)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
     v_new, forces, elongation, passes, residual, linear_iterations = integrate(
-        model, penalty, contacts, rows, rotation, springs, (forces, elongation, implicit), v_free, h
+        plain, penalty, contacts, rows, rotation, springs, (forces, elongation, implicit), v_free, h
     )
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
     positions, velocities, offsets, energy = finish(
-        model, settings, penalty, slabs, parallel, contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
+        plain, settings, penalty, slabs, parallel, contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
     return (
         positions,

@@ -77,6 +77,7 @@ from .loop_stages import (
     poses,
     record,
     store,
+    without_drive,
 )
 from .loop_steps import penalty_step, projection_step, velocity_step
 from .penalty import PenaltyLoop, penalty_loop
@@ -143,8 +144,9 @@ def run(
     sweeps_made = 0
     implicit_steps = 0
     linear_made = 0
+    plain = without_drive(model)  # for what only the step's free motion reads: record's code is one
     # the poses at each step's start, computed once after the step before: its sample takes them too
-    pose = poses(model, motion)
+    pose = poses(plain, motion)
     for s in range(steps):
         index = first_index + s
         elastic, implicit, linear, clear = 0.0, False, 0, False  # clear: penalty's steps never are
@@ -172,7 +174,7 @@ def run(
                 step, (model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried)
             )
         store(motion, positions, velocities)
-        pose = poses(model, motion)
+        pose = poses(plain, motion)
         time += settings.dt
         most = max(most, count)
         sweeps_made += sweeps
@@ -181,7 +183,7 @@ def run(
         if not healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, model, plan, large, motion, pose, time, count, sweeps, change, clear)
+            record(samples, written, plain, plan, large, motion, pose, time, count, sweeps, change, clear)
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
@@ -272,7 +274,7 @@ class Stepper:
         collision pass, 0 sweeps), as a dict of
         the series, recorded by the loop's ``record``: what ``Recorder.sample`` records.
         ``rows``: where it is recorded (see ``advance``)."""
-        samples, model, motion = self._samples(1, rows), loop_model(self.model), self.motion
+        samples, model, motion = self._samples(1, rows), without_drive(loop_model(self.model)), self.motion
         record(samples, 0, model, self.plan, self.flags[0], motion, poses(model, motion), self.time, -1, 0, 0.0, False)
         return samples._asdict()
 
@@ -332,7 +334,7 @@ class Stepper:
         if self.kind not in known:
             model, settings, plan, motion = loop_model(self.model), self.settings, self.plan, self.motion
             large, keeping, constraints, impulse, projection, slabs, parallel, penalty = self.flags
-            pose = poses(model, motion)
+            pose = poses(without_drive(model), motion)
             if penalty is not None:
                 function, arguments = penalty_step, (model, settings, plan, large, slabs, parallel, penalty)
             elif projection is not None:
