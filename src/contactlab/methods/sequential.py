@@ -211,7 +211,9 @@ def solve_sequential_impulses(
     # fast on a 4000-sphere pile as jumping through it), with the very same updates
     rows_o = rows_in_order(rows, order)
     friction_o, target_o, impulses_o = friction[order], target_normal_velocity[order], impulses[order]
-    sweeps, change = sweep_until(rows_o, friction_o, target_o, impulses_o, u, iterations, tolerance, starts, True)
+    # np.bool_, not the literal True: sweep_until is then the one compiled code solve_in_substeps calls too
+    exact = np.bool_(True)
+    sweeps, change = sweep_until(rows_o, friction_o, target_o, impulses_o, u, iterations, tolerance, starts, exact)
     for i in range(C):
         for d in range(3):
             impulses[order[i], d] = impulses_o[i, d]

@@ -149,7 +149,9 @@ def run(
     pose = poses(plain, motion)
     for s in range(steps):
         index = first_index + s
-        elastic, implicit, linear, clear = 0.0, False, 0, False  # clear: penalty's steps never are
+        # clear: penalty's steps never are; np.bool_, not the literal False, which would make penalty's
+        # record a type of its own, compiled again
+        elastic, implicit, linear, clear = 0.0, False, 0, np.bool_(False)
         # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
         # argument typed None), and exactly one flag is not None (compile_flags); ``step`` is the
         # live branch's step, whose argument types its EntryPoint's type names
