@@ -7,8 +7,11 @@ on an empty Numba cache of its own: through the compiled loop (``loop``: ``compi
 through the methods' step (``step``), or at the defaults. Prints the wall time, then the
 compilations by their own time (each one's time less that of the compilations nested in it),
 then the time in Numba's three LLVM stages (per-function passes, the final module's optimization
-with every linked callee, machine code), in all and for the largest libraries. Issue 36's
-compile-cost figures (benchmarks/README.md, twenty-third round) come from it.
+with every linked callee, machine code), in all and for the largest libraries, then every
+contactlab function compiled for more than one set of argument types in the run, with the
+arguments that differ: a literal where a variable was meant (``Literal[bool](True)`` beside
+``bool``), a read-only array beside a writable one, each a whole compile again. Issue 36's
+compile-cost figures (benchmarks/README.md, twenty-third and twenty-fifth rounds) come from it.
 """
 
 import collections
@@ -75,6 +78,29 @@ def main(argv):
     print("\nLLVM s  stage                   library")
     for (stage, library), spent in sorted(LLVM.items(), key=lambda item: -item[1])[:15]:
         print(f"{spent:6.2f}  {stage:22s}  {library}")
+    print("\ncompiled more than once: function, then each argument whose type differs")
+    for dispatcher in _dispatchers():
+        signatures = [tuple(str(kind) for kind in signature) for signature in dispatcher.signatures]
+        if len(signatures) > 1:
+            function = dispatcher.py_func
+            print(f"{len(signatures)}x  {function.__module__}.{function.__name__}")
+            for index in range(min(map(len, signatures))):
+                kinds = sorted({signature[index] for signature in signatures})
+                if len(kinds) > 1:
+                    print(f"      argument {index}: " + " | ".join(kind[:60] for kind in kinds))
+
+
+def _dispatchers():
+    """Every compiled function of contactlab's modules loaded in this process, once each."""
+    from numba.core.registry import CPUDispatcher
+
+    seen = {}
+    for module in list(sys.modules.values()):
+        if getattr(module, "__name__", "").startswith("contactlab"):
+            for value in vars(module).values():
+                if isinstance(value, CPUDispatcher):
+                    seen[id(value)] = value
+    return list(seen.values())
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ from .loop_stages import (
     without_drive,
 )
 from .penalty import PenaltyLoop, finish, integrate, springs_at
-from .penalty_springs import IMPLICIT_BY_INTEGRATOR
+from .penalty_springs import ImplicitSprings
 from .projection import advance, displaced_motion, project
 from .velocity_level import respond
 
@@ -288,6 +288,6 @@ def penalty_step(
         passes,
         residual,
         energy,
-        implicit and penalty.springs.implicit != IMPLICIT_BY_INTEGRATOR,
+        implicit and penalty.springs.implicit != ImplicitSprings.BY_INTEGRATOR,
         linear_iterations,
     )

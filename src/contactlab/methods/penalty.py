@@ -52,12 +52,10 @@ from .jacobian_rows import ContactRows, row_products
 from .loop_stages import CARRIED, LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
-    EXPLICIT_EULER,
     GUARD_SWEEPS,
     GUARD_TOLERANCE,
-    IMPLICIT_BY_INTEGRATOR,
-    IMPLICIT_MODES,
-    INTEGRATORS,
+    ImplicitSprings,
+    Integrator,
     SpringSettings,
     anchors_after,
     damping_ratios,
@@ -200,7 +198,7 @@ def suggest_stiffness(
 def amplification(integrator: str, dt: float, stiffness: float, mass: float, damping: float = 0.0) -> float:
     """Spectral radius of one step of a single contact spring (mass [kg], stiffness [N/m],
     damping [N s/m]) under ``integrator``: above 1 its oscillation grows every step."""
-    return step_amplification(INTEGRATORS.index(integrator), stiffness / mass * dt * dt, damping / mass * dt)
+    return step_amplification(Integrator[integrator.upper()], stiffness / mass * dt * dt, damping / mass * dt)
 
 
 def damping_ratio_from_restitution(restitution: float | np.ndarray) -> np.ndarray:
@@ -274,14 +272,14 @@ def spring_settings(options: Options, integrator: str) -> SpringSettings:
         return -1.0 if isinstance(value, str) else float(value)
 
     by_integrator = integrator == "backward_euler"
-    implicit = IMPLICIT_BY_INTEGRATOR if by_integrator else IMPLICIT_MODES[options.implicit_springs]
+    implicit = ImplicitSprings.BY_INTEGRATOR if by_integrator else ImplicitSprings[options.implicit_springs.upper()]
     return SpringSettings(
         stiffness=number(options.stiffness),
         allowed_penetration=float(options.allowed_penetration),
         damping_ratio=number(options.damping_ratio),
         friction_stiffness=number(options.friction_stiffness),
         implicit=implicit,
-        integrator=INTEGRATORS.index(integrator),
+        integrator=Integrator[integrator.upper()],
         implicit_iterations=int(options.implicit_iterations),
         linear_tolerance=float(options.linear_tolerance),
     )
@@ -523,7 +521,7 @@ def finish(
     v, v_new = velocities
     springs, elongation, implicit = spring_state
     h, B = guard.dt, motion.body_position.shape[0]
-    explicit_euler = penalty.springs.integrator == EXPLICIT_EULER and not implicit
+    explicit_euler = penalty.springs.integrator == Integrator.EXPLICIT_EULER and not implicit
     moved_by = v if explicit_euler else v_new
     held, changed = hold_back(model, guard, penalty, slabs, parallel, contacts, rows, motion, moved_by)
     if changed:

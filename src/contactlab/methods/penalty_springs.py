@@ -15,6 +15,7 @@ Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows 
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
@@ -26,24 +27,34 @@ from .jacobian_rows import ContactRows, apply_impulses, contact_velocity, row_pr
 # ---- one spring's step, and ζ from restitution ---------------------------------------------
 
 
-# The integrators and the implicit-springs modes as the compiled stages take them: named numbers
-# (Numba reads module constants as literals), in ``SpringSettings.integrator`` and ``.implicit``
-INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
-SYMPLECTIC_EULER, EXPLICIT_EULER, BACKWARD_EULER = range(3)  # INTEGRATORS' indices
-IMPLICIT_NEVER, IMPLICIT_AUTO, IMPLICIT_ALWAYS, IMPLICIT_BY_INTEGRATOR = range(4)
-"""The ``implicit`` modes: "never", "auto" (where the explicit step would grow), "always", and
-backward Euler's own (every step, by the integrator)."""
-IMPLICIT_MODES = {"never": IMPLICIT_NEVER, "auto": IMPLICIT_AUTO, "always": IMPLICIT_ALWAYS}
+class Integrator(IntEnum):
+    """The integrators (``dynamics.integrators.INTEGRATORS``, by their names upper-cased) as the
+    compiled stages take them: ``SpringSettings.integrator``, ``step_amplification``'s cases."""
+
+    SYMPLECTIC_EULER = 0
+    EXPLICIT_EULER = 1
+    BACKWARD_EULER = 2
+
+
+class ImplicitSprings(IntEnum):
+    """When the contact springs step by backward Euler (``SpringSettings.implicit``): the Options'
+    ``implicit_springs`` "never", "auto" (where the explicit step would grow) and "always", by
+    their names upper-cased, and backward Euler's own (every step, by the integrator)."""
+
+    NEVER = 0
+    AUTO = 1
+    ALWAYS = 2
+    BY_INTEGRATOR = 3
 
 
 @njit(cache=True)
-def step_amplification(integrator: int, w2: float, d: float) -> float:
-    """``amplification``, compiled: integrator 0 symplectic, 1 explicit, 2 backward Euler (as in
-    INTEGRATORS); w2 = (h ω)², d = h c / m. The 2×2 step matrix on (x / h, v) and the moduli of
-    its eigenvalues in closed form (a complex pair: both √det)."""
-    if integrator == SYMPLECTIC_EULER:  # v⁺ = v − (ω²h x + 2ζω h v),  x⁺ = x + h v⁺   (x in units of h)
+def step_amplification(integrator: Integrator, w2: float, d: float) -> float:
+    """``amplification``, compiled, for one of the three integrators; w2 = (h ω)², d = h c / m.
+    The 2×2 step matrix on (x / h, v) and the moduli of its eigenvalues in closed form (a complex
+    pair: both √det)."""
+    if integrator == Integrator.SYMPLECTIC_EULER:  # v⁺ = v − (ω²h x + 2ζω h v),  x⁺ = x + h v⁺   (x in units of h)
         a, b, c, e = 1.0 - w2, 1.0 - d, -w2, 1.0 - d
-    elif integrator == EXPLICIT_EULER:  # x⁺ = x + h v,  v⁺ = v − h(ω² x + c/m v)
+    elif integrator == Integrator.EXPLICIT_EULER:  # x⁺ = x + h v,  v⁺ = v − h(ω² x + c/m v)
         a, b, c, e = 1.0, 1.0, -w2, 1.0 - d
     else:  # backward Euler: the same at the new state; the step is this matrix's inverse
         a, b, c, e = 1.0, -1.0, w2, 1.0 + d
@@ -54,7 +65,7 @@ def step_amplification(integrator: int, w2: float, d: float) -> float:
     else:
         first, second = abs(half + np.sqrt(disc)), abs(half - np.sqrt(disc))
         largest, smallest = max(first, second), min(first, second)
-    return 1.0 / smallest if integrator == BACKWARD_EULER else largest
+    return 1.0 / smallest if integrator == Integrator.BACKWARD_EULER else largest
 
 
 @njit(cache=True)
@@ -230,10 +241,8 @@ class SpringSettings(NamedTuple):
     """ζ, or −1: from the material's restitution"""
     friction_stiffness: float
     """N/m, or −1: "auto" (the normal stiffness)"""
-    implicit: int
-    """IMPLICIT_NEVER, IMPLICIT_AUTO (where the explicit step is unstable), IMPLICIT_ALWAYS, IMPLICIT_BY_INTEGRATOR"""
-    integrator: int
-    """SYMPLECTIC_EULER, EXPLICIT_EULER or BACKWARD_EULER (``amplification``'s cases)"""
+    implicit: ImplicitSprings
+    integrator: Integrator
     implicit_iterations: int
     """passes of the active set, at most"""
     linear_tolerance: float
@@ -330,11 +339,11 @@ def springs_implicit(
     """Whether this step takes its contact springs by backward Euler: always under that
     integrator or with implicit_springs "always", never with "never" or without contacts, and
     under "auto" where the explicit step would amplify them (``springs_unstable``)."""
-    if settings.implicit == IMPLICIT_BY_INTEGRATOR:
+    if settings.implicit == ImplicitSprings.BY_INTEGRATOR:
         return True
-    if entity_a.shape[0] == 0 or settings.implicit == IMPLICIT_NEVER:
+    if entity_a.shape[0] == 0 or settings.implicit == ImplicitSprings.NEVER:
         return False
-    return settings.implicit == IMPLICIT_ALWAYS or springs_unstable(
+    return settings.implicit == ImplicitSprings.ALWAYS or springs_unstable(
         springs, entity_a, entity_b, entities, h, settings.integrator
     )
 
