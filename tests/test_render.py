@@ -176,8 +176,8 @@ def test_walls_end_at_the_floor():
         ],
         float,
     )
-    assert scenery.triangle_normals(floor)[0] == pytest.approx([0, 0, 1])
-    assert np.allclose(scenery.triangle_normals(wall), [-1, 0, 0])
+    assert scenery.face_normals(floor)[0] == pytest.approx([0, 0, 1])
+    assert np.allclose(scenery.face_normals(wall), [-1, 0, 0])
     polygons, normals = scenery.cut_flat([floor, wall], np.array([-0.2, -0.2, -0.2]), np.array([0.8, 0.2, 0.2]))
     floor_points = np.concatenate([p for p, n in zip(polygons, normals) if n[2] == 1])
     wall_points = np.concatenate([p for p, n in zip(polygons, normals) if n[0] == -1])

@@ -47,7 +47,7 @@ from . import interrupts, surfaces
 from .errors import InputError
 from .progress import bar as progress_bar
 from .record import DRAWN, atomic_path, checked_times, make_folders, read_trajectory, remove_empty
-from .scenery import axis_limits, scenery, triangle_normals
+from .scenery import axis_limits, face_normals, scenery
 from .trajectory import check_arrays
 
 FORMATS = ("mp4", "gif")
@@ -376,7 +376,7 @@ class _Picture:
 
         content, flat_polygons, flat_normals, solid = scenery(arrays)
         self.obstacle_faces = solid
-        self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), triangle_normals(solid), self.light, True)
+        self.obstacle_rgba = _shade(np.tile(OBSTACLE_RGBA, (len(solid), 1)), face_normals(solid), self.light, True)
 
         self.figure = Figure(figsize=(self.width / DPI, self.height / DPI), dpi=DPI, facecolor=BACKGROUND)
         self.canvas = FigureCanvasAgg(self.figure)
@@ -444,8 +444,8 @@ class _Picture:
         faces = np.concatenate([bodies, cloths, self.obstacle_faces])
         rgba = np.concatenate(
             [
-                _shade(self.body_rgba, triangle_normals(bodies), self.light, False),
-                _shade(self.cloth_rgba, triangle_normals(cloths), self.light, True),
+                _shade(self.body_rgba, face_normals(bodies), self.light, False),
+                _shade(self.cloth_rgba, face_normals(cloths), self.light, True),
                 self.obstacle_rgba,
             ]
         )

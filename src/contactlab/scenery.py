@@ -24,7 +24,7 @@ MARGIN = 0.15  # planes reach this share of the content's size beyond it
 Bounds = tuple[np.ndarray, np.ndarray]
 
 
-def triangle_normals(faces: np.ndarray) -> np.ndarray:
+def face_normals(faces: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3) of triangles ``faces`` (N, 3, 3), right-handed (counter-clockwise)."""
     normals = np.cross(faces[:, 1] - faces[:, 0], faces[:, 2] - faces[:, 0])
     length = np.linalg.norm(normals, axis=1, keepdims=True)
@@ -86,7 +86,7 @@ def cut_flat(flat: Sequence[np.ndarray], lower: np.ndarray, upper: np.ndarray) -
     free side of every plane (a square of 2 triangles, wound counter-clockwise seen from its
     free side), so that walls end at the floor. polygons: list of (k, 3) [m]; normals (n, 3)."""
     corners = np.array(np.meshgrid(*zip(lower, upper))).reshape(3, -1).T
-    normals = [triangle_normals(faces[:1])[0] for faces in flat]
+    normals = [face_normals(faces[:1])[0] for faces in flat]
     planes = [(i, normals[i], normals[i] @ faces[0, 0] - 1e-9) for i, faces in enumerate(flat) if len(faces) == 2]
     polygons, polygon_normals = [], []
     for i, (faces, normal) in enumerate(zip(flat, normals)):
