@@ -187,8 +187,8 @@ def allowed_gap(reach: Reach, side_a: np.ndarray, side_b: np.ndarray) -> float:
 def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
     """The point of triangle (a, b, c) (3,) [m] closest to x (3,) [m], as its barycentric weights
     (w_a, w_b, w_c), and whether it lies strictly inside the triangle (not on an edge or a
-    corner). Ericson, *Real-Time Collision Detection*, 5.1.5; a degenerate triangle gives a corner
-    or an edge point."""
+    corner). Ericson, *Real-Time Collision Detection*, 5.1.5; a degenerate triangle (two corners
+    at one point, or all three on a line) gives the closest of its corner and edge points."""
     ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
     ap0, ap1, ap2 = x[0] - a[0], x[1] - a[1], x[2] - a[2]
@@ -202,7 +202,9 @@ def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
     if d3 >= 0.0 and d4 <= d3:
         return 0.0, 1.0, 0.0, False
     vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+    # an edge's region only where it has a length (d1 − d3 = |ab|², d2 − d6 = |ac|², (d4 − d3) +
+    # (d5 − d6) = |bc|²): a point-like edge's test holds everywhere (its v is 0), its parameter 0 / 0
+    if d1 - d3 > 0.0 and vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
         return 1.0 - v, v, 0.0, False
     cp0, cp1, cp2 = x[0] - c[0], x[1] - c[1], x[2] - c[2]
@@ -211,13 +213,15 @@ def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
     if d6 >= 0.0 and d5 <= d6:
         return 0.0, 0.0, 1.0, False
     vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+    if d2 - d6 > 0.0 and vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
         w = d2 / (d2 - d6)
         return 1.0 - w, 0.0, w, False
     va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+    if (d4 - d3) + (d5 - d6) > 0.0 and va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
         w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
         return 0.0, 1.0 - w, w, False
+    if not va + vb + vc > 0.0:  # |ab × ac|² = 0, a triangle on a line that rounding let through: its edges
+        return _closest_on_edges(x, a, b, c)
     denominator = 1.0 / (va + vb + vc)
     v = vb * denominator
     w = vc * denominator
@@ -225,10 +229,32 @@ def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
 
 
 @njit(cache=True)
+def _closest_on_edges(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
+    """``closest_on_triangle`` for a triangle with no area: the closest point of its three edges,
+    as barycentric weights, never inside."""
+    corners = (a, b, c)
+    best, weights = np.inf, np.array([1.0, 0.0, 0.0])
+    for first in range(3):
+        second = (first + 1) % 3
+        start, end = corners[first], corners[second]
+        s, _ = closest_on_segments(start, end, x, x)
+        gap = 0.0
+        for k in range(3):
+            gap += (start[k] + s * (end[k] - start[k]) - x[k]) ** 2
+        if gap < best:
+            best = gap
+            weights[:] = 0.0
+            weights[first], weights[second] = 1.0 - s, s
+    return weights[0], weights[1], weights[2], False
+
+
+@njit(cache=True)
 def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> tuple[float, float]:
     """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2)
-    of two segments (3,) [m] each; an end where clamped (exactly 0 or 1), and for parallel
-    segments s = 0. Ericson, *Real-Time Collision Detection*, 5.1.9."""
+    of two segments (3,) [m] each; an end where clamped (exactly 0 or 1). Ericson, *Real-Time
+    Collision Detection*, 5.1.9; for (nearly) parallel segments the closest of the pairs that put
+    one segment's end against the other and of their crossing, s = 0 first (a tie: the overlap of
+    parallel segments)."""
     d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
     d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
     r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
@@ -245,15 +271,46 @@ def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.n
         return min(max(-c / a, 0.0), 1.0), 0.0
     b = d10 * d20 + d11 * d21 + d12 * d22
     denominator = a * e - b * b
-    s = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 1e-12 * a * e else 0.0
+    parallel = not denominator > 1e-12 * a * e
+    s = 0.0 if parallel else min(max((b * f - c * e) / denominator, 0.0), 1.0)
+    s, t = _clamped_pair(s, a, b, c, e, f)
+    if parallel:  # s = 1, t = 0 and t = 1 too (parallel: an end is closest), and the crossing of
+        # two skew segments barely off parallel, whose s loses digits (divided by ~0) but not all
+        d1, d2 = (d10, d11, d12), (d20, d21, d22)
+        best = _gap_squared(s, t, p1, p2, d1, d2)
+        crossing = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 0.0 else 0.0
+        ends = (
+            _clamped_pair(crossing, a, b, c, e, f),
+            _clamped_pair(1.0, a, b, c, e, f),
+            (min(max(-c / a, 0.0), 1.0), 0.0),
+            (min(max((b - c) / a, 0.0), 1.0), 1.0),
+        )
+        for s_end, t_end in ends:
+            gap = _gap_squared(s_end, t_end, p1, p2, d1, d2)
+            if gap < best:
+                s, t, best = s_end, t_end, gap
+    return s, t
+
+
+@njit(cache=True, inline="always")
+def _clamped_pair(s: float, a: float, b: float, c: float, e: float, f: float) -> tuple[float, float]:
+    """``closest_on_segments``' t for a given s, and where t leaves [0, 1] it clamped and s taken
+    again for it (Ericson's terms a, b, c, e, f)."""
     t = (b * s + f) / e
     if t < 0.0:
-        t = 0.0
-        s = min(max(-c / a, 0.0), 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((b - c) / a, 0.0), 1.0)
+        return min(max(-c / a, 0.0), 1.0), 0.0
+    if t > 1.0:
+        return min(max((b - c) / a, 0.0), 1.0), 1.0
     return s, t
+
+
+@njit(cache=True, inline="always")
+def _gap_squared(s: float, t: float, p1: np.ndarray, p2: np.ndarray, d1: tuple, d2: tuple) -> float:
+    """|p1 + s d1 − (p2 + t d2)|² [m²]."""
+    gap = 0.0
+    for k in range(3):
+        gap += (p1[k] + s * d1[k] - p2[k] - t * d2[k]) ** 2
+    return gap
 
 
 @njit(cache=True)
