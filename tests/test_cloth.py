@@ -214,9 +214,11 @@ def test_backward_euler_system_pins_and_matches_its_definition(rng):
 @pytest.fixture(scope="module")
 def draped_system():
     """The backward Euler system of the built-in cloth_drape 0.6 s in (625 vertices over a sphere):
-    simulated once for the module (the tests only read it)."""
+    simulated once for the module (the tests only read it), as the scene runs by default, as the
+    render, plot and command-line tests run it (so its kernels compile once for all of them)."""
     scene = load_scene("cloth_drape")
-    state = simulate(scene.model, "impulse", scene.dt, 0.6, integrator=scene.integrator, record_every=72).state
+    options = scene.method_options.get(scene.method)
+    state = simulate(scene.model, scene.method, scene.dt, 0.6, options, scene.integrator, record_every=72).state
     return particle_system(scene.model, state, scene.dt)
 
 
