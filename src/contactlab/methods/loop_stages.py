@@ -121,7 +121,7 @@ def without_drive(model: LoopModel) -> LoopModel:
 # the same arrays (no copy) with None in its place
 @overload(without_drive, inline="always")
 def _without_drive_compiled(model):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
-    if isinstance(model.types[LoopModel._fields.index("drive")], types.NoneType):
+    if isinstance(model.types[-1], types.NoneType):  # the drive, LoopModel's last field
         return lambda model: model
     return lambda model: LoopModel(*model[:-1], None)
 

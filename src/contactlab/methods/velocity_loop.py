@@ -144,7 +144,9 @@ def run(
     sweeps_made = 0
     implicit_steps = 0
     linear_made = 0
-    plain = without_drive(model)  # for what only the step's free motion reads: record's code is one
+    # poses and record never read the drive (only the step's free motion does): given the model
+    # without it, they are the same compiled code for a driven scene as for an undriven one
+    plain = without_drive(model)
     # the poses at each step's start, computed once after the step before: its sample takes them too
     pose = poses(plain, motion)
     for s in range(steps):
