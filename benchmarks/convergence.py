@@ -143,17 +143,8 @@ def orders(problem, seed=0):
     methods = problem["order"]
     out = {}
     if C >= PARALLEL_MIN_CONTACTS:  # as loop_stages.solve groups it (the same numbers on any thread count)
-        grouped, _ = split_into_slabs(
-            methods,
-            found.point,
-            rows.body,
-            rows.particle,
-            motion.body_position,
-            rows.body_inverse_mass,
-            motion.particle_position,
-            rows.particle_inverse_mass,
-            SWEEP_GROUPS,
-        )
+        positions = (motion.body_position, motion.particle_position)
+        grouped, _ = split_into_slabs(methods, found.point, rows, positions, SWEEP_GROUPS)
         out["methods' order (top down, 2 slabs)"] = grouped
     out["top down" if C >= PARALLEL_MIN_CONTACTS else "methods' order (top down)"] = methods
     out["bottom up"] = methods[::-1].copy()
@@ -173,12 +164,14 @@ def sweeps_matrix_free(problem, order, sweeps):
     errors, changes, history = [], [], [impulses]
     for _ in range(sweeps):
         u = problem["v_free"].copy()
-        impulses, _, change = solve_sequential_impulses(rows, friction, target, u, 1, 0.0, impulses, order, None)
+        impulses, _, change = solve_sequential_impulses(rows, friction, target, u, (1, 0.0), impulses, (order, None))
         errors.append(natural_map_error(W, q, friction, impulses.ravel()))
         changes.append(change)
         history.append(impulses)
     u = problem["v_free"].copy()
-    _, _, whole = solve_sequential_impulses(rows, friction, target, u, sweeps, 0.0, problem["warm"].copy(), order, None)
+    _, _, whole = solve_sequential_impulses(
+        rows, friction, target, u, (sweeps, 0.0), problem["warm"].copy(), (order, None)
+    )
     return errors, changes, history, whole
 
 

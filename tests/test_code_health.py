@@ -44,6 +44,27 @@ def test_no_module_is_longer_than_a_thousand_lines():
     assert {name: n for name, n in lengths.items() if n > LONGEST_MODULE} == {}
 
 
+# parameters: a function of the methods that takes more reads as a bag of arrays, not as its stage
+# of the loop (issue 36, item 5); what belongs together travels as one named value (a LoopModel, a
+# Motion, a Specialization, (u, targets, warm start, order) of a solve)
+MOST_PARAMETERS = 8
+
+
+def test_no_function_of_the_methods_takes_more_than_eight_parameters():
+    import ast
+
+    crowded = []
+    for path in sorted((PACKAGE / "methods").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                arguments = node.args
+                count = len(arguments.posonlyargs) + len(arguments.args) + len(arguments.kwonlyargs)
+                count += (arguments.vararg is not None) + (arguments.kwarg is not None)
+                if count > MOST_PARAMETERS:
+                    crowded.append(f"{path.name}:{node.lineno} {getattr(node, 'name', 'lambda')} ({count})")
+    assert crowded == []
+
+
 def test_the_suite_says_why_it_skipped_a_test(tmp_path):
     # issue 37: a summary line "25 skipped" hid that the FCLIB tests had no data; pytest's options
     # in pyproject.toml must list each skip with its reason

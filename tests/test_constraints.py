@@ -173,10 +173,9 @@ def test_matrix_free_and_assembled_give_the_same_lambda(rng, friction):
         contacts.friction,
         target[:, 0],
         u,
-        20000,
-        1e-14,
+        (20000, 1e-14),
         np.zeros((contacts.count, 3)),
-        *sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
+        sweep_groups(rows, contacts, state, solve_order(contacts, model.gravity)),
     )
     inverse = constraints.SystemInverse(inverse_mass=inverse_mass_matrix(model, state.body_orientation))
     B, q = constraints.lcp_matrices(J, inverse, v_free, target.ravel())

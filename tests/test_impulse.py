@@ -444,7 +444,11 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
     from conftest import random_rotations
 
     from contactlab.contacts import tangent_basis
+    from contactlab.methods.loop_stages import loop_settings
 
+    # the collision stage's settings: h = 1 ms, every approach bounces, 10 waves and sweeps to 1e-12 m/s
+    options = impulse.Options(iterations=10, tolerance=1e-12, restitution_threshold=0.0)
+    settings = loop_settings(ball_on_plane(), "impulse", options, 1e-3)
     for _trial in range(20):
         R = random_rotations(rng, 2)  # R_a, R_b (2, 3, 3)
         mass = rng.uniform(0.2, 5.0, 2)
@@ -469,21 +473,10 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         # the Jacobian form: J written out, against the rows the solver sweeps (bodies placed so
         # that the contact point, the origin, has these lever arms)
         t1, t2 = tangent_basis(n[None])
+        no_particles = -np.ones((1, 3), np.int64)
+        sides = (np.array([0]), np.array([1]), no_particles, no_particles, np.zeros((1, 3)), np.zeros((1, 3)))
         rows = jacobian_rows.contact_rows(
-            np.array([0]),
-            np.array([1]),
-            -np.ones((1, 3), np.int64),
-            -np.ones((1, 3), np.int64),
-            np.zeros((1, 3)),
-            np.zeros((1, 3)),
-            np.zeros((1, 3)),
-            -r_world,
-            n[None],
-            t1,
-            t2,
-            1 / mass,
-            inverse_world,
-            np.zeros(0),
+            sides, (np.zeros((1, 3)), n[None], t1, t2), -r_world, (1 / mass, inverse_world, np.zeros(0))
         )
         k = rows.k
         u = stack(v, w, np.zeros((0, 3)))
@@ -502,21 +495,8 @@ def test_jacobian_form_equals_r4_term_by_term_for_two_rigid_bodies(rng):
         if n @ v_rel >= 0:
             continue
         tau = np.empty(1)
-        velocity_level.resolve_collisions(
-            rows,
-            np.zeros(1),
-            np.array([eps]),
-            np.zeros(1),
-            np.zeros(1),
-            1e-3,
-            0.0,
-            u,
-            10,
-            10,
-            1e-12,
-            tau,
-            np.array([0]),
-        )
+        materials = (np.zeros(1), np.array([eps]))  # frictionless, restitution ε
+        velocity_level.resolve_collisions(rows, materials, np.zeros(1), np.zeros(1), u, tau, np.array([0]), settings)
         after_v, after_w, _ = unstack(u, 2)
         for i, sign in ((0, 1.0), (1, -1.0)):
             np.testing.assert_allclose(after_v[i], v[i] + sign * j * n / mass[i], rtol=1e-10, atol=1e-12)

@@ -89,18 +89,16 @@ def test_parallel_sweep_is_the_serial_sweep_in_the_grouped_order_bit_for_bit():
     warm = np.zeros((contacts.count, 3))
     u_parallel, u_serial = u0.copy(), u0.copy()
     lam_parallel, sweeps, _ = sequential.solve_sequential_impulses(
-        rows, contacts.friction, target, u_parallel, 30, -1.0, warm, grouped, starts
+        rows, contacts.friction, target, u_parallel, (30, -1.0), warm, (grouped, starts)
     )
     lam_serial, _, _ = sequential.solve_sequential_impulses(
         rows,
         contacts.friction,
         target,
         u_serial,
-        30,
-        -1.0,
+        (30, -1.0),
         warm,
-        grouped,
-        np.array([0, contacts.count, contacts.count]),
+        (grouped, np.array([0, contacts.count, contacts.count])),
     )
     assert sweeps == 30
     np.testing.assert_array_equal(lam_parallel, lam_serial)
@@ -117,7 +115,13 @@ def test_parallel_sweeps_converge_to_the_velocities_of_the_plain_order():
     for sweep_order, sweep_starts in ((grouped, starts), (order, np.array([0, contacts.count, contacts.count]))):
         u = u0.copy()
         lam, sweeps, change = sequential.solve_sequential_impulses(
-            rows, contacts.friction, target, u, 20000, 1e-13, np.zeros((contacts.count, 3)), sweep_order, sweep_starts
+            rows,
+            contacts.friction,
+            target,
+            u,
+            (20000, 1e-13),
+            np.zeros((contacts.count, 3)),
+            (sweep_order, sweep_starts),
         )
         assert change <= 1e-13
         vn = jacobian_rows.row_products(rows, u)[:, 0]
@@ -136,18 +140,16 @@ def test_below_the_threshold_or_in_one_group_the_sweep_is_serial(size, groups):
     np.testing.assert_array_equal(grouped, order)
     assert starts is None  # one group: the serial sweep, nothing parallel compiled
     lam, sweeps, _ = sequential.solve_sequential_impulses(
-        rows, contacts.friction, target, u.copy(), 20, -1.0, np.zeros((contacts.count, 3)), grouped, starts
+        rows, contacts.friction, target, u.copy(), (20, -1.0), np.zeros((contacts.count, 3)), (grouped, starts)
     )
     lam_array, _, _ = sequential.solve_sequential_impulses(
         rows,
         contacts.friction,
         target,
         u.copy(),
-        20,
-        -1.0,
+        (20, -1.0),
         np.zeros((contacts.count, 3)),
-        grouped,
-        np.array([0, contacts.count, contacts.count]),
+        (grouped, np.array([0, contacts.count, contacts.count])),
     )
     np.testing.assert_array_equal(lam, lam_array)  # the same sweep as one group given explicitly
 
@@ -238,7 +240,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     target = resting_targets(-contacts.depth, dt, options.stabilization, options.slop, options.max_push_velocity)
     u = stack(v, w, p)
     lam, sweeps, change = sequential.solve_sequential_impulses(
-        rows, contacts.friction, target, u, 100, 1e-7, warm, order, np.array([0, contacts.count, contacts.count])
+        rows, contacts.friction, target, u, (100, 1e-7), warm, (order, np.array([0, contacts.count, contacts.count]))
     )
     assert sweeps < 50 and change <= 1e-7
     before = u.copy()

@@ -54,7 +54,7 @@ def test_a_two_group_sweep_is_bit_for_bit_the_same_on_one_thread_and_on_two():
             numba.set_num_threads(count)
             u = u0.copy()
             lam, sweeps, change = sequential.solve_sequential_impulses(
-                rows, contacts.friction, target, u, 40, -1.0, np.zeros((contacts.count, 3)), grouped, starts
+                rows, contacts.friction, target, u, (40, -1.0), np.zeros((contacts.count, 3)), (grouped, starts)
             )
             results.append((lam, u, change))
     finally:

@@ -9,7 +9,7 @@ import pytest
 from conftest import ball_on_plane
 
 from contactlab import SimulationDiverged, simulate
-from contactlab.methods import get, impulse, loop_steps, velocity_loop
+from contactlab.methods import get, impulse, loop_stages, loop_steps, velocity_loop
 from contactlab.record import SERIES
 from contactlab.scene import builtin_scenes, load_scene
 
@@ -204,14 +204,17 @@ def test_compiled_loop_must_be_a_yes_or_no():
 
 def test_projection_takes_the_loop_and_compiles_only_its_own_step():
     """simulate(method="projection") takes the loop as the velocity methods do; the loop is told
-    the method by flags that are None for the steps it does not take (Numba then leaves them
-    uncompiled), and calls the projection's step."""
+    the method by its Specialization, whose flags are None for the steps it does not take (Numba
+    then leaves them uncompiled), and calls the projection's step."""
     scene = load_scene("box_stack")
     model, options = scene.model, get("projection").Options(passes=3)
     stepper = velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state())
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
-    assert stepper.flags[2:5] == (None, None, True)  # (constraints, impulse, projection)
+    methods = ("constraints", "impulse", "projection")
+    assert [getattr(stepper.spec, name) for name in methods] == [None, None, True]
     assert stepper.entry_point().function is loop_steps.projection_step
-    assert velocity_loop.compile_flags(model, "impulse", impulse.Options())[2:5] == (None, True, None)
-    assert velocity_loop.compile_flags(model, "constraints", get("constraints").Options())[2:5] == (True, None, None)
+    spec = loop_stages.specialization(model, "impulse", impulse.Options())
+    assert [getattr(spec, name) for name in methods] == [None, True, None]
+    spec = loop_stages.specialization(model, "constraints", get("constraints").Options())
+    assert [getattr(spec, name) for name in methods] == [True, None, None]
     assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]

@@ -132,9 +132,10 @@ class ThreadChooser:
             self._start_trial()
 
     def nothing_parallel(self) -> None:
-        """Tell the chooser the run has no parallel loop (the compiled loop without one, see
-        ``velocity_loop.compile_flags``): in "auto" mode it then makes no trials, which would time
-        the same code on both counts, and runs every step on one thread; a fixed count is kept."""
+        """Tell the chooser the run has no parallel loop (the compiled loop without one: see
+        ``loop_stages.specialization``, its ``parallel``): in "auto" mode it then makes no trials,
+        which would time the same code on both counts, and runs every step on one thread; a fixed
+        count is kept."""
         if self.mode == AUTO:
             self._auto = False
             self._plan = []

@@ -37,7 +37,7 @@ when things collide.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,11 +58,11 @@ from .jacobian_rows import row_products
 from .loop_stages import (
     CARRIED,
     build_rows,
-    compile_flags,
     loop_inputs,
     loop_model,
     loop_settings,
     solve,
+    specialization,
     without_drive,
 )
 from .sequential import contact_order
@@ -285,15 +285,13 @@ def solve_assembled(
     friction: np.ndarray,
     warm: np.ndarray,
     options: Options,
-    solver: str | None = None,
 ) -> tuple[np.ndarray, int, float]:
-    """λ (C, 3) of the problem u = W λ + q with the chosen solver (``solver`` overrides
-    ``options.solver``); (λ, iterations, residual). apgd takes W as the operator
-    ``delassus_operator`` and its step from ``delassus_bound`` (``inverse_mass`` M⁻¹ (N, N)
-    sparse); the others sweep W assembled by ``lcp_matrices``."""
+    """λ (C, 3) of the problem u = W λ + q with ``options.solver``; (λ, iterations, residual).
+    apgd takes W as the operator ``delassus_operator`` and its step from ``delassus_bound``
+    (``inverse_mass`` M⁻¹ (N, N) sparse); the others sweep W assembled by ``lcp_matrices``."""
     from ..lcp import solve_friction_contact, solve_lcp
 
-    solver = solver or options.solver
+    solver = options.solver
     C = len(friction)
     if solver == "apgd":
         result = solve_friction_contact(
@@ -414,9 +412,10 @@ def solve_constraints(
     targets[:, 0] = target
     # on implicit cloth, matrix_free means products with W = J A⁻¹ Jᵀ (apgd): sweeps would
     # need W's rows, that is A⁻¹ Jᵀ in full — dense, seconds a step on a 64 × 64 drape
-    solver = "apgd" if options.solver == "matrix_free" else options.solver
+    if options.solver == "matrix_free":
+        options = replace(options, solver="apgd")
     lam, iterations, residual = solve_assembled(
-        J, inverse, inverse_mass, v_free, targets.ravel(), contacts.friction, warm, options, solver
+        J, inverse, inverse_mass, v_free, targets.ravel(), contacts.friction, warm, options
     )
     return lam, v_free + inverse.solve(J.T @ lam.ravel()), iterations, residual
 
@@ -456,17 +455,16 @@ def step(
     if options.solver == "matrix_free" and inverse is None:  # the accelerations formulation, swept
         v_new = v_free.copy()
         order = contact_order(found.point, found.feature_id, arrays.gravity)
-        _, _, _, _, _, slabs, parallel = compile_flags(model, "constraints", options)
-        lam, iterations, residual = solve(
-            settings, slabs, parallel, rows, found, motion, v_new, target, warm, order, None
-        )
+        spec = specialization(model, "constraints", options)
+        system = (v_new, target, warm, order)
+        lam, iterations, residual = solve(settings, spec.slabs, spec.parallel, rows, found, motion, system, None)
     else:
         lam, v_new, iterations, residual = solve_constraints(
             model, state, contacts, v_free, target, warm, options, inverse
         )
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
     floats = tuple(np.array(v, dtype=float) for v in (*move, *free))  # as velocity_level._floats
-    positions = split_at_impact(arrays, found, motion, tau, floats[:3], floats[3:], v_new, h, settings.time_of_impact)
+    positions = split_at_impact(arrays, found, motion, tau, (floats[:3], floats[3:]), v_new, settings)
     carried_on = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
     new = State.assemble(state.time + h, positions, unstack(v_new, model.body_count), carried_on)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual), impulses=lam)

@@ -58,28 +58,17 @@ ContactRows.__doc__ = """The contacts' rows of J in the compact form above (a na
 
 
 @njit(cache=True)
-def contact_rows(
-    body_a: np.ndarray,
-    body_b: np.ndarray,
-    particles_a: np.ndarray,
-    particles_b: np.ndarray,
-    weights_a: np.ndarray,
-    weights_b: np.ndarray,
-    point: np.ndarray,
-    body_position: np.ndarray,
-    normal: np.ndarray,
-    tangent1: np.ndarray,
-    tangent2: np.ndarray,
-    body_inverse_mass: np.ndarray,
-    body_inverse_inertia_world: np.ndarray,
-    particle_inverse_mass: np.ndarray,
-) -> ContactRows:
+def contact_rows(sides: tuple, geometry: tuple, body_position: np.ndarray, masses: tuple) -> ContactRows:
     """The contacts' rows in the compact form above, a ``ContactRows``.
 
-    Shapes: C contacts; body_a, body_b (C,) int; particles_* (C, 3) int; weights_* (C, 3);
-    point, normal, tangent1, tangent2 (C, 3) [m, 1]; body_position (B, 3) [m] (the lever arm
-    is point − centre of mass); body_inverse_inertia_world (B, 3, 3).
+    C contacts: ``sides`` = (body_a, body_b (C,) int; particles_a, particles_b (C, 3) int;
+    weights_a, weights_b (C, 3)), ``geometry`` = (point, normal, tangent1, tangent2) (C, 3) [m, 1],
+    as a Contacts' fields; body_position (B, 3) [m] (the lever arm is point − centre of mass);
+    ``masses`` = (the bodies' inverse masses (B,) [1/kg], their world inverse inertias (B, 3, 3)
+    [1/(kg m²)], the particles' inverse masses (P,) [1/kg]).
     """
+    body_a, body_b, particles_a, particles_b, weights_a, weights_b = sides
+    point, normal, tangent1, tangent2 = geometry
     C = normal.shape[0]
     body = np.empty((C, 2), dtype=np.int64)
     particle = np.empty((C, 2, 3), dtype=np.int64)
@@ -106,29 +95,19 @@ def contact_rows(
                     arm[c, side, i] = point[c, i] - body_position[body[c, side], i]
         for d in range(5):
             row, column = (d, d) if d < 3 else (d - 2, 0)
-            k[c, d] = _coupling(
-                c,
-                frame[c, row],
-                frame[c, column],
-                body,
-                particle,
-                weight,
-                arm,
-                body_inverse_mass,
-                body_inverse_inertia_world,
-                particle_inverse_mass,
-            )
+            k[c, d] = _coupling(c, frame[c, row], frame[c, column], (body, particle, weight, arm), masses)
         for d in range(3):
             k[c, 5 + d] = 1.0 / k[c, d] if k[c, d] > 0.0 else 0.0
-    return ContactRows(
-        body, particle, weight, arm, frame, k, body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass
-    )
+    return ContactRows(body, particle, weight, arm, frame, k, *masses)
 
 
 @njit(cache=True, inline="always")
-def _coupling(c, d, e, body, particle, weight, arm, inverse_mass, inverse_inertia, particle_inverse_mass):
+def _coupling(c, d, e, sides, masses):
     """dᵀ J M⁻¹ Jᵀ e of contact c for two world directions d, e (3,): the velocity along d that a
-    unit impulse along e makes, summed over both sides [1/kg]."""
+    unit impulse along e makes, summed over both sides [1/kg]. ``sides`` = the rows' (body,
+    particle, weight, arm) as ``contact_rows`` fills them; ``masses`` as it takes them."""
+    body, particle, weight, arm = sides
+    inverse_mass, inverse_inertia, particle_inverse_mass = masses
     total = 0.0
     dot = d[0] * e[0] + d[1] * e[1] + d[2] * e[2]
     for side in range(2):
@@ -287,22 +266,17 @@ def rows_at(
     masses (B,) [1/kg] and world inverse inertias (B, 3, 3) [1/(kg m²)] there, and the particles'
     inverse masses (P,) [1/kg]: the one place that hands the contacts' fields to it, for the
     methods' steps (``rows_of``) and the compiled loop's (``loop_stages.build_rows``) alike."""
-    return contact_rows(
+    sides = (
         contacts.body_a,
         contacts.body_b,
         contacts.particles_a,
         contacts.particles_b,
         contacts.weights_a,
         contacts.weights_b,
-        contacts.point,
-        body_position,
-        contacts.normal,
-        contacts.tangent1,
-        contacts.tangent2,
-        body_inverse_mass,
-        body_inverse_inertia_world,
-        particle_inverse_mass,
     )
+    geometry = (contacts.point, contacts.normal, contacts.tangent1, contacts.tangent2)
+    masses = (body_inverse_mass, body_inverse_inertia_world, particle_inverse_mass)
+    return contact_rows(sides, geometry, body_position, masses)
 
 
 def rows_of(model: Model, contacts: Contacts, body_position: np.ndarray, body_orientation: np.ndarray) -> ContactRows:

@@ -19,7 +19,7 @@ contactlab.contacts.
 from __future__ import annotations
 
 from collections import namedtuple
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import types
@@ -30,7 +30,7 @@ from ..collision import assemble_contacts, dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES, pair_families
 from ..collision.manifolds import copy_rows, reuse_or_generate
-from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts
+from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
 from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
@@ -166,32 +166,67 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 
 PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
 
+Plan = namedtuple("Plan", ("families", "hull_store", "large", "keeping"))
+Plan.__doc__ = """What detection compiles for a scene: the narrow phase's pair families (``pair_families``)
+and hull store (None where no family needs hulls), ``large`` (True: at least GRID_FROM bodies and
+particles, the grid broad phase) and ``keeping`` (True: a pair family that keeps manifolds and a manifold
+tolerance > 0). A flag that is None leaves its branch uncompiled."""
 
-def compile_flags(model: Model, method: str, options: CollisionOptions) -> tuple:
-    """(large, keeping, constraints, impulse, projection, slabs, parallel): True, or None where the
-    scene can never need that branch of the loop, which Numba then leaves uncompiled (a first
-    run compiles a fraction of the loop: a ball on the floor needs neither the grid broad phase,
-    nor kept manifolds, nor the slab split; projection not the velocity methods' step, nor they
-    projection's) — the numbers are the same either way. large: at least GRID_FROM bodies and
-    particles; keeping: a pair family that keeps manifolds and a manifold tolerance > 0;
-    constraints, impulse, projection: the method is constraints, impulse, projection (two flags
-    for the velocity methods, not one: Numba prunes only a branch whose flag is None, and an
-    impulse run then compiles none of what only constraints takes; penalty: all three None, its
-    PenaltyLoop the flag after these);
-    slabs: PARALLEL_MIN_CONTACTS contacts are possible (MAX_PER_PAIR per pair); parallel:
-    several threads and PARALLEL_MIN_COLLIDERS bodies and particles."""
+Specialization = namedtuple(
+    "Specialization", ("plan", "constraints", "impulse", "projection", "slabs", "parallel", "penalty")
+)
+Specialization.__doc__ = """What a run's compiled code is specialized for, as one value: the detection Plan,
+the method (``constraints``, ``impulse``, ``projection``: True for the run's method, None for the others;
+``penalty``: penalty's PenaltyLoop, else None), ``slabs`` (True: PARALLEL_MIN_CONTACTS contacts are possible,
+MAX_PER_PAIR per pair) and ``parallel`` (True: several threads and PARALLEL_MIN_COLLIDERS bodies and
+particles). The numbers are the same whatever it holds.
+
+Numba leaves a branch uncompiled only where it tests an *argument* typed None, never a field of a tuple:
+each flag reaches the one kernel that branches on it as an argument of its own (``candidate_pairs``
+``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``), or is
+chosen on by its type when compiling (``kept_or_fresh``, ``for_response``)."""
+
+
+def specialization(model: Model, method: str, options: CollisionOptions, penalty: Any = None) -> Specialization:
+    """The Specialization of ``method``'s runs on ``model`` with these Options (``penalty``: penalty's
+    PenaltyLoop): a first run compiles a fraction of the loop — a ball on the floor needs neither
+    the grid broad phase, nor kept manifolds, nor the slab split; projection not the velocity
+    methods' step, nor they projection's. Two flags for the velocity methods, not one: an impulse
+    run then compiles none of what only constraints takes."""
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
-    present = {name for name, flag in zip(FAMILIES, pair_families(model)) if flag is not None}
+    families = pair_families(model)
+    present = {name for name, flag in zip(FAMILIES, families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
-    return (
+    plan = Plan(
+        families,
+        model.hull_store if needs_hulls(families) else None,
         True if dynamic >= GRID_FROM else None,
         True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
+    )
+    return Specialization(
+        plan,
         True if method == "constraints" else None,
         True if method == "impulse" else None,
         True if method == "projection" else None,
         True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
         True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,
+        penalty,
     )
+
+
+def for_response(spec: Specialization) -> Specialization:
+    """``spec`` without its Plan: what the response's kernels (``respond``, ``project``, ``finish``)
+    take, so that they are compiled once for every scene of one method and one solve, whatever
+    its shapes."""
+    return spec._replace(plan=None)
+
+
+# chosen by the Plan's type: the same tuple where it is None, else a new one without it (no copy)
+@overload(for_response, inline="always")
+def _for_response_compiled(spec):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
+    if isinstance(spec.types[0], types.NoneType):
+        return lambda spec: spec
+    return lambda spec: Specialization(None, *spec[1:])
 
 
 def restitution_threshold(model: Model, h: float, options: CollisionOptions) -> float:
@@ -381,56 +416,28 @@ def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.
 @njit(cache=True, inline="always")
 def detect(
     model: LoopModel,
-    plan: tuple,
-    large: bool | None,
-    keeping: bool | None,
+    plan: Plan,
     motion: Motion,
-    centers: np.ndarray,
-    rots: np.ndarray,
+    at: tuple[np.ndarray, np.ndarray],
     reach: np.ndarray,
     kept: tuple,
     tolerance: float,
 ) -> tuple[ContactArrays, tuple, bool]:
     """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
     hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
-    when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, their centres (N, 3) and
-    rotations (N, 3, 3) ``centers``, ``rots`` (``poses``). ``plan`` = (families, hull store) of
-    the narrow phase; ``large`` and ``keeping`` None: never a grid broad phase, never a kept
-    manifold (see ``Stepper``). Returns (ContactArrays, the manifolds to keep, whether the broad
-    phase found any pair within reach)."""
-    families, hull_store = plan
+    when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, ``at`` = their centres
+    (N, 3) and rotations (N, 3, 3) (``poses``). ``plan``: what detection is compiled for (its
+    ``large`` and ``keeping`` None: never a grid broad phase, never a kept manifold). Returns
+    (ContactArrays, the manifolds to keep, whether the broad phase found any pair within reach)."""
+    centers, rots = at
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, large)
+    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, plan.large)
     total = model.kinds.shape[0]
-    made = (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
     if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
-        return no_contacts(), made, False
-    # a branch of its own on ``keeping is None``: Numba prunes only that form, and the ball's
-    # loop then compiles no manifold reuse
-    if keeping is None:
-        found = generate_contacts(
-            pairs, model.kinds, model.params, centers, rots, _pair_reach(pairs, reach), hull_store, families
-        )
-    elif not tolerance > 0.0:
-        found = generate_contacts(
-            pairs, model.kinds, model.params, centers, rots, _pair_reach(pairs, reach), hull_store, families
-        )
-    else:
-        found, made = reuse_or_generate(
-            pairs,
-            model.kinds,
-            model.params,
-            centers,
-            rots,
-            reach,
-            model.radius,
-            hull_store,
-            families,
-            kept,
-            tolerance,
-            total,
-        )
-    point, normal, depth, feature, owner = found
+        return no_contacts(), _none_kept(kept), False
+    point, normal, depth, feature, owner, made = kept_or_fresh(
+        plan.keeping, model, plan, pairs, at, reach, kept, tolerance
+    )
     if depth.shape[0] == 0:
         return no_contacts(), made, True
     contacts = assemble_contacts(
@@ -448,6 +455,68 @@ def detect(
         total,
     )
     return contacts, made, True
+
+
+def kept_or_fresh(
+    keeping: bool | None,
+    model: LoopModel,
+    plan: Plan,
+    pairs: np.ndarray,
+    at: tuple[np.ndarray, np.ndarray],
+    reach: np.ndarray,
+    kept: tuple,
+    tolerance: float,
+) -> tuple:
+    """The narrow phase of ``detect`` over ``pairs`` (K, 2): (point, normal, depth, feature, owner
+    — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
+    [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
+    generated afresh and nothing is kept. Compiled only (below): its body is chosen by the type of
+    ``keeping``, so a scene that never keeps a manifold (``Plan.keeping`` None) compiles no reuse."""
+    raise NotImplementedError("kept_or_fresh runs compiled only (detect)")
+
+
+@overload(kept_or_fresh, inline="always")
+def _kept_or_fresh_compiled(keeping, model, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
+    if isinstance(keeping, types.NoneType):
+        return lambda keeping, model, plan, pairs, at, reach, kept, tolerance: _fresh(
+            model, plan, pairs, at, reach, kept
+        )
+
+    def kept_or_fresh(keeping, model, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
+        if not tolerance > 0.0:
+            return _fresh(model, plan, pairs, at, reach, kept)
+        found, made = reuse_or_generate(
+            pairs,
+            model.kinds,
+            model.params,
+            at[0],
+            at[1],
+            reach,
+            model.radius,
+            plan.hull_store,
+            plan.families,
+            kept,
+            tolerance,
+            model.kinds.shape[0],
+        )
+        return (*found, made)
+
+    return kept_or_fresh
+
+
+@njit(cache=True, inline="always")
+def _fresh(model, plan, pairs, at, reach, kept):
+    """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
+    found = generate_contacts(
+        pairs, model.kinds, model.params, at[0], at[1], _pair_reach(pairs, reach), plan.hull_store, plan.families
+    )
+    return (*found, _none_kept(kept))
+
+
+@njit(cache=True, inline="always")
+def _none_kept(kept):
+    """No manifold to keep: ``kept``'s eight fields, empty."""
+    return (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
 
 
 @njit(cache=True, inline="always")
@@ -497,52 +566,39 @@ def solve(
     rows: ContactRows,
     contacts: ContactArrays,
     motion: Motion,
-    u: np.ndarray,
-    target: np.ndarray,
-    warm: np.ndarray,
-    order: np.ndarray,
+    system: tuple,
     substepping: tuple | None,
 ) -> tuple[np.ndarray, int, float]:
-    """Stage 4c: the warm-started sweeps of sequential impulses on u (changed in place), the
-    contacts grouped for threads as ``sequential.sweep_groups`` does (``slabs`` None: never
+    """Stage 4c: the warm-started sweeps of sequential impulses, ``system`` = (u (N,), changed in
+    place; the normal rows' targets (C,) [m/s]; the first impulses (C, 3) [N s]; the sweep order
+    (C,)), the contacts grouped for threads as ``sequential.sweep_groups`` does (``slabs`` None: never
     PARALLEL_MIN_CONTACTS contacts, never grouped); ``parallel`` None compiles no parallel sweep
     (the groups are then swept one after the other: the same numbers). ``substepping`` None: one
     solve over the step; else (fixed (C,) bool, gaps at the start (C,) [m], the free motion's
     increment a substep (N,), the mean velocity over the substeps (N,), filled) for
     ``sequential.solve_in_substeps`` in ``settings.substeps`` substeps. Returns (impulses (C, 3)
     [N s], sweeps, last change [m/s])."""
+    order = system[3]
     C = order.shape[0]
     grouped, starts = order, np.array([0, C, C])
     if slabs is None:
-        return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, None, substepping)
+        return _solve_grouped(settings, rows, contacts, system, grouped, None, substepping)
     if C >= PARALLEL_MIN_CONTACTS:
-        grouped, starts = split_into_slabs(
-            order,
-            contacts.point,
-            rows.body,
-            rows.particle,
-            motion.body_position,
-            rows.body_inverse_mass,
-            motion.particle_position,
-            rows.particle_inverse_mass,
-            SWEEP_GROUPS,
-        )
+        positions = (motion.body_position, motion.particle_position)
+        grouped, starts = split_into_slabs(order, contacts.point, rows, positions, SWEEP_GROUPS)
     if parallel is None:
-        return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, None, substepping)
-    return _solve_grouped(settings, rows, contacts, u, target, warm, grouped, starts, substepping)
+        return _solve_grouped(settings, rows, contacts, system, grouped, None, substepping)
+    return _solve_grouped(settings, rows, contacts, system, grouped, starts, substepping)
 
 
 @njit(cache=True, inline="always")
-def _solve_grouped(settings, rows, contacts, u, target, warm, order, starts, substepping):
+def _solve_grouped(settings, rows, contacts, system, order, starts, substepping):
     """``solve``'s sweeps in ``order`` with the groups ``starts`` (None: serial): in one solve, or in substeps."""
+    u, target, warm = system[0], system[1], system[2]
     if substepping is None:
-        return solve_sequential_impulses(
-            rows, contacts.friction, target, u, settings.whole_sweeps, settings.tolerance, warm, order, starts
-        )
-    fixed, gap, increment, travelled = substepping
-    return solve_in_substeps(
-        rows, contacts.friction, target, fixed, gap, u, increment, travelled, settings, warm, order, starts
-    )
+        until = (settings.whole_sweeps, settings.tolerance)
+        return solve_sequential_impulses(rows, contacts.friction, target, u, until, warm, (order, starts))
+    return solve_in_substeps(rows, contacts.friction, target, u, substepping, settings, warm, (order, starts))
 
 
 # ---- after a step: the state stored, checked and recorded ---------------------------------
@@ -603,23 +659,20 @@ def record(
     samples: Samples,
     row: int,
     model: LoopModel,
-    plan: tuple,
-    large: bool | None,
+    plan: Plan,
     motion: Motion,
     at: tuple,
     time: float,
-    contact_count: int,
-    sweeps: int,
-    change: float,
-    clear: bool,
+    tally: tuple,
 ) -> None:
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
-    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does); the
-    step's ``contact_count``, or where it is −1 (no step) that of the fresh pass. ``at`` = the
-    bodies' rotations (B, 3, 3) and the colliders' centres and rotations at ``motion``'s
-    positions (``poses``), which the next step starts from too. ``clear``: the step before
-    found nothing within its swept reach (``swept_clear``), so nothing overlaps here and the
-    fresh pass, which would find no pair, is not made."""
+    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does), and
+    ``tally`` = the step's (contact count, sweeps, last change, clear): where the count is −1 (no
+    step), that of the fresh pass. ``at`` = the bodies' rotations (B, 3, 3) and the colliders'
+    centres and rotations at ``motion``'s positions (``poses``), which the next step starts from
+    too. ``clear``: the step before found nothing within its swept reach (``swept_clear``), so
+    nothing overlaps here and the fresh pass, which would find no pair, is not made."""
+    contact_count, sweeps, change, clear = tally
     rotation, centers, rots = at
     samples.time[row] = time
     copy_rows(samples.body_position[row], motion.body_position)
@@ -654,11 +707,18 @@ def record(
             touching,
             motion.body_position.shape[0] + motion.particle_position.shape[0],
             model.cloth_of,
-            large,
+            plan.large,
         )
         if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
             depth = generate_contacts(
-                pairs, model.kinds, model.params, centers, rots, np.zeros(pairs.shape[0]), plan[1], plan[0]
+                pairs,
+                model.kinds,
+                model.params,
+                centers,
+                rots,
+                np.zeros(pairs.shape[0]),
+                plan.hull_store,
+                plan.families,
             )[2]
             found = depth.shape[0]
             if found:

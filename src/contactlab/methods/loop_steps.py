@@ -11,7 +11,10 @@ twice is stages 1–3, which the step from Python runs for every scene (cloth sp
 every integrator) and this loop for the rigid ones (a driven scene's loads and paths are
 ``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py``
 holds the two paths equal, bit for bit. The three steps share one module because they share one
-signature and one convention: a flag that is None leaves its branch uncompiled.
+signature, ``(model, settings, spec, motion, start, time, carried)``, and one result,
+``(positions, velocities, carried, contacts, sweeps, change, clear, elastic energy, implicit,
+linear iterations)`` (a method without a value gives 0 or False): ``run`` calls whichever its
+run has without a branch. What each is compiled for is one value, the run's Specialization.
 """
 
 from __future__ import annotations
@@ -25,8 +28,10 @@ from .loop_stages import (
     LoopModel,
     LoopSettings,
     Motion,
+    Specialization,
     build_rows,
     detect,
+    for_response,
     free_motion,
     moved,
     poses,
@@ -34,7 +39,7 @@ from .loop_stages import (
     swept_reach,
     without_drive,
 )
-from .penalty import PenaltyLoop, finish, integrate, springs_at
+from .penalty import finish, integrate, springs_at
 from .penalty_springs import ImplicitSprings
 from .projection import advance, displaced_motion, project
 from .velocity_level import respond
@@ -46,28 +51,21 @@ from .velocity_level import respond
 def velocity_step(
     model: LoopModel,
     settings: LoopSettings,
-    plan: tuple,
-    large: bool | None,
-    keeping: bool | None,
-    impulse: bool | None,
-    constraints: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     motion: Motion,
     start: tuple,
     time: float,
     carried: tuple,
 ) -> tuple:
-    """One step of loop L3 with impulses or hard constraints on velocities.
+    """One step of loop L3 with impulses or hard constraints on velocities (``spec``'s
+    ``impulse`` or ``constraints``).
 
     ``start`` = the poses at the step's start: the bodies' rotations (B, 3, 3), the colliders'
     centres (N, 3) and rotations (N, 3, 3) (``poses``; ``run`` computes them once for the sample
     before and this step); ``time`` = the step's start [s] (a driven scene's loads and paths);
     ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
-    (K, 3)); ``plan`` and the flags ``large``, ``keeping``, ``impulse``, ``constraints``, ``slabs``
-    and ``parallel`` (True, or None to leave a stage's branch uncompiled) as ``Stepper`` sets them.
-    Returns (positions, velocities — the state's six arrays, new —, the carried triple for the next
-    step, the contacts' count, sweeps made, the sweeps' last change [m/s])."""
+    (K, 3)). Returns the steps' one result (module docstring): the sweeps made and their last
+    change [m/s]."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
@@ -77,7 +75,7 @@ def velocity_step(
     reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
-        plain, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
+        plain, spec.plan, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -91,71 +89,63 @@ def velocity_step(
             np.full(free[2].shape[0], h),
         )
         clear = swept_clear(near, settings.margin)
-        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear
+        return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear, 0.0, False, 0
     # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
     positions, velocities, impulses, sweeps, change = respond(
-        plain,
-        settings,
-        impulse,
-        constraints,
-        slabs,
-        parallel,
-        contacts,
-        motion,
-        rotation,
-        free,
-        free,
-        (carried[1], carried[2]),
+        plain, settings, spec, contacts, motion, rotation, (free, free), (carried[1], carried[2])
     )
     count = contacts.depth.shape[0]
-    return positions, velocities, (manifolds, contacts.feature_id, impulses), count, sweeps, change, False
+    return (
+        positions,
+        velocities,
+        (manifolds, contacts.feature_id, impulses),
+        count,
+        sweeps,
+        change,
+        False,
+        0.0,
+        False,
+        0,
+    )
 
 
 # ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
 
 
-# ``passes`` repeats the head of ``projection_step``'s signature (and so does ``velocity_step``'s):
-# deliberately, the flags one by one, not gathered into one tuple, for Numba drops a branch
-# whose flag is None only where that flag is an argument of its own.
 @njit(cache=True)
 def passes(
     model: LoopModel,
     settings: LoopSettings,
-    plan: tuple,
-    large: bool | None,
-    keeping: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     motion: Motion,
     reach: np.ndarray,
     kept: tuple,
     contacts: ContactArrays,
-    displacement: np.ndarray,
-    sweeps: int,
-    change: float,
+    progress: tuple,
 ) -> tuple[np.ndarray, ContactArrays, int, float]:
     """Stages 3–4 again, ``settings.passes`` − 1 times at most: contacts detected afresh (nothing
-    kept, the same ``reach`` (N,) [m]) at the positions the projected ``displacement`` (N,)
-    reaches from ``motion``, and projected, cold, for what one linear projection left (curved
-    surfaces, rotations); done once there is no contact, or a pass makes one sweep that moves
-    nothing more than the tolerance. Returns (displacement, the last pass's contacts, the sweeps
-    of every pass summed, the last pass's last correction [m])."""
+    kept, the same ``reach`` (N,) [m]) at the positions the projected displacement reaches from
+    ``motion``, and projected, cold, for what one linear projection left (curved surfaces,
+    rotations); done once there is no contact, or a pass makes one sweep that moves nothing more
+    than the tolerance. ``progress`` = (the displacement (N,) after the first pass, its sweeps, its
+    last correction [m]). Returns (displacement, the last pass's contacts, the sweeps of every pass
+    summed, the last pass's last correction [m])."""
+    displacement, sweeps, change = progress
+    response = for_response(spec)
     for _ in range(settings.passes - 1):
         if contacts.depth.shape[0] == 0:
             break
         at = displaced_motion(motion, displacement, settings.dt)
         rotation, centers, rots = poses(model, at)
-        contacts, _, _ = detect(model, plan, large, keeping, at, centers, rots, reach, kept, 0.0)
+        contacts, _, _ = detect(model, spec.plan, at, (centers, rots), reach, kept, 0.0)
         displacement, _, more, change = project(
             model,
             settings,
-            slabs,
-            parallel,
+            response,
             contacts,
             at,
             rotation,
-            displacement,
-            displacement,
+            (displacement, displacement),
             np.zeros((contacts.depth.shape[0], 3)),
         )
         sweeps += more
@@ -164,17 +154,11 @@ def passes(
     return displacement, contacts, sweeps, change
 
 
-# The steps' one signature (module docstring): the flags one by one, as in ``passes`` and
-# ``velocity_step`` — not a tuple of them, for Numba prunes only on an argument typed None.
 @njit(cache=True)
 def projection_step(
     model: LoopModel,
     settings: LoopSettings,
-    plan: tuple,
-    large: bool | None,
-    keeping: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     motion: Motion,
     start: tuple,
     time: float,
@@ -182,10 +166,9 @@ def projection_step(
 ) -> tuple:
     """One step of loop L2 with projection (``projection.step``, stage for stage).
 
-    ``start``, ``carried``, ``plan`` and the flags as for ``velocity_step`` (the carried values:
-    last step's first-pass λ (K, 3) [kg m]). Returns (positions, velocities — the state's six
-    arrays, new —, the carried triple for the next step, the last pass's contact count, sweeps
-    made in every pass, the last pass's last correction [m])."""
+    ``start`` and ``carried`` as for ``velocity_step`` (the carried values: last step's first-pass
+    λ (K, 3) [kg m]). Returns the steps' one result: the last pass's contact count, sweeps made in
+    every pass, the last pass's last correction [m]."""
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
@@ -197,35 +180,23 @@ def projection_step(
     reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
-        plain, plan, large, keeping, motion, centers, rots, reach, carried[0], settings.manifold_tolerance
+        plain, spec.plan, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
     displacement, lam, sweeps, change = project(
-        plain, settings, slabs, parallel, contacts, motion, rotation, np.zeros_like(predicted), predicted, warm
+        plain, settings, for_response(spec), contacts, motion, rotation, (np.zeros_like(predicted), predicted), warm
     )
     #    and again at the projected positions
     displacement, last, sweeps, change = passes(
-        plain,
-        settings,
-        plan,
-        large,
-        keeping,
-        slabs,
-        parallel,
-        motion,
-        reach,
-        carried[0],
-        contacts,
-        displacement,
-        sweeps,
-        change,
+        plain, settings, spec, motion, reach, carried[0], contacts, (displacement, sweeps, change)
     )
     # 5. advance dt, velocities from the projected positions
     start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)
     positions, velocities = advance(start_positions, v_free, displacement, predicted, h)
     clear = swept_clear(near, settings.margin)
-    return positions, velocities, (manifolds, contacts.feature_id, lam), last.depth.shape[0], sweeps, change, clear
+    count = last.depth.shape[0]
+    return positions, velocities, (manifolds, contacts.feature_id, lam), count, sweeps, change, clear, 0.0, False, 0
 
 
 # ---- penalty (loop L1): the stages of methods.penalty_springs and penalty_implicit ---------
@@ -235,34 +206,30 @@ def projection_step(
 def penalty_step(
     model: LoopModel,
     settings: LoopSettings,
-    plan: tuple,
-    large: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
-    penalty: PenaltyLoop,
+    spec: Specialization,
     motion: Motion,
     start: tuple,
     time: float,
     carried: tuple,
 ) -> tuple:
-    """One step of loop L1 with penalty forces: detection and the free velocities compiled here,
-    the springs, their integration, the guard and the anchors the stages of
-    :mod:`contactlab.methods.penalty` that its ``step`` from Python calls too.
+    """One step of loop L1 with penalty forces (``spec.penalty``, a PenaltyLoop): detection and the
+    free velocities compiled here, the springs, their integration, the guard and the anchors the
+    stages of :mod:`contactlab.methods.penalty` that its ``step`` from Python calls too.
 
     ``carried`` = (manifolds, never kept here; last step's contact ids (K,); their anchor offsets
-    (K, 3) [m]); ``settings`` the guard's (``penalty.penalty_loop``); ``start`` and the flags as
-    ``velocity_step``'s. Returns (positions, velocities — the state's six arrays, new —, the
-    carried triple, the contacts' count, active-set passes, the last linear solve's relative
-    residual, the elastic energy at the step's end [J], whether the springs went implicit under
-    an explicit integrator, the conjugate-gradient iterations of its solves)."""
+    (K, 3) [m]); ``settings`` the guard's (``penalty.penalty_loop``); ``start`` as
+    ``velocity_step``'s. Returns the steps' one result: active-set passes, the last linear solve's
+    relative residual, the elastic energy at the step's end [J], whether the springs went implicit
+    under an explicit integrator, the conjugate-gradient iterations of its solves."""
     h = settings.dt
+    penalty = spec.penalty
     rotation, centers, rots = start
     plain = without_drive(model)  # every stage but free motion: the same machine code driven or not
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
         plain, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
-    contacts, manifolds, _ = detect(plain, plan, large, None, motion, centers, rots, reach, carried[0], 0.0)
+    contacts, manifolds, _ = detect(plain, spec.plan, motion, (centers, rots), reach, carried[0], 0.0)
     rows = build_rows(plain, contacts, motion, rotation)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
@@ -273,20 +240,21 @@ def penalty_step(
     free = free_motion(model, motion, rotation, h, time)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
-    v_new, forces, elongation, passes, residual, linear_iterations = integrate(
-        plain, penalty, contacts, rows, rotation, springs, (forces, elongation, implicit), v_free, h
+    v_new, forces, elongation, active_passes, residual, linear_iterations = integrate(
+        plain, penalty, contacts, rows, rotation, (springs, forces, elongation, implicit), v_free, h
     )
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
     positions, velocities, offsets, energy = finish(
-        plain, settings, penalty, slabs, parallel, contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
+        plain, settings, for_response(spec), contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
     return (
         positions,
         velocities,
         (manifolds, contacts.feature_id, offsets),
         contacts.depth.shape[0],
-        passes,
+        active_passes,
         residual,
+        np.bool_(False),
         energy,
         implicit and penalty.springs.implicit != ImplicitSprings.BY_INTEGRATOR,
         linear_iterations,

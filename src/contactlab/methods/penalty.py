@@ -49,7 +49,18 @@ from ..state import State
 from ..validation import check_choices, check_counts, number, time_step
 from .base import CollisionOptions, StepInfo
 from .jacobian_rows import ContactRows, row_products
-from .loop_stages import CARRIED, LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, solve
+from .loop_stages import (
+    CARRIED,
+    LoopModel,
+    LoopSettings,
+    Motion,
+    Specialization,
+    build_rows,
+    for_response,
+    loop_inputs,
+    solve,
+    specialization,
+)
 from .penalty_implicit import free_dofs, implicit_spring_velocities, implicit_velocities, mass_blocks
 from .penalty_springs import (
     GUARD_SWEEPS,
@@ -289,15 +300,17 @@ def contact_stiffness(model: Model, state: State, contacts: Contacts, options: O
     """k (C,) [N/m] of each contact's normal spring: the option's number, or for "auto" the load
     the contact carries (``supported_loads``) over ``allowed_penetration``, so every contact of
     a stack sinks about that far however much rests on it (``normal_stiffness``)."""
-    return normal_stiffness(
-        spring_settings(options, "symplectic_euler"),
-        *contact_entities(contacts, model.body_count),
-        contacts.normal,
-        state.body_position,
-        state.particle_position,
+    loads = (
         np.where(model.body_kinematic, 0.0, model.body_mass),
         np.asarray(model.particle_mass, dtype=float),
         np.asarray(model.gravity, dtype=float),
+    )
+    return normal_stiffness(
+        spring_settings(options, "symplectic_euler"),
+        contact_entities(contacts, model.body_count),
+        contacts.normal,
+        (state.body_position, state.particle_position),
+        loads,
         entity_cloth(model),
     )
 
@@ -362,16 +375,16 @@ def step(
     # backward Euler (M1) under that integrator, or where an explicit step would grow
     if implicit and (options.linear_solver != "cg" or (model.spring_count and integrator == "backward_euler")):
         J = jacobian(contacts, state.body_position, model.body_count, model.particle_count)
-        A0, b0, free = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
-        integrated = implicit_velocities(springs, J, A0, b0, free, v_free, contacts.depth, h, options)
+        base = implicit_base(model, state, h, v_free, cloth_implicit=integrator == "backward_euler")
+        integrated = implicit_velocities(springs, J, base, v_free, contacts.depth, h, options)
     else:
-        at_start = (forces, elongation, implicit)
-        integrated = integrate(arrays, penalty, found, rows, rotation, springs, at_start, v_free, h)
+        at_start = (springs, forces, elongation, implicit)
+        integrated = integrate(arrays, penalty, found, rows, rotation, at_start, v_free, h)
     v_new, forces, elongation, passes, residual, linear_iterations = integrated
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
-    _, _, slabs, parallel = compile_flags(model, "penalty", options)[3:]
+    spec = for_response(specialization(model, "penalty", options, penalty))
     positions, velocities, offsets, energy = finish(
-        arrays, guard, penalty, slabs, parallel, found, rows, motion, (v, v_new), (springs, elongation, implicit)
+        arrays, guard, spec, found, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
     ids_key, offsets_key = CARRIED["penalty"]
     carried_on = {**state.carried, ids_key: contacts.feature_id, offsets_key: offsets}
@@ -455,14 +468,10 @@ def springs_at(
     loads = np.where(penalty.fixed, 0.0, model.body_mass)  # a kinematic body rests its weight on nothing
     stiffness = normal_stiffness(
         penalty.springs,
-        side_a,
-        side_b,
+        (side_a, side_b),
         contacts.normal,
-        motion.body_position,
-        motion.particle_position,
-        loads,
-        model.particle_mass,
-        model.gravity,
+        (motion.body_position, motion.particle_position),
+        (loads, model.particle_mass, model.gravity),
         penalty.cloth,
     )
     offsets = values_carried(carried[0], carried[1], contacts.feature_id)[0]
@@ -479,18 +488,18 @@ def integrate(
     contacts: ContactArrays,
     rows: ContactRows,
     rotation: np.ndarray,
-    springs: ContactSprings,
     at_start: tuple,
     v_free: np.ndarray,
     h: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, int]:
-    """Stage 4: the velocities after the step (N,) from the free ones ``v_free``: the spring forces
-    ``at_start`` = (forces (C, 3) [N], elongations (C, 2) [m], implicit) applied as h M⁻¹ Jᵀ F
+    """Stage 4: the velocities after the step (N,) from the free ones ``v_free``: the springs
+    ``at_start`` = (ContactSprings, forces (C, 3) [N], elongations (C, 2) [m], implicit), their
+    forces applied as h M⁻¹ Jᵀ F
     (``explicit_velocities``), or where implicit the springs by backward Euler on the rows
     (``implicit_spring_velocities``: matrix-free conjugate gradients, the bodies' mass blocks at
     the rotations (B, 3, 3) ``rotation``), over h [s]. Returns (v⁺, forces, elongations,
     active-set passes, the last linear solve's relative residual, conjugate-gradient iterations)."""
-    forces, elongation, implicit = at_start
+    springs, forces, elongation, implicit = at_start
     if not implicit:
         return explicit_velocities(rows, forces, v_free, h), forces, elongation, 0, 0.0, 0
     mass = mass_blocks(model.body_mass, model.body_inertia, rotation, model.particle_mass)
@@ -502,16 +511,15 @@ def integrate(
 def finish(
     model: LoopModel,
     guard: LoopSettings,
-    penalty: PenaltyLoop,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     contacts: ContactArrays,
     rows: ContactRows,
     motion: Motion,
     velocities: tuple,
     spring_state: tuple,
 ) -> tuple:
-    """Stages 4b–5: ``velocities`` = (v at the step's start, v⁺ of ``integrate``) (N,) each;
+    """Stages 4b–5 of the run ``spec`` (``for_response``: its PenaltyLoop ``penalty``, and the
+    guard's ``slabs`` and ``parallel``): ``velocities`` = (v at the step's start, v⁺ of ``integrate``) (N,) each;
     ``spring_state`` = (ContactSprings, elongations (C, 2) [m], implicit). The velocity that moves
     the step — v⁺, or v under explicit Euler with explicit springs — held back where it would
     carry a contact past half its pass-through depth (``hold_back``), the positions moved by it
@@ -521,9 +529,9 @@ def finish(
     v, v_new = velocities
     springs, elongation, implicit = spring_state
     h, B = guard.dt, motion.body_position.shape[0]
-    explicit_euler = penalty.springs.integrator == Integrator.EXPLICIT_EULER and not implicit
+    explicit_euler = spec.penalty.springs.integrator == Integrator.EXPLICIT_EULER and not implicit
     moved_by = v if explicit_euler else v_new
-    held, changed = hold_back(model, guard, penalty, slabs, parallel, contacts, rows, motion, moved_by)
+    held, changed = hold_back(model, guard, spec, contacts, rows, motion, moved_by)
     if changed:
         v_new = v_new + (held - moved_by) if explicit_euler else held
         moved_by = held
@@ -538,9 +546,8 @@ def finish(
         np.full(B, h),
         np.full(by[2].shape[0], h),
     )
-    elongation, offsets, energy = anchors_after(
-        springs, rows, contacts.depth, moved_by, elongation, not implicit, contacts.tangent1, contacts.tangent2, h
-    )
+    geometry = (contacts.depth, contacts.tangent1, contacts.tangent2)
+    elongation, offsets, energy = anchors_after(springs, rows, geometry, moved_by, elongation, not implicit, h)
     return positions, unstacked(v_new, B), offsets, energy
 
 
@@ -554,9 +561,7 @@ _AFTER_FRICTION = _FRICTION + 1
 def hold_back(
     model: LoopModel,
     guard: LoopSettings,
-    penalty: PenaltyLoop,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     contacts: ContactArrays,
     rows: ContactRows,
     motion: Motion,
@@ -568,7 +573,9 @@ def hold_back(
     [m]. A gap may close and a spring engage as deep as it likes short of that; a fast or small
     body that no spring of this stiffness could stop in time stops on the surface instead of
     passing through (normal impulses only, by frictionless sweeps: ``solve`` with the ``guard``'s
-    settings). Returns (``velocity`` itself, False, where nothing would; else a held copy, True)."""
+    settings; ``spec``'s PenaltyLoop, ``slabs`` and ``parallel``, as ``finish``). Returns
+    (``velocity`` itself, False, where nothing would; else a held copy, True)."""
+    penalty = spec.penalty
     C = contacts.depth.shape[0]
     pass_through = half_thickness_sums(
         contacts.feature_id,
@@ -583,5 +590,6 @@ def hold_back(
     held = velocity.copy()
     frictionless = ContactArrays(*contacts[:_FRICTION], np.zeros(C), *contacts[_AFTER_FRICTION:])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    solve(guard, slabs, parallel, rows, frictionless, motion, held, slowest, np.zeros((C, 3)), order, None)
+    system = (held, slowest, np.zeros((C, 3)), order)
+    solve(guard, spec.slabs, spec.parallel, rows, frictionless, motion, system, None)
     return held, True

@@ -340,19 +340,18 @@ def implicit_spring_velocities(
 def implicit_velocities(
     springs: ContactSprings,
     J: sp.spmatrix,
-    A0: sp.spmatrix,
-    b0: np.ndarray,
-    free: np.ndarray,
+    base: tuple,
     v_free: np.ndarray,
     depth: np.ndarray,
     dt: float,
     options: Options,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, int]:
-    """``implicit_spring_velocities`` with any base system A₀ v⁺ = b₀ (N, N) sparse
-    (``dynamics.generalized.implicit_base``: the cloth's linearized springs for cloth vertices
-    under backward Euler) and the Jacobian J (3C, N) sparse, solved by SciPy (``linear_solver``
-    "direct", or "cg" there): the path of cloth under backward Euler and of the direct solver.
-    ``free`` (N,) bool. Returns what ``implicit_spring_velocities`` returns."""
+    """``implicit_spring_velocities`` with any base system ``base`` = (A₀ (N, N) sparse, b₀ (N,),
+    free (N,) bool) of A₀ v⁺ = b₀ (``dynamics.generalized.implicit_base``: the cloth's linearized
+    springs for cloth vertices under backward Euler) and the Jacobian J (3C, N) sparse, solved by
+    SciPy (``linear_solver`` "direct", or "cg" there): the path of cloth under backward Euler and
+    of the direct solver. Returns what ``implicit_spring_velocities`` returns."""
+    A0, b0, free = base
     h = dt
     C = len(depth)
     k, c, k_t, c_t = springs.stiffness, springs.damping, springs.friction_stiffness, springs.friction_damping

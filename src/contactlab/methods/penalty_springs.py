@@ -16,7 +16,7 @@ Arrays: C contacts, B bodies, P particles, N = 6B + 3P degrees of freedom; rows 
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -97,14 +97,10 @@ def entities_of(body: np.ndarray, particles: np.ndarray, body_count: int) -> np.
 
 @njit(cache=True)
 def supported_loads(
-    entity_a: np.ndarray,
-    entity_b: np.ndarray,
+    sides: tuple[np.ndarray, np.ndarray],
     normal: np.ndarray,
-    body_position: np.ndarray,
-    particle_position: np.ndarray,
-    body_mass: np.ndarray,
-    particle_mass: np.ndarray,
-    gravity: np.ndarray,
+    positions: tuple[np.ndarray, np.ndarray],
+    loads: tuple,
     cloth_of: np.ndarray,
 ) -> np.ndarray:
     """The weight each contact carries [N] (C,): every body and free particle, from the highest
@@ -112,8 +108,10 @@ def supported_loads(
     72° of up, against ``gravity`` (3,) [m/s²]), in equal shares, and those pass it to the body
     or particle below; a static side takes it out. Contacts that support nothing carry the
     lighter side's weight per supporting contact. A kinematic body is given weight 0: it hands
-    nothing down and, like a static side, does not count as the lighter side. Sides as ``contact_entities`` gives them.
-    Arrays (C,), (C,), (C, 3), (B, 3), (P, 3), (B,), (P,) as in Contacts and State.
+    nothing down and, like a static side, does not count as the lighter side. ``sides`` = (entity
+    of side A, of side B) (C,) each, as ``contact_entities`` gives them; normal (C, 3);
+    ``positions`` = (bodies (B, 3), particles (P, 3)) [m]; ``loads`` = (body masses (B,),
+    particle masses (P,)) [kg], gravity (3,) [m/s²]).
 
     A cloth's vertices also carry one another's weight along its springs: ``cloth_of`` (B + P,)
     int, the cloth of each body and particle (−1: none). A cloth is one step of the load path,
@@ -123,6 +121,8 @@ def supported_loads(
     one), each at least its vertex's own weight (a sheet lying flat: the mean vertex weight, or its own); it
     comes in that order at the mean height of those resting vertices. A contact of a cloth with
     itself (a fold lying on the cloth) carries its vertex's own weight and hands nothing down."""
+    (entity_a, entity_b), (body_position, particle_position) = sides, positions
+    body_mass, particle_mass, gravity = loads
     C, B, P = entity_a.shape[0], body_mass.shape[0], particle_mass.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     loads = np.zeros(C)
@@ -250,13 +250,12 @@ class SpringSettings(NamedTuple):
 
 
 @njit(cache=True)
-def normal_stiffness(settings: SpringSettings, *loads_of: np.ndarray) -> np.ndarray:
+def normal_stiffness(settings: SpringSettings, *loads_of: Any) -> np.ndarray:
     """``contact_stiffness``, compiled: each contact's normal stiffness (C,) [N/m], the fixed one
-    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the nine
-    arguments of ``supported_loads`` (entity_a, entity_b, normal, body_position,
-    particle_position, body_mass, particle_mass, gravity, cloth_of), in its order."""
+    of ``settings`` or its supported load over the allowed penetration. ``loads_of``: the
+    arguments of ``supported_loads`` (sides, normal, positions, loads, cloth_of), in its order."""
     if settings.stiffness >= 0.0:
-        return np.full(loads_of[0].shape[0], settings.stiffness)
+        return np.full(loads_of[1].shape[0], settings.stiffness)
     return supported_loads(*loads_of) / settings.allowed_penetration
 
 
@@ -401,19 +400,19 @@ def explicit_velocities(rows: ContactRows, forces: np.ndarray, v_free: np.ndarra
 def anchors_after(
     springs: ContactSprings,
     rows: ContactRows,
-    depth: np.ndarray,
+    contacts: tuple,
     moved_by: np.ndarray,
     elongation: np.ndarray,
     follow: bool,
-    tangent1: np.ndarray,
-    tangent2: np.ndarray,
     h: float,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Stage 5: the anchors at the end of the step moved by ``moved_by`` (N,) over h [s]: where
     ``follow`` (an explicit step) the elongation (C, 2) [m] takes the point's tangential motion
-    h v_t; a contact no longer pressed (depth after the step ≤ 0) drops its anchor. Returns
+    h v_t; a contact no longer pressed (depth after the step ≤ 0) drops its anchor. ``contacts``
+    = (depth (C,) [m], tangent1, tangent2 (C, 3)) as the contacts' fields. Returns
     (elongation (C, 2), the anchor offsets to carry (C, 3) = s₁ t1 + s₂ t2 [m], elastic energy
     at the end of the step [J])."""
+    depth, tangent1, tangent2 = contacts
     C = depth.shape[0]
     velocity = row_products(rows, moved_by)
     after = elongation.copy()

@@ -46,7 +46,18 @@ from ..state import Positions, State
 from ..validation import check_counts, number
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
-from .loop_stages import LoopModel, LoopSettings, Motion, build_rows, compile_flags, loop_inputs, loop_settings, solve
+from .loop_stages import (
+    LoopModel,
+    LoopSettings,
+    Motion,
+    Specialization,
+    build_rows,
+    for_response,
+    loop_inputs,
+    loop_settings,
+    solve,
+    specialization,
+)
 from .sequential import contact_order
 from .velocity_level import swept_contacts
 
@@ -103,12 +114,12 @@ def step(
     contacts, manifolds = swept_contacts(model, state, options, sweep, particle_motion)
     arrays, motion, rotation, carried = loop_inputs(model, state, "projection")
     settings = loop_settings(model, "projection", options, dt)
-    _, _, _, _, _, slabs, parallel = compile_flags(model, "projection", options)
+    spec = for_response(specialization(model, "projection", options))
     found = contacts.arrays()
     warm = settings.warm_start * values_carried(carried[0], carried[1], found.feature_id)[0]
     zero = np.zeros_like(predicted_displacement)
     displacement, lam, total_sweeps, change = project(
-        arrays, settings, slabs, parallel, found, motion, rotation, zero, predicted_displacement, warm
+        arrays, settings, spec, found, motion, rotation, (zero, predicted_displacement), warm
     )
     carried_on = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
     pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
@@ -124,13 +135,11 @@ def step(
         displacement, more, sweeps, change = project(
             arrays,
             settings,
-            slabs,
-            parallel,
+            spec,
             contacts.arrays(),
             at,
             rotations.matrices(at.body_orientation),
-            displacement,
-            displacement,
+            (displacement, displacement),
             np.zeros((contacts.count, 3)),
         )
         pushed = values_by_id(ids, pushed, contacts.feature_id, 3)[0] + more
@@ -212,26 +221,28 @@ def displaced_motion(motion: Motion, displacement: np.ndarray, h: float) -> Moti
 def project(
     model: LoopModel,
     settings: LoopSettings,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     contacts: ContactArrays,
     at: Motion,
     rotation: np.ndarray,
-    offset: np.ndarray,
-    displacement: np.ndarray,
+    displacements: tuple[np.ndarray, np.ndarray],
     warm: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, int, float]:
-    """Stage 4 of loop L2: the step's displacement (N,) [m, rad]
-    corrected, a copy, so that no contact detected at the positions ``at`` (a Motion, with
-    rotation (B, 3, 3)), which the displacement ``offset`` (N,) reached from the step's start,
-    ends deeper than its slop: J_n u ≥ J_n offset + δ (``projection_targets``), by the sweeps of
-    ``solve`` on displacements from the warm start ``warm`` (C, 3) [kg m]. Returns (the corrected
-    displacement, λ (C, 3) [kg m], sweeps, last correction [m]); no contact, no sweep."""
+    """Stage 4 of loop L2: the step's displacement (N,) [m, rad] corrected, a copy, so that no
+    contact detected at the positions ``at`` (a Motion, with rotation (B, 3, 3)) ends deeper than
+    its slop: J_n u ≥ J_n offset + δ (``projection_targets``), by the sweeps of ``solve`` on
+    displacements from the warm start ``warm`` (C, 3) [kg m]. ``displacements`` = (offset, the
+    displacement that reached ``at`` from the step's start; the displacement to correct), (N,)
+    each; ``spec``: the run's Specialization (``for_response``: its ``slabs`` and ``parallel``
+    read here). Returns (the corrected displacement, λ (C, 3) [kg m], sweeps, last correction
+    [m]); no contact, no sweep."""
+    offset, displacement = displacements
     if contacts.depth.shape[0] == 0:
         return displacement, np.zeros((0, 3)), 0, 0.0
     rows = build_rows(model, contacts, at, rotation)
     target = projection_targets(rows, offset, contacts.depth, settings.slop)
     corrected = displacement.copy()
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    lam, sweeps, change = solve(settings, slabs, parallel, rows, contacts, at, corrected, target, warm, order, None)
+    system = (corrected, target, warm, order)
+    lam, sweeps, change = solve(settings, spec.slabs, spec.parallel, rows, contacts, at, system, None)
     return corrected, lam, sweeps, change

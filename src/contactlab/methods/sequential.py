@@ -133,18 +133,18 @@ def sweep_until(
     target: np.ndarray,
     impulses: np.ndarray,
     u: np.ndarray,
-    iterations: int,
-    tolerance: float,
+    until: tuple[int, float],
     starts: np.ndarray | None,
     exact: bool,
 ) -> tuple[int, float]:
-    """Sweeps over every contact in the order of ``rows`` (laid out in sweep order), at most
-    ``iterations`` of them, until a whole sweep changes no contact's relative velocity by more
-    than ``tolerance`` [m/s]; ``impulses`` (C, 3) [N s] and u change in place. ``starts`` as in
+    """Sweeps over every contact in the order of ``rows`` (laid out in sweep order), ``until`` =
+    (at most this many sweeps, the tolerance [m/s]): until a whole sweep changes no contact's
+    relative velocity by more than the tolerance; ``impulses`` (C, 3) [N s] and u change in place. ``starts`` as in
     ``solve_sequential_impulses`` (None: serial, the parallel sweep pruned). Returns (sweeps
     made, the last sweep's largest velocity change [m/s]; with ``exact`` False, a sweep that
     reaches the cap looks only as far as the first contact that changed by more than the
     tolerance, and the change is then a lower bound)."""
+    iterations, tolerance = until
     C = friction.shape[0]
     groups = 1
     if starts is not None:  # None (one group): the parallel sweep is pruned, never compiled
@@ -176,11 +176,9 @@ def solve_sequential_impulses(
     friction: np.ndarray,
     target_normal_velocity: np.ndarray,
     u: np.ndarray,
-    iterations: int,
-    tolerance: float,
+    until: tuple[int, float],
     initial_impulses: np.ndarray,
-    order: np.ndarray,
-    starts: np.ndarray | None,
+    sequence: tuple,
 ) -> tuple[np.ndarray, int, float]:
     """Contact impulses with accumulated clamping; changes the generalized velocity u in place (M2).
 
@@ -188,22 +186,24 @@ def solve_sequential_impulses(
     (warm starting: last step's impulses of the same contacts), then corrected like any
     accumulated impulse.
 
-    For every contact c (in ``order`` (C,) int; repeatedly): the normal impulse that brings
-    the normal relative velocity to ``target_normal_velocity[c]`` [m/s], with the accumulated
-    impulse kept ≥ 0 (never attractive, C2), then friction with the accumulated tangential
-    impulse kept in the disk μ λ_n (F2). ``order`` and ``starts`` (G + 2,) int come from
+    For every contact c (in ``sequence`` = (order (C,) int, starts); repeatedly): the normal
+    impulse that brings the normal relative velocity to ``target_normal_velocity[c]`` [m/s], with
+    the accumulated impulse kept ≥ 0 (never attractive, C2), then friction with the accumulated
+    tangential impulse kept in the disk μ λ_n (F2). ``order`` and ``starts`` (G + 2,) int come from
     ``sweep_groups``: groups 0 … G−1 of a sweep run side by side on G threads, then the last
     group (``sweep_groups_in_parallel``); ``starts`` None, or one group (G = 1), is the plain serial sweep in
     ``order``, which never touches the thread pool.
 
-    The sweeps stop once a whole sweep changes no contact's relative velocity (normal or
-    tangential, J Δu over the sweep) by more than ``tolerance`` [m/s]. Not the largest single
+    ``until`` = (at most this many sweeps, the tolerance [m/s]): the sweeps stop once a whole
+    sweep changes no contact's relative velocity (normal or tangential, J Δu over the sweep) by
+    more than the tolerance. Not the largest single
     update: in a stack each box stands on several corners, infinitely many impulse splits
     among them give the same velocities, and Gauss-Seidel keeps trading impulse between
     corners at a steady rate (3e-6 m/s per update on the 20-level pyramid, for ever) while
     the velocities have long stopped changing. Returns (impulses (C, 3) [N s] as (normal, t1,
     t2), sweeps made, that largest velocity change over the last sweep [m/s]).
     """
+    order, starts = sequence
     C = friction.shape[0]
     impulses = initial_impulses.copy()
     apply_impulses(rows, impulses, u)
@@ -213,7 +213,7 @@ def solve_sequential_impulses(
     friction_o, target_o, impulses_o = friction[order], target_normal_velocity[order], impulses[order]
     # np.bool_, not the literal True: sweep_until is then the one compiled code solve_in_substeps calls too
     exact = np.bool_(True)
-    sweeps, change = sweep_until(rows_o, friction_o, target_o, impulses_o, u, iterations, tolerance, starts, exact)
+    sweeps, change = sweep_until(rows_o, friction_o, target_o, impulses_o, u, until, starts, exact)
     for i in range(C):
         for d in range(3):
             impulses[order[i], d] = impulses_o[i, d]
@@ -237,15 +237,11 @@ def solve_in_substeps(
     rows: ContactRows,
     friction: np.ndarray,
     target_normal_velocity: np.ndarray,
-    fixed: np.ndarray,
-    gap: np.ndarray,
     u: np.ndarray,
-    increment: np.ndarray,
-    travelled: np.ndarray,
+    substepping: tuple,
     settings: tuple,
     initial_impulses: np.ndarray,
-    order: np.ndarray,
-    starts: np.ndarray | None,
+    sequence: tuple,
 ) -> tuple[np.ndarray, int, float]:
     """``solve_sequential_impulses`` in n = ``settings.substeps`` small steps of h/n with the
     contacts detected once (small steps, Macklin et al. 2019; the substeps of Box2D v3's soft
@@ -255,13 +251,13 @@ def solve_in_substeps(
     substep before), and moves each contact's gap by h/n times its normal velocity — the rows
     of J fixed at the step's start, the gaps to first order, no detection in between. The
     targets come from the gaps: ``resting_target`` over h/n for an open contact, the
-    stabilization's push for an overlap (``_gap_target``); a contact ``fixed`` (C,) bool
-    keeps its ``target_normal_velocity`` (a bounce). ``gap`` (C,) [m] at the step's start;
+    stabilization's push for an overlap (``_gap_target``). ``substepping`` = (fixed (C,) bool: a
+    contact that keeps its ``target_normal_velocity`` (a bounce); the gaps (C,) [m] at the step's
+    start; ``increment``; ``travelled`` (N,), which receives the mean of the substeps' velocities,
+    with which the positions move: x = x₀ + h ū, each substep a symplectic Euler step).
     ``settings`` a LoopSettings; ``initial_impulses`` (C, 3) [N s] over the whole step (the
-    warm start, a 1/n share of it starting the first substep); order, starts as in
-    ``solve_sequential_impulses``. u leaves as the velocity at the step's end and
-    ``travelled`` (N,) receives the mean of the substeps' velocities, with which the positions
-    move (x = x₀ + h ū: each substep a symplectic Euler step). Returns (impulses (C, 3) [N s]
+    warm start, a 1/n share of it starting the first substep); ``sequence`` as in
+    ``solve_sequential_impulses``. u leaves as the velocity at the step's end. Returns (impulses (C, 3) [N s]
     summed over the substeps, sweeps made over all substeps, the last sweep's largest velocity
     change [m/s]).
 
@@ -270,6 +266,8 @@ def solve_in_substeps(
     contact by contact (a pass over the rows each substep). Only the last substep's last
     sweep measures its change exactly; the others stop looking at the first contact that moved
     by more than the tolerance (``sweep_until``'s ``exact``)."""
+    fixed, gap, increment, travelled = substepping
+    order, starts = sequence
     C = friction.shape[0]
     N = u.shape[0]
     n = settings.substeps
@@ -294,9 +292,8 @@ def solve_in_substeps(
             u[i] += increment[i] + applied[i]
             before[i] = u[i]
         last = substep == n - 1
-        made, change = sweep_until(
-            rows_o, friction_o, target_o, share, u, settings.substep_sweeps, settings.tolerance, starts, last
-        )
+        until = (settings.substep_sweeps, settings.tolerance)
+        made, change = sweep_until(rows_o, friction_o, target_o, share, u, until, starts, last)
         sweeps += made
         for i in range(N):
             applied[i] += u[i] - before[i]
@@ -345,17 +342,13 @@ SWEEP_GROUPS = 2
 
 @njit(cache=True)
 def split_into_slabs(
-    order: np.ndarray,
-    point: np.ndarray,
-    body: np.ndarray,
-    particle: np.ndarray,
-    body_position: np.ndarray,
-    body_inverse_mass: np.ndarray,
-    particle_position: np.ndarray,
-    particle_inverse_mass: np.ndarray,
-    slabs: int,
+    order: np.ndarray, point: np.ndarray, rows: ContactRows, positions: tuple, slabs: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``sweep_groups``' work on the packed sides of ``rows``: (order (C,), starts (slabs + 2,))."""
+    """``sweep_groups``' work on the packed sides of ``rows``, the contacts at ``point`` (C, 3) [m],
+    the bodies and particles at ``positions`` = ((B, 3), (P, 3)) [m]: (order (C,), starts (slabs + 2,))."""
+    body, particle = rows.body, rows.particle
+    body_inverse_mass, particle_inverse_mass = rows.body_inverse_mass, rows.particle_inverse_mass
+    body_position, particle_position = positions
     C = order.shape[0]
     axis, extent = 0, -1.0  # the axis along which the contacts spread most
     for a in range(3):
@@ -430,15 +423,7 @@ def sweep_groups(
     if groups < 2 or C < min_contacts:
         return np.asarray(order), None
     return split_into_slabs(
-        np.asarray(order),
-        contacts.point,
-        rows.body,
-        rows.particle,
-        state.body_position,
-        rows.body_inverse_mass,
-        state.particle_position,
-        rows.particle_inverse_mass,
-        groups,
+        np.asarray(order), contacts.point, rows, (state.body_position, state.particle_position), groups
     )
 
 

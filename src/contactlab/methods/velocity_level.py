@@ -40,11 +40,13 @@ from .loop_stages import (
     LoopModel,
     LoopSettings,
     Motion,
+    Specialization,
     build_rows,
-    compile_flags,
+    for_response,
     loop_inputs,
     loop_settings,
     solve,
+    specialization,
 )
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
 from .sequential import contact_order, resting_target, sweep_contacts
@@ -115,22 +117,20 @@ LOAD_PATH_FROM = 2  # bodies and particles: fewer cannot rest on one another (gu
 def guess_new_impulses(
     warm: np.ndarray,
     found: np.ndarray,
-    fraction: float,
     contacts: ContactArrays,
-    body_position: np.ndarray,
-    particle_position: np.ndarray,
-    masses: tuple[np.ndarray, np.ndarray],
-    gravity: np.ndarray,
-    h: float,
+    positions: tuple[np.ndarray, np.ndarray],
+    loads: tuple,
+    settings: LoopSettings,
     pairs: np.ndarray | None,
 ) -> None:
     """The warm start of the contacts that carry nothing from the last step (``found`` (C,) False):
     the weight each would bear at rest, over the step. ``warm`` (C, 3) [N s] holds the carried
-    impulses times ``fraction`` (the Options' warm_start); a new contact whose normal lies within
-    72° of vertical gets ``fraction`` · W h along its normal, W [N] its share of the load path
+    impulses times the fraction f = ``settings.warm_start``; a new contact whose normal lies within
+    72° of vertical gets f · W h along its normal, W [N] its share of the load path
     (``penalty_springs.supported_loads``: each body's weight and what rests on it, shared among
-    the contacts it rests on), h [s]; the others keep 0. ``masses`` = (body masses (B,),
-    particle masses (P,)) [kg], positions (B, 3), (P, 3) [m], ``gravity`` (3,) [m/s²].
+    the contacts it rests on), h = ``settings.dt`` [s]; the others keep 0. ``positions`` = (the
+    bodies' (B, 3), the particles' (P, 3)) [m]; ``loads`` = (body masses (B,), particle masses
+    (P,)) [kg], gravity (3,) [m/s²]).
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
     one body's contacts find its weight in a sweep or two): nothing is guessed there. ``pairs``
@@ -146,28 +146,24 @@ def guess_new_impulses(
     accumulated clamping like any warm start."""
     if pairs is None:  # typed None: a scene with no dynamic pair, whose load path Numba leaves uncompiled
         return
+    fraction, h = settings.warm_start, settings.dt
+    (body_position, particle_position), gravity = positions, loads[2]
     B = body_position.shape[0]
     g = np.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
     if fraction <= 0.0 or g == 0.0 or found.all() or B + particle_position.shape[0] < LOAD_PATH_FROM:
         return  # weightless, or nothing new to guess: the carried values as they are
-    loads = supported_loads(
+    sides = (
         entities_of(contacts.body_a, contacts.particles_a, B),
         entities_of(contacts.body_b, contacts.particles_b, B),
-        contacts.normal,
-        body_position,
-        particle_position,
-        masses[0],
-        masses[1],
-        gravity,
-        pairs,
     )
+    weights = supported_loads(sides, contacts.normal, positions, loads, pairs)
     for c in range(found.shape[0]):
         if found[c]:
             continue
         normal = contacts.normal[c]
         along = (normal[0] * gravity[0] + normal[1] * gravity[1] + normal[2] * gravity[2]) / g
         if abs(along) > SUPPORT_COSINE:
-            warm[c, 0] = fraction * loads[c] * h
+            warm[c, 0] = fraction * weights[c] * h
 
 
 @njit(cache=True)
@@ -252,23 +248,21 @@ def impact_targets(
     normal_velocity: np.ndarray,
     gravity_normal: np.ndarray,
     restitution: np.ndarray,
-    dt: float,
-    threshold: float,
-    stabilization: float,
-    slop: float,
-    max_push_velocity: float,
+    settings: LoopSettings,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every contact's target normal velocity, all contacts at once (a simultaneous impact: the
     constraints method, C5b).
 
     gap_at_start d₀ (C,) [m]; normal_velocity v_n* (C,) [m/s] without contact forces;
-    gravity_normal g_n (C,) [m/s²]; restitution ε (C,); threshold [m/s]. A contact that closes
-    within the step (v_n* < 0, d₀ + h v_n* ≤ 0) does so at the fraction τ = d₀ / (−h v_n*) of it,
-    with the impact velocity u = v_n* + g_n (τ − ½) h (symplectic Euler is leapfrog); if u <
-    −threshold and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other contact gets
-    ``resting_targets`` (stabilization, slop [m], max push velocity [m/s]). Returns (target (C,)
-    [m/s], τ (C,), −1 where there was no impact)."""
-    h = dt
+    gravity_normal g_n (C,) [m/s²]; restitution ε (C,); h = ``settings.dt`` [s]. A contact that
+    closes within the step (v_n* < 0, d₀ + h v_n* ≤ 0) does so at the fraction τ = d₀ / (−h v_n*)
+    of it, with the impact velocity u = v_n* + g_n (τ − ½) h (symplectic Euler is leapfrog); if u <
+    −``settings.threshold`` [m/s] and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other
+    contact gets ``resting_targets`` (the settings' stabilization, slop [m] and max push velocity
+    [m/s]). Returns (target (C,) [m/s], τ (C,), −1 where there was no impact)."""
+    h = settings.dt
+    threshold, stabilization, slop = settings.threshold, settings.stabilization, settings.slop
+    max_push_velocity = settings.max_push_velocity
     C = gap_at_start.shape[0]
     target = np.empty(C)
     tau = np.empty(C)
@@ -281,7 +275,7 @@ def impact_targets(
             target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes) * h
             tau[c] = closes
         else:
-            target[c] = resting_target(gap, dt, stabilization, slop, max_push_velocity)
+            target[c] = resting_target(gap, h, stabilization, slop, max_push_velocity)
             tau[c] = -1.0
     return target, tau
 
@@ -292,18 +286,13 @@ def impact_targets(
 @njit(cache=True)
 def resolve_collisions(
     rows: ContactRows,
-    friction: np.ndarray,
-    restitution: np.ndarray,
+    materials: tuple[np.ndarray, np.ndarray],
     gravity_normal: np.ndarray,
     gap_at_start: np.ndarray,
-    dt: float,
-    threshold: float,
     u: np.ndarray,
-    max_waves: int,
-    sweeps: int,
-    tolerance: float,
     tau: np.ndarray,
     order: np.ndarray,
+    settings: LoopSettings,
 ) -> int:
     """Collision impulses (I2, R1–R4, F2) in waves, until no contact approaches.
 
@@ -317,11 +306,17 @@ def resolve_collisions(
     thus one wave and stay symmetric, while an impact passed along a chain of touching
     bodies makes one wave per link (Newton's cradle: one ball in, one ball out).
 
-    ``rows`` as from ``contact_rows``; gravity_normal, gap_at_start (C,) [m/s², m]; u the
-    generalized velocity (changed in place); ``tau`` (C,) receives each contact's τ, −1 where
-    it had no impact; ``order`` (C,) int is the order in which a wave's members are swept (see
-    ``solve_order``). Returns the number of waves.
+    ``rows`` as from ``contact_rows``; ``materials`` = (friction μ, restitution ε) (C,) each;
+    gravity_normal, gap_at_start (C,) [m/s², m]; u the generalized velocity (changed in place);
+    ``tau`` (C,) receives each contact's τ, −1 where it had no impact; ``order`` (C,) int is the
+    order in which a wave's members are swept (see ``solve_order``); of the ``settings``: h =
+    ``dt`` [s], the ``threshold`` [m/s], and ``iterations``, the most waves and the most sweeps of
+    one, each stopping once no contact's velocity changes by more than ``tolerance`` [m/s].
+    Returns the number of waves.
     """
+    friction, restitution = materials
+    dt, threshold, tolerance = settings.dt, settings.threshold, settings.tolerance
+    max_waves = sweeps = settings.iterations
     k = rows.k
     C = k.shape[0]
     target = np.empty(C)
@@ -379,36 +374,13 @@ def targets(
     )
     if impulse is not None:
         tau = np.empty(gap_at_start.shape[0])
-        resolve_collisions(
-            rows,
-            contacts.friction,
-            contacts.restitution,
-            gravity_normal,
-            gap_at_start,
-            h,
-            settings.threshold,
-            u,
-            settings.iterations,
-            settings.iterations,
-            settings.tolerance,
-            tau,
-            order,
-        )
+        materials = (contacts.friction, contacts.restitution)
+        resolve_collisions(rows, materials, gravity_normal, gap_at_start, u, tau, order, settings)
         return resting_targets(gap_at_start, h, settings.stabilization, settings.slop, settings.max_push_velocity), tau
-    if constraints is None:  # neither: no velocity method (never so; see ``compile_flags``)
+    if constraints is None:  # neither: no velocity method (never so; see ``specialization``)
         raise ValueError("targets: neither impulse nor constraints")
     normal_velocity = row_products(rows, u)[:, 0]
-    return impact_targets(
-        gap_at_start,
-        normal_velocity,
-        gravity_normal,
-        contacts.restitution,
-        h,
-        settings.threshold,
-        settings.stabilization,
-        settings.slop,
-        settings.max_push_velocity,
-    )
+    return impact_targets(gap_at_start, normal_velocity, gravity_normal, contacts.restitution, settings)
 
 
 @njit(cache=True, inline="always")
@@ -425,19 +397,9 @@ def warm_impulses(
     fraction; a new contact's weight over the step (``guess_new_impulses``); zeros at fraction 0."""
     values, found = values_carried(carried_ids, carried_values, contacts.feature_id)
     warm = settings.warm_start * values
-    masses = (model.body_mass, model.particle_mass)
-    guess_new_impulses(
-        warm,
-        found,
-        settings.warm_start,
-        contacts,
-        motion.body_position,
-        motion.particle_position,
-        masses,
-        model.gravity,
-        settings.dt,
-        model.cloth_of,
-    )
+    positions = (motion.body_position, motion.particle_position)
+    loads = (model.body_mass, model.particle_mass, model.gravity)
+    guess_new_impulses(warm, found, contacts, positions, loads, settings, model.cloth_of)
     return warm
 
 
@@ -447,21 +409,22 @@ def split_at_impact(
     contacts: ContactArrays,
     motion: Motion,
     tau: np.ndarray,
-    move: tuple,
-    free: tuple,
+    velocities: tuple,
     solved: np.ndarray,
-    h: float,
-    time_of_impact: bool,
+    settings: LoopSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Stage 5: positions x = x₀ + h v⁺, with the part of the step before each body's and
-    particle's earliest impact (τ (C,) per contact, −1 where none; ``earliest_impacts``)
-    travelled with the velocities that moved the prediction (``move``: v*, or the old velocities
-    under explicit Euler) and the rest with them corrected by the solve, move + (v⁺ − v*), v⁺ the
-    generalized velocity ``solved`` (N,) and v* the ``free`` velocities; ``time_of_impact``
+    """Stage 5: positions x = x₀ + h v⁺ (h = ``settings.dt`` [s]), with the part of the step before
+    each body's and particle's earliest impact (τ (C,) per contact, −1 where none;
+    ``earliest_impacts``) travelled with the velocities that moved the prediction and the rest with
+    them corrected by the solve, move + (v⁺ − v*), v⁺ the generalized velocity ``solved`` (N,):
+    ``velocities`` = (move: v*, or the old velocities under explicit Euler; v*, the free
+    velocities), each (body (B, 3), angular (B, 3), particle (P, 3)). ``settings.time_of_impact``
     False: no split (τ = −1 everywhere). Returns (body positions (B, 3) [m], orientations (B, 4),
     particle positions (P, 3) [m])."""
+    move, free = velocities
+    h = settings.dt
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    if not time_of_impact:
+    if not settings.time_of_impact:
         tau = np.full(tau.shape[0], -1.0)
     tau_body, tau_particle = earliest_impacts(
         contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, tau, B, P
@@ -498,26 +461,23 @@ def split_at_impact(
 def respond(
     model: LoopModel,
     settings: LoopSettings,
-    impulse: bool | None,
-    constraints: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
+    spec: Specialization,
     contacts: ContactArrays,
     motion: Motion,
     rotation: np.ndarray,
-    move: tuple,
-    free: tuple,
+    velocities: tuple,
     carried: tuple,
 ) -> tuple:
     """Stages 4–5 of loop L3 for the contacts detected at ``motion``'s positions (the bodies'
     rotations (B, 3, 3) ``rotation``): their rows, the targets of the normal rows (impulses: the
     collision waves first; constraints: all impacts at once), the warm-started sweeps of
-    sequential impulses (projected Gauss-Seidel on velocities, C7) from the ``free`` velocities
-    v*, and the positions split at the time of impact (``move``: what moved the prediction).
-    ``impulse``, ``constraints``, ``slabs``, ``parallel``: the flags of ``compile_flags`` (True,
-    or None to leave a branch uncompiled); ``carried`` = (last step's contact ids (K,), their
-    impulses (K, 3)). Returns (positions, velocities v⁺ ((B, 3), (B, 3), (P, 3)), impulses (C, 3)
-    [N s], sweeps made, the sweeps' last change [m/s]).
+    sequential impulses (projected Gauss-Seidel on velocities, C7) from the free velocities
+    v*, and the positions split at the time of impact. ``velocities`` = (what moved the
+    prediction, v*: each (body (B, 3), angular (B, 3), particle (P, 3))); ``spec``: the run's
+    Specialization (its ``impulse``, ``constraints``, ``slabs`` and ``parallel`` read here);
+    ``carried`` = (last step's contact ids (K,), their impulses (K, 3)). Returns (positions,
+    velocities v⁺ ((B, 3), (B, 3), (P, 3)), impulses (C, 3) [N s], sweeps made, the sweeps' last
+    change [m/s]).
 
     With ``settings.substeps`` n > 1 (small steps): a step whose solve ends above the tolerance
     (capped at ``settings.whole_sweeps`` sweeps), or every step where ``settings.always_substep``,
@@ -526,26 +486,27 @@ def respond(
     positions then move with the substeps' mean velocity. A step that converges is the plain
     solve's, bit for bit."""
     # 4. formulate the contact rows, their targets (collisions first, for impulses), and solve
+    move, free = velocities
     rows = build_rows(model, contacts, motion, rotation)
     u = stacked(free[0], free[1], free[2])
     order = contact_order(contacts.point, contacts.feature_id, model.gravity)
-    target, tau = targets(model, settings, impulse, constraints, contacts, rows, u, order)
+    target, tau = targets(model, settings, spec.impulse, spec.constraints, contacts, rows, u, order)
     warm = warm_impulses(model, settings, contacts, motion, carried[0], carried[1])
     if settings.substeps <= 1:
         impulses, sweeps, change = solve(
-            settings, slabs, parallel, rows, contacts, motion, u, target, warm, order, None
+            settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, warm, order), None
         )
-        return _respond_end(model, settings, contacts, motion, tau, move, free, u, u, impulses, sweeps, change)
+        return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     # small steps (settings.substeps > 1): the whole step's solve first, unless always substepped; a step it
     # leaves unconverged is solved again in substeps from the velocity at the start, warm-started from its answer
     entry = u.copy()
     impulses, sweeps, change = warm, 0, np.inf
     if not settings.always_substep:
         impulses, sweeps, change = solve(
-            settings, slabs, parallel, rows, contacts, motion, u, target, warm, order, None
+            settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, warm, order), None
         )
     if change <= settings.tolerance:
-        return _respond_end(model, settings, contacts, motion, tau, move, free, u, u, impulses, sweeps, change)
+        return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     n = settings.substeps
     start = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     free_u = stacked(free[0], free[1], free[2])
@@ -554,16 +515,16 @@ def respond(
         increment[i] = (free_u[i] - start[i]) / n
         u[i] = entry[i] - (free_u[i] - start[i])
     fixed = tau >= 0.0  # constraints' bounces keep their targets; impulse's were its waves
-    if impulse is not None:
+    if spec.impulse is not None:
         fixed[:] = False
     travelled = np.empty_like(u)
     substepping = (fixed, -contacts.depth, increment, travelled)
     impulses, more, change = solve(
-        settings, slabs, parallel, rows, contacts, motion, u, target, impulses, order, substepping
+        settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, impulses, order), substepping
     )
     sweeps += more
     as_before_where_unpushed(contacts, impulses, free[0].shape[0], entry, u, travelled)
-    return _respond_end(model, settings, contacts, motion, tau, move, free, u, travelled, impulses, sweeps, change)
+    return _respond_end(model, settings, contacts, motion, tau, velocities, (u, travelled, impulses, sweeps, change))
 
 
 @njit(cache=True)
@@ -597,13 +558,14 @@ def as_before_where_unpushed(
 
 
 @njit(cache=True, inline="always")
-def _respond_end(model, settings, contacts, motion, tau, move, free, u, travelled, impulses, sweeps, change):
-    """``respond``'s stage 5 and its result: the positions moved with ``travelled`` (N,) — the
-    solved velocity u, or its mean over the substeps —, split at the time of impact."""
-    h = settings.dt
+def _respond_end(model, settings, contacts, motion, tau, velocities, solved):
+    """``respond``'s stage 5 and its result: ``solved`` = (the solved velocity u (N,), what the
+    positions move with (N,) — u, or its mean over the substeps —, impulses, sweeps, change); the
+    positions split at the time of impact."""
+    u, travelled, impulses, sweeps, change = solved
     # 5. recompute positions from the corrected velocities (their mean over the substeps), split at the time of impact
-    positions = split_at_impact(model, contacts, motion, tau, move, free, travelled, h, settings.time_of_impact)
-    return positions, unstacked(u, free[0].shape[0]), impulses, sweeps, change
+    positions = split_at_impact(model, contacts, motion, tau, velocities, travelled, settings)
+    return positions, unstacked(u, motion.body_position.shape[0]), impulses, sweeps, change
 
 
 # ---- the step from Python: stages 1–3 for any scene, 4–5 compiled ---------------------------
@@ -634,20 +596,9 @@ def step(
     # 4–5. the contacts' response, and the positions after it
     arrays, motion, rotation, carried = loop_inputs(model, state, method)
     settings = loop_settings(model, method, options, dt)
-    _, _, constraints, impulse, _, slabs, parallel = compile_flags(model, method, options)
+    spec = for_response(specialization(model, method, options))
     positions, velocities, impulses, sweeps, change = respond(
-        arrays,
-        settings,
-        impulse,
-        constraints,
-        slabs,
-        parallel,
-        contacts.arrays(),
-        motion,
-        rotation,
-        _floats(move),
-        free,
-        carried,
+        arrays, settings, spec, contacts.arrays(), motion, rotation, (_floats(move), free), carried
     )
     kept = dict(state.carried, manifolds=manifolds)
     kept[keys[0]], kept[keys[1]] = contacts.feature_id, impulses

@@ -9,7 +9,7 @@ compiled code, with no Python between steps. The stages are the ones
 :mod:`contactlab.methods.impulse`, :mod:`contactlab.methods.constraints` and
 :mod:`contactlab.methods.projection` name, and the same compiled functions serve both paths, so
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
-A method's step is compiled only for the runs of that method (``compile_flags``).
+A method's step is compiled only for the runs of that method (its ``Specialization``).
 
 **Every run compiled, short ones included.** ``run`` calls its method's step by address
 (:func:`contactlab.compiling.call_entry`): the step's machine code, compiled once for the run's
@@ -57,9 +57,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import shapes
-from ..collision.families import pair_families
 from ..collision.manifolds import Manifolds
-from ..collision.narrow_phase import needs_hulls
 from ..compiling import EntryPoint, call_entry, njit
 from ..model import derived
 from ..state import State
@@ -70,17 +68,18 @@ from .loop_stages import (
     LoopSettings,
     Motion,
     Samples,
-    compile_flags,
+    Specialization,
     healthy,
     loop_model,
     loop_settings,
     poses,
     record,
+    specialization,
     store,
     without_drive,
 )
 from .loop_steps import penalty_step, projection_step, velocity_step
-from .penalty import PenaltyLoop, penalty_loop
+from .penalty import penalty_loop
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -110,35 +109,23 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
 def run(
     model: LoopModel,
     settings: LoopSettings,
-    plan: tuple,
-    large: bool | None,
-    keeping: bool | None,
-    constraints: bool | None,
-    impulse: bool | None,
-    projection: bool | None,
-    slabs: bool | None,
-    parallel: bool | None,
-    penalty: PenaltyLoop | None,
+    spec: Specialization,
     step: EntryPoint,
-    motion: Motion,
-    carried: tuple,
-    time: float,
-    steps: int,
-    first_index: int,
-    last_index: int,
-    record_every: int,
+    start: tuple,
+    schedule: tuple,
     samples: Samples,
-    max_speed: float,
 ) -> tuple:
-    """``steps`` steps of ``velocity_step`` (``constraints`` or ``impulse`` True), ``projection_step``
-    (``projection`` True) or ``penalty_step`` (``penalty`` a PenaltyLoop) — exactly one of the
-    four flags is not None, and the steps whose flag is None are not compiled — from the state
-    ``motion`` at ``time`` [s] (changed in place), numbered from ``first_index``; after step i, a
-    sample into ``samples`` (row after row) where i is a multiple of ``record_every`` or
-    ``last_index``. Stops early after a step that leaves a non-finite value or a speed above
-    ``max_speed`` [m/s]. Returns (steps made, whether it stopped so, carried, time, samples
-    written, most contacts, sweeps made, steps whose contact springs went implicit, penalty's
-    conjugate-gradient iterations made)."""
+    """``schedule`` = (steps, first index, last index, record every, max speed [m/s]): that many
+    steps of the run's ``step`` (``velocity_step``, ``projection_step`` or ``penalty_step``, compiled
+    for ``spec`` and called by address), from ``start`` = (the state's arrays, a Motion changed in
+    place; what the step carries; the time [s]), numbered from the first index; after step i, a
+    sample into ``samples`` (row after row) where i is a multiple of record every or the last
+    index. Stops early after a step that leaves a non-finite value or a speed above max speed.
+    Returns (steps made, whether it stopped so, carried, time, samples written, most contacts,
+    sweeps made, steps whose contact springs went implicit, penalty's conjugate-gradient
+    iterations made)."""
+    motion, carried, time = start
+    steps, first_index, last_index, record_every, max_speed = schedule
     written = np.int64(0)  # int64, not the literal 0: record is compiled once for run and for Stepper.sample
     most = 0
     sweeps_made = 0
@@ -151,32 +138,10 @@ def run(
     pose = poses(plain, motion)
     for s in range(steps):
         index = first_index + s
-        # clear: penalty's steps never are; np.bool_, not the literal False, which would make penalty's
-        # record a type of its own, compiled again
-        elastic, implicit, linear, clear = 0.0, False, 0, np.bool_(False)
-        # separate ifs, not if-else: Numba drops a branch only where its flag is None (as an
-        # argument typed None), and exactly one flag is not None (compile_flags); ``step`` is the
-        # live branch's step, whose argument types its EntryPoint's type names
-        if projection is not None:
-            positions, velocities, carried, count, sweeps, change, clear = call_entry(
-                step, (model, settings, plan, large, keeping, slabs, parallel, motion, pose, time, carried)
-            )
-        if constraints is not None:  # its own branch, impulse's below: each flag prunes only its own
-            positions, velocities, carried, count, sweeps, change, clear = call_entry(
-                step,
-                (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
-                + (motion, pose, time, carried),
-            )
-        if impulse is not None:
-            positions, velocities, carried, count, sweeps, change, clear = call_entry(
-                step,
-                (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
-                + (motion, pose, time, carried),
-            )
-        if penalty is not None:
-            positions, velocities, carried, count, sweeps, change, elastic, implicit, linear = call_entry(
-                step, (model, settings, plan, large, slabs, parallel, penalty, motion, pose, time, carried)
-            )
+        # every step has one signature and one result (loop_steps): no branch on the method here
+        positions, velocities, carried, count, sweeps, change, clear, elastic, implicit, linear = call_entry(
+            step, (model, settings, spec, motion, pose, time, carried)
+        )
         store(motion, positions, velocities)
         pose = poses(plain, motion)
         time += settings.dt
@@ -187,7 +152,7 @@ def run(
         if not healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, plain, plan, large, motion, pose, time, count, sweeps, change, clear)
+            record(samples, written, plain, spec.plan, motion, pose, time, (count, sweeps, change, clear))
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
@@ -213,7 +178,7 @@ class Stepper:
         self.carries_empty = method == "projection"
         self.keep_manifolds = options.manifold_tolerance > 0.0
         self.settings = loop_settings(model, method, options, dt)
-        self.flags = compile_flags(model, method, options) + (None,)  # penalty: None (PenaltyStepper)
+        self.spec = specialization(model, method, options)
         self.carried = _carried(
             state.carried.get("manifolds") or Manifolds.empty(),
             state.carried.get(self.keys[0]),
@@ -222,11 +187,8 @@ class Stepper:
         self.other = {k: v for k, v in state.carried.items() if k != "manifolds" and k not in self.keys}
 
     def _start(self, model, state):
-        """What every Stepper holds: the model, the narrow phase's plan, the state's time and
-        arrays (copies), the tallies."""
+        """What every Stepper holds: the model, the state's time and arrays (copies), the tallies."""
         self.model = model
-        families = pair_families(model)
-        self.plan = (families, model.hull_store if needs_hulls(families) else None)
         self.time = float(state.time)
         self.motion = Motion(
             *(
@@ -279,7 +241,7 @@ class Stepper:
         the series, recorded by the loop's ``record``: what ``Recorder.sample`` records.
         ``rows``: where it is recorded (see ``advance``)."""
         samples, model, motion = self._samples(1, rows), without_drive(loop_model(self.model)), self.motion
-        record(samples, 0, model, self.plan, self.flags[0], motion, poses(model, motion), self.time, -1, 0, 0.0, False)
+        record(samples, 0, model, self.spec.plan, motion, poses(model, motion), self.time, (-1, 0, 0.0, False))
         return samples._asdict()
 
     def advance(
@@ -312,22 +274,9 @@ class Stepper:
         return made, diverged, series
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
-        return (
-            loop_model(self.model),
-            self.settings,
-            self.plan,
-            *self.flags,
-            self.entry_point(),
-            self.motion,
-            self.carried,
-            self.time,
-            steps,
-            first_index,
-            last_index,
-            record_every,
-            samples,
-            max_speed,
-        )
+        start = (self.motion, self.carried, self.time)
+        schedule = (steps, first_index, last_index, record_every, max_speed)
+        return loop_model(self.model), self.settings, self.spec, self.entry_point(), start, schedule, samples
 
     def entry_point(self) -> EntryPoint:
         """This run's step (``velocity_step``, ``projection_step`` or ``penalty_step``) compiled
@@ -336,29 +285,27 @@ class Stepper:
         from Python."""
         known = _entry_points(self.model)
         if self.kind not in known:
-            model, settings, plan, motion = loop_model(self.model), self.settings, self.plan, self.motion
-            large, keeping, constraints, impulse, projection, slabs, parallel, penalty = self.flags
+            model, spec, motion = loop_model(self.model), self.spec, self.motion
+            function = penalty_step if spec.penalty is not None else velocity_step
+            if spec.projection is not None:
+                function = projection_step
             pose = poses(without_drive(model), motion)
-            if penalty is not None:
-                function, arguments = penalty_step, (model, settings, plan, large, slabs, parallel, penalty)
-            elif projection is not None:
-                function, arguments = projection_step, (model, settings, plan, large, keeping, slabs, parallel)
-            else:
-                function = velocity_step
-                arguments = (model, settings, plan, large, keeping, impulse, constraints, slabs, parallel)
-            known[self.kind] = EntryPoint.for_arguments(function, (*arguments, motion, pose, self.time, self.carried))
+            arguments = (model, self.settings, spec, motion, pose, self.time, self.carried)
+            known[self.kind] = EntryPoint.for_arguments(function, arguments)
         return known[self.kind]
 
     @property
     def kind(self) -> tuple:
-        """What sets ``run``'s machine code for this run apart: the scene's shape families, the
-        compile flags, and whether it is penalty's (its PenaltyLoop's values do not count)."""
-        return self.plan[0], self.flags[:-1], self.flags[-1] is not None
+        """What sets ``run``'s machine code for this run apart: its Specialization, but of its Plan
+        the families and flags only (not the hull store's arrays), and of penalty whether it is
+        penalty's (not its PenaltyLoop's values)."""
+        spec = self.spec
+        return spec.plan.families, spec.plan[2:], spec[1:-1], spec.penalty is not None
 
     @property
     def parallel(self) -> bool:
-        """Whether this run's loop has a parallel sweep compiled in (``compile_flags``' parallel)."""
-        return self.flags[6] is not None
+        """Whether this run's loop has a parallel sweep compiled in (the Specialization's ``parallel``)."""
+        return self.spec.parallel is not None
 
     def state(self) -> State:
         """The State reached (copies), with the carried data under the method's keys."""
@@ -387,7 +334,7 @@ class PenaltyStepper(Stepper):
     def __init__(self, model: Model, options: PenaltyOptions, integrator: str, dt: float, state: State) -> None:
         self._start(model, state)
         self.settings, penalty = penalty_loop(model, options, integrator, dt)  # settings: hold_back's sweeps
-        self.flags = compile_flags(model, "penalty", options) + (penalty,)
+        self.spec = specialization(model, "penalty", options, penalty)
         self.keys = CARRIED["penalty"]
         self.carried = _carried(Manifolds.empty(), state.carried.get(self.keys[0]), state.carried.get(self.keys[1]))
         self.other = {k: v for k, v in state.carried.items() if k not in self.keys}
