@@ -65,6 +65,27 @@ def test_no_function_of_the_methods_takes_more_than_eight_parameters():
     assert crowded == []
 
 
+# the public names two modules may both define: one interface, each module its own case of it —
+# every method's Options and step, every peer engine's World, and simulate(), contactlab's own or a
+# peer engine's (contactlab.peers), which returns the same Run
+SHARED_NAMES = {"Options", "step", "World", "simulate"}
+
+
+def test_one_name_one_meaning():
+    """Issue 36, item 5: no two modules define a public function or class of the same name
+    (``integrate`` was a quaternion step and penalty's stage 4; ``run`` a study and the loop)."""
+    import ast
+    from collections import defaultdict
+
+    where = defaultdict(list)
+    for name in _modules():
+        for node in ast.parse((PACKAGE / name).read_text(encoding="utf-8")).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and not node.name.startswith("_"):
+                where[node.name].append(name)
+    twice = {name: modules for name, modules in where.items() if len(modules) > 1}
+    assert set(twice) <= SHARED_NAMES, {name: twice[name] for name in set(twice) - SHARED_NAMES}
+
+
 def test_the_suite_says_why_it_skipped_a_test(tmp_path):
     # issue 37: a summary line "25 skipped" hid that the FCLIB tests had no data; pytest's options
     # in pyproject.toml must list each skip with its reason

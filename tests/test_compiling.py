@@ -401,7 +401,7 @@ def test_every_kernel_is_stamped_with_the_whole_package():
                 with open(os.path.join(folder, name), encoding="utf-8") as source:
                     text = source.read()
                 assert "from numba import njit" not in text, f"{name}: take njit from contactlab.compiling"
-    for kernel in (velocity_loop.run, generate_contacts):
+    for kernel in (velocity_loop.run_steps, generate_contacts):
         locator = kernel._cache._impl.locator
         assert isinstance(locator, compiling.PackageStampedLocator)
         assert locator.get_source_stamp() == ("package sources", compiling.sources_digest(package))

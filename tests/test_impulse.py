@@ -284,7 +284,7 @@ def test_warm_starting_carries_impulses_by_contact_id_and_steadies_a_pyramid():
     # the carried impulses hold the weight: the floor's contacts carry all 15 boxes, m g h per step
     from contactlab.collision import FEATURE_BITS
 
-    ids, values = run.state.carried["impulse_ids"], run.state.carried["impulse_values"]
+    ids, values = run.state.carried.of("impulse")
     colliders = scene.model.body_count + scene.model.obstacle_count
     on_floor = (ids >> FEATURE_BITS) % colliders == scene.model.body_count  # B is the floor plane
     assert values[on_floor, 0].sum() == pytest.approx(15 * 1.0 * G * scene.dt, rel=1e-3)

@@ -189,12 +189,12 @@ def test_a_resting_stack_reuses_every_manifold_and_matches_fresh_contacts():
     model = b.finalize()
     dt = 1 / 240
     state = simulate(model, "constraints", dt, 1.0, {"iterations": 50}).state
-    kept = state.carried["manifolds"]
+    kept = state.carried.manifolds
     assert len(kept) == 3 and kept.count.tolist() == [4, 4, 4]
     options = constraints.Options(iterations=50)
     state, _ = constraints.step(model, state, dt, options)
-    np.testing.assert_array_equal(state.carried["manifolds"].center, kept.center)  # all three reused
-    contacts, _ = keep(model, state, state.carried["manifolds"])
+    np.testing.assert_array_equal(state.carried.manifolds.center, kept.center)  # all three reused
+    contacts, _ = keep(model, state, state.carried.manifolds)
     fresh = collide(model, state, MARGIN)
     i, j = same_contacts(contacts, fresh)
     np.testing.assert_allclose(contacts.depth[i], fresh.depth[j], rtol=0, atol=1e-9)

@@ -13,6 +13,7 @@ from contactlab.dynamics.integrators import world_inverse_inertia
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.methods import jacobian_rows, penalty
 from contactlab.scene import builtin_scenes, load_scene
+from contactlab.state import Carry
 
 G = 9.81
 HALF = 0.05  # half edge of the test cubes [m]
@@ -53,7 +54,7 @@ def test_elastic_energy_is_half_k_delta_squared_and_its_gradient_the_force():
     springs = penalty.ContactSprings(
         np.array([k]), np.zeros(1), np.array([k]), np.zeros(1), np.zeros(1), np.zeros((1, 2))
     )
-    forces, _ = penalty.spring_forces(springs, np.array([0.004]), np.zeros((1, 3)))
+    forces, _ = penalty.contact_spring_forces(springs, np.array([0.004]), np.zeros((1, 3)))
 
     def energy(d):
         return penalty.elastic_energy(springs, np.array([d]), np.zeros((1, 2)))
@@ -68,12 +69,12 @@ def test_damping_is_optional_and_never_pulls():
     )
     depth = np.array([0.001, 0.001, -0.001])
     velocity = np.array([[-0.1, 0, 0], [1.0, 0, 0], [-1.0, 0, 0]])  # approaching, leaving fast, apart
-    forces, _ = penalty.spring_forces(springs, depth, velocity)
+    forces, _ = penalty.contact_spring_forces(springs, depth, velocity)
     np.testing.assert_allclose(forces[:, 0], [10.0 + 5.0, 0.0, 0.0])  # kδ − c v_n, clamped at 0
     undamped = penalty.ContactSprings(
         np.full(3, 1e4), np.zeros(3), np.full(3, 1e4), np.zeros(3), np.zeros(3), np.zeros((3, 2))
     )
-    forces, _ = penalty.spring_forces(undamped, depth, velocity)
+    forces, _ = penalty.contact_spring_forces(undamped, depth, velocity)
     np.testing.assert_allclose(forces[:, 0], [10.0, 10.0, 0.0])  # the slide: F = k δ n exactly
 
 
@@ -228,7 +229,7 @@ def test_anchor_spring_sticks_under_the_limit_and_slips_to_exactly_mu_fn():
         np.full(2, mu),
         np.array([[0.0002, 0.0], [0.003, 0.004]]),
     )
-    forces, elongation = penalty.spring_forces(springs, np.full(2, 0.001), np.zeros((2, 3)))
+    forces, elongation = penalty.contact_spring_forces(springs, np.full(2, 0.001), np.zeros((2, 3)))
     # normal force 10 N, limit 5 N: the first pulls 2 N and sticks, the second would pull 50 N
     np.testing.assert_allclose(forces[0], [10.0, -2.0, 0.0])
     np.testing.assert_allclose(elongation[0], [0.0002, 0.0])  # anchor stays
@@ -242,9 +243,10 @@ def test_anchors_live_in_the_state_keyed_by_contact_id():
     run = simulate(model, "penalty", dt=0.001, duration=0.05, options={"stiffness": 1e4})
     carried = run.state.carried
     contacts = collide(model, run.state, 0.001)
-    assert set(contacts.feature_id) == set(carried["anchor_ids"][np.linalg.norm(carried["anchor_offsets"], axis=1) > 0])
+    assert carried.method == "penalty"  # the anchors: offsets [m] by persistent contact id
+    assert set(contacts.feature_id) == set(carried.ids[np.linalg.norm(carried.values, axis=1) > 0])
     # the anchors hold the block: together they pull m g sinθ up the slope
-    pull = 4 * 1e4 * np.linalg.norm(carried["anchor_offsets"], axis=1).mean()
+    pull = 4 * 1e4 * np.linalg.norm(carried.values, axis=1).mean()
     np.testing.assert_allclose(pull, G * np.sin(np.radians(20)), rtol=0.05)
 
 
@@ -404,8 +406,8 @@ def corner_in_edge_forces(normal_choice):
         contacts = collide(model, state, 0.0, None, options.granularity, options.normal)
         J = jacobian(contacts, state.body_position, 1, 0)
         inverse_mass = inverse_mass_matrix(model, state.body_orientation)
-        springs = penalty.assembled_springs(contacts, J, inverse_mass, {}, options)
-        forces, _ = penalty.spring_forces(springs, contacts.depth, np.zeros((contacts.count, 3)))
+        springs = penalty.assembled_springs(contacts, J, inverse_mass, Carry.none(), options)
+        forces, _ = penalty.contact_spring_forces(springs, contacts.depth, np.zeros((contacts.count, 3)))
         totals.append(forces[:, :1] * contacts.normal)
     assert all(len(f) == 1 for f in totals)
     return np.concatenate(totals)

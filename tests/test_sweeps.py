@@ -216,16 +216,16 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     # the stack settles on the even split of each box's load that its new contacts' warm start
     # gives (velocity_level.guess_new_impulses), a fixed point of the sweeps; split it unevenly
     # (+30 % and −30 % in turn) and let it settle again: the corners then trade impulse
-    values = state.carried["impulse_values"].copy()
+    values = state.carried.values.copy()  # the impulses [N s]
     values[:, 0] *= np.resize([1.3, 0.7], len(values))
-    state.carried["impulse_values"] = values
+    state.carried = state.carried._replace(values=values)
     state = simulate(model, "impulse", dt, 0.35, state=state).state
     options = impulse.Options()
     v, w, p = free_velocities(model, state, dt)
     contacts, _ = collide_keeping(
         model,
         state,
-        state.carried["manifolds"],
+        state.carried.manifolds,
         options.manifold_tolerance,
         options.contact_margin,
         swept_distances(model, v, w, p, dt),
@@ -235,7 +235,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     )
     rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)
-    warm, found = values_by_id(state.carried["impulse_ids"], state.carried["impulse_values"], contacts.feature_id, 3)
+    warm, found = values_by_id(*state.carried.of("impulse"), contacts.feature_id, 3)
     assert found.all()  # every contact warm-started
     target = resting_targets(-contacts.depth, dt, options.stabilization, options.slop, options.max_push_velocity)
     u = stack(v, w, p)

@@ -76,17 +76,17 @@ def test_the_loop_gives_the_stitched_steps_numbers(name, method, options):
         assert looped.summary[key] == stitched.summary[key], key
     assert looped.summary["solver"] == stitched.summary["solver"]
     assert looped.summary["implicit_spring_steps"] == stitched.summary["implicit_spring_steps"]
-    # what the run carries on: the same manifolds and warm-start impulses under the same keys
-    assert set(looped.state.carried) == set(stitched.state.carried)
-    for key, value in looped.state.carried.items():
-        other = stitched.state.carried[key]
-        if value is None or other is None:
-            assert value is other, key
-            continue
-        for field in vars(value) if hasattr(value, "__dataclass_fields__") else {key: value}:
-            left = getattr(value, field) if hasattr(value, "__dataclass_fields__") else value
-            right = getattr(other, field) if hasattr(other, "__dataclass_fields__") else other
-            assert np.array_equal(left, right), (key, field)
+    # what the run carries on: the same method's values by the same ids, and the same manifolds
+    looped_carry, stitched_carry = looped.state.carried, stitched.state.carried
+    assert looped_carry.method == stitched_carry.method == method
+    assert np.array_equal(looped_carry.ids, stitched_carry.ids)
+    assert np.array_equal(looped_carry.values, stitched_carry.values)
+    if looped_carry.manifolds is None or stitched_carry.manifolds is None:
+        assert looped_carry.manifolds is stitched_carry.manifolds
+    else:
+        for field in vars(looped_carry.manifolds):
+            left, right = getattr(looped_carry.manifolds, field), getattr(stitched_carry.manifolds, field)
+            assert np.array_equal(left, right), field
 
 
 @pytest.mark.parametrize("method", ["impulse", "projection"])
@@ -108,10 +108,10 @@ def test_a_penalty_run_goes_on_from_its_state_through_either_path():
     scene = load_scene("box_stack")
     whole = simulate(scene.model, "penalty", scene.dt, 20 * scene.dt, compiled_loop=True)
     half = simulate(scene.model, "penalty", scene.dt, 10 * scene.dt, compiled_loop=True)
-    assert set(half.state.carried) == {"anchor_ids", "anchor_offsets"}
+    assert half.state.carried.method == "penalty" and half.state.carried.manifolds is None
     rest = simulate(scene.model, "penalty", scene.dt, 10 * scene.dt, state=half.state, compiled_loop=False)
     assert np.array_equal(rest.arrays["body_position"][-1], whole.arrays["body_position"][-1])
-    assert np.array_equal(rest.state.carried["anchor_offsets"], whole.state.carried["anchor_offsets"])
+    assert np.array_equal(rest.state.carried.values, whole.state.carried.values)  # the anchor offsets
 
 
 def test_recording_every_k_steps_samples_the_same_states():
@@ -157,8 +157,8 @@ def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
 
 def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_steps_own_machine_code():
     """Issue 36: a short run on an empty cache stepped the loop's body from Python (about 30 ms a
-    720-step ball run against 3 ms compiled), because compiling ``run`` linked its step in and
-    cost 10–14 s more. ``run`` now calls the step by address (compiling.call_entry): its machine
+    720-step ball run against 3 ms compiled), because compiling ``run_steps`` linked its step in and
+    cost 10–14 s more. ``run_steps`` now calls the step by address (compiling.call_entry): its machine
     code holds no copy of the step, so every run takes it, however short, and the loop run from
     Python calls the same machine code, giving the same numbers."""
     scene = load_scene("bouncing_ball")
@@ -174,8 +174,8 @@ def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_ste
     assert stepper(compiled_loop=False) is None  # the method's own step
     entry = stepper().entry_point()
     assert entry.function is loop_steps.velocity_step and entry.numba_type.arguments in entry.function.overloads
-    (types,) = [t for t in velocity_loop.run.overloads if entry.numba_type in t]
-    fresh = numba.njit(velocity_loop.run.py_func)  # not cached: a cached entry has no IR to read
+    (types,) = [t for t in velocity_loop.run_steps.overloads if entry.numba_type in t]
+    fresh = numba.njit(velocity_loop.run_steps.py_func)  # not cached: a cached entry has no IR to read
     fresh.compile(types)
     step_symbol = entry.function.overloads[entry.numba_type.arguments].fndesc.llvm_func_name
     llvm_ir = fresh.overloads[types].library.get_llvm_str()
@@ -187,7 +187,7 @@ def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_ste
         made, diverged, _, time, written, *_ = through(*twin._run_arguments(90, 1, 90, 7, samples, 1e6))
         return (made, diverged, time, written), samples, twin.motion
 
-    from_python, compiled = advanced(velocity_loop.run.py_func), advanced(velocity_loop.run)
+    from_python, compiled = advanced(velocity_loop.run_steps.py_func), advanced(velocity_loop.run_steps)
     assert from_python[0] == compiled[0] and from_python[0][3] == 13
     for name, series in from_python[1]._asdict().items():
         np.testing.assert_array_equal(series, getattr(compiled[1], name), err_msg=name)

@@ -78,7 +78,7 @@ def estimate(model: Model, steps: int, record_every: int, streamed: bool = False
     }
 
 
-def check(
+def require(
     model: Model,
     steps: int,
     record_every: int,

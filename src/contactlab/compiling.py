@@ -12,7 +12,7 @@ anything starts compiling, and nothing at all when everything comes from the cac
 
 **A cache entry is as fresh as the whole package.** Numba stamps a function's entry with its
 own source file alone, so an entry of a function that calls compiled code in other files
-outlives an edit to them: the stepping loop ``run`` (``methods/velocity_loop.py``) compiles in
+outlives an edit to them: the stepping loop ``run_steps`` (``methods/velocity_loop.py``) compiles in
 the stages of a dozen modules. A ``pip install`` of a newer contactlab into the same
 environment leaves the old ``.nbi``/``.nbc`` files beside the new sources (pip removes only the
 files it installed), and a checkout of another commit leaves them in ``src/``: in both, the

@@ -92,7 +92,7 @@ def check_run(
     stepping: the same InputError, naming the first bad one, for the same arguments (dt [s] > 0
     and finite, no longer than the duration [s], at most 10⁹ steps; the model something to move
     that the collision code supports; the method, its options and the integrator; the memory and,
-    for a ``trajectory`` file, the disk the run needs by :func:`contactlab.budget.check`).
+    for a ``trajectory`` file, the disk the run needs by :func:`contactlab.budget.require`).
     ``streamed`` and ``remedies`` as there: a sweep checks its cells with its own advice."""
     module, options, dt, duration, steps = _checked_arguments(
         model, method, dt, duration, options, integrator, record_every, state, scene_name
@@ -104,7 +104,7 @@ def check_run(
         raise InputError("memory_limit", f"expected a number of bytes > 0 (math.inf: none), found {memory_limit!r}")
     if trajectory is not None and not isinstance(trajectory, (str, os.PathLike)):
         raise InputError("trajectory", f"expected a file path (str or os.PathLike) or None, found {_kind(trajectory)}")
-    needed = budget.check(model, steps, record_every, memory_limit, trajectory, streamed=streamed, remedies=remedies)
+    needed = budget.require(model, steps, record_every, memory_limit, trajectory, streamed=streamed, remedies=remedies)
     return Checked(module, options, dt, duration, steps, needed["samples"])
 
 

@@ -1,19 +1,52 @@
-"""What changes in time: positions, velocities, orientations, and per-method carried data.
+"""What changes in time: positions, velocities, orientations, and what a method carries.
 
-Shapes: B bodies, P particles. Angular velocity is in the world frame. ``carried`` holds
-what a method keeps from one step to the next (warm-start impulses, penalty anchors), by name.
+Shapes: B bodies, P particles. Angular velocity is in the world frame. ``carried`` (a Carry)
+holds what a method keeps from one step to the next: the contact manifolds it may reuse, and each
+contact's warm start or anchor by persistent contact id.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .collision.manifolds import Manifolds
 
 Positions = tuple[np.ndarray, np.ndarray, np.ndarray]
 """A state's positions as one value: (body_position (B, 3) [m], body_orientation (B, 4) unit
 quaternions, particle_position (P, 3) [m]), the order of :attr:`State.positions`."""
+
+
+class Carry(NamedTuple):
+    """What a method keeps from one step to the next (none: :func:`Carry.none`)."""
+
+    method: str
+    """whose values these are ("impulse", "constraints", "projection", "penalty"; "" none): a
+    method starts from another's values as from none"""
+    manifolds: Manifolds | None
+    """the contact manifolds pairs that barely move reuse (impulse, constraints, projection; None: none)"""
+    ids: np.ndarray
+    """(K,) int64: the persistent ids of last step's contacts"""
+    values: np.ndarray
+    """(K, 3): what each carries — impulses [N s] (impulse, constraints), first-pass λ [kg m]
+    (projection), anchor offsets [m] (penalty)"""
+
+    @classmethod
+    def none(cls) -> Carry:
+        return cls("", None, np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+
+    def of(self, method: str) -> tuple[np.ndarray, np.ndarray]:
+        """(ids (K,), values (K, 3)) where they are ``method``'s, else both empty."""
+        if self.method != method:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        return self.ids, self.values
+
+    def copy(self) -> Carry:
+        """The ids and values copied; the manifolds shared (a frozen Manifolds, never written)."""
+        return self._replace(ids=self.ids.copy(), values=self.values.copy())
 
 
 @dataclass
@@ -32,8 +65,8 @@ class State:
     """(P, 3) m"""
     particle_velocity: np.ndarray
     """(P, 3) m/s"""
-    carried: dict[str, Any] = field(default_factory=dict)
-    """by name: what a method keeps between steps"""
+    carried: Carry = field(default_factory=Carry.none)
+    """what a method keeps between steps"""
 
     def __repr__(self):
         bodies, particles = len(self.body_position), len(self.particle_position)
@@ -48,12 +81,12 @@ class State:
         time: float,
         positions: tuple[np.ndarray, np.ndarray, np.ndarray],
         velocities: tuple[np.ndarray, np.ndarray, np.ndarray],
-        carried: dict[str, Any] | None = None,
+        carried: Carry | None = None,
     ) -> State:
         """A state from (body_position, body_orientation, particle_position) and
         (body_velocity, body_angular_velocity, particle_velocity)."""
         (bx, bq, px), (bv, bw, pv) = positions, velocities
-        return cls(time, bx, bq, bv, bw, px, pv, {} if carried is None else carried)
+        return cls(time, bx, bq, bv, bw, px, pv, Carry.none() if carried is None else carried)
 
     @property
     def positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,7 +107,7 @@ class State:
             body_angular_velocity=self.body_angular_velocity.copy(),
             particle_position=self.particle_position.copy(),
             particle_velocity=self.particle_velocity.copy(),
-            carried={k: (v.copy() if hasattr(v, "copy") else v) for k, v in self.carried.items()},
+            carried=self.carried.copy(),
         )
 
     def max_speed(self) -> float:

@@ -37,7 +37,7 @@ def square_csr(matrix, field: str) -> sp.csr_matrix:
     return csr
 
 
-def vector(values, n: int, field: str) -> np.ndarray:
+def finite_vector(values, n: int, field: str) -> np.ndarray:
     """``values`` as a finite float64 vector of length ``n`` (a copy); InputError otherwise."""
     try:
         out = np.array(values, dtype=np.float64, copy=True)

@@ -55,7 +55,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError
-from ._checks import choice, positive_float, positive_int, square_csr, vector
+from ._checks import choice, finite_vector, positive_float, positive_int, square_csr
 from .friction_sweeps import (
     _apgd_step,
     _diagonal_blocks,
@@ -108,10 +108,10 @@ def _check_problem(W, q, mu):
     if m % 3 != 0:
         raise InputError("W", f"expected a (3·nc, 3·nc) matrix for 3D contacts, got shape {csr.shape}.")
     nc = m // 3
-    q = vector(q, m, "q")
+    q = finite_vector(q, m, "q")
     if np.ndim(mu) == 0:
         mu = np.full(nc, float(mu))
-    mu = vector(mu, nc, "mu")
+    mu = finite_vector(mu, nc, "mu")
     if np.any(mu < 0.0):
         raise InputError("mu", "friction coefficients must be non-negative.")
     return csr, q, mu
@@ -129,7 +129,7 @@ def natural_map_error(
     W: (3·nc, 3·nc); q, r: (3·nc,); mu: (nc,) or a scalar.
     """
     csr, q, mu = _check_problem(W, q, mu)
-    r = vector(r, q.shape[0], "r")
+    r = finite_vector(r, q.shape[0], "r")
     normalization = choice(normalization, ("max", "q", "fclib", "none"), "normalization")
     u = csr @ r + q
     absolute, norm_r, norm_u = _natural_map_norms(mu, r, u, False)
@@ -278,7 +278,7 @@ def solve_friction_contact(
         raise InputError("warm_sweeps", f"expected a non-negative integer, got {warm_sweeps!r}.")
     m = q.shape[0]
     nc = m // 3
-    r = np.zeros(m) if r0 is None else _project_cone(vector(r0, m, "r0"), mu)
+    r = np.zeros(m) if r0 is None else _project_cone(finite_vector(r0, m, "r0"), mu)
     pyramid = friction_model == "pyramid"
     if m == 0:
         iterations, error = 0, 0.0

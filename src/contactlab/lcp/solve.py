@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import pgs as _kernels
-from ._checks import choice, positive_float, positive_int, square_csr, vector
+from ._checks import choice, finite_vector, positive_float, positive_int, square_csr
 from .coloring import color_rows
 from .lemke import lemke
 
@@ -77,13 +77,13 @@ def solve_lcp(
     method = choice(method, LCP_METHODS, "method")
     csr = square_csr(B, "B")
     n = csr.shape[0]
-    c = vector(c, n, "c")
+    c = finite_vector(c, n, "c")
     tol = positive_float(tol, "tol")
     max_iterations = positive_int(max_iterations, "max_iterations")
     omega = positive_float(omega, "omega")
     if omega >= 2.0:
         raise InputError("omega", f"expected a relaxation factor in (0, 2), got {omega!r}.")
-    lam = np.zeros(n) if warm_start is None else np.maximum(vector(warm_start, n, "warm_start"), 0.0)
+    lam = np.zeros(n) if warm_start is None else np.maximum(finite_vector(warm_start, n, "warm_start"), 0.0)
 
     if method == "lemke":
         lam, iterations, status, message = lemke(csr.toarray(), -c, max_iterations)

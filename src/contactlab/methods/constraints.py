@@ -50,13 +50,12 @@ from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, un
 from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_velocities
 from ..dynamics.sparse_cholesky import CholeskyFactor, ancestors, cholesky_solve_within
 from ..errors import InputError
-from ..state import State
+from ..state import Carry, State
 from ..validation import check_choices, check_counts, number
 from . import velocity_level
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
 from .loop_stages import (
-    CARRIED,
     build_rows,
     loop_inputs,
     loop_model,
@@ -68,7 +67,7 @@ from .loop_stages import (
 from .sequential import contact_order
 from .velocity_level import (
     SUBSTEP_WHEN,
-    predict,
+    predict_positions,
     split_at_impact,
     step_without_contacts,
     swept_contacts,
@@ -440,11 +439,11 @@ def step(
         free = free_velocities(model, state, h, integrator)
     v_free = stack(*free)
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
-    move, predicted, sweep = predict(model, state, free, integrator, h)
+    move, predicted, sweep = predict_positions(model, state, free, integrator, h)
     # 3. collision detection over the swept step
     contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
     if contacts.count == 0:
-        return step_without_contacts(state, h, predicted, free, contacts, manifolds, CARRIED["constraints"])
+        return step_without_contacts("constraints", state, h, (predicted, free), contacts, manifolds)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
     settings = loop_settings(model, "constraints", options, dt)
@@ -465,6 +464,6 @@ def step(
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
     floats = tuple(np.array(v, dtype=float) for v in (*move, *free))  # as velocity_level._floats
     positions = split_at_impact(arrays, found, motion, tau, (floats[:3], floats[3:]), v_new, settings)
-    carried_on = dict(state.carried, manifolds=manifolds, constraint_ids=contacts.feature_id, constraint_values=lam)
+    carried_on = Carry("constraints", manifolds, contacts.feature_id, lam)
     new = State.assemble(state.time + h, positions, unstack(v_new, model.body_count), carried_on)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual), impulses=lam)

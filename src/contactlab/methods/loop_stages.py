@@ -1,13 +1,13 @@
 """The stages every compiled step shares, and the loop's data (loops L1–L3).
 
-The arrays ``run`` (:mod:`contactlab.methods.velocity_loop`) steps — the model's (LoopModel),
+The arrays ``run_steps`` (:mod:`contactlab.methods.velocity_loop`) steps — the model's (LoopModel),
 the settings as plain numbers (LoopSettings), the state's six arrays (Motion) and the recording
 (Samples) — and the stages each method's compiled step (:mod:`contactlab.methods.loop_steps`)
 calls: free motion, how far each collider sweeps, detection with kept manifolds, the contact
 rows, the sequential-impulse sweeps, and after a step the state stored, checked and recorded.
 They live apart from the steps so that each step reads as its loop on the slide.
 
-Numba caches each of these next to this file, but ``run`` compiles them in and is refreshed
+Numba caches each of these next to this file, but ``run_steps`` compiles them in and is refreshed
 only when ``velocity_loop.py`` changes: after editing a stage here, delete the caches
 (README, "For developers").
 
@@ -270,30 +270,17 @@ def whole_sweeps(options: CollisionOptions) -> int:
     return int(options.iterations)
 
 
-CARRIED = {
-    "impulse": ("impulse_ids", "impulse_values"),
-    "constraints": ("constraint_ids", "constraint_values"),
-    "projection": ("projection_ids", "projection_values"),
-    "penalty": ("anchor_ids", "anchor_offsets"),
-}
-"""Each method's two keys in ``State.carried``: last step's contact ids (K,) and the values
-carried by id (K, 3): impulses [N s], projection λ [kg m], penalty's anchor offsets [m]."""
-
-
 def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Motion, np.ndarray, tuple]:
     """What the compiled stages take in a method's step from Python (``velocity_level.step``,
     ``projection.step``, ``penalty.step``): (LoopModel without its drive, which the methods'
     steps apply in Python (``integrators.free_velocities``), the state's arrays as a Motion, the
-    bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) as carried
-    under ``method``'s keys, ``CARRIED``)."""
+    bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) where the
+    state carries ``method``'s (``Carry.of``), else both empty)."""
     # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
     # stage typed anew mid-run compiles again (a State's arrays may be views, or the Model's own)
     motion = Motion(*(np.array(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
-    ids, values = (state.carried.get(key) for key in CARRIED[method])
-    carried = (
-        np.zeros(0, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64),
-        np.zeros((0, 3)) if values is None else np.array(values, dtype=float).reshape(-1, 3),
-    )
+    ids, values = state.carried.of(method)
+    carried = (np.array(ids, dtype=np.int64), np.array(values, dtype=float).reshape(-1, 3))
     return without_drive(loop_model(model)), motion, rotations.matrices(motion.body_orientation), carried
 
 
@@ -319,9 +306,9 @@ gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
 # The stages a step runs that take the LoopModel or the Motion whole are inlined into their
 # callers (or unpack them there and call a function of plain arrays): a call that passes a named
 # tuple of 17 arrays takes and releases a reference to each, which on a one-ball scene cost more
-# than the stage's arithmetic. (``poses``, ``store``, ``healthy`` and ``record``, which ``run``
-# calls between steps, are not: linked into ``run``, they measured as fast, and inlining them
-# cost about 5 s of ``run``'s compile.)
+# than the stage's arithmetic. (``poses``, ``store``, ``healthy`` and ``record``, which ``run_steps``
+# calls between steps, are not: linked into ``run_steps``, they measured as fast, and inlining them
+# cost about 5 s of ``run_steps``'s compile.)
 
 
 @njit(cache=True, inline="always")

@@ -1,4 +1,4 @@
-"""Each method's compiled step, the one ``run`` (:mod:`contactlab.methods.velocity_loop`) calls:
+"""Each method's compiled step, the one ``run_steps`` (:mod:`contactlab.methods.velocity_loop`) calls:
 impulse and constraints (``velocity_step``, loop L3), projection (``projection_step``, loop L2)
 and penalty (``penalty_step``, loop L1).
 
@@ -6,14 +6,14 @@ Each compiles stages 1–3 (free motion, how far each collider sweeps, detection
 manifolds: :mod:`contactlab.methods.loop_stages`) and calls for the rest the compiled stages its
 method's step from Python calls too, each written once: ``velocity_level.respond`` (stages 4–5
 of L3), ``projection.project`` (stage 4 of L2, with the further passes here), and
-``penalty.springs_at``, ``integrate`` and ``finish`` (stages 2, 4 and 4b–5 of L1). What stays
+``penalty.springs_at``, ``integrate_velocities`` and ``finish`` (stages 2, 4 and 4b–5 of L1). What stays
 twice is stages 1–3, which the step from Python runs for every scene (cloth springs, meshes,
 every integrator) and this loop for the rigid ones (a driven scene's loads and paths are
 ``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py``
 holds the two paths equal, bit for bit. The three steps share one module because they share one
 signature, ``(model, settings, spec, motion, start, time, carried)``, and one result,
 ``(positions, velocities, carried, contacts, sweeps, change, clear, elastic energy, implicit,
-linear iterations)`` (a method without a value gives 0 or False): ``run`` calls whichever its
+linear iterations)`` (a method without a value gives 0 or False): ``run_steps`` calls whichever its
 run has without a branch. What each is compiled for is one value, the run's Specialization.
 """
 
@@ -39,7 +39,7 @@ from .loop_stages import (
     swept_reach,
     without_drive,
 )
-from .penalty import finish, integrate, springs_at
+from .penalty import finish, integrate_velocities, springs_at
 from .penalty_springs import ImplicitSprings
 from .projection import advance, displaced_motion, project
 from .velocity_level import respond
@@ -61,7 +61,7 @@ def velocity_step(
     ``impulse`` or ``constraints``).
 
     ``start`` = the poses at the step's start: the bodies' rotations (B, 3, 3), the colliders'
-    centres (N, 3) and rotations (N, 3, 3) (``poses``; ``run`` computes them once for the sample
+    centres (N, 3) and rotations (N, 3, 3) (``poses``; ``run_steps`` computes them once for the sample
     before and this step); ``time`` = the step's start [s] (a driven scene's loads and paths);
     ``carried`` = (the kept manifolds' eight fields, last step's contact ids (K,), their impulses
     (K, 3)). Returns the steps' one result (module docstring): the sweeps made and their last
@@ -240,7 +240,7 @@ def penalty_step(
     free = free_motion(model, motion, rotation, h, time)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
-    v_new, forces, elongation, active_passes, residual, linear_iterations = integrate(
+    v_new, forces, elongation, active_passes, residual, linear_iterations = integrate_velocities(
         plain, penalty, contacts, rows, rotation, (springs, forces, elongation, implicit), v_free, h
     )
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on

@@ -21,8 +21,8 @@ Granularity (P2) and the choice of normal (P4/P5) are options of collision detec
 
 The anchor of a contact is stored as its elongation s = point − anchor, a world vector in the
 tangent plane that moves with side B; each step adds the tangential relative displacement of
-the point, h v_t, so s measures how far the point slid since it stuck (``anchor_offsets`` in
-``State.carried``, keyed by ``anchor_ids``).
+the point, h v_t, so s measures how far the point slid since it stuck (``State.carried``, a
+Carry of method "penalty": its ``values`` by its ``ids``, the persistent contact ids).
 
 This module holds the method — its Options, ``step``, the guidance for k — and the stages'
 Python forms; the compiled stages are in :mod:`contactlab.methods.penalty_springs` (stiffness,
@@ -45,12 +45,11 @@ from ..contacts import ContactArrays, Contacts, jacobian, values_by_id, values_c
 from ..dynamics.generalized import implicit_base, stack, stacked, unstacked
 from ..dynamics.integrators import free_velocities, moved
 from ..errors import InputError
-from ..state import State
+from ..state import Carry, State
 from ..validation import check_choices, check_counts, number, time_step
 from .base import CollisionOptions, StepInfo
 from .jacobian_rows import ContactRows, row_products
 from .loop_stages import (
-    CARRIED,
     LoopModel,
     LoopSettings,
     Motion,
@@ -79,8 +78,8 @@ from .penalty_springs import (
     step_amplification,
 )
 from .penalty_springs import ContactSprings as ContactSprings  # re-exported: tests and callers build them here
+from .penalty_springs import contact_spring_forces as contact_spring_forces  # re-exported: named here since SPEC P1
 from .penalty_springs import elastic_energy as elastic_energy  # re-exported: named here since SPEC P3
-from .penalty_springs import spring_forces as spring_forces  # re-exported: named here since SPEC P1
 from .sequential import contact_order
 
 if TYPE_CHECKING:
@@ -325,7 +324,7 @@ def assembled_springs(
     contacts: Contacts,
     J: sp.spmatrix,
     inverse_mass: sp.spmatrix,
-    carried: dict,
+    carried: Carry,
     options: Options,
     stiffness: np.ndarray | None = None,
 ) -> ContactSprings:
@@ -335,7 +334,7 @@ def assembled_springs(
     C = contacts.count
     inverse_effective = np.asarray((J @ inverse_mass).multiply(J).sum(axis=1)).ravel().reshape(C, 3)
     k = np.full(C, float(options.stiffness)) if stiffness is None else np.asarray(stiffness, dtype=float)
-    offsets, _ = values_by_id(carried.get("anchor_ids"), carried.get("anchor_offsets"), contacts.feature_id, 3)
+    offsets, _ = values_by_id(*carried.of("penalty"), contacts.feature_id, 3)
     return springs_of(spring_settings(options, "symplectic_euler"), k, inverse_effective, contacts.arrays(), offsets)
 
 
@@ -355,7 +354,7 @@ def step(
 ) -> tuple[State, StepInfo]:
     """One step of loop L1 with penalty forces; returns (new State, StepInfo). Detection and the
     free velocities run here, for every scene (cloth, meshes, driven bodies, every integrator);
-    the springs (``springs_at``), their integration (``integrate``, or SciPy's on an assembled
+    the springs (``springs_at``), their integration (``integrate_velocities``, or SciPy's on an assembled
     system, ``implicit_velocities``) and the guard and anchors (``finish``) are the compiled
     stages the compiled loop's step (``loop_steps.penalty_step``) runs."""
     h = dt
@@ -379,15 +378,14 @@ def step(
         integrated = implicit_velocities(springs, J, base, v_free, contacts.depth, h, options)
     else:
         at_start = (springs, forces, elongation, implicit)
-        integrated = integrate(arrays, penalty, found, rows, rotation, at_start, v_free, h)
+        integrated = integrate_velocities(arrays, penalty, found, rows, rotation, at_start, v_free, h)
     v_new, forces, elongation, passes, residual, linear_iterations = integrated
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
     spec = for_response(specialization(model, "penalty", options, penalty))
     positions, velocities, offsets, energy = finish(
         arrays, guard, spec, found, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
-    ids_key, offsets_key = CARRIED["penalty"]
-    carried_on = {**state.carried, ids_key: contacts.feature_id, offsets_key: offsets}
+    carried_on = Carry("penalty", None, contacts.feature_id, offsets)
     new = State.assemble(state.time + dt, positions, velocities, carried_on)
     return new, StepInfo(
         contacts,
@@ -460,7 +458,7 @@ def springs_at(
     """Stage 2: the contacts' springs (``penalty_springs.springs_of``: the stiffness of the option
     or of the load each carries, ``normal_stiffness``; the anchors of last step's contacts,
     ``carried`` = (ids (K,), offsets (K, 3) [m])), their forces at the velocity ``v`` (N,) —
-    (C, 3) [N] and the anchors' elongations (C, 2) [m], ``spring_forces`` — and whether the step
+    (C, 3) [N] and the anchors' elongations (C, 2) [m], ``contact_spring_forces`` — and whether the step
     integrates them by backward Euler (``springs_implicit``, over h [s])."""
     B = motion.body_position.shape[0]
     side_a = entities_of(contacts.body_a, contacts.particles_a, B)
@@ -476,13 +474,13 @@ def springs_at(
     )
     offsets = values_carried(carried[0], carried[1], contacts.feature_id)[0]
     springs = springs_of(penalty.springs, stiffness, rows.k[:, :3], contacts, offsets)
-    forces, elongation = spring_forces(springs, contacts.depth, row_products(rows, v))
+    forces, elongation = contact_spring_forces(springs, contacts.depth, row_products(rows, v))
     dynamic = B + motion.particle_position.shape[0]
     return springs, forces, elongation, springs_implicit(penalty.springs, springs, side_a, side_b, dynamic, h)
 
 
 @njit(cache=True)
-def integrate(
+def integrate_velocities(
     model: LoopModel,
     penalty: PenaltyLoop,
     contacts: ContactArrays,
@@ -519,9 +517,10 @@ def finish(
     spring_state: tuple,
 ) -> tuple:
     """Stages 4b–5 of the run ``spec`` (``for_response``: its PenaltyLoop ``penalty``, and the
-    guard's ``slabs`` and ``parallel``): ``velocities`` = (v at the step's start, v⁺ of ``integrate``) (N,) each;
-    ``spring_state`` = (ContactSprings, elongations (C, 2) [m], implicit). The velocity that moves
-    the step — v⁺, or v under explicit Euler with explicit springs — held back where it would
+    guard's ``slabs`` and ``parallel``): ``velocities`` = (v at the step's start, v⁺ of
+    ``integrate_velocities``) (N,) each; ``spring_state`` = (ContactSprings, elongations (C, 2)
+    [m], implicit). The velocity that moves the step — v⁺, or v under explicit Euler with explicit
+    springs — held back where it would
     carry a contact past half its pass-through depth (``hold_back``), the positions moved by it
     over ``guard.dt``, and the anchors of pressed contacts moved on (``anchors_after``). Returns
     (positions, velocities ((B, 3), (B, 3), (P, 3)), anchor offsets (C, 3) [m], the springs'

@@ -1,7 +1,7 @@
 """The compiled stages of penalty contact springs (SPEC P1, P3, F3, M1; loop L1, stages 2–5).
 
 How stiff each contact's spring is (the load it carries over the allowed penetration), its
-damping and its anchor (``springs_of``), the forces (``spring_forces``, P1 and F3) and the
+damping and its anchor (``springs_of``), the forces (``contact_spring_forces``, P1 and F3) and the
 energy they store (P3), whether an explicit step would amplify them (``step_amplification``,
 ``springs_implicit``), the velocities they give (``explicit_velocities``), the guard that holds
 a contact short of passing through (``slowest_approach``) and the anchors carried on
@@ -348,7 +348,9 @@ def springs_implicit(
 
 
 @njit(cache=True)
-def spring_forces(springs: ContactSprings, depth: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def contact_spring_forces(
+    springs: ContactSprings, depth: np.ndarray, velocity: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Contact forces at penetration ``depth`` (C,) [m] and contact-point relative velocities
     ``velocity`` (C, 3) = (v_n, v_t1, v_t2) [m/s] (that is, J v reshaped).
 
@@ -389,8 +391,8 @@ def elastic_energy(springs: ContactSprings, depth: np.ndarray, elongation: np.nd
 
 @njit(cache=True)
 def explicit_velocities(rows: ContactRows, forces: np.ndarray, v_free: np.ndarray, h: float) -> np.ndarray:
-    """v* + h M⁻¹ Jᵀ F (N,): the contact forces (C, 3) [N] of ``spring_forces`` over h [s] added to
-    the free velocities, contact by contact through the rows (``jacobian_rows.apply_impulses``)."""
+    """v* + h M⁻¹ Jᵀ F (N,): the contact forces (C, 3) [N] of ``contact_spring_forces`` over h [s]
+    added to the free velocities, contact by contact through the rows (``jacobian_rows.apply_impulses``)."""
     v_new = v_free.copy()
     apply_impulses(rows, h * forces, v_new)
     return v_new

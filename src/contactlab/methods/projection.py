@@ -42,7 +42,7 @@ from ..compiling import njit
 from ..contacts import ContactArrays, values_by_id, values_carried
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
-from ..state import Positions, State
+from ..state import Carry, Positions, State
 from ..validation import check_counts, number
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
@@ -121,7 +121,7 @@ def step(
     displacement, lam, total_sweeps, change = project(
         arrays, settings, spec, found, motion, rotation, (zero, predicted_displacement), warm
     )
-    carried_on = dict(state.carried, manifolds=manifolds, projection_ids=contacts.feature_id, projection_values=lam)
+    carried_on = Carry("projection", manifolds, contacts.feature_id, lam)
     pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
     for _ in range(options.passes - 1):
         if contacts.count == 0:

@@ -2,7 +2,7 @@
 velocities are impulses): impulses (methods.impulse) and hard constraints on velocities swept
 matrix-free (methods.constraints, C5b).
 
-Stages 1–3 from Python for every scene (``predict``: positions moved with the free velocities,
+Stages 1–3 from Python for every scene (``predict_positions``: positions moved with the free velocities,
 how far everything sweeps; ``swept_contacts``: contacts over the swept step; ``step_without_contacts``);
 stages 4–5 compiled, in ``respond`` — the contacts' rows, the targets of their normal rows
 (``targets``: impulses' collision waves, ``resolve_collisions``, then resting targets;
@@ -32,11 +32,10 @@ from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import advance_positions, free_velocities, moved
-from ..state import State
+from ..state import Carry, State
 from .base import StepInfo
 from .jacobian_rows import ContactRows, contact_velocity, row_products
 from .loop_stages import (
-    CARRIED,
     LoopModel,
     LoopSettings,
     Motion,
@@ -60,7 +59,7 @@ if TYPE_CHECKING:
     from .impulse import Options as ImpulseOptions
 
 
-def predict(
+def predict_positions(
     model: Model, state: State, free: tuple[np.ndarray, np.ndarray, np.ndarray], integrator: str, h: float
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
     """Stage 2: positions integrated with the free velocities ``free`` (body (B, 3), angular (B, 3),
@@ -85,24 +84,22 @@ def swept_contacts(
     displacements, from ``particle_motion`` (P, 3) [m], None: the sweep), box, hull and plane
     pairs that barely moved keeping last step's manifolds. Returns (Contacts, the manifolds to
     carry)."""
-    return options.collide(
-        model, state, sweep, state.carried.get("manifolds"), options.manifold_tolerance, particle_motion
-    )
+    return options.collide(model, state, sweep, state.carried.manifolds, options.manifold_tolerance, particle_motion)
 
 
 def step_without_contacts(
+    method: str,
     state: State,
     h: float,
-    predicted: tuple[np.ndarray, np.ndarray, np.ndarray],
-    free: tuple[np.ndarray, np.ndarray, np.ndarray],
+    positions: tuple[tuple, tuple],
     contacts: Contacts,
     manifolds: Manifolds | None,
-    warm_keys: tuple[str, str],
 ) -> tuple[State, StepInfo]:
-    """The step when nothing touches: the prediction stands; the warm-start values carried under
-    under ``warm_keys`` (``loop_stages.CARRIED``) are dropped (no contact persists). Returns (State, StepInfo)."""
-    carried = {key: value for key, value in state.carried.items() if key not in warm_keys}
-    carried["manifolds"] = manifolds
+    """The step of ``method`` when nothing touches: ``positions`` = (the predicted positions, the
+    free velocities) stand; no warm start is carried on (no contact persists), the ``manifolds``
+    are. Returns (State, StepInfo)."""
+    predicted, free = positions
+    carried = Carry(method, manifolds, np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
 
@@ -587,12 +584,11 @@ def step(
     # 1. internal forces → free velocities v*
     free = _floats(free_velocities(model, state, h, integrator))
     # 2. integrate positions (a prediction): how far each body and particle sweeps this step
-    move, predicted, sweep = predict(model, state, free, integrator, h)
+    move, predicted, sweep = predict_positions(model, state, free, integrator, h)
     # 3. collision detection over the swept step
     contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
-    keys = CARRIED[method]
     if contacts.count == 0:
-        return step_without_contacts(state, h, predicted, free, contacts, manifolds, keys)
+        return step_without_contacts(method, state, h, (predicted, free), contacts, manifolds)
     # 4–5. the contacts' response, and the positions after it
     arrays, motion, rotation, carried = loop_inputs(model, state, method)
     settings = loop_settings(model, method, options, dt)
@@ -600,8 +596,7 @@ def step(
     positions, velocities, impulses, sweeps, change = respond(
         arrays, settings, spec, contacts.arrays(), motion, rotation, (_floats(move), free), carried
     )
-    kept = dict(state.carried, manifolds=manifolds)
-    kept[keys[0]], kept[keys[1]] = contacts.feature_id, impulses
+    kept = Carry(method, manifolds, contacts.feature_id, impulses)
     new = State.assemble(state.time + h, positions, velocities, kept)
     return new, StepInfo(contacts, solver_iterations=int(sweeps), solver_residual=float(change), impulses=impulses)
 

@@ -11,21 +11,21 @@ compiled code, with no Python between steps. The stages are the ones
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 A method's step is compiled only for the runs of that method (its ``Specialization``).
 
-**Every run compiled, short ones included.** ``run`` calls its method's step by address
+**Every run compiled, short ones included.** ``run_steps`` calls its method's step by address
 (:func:`contactlab.compiling.call_entry`): the step's machine code, compiled once for the run's
-types (``Stepper.entry_point``), is not compiled again inside ``run``, whose own machine code is
+types (``Stepper.entry_point``), is not compiled again inside ``run_steps``, whose own machine code is
 the loop, the state stored, checked and recorded — 2–3 s to compile where linking the step in
 cost 10–14 s. So every run the loop serves runs compiled from its first step, and its next run
 in a fresh process loads it from the cache. The price is the call's boundary: each step passes
 its arrays across a call the optimizer cannot see into, their references counted at each
 crossing, about 0.6 µs a step (a quarter of a one-ball step, nothing on a pile).
 
-This module holds ``run`` and the Python side (the model and settings in the loop's form, the Steppers,
+This module holds ``run_steps`` and the Python side (the model and settings in the loop's form, the Steppers,
 ``stepper_for``); the stages every step shares and the loop's data are in
 :mod:`contactlab.methods.loop_stages`, each method's compiled step in
 :mod:`contactlab.methods.loop_steps`.
 
-Penalty (``penalty_step``, loop L1) runs in the same loop behind ``run``'s ``penalty`` flag:
+Penalty (``penalty_step``, loop L1; the Specialization's ``penalty``) runs in the same loop:
 detection at the step's start with the gaps its motion could close, the contact springs (the
 stiffness of each contact from the load it carries, anchors carried by contact id), their
 forces, the free velocities, the springs integrated explicitly (h M⁻¹ Jᵀ F through the rows)
@@ -60,10 +60,9 @@ from .. import shapes
 from ..collision.manifolds import Manifolds
 from ..compiling import EntryPoint, call_entry, njit
 from ..model import derived
-from ..state import State
+from ..state import Carry, State
 from .base import CollisionOptions
 from .loop_stages import (
-    CARRIED,
     LoopModel,
     LoopSettings,
     Motion,
@@ -106,7 +105,7 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
 
 
 @njit(cache=True)
-def run(
+def run_steps(
     model: LoopModel,
     settings: LoopSettings,
     spec: Specialization,
@@ -166,29 +165,21 @@ class Stepper:
 
     ``advance(steps, first_index, last_index, record_every)`` makes that many steps from the
     state given at construction and returns the samples it recorded; ``state()`` is the State
-    reached, with the warm-start data carried under the same keys as the method's ``step``
-    (so a run may go on through either path)."""
+    reached, carrying what the method's ``step`` carries (so a run may go on through either path)."""
 
     def __init__(
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
     ) -> None:
-        self._start(model, state)
-        self.keys = CARRIED[method]
-        # projection.step carries its λ every step, none included; the velocity methods drop theirs then
-        self.carries_empty = method == "projection"
+        self._start(model, method, state)
         self.keep_manifolds = options.manifold_tolerance > 0.0
         self.settings = loop_settings(model, method, options, dt)
         self.spec = specialization(model, method, options)
-        self.carried = _carried(
-            state.carried.get("manifolds") or Manifolds.empty(),
-            state.carried.get(self.keys[0]),
-            state.carried.get(self.keys[1]),
-        )
-        self.other = {k: v for k, v in state.carried.items() if k != "manifolds" and k not in self.keys}
 
-    def _start(self, model, state):
-        """What every Stepper holds: the model, the state's time and arrays (copies), the tallies."""
-        self.model = model
+    def _start(self, model, method, state):
+        """What every Stepper holds: the model, the method, the state's time, arrays (copies) and
+        carried values, the tallies."""
+        self.model, self.method = model, method
+        self.carried = _carried(state.carried.manifolds or Manifolds.empty(), *state.carried.of(method))
         self.time = float(state.time)
         self.motion = Motion(
             *(
@@ -254,7 +245,7 @@ class Stepper:
         rows: Rows | None = None,
     ) -> tuple[int, bool, dict[str, np.ndarray]]:
         """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
-        state blew up — see ``run`` —, the samples recorded as a dict of the series). ``rows``: a
+        state blew up — see ``run_steps`` —, the samples recorded as a dict of the series). ``rows``: a
         function of a count of samples giving the arrays to record them into (the Recorder's
         ``reserve``: its buffer's rows, no copy made); None: arrays of their own."""
         end = first_index + steps - 1  # the last index of these steps; indices start at 1
@@ -263,7 +254,7 @@ class Stepper:
             count += 1  # the run's last step, sampled too
         samples = self._samples(count, rows)
         arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
-        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run(*arguments)
+        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run_steps(*arguments)
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
@@ -280,8 +271,8 @@ class Stepper:
 
     def entry_point(self) -> EntryPoint:
         """This run's step (``velocity_step``, ``projection_step`` or ``penalty_step``) compiled
-        for its arguments' types, which ``run`` calls by address (contactlab.compiling): built once
-        for each kind of run of a Model, the same machine code whether ``run`` runs compiled or
+        for its arguments' types, which ``run_steps`` calls by address (contactlab.compiling): built once
+        for each kind of run of a Model, the same machine code whether ``run_steps`` runs compiled or
         from Python."""
         known = _entry_points(self.model)
         if self.kind not in known:
@@ -296,7 +287,7 @@ class Stepper:
 
     @property
     def kind(self) -> tuple:
-        """What sets ``run``'s machine code for this run apart: its Specialization, but of its Plan
+        """What sets ``run_steps``'s machine code for this run apart: its Specialization, but of its Plan
         the families and flags only (not the hull store's arrays), and of penalty whether it is
         penalty's (not its PenaltyLoop's values)."""
         spec = self.spec
@@ -308,13 +299,10 @@ class Stepper:
         return self.spec.parallel is not None
 
     def state(self) -> State:
-        """The State reached (copies), with the carried data under the method's keys."""
+        """The State reached (copies), carrying the method's values and, where it keeps them, its manifolds."""
         made, ids, values = self.carried
-        carried = dict(self.other)
-        carried["manifolds"] = Manifolds(*made) if self.keep_manifolds else None
-        if len(ids) or self.carries_empty:
-            carried[self.keys[0]], carried[self.keys[1]] = ids, values
-        return self._state_carrying(carried)
+        carried = Carry(self.method, Manifolds(*made) if self.keep_manifolds else None, ids, values)
+        return State(self.time, *(array.copy() for array in self.motion), carried)
 
     def reached(self) -> State:
         """The State reached as the loop holds it, for a look (the health checks): its arrays
@@ -322,37 +310,27 @@ class Stepper:
         for one to keep."""
         return State(self.time, *self.motion)
 
-    def _state_carrying(self, carried: dict) -> State:
-        """The State reached: the time, copies of the Motion's six arrays, and ``carried``."""
-        return State(self.time, *(array.copy() for array in self.motion), carried)
-
 
 class PenaltyStepper(Stepper):
-    """A Stepper of a penalty run (``penalty_step``): its anchors carried under ``penalty.step``'s
-    keys (anchor_ids, anchor_offsets), no manifolds kept."""
+    """A Stepper of a penalty run (``penalty_step``): its anchors carried as ``penalty.step`` carries
+    them, no manifolds kept."""
 
     def __init__(self, model: Model, options: PenaltyOptions, integrator: str, dt: float, state: State) -> None:
-        self._start(model, state)
+        self._start(model, "penalty", state)
+        self.carried = _carried(Manifolds.empty(), *state.carried.of("penalty"))  # penalty keeps none
+        self.keep_manifolds = False
         self.settings, penalty = penalty_loop(model, options, integrator, dt)  # settings: hold_back's sweeps
         self.spec = specialization(model, "penalty", options, penalty)
-        self.keys = CARRIED["penalty"]
-        self.carried = _carried(Manifolds.empty(), state.carried.get(self.keys[0]), state.carried.get(self.keys[1]))
-        self.other = {k: v for k, v in state.carried.items() if k not in self.keys}
-
-    def state(self) -> State:
-        """The State reached (copies), its anchors under the keys ``penalty.step`` carries them by."""
-        _, ids, offsets = self.carried
-        return self._state_carrying({**self.other, self.keys[0]: ids, self.keys[1]: offsets})
 
 
-def _carried(kept: Manifolds, ids: np.ndarray | None, values: np.ndarray | None) -> tuple:
-    """What ``run`` carries from step to step, from a State's carried data: the ``kept``
-    manifolds' eight fields, last step's contact ids (K,) and their values (K, 3) (impulses,
-    projection λ or penalty anchor offsets), empty where the State has none."""
+def _carried(kept: Manifolds, ids: np.ndarray, values: np.ndarray) -> tuple:
+    """What ``run_steps`` carries from step to step, from a State's Carry: the ``kept`` manifolds'
+    eight fields, last step's contact ids (K,) and their values (K, 3) (impulses, projection λ or
+    penalty anchor offsets), as the compiled steps' types (int64, float64 (K, 3))."""
     return (
         (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature),
-        np.zeros(0, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
-        np.zeros((0, 3)) if values is None else np.asarray(values, dtype=float).reshape(-1, 3),
+        np.asarray(ids, dtype=np.int64),
+        np.asarray(values, dtype=float).reshape(-1, 3),
     )
 
 

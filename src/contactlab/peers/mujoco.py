@@ -97,13 +97,13 @@ class World:
         zeta = {pair: damping_for(value[1], dt) for pair, value in targets.items()}
         own_mu = np.asarray(model.material_friction, dtype=float)
         own_zeta = np.array([damping_for(e, dt) for e in model.material_restitution])
-        friction, missed = translate.fit(mu, max, [*translate.uniform(mu, count, float), own_mu])
+        friction, missed = translate.closest_values(mu, max, [*translate.uniform(mu, count, float), own_mu])
         if missed:
             self.notes.append(
                 translate.missed_sentence("MuJoCo", "friction", "the larger", missed, model.material_names)
             )
         self.time_constant = bouncing_time_constant(dt)
-        damping, missed = translate.fit(
+        damping, missed = translate.closest_values(
             zeta, lambda a, b: (a + b) / 2, [*translate.uniform(zeta, count, float), own_zeta]
         )
         if missed:

@@ -137,7 +137,7 @@ class World:
         friction = np.sqrt(np.asarray(model.material_friction, dtype=float))
         epsilon = {pair: value[1] for pair, value in targets.items()}
         own = np.asarray(model.material_restitution, dtype=float)
-        restitution, missed = translate.fit(
+        restitution, missed = translate.closest_values(
             epsilon,
             lambda a, b: a * b,
             [

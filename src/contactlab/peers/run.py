@@ -58,7 +58,7 @@ def run_world(
     """Build ``module.World(model, dt)``, step it ``duration`` / ``dt`` times and record it (see
     contactlab.peers.simulate, which checks the scene first)."""
     dt, duration, steps = run_length(dt, duration)
-    samples = budget.check(model, steps, record_every, None, trajectory)["samples"]
+    samples = budget.require(model, steps, record_every, None, trajectory)["samples"]
     recorder = (
         Recorder(model, record_every, samples=samples)
         if trajectory is None

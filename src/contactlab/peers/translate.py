@@ -9,7 +9,7 @@ their engine's terms:
 * :func:`gaps`: one sentence for each thing in the model a peer cannot express (cloth,
   particles, a kinematic path, a non-convex mesh for MuJoCo), so the caller reports it instead
   of running a different scene;
-* :func:`pair_targets` and :func:`fit`: contactlab's contact materials (μ = √(μ_a μ_b),
+* :func:`pair_targets` and :func:`closest_values`: contactlab's contact materials (μ = √(μ_a μ_b),
   ε = max(ε_a, ε_b) of the two colliders' materials) against an engine that keeps one value per
   shape and combines two by its own rule (pybullet multiplies, MuJoCo takes the larger friction
   and the mean of the damping): the per-material values that meet contactlab's pairs, and a
@@ -140,7 +140,7 @@ def _z_onto(normal: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def convex_mesh(vertices: np.ndarray, triangles: np.ndarray) -> bool:
+def is_convex_mesh(vertices: np.ndarray, triangles: np.ndarray) -> bool:
     """Whether the closed triangle mesh (vertices (V, 3) [m], triangles (T, 3)) is convex: no
     vertex in front of any triangle's plane by more than 1e-9 of its size."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
@@ -179,7 +179,7 @@ def gaps(model: Model, peer: str) -> list[str]:
     if peer == "mujoco":
         for o in np.flatnonzero(model.obstacle_shape == shapes.MESH):
             mesh = model.meshes[int(model.obstacle_params[o, 0])]
-            if mesh.two_sided or not convex_mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles)):
+            if mesh.two_sided or not is_convex_mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles)):
                 found.append(
                     f"obstacle {o} is a non-convex triangle mesh, and MuJoCo collides a mesh as its convex hull, "
                     "which would fill its hollows"
@@ -207,7 +207,7 @@ def pair_targets(model: Model) -> dict[tuple[int, int], tuple[float, float]]:
     return targets
 
 
-def fit(
+def closest_values(
     targets: dict[tuple[int, int], float],
     combine: Callable[[float, float], float],
     candidates: Sequence[np.ndarray],

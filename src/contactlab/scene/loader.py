@@ -26,7 +26,7 @@ from ..errors import InputError
 from ..model import Model
 from .build import build_model
 from .overrides import apply_overrides
-from .schema import show, validate
+from .schema import show, validate_scene
 from .toml import parse_toml
 
 if TYPE_CHECKING:
@@ -219,7 +219,7 @@ def scene_from_raw(name: str, raw: dict, origin: str, overrides: str | Sequence[
     dict ``raw``, which the overrides change in place): how a study checks many settings of one
     scene without reading it again for each."""
     raw = apply_overrides(raw, overrides)
-    scene = validate(raw)
+    scene = validate_scene(raw)
     options = _method_options(scene)
     simulation = scene["simulation"]
     base = _builtin_dir() if origin.startswith("builtin:") else Path(origin).parent

@@ -541,7 +541,7 @@ def validate_table(
     return result
 
 
-def validate(raw: object) -> dict[str, Any]:
+def validate_scene(raw: object) -> dict[str, Any]:
     """The whole scene: a normalized dict with the keys of ``TOP``; InputError on the first mistake."""
     if not isinstance(raw, dict):
         raise InputError("", f"expected a TOML document (a table), found {show(raw)}")
