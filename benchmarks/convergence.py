@@ -74,7 +74,7 @@ from contactlab.methods.sequential import (  # noqa: E402
     solve_sequential_impulses,
     split_into_slabs,
 )
-from contactlab.methods.velocity_level import predict, swept_contacts, warm_impulses  # noqa: E402
+from contactlab.methods.velocity_level import predict_positions, swept_contacts, warm_impulses  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS_DIR = os.path.join(HERE, "results")
@@ -94,7 +94,7 @@ def capture(model, state, options):
     h = DT
     free = free_velocities(model, state, h, "symplectic_euler")
     v_free = np.array(stack(*free), dtype=float)
-    _, _, sweep = predict(model, state, free, "symplectic_euler", h)
+    _, _, sweep = predict_positions(model, state, free, "symplectic_euler", h)
     contacts, _ = swept_contacts(model, state, options, sweep)
     arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
     settings = loop_settings(model, "constraints", options, h)

@@ -186,8 +186,8 @@ def test_the_largest_study_is_checked_a_setting_at_a_time_with_news_of_a_long_ch
         f'"simulation.dt" = [{values(10, 0.001, 0.004)}]\n'
     )
     validated = []
-    validate = loader.validate
-    monkeypatch.setattr(loader, "validate", lambda raw: validated.append(1) or validate(raw))
+    validate = loader.validate_scene
+    monkeypatch.setattr(loader, "validate_scene", lambda raw: validated.append(1) or validate(raw))
     monkeypatch.setattr(study_module, "CHECK_NEWS_SECONDS", 0.0)
     news = []
     started = time.monotonic()

@@ -61,6 +61,7 @@ from .contact_output import Frame, PairOutput
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear
 from .convex import HullArrays, write_reduced
 from .convex_sat import convex_convex_sat
+from .geometry import segment_closest_parameters
 
 MAX_CONTACTS = MAX_POINTS  # contacts written per pair, at most
 FACE_REL_TOL = 0.05  # relative tolerance favouring faces over edges, and the larger reference face
@@ -247,32 +248,6 @@ def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback,
 
 
 @njit(cache=True)
-def _segment_closest(p1, q1, p2, q2, out_1, out_2):
-    """Closest points of segments p1 q1 and p2 q2 (3,), into out_1, out_2 (Ericson, 5.1.9)."""
-    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
-    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
-    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
-    a = d10 * d10 + d11 * d11 + d12 * d12
-    e = d20 * d20 + d21 * d21 + d22 * d22
-    f = d20 * r0 + d21 * r1 + d22 * r2
-    c = d10 * r0 + d11 * r1 + d12 * r2
-    b = d10 * d20 + d11 * d21 + d12 * d22
-    denominator = a * e - b * b
-    s = 0.0
-    if denominator > 0.0:
-        s = min(max((b * f - c * e) / denominator, 0.0), 1.0)
-    t = (b * s + f) / e if e > 0.0 else 0.0
-    if t < 0.0:
-        t = 0.0
-        s = min(max(-c / a, 0.0), 1.0) if a > 0.0 else 0.0
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((b - c) / a, 0.0), 1.0) if a > 0.0 else 0.0
-    out_1[0], out_1[1], out_1[2] = p1[0] + s * d10, p1[1] + s * d11, p1[2] + s * d12
-    out_2[0], out_2[1], out_2[2] = p2[0] + t * d20, p2[1] + t * d21, p2[2] + t * d22
-
-
-@njit(cache=True)
 def convex_convex(
     frame_a: Frame, hull_a: HullArrays, frame_b: Frame, hull_b: HullArrays, margin: float, out: PairOutput, slot: int
 ) -> int:
@@ -346,28 +321,36 @@ def convex_convex(
     return 0
 
 
+@njit(cache=True, inline="always")
+def _segment(p, q):
+    """The segment p q (3,) as (centre (3,), unit axis (3,), half length) for
+    ``geometry.segment_closest_parameters`` (an edge of no length: any axis, half length 0)."""
+    axis = np.empty(3)
+    length = np.sqrt((q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 + (q[2] - p[2]) ** 2)
+    for i in range(3):
+        axis[i] = (q[i] - p[i]) / length if length > 0.0 else (1.0 if i == 0 else 0.0)
+    center = np.empty(3)
+    for i in range(3):
+        center[i] = 0.5 * (p[i] + q[i])
+    return center, axis, 0.5 * length
+
+
 @njit(cache=True)
 def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, edges, axis, overlap, frame_a, out, slot):
     """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B (all in
     A's frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it)."""
     ea, eb = edges
-    center_a, rotation_a = frame_a
+    origin, rotation_a = frame_a
     out_point, out_normal, out_depth, out_feature = out
-    pa = np.empty(3)
-    pb = np.empty(3)
-    _segment_closest(
-        vertices_a[edge_vertex_a[ea, 0]],
-        vertices_a[edge_vertex_a[ea, 1]],
-        vb[edge_vertex_b[eb, 0]],
-        vb[edge_vertex_b[eb, 1]],
-        pa,
-        pb,
-    )
-    m0 = 0.5 * (pa[0] + pb[0])
-    m1 = 0.5 * (pa[1] + pb[1])
-    m2 = 0.5 * (pa[2] + pb[2])
+    # the closest points of the two edges, as the capsules' segments find them (geometry)
+    center_a, axis_a, half_a = _segment(vertices_a[edge_vertex_a[ea, 0]], vertices_a[edge_vertex_a[ea, 1]])
+    center_b, axis_b, half_b = _segment(vb[edge_vertex_b[eb, 0]], vb[edge_vertex_b[eb, 1]])
+    s, t = segment_closest_parameters(center_a, axis_a, half_a, center_b, axis_b, half_b)
+    m0 = 0.5 * (center_a[0] + s * axis_a[0] + center_b[0] + t * axis_b[0])
+    m1 = 0.5 * (center_a[1] + s * axis_a[1] + center_b[1] + t * axis_b[1])
+    m2 = 0.5 * (center_a[2] + s * axis_a[2] + center_b[2] + t * axis_b[2])
     for c in range(3):
-        out_point[slot, c] = center_a[c] + rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2
+        out_point[slot, c] = origin[c] + rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2
         # the axis points from A towards B; the contact normal from B into A is its opposite
         out_normal[slot, c] = -(rotation_a[c, 0] * axis[0] + rotation_a[c, 1] * axis[1] + rotation_a[c, 2] * axis[2])
     out_depth[slot] = overlap

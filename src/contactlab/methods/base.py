@@ -7,7 +7,7 @@ by name; the method modules import them from here, below it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,11 +42,15 @@ class StepInfo:
     None: no contacts (the viewer's arrows)"""
 
 
-@dataclass
+@dataclass(frozen=True)
 class CollisionOptions:
     """The collision-detection settings every method's Options starts with, declared and
     checked here once (see docs/collision.md); a method that wants another default declares
-    the field again with it."""
+    the field again with it.
+
+    Every method's Options are frozen: checked and normalized once, when built (``__post_init__``
+    settles each value with ``_number`` or ``_settle``), and never changed after; another setting
+    is another Options (``dataclasses.replace``)."""
 
     contact_margin: float = 0.002
     """m: gaps this small become (speculative) contacts"""
@@ -60,9 +64,17 @@ class CollisionOptions:
     """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
 
     def __post_init__(self):
-        self.contact_margin = number(self.contact_margin, "contact_margin", 0.0)
+        self._number("contact_margin", 0.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"samples": 1, "cloth_samples": 0})
+
+    def _settle(self, name: str, value: Any) -> None:
+        """Field ``name`` set to its checked ``value`` while the Options are built (they are frozen)."""
+        object.__setattr__(self, name, value)
+
+    def _number(self, name: str, minimum: float | None = None, **bounds: Any) -> None:
+        """Field ``name`` checked by ``validation.number`` (``minimum`` and its other bounds) and settled as a float."""
+        self._settle(name, number(getattr(self, name), name, minimum, **bounds))
 
     def collide(
         self,
@@ -93,7 +105,7 @@ class CollisionOptions:
         )
 
 
-@dataclass
+@dataclass(frozen=True)
 class KeptManifoldOptions(CollisionOptions):
     """CollisionOptions and the tolerance under which a pair's contacts are reused from the last
     step (the methods that step positions once per step: impulse, constraints)."""
@@ -103,4 +115,4 @@ class KeptManifoldOptions(CollisionOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        self.manifold_tolerance = number(self.manifold_tolerance, "manifold_tolerance", 0.0)
+        self._number("manifold_tolerance", 0.0)

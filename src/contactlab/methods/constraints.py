@@ -51,9 +51,9 @@ from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_
 from ..dynamics.sparse_cholesky import CholeskyFactor, ancestors, cholesky_solve_within
 from ..errors import InputError
 from ..state import Carry, State
-from ..validation import check_choices, check_counts, number
+from ..validation import check_choices
 from . import velocity_level
-from .base import KeptManifoldOptions, StepInfo
+from .base import StepInfo
 from .jacobian_rows import row_products
 from .loop_stages import (
     build_rows,
@@ -66,7 +66,7 @@ from .loop_stages import (
 )
 from .sequential import contact_order
 from .velocity_level import (
-    SUBSTEP_WHEN,
+    VelocityOptions,
     predict_positions,
     split_at_impact,
     step_without_contacts,
@@ -86,9 +86,11 @@ FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
 FORMULATIONS = ("velocity", "acceleration")
 
 
-@dataclass
-class Options(KeptManifoldOptions):
-    """Settings of ``[method.constraints]``, after the collision settings of KeptManifoldOptions."""
+@dataclass(frozen=True)
+class Options(VelocityOptions):
+    """Settings of ``[method.constraints]``: the collision settings, what impulse and constraints
+    share (VelocityOptions: its small steps with the matrix-free solver on velocities only), and
+    the solver's."""
 
     solver: str = "matrix_free"
     """matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke"""
@@ -96,50 +98,16 @@ class Options(KeptManifoldOptions):
     """velocity (C5b) | acceleration (C5a)"""
     friction_model: str = "cone"
     """nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)"""
-    iterations: int = 100
-    """solver sweeps per step (at most; newton: Newton steps)"""
-    substeps: int = 16
-    """matrix_free on velocities (else unused): a step left unconverged is solved again in this many substeps,
-    contacts detected once (1 = never)"""
-    substep_after: int = 12
-    """matrix_free: with substeps > 1, the whole-step sweeps stop after this many (and iterations) and a step
-    still above the tolerance goes on in substeps"""
-    substep_sweeps: int = 1
-    """matrix_free: sweeps per substep (at most)"""
-    substep_when: str = "unconverged"
-    """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
     tolerance: float | None = None
     """matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
     jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1] (default
     1e-6)"""
     omega: float = 1.0
     """over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)"""
-    warm_start: float = 1.0
-    """fraction of last step's λ to start from (by contact id), and of a new contact's weight over
-    the step (``velocity_level.guess_new_impulses``); 0 = cold"""
-    restitution_threshold: float = -1.0
-    """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
-    stabilization: float = 0.2
-    """fraction of an existing penetration removed per step (0 = none)"""
-    slop: float = 0.0005
-    """m of penetration left alone by the stabilization"""
-    max_push_velocity: float = 1.0
-    """m/s: the stabilization never pushes apart faster"""
-    time_of_impact: bool = True
-    """split the step at the impact (see methods.impulse)"""
 
     def __post_init__(self):
         super().__post_init__()
-        check_choices(
-            self,
-            {
-                "solver": SOLVERS,
-                "formulation": FORMULATIONS,
-                "friction_model": ("cone", "pyramid"),
-                "substep_when": SUBSTEP_WHEN,
-            },
-        )
-        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
+        check_choices(self, {"solver": SOLVERS, "formulation": FORMULATIONS, "friction_model": ("cone", "pyramid")})
         if self.solver in CONE_ONLY_SOLVERS and self.friction_model != "cone":
             raise InputError(
                 "friction_model",
@@ -147,16 +115,9 @@ class Options(KeptManifoldOptions):
                 f'friction_model = "cone", or solver "nsgs" or "staggered" for the pyramid',
             )
         if self.tolerance is None:  # each solver's own measure, so each its own default
-            self.tolerance = 1e-7 if self.solver == "matrix_free" else 1e-6
-        self.tolerance = number(self.tolerance, "tolerance", 0.0, strict=True)
-        self.omega = number(self.omega, "omega", 0.0, strict=True, maximum=2.0)
-        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")
-        self.stabilization = number(self.stabilization, "stabilization", 0.0, maximum=1.0)
-        self.slop = number(self.slop, "slop", 0.0)
-        self.max_push_velocity = number(self.max_push_velocity, "max_push_velocity", 0.0)
-        if not isinstance(self.time_of_impact, bool):
-            raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
+            self._settle("tolerance", 1e-7 if self.solver == "matrix_free" else 1e-6)
+        self._number("tolerance", 0.0, strict=True)
+        self._number("omega", 0.0, strict=True, maximum=2.0)
 
 
 # ---- C6: the MLCP reduced to an LCP ----------------------------------------------------------

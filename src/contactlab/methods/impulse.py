@@ -41,61 +41,26 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ..errors import InputError
-from ..validation import check_choices, check_counts, number
 from . import velocity_level
-from .base import KeptManifoldOptions, StepInfo
-from .velocity_level import SUBSTEP_WHEN
+from .base import StepInfo
+from .velocity_level import VelocityOptions
 
 if TYPE_CHECKING:
     from ..model import Model
     from ..state import State
 
 
-@dataclass
-class Options(KeptManifoldOptions):
-    """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md), after
-    the collision settings of KeptManifoldOptions."""
+@dataclass(frozen=True)
+class Options(VelocityOptions):
+    """Settings of ``[method.impulse]`` (documented with units in docs/methods/impulse.md): the
+    collision settings, what impulse and constraints share (VelocityOptions), and the tolerance."""
 
-    iterations: int = 100
-    """sweeps of sequential impulses per step, and collision waves (at most)"""
-    substeps: int = 16
-    """a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
-    substep_after: int = 12
-    """with substeps > 1, the resting sweeps stop after this many (and iterations) and a step still above the
-    tolerance goes on in substeps"""
-    substep_sweeps: int = 1
-    """sweeps per substep (at most)"""
-    substep_when: str = "unconverged"
-    """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
     tolerance: float = 1e-7
     """m/s: stop once a sweep changes no contact's velocity more"""
-    restitution_threshold: float = -1.0
-    """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
-    stabilization: float = 0.2
-    """fraction of an existing penetration removed per step (0 = none)"""
-    slop: float = 0.0005
-    """m of penetration left alone by the stabilization"""
-    max_push_velocity: float = 1.0
-    """m/s: the stabilization never pushes apart faster"""
-    time_of_impact: bool = True
-    """split the step at the impact (see module docs)"""
-    warm_start: float = 1.0
-    """fraction of last step's impulses to start from, and of a new contact's weight over the step
-    (``velocity_level.guess_new_impulses``); 0 = cold"""
 
     def __post_init__(self):
         super().__post_init__()
-        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
-        check_choices(self, {"substep_when": SUBSTEP_WHEN})
-        self.tolerance = number(self.tolerance, "tolerance", 0.0)
-        self.restitution_threshold = number(self.restitution_threshold, "restitution_threshold")
-        self.stabilization = number(self.stabilization, "stabilization", 0.0, maximum=1.0)
-        self.slop = number(self.slop, "slop", 0.0)
-        self.max_push_velocity = number(self.max_push_velocity, "max_push_velocity", 0.0)
-        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        if not isinstance(self.time_of_impact, bool):
-            raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
+        self._number("tolerance", 0.0)
 
 
 def step(

@@ -94,7 +94,7 @@ LINEAR_SOLVERS = ("cg", "direct")
 IMPLICIT_SPRINGS = ("auto", "always", "never")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Options(CollisionOptions):
     """Settings of ``[method.penalty]`` (after the collision settings of CollisionOptions)."""
 
@@ -120,16 +120,16 @@ class Options(CollisionOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        self.stiffness = _stiffness(self.stiffness, "stiffness")
-        self.friction_stiffness = _stiffness(self.friction_stiffness, "friction_stiffness")
-        self.allowed_penetration = number(self.allowed_penetration, "allowed_penetration", 0.0, strict=True)
+        self._settle("stiffness", _stiffness(self.stiffness, "stiffness"))
+        self._settle("friction_stiffness", _stiffness(self.friction_stiffness, "friction_stiffness"))
+        self._number("allowed_penetration", 0.0, strict=True)
         if self.damping_ratio != "restitution":
             if isinstance(self.damping_ratio, str):
                 raise InputError(
                     "damping_ratio", f'expected a number ≥ 0 or "restitution", found {self.damping_ratio!r}'
                 )
-            self.damping_ratio = number(self.damping_ratio, "damping_ratio", 0.0)
-        self.linear_tolerance = number(self.linear_tolerance, "linear_tolerance", 0.0, strict=True)
+            self._number("damping_ratio", 0.0)
+        self._number("linear_tolerance", 0.0, strict=True)
         check_choices(self, {"linear_solver": LINEAR_SOLVERS, "implicit_springs": IMPLICIT_SPRINGS})
         check_counts(self, {"implicit_iterations": 1})
 

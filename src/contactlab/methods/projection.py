@@ -43,7 +43,7 @@ from ..contacts import ContactArrays, values_by_id, values_carried
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import free_velocities, moved
 from ..state import Carry, Positions, State
-from ..validation import check_counts, number
+from ..validation import check_counts
 from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import row_products
 from .loop_stages import (
@@ -66,7 +66,7 @@ if TYPE_CHECKING:
     from .jacobian_rows import ContactRows
 
 
-@dataclass
+@dataclass(frozen=True)
 class Options(KeptManifoldOptions):
     """Settings of ``[method.projection]`` (after the collision settings of KeptManifoldOptions:
     the first pass of a step detects at the step's start, keeping box and hull manifolds)."""
@@ -89,9 +89,9 @@ class Options(KeptManifoldOptions):
     def __post_init__(self):
         super().__post_init__()
         check_counts(self, {"iterations": 1, "passes": 1})
-        self.tolerance = number(self.tolerance, "tolerance", 0.0)
-        self.warm_start = number(self.warm_start, "warm_start", 0.0, maximum=1.0)
-        self.slop = number(self.slop, "slop", 0.0)
+        self._number("tolerance", 0.0)
+        self._number("warm_start", 0.0, maximum=1.0)
+        self._number("slop", 0.0)
 
 
 def step(

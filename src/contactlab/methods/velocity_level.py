@@ -23,6 +23,7 @@ and both move the positions with the corrected velocities, split at the moment o
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -32,8 +33,10 @@ from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import advance_positions, free_velocities, moved
+from ..errors import InputError
 from ..state import Carry, State
-from .base import StepInfo
+from ..validation import check_choices, check_counts
+from .base import KeptManifoldOptions, StepInfo
 from .jacobian_rows import ContactRows, contact_velocity, row_products
 from .loop_stages import (
     LoopModel,
@@ -54,7 +57,6 @@ if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
     from ..contacts import Contacts
     from ..model import Model
-    from .base import KeptManifoldOptions
     from .constraints import Options as ConstraintsOptions
     from .impulse import Options as ImpulseOptions
 
@@ -106,6 +108,54 @@ def step_without_contacts(
 SUBSTEP_WHEN = ("unconverged", "always")
 """When a velocity method's step is solved in substeps (Options ``substep_when``): only where the
 whole-step sweeps leave it above the tolerance, or every step."""
+
+
+@dataclass(frozen=True)
+class VelocityOptions(KeptManifoldOptions):
+    """What the Options of impulse and constraints share, after the collision settings: the
+    sweeps, the small steps, the warm start and the velocity targets of stages 4–5, which
+    ``respond`` runs for both (documented with units in docs/methods/impulse.md and
+    constraints.md). Constraints reads the small steps with its matrix-free solver on velocities
+    only."""
+
+    iterations: int = 100
+    """sweeps per step (at most): impulse's sequential impulses and collision waves, constraints'
+    solver sweeps (newton: Newton steps)"""
+    substeps: int = 16
+    """a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
+    substep_after: int = 12
+    """with substeps > 1, the whole-step sweeps stop after this many (and iterations) and a step
+    still above the tolerance goes on in substeps"""
+    substep_sweeps: int = 1
+    """sweeps per substep (at most)"""
+    substep_when: str = "unconverged"
+    """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
+    warm_start: float = 1.0
+    """fraction of last step's impulses to start from (by contact id), and of a new contact's weight
+    over the step (``guess_new_impulses``); 0 = cold"""
+    restitution_threshold: float = -1.0
+    """m/s: slower approaches bounce with ε = 0; < 0 means 2·|g|·dt"""
+    stabilization: float = 0.2
+    """fraction of an existing penetration removed per step (0 = none)"""
+    slop: float = 0.0005
+    """m of penetration left alone by the stabilization"""
+    max_push_velocity: float = 1.0
+    """m/s: the stabilization never pushes apart faster"""
+    time_of_impact: bool = True
+    """split the step at the impact (see methods.impulse)"""
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
+        check_choices(self, {"substep_when": SUBSTEP_WHEN})
+        self._number("warm_start", 0.0, maximum=1.0)
+        self._number("restitution_threshold")
+        self._number("stabilization", 0.0, maximum=1.0)
+        self._number("slop", 0.0)
+        self._number("max_push_velocity", 0.0)
+        if not isinstance(self.time_of_impact, bool):
+            raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
+
 
 LOAD_PATH_FROM = 2  # bodies and particles: fewer cannot rest on one another (guess_new_impulses)
 
