@@ -166,20 +166,20 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 
 PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
 
-Plan = namedtuple("Plan", ("families", "hull_store", "large", "keeping"))
-Plan.__doc__ = """What detection compiles for a scene: the narrow phase's pair families (``pair_families``)
-and hull store (None where no family needs hulls), ``large`` (True: at least GRID_FROM bodies and
-particles, the grid broad phase) and ``keeping`` (True: a pair family that keeps manifolds and a manifold
-tolerance > 0). A flag that is None leaves its branch uncompiled."""
+Plan = namedtuple("Plan", ("families", "hull_store", "large"))
+Plan.__doc__ = """What the broad and narrow phase compile for a scene: its pair families (``pair_families``),
+its hull store (None where no family needs hulls) and ``large`` (True: at least GRID_FROM bodies and
+particles, the grid broad phase; None: never). What detection and a sample's fresh pass both take."""
 
 Specialization = namedtuple(
-    "Specialization", ("plan", "constraints", "impulse", "projection", "slabs", "parallel", "penalty")
+    "Specialization", ("plan", "keeping", "constraints", "impulse", "projection", "slabs", "parallel", "penalty")
 )
-Specialization.__doc__ = """What a run's compiled code is specialized for, as one value: the detection Plan,
-the method (``constraints``, ``impulse``, ``projection``: True for the run's method, None for the others;
-``penalty``: penalty's PenaltyLoop, else None), ``slabs`` (True: PARALLEL_MIN_CONTACTS contacts are possible,
+Specialization.__doc__ = """What a run's compiled code is specialized for, as one value: the detection Plan;
+``keeping`` (True: a pair family that keeps manifolds and a manifold tolerance > 0); the method
+(``constraints``, ``impulse``, ``projection``: True for the run's method, None for the others; ``penalty``:
+penalty's PenaltyLoop, else None); ``slabs`` (True: PARALLEL_MIN_CONTACTS contacts are possible,
 MAX_PER_PAIR per pair) and ``parallel`` (True: several threads and PARALLEL_MIN_COLLIDERS bodies and
-particles). The numbers are the same whatever it holds.
+particles). A flag that is None leaves its branch uncompiled; the numbers are the same whatever it holds.
 
 Numba leaves a branch uncompiled only where it tests an *argument* typed None, never a field of a tuple:
 each flag reaches the one kernel that branches on it as an argument of its own (``candidate_pairs``
@@ -197,14 +197,10 @@ def specialization(model: Model, method: str, options: CollisionOptions, penalty
     families = pair_families(model)
     present = {name for name, flag in zip(FAMILIES, families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
-    plan = Plan(
-        families,
-        model.hull_store if needs_hulls(families) else None,
-        True if dynamic >= GRID_FROM else None,
-        True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
-    )
+    plan = Plan(families, model.hull_store if needs_hulls(families) else None, True if dynamic >= GRID_FROM else None)
     return Specialization(
         plan,
+        True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
         True if method == "constraints" else None,
         True if method == "impulse" else None,
         True if method == "projection" else None,
@@ -215,18 +211,19 @@ def specialization(model: Model, method: str, options: CollisionOptions, penalty
 
 
 def for_response(spec: Specialization) -> Specialization:
-    """``spec`` without its Plan: what the response's kernels (``respond``, ``project``, ``finish``)
-    take, so that they are compiled once for every scene of one method and one solve, whatever
-    its shapes."""
-    return spec._replace(plan=None)
+    """``spec`` without what only detection reads (its Plan and ``keeping``): what the response's
+    kernels (``respond``, ``project``, ``finish``) take, so that they are compiled once for every
+    scene of one method and one solve, whatever its shapes."""
+    return spec._replace(plan=None, keeping=None)
 
 
-# chosen by the Plan's type: the same tuple where it is None, else a new one without it (no copy)
+# chosen by the types of the Plan and keeping: the same tuple where both are None, else a new one
+# without them (no copy)
 @overload(for_response, inline="always")
 def _for_response_compiled(spec):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
-    if isinstance(spec.types[0], types.NoneType):
+    if isinstance(spec.types[0], types.NoneType) and isinstance(spec.types[1], types.NoneType):
         return lambda spec: spec
-    return lambda spec: Specialization(None, *spec[1:])
+    return lambda spec: Specialization(None, None, *spec[2:])
 
 
 def restitution_threshold(model: Model, h: float, options: CollisionOptions) -> float:
@@ -404,6 +401,7 @@ def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.
 def detect(
     model: LoopModel,
     plan: Plan,
+    keeping: bool | None,
     motion: Motion,
     at: tuple[np.ndarray, np.ndarray],
     reach: np.ndarray,
@@ -413,8 +411,9 @@ def detect(
     """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
     hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
     when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, ``at`` = their centres
-    (N, 3) and rotations (N, 3, 3) (``poses``). ``plan``: what detection is compiled for (its
-    ``large`` and ``keeping`` None: never a grid broad phase, never a kept manifold). Returns
+    (N, 3) and rotations (N, 3, 3) (``poses``). ``plan``: what the broad and narrow phase are
+    compiled for (its ``large`` None: never a grid broad phase); ``keeping`` None: never a kept
+    manifold (the Specialization's). Returns
     (ContactArrays, the manifolds to keep, whether the broad phase found any pair within reach)."""
     centers, rots = at
     B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
@@ -422,9 +421,7 @@ def detect(
     total = model.kinds.shape[0]
     if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
         return no_contacts(), _none_kept(kept), False
-    point, normal, depth, feature, owner, made = kept_or_fresh(
-        plan.keeping, model, plan, pairs, at, reach, kept, tolerance
-    )
+    point, normal, depth, feature, owner, made = kept_or_fresh(keeping, model, plan, pairs, at, reach, kept, tolerance)
     if depth.shape[0] == 0:
         return no_contacts(), made, True
     contacts = assemble_contacts(
@@ -458,7 +455,7 @@ def kept_or_fresh(
     — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
     [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
     generated afresh and nothing is kept. Compiled only (below): its body is chosen by the type of
-    ``keeping``, so a scene that never keeps a manifold (``Plan.keeping`` None) compiles no reuse."""
+    ``keeping``, so a scene that never keeps a manifold (``Specialization.keeping`` None) compiles no reuse."""
     raise NotImplementedError("kept_or_fresh runs compiled only (detect)")
 
 

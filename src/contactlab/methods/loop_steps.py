@@ -75,7 +75,7 @@ def velocity_step(
     reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
-        plain, spec.plan, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
+        plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -137,7 +137,7 @@ def passes(
             break
         at = displaced_motion(motion, displacement, settings.dt)
         rotation, centers, rots = poses(model, at)
-        contacts, _, _ = detect(model, spec.plan, at, (centers, rots), reach, kept, 0.0)
+        contacts, _, _ = detect(model, spec.plan, spec.keeping, at, (centers, rots), reach, kept, 0.0)
         displacement, _, more, change = project(
             model,
             settings,
@@ -180,7 +180,7 @@ def projection_step(
     reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
-        plain, spec.plan, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
+        plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
@@ -229,7 +229,7 @@ def penalty_step(
     reach = swept_reach(
         plain, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
-    contacts, manifolds, _ = detect(plain, spec.plan, motion, (centers, rots), reach, carried[0], 0.0)
+    contacts, manifolds, _ = detect(plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], 0.0)
     rows = build_rows(plain, contacts, motion, rotation)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)

@@ -288,10 +288,10 @@ class Stepper:
     @property
     def kind(self) -> tuple:
         """What sets ``run_steps``'s machine code for this run apart: its Specialization, but of its Plan
-        the families and flags only (not the hull store's arrays), and of penalty whether it is
+        the families and ``large`` only (not the hull store's arrays), and of penalty whether it is
         penalty's (not its PenaltyLoop's values)."""
         spec = self.spec
-        return spec.plan.families, spec.plan[2:], spec[1:-1], spec.penalty is not None
+        return spec.plan.families, spec.plan.large, spec[1:-1], spec.penalty is not None
 
     @property
     def parallel(self) -> bool:
