@@ -85,7 +85,7 @@ def test_the_site_builds_strict_and_the_api_page_holds_the_docstrings(site):
     assert 'href="#contactlab.threads.set_threads"' in (site / "api" / "simulation" / "index.html").read_text()
     # dataclass fields are documented by the attribute docstring under them
     methods = _text(site / "api" / "methods" / "index.html")
-    assert "iterations: int = 100 sweeps of sequential impulses per step" in methods
+    assert "iterations: int = 100 sweeps per step (at most)" in methods
 
 
 def test_the_gallery_shows_every_example_in_full(site):
