@@ -207,6 +207,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     from contactlab.collision import collide_keeping, swept_distances
     from contactlab.contacts import values_by_id
     from contactlab.methods import impulse
+    from contactlab.methods.loop_stages import loop_settings
     from contactlab.methods.velocity_level import resting_targets
     from contactlab.scene import load_scene
 
@@ -237,7 +238,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     order = sequential.solve_order(contacts, model.gravity)
     warm, found = values_by_id(*state.carried.of("impulse"), contacts.feature_id, 3)
     assert found.all()  # every contact warm-started
-    target = resting_targets(-contacts.depth, dt, options.stabilization, options.slop, options.max_push_velocity)
+    target = resting_targets(-contacts.depth, loop_settings(model, "impulse", options, dt))
     u = stack(v, w, p)
     lam, sweeps, change = sequential.solve_sequential_impulses(
         rows, contacts.friction, target, u, (100, 1e-7), warm, (order, np.array([0, contacts.count, contacts.count]))

@@ -35,14 +35,14 @@ class Carry(NamedTuple):
     (projection), anchor offsets [m] (penalty)"""
 
     @classmethod
-    def none(cls) -> Carry:
-        return cls("", None, np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    def none(cls, method: str = "", manifolds: Manifolds | None = None) -> Carry:
+        """No contact's values (``method``'s, beside these ``manifolds``)."""
+        return cls(method, manifolds, np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
 
     def of(self, method: str) -> tuple[np.ndarray, np.ndarray]:
         """(ids (K,), values (K, 3)) where they are ``method``'s, else both empty."""
-        if self.method != method:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-        return self.ids, self.values
+        carry = self if self.method == method else Carry.none()
+        return carry.ids, carry.values
 
     def copy(self) -> Carry:
         """The ids and values copied; the manifolds shared (a frozen Manifolds, never written)."""

@@ -221,15 +221,17 @@ def solve_sequential_impulses(
 
 
 @njit(cache=True, inline="always")
-def resting_target(gap: float, dt: float, stabilization: float, slop: float, max_push_velocity: float) -> float:
+def resting_target(gap: float, settings: tuple) -> float:
     """The least normal relative velocity [m/s] a contact of gap ``gap`` [m] (> 0 open, < 0
     overlapping) may end a step of dt [s] with (C5b): −gap/dt while open (it may close, not
     overlap: a speculative contact), else a fraction ``stabilization`` of the overlap beyond
-    ``slop`` [m] pushed out per step, never faster than ``max_push_velocity`` [m/s]
-    (``velocity_level.resting_targets``, and each substep of ``solve_in_substeps``)."""
+    ``slop`` [m] pushed out per step, never faster than ``max_push_velocity`` [m/s] — dt and these
+    three of the ``settings`` (a LoopSettings) (``velocity_level.resting_targets`` and
+    ``impact_targets``, and each substep of ``solve_in_substeps``)."""
+    dt = settings.dt
     if gap >= 0.0:
         return -gap / dt
-    return min(stabilization * max(-gap - slop, 0.0) / dt, max_push_velocity)
+    return min(settings.stabilization * max(-gap - settings.slop, 0.0) / dt, settings.max_push_velocity)
 
 
 @njit(cache=True)
@@ -329,7 +331,7 @@ def _gap_target(c, gap, start, fixed, target, hs, settings):
         return
     if start[c] < 0.0:
         g = start[c]
-    target[c] = resting_target(g, settings.dt, settings.stabilization, settings.slop, settings.max_push_velocity)
+    target[c] = resting_target(g, settings)
 
 
 # A parallel sweep needs enough contacts to pay for its fork and join (~1 µs each on idle

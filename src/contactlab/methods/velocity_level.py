@@ -101,7 +101,7 @@ def step_without_contacts(
     free velocities) stand; no warm start is carried on (no contact persists), the ``manifolds``
     are. Returns (State, StepInfo)."""
     predicted, free = positions
-    carried = Carry(method, manifolds, np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    carried = Carry.none(method, manifolds)
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
 
@@ -214,20 +214,18 @@ def guess_new_impulses(
 
 
 @njit(cache=True)
-def resting_targets(
-    gap_at_start: np.ndarray, dt: float, stabilization: float, slop: float, max_push_velocity: float
-) -> np.ndarray:
-    """The least normal relative velocity each contact may end the step with (C,) [m/s], from
-    each gap at the step's start d₀ (C,) [m] (> 0 open, < 0 overlapping).
+def resting_targets(gap_at_start: np.ndarray, settings: LoopSettings) -> np.ndarray:
+    """The least normal relative velocity each contact may end the step of ``settings.dt`` [s] with
+    (C,) [m/s], from each gap at the step's start d₀ (C,) [m] (> 0 open, < 0 overlapping).
 
     Velocity-level non-penetration (C5b): the gap at the end of the step, d₀ + h v_n, must not
     be negative, so v_n ≥ −d₀/h; an open contact (d₀ > 0) may still approach that fast — a
     speculative contact. An existing penetration (d₀ < 0) is removed gradually: a fraction
-    ``stabilization`` of its depth beyond ``slop`` [m] per step, never faster than
-    ``max_push_velocity`` [m/s] (a deep overlap must not turn into a launch)."""
+    ``settings.stabilization`` of its depth beyond ``settings.slop`` [m] per step, never faster
+    than ``settings.max_push_velocity`` [m/s] (a deep overlap must not turn into a launch)."""
     target = np.empty_like(gap_at_start)
     for c in range(gap_at_start.shape[0]):
-        target[c] = resting_target(gap_at_start[c], dt, stabilization, slop, max_push_velocity)
+        target[c] = resting_target(gap_at_start[c], settings)
     return target
 
 
@@ -307,9 +305,7 @@ def impact_targets(
     −``settings.threshold`` [m/s] and ε > 0 it must leave at −ε u + g_n (½ − τ) h. Every other
     contact gets ``resting_targets`` (the settings' stabilization, slop [m] and max push velocity
     [m/s]). Returns (target (C,) [m/s], τ (C,), −1 where there was no impact)."""
-    h = settings.dt
-    threshold, stabilization, slop = settings.threshold, settings.stabilization, settings.slop
-    max_push_velocity = settings.max_push_velocity
+    h, threshold = settings.dt, settings.threshold
     C = gap_at_start.shape[0]
     target = np.empty(C)
     tau = np.empty(C)
@@ -322,7 +318,7 @@ def impact_targets(
             target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes) * h
             tau[c] = closes
         else:
-            target[c] = resting_target(gap, h, stabilization, slop, max_push_velocity)
+            target[c] = resting_target(gap, settings)
             tau[c] = -1.0
     return target, tau
 
@@ -414,7 +410,6 @@ def targets(
     ``impulse``, ``constraints``: True for that method, None for the other, whose branch is then
     not compiled (one flag would not do: Numba prunes a branch on a flag typed None, never on one
     typed bool)."""
-    h = settings.dt
     gap_at_start = -contacts.depth
     gravity_normal = gravity_along_normals(
         contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, contacts.normal, model.gravity
@@ -423,7 +418,7 @@ def targets(
         tau = np.empty(gap_at_start.shape[0])
         materials = (contacts.friction, contacts.restitution)
         resolve_collisions(rows, materials, gravity_normal, gap_at_start, u, tau, order, settings)
-        return resting_targets(gap_at_start, h, settings.stabilization, settings.slop, settings.max_push_velocity), tau
+        return resting_targets(gap_at_start, settings), tau
     if constraints is None:  # neither: no velocity method (never so; see ``specialization``)
         raise ValueError("targets: neither impulse nor constraints")
     normal_velocity = row_products(rows, u)[:, 0]

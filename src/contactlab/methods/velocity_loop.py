@@ -170,16 +170,16 @@ class Stepper:
     def __init__(
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
     ) -> None:
-        self._start(model, method, state)
+        self._start(model, method, state, state.carried.manifolds or Manifolds.empty())
         self.keep_manifolds = options.manifold_tolerance > 0.0
         self.settings = loop_settings(model, method, options, dt)
         self.spec = specialization(model, method, options)
 
-    def _start(self, model, method, state):
+    def _start(self, model, method, state, kept):
         """What every Stepper holds: the model, the method, the state's time, arrays (copies) and
-        carried values, the tallies."""
+        carried values beside the ``kept`` manifolds, the tallies."""
         self.model, self.method = model, method
-        self.carried = _carried(state.carried.manifolds or Manifolds.empty(), *state.carried.of(method))
+        self.carried = _carried(kept, *state.carried.of(method))
         self.time = float(state.time)
         self.motion = Motion(
             *(
@@ -316,8 +316,7 @@ class PenaltyStepper(Stepper):
     them, no manifolds kept."""
 
     def __init__(self, model: Model, options: PenaltyOptions, integrator: str, dt: float, state: State) -> None:
-        self._start(model, "penalty", state)
-        self.carried = _carried(Manifolds.empty(), *state.carried.of("penalty"))  # penalty keeps none
+        self._start(model, "penalty", state, Manifolds.empty())  # penalty keeps no manifold
         self.keep_manifolds = False
         self.settings, penalty = penalty_loop(model, options, integrator, dt)  # settings: hold_back's sweeps
         self.spec = specialization(model, "penalty", options, penalty)
