@@ -622,10 +622,16 @@ def test_a_cluster_holds_a_few_jobs_per_thread_not_the_whole_study():
     had 100,000 tasks to cancel, which timed out after 60 s. Jobs are submitted as others finish."""
     from contactlab import cluster
 
-    held = []
+    held, kept = [], []
     with cluster.connect(workers=1) as client:
         jobs = ((str(index), f"/jobs/{index}") for index in range(300))
         for key, result in cluster.run_tasks(client, os.path.basename, jobs):
             assert result == key
-            held.append(len(client.cluster.scheduler.tasks))
+            tasks = client.cluster.scheduler.tasks.values()
+            held.append(sum(task.state not in ("memory", "released", "forgotten", "erred") for task in tasks))
+            kept.append(len(tasks))
+    # Jobs waiting or running on the scheduler: never more than the window. A finished job's
+    # release reaches the scheduler asynchronously (CI once saw 33 tasks, one of them done and
+    # its release in transit), so all it holds is bounded by the window twice, not by the 300.
     assert len(held) == 300 and max(held) <= cluster.MIN_WINDOW
+    assert max(kept) <= 2 * cluster.MIN_WINDOW
