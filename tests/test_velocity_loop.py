@@ -171,7 +171,7 @@ def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_ste
 
     short = simulate(model, "impulse", scene.dt, 10 * scene.dt)
     assert short.summary["compiled_loop"] and short.summary["stepping"] == "compiled loop"
-    assert stepper(compiled_loop=False) is None  # the method's own step
+    assert not stepper(compiled_loop=False).compiled  # the method's own step (StitchedStepper)
     entry = stepper().entry_point()
     assert entry.function is loop_steps.velocity_step and entry.numba_type.arguments in entry.function.overloads
     (types,) = [t for t in velocity_loop.run_steps.overloads if entry.numba_type in t]
@@ -183,7 +183,7 @@ def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_ste
 
     def advanced(through):  # the loop's body from Python: call_entry calls the step's dispatcher
         twin = stepper()
-        samples = twin.samples_for(13)  # steps 1–90 sampled every 7th and the last: 7, 14, …, 84, 90
+        samples = velocity_loop.empty_samples(model, 13)  # steps 1–90 sampled every 7th and the last: 7, 14, …, 84, 90
         made, diverged, _, time, written, *_ = through(*twin._run_arguments(90, 1, 90, 7, samples, 1e6))
         return (made, diverged, time, written), samples, twin.motion
 

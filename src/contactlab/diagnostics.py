@@ -6,7 +6,7 @@ series (``contactlab.record``) alike."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -109,6 +109,30 @@ def gravitational(
 def max_penetration(contacts: Contacts) -> float:
     """Deepest overlap among contacts [m], 0 when none overlap."""
     return float(max(0.0, contacts.depth.max())) if contacts.count else 0.0
+
+
+def sample_of(model: Model, state: State, contacts: Contacts, info: Any = None) -> dict[str, Any]:
+    """One sample of a run, the series of SERIES by name: ``state``'s time and arrays, its
+    energies [J] and the deepest overlap [m] among ``contacts`` (those of a collision pass at its
+    own positions), with what the step that made it says (``info``, a method's StepInfo: its
+    contact count, sweeps, last change and elastic energy; None, no step: the count of
+    ``contacts``, no sweeps, no elastic energy)."""
+    return dict(
+        time=state.time,
+        body_position=state.body_position,
+        body_orientation=state.body_orientation,
+        body_velocity=state.body_velocity,
+        body_angular_velocity=state.body_angular_velocity,
+        particle_position=state.particle_position,
+        particle_velocity=state.particle_velocity,
+        energy_kinetic=kinetic_energy(model, state),
+        energy_potential=potential_energy(model, state),
+        energy_elastic=info.energy_elastic if info else 0.0,
+        max_penetration=max_penetration(contacts),
+        contact_count=info.contacts.count if info else contacts.count,
+        solver_iterations=info.solver_iterations if info else 0,
+        solver_residual=info.solver_residual if info else 0.0,
+    )
 
 
 def linear_momentum(model: Model, state: State) -> np.ndarray:

@@ -2,8 +2,10 @@
 
 A run that goes wrong numerically seldom fails by itself: a ball thrown 184 km up by a spring
 too stiff for the step, boxes 24 m under the floor, a pile whose energy grew 7,300-fold all
-end with finite numbers. So every run checks, at every recorded sample and after every chunk
-of steps of the compiled loop:
+end with finite numbers. So every run checks finite and speed after every step (the stepper
+stops itself there), and the rest at every recorded sample, all of a chunk of steps (about
+0.1 s) at once after it (``simulate``; the first sample that fails ends the trajectory), and the
+state at the chunk's end:
 
 - **finite**: every position, orientation and velocity is a finite number;
 - **speed**: no body centre or particle moves faster than ``SPEED_FACTOR`` times the scene's
@@ -42,11 +44,11 @@ from .collision import collide, pass_through_depths
 from .collision.cloth_self import cloth_elements, crossings
 from .driving import too_fast
 from .model import derived
+from .state import State
 
 if TYPE_CHECKING:
     from .contacts import Contacts
     from .model import Model
-    from .state import State
 
 
 SPEED_FACTOR = 10.0  # × the scene's speed scale
@@ -98,11 +100,10 @@ class Health:
 
     # ---- the checks --------------------------------------------------------------------------
 
-    def check_state(self, state: State, full: bool = True) -> Violation | None:
-        """Finite and speed, on a State; stops the run (returns the Violation) or records it.
-        ``full`` False (between samples): the speeds alone, which a non-finite velocity makes NaN."""
+    def check_state(self, state: State) -> Violation | None:
+        """Finite and speed, on a State; stops the run (returns the Violation) or records it."""
         speed = state.max_speed()
-        if not (speed <= HARD_SPEED and (not full or state.is_finite())):
+        if not (speed <= HARD_SPEED and state.is_finite()):
             return self._found(
                 Violation("finite", state.time, f"the state stopped being finite (or passed {HARD_SPEED:g} m/s)"),
                 always=True,
@@ -217,13 +218,47 @@ class Health:
             )
         )
 
+    def check_sampled_depths(self, samples: Mapping[str, np.ndarray]) -> Violation | None:
+        """``check_depth`` at every sample of ``samples`` (the series by name, one row per sample),
+        in order: the first Violation that stops the run, or None. Only the rows that may fail
+        are looked at one by one (a collision pass where the deepest overlap is past the quick
+        bound, the crossings of a self-colliding cloth): whether a centre lies behind a plane
+        is decided for all rows at once."""
+        if not len(samples["time"]) or self._all_recorded():
+            return None
+        deep = samples["max_penetration"] > self._quick_bound()  # NaN: not deep (the finite check's)
+        rows = np.ones(len(deep), dtype=bool) if self.self_colliding else deep | self._rows_behind_planes(samples)
+        for row in np.flatnonzero(rows):
+            violation = self.check_depth(State.sampled(samples, int(row)), float(samples["max_penetration"][row]))
+            if violation is not None:
+                return violation
+        return None
+
+    def _all_recorded(self):
+        """Whether divergence is allowed and the depth and crossing checks have each recorded theirs."""
+        checks = {"depth", "crossing"} if self.self_colliding else {"depth"}
+        return self.allow_divergence and checks <= {v.check for v in self.violations}
+
+    def _quick_bound(self):
+        """[m] the deepest overlap no contact can pass the depth check within (``check_depth``)."""
+        return DEPTH_FRACTION * self.thinnest * max(1.0, 1.1 * self.initial_depth_ratio)
+
+    def _rows_behind_planes(self, samples):
+        """(n,) bool: the samples with a body or particle centre behind a static plane by more
+        than its half thickness (``_behind_planes``, every row at once)."""
+        if not len(self.plane_offsets) or not len(self.half_thickness):
+            return np.zeros(len(samples["time"]), dtype=bool)
+        centres = np.concatenate([samples["body_position"], samples["particle_position"]], axis=1)  # (n, B + P, 3)
+        behind = self.plane_offsets - centres @ self.plane_normals.T - self.half_thickness[:, None]
+        return (behind > 1e-9).any(axis=(1, 2))
+
     def check_depth(self, state: State, deepest: float | None) -> Violation | None:
         """``check_contacts`` on the contacts of ``state``'s own positions, where ``deepest`` [m],
         the deepest overlap there, may be known already (its recorded sample's; None: not known).
         No contact can pass the depth check while ``deepest`` stays within DEPTH_FRACTION of the
         thinnest dynamic collider's half thickness (a lower bound of every pass-through depth),
         so the collision pass is made only past that, or where ``deepest`` is not known."""
-        if deepest is not None and deepest <= DEPTH_FRACTION * self.thinnest * max(1.0, 1.1 * self.initial_depth_ratio):
+        if deepest is not None and deepest <= self._quick_bound():
             return self._behind_planes(state) or self._crossing(state)
         return self.check_contacts(state, collide(self.model, state))
 

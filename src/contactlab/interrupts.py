@@ -117,6 +117,15 @@ def check() -> None:
             raise Interrupted(signal.SIGTERM)
 
 
+def pending() -> bool:
+    """Whether :func:`check` would raise now, without raising: for a loop that ends its chunk of
+    work early and leaves the raising to its caller's next ``check``."""
+    if _pending is not None:
+        return True
+    asked = _stop_asked.get(threading.get_ident()) if _stop_asked else None
+    return asked is not None and bool(asked())
+
+
 _stop_asked: dict = {}  # thread ident -> a function saying whether the job in that thread should stop
 
 

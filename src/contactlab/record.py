@@ -26,7 +26,6 @@ import numpy as np
 
 from . import diagnostics, interrupts, store, surfaces
 from .collision import collide
-from .collision.cloth_self import is_self_contact
 from .diagnostics import SERIES
 from .errors import InputError
 from .model import derived
@@ -127,8 +126,6 @@ class Totals:
     """m"""
     max_iterations: int = 0
     max_residual: float = 0.0
-    max_self_contacts: int = 0
-    """the most cloth self-contacts (collision.cloth_self) in one sample the Python path recorded"""
 
     def add(self, chunk: Mapping[str, np.ndarray]) -> None:
         """Take in the samples of ``chunk`` (name -> array of n rows)."""
@@ -198,29 +195,11 @@ class Recorder:
         self.totals = Totals()
 
     def sample(self, state: State, info: Any = None) -> Contacts:
-        """Record ``state``; penetration is measured on its own positions (collision pass), whose
-        Contacts it returns."""
-        model = self.model
-        contacts = collide(model, state)
-        self.totals.max_self_contacts = max(self.totals.max_self_contacts, int(is_self_contact(contacts).sum()))
-        values = dict(
-            time=state.time,
-            body_position=state.body_position,
-            body_orientation=state.body_orientation,
-            body_velocity=state.body_velocity,
-            body_angular_velocity=state.body_angular_velocity,
-            particle_position=state.particle_position,
-            particle_velocity=state.particle_velocity,
-            energy_kinetic=diagnostics.kinetic_energy(model, state),
-            energy_potential=diagnostics.potential_energy(model, state),
-            energy_elastic=info.energy_elastic if info else 0.0,
-            max_penetration=diagnostics.max_penetration(contacts),
-            contact_count=info.contacts.count if info else contacts.count,
-            solver_iterations=info.solver_iterations if info else 0,
-            solver_residual=info.solver_residual if info else 0.0,
-        )
+        """Record ``state`` (``info``: the StepInfo of the step that made it, None: no step);
+        penetration is measured on its own positions (collision pass), whose Contacts it returns."""
+        contacts = collide(self.model, state)
         rows = self.reserve(1)
-        for name, value in values.items():
+        for name, value in diagnostics.sample_of(self.model, state, contacts, info).items():
             rows[name][0] = value
         self.commit(1)
         return contacts

@@ -47,9 +47,7 @@ def state_at(arrays: Mapping[str, Any], sample: int) -> State:
     """The :class:`contactlab.state.State` recorded at trajectory sample ``sample``."""
     from .state import State
 
-    row = read_trajectory(arrays, STATE_SERIES, [sample])
-    fields: dict[str, Any] = {name: np.ascontiguousarray(row[name][0], dtype=float) for name in STATE_SERIES[1:]}
-    return State(float(row["time"][0]), **fields)
+    return State.sampled(read_trajectory(arrays, STATE_SERIES, [sample]), 0)
 
 
 def contacts_at(model: Model, summary: Mapping[str, Any], state: State) -> ContactView:

@@ -218,7 +218,8 @@ def simulate(
     compiled_loop: for every method on the scenes the stepping loop serves, None (the default) or
     True runs them through the compiled loop, whatever the run's length, False through the
     method's own ``step`` (:func:`contactlab.methods.velocity_loop.stepper_for`) — the numbers are
-    the same bit for bit either way; allow_divergence: keep going when a health
+    the same bit for bit either way, and either is advanced, recorded and health-checked by the
+    same loop here, in chunks of about 0.1 s; allow_divergence: keep going when a health
     check fails (:mod:`contactlab.health`), recording it in the summary, instead of stopping;
     memory_limit [bytes]: the most the run may need by its estimate (:mod:`contactlab.budget`; None:
     half this machine's memory, ``math.inf`` none); trajectory: None (the default) keeps the samples
@@ -307,18 +308,15 @@ def _record_run(plan, recorder, state, chooser, health, clock):
     model, module, method, dt, steps, options, integrator, scene_name, progress, compiled_loop = plan
     compiling, notice, run_started = clock  # the run: its first sample, the steps, the other samples
     stepper = velocity_loop.stepper_for(model, method, options, integrator, dt, state, compiled_loop)
-    if stepper is not None and not stepper.parallel:
+    if not stepper.parallel:
         chooser.nothing_parallel()  # a small scene's loop: no thread trials, no chunks cut short by them
     with numba_event.install_listener("numba:compile", compiling), compile_notice(notice):
-        if stepper is None:
-            recorder.sample(state)  # its collide() compiles the collision kernels first
-        else:
-            stepper.sample(recorder.reserve)  # the loop's own recording, which the steps use too
-            recorder.commit(1)
+        stepper.sample(recorder.reserve)  # the stepper's own recording, which the steps use too
+        recorder.commit(1)
     setup_compile_seconds = _seconds(compiling)
     health.check_samples(recorder.latest(ENERGY_SERIES), 0)  # the energy to hold the run to
-    # and how deep it starts, from the loop's first sample where there is one (no collision pass)
-    health.start(state, float(recorder.latest(("max_penetration",))["max_penetration"][0]) if stepper else None)
+    # and how deep it starts, from the first sample (no collision pass of its own)
+    health.start(state, float(recorder.latest(("max_penetration",))["max_penetration"][0]))
     tally = Tally()
     stopped = interrupted = None
     with (
@@ -328,31 +326,12 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         chooser,
     ):
         try:
-            if stepper is None:
-                state = _step_in_python(
-                    module,
-                    model,
-                    state,
-                    dt,
-                    options,
-                    integrator,
-                    steps,
-                    recorder,
-                    chooser,
-                    compiling,
-                    tally,
-                    bar,
-                    health,
-                )
-            else:
-                state = _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
+            state = _step(stepper, steps, recorder, chooser, compiling, tally, bar, health)
         except _Stopped as stop:
             stopped, state = stop.violation, stop.state
         except interrupts.Interrupted as signal_stop:
-            interrupted = signal_stop
-            state = stepper.state() if stepper is not None else tally.state or state
-            if stepper is not None:
-                tally.take(stepper)
+            interrupted, state = signal_stop, stepper.state()
+            tally.take(stepper)
     wall = time.perf_counter() - run_started
     recorder.flush()
     totals = recorder.totals
@@ -373,8 +352,8 @@ def _record_run(plan, recorder, state, chooser, health, clock):
             setup_compile_seconds + max(0.0, first_step_seconds - ordinary_step) + tally.later_compile_seconds
         ),
         "recording_seconds": tally.recording_seconds,
-        "compiled_loop": stepper is not None,
-        "stepping": "python" if stepper is None else "compiled loop",
+        "compiled_loop": stepper.compiled,
+        "stepping": "compiled loop" if stepper.compiled else "python",
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         **run_measures(model, tally, totals, steps),
@@ -430,7 +409,7 @@ def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[st
         "bodies": model.body_count,
         "particles": model.particle_count,
         "max_contacts": tally.max_contacts,
-        "self_contacts": totals.max_self_contacts,
+        "self_contacts": tally.self_contacts,
         "max_penetration": totals.max_penetration,
         "final_penetration": totals.final_penetration,
         "energy": totals.energy(),
@@ -464,18 +443,19 @@ class Tally:
     """penalty: steps whose contact springs went implicit (explicit unstable)"""
     linear_iterations_made: int = 0
     """penalty: conjugate-gradient iterations of the implicit springs, every step"""
-    state: State | None = None
-    """the latest State the Python path made"""
+    self_contacts: int = 0
+    """the most cloth self-contacts (collision.cloth_self) in one sample"""
     window_rates: list[float] = field(default_factory=list)
     """steps/s of each WINDOW_SECONDS of stepping"""
     window: list[Any] = field(default_factory=lambda: [0, 0.0])
     """the window being filled: steps, seconds"""
 
     def take(self, stepper: Any) -> None:
-        """The counts the compiled loop kept (methods.velocity_loop.Stepper)."""
+        """The counts the run's stepper kept (methods.velocity_loop)."""
         self.max_contacts, self.sweeps_made = stepper.max_contacts, stepper.sweeps_made
         self.implicit_spring_steps = stepper.implicit_spring_steps
         self.linear_iterations_made = stepper.linear_iterations_made
+        self.self_contacts = stepper.self_contacts
 
     def timed(self, step_index: int, elapsed: float, compiled: float, steps: int = 1) -> bool:
         """Book the ``steps`` steps from ``step_index`` on that took ``elapsed`` [s], ``compiled``
@@ -507,44 +487,6 @@ class Tally:
         return {"median": float(median), "low": float(low), "high": float(high), "windows": len(rates)}
 
 
-def _step_in_python(
-    module, model, state, dt, options, integrator, steps, recorder, chooser, compiling, tally, bar, health
-):
-    """Step with the method's ``step``, one Python call a step (cloth, meshes, penalty, projection…),
-    checking the run's health after every step and at every sample."""
-    record_every = recorder.record_every
-    for step_index in range(1, steps + 1):
-        interrupts.check()
-        compiled_before = _seconds(compiling)
-        chooser.before_step()
-        started = time.perf_counter()
-        state, info = module.step(model, state, dt, options, integrator)
-        elapsed = time.perf_counter() - started
-        if tally.timed(step_index, elapsed, _seconds(compiling) - compiled_before):
-            chooser.after_step(elapsed)
-        tally.max_contacts = max(tally.max_contacts, info.contacts.count)
-        tally.sweeps_made += info.solver_iterations
-        tally.implicit_spring_steps += info.implicit_springs
-        tally.linear_iterations_made += info.linear_iterations
-        tally.state = state
-        sampled = step_index % record_every == 0 or step_index == steps
-        violation = health.check_state(state, full=sampled)
-        recorded = violation is None and sampled
-        if recorded:
-            started = time.perf_counter()
-            contacts = recorder.sample(state, info)
-            tally.recording_seconds += time.perf_counter() - started
-            violation = health.check_samples(recorder.latest(ENERGY_SERIES), 0) or health.check_contacts(
-                state, contacts
-            )
-        if violation is not None:
-            if not recorded:
-                recorder.sample(state, info)  # the state that went wrong ends the trajectory
-            raise _Stopped(violation, state)
-        _advance(bar, step_index, 1)
-    return state
-
-
 def _advance(bar, step_index, made):
     """Move the progress bar by ``made`` steps; after the first step, which compiled the kernels
     (or loaded them), its clock starts again, so its rate and time left are the stepping's."""
@@ -562,11 +504,12 @@ CHUNK_GROWTH = 16
 WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
-def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health):
-    """Step through the compiled loop (methods.velocity_loop), in chunks of steps that each take
-    about CHUNK_SECONDS; the first step alone, which compiles. Samples are recorded inside, into
-    the recorder's buffer (a chunk no longer than its samples fit there: memory stays flat); the
-    loop stops itself past the health's speed limit, and the rest is checked after each chunk."""
+def _step(stepper, steps, recorder, chooser, compiling, tally, bar, health):
+    """Step the run's ``stepper`` (methods.velocity_loop: the compiled loop, or the method's own
+    ``step`` from Python) in chunks of steps that each take about CHUNK_SECONDS; the first step
+    alone, which compiles. Samples are recorded inside, into the recorder's buffer (a chunk no
+    longer than its samples fit there: memory stays flat); the stepper stops itself past the
+    health's speed limit, and the rest is checked after each chunk."""
 
     # the loop stops where check_state would: past the scene's speed limit, and always past HARD_SPEED
     speed_limit = HARD_SPEED if health.allow_divergence else min(health.speed_limit, HARD_SPEED)
@@ -574,26 +517,33 @@ def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
     while step_index <= steps:
         interrupts.check()
         count = min(chunk, steps - step_index + 1, chooser.steps_at_this_count() or steps, recorder.steps_that_fit())
-        compiled_before = _seconds(compiling)
+        compiled_before, recorded_before = _seconds(compiling), stepper.recording_seconds
         chooser.before_step(count)
         started = time.perf_counter()
         made, diverged, samples = stepper.advance(
             count, step_index, steps, recorder.record_every, speed_limit, recorder.reserve
         )  # recorded into the recorder's buffer
-        elapsed = time.perf_counter() - started
+        recording = stepper.recording_seconds - recorded_before  # the loop's own: none (within its steps)
+        tally.recording_seconds += recording
+        elapsed = time.perf_counter() - started - recording
         compiled = _seconds(compiling) - compiled_before
         if tally.timed(step_index, elapsed, compiled, made):
             chooser.after_steps(made, elapsed)
-        recorder.commit(len(samples["time"]))
         reached = stepper.reached()  # checked, not kept: no copies
-        violation = (health.check_state(reached) if diverged else None) or health.check_samples(samples, 0)
-        if violation is None:  # the depth check, told the deepest overlap where the last sample is at this state
-            sampled = len(samples["time"]) and samples["time"][-1] == reached.time
-            violation = health.check_depth(reached, float(samples["max_penetration"][-1]) if sampled else None)
+        # every sample, in order: the first that fails ends the trajectory; then the state reached
+        times = samples["time"]
+        violation = _earlier(health.check_samples(samples, 0), health.check_sampled_depths(samples))
+        kept = len(times) if violation is None else int(np.searchsorted(times, violation.time, side="right"))
+        if violation is None and diverged:
+            violation = health.check_state(reached)
+        recorder.commit(kept)
+        if violation is None and not (kept and times[-1] == reached.time):
+            violation = health.check_depth(reached, None)  # and the chunk's end, where it is no sample
         if violation is not None:
             tally.take(stepper)
-            if len(samples["time"]) == 0 or samples["time"][-1] != reached.time:
-                recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
+            if kept and times[kept - 1] == violation.time:
+                raise _Stopped(violation, State.sampled(samples, kept - 1))
+            recorder.extend(stepper.sample())  # the state that went wrong ends the trajectory
             raise _Stopped(violation, stepper.state())
         if step_index > 1 or compiled == 0.0:  # the next chunk: about CHUNK_SECONDS of steps at this pace
             chunk = max(1, min(CHUNK_GROWTH * chunk, int(CHUNK_SECONDS * made / max(elapsed, 1e-9))))
@@ -601,6 +551,13 @@ def _step_loop(stepper, steps, recorder, chooser, compiling, tally, bar, health)
         step_index += made
     tally.take(stepper)
     return stepper.state()
+
+
+def _earlier(first, second):
+    """The earlier of two Violations (or None), the first where they are at one time."""
+    if first is None or (second is not None and second.time < first.time):
+        return second
+    return first
 
 
 def _seconds(listener):

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from .collision.manifolds import Manifolds
 
 Positions = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -87,6 +89,14 @@ class State:
         (body_velocity, body_angular_velocity, particle_velocity)."""
         (bx, bq, px), (bv, bw, pv) = positions, velocities
         return cls(time, bx, bq, bv, bw, px, pv, Carry.none() if carried is None else carried)
+
+    @classmethod
+    def sampled(cls, samples: Mapping[str, np.ndarray], row: int) -> State:
+        """The State of sample ``row`` of a run's ``samples`` (each series of SERIES by name,
+        one row per sample: its time and six arrays), its arrays contiguous float copies;
+        nothing carried."""
+        bx, bq, bv, bw, px, pv = (np.array(samples[name][row], dtype=float) for name in ARRAYS)
+        return cls(float(samples["time"][row]), bx, bq, bv, bw, px, pv)
 
     @property
     def positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -42,7 +42,8 @@ or not (external forces and kinematic paths given as constants or keyframes, con
 the loop and the methods' steps evaluate them with the same compiled ``drive_velocities``). A
 scene with cloth or meshes, another granularity, explicit Euler, or an assembled solver steps
 through the methods' ``step``, and so does a scene with a force or a path given as a Python
-function, which compiled code cannot call.
+function, which compiled code cannot call. That path is a Stepper too (``StitchedStepper``):
+``simulate`` advances, records and checks every run alike, in chunks, whichever steps it.
 
 Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
 colliders, C contacts; the generalized velocity u (6B + 3P,) in the DOF layout of
@@ -51,12 +52,15 @@ contactlab.contacts.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import shapes
+from .. import diagnostics, interrupts, shapes
+from ..collision import collide
+from ..collision.cloth_self import is_self_contact
 from ..collision.manifolds import Manifolds
 from ..compiling import EntryPoint, call_entry, njit
 from ..model import derived
@@ -167,6 +171,11 @@ class Stepper:
     state given at construction and returns the samples it recorded; ``state()`` is the State
     reached, carrying what the method's ``step`` carries (so a run may go on through either path)."""
 
+    compiled = True
+    """whether the run steps through the compiled loop (summary ``compiled_loop``)"""
+    recording_seconds = 0.0
+    """[s] of recording apart from the stepping: none, the loop's samples are written within its steps"""
+
     def __init__(
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
     ) -> None:
@@ -199,32 +208,13 @@ class Stepper:
         self.last_contacts = 0
         self.implicit_spring_steps = 0
         self.linear_iterations_made = 0
-
-    def samples_for(self, count: int) -> Samples:
-        """Empty Samples for ``count`` samples."""
-        B, P = self.model.body_count, self.model.particle_count
-        return Samples(
-            np.empty(count),
-            np.empty((count, B, 3)),
-            np.empty((count, B, 4)),
-            np.empty((count, B, 3)),
-            np.empty((count, B, 3)),
-            np.empty((count, P, 3)),
-            np.empty((count, P, 3)),
-            np.empty(count),
-            np.empty(count),
-            np.empty(count),
-            np.empty(count),
-            np.empty(count, dtype=np.int64),
-            np.empty(count, dtype=np.int64),
-            np.empty(count),
-        )
+        self.self_contacts = 0  # cloth self-contacts: none on the scenes the loop serves
 
     def _samples(self, count: int, rows: Rows | None) -> Samples:
         """Samples for ``count`` samples: the arrays ``rows(count)`` gives (name -> (count, ...),
         in the order of SERIES: the Recorder's ``reserve``, recorded into in place), or empty
         ones of their own where ``rows`` is None."""
-        return self.samples_for(count) if rows is None else Samples(**rows(count))
+        return empty_samples(self.model, count) if rows is None else Samples(**rows(count))
 
     def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
         """The sample of the state as it stands (no step made: its contacts those of the fresh
@@ -248,10 +238,7 @@ class Stepper:
         state blew up — see ``run_steps`` —, the samples recorded as a dict of the series). ``rows``: a
         function of a count of samples giving the arrays to record them into (the Recorder's
         ``reserve``: its buffer's rows, no copy made); None: arrays of their own."""
-        end = first_index + steps - 1  # the last index of these steps; indices start at 1
-        count = end // record_every - (first_index - 1) // record_every  # the multiples of record_every
-        if first_index <= last_index <= end and last_index % record_every:
-            count += 1  # the run's last step, sampled too
+        count = samples_in(steps, first_index, last_index, record_every)
         samples = self._samples(count, rows)
         arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
         made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run_steps(*arguments)
@@ -340,6 +327,125 @@ def _entry_points(model: Model) -> dict[tuple, EntryPoint]:
     return {}
 
 
+class StitchedStepper:
+    """Steps one run of ``method`` on ``model`` through the method's own ``step``, called from
+    Python once a step — the stages stitched together in Python, each the compiled code the loop
+    runs where the loop has it — for the scenes the loop does not serve (``applies``: cloth,
+    meshes, another granularity or normal, explicit Euler, an assembled solver, a force or path
+    given as a Python function) and for any run with ``compiled_loop=False``.
+
+    It is a Stepper to ``simulate``: the same ``advance``, ``sample``, ``state`` and tallies, so
+    every run is stepped, recorded and checked by one loop, in chunks. A sample's contacts are
+    those of a collision pass at the sampled state's own positions (``collision.collide``), as
+    the loop's ``record`` makes them; ``self_contacts`` is the most cloth self-contacts among them."""
+
+    compiled = False
+    parallel = True  # its kernels (cloth springs and self-contact, the CG solve) may take threads
+
+    def __init__(
+        self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
+    ) -> None:
+        from . import get
+
+        self.model, self.method, self.options, self.integrator, self.dt = model, method, options, integrator, dt
+        self.step = get(method).step
+        self.current = state
+        self.max_contacts = self.sweeps_made = self.implicit_spring_steps = self.linear_iterations_made = 0
+        self.self_contacts = 0
+        self.recording_seconds = 0.0  # [s] of the samples' collision passes and copies, apart from the steps
+
+    def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
+        """The sample of the state as it stands (no step made: the contact count that of the
+        collision pass), as a dict of the series; ``rows`` as for ``advance``."""
+        samples = empty_samples(self.model, 1)._asdict() if rows is None else rows(1)
+        self._record(samples, 0, self.current, None)
+        return samples
+
+    def advance(
+        self,
+        steps: int,
+        first_index: int,
+        last_index: int,
+        record_every: int,
+        max_speed: float,
+        rows: Rows | None = None,
+    ) -> tuple[int, bool, dict[str, np.ndarray]]:
+        """``Stepper.advance``: ``steps`` steps of the method's ``step`` from the state reached,
+        numbered from ``first_index``, each sampled where its index is a multiple of
+        ``record_every`` or ``last_index``; stops after a step that leaves a non-finite value or
+        a speed above ``max_speed`` [m/s], and after the step in which a signal came
+        (``interrupts.pending``: Ctrl-C is answered within a step, as the loop's chunk of about
+        0.1 s is). Returns (steps made, whether it stopped for its state, the samples recorded)."""
+        count = samples_in(steps, first_index, last_index, record_every)
+        samples = empty_samples(self.model, count)._asdict() if rows is None else rows(count)
+        written, made, diverged = 0, steps, False
+        for index in range(first_index, first_index + steps):
+            state, info = self.step(self.model, self.current, self.dt, self.options, self.integrator)
+            self.current = state
+            self.max_contacts = max(self.max_contacts, info.contacts.count)
+            self.sweeps_made += info.solver_iterations
+            self.implicit_spring_steps += info.implicit_springs
+            self.linear_iterations_made += info.linear_iterations
+            if not (state.max_speed() <= max_speed and state.is_finite()):
+                made, diverged = index - first_index + 1, True
+                break
+            if index % record_every == 0 or index == last_index:
+                self._record(samples, written, state, info)
+                written += 1
+            if interrupts.pending():  # a signal: the chunk ends here, and simulate's check raises
+                made = index - first_index + 1
+                break
+        return made, diverged, {name: values[:written] for name, values in samples.items()}
+
+    def _record(self, samples: dict[str, np.ndarray], row: int, state: State, info: Any) -> None:
+        started = time.perf_counter()
+        contacts = collide(self.model, state)
+        self.self_contacts = max(self.self_contacts, int(is_self_contact(contacts).sum()))
+        for name, value in diagnostics.sample_of(self.model, state, contacts, info).items():
+            samples[name][row] = value
+        self.recording_seconds += time.perf_counter() - started
+
+    def state(self) -> State:
+        """The State reached, carrying what the method's ``step`` carries."""
+        return self.current
+
+    def reached(self) -> State:
+        """The State reached (``state``): the health checks' look."""
+        return self.current
+
+
+def samples_in(steps: int, first_index: int, last_index: int, record_every: int) -> int:
+    """How many samples ``steps`` steps numbered from ``first_index`` make: one for each index
+    that is a multiple of ``record_every``, and one for the run's ``last_index`` where it is
+    among them and no such multiple."""
+    end = first_index + steps - 1  # the last index of these steps; indices start at 1
+    count = end // record_every - (first_index - 1) // record_every
+    if first_index <= last_index <= end and last_index % record_every:
+        count += 1
+    return count
+
+
+def empty_samples(model: Model, count: int) -> Samples:
+    """Empty Samples for ``count`` samples of ``model``'s run."""
+    B, P = model.body_count, model.particle_count
+    return Samples(
+        np.empty(count),
+        np.empty((count, B, 3)),
+        np.empty((count, B, 4)),
+        np.empty((count, B, 3)),
+        np.empty((count, B, 3)),
+        np.empty((count, P, 3)),
+        np.empty((count, P, 3)),
+        np.empty(count),
+        np.empty(count),
+        np.empty(count),
+        np.empty(count),
+        np.empty(count, dtype=np.int64),
+        np.empty(count, dtype=np.int64),
+        np.empty(count),
+    )
+
+
 def stepper_for(
     model: Model,
     method: str,
@@ -348,12 +454,12 @@ def stepper_for(
     dt: float,
     state: State,
     compiled_loop: bool | None = None,
-) -> Stepper | None:
-    """A Stepper for this run, or None to step through the methods' ``step``: None where the
-    loop does not serve the scene (``applies``) or ``compiled_loop`` is False (None and True:
-    the loop wherever it serves)."""
+) -> Stepper | StitchedStepper:
+    """The Stepper of this run: through the compiled loop wherever it serves the scene
+    (``applies``) unless ``compiled_loop`` is False (None and True: the loop wherever it
+    serves), else through the method's ``step`` (StitchedStepper)."""
     if compiled_loop is False or not applies(model, method, options, integrator):
-        return None
+        return StitchedStepper(model, method, options, integrator, dt, state)
     if method == "penalty":
         return PenaltyStepper(model, options, integrator, dt, state)
     return Stepper(model, method, options, integrator, dt, state)
