@@ -59,10 +59,45 @@ def swept_distances(
 ) -> np.ndarray:
     """How far each body and particle may move in a step of dt [s] at the given velocities,
     (B + P,) [m]: h |v|, plus for a body how far its farthest point turns, h |ω| r. This is the
-    ``sweep`` argument of :func:`collide`."""
-    body_reach = model.body_radii
-    body = dt * (np.linalg.norm(body_velocity, axis=1) + np.linalg.norm(body_angular_velocity, axis=1) * body_reach)
-    return np.concatenate([body, dt * np.linalg.norm(particle_velocity, axis=1)])
+    ``sweep`` argument of :func:`collide` (``swept_reach``, which the compiled loop runs, with no
+    margin)."""
+    radius = np.zeros(model.body_count + model.particle_count)
+    radius[: model.body_count] = model.body_radii
+    return swept_reach(
+        radius,
+        np.asarray(body_velocity, dtype=float),
+        np.asarray(body_angular_velocity, dtype=float),
+        np.asarray(particle_velocity, dtype=float),
+        float(dt),
+        0.0,
+    )
+
+
+@njit(cache=True)
+def swept_reach(
+    radius: np.ndarray,
+    body_velocity: np.ndarray,
+    angular_velocity: np.ndarray,
+    particle_velocity: np.ndarray,
+    h: float,
+    margin: float,
+) -> np.ndarray:
+    """How far each collider reaches in a step of h [s], (N,) [m] for the N of ``radius`` (each
+    collider's bounding radius [m], bodies first, then particles and obstacles): half the
+    contact ``margin`` [m], plus for a body the distance it sweeps, h (|v| + |ω| r), and for a
+    particle h |v| (body_velocity, angular_velocity (B, 3), particle_velocity (P, 3))."""
+    B, P = body_velocity.shape[0], particle_velocity.shape[0]
+    reach = np.full(radius.shape[0], 0.5 * margin)
+    for b in range(B):
+        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * radius[b])
+    for p in range(P):
+        reach[B + p] += h * _norm(particle_velocity[p])
+    return reach
+
+
+@njit(cache=True, inline="always")
+def _norm(v):
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 def _colliders(model, state):

@@ -50,36 +50,50 @@ def world_inverse_inertia(model: Model, orientation: np.ndarray) -> np.ndarray:
     return rotations.world_inertia(rotations.to_matrix(orientation), model.body_inverse_inertia)
 
 
-def _gyroscopic_implicit(model, orientation, angular_velocity, dt, newton_steps=4):
-    """ω after dt of torque-free rotation by the implicit midpoint rule in the body frame.
-
-    Solves I(ω₂ − ω₁) + h ω̄ × Iω̄ = 0 with ω̄ = (ω₁ + ω₂)/2 by Newton's method. The midpoint
-    rule keeps every quadratic invariant of Euler's equations, so both the rotational energy
-    ½ ωᵀIω and |Iω| are conserved up to the Newton tolerance.
-    """
-    if len(angular_velocity) == 0:
-        return angular_velocity.copy()
-    # a body whose ω is along a principal axis, or whose inertia is isotropic (a sphere), has
-    # no gyroscopic torque: only the others need the Newton solve
-    inertia_all = model.body_inertia
-    spinning = np.abs(inertia_all - inertia_all.mean(axis=1, keepdims=True)).max(axis=1) > 0.0
-    spinning &= np.any(angular_velocity != 0.0, axis=1)
-    if not spinning.any():
-        return angular_velocity.copy()
-    return gyroscopic_midpoint(
-        rotations.to_matrix(orientation),
-        np.ascontiguousarray(inertia_all, dtype=float),
-        np.ascontiguousarray(angular_velocity, dtype=float),
-        float(dt),
-        newton_steps,
-    )
-
-
 @njit(cache=True)
+def free_flight(
+    gravity: np.ndarray,
+    inertia: np.ndarray,
+    pinned: np.ndarray,
+    body_velocity: np.ndarray,
+    angular_velocity: np.ndarray,
+    particle_velocity: np.ndarray,
+    rotation: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage 1 under gravity alone (symplectic and backward Euler; the compiled loop runs it as
+    the methods' steps do): v* = v + h g for bodies and particles (body_velocity (B, 3),
+    particle_velocity (P, 3) [m/s], gravity (3,) [m/s²]), pinned particles ((P,) bool) held at
+    rest, and each body's ω after h [s] of torque-free rotation by the implicit midpoint rule
+    (``gyroscopic_midpoint``, 4 Newton steps; rotation (B, 3, 3), inertia (B, 3) principal
+    [kg m²], angular_velocity (B, 3) [rad/s]). Solves I(ω₂ − ω₁) + h ω̄ × Iω̄ = 0 with ω̄ =
+    (ω₁ + ω₂)/2: the midpoint rule keeps every quadratic invariant of Euler's equations, so
+    both ½ ωᵀIω and |Iω| are conserved up to the Newton tolerance. Returns new arrays (body,
+    angular, particle)."""
+    # element by element, not v + h g: the array expression allocates h g and broadcasts (the same sums)
+    body = np.empty_like(body_velocity)
+    _add_gravity(body, body_velocity, gravity, h)
+    angular = gyroscopic_midpoint(rotation, inertia, angular_velocity, h, 4)
+    particle = np.empty_like(particle_velocity)
+    _add_gravity(particle, particle_velocity, gravity, h)
+    for p in range(particle.shape[0]):
+        if pinned[p]:
+            particle[p, 0] = particle[p, 1] = particle[p, 2] = 0.0
+    return body, angular, particle
+
+
+@njit(cache=True, inline="always")
+def _add_gravity(out, velocity, gravity, h):
+    for n in range(velocity.shape[0]):
+        for i in range(3):
+            out[n, i] = velocity[n, i] + h * gravity[i]
+
+
+@njit(cache=True, inline="always")  # inlined into free_flight, and so into the compiled loop
 def gyroscopic_midpoint(
     rotation: np.ndarray, inertia: np.ndarray, angular_velocity: np.ndarray, dt: float, newton_steps: int
 ) -> np.ndarray:
-    """``_gyroscopic_implicit``, compiled, body by body: rotation (B, 3, 3) body → world,
+    """ω after h of torque-free rotation (``free_flight``), body by body: rotation (B, 3, 3) body → world,
     inertia (B, 3) principal [kg m²], angular_velocity (B, 3) world [rad/s]. A body with an
     isotropic inertia, or at rest, keeps its ω (it has no gyroscopic torque); the others take
     ``newton_steps`` Newton steps on I(ω₂ − ω₁) + h ω̄ × Iω̄ = 0 in the body frame."""
@@ -492,20 +506,20 @@ def free_velocities(
     ``linear_tolerance``). Pinned particles get zero velocity. Returns (body_velocity (B,3),
     body_angular_velocity (B,3), particle_velocity (P,3)).
     """
-    g = model.gravity
-    if model.spring_count and integrator == "backward_euler":
-        system = particle_system(model, state, dt)
-        particle_velocity = state.particle_velocity + solve_particle_system(
-            system, model, linear_tolerance, linear_solver
-        )
-    else:
-        particle_velocity = state.particle_velocity + dt * g
-        if model.spring_count:
+    body_velocity, angular, particle_velocity = _flight(model, state, dt, integrator)
+    if model.spring_count:
+        if integrator == "backward_euler":
+            system = particle_system(model, state, dt)
+            particle_velocity = state.particle_velocity + solve_particle_system(
+                system, model, linear_tolerance, linear_solver
+            )
+        else:
             springs = spring_forces(model, state.particle_position, state.particle_velocity)
             particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
-    if model.particle_pinned.any():
-        particle_velocity[model.particle_pinned] = 0.0
-    return (*body_free_velocities(model, state, dt, integrator), particle_velocity)
+        if model.particle_pinned.any():
+            particle_velocity[model.particle_pinned] = 0.0
+    _drive(model, state, dt, body_velocity, angular)
+    return body_velocity, angular, particle_velocity
 
 
 def body_free_velocities(
@@ -514,27 +528,53 @@ def body_free_velocities(
     """The rigid bodies' part of ``free_velocities`` (the constraints method calls it alone: its
     particles are solved with the contacts): (body_velocity (B,3) [m/s], body_angular_velocity
     (B,3) [rad/s]) after dt under gravity. The gyroscopic term is explicit under explicit Euler
-    and implicit (midpoint) otherwise; gravity does not depend on the state, so backward Euler's
-    bodies move as symplectic Euler's.
+    and implicit (midpoint, ``free_flight``) otherwise; gravity does not depend on the state, so
+    backward Euler's bodies move as symplectic Euler's.
 
     A driven model (``model.drive``, contactlab.driving) adds its external forces and torques
     [N], [N m] at the step's start time ``state.time``, and gives each kinematic body the
     velocity that carries it onto its path over the step (their inverse mass is 0: gravity and
     forces do not move them). External forces reach the bodies only this way
     (``ModelBuilder.add_force``)."""
-    body_velocity = state.body_velocity + dt * model.gravity
-    gyroscopic = _gyroscopic_explicit if integrator == "explicit_euler" else _gyroscopic_implicit
-    angular = gyroscopic(model, state.body_orientation, state.body_angular_velocity, dt)
-    drive = model.drive
-    if drive is not None:  # the compiled stage the compiled loop runs too, then any Python functions' paths
-        t = float(state.time)
-        position, orientation = (np.array(a, dtype=float) for a in (state.body_position, state.body_orientation))
-        inverse = (np.array(model.body_inverse_mass, dtype=float), np.array(model.body_inverse_inertia, dtype=float))
-        pose = (rotations.matrices(orientation), position, orientation)
-        drive_velocities(drive.table, t, float(dt), inverse, pose, drive.function_loads(t), body_velocity, angular)
-        bodies, velocity, turning = drive.function_path_velocities(position, orientation, t, dt)
-        body_velocity[bodies], angular[bodies] = velocity, turning
+    body_velocity, angular, _ = _flight(model, state, dt, integrator)
+    _drive(model, state, dt, body_velocity, angular)
     return body_velocity, angular
+
+
+def _flight(model, state, dt, integrator):
+    """(body, angular, particle) velocities after dt under gravity alone, pinned particles at rest:
+    ``free_flight`` (the compiled loop's stage 1), or under explicit Euler the explicit gyroscopic term."""
+    if integrator == "explicit_euler":
+        particle = state.particle_velocity + dt * model.gravity
+        particle[np.asarray(model.particle_pinned, dtype=bool)] = 0.0
+        angular = _gyroscopic_explicit(model, state.body_orientation, state.body_angular_velocity, dt)
+        return state.body_velocity + dt * model.gravity, angular, particle
+    orientation = np.array(state.body_orientation, dtype=float)
+    return free_flight(
+        np.array(model.gravity, dtype=float),
+        np.array(model.body_inertia, dtype=float),
+        np.array(model.particle_pinned, dtype=np.bool_),
+        np.array(state.body_velocity, dtype=float),
+        np.array(state.body_angular_velocity, dtype=float),
+        np.array(state.particle_velocity, dtype=float),
+        rotations.matrices(orientation),
+        float(dt),
+    )
+
+
+def _drive(model, state, dt, body_velocity, angular):
+    """A driven model's loads and kinematic paths at the step's start, added to the bodies' free
+    velocities in place: the compiled stage the compiled loop runs too, then any Python functions' paths."""
+    drive = model.drive
+    if drive is None:
+        return
+    t = float(state.time)
+    position, orientation = (np.array(a, dtype=float) for a in (state.body_position, state.body_orientation))
+    inverse = (np.array(model.body_inverse_mass, dtype=float), np.array(model.body_inverse_inertia, dtype=float))
+    pose = (rotations.matrices(orientation), position, orientation)
+    drive_velocities(drive.table, t, float(dt), inverse, pose, drive.function_loads(t), body_velocity, angular)
+    bodies, velocity, turning = drive.function_path_velocities(position, orientation, t, dt)
+    body_velocity[bodies], angular[bodies] = velocity, turning
 
 
 def advance_positions(

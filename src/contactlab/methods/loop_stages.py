@@ -294,7 +294,10 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # arguments) does not get.
 collider_poses = njit(inline="always")(collision.collider_poses.py_func)
 candidate_pairs = collision.candidate_pairs
-gyroscopic_midpoint = njit(inline="always")(integrators.gyroscopic_midpoint.py_func)
+free_flight = njit(inline="always")(
+    integrators.free_flight.py_func
+)  # stage 1 under gravity, as the methods' steps run it
+swept_reach = njit(inline="always")(collision.swept_reach.py_func)  # stage 2, as the methods' steps run it
 moved = njit(inline="always")(integrators.moved.py_func)
 kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
 gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
@@ -316,7 +319,7 @@ def free_motion(
     midpoint rule; pinned particles held), and in a driven scene the external loads at the step's
     start t [s] and the kinematic bodies' path velocities (``driving.drive_velocities``, which the
     methods' steps call too): (body (B, 3), angular (B, 3), particle (P, 3))."""
-    body, angular, particle = _free_motion(
+    body, angular, particle = free_flight(
         model.gravity,
         model.body_inertia,
         model.particle_pinned,
@@ -330,53 +333,6 @@ def free_motion(
     pose = (rotation, motion.body_position, motion.body_orientation)
     drive_velocities(model.drive, t, h, inverse, pose, None, body, angular)
     return body, angular, particle
-
-
-@njit(cache=True, inline="always")
-def _free_motion(gravity, inertia, pinned, body_velocity, angular_velocity, particle_velocity, rotation, h):
-    # element by element, not v + h g: the array expression allocates h g and broadcasts (the
-    # same sums)
-    body = np.empty_like(body_velocity)
-    _add_gravity(body, body_velocity, gravity, h)
-    angular = gyroscopic_midpoint(rotation, inertia, angular_velocity, h, 4)
-    particle = np.empty_like(particle_velocity)
-    _add_gravity(particle, particle_velocity, gravity, h)
-    for p in range(particle.shape[0]):
-        if pinned[p]:
-            particle[p, 0] = particle[p, 1] = particle[p, 2] = 0.0
-    return body, angular, particle
-
-
-@njit(cache=True, inline="always")
-def _add_gravity(out, velocity, gravity, h):
-    for n in range(velocity.shape[0]):
-        for i in range(3):
-            out[n, i] = velocity[n, i] + h * gravity[i]
-
-
-@njit(cache=True, inline="always")
-def swept_reach(
-    model: LoopModel,
-    body_velocity: np.ndarray,
-    angular_velocity: np.ndarray,
-    particle_velocity: np.ndarray,
-    h: float,
-    margin: float,
-) -> np.ndarray:
-    """Stage 2: how far each collider reaches this step (N,) [m]: half the contact margin, plus
-    for a dynamic one the distance it sweeps, h |v| (+ h |ω| r for a body's farthest point)."""
-    return _swept_reach(model.radius, body_velocity, angular_velocity, particle_velocity, h, margin)
-
-
-@njit(cache=True, inline="always")
-def _swept_reach(radius, body_velocity, angular_velocity, particle_velocity, h, margin):
-    B, P = body_velocity.shape[0], particle_velocity.shape[0]
-    reach = np.full(radius.shape[0], 0.5 * margin)
-    for b in range(B):
-        reach[b] += h * (_norm(body_velocity[b]) + _norm(angular_velocity[b]) * radius[b])
-    for p in range(P):
-        reach[B + p] += h * _norm(particle_velocity[p])
-    return reach
 
 
 @njit(cache=True, inline="always")

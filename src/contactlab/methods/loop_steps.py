@@ -72,7 +72,7 @@ def velocity_step(
     free = free_motion(model, motion, rotation, h, time)
     plain = without_drive(model)  # every later stage: the same machine code driven or not
     # 2. predict: how far each body and particle sweeps this step
-    reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
         plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
@@ -177,7 +177,7 @@ def projection_step(
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
     v_free = stacked(free[0], free[1], free[2])
     predicted = h * v_free
-    reach = swept_reach(plain, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
         plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
@@ -227,7 +227,7 @@ def penalty_step(
     plain = without_drive(model)  # every stage but free motion: the same machine code driven or not
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
-        plain, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
+        plain.radius, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
     )
     contacts, manifolds, _ = detect(plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], 0.0)
     rows = build_rows(plain, contacts, motion, rotation)

@@ -3,7 +3,10 @@ velocities are impulses): impulses (methods.impulse) and hard constraints on vel
 matrix-free (methods.constraints, C5b).
 
 Stages 1–3 from Python for every scene (``predict_positions``: positions moved with the free velocities,
-how far everything sweeps; ``swept_contacts``: contacts over the swept step; ``step_without_contacts``);
+how far everything sweeps; ``swept_contacts``: contacts over the swept step; ``step_without_contacts``),
+their arithmetic the compiled loop's own (free flight under gravity, ``integrators.free_flight``; the
+swept reach, ``collision.swept_reach``; the broad and narrow phase kernels) with what only this path
+serves added (cloth springs, explicit Euler, meshes, a force given as a Python function);
 stages 4–5 compiled, in ``respond`` — the contacts' rows, the targets of their normal rows
 (``targets``: impulses' collision waves, ``resolve_collisions``, then resting targets;
 constraints' simultaneous ``impact_targets``), the warm start (``warm_impulses``), the sweeps
