@@ -278,13 +278,12 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
 
     from numba.core import event
 
-    from contactlab import record
     from contactlab.methods import impulse, velocity_loop
 
     calls = []
 
     def compiling_first(real):
-        """The first sample (the loop's own, or Recorder.sample's when stitched) compiles."""
+        """The first sample (the Stepper's: the loop's own, or the stitched one's) compiles."""
 
         def sample(self, *args):
             if not calls:
@@ -310,7 +309,9 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
             velocity_loop.Stepper, "advance", compiling_on_a_later_call(velocity_loop.Stepper.advance, 2)
         )
     else:
-        monkeypatch.setattr(record.Recorder, "sample", compiling_first(record.Recorder.sample))
+        monkeypatch.setattr(
+            velocity_loop.StitchedStepper, "sample", compiling_first(velocity_loop.StitchedStepper.sample)
+        )
         monkeypatch.setattr(impulse, "step", compiling_on_a_later_call(impulse.step, 3))
     b = ModelBuilder()
     b.add_body("sphere", radius=0.1, mass=1.0, position=(0, 0, 1.0))
