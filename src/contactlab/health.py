@@ -248,7 +248,8 @@ class Health:
         than its half thickness (``_behind_planes``, every row at once)."""
         if not len(self.plane_offsets) or not len(self.half_thickness):
             return np.zeros(len(samples["time"]), dtype=bool)
-        centres = np.concatenate([samples["body_position"], samples["particle_position"]], axis=1)  # (n, B + P, 3)
+        bodies, particles = samples["body_position"], samples["particle_position"]
+        centres = np.concatenate([bodies, particles], axis=1) if particles.shape[1] else bodies  # (n, B + P, 3)
         behind = self.plane_offsets - centres @ self.plane_normals.T - self.half_thickness[:, None]
         return (behind > 1e-9).any(axis=(1, 2))
 
