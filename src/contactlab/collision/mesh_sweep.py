@@ -186,23 +186,3 @@ def sweep_sphere_mesh(
     else:
         normal[0], normal[1], normal[2] = dx / d, dy / d, dz / d
     return True, best_t, best_triangle, normal
-
-
-@njit(cache=True)
-def sweep_spheres_mesh(
-    starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, mesh: MeshGeometry
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`sweep_sphere_mesh` for N spheres: hit (N,) bool, toi (N,), triangle (N,), normal (N, 3)."""
-    count = starts.shape[0]
-    hit = np.zeros(count, dtype=np.bool_)
-    toi = np.ones(count)
-    triangle = np.full(count, -1, dtype=np.int64)
-    normal = np.zeros((count, 3))
-    for k in range(count):
-        h, t, tri, n = sweep_sphere_mesh(starts[k], ends[k], radii[k], mesh)
-        hit[k] = h
-        toi[k] = t
-        triangle[k] = tri
-        for i in range(3):
-            normal[k, i] = n[i]
-    return hit, toi, triangle, normal

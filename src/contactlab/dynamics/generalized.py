@@ -23,11 +23,6 @@ if TYPE_CHECKING:
     from ..state import State
 
 
-def dof_count(model: Model) -> int:
-    """N = 6B + 3P."""
-    return 6 * model.body_count + 3 * model.particle_count
-
-
 def stack(body_velocity: np.ndarray, body_angular_velocity: np.ndarray, particle_velocity: np.ndarray) -> np.ndarray:
     """v (N,) from body_velocity (B,3), body_angular_velocity (B,3), particle_velocity (P,3)."""
     return stacked(
