@@ -35,6 +35,10 @@ class Carry(NamedTuple):
     values: np.ndarray
     """(K, 3): what each carries — impulses [N s] (impulse, constraints), first-pass λ [kg m]
     (projection), anchor offsets [m] (penalty)"""
+    springs: np.ndarray | None = None
+    """(P, 3) [m/s]: the cloth springs' backward Euler Δv of the step that made the state, where
+    it solved them by conjugate gradients: the next step's solve starts from it (None: from the
+    diagonal's guess). Any method's: the cloth's motion, not a contact's"""
 
     @classmethod
     def none(cls, method: str = "", manifolds: Manifolds | None = None) -> Carry:
@@ -48,7 +52,8 @@ class Carry(NamedTuple):
 
     def copy(self) -> Carry:
         """The ids and values copied; the manifolds shared (a frozen Manifolds, never written)."""
-        return self._replace(ids=self.ids.copy(), values=self.values.copy())
+        springs = None if self.springs is None else self.springs.copy()
+        return self._replace(ids=self.ids.copy(), values=self.values.copy(), springs=springs)
 
 
 @dataclass

@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     import scipy.sparse.linalg as spla
 
     from ..model import Model
-    from ..state import State
+    from ..state import Carry, State
 
 INTEGRATORS = ("symplectic_euler", "explicit_euler", "backward_euler")
 
@@ -252,30 +252,40 @@ def factor_symmetric(matrix: sp.spmatrix) -> CholeskyFactor | spla.SuperLU:
 
 
 def solve_particle_system(
-    system: ParticleSystem, model: Model, tolerance: float = 1e-6, solver: str = "cg"
+    system: ParticleSystem, model: Model, tolerance: float = 1e-6, solver: str = "cg", guess: np.ndarray | None = None
 ) -> np.ndarray:
     """Δv (P, 3) [m/s] of a ``ParticleSystem``: the coupled particles by conjugate gradients
     with a block Jacobi preconditioner (``solver="cg"``, to the relative residual ``tolerance`` —
     the linearization itself is only first-order accurate, so 1e-6 is plenty; a sparse direct
     solve if it does not converge in max(100, coupled DOFs) iterations) or by a sparse direct
-    solve (``"direct"``); the others from their diagonal. ``model`` is accepted for symmetry with
-    ``particle_system`` and not used."""
-    return solve_coupled(system.matrix, system.rhs, np.repeat(system.coupled, 3), tolerance, solver)[0].reshape(-1, 3)
+    solve (``"direct"``); the others from their diagonal. ``guess`` (P, 3): where the conjugate
+    gradients start on the coupled particles (None: from the diagonal's answer, rhs / A_ii).
+    ``model`` is accepted for symmetry with ``particle_system`` and not used."""
+    coupled = np.repeat(system.coupled, 3)
+    return solve_coupled(system.matrix, system.rhs, coupled, tolerance, solver, guess)[0].reshape(-1, 3)
 
 
 def solve_coupled(
-    matrix: sp.spmatrix, rhs: np.ndarray, coupled: np.ndarray, tolerance: float = 1e-6, solver: str = "cg"
+    matrix: sp.spmatrix,
+    rhs: np.ndarray,
+    coupled: np.ndarray,
+    tolerance: float = 1e-6,
+    solver: str = "cg",
+    guess: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """x (N,) of A x = rhs for a symmetric positive definite A (N, N) whose rows and columns
     outside ``coupled`` (N,) bool hold only their diagonal: those from the diagonal, the coupled
     ones as ``solve_particle_system`` says (``solver`` "cg": compiled block-Jacobi-preconditioned
     conjugate gradients to the relative residual ``tolerance``, a sparse direct solve if they do
-    not converge in max(100, N_coupled) iterations; "direct": the sparse direct solve). Returns
+    not converge in max(100, N_coupled) iterations; "direct": the sparse direct solve; ``guess``
+    (N values, None: none): where the conjugate gradients start on the coupled rows). Returns
     (x, conjugate-gradient iterations made)."""
     A = matrix.tocsr()
     delta = rhs / A.diagonal()  # exact for the uncoupled rows (A = m I there)
     if not coupled.any():
         return delta, 0
+    if guess is not None and guess.size == delta.size:
+        delta[coupled] = guess.reshape(-1)[coupled]
     iterations, converged = 0, False
     if solver == "cg":
         delta, iterations, converged = conjugate_gradients(
@@ -510,8 +520,9 @@ def free_velocities(
     if model.spring_count:
         if integrator == "backward_euler":
             system = particle_system(model, state, dt)
+            guess = state.carried.springs  # last step's Δv: the draped cloth's next is close
             particle_velocity = state.particle_velocity + solve_particle_system(
-                system, model, linear_tolerance, linear_solver
+                system, model, linear_tolerance, linear_solver, guess
             )
         else:
             springs = spring_forces(model, state.particle_position, state.particle_velocity)
@@ -520,6 +531,15 @@ def free_velocities(
             particle_velocity[model.particle_pinned] = 0.0
     _drive(model, state, dt, body_velocity, angular)
     return body_velocity, angular, particle_velocity
+
+
+def carrying_springs(carry: Carry, model: Model, state: State, particle_velocity: np.ndarray, integrator: str) -> Carry:
+    """``carry`` with this step's cloth springs' backward Euler Δv (``Carry.springs``, (P, 3)
+    [m/s]: the free particle velocities ``particle_velocity`` less ``state``'s), for the next
+    step's solve to start from; ``carry`` itself where no spring was solved implicitly."""
+    if not (model.spring_count and integrator == "backward_euler"):
+        return carry
+    return carry._replace(springs=np.asarray(particle_velocity, dtype=float) - state.particle_velocity)
 
 
 def body_free_velocities(

@@ -47,7 +47,7 @@ import scipy.sparse.linalg as spla
 from ..compiling import njit
 from ..contacts import jacobian
 from ..dynamics.generalized import implicit_base, inverse_mass_matrix, stack, unstack
-from ..dynamics.integrators import body_free_velocities, factor_symmetric, free_velocities
+from ..dynamics.integrators import body_free_velocities, carrying_springs, factor_symmetric, free_velocities
 from ..dynamics.sparse_cholesky import CholeskyFactor, ancestors, cholesky_solve_within
 from ..errors import InputError
 from ..state import Carry, State
@@ -404,7 +404,8 @@ def step(
     # 3. collision detection over the swept step
     contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
     if contacts.count == 0:
-        return step_without_contacts("constraints", state, h, (predicted, free), contacts, manifolds)
+        carried = carrying_springs(Carry.none("constraints", manifolds), model, state, free[2], integrator)
+        return step_without_contacts(state, h, (predicted, free), contacts, carried)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
     settings = loop_settings(model, "constraints", options, dt)
@@ -425,6 +426,8 @@ def step(
     # 5. recompute velocities and positions (x = x₀ + h v⁺), split at the time of impact
     floats = tuple(np.array(v, dtype=float) for v in (*move, *free))  # as velocity_level._floats
     positions = split_at_impact(arrays, found, motion, tau, (floats[:3], floats[3:]), v_new, settings)
-    carried_on = Carry("constraints", manifolds, contacts.feature_id, lam)
+    carried_on = carrying_springs(
+        Carry("constraints", manifolds, contacts.feature_id, lam), model, state, free[2], integrator
+    )
     new = State.assemble(state.time + h, positions, unstack(v_new, model.body_count), carried_on)
     return new, StepInfo(contacts, solver_iterations=int(iterations), solver_residual=float(residual), impulses=lam)

@@ -43,7 +43,7 @@ from ..collision import half_thickness_sums, swept_distances
 from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, jacobian, values_by_id, values_carried
 from ..dynamics.generalized import implicit_base, stack, stacked, unstacked
-from ..dynamics.integrators import free_velocities, moved
+from ..dynamics.integrators import carrying_springs, free_velocities, moved
 from ..errors import InputError
 from ..state import Carry, State
 from ..validation import check_choices, check_counts, number, time_step
@@ -369,7 +369,8 @@ def step(
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     springs, forces, elongation, implicit = springs_at(arrays, penalty, found, rows, motion, v, carried, h)
     # 3. internal forces (gravity, cloth springs, external forces) → free velocities v* = v + h M⁻¹ f
-    v_free = stack(*free_velocities(model, state, h, integrator))
+    free = free_velocities(model, state, h, integrator)
+    v_free = stack(*free)
     # 4. integrate velocities, the contact forces distributed as Jᵀ F (D1); the springs by
     # backward Euler (M1) under that integrator, or where an explicit step would grow
     if implicit and (options.linear_solver != "cg" or (model.spring_count and integrator == "backward_euler")):
@@ -385,7 +386,9 @@ def step(
     positions, velocities, offsets, energy = finish(
         arrays, guard, spec, found, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
-    carried_on = Carry("penalty", None, contacts.feature_id, offsets)
+    carried_on = carrying_springs(
+        Carry("penalty", None, contacts.feature_id, offsets), model, state, free[2], integrator
+    )
     new = State.assemble(state.time + dt, positions, velocities, carried_on)
     return new, StepInfo(
         contacts,

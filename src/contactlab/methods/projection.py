@@ -41,7 +41,7 @@ from ..collision import swept_distances
 from ..compiling import njit
 from ..contacts import ContactArrays, values_by_id, values_carried
 from ..dynamics.generalized import stack, unstack, unstacked
-from ..dynamics.integrators import free_velocities, moved
+from ..dynamics.integrators import carrying_springs, free_velocities, moved
 from ..state import Carry, Positions, State
 from ..validation import check_counts
 from .base import KeptManifoldOptions, StepInfo
@@ -102,7 +102,8 @@ def step(
     stage the compiled loop's step (``loop_steps.projection_step``) runs."""
     h = dt
     # 1. internal forces → free velocities v*
-    v_free = stack(*free_velocities(model, state, h, integrator))
+    free = free_velocities(model, state, h, integrator)
+    v_free = stack(*free)
     # 2. integrate velocities and positions: x̃ = x + h v* (explicit Euler: the old velocities)
     moving = stack(*state.velocities) if integrator == "explicit_euler" else v_free
     predicted_displacement = h * moving
@@ -121,7 +122,9 @@ def step(
     displacement, lam, total_sweeps, change = project(
         arrays, settings, spec, found, motion, rotation, (zero, predicted_displacement), warm
     )
-    carried_on = Carry("projection", manifolds, contacts.feature_id, lam)
+    carried_on = carrying_springs(
+        Carry("projection", manifolds, contacts.feature_id, lam), model, state, free[2], integrator
+    )
     pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
     for _ in range(options.passes - 1):
         if contacts.count == 0:

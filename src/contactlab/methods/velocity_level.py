@@ -35,7 +35,7 @@ from ..collision import swept_distances
 from ..compiling import njit
 from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stacked, unstacked
-from ..dynamics.integrators import advance_positions, free_velocities, moved
+from ..dynamics.integrators import advance_positions, carrying_springs, free_velocities, moved
 from ..errors import InputError
 from ..state import Carry, State
 from ..validation import check_choices, check_counts
@@ -93,18 +93,13 @@ def swept_contacts(
 
 
 def step_without_contacts(
-    method: str,
-    state: State,
-    h: float,
-    positions: tuple[tuple, tuple],
-    contacts: Contacts,
-    manifolds: Manifolds | None,
+    state: State, h: float, positions: tuple[tuple, tuple], contacts: Contacts, carried: Carry
 ) -> tuple[State, StepInfo]:
-    """The step of ``method`` when nothing touches: ``positions`` = (the predicted positions, the
-    free velocities) stand; no warm start is carried on (no contact persists), the ``manifolds``
-    are. Returns (State, StepInfo)."""
+    """The step of a method when nothing touches: ``positions`` = (the predicted positions, the
+    free velocities) stand; ``carried``: no contact's values (none persists), the manifolds and
+    the cloth's springs (``Carry.none(method, manifolds)``, ``carrying_springs``). Returns
+    (State, StepInfo)."""
     predicted, free = positions
-    carried = Carry.none(method, manifolds)
     return State.assemble(state.time + h, predicted, free, carried), StepInfo(contacts)
 
 
@@ -636,7 +631,8 @@ def step(
     # 3. collision detection over the swept step
     contacts, manifolds = swept_contacts(model, state, options, sweep, h * move[2])
     if contacts.count == 0:
-        return step_without_contacts(method, state, h, (predicted, free), contacts, manifolds)
+        carried = carrying_springs(Carry.none(method, manifolds), model, state, free[2], integrator)
+        return step_without_contacts(state, h, (predicted, free), contacts, carried)
     # 4–5. the contacts' response, and the positions after it
     arrays, motion, rotation, carried = loop_inputs(model, state, method)
     settings = loop_settings(model, method, options, dt)
@@ -644,7 +640,7 @@ def step(
     positions, velocities, impulses, sweeps, change = respond(
         arrays, settings, spec, contacts.arrays(), motion, rotation, (_floats(move), free), carried
     )
-    kept = Carry(method, manifolds, contacts.feature_id, impulses)
+    kept = carrying_springs(Carry(method, manifolds, contacts.feature_id, impulses), model, state, free[2], integrator)
     new = State.assemble(state.time + h, positions, velocities, kept)
     return new, StepInfo(contacts, solver_iterations=int(sweeps), solver_residual=float(change), impulses=impulses)
 
