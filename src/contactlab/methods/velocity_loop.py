@@ -164,17 +164,73 @@ def run_steps(
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
 
 
-class Stepper:
-    """Steps one run of ``method`` on ``model`` through the compiled loop.
+class Stepping:
+    """What ``simulate`` advances a run with, whichever path steps it (``stepper_for``): the
+    compiled loop (Stepper, PenaltyStepper) or the method's own ``step`` (StitchedStepper).
 
-    ``advance(steps, first_index, last_index, record_every)`` makes that many steps from the
-    state given at construction and returns the samples it recorded; ``state()`` is the State
-    reached, carrying what the method's ``step`` carries (so a run may go on through either path)."""
+    ``advance(steps, first_index, last_index, record_every, max_speed, rows)`` makes that many steps
+    from the state reached and returns the samples it recorded; ``sample(rows)`` records the state
+    as it stands; ``state()`` is the State reached, carrying what the method's ``step`` carries (so a
+    run may go on through either path), ``reached()`` the same for a look; the tallies
+    (``max_contacts``, ``sweeps_made``, ``implicit_spring_steps``, ``linear_iterations_made``,
+    ``self_contacts``, ``recording_seconds``) sum what the steps made. A subclass writes the steps
+    (``_steps``) and one sample of the state as it stands (``_sample_now``)."""
 
+    model: Model
     compiled = True
     """whether the run steps through the compiled loop (summary ``compiled_loop``)"""
     recording_seconds = 0.0
-    """[s] of recording apart from the stepping: none, the loop's samples are written within its steps"""
+    """[s] of recording apart from the stepping (the loop's samples are written within its steps)"""
+
+    def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
+        """The sample of the state as it stands (no step made: its contacts those of a fresh
+        collision pass, 0 sweeps), as a dict of the series: what ``Recorder.sample`` records.
+        ``rows``: where it is recorded (see ``advance``)."""
+        samples = self._samples(1, rows)
+        self._sample_now(samples)
+        return samples._asdict()
+
+    def advance(
+        self,
+        steps: int,
+        first_index: int,
+        last_index: int,
+        record_every: int,
+        max_speed: float,
+        rows: Rows | None = None,
+    ) -> tuple[int, bool, dict[str, np.ndarray]]:
+        """Make ``steps`` steps numbered from ``first_index``, each sampled where its index is a
+        multiple of ``record_every`` or the run's ``last_index``; stop after a step that leaves a
+        non-finite value or a speed above ``max_speed`` [m/s]. Returns (steps made, whether it
+        stopped so, the samples recorded as a dict of the series). ``rows``: a function of a
+        count of samples giving the arrays to record them into (the Recorder's ``reserve``: its
+        buffer's rows, no copy made); None: arrays of their own."""
+        count = samples_in(steps, first_index, last_index, record_every)
+        samples = self._samples(count, rows)
+        made, diverged, written = self._steps(samples, (steps, first_index, last_index, record_every, max_speed))
+        series = samples._asdict()
+        if written < count:  # stopped early: the rows written only
+            series = {name: array[:written] for name, array in series.items()}
+        return made, diverged, series
+
+    def _samples(self, count: int, rows: Rows | None) -> Samples:
+        """Samples for ``count`` samples: the arrays ``rows(count)`` gives (name -> (count, ...),
+        in the order of SERIES: the Recorder's ``reserve``, recorded into in place), or empty
+        ones of their own where ``rows`` is None."""
+        return empty_samples(self.model, count) if rows is None else Samples(**rows(count))
+
+    def _steps(self, samples: Samples, schedule: tuple) -> tuple[int, bool, int]:
+        """``advance``'s steps, ``schedule`` = (steps, first index, last index, record every, max
+        speed), recorded into ``samples``: (steps made, whether stopped for the state, samples written)."""
+        raise NotImplementedError
+
+    def _sample_now(self, samples: Samples) -> None:
+        """The state as it stands into the first row of ``samples``."""
+        raise NotImplementedError
+
+
+class Stepper(Stepping):
+    """Steps one run of ``method`` on ``model`` through the compiled loop (``run_steps``)."""
 
     def __init__(
         self, model: Model, method: str, options: CollisionOptions, integrator: str, dt: float, state: State
@@ -210,46 +266,19 @@ class Stepper:
         self.linear_iterations_made = 0
         self.self_contacts = 0  # cloth self-contacts: none on the scenes the loop serves
 
-    def _samples(self, count: int, rows: Rows | None) -> Samples:
-        """Samples for ``count`` samples: the arrays ``rows(count)`` gives (name -> (count, ...),
-        in the order of SERIES: the Recorder's ``reserve``, recorded into in place), or empty
-        ones of their own where ``rows`` is None."""
-        return empty_samples(self.model, count) if rows is None else Samples(**rows(count))
-
-    def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
-        """The sample of the state as it stands (no step made: its contacts those of the fresh
-        collision pass, 0 sweeps), as a dict of
-        the series, recorded by the loop's ``record``: what ``Recorder.sample`` records.
-        ``rows``: where it is recorded (see ``advance``)."""
-        samples, model, motion = self._samples(1, rows), without_drive(loop_model(self.model)), self.motion
+    def _sample_now(self, samples: Samples) -> None:
+        model, motion = without_drive(loop_model(self.model)), self.motion  # the loop's own ``record``
         record(samples, 0, model, self.spec.plan, motion, poses(model, motion), self.time, (-1, 0, 0.0, False))
-        return samples._asdict()
 
-    def advance(
-        self,
-        steps: int,
-        first_index: int,
-        last_index: int,
-        record_every: int,
-        max_speed: float,
-        rows: Rows | None = None,
-    ) -> tuple[int, bool, dict[str, np.ndarray]]:
-        """Make ``steps`` steps (numbered from ``first_index``). Returns (steps made, whether the
-        state blew up — see ``run_steps`` —, the samples recorded as a dict of the series). ``rows``: a
-        function of a count of samples giving the arrays to record them into (the Recorder's
-        ``reserve``: its buffer's rows, no copy made); None: arrays of their own."""
-        count = samples_in(steps, first_index, last_index, record_every)
-        samples = self._samples(count, rows)
+    def _steps(self, samples: Samples, schedule: tuple) -> tuple[int, bool, int]:
+        steps, first_index, last_index, record_every, max_speed = schedule
         arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
         made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run_steps(*arguments)
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
         self.linear_iterations_made += linear
-        series = samples._asdict()
-        if written < count:  # stopped early: the rows written only
-            series = {name: array[:written] for name, array in series.items()}
-        return made, diverged, series
+        return made, diverged, written
 
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
         start = (self.motion, self.carried, self.time)
@@ -327,17 +356,18 @@ def _entry_points(model: Model) -> dict[tuple, EntryPoint]:
     return {}
 
 
-class StitchedStepper:
+class StitchedStepper(Stepping):
     """Steps one run of ``method`` on ``model`` through the method's own ``step``, called from
     Python once a step — the stages stitched together in Python, each the compiled code the loop
     runs where the loop has it — for the scenes the loop does not serve (``applies``: cloth,
     meshes, another granularity or normal, explicit Euler, an assembled solver, a force or path
     given as a Python function) and for any run with ``compiled_loop=False``.
 
-    It is a Stepper to ``simulate``: the same ``advance``, ``sample``, ``state`` and tallies, so
-    every run is stepped, recorded and checked by one loop, in chunks. A sample's contacts are
-    those of a collision pass at the sampled state's own positions (``collision.collide``), as
-    the loop's ``record`` makes them; ``self_contacts`` is the most cloth self-contacts among them."""
+    A sample's contacts are those of a collision pass at the sampled state's own positions
+    (``collision.collide``), as the loop's ``record`` makes them; ``self_contacts`` is the most
+    cloth self-contacts among them. A chunk also ends after the step in which a signal came
+    (``interrupts.pending``): Ctrl-C is answered within a step, as the loop's chunk of about
+    0.1 s is."""
 
     compiled = False
     parallel = True  # its kernels (cloth springs and self-contact, the CG solve) may take threads
@@ -354,31 +384,12 @@ class StitchedStepper:
         self.self_contacts = 0
         self.recording_seconds = 0.0  # [s] of the samples' collision passes and copies, apart from the steps
 
-    def sample(self, rows: Rows | None = None) -> dict[str, np.ndarray]:
-        """The sample of the state as it stands (no step made: the contact count that of the
-        collision pass), as a dict of the series; ``rows`` as for ``advance``."""
-        samples = empty_samples(self.model, 1)._asdict() if rows is None else rows(1)
+    def _sample_now(self, samples: Samples) -> None:
         self._record(samples, 0, self.current, None)
-        return samples
 
-    def advance(
-        self,
-        steps: int,
-        first_index: int,
-        last_index: int,
-        record_every: int,
-        max_speed: float,
-        rows: Rows | None = None,
-    ) -> tuple[int, bool, dict[str, np.ndarray]]:
-        """``Stepper.advance``: ``steps`` steps of the method's ``step`` from the state reached,
-        numbered from ``first_index``, each sampled where its index is a multiple of
-        ``record_every`` or ``last_index``; stops after a step that leaves a non-finite value or
-        a speed above ``max_speed`` [m/s], and after the step in which a signal came
-        (``interrupts.pending``: Ctrl-C is answered within a step, as the loop's chunk of about
-        0.1 s is). Returns (steps made, whether it stopped for its state, the samples recorded)."""
-        count = samples_in(steps, first_index, last_index, record_every)
-        samples = empty_samples(self.model, count)._asdict() if rows is None else rows(count)
-        written, made, diverged = 0, steps, False
+    def _steps(self, samples: Samples, schedule: tuple) -> tuple[int, bool, int]:
+        steps, first_index, last_index, record_every, max_speed = schedule
+        written = 0
         for index in range(first_index, first_index + steps):
             state, info = self.step(self.model, self.current, self.dt, self.options, self.integrator)
             self.current = state
@@ -387,22 +398,20 @@ class StitchedStepper:
             self.implicit_spring_steps += info.implicit_springs
             self.linear_iterations_made += info.linear_iterations
             if not (state.max_speed() <= max_speed and state.is_finite()):
-                made, diverged = index - first_index + 1, True
-                break
+                return index - first_index + 1, True, written
             if index % record_every == 0 or index == last_index:
                 self._record(samples, written, state, info)
                 written += 1
             if interrupts.pending():  # a signal: the chunk ends here, and simulate's check raises
-                made = index - first_index + 1
-                break
-        return made, diverged, {name: values[:written] for name, values in samples.items()}
+                return index - first_index + 1, False, written
+        return steps, False, written
 
-    def _record(self, samples: dict[str, np.ndarray], row: int, state: State, info: Any) -> None:
+    def _record(self, samples: Samples, row: int, state: State, info: Any) -> None:
         started = time.perf_counter()
         contacts = collide(self.model, state)
         self.self_contacts = max(self.self_contacts, int(is_self_contact(contacts).sum()))
         for name, value in diagnostics.sample_of(self.model, state, contacts, info).items():
-            samples[name][row] = value
+            getattr(samples, name)[row] = value
         self.recording_seconds += time.perf_counter() - started
 
     def state(self) -> State:
@@ -454,7 +463,7 @@ def stepper_for(
     dt: float,
     state: State,
     compiled_loop: bool | None = None,
-) -> Stepper | StitchedStepper:
+) -> Stepping:
     """The Stepper of this run: through the compiled loop wherever it serves the scene
     (``applies``) unless ``compiled_loop`` is False (None and True: the loop wherever it
     serves), else through the method's ``step`` (StitchedStepper)."""
