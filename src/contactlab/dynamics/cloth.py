@@ -105,20 +105,6 @@ def _tension(springs, particle_position, particle_velocity, damped, s):
 
 
 @njit(cache=True)
-def tensions(
-    springs: Springs, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool
-) -> np.ndarray:
-    """``spring_tensions`` on the model's spring arrays ``springs`` (``_springs``), (S,):
-    k (l − L) + c (v_j − v_i)·u [N] (the damping term only if ``damped``; ``particle_velocity``
-    (P, 3) is not read otherwise)."""
-    S = springs[0].shape[0]
-    out = np.empty(S)
-    for s in range(S):
-        out[s] = _tension(springs, particle_position, particle_velocity, damped, s)[0]
-    return out
-
-
-@njit(cache=True)
 def forces(springs: Springs, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool) -> np.ndarray:
     """``spring_forces`` on the model's spring arrays ``springs`` (``_springs``): f_i = tension · u
     on i, −f_i on j, summed into (P, 3) [N] in one pass over the springs. The pulls on the i ends
@@ -138,16 +124,6 @@ def forces(springs: Springs, particle_position: np.ndarray, particle_velocity: n
         on_j[j, 1] += tension * uy
         on_j[j, 2] += tension * uz
     return on_i - on_j
-
-
-def spring_tensions(
-    model: Model, particle_position: np.ndarray, particle_velocity: np.ndarray | None = None
-) -> np.ndarray:
-    """Scalar pull of each spring along its axis (S,) [N]: k (l − L) + c (v_j − v_i)·u
-    (positive when it pulls its ends together)."""
-    x = _float_rows(particle_position)
-    v = x if particle_velocity is None else _float_rows(particle_velocity)
-    return tensions(_springs(model), x, v, particle_velocity is not None)
 
 
 def spring_forces(
