@@ -111,17 +111,18 @@ def check() -> None:
     if _pending is not None:
         signum, _pending = _pending, None
         raise Interrupted(signum)
-    if _stop_asked:
-        asked = _stop_asked.get(threading.get_ident())
-        if asked is not None and asked():
-            raise Interrupted(signal.SIGTERM)
+    if _job_asked_to_stop():
+        raise Interrupted(signal.SIGTERM)
 
 
 def pending() -> bool:
     """Whether :func:`check` would raise now, without raising: for a loop that ends its chunk of
     work early and leaves the raising to its caller's next ``check``."""
-    if _pending is not None:
-        return True
+    return _pending is not None or _job_asked_to_stop()
+
+
+def _job_asked_to_stop() -> bool:
+    """Whether this thread runs inside :func:`stoppable` and its job was asked to stop."""
     asked = _stop_asked.get(threading.get_ident()) if _stop_asked else None
     return asked is not None and bool(asked())
 

@@ -22,6 +22,7 @@ from .cloth import cloth_sample_contacts
 from .cloth_self import cloth_self_contacts
 from .contact_output import FEATURE_BITS as FEATURE_BITS  # re-exported: contact ids are (pair << it) | feature
 from .families import pair_families
+from .geometry import norm
 from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
 from .granularity import NORMALS as NORMALS
 from .granularity import polytope_contacts
@@ -95,9 +96,7 @@ def swept_reach(
     return reach
 
 
-@njit(cache=True, inline="always")
-def _norm(v):
-    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+_norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into swept_reach
 
 
 def _colliders(model, state):

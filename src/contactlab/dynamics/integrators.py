@@ -32,6 +32,7 @@ import numpy as np
 from .. import rotations
 from ..compiling import njit
 from ..driving import drive_velocities
+from ..model import derived
 from .cloth import block_product, jacobian_blocks, spring_forces, spring_pattern
 from .sparse_cholesky import CholeskyFactor, cholesky
 
@@ -571,14 +572,24 @@ def _flight(model, state, dt, integrator):
         return state.body_velocity + dt * model.gravity, angular, particle
     orientation = np.array(state.body_orientation, dtype=float)
     return free_flight(
-        np.array(model.gravity, dtype=float),
-        np.array(model.body_inertia, dtype=float),
-        np.array(model.particle_pinned, dtype=np.bool_),
+        *_flight_constants(model),
         np.array(state.body_velocity, dtype=float),
         np.array(state.body_angular_velocity, dtype=float),
         np.array(state.particle_velocity, dtype=float),
         rotations.matrices(orientation),
         float(dt),
+    )
+
+
+@derived
+def _flight_constants(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What ``free_flight`` reads of a Model — gravity (3,), the bodies' principal inertia (B, 3),
+    the pinned particles (P,) — as writable copies (a read-only array is another type to Numba, and
+    compiles it again), made once per Model."""
+    return (
+        np.array(model.gravity, dtype=float),
+        np.array(model.body_inertia, dtype=float),
+        np.array(model.particle_pinned, dtype=np.bool_),
     )
 
 

@@ -29,6 +29,7 @@ from .. import collision, diagnostics, rotations, shapes
 from ..collision import assemble_contacts, dynamic_pairs_possible
 from ..collision.broad_phase import GRID_FROM
 from ..collision.families import KEPT_FAMILIES, pair_families
+from ..collision.geometry import norm
 from ..collision.manifolds import copy_rows, reuse_or_generate
 from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
 from ..compiling import available_threads, njit
@@ -294,10 +295,9 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # arguments) does not get.
 collider_poses = njit(inline="always")(collision.collider_poses.py_func)
 candidate_pairs = collision.candidate_pairs
-free_flight = njit(inline="always")(
-    integrators.free_flight.py_func
-)  # stage 1 under gravity, as the methods' steps run it
-swept_reach = njit(inline="always")(collision.swept_reach.py_func)  # stage 2, as the methods' steps run it
+# stages 1 (under gravity) and 2, as the methods' steps run them
+free_flight = njit(inline="always")(integrators.free_flight.py_func)
+swept_reach = njit(inline="always")(collision.swept_reach.py_func)
 moved = njit(inline="always")(integrators.moved.py_func)
 kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
 gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
@@ -335,9 +335,7 @@ def free_motion(
     return body, angular, particle
 
 
-@njit(cache=True, inline="always")
-def _norm(v):
-    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+_norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into healthy
 
 
 @njit(cache=True)
