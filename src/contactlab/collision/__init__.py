@@ -11,6 +11,8 @@ from collections import namedtuple
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 from .. import rotations, shapes
 from ..compiling import njit
@@ -21,19 +23,18 @@ from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
 from .cloth import cloth_sample_contacts
 from .cloth_self import cloth_self_contacts
 from .contact_output import FEATURE_BITS as FEATURE_BITS  # re-exported: contact ids are (pair << it) | feature
-from .families import pair_families
+from .families import keeps_manifolds, pair_families
 from .geometry import norm
 from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
 from .granularity import NORMALS as NORMALS
 from .granularity import polytope_contacts
-from .manifolds import generate_reusing
+from .manifolds import Manifolds, reuse_or_generate
 from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
 from .narrow_phase import generate_contacts, needs_hulls, supported
 
 if TYPE_CHECKING:
     from ..model import Model
     from ..state import State
-    from .manifolds import Manifolds
 
 
 @derived
@@ -99,17 +100,68 @@ def swept_reach(
 _norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into swept_reach
 
 
-def _colliders(model, state):
-    """Global collider arrays: kinds (N,), params (N,4), centres (N,3), rotations (N,3,3)."""
-    kinds, params, _, obstacle_rotations = model.collider_table
-    centers, rots = collider_poses(
-        state.body_position,
-        rotations.to_matrix(state.body_orientation),
-        state.particle_position,
-        model.obstacle_position,
-        obstacle_rotations,
+Colliders = namedtuple(
+    "Colliders",
+    (
+        "kinds",  # (N,) int64 shape kind of each collider (contactlab.shapes)
+        "params",  # (N, 4) its shape parameters [m] (Model.collider_table)
+        "radius",  # (N,) bounding radii [m]
+        "materials",  # (N,) int64 material index
+        "material_friction",  # (M,)
+        "material_restitution",  # (M,)
+        "obstacle_position",  # (O, 3) [m]
+        "obstacle_rotation",  # (O, 3, 3) obstacle → world
+        # (B + P,) int64 the cloth of each body and particle (−1: none), whose vertices make no
+        # pair with one another; None under two bodies and particles (``dynamic_pairs_possible``)
+        "cloth_of",
+        "body_count",  # B
+    ),
+)
+Colliders.__doc__ = """A model's colliders as detection reads them, bodies 0..B−1, particles B..B+P−1, obstacles
+B+P..N−1: what does not move. Writable copies (Numba types a read-only array apart), built once a Model
+(``colliders``); the compiled loop's LoopModel holds the same value."""
+
+
+@derived
+def colliders(model: Model) -> Colliders:
+    """The Colliders of ``model``, built on first use and kept with it."""
+    kinds, params, materials, obstacle_rotation = model.collider_table
+    dynamic = model.body_count + model.particle_count
+    copy = np.array  # np.array copies: a writable, contiguous array
+    cloth_of = np.concatenate([np.full(model.body_count, -1), model.particle_cloth]).astype(np.int64)
+    return Colliders(
+        copy(kinds, dtype=np.int64),
+        copy(params, dtype=float),
+        copy(shapes.bounding_radii(kinds, params), dtype=float),
+        copy(materials, dtype=np.int64),
+        copy(model.material_friction, dtype=float),
+        copy(model.material_restitution, dtype=float),
+        copy(model.obstacle_position, dtype=float),
+        copy(obstacle_rotation, dtype=float),
+        cloth_of if dynamic_pairs_possible(dynamic) else None,
+        model.body_count,
     )
-    return kinds, params, centers, rots
+
+
+Plan = namedtuple("Plan", ("families", "hull_store", "large"))
+Plan.__doc__ = """What the broad and narrow phase compile for a scene: its pair families (``pair_families``),
+its hull store (None where no family needs hulls) and ``large`` (True: at least GRID_FROM bodies and
+particles, the grid broad phase; None: never). What detection and a sample's fresh pass both take."""
+
+
+@derived
+def detection_plan(model: Model) -> Plan:
+    """The Plan of ``model``'s detection, built once a Model."""
+    families = pair_families(model)
+    large = True if model.body_count + model.particle_count >= GRID_FROM else None
+    return Plan(families, model.hull_store if needs_hulls(families) else None, large)
+
+
+def keeping_for(model: Model, tolerance: float) -> bool | None:
+    """Whether ``model``'s detection keeps manifolds at this manifold ``tolerance`` [m]: True
+    where it is > 0 and a pair family of the scene keeps them (``keeps_manifolds``), else None —
+    the ``keeping`` of :func:`detect`, which as None compiles no reuse."""
+    return True if tolerance > 0.0 and keeps_manifolds(pair_families(model)) else None
 
 
 @njit(cache=True)
@@ -222,6 +274,157 @@ def dynamic_pairs_possible(dynamic: int) -> bool:
     return dynamic >= 2
 
 
+@njit(cache=True, inline="always")
+def detect(
+    table: Colliders,
+    plan: Plan,
+    keeping: bool | None,
+    at: tuple[np.ndarray, np.ndarray],
+    reach: np.ndarray,
+    kept: tuple,
+    tolerance: float,
+    replaced: tuple[np.ndarray, np.ndarray] | None,
+) -> tuple[ContactArrays, tuple, bool]:
+    """Detection (stage 3 of every loop): the contacts of the colliders at centres and rotations
+    ``at`` = ((N, 3) [m], (N, 3, 3)) within ``reach`` (N,) [m] of each other (speculative contacts),
+    from the broad phase (``candidate_pairs``), the narrow phase and the assembly of their rows.
+    Box, hull and plane pairs that barely moved reuse the ``kept`` manifolds (Manifolds' eight
+    fields) when ``tolerance`` [m] > 0. ``plan``: what the broad and narrow phase are compiled for
+    (its ``large`` None: never a grid broad phase); ``keeping`` None: never a kept manifold
+    (``keeping_for``); ``replaced`` = (bodies, colliders) whose pairs another granularity makes
+    (``collision.granularity``), None: none. Both as None leave their code uncompiled.
+
+    The one detection: ``collide_keeping`` calls it compiled, the compiled loop inlines it.
+    Returns (ContactArrays, the manifolds to keep, whether the broad phase found any pair)."""
+    centers, rots = at
+    dynamic = table.kinds.shape[0] - table.obstacle_position.shape[0]
+    _, _, pairs = candidate_pairs(table.kinds, table.params, centers, rots, reach, dynamic, table.cloth_of, plan.large)
+    pairs = without_replaced(pairs, replaced)
+    if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
+        return no_contacts(), _none_kept(kept), False
+    point, normal, depth, feature, owner, made = kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance)
+    if depth.shape[0] == 0:
+        return no_contacts(), made, True
+    contacts = assemble_contacts(
+        pairs[owner, 0],
+        pairs[owner, 1],
+        point,
+        normal,
+        depth,
+        feature,
+        table.body_count,
+        dynamic - table.body_count,
+        table.materials,
+        table.material_friction,
+        table.material_restitution,
+        table.kinds.shape[0],
+    )
+    return contacts, made, True
+
+
+def kept_or_fresh(
+    keeping: bool | None,
+    table: Colliders,
+    plan: Plan,
+    pairs: np.ndarray,
+    at: tuple[np.ndarray, np.ndarray],
+    reach: np.ndarray,
+    kept: tuple,
+    tolerance: float,
+) -> tuple:
+    """The narrow phase of ``detect`` over ``pairs`` (K, 2): (point, normal, depth, feature, owner
+    — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
+    [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
+    generated afresh and nothing is kept. Compiled only (below): its body is chosen by the type of
+    ``keeping``, so a scene that never keeps a manifold compiles no reuse."""
+    raise NotImplementedError("kept_or_fresh runs compiled only (detect)")
+
+
+@overload(kept_or_fresh, inline="always")
+def _kept_or_fresh_compiled(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
+    if isinstance(keeping, types.NoneType):
+        return lambda keeping, table, plan, pairs, at, reach, kept, tolerance: _fresh(
+            table, plan, pairs, at, reach, kept
+        )
+
+    def kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
+        if not tolerance > 0.0:
+            return _fresh(table, plan, pairs, at, reach, kept)
+        found, made = reuse_or_generate(
+            pairs,
+            table.kinds,
+            table.params,
+            at[0],
+            at[1],
+            reach,
+            table.radius,
+            plan.hull_store,
+            plan.families,
+            kept,
+            tolerance,
+            table.kinds.shape[0],
+        )
+        return (*found, made)
+
+    return kept_or_fresh
+
+
+def without_replaced(pairs: np.ndarray, replaced: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """``pairs`` (K, 2) less those (a, b) where ``replaced`` = (mask of a, mask of b), two (N,)
+    bool, marks both: their contacts come from ``granularity.polytope_contacts`` instead.
+    ``pairs`` itself where ``replaced`` is None. Compiled only (below), chosen by its type."""
+    raise NotImplementedError("without_replaced runs compiled only (detect)")
+
+
+@overload(without_replaced, inline="always")
+def _without_replaced_compiled(pairs, replaced):  # type: ignore[no-untyped-def]
+    if isinstance(replaced, types.NoneType):
+        return lambda pairs, replaced: pairs
+
+    def without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
+        side_a, side_b = replaced
+        keep = np.empty(pairs.shape[0], dtype=np.bool_)
+        for k in range(pairs.shape[0]):
+            keep[k] = not (side_a[pairs[k, 0]] and side_b[pairs[k, 1]])
+        return pairs[keep]
+
+    return without_replaced
+
+
+@njit(cache=True, inline="always")
+def _fresh(table, plan, pairs, at, reach, kept):
+    """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
+    found = generate_contacts(
+        pairs, table.kinds, table.params, at[0], at[1], _pair_reach(pairs, reach), plan.hull_store, plan.families
+    )
+    return (*found, _none_kept(kept))
+
+
+@njit(cache=True, inline="always")
+def _none_kept(kept):
+    """No manifold to keep: ``kept``'s eight fields, empty."""
+    return (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
+
+
+@njit(cache=True, inline="always")
+def _pair_reach(pairs, reach):
+    """The gap each pair's contacts may have (K,) [m]: its two colliders' reach summed."""
+    out = np.empty(pairs.shape[0])
+    for k in range(pairs.shape[0]):
+        out[k] = reach[pairs[k, 0]] + reach[pairs[k, 1]]
+    return out
+
+
+@njit(cache=True)
+def no_contacts() -> ContactArrays:
+    """The ContactArrays of no contact, from two empty arrays (every field a view of one): what
+    ``assemble_contacts`` gives for none, without its dozen allocations a step."""
+    real = np.empty((0, 3))
+    whole = np.empty((0, 3), dtype=np.int64)
+    flat, ids = real.reshape(0), whole.reshape(0)
+    return ContactArrays(ids, ids, whole, whole, real, real, real, real, flat, real, real, flat, flat, ids)
+
+
 # collide takes collide_keeping's parameters less the manifolds (deliberately repeated: the
 # public signature says each default where a user reads it)
 def collide(
@@ -280,50 +483,43 @@ def collide_keeping(
     """
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
-    kinds, params, centers, rots = _colliders(model, state)
+    table, plan = colliders(model), detection_plan(model)
+    centers, rots = collider_poses(
+        state.body_position,
+        rotations.to_matrix(state.body_orientation),
+        state.particle_position,
+        table.obstacle_position,
+        table.obstacle_rotation,
+    )
     # each collider reaches half the margin plus its own sweep; a pair, the sum of the two
     reach = np.full(dynamic + O, 0.5 * float(margin))
     if sweep is not None:
         reach[:dynamic] += sweep
-    cloth_of = (  # neighbours within one cloth: no contact; None: no dynamic pair at all
-        np.concatenate([np.full(B, -1), model.particle_cloth]) if dynamic_pairs_possible(dynamic) else None
-    )
-    large = True if dynamic >= GRID_FROM else None  # None: the grids are never needed, nor compiled
-    lower, upper, pairs = candidate_pairs(kinds, params, centers, rots, reach, dynamic, cloth_of, large)
     # dynamic × static: planes by signed distance of the bounds, other obstacles by box overlap
+    parts = []
     meshes = mesh_table(model)
-    mesh_parts = (
-        [] if meshes is None else [mesh_contacts(meshes, kinds, params, centers, rots, reach, (lower, upper), dynamic)]
-    )
+    if meshes is not None:
+        bounds = _bounds(table.kinds, table.params, centers, rots, reach)
+        parts.append(mesh_contacts(meshes, table.kinds, table.params, centers, rots, reach, bounds, dynamic))
+    replaced = None
     if granularity != "vertex" or normal != "object":
         reach_all = margin + (sweep.max() if sweep is not None and len(sweep) else 0.0)
         surface_parts, bodies, obstacles = polytope_contacts(
             model, state, granularity, normal, samples, reach_all, dynamic + O
         )
-        replaced = np.isin(pairs[:, 0], bodies) & np.isin(pairs[:, 1], dynamic + obstacles)
-        pairs = pairs[~replaced]
-        mesh_parts = [
-            tuple(column[~(np.isin(part[0], bodies) & np.isin(part[1], dynamic + obstacles))] for column in part)
-            for part in mesh_parts
-        ] + surface_parts
-    families = pair_families(model)  # only these pair routines are compiled (narrow_phase.FAMILIES)
-    hulls = model.hull_store if needs_hulls(families) else None
-    if tolerance > 0.0:
-        contact_point, contact_normal, depth, feature, owner, manifolds = generate_reusing(
-            pairs, (kinds, params, centers, rots), reach, hulls, families, manifolds, tolerance, dynamic + O
-        )
-    else:
-        contact_point, contact_normal, depth, feature, owner = generate_contacts(
-            pairs, kinds, params, centers, rots, reach[pairs[:, 0]] + reach[pairs[:, 1]], hulls, families
-        )
-        manifolds = None
-    parts = [(pairs[owner, 0], pairs[owner, 1], contact_point, contact_normal, depth, feature)] + mesh_parts
-    a, b, contact_point, contact_normal, depth, feature = (np.concatenate(column) for column in zip(*parts))
-    found = (
-        Contacts.empty()
-        if len(a) == 0
-        else _assemble(model, a, b, contact_point, contact_normal, depth, feature, dynamic + O)
-    )
+        replaced = (np.zeros(dynamic + O, dtype=np.bool_), np.zeros(dynamic + O, dtype=np.bool_))
+        replaced[0][bodies] = True
+        replaced[1][dynamic + np.asarray(obstacles, dtype=np.int64)] = True
+        parts = [tuple(column[~(replaced[0][part[0]] & replaced[1][part[1]])] for column in part) for part in parts]
+        parts += surface_parts
+    keeping = keeping_for(model, tolerance)
+    kept = tuple(vars(manifolds if manifolds is not None and keeping else Manifolds.empty()).values())
+    arrays, made, _ = detect(table, plan, keeping, (centers, rots), reach, kept, tolerance, replaced)
+    found = Contacts.from_arrays(arrays)
+    if parts:
+        a, b, point, unit, depth, feature = (np.concatenate(column) for column in zip(*parts))
+        if len(a):
+            found = Contacts.concatenate([found, _assemble(model, a, b, point, unit, depth, feature, dynamic + O)])
     if cloth_samples > 0 and len(getattr(model, "triangles", ())):
         reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
         found = Contacts.concatenate(
@@ -331,7 +527,7 @@ def collide_keeping(
         )
     if len(model.triangles) and model.cloth_self_collision.any():
         found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep, particle_motion)])
-    return found, manifolds
+    return found, (Manifolds(*made) if tolerance > 0.0 else None)
 
 
 def pass_through_depths(model: Model, contacts: Contacts) -> np.ndarray:
@@ -456,7 +652,8 @@ def mesh_contacts(
 
 
 def _assemble(model, a, b, point, normal, depth, feature, total):
-    materials = model.collider_table[2]
+    """The Contacts of the pairs' contacts found outside ``detect`` (meshes, other granularities)."""
+    table = colliders(model)
     return Contacts.from_arrays(
         assemble_contacts(
             a,
@@ -467,9 +664,9 @@ def _assemble(model, a, b, point, normal, depth, feature, total):
             feature,
             model.body_count,
             model.particle_count,
-            materials,
-            model.material_friction,
-            model.material_restitution,
+            table.materials,
+            table.material_friction,
+            table.material_restitution,
             total,
         )
     )

@@ -29,7 +29,6 @@ import numpy as np
 
 from .. import shapes
 from ..compiling import njit
-from .families import keeps_manifolds
 from .narrow_phase import MAX_PER_PAIR, generate_contacts
 
 
@@ -276,51 +275,6 @@ def _combine(
     )
 
 
-def generate_reusing(
-    pairs: np.ndarray,
-    colliders: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    reach: np.ndarray,
-    hull_store: tuple[np.ndarray, ...] | None,
-    families: tuple[bool | None, ...],
-    manifolds: Manifolds | None,
-    tolerance: float,
-    total: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Manifolds]:
-    """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid ``manifolds`` (or
-    None) of ``kept_pairs``, with motion ``tolerance`` [m] > 0; ``colliders`` the table (kinds (N,),
-    params (N, 4), centres (N, 3) [m], rotations (N, 3, 3)); ``reach`` (N,) per collider [m]; ``total`` the
-    number of colliders (for the keys); ``hull_store`` and ``families`` as ``generate_contacts`` takes
-    them. Returns (point, normal, depth, feature, owner, the manifolds to keep for the next step). Contacts come in
-    pair order, as from
-    ``generate_contacts``; a pair that keeps nothing gets exactly what ``generate_contacts``
-    gives it."""
-    kinds, params, centers, rots = colliders
-    kept = manifolds if manifolds is not None else Manifolds.empty()
-    # a pile of spheres: no reuse (and its code never compiled); a scene with no box, hull or
-    # plane pair does not even compile kept_pairs
-    if not keeps_manifolds(families) or not kept_pairs(kinds, pairs).any():
-        pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]
-        return (
-            *generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families),
-            Manifolds.empty(),
-        )
-    contacts, made = reuse_or_generate(
-        pairs,
-        kinds,
-        params,
-        centers,
-        rots,
-        reach,
-        shapes.bounding_radii(kinds, params),
-        hull_store,
-        families,
-        (kept.keys, kept.reach, kept.center, kept.rotation, kept.count, kept.witness, kept.normal, kept.feature),
-        tolerance,
-        total,
-    )
-    return (*contacts, Manifolds(*made))
-
-
 @njit(cache=True)
 def reuse_or_generate(
     pairs: np.ndarray,
@@ -336,10 +290,14 @@ def reuse_or_generate(
     tolerance: float,
     total: int,
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
-    """``generate_reusing``, compiled (the stepping loops of contactlab.methods.velocity_loop call
-    it): ``radius`` (N,) the colliders' bounding radii [m]; ``kept`` the last manifolds as the
-    tuple of Manifolds' eight fields. Returns ((point, normal, depth, feature, owner), the
-    eight fields of the manifolds to keep)."""
+    """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid manifolds ``kept`` (the
+    last step's, as the tuple of Manifolds' eight fields) of ``kept_pairs``, with motion
+    ``tolerance`` [m] > 0 (``collision.detect`` calls it): the colliders' kinds (N,), params (N, 4),
+    centres (N, 3) [m], rotations (N, 3, 3) and bounding ``radius`` (N,) [m]; ``reach`` (N,) per
+    collider [m]; ``total`` = N (for the keys); ``hull_store`` and ``families`` as
+    ``generate_contacts`` takes them. Returns ((point, normal, depth, feature, owner), the eight
+    fields of the manifolds to keep). Contacts come in pair order, as from ``generate_contacts``;
+    a pair that keeps nothing gets exactly what ``generate_contacts`` gives it."""
     kept_keys, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
     first, second = pairs[:, 0], pairs[:, 1]
     keys = first * total + second

@@ -25,13 +25,11 @@ import numpy as np
 from numba import types
 from numba.extending import overload
 
-from .. import collision, diagnostics, rotations, shapes
-from ..collision import assemble_contacts, dynamic_pairs_possible
-from ..collision.broad_phase import GRID_FROM
-from ..collision.families import KEPT_FAMILIES, pair_families
+from .. import collision, diagnostics, rotations
+from ..collision import Plan, colliders, detection_plan, keeping_for
 from ..collision.geometry import norm
-from ..collision.manifolds import copy_rows, reuse_or_generate
-from ..collision.narrow_phase import FAMILIES, MAX_PER_PAIR, generate_contacts, needs_hulls
+from ..collision.manifolds import copy_rows
+from ..collision.narrow_phase import MAX_PER_PAIR, generate_contacts
 from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
@@ -64,15 +62,7 @@ LoopModel = namedtuple(
         "particle_mass",  # (P,) kg
         "particle_inverse_mass",  # (P,) 1/kg, 0 pinned
         "particle_pinned",  # (P,) bool
-        "kinds",
-        "params",  # (N,) int64, (N, 4): the colliders (Model.collider_table)
-        "radius",  # (N,) bounding radii [m]
-        "materials",  # (N,) int
-        "obstacle_position",  # (O, 3) m
-        "obstacle_rotation",  # (O, 3, 3)
-        "material_friction",  # (M,)
-        "material_restitution",  # (M,)
-        "cloth_of",  # (B + P,) int, −1: no cloth (always, here); None under two bodies and particles
+        "colliders",  # the colliders as detection reads them (collision.Colliders, the same value)
         # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the
         # scene. Last, for ``without_drive``
         "drive",
@@ -85,8 +75,6 @@ LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba t
 def loop_model(model: Model) -> LoopModel:
     """The LoopModel of a Model (writable copies of its arrays): built on first use and kept with
     the model (``contactlab.model.derived``)."""
-    kinds, params, materials, obstacle_rotation = model.collider_table
-    B, P = model.body_count, model.particle_count
     copy = np.array  # np.array copies: a writable, contiguous array
     return LoopModel(
         copy(model.gravity, dtype=float),
@@ -97,15 +85,7 @@ def loop_model(model: Model) -> LoopModel:
         copy(model.particle_mass, dtype=float),
         copy(model.particle_inverse_mass, dtype=float),
         copy(model.particle_pinned, dtype=np.bool_),
-        copy(kinds, dtype=np.int64),
-        copy(params, dtype=float),
-        copy(shapes.bounding_radii(kinds, params), dtype=float),
-        copy(materials, dtype=np.int64),
-        copy(model.obstacle_position, dtype=float),
-        copy(obstacle_rotation, dtype=float),
-        copy(model.material_friction, dtype=float),
-        copy(model.material_restitution, dtype=float),
-        np.full(B + P, -1, dtype=np.int64) if dynamic_pairs_possible(B + P) else None,
+        colliders(model),
         None if model.drive is None else model.drive.table,
     )
 
@@ -167,11 +147,6 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 
 PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
 
-Plan = namedtuple("Plan", ("families", "hull_store", "large"))
-Plan.__doc__ = """What the broad and narrow phase compile for a scene: its pair families (``pair_families``),
-its hull store (None where no family needs hulls) and ``large`` (True: at least GRID_FROM bodies and
-particles, the grid broad phase; None: never). What detection and a sample's fresh pass both take."""
-
 Specialization = namedtuple(
     "Specialization", ("plan", "keeping", "constraints", "impulse", "projection", "slabs", "parallel", "penalty")
 )
@@ -195,13 +170,10 @@ def specialization(model: Model, method: str, options: CollisionOptions, penalty
     methods' step, nor they projection's. Two flags for the velocity methods, not one: an impulse
     run then compiles none of what only constraints takes."""
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
-    families = pair_families(model)
-    present = {name for name, flag in zip(FAMILIES, families) if flag is not None}
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
-    plan = Plan(families, model.hull_store if needs_hulls(families) else None, True if dynamic >= GRID_FROM else None)
     return Specialization(
-        plan,
-        True if getattr(options, "manifold_tolerance", 0.0) > 0.0 and present & set(KEPT_FAMILIES) else None,
+        detection_plan(model),
+        keeping_for(model, getattr(options, "manifold_tolerance", 0.0)),
         True if method == "constraints" else None,
         True if method == "impulse" else None,
         True if method == "projection" else None,
@@ -295,6 +267,7 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # arguments) does not get.
 collider_poses = njit(inline="always")(collision.collider_poses.py_func)
 candidate_pairs = collision.candidate_pairs
+detect = collision.detect
 # stages 1 (under gravity) and 2, as the methods' steps run them
 free_flight = njit(inline="always")(integrators.free_flight.py_func)
 swept_reach = njit(inline="always")(collision.swept_reach.py_func)
@@ -346,115 +319,13 @@ def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.
     after it."""
     rotation = rotations.matrices(motion.body_orientation)
     centers, rots = collider_poses(
-        motion.body_position, rotation, motion.particle_position, model.obstacle_position, model.obstacle_rotation
+        motion.body_position,
+        rotation,
+        motion.particle_position,
+        model.colliders.obstacle_position,
+        model.colliders.obstacle_rotation,
     )
     return rotation, centers, rots
-
-
-@njit(cache=True, inline="always")
-def detect(
-    model: LoopModel,
-    plan: Plan,
-    keeping: bool | None,
-    motion: Motion,
-    at: tuple[np.ndarray, np.ndarray],
-    reach: np.ndarray,
-    kept: tuple,
-    tolerance: float,
-) -> tuple[ContactArrays, tuple, bool]:
-    """Stage 3: the contacts at the step's start within ``reach`` (speculative contacts), box,
-    hull and plane pairs that barely moved reusing the ``kept`` manifolds (Manifolds' eight fields)
-    when ``tolerance`` [m] > 0; the colliders at ``motion``'s positions, ``at`` = their centres
-    (N, 3) and rotations (N, 3, 3) (``poses``). ``plan``: what the broad and narrow phase are
-    compiled for (its ``large`` None: never a grid broad phase); ``keeping`` None: never a kept
-    manifold (the Specialization's). Returns
-    (ContactArrays, the manifolds to keep, whether the broad phase found any pair within reach)."""
-    centers, rots = at
-    B, P = motion.body_position.shape[0], motion.particle_position.shape[0]
-    _, _, pairs = candidate_pairs(model.kinds, model.params, centers, rots, reach, B + P, model.cloth_of, plan.large)
-    total = model.kinds.shape[0]
-    if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
-        return no_contacts(), _none_kept(kept), False
-    point, normal, depth, feature, owner, made = kept_or_fresh(keeping, model, plan, pairs, at, reach, kept, tolerance)
-    if depth.shape[0] == 0:
-        return no_contacts(), made, True
-    contacts = assemble_contacts(
-        pairs[owner, 0],
-        pairs[owner, 1],
-        point,
-        normal,
-        depth,
-        feature,
-        B,
-        P,
-        model.materials,
-        model.material_friction,
-        model.material_restitution,
-        total,
-    )
-    return contacts, made, True
-
-
-def kept_or_fresh(
-    keeping: bool | None,
-    model: LoopModel,
-    plan: Plan,
-    pairs: np.ndarray,
-    at: tuple[np.ndarray, np.ndarray],
-    reach: np.ndarray,
-    kept: tuple,
-    tolerance: float,
-) -> tuple:
-    """The narrow phase of ``detect`` over ``pairs`` (K, 2): (point, normal, depth, feature, owner
-    — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
-    [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
-    generated afresh and nothing is kept. Compiled only (below): its body is chosen by the type of
-    ``keeping``, so a scene that never keeps a manifold (``Specialization.keeping`` None) compiles no reuse."""
-    raise NotImplementedError("kept_or_fresh runs compiled only (detect)")
-
-
-@overload(kept_or_fresh, inline="always")
-def _kept_or_fresh_compiled(keeping, model, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
-    if isinstance(keeping, types.NoneType):
-        return lambda keeping, model, plan, pairs, at, reach, kept, tolerance: _fresh(
-            model, plan, pairs, at, reach, kept
-        )
-
-    def kept_or_fresh(keeping, model, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
-        if not tolerance > 0.0:
-            return _fresh(model, plan, pairs, at, reach, kept)
-        found, made = reuse_or_generate(
-            pairs,
-            model.kinds,
-            model.params,
-            at[0],
-            at[1],
-            reach,
-            model.radius,
-            plan.hull_store,
-            plan.families,
-            kept,
-            tolerance,
-            model.kinds.shape[0],
-        )
-        return (*found, made)
-
-    return kept_or_fresh
-
-
-@njit(cache=True, inline="always")
-def _fresh(model, plan, pairs, at, reach, kept):
-    """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
-    found = generate_contacts(
-        pairs, model.kinds, model.params, at[0], at[1], _pair_reach(pairs, reach), plan.hull_store, plan.families
-    )
-    return (*found, _none_kept(kept))
-
-
-@njit(cache=True, inline="always")
-def _none_kept(kept):
-    """No manifold to keep: ``kept``'s eight fields, empty."""
-    return (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
 
 
 @njit(cache=True, inline="always")
@@ -466,25 +337,6 @@ def swept_clear(near: bool, margin: float) -> bool:
     within its swept bounds by half the margin, far beyond rounding, so the zero-reach broad
     phase of ``record`` would find no pair either."""
     return not near and margin > 0.0
-
-
-@njit(cache=True, inline="always")
-def _pair_reach(pairs, reach):
-    """The gap each pair's contacts may have (K,) [m]: its two colliders' reach summed."""
-    out = np.empty(pairs.shape[0])
-    for k in range(pairs.shape[0]):
-        out[k] = reach[pairs[k, 0]] + reach[pairs[k, 1]]
-    return out
-
-
-@njit(cache=True)
-def no_contacts() -> ContactArrays:
-    """The ContactArrays of no contact, from two empty arrays (every field a view of one): what
-    ``assemble_contacts`` gives for none, without its dozen allocations a step."""
-    real = np.empty((0, 3))
-    whole = np.empty((0, 3), dtype=np.int64)
-    flat, ids = real.reshape(0), whole.reshape(0)
-    return ContactArrays(ids, ids, whole, whole, real, real, real, real, flat, real, real, flat, flat, ids)
 
 
 @njit(cache=True)
@@ -636,22 +488,23 @@ def record(
     # after a step that found nothing within its swept reach nothing overlaps (the fresh pass
     # would find no pair): on an airborne ball the pass was a quarter of a sampled step
     if not clear:
-        touching = np.zeros(model.kinds.shape[0])
+        table = model.colliders
+        touching = np.zeros(table.kinds.shape[0])
         _, _, pairs = candidate_pairs(
-            model.kinds,
-            model.params,
+            table.kinds,
+            table.params,
             centers,
             rots,
             touching,
             motion.body_position.shape[0] + motion.particle_position.shape[0],
-            model.cloth_of,
+            table.cloth_of,
             plan.large,
         )
         if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
             depth = generate_contacts(
                 pairs,
-                model.kinds,
-                model.params,
+                table.kinds,
+                table.params,
                 centers,
                 rots,
                 np.zeros(pairs.shape[0]),

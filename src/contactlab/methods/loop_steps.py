@@ -72,10 +72,10 @@ def velocity_step(
     free = free_motion(model, motion, rotation, h, time)
     plain = without_drive(model)  # every later stage: the same machine code driven or not
     # 2. predict: how far each body and particle sweeps this step
-    reach = swept_reach(plain.radius, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain.colliders.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
-        plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
+        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -137,7 +137,7 @@ def passes(
             break
         at = displaced_motion(motion, displacement, settings.dt)
         rotation, centers, rots = poses(model, at)
-        contacts, _, _ = detect(model, spec.plan, spec.keeping, at, (centers, rots), reach, kept, 0.0)
+        contacts, _, _ = detect(model.colliders, spec.plan, spec.keeping, (centers, rots), reach, kept, 0.0, None)
         displacement, _, more, change = project(
             model,
             settings,
@@ -177,10 +177,10 @@ def projection_step(
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
     v_free = stacked(free[0], free[1], free[2])
     predicted = h * v_free
-    reach = swept_reach(plain.radius, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(plain.colliders.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
-        plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], settings.manifold_tolerance
+        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
@@ -227,9 +227,16 @@ def penalty_step(
     plain = without_drive(model)  # every stage but free motion: the same machine code driven or not
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
-        plain.radius, motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity, h, settings.margin
+        plain.colliders.radius,
+        motion.body_velocity,
+        motion.body_angular_velocity,
+        motion.particle_velocity,
+        h,
+        settings.margin,
     )
-    contacts, manifolds, _ = detect(plain, spec.plan, spec.keeping, motion, (centers, rots), reach, carried[0], 0.0)
+    contacts, manifolds, _ = detect(
+        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], 0.0, None
+    )
     rows = build_rows(plain, contacts, motion, rotation)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)

@@ -179,7 +179,7 @@ def guess_new_impulses(
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
     one body's contacts find its weight in a sweep or two): nothing is guessed there. ``pairs``
-    is ``LoopModel.cloth_of`` (the cloth of each body and particle, whose springs carry its weight
+    is ``Colliders.cloth_of`` (the cloth of each body and particle, whose springs carry its weight
     in the load path), None in exactly such a scene (no dynamic pair possible), and as an
     argument typed None it leaves the load path uncompiled there (2 s of a ball's first run).
 
@@ -439,7 +439,7 @@ def warm_impulses(
     warm = settings.warm_start * values
     positions = (motion.body_position, motion.particle_position)
     loads = (model.body_mass, model.particle_mass, model.gravity)
-    guess_new_impulses(warm, found, contacts, positions, loads, settings, model.cloth_of)
+    guess_new_impulses(warm, found, contacts, positions, loads, settings, model.colliders.cloth_of)
     return warm
 
 
