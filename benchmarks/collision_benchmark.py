@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from contactlab import ModelBuilder, collide, simulate
-from contactlab.collision import _bounds, _colliders, collide_keeping
+from contactlab.collision import _bounds, collide_keeping, colliders, state_poses
 from contactlab.collision.broad_phase import overlapping_pairs
 
 
@@ -62,8 +62,9 @@ def measure(name, model, repeat):
     times, broad = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        kinds, params, centers, rots = _colliders(model, state)
-        lower, upper = _bounds(kinds, params, centers, rots, np.zeros(len(kinds)))
+        table = colliders(model)
+        centers, rots = state_poses(model, state)
+        lower, upper = _bounds(table.kinds, table.params, centers, rots, np.zeros(len(table.kinds)))
         overlapping_pairs(lower[: model.body_count], upper[: model.body_count])
         t1 = time.perf_counter()
         contacts = collide(model, state)

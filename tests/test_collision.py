@@ -236,18 +236,18 @@ def test_fast_sphere_does_not_pass_through_another():
 def test_collider_rotations_are_laid_out_for_the_compiled_pair_routines():
     """The narrow phase is compiled for C-ordered rotations; rotations.to_matrix returns other
     strides, which would compile a second, slower specialization (Numba warns about it)."""
-    from contactlab.collision import _colliders
+    from contactlab.collision import state_poses
 
     b = ModelBuilder()
     b.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1, orientation=(0.9, 0.1, 0.3, 0.2))
     b.add_obstacle("plane", normal=(0, 0, 1))
     model = b.finalize()
-    assert _colliders(model, model.state())[3].flags.c_contiguous
+    assert state_poses(model, model.state())[1].flags.c_contiguous
 
 
 def test_bounds_enclose_every_shape(rng):
     """The broad phase's boxes contain every point of the shapes (sampled on their surfaces)."""
-    from contactlab.collision import _bounds, _colliders
+    from contactlab.collision import _bounds, colliders, state_poses
 
     b = ModelBuilder()
     for _ in range(20):
@@ -259,7 +259,8 @@ def test_bounds_enclose_every_shape(rng):
         b.add_body("sphere", radius=0.1, mass=1, position=rng.normal(size=3))
     model = b.finalize()
     state = model.state()
-    kinds, params, centers, rots = _colliders(model, state)
+    kinds, params = colliders(model).kinds, colliders(model).params
+    centers, rots = state_poses(model, state)
     lower, upper = _bounds(kinds, params, centers, rots, np.zeros(len(kinds)))
     R = rotations.to_matrix(state.body_orientation)
     directions = rng.normal(size=(500, 3))

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, collide, simulate
-from contactlab.collision import _colliders
+from contactlab.collision import colliders, state_poses
 from contactlab.collision.broad_phase import brute_force_pairs
 from contactlab.collision.families import pair_families
 from contactlab.collision.narrow_phase import (
@@ -102,7 +102,8 @@ def mixed_model():
 def test_the_specialised_narrow_phase_gives_the_contacts_of_the_full_dispatch():
     model = mixed_model()
     assert present(pair_families(model)) == set(FAMILIES)
-    kinds, params, centers, rots = _colliders(model, model.state())
+    kinds, params = colliders(model).kinds, colliders(model).params
+    centers, rots = state_poses(model, model.state())
     pairs = brute_force_pairs(np.full((len(kinds), 3), -1.0), np.full((len(kinds), 3), 1.0))  # every pair
     dynamic = model.body_count + model.particle_count
     pairs = pairs[(pairs[:, 0] < dynamic) & np.array([family(kinds[a], kinds[b]) is not None for a, b in pairs])]
@@ -147,7 +148,8 @@ def test_a_family_left_out_is_not_compiled_in():
     b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 0.05))
     b.add_obstacle("plane", normal=(0, 0, 1))
     model = b.finalize()
-    kinds, params, centers, rots = _colliders(model, model.state())
+    kinds, params = colliders(model).kinds, colliders(model).params
+    centers, rots = state_poses(model, model.state())
     pairs = np.array([[0, 1]], dtype=np.int64)
     point, *_ = fresh(pairs, kinds, params, centers, rots, np.zeros(1), None, pair_families(model))
     assert len(point) == 1

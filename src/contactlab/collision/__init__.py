@@ -164,6 +164,19 @@ def keeping_for(model: Model, tolerance: float) -> bool | None:
     return True if tolerance > 0.0 and keeps_manifolds(pair_families(model)) else None
 
 
+def state_poses(model: Model, state: State) -> tuple[np.ndarray, np.ndarray]:
+    """The colliders' centres (N, 3) [m] and rotations (N, 3, 3) at ``state``'s positions
+    (``collider_poses``)."""
+    table = colliders(model)
+    return collider_poses(
+        state.body_position,
+        rotations.to_matrix(state.body_orientation),
+        state.particle_position,
+        table.obstacle_position,
+        table.obstacle_rotation,
+    )
+
+
 @njit(cache=True)
 def collider_poses(
     body_position: np.ndarray,
@@ -484,13 +497,7 @@ def collide_keeping(
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
     table, plan = colliders(model), detection_plan(model)
-    centers, rots = collider_poses(
-        state.body_position,
-        rotations.to_matrix(state.body_orientation),
-        state.particle_position,
-        table.obstacle_position,
-        table.obstacle_rotation,
-    )
+    centers, rots = state_poses(model, state)
     # each collider reaches half the margin plus its own sweep; a pair, the sum of the two
     reach = np.full(dynamic + O, 0.5 * float(margin))
     if sweep is not None:

@@ -3,9 +3,11 @@
 The arrays ``run_steps`` (:mod:`contactlab.methods.velocity_loop`) steps — the model's (LoopModel),
 the settings as plain numbers (LoopSettings), the state's six arrays (Motion) and the recording
 (Samples) — and the stages each method's compiled step (:mod:`contactlab.methods.loop_steps`)
-calls: free motion, how far each collider sweeps, detection with kept manifolds, the contact
-rows, the sequential-impulse sweeps, and after a step the state stored, checked and recorded.
-They live apart from the steps so that each step reads as its loop on the slide.
+calls: free motion (``integrators.free_flight``), how far each collider sweeps
+(``collision.swept_reach``), detection with kept manifolds (``collision.detect``) — each the one
+function the methods' steps from Python call too, inlined here —, the contact rows, the
+sequential-impulse sweeps, and after a step the state stored, checked and recorded. They live
+apart from the steps so that each step reads as its loop on the slide.
 
 Numba caches each of these next to this file, but ``run_steps`` compiles them in and is refreshed
 only when ``velocity_loop.py`` changes: after editing a stage here, delete the caches
