@@ -32,10 +32,17 @@ function, by its address — so the caller's machine code holds only its own bod
 it is an ordinary call of the function, compiled it jumps to the same machine code. The entry
 point's Numba type carries the argument and return types, so a call with other types is a
 typing error, never a jump to code made for other arguments.
+
+**Orchestration that runs either way.** A function that only calls kernels, and slices and
+joins what they return (detection: broad phase, narrow phase, assembly), costs little to run
+from Python, but compiled on its own it links every kernel it calls (2 s for detection).
+:func:`python_or_inlined` makes such a function run as written where Python calls it, and
+inlined where compiled code calls it: one source, the same kernels, the same numbers.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import os
@@ -69,6 +76,7 @@ __all__ = [
     "call_entry",
     "compile_notice",
     "njit",
+    "python_or_inlined",
     "sources_digest",
 ]
 
@@ -269,3 +277,17 @@ def _call_entry_compiled(entry, arguments):  # type: ignore[no-untyped-def]  # N
         return _call_address(entry, arguments)
 
     return call
+
+
+def python_or_inlined(function: Any) -> Any:
+    """``function`` itself, which Python runs as written (its kernels compiled), and which compiled
+    code calls inlined (Numba compiles its body into the caller's): one source for both, and
+    from Python no compile of it on its own. For orchestration only — calls of compiled kernels,
+    slices, tuples —, whose arithmetic is the kernels': so both give the same numbers."""
+
+    @functools.wraps(function)  # the same signature, which Numba checks the implementation against
+    def typing(*argument_types: Any) -> Any:
+        return function
+
+    overload(function, inline="always")(typing)
+    return function

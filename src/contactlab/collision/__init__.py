@@ -15,7 +15,7 @@ from numba import types
 from numba.extending import overload
 
 from .. import rotations, shapes
-from ..compiling import njit
+from ..compiling import njit, python_or_inlined
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from ..model import derived
@@ -287,7 +287,7 @@ def dynamic_pairs_possible(dynamic: int) -> bool:
     return dynamic >= 2
 
 
-@njit(cache=True, inline="always")
+@python_or_inlined
 def detect(
     table: Colliders,
     plan: Plan,
@@ -300,15 +300,17 @@ def detect(
 ) -> tuple[ContactArrays, tuple, bool]:
     """Detection (stage 3 of every loop): the contacts of the colliders at centres and rotations
     ``at`` = ((N, 3) [m], (N, 3, 3)) within ``reach`` (N,) [m] of each other (speculative contacts),
-    from the broad phase (``candidate_pairs``), the narrow phase and the assembly of their rows.
-    Box, hull and plane pairs that barely moved reuse the ``kept`` manifolds (Manifolds' eight
-    fields) when ``tolerance`` [m] > 0. ``plan``: what the broad and narrow phase are compiled for
-    (its ``large`` None: never a grid broad phase); ``keeping`` None: never a kept manifold
-    (``keeping_for``); ``replaced`` = (bodies, colliders) whose pairs another granularity makes
-    (``collision.granularity``), None: none. Both as None leave their code uncompiled.
+    from the broad phase (``candidate_pairs``), the narrow phase and their assembly. Box, hull
+    and plane pairs that barely moved reuse the ``kept`` manifolds (Manifolds' eight fields)
+    when ``tolerance`` [m] > 0. ``plan``: what the broad and narrow phase are compiled for (its
+    ``large`` None: never a grid broad phase); ``keeping`` None: never a kept manifold
+    (``keeping_for``); ``replaced`` = (mask of a, mask of b), two (N,) bool: the pairs (a, b)
+    another granularity makes (``collision.granularity``), None: none. Both as None leave their
+    code uncompiled.
 
-    The one detection: ``collide_keeping`` calls it compiled, the compiled loop inlines it.
-    Returns (ContactArrays, the manifolds to keep, whether the broad phase found any pair)."""
+    The one detection: ``collide_keeping`` runs it from Python (its kernels compiled), the
+    compiled loop inlines it (``python_or_inlined``). Returns (ContactArrays, the manifolds to
+    keep, whether the broad phase found any pair)."""
     centers, rots = at
     dynamic = table.kinds.shape[0] - table.obstacle_position.shape[0]
     _, _, pairs = candidate_pairs(table.kinds, table.params, centers, rots, reach, dynamic, table.cloth_of, plan.large)
@@ -335,97 +337,73 @@ def detect(
     return contacts, made, True
 
 
-def kept_or_fresh(
-    keeping: bool | None,
-    table: Colliders,
-    plan: Plan,
-    pairs: np.ndarray,
-    at: tuple[np.ndarray, np.ndarray],
-    reach: np.ndarray,
-    kept: tuple,
-    tolerance: float,
-) -> tuple:
+def kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
     """The narrow phase of ``detect`` over ``pairs`` (K, 2): (point, normal, depth, feature, owner
     — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
     [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
-    generated afresh and nothing is kept. Compiled only (below): its body is chosen by the type of
-    ``keeping``, so a scene that never keeps a manifold compiles no reuse."""
-    raise NotImplementedError("kept_or_fresh runs compiled only (detect)")
+    generated afresh and nothing is kept. (Unannotated: Numba holds an implementation to the
+    signature of the function it implements, annotations included.)"""
+    if keeping is None or not tolerance > 0.0:
+        return _fresh(table, plan, pairs, at, reach, kept)
+    found, made = reuse_or_generate(
+        pairs,
+        table.kinds,
+        table.params,
+        at[0],
+        at[1],
+        reach,
+        table.radius,
+        plan.hull_store,
+        plan.families,
+        kept,
+        tolerance,
+        table.kinds.shape[0],
+    )
+    return (*found, made)
 
 
+# compiled, chosen by the type of ``keeping``: as None, the reuse is not compiled at all
 @overload(kept_or_fresh, inline="always")
 def _kept_or_fresh_compiled(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
     if isinstance(keeping, types.NoneType):
         return lambda keeping, table, plan, pairs, at, reach, kept, tolerance: _fresh(
             table, plan, pairs, at, reach, kept
         )
-
-    def kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
-        if not tolerance > 0.0:
-            return _fresh(table, plan, pairs, at, reach, kept)
-        found, made = reuse_or_generate(
-            pairs,
-            table.kinds,
-            table.params,
-            at[0],
-            at[1],
-            reach,
-            table.radius,
-            plan.hull_store,
-            plan.families,
-            kept,
-            tolerance,
-            table.kinds.shape[0],
-        )
-        return (*found, made)
-
     return kept_or_fresh
 
 
-def without_replaced(pairs: np.ndarray, replaced: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+def without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
     """``pairs`` (K, 2) less those (a, b) where ``replaced`` = (mask of a, mask of b), two (N,)
     bool, marks both: their contacts come from ``granularity.polytope_contacts`` instead.
-    ``pairs`` itself where ``replaced`` is None. Compiled only (below), chosen by its type."""
-    raise NotImplementedError("without_replaced runs compiled only (detect)")
+    ``pairs`` itself where ``replaced`` is None."""
+    if replaced is None:
+        return pairs
+    side_a, side_b = replaced
+    return pairs[~(side_a[pairs[:, 0]] & side_b[pairs[:, 1]])]
 
 
+# compiled, chosen by the type of ``replaced``: as None, nothing of the filter is compiled
 @overload(without_replaced, inline="always")
 def _without_replaced_compiled(pairs, replaced):  # type: ignore[no-untyped-def]
     if isinstance(replaced, types.NoneType):
         return lambda pairs, replaced: pairs
-
-    def without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
-        side_a, side_b = replaced
-        keep = np.empty(pairs.shape[0], dtype=np.bool_)
-        for k in range(pairs.shape[0]):
-            keep[k] = not (side_a[pairs[k, 0]] and side_b[pairs[k, 1]])
-        return pairs[keep]
-
     return without_replaced
 
 
-@njit(cache=True, inline="always")
+@python_or_inlined
 def _fresh(table, plan, pairs, at, reach, kept):
     """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
+    pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]  # a pair's contacts: its two reaches summed
     found = generate_contacts(
-        pairs, table.kinds, table.params, at[0], at[1], _pair_reach(pairs, reach), plan.hull_store, plan.families
+        pairs, table.kinds, table.params, at[0], at[1], pair_reach, plan.hull_store, plan.families
     )
     return (*found, _none_kept(kept))
 
 
-@njit(cache=True, inline="always")
+@python_or_inlined
 def _none_kept(kept):
     """No manifold to keep: ``kept``'s eight fields, empty."""
     return (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
-
-
-@njit(cache=True, inline="always")
-def _pair_reach(pairs, reach):
-    """The gap each pair's contacts may have (K,) [m]: its two colliders' reach summed."""
-    out = np.empty(pairs.shape[0])
-    for k in range(pairs.shape[0]):
-        out[k] = reach[pairs[k, 0]] + reach[pairs[k, 1]]
-    return out
 
 
 @njit(cache=True)
