@@ -454,3 +454,33 @@ def test_a_call_by_address_runs_the_same_machine_code_compiled_or_from_python_an
     again = pickle.loads(pickle.dumps(entry))
     assert again.numba_type == entry.numba_type and again.address == entry.address
     assert _oscillated(again, position.copy(), velocity.copy(), 0.01, 4.0, 300) == compiled
+
+
+def test_detection_from_python_is_the_loops_code_and_compiles_nothing_of_its_own():
+    """``collide`` runs ``collision.detect`` as Python (``compiling.in_python``), calling the
+    kernels the compiled loop calls: it compiles no whole-detection kernel of its own (2 s a
+    scene), and the same code compiled, as the loop inlines it, gives the same contacts bit for
+    bit, fresh and reusing kept manifolds alike."""
+    from contactlab import collision
+    from contactlab.collision.manifolds import Manifolds
+    from contactlab.compiling import in_python
+
+    model = mixed_model()
+    state = model.state()
+    collide(model, state, margin=0.02)
+    assert collision.detect.signatures == []  # ran as Python, not compiled on its own
+
+    @numba.njit
+    def compiled(table, plan, keeping, at, reach, kept, tolerance):
+        return collision.detect(table, plan, keeping, at, reach, kept, tolerance, None)
+
+    table, plan = collision.colliders(model), collision.detection_plan(model)
+    at = state_poses(model, state)
+    reach = np.full(len(table.kinds), 0.01)
+    kept = tuple(vars(Manifolds.empty()).values())
+    for keeping, tolerance in ((None, 0.0), (True, 1e-3)):
+        python = in_python(collision.detect)(table, plan, keeping, at, reach, kept, tolerance, None)
+        machine = compiled(table, plan, keeping, at, reach, kept, tolerance)
+        assert python[2] and machine[2] and len(python[0].depth) > 10
+        for ours, theirs in zip(python[0] + python[1], machine[0] + machine[1]):
+            np.testing.assert_array_equal(ours, theirs)

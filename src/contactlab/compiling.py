@@ -36,17 +36,17 @@ typing error, never a jump to code made for other arguments.
 **Orchestration that runs either way.** A function that only calls kernels, and slices and
 joins what they return (detection: broad phase, narrow phase, assembly), costs little to run
 from Python, but compiled on its own it links every kernel it calls (2 s for detection).
-:func:`python_or_inlined` makes such a function run as written where Python calls it, and
-inlined where compiled code calls it: one source, the same kernels, the same numbers.
+:func:`in_python` gives such a function, compiled code inlines, as Python that calls the same
+compiled kernels: one source, the same numbers.
 """
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import importlib
 import os
 import sys
+import types as types_module
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -57,6 +57,7 @@ from llvmlite import ir
 from numba import njit, typeof
 from numba.core import caching, cgutils, event, types
 from numba.core.errors import TypingError
+from numba.core.registry import CPUDispatcher as Dispatcher
 from numba.extending import (
     NativeValue,
     intrinsic,
@@ -76,7 +77,7 @@ __all__ = [
     "call_entry",
     "compile_notice",
     "njit",
-    "python_or_inlined",
+    "in_python",
     "sources_digest",
 ]
 
@@ -279,15 +280,25 @@ def _call_entry_compiled(entry, arguments):  # type: ignore[no-untyped-def]  # N
     return call
 
 
-def python_or_inlined(function: Any) -> Any:
-    """``function`` itself, which Python runs as written (its kernels compiled), and which compiled
-    code calls inlined (Numba compiles its body into the caller's): one source for both, and
-    from Python no compile of it on its own. For orchestration only — calls of compiled kernels,
-    slices, tuples —, whose arithmetic is the kernels': so both give the same numbers."""
+def in_python(kernel: Any) -> Any:
+    """``kernel`` (a compiled dispatcher, or a Python function that compiled code calls through an
+    ``overload``) as a Python function of the same code, in which every function it inlines
+    (``inline="always"``) or calls as Python runs as Python too, the same way down, and every
+    other kernel it calls runs compiled: for orchestration that only calls kernels and slices
+    what they return, whose compiled form would link all of them (2 s for detection)."""
+    if kernel in _IN_PYTHON:
+        return _IN_PYTHON[kernel]
+    function = getattr(kernel, "py_func", kernel)
+    names = dict(function.__globals__)
+    twin = types_module.FunctionType(function.__code__, names, function.__name__, function.__defaults__)
+    twin.__doc__, twin.__wrapped__ = function.__doc__, function
+    _IN_PYTHON[kernel] = twin
+    for name in function.__code__.co_names:
+        value = names.get(name)
+        inlined = isinstance(value, Dispatcher) and value.targetoptions.get("inline") == "always"
+        if inlined or (isinstance(value, types_module.FunctionType) and value.__module__.startswith(__package__)):
+            names[name] = in_python(value)
+    return twin
 
-    @functools.wraps(function)  # the same signature, which Numba checks the implementation against
-    def typing(*argument_types: Any) -> Any:
-        return function
 
-    overload(function, inline="always")(typing)
-    return function
+_IN_PYTHON: dict[Any, Any] = {}

@@ -15,7 +15,7 @@ from numba import types
 from numba.extending import overload
 
 from .. import rotations, shapes
-from ..compiling import njit, python_or_inlined
+from ..compiling import in_python, njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from ..model import derived
@@ -287,7 +287,7 @@ def dynamic_pairs_possible(dynamic: int) -> bool:
     return dynamic >= 2
 
 
-@python_or_inlined
+@njit(cache=True, inline="always")
 def detect(
     table: Colliders,
     plan: Plan,
@@ -308,8 +308,8 @@ def detect(
     another granularity makes (``collision.granularity``), None: none. Both as None leave their
     code uncompiled.
 
-    The one detection: ``collide_keeping`` runs it from Python (its kernels compiled), the
-    compiled loop inlines it (``python_or_inlined``). Returns (ContactArrays, the manifolds to
+    The one detection: the compiled loop inlines it, ``collide_keeping`` runs it as Python
+    (``compiling.in_python``: the same code calling the same compiled kernels). Returns (ContactArrays, the manifolds to
     keep, whether the broad phase found any pair)."""
     centers, rots = at
     dynamic = table.kinds.shape[0] - table.obstacle_position.shape[0]
@@ -390,7 +390,7 @@ def _without_replaced_compiled(pairs, replaced):  # type: ignore[no-untyped-def]
     return without_replaced
 
 
-@python_or_inlined
+@njit(cache=True, inline="always")
 def _fresh(table, plan, pairs, at, reach, kept):
     """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
     pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]  # a pair's contacts: its two reaches summed
@@ -400,7 +400,7 @@ def _fresh(table, plan, pairs, at, reach, kept):
     return (*found, _none_kept(kept))
 
 
-@python_or_inlined
+@njit(cache=True, inline="always")
 def _none_kept(kept):
     """No manifold to keep: ``kept``'s eight fields, empty."""
     return (kept[0][:0], kept[1][:0], kept[2][:0], kept[3][:0], kept[4][:0], kept[5][:0], kept[6][:0], kept[7][:0])
@@ -499,7 +499,7 @@ def collide_keeping(
         parts += surface_parts
     keeping = keeping_for(model, tolerance)
     kept = tuple(vars(manifolds if manifolds is not None and keeping else Manifolds.empty()).values())
-    arrays, made, _ = detect(table, plan, keeping, (centers, rots), reach, kept, tolerance, replaced)
+    arrays, made, _ = in_python(detect)(table, plan, keeping, (centers, rots), reach, kept, tolerance, replaced)
     found = Contacts.from_arrays(arrays)
     if parts:
         a, b, point, unit, depth, feature = (np.concatenate(column) for column in zip(*parts))
