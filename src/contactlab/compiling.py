@@ -42,6 +42,7 @@ compiled kernels: one source, the same numbers.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import os
@@ -291,7 +292,7 @@ def in_python(kernel: Any) -> Any:
     function = getattr(kernel, "py_func", kernel)
     names = dict(function.__globals__)
     twin = types_module.FunctionType(function.__code__, names, function.__name__, function.__defaults__)
-    twin.__doc__, twin.__wrapped__ = function.__doc__, function
+    functools.update_wrapper(twin, function)  # its name, docstring and module; __wrapped__ the original
     _IN_PYTHON[kernel] = twin
     for name in function.__code__.co_names:
         value = names.get(name)

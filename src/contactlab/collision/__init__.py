@@ -314,10 +314,10 @@ def detect(
     centers, rots = at
     dynamic = table.kinds.shape[0] - table.obstacle_position.shape[0]
     _, _, pairs = candidate_pairs(table.kinds, table.params, centers, rots, reach, dynamic, table.cloth_of, plan.large)
-    pairs = without_replaced(pairs, replaced)
+    pairs = _without_replaced(pairs, replaced)
     if pairs.shape[0] == 0:  # nothing near: no narrow phase, nothing kept, nothing to assemble
         return no_contacts(), _none_kept(kept), False
-    point, normal, depth, feature, owner, made = kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance)
+    point, normal, depth, feature, owner, made = _kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance)
     if depth.shape[0] == 0:
         return no_contacts(), made, True
     contacts = assemble_contacts(
@@ -337,7 +337,7 @@ def detect(
     return contacts, made, True
 
 
-def kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
+def _kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
     """The narrow phase of ``detect`` over ``pairs`` (K, 2): (point, normal, depth, feature, owner
     — ``generate_contacts``' —, the manifolds to keep). Pairs that moved less than ``tolerance``
     [m] reuse their ``kept`` manifolds (``reuse_or_generate``) where ``keeping``, else all are
@@ -363,16 +363,16 @@ def kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # t
 
 
 # compiled, chosen by the type of ``keeping``: as None, the reuse is not compiled at all
-@overload(kept_or_fresh, inline="always")
+@overload(_kept_or_fresh, inline="always")
 def _kept_or_fresh_compiled(keeping, table, plan, pairs, at, reach, kept, tolerance):  # type: ignore[no-untyped-def]
     if isinstance(keeping, types.NoneType):
         return lambda keeping, table, plan, pairs, at, reach, kept, tolerance: _fresh(
             table, plan, pairs, at, reach, kept
         )
-    return kept_or_fresh
+    return _kept_or_fresh
 
 
-def without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
+def _without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
     """``pairs`` (K, 2) less those (a, b) where ``replaced`` = (mask of a, mask of b), two (N,)
     bool, marks both: their contacts come from ``granularity.polytope_contacts`` instead.
     ``pairs`` itself where ``replaced`` is None."""
@@ -383,16 +383,16 @@ def without_replaced(pairs, replaced):  # type: ignore[no-untyped-def]
 
 
 # compiled, chosen by the type of ``replaced``: as None, nothing of the filter is compiled
-@overload(without_replaced, inline="always")
+@overload(_without_replaced, inline="always")
 def _without_replaced_compiled(pairs, replaced):  # type: ignore[no-untyped-def]
     if isinstance(replaced, types.NoneType):
         return lambda pairs, replaced: pairs
-    return without_replaced
+    return _without_replaced
 
 
 @njit(cache=True, inline="always")
 def _fresh(table, plan, pairs, at, reach, kept):
-    """``kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
+    """``_kept_or_fresh`` with nothing kept: every pair's contacts generated, no manifold to keep."""
     pair_reach = reach[pairs[:, 0]] + reach[pairs[:, 1]]  # a pair's contacts: its two reaches summed
     found = generate_contacts(
         pairs, table.kinds, table.params, at[0], at[1], pair_reach, plan.hull_store, plan.families

@@ -162,7 +162,7 @@ particles). A flag that is None leaves its branch uncompiled; the numbers are th
 Numba leaves a branch uncompiled only where it tests an *argument* typed None, never a field of a tuple:
 each flag reaches the one kernel that branches on it as an argument of its own (``candidate_pairs``
 ``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``), or is
-chosen on by its type when compiling (``kept_or_fresh``, ``for_response``)."""
+chosen on by its type when compiling (``collision._kept_or_fresh``, ``for_response``)."""
 
 
 def specialization(model: Model, method: str, options: CollisionOptions, penalty: Any = None) -> Specialization:
