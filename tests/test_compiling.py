@@ -4,7 +4,6 @@ gives the contacts of the full dispatch, and a compilation says so on stderr."""
 import io
 import json
 import os
-import pickle
 import subprocess
 import sys
 
@@ -24,7 +23,7 @@ from contactlab.collision.narrow_phase import (
     generate_contacts,
     needs_hulls,
 )
-from contactlab.compiling import NOTICE, EntryPoint, FirstCompile, call_entry, compile_notice
+from contactlab.compiling import NOTICE, FirstCompile, compile_notice
 
 OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) * 0.06
 TETRAHEDRON = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]) - 0.025
@@ -404,56 +403,11 @@ def test_every_kernel_is_stamped_with_the_whole_package():
                 with open(os.path.join(folder, name), encoding="utf-8") as source:
                     text = source.read()
                 assert "from numba import njit" not in text, f"{name}: take njit from contactlab.compiling"
-    for kernel in (velocity_loop.run_steps, generate_contacts):
+    for kernel in (velocity_loop.LOOPS["velocity"], generate_contacts):
         locator = kernel._cache._impl.locator
         assert isinstance(locator, compiling.PackageStampedLocator)
         assert locator.get_source_stamp() == ("package sources", compiling.sources_digest(package))
         assert locator.get_cache_path() == kernel._cache._cache_path
-
-
-@numba.njit
-def _accelerated(position, velocity, h, stiffness):
-    """One explicit step of x'' = −k x on arrays (changed in place); raises on a non-finite x."""
-    for i in range(position.shape[0]):
-        velocity[i] -= h * stiffness * position[i]
-        position[i] += h * velocity[i]
-    if not np.isfinite(position).all():
-        raise ValueError("position not finite")
-    return position.sum(), (velocity.copy(), position.shape[0])
-
-
-@numba.njit
-def _oscillated(entry, position, velocity, h, stiffness, steps):
-    total = 0.0
-    for _ in range(steps):
-        summed, (copied, count) = call_entry(entry, (position, velocity, h, stiffness))
-        total += summed + copied[0] + count
-    return total
-
-
-def test_a_call_by_address_runs_the_same_machine_code_compiled_or_from_python_and_checks_its_types():
-    """compiling.call_entry: the caller compiled jumps to the EntryPoint's machine code, the caller
-    from Python calls its dispatcher (the same overload), so both give the same numbers bit for
-    bit; an exception the callee raises reaches the caller; arguments of other types than the
-    entry point was made for are a typing error, not a jump into code made for others."""
-    position, velocity = np.linspace(-1.0, 1.0, 5), np.zeros(5)
-    entry = EntryPoint.for_arguments(_accelerated, (position, velocity, 0.01, 4.0))
-    assert entry.numba_type.arguments in _accelerated.overloads and entry.address > 0
-    compiled = _oscillated(entry, position.copy(), velocity.copy(), 0.01, 4.0, 300)
-    from_python = _oscillated.py_func(entry, position.copy(), velocity.copy(), 0.01, 4.0, 300)
-    assert compiled == from_python
-    # x'' = −4 x from x0 at rest: the symplectic step's sum of x stays near x0 cos(2t), t = 3 s
-    final = position.copy()
-    _oscillated(entry, final, velocity.copy(), 0.01, 4.0, 300)
-    np.testing.assert_allclose(final, position * np.cos(2 * 3.0), atol=0.02)
-    with pytest.raises(ValueError, match="not finite"):
-        _oscillated(entry, np.full(5, np.nan), velocity.copy(), 0.01, 4.0, 1)
-    with pytest.raises(numba.TypingError, match="called with"):
-        _oscillated(entry, position.copy(), velocity.copy(), 0.01, 4, 1)  # stiffness an int: other types
-    # pickled (a Model keeps its loop's entry points), it is found again by name and types
-    again = pickle.loads(pickle.dumps(entry))
-    assert again.numba_type == entry.numba_type and again.address == entry.address
-    assert _oscillated(again, position.copy(), velocity.copy(), 0.01, 4.0, 300) == compiled
 
 
 def test_detection_from_python_is_the_loops_code_and_compiles_nothing_of_its_own():

@@ -3,7 +3,6 @@
 by one from Python (the methods' ``step``): on every built-in scene the loop serves, the two give
 bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
 
-import numba
 import numpy as np
 import pytest
 from conftest import ball_on_plane
@@ -155,44 +154,23 @@ def test_the_loop_stops_at_the_step_that_passes_the_speed_limit(monkeypatch):
     assert run.arrays["time"][-1] == pytest.approx(steps * dt)
 
 
-def test_a_run_of_any_length_steps_through_the_compiled_loop_which_calls_the_steps_own_machine_code():
+def test_a_run_of_any_length_steps_through_the_compiled_loop_with_its_step_inlined():
     """Issue 36: a short run on an empty cache stepped the loop's body from Python (about 30 ms a
-    720-step ball run against 3 ms compiled), because compiling ``run_steps`` linked its step in and
-    cost 10–14 s more. ``run_steps`` now calls the step by address (compiling.call_entry): its machine
-    code holds no copy of the step, so every run takes it, however short, and the loop run from
-    Python calls the same machine code, giving the same numbers."""
+    720-step ball run against 3 ms compiled), because compiling the loop linked a step compiled on
+    its own and cost 10–14 s more. Each of the loop's compiled forms (``velocity_loop.LOOPS``) now
+    holds its method's step inlined, compiled only there: every run takes the loop however short,
+    and the step is never compiled on its own."""
     scene = load_scene("bouncing_ball")
     model, options = scene.model, impulse.Options()
-
-    def stepper(compiled_loop=None):
-        return velocity_loop.stepper_for(
-            model, "impulse", options, scene.integrator, scene.dt, model.state(), compiled_loop
-        )
-
+    stepper = velocity_loop.stepper_for(model, "impulse", options, scene.integrator, scene.dt, model.state())
     short = simulate(model, "impulse", scene.dt, 10 * scene.dt)
     assert short.summary["compiled_loop"] and short.summary["stepping"] == "compiled loop"
-    assert not stepper(compiled_loop=False).compiled  # the method's own step (StitchedStepper)
-    entry = stepper().entry_point()
-    assert entry.function is loop_steps.velocity_step and entry.numba_type.arguments in entry.function.overloads
-    (types,) = [t for t in velocity_loop.run_steps.overloads if entry.numba_type in t]
-    fresh = numba.njit(velocity_loop.run_steps.py_func)  # not cached: a cached entry has no IR to read
-    fresh.compile(types)
-    step_symbol = entry.function.overloads[entry.numba_type.arguments].fndesc.llvm_func_name
-    llvm_ir = fresh.overloads[types].library.get_llvm_str()
-    assert "define" in llvm_ir and step_symbol not in llvm_ir  # the step is neither compiled into run nor linked
-
-    def advanced(through):  # the loop's body from Python: call_entry calls the step's dispatcher
-        twin = stepper()
-        samples = velocity_loop.empty_samples(model, 13)  # steps 1–90 sampled every 7th and the last: 7, 14, …, 84, 90
-        made, diverged, _, time, written, *_ = through(*twin._run_arguments(90, 1, 90, 7, samples, 1e6))
-        return (made, diverged, time, written), samples, twin.motion
-
-    from_python, compiled = advanced(velocity_loop.run_steps.py_func), advanced(velocity_loop.run_steps)
-    assert from_python[0] == compiled[0] and from_python[0][3] == 13
-    for name, series in from_python[1]._asdict().items():
-        np.testing.assert_array_equal(series, getattr(compiled[1], name), err_msg=name)
-    for python_array, compiled_array in zip(from_python[2], compiled[2]):
-        np.testing.assert_array_equal(python_array, compiled_array)
+    assert stepper.loop is velocity_loop.LOOPS["velocity"] and stepper.loop.signatures
+    assert not loop_steps.velocity_step.signatures  # inlined into the loop, not compiled on its own
+    not_compiled = velocity_loop.stepper_for(
+        model, "impulse", options, scene.integrator, scene.dt, model.state(), compiled_loop=False
+    )
+    assert not not_compiled.compiled  # the method's own step (StitchedStepper)
 
 
 def test_compiled_loop_must_be_a_yes_or_no():
@@ -212,7 +190,7 @@ def test_projection_takes_the_loop_and_compiles_only_its_own_step():
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
     methods = ("constraints", "impulse", "projection")
     assert [getattr(stepper.spec, name) for name in methods] == [None, None, True]
-    assert stepper.entry_point().function is loop_steps.projection_step
+    assert stepper.loop is velocity_loop.LOOPS["projection"]
     spec = loop_stages.specialization(model, "impulse", impulse.Options())
     assert [getattr(spec, name) for name in methods] == [None, True, None]
     spec = loop_stages.specialization(model, "constraints", get("constraints").Options())

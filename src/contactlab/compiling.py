@@ -24,18 +24,11 @@ stale, and the next run compiles afresh (and says so).
 The most threads the kernels may use is Numba's, fixed when it starts: :func:`available_threads`
 (:mod:`contactlab.threads` chooses how many of them a run takes).
 
-**Calling machine code without compiling it again.** Numba links the machine code of every
-compiled function a function calls into its own, and optimizes and emits the whole again: the
-stepping loop, compiled around a step that is already compiled, spent 10–14 s on the step's
-code once more. :func:`call_entry` calls an :class:`EntryPoint` — one overload of a compiled
-function, by its address — so the caller's machine code holds only its own body: from Python
-it is an ordinary call of the function, compiled it jumps to the same machine code. The entry
-point's Numba type carries the argument and return types, so a call with other types is a
-typing error, never a jump to code made for other arguments.
-
 **Orchestration that runs either way.** A function that only calls kernels, and slices and
 joins what they return (detection: broad phase, narrow phase, assembly), costs little to run
-from Python, but compiled on its own it links every kernel it calls (2 s for detection).
+from Python, but compiled on its own it links every kernel it calls (Numba links the machine
+code of every compiled function a function calls into its own and optimizes the whole again:
+2 s for detection).
 :func:`in_python` gives such a function, compiled code inlines, as Python that calls the same
 compiled kernels: one source, the same numbers.
 """
@@ -44,7 +37,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import importlib
 import os
 import sys
 import types as types_module
@@ -54,28 +46,15 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numba
-from llvmlite import ir
-from numba import njit, typeof
-from numba.core import caching, cgutils, event, types
-from numba.core.errors import TypingError
+from numba import njit
+from numba.core import caching, event
 from numba.core.registry import CPUDispatcher as Dispatcher
-from numba.extending import (
-    NativeValue,
-    intrinsic,
-    models,
-    overload,
-    register_model,
-    typeof_impl,
-    unbox,
-)
 
 __all__ = [
     "NOTICE",
     "FirstCompile",
     "PackageStampedLocator",
     "available_threads",
-    "EntryPoint",
-    "call_entry",
     "compile_notice",
     "njit",
     "in_python",
@@ -182,103 +161,6 @@ class PackageStampedLocator(caching._CacheLocator):
 
 
 PackageStampedLocator.stamp_package(Path(__file__).parent)
-
-
-class EntryPoint:
-    """The machine code of ``function`` (a compiled dispatcher) for ``argument_types`` (Numba
-    types, as the caller will pass them): compiled or loaded from the cache here, held by its
-    address, for :func:`call_entry`. Pickled, it is its function's name and the types, and
-    unpickled it finds the machine code in the new process (an address is no more than a number
-    elsewhere)."""
-
-    def __init__(self, function: Any, argument_types: tuple) -> None:
-        function.compile(argument_types)
-        result = function.overloads[argument_types]
-        self.function = function
-        self.address = result.library.get_pointer_to_function(result.fndesc.llvm_func_name)
-        self.numba_type = EntryPointType(
-            f"{function.py_func.__module__}.{function.py_func.__qualname__}",
-            argument_types,
-            result.signature.return_type,
-        )
-
-    @classmethod
-    def for_arguments(cls, function: Any, arguments: tuple) -> EntryPoint:
-        """The EntryPoint of ``function`` for the types of ``arguments`` (values, as the caller
-        will pass them)."""
-        return cls(function, tuple(typeof(a) for a in arguments))
-
-    def __reduce__(self) -> tuple:
-        code = self.function.py_func
-        return _entry_point_of, (code.__module__, code.__qualname__, self.numba_type.arguments)
-
-
-def _entry_point_of(module: str, name: str, argument_types: tuple) -> EntryPoint:
-    """The EntryPoint of the function ``name`` of ``module`` for ``argument_types`` (unpickling)."""
-    return EntryPoint(getattr(importlib.import_module(module), name), argument_types)
-
-
-class EntryPointType(types.Type):
-    """Numba's type of an :class:`EntryPoint`: the function's name, its argument types and its
-    return type; the value is the address (int64)."""
-
-    def __init__(self, name: str, arguments: tuple, returns: types.Type) -> None:
-        self.arguments = arguments
-        self.returns = returns
-        super().__init__(name=f"EntryPoint({name}{arguments} -> {returns})")
-
-
-@typeof_impl.register(EntryPoint)
-def _typeof_entry_point(value: EntryPoint, context: Any) -> EntryPointType:
-    return value.numba_type
-
-
-@register_model(EntryPointType)
-class _EntryPointModel(models.PrimitiveModel):
-    def __init__(self, dmm: Any, fe_type: EntryPointType) -> None:
-        super().__init__(dmm, fe_type, ir.IntType(64))
-
-
-@unbox(EntryPointType)
-def _unbox_entry_point(typ: EntryPointType, obj: Any, c: Any) -> NativeValue:
-    address = c.pyapi.object_getattr_string(obj, "address")
-    value = c.pyapi.long_as_longlong(address)
-    c.pyapi.decref(address)
-    return NativeValue(value, is_error=c.pyapi.c_api_error())
-
-
-def call_entry(entry: EntryPoint, arguments: tuple) -> Any:
-    """``entry``'s function called with ``arguments``: from Python an ordinary call; in compiled
-    code a call to its machine code by address, which the caller neither compiles nor links."""
-    return entry.function(*arguments)
-
-
-@intrinsic
-def _call_address(typingctx: Any, entry: EntryPointType, arguments: Any) -> Any:
-    if tuple(arguments.types) != entry.arguments:
-        raise TypingError(f"{entry} called with {tuple(arguments.types)}")
-
-    def codegen(context: Any, builder: Any, signature: Any, values: Any) -> Any:
-        address, packed = values
-        passed = cgutils.unpack_tuple(builder, packed, len(entry.arguments))
-        function_type = context.call_conv.get_function_type(entry.returns, entry.arguments)
-        pointer = builder.inttoptr(address, function_type.as_pointer())
-        status, result = context.call_conv.call_function(builder, pointer, entry.returns, entry.arguments, passed)
-        with cgutils.if_unlikely(builder, status.is_error):
-            context.call_conv.return_status_propagate(builder, status)
-        return result
-
-    return entry.returns(entry, arguments), codegen
-
-
-# inlined into the caller: the tuple of arguments it packs is then unpacked in the same function,
-# where Numba's reference-count pruning drops the pairs (a ball's step 0.17 µs faster)
-@overload(call_entry, inline="always")
-def _call_entry_compiled(entry, arguments):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
-    def call(entry, arguments):  # type: ignore[no-untyped-def]
-        return _call_address(entry, arguments)
-
-    return call
 
 
 def in_python(kernel: Any) -> Any:

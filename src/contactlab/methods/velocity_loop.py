@@ -11,14 +11,13 @@ compiled code, with no Python between steps. The stages are the ones
 the loop gives what their ``step`` gives (``tests/test_velocity_loop.py`` holds them equal).
 A method's step is compiled only for the runs of that method (its ``Specialization``).
 
-**Every run compiled, short ones included.** ``run_steps`` calls its method's step by address
-(:func:`contactlab.compiling.call_entry`): the step's machine code, compiled once for the run's
-types (``Stepper.entry_point``), is not compiled again inside ``run_steps``, whose own machine code is
-the loop, the state stored, checked and recorded — 2–3 s to compile where linking the step in
-cost 10–14 s. So every run the loop serves runs compiled from its first step, and its next run
-in a fresh process loads it from the cache. The price is the call's boundary: each step passes
-its arrays across a call the optimizer cannot see into, their references counted at each
-crossing, about 0.6 µs a step (a quarter of a one-ball step, nothing on a pile).
+**Every run compiled, short ones included.** ``run_steps`` is compiled three times
+(``LOOPS``), each with its method's step inlined (``velocity_step``, ``projection_step`` or
+``penalty_step``): the step's code is compiled once, inside the loop, never on its own. So every run
+the loop serves runs compiled from its first step, its next run in a fresh process loads it from
+the cache, and no step's arrays cross a call between the loop and the step (calling the step by
+address, as the loop did before, cost about 0.6 µs a step in references counted at the
+crossing: a fifth of a one-ball step).
 
 This module holds ``run_steps`` and the Python side (the model and settings in the loop's form, the Steppers,
 ``stepper_for``); the stages every step shares and the loop's data are in
@@ -54,6 +53,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from types import FunctionType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -62,8 +62,7 @@ from .. import diagnostics, interrupts, shapes
 from ..collision import collide
 from ..collision.cloth_self import is_self_contact
 from ..collision.manifolds import Manifolds
-from ..compiling import EntryPoint, call_entry, njit
-from ..model import derived
+from ..compiling import njit
 from ..state import Carry, State
 from .base import CollisionOptions
 from .loop_stages import (
@@ -108,12 +107,10 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
     return method != "constraints" or (options.solver == "matrix_free" and options.formulation == "velocity")
 
 
-@njit(cache=True)
 def run_steps(
     model: LoopModel,
     settings: LoopSettings,
     spec: Specialization,
-    step: EntryPoint,
     start: tuple,
     schedule: tuple,
     samples: Samples,
@@ -142,8 +139,8 @@ def run_steps(
     for s in range(steps):
         index = first_index + s
         # every step has one signature and one result (loop_steps): no branch on the method here
-        positions, velocities, carried, count, sweeps, change, clear, elastic, implicit, linear = call_entry(
-            step, (model, settings, spec, motion, pose, time, carried)
+        positions, velocities, carried, count, sweeps, change, clear, elastic, implicit, linear = method_step(
+            model, settings, spec, motion, pose, time, carried
         )
         store(motion, positions, velocities)
         pose = poses(plain, motion)
@@ -159,6 +156,30 @@ def run_steps(
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
+
+
+def method_step(*arguments: Any) -> tuple:
+    """Where ``run_steps`` takes its method's step: each of its compiled forms (``LOOPS``) puts
+    that step's code here, inlined."""
+    raise NotImplementedError("run_steps runs compiled, as one of LOOPS")
+
+
+def _loop_with(step: Any, name: str) -> Any:
+    """``run_steps`` compiled with ``step`` (a step of loop_steps) inlined as its ``method_step``:
+    its code once, the step's too, and no call between them (each step's arrays would cross it,
+    their references counted)."""
+    template = run_steps
+    names = dict(template.__globals__, method_step=njit(inline="always")(step.py_func))
+    loop = FunctionType(template.__code__, names, name, template.__defaults__)
+    loop.__qualname__, loop.__doc__ = name, template.__doc__  # its own cache entries
+    return njit(cache=True)(loop)
+
+
+LOOPS = {
+    "velocity": _loop_with(velocity_step, "run_velocity_steps"),
+    "projection": _loop_with(projection_step, "run_projection_steps"),
+    "penalty": _loop_with(penalty_step, "run_penalty_steps"),
+}
 
 
 # ---- from Python: the model, the settings and the state in the loop's form, and back --------
@@ -273,7 +294,7 @@ class Stepper(Stepping):
     def _steps(self, samples: Samples, schedule: tuple) -> tuple[int, bool, int]:
         steps, first_index, last_index, record_every, max_speed = schedule
         arguments = self._run_arguments(steps, first_index, last_index, record_every, samples, max_speed)
-        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = run_steps(*arguments)
+        made, diverged, self.carried, self.time, written, most, sweeps, implicit, linear = self.loop(*arguments)
         self.max_contacts = max(self.max_contacts, most)
         self.sweeps_made += sweeps
         self.implicit_spring_steps += implicit
@@ -283,23 +304,14 @@ class Stepper(Stepping):
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
         start = (self.motion, self.carried, self.time)
         schedule = (steps, first_index, last_index, record_every, max_speed)
-        return loop_model(self.model), self.settings, self.spec, self.entry_point(), start, schedule, samples
+        return loop_model(self.model), self.settings, self.spec, start, schedule, samples
 
-    def entry_point(self) -> EntryPoint:
-        """This run's step (``velocity_step``, ``projection_step`` or ``penalty_step``) compiled
-        for its arguments' types, which ``run_steps`` calls by address (contactlab.compiling): built once
-        for each kind of run of a Model, the same machine code whether ``run_steps`` runs compiled or
-        from Python."""
-        known = _entry_points(self.model)
-        if self.kind not in known:
-            model, spec, motion = loop_model(self.model), self.spec, self.motion
-            function = penalty_step if spec.penalty is not None else velocity_step
-            if spec.projection is not None:
-                function = projection_step
-            pose = poses(without_drive(model), motion)
-            arguments = (model, self.settings, spec, motion, pose, self.time, self.carried)
-            known[self.kind] = EntryPoint.for_arguments(function, arguments)
-        return known[self.kind]
+    @property
+    def loop(self) -> Any:
+        """This run's compiled loop (one of ``LOOPS``): its method's step inlined."""
+        if self.spec.penalty is not None:
+            return LOOPS["penalty"]
+        return LOOPS["projection" if self.spec.projection is not None else "velocity"]
 
     @property
     def kind(self) -> tuple:
@@ -347,13 +359,6 @@ def _carried(kept: Manifolds, ids: np.ndarray, values: np.ndarray) -> tuple:
         np.asarray(ids, dtype=np.int64),
         np.asarray(values, dtype=float).reshape(-1, 3),
     )
-
-
-@derived
-def _entry_points(model: Model) -> dict[tuple, EntryPoint]:
-    """The steps' machine code (``Stepper.entry_point``) by the kind of run (``Stepper.kind``),
-    kept with the Model: the arguments' types are the same for every run of one kind."""
-    return {}
 
 
 class StitchedStepper(Stepping):
