@@ -314,14 +314,6 @@ class Stepper(Stepping):
         return LOOPS["projection" if self.spec.projection is not None else "velocity"]
 
     @property
-    def kind(self) -> tuple:
-        """What sets ``run_steps``'s machine code for this run apart: its Specialization, but of its Plan
-        the families and ``large`` only (not the hull store's arrays), and of penalty whether it is
-        penalty's (not its PenaltyLoop's values)."""
-        spec = self.spec
-        return spec.plan.families, spec.plan.large, spec[1:-1], spec.penalty is not None
-
-    @property
     def parallel(self) -> bool:
         """Whether this run's loop has a parallel sweep compiled in (the Specialization's ``parallel``)."""
         return self.spec.parallel is not None
