@@ -163,24 +163,32 @@ class PackageStampedLocator(caching._CacheLocator):
 PackageStampedLocator.stamp_package(Path(__file__).parent)
 
 
-def in_python(kernel: Any) -> Any:
+def in_python(kernel: Any, **replacing: Any) -> Any:
     """``kernel`` (a compiled dispatcher, or a Python function that compiled code calls through an
     ``overload``) as a Python function of the same code, in which every function it inlines
     (``inline="always"``) or calls as Python runs as Python too, the same way down, and every
     other kernel it calls runs compiled: for orchestration that only calls kernels and slices
-    what they return, whose compiled form would link all of them (2 s for detection)."""
-    if kernel in _IN_PYTHON:
+    what they return, whose compiled form would link all of them (2 s for detection).
+
+    ``replacing``: names of ``kernel``'s own globals given other values in this twin (not in the
+    functions it calls), a stage that only Python can run (``projection.step``'s detection, which
+    sees meshes and cloth); a twin with replacements is made anew each call, not kept."""
+    if not replacing and kernel in _IN_PYTHON:
         return _IN_PYTHON[kernel]
     function = getattr(kernel, "py_func", kernel)
     names = dict(function.__globals__)
     twin = types_module.FunctionType(function.__code__, names, function.__name__, function.__defaults__)
     functools.update_wrapper(twin, function)  # its name, docstring and module; __wrapped__ the original
-    _IN_PYTHON[kernel] = twin
+    if not replacing:
+        _IN_PYTHON[kernel] = twin
     for name in function.__code__.co_names:
         value = names.get(name)
         inlined = isinstance(value, Dispatcher) and value.targetoptions.get("inline") == "always"
-        if inlined or (isinstance(value, types_module.FunctionType) and value.__module__.startswith(__package__)):
+        if name not in replacing and (
+            inlined or (isinstance(value, types_module.FunctionType) and value.__module__.startswith(__package__))
+        ):
             names[name] = in_python(value)
+    names.update(replacing)
     return twin
 
 

@@ -5,8 +5,8 @@ and penalty (``penalty_step``, loop L1).
 Each compiles stages 1–3 (free motion, how far each collider sweeps, detection with kept
 manifolds: ``integrators.free_flight``, ``collision.swept_reach`` and ``collision.detect``, inlined)
 and calls for the rest the compiled stages its method's step from Python calls too, each written
-once: ``velocity_level.respond`` (stages 4–5 of L3), ``projection.project`` (stage 4 of L2, with
-the further passes here), and ``penalty.springs_at``, ``integrate_velocities`` and ``finish``
+once: ``velocity_level.respond`` (stages 4–5 of L3), ``projection.project`` and ``passes`` (stage
+4 of L2 and the further detect-and-project passes), and ``penalty.springs_at``, ``integrate_velocities`` and ``finish``
 (stages 2, 4 and 4b–5 of L1). The step from Python runs the same stages 1–3 for every scene
 (cloth springs, meshes, every integrator) and this loop for the rigid ones (a driven scene's loads
 and paths are ``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py`` checks that the
@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiling import njit
-from ..contacts import ContactArrays, values_carried
+from ..contacts import values_carried
 from ..dynamics.generalized import stacked
 from .loop_stages import (
     LoopModel,
@@ -34,14 +34,13 @@ from .loop_stages import (
     for_response,
     free_motion,
     moved,
-    poses,
     swept_clear,
     swept_reach,
     without_drive,
 )
 from .penalty import finish, integrate_velocities, springs_at
 from .penalty_springs import ImplicitSprings
-from .projection import advance, displaced_motion, project
+from .projection import advance, passes, project
 from .velocity_level import respond
 
 # ---- impulse and constraints (loop L3) ------------------------------------------------------
@@ -109,49 +108,7 @@ def velocity_step(
     )
 
 
-# ---- the stages of a projection step (loop L2) that the velocity methods do not take ---------
-
-
-@njit(cache=True)
-def passes(
-    model: LoopModel,
-    settings: LoopSettings,
-    spec: Specialization,
-    motion: Motion,
-    reach: np.ndarray,
-    kept: tuple,
-    contacts: ContactArrays,
-    progress: tuple,
-) -> tuple[np.ndarray, ContactArrays, int, float]:
-    """Stages 3–4 again, ``settings.passes`` − 1 times at most: contacts detected afresh (nothing
-    kept, the same ``reach`` (N,) [m]) at the positions the projected displacement reaches from
-    ``motion``, and projected, cold, for what one linear projection left (curved surfaces,
-    rotations); done once there is no contact, or a pass makes one sweep that moves nothing more
-    than the tolerance. ``progress`` = (the displacement (N,) after the first pass, its sweeps, its
-    last correction [m]). Returns (displacement, the last pass's contacts, the sweeps of every pass
-    summed, the last pass's last correction [m])."""
-    displacement, sweeps, change = progress
-    response = for_response(spec)
-    for _ in range(settings.passes - 1):
-        if contacts.depth.shape[0] == 0:
-            break
-        at = displaced_motion(motion, displacement, settings.dt)
-        rotation, centers, rots = poses(model, at)
-        contacts, _, _ = detect(model.colliders, spec.plan, spec.keeping, (centers, rots), reach, kept, 0.0, None)
-        displacement, _, more, change = project(
-            model,
-            settings,
-            response,
-            contacts,
-            at,
-            rotation,
-            (displacement, displacement),
-            np.zeros((contacts.depth.shape[0], 3)),
-        )
-        sweeps += more
-        if more <= 1 and change <= settings.tolerance:
-            break
-    return displacement, contacts, sweeps, change
+# ---- projection (loop L2) ---------------------------------------------------------------
 
 
 @njit(cache=True)
@@ -188,8 +145,8 @@ def projection_step(
         plain, settings, for_response(spec), contacts, motion, rotation, (np.zeros_like(predicted), predicted), warm
     )
     #    and again at the projected positions
-    displacement, last, sweeps, change = passes(
-        plain, settings, spec, motion, reach, carried[0], contacts, (displacement, sweeps, change)
+    displacement, last, sweeps, change, _ = passes(
+        plain, settings, spec, motion, (reach, carried[0]), contacts, (displacement, sweeps, change, lam)
     )
     # 5. advance dt, velocities from the projected positions
     start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)

@@ -38,8 +38,8 @@ import numpy as np
 
 from .. import rotations
 from ..collision import swept_distances
-from ..compiling import njit
-from ..contacts import ContactArrays, values_by_id, values_carried
+from ..compiling import in_python, njit
+from ..contacts import ContactArrays, values_carried
 from ..dynamics.generalized import stack, unstack, unstacked
 from ..dynamics.integrators import carrying_springs, free_velocities, moved
 from ..state import Carry, Positions, State
@@ -52,9 +52,11 @@ from .loop_stages import (
     Motion,
     Specialization,
     build_rows,
+    detect,
     for_response,
     loop_inputs,
     loop_settings,
+    poses,
     solve,
     specialization,
 )
@@ -125,36 +127,26 @@ def step(
     carried_on = carrying_springs(
         Carry("projection", manifolds, contacts.feature_id, lam), model, state, free[2], integrator
     )
-    pushed = lam  # [kg m] each contact's λ summed over the passes, by contact id
-    for _ in range(options.passes - 1):
-        if contacts.count == 0:
-            break
-        at = displaced_motion(motion, displacement, h)
+    #    and again at the projected positions: the loop's own passes, their detection this step's
+    #    (meshes, cloth and other granularities too), run from Python
+    last = [contacts]
+
+    def detect_projected(_model, _spec, at, _kept):
         projected = State.assemble(
             state.time + h, (at.body_position, at.body_orientation, at.particle_position), state.velocities
         )
-        ids = contacts.feature_id
-        contacts, _ = options.collide(model, projected, sweep, particle_motion=particle_motion)
-        displacement, more, sweeps, change = project(
-            arrays,
-            settings,
-            spec,
-            contacts.arrays(),
-            at,
-            rotations.matrices(at.body_orientation),
-            (displacement, displacement),
-            np.zeros((contacts.count, 3)),
-        )
-        pushed = values_by_id(ids, pushed, contacts.feature_id, 3)[0] + more
-        total_sweeps += sweeps
-        if sweeps <= 1 and change <= options.tolerance:
-            break
+        last[0] = options.collide(model, projected, sweep, particle_motion=particle_motion)[0]
+        return last[0].arrays(), rotations.matrices(at.body_orientation)
+
+    displacement, _, total_sweeps, change, pushed = in_python(passes, detect_projected=detect_projected)(
+        arrays, settings, spec, motion, (None, None), found, (displacement, total_sweeps, change, lam)
+    )
     # 5. advance dt, velocities from the projected positions
     start = (motion.body_position, motion.body_orientation, motion.particle_position)
     positions, velocities = advance(start, v_free, displacement, predicted_displacement, h)
     new = State.assemble(state.time + h, positions, velocities, carried_on)
     return new, StepInfo(
-        contacts, solver_iterations=total_sweeps, solver_residual=change, impulses=pushed / h
+        last[0], solver_iterations=total_sweeps, solver_residual=change, impulses=pushed / h
     )  # a correction Δx = M⁻¹ Jᵀ λ is the velocity change Δx / h
 
 
@@ -249,3 +241,63 @@ def project(
     system = (corrected, target, warm, order)
     lam, sweeps, change = solve(settings, spec.slabs, spec.parallel, rows, contacts, at, system, None)
     return corrected, lam, sweeps, change
+
+
+@njit(cache=True, inline="always")
+def detect_projected(
+    model: LoopModel, spec: Specialization, at: Motion, detecting: tuple
+) -> tuple[ContactArrays, np.ndarray]:
+    """Stage 3 of a further pass: the contacts at the projected positions ``at`` (a Motion),
+    detected afresh (nothing kept) within the step's first ``reach`` (N,) [m]; ``detecting`` =
+    (reach, the kept manifolds' fields, for their types). Returns (ContactArrays, the bodies'
+    rotations (B, 3, 3) at ``at``). ``step`` runs ``passes`` with its own detection here."""
+    reach, kept = detecting
+    rotation, centers, rots = poses(model, at)
+    contacts, _, _ = detect(model.colliders, spec.plan, spec.keeping, (centers, rots), reach, kept, 0.0, None)
+    return contacts, rotation
+
+
+@njit(cache=True)
+def passes(
+    model: LoopModel,
+    settings: LoopSettings,
+    spec: Specialization,
+    motion: Motion,
+    detecting: tuple,
+    contacts: ContactArrays,
+    progress: tuple,
+) -> tuple[np.ndarray, ContactArrays, int, float, np.ndarray]:
+    """Stages 3–4 again, ``settings.passes`` − 1 times at most: contacts detected afresh at the
+    positions the projected displacement reaches from ``motion`` (``detect_projected``, given
+    ``detecting``), and projected, cold, for what one linear projection left (curved surfaces,
+    rotations); done once there is no contact, or a pass makes one sweep that moves nothing more
+    than the tolerance. ``contacts``: the first pass's; ``progress`` = (the displacement (N,) after
+    the first pass, its sweeps, its last correction [m], its λ (C, 3) [kg m]). Returns
+    (displacement, the last pass's contacts, the sweeps of every pass summed, the last pass's last
+    correction [m], each last contact's λ summed over the passes by contact id (C, 3) [kg m]).
+
+    The one loop of passes: the compiled step (``loop_steps.projection_step``) runs it compiled,
+    ``step`` runs it from Python (``compiling.in_python``) with its own detection."""
+    displacement, sweeps, change, pushed = progress
+    response = for_response(spec)
+    for _ in range(settings.passes - 1):
+        if contacts.depth.shape[0] == 0:
+            break
+        at = displaced_motion(motion, displacement, settings.dt)
+        found, rotation = detect_projected(model, spec, at, detecting)
+        displacement, more, made, change = project(
+            model,
+            settings,
+            response,
+            found,
+            at,
+            rotation,
+            (displacement, displacement),
+            np.zeros((found.depth.shape[0], 3)),
+        )
+        pushed = values_carried(contacts.feature_id, pushed, found.feature_id)[0] + more
+        contacts = found
+        sweeps += made
+        if made <= 1 and change <= settings.tolerance:
+            break
+    return displacement, contacts, sweeps, change, pushed
