@@ -55,19 +55,26 @@ class Manifolds:
 
     @classmethod
     def empty(cls) -> Manifolds:
-        return cls(
-            np.zeros(0, np.int64),
-            np.zeros(0),
-            np.zeros((0, 2, 3)),
-            np.zeros((0, 2, 3, 3)),
-            np.zeros(0, np.int64),
-            np.zeros((0, MAX_PER_PAIR, 2, 3)),
-            np.zeros((0, MAX_PER_PAIR, 3)),
-            np.zeros((0, MAX_PER_PAIR), np.int64),
-        )
+        return cls(*no_manifolds())
 
     def __len__(self):
         return len(self.keys)
+
+
+@njit(cache=True)
+def no_manifolds() -> tuple:
+    """The eight fields of Manifolds (``Manifolds.empty``'s) with no pair: what a detection with
+    nothing to keep takes for ``kept`` (the loop's ``record``), compiled or not."""
+    return (
+        np.zeros(0, np.int64),
+        np.zeros(0),
+        np.zeros((0, 2, 3)),
+        np.zeros((0, 2, 3, 3)),
+        np.zeros(0, np.int64),
+        np.zeros((0, MAX_PER_PAIR, 2, 3)),
+        np.zeros((0, MAX_PER_PAIR, 3)),
+        np.zeros((0, MAX_PER_PAIR), np.int64),
+    )
 
 
 @njit(cache=True)

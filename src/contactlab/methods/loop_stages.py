@@ -30,8 +30,8 @@ from numba.extending import overload
 from .. import collision, diagnostics, rotations
 from ..collision import Plan, colliders, detection_plan, keeping_for
 from ..collision.geometry import norm
-from ..collision.manifolds import copy_rows
-from ..collision.narrow_phase import MAX_PER_PAIR, generate_contacts
+from ..collision.manifolds import copy_rows, no_manifolds
+from ..collision.narrow_phase import MAX_PER_PAIR
 from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
@@ -268,7 +268,6 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # before typing, a pruning of arguments that an inlined copy (whose arguments are no longer
 # arguments) does not get.
 collider_poses = njit(inline="always")(collision.collider_poses.py_func)
-candidate_pairs = collision.candidate_pairs
 detect = collision.detect
 # stages 1 (under gravity) and 2, as the methods' steps run them
 free_flight = njit(inline="always")(integrators.free_flight.py_func)
@@ -458,12 +457,14 @@ def record(
     tally: tuple,
 ) -> None:
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
-    deepest overlap, measured afresh at its own positions (as ``Recorder.sample`` does), and
-    ``tally`` = the step's (contact count, sweeps, last change, clear): where the count is −1 (no
-    step), that of the fresh pass. ``at`` = the bodies' rotations (B, 3, 3) and the colliders'
-    centres and rotations at ``motion``'s positions (``poses``), which the next step starts from
-    too. ``clear``: the step before found nothing within its swept reach (``swept_clear``), so
-    nothing overlaps here and the fresh pass, which would find no pair, is not made."""
+        deepest overlap, measured afresh at its own positions by the one detection (``detect``, with
+        no reach and nothing kept, as ``collision.collide`` runs it for a sample from Python), and
+        ``tally`` = the step's (contact count, sweeps, last change, clear): where the count is −1 (no
+        step), that of the fresh pass. ``at`` = the bodies' rotations (B, 3, 3) and the colliders'
+        centres and rotations at ``motion``'s positions (``poses``), which the next step starts from
+        too. ``clear``: the step before found nothing within its swept reach (``swept_clear``), so
+        nothing overlaps here and the fresh pass, which would find no pair, is not made. ``detecting`` =
+    (the run's detection Plan, the kept manifolds' fields, only for their types)."""
     contact_count, sweeps, change, clear = tally
     rotation, centers, rots = at
     samples.time[row] = time
@@ -490,32 +491,11 @@ def record(
     # after a step that found nothing within its swept reach nothing overlaps (the fresh pass
     # would find no pair): on an airborne ball the pass was a quarter of a sampled step
     if not clear:
-        table = model.colliders
-        touching = np.zeros(table.kinds.shape[0])
-        _, _, pairs = candidate_pairs(
-            table.kinds,
-            table.params,
-            centers,
-            rots,
-            touching,
-            motion.body_position.shape[0] + motion.particle_position.shape[0],
-            table.cloth_of,
-            plan.large,
-        )
-        if pairs.shape[0]:  # no pair near: no overlap, and no narrow phase to run for it
-            depth = generate_contacts(
-                pairs,
-                table.kinds,
-                table.params,
-                centers,
-                rots,
-                np.zeros(pairs.shape[0]),
-                plan.hull_store,
-                plan.families,
-            )[2]
-            found = depth.shape[0]
-            if found:
-                deepest = max(0.0, depth.max())
+        touching = np.zeros(model.colliders.kinds.shape[0])
+        depth = detect(model.colliders, plan, None, (centers, rots), touching, no_manifolds(), 0.0, None)[0].depth
+        found = depth.shape[0]
+        if found:
+            deepest = max(0.0, depth.max())
     samples.max_penetration[row] = deepest
     samples.contact_count[row] = found if contact_count < 0 else contact_count
     samples.solver_iterations[row] = sweeps
