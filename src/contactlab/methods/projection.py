@@ -99,9 +99,10 @@ class Options(KeptManifoldOptions):
 def step(
     model: Model, state: State, dt: float, options: Options, integrator: str = "symplectic_euler"
 ) -> tuple[State, StepInfo]:
-    """One step of loop L2 with projection; returns (new State, StepInfo). Stages 1–3 and the
-    passes' detection run here, for every scene; each projection is ``project``, the compiled
-    stage the compiled loop's step (``loop_steps.projection_step``) runs."""
+    """One step of loop L2 with projection; returns (new State, StepInfo). Stages 1–3 and every
+    pass's detection run here, for every scene; the projection (``project``) and the further
+    passes (``passes``, run as Python with this step's detection) are the code the compiled
+    loop's step (``loop_steps.projection_step``) runs."""
     h = dt
     # 1. internal forces → free velocities v*
     free = free_velocities(model, state, h, integrator)
