@@ -312,20 +312,35 @@ def free_motion(
 _norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into healthy
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def poses(model: LoopModel, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The poses at ``motion``'s positions: the bodies' rotation matrices (B, 3, 3), and the
     colliders' centres (N, 3) [m] and rotations (N, 3, 3) (``collision.collider_poses``): what a
     step (``start``), ``detect`` and ``record`` take, computed once for a sample and the step
-    after it."""
-    rotation = rotations.matrices(motion.body_orientation)
-    centers, rots = collider_poses(
+    after it. Inlined, it hands ``poses_of`` the five arrays it reads, not the two tuples whole
+    (whose every array's reference a call takes and releases: 0.17 µs of a one-ball step)."""
+    table = model.colliders
+    return poses_of(
+        motion.body_orientation,
         motion.body_position,
-        rotation,
         motion.particle_position,
-        model.colliders.obstacle_position,
-        model.colliders.obstacle_rotation,
+        table.obstacle_position,
+        table.obstacle_rotation,
     )
+
+
+@njit(cache=True)
+def poses_of(
+    body_orientation: np.ndarray,
+    body_position: np.ndarray,
+    particle_position: np.ndarray,
+    obstacle_position: np.ndarray,
+    obstacle_rotation: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``poses`` from the arrays: orientations (B, 4), positions (B, 3) [m], particle positions
+    (P, 3) [m], the obstacles' positions (O, 3) [m] and rotations (O, 3, 3)."""
+    rotation = rotations.matrices(body_orientation)
+    centers, rots = collider_poses(body_position, rotation, particle_position, obstacle_position, obstacle_rotation)
     return rotation, centers, rots
 
 
