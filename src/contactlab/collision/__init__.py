@@ -63,16 +63,14 @@ def swept_distances(
     (B + P,) [m]: h |v|, plus for a body how far its farthest point turns, h |ω| r. This is the
     ``sweep`` argument of :func:`collide` (``swept_reach``, which the compiled loop runs, with no
     margin)."""
-    radius = np.zeros(model.body_count + model.particle_count)
-    radius[: model.body_count] = model.body_radii
     return swept_reach(
-        radius,
+        colliders(model).radius,
         np.asarray(body_velocity, dtype=float),
         np.asarray(body_angular_velocity, dtype=float),
         np.asarray(particle_velocity, dtype=float),
         float(dt),
         0.0,
-    )
+    )[: model.body_count + model.particle_count]
 
 
 @njit(cache=True)
@@ -128,7 +126,6 @@ def colliders(model: Model) -> Colliders:
     kinds, params, materials, obstacle_rotation = model.collider_table
     dynamic = model.body_count + model.particle_count
     copy = np.array  # np.array copies: a writable, contiguous array
-    cloth_of = np.concatenate([np.full(model.body_count, -1), model.particle_cloth]).astype(np.int64)
     return Colliders(
         copy(kinds, dtype=np.int64),
         copy(params, dtype=float),
@@ -138,9 +135,16 @@ def colliders(model: Model) -> Colliders:
         copy(model.material_restitution, dtype=float),
         copy(model.obstacle_position, dtype=float),
         copy(obstacle_rotation, dtype=float),
-        cloth_of if dynamic_pairs_possible(dynamic) else None,
+        dynamic_cloth(model) if dynamic_pairs_possible(dynamic) else None,
         model.body_count,
     )
+
+
+def dynamic_cloth(model: Model) -> np.ndarray:
+    """The cloth of each body and particle (B + P,) int64, −1 none (bodies never): ``Colliders``'
+    ``cloth_of`` (whose vertices make no pair with one another), and the load paths of penalty's
+    springs (``penalty_springs.along_springs``)."""
+    return np.concatenate((np.full(model.body_count, -1, dtype=np.int64), np.asarray(model.particle_cloth, np.int64)))
 
 
 Plan = namedtuple("Plan", ("families", "hull_store", "large"))

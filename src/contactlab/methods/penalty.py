@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..collision import half_thickness_sums, swept_distances
+from ..collision import dynamic_cloth, half_thickness_sums, swept_distances
 from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, jacobian, values_by_id, values_carried
 from ..dynamics.generalized import implicit_base, stack, stacked, unstacked
@@ -310,14 +310,8 @@ def contact_stiffness(model: Model, state: State, contacts: Contacts, options: O
         contacts.normal,
         (state.body_position, state.particle_position),
         loads,
-        entity_cloth(model),
+        dynamic_cloth(model),
     )
-
-
-def entity_cloth(model: Model) -> np.ndarray:
-    """The cloth of each body and particle (B + P,) int, −1 none (bodies never): whose vertices
-    carry one another's weight along its springs (``penalty_springs.along_springs``)."""
-    return np.concatenate((np.full(model.body_count, -1, dtype=np.int64), np.asarray(model.particle_cloth, np.int64)))
 
 
 def assembled_springs(
@@ -442,7 +436,7 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         thickness=np.array(model.collider_half_thickness, dtype=float),
         particle_radius=np.array(model.particle_radius, dtype=float),
         fixed=np.array(model.body_kinematic, dtype=np.bool_),
-        cloth=entity_cloth(model),
+        cloth=dynamic_cloth(model),
     )
     return guard, penalty
 
