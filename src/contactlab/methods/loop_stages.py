@@ -473,14 +473,14 @@ def record(
     tally: tuple,
 ) -> None:
     """Sample ``row``: the state, its energies (``diagnostics``: kinetic, gravitational) and its
-        deepest overlap, measured afresh at its own positions by the one detection (``detect``, with
-        no reach and nothing kept, as ``collision.collide`` runs it for a sample from Python), and
-        ``tally`` = the step's (contact count, sweeps, last change, clear): where the count is −1 (no
-        step), that of the fresh pass. ``at`` = the bodies' rotations (B, 3, 3) and the colliders'
-        centres and rotations at ``motion``'s positions (``poses``), which the next step starts from
-        too. ``clear``: the step before found nothing within its swept reach (``swept_clear``), so
-        nothing overlaps here and the fresh pass, which would find no pair, is not made. ``detecting`` =
-    (the run's detection Plan, the kept manifolds' fields, only for their types)."""
+    deepest overlap, measured afresh at its own positions by the one detection (``detect``, with
+    no reach and nothing kept, as ``collision.collide`` runs it for a sample from Python), and
+    ``tally`` = the step's (contact count, sweeps, last change, clear): where the count is −1 (no
+    step), that of the fresh pass. ``plan``: the run's detection Plan. ``at`` = the bodies'
+    rotations (B, 3, 3) and the colliders' centres and rotations at ``motion``'s positions
+    (``poses``), which the next step starts from too. ``clear``: the step before found nothing
+    within its swept reach (``swept_clear``), so nothing overlaps here and the fresh pass, which
+    would find no pair, is not made."""
     contact_count, sweeps, change, clear = tally
     rotation, centers, rots = at
     samples.time[row] = time

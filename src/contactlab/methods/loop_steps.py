@@ -6,15 +6,16 @@ Each compiles stages 1–3 (free motion, how far each collider sweeps, detection
 manifolds: ``integrators.free_flight``, ``collision.swept_reach`` and ``collision.detect``, inlined)
 and calls for the rest the compiled stages its method's step from Python calls too, each written
 once: ``velocity_level.respond`` (stages 4–5 of L3), ``projection.project`` and ``passes`` (stage
-4 of L2 and the further detect-and-project passes), and ``penalty.springs_at``, ``integrate_velocities`` and ``finish``
-(stages 2, 4 and 4b–5 of L1). The step from Python runs the same stages 1–3 for every scene
-(cloth springs, meshes, every integrator) and this loop for the rigid ones (a driven scene's loads
-and paths are ``driving.drive_velocities`` in both); ``tests/test_velocity_loop.py`` checks that the
-two paths give the same numbers, bit for bit. The three steps share one module because they share one
-signature, ``(model, settings, spec, motion, start, time, carried)``, and one result,
-``(positions, velocities, carried, contacts, sweeps, change, clear, elastic energy, implicit,
-linear iterations)`` (a method without a value gives 0 or False): ``run_steps`` calls whichever its
-run has without a branch. What each is compiled for is one value, the run's Specialization.
+4 of L2 and the further detect-and-project passes), and ``penalty.springs_at``,
+``integrate_velocities`` and ``finish`` (stages 2, 4 and 4b–5 of L1). The step from Python runs
+the same stages 1–3 for every scene (cloth springs, meshes, every integrator), and this loop runs
+the rigid ones (a driven scene's loads and paths are ``driving.drive_velocities`` in both);
+``tests/test_velocity_loop.py`` checks that the two paths give the same numbers, bit for bit. The
+three steps share one module because they share one signature, ``(model, settings, spec, motion,
+start, time, carried)``, and one result, ``(positions, velocities, carried, contacts, sweeps,
+change, clear, elastic energy, implicit, linear iterations)`` (a method without a value gives 0 or
+False): ``run_steps`` calls whichever its run has without a branch. What each is compiled for is
+one value, the run's Specialization.
 """
 
 from __future__ import annotations

@@ -132,7 +132,7 @@ def step(
     #    (meshes, cloth and other granularities too), run from Python
     last = [contacts]
 
-    def detect_projected(_model, _spec, at, _kept):
+    def detect_projected(_model, _spec, at, _detecting):
         projected = State.assemble(
             state.time + h, (at.body_position, at.body_orientation, at.particle_position), state.velocities
         )

@@ -117,7 +117,7 @@ def run_steps(
 ) -> tuple:
     """``schedule`` = (steps, first index, last index, record every, max speed [m/s]): that many
     steps of the run's ``step`` (``velocity_step``, ``projection_step`` or ``penalty_step``, compiled
-    for ``spec`` and called by address), from ``start`` = (the state's arrays, a Motion changed in
+    for ``spec`` and inlined: ``LOOPS``), from ``start`` = (the state's arrays, a Motion changed in
     place; what the step carries; the time [s]), numbered from the first index; after step i, a
     sample into ``samples`` (row after row) where i is a multiple of record every or the last
     index. Stops early after a step that leaves a non-finite value or a speed above max speed.
