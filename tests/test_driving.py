@@ -3,12 +3,12 @@ checked against closed forms under every method."""
 
 import numpy as np
 import pytest
-from numba import njit
+from numba.core import event
 
-from contactlab import ModelBuilder, simulate
+from contactlab import ModelBuilder, driving, simulate
 from contactlab.closed_form import checks
 from contactlab.errors import InputError, SimulationDiverged
-from contactlab.methods import loop_stages, velocity_loop
+from contactlab.methods import velocity_loop
 from contactlab.scene import load_scene
 
 METHODS = ("penalty", "projection", "impulse", "constraints")
@@ -149,26 +149,31 @@ def test_keyframed_drives_step_in_the_compiled_loop_and_python_functions_outside
         assert not velocity_loop.applies(builder.finalize(), "impulse", options, "symplectic_euler")
 
 
-def test_every_stage_after_free_motion_takes_the_model_without_its_drive():
-    """Only free motion reads the drive (loop_stages.without_drive): the stages after it take the
-    same arrays with the drive None, compiled or from Python, so a driven scene's contacts, rows and
-    sweeps run the machine code of the same scene undriven (its first run compiles its step, not
-    those stages again: benchmarks/README.md, twenty-fifth round)."""
-    model = loop_stages.loop_model(load_scene("box_pushed").model)
-    assert model.drive is not None
+def test_a_driven_scene_steps_in_the_loop_its_undriven_twin_compiled():
+    """The loop takes a scene's drive as a table of arrays (``driving.table_of``), an undriven
+    scene's empty (UNDRIVEN) and of the same types, so a scene's compiled loop is the same driven
+    or not: once the box has slid undriven, a constant force and a keyframed path on it run that
+    loop, compiled for neither (benchmarks/README.md, thirtieth round)."""
 
-    @njit
-    def compiled(model):
-        return loop_stages.without_drive(model)
+    def box(drive):
+        builder = ModelBuilder()
+        builder.add_body("box", half_extents=(0.1, 0.1, 0.1), mass=1.0, position=(0.0, 0.0, 0.1), name="box")
+        builder.add_obstacle("plane", normal=(0, 0, 1))
+        drive(builder)
+        return builder.finalize()
 
-    for plain in (loop_stages.without_drive(model), compiled(model)):
-        assert plain.drive is None
-        same = [a is b or np.shares_memory(a, b) for a, b in zip(plain[:-2], model[:-2])]
-        same += [a is b or np.shares_memory(a, b) for a, b in zip(plain.colliders, model.colliders) if a is not None]
-        assert all(same) and len(same) == len(model) - 2 + len(model.colliders)
-    undriven = loop_stages.loop_model(load_scene("sliding_block").model)
-    assert loop_stages.without_drive(undriven) is undriven
-    assert compiled(undriven).drive is None
+    undriven = box(lambda builder: None)
+    assert undriven.drive is None and driving.table_of(undriven.drive) is driving.UNDRIVEN
+    simulate(undriven, "impulse", dt=0.01, duration=0.05)
+    for drive in (
+        lambda builder: builder.add_force("box", force=(1.0, 0.0, 0.0)),
+        lambda builder: builder.add_path("box", positions=[[0, 0, 0.1], [0.1, 0, 0.1]], times=[0.0, 1.0]),
+    ):
+        with event.install_recorder("numba:compile") as compiled:
+            run = simulate(box(drive), "impulse", dt=0.01, duration=0.05)
+        assert run.summary["compiled_loop"]
+        loops = [e for _, e in compiled.buffer if e.data.get("dispatcher") in velocity_loop.LOOPS.values()]
+        assert loops == []
 
 
 # ---- the pushed box: closed form under every method ---------------------------------------------

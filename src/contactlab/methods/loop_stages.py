@@ -35,7 +35,7 @@ from ..collision.narrow_phase import MAX_PER_PAIR
 from ..compiling import available_threads, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
-from ..driving import drive_velocities
+from ..driving import DriveTable, drive_velocities
 from ..dynamics import integrators
 from ..model import derived
 from ..state import ARRAYS as STATE_ARRAYS
@@ -65,12 +65,12 @@ LoopModel = namedtuple(
         "particle_inverse_mass",  # (P,) 1/kg, 0 pinned
         "particle_pinned",  # (P,) bool
         "colliders",  # the colliders as detection reads them (collision.Colliders, the same value)
-        # the keyframed loads and paths (contactlab.driving.DriveTable); None: nothing drives the
-        # scene. Last, for ``without_drive``
-        "drive",
     ),
 )
-LoopModel.__doc__ = "The model's arrays the loop reads (writable copies: Numba types read-only arrays apart)."
+LoopModel.__doc__ = """The model's arrays the loop reads (writable copies: Numba types read-only arrays apart).
+Not its drive, which only free motion reads, an argument of its own (``driving.table_of``): every
+other stage takes the LoopModel whole, and would take a reference to each of the drive's arrays
+(on a one-ball scene, a step's calls passing nine more arrays each cost a fifth of its time)."""
 
 
 @derived
@@ -88,25 +88,7 @@ def loop_model(model: Model) -> LoopModel:
         copy(model.particle_inverse_mass, dtype=float),
         copy(model.particle_pinned, dtype=np.bool_),
         colliders(model),
-        None if model.drive is None else model.drive.table,
     )
-
-
-def without_drive(model: LoopModel) -> LoopModel:
-    """``model`` with no drive (its ``drive`` None): what every stage but ``free_motion`` takes,
-    so a driven scene's contacts, rows and sweeps run the very machine code an undriven scene's
-    do, and only its step, where ``free_motion`` reads the drive, is compiled for the drive's
-    type."""
-    return model if model.drive is None else model._replace(drive=None)
-
-
-# the body chosen by the drive's type: the same LoopModel where it is None, else a new tuple of
-# the same arrays (no copy) with None in its place
-@overload(without_drive, inline="always")
-def _without_drive_compiled(model):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
-    if isinstance(model.types[-1], types.NoneType):  # the drive, LoopModel's last field
-        return lambda model: model
-    return lambda model: LoopModel(*model[:-1], None)
 
 
 LoopSettings = namedtuple(
@@ -244,8 +226,8 @@ def whole_sweeps(options: CollisionOptions) -> int:
 
 def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Motion, np.ndarray, tuple]:
     """What the compiled stages take in a method's step from Python (``velocity_level.step``,
-    ``projection.step``, ``penalty.step``): (LoopModel without its drive, which the methods'
-    steps apply in Python (``integrators.free_velocities``), the state's arrays as a Motion, the
+    ``projection.step``, ``penalty.step``): (the LoopModel (the drive the methods' steps apply in
+    Python, ``integrators.free_velocities``), the state's arrays as a Motion, the
     bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) where the
     state carries ``method``'s (``Carry.of``), else both empty)."""
     # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
@@ -253,7 +235,7 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
     motion = Motion(*(np.array(getattr(state, name), dtype=float) for name in STATE_ARRAYS))
     ids, values = state.carried.of(method)
     carried = (np.array(ids, dtype=np.int64), np.array(values, dtype=float).reshape(-1, 3))
-    return without_drive(loop_model(model)), motion, rotations.matrices(motion.body_orientation), carried
+    return loop_model(model), motion, rotations.matrices(motion.body_orientation), carried
 
 
 # ---- the stages every step shares (loops L1–L3) --------------------------------------------
@@ -288,12 +270,12 @@ gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
 
 @njit(cache=True, inline="always")
 def free_motion(
-    model: LoopModel, motion: Motion, rotation: np.ndarray, h: float, t: float
+    model: LoopModel, drive: DriveTable, motion: Motion, rotation: np.ndarray, h: float, t: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stage 1: velocities after h [s] under gravity, v* = v + h g (the gyroscopic term by the
     midpoint rule; pinned particles held), and in a driven scene the external loads at the step's
-    start t [s] and the kinematic bodies' path velocities (``driving.drive_velocities``, which the
-    methods' steps call too): (body (B, 3), angular (B, 3), particle (P, 3))."""
+    start t [s] and the kinematic bodies' path velocities (``drive``'s, ``driving.drive_velocities``,
+    which the methods' steps call too): (body (B, 3), angular (B, 3), particle (P, 3))."""
     body, angular, particle = free_flight(
         model.gravity,
         model.body_inertia,
@@ -304,9 +286,10 @@ def free_motion(
         rotation,
         h,
     )
-    inverse = (model.body_inverse_mass, model.body_inverse_inertia)
-    pose = (rotation, motion.body_position, motion.body_orientation)
-    drive_velocities(model.drive, t, h, inverse, pose, None, body, angular)
+    if drive.constant_force.shape[0]:  # driven (an undriven scene's table has no rows): no call otherwise
+        inverse = (model.body_inverse_mass, model.body_inverse_inertia)
+        pose = (rotation, motion.body_position, motion.body_orientation)
+        drive_velocities(drive, t, h, inverse, pose, None, body, angular)
     return body, angular, particle
 
 

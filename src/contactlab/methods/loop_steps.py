@@ -11,8 +11,9 @@ once: ``velocity_level.respond`` (stages 4–5 of L3), ``projection.project`` an
 the same stages 1–3 for every scene (cloth springs, meshes, every integrator), and this loop runs
 the rigid ones (a driven scene's loads and paths are ``driving.drive_velocities`` in both);
 ``tests/test_velocity_loop.py`` checks that the two paths give the same numbers, bit for bit. The
-three steps share one module because they share one signature, ``(model, settings, spec, motion,
-start, time, carried)``, and one result, ``(positions, velocities, carried, contacts, sweeps,
+three steps share one module because they share one signature, ``(model, drive, settings, spec,
+motion, start, time, carried)`` (``drive``: the scene's DriveTable, ``driving.table_of``, which only
+free motion reads), and one result, ``(positions, velocities, carried, contacts, sweeps,
 change, clear, elastic energy, implicit, linear iterations)`` (a method without a value gives 0 or
 False): ``run_steps`` calls whichever its run has without a branch. What each is compiled for is
 one value, the run's Specialization.
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..compiling import njit
 from ..contacts import values_carried
+from ..driving import DriveTable
 from ..dynamics.generalized import stacked
 from .loop_stages import (
     LoopModel,
@@ -37,7 +39,6 @@ from .loop_stages import (
     moved,
     swept_clear,
     swept_reach,
-    without_drive,
 )
 from .penalty import finish, integrate_velocities, springs_at
 from .penalty_springs import ImplicitSprings
@@ -50,6 +51,7 @@ from .velocity_level import respond
 @njit(cache=True)
 def velocity_step(
     model: LoopModel,
+    drive: DriveTable,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,
@@ -69,13 +71,12 @@ def velocity_step(
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
-    free = free_motion(model, motion, rotation, h, time)
-    plain = without_drive(model)  # every later stage: the same machine code driven or not
+    free = free_motion(model, drive, motion, rotation, h, time)
     # 2. predict: how far each body and particle sweeps this step
-    reach = swept_reach(plain.colliders.radius, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(model.colliders.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step
     contacts, manifolds, near = detect(
-        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
+        model.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
     )
     if contacts.depth.shape[0] == 0:
         positions = moved(
@@ -92,7 +93,7 @@ def velocity_step(
         return positions, free, (manifolds, carried[1][:0], carried[2][:0]), 0, 0, 0.0, clear, 0.0, False, 0
     # 4–5. the contact rows, their targets and the solve; positions split at the time of impact
     positions, velocities, impulses, sweeps, change = respond(
-        plain, settings, spec, contacts, motion, rotation, (free, free), (carried[1], carried[2])
+        model, settings, spec, contacts, motion, rotation, (free, free), (carried[1], carried[2])
     )
     count = contacts.depth.shape[0]
     return (
@@ -115,6 +116,7 @@ def velocity_step(
 @njit(cache=True)
 def projection_step(
     model: LoopModel,
+    drive: DriveTable,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,
@@ -130,24 +132,23 @@ def projection_step(
     h = settings.dt
     rotation, centers, rots = start
     # 1. internal forces → free velocities v*
-    free = free_motion(model, motion, rotation, h, time)
-    plain = without_drive(model)  # every later stage: the same machine code driven or not
+    free = free_motion(model, drive, motion, rotation, h, time)
     # 2. predict: the step's displacement u = h v*, and how far each body and particle sweeps
     v_free = stacked(free[0], free[1], free[2])
     predicted = h * v_free
-    reach = swept_reach(plain.colliders.radius, free[0], free[1], free[2], h, settings.margin)
+    reach = swept_reach(model.colliders.radius, free[0], free[1], free[2], h, settings.margin)
     # 3. collision detection over the swept step, at its start
     contacts, manifolds, near = detect(
-        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
+        model.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], settings.manifold_tolerance, None
     )
     # 4. project the colliding points onto the surfaces, warm started by contact id
     warm = settings.warm_start * values_carried(carried[1], carried[2], contacts.feature_id)[0]
     displacement, lam, sweeps, change = project(
-        plain, settings, for_response(spec), contacts, motion, rotation, (np.zeros_like(predicted), predicted), warm
+        model, settings, for_response(spec), contacts, motion, rotation, (np.zeros_like(predicted), predicted), warm
     )
     #    and again at the projected positions
     displacement, last, sweeps, change, _ = passes(
-        plain, settings, spec, motion, (reach, carried[0]), contacts, (displacement, sweeps, change, lam)
+        model, settings, spec, motion, (reach, carried[0]), contacts, (displacement, sweeps, change, lam)
     )
     # 5. advance dt, velocities from the projected positions
     start_positions = (motion.body_position, motion.body_orientation, motion.particle_position)
@@ -163,6 +164,7 @@ def projection_step(
 @njit(cache=True)
 def penalty_step(
     model: LoopModel,
+    drive: DriveTable,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,
@@ -182,10 +184,9 @@ def penalty_step(
     h = settings.dt
     penalty = spec.penalty
     rotation, centers, rots = start
-    plain = without_drive(model)  # every stage but free motion: the same machine code driven or not
     # 1. collision detection, with the gaps this step's motion could close
     reach = swept_reach(
-        plain.colliders.radius,
+        model.colliders.radius,
         motion.body_velocity,
         motion.body_angular_velocity,
         motion.particle_velocity,
@@ -193,24 +194,24 @@ def penalty_step(
         settings.margin,
     )
     contacts, manifolds, _ = detect(
-        plain.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], 0.0, None
+        model.colliders, spec.plan, spec.keeping, (centers, rots), reach, carried[0], 0.0, None
     )
-    rows = build_rows(plain, contacts, motion, rotation)
+    rows = build_rows(model, contacts, motion, rotation)
     # 2. collision forces: normal springs k δ and anchor springs carried by contact id (P1, F3)
     v = stacked(motion.body_velocity, motion.body_angular_velocity, motion.particle_velocity)
     springs, forces, elongation, implicit = springs_at(
-        plain, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
+        model, penalty, contacts, rows, motion, v, (carried[1], carried[2]), h
     )
     # 3. internal forces (gravity) → free velocities v*
-    free = free_motion(model, motion, rotation, h, time)
+    free = free_motion(model, drive, motion, rotation, h, time)
     v_free = stacked(free[0], free[1], free[2])
     # 4. integrate velocities: the forces as h M⁻¹ Jᵀ F, or the springs by backward Euler (M1)
     v_new, forces, elongation, active_passes, residual, linear_iterations = integrate_velocities(
-        plain, penalty, contacts, rows, rotation, (springs, forces, elongation, implicit), v_free, h
+        model, penalty, contacts, rows, rotation, (springs, forces, elongation, implicit), v_free, h
     )
     # 4b–5. no contact carried past half its pass-through depth; positions; the anchors go on
     positions, velocities, offsets, energy = finish(
-        plain, settings, for_response(spec), contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
+        model, settings, for_response(spec), contacts, rows, motion, (v, v_new), (springs, elongation, implicit)
     )
     return (
         positions,

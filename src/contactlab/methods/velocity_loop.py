@@ -63,6 +63,7 @@ from ..collision import collide
 from ..collision.cloth_self import is_self_contact
 from ..collision.manifolds import Manifolds
 from ..compiling import njit
+from ..driving import DriveTable, table_of
 from ..state import Carry, State
 from .base import CollisionOptions
 from .loop_stages import (
@@ -78,7 +79,6 @@ from .loop_stages import (
     record,
     specialization,
     store,
-    without_drive,
 )
 from .loop_steps import penalty_step, projection_step, velocity_step
 from .penalty import penalty_loop
@@ -109,6 +109,7 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
 
 def run_steps(
     model: LoopModel,
+    drive: DriveTable,
     settings: LoopSettings,
     spec: Specialization,
     start: tuple,
@@ -116,8 +117,9 @@ def run_steps(
     samples: Samples,
 ) -> tuple:
     """``schedule`` = (steps, first index, last index, record every, max speed [m/s]): that many
-    steps of the run's ``step`` (``velocity_step``, ``projection_step`` or ``penalty_step``, compiled
-    for ``spec`` and inlined: ``LOOPS``), from ``start`` = (the state's arrays, a Motion changed in
+    steps of ``model`` driven by ``drive`` (``driving.table_of``) by the run's ``step``
+    (``velocity_step``, ``projection_step`` or ``penalty_step``, compiled for ``spec`` and
+    inlined: ``LOOPS``), from ``start`` = (the state's arrays, a Motion changed in
     place; what the step carries; the time [s]), numbered from the first index; after step i, a
     sample into ``samples`` (row after row) where i is a multiple of record every or the last
     index. Stops early after a step that leaves a non-finite value or a speed above max speed.
@@ -131,19 +133,16 @@ def run_steps(
     sweeps_made = 0
     implicit_steps = 0
     linear_made = 0
-    # poses and record never read the drive (only the step's free motion does): given the model
-    # without it, they are the same compiled code for a driven scene as for an undriven one
-    plain = without_drive(model)
     # the poses at each step's start, computed once after the step before: its sample takes them too
-    pose = poses(plain, motion)
+    pose = poses(model, motion)
     for s in range(steps):
         index = first_index + s
         # every step has one signature and one result (loop_steps): no branch on the method here
         positions, velocities, carried, count, sweeps, change, clear, elastic, implicit, linear = method_step(
-            model, settings, spec, motion, pose, time, carried
+            model, drive, settings, spec, motion, pose, time, carried
         )
         store(motion, positions, velocities)
-        pose = poses(plain, motion)
+        pose = poses(model, motion)
         time += settings.dt
         most = max(most, count)
         sweeps_made += sweeps
@@ -152,7 +151,7 @@ def run_steps(
         if not healthy(motion, max_speed):
             return s + 1, True, carried, time, written, most, sweeps_made, implicit_steps, linear_made
         if index % record_every == 0 or index == last_index:
-            record(samples, written, plain, spec.plan, motion, pose, time, (count, sweeps, change, clear))
+            record(samples, written, model, spec.plan, motion, pose, time, (count, sweeps, change, clear))
             samples.energy_elastic[written] = elastic
             written += 1
     return steps, False, carried, time, written, most, sweeps_made, implicit_steps, linear_made
@@ -288,7 +287,7 @@ class Stepper(Stepping):
         self.self_contacts = 0  # cloth self-contacts: none on the scenes the loop serves
 
     def _sample_now(self, samples: Samples) -> None:
-        model, motion = without_drive(loop_model(self.model)), self.motion  # the loop's own ``record``
+        model, motion = loop_model(self.model), self.motion  # the loop's own ``record``
         record(samples, 0, model, self.spec.plan, motion, poses(model, motion), self.time, (-1, 0, 0.0, False))
 
     def _steps(self, samples: Samples, schedule: tuple) -> tuple[int, bool, int]:
@@ -304,7 +303,7 @@ class Stepper(Stepping):
     def _run_arguments(self, steps, first_index, last_index, record_every, samples, max_speed):
         start = (self.motion, self.carried, self.time)
         schedule = (steps, first_index, last_index, record_every, max_speed)
-        return loop_model(self.model), self.settings, self.spec, start, schedule, samples
+        return loop_model(self.model), table_of(self.model.drive), self.settings, self.spec, start, schedule, samples
 
     @property
     def loop(self) -> Any:
