@@ -498,9 +498,11 @@ def _advance(bar, step_index, made):
 CHUNK_SECONDS = 0.1  # s: the compiled loop returns to Python about this often (progress, Ctrl-C, threads)
 # the next chunk at most this many times the last: its pace, measured on few steps, may be off,
 # but each call into the loop costs tens of µs (its arguments' unboxing), so a run of a tiny
-# scene (a few µs a step) should reach its full chunk in few calls (1, 16, 256, …: the first
-# step's pace counts where it compiled nothing)
-CHUNK_GROWTH = 16
+# scene (a few µs a step) should reach its full chunk in few calls (1, 64, 4096, …: the first
+# step's pace counts where it compiled nothing; a 720-step ball run makes three, 0.04 ms less
+# than with 16, benchmarks/README.md, thirtieth round). At worst, where the first step is far
+# cheaper than those after it, the second chunk is 64 of them
+CHUNK_GROWTH = 64
 WINDOW_SECONDS = 0.1  # s of stepping per measurement of the rate (summary "steps_per_second_spread")
 
 
