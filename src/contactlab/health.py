@@ -248,10 +248,14 @@ class Health:
         than its half thickness (``_behind_planes``, every row at once)."""
         if not len(self.plane_offsets) or not len(self.half_thickness):
             return np.zeros(len(samples["time"]), dtype=bool)
-        bodies, particles = samples["body_position"], samples["particle_position"]
-        centres = np.concatenate([bodies, particles], axis=1) if particles.shape[1] else bodies  # (n, B + P, 3)
-        behind = self.plane_offsets - centres @ self.plane_normals.T - self.half_thickness[:, None]
-        return (behind > 1e-9).any(axis=(1, 2))
+        return (self._behind(samples["body_position"], samples["particle_position"]) > 1e-9).any(axis=(1, 2))
+
+    def _behind(self, bodies, particles):
+        """How far each body and particle centre lies behind each static plane, past its half
+        thickness [m]: (..., B + P, O), of the centres (..., B, 3) and (..., P, 3) of one state
+        or of n samples."""
+        centres = np.concatenate([bodies, particles], axis=-2) if particles.shape[-2] else bodies
+        return self.plane_offsets - centres @ self.plane_normals.T - self.half_thickness[:, None]
 
     def check_depth(self, state: State, deepest: float | None) -> Violation | None:
         """``check_contacts`` on the contacts of ``state``'s own positions, where ``deepest`` [m],
@@ -266,12 +270,7 @@ class Health:
     def _behind_planes(self, state):
         if not len(self.plane_offsets) or not len(self.half_thickness):
             return None
-        centres = (
-            np.concatenate([state.body_position, state.particle_position])
-            if len(state.particle_position)
-            else state.body_position
-        )
-        behind = self.plane_offsets[None, :] - centres @ self.plane_normals.T - self.half_thickness[:, None]
+        behind = self._behind(np.asarray(state.body_position), np.reshape(state.particle_position, (-1, 3)))
         worst = np.unravel_index(np.argmax(behind), behind.shape)  # a NaN first: it is not > 1e-9, nothing said
         if behind[worst] > 1e-9:
             return self._found(
