@@ -14,6 +14,7 @@ A method module provides:
 from __future__ import annotations
 
 from dataclasses import fields
+from functools import cache
 from types import ModuleType
 
 from ..errors import InputError
@@ -46,9 +47,12 @@ def get(name: str) -> ModuleType:
 
 
 def make_options(module: ModuleType, table: dict[str, object], path: str) -> CollisionOptions:
-    """Build ``module.Options`` from a scene-file table (dict); unknown keys are InputErrors."""
+    """Build ``module.Options`` from a scene-file table (dict); unknown keys are InputErrors. An
+    empty table gives the defaults, built once (frozen, so shared: a tiny run's 30 µs of checks)."""
     import difflib
 
+    if not table:
+        return _defaults(module)
     known = {f.name: f for f in fields(module.Options)}
     values = {}
     for key, value in table.items():
@@ -61,3 +65,9 @@ def make_options(module: ModuleType, table: dict[str, object], path: str) -> Col
         return module.Options(**values)
     except InputError as error:
         raise InputError(f"{path}.{error.field}", error.message) from None
+
+
+@cache
+def _defaults(module: ModuleType) -> CollisionOptions:
+    """``module.Options()``, once per method."""
+    return module.Options()
