@@ -847,7 +847,11 @@ SCENES = now_and_then_a_stray_key(
 
 
 def run_briefly(scene):
-    """Simulate a loaded scene for at most 4 steps: a run, or InputError, or SimulationDiverged."""
+    """Simulate a loaded scene for at most 4 steps: a run, or InputError, or SimulationDiverged.
+    Through the methods' ``step`` (``compiled_loop=False``; the checks and the stages are the
+    loop's, the same numbers): the loop compiles for each mix of shapes, 15–20 s a mix, and the
+    generated scenes make a dozen mixes the scene tests do not, which cost this one test 60–160 s
+    of the suite (the loop's specializations are the scene and method tests' to compile)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         simulate(
@@ -857,6 +861,7 @@ def run_briefly(scene):
             min(scene.duration, 4 * scene.dt),
             scene.method_options.get(scene.method),
             scene.integrator,
+            compiled_loop=False,
         )
 
 
