@@ -188,27 +188,14 @@ DriveTable = namedtuple(
     ),
 )
 DriveTable.__doc__ = """A Drive's keyframes and constant loads as the compiled kernels take them (writable
-copies): what both the methods' steps and the compiled loop evaluate, with the same functions (a scene
-nothing drives: UNDRIVEN)."""
+copies): what both the methods' steps and the compiled loop evaluate, with the same functions."""
 
 
-def table_of(drive: Drive | None) -> DriveTable:
-    """The DriveTable the compiled loop steps a model with: its ``drive``'s, or UNDRIVEN
-    where it has none (None): one Numba type either way."""
-    return UNDRIVEN if drive is None else drive.table
-
-
-# the table of a scene nothing drives: every array empty, of the same types as a driven scene's
-# (one compiled loop serves both), and no rows of constant loads, which every driven scene's has
-UNDRIVEN = DriveTable(
-    np.zeros((0, 3)),
-    np.zeros((0, 3)),
-    np.zeros(0, dtype=np.int64),
-    *pad_keyframes([], [], 6),
-    np.zeros(0, dtype=np.int64),
-    *pad_keyframes([], [], 3),
-    pad_keyframes([], [], 4)[1],
-)
+def table_of(drive: Drive | None) -> DriveTable | None:
+    """What the compiled loop steps a model's ``drive`` with: its DriveTable, or None where
+    nothing drives it (an argument typed None, so that none of the drive's code is compiled:
+    5–7 s of a first run, measured with an empty table in its place)."""
+    return None if drive is None else drive.table
 
 
 @njit(cache=True)
@@ -305,7 +292,7 @@ def path_velocities(
 
 @njit(cache=True)
 def drive_velocities(
-    table: DriveTable,
+    table: DriveTable | None,
     t: float,
     h: float,
     inverse: tuple[np.ndarray, np.ndarray],
@@ -321,9 +308,9 @@ def drive_velocities(
     velocity that carries it onto its path over the step, h [s]. ``inverse`` = the bodies'
     (inverse masses (B,) [1/kg], principal inverse inertias (B, 3) [1/(kg m²)]); ``pose`` = their
     (rotations (B, 3, 3), positions (B, 3) [m], orientations (B, 4)) at the step's start;
-    ``velocity``, ``angular`` (B, 3) [m/s], [rad/s]. UNDRIVEN (no rows of constant loads, which
-    every driven scene's table has): nothing."""
-    if table.constant_force.shape[0] == 0:
+    ``velocity``, ``angular`` (B, 3) [m/s], [rad/s]. ``table`` None (a scene nothing drives, an
+    argument typed None): nothing, and nothing of this is compiled."""
+    if table is None:
         return
     force, torque = keyed_loads(table, t)
     if extra is not None:

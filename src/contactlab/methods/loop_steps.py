@@ -12,8 +12,8 @@ the same stages 1–3 for every scene (cloth springs, meshes, every integrator),
 the rigid ones (a driven scene's loads and paths are ``driving.drive_velocities`` in both);
 ``tests/test_velocity_loop.py`` checks that the two paths give the same numbers, bit for bit. The
 three steps share one module because they share one signature, ``(model, drive, settings, spec,
-motion, start, time, carried)`` (``drive``: the scene's DriveTable, ``driving.table_of``, which only
-free motion reads), and one result, ``(positions, velocities, carried, contacts, sweeps,
+motion, start, time, carried)`` (``drive``: the scene's DriveTable or None, ``driving.table_of``,
+which only free motion reads), and one result, ``(positions, velocities, carried, contacts, sweeps,
 change, clear, elastic energy, implicit, linear iterations)`` (a method without a value gives 0 or
 False): ``run_steps`` calls whichever its run has without a branch. What each is compiled for is
 one value, the run's Specialization.
@@ -51,7 +51,7 @@ from .velocity_level import respond
 @njit(cache=True)
 def velocity_step(
     model: LoopModel,
-    drive: DriveTable,
+    drive: DriveTable | None,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,
@@ -116,7 +116,7 @@ def velocity_step(
 @njit(cache=True)
 def projection_step(
     model: LoopModel,
-    drive: DriveTable,
+    drive: DriveTable | None,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,
@@ -164,7 +164,7 @@ def projection_step(
 @njit(cache=True)
 def penalty_step(
     model: LoopModel,
-    drive: DriveTable,
+    drive: DriveTable | None,
     settings: LoopSettings,
     spec: Specialization,
     motion: Motion,

@@ -109,7 +109,7 @@ def applies(model: Model, method: str, options: CollisionOptions, integrator: st
 
 def run_steps(
     model: LoopModel,
-    drive: DriveTable,
+    drive: DriveTable | None,
     settings: LoopSettings,
     spec: Specialization,
     start: tuple,
