@@ -234,8 +234,9 @@ def test_a_run_says_so_on_stderr_only_when_it_compiles(capsys):
 
 
 def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_path):
-    """A short free fall (no contact yet, so only a few kernels) on an empty Numba cache:
-    the notice on stderr, the JSON alone on stdout; the second run loads it all, silently."""
+    """A short run of the bouncing ball on an empty Numba cache (its whole compiled loop, as any
+    first run: the suite's slowest test): the notice on stderr, the JSON alone on stdout; the
+    second run loads it all, silently."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
 
     def run():
