@@ -227,8 +227,8 @@ def whole_sweeps(options: CollisionOptions) -> int:
 
 def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Motion, np.ndarray, tuple]:
     """What the compiled stages take in a method's step from Python (``velocity_level.step``,
-    ``projection.step``, ``penalty.step``): (the LoopModel (the drive the methods' steps apply in
-    Python, ``integrators.free_velocities``), the state's arrays as a Motion, the
+    ``projection.step``, ``penalty.step``, which apply the drive themselves in
+    ``integrators.free_velocities``): (the LoopModel, the state's arrays as a Motion, the
     bodies' rotations (B, 3, 3), (last step's contact ids (K,), their values (K, 3)) where the
     state carries ``method``'s (``Carry.of``), else both empty)."""
     # copies, writable and contiguous: a read-only or strided array is another Numba type, and a
