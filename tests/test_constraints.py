@@ -514,3 +514,22 @@ def test_substeps_hold_a_pile_the_same_sweeps_cannot():
     # 0.72 mm against 0.94 mm (deterministic: the same on any thread count); on the 1000-sphere
     # pile 8 substeps hold 0.96-1.07 mm where 10 whole-step sweeps leave 1.9 mm (benchmarks/README.md)
     assert small.summary["max_penetration"] < 0.8 * whole.summary["max_penetration"]
+
+
+def test_the_accelerations_formulation_sweeps_to_its_iteration_cap_not_to_substep_after():
+    """Only the velocity formulation goes on in substeps after ``substep_after`` whole-step
+    sweeps; the accelerations formulation has none to go on with, so a slow solve there takes
+    every sweep ``iterations`` allows (it stopped at 12 before)."""
+    b = ModelBuilder()
+    b.add_material("m", friction=0.5, restitution=0.0)
+    spacing = 0.1 - 1e-3  # a lattice of spheres, each overlapping its neighbours by 1 mm: jammed
+    for i in range(5):
+        for j in range(5):
+            for k in range(4):
+                position = (i * spacing, j * spacing, 0.05 - 5e-4 + k * spacing)
+                b.add_body("sphere", radius=0.05, mass=1.0 + 0.1 * ((i + 2 * j + 3 * k) % 5), position=position)
+    b.add_obstacle("plane", normal=(0, 0, 1), material="m")
+    model = b.finalize()
+    options = constraints.Options(formulation="acceleration", iterations=60, tolerance=1e-12)
+    state, info = constraints.step(model, model.state(), 1 / 240, options)
+    assert options.substep_after < info.solver_iterations <= 60

@@ -248,3 +248,39 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     largest_update = sequential.sweep_contacts(order, contacts.count, target, lam, rows, contacts.friction, u)
     assert largest_update > 10 * 1e-7  # the single-update rule would have gone on
     assert sequential.largest_row_change(rows, u, before) < largest_update
+
+
+def _solve(problem_of, cap, give_up):
+    """The lattice's solve from a zero warm start, capped at ``cap`` sweeps to 1e-7 m/s."""
+    contacts, rows, order, u0, target = problem_of
+    u = u0.copy()
+    lam, sweeps, change = sequential.solve_sequential_impulses(
+        rows, contacts.friction, target, u, (cap, 1e-7), np.zeros((contacts.count, 3)), (order, None), give_up
+    )
+    return lam, u, sweeps, change
+
+
+def test_a_solve_that_cannot_reach_the_tolerance_within_its_cap_gives_up_at_its_fourth_sweep():
+    """A stacked lattice pushed out of its overlaps from no warm start converges far more slowly
+    than a change falling 0.3-fold a sweep (FASTEST_RATE): with substeps to follow, its
+    whole-step solve stops at sweep GIVE_UP_AT, exactly where a solve capped there would; a
+    ``give_up`` just above that sweep's change lets it go on, exactly as a solve never given up."""
+    model = sphere_lattice(friction=0.5)
+    state, contacts, rows, order, u0, target = problem(model)
+    lattice = (contacts, rows, order, u0, target)
+    cap, at = 12, sequential.GIVE_UP_AT
+    hopeless = sequential.hopeless_change(cap, 1e-7)
+    assert hopeless == pytest.approx(1e-7 / sequential.FASTEST_RATE ** (cap - at))
+    lam_at, u_at, sweeps_at, change_at = _solve(lattice, at, np.inf)  # capped there: its change exact
+    assert sweeps_at == at and change_at > hopeless  # hopeless indeed
+    lam, u, sweeps, change = _solve(lattice, cap, hopeless)
+    assert sweeps == at and change > hopeless  # a lower bound, but above the line
+    np.testing.assert_array_equal(lam, lam_at)
+    np.testing.assert_array_equal(u, u_at)
+    # a line just above the fourth sweep's change: the solve goes on to its cap, as if never given up
+    lam_on, u_on, sweeps_on, change_on = _solve(lattice, cap, change_at * 1.01)
+    lam_all, u_all, sweeps_all, change_all = _solve(lattice, cap, np.inf)
+    assert sweeps_on == sweeps_all == cap
+    np.testing.assert_array_equal(lam_on, lam_all)
+    np.testing.assert_array_equal(u_on, u_all)
+    assert change_on == change_all

@@ -43,6 +43,7 @@ from .jacobian_rows import ContactRows, rows_at
 from .sequential import (
     PARALLEL_MIN_CONTACTS,
     SWEEP_GROUPS,
+    hopeless_change,
     solve_in_substeps,
     solve_sequential_impulses,
     split_into_slabs,
@@ -385,9 +386,10 @@ def solve(
 def _solve_grouped(settings, rows, contacts, system, order, starts, substepping):
     """``solve``'s sweeps in ``order`` with the groups ``starts`` (None: serial): in one solve, or in substeps."""
     u, target, warm = system[0], system[1], system[2]
-    if substepping is None:
+    if substepping is None:  # with substeps to follow (respond), a hopeless whole-step solve gives up early
         until = (settings.whole_sweeps, settings.tolerance)
-        return solve_sequential_impulses(rows, contacts.friction, target, u, until, warm, (order, starts))
+        give_up = hopeless_change(settings.whole_sweeps, settings.tolerance) if settings.substeps > 1 else np.inf
+        return solve_sequential_impulses(rows, contacts.friction, target, u, until, warm, (order, starts), give_up)
     return solve_in_substeps(rows, contacts.friction, target, u, substepping, settings, warm, (order, starts))
 
 
