@@ -391,6 +391,59 @@ def test_an_edited_callee_in_another_file_makes_the_callers_cache_stale(tmp_path
     assert totals() == ["2", "1"]  # and the fresh entry is the one the next process loads
 
 
+# One kernel, compiled for a type of its own by each of several processes at once, each saving
+# its entry slowly (the window of the race widened to a second), then loaded by a fresh process.
+TYPED_KERNEL = "{njit}\n\n\n@njit(cache=True)\ndef twice_plus_one(x):\n    return x * 2 + 1\n"
+SAVE_SLOWLY = """
+import sys, time
+from numba.core import caching
+index_saved = caching.IndexDataCacheFile._save_index
+def slowly(self, overloads):
+    time.sleep(1.0)
+    index_saved(self, overloads)
+caching.IndexDataCacheFile._save_index = slowly
+import numpy as np
+import contactlab.compiling
+from kernels.typed import twice_plus_one
+print(repr(twice_plus_one(getattr(np, sys.argv[1])(3))))
+"""
+LOAD_ALL = """
+import numpy as np
+import contactlab.compiling
+from kernels.typed import twice_plus_one
+values = [repr(twice_plus_one(getattr(np, name)(3))) for name in {types}]
+assert not twice_plus_one.stats.cache_misses, twice_plus_one.stats.cache_misses
+print(" ".join(values))
+"""
+
+
+def test_processes_saving_one_kernel_for_different_types_at_once_keep_its_cache_whole(tmp_path):
+    """Numba picks a new signature's data file by reading the index, and writes the index, then
+    the data, unlocked: processes saving one function at once took one file name for several
+    signatures, and a later process loaded another signature's machine code (the suite crashed
+    so). ``contactlab.compiling`` saves under a lock of the index: each signature's entry is
+    its own, and a fresh process loads every one of them with no compiling."""
+    folder = tmp_path / "packages" / "kernels"
+    folder.mkdir(parents=True)
+    (folder / "__init__.py").write_text(STAMP_INIT)
+    (folder / "typed.py").write_text(TYPED_KERNEL.format(njit=STAMPED))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "packages"), *sys.path])}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")
+    types = ["int8", "int16", "int32", "float32", "float64", "complex128"]
+    saving = [
+        subprocess.Popen([sys.executable, "-c", SAVE_SLOWLY, name], env=env, stdout=subprocess.PIPE, text=True)
+        for name in types
+    ]
+    outputs = [process.communicate(timeout=180)[0].strip() for process in saving]
+    assert all(process.returncode == 0 for process in saving)
+    assert [complex(value.strip("()")) for value in outputs] == [7] * len(types)
+    loaded = subprocess.run(
+        [sys.executable, "-c", LOAD_ALL.format(types=types)], env=env, capture_output=True, text=True, timeout=180
+    )
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.split() == outputs  # each type's own machine code: its own value and type
+
+
 def test_every_kernel_is_stamped_with_the_whole_package():
     """Every module of contactlab takes njit from contactlab.compiling, and its kernels' cache
     entries carry the digest of all the package's sources."""

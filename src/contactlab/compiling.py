@@ -50,6 +50,12 @@ from numba import njit
 from numba.core import caching, event
 from numba.core.registry import CPUDispatcher as Dispatcher
 
+fcntl: Any
+try:
+    import fcntl
+except ImportError:  # no POSIX file locks (Windows): Numba's own saving, unlocked
+    fcntl = None
+
 __all__ = [
     "NOTICE",
     "FirstCompile",
@@ -161,6 +167,41 @@ class PackageStampedLocator(caching._CacheLocator):
 
 
 PackageStampedLocator.stamp_package(Path(__file__).parent)
+
+
+@contextmanager
+def _index_locked(index_path: str) -> Iterator[None]:
+    """Hold an exclusive lock on ``index_path`` + ".lock" across processes (``fcntl``; where
+    there is none, no lock)."""
+    if fcntl is None:
+        yield
+        return
+    with open(index_path + ".lock", "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+_UNLOCKED_SAVE = caching.IndexDataCacheFile.save
+
+
+def _save_locked(self: Any, key: Any, data: Any) -> None:
+    """Numba's ``IndexDataCacheFile.save`` under a lock of the function's index file.
+
+    Numba reads a function's index, picks a data file name for a new signature (the first
+    number the index has not used), writes the index, then the data, with no lock between
+    processes. Two processes (the suite's two workers) that compile one function for two
+    signatures at once can pick the same number: the index then names one signature and the
+    data file holds the other's machine code, and the next process that loads it crashes (a
+    segmentation fault seen in the suite, on ``loop_stages.solve``). Under the lock a process
+    reads the index only after the last one wrote its index and data."""
+    with _index_locked(self._index_path):
+        _UNLOCKED_SAVE(self, key, data)
+
+
+caching.IndexDataCacheFile.save = _save_locked
 
 
 def in_python(kernel: Any, **replacing: Any) -> Any:
