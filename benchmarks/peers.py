@@ -833,7 +833,7 @@ def lcp_runs(results, path, quick):
         B, c, source = random_spd_lcp()
     timings = {}
     answers = {}
-    for method in ("pgs", "redblack"):
+    for method in ("pgs", "redblack", "redblack_blocks"):
         solve_lcp(B, c, method=method, tol=1e-8, max_iterations=5)  # compile
         best = None
         for _ in range(3):
@@ -843,10 +843,10 @@ def lcp_runs(results, path, quick):
             best = elapsed if best is None else min(best, elapsed)
         timings[method] = (best, result)
         answers[method] = result.lam
-    difference = float(
-        np.linalg.norm(answers["pgs"] - answers["redblack"]) / max(np.linalg.norm(answers["pgs"]), 1e-300)
-    )
     for method, (seconds, result) in timings.items():
+        difference = float(
+            np.linalg.norm(answers["pgs"] - answers[method]) / max(np.linalg.norm(answers["pgs"]), 1e-300)
+        )
         record(
             results,
             f"lcp/{method}",

@@ -203,7 +203,7 @@ def sphere_column(rng):
     return b.finalize()
 
 
-@pytest.mark.parametrize("solver", ["pgs", "redblack", "jacobi", "lemke"])
+@pytest.mark.parametrize("solver", ["pgs", "redblack", "redblack_blocks", "jacobi", "lemke"])
 def test_frictionless_lcp_solvers_hold_a_column(rng, solver):
     model = sphere_column(rng)
     run = simulate(

@@ -20,6 +20,7 @@ from contactlab.lcp import (
     solve_friction_contact,
     solve_lcp,
 )
+from contactlab.lcp.coloring import level_blocks
 from contactlab.lcp.friction import largest_eigenvalue
 from contactlab.lcp.friction_sweeps import _project_cone
 
@@ -55,6 +56,22 @@ def contact_lcp(rng, n, bodies=None):
     return B, rng.normal(size=n), pairs
 
 
+def lattice_lcp(rng, side):
+    """B = J M⁻¹ Jᵀ + 0.05 I of bodies on a side × side grid (3 DOFs each), one row for each
+    pair of grid neighbours, random normals: the coupling graph of a layer of touching bodies."""
+    index = np.arange(side * side).reshape(side, side)
+    pairs = np.concatenate(
+        [np.c_[index[:, :-1].ravel(), index[:, 1:].ravel()], np.c_[index[:-1, :].ravel(), index[1:, :].ravel()]]
+    )
+    n = len(pairs)
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rows = np.repeat(np.arange(n), 6)
+    cols = (3 * pairs[:, [0, 0, 0, 1, 1, 1]] + np.tile([0, 1, 2], 2)).ravel()
+    J = sp.csr_matrix((np.c_[normals, -normals].ravel(), (rows, cols)), shape=(n, 3 * side * side))
+    return (J @ J.T + 0.05 * sp.eye(n)).tocsr(), rng.normal(size=n)
+
+
 def dense_spd(rng, n):
     G = rng.normal(size=(n, n))
     return G @ G.T / n + 0.5 * np.eye(n), rng.normal(size=n)
@@ -75,7 +92,7 @@ def test_lemke_meets_complementarity_on_random_spd(rng, n):
     np.testing.assert_allclose(res.w, B @ res.lam - c, atol=1e-12)
 
 
-@pytest.mark.parametrize("method", ["pgs", "redblack"])
+@pytest.mark.parametrize("method", ["pgs", "redblack", "redblack_blocks"])
 @pytest.mark.parametrize("n", [5, 50, 200])
 def test_gauss_seidel_reaches_lemke_solution(rng, method, n):
     for B, c in (contact_lcp(rng, n)[:2], dense_spd(rng, n)):
@@ -132,6 +149,44 @@ def test_parallel_redblack_sweeps_equal_sequential_sweeps_in_color_order(rng, mo
     seq = solve_lcp(B[order][:, order], c[order], method="pgs", tol=1e-300, max_iterations=15, omega=1.2)
     assert red.iterations == seq.iterations == 15
     np.testing.assert_allclose(red.lam[order], seq.lam, rtol=1e-12, atol=1e-12)
+
+
+def test_level_blocks_couple_only_with_the_blocks_beside_them(rng):
+    """``level_blocks`` cuts the rows into runs of whole breadth-first levels: a coupled pair of
+    rows lies in one block or in two numbered one apart, so no two red (even) blocks couple, nor
+    two black ones; the blocks are about n / count rows each. Two problems side by side (two
+    components) are cut as one."""
+    B1, _ = lattice_lcp(rng, 30)
+    B2, _ = lattice_lcp(rng, 12)
+    B = sp.block_diag([B1, B2]).tocsr()
+    n = B.shape[0]
+    blocks = level_blocks(B, 8)
+    assert np.array_equal(np.unique(blocks), np.arange(blocks.max() + 1))  # numbered 0, 1, … without gaps
+    rows, cols = B.nonzero()
+    assert np.abs(blocks[rows] - blocks[cols]).max() == 1  # neighbours couple, none further apart
+    assert coloring_is_valid(B, blocks % 2) is False  # red couples with black, as it must
+    red_and_black = [np.flatnonzero(blocks % 2 == k) for k in (0, 1)]
+    for members in red_and_black:  # within a color, only rows of one block couple
+        within = B[members][:, members].tocoo()
+        assert np.all(blocks[members][within.row] == blocks[members][within.col])
+    assert blocks.max() + 1 >= 6 and np.bincount(blocks).max() <= 2 * n / 8
+
+
+def test_parallel_block_sweeps_equal_sequential_sweeps_in_block_order(rng, monkeypatch):
+    """``redblack_blocks``: the red blocks swept side by side, then the black, give k sweeps of
+    plain Gauss-Seidel on the rows in order of color, block and index (blocks of one color
+    share no coupling), and the solution pgs reaches."""
+    monkeypatch.setattr(lcp_solve, "REDBLACK_MIN_PARALLEL_ROWS", 1)
+    B, c = lattice_lcp(rng, 15)
+    blocks = level_blocks(B, lcp_solve.block_count(B.shape[0]))
+    order = np.lexsort((blocks, blocks % 2))
+    red = solve_lcp(B, c, method="redblack_blocks", tol=1e-300, max_iterations=15, omega=1.2)
+    seq = solve_lcp(B[order][:, order], c[order], method="pgs", tol=1e-300, max_iterations=15, omega=1.2)
+    assert red.iterations == seq.iterations == 15 and red.colors == 2
+    np.testing.assert_array_equal(red.lam[order], seq.lam)
+    exact = solve_lcp(B, c, method="lemke")
+    done = solve_lcp(B, c, method="redblack_blocks", tol=1e-10, max_iterations=20000)
+    assert done.converged and np.abs(done.lam - exact.lam).max() <= 1e-6
 
 
 def test_color_contacts_separates_rows_sharing_a_body():

@@ -77,6 +77,77 @@ def color_rows(B: sp.spmatrix | np.ndarray) -> np.ndarray:
     return _color_graph(coupling_graph(B))
 
 
+@njit(cache=True)
+def _breadth_first(rows, columns, start, base, level, queue):
+    """Levels base + distance from ``start`` of its connected component, written into ``level``
+    (−1: not reached yet), the neighbours of i being the columns of row i and the rows of column
+    i stored in a matrix (``rows`` = its CSR (indptr, indices), ``columns`` its transpose's: B's
+    coupling graph without forming B + Bᵀ); ``queue`` receives the component's vertices in the
+    order reached. Returns how many there are."""
+    level[start] = base
+    queue[0] = start
+    head, tail = 0, 1
+    while head < tail:
+        v = queue[head]
+        head += 1
+        for indptr, indices in (rows, columns):
+            for k in range(indptr[v], indptr[v + 1]):
+                u = indices[k]
+                if level[u] < 0:
+                    level[u] = level[v] + 1
+                    queue[tail] = u
+                    tail += 1
+    return tail
+
+
+@njit(cache=True)
+def _levels(rows, columns):
+    """Breadth-first levels (n,) int64 of a matrix's coupling graph (``rows``, ``columns`` as
+    ``_breadth_first`` takes them): each connected component from a vertex at its far end (the
+    last reached from its lowest-numbered vertex: a long, narrow level structure), its levels
+    after those of the components before it. Two coupled rows are on the same level or on
+    neighbouring ones (a stored zero counts as a coupling here: blocks only stay further apart)."""
+    n = rows[0].shape[0] - 1
+    level = np.full(n, -1, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    base = 0
+    for seed in range(n):
+        if level[seed] >= 0:
+            continue
+        count = _breadth_first(rows, columns, seed, base, level, queue)
+        far = queue[count - 1]
+        for i in range(count):
+            level[queue[i]] = -1
+        count = _breadth_first(rows, columns, far, base, level, queue)
+        base = level[queue[count - 1]] + 1
+    return level
+
+
+def level_blocks(B: sp.spmatrix | np.ndarray, count: int) -> np.ndarray:
+    """Cut the rows of ``B`` (n, n) into at most ``count`` blocks of about 1 / count of its stored
+    entries each (a sweep's work) for block red-black Gauss-Seidel (``solve_lcp``'s
+    ``redblack_blocks``): blocks (n,) int64 numbered 0, 1, … in order, each a run of whole
+    breadth-first levels of the coupling graph.
+
+    A row is coupled only with rows of its own level and the levels beside it, so only with rows
+    of its own block and of the blocks numbered just before and after it: the even-numbered
+    ("red") blocks never couple with each other, nor the odd ("black") ones."""
+    csr = square_csr(B, "B")
+    n = csr.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    transpose = csr.T.tocsr()
+    level = _levels(
+        (csr.indptr.astype(np.int64), csr.indices.astype(np.int64)),
+        (transpose.indptr.astype(np.int64), transpose.indices.astype(np.int64)),
+    )
+    work = np.bincount(level, weights=np.diff(csr.indptr) + 1.0)  # entries of each level's rows
+    before = np.cumsum(work) - work  # the work on the levels before each level
+    block = np.minimum((before * count / work.sum()).astype(np.int64), count - 1)  # by where the level starts
+    # numbered by the blocks that hold a level, so neighbouring levels are in blocks one apart
+    return np.unique(block, return_inverse=True)[1].astype(np.int64)[level]
+
+
 def color_contacts(index_lists: Sequence[Sequence[int]], n_dofs: int | None = None) -> np.ndarray:
     """Color rows given, for each row, the degrees of freedom (or bodies) it touches.
 

@@ -1,13 +1,20 @@
 """Compiled iterations for the LCP ``w = B λ − c ≥ 0, λ ≥ 0, λᵀ w = 0`` (SPEC C6–C9).
 
 All loops over rows run inside Numba (``@njit(cache=True)``) on the CSR arrays of B, in one
-kernel, :func:`projected_sweeps`, for the three methods:
+kernel, :func:`projected_sweeps`, for the four methods:
 
 * projected Gauss-Seidel (SPEC C7) with over-relaxation ω: the rows as one color;
 * projected Jacobi (``jacobi``): every row from the previous iterate;
 * multi-color ("red-black") Gauss-Seidel (SPEC C8): colors visited in order, the rows of one
   color updated in parallel (``prange``), which is race-free because same-colored rows are not
-  coupled (see :mod:`contactlab.lcp.coloring`).
+  coupled (see :mod:`contactlab.lcp.coloring`);
+* block red-black Gauss-Seidel (``redblack_blocks``): the rows cut into blocks, red and black
+  alternately, that couple only with the blocks beside them (``coloring.level_blocks``); the red
+  blocks are swept side by side (``prange``), each in its rows' order as in ``pgs``, then the
+  black ones. Two colors a sweep instead of a dozen or more, and the serial order within a block.
+
+Each color is a run of blocks and each block a run of rows (one row a block for ``redblack``,
+one block of every row for ``pgs`` and ``jacobi``): one loop serves all four.
 
 One row update is the exact solution of row i holding the others fixed, then the projection::
 
@@ -93,24 +100,27 @@ def projected_sweeps(
     omega: float,
     tol: float,
     max_iterations: int,
-    color_start: np.ndarray,
+    groups: tuple[np.ndarray, np.ndarray],
     min_parallel: int,
     jacobi: bool,
 ) -> tuple[int, float]:
     """Projected Gauss-Seidel or Jacobi sweeps on λ (n,), updated in place, until the residual is
     ``<= tol`` or ``max_iterations`` sweeps. Returns ``(sweeps, residual)``.
 
-    ``color_start`` (ncolors + 1,) groups the rows by color: color k is rows
-    ``color_start[k]:color_start[k + 1]``, visited in order. One color ``[0, n]`` is projected
-    Gauss-Seidel (SPEC C7); several, of rows not coupled within a color (numbered so by
-    :mod:`contactlab.lcp.coloring`), multi-color Gauss-Seidel (SPEC C8), where a color of at least
-    ``min_parallel`` rows is updated in parallel (``prange``) and the residual too once n ≥
-    ``min_parallel`` (waking the thread pool costs more than a small group's work, and much more
-    when the cores are busy). Rows coupled within a color need ``min_parallel > n``, as do runs
-    that must give the sequential residual to the last bit. ``jacobi``: every row from the last
-    sweep's iterate (projected Jacobi). One kernel for all three, so the sweep and the stopping
-    test are written once; its sequential path is no slower than the plain (not parallel=True)
-    Gauss-Seidel kernel it replaced (measured on a 3000-row problem)."""
+    ``groups`` = (color_start (ncolors + 1,), block_start (nblocks + 1,)): color k is blocks
+    ``color_start[k]:color_start[k + 1]``, visited in color order, and block b rows
+    ``block_start[b]:block_start[b + 1]``, swept in order. One color of one block is projected
+    Gauss-Seidel (SPEC C7); several colors whose blocks do not couple with each other (numbered
+    so by :mod:`contactlab.lcp.coloring`), multi-color Gauss-Seidel (SPEC C8: blocks of one row)
+    or block red-black Gauss-Seidel (two colors of blocks of many rows). The blocks of a color of
+    at least ``min_parallel`` rows are swept in parallel (``prange``), and the residual too once
+    n ≥ ``min_parallel`` (waking the thread pool costs more than a small group's work, and much
+    more when the cores are busy). Blocks coupled within a color need ``min_parallel > n``, as do
+    runs that must give the sequential residual to the last bit. ``jacobi``: every row from the
+    last sweep's iterate (projected Jacobi). One kernel for all four, so the sweep and the
+    stopping test are written once; its sequential path is no slower than the plain (not
+    parallel=True) Gauss-Seidel kernel it replaced (measured on a 3000-row problem)."""
+    color_start, block_start = groups
     n = c.shape[0]
     w = np.empty(n)
     ncolors = color_start.shape[0] - 1
@@ -127,14 +137,16 @@ def projected_sweeps(
             for i in range(n):  # a loop, not source[:] = lam: parallel=True would spread that on threads
                 source[i] = lam[i]
         for color in range(ncolors):
-            start = color_start[color]
-            stop = color_start[color + 1]
-            if stop - start >= min_parallel:
-                for i in prange(start, stop):
-                    _relax_row(indptr, indices, data, diag, c, lam, source, omega, i)
+            first = color_start[color]
+            last = color_start[color + 1]
+            if block_start[last] - block_start[first] >= min_parallel:
+                for b in prange(first, last):
+                    for i in range(block_start[b], block_start[b + 1]):
+                        _relax_row(indptr, indices, data, diag, c, lam, source, omega, i)
             else:
-                for i in range(start, stop):
-                    _relax_row(indptr, indices, data, diag, c, lam, source, omega, i)
+                for b in range(first, last):
+                    for i in range(block_start[b], block_start[b + 1]):
+                        _relax_row(indptr, indices, data, diag, c, lam, source, omega, i)
         if parallel_residual:
             residual = lcp_residual_parallel(indptr, indices, data, c, lam, w)
         else:

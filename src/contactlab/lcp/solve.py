@@ -10,17 +10,26 @@ import numpy as np
 from ..errors import InputError
 from . import pgs as _kernels
 from ._checks import choice, finite_vector, positive_float, positive_int, square_csr
-from .coloring import color_rows
+from .coloring import color_rows, level_blocks
 from .lemke import lemke
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
 
-LCP_METHODS = ("pgs", "redblack", "jacobi", "lemke")
+LCP_METHODS = ("pgs", "redblack", "redblack_blocks", "jacobi", "lemke")
 
 #: A color group of ``redblack`` with at least this many rows is updated in parallel (``prange``);
 #: smaller groups run on one thread, where the thread-pool wake-up would cost more than the work.
 REDBLACK_MIN_PARALLEL_ROWS = 128
+
+#: ``redblack_blocks`` cuts n rows into 4 blocks per BLOCK_ROWS rows or part (at least 4: two
+#: red, two black): a number fixed by n alone, so the answer is the same on any thread count.
+BLOCK_ROWS = 16384
+
+
+def block_count(n: int) -> int:
+    """The blocks ``redblack_blocks`` cuts n rows into: 4 per BLOCK_ROWS rows or part."""
+    return 4 * max(1, -(-n // BLOCK_ROWS))
 
 
 @dataclass
@@ -63,7 +72,12 @@ def solve_lcp(
        are not updated) and converge for symmetric positive (semi)definite B (jacobi only for
        diagonally dominant B); ``lemke`` accepts any B.
     c: (n,) right-hand side; for contacts ``c = d − J A⁻¹ b``.
-    method: ``"pgs"`` (SPEC C7), ``"redblack"`` (SPEC C8), ``"jacobi"`` or ``"lemke"`` (exact).
+    method: ``"pgs"`` (SPEC C7), ``"redblack"`` (SPEC C8: rows colored so that no two of a color
+       couple, each color's rows updated in parallel), ``"redblack_blocks"`` (block red-black
+       Gauss-Seidel: the rows cut into ``block_count(n)`` blocks, red and black alternately, of
+       whole breadth-first levels of the coupling graph, ``coloring.level_blocks``; the red blocks
+       swept side by side, each in its rows' order as pgs sweeps them, then the black), ``"jacobi"``
+       or ``"lemke"`` (exact).
     tol: absolute tolerance on the residual ``‖λ − max(0, λ − w)‖₂`` (units of w).
     max_iterations: sweep limit (iterative methods) or pivot limit (lemke).
     warm_start: (n,) start λ for the iterative methods (negative entries are set to 0); lemke
@@ -111,11 +125,19 @@ def solve_lcp(
     ncolors = 0
     if n == 0:
         iterations, residual = 0, 0.0
-    elif method == "redblack":
-        colors = color_rows(csr)
+    elif method in ("redblack", "redblack_blocks"):
+        if method == "redblack":  # blocks of one row, colored
+            blocks = np.arange(n, dtype=np.int64)
+            colors = color_rows(csr)
+        else:  # blocks of whole levels, red and black alternately
+            blocks = level_blocks(csr, block_count(n))
+            colors = blocks % 2
         ncolors = int(colors.max()) + 1
-        order = np.argsort(colors, kind="stable").astype(np.int64)
-        color_start = np.searchsorted(colors[order], np.arange(ncolors + 1)).astype(np.int64)
+        # rows in order of color, then block, then their own: color_start indexes the blocks
+        order = np.lexsort((blocks, colors)).astype(np.int64)
+        first = np.flatnonzero(np.r_[True, blocks[order][1:] != blocks[order][:-1]])  # each block's first row
+        block_start = np.append(first, n).astype(np.int64)
+        color_start = np.searchsorted(colors[order][first], np.arange(ncolors + 1)).astype(np.int64)
         # the problem renumbered color by color (P B Pᵀ), so that each color's rows and their
         # λ lie together in memory and a thread reads its share front to back
         permuted = csr[order][:, order].tocsr()
@@ -131,16 +153,16 @@ def solve_lcp(
             omega,
             tol,
             max_iterations,
-            color_start,
+            (color_start, block_start),
             REDBLACK_MIN_PARALLEL_ROWS,
             False,
         )
         lam[order] = lam_permuted
     else:
-        # one color of coupled rows, never split across threads: the sequential sweep
-        one_color = np.array([0, n], dtype=np.int64)
+        # one color of one block of coupled rows, never split across threads: the sequential sweep
+        one = (np.array([0, 1], dtype=np.int64), np.array([0, n], dtype=np.int64))
         iterations, residual = _kernels.projected_sweeps(
-            indptr, indices, data, diag, c, lam, omega, tol, max_iterations, one_color, n + 1, method == "jacobi"
+            indptr, indices, data, diag, c, lam, omega, tol, max_iterations, one, n + 1, method == "jacobi"
         )
     w = csr @ lam - c
     residual = float(np.linalg.norm(lam - np.maximum(0.0, lam - w)))

@@ -28,7 +28,7 @@ products B x = J (A⁻¹ (Jᵀ x)), one back-solve each with the step's LU of A,
 (``implicit_free_velocities``). "nsgs" (F4a) and "staggered" (F4b)
 solve the assembled W, q, and "newton" solves it by semi-smooth Newton steps on the
 Alart–Curnier function (``contactlab.lcp.newton``: a sparse LU a step, for stiff problems the
-sweeps leave unconverged); "pgs", "redblack", "jacobi" and "lemke" solve the frictionless LCP
+sweeps leave unconverged); "pgs", "redblack", "redblack_blocks", "jacobi" and "lemke" solve the frictionless LCP
 B_nn λ_n ≥ c_n (friction ignored: use them to study C7–C9). The accelerations formulation
 (C5a, ``formulation = "acceleration"``, see ``acceleration_target``) keeps resting contacts
 resting but has no means to stop an impact within a step — why velocities are preferred
@@ -79,9 +79,20 @@ if TYPE_CHECKING:
     from ..model import Model
     from .jacobian_rows import ContactRows
 
-SOLVERS = ("matrix_free", "nsgs", "staggered", "apgd", "newton", "pgs", "redblack", "jacobi", "lemke")
+SOLVERS = (
+    "matrix_free",
+    "nsgs",
+    "staggered",
+    "apgd",
+    "newton",
+    "pgs",
+    "redblack",
+    "redblack_blocks",
+    "jacobi",
+    "lemke",
+)
 CONE_ONLY_SOLVERS = ("apgd", "newton")  # they solve the Coulomb cone, not its pyramid
-FRICTIONLESS_SOLVERS = ("pgs", "redblack", "jacobi", "lemke")
+FRICTIONLESS_SOLVERS = ("pgs", "redblack", "redblack_blocks", "jacobi", "lemke")
 FORMULATIONS = ("velocity", "acceleration")
 
 
@@ -92,17 +103,18 @@ class Options(VelocityOptions):
     the solver's."""
 
     solver: str = "matrix_free"
-    """matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | jacobi | lemke"""
+    """matrix_free | nsgs (F4a) | staggered (F4b) | apgd | newton | pgs | redblack | redblack_blocks | jacobi |
+    lemke"""
     formulation: str = "velocity"
     """velocity (C5b) | acceleration (C5a)"""
     friction_model: str = "cone"
     """nsgs/staggered: cone (disk ‖r_t‖ ≤ μ r_n) | pyramid (inscribed box)"""
     tolerance: float | None = None
     """matrix_free: the largest change a sweep makes to a contact's velocity [m/s] (default 1e-7); pgs, redblack,
-    jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map error [1] (default
-    1e-6)"""
+    redblack_blocks, jacobi, lemke: the LCP residual [m/s]; nsgs, staggered, apgd, newton: the relative natural-map
+    error [1] (default 1e-6)"""
     omega: float = 1.0
-    """over-relaxation factor [1] of pgs, redblack, jacobi (0 < ω ≤ 2)"""
+    """over-relaxation factor [1] of pgs, redblack, redblack_blocks, jacobi (0 < ω ≤ 2)"""
 
     def __post_init__(self):
         super().__post_init__()
