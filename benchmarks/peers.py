@@ -105,15 +105,27 @@ def pile_layout(count, grid=9, spacing=0.11, first_z=0.2):
     return centres, half_width
 
 
-def pyramid_layout(levels=20, size=0.1, gap=0.005):
+def pyramid_layout(levels=20, size=0.1, gap=0.005, square=False):
     """Box centres of a 2D pyramid: level L (from 0) holds levels − L boxes, resting exactly on
-    the level below (the gaps are sideways)."""
+    the level below (the gaps are sideways), each over the gap between two below; ``square``: a
+    3-D pyramid, level L a square of (levels − L)² boxes, each over the corners of four."""
     centres = []
     for level in range(levels):
         n = levels - level
-        for i in range(n):
-            centres.append(((i - (n - 1) / 2) * (size + gap), 0.0, size / 2 + size * level))
+        along = [(i - (n - 1) / 2) * (size + gap) for i in range(n)]
+        for x in along:
+            for y in along if square else [0.0]:
+                centres.append((x, y, size / 2 + size * level))
     return np.array(centres)
+
+
+# issue 38's variants of the pyramid: its rows' boxes touching (no sideways gap), and a 3-D
+# square pyramid of 10 levels (385 boxes)
+PYRAMIDS = {
+    "pyramid": dict(levels=20),
+    "pyramid_touching": dict(levels=20, gap=0.0),
+    "pyramid3d": dict(levels=10, square=True),
+}
 
 
 BALL = dict(radius=0.05, height=1.0, restitution=0.8)  # centre 1 m up: the first apex is r + ε² (1 − r)
@@ -171,10 +183,10 @@ def contactlab_pile(count, grid=9):
     return b.finalize(), half_width
 
 
-def contactlab_pyramid(levels=20):
+def contactlab_pyramid(levels=20, **layout):
     b = ModelBuilder()
     b.add_material("wood", friction=0.6, restitution=0.0)
-    for c in pyramid_layout(levels):
+    for c in pyramid_layout(levels, **layout):
         b.add_body("box", half_extents=(0.05, 0.05, 0.05), mass=1.0, position=c, material="wood")
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="wood")
     return b.finalize()
@@ -443,31 +455,33 @@ def ball_runs(results, duration, path, rounds=BALL_ROUNDS):
         )
 
 
-def _pyramid_rounds(model, steps, sample_every, results, first_bullet_rate, path, rounds=PYRAMID_ROUNDS):
+def _pyramid_rounds(model, scene, steps, sample_every, results, first_bullet_rate, path, rounds=PYRAMID_ROUNDS):
     """The pyramid's target compares ``constraints`` with pybullet, and on a host whose speed
     drifts (20 % within a quarter of an hour on the sixteenth round's) two runs a minute apart
     compare the host as much as the engines. So after the first runs of each, the two run
     again in turn, ``rounds`` in all: contactlab's row keeps its best rate and every round's
     (``round_rates``), and this returns pybullet's rates, the first run's first."""
-    row = results["runs"].get("pyramid/contactlab-constraints", {})
+    row = results["runs"].get(f"{scene}/contactlab-constraints", {})
     if "steps_per_second" not in row:  # it diverged: nothing to pair
         return [first_bullet_rate]
     ours, theirs = [row["steps_per_second"]], [first_bullet_rate]
     for _ in range(rounds - 1):
         ours.append(run_contactlab(model, "constraints", steps * DT, sample_every)[0]["steps_per_second"])
-        theirs.append(run_peer(model, "pybullet", steps * DT, steps, "pyramid")[0]["steps_per_second"])
+        theirs.append(run_peer(model, "pybullet", steps * DT, steps, scene)[0]["steps_per_second"])
     record(
         results,
-        "pyramid/contactlab-constraints",
+        f"{scene}/contactlab-constraints",
         dict(row, steps_per_second=max(ours), round_rates=[round(r, 1) for r in ours]),
         path,
     )
     return theirs
 
 
-def pyramid_runs(results, duration, sample_every, path):
+def pyramid_runs(results, duration, sample_every, path, scene="pyramid"):
+    """The pyramid ``scene`` (a key of PYRAMIDS): contactlab's methods (its variants:
+    constraints and impulse), then each peer, pybullet in rounds with constraints."""
     steps = int(round(duration / DT))
-    model = contactlab_pyramid()
+    model = contactlab_pyramid(**PYRAMIDS[scene])
 
     def measures(summary, arrays):
         travel = moved(list(arrays["body_position"]))
@@ -478,23 +492,15 @@ def pyramid_runs(results, duration, sample_every, path):
             moved_over_1cm=int((travel > 1e-2).sum()),
         )
 
-    contactlab_rows(
-        results,
-        "pyramid",
-        model,
-        METHODS,
-        duration,
-        sample_every,
-        path,
-        measures,
-    )
+    methods = METHODS if scene == "pyramid" else ("constraints", "impulse")
+    contactlab_rows(results, scene, model, methods, duration, sample_every, path, measures)
     for peer in PEERS:
-        summary, arrays = run_peer(model, peer, duration, sample_every, "pyramid")
-        row = peer_row("pyramid", peer, summary, duration, **measures(summary, arrays))
+        summary, arrays = run_peer(model, peer, duration, sample_every, scene)
+        row = peer_row(scene, peer, summary, duration, **measures(summary, arrays))
         if peer == "pybullet":  # the target's pair: best of interleaved rounds with constraints
-            rounds = _pyramid_rounds(model, steps, sample_every, results, row["steps_per_second"], path)
+            rounds = _pyramid_rounds(model, scene, steps, sample_every, results, row["steps_per_second"], path)
             row.update(steps_per_second=max(rounds), round_rates=[round(r, 1) for r in rounds])
-        record(results, f"pyramid/{peer}", row, path)
+        record(results, f"{scene}/{peer}", row, path)
 
 
 def cloth_runs(results, n, duration, sample_every, path, methods=("projection", "constraints"), peers=True):
@@ -953,6 +959,8 @@ def main():
             "pile1000",
             "pile4000",
             "pyramid",
+            "pyramid_touching",
+            "pyramid3d",
             "cloth64",
             "cloth128",
             "scaling",
@@ -1004,6 +1012,8 @@ def main():
             "ball",
             "pile1000",
             "pyramid",
+            "pyramid_touching",
+            "pyramid3d",
             "cloth64",
             "lcp",
             "scaling",
@@ -1021,8 +1031,8 @@ def main():
                 ball_runs(results, settings["ball"], args.results)
             elif item.startswith("pile"):
                 pile_runs(results, int(item[4:]), settings[item], every, args.results)
-            elif item == "pyramid":
-                pyramid_runs(results, settings["pyramid"], every, args.results)
+            elif item in PYRAMIDS:
+                pyramid_runs(results, settings["pyramid"], every, args.results, item)
             elif item.startswith("cloth"):
                 cloth_runs(
                     results, int(item[5:]), settings[item], every, args.results, args.cloth_methods, not args.no_peers

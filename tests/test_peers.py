@@ -449,3 +449,25 @@ def test_a_wall_whose_normal_is_not_up_holds_a_ball_in_every_engine(peer):
         run = peers.simulate(model, peer, 0.002, 1.0, record_every=50)
         height = run.arrays["body_position"][:, 0] @ normal
         assert height.min() > 0.09 and height[-1] == pytest.approx(0.1, abs=2e-3), (normal, height)
+
+
+def test_the_benchmark_pyramids_rest_each_box_on_the_level_below(monkeypatch):
+    """The benchmark's pyramids (issue 38's variants): every box of a level above the floor rests
+    with its bottom face exactly on the top faces of the boxes below it — two in the 2-D
+    pyramids, four in the 3-D one (over their shared corner) — and the touching variant's
+    neighbours in a row touch side to side, where the plain pyramid keeps a 5 mm gap."""
+    bench = _benchmark(monkeypatch)
+    size = 0.1
+    for name, layout in bench.PYRAMIDS.items():
+        centres = bench.pyramid_layout(**layout, size=size)
+        levels, square = layout["levels"], layout.get("square", False)
+        assert len(centres) == sum((n * n if square else n) for n in range(1, levels + 1))
+        gap = layout.get("gap", 0.005)
+        for box in centres[centres[:, 2] > size]:
+            below = centres[np.isclose(centres[:, 2], box[2] - size)]
+            under = below[np.all(np.abs(below[:, :2] - box[:2]) < size, axis=1)]  # footprints overlapping
+            assert len(under) == (4 if square else 2), name
+            assert np.allclose(np.abs(under[:, :2] - box[:2])[:, 0], (size + gap) / 2)
+        floor = centres[np.isclose(centres[:, 2], size / 2)]
+        row = floor[np.isclose(floor[:, 1], floor[0, 1])]
+        assert np.allclose(np.diff(np.sort(row[:, 0])), size + gap), name  # side by side: touching if gap 0
