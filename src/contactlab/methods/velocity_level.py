@@ -122,7 +122,8 @@ class VelocityOptions(KeptManifoldOptions):
     substeps: int = 16
     """a step left unconverged is solved again in this many substeps, contacts detected once (1 = never)"""
     substep_after: int = 12
-    """with substeps > 1, the whole-step sweeps stop after this many (and iterations) and a step
+    """with substeps > 1, the whole-step sweeps stop after this many (and iterations), or after 4 where
+    their change is too far above the tolerance to reach it (sequential.hopeless_change), and a step
     still above the tolerance goes on in substeps"""
     substep_sweeps: int = 1
     """sweeps per substep (at most)"""
