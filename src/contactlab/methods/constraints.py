@@ -419,8 +419,7 @@ def step(
         return step_without_contacts(state, h, (predicted, free), contacts, carried)
     # 4. formulate the constraints: targets of the normal rows (C1–C5), then the LCP (C6) and its solve
     arrays, motion, rotation, carried = loop_inputs(model, state, "constraints")
-    # no substeps on this path: the whole-step solve takes every sweep ``iterations`` allows
-    settings = loop_settings(model, "constraints", options, dt)._replace(substeps=1, whole_sweeps=options.iterations)
+    settings = loop_settings(model, "constraints", options, dt)
     found = contacts.arrays()
     rows = build_rows(arrays, found, motion, rotation)
     target, tau = normal_row_targets(model, state, contacts, rows, v_free, h, options)

@@ -211,17 +211,26 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
         margin=float(options.contact_margin),
         manifold_tolerance=float(options.manifold_tolerance),
         passes=1 if velocity else int(options.passes),
-        substeps=int(getattr(options, "substeps", 1)),
+        substeps=substeps(options),
         substep_sweeps=int(getattr(options, "substep_sweeps", 1)),
         always_substep=getattr(options, "substep_when", "unconverged") == "always",
         whole_sweeps=whole_sweeps(options),
     )
 
 
+def substeps(options: CollisionOptions) -> int:
+    """The substeps an unconverged step goes on in: the Options' ``substeps``; 1 (none) where they
+    have none (projection, penalty) and in constraints' accelerations formulation, which solves
+    each step whole."""
+    if getattr(options, "formulation", "velocity") != "velocity":
+        return 1
+    return int(getattr(options, "substeps", 1))
+
+
 def whole_sweeps(options: CollisionOptions) -> int:
     """The most sweeps of one whole-step solve: ``iterations``, and no more than ``substep_after``
     where a step they leave unconverged goes on in substeps (``substeps`` > 1)."""
-    if getattr(options, "substeps", 1) > 1:
+    if substeps(options) > 1:
         return int(min(options.iterations, options.substep_after))
     return int(options.iterations)
 

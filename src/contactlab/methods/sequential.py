@@ -188,8 +188,8 @@ def sweep_until(
         # matters; the last sweep's change (returned) is exact either way: a sweep that stops
         # the solve passed every contact, and the cap's sweep takes them all
         enough = tolerance if sweeps < iterations or not exact else np.inf
-        if sweeps == GIVE_UP_AT and sweeps < iterations:
-            enough = max(tolerance, give_up)
+        if sweeps == GIVE_UP_AT and give_up < np.inf:  # whether it is hopeless: look further
+            enough = max(enough, give_up)
         change = largest_row_change(rows, u, before, enough)
         if change <= tolerance or (sweeps == GIVE_UP_AT and change > give_up):
             break
@@ -273,8 +273,8 @@ def resting_target(gap: float, settings: tuple) -> float:
     overlapping) may end a step of dt [s] with (C5b): −gap/dt while open (it may close, not
     overlap: a speculative contact), else a fraction ``stabilization`` of the overlap beyond
     ``slop`` [m] pushed out per step, never faster than ``max_push_velocity`` [m/s] — dt and these
-    three of the ``settings`` (a LoopSettings, or the SubstepGaps of ``aim_at_gap``, which hold
-    them too) (``velocity_level.resting_targets`` and ``impact_targets``, and each substep of
+    three of the ``settings`` (a LoopSettings, or the SubstepGaps a substep's ``sweep_contacts``
+    reads, which hold them too) (``velocity_level.resting_targets`` and ``impact_targets``, and each substep of
     ``solve_in_substeps``)."""
     dt = settings.dt
     if gap >= 0.0:
@@ -301,7 +301,7 @@ def solve_in_substeps(
     substep before), and so moves each contact's gap by h/n times its normal velocity — the rows
     of J fixed at the step's start, the gaps to first order (the gap at the start plus J_n of the
     displacement so far), no detection in between. The targets come from the gaps, each set as
-    the sweep reaches its contact (``aim_at_gap``): ``resting_target`` over h/n for an open
+    the sweep reaches its contact (``sweep_contacts``): ``resting_target`` over h/n for an open
     contact, the stabilization's push for an overlap. ``substepping`` = (fixed (C,) bool: a
     contact that keeps its ``target_normal_velocity`` (a bounce); the gaps (C,) [m] at the step's
     start; ``increment``; ``travelled`` (N,), which receives the mean of the substeps' velocities,
