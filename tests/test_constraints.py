@@ -22,7 +22,12 @@ HALF = 0.05
 # every step solved in small steps (sequential.solve_in_substeps), the contacts detected once: the
 # closed forms below hold for it as for the whole-step solve (issue 38)
 SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
-WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize("options", [{}, SUBSTEPPED], ids=["whole", "substepped"])
+# sweeps (and collision waves) cut at 4, so that many steps end unconverged, with the
+# shock-propagation pass (methods.shock)
+SHOCKED = {"substeps": 1, "iterations": 4, "shock_sweeps": 8}
+WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize(
+    "options", [{}, SUBSTEPPED, SHOCKED], ids=["whole", "substepped", "shocked"]
+)
 
 
 def apexes(height, velocity):
@@ -77,8 +82,8 @@ def test_acceleration_formulation_holds_a_resting_box():
 
 @pytest.mark.parametrize(
     "options",
-    [{"solver": solver} for solver in ("matrix_free", "nsgs", "staggered", "apgd", "newton")] + [SUBSTEPPED],
-    ids=["matrix_free", "nsgs", "staggered", "apgd", "newton", "substepped"],
+    [{"solver": solver} for solver in ("matrix_free", "nsgs", "staggered", "apgd", "newton")] + [SUBSTEPPED, SHOCKED],
+    ids=["matrix_free", "nsgs", "staggered", "apgd", "newton", "substepped", "shocked"],
 )
 def test_sliding_block_stops_at_v2_over_2_mu_g(options):
     v0, mu = 3.0, 0.3

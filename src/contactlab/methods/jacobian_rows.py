@@ -93,12 +93,22 @@ def contact_rows(sides: tuple, geometry: tuple, body_position: np.ndarray, masse
             if body[c, side] >= 0:
                 for i in range(3):
                     arm[c, side, i] = point[c, i] - body_position[body[c, side], i]
-        for d in range(5):
-            row, column = (d, d) if d < 3 else (d - 2, 0)
-            k[c, d] = _coupling(c, frame[c, row], frame[c, column], (body, particle, weight, arm), masses)
-        for d in range(3):
-            k[c, 5 + d] = 1.0 / k[c, d] if k[c, d] > 0.0 else 0.0
+        effective_masses(c, frame, (body, particle, weight, arm), masses, k)
     return ContactRows(body, particle, weight, arm, frame, k, *masses)
+
+
+@njit(cache=True, inline="always")
+def effective_masses(c, frame, sides, masses, k):
+    """Fill k[c] (the contact's row of ``ContactRows.k``, (8,)) from its ``frame`` (C, 3, 3), its
+    ``sides`` = the rows' (body, particle, weight, arm) and ``masses`` = (the bodies' inverse
+    masses (B,) [1/kg], world inverse inertias (B, 3, 3), the particles' inverse masses (P,)):
+    what ``contact_rows`` builds, and what shock propagation rebuilds with the bodies below held
+    (their inverse masses 0, ``methods.shock``)."""
+    for d in range(5):
+        row, column = (d, d) if d < 3 else (d - 2, 0)
+        k[c, d] = _coupling(c, frame[c, row], frame[c, column], sides, masses)
+    for d in range(3):
+        k[c, 5 + d] = 1.0 / k[c, d] if k[c, d] > 0.0 else 0.0
 
 
 @njit(cache=True, inline="always")

@@ -112,14 +112,16 @@ LoopSettings = namedtuple(
         "substep_sweeps",
         "always_substep",
         "whole_sweeps",
+        "shock_sweeps",
     ),
 )
 LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
 ([m/s]; projection: [m]), restitution threshold [m/s] (resolved), stabilization, slop [m], max push [m/s],
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
 detect-and-project passes, the velocity methods' substeps, sweeps a substep and whether every step is
-substepped (else only an unconverged one), and the most sweeps of a whole-step solve (``iterations``, or
-fewer where an unconverged step goes on in substeps: ``substep_after``). What a method's Options lack is 0
+substepped (else only an unconverged one), the most sweeps of a whole-step solve (``iterations``, or
+fewer where an unconverged step goes on in substeps: ``substep_after``), and the most sweeps a level of the
+shock-propagation pass makes after an unconverged step (0: no pass). What a method's Options lack is 0
 (False, 1 pass, 1 substep): see ``loop_settings``."""
 
 Motion = namedtuple("Motion", STATE_ARRAYS)
@@ -215,6 +217,7 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
         substep_sweeps=int(getattr(options, "substep_sweeps", 1)),
         always_substep=getattr(options, "substep_when", "unconverged") == "always",
         whole_sweeps=whole_sweeps(options),
+        shock_sweeps=int(getattr(options, "shock_sweeps", 0)),
     )
 
 

@@ -430,6 +430,7 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         substep_sweeps=1,
         always_substep=False,
         whole_sweeps=GUARD_SWEEPS,
+        shock_sweeps=0,
     )
     penalty = PenaltyLoop(
         springs=spring_settings(options, integrator),

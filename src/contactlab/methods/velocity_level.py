@@ -55,6 +55,7 @@ from .loop_stages import (
 )
 from .penalty_springs import SUPPORT_COSINE, entities_of, supported_loads
 from .sequential import contact_order, resting_target, sweep_contacts
+from .shock import propagate_shock
 
 if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
@@ -129,6 +130,10 @@ class VelocityOptions(KeptManifoldOptions):
     """sweeps per substep (at most)"""
     substep_when: str = "unconverged"
     """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
+    shock_sweeps: int = 0
+    """a step the sweeps leave above the tolerance ends with a shock-propagation pass, level by level from
+    the ground up with the levels below held (methods.shock), of at most this many sweeps a level; 0 = none.
+    Instead of substeps: needs substeps = 1"""
     warm_start: float = 1.0
     """fraction of last step's impulses to start from (by contact id), and of a new contact's weight
     over the step (``guess_new_impulses``); 0 = cold"""
@@ -145,7 +150,13 @@ class VelocityOptions(KeptManifoldOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1})
+        check_counts(self, {"iterations": 1, "substeps": 1, "substep_sweeps": 1, "substep_after": 1, "shock_sweeps": 0})
+        if self.shock_sweeps > 0 and self.substeps > 1:
+            raise InputError(
+                "shock_sweeps",
+                f"shock propagation ends an unconverged step instead of substeps; set substeps = 1 with "
+                f"shock_sweeps = {self.shock_sweeps}, or shock_sweeps = 0",
+            )
         check_choices(self, {"substep_when": SUBSTEP_WHEN})
         self._number("warm_start", 0.0, maximum=1.0)
         self._number("restitution_threshold")
@@ -524,7 +535,9 @@ def respond(
     (capped at ``settings.whole_sweeps`` sweeps), or every step where ``settings.always_substep``,
     is solved again in n substeps of h/n (``sequential.solve_in_substeps``) from the velocity at
     the step's start, gravity added a substep at a time, warm-started from that answer; the
-    positions then move with the substeps' mean velocity. A step that converges is the plain
+    positions then move with the substeps' mean velocity. With ``settings.shock_sweeps`` > 0
+    (and no substeps), a step the solve leaves above the tolerance ends with the shock-propagation
+    pass (``shock.propagate_shock``), its impulses not carried. A step that converges is the plain
     solve's, bit for bit. A substepped step returns the substeps' summed impulses, or, where the
     whole-step sweeps ran to their cap without giving up, the whole-step answer (the warm start
     the next step's sweeps settle from)."""
@@ -539,6 +552,9 @@ def respond(
         impulses, sweeps, change = solve(
             settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, warm, order), None
         )
+        if settings.shock_sweeps > 0 and change > settings.tolerance:  # unconverged: the shock pass
+            until = (settings.shock_sweeps, settings.tolerance)
+            sweeps += propagate_shock(rows, contacts.friction, target, impulses, u, order, until)
         return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     # small steps (settings.substeps > 1): the whole step's solve first, unless always substepped; a step it
     # leaves unconverged is solved again in substeps from the velocity at the start, warm-started from its answer
