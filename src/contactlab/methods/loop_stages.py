@@ -113,6 +113,7 @@ LoopSettings = namedtuple(
         "always_substep",
         "whole_sweeps",
         "shock_sweeps",
+        "contact_hertz",
     ),
 )
 LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, tolerance
@@ -121,7 +122,8 @@ time of impact (bool), warm-start fraction, contact margin [m], manifold toleran
 detect-and-project passes, the velocity methods' substeps, sweeps a substep and whether every step is
 substepped (else only an unconverged one), the most sweeps of a whole-step solve (``iterations``, or
 fewer where an unconverged step goes on in substeps: ``substep_after``), and the most sweeps a level of the
-shock-propagation pass makes after an unconverged step (0: no pass). What a method's Options lack is 0
+shock-propagation pass makes after an unconverged step (0: no pass), and the substeps' soft contacts'
+stiffness [Hz] (0: rigid). What a method's Options lack is 0
 (False, 1 pass, 1 substep): see ``loop_settings``."""
 
 Motion = namedtuple("Motion", STATE_ARRAYS)
@@ -218,6 +220,7 @@ def loop_settings(model: Model, method: str, options: CollisionOptions, dt: floa
         always_substep=getattr(options, "substep_when", "unconverged") == "always",
         whole_sweeps=whole_sweeps(options),
         shock_sweeps=int(getattr(options, "shock_sweeps", 0)),
+        contact_hertz=float(getattr(options, "contact_hertz", 0.0)),
     )
 
 

@@ -431,6 +431,7 @@ def penalty_loop(model: Model, options: Options, integrator: str, dt: float) -> 
         always_substep=False,
         whole_sweeps=GUARD_SWEEPS,
         shock_sweeps=0,
+        contact_hertz=0.0,
     )
     penalty = PenaltyLoop(
         springs=spring_settings(options, integrator),

@@ -55,7 +55,9 @@ def sweep_contacts(
 
     ``gaps`` None: the targets are given. In a substep (``solve_in_substeps``), the substeps'
     gaps (``SubstepGaps``): each contact's target is first set from its gap now, in the same pass
-    as its velocities rather than in one of its own (see ``SubstepGaps`` for the rule).
+    as its velocities rather than in one of its own (see ``SubstepGaps`` for the rule), and an
+    overlapping contact of a soft step is a soft row: Δλ_n = −s k⁻¹ (v_n − target) − l λ_n, s and l
+    the gaps' ``mass_scale`` and ``impulse_scale`` (1 and 0: the rigid update).
     """
     k = rows.k
     change = 0.0
@@ -69,15 +71,21 @@ def sweep_contacts(
         c = members[m]
         if k[c, 0] <= 0.0:  # static against static: nothing can move
             continue
+        stiffness, leak = 1.0, 0.0  # a rigid row: the whole correction, nothing of the old impulse let go
         if gaps is not None and not fixed[c]:  # the gap now, d₀ + h J_n ū
             gap = start[c] + gaps.dt * contact_velocity(c, rows, travelled)[0]
             if gap >= 0.0:
                 target[c] = -gap / (gaps.dt / gaps.substeps)
-            else:  # an overlap there at the step's start is pushed out at that overlap's speed
+            elif gaps.bias_rate <= 0.0:  # an overlap there at the step's start is pushed out at that overlap's speed
                 target[c] = resting_target(start[c] if start[c] < 0.0 else gap, gaps)
+            elif gaps.relax:  # a soft step's relaxing sweep: stop the approach, push nothing out
+                target[c] = 0.0
+            else:  # a soft contact: pushed out at bias_rate × the overlap, its row softened
+                target[c] = min(-gaps.bias_rate * gap, gaps.max_push_velocity)
+                stiffness, leak = gaps.mass_scale, gaps.impulse_scale
         vn, v1, v2 = contact_velocity(c, rows, u)
         old = impulses[c, 0]
-        normal = max(0.0, old - (vn - target[c]) * k[c, 5])
+        normal = max(0.0, old - stiffness * (vn - target[c]) * k[c, 5] - leak * old)
         impulses[c, 0] = normal
         dn = normal - old
         change = max(change, abs(dn) * k[c, 0])
@@ -302,7 +310,9 @@ def solve_in_substeps(
     of J fixed at the step's start, the gaps to first order (the gap at the start plus J_n of the
     displacement so far), no detection in between. The targets come from the gaps, each set as
     the sweep reaches its contact (``sweep_contacts``): ``resting_target`` over h/n for an open
-    contact, the stabilization's push for an overlap. ``substepping`` = (fixed (C,) bool: a
+    contact, the stabilization's push for an overlap, or with ``settings.contact_hertz`` > 0 a soft
+    contact's, each substep's sweeps then followed by a relaxing sweep (``SubstepGaps``; Box2D
+    v3's soft step). ``substepping`` = (fixed (C,) bool: a
     contact that keeps its ``target_normal_velocity`` (a bounce); the gaps (C,) [m] at the step's
     start; ``increment``; ``travelled`` (N,), which receives the mean of the substeps' velocities,
     with which the positions move: x = x₀ + h ū, each substep a symplectic Euler step).
@@ -332,18 +342,32 @@ def solve_in_substeps(
     for i in range(N):
         travelled[i] = 0.0
     pushing = (settings.dt, settings.substeps, settings.stabilization, settings.slop, settings.max_push_velocity)
-    gaps = SubstepGaps(gap_o, fixed[order], travelled, *pushing)
+    soft = soft_contact(settings.contact_hertz, settings.dt / n)
+    fixed_o = fixed[order]
+    gaps = SubstepGaps(gap_o, fixed_o, travelled, *pushing, *soft, False)
+    # the relaxing sweep reads the gaps at the substep's start, as its sweep did: the velocity it
+    # settles is the one the substep moved with (from the gaps after it, it held the last
+    # substep's velocity to the next step's speculative gap, and a falling ball lost its bounce)
+    before_moving = np.zeros(N)
+    relaxing = SubstepGaps(gap_o, fixed_o, before_moving, *pushing, *soft, True)
     sweeps, change = 0, 0.0
     for substep in range(n):
         for i in range(N):
             u[i] += increment[i] + applied[i]
             before[i] = u[i]
-        until = (settings.substep_sweeps, settings.tolerance, substep == n - 1, np.inf)
+        last = substep == n - 1
+        until = (settings.substep_sweeps, settings.tolerance, last and soft[0] <= 0.0, np.inf)
         made, change = sweep_until(rows_o, friction_o, target_o, share, u, until, starts, gaps)
         sweeps += made
         for i in range(N):
-            applied[i] += u[i] - before[i]
+            before_moving[i] = travelled[i]
             travelled[i] += u[i] / n
+        if soft[0] > 0.0:  # the soft step's relaxing sweep, after the positions moved
+            until = (settings.substep_sweeps, settings.tolerance, last, np.inf)
+            made, change = sweep_until(rows_o, friction_o, target_o, share, u, until, starts, relaxing)
+            sweeps += made
+        for i in range(N):
+            applied[i] += u[i] - before[i]
         for c in range(C):
             for d in range(3):
                 total[c, d] += share[c, d]
@@ -352,6 +376,25 @@ def solve_in_substeps(
         for d in range(3):
             impulses[order[i], d] = total[i, d]
     return impulses, sweeps, change
+
+
+SOFT_DAMPING_RATIO = 10.0  # ζ of a soft contact: Box2D v3's contact damping ratio, heavily overdamped
+
+
+@njit(cache=True)
+def soft_contact(hertz: float, h: float) -> tuple[float, float, float]:
+    """A soft contact's (bias rate [1/s], mass scale, impulse scale) for a substep of h [s]: a
+    damped spring of frequency ``hertz`` [Hz] (at most a quarter of the substep rate, 1/4h) and
+    damping ratio SOFT_DAMPING_RATIO, solved implicitly (Box2D v3's soft step, after Catto's
+    "Soft constraints"): with ω = 2π f, a₁ = 2ζ + hω, a₂ = hω a₁, a₃ = 1/(1 + a₂), the bias rate
+    ω/a₁, the mass scale a₂ a₃, the impulse scale a₃. ``hertz`` 0: (0, 1, 0), a rigid row."""
+    if hertz <= 0.0:
+        return 0.0, 1.0, 0.0
+    omega = 2.0 * np.pi * min(hertz, 0.25 / h)
+    a1 = 2.0 * SOFT_DAMPING_RATIO + h * omega
+    a2 = h * omega * a1
+    a3 = 1.0 / (1.0 + a2)
+    return omega / a1, a2 * a3, a3
 
 
 class SubstepGaps(NamedTuple):
@@ -368,7 +411,13 @@ class SubstepGaps(NamedTuple):
     left): that made up within the step what a substep's one sweep left undone (the 1000-sphere
     pile's deepest overlap fell from 0.96 to 0.68 mm at 8 substeps), but it holds every corner
     of a resting box at its starting gap, and the 20-level pyramid, substepped every step, slid
-    apart (51 mm, 97 boxes > 1 mm in 5 s, against 0.03 mm)."""
+    apart (51 mm, 97 boxes > 1 mm in 5 s, against 0.03 mm).
+
+    Soft contacts (``bias_rate`` > 0, Box2D v3's soft step): an overlap is a damped spring of
+    ``soft_contact``'s stiffness instead, pushed out at −bias_rate d as the sweep finds it, its
+    row softened (``sweep_contacts``); after each substep's sweeps a relaxing sweep (``relax``)
+    takes the push out of the velocities, so that it moves the bodies apart without launching
+    them. An open contact is rigid either way."""
 
     start: np.ndarray  # (C,) [m] each contact's gap at the step's start (> 0 open, < 0 overlapping)
     fixed: np.ndarray  # (C,) bool: the contact keeps the target it came with (a bounce)
@@ -379,6 +428,11 @@ class SubstepGaps(NamedTuple):
     stabilization: float  # resting_target's three
     slop: float
     max_push_velocity: float
+    # soft contacts (``soft_contact``; bias_rate 0: rigid, the rule above)
+    bias_rate: float  # [1/s] an overlap d < 0 is pushed out at −bias_rate d (at most max_push_velocity)
+    mass_scale: float  # the share of a rigid row's correction a soft row makes
+    impulse_scale: float  # the share of its accumulated impulse a soft row lets go each update
+    relax: bool  # a relaxing sweep: overlaps are held (target 0), rigid
 
 
 # A parallel sweep needs enough contacts to pay for its fork and join (~1 µs each on idle

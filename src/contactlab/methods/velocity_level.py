@@ -130,6 +130,9 @@ class VelocityOptions(KeptManifoldOptions):
     """sweeps per substep (at most)"""
     substep_when: str = "unconverged"
     """unconverged (a step the whole-step sweeps leave above the tolerance) | always"""
+    contact_hertz: float = 0.0
+    """Hz: in substeps, an overlap is a soft contact of this stiffness (damping ratio 10) pushed out by it, each
+    substep's sweeps followed by a relaxing sweep (Box2D v3's soft step); 0 = rigid, pushed out by the stabilization"""
     shock_sweeps: int = 0
     """a step the sweeps leave above the tolerance ends with a shock-propagation pass, level by level from
     the ground up with the levels below held (methods.shock), of at most this many sweeps a level; 0 = none.
@@ -163,6 +166,7 @@ class VelocityOptions(KeptManifoldOptions):
         self._number("stabilization", 0.0, maximum=1.0)
         self._number("slop", 0.0)
         self._number("max_push_velocity", 0.0)
+        self._number("contact_hertz", 0.0)
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
