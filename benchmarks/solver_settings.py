@@ -31,10 +31,13 @@ SAMPLE_EVERY = 12
 
 
 def parse(setting):
-    """Options from 'key=value key=value' (numbers as numbers)."""
+    """Options from 'key=value key=value' (numbers as numbers, true/false as booleans)."""
     options = {}
     for pair in setting.split():
         key, value = pair.split("=", 1)
+        if value.lower() in ("true", "false"):
+            options[key] = value.lower() == "true"
+            continue
         try:
             options[key] = int(value)
         except ValueError:

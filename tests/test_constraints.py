@@ -25,8 +25,10 @@ SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
 # sweeps (and collision waves) cut at 4, so that many steps end unconverged, with the
 # shock-propagation pass (methods.shock)
 SHOCKED = {"substeps": 1, "iterations": 4, "shock_sweeps": 8}
+# each manifold's normals solved as one block (methods.blocks)
+BLOCKS = {"substeps": 1, "block_solve": True}
 WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize(
-    "options", [{}, SUBSTEPPED, SHOCKED], ids=["whole", "substepped", "shocked"]
+    "options", [{}, SUBSTEPPED, SHOCKED, BLOCKS], ids=["whole", "substepped", "shocked", "blocks"]
 )
 
 
@@ -82,8 +84,9 @@ def test_acceleration_formulation_holds_a_resting_box():
 
 @pytest.mark.parametrize(
     "options",
-    [{"solver": solver} for solver in ("matrix_free", "nsgs", "staggered", "apgd", "newton")] + [SUBSTEPPED, SHOCKED],
-    ids=["matrix_free", "nsgs", "staggered", "apgd", "newton", "substepped", "shocked"],
+    [{"solver": solver} for solver in ("matrix_free", "nsgs", "staggered", "apgd", "newton")]
+    + [SUBSTEPPED, SHOCKED, BLOCKS],
+    ids=["matrix_free", "nsgs", "staggered", "apgd", "newton", "substepped", "shocked", "blocks"],
 )
 def test_sliding_block_stops_at_v2_over_2_mu_g(options):
     v0, mu = 3.0, 0.3

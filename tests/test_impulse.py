@@ -17,8 +17,10 @@ SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
 # sweeps (and collision waves) cut at 4, so that many steps end unconverged, with the
 # shock-propagation pass (methods.shock)
 SHOCKED = {"substeps": 1, "iterations": 4, "shock_sweeps": 8}
+# each manifold's normals solved as one block (methods.blocks)
+BLOCKS = {"substeps": 1, "block_solve": True}
 WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize(
-    "options", [{}, SUBSTEPPED, SHOCKED], ids=["whole", "substepped", "shocked"]
+    "options", [{}, SUBSTEPPED, SHOCKED, BLOCKS], ids=["whole", "substepped", "shocked", "blocks"]
 )
 
 

@@ -121,10 +121,10 @@ LoopSettings.__doc__ = """A method's Options as plain numbers: dt [s], sweeps, t
 time of impact (bool), warm-start fraction, contact margin [m], manifold tolerance [m] (0: nothing kept),
 detect-and-project passes, the velocity methods' substeps, sweeps a substep and whether every step is
 substepped (else only an unconverged one), the most sweeps of a whole-step solve (``iterations``, or
-fewer where an unconverged step goes on in substeps: ``substep_after``), and the most sweeps a level of the
-shock-propagation pass makes after an unconverged step (0: no pass), and the substeps' soft contacts'
-stiffness [Hz] (0: rigid). What a method's Options lack is 0
-(False, 1 pass, 1 substep): see ``loop_settings``."""
+fewer where an unconverged step goes on in substeps: ``substep_after``), the most sweeps a level of the
+shock-propagation pass makes after an unconverged step (0: no pass), the substeps' soft contacts'
+stiffness [Hz] (0: rigid). What a method's Options lack is 0 (False, 1 pass, 1 substep): see
+``loop_settings``."""
 
 Motion = namedtuple("Motion", STATE_ARRAYS)
 Motion.__doc__ = "The state's six arrays, (B, 3), (B, 4), (B, 3), (B, 3), (P, 3), (P, 3), changed in place."
@@ -138,18 +138,22 @@ Samples.__doc__ = "Preallocated recording arrays, one row per sample: the series
 PARALLEL_MIN_COLLIDERS = 100  # fewer bodies and particles: no parallel sweep is compiled in
 
 Specialization = namedtuple(
-    "Specialization", ("plan", "keeping", "constraints", "impulse", "projection", "slabs", "parallel", "penalty")
+    "Specialization",
+    ("plan", "keeping", "constraints", "impulse", "projection", "slabs", "parallel", "penalty", "shock", "blocks"),
 )
 Specialization.__doc__ = """What a run's compiled code is specialized for, as one value: the detection Plan;
 ``keeping`` (True: a pair family that keeps manifolds and a manifold tolerance > 0); the method
 (``constraints``, ``impulse``, ``projection``: True for the run's method, None for the others; ``penalty``:
 penalty's PenaltyLoop, else None); ``slabs`` (True: PARALLEL_MIN_CONTACTS contacts are possible,
 MAX_PER_PAIR per pair) and ``parallel`` (True: several threads and PARALLEL_MIN_COLLIDERS bodies and
-particles). A flag that is None leaves its branch uncompiled; the numbers are the same whatever it holds.
+particles); ``shock`` and ``blocks`` (True: the Options' shock propagation, block solves). A flag that is
+None leaves its branch uncompiled; the numbers are the same whatever it holds (``shock`` and ``blocks``
+aside, which are the Options' own choices).
 
 Numba leaves a branch uncompiled only where it tests an *argument* typed None, never a field of a tuple:
 each flag reaches the one kernel that branches on it as an argument of its own (``candidate_pairs``
-``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``), or is
+``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``,
+``velocity_level.shock_pass`` ``shock``, ``velocity_level.block_pass`` ``blocks``), or is
 chosen on by its type when compiling (``collision._kept_or_fresh``, ``for_response``)."""
 
 
@@ -170,6 +174,8 @@ def specialization(model: Model, method: str, options: CollisionOptions, penalty
         True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
         True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,
         penalty,
+        True if getattr(options, "shock_sweeps", 0) > 0 else None,
+        True if getattr(options, "block_solve", False) else None,
     )
 
 

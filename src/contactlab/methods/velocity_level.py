@@ -40,6 +40,7 @@ from ..errors import InputError
 from ..state import Carry, State
 from ..validation import check_choices, check_counts
 from .base import KeptManifoldOptions, StepInfo
+from .blocks import solve_in_blocks
 from .jacobian_rows import ContactRows, contact_velocity, row_products
 from .loop_stages import (
     LoopModel,
@@ -133,6 +134,9 @@ class VelocityOptions(KeptManifoldOptions):
     contact_hertz: float = 0.0
     """Hz: in substeps, an overlap is a soft contact of this stiffness (damping ratio 10) pushed out by it, each
     substep's sweeps followed by a relaxing sweep (Box2D v3's soft step); 0 = rigid, pushed out by the stabilization"""
+    block_solve: bool = False
+    """the whole-step sweeps solve the normals of each manifold (a pair of bodies' contacts, 4 at most) as one
+    small LCP, exactly (methods.blocks), then their friction"""
     shock_sweeps: int = 0
     """a step the sweeps leave above the tolerance ends with a shock-propagation pass, level by level from
     the ground up with the levels below held (methods.shock), of at most this many sweeps a level; 0 = none.
@@ -167,6 +171,8 @@ class VelocityOptions(KeptManifoldOptions):
         self._number("slop", 0.0)
         self._number("max_push_velocity", 0.0)
         self._number("contact_hertz", 0.0)
+        if not isinstance(self.block_solve, bool):
+            raise InputError("block_solve", f"expected true or false, found {self.block_solve!r}")
         if not isinstance(self.time_of_impact, bool):
             raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
 
@@ -553,21 +559,16 @@ def respond(
     target, tau = targets(model, settings, spec.impulse, spec.constraints, contacts, rows, u, order)
     warm = warm_impulses(model, settings, contacts, motion, carried[0], carried[1])
     if settings.substeps <= 1:
-        impulses, sweeps, change = solve(
-            settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, warm, order), None
-        )
-        if settings.shock_sweeps > 0 and change > settings.tolerance:  # unconverged: the shock pass
-            until = (settings.shock_sweeps, settings.tolerance)
-            sweeps += propagate_shock(rows, contacts.friction, target, impulses, u, order, until)
+        impulses, sweeps, change = _whole_step_solve(settings, spec, rows, contacts, motion, (u, target, warm, order))
+        if change > settings.tolerance:  # unconverged: the shock pass, where the Options ask for it
+            sweeps += shock_pass(spec.shock, settings, rows, contacts.friction, (u, target, impulses, order))
         return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     # small steps (settings.substeps > 1): the whole step's solve first, unless always substepped; a step it
     # leaves unconverged is solved again in substeps from the velocity at the start, warm-started from its answer
     entry = u.copy()
     impulses, sweeps, change = warm, 0, np.inf
     if not settings.always_substep:
-        impulses, sweeps, change = solve(
-            settings, spec.slabs, spec.parallel, rows, contacts, motion, (u, target, warm, order), None
-        )
+        impulses, sweeps, change = _whole_step_solve(settings, spec, rows, contacts, motion, (u, target, warm, order))
     if change <= settings.tolerance:
         return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     n = settings.substeps
@@ -596,6 +597,44 @@ def respond(
         impulses = whole
     sweeps += more
     return _respond_end(model, settings, contacts, motion, tau, velocities, (u, travelled, impulses, sweeps, change))
+
+
+@njit(cache=True, inline="always")
+def _whole_step_solve(settings, spec, rows, contacts, motion, system):
+    """``respond``'s whole-step solve: in blocks per manifold where the Options ask for it
+    (``block_pass``), else ``loop_stages.solve``'s sweeps."""
+    impulses, sweeps, change = block_pass(spec.blocks, settings, rows, contacts.friction, system)
+    if sweeps < 0:  # no block solve asked for
+        return solve(settings, spec.slabs, spec.parallel, rows, contacts, motion, system, None)
+    return impulses, sweeps, change
+
+
+@njit(cache=True)
+def block_pass(
+    blocks: bool | None, settings: LoopSettings, rows: ContactRows, friction: np.ndarray, system: tuple
+) -> tuple[np.ndarray, int, float]:
+    """``blocks.solve_in_blocks`` (serial) of ``system`` = (u (N,), changed in place; the targets
+    (C,) [m/s]; the warm start (C, 3) [N s]; the sweep order (C,)), at most ``settings.whole_sweeps``
+    sweeps to ``settings.tolerance``: (impulses (C, 3) [N s], sweeps, last change [m/s]). ``blocks``
+    None (the Specialization's: no block solve asked for) compiles none of it and returns −1 sweeps."""
+    if blocks is None:
+        return np.empty((0, 3)), -1, 0.0
+    u, target, warm, order = system
+    return solve_in_blocks(rows, friction, target, u, (settings.whole_sweeps, settings.tolerance), warm, order)
+
+
+@njit(cache=True)
+def shock_pass(
+    shock: bool | None, settings: LoopSettings, rows: ContactRows, friction: np.ndarray, system: tuple
+) -> int:
+    """``shock.propagate_shock`` on ``system`` = (u (N,), changed in place; the targets (C,) [m/s];
+    the sweeps' impulses (C, 3) [N s], left as they are; the sweep order (C,)), at most
+    ``settings.shock_sweeps`` sweeps a level to ``settings.tolerance``; returns the sweeps it made.
+    ``shock`` None (the Specialization's: no shock propagation asked for) compiles none of it."""
+    if shock is None:
+        return 0
+    u, target, impulses, order = system
+    return propagate_shock(rows, friction, target, impulses, u, order, (settings.shock_sweeps, settings.tolerance))
 
 
 @njit(cache=True)
