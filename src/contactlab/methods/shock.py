@@ -54,13 +54,13 @@ def propagate_shock(
     contacts (rounded up)."""
     sweeps, tolerance = until
     C = friction.shape[0]
-    level, entities, count = entity_levels(rows)
+    level, entities, movable = entity_levels(rows)
     B = rows.body_inverse_mass.shape[0]
     contact_level = np.zeros(C, dtype=np.int64)
     top = 0  # the highest level reached
     for c in range(C):
         for s in range(2):
-            for i in range(count[c, s]):
+            for i in range(movable[c, s]):
                 contact_level[c] = max(contact_level[c], level[entities[c, s, i]])
         if contact_level[c] < UNREACHED:
             top = max(top, contact_level[c])
