@@ -6,9 +6,7 @@ import pytest
 from conftest import cube_on_plane
 from test_sweeps import problem, sphere_lattice
 
-from contactlab import ModelBuilder, collide
-from contactlab.dynamics.generalized import stack
-from contactlab.dynamics.integrators import free_velocities
+from contactlab import ModelBuilder
 from contactlab.lcp import solve_lcp
 from contactlab.methods import blocks, jacobian_rows, sequential
 
@@ -25,10 +23,8 @@ def two_boxes_on_a_floor():
 
 
 def rows_of(model):
-    state = model.state()
-    contacts = collide(model, state, 0.002)
-    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
-    return contacts, rows, sequential.solve_order(contacts, model.gravity), stack(*free_velocities(model, state, DT))
+    """(contacts, rows, order, u) of the model at its start, as test_sweeps.problem makes them."""
+    return problem(model)[1:5]
 
 
 def test_blocks_hold_one_pair_of_bodies_each_in_the_sweep_order():

@@ -5,11 +5,10 @@ alone crush them."""
 import numpy as np
 import pytest
 from test_health import _mass_ratio_stack
+from test_sweeps import problem
 
-from contactlab import InputError, ModelBuilder, collide, simulate
-from contactlab.dynamics.generalized import stack
-from contactlab.dynamics.integrators import free_velocities
-from contactlab.methods import constraints, jacobian_rows, sequential, shock
+from contactlab import InputError, ModelBuilder, simulate
+from contactlab.methods import constraints, sequential, shock
 from contactlab.methods.loop_stages import loop_settings
 from contactlab.methods.velocity_level import resting_targets
 
@@ -33,11 +32,7 @@ def column_and_pair(masses):
 def unconverged_solve(model, sweeps):
     """The model's contacts at its start, solved cold for ``sweeps`` sweeps: (contacts, rows,
     order, targets, impulses, u)."""
-    state = model.state()
-    contacts = collide(model, state, 0.002)
-    rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
-    order = sequential.solve_order(contacts, model.gravity)
-    u = stack(*free_velocities(model, state, DT))
+    _, contacts, rows, order, u, _ = problem(model)
     target = resting_targets(-contacts.depth, loop_settings(model, "constraints", constraints.Options(), DT))
     impulses, _, change = sequential.solve_sequential_impulses(
         rows, contacts.friction, target, u, (sweeps, 1e-7), np.zeros((contacts.count, 3)), (order, None)
