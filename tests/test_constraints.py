@@ -27,7 +27,9 @@ SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
 SHOCKED = {"substeps": 1, "iterations": 4, "shock_sweeps": 8}
 # each manifold's normals solved as one block (methods.blocks)
 BLOCKS = {"substeps": 1, "block_solve": True}
-WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize(
+WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize("options", [{}, SUBSTEPPED], ids=["whole", "substepped"])
+# shock propagation and block solves act where bodies rest on several contacts: the boxes' tests run them too
+EVERY_SOLVE = pytest.mark.parametrize(
     "options", [{}, SUBSTEPPED, SHOCKED, BLOCKS], ids=["whole", "substepped", "shocked", "blocks"]
 )
 
@@ -98,7 +100,7 @@ def test_sliding_block_stops_at_v2_over_2_mu_g(options):
     np.testing.assert_allclose(x[-1], v0**2 / (2 * mu * G), rtol=0.03)
 
 
-@WHOLE_OR_SUBSTEPPED
+@EVERY_SOLVE
 @pytest.mark.parametrize("friction, sticks", [(0.5, True), (0.2, False)])
 def test_incline_sticks_below_the_friction_angle_and_slides_above(friction, sticks, options):
     theta = np.radians(20.0)
@@ -125,7 +127,7 @@ def test_sphere_goes_from_sliding_to_rolling_at_five_sevenths(options):
     np.testing.assert_allclose(np.diff(v[sliding]) / np.diff(t[sliding]), -mu * G, rtol=1e-3)
 
 
-@WHOLE_OR_SUBSTEPPED
+@EVERY_SOLVE
 @pytest.mark.parametrize("name", ["box_stack", "box_pyramid"])
 def test_stacks_stand_for_ten_seconds(name, options):
     scene = load_scene(name)

@@ -98,7 +98,7 @@ def contact_rows(sides: tuple, geometry: tuple, body_position: np.ndarray, masse
 
 
 @njit(cache=True, inline="always")
-def effective_masses(c, frame, sides, masses, k):
+def effective_masses(c: int, frame: np.ndarray, sides: tuple, masses: tuple, k: np.ndarray) -> None:
     """Fill k[c] (the contact's row of ``ContactRows.k``, (8,)) from its ``frame`` (C, 3, 3), its
     ``sides`` = the rows' (body, particle, weight, arm) and ``masses`` = (the bodies' inverse
     masses (B,) [1/kg], world inverse inertias (B, 3, 3), the particles' inverse masses (P,)):
