@@ -14,16 +14,9 @@ G = 9.81
 # every step solved in small steps (sequential.solve_in_substeps), the contacts detected once: the
 # closed forms below hold for it as for the whole-step solve (issue 38)
 SUBSTEPPED = {"substeps": 8, "substep_when": "always"}
-# sweeps (and collision waves) cut at 4, so that many steps end unconverged, with the
-# shock-propagation pass (methods.shock)
-SHOCKED = {"substeps": 1, "iterations": 4, "shock_sweeps": 8}
-# each manifold's normals solved as one block (methods.blocks)
-BLOCKS = {"substeps": 1, "block_solve": True}
 WHOLE_OR_SUBSTEPPED = pytest.mark.parametrize("options", [{}, SUBSTEPPED], ids=["whole", "substepped"])
-# shock propagation and block solves act where bodies rest on several contacts: the boxes' tests run them too
-EVERY_SOLVE = pytest.mark.parametrize(
-    "options", [{}, SUBSTEPPED, SHOCKED, BLOCKS], ids=["whole", "substepped", "shocked", "blocks"]
-)
+# shock propagation and block solves (respond's, shared with constraints) run the boxes' closed forms in
+# tests/test_constraints.py (EVERY_SOLVE)
 
 
 def apexes(height, velocity):
@@ -113,7 +106,7 @@ def test_newtons_cradle_one_in_one_out(options):
     np.testing.assert_allclose(v, [0, 0, 0, 0, 1.0], atol=1e-6)
 
 
-@EVERY_SOLVE
+@WHOLE_OR_SUBSTEPPED
 def test_sliding_block_stops_at_v2_over_2_mu_g(options):
     mu, v0 = 0.3, 3.0
     b = ModelBuilder()
@@ -338,7 +331,7 @@ def test_a_new_contact_starts_from_the_weight_it_bears():
     assert np.all(first_impulses(0.0) == 0.0)
 
 
-@EVERY_SOLVE
+@WHOLE_OR_SUBSTEPPED
 @pytest.mark.parametrize("method", ["impulse", "constraints"])
 def test_a_box_a_thousand_times_heavier_stands_on_a_light_one(method, options):
     """1:1000 at the defaults: the light box carries the heavy one for 5 s, the top box within
