@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiling import njit
-from .jacobian_rows import ContactRows, apply_impulse, apply_impulses, contact_velocity
-from .sequential import largest_row_change, sweep_contacts
+from .jacobian_rows import ContactRows, apply_impulse, apply_impulses, body_coupling, contact_velocity
+from .sequential import largest_row_change, stable_buckets, sweep_contacts
 
 BLOCK = 4  # contacts solved together at most: a box face's corners (2⁴ active sets to try)
 REGULARIZATION = 1e-9  # of the block's mean diagonal, added to it: a flat face's block is singular
@@ -103,18 +103,10 @@ def manifold_blocks(rows: ContactRows, order: np.ndarray) -> tuple[np.ndarray, n
     position = np.empty(blocks, dtype=np.int64)
     for k in range(blocks):
         position[place[k]] = k
-    count = np.zeros(blocks + 1, dtype=np.int64)
+    placed = np.empty(C, dtype=np.int64)  # each contact's block, numbered in sweep order
     for c in range(C):
-        count[position[block_of[c]] + 1] += 1
-    starts = np.cumsum(count)
-    fill = starts[:-1].copy()
-    members = np.empty(C, dtype=np.int64)
-    for i in range(C):  # within a block, the sweep order
-        c = order[i]
-        k = position[block_of[c]]
-        members[fill[k]] = c
-        fill[k] += 1
-    return members, starts
+        placed[c] = position[block_of[c]]
+    return stable_buckets(order, placed, blocks)  # within a block, the sweep order
 
 
 @njit(cache=True)
@@ -136,24 +128,16 @@ def block_couplings(rows: ContactRows, members: np.ndarray, starts: np.ndarray) 
 def _normal_coupling(i, j, rows):
     """n_iᵀ J_i M⁻¹ J_jᵀ n_j for two contacts between bodies (no particles) [1/kg]."""
     total = 0.0
-    frame, arm = rows.frame, rows.arm
     for si in range(2):
         b = rows.body[i, si]
         if b < 0:
             continue
         for sj in range(2):
-            if rows.body[j, sj] != b:
-                continue
-            sign = (1.0 - 2.0 * si) * (1.0 - 2.0 * sj)
-            ni, nj = frame[i, 0], frame[j, 0]
-            ri, rj = arm[i, si], arm[j, sj]
-            ti = (ri[1] * ni[2] - ri[2] * ni[1], ri[2] * ni[0] - ri[0] * ni[2], ri[0] * ni[1] - ri[1] * ni[0])
-            tj = (rj[1] * nj[2] - rj[2] * nj[1], rj[2] * nj[0] - rj[0] * nj[2], rj[0] * nj[1] - rj[1] * nj[0])
-            value = rows.body_inverse_mass[b] * (ni[0] * nj[0] + ni[1] * nj[1] + ni[2] * nj[2])
-            for p in range(3):
-                for q in range(3):
-                    value += ti[p] * rows.inverse_inertia[b, p, q] * tj[q]
-            total += sign * value
+            if rows.body[j, sj] == b:
+                sign = (1.0 - 2.0 * si) * (1.0 - 2.0 * sj)
+                arms = (rows.arm[i, si], rows.arm[j, sj])
+                masses = (rows.body_inverse_mass[b], rows.inverse_inertia[b])
+                total = body_coupling(total, sign, arms, (rows.frame[i, 0], rows.frame[j, 0]), masses)
     return total
 
 

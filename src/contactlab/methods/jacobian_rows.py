@@ -123,18 +123,38 @@ def _coupling(c, d, e, sides, masses):
     for side in range(2):
         b = body[c, side]
         if b >= 0:
-            r = arm[c, side]
-            rd = (r[1] * d[2] - r[2] * d[1], r[2] * d[0] - r[0] * d[2], r[0] * d[1] - r[1] * d[0])
-            re = (r[1] * e[2] - r[2] * e[1], r[2] * e[0] - r[0] * e[2], r[0] * e[1] - r[1] * e[0])
-            total += inverse_mass[b] * dot
-            for i in range(3):
-                for j in range(3):
-                    total += rd[i] * inverse_inertia[b, i, j] * re[j]
+            masses_b = (inverse_mass[b], inverse_inertia[b])
+            total = body_coupling(total, 1.0, (arm[c, side], arm[c, side]), (d, e), masses_b)
         for m in range(3):
             p = particle[c, side, m]
             if p < 0:
                 break
             total += weight[c, side, m] ** 2 * particle_inverse_mass[p] * dot
+    return total
+
+
+@njit(cache=True, inline="always")
+def body_coupling(total: float, sign: float, arms: tuple, directions: tuple, masses: tuple) -> float:
+    """``total`` + sign · (dᵀ e / m + (r_d × d)ᵀ I⁻¹ (r_e × e)) [1/kg]: the velocity along d, at the
+    point of lever arm r_d, that a unit impulse along e at the point of lever arm r_e makes on one
+    rigid body, ``arms`` = (r_d, r_e) (3,) [m], ``directions`` = (d, e) (3,), ``masses`` = (1/m
+    [1/kg], the world I⁻¹ (3, 3)); each term added to the total in turn. A contact's own rows
+    (``_coupling``: r_d = r_e) and two contacts' coupling (``blocks``)."""
+    (rd_arm, re_arm), (d, e), (inverse_mass, inverse_inertia) = arms, directions, masses
+    rd = (
+        rd_arm[1] * d[2] - rd_arm[2] * d[1],
+        rd_arm[2] * d[0] - rd_arm[0] * d[2],
+        rd_arm[0] * d[1] - rd_arm[1] * d[0],
+    )
+    re = (
+        re_arm[1] * e[2] - re_arm[2] * e[1],
+        re_arm[2] * e[0] - re_arm[0] * e[2],
+        re_arm[0] * e[1] - re_arm[1] * e[0],
+    )
+    total += sign * (inverse_mass * (d[0] * e[0] + d[1] * e[1] + d[2] * e[2]))
+    for i in range(3):
+        for j in range(3):
+            total += sign * (rd[i] * inverse_inertia[i, j] * re[j])
     return total
 
 

@@ -359,8 +359,10 @@ def solve_in_substeps(
         until = (settings.substep_sweeps, settings.tolerance, last and soft[0] <= 0.0, np.inf)
         made, change = sweep_until(rows_o, friction_o, target_o, share, u, until, starts, gaps)
         sweeps += made
+        if soft[0] > 0.0:
+            for i in range(N):
+                before_moving[i] = travelled[i]
         for i in range(N):
-            before_moving[i] = travelled[i]
             travelled[i] += u[i] / n
         if soft[0] > 0.0:  # the soft step's relaxing sweep, after the positions moved
             until = (settings.substep_sweeps, settings.tolerance, last, np.inf)
@@ -476,19 +478,25 @@ def split_into_slabs(
                 if particle_inverse_mass[p] > 0.0:
                     g = _joined(g, np.searchsorted(cuts, particle_position[p, axis], side="right"))
         group[c] = slabs if g < 0 else g  # spanning two slabs (or touching nothing movable): last
-    count = np.zeros(slabs + 1, dtype=np.int64)
-    for c in range(C):
-        count[group[c]] += 1
-    starts = np.zeros(slabs + 2, dtype=np.int64)
-    for g in range(slabs + 1):
-        starts[g + 1] = starts[g] + count[g]
+    return stable_buckets(order, group, slabs + 1)  # stable: each group keeps the order it had
+
+
+@njit(cache=True)
+def stable_buckets(items: np.ndarray, key: np.ndarray, buckets: int) -> tuple[np.ndarray, np.ndarray]:
+    """``items`` (n,) int sorted by ``key[item]`` (an int in 0 … buckets − 1), stable (a counting
+    sort): (the sorted items (n,), starts (buckets + 1,)), bucket b ``sorted[starts[b]:starts[b + 1]]``.
+    The slabs' groups (``split_into_slabs``), shock propagation's levels, the manifolds' blocks."""
+    count = np.zeros(buckets + 1, dtype=np.int64)
+    for i in range(items.shape[0]):
+        count[key[items[i]] + 1] += 1
+    starts = np.cumsum(count)
     fill = starts[:-1].copy()
-    grouped = np.empty(C, dtype=np.int64)
-    for i in range(C):  # stable: each group keeps the order it had
-        c = order[i]
-        grouped[fill[group[c]]] = c
-        fill[group[c]] += 1
-    return grouped, starts
+    out = np.empty_like(items)
+    for i in range(items.shape[0]):
+        b = key[items[i]]
+        out[fill[b]] = items[i]
+        fill[b] += 1
+    return out, starts
 
 
 @njit(cache=True, inline="always")

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..compiling import njit
 from .jacobian_rows import ContactRows, effective_masses
-from .sequential import sweep_contacts
+from .sequential import stable_buckets, sweep_contacts
 
 UNREACHED = 1 << 40  # the level of what reaches nothing fixed through the contacts (below any int64 + 1)
 
@@ -66,8 +66,8 @@ def propagate_shock(
             top = max(top, contact_level[c])
     for c in range(C):  # what reaches nothing fixed: one level above the rest
         contact_level[c] = min(contact_level[c], top + 1)
-    members, starts = _by_level(order[::-1].copy(), contact_level, top + 2)
-    held = _by_level(np.arange(level.shape[0]), np.minimum(level, top + 1), top + 2)[0]
+    members, starts = stable_buckets(order[::-1].copy(), contact_level, top + 2)
+    held = stable_buckets(np.arange(level.shape[0]), np.minimum(level, top + 1), top + 2)[0]
     # the pass's own masses (the bodies below held) and effective masses; the rows' sides as they are
     inverse_mass, inverse_inertia = rows.body_inverse_mass.copy(), rows.inverse_inertia.copy()
     particle_inverse_mass = rows.particle_inverse_mass.copy()
@@ -174,20 +174,3 @@ def entity_levels(rows: ContactRows) -> tuple[np.ndarray, np.ndarray, np.ndarray
                         queue[queued] = f
                         queued += 1
     return level, entities, count
-
-
-@njit(cache=True)
-def _by_level(items, key, levels):
-    """``items`` (n,) sorted by ``key`` (n,) int in 0 … levels − 1, stable (a counting sort):
-    (sorted items, starts (levels + 1,), level L's items sorted[starts[L]:starts[L + 1]])."""
-    count = np.zeros(levels + 1, dtype=np.int64)
-    for i in range(items.shape[0]):
-        count[key[items[i]] + 1] += 1
-    starts = np.cumsum(count)
-    fill = starts[:-1].copy()
-    out = np.empty_like(items)
-    for i in range(items.shape[0]):
-        L = key[items[i]]
-        out[fill[L]] = items[i]
-        fill[L] += 1
-    return out, starts
