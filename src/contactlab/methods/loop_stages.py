@@ -152,9 +152,9 @@ aside, which are the Options' own choices).
 
 Numba leaves a branch uncompiled only where it tests an *argument* typed None, never a field of a tuple:
 each flag reaches the one kernel that branches on it as an argument of its own (``candidate_pairs``
-``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``), or is
-chosen on by its type when compiling (``collision._kept_or_fresh``, ``for_response``,
-``velocity_level._whole_step_solve`` ``blocks`` and ``_shock_pass`` ``shock``)."""
+``large``, ``targets`` ``impulse`` and ``constraints``, ``solve`` ``slabs`` and ``parallel``,
+``velocity_level.shock_pass`` ``shock``, ``velocity_level.block_pass`` ``blocks``), or is
+chosen on by its type when compiling (``collision._kept_or_fresh``, ``for_response``)."""
 
 
 def specialization(model: Model, method: str, options: CollisionOptions, penalty: Any = None) -> Specialization:

@@ -30,8 +30,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import types
-from numba.extending import overload
 
 from ..collision import swept_distances
 from ..compiling import njit
@@ -561,18 +559,16 @@ def respond(
     target, tau = targets(model, settings, spec.impulse, spec.constraints, contacts, rows, u, order)
     warm = warm_impulses(model, settings, contacts, motion, carried[0], carried[1])
     if settings.substeps <= 1:
-        system = (u, target, warm, order)
-        impulses, sweeps, change = _whole_step_solve(spec.blocks, settings, spec, rows, contacts, motion, system)
+        impulses, sweeps, change = _whole_step_solve(settings, spec, rows, contacts, motion, (u, target, warm, order))
         if change > settings.tolerance:  # unconverged: the shock pass, where the Options ask for it
-            sweeps += _shock_pass(spec.shock, settings, rows, contacts.friction, (u, target, impulses, order))
+            sweeps += shock_pass(spec.shock, settings, rows, contacts.friction, (u, target, impulses, order))
         return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     # small steps (settings.substeps > 1): the whole step's solve first, unless always substepped; a step it
     # leaves unconverged is solved again in substeps from the velocity at the start, warm-started from its answer
     entry = u.copy()
     impulses, sweeps, change = warm, 0, np.inf
     if not settings.always_substep:
-        system = (u, target, warm, order)
-        impulses, sweeps, change = _whole_step_solve(spec.blocks, settings, spec, rows, contacts, motion, system)
+        impulses, sweeps, change = _whole_step_solve(settings, spec, rows, contacts, motion, (u, target, warm, order))
     if change <= settings.tolerance:
         return _respond_end(model, settings, contacts, motion, tau, velocities, (u, u, impulses, sweeps, change))
     n = settings.substeps
@@ -603,48 +599,42 @@ def respond(
     return _respond_end(model, settings, contacts, motion, tau, velocities, (u, travelled, impulses, sweeps, change))
 
 
-def _whole_step_solve(blocks, settings, spec, rows, contacts, motion, system):  # type: ignore[no-untyped-def]
-    """``respond``'s whole-step solve of ``system`` = (u (N,), changed in place; the targets (C,)
-    [m/s]; the warm start (C, 3) [N s]; the sweep order (C,)): ``loop_stages.solve``'s sweeps, or
-    where ``blocks`` (the Specialization's) is True, ``blocks.solve_in_blocks`` (serial), at most
-    ``settings.whole_sweeps`` sweeps to ``settings.tolerance``. Returns (impulses (C, 3) [N s],
-    sweeps, last change [m/s]). (Unannotated: Numba holds an implementation to the signature of
-    the function it implements, annotations included.)"""
-    if blocks is None:
+@njit(cache=True, inline="always")
+def _whole_step_solve(settings, spec, rows, contacts, motion, system):
+    """``respond``'s whole-step solve: in blocks per manifold where the Options ask for it
+    (``block_pass``), else ``loop_stages.solve``'s sweeps."""
+    impulses, sweeps, change = block_pass(spec.blocks, settings, rows, contacts.friction, system)
+    if sweeps < 0:  # no block solve asked for
         return solve(settings, spec.slabs, spec.parallel, rows, contacts, motion, system, None)
+    return impulses, sweeps, change
+
+
+@njit(cache=True)
+def block_pass(
+    blocks: bool | None, settings: LoopSettings, rows: ContactRows, friction: np.ndarray, system: tuple
+) -> tuple[np.ndarray, int, float]:
+    """``blocks.solve_in_blocks`` (serial) of ``system`` = (u (N,), changed in place; the targets
+    (C,) [m/s]; the warm start (C, 3) [N s]; the sweep order (C,)), at most ``settings.whole_sweeps``
+    sweeps to ``settings.tolerance``: (impulses (C, 3) [N s], sweeps, last change [m/s]). ``blocks``
+    None (the Specialization's: no block solve asked for) compiles none of it and returns −1 sweeps."""
+    if blocks is None:
+        return np.empty((0, 3)), -1, 0.0
     u, target, warm, order = system
-    until = (settings.whole_sweeps, settings.tolerance)
-    return solve_in_blocks(rows, contacts.friction, target, u, until, warm, order)
+    return solve_in_blocks(rows, friction, target, u, (settings.whole_sweeps, settings.tolerance), warm, order)
 
 
-# compiled, chosen by the type of ``blocks``: as None (no block solve asked for), the plain sweeps
-# inlined and nothing of the blocks compiled, no call more than before
-@overload(_whole_step_solve, inline="always")
-def _whole_step_solve_compiled(blocks, settings, spec, rows, contacts, motion, system):  # type: ignore[no-untyped-def]
-    if isinstance(blocks, types.NoneType):
-        return lambda blocks, settings, spec, rows, contacts, motion, system: solve(
-            settings, spec.slabs, spec.parallel, rows, contacts, motion, system, None
-        )
-    return _whole_step_solve
-
-
-def _shock_pass(shock, settings, rows, friction, system):  # type: ignore[no-untyped-def]
+@njit(cache=True)
+def shock_pass(
+    shock: bool | None, settings: LoopSettings, rows: ContactRows, friction: np.ndarray, system: tuple
+) -> int:
     """``shock.propagate_shock`` on ``system`` = (u (N,), changed in place; the targets (C,) [m/s];
     the sweeps' impulses (C, 3) [N s], left as they are; the sweep order (C,)), at most
-    ``settings.shock_sweeps`` sweeps a level to ``settings.tolerance``, where ``shock`` (the
-    Specialization's) is True; returns the sweeps it made (0 without the pass)."""
+    ``settings.shock_sweeps`` sweeps a level to ``settings.tolerance``; returns the sweeps it made.
+    ``shock`` None (the Specialization's: no shock propagation asked for) compiles none of it."""
     if shock is None:
         return 0
     u, target, impulses, order = system
     return propagate_shock(rows, friction, target, impulses, u, order, (settings.shock_sweeps, settings.tolerance))
-
-
-# compiled, chosen by the type of ``shock``: as None, nothing of the pass compiled
-@overload(_shock_pass, inline="always")
-def _shock_pass_compiled(shock, settings, rows, friction, system):  # type: ignore[no-untyped-def]
-    if isinstance(shock, types.NoneType):
-        return lambda shock, settings, rows, friction, system: 0
-    return _shock_pass
 
 
 @njit(cache=True)
