@@ -9,6 +9,11 @@ import pytest
 
 from contactlab import ModelBuilder
 
+# The commands the tests start compile their kernels, as they did before a cold first run could
+# step as Python (contactlab.kernel_variants): their stderr and timings stay what the tests expect.
+# tests/test_kernel_variants.py takes this away to test that choice.
+os.environ.setdefault("CONTACTLAB_KERNELS", "compiled")
+
 FCLIB = Path(__file__).resolve().parents[1] / "data" / "fclib"
 """The FCLIB-format problems kept in the repository (provenance and licence: data/fclib/README.md)."""
 FCLIB_FILES = sorted(path.name for path in FCLIB.glob("*") if path.suffix in (".dat", ".hdf5"))

@@ -51,3 +51,63 @@ def test_a_rerun_of_a_builtin_scene_is_bit_identical(name):
         for field in FIELDS:
             np.testing.assert_array_equal(again[field], first[field], err_msg=f"{name} with {method}: {field}")
     assert ran >= 2
+
+
+INTERPRETED = """
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[2])
+from test_reruns import FIELDS, _run, rigid_runs
+from contactlab.scene import load_scene
+from contactlab.kernel_variants import interpreted
+assert interpreted()
+arrays = {}
+for name, method in rigid_runs():
+    ran = _run(load_scene(name), method, 1)
+    for field in FIELDS:
+        arrays[f"{name}/{method}/{field}"] = np.asarray(ran if isinstance(ran, str) else ran[field])
+np.savez(sys.argv[1], **arrays)
+"""
+
+
+def rigid_runs():
+    """(scene, method) of every built-in scene and method that the compiled loop steps."""
+    from contactlab.kernel_variants import variant_of
+    from contactlab.methods import get, make_options
+
+    runs = []
+    for name, _ in builtin_scenes():
+        scene = load_scene(name)
+        for method in AVAILABLE:
+            options = make_options(get(method), scene.method_options.get(method, {}), method)
+            if variant_of(scene.model, method, options, scene.integrator) is not None:
+                runs.append((name, method))
+    return runs
+
+
+def test_every_builtin_rigid_scene_steps_as_python_as_it_steps_compiled(tmp_path):
+    """The kernels run as Python (NUMBA_DISABLE_JIT=1: what a short first run does, see
+    contactlab.kernel_variants) are the compiled kernels' own source: every built-in scene that the
+    compiled loop steps, under every method, gives the same trajectory bit for bit either way."""
+    import os
+    import subprocess
+    import sys
+
+    saved = tmp_path / "interpreted.npz"
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    done = subprocess.run(
+        [sys.executable, "-c", INTERPRETED, str(saved), os.path.dirname(__file__)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    interpreted = np.load(saved)
+    runs = rigid_runs()
+    assert len(runs) >= 3 * 15
+    for name, method in runs:
+        compiled = _run(load_scene(name), method, 1)
+        for field in FIELDS:
+            expected = np.asarray(compiled if isinstance(compiled, str) else compiled[field])
+            np.testing.assert_array_equal(interpreted[f"{name}/{method}/{field}"], expected, err_msg=f"{name} {method}")

@@ -250,12 +250,14 @@ def _memory_limit(text):
     return gigabytes * 2**30
 
 
-def _run(args):
+def _run(args, restart=False):
     """``contactlab run`` with its parsed arguments ``args`` (``demo`` is ``run`` of the default
     scene with every default): the scene run, its files written, its summary printed; returns
-    the Run."""
+    the Run. ``restart``: this is the program's own process, which may start again compiled or as
+    Python (``kernel_variants.settle``)."""
     from .closed_form import checks
     from .folder_lock import held
+    from .kernel_variants import settle
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, write_summary
     from .scene import load_scene
@@ -282,6 +284,7 @@ def _run(args):
             f"the run would make {steps:,} steps (duration {scene.duration:g} s at dt = "
             f"{scene.dt:g} s): times are in seconds; add --yes to run it",
         )
+    settle(scene, steps, restart)  # compiled, or as Python where compiling costs more than the run
     out = args.out or os.path.join("out", f"{scene.name}-{scene.method}")
     trajectory = os.path.join(out, TRAJECTORY)
     made = make_folders(out)
@@ -446,7 +449,8 @@ def _where_time_went(summary):
         parts.append(f"{summary['compile_seconds']:.2f} s compiling or loading kernels")
     if summary["recording_seconds"] >= 0.1:
         parts.append(f"{summary['recording_seconds']:.2f} s recording")
-    parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping")
+    python = " as Python" if summary.get("kernels") == "python" else ""
+    parts.append(f"{summary['steps_per_second']:.0f} steps/s stepping{python}")
     return ", ".join(parts)
 
 
@@ -501,14 +505,14 @@ def _main(argv):
 
             set_threads(args.threads, "--threads")
         if args.command in (None, "demo"):
-            _run(_parser().parse_args(["run", DEFAULT_SCENE]))
+            _run(_parser().parse_args(["run", DEFAULT_SCENE]), restart=argv is None)
         elif args.command == "scenes":
             from .scene import builtin_scenes
 
             for name, description in builtin_scenes():
                 print(f"{name:20s} {description}")
         elif args.command == "run":
-            _run(args)
+            _run(args, restart=argv is None)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":

@@ -40,6 +40,7 @@ import hashlib
 import os
 import sys
 import types as types_module
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -61,9 +62,11 @@ __all__ = [
     "FirstCompile",
     "PackageStampedLocator",
     "available_threads",
+    "kernel_cache_root",
     "compile_notice",
     "njit",
     "in_python",
+    "inlined",
     "sources_digest",
 ]
 
@@ -121,35 +124,58 @@ def sources_digest(root: str | os.PathLike[str]) -> str:
 _CACHE_IMPL: Any = getattr(caching, "CacheImpl", None) or caching._CacheImpl
 
 
+def kernel_cache_root() -> Path:
+    """The folder under which contactlab's compiled kernels are kept, one subfolder a package
+    content (:class:`PackageStampedLocator`): ``NUMBA_CACHE_DIR`` where it is set, else the user's
+    cache (``$XDG_CACHE_HOME``, by default ``~/.cache``), ``contactlab/kernels``."""
+    if numba.config.CACHE_DIR:
+        return Path(numba.config.CACHE_DIR)
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(home) / "contactlab" / "kernels"
+
+
 class PackageStampedLocator(caching._CacheLocator):
-    """Numba's own cache location for a function of a package in ``ROOTS`` (``__pycache__``
-    beside the source, ``NUMBA_CACHE_DIR``, or the user-wide cache: whichever Numba's locators
-    choose), with the digest of the whole package (:func:`sources_digest`) as the source stamp
-    that Numba checks before it loads an entry. Functions of other files are left to Numba's
-    locators (``from_function`` returns None for them)."""
+    """Where a compiled function of a package in ``ROOTS`` is kept, found by the package's
+    content rather than by where it is installed: ``kernel_cache_root()/<package>-<digest>-numba<version>/``
+    and the source file's folder within the package (a wheel installed in two virtual
+    environments, a Dask worker's and a CI clone's copies of one commit share one cache), with the
+    digest of the whole package (:func:`sources_digest`) also the source stamp that Numba checks
+    before it loads an entry. Where that folder cannot be written, Numba's own location (beside the
+    source, or its user-wide cache) with the same stamp. Functions of other files are left to
+    Numba's locators (``from_function`` returns None for them)."""
 
     ROOTS: dict[str, str | None] = {}  # package folder → its digest, hashed at its first function
 
-    def __init__(self, inner: Any, stamp: tuple[str, str]) -> None:
-        self._inner = inner
+    def __init__(self, path: str, stamp: tuple[str, str], py_file: str, disambiguator: str) -> None:
+        self._path = path
         self._stamp = stamp
+        self._py_file = py_file  # Numba names it in its warning that a function cannot be cached
+        self._disambiguator = disambiguator
 
     def get_cache_path(self) -> str:
-        return str(self._inner.get_cache_path())
+        return self._path
 
     def get_source_stamp(self) -> tuple[str, str]:
         return self._stamp
 
     def get_disambiguator(self) -> str:
-        return str(self._inner.get_disambiguator())
+        return self._disambiguator
 
     @classmethod
     def stamp_package(cls, root: str | os.PathLike[str]) -> None:
-        """Stamp the cache entries of every function compiled from now on from a file under
-        ``root`` with the digest of all the sources under it."""
+        """Keep the cache entries of every function compiled from now on from a file under
+        ``root`` by, and stamped with, the digest of all the sources under it."""
         cls.ROOTS.setdefault(os.path.abspath(root), None)
         if cls not in _CACHE_IMPL._locator_classes:
             _CACHE_IMPL._locator_classes.insert(0, cls)
+
+    @classmethod
+    def folder_of(cls, root: str) -> Path:
+        """The cache folder of the package at ``root`` (stamped): one a content and Numba version."""
+        if cls.ROOTS[root] is None:
+            cls.ROOTS[root] = sources_digest(root)
+        name = f"{os.path.basename(root)}-{str(cls.ROOTS[root])[:20]}-numba{numba.__version__}"
+        return kernel_cache_root() / name
 
     @classmethod
     def from_function(cls, py_func: Any, py_file: str) -> PackageStampedLocator | None:
@@ -157,16 +183,26 @@ class PackageStampedLocator(caching._CacheLocator):
         root = next((r for r in cls.ROOTS if path.startswith(r + os.sep)), None)
         if root is None:
             return None
+        folder = cls.folder_of(root)
+        stamp = ("package sources", str(cls.ROOTS[root]))
+        disambiguator = str(py_func.__code__.co_firstlineno)
+        located = cls(str(folder / os.path.relpath(os.path.dirname(path), root)), stamp, py_file, disambiguator)
+        try:
+            located.ensure_cache_path()
+            return located
+        except OSError:  # not writable: wherever Numba's own locators put it
+            pass
         for other in _CACHE_IMPL._locator_classes:
             inner = None if other is cls else other.from_function(py_func, py_file)
             if inner is not None:
-                if cls.ROOTS[root] is None:
-                    cls.ROOTS[root] = sources_digest(root)
-                return cls(inner, ("package sources", str(cls.ROOTS[root])))
+                return cls(inner.get_cache_path(), stamp, py_file, inner.get_disambiguator())
         return None
 
 
 PackageStampedLocator.stamp_package(Path(__file__).parent)
+
+if numba.config.DISABLE_JIT:  # the kernels as Python: their integer hashes wrap, as compiled, unwarned
+    warnings.filterwarnings("ignore", "overflow encountered in scalar", RuntimeWarning, r"contactlab\.")
 
 
 @contextmanager
@@ -204,6 +240,13 @@ def _save_locked(self: Any, key: Any, data: Any) -> None:
 caching.IndexDataCacheFile.save = _save_locked
 
 
+def inlined(kernel: Any) -> Any:
+    """``kernel``'s Python function compiled anew with ``inline="always"``: inlined into each
+    compiled caller, while ``kernel`` itself stays a callable kernel for every other caller. Under
+    ``NUMBA_DISABLE_JIT=1`` (``njit`` gives back the Python function) the function itself."""
+    return njit(inline="always")(getattr(kernel, "py_func", kernel))
+
+
 def in_python(kernel: Any, **replacing: Any) -> Any:
     """``kernel`` (a compiled dispatcher, or a Python function that compiled code calls through an
     ``overload``) as a Python function of the same code, in which every function it inlines
@@ -213,16 +256,22 @@ def in_python(kernel: Any, **replacing: Any) -> Any:
 
     ``replacing``: names of ``kernel``'s own globals given other values in this twin (not in the
     functions it calls), a stage that only Python can run (``projection.step``'s detection, which
-    sees meshes and cloth); a twin with replacements is made anew each call, not kept."""
-    if not replacing and kernel in _IN_PYTHON:
-        return _IN_PYTHON[kernel]
+    sees meshes and cloth); a twin with replacements is made anew each call, not kept. Under
+    ``NUMBA_DISABLE_JIT=1``, where every kernel is Python already, ``kernel`` itself, or its twin
+    with the replacements alone."""
+    interpreted = numba.config.DISABLE_JIT
+    if not replacing and (interpreted or kernel in _IN_PYTHON):
+        return kernel if interpreted else _IN_PYTHON[kernel]
     function = getattr(kernel, "py_func", kernel)
     names = dict(function.__globals__)
-    twin = types_module.FunctionType(function.__code__, names, function.__name__, function.__defaults__)
+    twin = types_module.FunctionType(
+        function.__code__, names, function.__name__, function.__defaults__, function.__closure__
+    )
     functools.update_wrapper(twin, function)  # its name, docstring and module; __wrapped__ the original
+    twin.__kwdefaults__ = function.__kwdefaults__
     if not replacing:
         _IN_PYTHON[kernel] = twin
-    for name in function.__code__.co_names:
+    for name in () if interpreted else function.__code__.co_names:
         value = names.get(name)
         inlined = isinstance(value, Dispatcher) and value.targetoptions.get("inline") == "always"
         if name not in replacing and (

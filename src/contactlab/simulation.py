@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba.core import event as numba_event
 
-from . import budget, interrupts, methods, plausibility
+from . import budget, interrupts, kernel_variants, methods, plausibility
 from .collision import check_supported
 from .compiling import FirstCompile, compile_notice
 from .dynamics.integrators import INTEGRATORS
@@ -354,6 +354,7 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         "recording_seconds": tally.recording_seconds,
         "compiled_loop": stepper.compiled,
         "stepping": "compiled loop" if stepper.compiled else "python",
+        "kernels": "python" if kernel_variants.interpreted() else "compiled",
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
         **run_measures(model, tally, totals, steps),
@@ -381,6 +382,10 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         summary["interrupted"] = {"signal": interrupted.name, "time": totals.last_time, "steps_made": steps_made}
         interrupted.run = Run(state, arrays, summary, model)
         raise interrupted
+    if stepper.compiled:  # this kind of run is compiled on this machine from now on
+        kernel_variants.remember(
+            kernel_variants.variant_of(model, method, options, integrator), summary["compile_seconds"]
+        )
     return Run(state, arrays, summary, model)
 
 

@@ -15,7 +15,7 @@ from numba import types
 from numba.extending import overload
 
 from .. import rotations, shapes
-from ..compiling import in_python, njit
+from ..compiling import in_python, inlined, njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from ..model import derived
@@ -95,7 +95,7 @@ def swept_reach(
     return reach
 
 
-_norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into swept_reach
+_norm = inlined(norm)  # geometry.norm, inlined into swept_reach
 
 
 Colliders = namedtuple(

@@ -17,6 +17,8 @@ spheres and boxes, :mod:`~contactlab.collision.capsule`, :mod:`~contactlab.colli
 which of them a scene needs in :mod:`~contactlab.collision.families`.
 """
 
+from typing import Any
+
 import numpy as np
 from numba import types
 from numba.core.errors import TypingError
@@ -94,18 +96,25 @@ def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull
     written from row ``slot`` on in pair order, with ``out_owner`` = k; returns how many were
     written. Each pair is taken in canonical order (rank of A ≤ rank of B; computed swapped and
     its normals flipped otherwise). A pair whose family is ``None`` in ``families`` (see
-    FAMILIES), or that has no routine, gets none. Compiled code only (the overload below)."""
-    raise NotImplementedError("compiled code only")
+    FAMILIES), or that has no routine, gets none. Compiled, the overload below; run as Python
+    (``NUMBA_DISABLE_JIT=1``), this body runs the same loop."""
+    loop = _loop_for(tuple(family is not None for family in families))
+    return loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot)
 
 
 @overload(_pairs_loop)
 def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
     """The loop for one families type. Its ``None`` entries are the constant False here, so
-    Numba drops those routines' branches before typing and never compiles them. The loop and
-    the dispatch are one function: a call per pair that handed over the arrays (and the hull
-    store's ten) would cost more than a sphere pair itself."""
+    Numba drops those routines' branches before typing and never compiles them."""
     if not isinstance(families, types.BaseTuple) or len(families) != len(FAMILIES):
         raise TypingError(f"families: expected a tuple of {len(FAMILIES)} True or None, found {families}")
+    return _loop_for(tuple(not isinstance(t, types.NoneType) for t in families.types))
+
+
+def _loop_for(present: tuple[bool, ...]) -> Any:
+    """The pairs' loop with the routine of each family whose flag in ``present`` (one a FAMILIES
+    entry) is True. The loop and the dispatch are one function: a call per pair that handed over
+    the arrays (and the hull store's ten) would cost more than a sphere pair itself."""
     (
         has_sphere_sphere,
         has_sphere_capsule,
@@ -120,7 +129,7 @@ def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, 
         has_capsule_convex,
         has_convex_convex,
         has_convex_plane,
-    ) = (not isinstance(t, types.NoneType) for t in families.types)
+    ) = present
 
     def loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
         count = slot

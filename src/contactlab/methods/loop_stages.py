@@ -32,7 +32,7 @@ from ..collision import Plan, colliders, detection_plan, keeping_for
 from ..collision.geometry import norm
 from ..collision.manifolds import copy_rows, no_manifolds
 from ..collision.narrow_phase import MAX_PER_PAIR
-from ..compiling import available_threads, njit
+from ..compiling import available_threads, inlined, njit
 from ..contacts import ContactArrays
 from ..diagnostics import SERIES
 from ..driving import DriveTable, drive_velocities
@@ -272,14 +272,14 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # ``cloth_of`` None in a scene that can have no dynamic pair so that Numba drops its sweep
 # before typing, a pruning of arguments that an inlined copy (whose arguments are no longer
 # arguments) does not get.
-collider_poses = njit(inline="always")(collision.collider_poses.py_func)
+collider_poses = inlined(collision.collider_poses)
 detect = collision.detect
 # stages 1 (under gravity) and 2, as the methods' steps run them
-free_flight = njit(inline="always")(integrators.free_flight.py_func)
-swept_reach = njit(inline="always")(collision.swept_reach.py_func)
-moved = njit(inline="always")(integrators.moved.py_func)
-kinetic = njit(inline="always")(diagnostics.kinetic.py_func)
-gravitational = njit(inline="always")(diagnostics.gravitational.py_func)
+free_flight = inlined(integrators.free_flight)
+swept_reach = inlined(collision.swept_reach)
+moved = inlined(integrators.moved)
+kinetic = inlined(diagnostics.kinetic)
+gravitational = inlined(diagnostics.gravitational)
 
 
 # The stages a step runs that take the LoopModel or the Motion whole are inlined into their
@@ -315,7 +315,7 @@ def free_motion(
     return body, angular, particle
 
 
-_norm = njit(inline="always")(norm.py_func)  # geometry.norm, inlined into healthy
+_norm = inlined(norm)  # geometry.norm, inlined into healthy
 
 
 @njit(cache=True, inline="always")

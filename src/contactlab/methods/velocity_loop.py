@@ -62,7 +62,7 @@ from .. import diagnostics, interrupts, shapes
 from ..collision import collide
 from ..collision.cloth_self import is_self_contact
 from ..collision.manifolds import Manifolds
-from ..compiling import njit
+from ..compiling import inlined, njit
 from ..driving import DriveTable, table_of
 from ..state import Carry, State
 from .base import CollisionOptions
@@ -168,7 +168,7 @@ def _loop_with(step: Any, name: str) -> Any:
     its code once, the step's too, and no call between them (each step's arrays would cross it,
     their references counted)."""
     template = run_steps
-    names = dict(template.__globals__, method_step=njit(inline="always")(step.py_func))
+    names = dict(template.__globals__, method_step=inlined(step))
     loop = FunctionType(template.__code__, names, name, template.__defaults__)
     loop.__qualname__, loop.__doc__ = name, template.__doc__  # its own cache entries
     return njit(cache=True)(loop)

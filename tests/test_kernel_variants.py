@@ -1,0 +1,125 @@
+"""A first run that would wait longer on the compiler than it takes as Python steps as Python
+(contactlab.kernel_variants): said in one line, the same numbers, and the kind recorded once a
+compiled run has made it."""
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+
+import pytest
+
+from contactlab import kernel_variants
+from contactlab.compiling import NOTICE, PackageStampedLocator
+from contactlab.scene import load_scene
+
+
+def _command(tmp_path, *arguments, **env):
+    environment = {
+        key: value for key, value in os.environ.items() if key not in ("CONTACTLAB_KERNELS", "NUMBA_DISABLE_JIT")
+    }
+    environment.update(NUMBA_CACHE_DIR=str(tmp_path / "cache"), **env)
+    return subprocess.run(
+        [sys.executable, "-m", "contactlab", *arguments],
+        cwd=tmp_path,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_a_short_first_run_steps_as_python_says_so_and_compiles_nothing(tmp_path):
+    """The sliding block's 500 steps on an empty cache: one line on stderr, no compile notice, no
+    kernel written to the cache, the closed-form expectations met, the summary saying so."""
+    done = _command(tmp_path, "run", "sliding_block", "--json", "--no-plots", "--out", "block")
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("stepping as Python: about "), lines
+    assert NOTICE not in done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["kernels"] == "python" and summary["compile_seconds"] < 0.1
+    assert all(check["passed"] for check in summary["checks"]), summary["checks"]
+    assert not list((tmp_path / "cache").rglob("methods/*.nbc"))  # no step compiled
+
+
+def test_a_user_who_sets_numba_disable_jit_gets_what_they_chose(tmp_path):
+    """NUMBA_DISABLE_JIT=0 compiles even a short first run, and records its kind as compiled on
+    this machine: the next run of it loads it, compiled, without a probe."""
+    first = _command(
+        tmp_path,
+        "run",
+        "bouncing_ball",
+        "--duration",
+        "0.05",
+        "--json",
+        "--no-plots",
+        "--out",
+        "a",
+        NUMBA_DISABLE_JIT="0",
+    )
+    assert first.returncode == 0, first.stderr
+    assert NOTICE in first.stderr.splitlines() and json.loads(first.stdout)["kernels"] == "compiled"
+    recorded = list((tmp_path / "cache").rglob(kernel_variants.VARIANTS_FILE))
+    assert len(recorded) == 1
+    kinds = json.loads(recorded[0].read_text())
+    ball = load_scene("bouncing_ball")
+    assert list(kinds) == [kernel_variants.variant_of(ball.model, "impulse", ball.options["impulse"], ball.integrator)]
+    assert next(iter(kinds.values())) > 1.0  # the seconds it spent compiling
+    again = _command(tmp_path, "run", "bouncing_ball", "--duration", "0.05", "--json", "--no-plots", "--out", "b")
+    assert again.returncode == 0, again.stderr
+    assert again.stderr == "" and json.loads(again.stdout)["kernels"] == "compiled"
+
+
+def test_the_kind_of_a_run_tells_apart_what_compiles_apart():
+    """Runs that compile one loop share a kind; another method, another shape family, another
+    flag do not; the Python-wired path (cloth) has none."""
+    ball, block, cloth = (load_scene(name) for name in ("bouncing_ball", "sliding_block", "cloth_drape"))
+
+    def kind(scene, method=None):
+        method = method or scene.method
+        return kernel_variants.variant_of(scene.model, method, scene.options[scene.method], scene.integrator)
+
+    assert kind(ball) == kind(load_scene("bouncing_ball", ["simulation.duration=1.0"]))
+    assert kind(ball) != kind(block)  # sphere-plane against box-plane
+    assert kind(cloth) is None
+
+
+def test_the_compile_estimate_is_the_median_of_this_machines_compiles(tmp_path, monkeypatch):
+    monkeypatch.setattr(PackageStampedLocator, "folder_of", classmethod(lambda cls, root: tmp_path))
+    assert kernel_variants.compiled_variants() == {}
+    assert kernel_variants.compile_estimate() == kernel_variants.DEFAULT_COMPILE_SECONDS
+    for name, seconds in (("a", 30.0), ("b", 50.0), ("c", 0.0), ("d", 40.0)):
+        kernel_variants.remember(name, seconds)
+    assert kernel_variants.compiled_variants() == {"a": 30.0, "b": 50.0, "c": 0.0, "d": 40.0}
+    assert kernel_variants.compile_estimate() == 40.0  # loads (0 s) left out
+    (tmp_path / kernel_variants.VARIANTS_FILE).write_text("not json")
+    assert kernel_variants.compiled_variants() == {}  # a damaged record: every kind probes again
+
+
+def test_an_uncachable_kernel_warns_instead_of_failing(tmp_path):
+    """Numba names the kernel's file when it warns that a kernel cannot be cached: the package's
+    locator has it (an AttributeError once, which NUMBA_OPT=0 brought out)."""
+    folder = tmp_path / "packages" / "uncachable"
+    folder.mkdir(parents=True)
+    (folder / "__init__.py").write_text(
+        "from contactlab.compiling import PackageStampedLocator as L\n\nL.stamp_package(__path__[0])\n"
+    )
+    (folder / "kernel.py").write_text(
+        "from numba import njit, objmode\n\n\n@njit(cache=True)\ndef lifted(x):\n"
+        "    with objmode(y='float64'):\n        y = float(x) + 1.0\n    return y\n"
+    )
+    script = (
+        "import warnings\nwarnings.simplefilter('always')\nfrom uncachable.kernel import lifted\nprint(lifted(1.0))"
+    )
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(tmp_path / "packages"), *sys.path]),
+        "NUMBA_OPT": "0",
+        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+    }
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "2.0"
+    assert "Cannot cache compiled function" in done.stderr and "kernel.py" in done.stderr
