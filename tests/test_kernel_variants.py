@@ -6,9 +6,6 @@ import json
 import os
 import subprocess
 import sys
-import warnings
-
-import pytest
 
 from contactlab import kernel_variants
 from contactlab.compiling import NOTICE, PackageStampedLocator

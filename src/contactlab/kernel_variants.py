@@ -14,8 +14,8 @@ first run never waits on a compile that costs more than the run it serves, ``con
    steps through the methods' Python-wired path (cloth, meshes: always compiled): it compiles or
    loads as before;
 2. otherwise the command starts again as Python (the same process, ``os.execv``) and times a few
-   steps of the scene (:func:`probe`: PROBE_STEPS, where they take at most PROBE_SECONDS); where the whole run would take
-   less than INTERPRET_SHARE of the compile this machine last needed (:func:`compile_estimate`), it
+   steps of the scene (:func:`probe`: PROBE_STEPS, where they take at most PROBE_SECONDS); where the
+   whole run would take less than INTERPRET_SHARE of what a compile takes here (:func:`compile_estimate`), it
    steps the run as Python and says so in one line on stderr; else it starts once more, compiled,
    and the compile happens where it repays.
 
