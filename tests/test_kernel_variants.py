@@ -120,3 +120,31 @@ def test_an_uncachable_kernel_warns_instead_of_failing(tmp_path):
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "2.0"
     assert "Cannot cache compiled function" in done.stderr and "kernel.py" in done.stderr
+
+
+def test_compile_builds_a_kind_up_front_and_a_run_of_it_then_waits_on_nothing(tmp_path):
+    """``contactlab compile`` on an empty cache, in a worker process of its own: the kind recorded,
+    and a first run of it afterwards neither probes nor compiles (stderr silent); a second compile
+    finds nothing to do."""
+    done = _command(tmp_path, "compile", "bouncing_ball", "--methods", "impulse", "--workers", "1")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("Compiled 1 kinds of run in ")
+    assert "compiling 1 kinds of run in 1 processes (about " in done.stderr
+    run = _command(tmp_path, "run", "bouncing_ball", "--duration", "0.05", "--json", "--no-plots", "--out", "a")
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == "" and json.loads(run.stdout)["kernels"] == "compiled"
+    again = _command(tmp_path, "compile", "bouncing_ball", "rolling_sphere", "--methods", "impulse")
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.startswith("Compiled 0 kinds of run in ") and "; 1 were compiled already;" in again.stdout
+
+
+def test_compile_takes_one_job_a_kind_and_refuses_bad_input(tmp_path):
+    from contactlab.precompile import jobs_for
+
+    jobs, refused = jobs_for(["bouncing_ball", "rolling_sphere", "sliding_block"], ["impulse"])
+    assert [job.scene for job in jobs] == ["bouncing_ball", "sliding_block"]  # the two spheres: one kind
+    assert refused == []
+    bad = _command(tmp_path, "compile", "bouncing_ball", "--methods", "impulse,bogus")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--methods" in bad.stderr
+    nothing = _command(tmp_path, "compile", "no_such_scene")
+    assert nothing.returncode == 2 and nothing.stderr.count("\n") == 1

@@ -3,6 +3,7 @@
 contactlab                 run the default scene (same as ``contactlab demo``)
 contactlab scenes          list the built-in scenes
 contactlab run SCENE ...   run a built-in scene or a .toml file
+contactlab compile [SCENE] every kind of run of these scenes (default: every built-in) compiled up front
 contactlab compare SCENE   run it with every method; report.html, report.md, comparison.csv
 contactlab render OUT_DIR  video.mp4, video.gif and still.png of a run's trajectory
 contactlab export OUT_DIR  the run as USD, or as an OBJ or PLY sequence
@@ -47,6 +48,12 @@ def _parser():
     commands = parser.add_subparsers(dest="command", parser_class=_Parser)
     commands.add_parser("demo", help="run the default scene and say where its outputs are")
     commands.add_parser("scenes", help="list the built-in scenes")
+    compiling = commands.add_parser(
+        "compile", help="compile every kind of run of these scenes up front, in parallel (default: every built-in)"
+    )
+    compiling.add_argument("scenes", nargs="*", metavar="SCENE", help="built-in scene names or .toml files")
+    compiling.add_argument("--methods", help="comma-separated methods (default: all four)")
+    compiling.add_argument("--workers", type=int, help="processes compiling at once (default: one a core)")
     run = commands.add_parser("run", help="run a built-in scene or a scene file")
     _scene_arguments(run)
     run.add_argument("--method", help="penalty | projection | impulse | constraints (default: the scene's)")
@@ -355,6 +362,25 @@ def _view(sources, port=None, stream=None):
         raise Interrupted(signal.SIGTERM)
 
 
+def _compile(args):
+    from .methods import AVAILABLE
+    from .precompile import compile_kinds
+    from .scene import builtin_scenes
+    from .validation import whole_number
+
+    if args.workers is not None:
+        whole_number(args.workers, "--workers", 1)
+    methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods is not None else list(AVAILABLE)
+    if not methods:
+        raise InputError("--methods", "names no method; give one or more of " + ", ".join(AVAILABLE))
+    scenes = args.scenes or [name for name, _ in builtin_scenes()]
+    done = compile_kinds(scenes, methods, args.workers, progress=True)
+    print(
+        f"Compiled {len(done.compiled)} kinds of run in {done.seconds:.0f} s; {len(done.already)} were compiled "
+        f"already; {len(done.refused)} runs a method refuses (left out)."
+    )
+
+
 def _compare(args):
     from .compare import compare
     from .methods import AVAILABLE
@@ -513,6 +539,8 @@ def _main(argv):
                 print(f"{name:20s} {description}")
         elif args.command == "run":
             _run(args, restart=argv is None)
+        elif args.command == "compile":
+            _compile(args)
         elif args.command == "compare":
             _compare(args)
         elif args.command == "sweep":
