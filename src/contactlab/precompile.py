@@ -23,7 +23,6 @@ from . import interrupts, kernel_variants
 from .errors import InputError
 from .progress import bar
 
-
 WAIT_SECONDS = 0.25  # how often the parent looks for a signal while the workers compile
 
 
