@@ -9,6 +9,7 @@ import sys
 
 from contactlab import kernel_variants
 from contactlab.compiling import NOTICE, PackageStampedLocator
+from contactlab.methods import get, make_options
 from contactlab.scene import load_scene
 
 
@@ -70,16 +71,18 @@ def test_a_user_who_sets_numba_disable_jit_gets_what_they_chose(tmp_path):
 
 
 def test_the_kind_of_a_run_tells_apart_what_compiles_apart():
-    """Runs that compile one loop share a kind; another method, another shape family, another
-    flag do not; the Python-wired path (cloth) has none."""
+    """Runs that compile one loop share a kind (impulse and constraints share theirs); another
+    loop, another shape family, another flag do not; the Python-wired path (cloth) has none."""
     ball, block, cloth = (load_scene(name) for name in ("bouncing_ball", "sliding_block", "cloth_drape"))
 
     def kind(scene, method=None):
         method = method or scene.method
-        return kernel_variants.variant_of(scene.model, method, scene.options[scene.method], scene.integrator)
+        options = make_options(get(method), scene.method_options.get(method, {}), method)
+        return kernel_variants.variant_of(scene.model, method, options, scene.integrator)
 
     assert kind(ball) == kind(load_scene("bouncing_ball", ["simulation.duration=1.0"]))
     assert kind(ball) != kind(block)  # sphere-plane against box-plane
+    assert kind(ball, "constraints") == kind(ball) != kind(ball, "projection")  # one loop for the two
     assert kind(cloth) is None
 
 

@@ -3,6 +3,7 @@
 by one from Python (the methods' ``step``): on every built-in scene the loop serves, the two give
 bit-identical trajectories and diagnostics — the loop is a faster path, not other physics."""
 
+import numba
 import numpy as np
 import pytest
 from conftest import ball_on_plane
@@ -182,17 +183,19 @@ def test_compiled_loop_must_be_a_yes_or_no():
 
 def test_projection_takes_the_loop_and_compiles_only_its_own_step():
     """simulate(method="projection") takes the loop as the velocity methods do; the loop is told
-    the method by its Specialization, whose flags are None for the steps it does not take (Numba
-    then leaves them uncompiled), and calls the projection's step."""
+    the method by its Specialization, whose ``projection`` is None for the steps that do not take
+    it (Numba then leaves projection uncompiled there), and calls the projection's step. Impulse and
+    constraints differ by value (False, True), not type: their runs share one compiled loop."""
     scene = load_scene("box_stack")
     model, options = scene.model, get("projection").Options(passes=3)
     stepper = velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state())
     assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
     methods = ("constraints", "impulse", "projection")
-    assert [getattr(stepper.spec, name) for name in methods] == [None, None, True]
+    assert [getattr(stepper.spec, name) for name in methods] == [False, False, True]
     assert stepper.loop is velocity_loop.LOOPS["projection"]
     spec = loop_stages.specialization(model, "impulse", impulse.Options())
-    assert [getattr(spec, name) for name in methods] == [None, True, None]
+    assert [getattr(spec, name) for name in methods] == [False, True, None]
     spec = loop_stages.specialization(model, "constraints", get("constraints").Options())
-    assert [getattr(spec, name) for name in methods] == [True, None, None]
+    assert [getattr(spec, name) for name in methods] == [True, False, None]
+    assert numba.typeof(spec) == numba.typeof(loop_stages.specialization(model, "impulse", impulse.Options()))
     assert simulate(model, "projection", scene.dt, 10 * scene.dt).summary["compiled_loop"]

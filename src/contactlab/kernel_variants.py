@@ -73,7 +73,8 @@ def variant_of(model: Model, method: str, options: Any, integrator: str) -> str 
     hulls = "-" if spec.plan.hull_store is None else "h"
     large = "-" if spec.plan.large is None else "g"
     drive = "-" if model.drive is None else "d"
-    return f"{method}/{integrator}/{families}{hulls}{large}/{flags}{drive}"
+    loop = "velocity" if method in ("impulse", "constraints") else method  # the two share one loop
+    return f"{loop}/{integrator}/{families}{hulls}{large}/{flags}{drive}"
 
 
 def _record() -> Path:

@@ -354,7 +354,7 @@ def normal_row_targets(
     if options.formulation == "velocity":  # the sweep order is impulse's alone: any order does
         settings = loop_settings(model, "constraints", options, h)
         order = np.arange(contacts.count)
-        return targets(loop_model(model), settings, None, True, contacts.arrays(), rows, v_free, order)
+        return targets(loop_model(model), settings, False, True, contacts.arrays(), rows, v_free, order)
     gap_at_start = -contacts.depth
     normal_velocity = row_products(rows, v_free)[:, 0]
     current = row_products(rows, stack(*state.velocities))[:, 0]

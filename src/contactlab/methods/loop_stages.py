@@ -143,7 +143,8 @@ Specialization = namedtuple(
 )
 Specialization.__doc__ = """What a run's compiled code is specialized for, as one value: the detection Plan;
 ``keeping`` (True: a pair family that keeps manifolds and a manifold tolerance > 0); the method
-(``constraints``, ``impulse``, ``projection``: True for the run's method, None for the others; ``penalty``:
+(``constraints``, ``impulse``: whether it is the run's, values the one velocity loop of both reads as
+it runs; ``projection``: True for projection's runs, None for the others; ``penalty``:
 penalty's PenaltyLoop, else None); ``slabs`` (True: PARALLEL_MIN_CONTACTS contacts are possible,
 MAX_PER_PAIR per pair) and ``parallel`` (True: several threads and PARALLEL_MIN_COLLIDERS bodies and
 particles); ``shock`` and ``blocks`` (True: the Options' shock propagation, block solves). A flag that is
@@ -161,15 +162,15 @@ def specialization(model: Model, method: str, options: CollisionOptions, penalty
     """The Specialization of ``method``'s runs on ``model`` with these Options (``penalty``: penalty's
     PenaltyLoop): a first run compiles a fraction of the loop — a ball on the floor needs neither
     the grid broad phase, nor kept manifolds, nor the slab split; projection not the velocity
-    methods' step, nor they projection's. Two flags for the velocity methods, not one: an impulse
-    run then compiles none of what only constraints takes."""
+    methods' step, nor they projection's. Impulse and constraints differ by values, not types:
+    their runs share one compiled loop."""
     dynamic, obstacles = model.body_count + model.particle_count, model.obstacle_count
     most_contacts = MAX_PER_PAIR * (dynamic * (dynamic - 1) // 2 + dynamic * obstacles)
     return Specialization(
         detection_plan(model),
         keeping_for(model, getattr(options, "manifold_tolerance", 0.0)),
-        True if method == "constraints" else None,
-        True if method == "impulse" else None,
+        method == "constraints",
+        method == "impulse",
         True if method == "projection" else None,
         True if most_contacts >= PARALLEL_MIN_CONTACTS else None,
         True if available_threads() > 1 and dynamic >= PARALLEL_MIN_COLLIDERS else None,

@@ -427,19 +427,18 @@ def targets(
     """Stage 4b: each normal row's target velocity (C,) [m/s] and time of impact τ (C,) (−1:
     none). Impulse: the collision waves (``resolve_collisions``) change u, then every
     contact rests (``resting_targets``); constraints: all impacts at once (``impact_targets``).
-    ``impulse``, ``constraints``: True for that method, None for the other, whose branch is then
-    not compiled (one flag would not do: Numba prunes a branch on a flag typed None, never on one
-    typed bool)."""
+    ``impulse``, ``constraints``: whether the run is that method's, read as the step runs: impulse
+    and constraints runs share one compiled loop (a kind of run fewer to compile)."""
     gap_at_start = -contacts.depth
     gravity_normal = gravity_along_normals(
         contacts.body_a, contacts.body_b, contacts.particles_a, contacts.particles_b, contacts.normal, model.gravity
     )
-    if impulse is not None:
+    if impulse:
         tau = np.empty(gap_at_start.shape[0])
         materials = (contacts.friction, contacts.restitution)
         resolve_collisions(rows, materials, gravity_normal, gap_at_start, u, tau, order, settings)
         return resting_targets(gap_at_start, settings), tau
-    if constraints is None:  # neither: no velocity method (never so; see ``specialization``)
+    if not constraints:  # neither: no velocity method (never so; see ``specialization``)
         raise ValueError("targets: neither impulse nor constraints")
     normal_velocity = row_products(rows, u)[:, 0]
     return impact_targets(gap_at_start, normal_velocity, gravity_normal, contacts.restitution, settings)
@@ -579,7 +578,7 @@ def respond(
         increment[i] = (free_u[i] - start[i]) / n
         u[i] = entry[i] - (free_u[i] - start[i])
     fixed = tau >= 0.0  # constraints' bounces keep their targets; impulse's were its waves
-    if spec.impulse is not None:
+    if spec.impulse:
         fixed[:] = False
     travelled = np.empty_like(u)
     substepping = (fixed, -contacts.depth, increment, travelled)
