@@ -119,3 +119,24 @@ def test_every_code_name_in_the_readme_spec_table_exists():
             if name and (test_file is None or not _defined(test_file, name)):
                 missing.append(f"{item}: {name} in {test_file}")
     assert not missing, missing
+
+
+def test_the_readmes_first_use_figures_are_the_benchmarks():
+    """The first demo's and the first five commands' times in README.md are those of
+    benchmarks/results/first_use.json (benchmarks/first_use.py), as it rounds them."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "first_use.json").read_text())
+    text = " ".join((root / "README.md").read_text().split())
+    demo = re.search(r"the first `contactlab demo` in a fresh environment and home takes ([\d.]+) s", text)
+    assert demo and float(demo.group(1)) == round(result["first"][0]["wall_seconds"], 1)
+    assert f"({result['date']}, {result['machine'].split(',')[0]}" in text
+    install = re.search(r"`pip install \.` took ([\d.]+) s", text)
+    assert install and float(install.group(1)) == round(result["install_seconds"])
+    if len(result["first"]) == 5:
+        five = re.search(r"the five first commands of issue 56 took ([\d.]+) s, against ([\d.]+) s", text)
+        assert five and (float(five.group(1)), float(five.group(2))) == (
+            round(result["first_total_seconds"]),
+            round(result["second_total_seconds"]),
+        )

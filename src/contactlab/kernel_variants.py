@@ -124,14 +124,19 @@ def probe(scene: Scene, steps: int) -> float:
     """How long ``steps`` steps of ``scene`` take as this process runs them [s]: a run of one step
     (what a run sets up once, and first uses, in it) untimed, then one of one step and one of
     PROBE_STEPS more, whose difference is the cost of a step (the second only where the first says
-    it takes at most about PROBE_SECONDS). Runs nothing of the real run: no file, no output."""
+    it takes at most about PROBE_SECONDS). Runs nothing of the real run: no file, no output;
+    a probe the scene stops early (it diverges) counts as cheap: the run itself then says why."""
+    from .errors import SimulationDiverged
     from .simulation import simulate
 
     def seconds(count: int) -> float:
         started = time.perf_counter()
         with warnings.catch_warnings():  # the run itself says what the scene warrants
             warnings.simplefilter("ignore")
-            simulate(scene.model, scene.method, scene.dt, count * scene.dt, options, scene.integrator)
+            try:
+                simulate(scene.model, scene.method, scene.dt, count * scene.dt, options, scene.integrator)
+            except SimulationDiverged:
+                return 0.0
         return time.perf_counter() - started
 
     options = scene.options[scene.method]

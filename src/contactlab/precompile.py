@@ -88,7 +88,7 @@ def compile_kinds(
     scenes: Sequence[str], methods: Sequence[str], workers: int | None = None, progress: bool = False
 ) -> Compiled:
     """Compile every kind of run of ``scenes`` under ``methods`` not yet compiled on this machine,
-    ``workers`` processes at once (None: one a core), with ``progress`` on stderr. Ctrl-C or
+    ``workers`` processes at once (None, or more than the cores: one a core), with ``progress`` on stderr. Ctrl-C or
     SIGTERM stops the workers at once (Interrupted); what they finished stays compiled."""
     from .cluster import cores
 
@@ -101,7 +101,7 @@ def compile_kinds(
     todo = [job for job in jobs if job.kind not in known]
     compiled: list[Job] = []
     if todo:
-        count = max(1, min(workers or cores(), len(todo)))
+        count = max(1, min(workers or cores(), cores(), len(todo)))  # more than the cores would only queue
         if progress:
             estimate = kernel_variants.compile_estimate() * len(todo) / count
             print(
