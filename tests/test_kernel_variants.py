@@ -151,3 +151,24 @@ def test_compile_takes_one_job_a_kind_and_refuses_bad_input(tmp_path):
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--methods" in bad.stderr
     nothing = _command(tmp_path, "compile", "no_such_scene")
     assert nothing.returncode == 2 and nothing.stderr.count("\n") == 1
+
+
+def test_old_kernel_folders_are_pruned_to_the_most_recent(tmp_path, monkeypatch):
+    """Each content of the sources has a kernel folder; only the most recently used are kept."""
+    import time
+
+    from contactlab import compiling
+
+    monkeypatch.setattr(compiling, "kernel_cache_root", lambda: tmp_path)
+    for index in range(5):
+        folder = tmp_path / f"contactlab-{index:020d}-numba0.1"
+        folder.mkdir()
+        stamp = time.time() - 100 + index
+        os.utime(folder, (stamp, stamp))
+    (tmp_path / "otherpackage-0-numba0.1").mkdir()
+    compiling.prune_kernel_folders("contactlab", keep=2)
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        "contactlab-00000000000000000003-numba0.1",
+        "contactlab-00000000000000000004-numba0.1",
+        "otherpackage-0-numba0.1",
+    ]

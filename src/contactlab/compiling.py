@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import shutil
 import sys
 import types as types_module
 import warnings
@@ -134,6 +135,25 @@ def kernel_cache_root() -> Path:
     return Path(home) / "contactlab" / "kernels"
 
 
+KEPT_FOLDERS = 8  # a package's kernel folders kept (the most recently used), one a content
+
+
+def prune_kernel_folders(package: str, keep: int) -> None:
+    """Remove ``package``'s kernel folders under ``kernel_cache_root()`` beyond the ``keep`` most
+    recently modified (a folder is modified whenever a kernel is saved into it). Nothing is
+    raised: a folder that cannot be removed stays."""
+    try:
+        folders = sorted(
+            (folder for folder in kernel_cache_root().glob(f"{package}-*-numba*") if folder.is_dir()),
+            key=lambda folder: folder.stat().st_mtime,
+            reverse=True,
+        )
+    except OSError:
+        return
+    for folder in folders[keep:]:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 class PackageStampedLocator(caching._CacheLocator):
     """Where a compiled function of a package in ``ROOTS`` is kept, found by the package's
     content rather than by where it is installed: ``kernel_cache_root()/<package>-<digest>-numba<version>/``
@@ -171,9 +191,13 @@ class PackageStampedLocator(caching._CacheLocator):
 
     @classmethod
     def folder_of(cls, root: str) -> Path:
-        """The cache folder of the package at ``root`` (stamped): one a content and Numba version."""
+        """The cache folder of the package at ``root`` (stamped): one a content and Numba version.
+        The first time it is asked for in a process, the package's folders beyond the KEPT_FOLDERS
+        most recently used are removed (each edit of a source makes a new one: a developer's day
+        would otherwise leave hundreds)."""
         if cls.ROOTS[root] is None:
             cls.ROOTS[root] = sources_digest(root)
+            prune_kernel_folders(os.path.basename(root), keep=KEPT_FOLDERS)
         name = f"{os.path.basename(root)}-{str(cls.ROOTS[root])[:20]}-numba{numba.__version__}"
         return kernel_cache_root() / name
 
