@@ -9,14 +9,13 @@ import sys
 
 from contactlab import kernel_variants
 from contactlab.compiling import NOTICE, PackageStampedLocator
+from contactlab.first_run import CHOICE
 from contactlab.methods import get, make_options
 from contactlab.scene import load_scene
 
 
 def _command(tmp_path, *arguments, **env):
-    environment = {
-        key: value for key, value in os.environ.items() if key not in ("CONTACTLAB_KERNELS", "NUMBA_DISABLE_JIT")
-    }
+    environment = {key: value for key, value in os.environ.items() if key not in (CHOICE, "NUMBA_DISABLE_JIT")}
     environment.update(NUMBA_CACHE_DIR=str(tmp_path / "cache"), **env)
     return subprocess.run(
         [sys.executable, "-m", "contactlab", *arguments],

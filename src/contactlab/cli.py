@@ -261,10 +261,10 @@ def _run(args, restart=False):
     """``contactlab run`` with its parsed arguments ``args`` (``demo`` is ``run`` of the default
     scene with every default): the scene run, its files written, its summary printed; returns
     the Run. ``restart``: this is the program's own process, which may start again compiled or as
-    Python (``kernel_variants.settle``)."""
+    Python (``first_run.settle``)."""
     from .closed_form import checks
+    from .first_run import settle
     from .folder_lock import held
-    from .kernel_variants import settle
     from .plausibility import MANY_STEPS
     from .record import TRAJECTORY, make_folders, write_summary
     from .scene import load_scene

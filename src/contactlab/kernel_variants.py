@@ -1,5 +1,5 @@
-"""Which kinds of run this machine has compiled, and whether a command's run compiles its kernels
-or steps them as Python.
+"""Which kinds of run this machine has compiled: the record that decides whether a command's run
+compiles its kernels or steps them as Python (:mod:`contactlab.first_run`).
 
 The compiled stepping loop is specialized per kind of run (:func:`variant_of`: the method, the
 integrator, the scene's shape families and the options' flags, ``loop_stages.Specialization``), and
@@ -7,21 +7,23 @@ a run of a kind that this machine has never compiled waits for Numba first: 40�
 where the run itself may take a second. The same kernels also run as Python, their own source
 executed by the interpreter (``NUMBA_DISABLE_JIT=1``), with the same numbers bit for bit. So that a
 first run never waits on a compile that costs more than the run it serves, ``contactlab run`` (and
-``demo``) goes through :func:`settle` before it writes anything:
+``demo``) goes through :func:`contactlab.first_run.settle` before it writes anything:
 
 1. the run's kind is in this machine's record of compiled kinds (:func:`compiled_variants`,
    ``variants.json`` in the package's kernel cache, written after every compiled run), or the run
    steps through the methods' Python-wired path (cloth, meshes: always compiled): it compiles or
    loads as before;
 2. otherwise the command starts again as Python (the same process, ``os.execv``) and times a few
-   steps of the scene (:func:`probe`: PROBE_STEPS, where they take at most PROBE_SECONDS); where the
-   whole run would take less than INTERPRET_SHARE of what a compile takes here (:func:`compile_estimate`), it
+   steps of the scene (:func:`contactlab.first_run.probe`); where the whole run would take less
+   than half of what a compile takes here (:func:`compile_estimate`), it
    steps the run as Python and says so in one line on stderr; else it starts once more, compiled,
    and the compile happens where it repays.
 
 ``NUMBA_DISABLE_JIT`` set by the user (0 or 1) is their choice and is left alone; ``contactlab
 compile`` builds the kinds up front (:mod:`contactlab.precompile`). Library calls (``simulate``) run
-however their process was started: only a command can choose before Numba is set up.
+however their process was started: only a command can choose before Numba is set up. This module
+holds the record (written by ``simulate`` after each compiled run), the kind of a run and what a
+compile costs here; :mod:`contactlab.first_run` the probe and the command's choice.
 """
 
 from __future__ import annotations
@@ -29,28 +31,19 @@ from __future__ import annotations
 import json
 import os
 import statistics
-import sys
 import tempfile
-import time
-import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numba
 
-from . import interrupts
 from .compiling import PackageStampedLocator
 
 if TYPE_CHECKING:
     from .model import Model
-    from .scene import Scene
 
-CHOICE = "CONTACTLAB_KERNELS"  # set by settle() for the process it starts again: "probe" or "compiled"
 VARIANTS_FILE = "variants.json"
 DEFAULT_COMPILE_SECONDS = 45.0  # a first kind on 2 cores (the demo's loop: 51–64 s; another kind 30–40 s)
-INTERPRET_SHARE = 0.5  # step as Python where that takes at most this share of the compile it saves
-PROBE_STEPS = 10  # the steps a probe times
-PROBE_SECONDS = 1.0  # the most those may take by the first step's time, else the first step's time tells
 
 
 def interpreted() -> bool:
@@ -118,69 +111,3 @@ def compile_estimate() -> float:
     compiles recorded here, DEFAULT_COMPILE_SECONDS where none is."""
     spent = [seconds for seconds in compiled_variants().values() if seconds > 1.0]
     return float(statistics.median(spent)) if spent else DEFAULT_COMPILE_SECONDS
-
-
-def probe(scene: Scene, steps: int) -> float:
-    """How long ``steps`` steps of ``scene`` take as this process runs them [s]: a run of one step
-    (what a run sets up once, and first uses, in it) untimed, then one of one step and one of
-    PROBE_STEPS more, whose difference is the cost of a step (the second only where the first says
-    it takes at most about PROBE_SECONDS). Runs nothing of the real run: no file, no output;
-    a probe the scene stops early (it diverges) counts as cheap: the run itself then says why."""
-    from .errors import SimulationDiverged
-    from .simulation import simulate
-
-    def seconds(count: int) -> float:
-        started = time.perf_counter()
-        with warnings.catch_warnings():  # the run itself says what the scene warrants
-            warnings.simplefilter("ignore")
-            try:
-                simulate(scene.model, scene.method, scene.dt, count * scene.dt, options, scene.integrator)
-            except SimulationDiverged:
-                return 0.0
-        return time.perf_counter() - started
-
-    options = scene.options[scene.method]
-    seconds(1)
-    once = seconds(1)  # what a run costs besides its steps, and one step
-    if once * PROBE_STEPS > PROBE_SECONDS or steps <= PROBE_STEPS:  # slow steps, or few: that is enough
-        return once * steps
-    step = max(0.0, seconds(1 + PROBE_STEPS) - once) / PROBE_STEPS
-    return once + step * (steps - 1)
-
-
-def settle(scene: Scene, steps: int, restart: bool) -> None:
-    """Before ``contactlab run`` writes anything: go on as this process is (compiled, or as Python
-    where that was chosen), or start the command again in this process (``os.execv``), as Python to
-    probe, or compiled after a probe (see the module docstring). ``restart`` False (a command
-    called as a function, ``cli.main(argv)``): nothing changes."""
-    choice = os.environ.get(CHOICE)
-    if not restart or choice == "compiled" or ("NUMBA_DISABLE_JIT" in os.environ and choice != "probe"):
-        return
-    variant = variant_of(scene.model, scene.method, scene.options[scene.method], scene.integrator)
-    if choice != "probe":
-        if variant is not None and variant not in compiled_variants():
-            _again(probe=True)
-        return
-    estimate = compile_estimate()
-    needed = probe(scene, steps)
-    if needed > INTERPRET_SHARE * estimate:
-        _again(probe=False)
-    print(
-        f"stepping as Python: about {needed:.0f} s, where compiling this kind of run first would take "
-        f"about {estimate:.0f} s ('contactlab compile' builds every kind once)",
-        file=sys.stderr,
-        flush=True,
-    )
-
-
-def _again(probe: bool) -> None:
-    """Start this command anew in this process: as Python to probe (``probe``), else compiled."""
-    interrupts.check()  # a Ctrl-C while the scene loaded stops here, not in the next process
-    environment = dict(os.environ, **{CHOICE: "probe" if probe else "compiled"})
-    if probe:
-        environment["NUMBA_DISABLE_JIT"] = "1"
-    else:
-        environment.pop("NUMBA_DISABLE_JIT", None)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], environment)

@@ -21,12 +21,13 @@ from typing import Any, NamedTuple
 
 from . import interrupts, kernel_variants
 from .errors import InputError
+from .first_run import CHOICE
 from .progress import bar
 
 WAIT_SECONDS = 0.25  # how often the parent looks for a signal while the workers compile
 
 
-class Job(NamedTuple):
+class KindToCompile(NamedTuple):
     """One kind of run to compile: a scene (a built-in name or a file) and a method."""
 
     scene: str
@@ -38,20 +39,20 @@ class Compiled(NamedTuple):
     """What ``compile_kinds`` did: the kinds compiled now, those compiled already, the runs a method
     refuses (their scene and method, and why), and the wall time [s]."""
 
-    compiled: list[Job]
-    already: list[Job]
+    compiled: list[KindToCompile]
+    already: list[KindToCompile]
     refused: list[tuple[str, str, str]]
     seconds: float
 
 
-def jobs_for(scenes: Sequence[str], methods: Sequence[str]) -> tuple[list[Job], list[tuple[str, str, str]]]:
-    """The kinds of run of these scenes under these methods, one Job a kind (the first scene that
+def jobs_for(scenes: Sequence[str], methods: Sequence[str]) -> tuple[list[KindToCompile], list[tuple[str, str, str]]]:
+    """The kinds of run of these scenes under these methods, one KindToCompile a kind (the first scene that
     needs it), and the (scene, method, why) a method refuses. Raises InputError for a scene that
     cannot be loaded."""
     from .methods import get, make_options
     from .scene import load_scene
 
-    jobs: dict[str, Job] = {}
+    jobs: dict[str, KindToCompile] = {}
     refused = []
     for name in scenes:
         scene = load_scene(name)
@@ -62,11 +63,11 @@ def jobs_for(scenes: Sequence[str], methods: Sequence[str]) -> tuple[list[Job], 
                 refused.append((name, method, str(error)))
                 continue
             kind = kernel_variants.variant_of(scene.model, method, options, scene.integrator) or f"{name}/{method}"
-            jobs.setdefault(kind, Job(name, method, kind))
+            jobs.setdefault(kind, KindToCompile(name, method, kind))
     return list(jobs.values()), refused
 
 
-def _compile(job: Job) -> tuple[Job, str | None]:
+def _compile(job: KindToCompile) -> tuple[KindToCompile, str | None]:
     """In a worker process: two steps of the job's scene under its method, compiled, which records
     the kind (``simulation`` does, after a compiled run). (job, None), or (job, why) where the run
     was refused."""
@@ -99,7 +100,7 @@ def compile_kinds(
     known = kernel_variants.compiled_variants()
     already = [job for job in jobs if job.kind in known]
     todo = [job for job in jobs if job.kind not in known]
-    compiled: list[Job] = []
+    compiled: list[KindToCompile] = []
     if todo:
         count = max(1, min(workers or cores(), cores(), len(todo)))  # more than the cores would only queue
         if progress:
@@ -115,9 +116,11 @@ def compile_kinds(
     return Compiled(compiled, already, refused, time.perf_counter() - started)
 
 
-def _in_workers(todo: list[Job], count: int, progress: bool) -> tuple[list[Job], list[tuple[str, str, str]]]:
+def _in_workers(
+    todo: list[KindToCompile], count: int, progress: bool
+) -> tuple[list[KindToCompile], list[tuple[str, str, str]]]:
     """Run ``_compile`` for each job on ``count`` fresh processes; none outlives the call."""
-    os.environ[kernel_variants.CHOICE] = "compiled"  # the workers compile (they inherit it)
+    os.environ[CHOICE] = "compiled"  # the workers compile (they inherit it)
     compiled, refused = [], []
     pool: Any = multiprocessing.get_context("spawn").Pool(count)
     try:

@@ -155,6 +155,16 @@ def system_diagonal(system: SpringSystem) -> np.ndarray:
     return diagonal
 
 
+@njit(cache=True, inline="always")
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """a · b of two (N,) arrays, summed in index order: the same bits compiled and as Python
+    (``np.dot`` calls a BLAS whose summation order differs between NumPy's and Numba's builds)."""
+    total = 0.0
+    for i in range(a.shape[0]):
+        total += a[i] * b[i]
+    return total
+
+
 @njit(cache=True)
 def spring_conjugate_gradients(
     system: SpringSystem, rhs: np.ndarray, guess: np.ndarray, tolerance: float, most: int
@@ -172,17 +182,17 @@ def spring_conjugate_gradients(
         r[i] = rhs[i] - Ap[i]
         z[i] = r[i] / diagonal[i]
         p[i] = z[i]
-    scale = max(np.sqrt(np.dot(rhs, rhs)), 1e-300)
-    rz = np.dot(r, z)
+    scale = max(np.sqrt(_dot(rhs, rhs)), 1e-300)
+    rz = _dot(r, z)
     iterations = 0
-    while iterations < most and np.sqrt(np.dot(r, r)) > tolerance * scale and rz != 0.0:
+    while iterations < most and np.sqrt(_dot(r, r)) > tolerance * scale and rz != 0.0:
         system_product(system, p, kept, Ap)
-        alpha = rz / np.dot(p, Ap)
+        alpha = rz / _dot(p, Ap)
         for i in range(N):
             x[i] += alpha * p[i]
             r[i] -= alpha * Ap[i]
             z[i] = r[i] / diagonal[i]
-        following = np.dot(r, z)
+        following = _dot(r, z)
         beta = following / rz
         for i in range(N):
             p[i] = z[i] + beta * p[i]
@@ -191,7 +201,7 @@ def spring_conjugate_gradients(
     system_product(system, x, kept, Ap)
     for i in range(N):
         Ap[i] -= rhs[i]
-    return x, np.sqrt(np.dot(Ap, Ap)) / scale, iterations
+    return x, np.sqrt(_dot(Ap, Ap)) / scale, iterations
 
 
 @njit(cache=True)
