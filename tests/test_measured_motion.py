@@ -228,3 +228,27 @@ def test_validate_starts_the_peers_from_the_measurement_and_finds_no_error_in_th
     assert rows["mujoco"]["position_error_pct"] < 1e-6 and rows["mujoco"]["rotation_error_deg"] < 1e-4
     assert rows["pybullet"]["position_error_pct"] > 0.1 and rows["impulse"]["position_error_pct"] > 0.1
     assert result.best == "mujoco"
+
+
+def test_validate_where_no_run_completed_says_so_and_exits_3(tmp_path, monkeypatch, capsys):
+    # issue 59: every run diverged, and validate said "Median position error: impulse nan %", exit 0
+    import time as clock
+
+    from contactlab import cli, prediction
+
+    def diverged(job):  # what predict returns for a run a health check stopped
+        measurement = prediction.read_measurement(job["measurement"])
+        row = {"measurement": measurement.name, "method": job["method"], "samples": len(measurement.time)}
+        return prediction._failed(row, "diverged", "energy from nowhere at t = 0.1 s", clock.perf_counter())
+
+    monkeypatch.setattr(prediction, "predict", diverged)
+    out = tmp_path / "out"
+    measured = [os.path.join(os.path.dirname(SCENE), f"toss_0{k}.h5") for k in (1, 2)]
+    code = cli.main(["validate", SCENE, *measured, "--methods", "impulse,penalty", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 3
+    assert "Median position error: impulse none completed, penalty none completed." in captured.out
+    assert "nan" not in captured.out
+    csv = out / "validation.csv"
+    assert captured.err.splitlines() == [f"error: no run of any method completed (each row of {csv} says why)"]
+    assert csv.is_file() and (out / "report.md").is_file()  # what went wrong, kept to be read

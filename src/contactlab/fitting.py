@@ -42,9 +42,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import __version__, cluster, interrupts
+from . import __version__, cluster, folder_lock, interrupts
 from .errors import InputError
-from .prediction import checked_inputs, method_names, predict
+from .methods import method_names
+from .prediction import checked_inputs, predict
 from .record import atomic_path, make_folders, remove_empty
 
 if TYPE_CHECKING:
@@ -185,32 +186,33 @@ def fit(
     start = [_start(source, v) for v in varied]
     say = log or (lambda line: None)
     made = make_folders(os.path.join(out, "evaluations"))
-    try:
-        context = _given(client) if client is not None else cluster.connect(scheduler, workers)
-        with context as connected:
-            say(f"Dask dashboard: {cluster.dashboard(connected)}")
-            runs = _Runs(connected, source, overrides, os.path.join(out, "evaluations"), progress)
-            result = {}
-            evaluated = {}
-            for method in names:
-                result[method], evaluated[method] = _fit_method(
-                    runs, method, varied, start, [measurements[i] for i in train], budget, say
-                )
-                if held:
-                    rows = runs.rows(method, varied, result[method]["values"], [measurements[i] for i in held])
-                    result[method]["holdout_error"] = _median(rows)
-                    say(f"{method}: held-out error {result[method]['holdout_error']:.3g} %")
-    except BaseException:
-        remove_empty(made)
-        raise
-    fitted = Fit(
-        methods=result,
-        vary=varied,
-        train=[measurements[i].name for i in train],
-        holdout=[measurements[i].name for i in held],
-        out=out,
-    )
-    _write(fitted, evaluated)
+    with folder_lock.held(out, "--out", made):  # one fit at a time writes a folder
+        try:
+            context = _given(client) if client is not None else cluster.connect(scheduler, workers)
+            with context as connected:
+                say(f"Dask dashboard: {cluster.dashboard(connected)}")
+                runs = _Runs(connected, source, overrides, os.path.join(out, "evaluations"), progress)
+                result = {}
+                evaluated = {}
+                for method in names:
+                    result[method], evaluated[method] = _fit_method(
+                        runs, method, varied, start, [measurements[i] for i in train], budget, say
+                    )
+                    if held:
+                        rows = runs.rows(method, varied, result[method]["values"], [measurements[i] for i in held])
+                        result[method]["holdout_error"] = _median(rows)
+                        say(f"{method}: held-out error {result[method]['holdout_error']:.3g} %")
+        except BaseException:
+            remove_empty(made)
+            raise
+        fitted = Fit(
+            methods=result,
+            vary=varied,
+            train=[measurements[i].name for i in train],
+            holdout=[measurements[i].name for i in held],
+            out=out,
+        )
+        _write(fitted, evaluated)
     return fitted
 
 
@@ -378,6 +380,7 @@ def _write(fitted: Fit, evaluated) -> None:
             {method: list(entry["values"].values()) for method, entry in fitted.methods.items()},
         )
         written += fitted.plots
+        interrupts.check()
         fitted.json = os.path.join(fitted.out, "fit.json")
         with atomic_path(fitted.json) as temporary, open(temporary, "w", encoding="utf-8") as stream:
             json.dump(fitted.as_json(), stream, indent=2)

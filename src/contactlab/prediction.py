@@ -44,8 +44,9 @@ import numpy as np
 from . import rotations, shapes
 from .errors import InputError, SimulationDiverged, first_line
 from .measured import Measurement, read_measurement
-from .methods import AVAILABLE
+from .methods import method_names
 from .peers import PEERS, Inexpressible
+from .record import check_folder
 
 if TYPE_CHECKING:
     from .model import Model
@@ -263,20 +264,6 @@ def _plain(value):
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
-def method_names(methods: str | Sequence[str] | None, option: str = "--methods") -> list[str]:
-    """The methods named (a list or a comma-separated string; None: all four), checked."""
-    if methods is None:
-        return list(AVAILABLE)
-    names = [name.strip() for name in (methods.split(",") if isinstance(methods, str) else methods)]
-    names = list(dict.fromkeys(name for name in names if name))
-    for name in names:
-        if name not in AVAILABLE:
-            raise InputError(option, f"unknown method {name!r}; expected some of: {', '.join(AVAILABLE)}")
-    if not names:
-        raise InputError(option, f"expected at least one of: {', '.join(AVAILABLE)}")
-    return names
-
-
 def checked_inputs(
     scene: str | os.PathLike[str],
     measured: Sequence[str | os.PathLike[str]],
@@ -348,6 +335,7 @@ def validate(
     loaded, source, measurements, names = checked_inputs(scene, measured, methods, overrides)
     names += peer_names(peers)
     out = os.fspath(out) if out is not None else os.path.join("out", f"{loaded.name}-validate")
+    check_folder(out)  # a file there fails now, not after the runs
     rows = []
     for measurement in measurements:
         for method in names:
