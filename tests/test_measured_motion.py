@@ -252,3 +252,20 @@ def test_validate_where_no_run_completed_says_so_and_exits_3(tmp_path, monkeypat
     csv = out / "validation.csv"
     assert captured.err.splitlines() == [f"error: no run of any method completed (each row of {csv} says why)"]
     assert csv.is_file() and (out / "report.md").is_file()  # what went wrong, kept to be read
+
+
+def test_a_whole_number_setting_is_fitted_in_whole_numbers():
+    # issue 59: fit --vary method.impulse.iterations=1:100 was refused, "expected a whole number
+    # ≥ 1, found 1.0", though any --set path may be fitted
+    from contactlab.fitting import _checked
+
+    count = _checked(parse_vary("method.impulse.iterations=1:100"), SCENE, COARSE, ["impulse"])
+    assert (
+        count.whole
+        and count.value(0.3712) == 38
+        and count.setting(count.value(0.3712)) == ("method.impulse.iterations=38")
+    )
+    friction = _checked(parse_vary("materials.0.friction=0:1"), SCENE, COARSE, ["impulse"])
+    assert not friction.whole and friction.setting(friction.value(0.3712)) == "materials.0.friction=0.3712"
+    with pytest.raises(InputError, match=r"^--vary: method.impulse.iterations=0.5: "):
+        _checked(parse_vary("method.impulse.iterations=0.5:10"), SCENE, COARSE, ["impulse"])
