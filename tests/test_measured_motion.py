@@ -269,3 +269,15 @@ def test_a_whole_number_setting_is_fitted_in_whole_numbers():
     assert not friction.whole and friction.setting(friction.value(0.3712)) == "materials.0.friction=0.3712"
     with pytest.raises(InputError, match=r"^--vary: method.impulse.iterations=0.5: "):
         _checked(parse_vary("method.impulse.iterations=0.5:10"), SCENE, COARSE, ["impulse"])
+
+
+def test_a_measurement_too_long_to_run_is_refused_with_advice_validate_can_follow(tmp_path):
+    # issue 59: an 800,000 s measurement's refusal advised record every, trajectory= and
+    # --memory-limit, none of which validate or fit takes
+    times = np.concatenate([np.linspace(0.0, 0.04, 5), np.linspace(1.0, 8e5, 6)])
+    with pytest.raises(InputError) as refused:
+        validate(SCENE, [_broken(tmp_path / "long.h5", time=times)], "impulse", tmp_path / "out")
+    assert "cut the measurement into shorter files, or give a longer simulation.dt (--set)" in refused.value.message
+    for advice in ("record every", "trajectory=", "memory_limit", "--memory-limit"):
+        assert advice not in refused.value.message, refused.value
+    assert not (tmp_path / "out").exists()

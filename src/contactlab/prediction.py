@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import rotations, shapes
+from . import budget, rotations, shapes
 from .errors import InputError, SimulationDiverged, first_line
 from .measured import Measurement, read_measurement
 from .methods import method_names
@@ -56,6 +56,11 @@ if TYPE_CHECKING:
 ESTIMATE_SECONDS = 0.05  # s of the first samples the starting velocities are estimated from
 ERRORS = ("position_error_pct", "rotation_error_deg", "final_position_error_pct")
 COLUMNS = ("measurement", "method", "status", *ERRORS, "samples", "duration_s", "velocities", "message", "seconds")
+REMEDIES = budget.Remedies(  # what validate and fit offer a run that would not fit (it records every step)
+    disk="cut the measurement into shorter files, or give a longer simulation.dt (--set)",
+    memory="cut the measurement into shorter files, or give a longer simulation.dt (--set)",
+    model="simulate fewer bodies, particles or cloth vertices",
+)
 
 
 # ---- the bodies measured ---------------------------------------------------------------------------
@@ -291,7 +296,7 @@ def checked_inputs(
         matched_bodies(loaded.model, measurement)
         for method in names:
             checked = load_scene(source, scene_overrides(method, measurement, settings))
-            checked.check()  # the run limits: a measured duration shorter than the scene's dt, ...
+            checked.check(remedies=REMEDIES)  # the run limits: a measured duration shorter than the scene's dt, ...
     return loaded, source, measurements, names
 
 
