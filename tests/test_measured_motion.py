@@ -277,6 +277,7 @@ def test_a_measurement_too_long_to_run_is_refused_with_advice_validate_can_follo
     times = np.concatenate([np.linspace(0.0, 0.04, 5), np.linspace(1.0, 8e5, 6)])
     with pytest.raises(InputError) as refused:
         validate(SCENE, [_broken(tmp_path / "long.h5", time=times)], "impulse", tmp_path / "out")
+    assert refused.value.field == "long.h5"
     assert "cut the measurement into shorter files, or give a longer simulation.dt (--set)" in refused.value.message
     for advice in ("record every", "trajectory=", "memory_limit", "--memory-limit"):
         assert advice not in refused.value.message, refused.value

@@ -296,7 +296,11 @@ def checked_inputs(
         matched_bodies(loaded.model, measurement)
         for method in names:
             checked = load_scene(source, scene_overrides(method, measurement, settings))
-            checked.check(remedies=REMEDIES)  # the run limits: a measured duration shorter than the scene's dt, ...
+            try:  # the run limits: a measured duration shorter than the scene's dt, ...
+                checked.check(remedies=REMEDIES)
+            except InputError as error:  # one too long to hold: the measurement's fault, not a record_every's
+                field = os.path.basename(measurement.path) if error.field == "record_every" else error.field
+                raise InputError(field, error.message) from None
     return loaded, source, measurements, names
 
 
