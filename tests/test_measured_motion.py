@@ -282,3 +282,18 @@ def test_a_measurement_too_long_to_run_is_refused_with_advice_validate_can_follo
     for advice in ("record every", "trajectory=", "memory_limit", "--memory-limit"):
         assert advice not in refused.value.message, refused.value
     assert not (tmp_path / "out").exists()
+
+
+def test_positions_in_millimetres_are_warned_of(tmp_path):
+    # issue 59: positions in millimetres (up to 600 m, within the 1 km refused) were taken as
+    # metres without a word, and validate found 5.4e5 % errors
+    import warnings
+
+    t = np.linspace(0.0, 0.2, 11)
+    millimetres = np.stack([2000.0 * t, 0.0 * t, 100.0 + 0.0 * t], axis=-1)[:, None]  # 2 m/s, in mm
+    words = r"^m.h5:body_position: a body moves at 2e\+03 m/s between samples \d+ and \d+; "
+    with pytest.warns(UserWarning, match=words):
+        read_measurement(_broken(tmp_path / "m.h5", body_position=millimetres))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_measurement(_broken(tmp_path / "metres.h5", body_position=millimetres / 1000.0))
