@@ -237,6 +237,15 @@ def test_a_series_that_stalls_gets_no_order_but_the_dt_it_stalls_from():
     assert convergence_words(power[:1], power[:1]) == ""
 
 
+def test_a_cells_cost_leaves_its_compiling_out():
+    # issue 59: the Pareto plot counted the first cell's compile time as that cell's cost
+    from contactlab.sweep_report import cost
+
+    rows = pd.DataFrame({"wall_seconds": [5.0, 0.2, 0.3], "compile_seconds": [4.8, 0.0, None]})
+    assert cost(rows).tolist() == pytest.approx([0.2, 0.2, 0.3])
+    assert cost(rows.drop(columns="compile_seconds")).tolist() == [5.0, 0.2, 0.3]  # an older table's rows
+
+
 def test_the_pareto_front_holds_exactly_the_cells_nothing_beats():
     cost = np.array([1.0, 2.0, 3.0, 1.5, 4.0, np.nan])
     error = np.array([0.5, 0.1, 0.2, 0.6, 0.01, 0.0])
