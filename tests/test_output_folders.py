@@ -83,6 +83,7 @@ def held_elsewhere(tmp_path):
     [
         ["compare", "bouncing_ball", "--no-video", "--workers", "1"],
         ["sweep", "study.toml", "--workers", "1"],
+        ["validate", os.path.join(MEASURED, "cube_toss.toml"), os.path.join(MEASURED, "toss_01.h5")],
         [
             "fit",
             os.path.join(MEASURED, "cube_toss.toml"),

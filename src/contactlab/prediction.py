@@ -46,7 +46,7 @@ from .errors import InputError, SimulationDiverged, first_line
 from .measured import Measurement, read_measurement
 from .methods import method_names
 from .peers import PEERS, Inexpressible
-from .record import check_folder
+from .record import make_folders
 
 if TYPE_CHECKING:
     from .model import Model
@@ -338,25 +338,27 @@ def validate(
     comma-separated string) started from the same measured states beside them (their rows
     named by the engine; one a scene it cannot express is "not run", saying why). Every input
     is checked before anything runs or is written."""
+    from .folder_lock import held
     from .peers import peer_names
     from .prediction_report import write_validation
 
     loaded, source, measurements, names = checked_inputs(scene, measured, methods, overrides)
     names += peer_names(peers)
     out = os.fspath(out) if out is not None else os.path.join("out", f"{loaded.name}-validate")
-    check_folder(out)  # a file there fails now, not after the runs
-    rows = []
-    for measurement in measurements:
-        for method in names:
-            job = {
-                "scene": source,
-                "settings": list(overrides),
-                "method": method,
-                "measurement": os.path.abspath(measurement.path),
-                "paths": True,
-            }
-            rows.append(predict(job))
-    found = medians(rows, names)
-    result = Validation(rows=rows, medians=found, best=best_method(found), out=out)
-    write_validation(result, loaded, measurements, COLUMNS)
+    made = make_folders(out)  # a file there fails now, not after the runs
+    with held(out, "--out", made):  # one validate at a time writes a folder; one left empty goes again
+        rows = []
+        for measurement in measurements:
+            for method in names:
+                job = {
+                    "scene": source,
+                    "settings": list(overrides),
+                    "method": method,
+                    "measurement": os.path.abspath(measurement.path),
+                    "paths": True,
+                }
+                rows.append(predict(job))
+        found = medians(rows, names)
+        result = Validation(rows=rows, medians=found, best=best_method(found), out=out)
+        write_validation(result, loaded, measurements, COLUMNS)
     return result

@@ -323,9 +323,10 @@ def atomic_path(path: str) -> Iterator[str]:
         raise
 
 
-def check_folder(path: str, field: str = "--out") -> list[str]:
-    """The folders :func:`make_folders` would create for ``path``, outermost first; InputError
-    naming ``field`` when one of them is something else already (a file, /dev/null)."""
+def make_folders(path: str, field: str = "--out") -> list[str]:
+    """Create the folder ``path`` and whichever of its parents are missing; returns the folders
+    created, outermost first (for :func:`remove_empty`). InputError naming ``field`` when one of
+    them is something else already (a file, /dev/null), before anything is created."""
     missing = []
     while path and not os.path.isdir(path):
         if os.path.lexists(path):
@@ -333,14 +334,6 @@ def check_folder(path: str, field: str = "--out") -> list[str]:
         missing.append(path)
         path = os.path.dirname(path)
     missing.reverse()
-    return missing
-
-
-def make_folders(path: str, field: str = "--out") -> list[str]:
-    """Create the folder ``path`` and whichever of its parents are missing; returns the folders
-    created, outermost first (for :func:`remove_empty`). InputError naming ``field`` when one of
-    them is something else already (:func:`check_folder`), before anything is created."""
-    missing = check_folder(path, field)
     for folder in missing:
         os.makedirs(folder, exist_ok=True)
     return missing
