@@ -64,6 +64,7 @@ def _starting_workers(group):
         (("sweep", "study.toml"), signal.SIGINT, True),  # a terminal's Ctrl-C: the command and its workers
         (("compare", "bouncing_ball", "--methods", "impulse,constraints", "--no-video"), signal.SIGINT, True),
         (("sweep", "study.toml"), signal.SIGTERM, False),  # kill PID: the command alone
+        (("sweep", "study.toml"), signal.SIGTERM, True),  # a job runner's stop: the whole group
     ],
 )
 def test_a_signal_while_the_workers_start_stops_the_command_in_one_line(tmp_path, arguments, signum, to_group):

@@ -24,8 +24,9 @@ Stopping (Ctrl-C, SIGTERM, the caller): :func:`run_tasks` cancels the jobs not f
 job already running stops at its next step, frame or file (``interrupts.check``; the job sees
 its task cancelled or its worker closing), as it would in this process — a run keeps its
 trajectory up to then — so the workers are idle within a fraction of a second and a local
-cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C
-(a terminal sends it to every process of the command): the command stops them itself. While an
+cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C and
+SIGTERM (a terminal sends Ctrl-C to every process of the command): the command stops them
+itself, at any moment, their start included (:func:`_start_local`). While an
 interrupted command closes its cluster, distributed's log (closed connections, cancelled
 tasks) is silenced: the command's one line says what happened.
 """
@@ -305,15 +306,16 @@ def _start_local(workers: int):
     end or failed with "Nanny failed to start" and a traceback of a hundred lines).
 
     Ctrl-C reaches the worker processes too (a terminal sends it to every process of the
-    command), and one still importing would die of it with a traceback: so the cluster's
-    threads are made with SIGINT blocked, and the processes they start inherit the block until
-    :func:`dask_setup` ignores SIGINT there (a blocked signal waits; an ignored one is gone)."""
+    command; a job runner's SIGTERM often goes to the whole process group as well), and one
+    still importing would die of it with a traceback: so the cluster's threads are made with
+    SIGINT and SIGTERM blocked, and the processes they start inherit the block until
+    :func:`dask_setup` ignores them there (a blocked signal waits; an ignored one is gone)."""
     from multiprocessing import resource_tracker
 
     from distributed import LocalCluster
 
-    resource_tracker.ensure_running()  # started by the first worker, it would unblock SIGINT in Dask's thread
-    blocked = _block_sigint()
+    resource_tracker.ensure_running()  # started by the first worker, it would unblock them in Dask's thread
+    blocked = _block_stops()
     cluster = None
     try:
         cluster = LocalCluster(
@@ -325,7 +327,7 @@ def _start_local(workers: int):
             silence_logs=logging.ERROR,  # a cancelled task's warning is no news
             preload=[__name__],  # dask_setup: each worker ignores Ctrl-C
         )
-        _unblock_sigint(blocked)  # a Ctrl-C of the last moments arrives here
+        _unblock_stops(blocked)  # a signal of the last moments arrives here
         blocked = None
         cluster.scale(workers)
         _waited(asyncio.run_coroutine_threadsafe(_workers_started(cluster), cluster.loop.asyncio_loop))
@@ -335,7 +337,7 @@ def _start_local(workers: int):
             _stop(cluster)
         raise
     finally:
-        _unblock_sigint(blocked)
+        _unblock_stops(blocked)
 
 
 async def _workers_started(cluster) -> None:
@@ -344,18 +346,19 @@ async def _workers_started(cluster) -> None:
     await cluster._correct_state()
 
 
-def _block_sigint() -> object:
-    """Block SIGINT in this thread (and the threads it starts from now on); returns what to give
-    :func:`_unblock_sigint`. Nothing where threads have no signal masks (Windows)."""
+def _block_stops() -> object:
+    """Block SIGINT and SIGTERM (interrupts.EXIT_CODES) in this thread and the threads it starts
+    from now on; returns what to give :func:`_unblock_stops`. Nothing where threads have no
+    signal masks (Windows)."""
     if not hasattr(signal, "pthread_sigmask"):
         return None
-    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    return signal.pthread_sigmask(signal.SIG_BLOCK, set(interrupts.EXIT_CODES))
 
 
-def _unblock_sigint(blocked: object) -> None:
-    """Undo :func:`_block_sigint` (given its answer; None: nothing to undo)."""
-    if blocked is not None and signal.SIGINT not in blocked:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+def _unblock_stops(blocked: object) -> None:
+    """Undo :func:`_block_stops` (given its answer; None: nothing to undo)."""
+    if blocked is not None:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, set(interrupts.EXIT_CODES) - set(blocked))
 
 
 def _stop(cluster) -> None:
@@ -404,19 +407,23 @@ def _silenced() -> Iterator[None]:
 
 def dask_setup(worker: Any) -> None:
     """Run by Dask in each worker process of a local cluster as it starts (the ``preload`` of
-    :func:`connect`). Ctrl-C is ignored there: a terminal sends it to every process of the
-    command in front, and a worker would die of it with a traceback, while the command stops
-    its jobs and closes its workers itself. And tqdm (the bars of ``simulate`` and ``render``,
-    off on a worker) locks with a thread lock, not its default multiprocessing one: a semaphore
-    that a worker killed while stuck (in a compilation, say) would leave to multiprocessing's
-    ``resource_tracker``, which warns of it when the command exits."""
+    :func:`connect`). Ctrl-C and SIGTERM are ignored there: a terminal sends Ctrl-C to every
+    process of the command in front (and a job runner often SIGTERM), and a worker would die of
+    it with a traceback — or, dead while the command fetched its result, have Dask log
+    "Couldn't gather keys" — while the command stops its jobs and closes its workers itself
+    (Dask closes a worker by message, then SIGKILL; never by SIGTERM). And tqdm (the bars of
+    ``simulate`` and ``render``, off on a worker) locks with a thread lock, not its default
+    multiprocessing one: a semaphore that a worker killed while stuck (in a compilation, say)
+    would leave to multiprocessing's ``resource_tracker``, which warns of it when the command
+    exits."""
     from tqdm import tqdm
 
     tqdm.set_lock(threading.RLock())
     with contextlib.suppress(ValueError):  # not the main thread (a worker started some other way)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        if hasattr(signal, "pthread_sigmask"):  # born with SIGINT blocked (_start_local): one held is dropped
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        for stop in interrupts.EXIT_CODES:
+            signal.signal(stop, signal.SIG_IGN)
+        if hasattr(signal, "pthread_sigmask"):  # born with them blocked (_start_local): one held is dropped
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, set(interrupts.EXIT_CODES))
 
 
 def dask_teardown(worker: Any) -> None:
