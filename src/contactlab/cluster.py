@@ -334,7 +334,7 @@ def _start_local(workers: int):
         return cluster
     except BaseException:
         if cluster is not None:
-            _stop(cluster)
+            _stop(cluster, starting=True)
         raise
     finally:
         _unblock_stops(blocked)
@@ -361,10 +361,18 @@ def _unblock_stops(blocked: object) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, set(interrupts.EXIT_CODES) - set(blocked))
 
 
-def _stop(cluster) -> None:
-    """Close a local ``cluster`` at once, Dask's log silenced: its worker processes, started or
-    starting, end within :data:`STOP_SECONDS` (killed if they do not)."""
+def _stop(cluster, starting: bool = False) -> None:
+    """Close a local ``cluster`` at once, Dask's log silenced: its worker processes end within
+    :data:`STOP_SECONDS` (killed if they do not). ``starting``: the cluster was still starting
+    its workers, which have nothing to keep: they are killed at once (Dask would wait for one
+    still importing to finish its start before closing it: most of 2 s on a busy machine)."""
     with _silenced():
+        if starting:
+            for nanny in getattr(cluster, "_created", ()):  # Dask's: every worker started or starting
+                pid = getattr(getattr(nanny, "process", None), "pid", None)
+                if pid is not None:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(pid, signal.SIGKILL)
         cluster.sync(_close_workers, cluster, STOP_SECONDS)
         cluster.close()
 
