@@ -615,6 +615,22 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr
 
 
+def test_a_single_cell_runs_here_and_says_so(tmp_path):
+    # issue 59: a study too small to repay a cluster started one all the same (seconds)
+    from contactlab import sweep
+
+    one = BALL_STUDY.replace('["impulse", "constraints"]', '["impulse"]').replace("[0.004, 0.002]", "[0.004]")
+    study = write(tmp_path, one.replace("[0.8, 0.5]", "[0.8]"))
+    lines = []
+    table = sweep.run(study, tmp_path / "out", log=lines.append)
+    assert lines == [
+        "1 cells: 0 done already, 1 to run",
+        "1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)",
+    ]
+    assert table["status"].tolist() == ["ok"] and table["worker"].tolist() == ["local"]
+    assert {"cells", "results.parquet", "report.html"} <= set(os.listdir(tmp_path / "out"))
+
+
 def test_a_study_of_many_short_runs_steps_its_cells_through_the_compiled_loop():
     # issue 36: a study is thousands of short runs, each of which stepped the loop's body from
     # Python (about 30 ms a 720-step ball run against 3 ms through the compiled loop) unless the

@@ -81,6 +81,11 @@ def run(
                 trajectories = stamps(job["trajectory"] for _, job in jobs if job["trajectory"])
                 if client is not None:
                     _run_jobs(client, jobs, cells_folder, progress, say, counts)
+                elif scheduler is None and workers is None and len(jobs) == 1:  # nothing to spread
+                    say(counts)
+                    say("1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)")
+                    key, job = jobs[0]
+                    _write_row(cells_folder, key, run_cell(job))
                 else:
                     with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
                         _run_jobs(connected, jobs, cells_folder, progress, say, counts)
