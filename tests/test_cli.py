@@ -487,3 +487,16 @@ def test_a_second_run_into_a_folder_being_written_is_refused_and_a_stale_lock_is
     again = contactlab("run", "bouncing_ball", "--duration", "0.1", "--no-plots", "--out", "shared", cwd=tmp_path)
     assert again.returncode == 0, again.stderr
     assert not (out / LOCK_NAME).exists()
+
+
+@pytest.mark.parametrize("command", [["compare", "bouncing_ball"], ["validate", "bouncing_ball", "m.h5"]])
+def test_an_empty_methods_list_is_refused_by_compare_as_by_validate(tmp_path, monkeypatch, capsys, command):
+    # issue 59: compare --methods '' ran all four methods where validate refused it
+    from contactlab import cli
+
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*command, "--methods", ""]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "error: bouncing_ball: --methods: expected at least one of: penalty, projection, impulse, constraints"
+    ]
+    assert os.listdir(tmp_path) == []

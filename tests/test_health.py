@@ -194,6 +194,24 @@ def test_ctrl_c_inside_simulate_stops_between_steps_with_a_keyboard_interrupt():
     assert restored is signal.default_int_handler
 
 
+def test_a_run_stopped_before_it_finished_counts_the_steps_it_made():
+    """Issue 59: a run interrupted at t = 0 said "steps": 720 (the steps planned) in its summary
+    while "interrupted" said 0 made; "steps" is the steps taken, and so are its means."""
+    from contactlab import interrupts
+
+    scene = load_scene("bouncing_ball")
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(interrupts.Interrupted) as stopped, interrupts.deferred():
+            os.kill(os.getpid(), signal.SIGINT)  # before the run: held to its first step boundary
+            scene.simulate(compiled_loop=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    summary = stopped.value.run.summary
+    assert summary["steps"] == summary["interrupted"]["steps_made"] < round(scene.duration / scene.dt)
+    assert np.isfinite(summary["steps_per_second"]) and np.isfinite(summary["solver"]["mean_iterations"])
+
+
 # ---- limits before work (contactlab.budget) ----------------------------------------------------------
 
 

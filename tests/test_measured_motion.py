@@ -228,3 +228,72 @@ def test_validate_starts_the_peers_from_the_measurement_and_finds_no_error_in_th
     assert rows["mujoco"]["position_error_pct"] < 1e-6 and rows["mujoco"]["rotation_error_deg"] < 1e-4
     assert rows["pybullet"]["position_error_pct"] > 0.1 and rows["impulse"]["position_error_pct"] > 0.1
     assert result.best == "mujoco"
+
+
+def test_validate_where_no_run_completed_says_so_and_exits_3(tmp_path, monkeypatch, capsys):
+    # issue 59: every run diverged, and validate said "Median position error: impulse nan %", exit 0
+    import time as clock
+
+    from contactlab import cli, prediction
+
+    def diverged(job):  # what predict returns for a run a health check stopped
+        measurement = prediction.read_measurement(job["measurement"])
+        row = {"measurement": measurement.name, "method": job["method"], "samples": len(measurement.time)}
+        return prediction._failed(row, "diverged", "energy from nowhere at t = 0.1 s", clock.perf_counter())
+
+    monkeypatch.setattr(prediction, "predict", diverged)
+    out = tmp_path / "out"
+    measured = [os.path.join(os.path.dirname(SCENE), f"toss_0{k}.h5") for k in (1, 2)]
+    code = cli.main(["validate", SCENE, *measured, "--methods", "impulse,penalty", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 3
+    assert "Median position error: impulse none completed, penalty none completed." in captured.out
+    assert "nan" not in captured.out
+    csv = out / "validation.csv"
+    assert captured.err.splitlines() == [f"error: no run of any method completed (each row of {csv} says why)"]
+    assert csv.is_file() and (out / "report.md").is_file()  # what went wrong, kept to be read
+
+
+def test_a_whole_number_setting_is_fitted_in_whole_numbers():
+    # issue 59: fit --vary method.impulse.iterations=1:100 was refused, "expected a whole number
+    # ≥ 1, found 1.0", though any --set path may be fitted
+    from contactlab.fitting import _checked
+
+    count = _checked(parse_vary("method.impulse.iterations=1:100"), SCENE, COARSE, ["impulse"])
+    assert (
+        count.whole
+        and count.value(0.3712) == 38
+        and count.setting(count.value(0.3712)) == ("method.impulse.iterations=38")
+    )
+    friction = _checked(parse_vary("materials.0.friction=0:1"), SCENE, COARSE, ["impulse"])
+    assert not friction.whole and friction.setting(friction.value(0.3712)) == "materials.0.friction=0.3712"
+    with pytest.raises(InputError, match=r"^--vary: method.impulse.iterations=0.5: "):
+        _checked(parse_vary("method.impulse.iterations=0.5:10"), SCENE, COARSE, ["impulse"])
+
+
+def test_a_measurement_too_long_to_run_is_refused_with_advice_validate_can_follow(tmp_path):
+    # issue 59: an 800,000 s measurement's refusal advised record every, trajectory= and
+    # --memory-limit, none of which validate or fit takes
+    times = np.concatenate([np.linspace(0.0, 0.04, 5), np.linspace(1.0, 8e5, 6)])
+    with pytest.raises(InputError) as refused:
+        validate(SCENE, [_broken(tmp_path / "long.h5", time=times)], "impulse", tmp_path / "out")
+    assert refused.value.field == "long.h5"
+    assert "cut the measurement into shorter files, or give a longer simulation.dt (--set)" in refused.value.message
+    for advice in ("record every", "trajectory=", "memory_limit", "--memory-limit"):
+        assert advice not in refused.value.message, refused.value
+    assert not (tmp_path / "out").exists()
+
+
+def test_positions_in_millimetres_are_warned_of(tmp_path):
+    # issue 59: positions in millimetres (up to 600 m, within the 1 km refused) were taken as
+    # metres without a word, and validate found 5.4e5 % errors
+    import warnings
+
+    t = np.linspace(0.0, 0.2, 11)
+    millimetres = np.stack([2000.0 * t, 0.0 * t, 100.0 + 0.0 * t], axis=-1)[:, None]  # 2 m/s, in mm
+    words = r"^m.h5:body_position: a body moves at 2e\+03 m/s between samples \d+ and \d+; "
+    with pytest.warns(UserWarning, match=words):
+        read_measurement(_broken(tmp_path / "m.h5", body_position=millimetres))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_measurement(_broken(tmp_path / "metres.h5", body_position=millimetres / 1000.0))

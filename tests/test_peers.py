@@ -471,3 +471,12 @@ def test_the_benchmark_pyramids_rest_each_box_on_the_level_below(monkeypatch):
         floor = centres[np.isclose(centres[:, 2], size / 2)]
         row = floor[np.isclose(floor[:, 1], floor[0, 1])]
         assert np.allclose(np.diff(np.sort(row[:, 0])), size + gap), name  # side by side: touching if gap 0
+
+
+def test_pybullet_loads_without_its_build_banner():
+    # issue 59: "pybullet build time: …" on standard error before every command's own line
+    pytest.importorskip("pybullet", reason=REASON)
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import contactlab.peers.pybullet"], capture_output=True, text=True, timeout=120
+    )
+    assert loaded.returncode == 0 and loaded.stderr == "" and loaded.stdout == "", loaded.stderr

@@ -627,3 +627,18 @@ def test_scene_simulate_is_simulate_with_the_scene_s_own_arguments():
     assert sorted(by_scene.arrays) == sorted(by_hand.arrays)
     for key in by_hand.arrays:
         np.testing.assert_array_equal(np.asarray(by_scene.arrays[key]), np.asarray(by_hand.arrays[key]))
+
+
+def test_a_scene_file_with_a_byte_order_mark_reads_as_without_it(tmp_path):
+    # issue 59: a scene saved with a UTF-8 byte-order mark (Notepad) was "line 1, column 1: this
+    # is not valid TOML"; a byte that is not UTF-8 after the mark is still named at its offset
+    text = (Path(__file__).parents[1] / "src" / "contactlab" / "scene" / "builtin" / "bouncing_ball.toml").read_bytes()
+    marked = tmp_path / "marked.toml"
+    marked.write_bytes(b"\xef\xbb\xbf" + text)
+    plain = tmp_path / "plain.toml"
+    plain.write_bytes(text)
+    assert load_scene(marked).model.describe() == load_scene(plain).model.describe()
+    broken = tmp_path / "broken.toml"
+    broken.write_bytes(b"\xef\xbb\xbf# \xff\n")
+    with pytest.raises(InputError, match="found a byte 0xff at offset 5 that is not"):
+        load_scene(broken)

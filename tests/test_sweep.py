@@ -237,6 +237,15 @@ def test_a_series_that_stalls_gets_no_order_but_the_dt_it_stalls_from():
     assert convergence_words(power[:1], power[:1]) == ""
 
 
+def test_a_cells_cost_leaves_its_compiling_out():
+    # issue 59: the Pareto plot counted the first cell's compile time as that cell's cost
+    from contactlab.sweep_report import cost
+
+    rows = pd.DataFrame({"wall_seconds": [5.0, 0.2, 0.3], "compile_seconds": [4.8, 0.0, None]})
+    assert cost(rows).tolist() == pytest.approx([0.2, 0.2, 0.3])
+    assert cost(rows.drop(columns="compile_seconds")).tolist() == [5.0, 0.2, 0.3]  # an older table's rows
+
+
 def test_the_pareto_front_holds_exactly_the_cells_nothing_beats():
     cost = np.array([1.0, 2.0, 3.0, 1.5, 4.0, np.nan])
     error = np.array([0.5, 0.1, 0.2, 0.6, 0.01, 0.0])
@@ -560,10 +569,13 @@ def test_a_local_cluster_takes_one_worker_per_idle_core():
                 spinner.join()
 
 
-def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rerun(tmp_path):
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rerun(tmp_path, signum):
     """Ctrl-C in a terminal reaches the command and its workers: within a second the command
     exits 130 with one line (no traceback, no Dask log, no resource_tracker warning), and no
-    worker outlives it. Issue 37: it took 5 s and warned of leaked semaphores."""
+    worker outlives it. Issue 37: it took 5 s and warned of leaked semaphores. The same for a
+    SIGTERM to the whole process group, as a job runner sends it (issue 59: a worker died of it,
+    and Dask logged "Couldn't gather keys"): exit 143."""
     # 20 s cells (5,000-10,000 steps each), not 1 s: the signal must find cells still to run,
     # and 1 s cells of a ball finish in milliseconds once compiled (the six left could all end
     # between the second cell's file and the signal, and the sweep exit 0)
@@ -586,20 +598,37 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and not (cells.is_dir() and len(os.listdir(cells)) >= 2):
         time.sleep(0.05)
-    os.killpg(process.pid, signal.SIGINT)
+    os.killpg(process.pid, signum)
     sent = time.monotonic()
     _, stderr = process.communicate(timeout=300)
     took = time.monotonic() - sent
     kept = len(os.listdir(cells))
-    assert process.returncode == 130 and 2 <= kept < 8 and took < 2.0, (took, stderr)
+    assert process.returncode == 128 + signum and 2 <= kept < 8 and took < 2.0, (took, stderr)
     news = ("8 cells: 0 done already, 8 to run", "Dask dashboard: ", "compiling contact kernels")
     assert [line for line in messages(stderr) if not line.startswith(news)] == [
-        f"interrupted (SIGINT); written before it: {os.path.join('out', 'stopped-sweep', 'cells')}"
+        f"interrupted ({signal.Signals(signum).name}); written before it: "
+        f"{os.path.join('out', 'stopped-sweep', 'cells')}"
     ], stderr
     assert not any(name.startswith(".partial-") for name in os.listdir(cells))
     assert not alive_in_group(process.pid, 1.0)
     again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr
+
+
+def test_a_single_cell_runs_here_and_says_so(tmp_path):
+    # issue 59: a study too small to repay a cluster started one all the same (seconds)
+    from contactlab import sweep
+
+    one = BALL_STUDY.replace('["impulse", "constraints"]', '["impulse"]').replace("[0.004, 0.002]", "[0.004]")
+    study = write(tmp_path, one.replace("[0.8, 0.5]", "[0.8]"))
+    lines = []
+    table = sweep.run(study, tmp_path / "out", log=lines.append)
+    assert lines == [
+        "1 cells: 0 done already, 1 to run",
+        "1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)",
+    ]
+    assert table["status"].tolist() == ["ok"] and table["worker"].tolist() == ["local"]
+    assert {"cells", "results.parquet", "report.html"} <= set(os.listdir(tmp_path / "out"))
 
 
 def test_a_study_of_many_short_runs_steps_its_cells_through_the_compiled_loop():

@@ -129,6 +129,19 @@ def test_a_compare_folder_opens_its_methods_side_by_side(compared):
         shown.stop()
 
 
+def test_a_compare_folder_shows_the_methods_of_its_comparison_not_an_earlier_ones(tmp_path):
+    # issue 59: compare --methods impulse into the folder of an earlier 4-method comparison, and
+    # view showed 4 pyramids for a 1-method report
+    from contactlab.viewed_runs import run_folders
+
+    for method in AVAILABLE:  # the earlier comparison's runs
+        (tmp_path / method).mkdir()
+        (tmp_path / method / "trajectory.h5").write_bytes(b"")
+    assert run_folders(str(tmp_path)) == [str(tmp_path / method) for method in AVAILABLE]
+    (tmp_path / "comparison.csv").write_text("method,steps\nimpulse,100\n", encoding="utf-8")
+    assert run_folders(str(tmp_path)) == [str(tmp_path / "impulse")]
+
+
 def test_viewing_a_run_returns_a_server_with_stop_and_forces_from_the_method():
     builder = ModelBuilder(gravity=(0, 0, -9.81))
     builder.add_body("sphere", radius=0.1, mass=2.0, position=(0, 0, 0.1))

@@ -383,10 +383,10 @@ def _compile(args):
 
 def _compare(args):
     from .compare import compare
-    from .methods import AVAILABLE
+    from .methods import method_names
     from .validation import whole_number
 
-    methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods else None
+    methods = method_names(args.methods) if args.methods is not None else None  # "" names none: refused
     whole_number(args.fps, "--fps", 1)
     comparison = compare(
         args.scene,
@@ -436,11 +436,19 @@ def _validate(args):
     result = validate(args.scene, args.measured, args.methods, args.out, overrides=args.overrides, peers=args.peers)
     if args.json:
         print(json.dumps(result.as_json()))
-        return
-    print(table_text(result.rows))
-    medians = ", ".join(f"{method} {values['position_error_pct']:.3g} %" for method, values in result.medians.items())
-    print(f"Median position error: {medians}" + (f"; best: {result.best}." if result.best else "."))
-    print(f"Table: {result.csv}; report: {result.report}")
+    else:
+        print(table_text(result.rows))
+        medians = ", ".join(_median_text(method, values) for method, values in result.medians.items())
+        print(f"Median position error: {medians}" + (f"; best: {result.best}." if result.best else "."))
+        print(f"Table: {result.csv}; report: {result.report}")
+    if result.best is None:  # a table of failures: no error measured (exit 3, as a run that went wrong)
+        raise SimulationDiverged(f"no run of any method completed (each row of {result.csv} says why)")
+
+
+def _median_text(method, values):
+    """'impulse 3.2 %', or, where none of the method's runs completed, 'impulse none completed'."""
+    median = values["position_error_pct"]
+    return f"{method} {median:.3g} %" if median == median else f"{method} none completed"
 
 
 def _fit(args):
@@ -617,7 +625,8 @@ def _main(argv):
         print(f"error: {error}{kept}", file=sys.stderr)
         return 3
     except OSError as error:
-        print(f"error: cannot write the outputs: {error.strerror or error} ({error.filename})", file=sys.stderr)
+        where = f" ({error.filename})" if error.filename else ""  # the file, where the error names it
+        print(f"error: cannot write the outputs: {error.strerror or error}{where}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as error:
         signum = error.signum if isinstance(error, Interrupted) else signal.SIGINT

@@ -24,15 +24,18 @@ Stopping (Ctrl-C, SIGTERM, the caller): :func:`run_tasks` cancels the jobs not f
 job already running stops at its next step, frame or file (``interrupts.check``; the job sees
 its task cancelled or its worker closing), as it would in this process — a run keeps its
 trajectory up to then — so the workers are idle within a fraction of a second and a local
-cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C
-(a terminal sends it to every process of the command): the command stops them itself. While an
+cluster closes at once, its worker processes ending normally. Those workers ignore Ctrl-C and
+SIGTERM (a terminal sends Ctrl-C to every process of the command): the command stops them
+itself, at any moment, their start included (:func:`_start_local`). While an
 interrupted command closes its cluster, distributed's log (closed connections, cancelled
 tasks) is silenced: the command's one line says what happened.
 """
 
 from __future__ import annotations
 
+import asyncio
 import atexit
+import concurrent.futures
 import contextlib
 import itertools
 import logging
@@ -44,6 +47,7 @@ import sys
 import threading
 import time
 import uuid
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING, Any
 
@@ -57,10 +61,12 @@ if TYPE_CHECKING:
 
 CONNECT_TIMEOUT = 10.0  # s: how long Dask's handshake with a scheduler that answered may take
 REACH_TIMEOUT = 3.0  # s: how long a scheduler's host may take to accept a connection at all
+HANDSHAKE_TIMEOUT = 3.0  # s: how long what listens there may take to say it is a Dask scheduler
 POLL_SECONDS = 0.1  # s: how often the wait for results looks for a signal
 MIN_WINDOW = 32  # jobs in flight at least (run_tasks)
 STOP_SECONDS = 1.0  # s: how long an interrupted command waits for a local worker to end its job and exit
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
+WORKER_MEMORY = 2**29  # bytes of free memory a local worker process needs: about 240 MB at rest, and its runs
 
 
 def cores() -> int:
@@ -90,8 +96,31 @@ def idle_cores(seconds: float = IDLE_PROBE_SECONDS) -> int | None:
     return (os.cpu_count() or 1) * (idle_after - idle) / elapsed if elapsed > 0 else None
 
 
+def available_memory() -> int | None:
+    """Bytes of memory the machine can give new processes now (MemAvailable of /proc/meminfo;
+    None where it cannot be read)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as stream:
+            for line in stream:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def most_workers() -> int:
+    """The most worker processes a local cluster starts: one per core (a contact solve keeps
+    its core busy, so more only take turns) and one per :data:`WORKER_MEMORY` of free memory;
+    at least one."""
+    memory = available_memory()
+    by_memory = cores() if memory is None else memory // WORKER_MEMORY
+    return max(1, min(cores(), by_memory))
+
+
 def default_workers() -> int:
-    """Worker processes of a local cluster: one per core that is idle now (at least one).
+    """Worker processes of a local cluster: one per core that is idle now (at least one, at
+    most :func:`most_workers`).
 
     On a machine another process keeps busy, a worker per core would make the workers take
     turns with it and each other: measured on 2 cores with one kept busy, two workers ran a
@@ -100,14 +129,34 @@ def default_workers() -> int:
     :data:`IDLE_PROBE_SECONDS`."""
     idle = idle_cores()
     usable = cores() if idle is None else int(idle + 0.5)
-    return max(1, min(cores(), usable))
+    return max(1, min(most_workers(), usable))
+
+
+def local_workers(workers: int | None) -> int:
+    """The worker processes a local cluster asked for ``workers`` (None: :func:`default_workers`)
+    starts: no more than :func:`most_workers`, with a warning (one line) saying so when fewer
+    than asked. (500 workers on 2 cores made the machine unusable for minutes: issue 59.)"""
+    if workers is None:
+        return default_workers()
+    most = most_workers()
+    if workers > most:
+        memory = available_memory()
+        free = "" if memory is None else f" and {memory / 2**30:.1f} GB of free memory"
+        warnings.warn(
+            f"--workers {workers} is more than this machine runs at once ({cores()} cores{free}, "
+            f"one worker per core and per {WORKER_MEMORY / 2**30:g} GB): using {most}",
+            stacklevel=3,
+        )
+    return min(workers, most)
 
 
 def check_cluster(scheduler: str | None, workers: int | None = None, field: str = "--scheduler") -> None:
-    """Refuse, before anything starts, what :func:`connect` could not use: a ``scheduler`` that
-    is not ``tcp://HOST:PORT`` (PORT a whole number from 1 to 65535; an IPv6 HOST in brackets),
-    ``workers`` that is not a whole number ≥ 1, or ``workers`` given with a ``scheduler``.
-    InputError naming ``field`` (the address) or "--workers"."""
+    """Refuse, before anything starts or is written, what :func:`connect` could not use: a
+    ``scheduler`` that is not ``tcp://HOST:PORT`` (PORT a whole number from 1 to 65535; an IPv6
+    HOST in brackets), or where no Dask scheduler answers within a few seconds
+    (:func:`_reach`, :func:`_identify`), ``workers`` that is not a whole number ≥ 1, or
+    ``workers`` given with a ``scheduler``. InputError naming ``field`` (the address) or
+    "--workers"."""
     if scheduler is None:
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
             raise InputError("--workers", f"expected a whole number of worker processes ≥ 1, found {workers!r}")
@@ -118,7 +167,8 @@ def check_cluster(scheduler: str | None, workers: int | None = None, field: str 
             "sets the workers of a local cluster; an existing cluster (--scheduler) has "
             "the workers started for it ('dask worker ADDRESS')",
         )
-    _host_and_port(scheduler, field)
+    _reach(scheduler, field)
+    _identify(scheduler, field)
 
 
 def _host_and_port(scheduler: object, field: str) -> tuple[str, int]:
@@ -165,19 +215,111 @@ def _unreachable(scheduler: str, reason: str) -> str:
     )
 
 
+def _identify(scheduler: str, field: str) -> None:
+    """Ask what listens at ``scheduler`` who it is, in Dask's protocol, and wait at most
+    :data:`HANDSHAKE_TIMEOUT` for the answer (looking for a signal meanwhile): InputError naming
+    ``field`` unless it is a Dask scheduler. Dask's own handshake waits for an answer without
+    end — an HTTP server (the dashboard's port, say) waits for the rest of a request that never
+    comes — and takes the first bytes another server sends for a message's length (exabytes)."""
+    answer: concurrent.futures.Future = concurrent.futures.Future()
+
+    def ask():  # in a thread of its own: the caller's thread may run an event loop (a notebook)
+        try:
+            answer.set_result(asyncio.run(asyncio.wait_for(_identity(scheduler), HANDSHAKE_TIMEOUT)))
+        except BaseException as error:
+            answer.set_exception(error)
+
+    with _silenced():  # distributed logs the garbled message it read
+        threading.Thread(target=ask, name="contactlab scheduler handshake", daemon=True).start()
+        try:
+            kind = _waited(answer)
+        except TimeoutError:
+            reason = f"no answer in Dask's protocol within {HANDSHAKE_TIMEOUT:g} s"
+        except Exception:  # noqa: BLE001 — whatever it answered, it was not Dask's protocol
+            reason = "it answers, but not in Dask's protocol"
+        else:
+            if kind == "Scheduler":
+                return
+            reason = f"a Dask {str(kind).lower()} answers there, not a scheduler"
+    raise InputError(
+        field,
+        f"{scheduler} is not a Dask scheduler ({reason}); give the address that 'dask scheduler' "
+        "prints (tcp://HOST:8786 by default; its dashboard's port, 8787, serves web pages)",
+    )
+
+
+async def _identity(scheduler: str) -> object:
+    """The ``type`` a Dask server at ``scheduler`` gives in its identity ("Scheduler", "Worker")."""
+    from distributed.comm import connect as open_comm
+
+    comm = await open_comm(scheduler, timeout=HANDSHAKE_TIMEOUT)
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        identity = await comm.read()
+    finally:
+        comm.abort()
+    return identity.get("type") if isinstance(identity, dict) else None
+
+
+def _waited(future: concurrent.futures.Future) -> Any:
+    """``future``'s result, looking for a signal (``interrupts.check``) every :data:`POLL_SECONDS`
+    while it is not there: the wait is as short as the command's answer to Ctrl-C."""
+    while not concurrent.futures.wait([future], timeout=POLL_SECONDS).done:
+        interrupts.check()
+    return future.result()
+
+
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None, field: str = "--scheduler") -> Iterator[Client]:
     """Yield a ``distributed.Client``: to the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
-    or, when None, to a new local cluster of ``workers`` single-threaded worker processes
-    (default :func:`default_workers`) listening on 127.0.0.1 only, closed on exit.
-    InputError naming ``field`` when the address is malformed or the scheduler cannot be
-    reached, "--workers" for a bad ``workers`` (:func:`check_cluster`)."""
-    from distributed import Client, LocalCluster
+    or, when None, to a new local cluster of :func:`local_workers` single-threaded worker
+    processes listening on 127.0.0.1 only, closed on exit. InputError naming ``field`` when the
+    address is malformed or no scheduler answers there, "--workers" for a bad ``workers``
+    (:func:`check_cluster`). A signal while a local cluster starts stops it within
+    :data:`STOP_SECONDS` or so (:func:`_start_local`)."""
+    interrupts.check()  # a signal of the command's first moments: before a second of Dask's imports
+    from distributed import Client
 
     check_cluster(scheduler, workers, field)
     if scheduler is None:
+        cluster = _start_local(local_workers(workers))
+        try:
+            client = Client(cluster)
+        except BaseException:
+            _stop(cluster)
+            raise
+        with _closing(cluster, client) as client:
+            yield client
+        return
+    try:
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as error:
+        raise InputError(field, _unreachable(scheduler, first_line(error))) from None
+    with _closing(None, client):
+        yield client
+
+
+def _start_local(workers: int):
+    """A ``distributed.LocalCluster`` of ``workers`` worker processes, started while this thread
+    looks for a signal every :data:`POLL_SECONDS`: one stops the start and closes what had
+    started (a start takes seconds on a busy machine; Dask's own start, one call, ran to its
+    end or failed with "Nanny failed to start" and a traceback of a hundred lines).
+
+    Ctrl-C reaches the worker processes too (a terminal sends it to every process of the
+    command; a job runner's SIGTERM often goes to the whole process group as well), and one
+    still importing would die of it with a traceback: so the cluster's threads are made with
+    SIGINT and SIGTERM blocked, and the processes they start inherit the block until
+    :func:`dask_setup` ignores them there (a blocked signal waits; an ignored one is gone)."""
+    from multiprocessing import resource_tracker
+
+    from distributed import LocalCluster
+
+    resource_tracker.ensure_running()  # started by the first worker, it would unblock them in Dask's thread
+    blocked = _block_stops()
+    cluster = None
+    try:
         cluster = LocalCluster(
-            n_workers=workers or default_workers(),
+            n_workers=0,  # the scheduler only: the workers start below, a signal looked for meanwhile
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
@@ -185,16 +327,54 @@ def connect(scheduler: str | None = None, workers: int | None = None, field: str
             silence_logs=logging.ERROR,  # a cancelled task's warning is no news
             preload=[__name__],  # dask_setup: each worker ignores Ctrl-C
         )
-        with _closing(cluster, Client(cluster)) as client:
-            yield client
-        return
-    _reach(scheduler, field)
-    try:
-        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as error:
-        raise InputError(field, _unreachable(scheduler, first_line(error))) from None
-    with _closing(None, client):
-        yield client
+        _unblock_stops(blocked)  # a signal of the last moments arrives here
+        blocked = None
+        cluster.scale(workers)
+        _waited(asyncio.run_coroutine_threadsafe(_workers_started(cluster), cluster.loop.asyncio_loop))
+        return cluster
+    except BaseException:
+        if cluster is not None:
+            _stop(cluster, starting=True)
+        raise
+    finally:
+        _unblock_stops(blocked)
+
+
+async def _workers_started(cluster) -> None:
+    """Wait for the workers ``cluster.scale`` asked for (distributed's own wait: its
+    ``_correct_state``, which raises when a worker fails to start)."""
+    await cluster._correct_state()
+
+
+def _block_stops() -> object:
+    """Block SIGINT and SIGTERM (interrupts.EXIT_CODES) in this thread and the threads it starts
+    from now on; returns what to give :func:`_unblock_stops`. Nothing where threads have no
+    signal masks (Windows)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return None
+    return signal.pthread_sigmask(signal.SIG_BLOCK, set(interrupts.EXIT_CODES))
+
+
+def _unblock_stops(blocked: object) -> None:
+    """Undo :func:`_block_stops` (given its answer; None: nothing to undo)."""
+    if blocked is not None:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, set(interrupts.EXIT_CODES) - set(blocked))
+
+
+def _stop(cluster, starting: bool = False) -> None:
+    """Close a local ``cluster`` at once, Dask's log silenced: its worker processes end within
+    :data:`STOP_SECONDS` (killed if they do not). ``starting``: the cluster was still starting
+    its workers, which have nothing to keep: they are killed at once (Dask would wait for one
+    still importing to finish its start before closing it: most of 2 s on a busy machine)."""
+    with _silenced():
+        if starting:
+            for nanny in getattr(cluster, "_created", ()):  # Dask's: every worker started or starting
+                pid = getattr(getattr(nanny, "process", None), "pid", None)
+                if pid is not None:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(pid, signal.SIGKILL)
+        cluster.sync(_close_workers, cluster, STOP_SECONDS)
+        cluster.close()
 
 
 @contextlib.contextmanager
@@ -206,9 +386,8 @@ def _closing(cluster, client: Client) -> Iterator[Client]:
     except BaseException:
         with _silenced():
             client.close()
-            if cluster is not None:
-                cluster.sync(_close_workers, cluster, STOP_SECONDS)
-                cluster.close()
+        if cluster is not None:
+            _stop(cluster)
         raise
     client.close()
     if cluster is not None:
@@ -216,11 +395,11 @@ def _closing(cluster, client: Client) -> Iterator[Client]:
 
 
 async def _close_workers(cluster, seconds: float) -> None:
-    """Close the worker processes of the local ``cluster``, killing those still there after
-    ``seconds`` (one stuck in a compilation, which no signal interrupts)."""
-    import asyncio
-
-    await asyncio.gather(*(nanny.close(timeout=seconds / 0.8) for nanny in list(cluster.workers.values())))
+    """Close the worker processes of the local ``cluster``, those still starting too (Dask's
+    ``_created``: a worker joins ``cluster.workers`` once all have started), killing those
+    still there after ``seconds`` (one stuck in a compilation, which no signal interrupts)."""
+    nannies = {*cluster.workers.values(), *getattr(cluster, "_created", ())}
+    await asyncio.gather(*(nanny.close(timeout=seconds / 0.8) for nanny in nannies), return_exceptions=True)
 
 
 @contextlib.contextmanager
@@ -236,17 +415,23 @@ def _silenced() -> Iterator[None]:
 
 def dask_setup(worker: Any) -> None:
     """Run by Dask in each worker process of a local cluster as it starts (the ``preload`` of
-    :func:`connect`). Ctrl-C is ignored there: a terminal sends it to every process of the
-    command in front, and a worker would die of it with a traceback, while the command stops
-    its jobs and closes its workers itself. And tqdm (the bars of ``simulate`` and ``render``,
-    off on a worker) locks with a thread lock, not its default multiprocessing one: a semaphore
-    that a worker killed while stuck (in a compilation, say) would leave to multiprocessing's
-    ``resource_tracker``, which warns of it when the command exits."""
+    :func:`connect`). Ctrl-C and SIGTERM are ignored there: a terminal sends Ctrl-C to every
+    process of the command in front (and a job runner often SIGTERM), and a worker would die of
+    it with a traceback — or, dead while the command fetched its result, have Dask log
+    "Couldn't gather keys" — while the command stops its jobs and closes its workers itself
+    (Dask closes a worker by message, then SIGKILL; never by SIGTERM). And tqdm (the bars of
+    ``simulate`` and ``render``, off on a worker) locks with a thread lock, not its default
+    multiprocessing one: a semaphore that a worker killed while stuck (in a compilation, say)
+    would leave to multiprocessing's ``resource_tracker``, which warns of it when the command
+    exits."""
     from tqdm import tqdm
 
     tqdm.set_lock(threading.RLock())
     with contextlib.suppress(ValueError):  # not the main thread (a worker started some other way)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        for stop in interrupts.EXIT_CODES:
+            signal.signal(stop, signal.SIG_IGN)
+        if hasattr(signal, "pthread_sigmask"):  # born with them blocked (_start_local): one held is dropped
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, set(interrupts.EXIT_CODES))
 
 
 def dask_teardown(worker: Any) -> None:

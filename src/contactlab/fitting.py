@@ -37,14 +37,15 @@ import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import __version__, cluster, interrupts
+from . import __version__, cluster, folder_lock, interrupts
 from .errors import InputError
-from .prediction import checked_inputs, method_names, predict
+from .methods import method_names
+from .prediction import checked_inputs, predict
 from .record import atomic_path, make_folders, remove_empty
 
 if TYPE_CHECKING:
@@ -62,14 +63,21 @@ DEFAULT_HOLDOUT = 0.25
 
 @dataclass(frozen=True)
 class Vary:
-    """A setting to fit: its ``--set`` ``path``, within [``low``, ``high``]."""
+    """A setting to fit: its ``--set`` ``path``, within [``low``, ``high``]; ``whole``: a whole
+    number (an iteration count), its values rounded."""
 
     path: str
     low: float
     high: float
+    whole: bool = False
 
     def value(self, scaled: float) -> float:
-        return float(self.low + round(float(scaled), DIGITS) * (self.high - self.low))
+        value = float(self.low + round(float(scaled), DIGITS) * (self.high - self.low))
+        return round(value) if self.whole else value
+
+    def setting(self, value: float) -> str:
+        """The ``--set`` string giving ``value`` to the setting ("PATH=0.35", "PATH=12")."""
+        return f"{self.path}={round(value) if self.whole else float(value)!r}"
 
 
 def parse_vary(text: str) -> Vary:
@@ -159,7 +167,6 @@ def fit(
     fraction), and write ``fit.json`` and the plots into ``out`` (default ``out/<scene>-fit``).
     The runs go to ``client``, or to a cluster from :func:`contactlab.cluster.connect`
     (``scheduler``, ``workers``). Every input is checked before a cluster starts."""
-    from .scene import load_scene
 
     varied = [item if isinstance(item, Vary) else parse_vary(item) for item in vary]
     if not varied:
@@ -173,45 +180,59 @@ def fit(
     if client is None:
         cluster.check_cluster(scheduler, workers)
     loaded, source, measurements, names = checked_inputs(scene, measured, names, overrides)
-    for v in varied:  # each end of each range, with each method, as a run would load it
-        for end in (v.low, v.high):
-            for method in names:
-                try:
-                    load_scene(source, [*overrides, f"{v.path}={end!r}", f"simulation.method={method}"])
-                except InputError as error:
-                    raise InputError("--vary", f"{v.path}={end!r}: {error}") from None
+    varied = [_checked(v, source, overrides, names) for v in varied]
     train, held = split(len(measurements), holdout)
     out = os.fspath(out) if out is not None else os.path.join("out", f"{loaded.name}-fit")
     start = [_start(source, v) for v in varied]
     say = log or (lambda line: None)
     made = make_folders(os.path.join(out, "evaluations"))
-    try:
-        context = _given(client) if client is not None else cluster.connect(scheduler, workers)
-        with context as connected:
-            say(f"Dask dashboard: {cluster.dashboard(connected)}")
-            runs = _Runs(connected, source, overrides, os.path.join(out, "evaluations"), progress)
-            result = {}
-            evaluated = {}
-            for method in names:
-                result[method], evaluated[method] = _fit_method(
-                    runs, method, varied, start, [measurements[i] for i in train], budget, say
-                )
-                if held:
-                    rows = runs.rows(method, varied, result[method]["values"], [measurements[i] for i in held])
-                    result[method]["holdout_error"] = _median(rows)
-                    say(f"{method}: held-out error {result[method]['holdout_error']:.3g} %")
-    except BaseException:
-        remove_empty(made)
-        raise
-    fitted = Fit(
-        methods=result,
-        vary=varied,
-        train=[measurements[i].name for i in train],
-        holdout=[measurements[i].name for i in held],
-        out=out,
-    )
-    _write(fitted, evaluated)
+    with folder_lock.held(out, "--out", made):  # one fit at a time writes a folder
+        try:
+            context = _given(client) if client is not None else cluster.connect(scheduler, workers)
+            with context as connected:
+                say(f"Dask dashboard: {cluster.dashboard(connected)}")
+                runs = _Runs(connected, source, overrides, os.path.join(out, "evaluations"), progress)
+                result = {}
+                evaluated = {}
+                for method in names:
+                    result[method], evaluated[method] = _fit_method(
+                        runs, method, varied, start, [measurements[i] for i in train], budget, say
+                    )
+                    if held:
+                        rows = runs.rows(method, varied, result[method]["values"], [measurements[i] for i in held])
+                        result[method]["holdout_error"] = _median(rows)
+                        say(f"{method}: held-out error {result[method]['holdout_error']:.3g} %")
+        except BaseException:
+            remove_empty(made)
+            raise
+        fitted = Fit(
+            methods=result,
+            vary=varied,
+            train=[measurements[i].name for i in train],
+            holdout=[measurements[i].name for i in held],
+            out=out,
+        )
+        _write(fitted, evaluated)
     return fitted
+
+
+def _checked(vary: Vary, source: str, overrides: Sequence[str], methods: Sequence[str]) -> Vary:
+    """``vary`` as its runs will set it, each end of its range loaded with each method as a run
+    would load it: whole where the setting takes whole numbers only (an iteration count refuses
+    1.0 and takes 1) and the range's ends are whole. InputError naming ``--vary`` otherwise."""
+    from .scene import load_scene
+
+    ends_whole = vary.low == round(vary.low) and vary.high == round(vary.high)
+    refused = None
+    for candidate in (vary, replace(vary, whole=True)) if ends_whole else (vary,):
+        try:
+            for end in (vary.low, vary.high):
+                for method in methods:
+                    load_scene(source, [*overrides, candidate.setting(end), f"simulation.method={method}"])
+            return candidate
+        except InputError as error:
+            refused = refused or InputError("--vary", f"{candidate.setting(end)}: {error}")
+    raise refused
 
 
 class _given:
@@ -262,7 +283,7 @@ class _Runs:
     def rows(self, method: str, varied: Sequence[Vary], values: Mapping[str, float], measurements) -> list[dict]:
         """The rows of ``method`` with the settings ``values`` over ``measurements``: those kept
         read back, the others run on the cluster (all at once) and kept."""
-        settings = [*self.overrides, *(f"{v.path}={float(values[v.path])!r}" for v in varied)]
+        settings = [*self.overrides, *(v.setting(values[v.path]) for v in varied)]
         found, jobs = {}, []
         for measurement in measurements:
             key = self._key(method, settings, measurement)
@@ -378,6 +399,7 @@ def _write(fitted: Fit, evaluated) -> None:
             {method: list(entry["values"].values()) for method, entry in fitted.methods.items()},
         )
         written += fitted.plots
+        interrupts.check()
         fitted.json = os.path.join(fitted.out, "fit.json")
         with atomic_path(fitted.json) as temporary, open(temporary, "w", encoding="utf-8") as stream:
             json.dump(fitted.as_json(), stream, indent=2)

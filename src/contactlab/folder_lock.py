@@ -1,4 +1,4 @@
-"""One writer at a time for an output folder: ``contactlab run``'s ``--out``.
+"""One writer at a time for an output folder: every command's ``--out`` but fclib bench's.
 
 Two runs into one folder at once would each write trajectory.h5, summary.json and the plots,
 and the folder would hold the last finisher's files while both said they wrote them. So the
@@ -32,14 +32,19 @@ LOCK_NAME = ".contactlab.lock"
 @contextlib.contextmanager
 def held(folder: str, field: str = "--out", made: Sequence[str] = ()) -> Iterator[None]:
     """Hold ``folder``'s lock (the folder exists) while the block runs; InputError naming
-    ``field`` when another process holds it. On the way out the lock file is removed, and then
-    the folders of ``made`` (:func:`contactlab.record.make_folders`'s list) left empty."""
+    ``field`` when another process holds it. On the way out (refused too) the lock file is
+    removed, and then the folders of ``made`` (:func:`contactlab.record.make_folders`'s list)
+    left empty."""
     try:
         import fcntl
     except ImportError:  # no flock here: nothing to hold
         fcntl = None
     path = os.path.join(folder, LOCK_NAME)
-    stream = _take(path, folder, field, fcntl) if fcntl is not None else None
+    try:
+        stream = _take(path, folder, field, fcntl) if fcntl is not None else None
+    except BaseException:  # refused: the folders made for this writer go again
+        remove_empty(made)
+        raise
     try:
         yield
     finally:

@@ -39,6 +39,7 @@ from .errors import InputError, first_line
 
 QUATERNION_TOLERANCE = 1e-3  # |‖q‖ − 1| accepted (a tracker's rounding); normalized after
 MAX_POSITION = 1e3  # m: a tracked body further than this from the origin was given in millimetres
+LIKELY_SPEED = 100.0  # m/s: a tracked body faster than this between two samples was likely given in millimetres
 MAX_SAMPLES = 10_000_000  # samples a file may hold
 VECTORS = ("body_position", "body_velocity", "body_angular_velocity")
 
@@ -149,6 +150,7 @@ def _checked(path, shown, found):
             f"a body is {far:g} m from the origin, beyond the {MAX_POSITION:g} m a tracked body can be; "
             "positions are in metres (millimetres divided by 1000)",
         )
+    _warn_of_speed(shown, found["time"], found["body_position"])
     if (found["body_velocity"] is None) != (found["body_angular_velocity"] is None):
         given = "body_velocity" if found["body_velocity"] is not None else "body_angular_velocity"
         raise InputError(f"{shown}:{given}", "give body_velocity and body_angular_velocity together, or neither")
@@ -162,6 +164,25 @@ def _checked(path, shown, found):
         velocity=found["body_velocity"],
         angular_velocity=found["body_angular_velocity"],
     )
+
+
+def _warn_of_speed(shown: str, time: np.ndarray, position: np.ndarray) -> None:
+    """A warning (one line) where a body moves faster than :data:`LIKELY_SPEED` between two
+    samples (``time`` (T,) [s], ``position`` (T, B, 3)): positions in millimetres within
+    :data:`MAX_POSITION` (600 m) were taken as metres, and every error was 1000 times too large."""
+    if len(time) < 2:
+        return
+    speeds = np.linalg.norm(np.diff(position, axis=0), axis=2) / np.diff(time)[:, None]
+    fastest = float(speeds.max())
+    if fastest > LIKELY_SPEED:
+        import warnings
+
+        k = int(np.unravel_index(int(np.argmax(speeds)), speeds.shape)[0])
+        warnings.warn(
+            f"{shown}:body_position: a body moves at {fastest:.3g} m/s between samples {k} and {k + 1}; "
+            "positions are in metres (millimetres divided by 1000)",
+            stacklevel=3,
+        )
 
 
 def _names(names, bodies, shown):

@@ -41,11 +41,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import rotations, shapes
+from . import budget, rotations, shapes
 from .errors import InputError, SimulationDiverged, first_line
 from .measured import Measurement, read_measurement
-from .methods import AVAILABLE
+from .methods import method_names
 from .peers import PEERS, Inexpressible
+from .record import make_folders
 
 if TYPE_CHECKING:
     from .model import Model
@@ -55,6 +56,11 @@ if TYPE_CHECKING:
 ESTIMATE_SECONDS = 0.05  # s of the first samples the starting velocities are estimated from
 ERRORS = ("position_error_pct", "rotation_error_deg", "final_position_error_pct")
 COLUMNS = ("measurement", "method", "status", *ERRORS, "samples", "duration_s", "velocities", "message", "seconds")
+REMEDIES = budget.Remedies(  # what validate and fit offer a run that would not fit (it records every step)
+    disk="cut the measurement into shorter files, or give a longer simulation.dt (--set)",
+    memory="cut the measurement into shorter files, or give a longer simulation.dt (--set)",
+    model="simulate fewer bodies, particles or cloth vertices",
+)
 
 
 # ---- the bodies measured ---------------------------------------------------------------------------
@@ -263,20 +269,6 @@ def _plain(value):
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
-def method_names(methods: str | Sequence[str] | None, option: str = "--methods") -> list[str]:
-    """The methods named (a list or a comma-separated string; None: all four), checked."""
-    if methods is None:
-        return list(AVAILABLE)
-    names = [name.strip() for name in (methods.split(",") if isinstance(methods, str) else methods)]
-    names = list(dict.fromkeys(name for name in names if name))
-    for name in names:
-        if name not in AVAILABLE:
-            raise InputError(option, f"unknown method {name!r}; expected some of: {', '.join(AVAILABLE)}")
-    if not names:
-        raise InputError(option, f"expected at least one of: {', '.join(AVAILABLE)}")
-    return names
-
-
 def checked_inputs(
     scene: str | os.PathLike[str],
     measured: Sequence[str | os.PathLike[str]],
@@ -304,7 +296,11 @@ def checked_inputs(
         matched_bodies(loaded.model, measurement)
         for method in names:
             checked = load_scene(source, scene_overrides(method, measurement, settings))
-            checked.check()  # the run limits: a measured duration shorter than the scene's dt, ...
+            try:  # the run limits: a measured duration shorter than the scene's dt, ...
+                checked.check(remedies=REMEDIES)
+            except InputError as error:  # one too long to hold: the measurement's fault, not a record_every's
+                field = os.path.basename(measurement.path) if error.field == "record_every" else error.field
+                raise InputError(field, error.message) from None
     return loaded, source, measurements, names
 
 
@@ -342,24 +338,27 @@ def validate(
     comma-separated string) started from the same measured states beside them (their rows
     named by the engine; one a scene it cannot express is "not run", saying why). Every input
     is checked before anything runs or is written."""
+    from .folder_lock import held
     from .peers import peer_names
     from .prediction_report import write_validation
 
     loaded, source, measurements, names = checked_inputs(scene, measured, methods, overrides)
     names += peer_names(peers)
     out = os.fspath(out) if out is not None else os.path.join("out", f"{loaded.name}-validate")
-    rows = []
-    for measurement in measurements:
-        for method in names:
-            job = {
-                "scene": source,
-                "settings": list(overrides),
-                "method": method,
-                "measurement": os.path.abspath(measurement.path),
-                "paths": True,
-            }
-            rows.append(predict(job))
-    found = medians(rows, names)
-    result = Validation(rows=rows, medians=found, best=best_method(found), out=out)
-    write_validation(result, loaded, measurements, COLUMNS)
+    made = make_folders(out)  # a file there fails now, not after the runs
+    with held(out, "--out", made):  # one validate at a time writes a folder; one left empty goes again
+        rows = []
+        for measurement in measurements:
+            for method in names:
+                job = {
+                    "scene": source,
+                    "settings": list(overrides),
+                    "method": method,
+                    "measurement": os.path.abspath(measurement.path),
+                    "paths": True,
+                }
+                rows.append(predict(job))
+        found = medians(rows, names)
+        result = Validation(rows=rows, medians=found, best=best_method(found), out=out)
+        write_validation(result, loaded, measurements, COLUMNS)
     return result

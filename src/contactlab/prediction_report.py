@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import interrupts
 from .record import atomic_path, make_folders, undo_written
 
 if TYPE_CHECKING:
@@ -44,11 +45,13 @@ def write_validation(
         write_csv(result.csv, result.rows, columns)
         written.append(result.csv)
         for measurement in measurements[:MAX_PATH_PLOTS]:
+            interrupts.check()  # Ctrl-C or SIGTERM: between pictures (it waited for the whole report)
             rows = [row for row in result.rows if row["measurement"] == measurement.name and "simulated" in row]
             path = os.path.join(result.out, "plots", f"{_file_name(measurement.name)}.png")
             _path_plot(path, measurement, rows)
             written.append(path)
             result.plots.append(path)
+        interrupts.check()
         result.report = os.path.join(result.out, "report.md")
         _write_text(result.report, validation_markdown(result, scene, len(measurements)))
         written.append(result.report)
@@ -187,6 +190,7 @@ def write_fit_plots(
     that setting, the fitted value (``fitted``: method -> values) marked; returns the files."""
     written = []
     for k, setting in enumerate(paths):
+        interrupts.check()  # Ctrl-C or SIGTERM: between pictures
         plt, figure, axes = _figure()
         for method, points in evaluated.items():
             finite = [(values[k], error) for values, error in points if math.isfinite(error)]

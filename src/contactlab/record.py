@@ -315,17 +315,22 @@ def atomic_path(path: str) -> Iterator[str]:
         with interrupts.deferred():  # renamed and noted as written, or neither
             os.replace(temporary, path)
             interrupts.note_written(path)
-    except BaseException:
+    except BaseException as error:
         if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
+        if isinstance(error, OSError) and error.filename is None:  # a write's ENOSPC names no file:
+            error.filename = path  # the message then says which output could not be written
         raise
 
 
-def make_folders(path: str) -> list[str]:
+def make_folders(path: str, field: str = "--out") -> list[str]:
     """Create the folder ``path`` and whichever of its parents are missing; returns the folders
-    created, outermost first (for :func:`remove_empty`)."""
+    created, outermost first (for :func:`remove_empty`). InputError naming ``field`` when one of
+    them is something else already (a file, /dev/null), before anything is created."""
     missing = []
     while path and not os.path.isdir(path):
+        if os.path.lexists(path):
+            raise InputError(field, f"{path} is there and is not a folder; give a new folder or an existing one")
         missing.append(path)
         path = os.path.dirname(path)
     missing.reverse()

@@ -338,13 +338,15 @@ def _record_run(plan, recorder, state, chooser, health, clock):
     status = "diverged" if stopped is not None else "interrupted" if interrupted is not None else "complete"
     arrays = recorder.arrays() if recorder.sink is None else TrajectoryFile(recorder.sink.finish(status))
     first_step_seconds, stepping_seconds = tally.first_step_seconds, tally.stepping_seconds
-    ordinary_step = stepping_seconds / (steps - 1) if steps > 1 else 0.0
+    steps_made = int(round((state.time - totals.first_time) / dt))
+    taken = steps if status == "complete" else steps_made  # what the summary counts: a stopped run's steps
+    ordinary_step = stepping_seconds / (taken - 1) if taken > 1 else 0.0
     summary = {
         "scene": scene_name,
         "method": method,
         "integrator": integrator,
         "dt": dt,
-        "steps": steps,
+        "steps": taken,
         "options": _options_table(options),
         "wall_seconds": wall,
         "first_step_seconds": first_step_seconds,
@@ -357,18 +359,17 @@ def _record_run(plan, recorder, state, chooser, health, clock):
         "kernels": "python" if kernel_variants.interpreted() else "compiled",
         "implicit_spring_steps": tally.implicit_spring_steps,
         "threads": chooser.summary(),
-        **run_measures(model, tally, totals, steps),
+        **run_measures(model, tally, totals, taken),
         "solver": {
             "max_iterations": totals.max_iterations,
-            "mean_iterations": tally.sweeps_made / steps,
-            "cg_iterations_per_step": tally.linear_iterations_made / steps,
+            "mean_iterations": tally.sweeps_made / max(1, taken),
+            "cg_iterations_per_step": tally.linear_iterations_made / max(1, taken),
             "max_residual": totals.max_residual,
         },
         "health": health.summary(),
         "diverged": None,
         "interrupted": None,
     }
-    steps_made = int(round((state.time - totals.first_time) / dt))
     if stopped is not None:
         message = health.message(stopped)
         summary["diverged"] = {
@@ -409,6 +410,8 @@ def run_measures(model: Model, tally: Tally, totals: Any, steps: int) -> dict[st
             (steps - 1) / tally.stepping_seconds
             if steps > 1 and tally.stepping_seconds > 0
             else 1.0 / max(tally.first_step_seconds, 1e-9)
+            if steps >= 1
+            else 0.0  # no step made (a run stopped before its first)
         ),
         "steps_per_second_spread": tally.rate_spread(),
         "bodies": model.body_count,

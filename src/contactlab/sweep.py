@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from . import __version__, cluster, interrupts
 from .compare import TIMINGS
 from .errors import InputError, SimulationDiverged
+from .folder_lock import held
 from .record import atomic_path, make_folders, remove_empty, replaced, stamps
 from .study import Study, load_study, toml_value
 
@@ -37,7 +38,8 @@ if TYPE_CHECKING:
     from distributed import Client
 
 
-TIMING_COLUMNS = (*TIMINGS, "cell_seconds", "worker")  # what differs from one run of a cell to the next
+# what differs from one run of a cell to the next
+TIMING_COLUMNS = (*TIMINGS, "compile_seconds", "cell_seconds", "worker")
 
 
 def run(
@@ -63,36 +65,42 @@ def run(
     out = os.fspath(out) if out is not None else os.path.join("out", f"{study.name}-sweep")
     cells_folder = os.path.join(out, "cells")
     made = make_folders(cells_folder)
-    trajectories = {}  # with record = "trajectory": each cell's file as it was before the sweep
-    try:
-        if study.record == "trajectory":
-            made += make_folders(os.path.join(out, "trajectories"))
-        say = log or (lambda line: None)
-        done = _finished_rows(cells_folder, study.cells, say)
-        todo = [cell for cell in study.cells if cell.key not in done]
-        counts = f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run"
-        if not todo:
-            say(counts)
-        else:
-            jobs = _jobs(todo, study, out)
-            trajectories = stamps(job["trajectory"] for _, job in jobs if job["trajectory"])
-            if client is not None:
-                _run_jobs(client, jobs, cells_folder, progress, say, counts)
+    with held(out, "--out", made):  # one sweep at a time writes a folder (two computed the same cells twice)
+        trajectories = {}  # with record = "trajectory": each cell's file as it was before the sweep
+        try:
+            if study.record == "trajectory":
+                made += make_folders(os.path.join(out, "trajectories"))
+            say = log or (lambda line: None)
+            done = _finished_rows(cells_folder, study.cells, say)
+            todo = [cell for cell in study.cells if cell.key not in done]
+            counts = f"{len(study.cells)} cells: {len(study.cells) - len(todo)} done already, {len(todo)} to run"
+            if not todo:
+                say(counts)
             else:
-                with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
-                    _run_jobs(connected, jobs, cells_folder, progress, say, counts)
-    except BaseException:
-        if replaced(trajectories):  # the workers wrote trajectories (a stopped cell's, up to then)
-            interrupts.note_written(os.path.join(out, "trajectories"))
-        remove_empty(made)  # nothing finished: no folder left (finished cells stay)
-        raise
-    table = pd.DataFrame([done.get(cell.key) or _read_row(cells_folder, cell.key) for cell in study.cells])
-    table = table.reindex(columns=_columns(study, table))
-    _write_table(table, out)
-    from .sweep_report import write_report
+                jobs = _jobs(todo, study, out)
+                trajectories = stamps(job["trajectory"] for _, job in jobs if job["trajectory"])
+                if client is not None:
+                    _run_jobs(client, jobs, cells_folder, progress, say, counts)
+                elif scheduler is None and workers is None and len(jobs) == 1:  # nothing to spread
+                    say(counts)
+                    say("1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)")
+                    key, job = jobs[0]
+                    _write_row(cells_folder, key, run_cell(job))
+                else:
+                    with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
+                        _run_jobs(connected, jobs, cells_folder, progress, say, counts)
+        except BaseException:
+            if replaced(trajectories):  # the workers wrote trajectories (a stopped cell's, up to then)
+                interrupts.note_written(os.path.join(out, "trajectories"))
+            remove_empty(made)  # nothing finished: no folder left (finished cells stay)
+            raise
+        table = pd.DataFrame([done.get(cell.key) or _read_row(cells_folder, cell.key) for cell in study.cells])
+        table = table.reindex(columns=_columns(study, table))
+        _write_table(table, out)
+        from .sweep_report import write_report
 
-    write_report(study, table, out)
-    return table
+        write_report(study, table, out)
+        return table
 
 
 def _jobs(cells, study, out):
@@ -169,6 +177,7 @@ def run_cell(job: Mapping[str, Any]) -> dict[str, Any]:
     row["diverged_at_s"] = None
     row["trajectory"] = job["trajectory"]
     row["stepping"] = run.summary["stepping"]
+    row["compile_seconds"] = run.summary.get("compile_seconds", 0.0)  # a worker's first cell of a kind
     row["cell_seconds"] = time.perf_counter() - started
     return row
 

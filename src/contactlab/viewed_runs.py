@@ -44,7 +44,9 @@ def _is_run(directory):
 def run_folders(directory: str, field: str = "RUN_DIR") -> list[str]:
     """The run folders ``directory`` stands for: itself when it holds a trajectory, else its
     sub-folders that do (a ``contactlab compare`` output: one per method, in the order of
-    :data:`contactlab.methods.AVAILABLE`, then by name). InputError naming the folder otherwise."""
+    :data:`contactlab.methods.AVAILABLE`, then by name; only the methods of its comparison.csv
+    where it has one, so the folders an earlier comparison into the same --out left are not
+    shown as this one's). InputError naming the folder otherwise."""
     from .methods import AVAILABLE
 
     directory = os.fspath(directory)
@@ -56,8 +58,13 @@ def run_folders(directory: str, field: str = "RUN_DIR") -> list[str]:
         )
     if _is_run(directory):
         return [directory]
+    compared = _compared_methods(directory)
     names = sorted(
-        (name for name in os.listdir(directory) if _is_run(os.path.join(directory, name))),
+        (
+            name
+            for name in os.listdir(directory)
+            if _is_run(os.path.join(directory, name)) and (compared is None or name in compared)
+        ),
         key=lambda name: (AVAILABLE.index(name) if name in AVAILABLE else len(AVAILABLE), name),
     )
     if not names:
@@ -67,6 +74,18 @@ def run_folders(directory: str, field: str = "RUN_DIR") -> list[str]:
             f"folder of 'contactlab run' (its --out) or of 'contactlab compare'",
         )
     return [os.path.join(directory, name) for name in names]
+
+
+def _compared_methods(directory: str) -> set[str] | None:
+    """The methods (and peers) of the comparison.csv in ``directory``, or None where there is
+    none that can be read."""
+    import csv
+
+    try:
+        with open(os.path.join(directory, "comparison.csv"), encoding="utf-8", newline="") as stream:
+            return {row["method"] for row in csv.DictReader(stream)}
+    except (OSError, KeyError, csv.Error, UnicodeDecodeError):
+        return None
 
 
 def model_of(summary: Mapping[str, Any], arrays: Mapping[str, Any]) -> Model | None:

@@ -257,12 +257,19 @@ def _alike(one, other):
 def _speed_sentence(ran):
     """Who stepped fastest and slowest by the median rate, naming the methods whose speed is
     within noise of the fastest (their middle halves overlap), so a reordering between two
-    runs of the same comparison is not read as a result."""
+    runs of the same comparison is not read as a result; no ranking where a run was timed in
+    one window only (its quartiles are its median: no spread to tell noise from a difference)."""
 
     def rate(outcome):
         median = outcome.row.get("steps_per_second_median")
         return outcome.row["steps_per_second"] if median is None else median
 
+    unspread = [o.method for o in ran if o.row.get("steps_per_second_low") == o.row.get("steps_per_second_high")]
+    if len(ran) > 1 and unspread:  # issue 59: a ranking by one timing each changed from one compare to the next
+        return (
+            f"Speed: not ranked: {_names(unspread)} stepped too briefly to be timed in more than one "
+            "~0.1 s window, so no spread tells a difference from the machine's noise (steps/s in the table)."
+        )
     ordered = sorted(ran, key=rate, reverse=True)
     fastest = ordered[0]
     noise = [o.method for o in ordered[1:] if _alike(fastest, o)]

@@ -13,6 +13,7 @@ created are removed again.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -23,7 +24,8 @@ from .. import cluster, interrupts
 from .. import peers as peers_package
 from ..closed_form import Check
 from ..errors import InputError, SimulationDiverged
-from ..methods import AVAILABLE
+from ..folder_lock import held
+from ..methods import method_names
 from ..plots import write_comparison_plots, write_plots
 from ..record import (
     TRAJECTORY,
@@ -105,20 +107,7 @@ class _Outcome:
 
 def _method_names(methods):
     """(names, named): the methods to compare, and whether the caller named them."""
-    if methods is None:
-        return list(AVAILABLE), False
-    if isinstance(methods, str):
-        methods = methods.split(",")
-    names = []
-    for name in methods:
-        name = str(name).strip()
-        if name not in AVAILABLE:
-            raise InputError("--methods", f"unknown method {name!r}; expected some of: {', '.join(AVAILABLE)}")
-        if name not in names:
-            names.append(name)
-    if not names:
-        raise InputError("--methods", f"expected at least one of: {', '.join(AVAILABLE)}")
-    return names, True
+    return method_names(methods), methods is not None
 
 
 def supports(method: str, scene: Scene) -> bool:
@@ -221,6 +210,7 @@ def _run_all(
         as_written = load_scene(scene_source, overrides)
         scenes.update({peer: as_written for peer in peer_names})
     out = os.fspath(out) if out is not None else os.path.join("out", f"{next(iter(scenes.values())).name}-compare")
+    created.lock(out)  # one compare at a time writes a folder: a second is refused, naming the first
     skipped, jobs = {}, []
     for name, scene in scenes.items():
         if name in peer_names:
@@ -319,10 +309,22 @@ def _outputs(jobs):
 
 
 class _Created:
-    """Files and folders one compare() call wrote, so a failure can remove them again."""
+    """Files and folders one compare() call wrote, so a failure can remove them again, and the
+    lock on its output folder while it writes (contactlab.folder_lock: two compares into one
+    folder mixed their reports)."""
 
     def __init__(self):
         self.files, self.folders = [], []
+        self.locked = contextlib.ExitStack()
+
+    def lock(self, out):
+        """Create the folder ``out`` and hold its lock until :meth:`unlock` (InputError when
+        another command holds it)."""
+        self.folder(out)
+        self.locked.enter_context(held(out, "--out"))
+
+    def unlock(self):
+        self.locked.close()
 
     def folder(self, path):
         self.folders += make_folders(path)
@@ -338,6 +340,7 @@ class _Created:
         return path
 
     def remove(self):
+        self.unlock()
         undo_written(self.files)  # an interrupted compare says it wrote nothing
         for folder in self.folders:  # what a stopped worker was writing
             for name in os.listdir(folder) if os.path.isdir(folder) else ():
@@ -443,7 +446,7 @@ def compare(
         markdown, html = report.report_texts(
             scene, outcomes, summary_text, report.table_cells(outcomes), plot_paths, out
         )
-        return Comparison(  # the three reports are written as the result names them
+        comparison = Comparison(  # the three reports are written as the result names them
             rows=rows,
             out=out,
             report_html=created.text(os.path.join(out, "report.html"), html),
@@ -458,3 +461,5 @@ def compare(
     except BaseException:
         created.remove()
         raise
+    created.unlock()
+    return comparison

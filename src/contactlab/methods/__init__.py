@@ -13,6 +13,7 @@ A method module provides:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import fields
 from functools import cache
 from types import ModuleType
@@ -23,6 +24,21 @@ from .base import KeptManifoldOptions as KeptManifoldOptions
 from .base import StepInfo as StepInfo
 
 AVAILABLE = ("penalty", "projection", "impulse", "constraints")
+
+
+def method_names(methods: str | Sequence[str] | None, option: str = "--methods") -> list[str]:
+    """The methods named (a list or a comma-separated string; None: all four), each once, checked:
+    InputError naming ``option`` for an unknown one or none at all (``""``)."""
+    if methods is None:
+        return list(AVAILABLE)
+    names = [name.strip() for name in (methods.split(",") if isinstance(methods, str) else methods)]
+    names = list(dict.fromkeys(name for name in names if name))
+    for name in names:
+        if name not in AVAILABLE:
+            raise InputError(option, f"unknown method {name!r}; expected some of: {', '.join(AVAILABLE)}")
+    if not names:
+        raise InputError(option, f"expected at least one of: {', '.join(AVAILABLE)}")
+    return names
 
 
 def get(name: str) -> ModuleType:

@@ -26,15 +26,34 @@ run names the pairs it cannot (docs/peers.md).
 from __future__ import annotations
 
 import math
+import os
+import sys
 
 import numpy as np
-import pybullet
 
 from ..model import Model
 from ..state import State
 from . import translate
 
 NAME = "pybullet"
+
+
+def _imported_quietly():
+    """pybullet, imported without its build banner: its C code prints "pybullet build time: …"
+    on standard error as it loads, a line before every command's own (its one line of error)."""
+    sys.stderr.flush()
+    kept = os.dup(2)
+    try:
+        with open(os.devnull, "w", encoding="ascii") as nowhere:
+            os.dup2(nowhere.fileno(), 2)
+            import pybullet
+    finally:
+        os.dup2(kept, 2)
+        os.close(kept)
+    return pybullet
+
+
+pybullet = _imported_quietly()
 
 
 def _version() -> str:

@@ -11,6 +11,7 @@ available → build the Model. Every mistake is an InputError.
 
 from __future__ import annotations
 
+import codecs
 import difflib
 import functools
 import os
@@ -150,11 +151,13 @@ def _read_file(path):
         raise InputError(
             "", f"the scene file {shown} is more than the {MAX_SCENE_BYTES // 2**20} MiB a scene file may be"
         )
-    try:
-        return data.decode("utf-8")
+    start = len(codecs.BOM_UTF8) if data.startswith(codecs.BOM_UTF8) else 0  # the byte-order mark some editors
+    try:  # (Notepad) write is no part of the text
+        return data[start:].decode("utf-8")
     except UnicodeDecodeError as error:
+        offset = start + error.start
         raise InputError(
-            "", f"expected UTF-8 text, found a byte 0x{data[error.start]:02x} at offset {error.start} that is not"
+            "", f"expected UTF-8 text, found a byte 0x{data[offset]:02x} at offset {offset} that is not"
         ) from None
 
 
