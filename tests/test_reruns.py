@@ -97,10 +97,10 @@ def test_every_builtin_rigid_scene_steps_as_python_as_it_steps_compiled(tmp_path
     contactlab.first_run) are the compiled kernels' own source: every built-in scene that the
     compiled loop steps gives the same trajectory either way: bit for bit wherever no two boxes can
     touch. Where they can (box_pushed, box_stack, box_pyramid, card_house, domino_chain,
-    mass_ratio_stack), not
-    yet: after 12 steps the velocities differ by about 1e-15 (box_stack under constraints, box_pyramid
-    under penalty; the cause is not found — penalty's conjugate gradients' dot products were one,
-    mended): there the real-valued fields are held to 1e-9 relative, the counts bit for bit."""
+    mass_ratio_stack), not yet: after 12 steps the velocities differ by about 1e-15 (box_stack under
+    constraints, box_pyramid under penalty; the cause is not found — penalty's conjugate gradients'
+    dot products were one, mended): there the real-valued fields are held to 1e-9 relative, the
+    counts bit for bit."""
     import os
     import subprocess
     import sys
