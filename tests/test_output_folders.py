@@ -116,7 +116,7 @@ def test_a_write_that_fails_names_its_file(tmp_path, monkeypatch, capsys):
     # issue 59: a full disk said "cannot write the outputs: … No space left on device (None)"
     path = str(tmp_path / "summary.json")
 
-    def full_disk(args):  # a write's ENOSPC names no file
+    def full_disk(args, restart=False):  # a write's ENOSPC names no file
         with record.atomic_path(path) as temporary:
             with open(temporary, "wb") as stream:
                 stream.write(b"{")

@@ -318,8 +318,8 @@ def atomic_path(path: str) -> Iterator[str]:
     except BaseException as error:
         if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
-        if isinstance(error, OSError) and error.filename is None:  # a write's ENOSPC names no file:
-            error.filename = path  # the message then says which output could not be written
+        if isinstance(error, OSError) and error.filename is None and error.errno is not None:
+            error.filename = path  # a write's ENOSPC names no file: the message then says which output
         raise
 
 
