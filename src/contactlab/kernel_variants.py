@@ -6,7 +6,7 @@ integrator, the scene's shape families and the options' flags, ``loop_stages.Spe
 a run of a kind that this machine has never compiled waits for Numba first: 40–60 s on 2 cores,
 where the run itself may take a second. The same kernels also run as Python, their own source
 executed by the interpreter (``NUMBA_DISABLE_JIT=1``), with the same numbers (bit for bit wherever
-no two boxes touch; within about 1e-15 where they do, a difference not yet traced). So that a
+no two boxes touch; where they do, about 1e-15 apart a step, a difference not yet traced). So that a
 first run never waits on a compile that costs more than the run it serves, ``contactlab run`` (and
 ``demo``) goes through :func:`contactlab.first_run.settle` before it writes anything:
 
