@@ -363,16 +363,14 @@ def _view(sources, port=None, stream=None):
 
 
 def _compile(args):
-    from .methods import AVAILABLE
+    from .methods import method_names
     from .precompile import compile_kinds
     from .scene import builtin_scenes
     from .validation import whole_number
 
     if args.workers is not None:
         whole_number(args.workers, "--workers", 1)
-    methods = _list_option(args.methods, "--methods", AVAILABLE) if args.methods is not None else list(AVAILABLE)
-    if not methods:
-        raise InputError("--methods", "names no method; give one or more of " + ", ".join(AVAILABLE))
+    methods = method_names(args.methods)  # None: all four; "" names none: refused
     scenes = args.scenes or [name for name, _ in builtin_scenes()]
     done = compile_kinds(scenes, methods, args.workers, progress=True)
     print(

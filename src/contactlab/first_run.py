@@ -60,8 +60,8 @@ def settle(scene: Scene, steps: int, restart: bool) -> None:
     choice = os.environ.get(CHOICE)
     if not restart or choice == "compiled" or ("NUMBA_DISABLE_JIT" in os.environ and choice != "probe"):
         return
-    variant = variant_of(scene.model, scene.method, scene.options[scene.method], scene.integrator)
     if choice != "probe":
+        variant = variant_of(scene.model, scene.method, scene.options[scene.method], scene.integrator)
         if variant is not None and variant not in compiled_variants():
             _again(probe=True)
         return

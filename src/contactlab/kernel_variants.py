@@ -71,9 +71,12 @@ def variant_of(model: Model, method: str, options: Any, integrator: str) -> str 
     return f"{loop}/{integrator}/{families}{hulls}{large}/{flags}{drive}"
 
 
+_PACKAGE = os.path.dirname(os.path.abspath(__file__))  # contactlab's folder, as stamp_package keys it
+_REMEMBERED: set[str] = set()  # the kinds this process has recorded or found recorded
+
+
 def _record() -> Path:
-    root = next(iter(PackageStampedLocator.ROOTS))
-    return PackageStampedLocator.folder_of(root) / VARIANTS_FILE
+    return PackageStampedLocator.folder_of(_PACKAGE) / VARIANTS_FILE
 
 
 def compiled_variants() -> dict[str, float]:
@@ -90,11 +93,13 @@ def compiled_variants() -> dict[str, float]:
 def remember(variant: str | None, compile_seconds: float) -> None:
     """Record that a compiled run of kind ``variant`` ran here (``compile_seconds`` [s]: what it
     spent compiling). Written whole to a new file and moved over the old one; a record that cannot
-    be written is skipped (the next run of that kind probes again, nothing worse)."""
-    if variant is None or interpreted():
+    be written is skipped (the next run of that kind probes again, nothing worse). Once a kind is
+    recorded, later runs of it in this process read nothing (200 short runs: 200 reads of the file)."""
+    if variant is None or interpreted() or variant in _REMEMBERED:
         return
     known = compiled_variants()
     if variant in known and (compile_seconds <= 0.0 or known[variant] > 0.0):
+        _REMEMBERED.add(variant)
         return
     known[variant] = round(float(compile_seconds), 2)
     path = _record()
@@ -103,6 +108,7 @@ def remember(variant: str | None, compile_seconds: float) -> None:
         with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as handle:
             json.dump(known, handle, indent=1, sort_keys=True)
         os.replace(handle.name, path)
+        _REMEMBERED.add(variant)
     except OSError:
         pass
 

@@ -72,12 +72,11 @@ def _compile(job: KindToCompile) -> tuple[KindToCompile, str | None]:
     the kind (``simulation`` does, after a compiled run). (job, None), or (job, why) where the run
     was refused."""
     from .errors import SimulationDiverged
-    from .methods import get, make_options
     from .scene import load_scene
     from .simulation import simulate
 
     scene = load_scene(job.scene)
-    options = make_options(get(job.method), scene.method_options.get(job.method, {}), f"method.{job.method}")
+    options = scene.method_options.get(job.method, {})  # the table, built into Options by simulate
     try:
         simulate(scene.model, job.method, scene.dt, 2 * scene.dt, options, scene.integrator)
     except (InputError, SimulationDiverged) as error:
@@ -89,9 +88,10 @@ def compile_kinds(
     scenes: Sequence[str], methods: Sequence[str], workers: int | None = None, progress: bool = False
 ) -> Compiled:
     """Compile every kind of run of ``scenes`` under ``methods`` not yet compiled on this machine,
-    ``workers`` processes at once (None, or more than the cores: one a core), with ``progress`` on stderr. Ctrl-C or
+    ``workers`` processes at once (None, or more than ``cluster.most_workers()``: that many, one a
+    core and a half-gigabyte of free memory), with ``progress`` on stderr. Ctrl-C or
     SIGTERM stops the workers at once (Interrupted); what they finished stays compiled."""
-    from .cluster import cores
+    from .cluster import most_workers
 
     if kernel_variants.interpreted():
         raise InputError("NUMBA_DISABLE_JIT", "is set: nothing compiles; unset it to compile the kernels")
@@ -102,7 +102,7 @@ def compile_kinds(
     todo = [job for job in jobs if job.kind not in known]
     compiled: list[KindToCompile] = []
     if todo:
-        count = max(1, min(workers or cores(), cores(), len(todo)))  # more than the cores would only queue
+        count = min(workers or most_workers(), most_workers(), len(todo))  # more would only take turns
         if progress:
             estimate = kernel_variants.compile_estimate() * len(todo) / count
             print(
