@@ -2,7 +2,6 @@
 gives the contacts of the full dispatch, and a compilation says so on stderr."""
 
 import io
-import json
 import os
 import subprocess
 import sys
@@ -231,44 +230,6 @@ def test_a_run_says_so_on_stderr_only_when_it_compiles(capsys):
     captured = capsys.readouterr()
     assert NOTICE not in captured.err and captured.out == ""
     assert run.summary["compile_seconds"] >= 0.0 and run.summary["steps_per_second"] > 0.0
-
-
-def test_the_command_line_says_so_on_stderr_on_an_empty_cache_and_not_after(tmp_path):
-    """A short run of the bouncing ball on an empty Numba cache (its whole compiled loop, as any
-    first run: the suite's slowest test): the notice on stderr, the JSON alone on stdout; the
-    second run loads it all, silently."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-
-    def run():
-        return subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "contactlab",
-                "run",
-                "bouncing_ball",
-                "--duration",
-                "0.02",
-                "--json",
-                "--no-plots",
-                "--out",
-                str(tmp_path / "out"),
-            ],
-            cwd=tmp_path,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-
-    cold = run()
-    assert cold.returncode == 0, cold.stderr
-    assert NOTICE in cold.stderr.splitlines()
-    assert json.loads(cold.stdout)["compile_seconds"] > 0.0
-    warm = run()
-    assert warm.returncode == 0, warm.stderr
-    assert NOTICE not in warm.stderr
-    json.loads(warm.stdout)
 
 
 @pytest.mark.parametrize("path", ["loop", "stitched"])

@@ -42,7 +42,7 @@ import shutil
 import sys
 import types as types_module
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
@@ -71,7 +71,7 @@ __all__ = [
     "sources_digest",
 ]
 
-NOTICE = "compiling contact kernels for first use… (once: later runs load them from Numba's cache)"
+NOTICE = "compiling contact kernels for first use…"  # how that line starts (simulate adds how long, once)
 
 
 def available_threads() -> int:
@@ -80,12 +80,13 @@ def available_threads() -> int:
 
 
 class FirstCompile(event.Listener):
-    """A Numba event listener that prints ``message`` at the first compilation it sees.
+    """A Numba event listener that prints ``message`` (a line, or a function giving it, called
+    then) at the first compilation it sees.
 
     ``said`` tells whether it has printed. Numba sends "numba:compile" only for a real
     compilation (a function it has no cached machine code for), never for a cache load."""
 
-    def __init__(self, message: str = NOTICE, stream: TextIO | None = None) -> None:
+    def __init__(self, message: str | Callable[[], str] = NOTICE, stream: TextIO | None = None) -> None:
         self.message = message
         self.stream = stream
         self.said = False
@@ -94,7 +95,7 @@ class FirstCompile(event.Listener):
         if not self.said:
             self.said = True
             stream = self.stream if self.stream is not None else sys.stderr
-            print(self.message, file=stream, flush=True)
+            print(self.message if isinstance(self.message, str) else self.message(), file=stream, flush=True)
 
     def on_end(self, event: event.Event) -> None:
         pass

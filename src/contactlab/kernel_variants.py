@@ -5,8 +5,8 @@ The compiled stepping loop is specialized per kind of run (:func:`variant_of`: t
 integrator, the scene's shape families and the options' flags, ``loop_stages.Specialization``), and
 a run of a kind that this machine has never compiled waits for Numba first: 40–60 s on 2 cores,
 where the run itself may take a second. The same kernels also run as Python, their own source
-executed by the interpreter (``NUMBA_DISABLE_JIT=1``), with the same numbers (bit for bit wherever
-no two boxes touch; where they do, about 1e-15 apart a step, a difference not yet traced). So that a
+executed by the interpreter (``NUMBA_DISABLE_JIT=1``), with the same numbers, bit for bit (sorts
+stable, sums in index order, no BLAS: see tests/test_reruns.py). So that a
 first run never waits on a compile that costs more than the run it serves, ``contactlab run`` (and
 ``demo``) goes through :func:`contactlab.first_run.settle` before it writes anything:
 
@@ -118,3 +118,12 @@ def compile_estimate() -> float:
     compiles recorded here, DEFAULT_COMPILE_SECONDS where none is."""
     spent = [seconds for seconds in compiled_variants().values() if seconds > 1.0]
     return float(statistics.median(spent)) if spent else DEFAULT_COMPILE_SECONDS
+
+
+def compiling_notice() -> str:
+    """The line a run that compiles prints as it starts to: that it compiles, for about how long
+    here (:func:`compile_estimate`), and that it happens once."""
+    return (
+        f"compiling contact kernels for first use… about {compile_estimate():.0f} s on this machine, "
+        "once (later runs load them from the cache; 'contactlab compile' builds every kind ahead)"
+    )

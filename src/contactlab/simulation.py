@@ -254,7 +254,9 @@ def simulate(
             raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
         # the run's clock and compile tally start here: the plausibility check's collide() is the
         # first to need the collision kernels, and compiles them on an empty cache
-        clock = _Clock(numba_event.TimingListener(), FirstCompile(), time.perf_counter())
+        clock = _Clock(
+            numba_event.TimingListener(), FirstCompile(kernel_variants.compiling_notice), time.perf_counter()
+        )
         with numba_event.install_listener("numba:compile", clock.compiling), compile_notice(clock.notice):
             for line in plausibility.warnings_for(model, state, dt, steps):  # a unit slip? one line each
                 warnings.warn(line, plausibility.PlausibilityWarning, stacklevel=2)

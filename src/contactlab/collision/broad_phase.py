@@ -53,7 +53,7 @@ def boxes_overlapping(lower: np.ndarray, upper: np.ndarray, large: bool | None) 
         return pairs  # already sorted by (i, j)
     pairs = grid_pairs(lower, upper)
     key = pairs[:, 0] * lower.shape[0] + pairs[:, 1]  # one sort key per pair (i < j < N)
-    return pairs[np.argsort(key)]  # an order independent of the hashing
+    return pairs[np.argsort(key, kind="mergesort")]  # an order independent of the hashing
 
 
 @njit(cache=True)
@@ -75,7 +75,7 @@ def _append_pair(pairs, found, a, b):
 def sweep_and_prune(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Pairs (i, j), i < j, whose boxes overlap, by sweeping along x (see the module)."""
     count = lower.shape[0]
-    order = np.argsort(lower[:, 0])
+    order = np.argsort(lower[:, 0], kind="mergesort")
     pairs = np.empty((max(16, 4 * count), 2), dtype=np.int64)
     found = np.int64(0)  # not a literal 0: _append_pair would compile twice
     for position in range(count):

@@ -266,7 +266,7 @@ def _combine(
             f += 1
         if keeps[k]:
             r += 1
-    order = np.argsort(new_keys)
+    order = np.argsort(new_keys, kind="mergesort")
     return (
         (out_point[:c], out_normal[:c], out_depth[:c], out_feature[:c], out_owner[:c]),
         (

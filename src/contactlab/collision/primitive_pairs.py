@@ -15,6 +15,7 @@ import numpy as np
 
 from ..compiling import njit
 from .contact_output import Frame, PairOutput, write_contact
+from .geometry import rotate, to_local
 
 Sphere = tuple[np.ndarray, float]  # (centre (3,) [m], radius [m] ≥ 0) of a sphere or a particle
 Box = tuple[Frame, np.ndarray]  # (frame: centre (3,) [m], rotation (3, 3) body → world; half extents (3,) [m])
@@ -83,7 +84,7 @@ def box_plane(box: Box, plane: np.ndarray, margin: float, out: PairOutput, slot:
         sy = 1.0 if corner & 2 else -1.0
         sz = 1.0 if corner & 4 else -1.0
         local = np.array([sx * half_extents[0], sy * half_extents[1], sz * half_extents[2]])
-        x = center + rotation @ local
+        x = center + rotate(rotation, local)
         distance = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2] - plane[3]
         if -distance >= -margin:
             write_contact(out, slot + count, x - normal * (0.5 * distance), normal, -distance, corner)
@@ -101,7 +102,7 @@ def sphere_box(sphere: Sphere, box: Box, margin: float, out: PairOutput, slot: i
     center, radius = sphere
     box_frame, half_extents = box
     box_center, box_rotation = box_frame
-    local = box_rotation.T @ (center - box_center)
+    local = to_local(box_rotation, box_center, center)
     closest = np.minimum(np.maximum(local, -half_extents), half_extents)
     delta = local - closest
     distance = np.sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2])
@@ -122,8 +123,8 @@ def sphere_box(sphere: Sphere, box: Box, margin: float, out: PairOutput, slot: i
         feature = 1 + 2 * axis + (1 if sign > 0 else 0)
     if depth < -margin:
         return 0
-    normal = box_rotation @ normal_local
-    surface_b = box_center + box_rotation @ closest
+    normal = rotate(box_rotation, normal_local)
+    surface_b = box_center + rotate(box_rotation, closest)
     surface_a = center - normal * radius
     write_contact(out, slot, 0.5 * (surface_a + surface_b), normal, depth, feature)
     return 1

@@ -150,7 +150,7 @@ def _permuted_upper(start, column, order):
                 row[count] = position[column[e]]
                 block[count, 0], block[count, 1] = column[e], order[k]  # A's block (row, column)
                 count += 1
-        rising = np.argsort(row[upper_start[k] : count])
+        rising = np.argsort(row[upper_start[k] : count], kind="mergesort")
         row[upper_start[k] : count] = row[upper_start[k] : count][rising]
         block[upper_start[k] : count] = block[upper_start[k] : count][rising]
     return upper_start, row, block

@@ -161,7 +161,10 @@ def _start(indptr, indices, data, q, mu, r, pyramid):
     of r) for r (m,), q (m,) with m = 3 nc."""
     m = q.shape[0]
     u = np.empty(m)
-    norm_q = math.sqrt(np.sum(q * q))
+    norm_q = 0.0  # in index order, as compiled: NumPy's sum (run as Python) would pair the terms up
+    for i in range(m):
+        norm_q += q[i] * q[i]
+    norm_q = math.sqrt(norm_q)
     return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
 
 

@@ -71,7 +71,10 @@ def lcp_residual_parallel(
         partial[chunk] = _residual_rows(
             indptr, indices, data, c, lam, w, chunk * n // RESIDUAL_CHUNKS, (chunk + 1) * n // RESIDUAL_CHUNKS
         )
-    return math.sqrt(partial.sum())
+    total = 0.0  # in index order: NumPy's sum (run as Python) would pair them up
+    for chunk in range(RESIDUAL_CHUNKS):
+        total += partial[chunk]
+    return math.sqrt(total)
 
 
 @njit(cache=True, inline="always")

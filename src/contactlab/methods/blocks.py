@@ -86,7 +86,7 @@ def manifold_blocks(rows: ContactRows, order: np.ndarray) -> tuple[np.ndarray, n
             a, b = rows.body[c, 0] + 1, rows.body[c, 1] + 1
             pair = min(a, b) * (B + 1) + max(a, b)
         key[c] = pair * C + rank[c]
-    by_pair = np.argsort(key)
+    by_pair = np.argsort(key, kind="mergesort")
     first = np.empty(C, dtype=np.int64)  # each block's first rank, for its place in the sweep
     block_of = np.empty(C, dtype=np.int64)
     blocks = 0
@@ -99,7 +99,7 @@ def manifold_blocks(rows: ContactRows, order: np.ndarray) -> tuple[np.ndarray, n
             size = 0
         block_of[c] = blocks - 1
         size += 1
-    place = np.argsort(first[:blocks])  # blocks in sweep order
+    place = np.argsort(first[:blocks], kind="mergesort")  # blocks in sweep order
     position = np.empty(blocks, dtype=np.int64)
     for k in range(blocks):
         position[place[k]] = k

@@ -186,7 +186,7 @@ def supported_loads(
         if external[c]:
             resting_on[filled[node[upper[c]]]] = c
             filled[node[upper[c]]] += 1
-    for n in np.argsort(-node_height):
+    for n in np.argsort(-node_height, kind="mergesort"):
         if node_supports[n] == 0:
             continue
         share = carried[n] / node_supports[n]

@@ -219,7 +219,7 @@ FASTEST_RATE = 0.3
 def hopeless_change(iterations: int, tolerance: float) -> float:
     """The change [m/s] above which a solve capped at ``iterations`` sweeps gives up at its
     GIVE_UP_AT-th: tolerance / FASTEST_RATE^(iterations − GIVE_UP_AT)."""
-    return tolerance / FASTEST_RATE ** max(iterations - GIVE_UP_AT, 0)
+    return tolerance / FASTEST_RATE ** float(max(iterations - GIVE_UP_AT, 0))  # pow, as Python takes it
 
 
 @njit(cache=True)
