@@ -139,3 +139,34 @@ def test_a_write_that_fails_names_its_file(tmp_path, monkeypatch, capsys):
     assert err == [f"error: cannot write the outputs: {os.strerror(errno.ENOSPC)} ({path})"]
     assert os.listdir(tmp_path) == []  # the temporary file is gone
 
+
+def test_a_comparison_owns_its_folder_an_earlier_ones_methods_go_and_the_users_files_stay(tmp_path):
+    # issue 59: compare --methods impulse into the folder of an earlier 4-method comparison left
+    # the 3 other method folders there, to be taken for this comparison's
+    def compare(methods):
+        return subprocess.run(
+            [sys.executable, "-m", "contactlab", "compare", "bouncing_ball", "--no-video", "--methods", methods]
+            + ["--duration", "0.2", "--workers", "1", "--out", "out"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+
+    out = tmp_path / "out"
+    first = compare("projection,impulse,constraints")
+    assert first.returncode == 0, first.stderr
+    assert {"projection", "impulse", "constraints"} <= set(os.listdir(out))
+    (out / "projection" / "notes.txt").write_text("mine\n", encoding="utf-8")  # a user's file in a method folder
+    (out / "penalty").mkdir()  # a folder named after a method that holds no run: the user's
+    (out / "penalty" / "plan.txt").write_text("mine\n", encoding="utf-8")
+    (out / "mine").mkdir()
+    second = compare("impulse")
+    assert second.returncode == 0, second.stderr
+    assert "constraints" not in os.listdir(out)  # the earlier comparison's, wholly
+    assert os.listdir(out / "projection") == ["notes.txt"]  # its run gone, the user's file kept
+    assert os.listdir(out / "penalty") == ["plan.txt"] and os.listdir(out / "mine") == []
+    assert {"trajectory.h5", "summary.json", "plots"} <= set(os.listdir(out / "impulse"))
+    with open(out / "comparison.csv", encoding="utf-8") as stream:
+        assert [line.split(",")[0] for line in stream.read().splitlines()[1:]] == ["impulse"]
+    assert LOCK_NAME not in os.listdir(out)
