@@ -132,6 +132,16 @@ def test_the_readmes_first_use_figures_are_the_benchmarks():
     demo = re.search(r"the first `contactlab demo` in a fresh environment and home takes ([\d.]+) s", text)
     assert demo and float(demo.group(1)) == round(result["first"][0]["wall_seconds"], 1)
     assert f"({result['date']}, {result['machine'].split(',')[0]}" in text
+    compare = re.search(
+        r"compiles its kernels first: ([\d.]+) s on 2 cores with `--no-video`, ([\d.]+) s the second", text
+    )
+    times = {run["command"]: run["wall_seconds"] for run in result["first"]}
+    again = {run["command"]: run["wall_seconds"] for run in result["second"]}
+    pyramid = "compare box_pyramid --no-video"
+    assert compare and (float(compare.group(1)), float(compare.group(2))) == (
+        round(times[pyramid]),
+        round(again[pyramid], 1),
+    )
     install = re.search(r"`pip install \.` took ([\d.]+) s", text)
     assert install and float(install.group(1)) == round(result["install_seconds"])
     if len(result["first"]) == 5:
@@ -140,3 +150,60 @@ def test_the_readmes_first_use_figures_are_the_benchmarks():
             round(result["first_total_seconds"]),
             round(result["second_total_seconds"]),
         )
+
+
+def _readme_text():
+    """README.md with its lines joined by single spaces (a figure may be wrapped anywhere)."""
+    return " ".join((Path(__file__).parent.parent / "README.md").read_text().split())
+
+
+def test_the_readmes_figures_against_the_peers_are_the_benchmarks():
+    """Every figure of the README's paragraph on the peers is benchmarks/results/results.json's
+    (benchmarks/peers.py), rounded as the text has it, with that file's date, machine and load."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "results.json").read_text())
+    runs, text = result["runs"], _readme_text()
+
+    def rate(key):
+        return runs[key]["steps_per_second"]
+
+    def ratio(key, peer):
+        return rate(key) / rate(peer)
+
+    loads = [
+        load
+        for key in runs
+        if key.split("/")[0] in ("pyramid", "pile1000", "pile4000", "ball", "manyruns")
+        for load in runs[key]["load"]
+    ]
+    assert f"({result['machine']['date']}, {result['machine']['cpu'].split('(')[0]}" in text
+    assert f"load {min(loads):.1f}–{max(loads):.1f}: benchmarks/results/results.json" in text
+    expected = {
+        "pyramid 4.2× as fast as pybullet under constraints": ratio(
+            "pyramid/contactlab-constraints", "pyramid/pybullet"
+        ),
+        "and 4.3× under impulses": ratio("pyramid/contactlab-impulse", "pyramid/pybullet"),
+        "0.97× under penalty": ratio("pyramid/contactlab-penalty", "pyramid/pybullet"),
+        "and 1.09× under projection": ratio("pyramid/contactlab-projection", "pyramid/pybullet"),
+        "(4.56 sweeps a step": runs["pyramid/contactlab-impulse"]["sweeps_per_step"],
+        "every box within 0.07 mm": 1e3 * runs["pyramid/contactlab-impulse"]["drift"],
+        "a pybullet box moved 234 mm": 1e3 * runs["pyramid/pybullet"]["drift"],
+        "sphere piles 2.1×": ratio("pile1000/contactlab-constraints", "pile1000/pybullet"),
+        "and 3.6× as fast under constraints": ratio("pile4000/contactlab-constraints", "pile4000/pybullet"),
+        "penetration (0.53": 1e3 * runs["pile1000/contactlab-constraints"]["max_penetration"],
+        "and 1.1 mm against": 1e3 * runs["pile4000/contactlab-constraints"]["max_penetration"],
+        "against 9.5": 1e3 * runs["pile1000/pybullet"]["max_penetration"],
+        "and 18.4 mm)": 1e3 * runs["pile4000/pybullet"]["max_penetration"],
+        "about 407,000 steps/s": rate("ball/contactlab-impulse"),
+        "0.77× pybullet": ratio("ball/contactlab-impulse", "ball/pybullet"),
+        "0.87× MuJoCo": ratio("ball/contactlab-impulse", "ball/mujoco"),
+        "at 0.55× MuJoCo's throughput": runs["manyruns/mujoco"]["ms_per_run"]
+        / runs["manyruns/contactlab"]["defaults"]["ms_per_run"],
+    }
+    for phrase, value in expected.items():
+        assert phrase in text, phrase
+        shown = re.search(r"\d[\d,]*(?:\.\d+)?", phrase).group(0)
+        digits = len(shown.split(".")[1]) if "." in shown else -3 if shown.endswith(",000") else 0
+        assert float(shown.replace(",", "")) == round(value, digits), (phrase, value)
