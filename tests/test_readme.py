@@ -207,3 +207,38 @@ def test_the_readmes_figures_against_the_peers_are_the_benchmarks():
         shown = re.search(r"\d[\d,]*(?:\.\d+)?", phrase).group(0)
         digits = len(shown.split(".")[1]) if "." in shown else -3 if shown.endswith(",000") else 0
         assert float(shown.replace(",", "")) == round(value, digits), (phrase, value)
+
+
+def _table_rows(path):
+    """The rows of the first Markdown table of ``path``, as lists of cell texts (the header and
+    the rule left out)."""
+    lines = [line for line in path.read_text().splitlines() if line.startswith("|")]
+    return [_cells(line) for line in lines[2:]]
+
+
+def test_the_docs_figures_on_cloth_self_contact_are_the_benchmarks():
+    """docs/collision.md's cost of cloth self-contact is benchmarks/results/cloth_self.md's
+    (benchmarks/cloth_self.py): its ratios, its self-contacts, its date and load."""
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results" / "cloth_self.md"
+    rows = {row[0]: row for row in _table_rows(results)}
+    drape, fold = rows["cloth_drape, self_collision = true"], rows["folding 64 × 64, self_collision = true"]
+    date, load = re.search(r"(\d{4}-\d\d-\d\d), .*load average ([\d.]+)", results.read_text()).groups()
+    text = " ".join((root / "docs" / "collision.md").read_text().split())
+    assert f"cloth_self.md`, {date}, 2 cores, load {float(load):.1f})" in text
+    assert f"a step takes {drape[3]} as long as without self-contact" in text
+    contacts = f"{round(int(fold[5]), -2):,}".replace(",", " ")  # 2 300, as the page writes thousands
+    assert f"folding onto itself, {fold[3]}, with some {contacts} self-contacts" in text
+
+
+def test_the_docs_sweep_speedup_is_the_benchmark():
+    """docs/sweep.md's speed-up of a local cluster is benchmarks/results/sweep_speedup.md's
+    (benchmarks/sweep_speedup.py), with its date, machine, load and cells' length."""
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results" / "sweep_speedup.md"
+    idle = _table_rows(results)[0]
+    date, cpu = re.search(r"on (\d{4}-\d\d-\d\d): ([^,]+), 2 cores", results.read_text()).groups()
+    load = float(re.search(r"load ([\d.]+) at start", idle[0]).group(1))
+    text = " ".join((root / "docs" / "sweep.md").read_text().split())
+    assert f"Its committed run ({date}, {cpu}, 2 cores, load {load:.1f}) found the cluster {idle[4]} as fast" in text
+    assert f"whose cells took {round(float(idle[2]) / 16)} s each on average" in text
