@@ -242,3 +242,62 @@ def test_the_docs_sweep_speedup_is_the_benchmark():
     text = " ".join((root / "docs" / "sweep.md").read_text().split())
     assert f"Its committed run ({date}, {cpu}, 2 cores, load {load:.1f}) found the cluster {idle[4]} as fast" in text
     assert f"whose cells took {round(float(idle[2]) / 16)} s each on average" in text
+
+
+def _table(text, header):
+    """{first cell: cells} of the Markdown table of ``text`` that starts with the line ``header``."""
+    lines = text.splitlines()
+    start = lines.index(header) + 2
+    rows = {}
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        cells = _cells(line)
+        rows[cells[0]] = cells
+    return rows
+
+
+def test_the_lcp_pages_figures_are_the_benchmarks():
+    """docs/lcp.md's solver figures are those of their results files: red-black against pgs
+    (results.json's lcp runs), newton against nsgs on the FCLIB files (fclib_newton.md) and
+    newton on every readable problem (fclib_newton_siconos.md), tables and sums."""
+    import json
+
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results"
+    page = (root / "docs" / "lcp.md").read_text()
+    text = " ".join(page.split())
+    lcp = json.loads((results / "results.json").read_text())["runs"]
+    pgs = lcp["lcp/pgs"]["seconds"]
+    assert f"converged {pgs / lcp['lcp/redblack']['seconds']:.2f}× as fast as `pgs` on 2 cores" in text
+    assert f"solved that pile's LCP {pgs / lcp['lcp/redblack_blocks']['seconds']:.2f}× as fast as `pgs`" in text
+    sweeps = [lcp[f"lcp/{name}"]["sweeps"] for name in ("pgs", "redblack_blocks", "redblack")]
+    assert f"({sweeps[1]} against {sweeps[0]} on the 4000-sphere pile; `redblack`'s order {sweeps[2]} there)" in text
+
+    newton = _table((results / "fclib_newton.md").read_text(), _header(results / "fclib_newton.md", "| file | nc |"))
+    shown = _table(page, "| file | nc | newton steps | newton error | newton ms | nsgs sweeps | nsgs error | nsgs ms |")
+    assert len(shown) == 15 and all(cells == newton[name][:8] for name, cells in shown.items())
+    together = [round(sum(float(cells[column]) for cells in shown.values())) for column in (4, 7)]
+    assert f"in {together[0]} ms together (nsgs: {together[1]} ms)" in text
+
+    every = _table(
+        (results / "fclib_newton_siconos.md").read_text(),
+        "| file | nc | newton iterations | newton error | newton ms |",
+    )
+    shown = _table(page, "| problem | contacts | in data/fclib | method | iterations | time (ms) | error reached |")
+    assert {name: [c[1], c[4], c[5], c[6]] for name, c in shown.items()} == {
+        name: [c[1], c[2], c[4], c[3]] for name, c in every.items()
+    }
+    slowest = sorted(every.values(), key=lambda cells: -float(cells[4]))[:2]
+    total = sum(float(cells[4]) for cells in every.values()) / 1e3
+    assert (
+        f"the slowest in {float(slowest[0][4]) / 1e3:.2f} s ({slowest[0][0].split('-')[0]}, {slowest[0][2]} steps"
+        in text
+    )
+    assert f"and {float(slowest[1][4]) / 1e3:.2f} s ({slowest[1][0].split('.')[0]}, {slowest[1][2]} steps)" in text
+    assert f"{total:.1f} s for all {len(every)}." in text
+
+
+def _header(path, start):
+    """The first line of ``path`` that starts with ``start`` (a table's header)."""
+    return next(line for line in path.read_text().splitlines() if line.startswith(start))
