@@ -45,6 +45,7 @@ import hashlib
 import os
 import shutil
 import sys
+import threading
 import types as types_module
 import warnings
 from collections.abc import Callable, Iterator
@@ -81,8 +82,9 @@ __all__ = [
 
 NOTICE = "compiling contact kernels for first use… (once: later runs load them from Numba's cache)"
 
-_sender: Callable[[str], None] | None = None
-"""where the notice goes instead of standard error (:func:`notices_to`); None: printed here"""
+_sending = threading.local()
+"""``send``: where the notice goes instead of standard error in this thread (:func:`notices_to`; a
+worker's job compiles in its own thread, and a worker may run several jobs at once)"""
 _said_in_command: list[bool] = []
 """one entry per :func:`one_notice` open: whether the command has said the notice"""
 
@@ -91,8 +93,9 @@ def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> No
     """Give the compile notice ``message``: to the sender of :func:`notices_to` where one is set;
     else once at most within :func:`one_notice` (a command), with ``write`` (default: one line on
     ``sys.stderr``), as often as asked outside it."""
-    if _sender is not None:
-        _sender(message)
+    send = getattr(_sending, "send", None)
+    if send is not None:
+        send(message)
         return
     if _said_in_command:
         if _said_in_command[-1]:
@@ -117,14 +120,15 @@ def one_notice() -> Iterator[None]:
 
 @contextmanager
 def notices_to(send: Callable[[str], None]) -> Iterator[None]:
-    """Within the block, the compile notice is handed to ``send(message)`` instead of being printed:
-    a job on a Dask worker sends it to the command that submitted the job (contactlab.cluster)."""
-    global _sender
-    previous, _sender = _sender, send
+    """Within the block (in this thread), the compile notice is handed to ``send(message)`` instead
+    of being printed: a job on a Dask worker sends it to the command that submitted the job
+    (contactlab.cluster)."""
+    previous = getattr(_sending, "send", None)
+    _sending.send = send
     try:
         yield
     finally:
-        _sender = previous
+        _sending.send = previous
 
 
 def available_threads() -> int:
