@@ -415,7 +415,8 @@ def _remove_earlier_methods(out: str, kept: set[str]) -> list[str]:
         try:
             for folder in (directory, os.path.join(directory, "plots")):
                 if os.path.isdir(folder):
-                    files += [os.path.join(folder, name) for name in os.listdir(folder) if name.startswith(".partial-")]
+                    half_written = [entry for entry in os.listdir(folder) if entry.startswith(".partial-")]
+                    files += [os.path.join(folder, entry) for entry in half_written]
             for path in files:
                 if os.path.isfile(path):
                     os.unlink(path)
