@@ -7,7 +7,7 @@ import pytest
 
 from contactlab import closed_form
 from contactlab.closed_form import Check
-from contactlab.scene import load_scene
+from contactlab.scene import builtin_scenes, load_scene
 from contactlab.simulation import simulate
 
 
@@ -133,6 +133,7 @@ def test_every_built_in_check_carries_the_tolerance_the_module_sets():
         ("incline", 0.5),
         ("particles_box", 1.0),
         ("domino_chain", 3.0),
+        ("cloth_fold", 1.5),
     ],
 )
 def test_impulses_meet_every_stated_expectation(name, duration):
@@ -154,6 +155,42 @@ def test_a_method_that_misses_an_expectation_fails_it_with_the_number():
     stack = _by_quantity(_run("box_stack", overrides=["bodies.0.velocity=[1,0,0]"], duration=0.3)[1])
     displacement = stack["largest body displacement"]
     assert displacement.measured > 0.1 and displacement.passed is False
+
+
+def test_a_strip_that_passes_through_itself_or_still_stands_misses_cloth_folds_expectation():
+    # issue 59: cloth_fold stated none. Its bounds follow from its thickness t = 4 mm and its 24
+    # rows: at least two layers, 3t; at most every row a layer resting on the one below, t + 23·2t
+    _, found = _run("cloth_fold", duration=0.2)  # the strip still stands: no heap yet
+    height = _by_quantity(found)["heap height"]
+    assert height.expected - height.tolerance == pytest.approx(0.012) and height.measured > 0.25
+    assert height.expected + height.tolerance == pytest.approx(0.188) and height.passed is False
+    _, found = _run("cloth_fold", overrides=["cloth.0.self_collision=false"])  # it falls through itself
+    crossed = _by_quantity(found)["edges through the cloth"]
+    assert crossed.measured > 0 and crossed.passed is False, crossed.verdict()
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            name,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="cloth_table states it slides off the table and falls to the floor, but in its 3 s "
+                "it slides about 5 cm and hangs over the edge (measured under every method): its "
+                "expectation waits for a scene that does what it says",
+            ),
+        )
+        if name == "cloth_table"
+        else name
+        for name, _ in builtin_scenes()
+    ],
+)
+def test_every_built_in_scene_states_an_expectation(name):
+    # issue 59: cloth_fold stated none. Two steps under the scene's own method: the checks apply
+    # to the scene as it is built (a check whose layout no longer fits gives none)
+    scene = load_scene(name)
+    assert _run(name, method=scene.method, duration=2 * scene.dt)[1], name
 
 
 def test_nothing_inside_an_obstacle_is_measured_from_the_centres():

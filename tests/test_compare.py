@@ -405,6 +405,21 @@ def test_a_failure_while_writing_removes_what_the_comparison_wrote(tmp_path, mon
     assert os.listdir(out) == ["mine.txt"]
 
 
+def test_a_comparison_that_fails_leaves_the_earlier_ones_methods_as_they_were(tmp_path, monkeypatch):
+    # issue 59: a comparison removes the method folders of an earlier one only once its own
+    # reports are written; one that fails before keeps them (and the earlier report naming them)
+    compare("bouncing_ball", ["impulse", "constraints"], str(tmp_path), duration=0.02, video=False)
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(run, "write_comparison_plots", broken)
+    with pytest.raises(OSError, match="disk full"):
+        compare("bouncing_ball", ["impulse"], str(tmp_path), duration=0.02, video=False)
+    assert sorted(os.listdir(tmp_path / "constraints")) == ["plots", "summary.json", "trajectory.h5"]
+    assert "constraints" in (tmp_path / "comparison.csv").read_text(encoding="utf-8")
+
+
 def test_default_output_folder_is_out_scene_compare(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = compare("bouncing_ball", "impulse", duration=0.02, video=False)

@@ -22,7 +22,7 @@ from contactlab.collision.narrow_phase import (
     generate_contacts,
     needs_hulls,
 )
-from contactlab.compiling import NOTICE, FirstCompile, compile_notice
+from contactlab.compiling import NOTICE, FirstCompile, compile_notice, notices_to, one_notice
 
 OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) * 0.06
 TETRAHEDRON = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]) - 0.025
@@ -205,6 +205,24 @@ def test_a_compilation_prints_the_notice_once():
         assert third(1.0) == 0.0
     assert stream.getvalue() == NOTICE + "\n"
     assert "first use" in NOTICE
+
+
+def test_a_command_says_it_once_however_many_runs_compile_and_a_worker_hands_it_on(capsys):
+    # issue 59: a comparison or sweep in one process printed it at each run that compiled
+    def compile_one():
+        with compile_notice() as listener:
+            numba.njit(lambda x: x + 1.0)(1.0)  # a function of its own: it compiles
+        return listener.said
+
+    assert compile_one() and compile_one()  # two runs outside a command: a line each
+    assert capsys.readouterr().err == 2 * (NOTICE + "\n")
+    with one_notice():
+        assert compile_one() and compile_one()
+    assert capsys.readouterr().err == NOTICE + "\n"
+    sent = []
+    with notices_to(sent.append):  # a job on a Dask worker: to the command, nothing printed
+        assert compile_one()
+    assert sent == [NOTICE] and capsys.readouterr().err == ""
 
 
 def test_nothing_is_printed_when_nothing_compiles(capsys):

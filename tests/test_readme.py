@@ -132,6 +132,16 @@ def test_the_readmes_first_use_figures_are_the_benchmarks():
     demo = re.search(r"the first `contactlab demo` in a fresh environment and home takes ([\d.]+) s", text)
     assert demo and float(demo.group(1)) == round(result["first"][0]["wall_seconds"], 1)
     assert f"({result['date']}, {result['machine'].split(',')[0]}" in text
+    compare = re.search(
+        r"compiles its kernels first: ([\d.]+) s on 2 cores with `--no-video`, ([\d.]+) s the second", text
+    )
+    times = {run["command"]: run["wall_seconds"] for run in result["first"]}
+    again = {run["command"]: run["wall_seconds"] for run in result["second"]}
+    pyramid = "compare box_pyramid --no-video"
+    assert compare and (float(compare.group(1)), float(compare.group(2))) == (
+        round(times[pyramid]),
+        round(again[pyramid], 1),
+    )
     install = re.search(r"`pip install \.` took ([\d.]+) s", text)
     assert install and float(install.group(1)) == round(result["install_seconds"])
     if len(result["first"]) == 5:
@@ -140,3 +150,154 @@ def test_the_readmes_first_use_figures_are_the_benchmarks():
             round(result["first_total_seconds"]),
             round(result["second_total_seconds"]),
         )
+
+
+def _readme_text():
+    """README.md with its lines joined by single spaces (a figure may be wrapped anywhere)."""
+    return " ".join((Path(__file__).parent.parent / "README.md").read_text().split())
+
+
+def test_the_readmes_figures_against_the_peers_are_the_benchmarks():
+    """Every figure of the README's paragraph on the peers is benchmarks/results/results.json's
+    (benchmarks/peers.py), rounded as the text has it, with that file's date, machine and load."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "results.json").read_text())
+    runs, text = result["runs"], _readme_text()
+
+    def rate(key):
+        return runs[key]["steps_per_second"]
+
+    def ratio(key, peer):
+        return rate(key) / rate(peer)
+
+    loads = [
+        load
+        for key in runs
+        if key.split("/")[0] in ("pyramid", "pile1000", "pile4000", "ball", "manyruns")
+        for load in runs[key]["load"]
+    ]
+    assert f"({result['machine']['date']}, {result['machine']['cpu'].split('(')[0]}" in text
+    assert f"load {min(loads):.1f}–{max(loads):.1f}: benchmarks/results/results.json" in text
+    expected = {
+        "pyramid 4.2× as fast as pybullet under constraints": ratio(
+            "pyramid/contactlab-constraints", "pyramid/pybullet"
+        ),
+        "and 4.3× under impulses": ratio("pyramid/contactlab-impulse", "pyramid/pybullet"),
+        "0.97× under penalty": ratio("pyramid/contactlab-penalty", "pyramid/pybullet"),
+        "and 1.09× under projection": ratio("pyramid/contactlab-projection", "pyramid/pybullet"),
+        "(4.56 sweeps a step": runs["pyramid/contactlab-impulse"]["sweeps_per_step"],
+        "every box within 0.07 mm": 1e3 * runs["pyramid/contactlab-impulse"]["drift"],
+        "a pybullet box moved 234 mm": 1e3 * runs["pyramid/pybullet"]["drift"],
+        "sphere piles 2.1×": ratio("pile1000/contactlab-constraints", "pile1000/pybullet"),
+        "and 3.6× as fast under constraints": ratio("pile4000/contactlab-constraints", "pile4000/pybullet"),
+        "penetration (0.53": 1e3 * runs["pile1000/contactlab-constraints"]["max_penetration"],
+        "and 1.1 mm against": 1e3 * runs["pile4000/contactlab-constraints"]["max_penetration"],
+        "against 9.5": 1e3 * runs["pile1000/pybullet"]["max_penetration"],
+        "and 18.4 mm)": 1e3 * runs["pile4000/pybullet"]["max_penetration"],
+        "about 407,000 steps/s": rate("ball/contactlab-impulse"),
+        "0.77× pybullet": ratio("ball/contactlab-impulse", "ball/pybullet"),
+        "0.87× MuJoCo": ratio("ball/contactlab-impulse", "ball/mujoco"),
+        "at 0.55× MuJoCo's throughput": runs["manyruns/mujoco"]["ms_per_run"]
+        / runs["manyruns/contactlab"]["defaults"]["ms_per_run"],
+    }
+    for phrase, value in expected.items():
+        assert phrase in text, phrase
+        shown = re.search(r"\d[\d,]*(?:\.\d+)?", phrase).group(0)
+        digits = len(shown.split(".")[1]) if "." in shown else -3 if shown.endswith(",000") else 0
+        assert float(shown.replace(",", "")) == round(value, digits), (phrase, value)
+
+
+def _table_rows(path):
+    """The rows of the first Markdown table of ``path``, as lists of cell texts (the header and
+    the rule left out)."""
+    lines = [line for line in path.read_text().splitlines() if line.startswith("|")]
+    return [_cells(line) for line in lines[2:]]
+
+
+def test_the_docs_figures_on_cloth_self_contact_are_the_benchmarks():
+    """docs/collision.md's cost of cloth self-contact is benchmarks/results/cloth_self.md's
+    (benchmarks/cloth_self.py): its ratios, its self-contacts, its date and load."""
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results" / "cloth_self.md"
+    rows = {row[0]: row for row in _table_rows(results)}
+    drape, fold = rows["cloth_drape, self_collision = true"], rows["folding 64 × 64, self_collision = true"]
+    date, load = re.search(r"(\d{4}-\d\d-\d\d), .*load average ([\d.]+)", results.read_text()).groups()
+    text = " ".join((root / "docs" / "collision.md").read_text().split())
+    assert f"cloth_self.md`, {date}, 2 cores, load {float(load):.1f})" in text
+    assert f"a step takes {drape[3]} as long as without self-contact" in text
+    contacts = f"{round(int(fold[5]), -2):,}".replace(",", " ")  # 2 300, as the page writes thousands
+    assert f"folding onto itself, {fold[3]}, with some {contacts} self-contacts" in text
+
+
+def test_the_docs_sweep_speedup_is_the_benchmark():
+    """docs/sweep.md's speed-up of a local cluster is benchmarks/results/sweep_speedup.md's
+    (benchmarks/sweep_speedup.py), with its date, machine, load and cells' length."""
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results" / "sweep_speedup.md"
+    idle = _table_rows(results)[0]
+    date, cpu = re.search(r"on (\d{4}-\d\d-\d\d): ([^,]+), 2 cores", results.read_text()).groups()
+    load = float(re.search(r"load ([\d.]+) at start", idle[0]).group(1))
+    text = " ".join((root / "docs" / "sweep.md").read_text().split())
+    assert f"Its committed run ({date}, {cpu}, 2 cores, load {load:.1f}) found the cluster {idle[4]} as fast" in text
+    assert f"whose cells took {round(float(idle[2]) / 16)} s each on average" in text
+
+
+def _table(text, header):
+    """{first cell: cells} of the Markdown table of ``text`` that starts with the line ``header``."""
+    lines = text.splitlines()
+    start = lines.index(header) + 2
+    rows = {}
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        cells = _cells(line)
+        rows[cells[0]] = cells
+    return rows
+
+
+def test_the_lcp_pages_figures_are_the_benchmarks():
+    """docs/lcp.md's solver figures are those of their results files: red-black against pgs
+    (results.json's lcp runs), newton against nsgs on the FCLIB files (fclib_newton.md) and
+    newton on every readable problem (fclib_newton_siconos.md), tables and sums."""
+    import json
+
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results"
+    page = (root / "docs" / "lcp.md").read_text()
+    text = " ".join(page.split())
+    lcp = json.loads((results / "results.json").read_text())["runs"]
+    pgs = lcp["lcp/pgs"]["seconds"]
+    assert f"converged {pgs / lcp['lcp/redblack']['seconds']:.2f}× as fast as `pgs` on 2 cores" in text
+    assert f"solved that pile's LCP {pgs / lcp['lcp/redblack_blocks']['seconds']:.2f}× as fast as `pgs`" in text
+    sweeps = [lcp[f"lcp/{name}"]["sweeps"] for name in ("pgs", "redblack_blocks", "redblack")]
+    assert f"({sweeps[1]} against {sweeps[0]} on the 4000-sphere pile; `redblack`'s order {sweeps[2]} there)" in text
+
+    newton = _table((results / "fclib_newton.md").read_text(), _header(results / "fclib_newton.md", "| file | nc |"))
+    shown = _table(page, "| file | nc | newton steps | newton error | newton ms | nsgs sweeps | nsgs error | nsgs ms |")
+    assert len(shown) == 15 and all(cells == newton[name][:8] for name, cells in shown.items())
+    together = [round(sum(float(cells[column]) for cells in shown.values())) for column in (4, 7)]
+    assert f"in {together[0]} ms together (nsgs: {together[1]} ms)" in text
+
+    every = _table(
+        (results / "fclib_newton_siconos.md").read_text(),
+        "| file | nc | newton iterations | newton error | newton ms |",
+    )
+    shown = _table(page, "| problem | contacts | in data/fclib | method | iterations | time (ms) | error reached |")
+    assert {name: [c[1], c[4], c[5], c[6]] for name, c in shown.items()} == {
+        name: [c[1], c[2], c[4], c[3]] for name, c in every.items()
+    }
+    slowest = sorted(every.values(), key=lambda cells: -float(cells[4]))[:2]
+    total = sum(float(cells[4]) for cells in every.values()) / 1e3
+    assert (
+        f"the slowest in {float(slowest[0][4]) / 1e3:.2f} s ({slowest[0][0].split('-')[0]}, {slowest[0][2]} steps"
+        in text
+    )
+    assert f"and {float(slowest[1][4]) / 1e3:.2f} s ({slowest[1][0].split('.')[0]}, {slowest[1][2]} steps)" in text
+    assert f"{total:.1f} s for all {len(every)}." in text
+
+
+def _header(path, start):
+    """The first line of ``path`` that starts with ``start`` (a table's header)."""
+    return next(line for line in path.read_text().splitlines() if line.startswith(start))

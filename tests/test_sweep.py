@@ -15,6 +15,7 @@ import pytest
 from conftest import alive_in_group, interruptible, messages
 
 from contactlab import InputError, closed_form, simulate
+from contactlab.compiling import NOTICE
 from contactlab.scene import load_scene
 from contactlab.scene.loader import read_source
 from contactlab.study import load_study, toml_value
@@ -613,6 +614,40 @@ def test_ctrl_c_stops_a_sweep_in_one_line_keeping_its_finished_cells_for_the_rer
     assert not alive_in_group(process.pid, 1.0)
     again = _sweep_command("study.toml", "--workers", "1", cwd=tmp_path)
     assert again.returncode == 0 and f"8 cells: {kept} done already, {8 - kept} to run" in again.stderr
+
+
+def test_a_sweep_on_a_local_cluster_says_compiling_once_however_many_workers_compile(tmp_path):
+    # issue 59: "compiling contact kernels for first use…" came once a worker, 3 times inside the
+    # sweep's progress. Each cell here first compiles a kernel no cache holds (as a cell does on
+    # an empty cache), on each of the 2 workers, then runs as a cell does.
+    script = """
+import sys, time
+import numba
+from contactlab import cli, sweep
+from contactlab.compiling import compile_notice
+
+def run_cell(job, cell=sweep.run_cell):
+    with compile_notice():
+        numba.njit(lambda x: x + 1.0)(1.0)  # a function of its own: compiled here, every time
+    time.sleep(0.5)  # no worker takes every cell
+    return cell(job)
+
+sweep.run_cell = run_cell
+sys.exit(cli.main(sys.argv[1:]))
+"""
+    study = BALL_STUDY.replace('["impulse", "constraints"]', '["impulse"]').replace("[1.0]", "[0.2]")
+    write(tmp_path, study)
+    done = subprocess.run(
+        [sys.executable, "-c", script, "sweep", "study.toml", "--workers", "2", "--out", "out"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count(NOTICE) == 1, done.stderr
+    workers = pd.read_parquet(tmp_path / "out" / "results.parquet")["worker"]
+    assert len(workers) == 4 and workers.nunique() == 2  # both compiled: each would have said it
 
 
 def test_a_single_cell_runs_here_and_says_so(tmp_path):

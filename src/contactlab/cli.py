@@ -531,6 +531,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv):
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
+    from .compiling import one_notice
+
+    with one_notice():  # "compiling contact kernels…" once, however many runs and workers compile
+        return _command(args, argv)
+
+
+def _command(args, argv):
+    """Run the command ``args`` (parsed from ``argv``); its exit code."""
     try:
         if hasattr(args, "threads"):
             from .threads import set_threads

@@ -22,7 +22,9 @@ its stated expectation allows, and ``passed``. How the tolerances are set, once 
   sample, the bound the scenes' descriptions state (and ``SINKING``, 5 mm of overlap, where
   they say nothing may sink);
 * G1 for piles, particles and cloth: no centre of a body or particle ever inside a static
-  obstacle (tolerance 0), and no overlap deeper than ``OVERLAP_SHARE`` of the smallest radius.
+  obstacle (tolerance 0), and no overlap deeper than ``OVERLAP_SHARE`` of the smallest radius;
+* a cloth that folds onto itself: no edge through the cloth (tolerance 0), and a heap whose
+  height lies between the bounds its contact distances set (:func:`_cloth_fold`).
 """
 
 from __future__ import annotations
@@ -527,6 +529,42 @@ def _domino_chain(model, arrays):
     return [Check("tilt of the last domino", "deg", 90.0, tilt, 45.0)]
 
 
+def _cloth_fold(model, arrays):
+    """A strip stood on its foot piles up on the floor in folds, layer on layer, and never passes
+    through itself. Two checks:
+
+    * no crossing: the most edges through a triangle of the cloth (its own or another cloth's,
+      ``collision.cloth_self.crossings`` over every cloth, self-contact on or off) in any sample,
+      beyond those of the first sample; expected 0, tolerance 0;
+    * the heap's height, its highest vertex above the floor at the last sample [m], between two
+      bounds that follow from the contact distances (a vertex is a particle of radius
+      ``thickness`` t: the floor holds it t above, self-contact holds two layers 2t apart):
+      at least two layers, 3t (a strip that toppled flat, or never folded onto itself, lies at t),
+      and at most every row of vertices along the strip a layer of its own resting on the one
+      below, t + (rows − 1)·2t (anything higher still stands or leans: not yet piled). A Check
+      is symmetric: expected is the middle of the two bounds, tolerance half their distance.
+    """
+    _, up = _gravity(model)
+    floor = _horizontal_floor(model, up) if model.obstacle_count else None
+    cloth = np.flatnonzero(np.asarray(model.particle_cloth) >= 0)
+    if floor is None or model.cloth_count != 1 or model.body_count or len(cloth) != model.particle_count:
+        return []
+    from .collision.cloth_self import crossings
+
+    positions = np.asarray(arrays["particle_position"], dtype=float)
+    counts = [len(crossings(model, sample, every_cloth=True)) for sample in positions]
+    thickness = float(np.min(model.particle_radius))
+    start = np.asarray(model.initial.particle_position, dtype=float)
+    along = int(np.argmax(np.ptp(start, axis=0)))  # the strip's length
+    rows = len(np.unique(np.round(start[:, along], 9)))
+    low, high = 3.0 * thickness, thickness + (rows - 1) * 2.0 * thickness
+    height = float(np.max(positions[-1] @ up) - floor)
+    return [
+        Check("edges through the cloth", "edges", 0.0, float(max(counts) - counts[0]), 0.0),
+        Check("heap height", "m", (low + high) / 2, height, (high - low) / 2),
+    ]
+
+
 _CHECKS = {
     "bouncing_ball": _bouncing_ball,
     "sliding_block": _sliding_block,
@@ -543,6 +581,7 @@ _CHECKS = {
     "capsule_pile": _kept_out,
     "particles_box": _kept_out,
     "cloth_drape": _kept_out,
+    "cloth_fold": _cloth_fold,
     "mesh_bowl": _in_the_bowl,
     "particles_bowl": _in_the_bowl,
     "domino_chain": _domino_chain,

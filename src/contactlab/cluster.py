@@ -51,7 +51,7 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING, Any
 
-from . import interrupts
+from . import compiling, interrupts
 from .errors import InputError, first_line
 from .progress import bar as progress_bar
 
@@ -476,10 +476,16 @@ def run_tasks(
     stderr (contactlab.progress: a bar on a terminal, else a line every few seconds). A
     signal (contactlab.interrupts) takes effect within :data:`POLL_SECONDS`; then, as when the
     caller stops early, the jobs in flight (a few per thread of the cluster, :class:`_Window`)
-    are cancelled, and those running stop at their next ``interrupts.check`` (:func:`_run_job`)."""
+    are cancelled, and those running stop at their next ``interrupts.check`` (:func:`_run_job`).
+    A job that compiles kernels sends the compile notice here rather than print it on its
+    worker (into the bar, once a worker): it is said once (contactlab.compiling.say: once a
+    command inside ``one_notice``, else once a call), clear of the bar."""
     from distributed import as_completed
 
     token = uuid.uuid4().hex[:8]  # task keys of this call only, on a scheduler others may share
+    heard: list[str] = []  # compile notices the jobs sent (appended in the client's thread)
+    topic = f"contactlab-compiling-{client.id}-{token}"
+    client.subscribe_topic(topic, lambda event: heard.append(event[1]))
     jobs = list(jobs)
     waiting = iter(jobs)
     futures: dict = {}  # submitted, not finished -> its key
@@ -493,6 +499,7 @@ def run_tasks(
                 _run_job,
                 [function] * len(batch),
                 [job for _, job in batch],
+                [topic] * len(batch),
                 key=[f"contactlab-{key}-{token}" for key, _ in batch],
                 pure=False,
             )
@@ -500,10 +507,19 @@ def run_tasks(
             finished.update(submitted)
 
     bar = progress_bar(len(jobs), description, "job", progress)
+    said = False
+
+    def tell():  # the first compile notice a job sent, once
+        nonlocal said
+        if heard and not said:
+            said = True
+            compiling.say(heard[0], bar.write)
+
     try:
         submit()
         while futures:
             interrupts.check()
+            tell()
             batch = finished.next_batch(block=False)
             if not batch:
                 bar.tick()  # no job finished: a line where stderr is no terminal, every few seconds still
@@ -519,10 +535,13 @@ def run_tasks(
                 bar.update(1)
                 yield key, result
             submit()
+        tell()
     finally:
         if futures:  # stopped early (a signal, the caller): cancel those in flight, in one message
             with _silenced():
                 client.cancel(list(futures))
+        with _silenced(), contextlib.suppress(Exception):  # a closed connection has no topic left to leave
+            client.unsubscribe_topic(topic)
         bar.close()
 
 
@@ -543,9 +562,10 @@ class _Window:
         return self.known
 
 
-def _run_job(function: Callable[[Any], Any], job: Any) -> Any:
+def _run_job(function: Callable[[Any], Any], job: Any, topic: str) -> Any:
     """``function(job)`` on a Dask worker, stopped at its next ``interrupts.check`` once its task
-    is cancelled or its worker is closing (then None: nobody waits for the result)."""
+    is cancelled or its worker is closing (then None: nobody waits for the result). A compile
+    notice of the job goes to the command as an event of ``topic`` (:func:`run_tasks`)."""
     from distributed import get_worker
     from distributed.core import Status
 
@@ -558,7 +578,7 @@ def _run_job(function: Callable[[Any], Any], job: Any) -> Any:
             worker.status in (Status.closing, Status.closed, Status.failed) or task is None or task.state == "cancelled"
         )
 
-    with interrupts.stoppable(asked):
+    with interrupts.stoppable(asked), compiling.notices_to(lambda message: worker.log_event(topic, message)):
         try:
             return function(job)
         except interrupts.Interrupted:

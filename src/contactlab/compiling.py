@@ -10,6 +10,11 @@ anything starts compiling, and nothing at all when everything comes from the cac
     with compile_notice():
         run_the_steps()          # "compiling contact kernels for first use…" if it compiles
 
+A command says it once, however many runs compile (a comparison's methods, a sweep's cells):
+the command line runs inside :func:`one_notice`. A job on a Dask worker does not print it where
+the command's progress bar is drawn: inside :func:`notices_to` (``contactlab.cluster``'s jobs)
+the line goes to the command that submitted the job, which says it (:func:`say`).
+
 **A cache entry is as fresh as the whole package.** Numba stamps a function's entry with its
 own source file alone, so an entry of a function that calls compiled code in other files
 outlives an edit to them: the stepping loop ``run_steps`` (``methods/velocity_loop.py``) compiles in
@@ -40,6 +45,7 @@ import hashlib
 import os
 import shutil
 import sys
+import threading
 import types as types_module
 import warnings
 from collections.abc import Callable, Iterator
@@ -61,6 +67,9 @@ except ImportError:  # no POSIX file locks (Windows): Numba's own saving, unlock
 __all__ = [
     "NOTICE",
     "FirstCompile",
+    "notices_to",
+    "one_notice",
+    "say",
     "PackageStampedLocator",
     "available_threads",
     "kernel_cache_root",
@@ -73,6 +82,54 @@ __all__ = [
 
 NOTICE = "compiling contact kernels for first use…"  # how that line starts (simulate adds how long, once)
 
+_sending = threading.local()
+"""``send``: where the notice goes instead of standard error in this thread (:func:`notices_to`; a
+worker's job compiles in its own thread, and a worker may run several jobs at once)"""
+_said_in_command: list[bool] = []
+"""one entry per :func:`one_notice` open: whether the command has said the notice"""
+
+
+def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> None:
+    """Give the compile notice ``message``: to the sender of :func:`notices_to` where one is set;
+    else once at most within :func:`one_notice` (a command), with ``write`` (default: one line on
+    ``sys.stderr``), as often as asked outside it."""
+    send = getattr(_sending, "send", None)
+    if send is not None:
+        send(message)
+        return
+    if _said_in_command:
+        if _said_in_command[-1]:
+            return
+        _said_in_command[-1] = True
+    if write is None:
+        print(message, file=sys.stderr, flush=True)
+    else:
+        write(message)
+
+
+@contextmanager
+def one_notice() -> Iterator[None]:
+    """Within the block (a command), the compile notice is said once at most, however many runs
+    compile in this process or on its cluster's workers (:func:`say`)."""
+    _said_in_command.append(False)
+    try:
+        yield
+    finally:
+        _said_in_command.pop()
+
+
+@contextmanager
+def notices_to(send: Callable[[str], None]) -> Iterator[None]:
+    """Within the block (in this thread), the compile notice is handed to ``send(message)`` instead
+    of being printed: a job on a Dask worker sends it to the command that submitted the job
+    (contactlab.cluster)."""
+    previous = getattr(_sending, "send", None)
+    _sending.send = send
+    try:
+        yield
+    finally:
+        _sending.send = previous
+
 
 def available_threads() -> int:
     """The most threads the compiled kernels can use in this process (NUMBA_NUM_THREADS)."""
@@ -80,10 +137,10 @@ def available_threads() -> int:
 
 
 class FirstCompile(event.Listener):
-    """A Numba event listener that prints ``message`` (a line, or a function giving it, called
-    then) at the first compilation it sees.
+    """A Numba event listener that says ``message`` (a line, or a function giving it, called then;
+    :func:`say`) at the first compilation it sees, on ``stream`` (default: ``sys.stderr`` as it is then).
 
-    ``said`` tells whether it has printed. Numba sends "numba:compile" only for a real
+    ``said`` tells whether it has said it. Numba sends "numba:compile" only for a real
     compilation (a function it has no cached machine code for), never for a cache load."""
 
     def __init__(self, message: str | Callable[[], str] = NOTICE, stream: TextIO | None = None) -> None:
@@ -94,8 +151,8 @@ class FirstCompile(event.Listener):
     def on_start(self, event: event.Event) -> None:
         if not self.said:
             self.said = True
-            stream = self.stream if self.stream is not None else sys.stderr
-            print(self.message if isinstance(self.message, str) else self.message(), file=stream, flush=True)
+            stream, message = self.stream, self.message if isinstance(self.message, str) else self.message()
+            say(message, None if stream is None else lambda line: print(line, file=stream, flush=True))
 
     def on_end(self, event: event.Event) -> None:
         pass
@@ -103,9 +160,10 @@ class FirstCompile(event.Listener):
 
 @contextmanager
 def compile_notice(listener: FirstCompile | None = None) -> Iterator[FirstCompile]:
-    """Within the block, the first Numba compilation prints ``NOTICE`` as one line on
-    ``sys.stderr``; yields the FirstCompile listener. Hand the same ``listener`` to several
-    blocks (one run's set-up and its steps) for one line at most over all of them."""
+    """Within the block, the first Numba compilation says ``NOTICE`` (:func:`say`: one line on
+    ``sys.stderr``, or to the command a worker's job came from); yields the FirstCompile
+    listener. Hand the same ``listener`` to several blocks (one run's set-up and its steps) for
+    one line at most over all of them."""
     listener = FirstCompile() if listener is None else listener
     with event.install_listener("numba:compile", listener):
         yield listener

@@ -35,6 +35,7 @@ import pandas as pd
 from . import cluster
 from .errors import InputError, first_line, shorten
 from .fclib import read_problem
+from .folder_lock import held
 from .lcp import natural_map_error, solve_friction_contact
 from .plots import DPI, STYLES, _figure
 from .record import atomic_path, make_folders, undo_written
@@ -249,14 +250,12 @@ def _caps(max_iterations, solvers) -> dict:
     return {solver: int(max_iterations) for solver in solvers}
 
 
-def _check_settings(tol, repeats, out):
-    """InputError unless tol is a positive finite number, repeats a whole number ≥ 1 and out no file."""
+def _check_settings(tol, repeats):
+    """InputError unless tol is a positive finite number and repeats a whole number ≥ 1."""
     if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not (0 < tol < math.inf):
         raise InputError("--tol", f"expected a positive finite tolerance, found {tol!r}.")
     if isinstance(repeats, bool) or not isinstance(repeats, numbers.Integral) or repeats < 1:
         raise InputError("--repeats", f"expected a whole number of timed solves ≥ 1, found {repeats!r}.")
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise InputError("--out", f"expected a folder for the results, found a file at {out}.")
 
 
 def bench(
@@ -273,7 +272,8 @@ def bench(
 ) -> Bench:
     """Solve every problem file of ``directory`` with every solver of ``solvers`` (default:
     all of SOLVERS) on Dask, and write results.csv, results.md and profile.png into ``out``
-    (default ``out/fclib-bench``, created if needed).
+    (default ``out/fclib-bench``, created if needed; one bench at a time writes it: a second is
+    refused with an InputError naming the first's process, contactlab.folder_lock).
 
     ``scheduler``: a Dask scheduler's address (``tcp://HOST:PORT``), or None for a local
     cluster of ``workers`` single-threaded processes (default: one per core;
@@ -289,7 +289,7 @@ def bench(
     solvers = check_solvers(solvers)
     caps = _caps(max_iterations, solvers)
     out = Path(DEFAULT_OUT if out is None else out)
-    _check_settings(tol, repeats, out)
+    _check_settings(tol, repeats)
     cluster.check_cluster(scheduler, workers)
     repeats = int(repeats)
     files = problem_files(directory)
@@ -299,26 +299,27 @@ def bench(
         for solver in solvers
     }
 
-    rows = {}
-    with cluster.connect(scheduler, workers) as client:
-        before = client.run(_machine, on_error="ignore")
-        for key, result in cluster.run_tasks(client, run_job, jobs.items(), progress, "fclib bench"):
-            rows[key] = _failed_row(jobs[key], result) if isinstance(result, BaseException) else result
-        after = client.run(_machine, on_error="ignore")
+    made = make_folders(str(out))  # InputError for an --out that is there and is not a folder
+    with held(str(out), "--out", made):  # one bench at a time writes a folder; a second is refused
+        rows = {}
+        with cluster.connect(scheduler, workers) as client:
+            before = client.run(_machine, on_error="ignore")
+            for key, result in cluster.run_tasks(client, run_job, jobs.items(), progress, "fclib bench"):
+                rows[key] = _failed_row(jobs[key], result) if isinstance(result, BaseException) else result
+            after = client.run(_machine, on_error="ignore")
 
-    table = pd.DataFrame([rows[key] for key in jobs], columns=list(COLUMNS))  # jobs' order: problems, solvers
-    table = table.astype({"contacts": "Int64", "iterations": "Int64", "converged": bool})
-    settings = dict(directory=str(directory), tol=float(tol), caps=caps, repeats=repeats)
-    return _write(table, solvers, out, settings, _machine_line(before, after))
+        table = pd.DataFrame([rows[key] for key in jobs], columns=list(COLUMNS))  # jobs' order: problems, solvers
+        table = table.astype({"contacts": "Int64", "iterations": "Int64", "converged": bool})
+        settings = dict(directory=str(directory), tol=float(tol), caps=caps, repeats=repeats)
+        return _write(table, solvers, out, settings, _machine_line(before, after))
 
 
 # ----------------------------------------------------------------------------- the files
 
 
 def _write(table, solvers, out, settings, machine) -> Bench:
-    """results.csv, results.md and profile.png of ``table`` into ``out``; on failure the files
-    this call wrote are removed (and the folders it created)."""
-    made = make_folders(str(out))
+    """results.csv, results.md and profile.png of ``table`` into the folder ``out``; on failure
+    the files this call wrote are removed."""
     paths = Bench(table, out / "results.csv", out / "results.md", out / "profile.png", out)
     written = []
     try:
@@ -336,7 +337,7 @@ def _write(table, solvers, out, settings, machine) -> Bench:
             figure.savefig(temporary, format="png", dpi=DPI)
         written.append(str(paths.profile_png))
     except BaseException:
-        undo_written(written, made)
+        undo_written(written)
         raise
     return paths
 

@@ -1,4 +1,4 @@
-"""One writer at a time for an output folder: every command's ``--out`` but fclib bench's.
+"""One writer at a time for an output folder: every command's ``--out``.
 
 Two runs into one folder at once would each write trajectory.h5, summary.json and the plots,
 and the folder would hold the last finisher's files while both said they wrote them. So the

@@ -8,6 +8,7 @@ filling a log with carriage returns.
         shown.restart()       # count again from 0, the clock started anew
         shown.update(600)     # on a terminal the bar moves; elsewhere a line at most every 5 s:
         shown.tick()          #   "box_pyramid (impulse): 600/1200 steps (50 %) after 5 s"
+        shown.write("a line") # printed clear of the bar
 
 A terminal bar appears only for work longer than BAR_DELAY and is erased when it closes, so
 the summary a command prints next starts on a clean line.
@@ -27,7 +28,8 @@ BAR_DELAY = 1.0  # s: a terminal bar shows only for work that lasts longer than 
 
 class _Progress:
     """What every kind of progress answers: ``update(n)`` (n more units done), ``restart()``
-    (count from 0 again), ``tick()`` (nothing done, time passed) and ``close()``; a context manager."""
+    (count from 0 again), ``tick()`` (nothing done, time passed), ``write(line)`` (a line of
+    news, clear of the progress) and ``close()``; a context manager."""
 
     def update(self, count: int = 1) -> None:
         pass
@@ -40,6 +42,10 @@ class _Progress:
 
     def close(self) -> None:
         pass
+
+    def write(self, line: str) -> None:
+        """Print ``line`` on standard error, clear of the progress (a bar is drawn again below it)."""
+        print(line, file=sys.stderr, flush=True)
 
     def __enter__(self) -> _Progress:
         return self
@@ -72,6 +78,9 @@ class _Bar(_Progress):
     def close(self) -> None:
         self._bar.close()
 
+    def write(self, line: str) -> None:
+        tqdm.write(line, file=self._arguments["file"])
+
 
 class _Lines(_Progress):
     """A plain line on ``stream`` at most every PLAIN_SECONDS, the first after PLAIN_SECONDS:
@@ -85,6 +94,9 @@ class _Lines(_Progress):
     def update(self, count: int = 1) -> None:
         self._done += count
         self.tick()
+
+    def write(self, line: str) -> None:
+        print(line, file=self._stream, flush=True)
 
     def restart(self) -> None:
         self._done = 0

@@ -63,7 +63,8 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class ClothElements:
-    """The elements of the cloths whose ``self_collision`` is on (global particle indices)."""
+    """The elements of the cloths whose ``self_collision`` is on, or of every cloth
+    (:func:`every_cloth_element`), by global particle indices."""
 
     triangles: np.ndarray
     """(F', 3) int64, the corners of each triangle"""
@@ -82,9 +83,24 @@ class ClothElements:
 @derived
 def cloth_elements(model: Model) -> ClothElements:
     """The ClothElements of ``model``, built once and kept with it."""
+    return _elements(model, only_self_colliding=True)
+
+
+@derived
+def every_cloth_element(model: Model) -> ClothElements:
+    """The elements of every cloth of ``model``, its ``self_collision`` on or off (what a
+    crossing is counted on where the cloth was let pass through itself), built once and kept."""
+    return _elements(model, only_self_colliding=False)
+
+
+def _elements(model: Model, only_self_colliding: bool) -> ClothElements:
+    """The ClothElements of the cloths of ``model`` whose self_collision is on, or of all."""
     triangles = np.asarray(model.triangles, dtype=np.int64).reshape(-1, 3)
     cloth = model.particle_cloth[triangles[:, 0]] if len(triangles) else np.zeros(0, dtype=np.int64)
-    chosen = np.nonzero(np.asarray(model.cloth_self_collision, dtype=bool)[cloth])[0] if len(triangles) else cloth
+    flags = np.asarray(model.cloth_self_collision, dtype=bool)
+    if not only_self_colliding:
+        flags = np.ones_like(flags)
+    chosen = np.nonzero(flags[cloth])[0] if len(triangles) else cloth
     kept = triangles[chosen]
     edges = np.sort(kept[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     edges = np.unique(edges, axis=0) if len(edges) else np.zeros((0, 2), dtype=np.int64)
@@ -553,11 +569,12 @@ def _materials(a: int, b: int, material_friction: np.ndarray, material_restituti
 # ---- crossings: the health check's test --------------------------------------------------------
 
 
-def crossings(model: Model, particle_position: np.ndarray) -> np.ndarray:
-    """The (edge, triangle) pairs (K, 2) of the self-colliding cloths at ``particle_position``
-    (P, 3) [m] where an edge passes through a triangle it has no corner of: indices into
-    ``cloth_elements(model).edges`` and ``.triangles``. None is the goal of self-contact."""
-    elements = cloth_elements(model)
+def crossings(model: Model, particle_position: np.ndarray, every_cloth: bool = False) -> np.ndarray:
+    """The (edge, triangle) pairs (K, 2) of the self-colliding cloths (``every_cloth``: of all
+    cloths) at ``particle_position`` (P, 3) [m] where an edge passes through a triangle it has no
+    corner of: indices into ``cloth_elements(model)`` (``every_cloth_element(model)``)'s
+    ``edges`` and ``triangles``. None is the goal of self-contact."""
+    elements = every_cloth_element(model) if every_cloth else cloth_elements(model)
     if elements.empty:
         return np.zeros((0, 2), dtype=np.int64)
     return edge_triangle_crossings(

@@ -378,6 +378,60 @@ def _write_method(outcome, out, created):
     outcome.files = files
 
 
+def _method_files(directory: str) -> list[str]:
+    """The files a comparison writes into a method's folder ``directory`` (:func:`_write_method`,
+    :func:`run_method`): trajectory.h5 (trajectory.npz of an older contactlab), summary.json,
+    the plots, the video, GIF and still."""
+    from ..plots import PLOTS
+    from ..render import FORMATS, output_paths
+
+    return [
+        os.path.join(directory, TRAJECTORY),
+        os.path.join(directory, "trajectory.npz"),
+        os.path.join(directory, "summary.json"),
+        *(os.path.join(directory, "plots", f"{name}.png") for name in PLOTS),
+        *output_paths(directory, FORMATS).values(),
+    ]
+
+
+def _remove_earlier_methods(out: str, kept: set[str]) -> list[str]:
+    """Remove what an earlier comparison into ``out`` left of the methods (and peers) that this
+    one did not run (``kept``: the names whose folders it wrote). A folder counts only where it
+    is recognisably a method's run: named after a method or a peer
+    (contactlab.methods.AVAILABLE, contactlab.peers.PEERS), holding a trajectory or a
+    summary.json. From it go the files a comparison writes there (:func:`_method_files`) and
+    those a stopped worker left half-written (``.partial-*``); the folder goes where nothing else
+    is left in it, so a file of the user's, and its folder, stay. A file that cannot be removed
+    is warned of in one line and left. Returns the folders removed."""
+    from ..methods import AVAILABLE
+    from ..peers import PEERS
+
+    removed = []
+    for name in (*AVAILABLE, *PEERS):
+        directory = os.path.join(out, name)
+        files = _method_files(directory)
+        if name in kept or not any(os.path.isfile(path) for path in files[:3]):
+            continue
+        try:
+            for folder in (directory, os.path.join(directory, "plots")):
+                if os.path.isdir(folder):
+                    half_written = [entry for entry in os.listdir(folder) if entry.startswith(".partial-")]
+                    files += [os.path.join(folder, entry) for entry in half_written]
+            for path in files:
+                if os.path.isfile(path):
+                    os.unlink(path)
+        except OSError as error:
+            warnings.warn(
+                f"the earlier comparison's {directory} is left: cannot remove {error.filename} ({error.strerror})",
+                stacklevel=2,
+            )
+            continue
+        remove_empty([directory, os.path.join(directory, "plots")])
+        if not os.path.exists(directory):
+            removed.append(directory)
+    return removed
+
+
 def compare(
     scene_source: str | os.PathLike[str],
     methods: str | Sequence[str] | None = None,
@@ -461,5 +515,8 @@ def compare(
     except BaseException:
         created.remove()
         raise
-    created.unlock()
+    try:  # this comparison's reports are written: the folder is this comparison's alone
+        _remove_earlier_methods(out, {outcome.method for outcome in outcomes if outcome.files})
+    finally:
+        created.unlock()
     return comparison
