@@ -32,13 +32,23 @@ def present(families):
     return {name for name, flag in zip(FAMILIES, families) if flag is not None}
 
 
-def test_a_ball_on_the_floor_needs_sphere_plane_alone():
-    b = ModelBuilder()
-    b.add_body("sphere", radius=0.1, mass=1, position=(0, 0, 1))
-    b.add_obstacle("plane", normal=(0, 0, 1))
-    model = b.finalize()
-    assert present(pair_families(model)) == {"sphere_plane"}
-    assert not needs_hulls(pair_families(model))
+def test_a_ball_on_the_floor_compiles_the_round_pairs_alone_as_a_pile_of_balls_does():
+    """Families follow the kinds present, not how many of each: one ball on the floor compiles
+    sphere–plane and sphere–sphere (never met, a branch not taken) and so the loop of a pile of
+    balls on the floor; one box on the floor, that of a stack of boxes."""
+
+    def families(shape, count, **size):
+        b = ModelBuilder()
+        for i in range(count):
+            b.add_body(shape, mass=1, position=(0, 0, 1 + i), **size)
+        b.add_obstacle("plane", normal=(0, 0, 1))
+        return pair_families(b.finalize())
+
+    assert present(families("sphere", 1, radius=0.1)) == {"sphere_sphere", "sphere_plane"}
+    assert families("sphere", 1, radius=0.1) == families("sphere", 5, radius=0.1)
+    assert not needs_hulls(families("sphere", 1, radius=0.1))
+    assert present(families("box", 1, half_extents=(0.1,) * 3)) == {"box_box", "box_plane"}
+    assert families("box", 1, half_extents=(0.1,) * 3) == families("box", 3, half_extents=(0.1,) * 3)
 
 
 def test_scene_families_pair_dynamic_shapes_with_each_other_and_with_the_obstacles():
