@@ -183,3 +183,17 @@ def test_old_kernel_folders_are_pruned_to_the_most_recent(tmp_path, monkeypatch)
         "contactlab-00000000000000000004-numba0.1",
         "otherpackage-0-numba0.1",
     ]
+
+
+def test_a_probe_that_met_no_contact_does_not_speak_for_a_scene_of_many_colliders():
+    """sphere_pile's first steps are in the air (no contact, cheap as Python) where its run ends in
+    a pile of a thousand contacts (seconds a step as Python): its probe answers infinity, so the
+    run compiles; a scene of a few colliders (the ball, also in the air) keeps its probe's time."""
+    import math
+
+    from contactlab.first_run import FEW_COLLIDERS, probe
+
+    pile, ball = load_scene("sphere_pile"), load_scene("bouncing_ball")
+    assert pile.model.body_count + pile.model.particle_count > FEW_COLLIDERS
+    assert probe(pile, 480) == math.inf
+    assert 0.0 < probe(ball, 480) < math.inf

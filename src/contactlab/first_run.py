@@ -6,6 +6,7 @@ docs/cli.md, "Compiled or stepped as Python").
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -22,6 +23,7 @@ CHOICE = "CONTACTLAB_KERNELS"  # set by settle() for the process it starts again
 INTERPRET_SHARE = 0.5  # step as Python where that takes at most this share of the compile it saves
 PROBE_STEPS = 10  # the steps a probe times
 PROBE_SECONDS = 1.0  # the most those may take by the first step's time, else the first step's time tells
+FEW_COLLIDERS = 12  # bodies and particles: a probe without a contact still bounds such a scene's steps
 
 
 def probe(scene: Scene, steps: int) -> float:
@@ -29,27 +31,38 @@ def probe(scene: Scene, steps: int) -> float:
     (what a run sets up once, and first uses, in it) untimed, then one of one step and one of
     PROBE_STEPS more, whose difference is the cost of a step (the second only where the first says
     it takes at most about PROBE_SECONDS). Runs nothing of the real run: no file, no output;
-    a probe the scene stops early (it diverges) counts as cheap: the run itself then says why."""
+    a probe the scene stops early (it diverges) counts as cheap: the run itself then says why.
+
+    Steps without a contact are cheap as Python, those of a pile at rest are not (sphere_pile:
+    under 0.1 s a step in the air, seconds once its thousand contacts form): where the probe's
+    steps met no contact and the scene holds more than FEW_COLLIDERS bodies and particles, what
+    they cost says nothing of the run's, and the answer is infinite (compile). A scene of a few
+    colliders has few contacts whatever happens, and its probe stands."""
     from .errors import SimulationDiverged
     from .simulation import simulate
+
+    met = [0]  # the most contacts a probe run met
 
     def seconds(count: int) -> float:
         started = time.perf_counter()
         with warnings.catch_warnings():  # the run itself says what the scene warrants
             warnings.simplefilter("ignore")
             try:
-                simulate(scene.model, scene.method, scene.dt, count * scene.dt, options, scene.integrator)
+                run = simulate(scene.model, scene.method, scene.dt, count * scene.dt, options, scene.integrator)
             except SimulationDiverged:
                 return 0.0
+        met[0] = max(met[0], int(run.summary["max_contacts"]))
         return time.perf_counter() - started
 
     options = scene.options[scene.method]
     seconds(1)
     once = seconds(1)  # what a run costs besides its steps, and one step
     if once * PROBE_STEPS > PROBE_SECONDS or steps <= PROBE_STEPS:  # slow steps, or few: that is enough
-        return once * steps
-    step = max(0.0, seconds(1 + PROBE_STEPS) - once) / PROBE_STEPS
-    return once + step * (steps - 1)
+        needed = once * steps
+    else:
+        needed = once + max(0.0, seconds(1 + PROBE_STEPS) - once) / PROBE_STEPS * (steps - 1)
+    colliders = scene.model.body_count + scene.model.particle_count
+    return needed if met[0] > 0 or colliders <= FEW_COLLIDERS else math.inf
 
 
 def settle(scene: Scene, steps: int, restart: bool) -> None:
