@@ -94,8 +94,9 @@ def scene_families(dynamic_kinds: np.ndarray, static_kinds: np.ndarray) -> tuple
     included, and of a dynamic kind with a static one.
 
     A kind's pair with itself is compiled in even where the scene holds one collider of it: a
-    box on the floor and a stack of boxes then compile one loop, not two (the routine costs a
-    few seconds once; a second loop costs tens), and a dispatch branch never taken costs nothing.
+    box on the floor and a stack of boxes then share their families, and so their kind of run
+    (``kernel_variants.variant_of``), where a second loop would cost tens of seconds and the
+    routine a few; a dispatch branch never taken costs nothing.
 
     dynamic_kinds: (B + P,) the bodies' kinds and POINT per particle; static_kinds: (O,)."""
     kinds = np.unique(np.asarray(dynamic_kinds, dtype=np.int64)).tolist()
