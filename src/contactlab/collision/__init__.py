@@ -110,7 +110,7 @@ Colliders = namedtuple(
         "obstacle_position",  # (O, 3) [m]
         "obstacle_rotation",  # (O, 3, 3) obstacle → world
         # (B + P,) int64 the cloth of each body and particle (−1: none), whose vertices make no
-        # pair with one another; None under two bodies and particles (``dynamic_pairs_possible``)
+        # pair with one another
         "cloth_of",
         "body_count",  # B
     ),
@@ -124,7 +124,6 @@ B+P..N−1: what does not move. Writable copies (Numba types a read-only array a
 def colliders(model: Model) -> Colliders:
     """The Colliders of ``model``, built on first use and kept with it."""
     kinds, params, materials, obstacle_rotation = model.collider_table
-    dynamic = model.body_count + model.particle_count
     copy = np.array  # np.array copies: a writable, contiguous array
     return Colliders(
         copy(kinds, dtype=np.int64),
@@ -135,7 +134,7 @@ def colliders(model: Model) -> Colliders:
         copy(model.material_restitution, dtype=float),
         copy(model.obstacle_position, dtype=float),
         copy(obstacle_rotation, dtype=float),
-        dynamic_cloth(model) if dynamic_pairs_possible(dynamic) else None,
+        dynamic_cloth(model),
         model.body_count,
     )
 
@@ -251,23 +250,19 @@ def candidate_pairs(
     rots: np.ndarray,
     reach: np.ndarray,
     dynamic: int,
-    cloth_of: np.ndarray | None,
+    cloth_of: np.ndarray,
     large: bool | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The broad phase: (lower, upper) bounds (N, 3) [m] of the colliders grown by ``reach``
     (N,) [m], and the candidate pairs (K, 2) int64 — the dynamic pairs (colliders 0 … dynamic−1)
     whose bounds overlap, sorted, then each dynamic collider against the static obstacles
     (``static_pairs``; meshes apart). ``cloth_of`` (dynamic,) int: the cloth of each dynamic
-    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart);
-    None for a scene of fewer than two dynamic colliders, which has no dynamic pair: the sweep
-    is then not compiled (``dynamic_pairs_possible``). ``large``: as
+    collider (−1 none); two vertices of one cloth make no pair (their springs keep them apart).
+    Always an array, so that a lone body's run compiles the same loop as a stack's (one kind of
+    run, not one per count). ``large``: as
     ``broad_phase.boxes_overlapping`` takes it."""
     lower, upper = _bounds(kinds, params, centers, rots, reach)
     statics = static_pairs(lower, upper, kinds, params, dynamic)
-    # a branch on a None argument: Numba drops the rest before typing (a ball on the floor
-    # compiles no sweep and prune, about 2 s of a cold start)
-    if cloth_of is None:
-        return lower, upper, statics
     if dynamic < 2:  # one body or none: its static pairs are all (no empty sweep, no copy a step)
         return lower, upper, statics
     dynamic_pairs = boxes_overlapping(lower[:dynamic], upper[:dynamic], large)
@@ -283,12 +278,6 @@ def candidate_pairs(
         pairs[count, 0], pairs[count, 1] = statics[k, 0], statics[k, 1]
         count += 1
     return lower, upper, pairs[:count]
-
-
-def dynamic_pairs_possible(dynamic: int) -> bool:
-    """Whether ``dynamic`` bodies and particles can make a dynamic pair (at least two):
-    otherwise ``candidate_pairs`` takes ``cloth_of`` None and compiles no sweep."""
-    return dynamic >= 2
 
 
 @njit(cache=True, inline="always")

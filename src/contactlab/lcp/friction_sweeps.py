@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..compiling import njit
+from ..ordered_sums import dot
 from .disk import _disk_solve
 
 _SQRT_HALF = math.sqrt(0.5)
@@ -161,10 +162,7 @@ def _start(indptr, indices, data, q, mu, r, pyramid):
     of r) for r (m,), q (m,) with m = 3 nc."""
     m = q.shape[0]
     u = np.empty(m)
-    norm_q = 0.0  # in index order, as compiled: NumPy's sum (run as Python) would pair the terms up
-    for i in range(m):
-        norm_q += q[i] * q[i]
-    norm_q = math.sqrt(norm_q)
+    norm_q = math.sqrt(dot(q, q))  # in index order: the same bits compiled and as Python
     return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
 
 

@@ -269,10 +269,9 @@ def loop_inputs(model: Model, state: State, method: str) -> tuple[LoopModel, Mot
 # airborne step before this, most of its time; 442 since). So the small kernels a step and its
 # sample call are inlined here: the same Python functions, as dispatchers of their own that Numba
 # inlines (their own dispatchers stay as they are for every other caller), and Numba's
-# reference-count pruning then drops many of the pairs. Not the broad phase: it takes
-# ``cloth_of`` None in a scene that can have no dynamic pair so that Numba drops its sweep
-# before typing, a pruning of arguments that an inlined copy (whose arguments are no longer
-# arguments) does not get.
+# reference-count pruning then drops many of the pairs. Not detection: its Plan's None families
+# leave their routines uncompiled, a pruning of arguments that an inlined copy (whose arguments
+# are no longer arguments) does not get.
 collider_poses = inlined(collision.collider_poses)
 detect = collision.detect
 # stages 1 (under gravity) and 2, as the methods' steps run them

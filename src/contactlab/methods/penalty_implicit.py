@@ -22,6 +22,7 @@ import scipy.sparse as sp
 from ..compiling import njit
 from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import factor_symmetric
+from ..ordered_sums import dot
 from ..rotations import world_tensors
 from .jacobian_rows import ContactRows, along_rows, contact_velocity, row_products
 from .penalty_springs import ContactSprings, SpringSettings
@@ -155,16 +156,6 @@ def system_diagonal(system: SpringSystem) -> np.ndarray:
     return diagonal
 
 
-@njit(cache=True, inline="always")
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """a · b of two (N,) arrays, summed in index order: the same bits compiled and as Python
-    (``np.dot`` calls a BLAS whose summation order differs between NumPy's and Numba's builds)."""
-    total = 0.0
-    for i in range(a.shape[0]):
-        total += a[i] * b[i]
-    return total
-
-
 @njit(cache=True)
 def spring_conjugate_gradients(
     system: SpringSystem, rhs: np.ndarray, guess: np.ndarray, tolerance: float, most: int
@@ -182,17 +173,17 @@ def spring_conjugate_gradients(
         r[i] = rhs[i] - Ap[i]
         z[i] = r[i] / diagonal[i]
         p[i] = z[i]
-    scale = max(np.sqrt(_dot(rhs, rhs)), 1e-300)
-    rz = _dot(r, z)
+    scale = max(np.sqrt(dot(rhs, rhs)), 1e-300)
+    rz = dot(r, z)
     iterations = 0
-    while iterations < most and np.sqrt(_dot(r, r)) > tolerance * scale and rz != 0.0:
+    while iterations < most and np.sqrt(dot(r, r)) > tolerance * scale and rz != 0.0:
         system_product(system, p, kept, Ap)
-        alpha = rz / _dot(p, Ap)
+        alpha = rz / dot(p, Ap)
         for i in range(N):
             x[i] += alpha * p[i]
             r[i] -= alpha * Ap[i]
             z[i] = r[i] / diagonal[i]
-        following = _dot(r, z)
+        following = dot(r, z)
         beta = following / rz
         for i in range(N):
             p[i] = z[i] + beta * p[i]
@@ -201,7 +192,7 @@ def spring_conjugate_gradients(
     system_product(system, x, kept, Ap)
     for i in range(N):
         Ap[i] -= rhs[i]
-    return x, np.sqrt(_dot(Ap, Ap)) / scale, iterations
+    return x, np.sqrt(dot(Ap, Ap)) / scale, iterations
 
 
 @njit(cache=True)

@@ -188,7 +188,7 @@ def guess_new_impulses(
     positions: tuple[np.ndarray, np.ndarray],
     loads: tuple,
     settings: LoopSettings,
-    pairs: np.ndarray | None,
+    cloth_of: np.ndarray,
 ) -> None:
     """The warm start of the contacts that carry nothing from the last step (``found`` (C,) False):
     the weight each would bear at rest, over the step. ``warm`` (C, 3) [N s] holds the carried
@@ -200,10 +200,9 @@ def guess_new_impulses(
     (P,)) [kg], gravity (3,) [m/s²]).
 
     A scene of fewer than LOAD_PATH_FROM bodies and particles has no load path to build (its
-    one body's contacts find its weight in a sweep or two): nothing is guessed there. ``pairs``
-    is ``Colliders.cloth_of`` (the cloth of each body and particle, whose springs carry its weight
-    in the load path), None in exactly such a scene (no dynamic pair possible), and as an
-    argument typed None it leaves the load path uncompiled there (2 s of a ball's first run).
+    one body's contacts find its weight in a sweep or two): nothing is guessed there.
+    ``cloth_of`` is ``Colliders.cloth_of`` (the cloth of each body and particle, whose springs
+    carry its weight in the load path).
 
     Why: started from zero, a stack must build its load path sweep by sweep, the weight of the
     top box reaching the floor only after as many sweeps as there are levels; started from the
@@ -211,8 +210,6 @@ def guess_new_impulses(
     of it in the first second. The solve itself, and so its answer to the tolerance, is
     unchanged: a guess too large (an impact, a contact about to open) is taken back by the
     accumulated clamping like any warm start."""
-    if pairs is None:  # typed None: a scene with no dynamic pair, whose load path Numba leaves uncompiled
-        return
     fraction, h = settings.warm_start, settings.dt
     (body_position, particle_position), gravity = positions, loads[2]
     B = body_position.shape[0]
@@ -223,7 +220,7 @@ def guess_new_impulses(
         entities_of(contacts.body_a, contacts.particles_a, B),
         entities_of(contacts.body_b, contacts.particles_b, B),
     )
-    weights = supported_loads(sides, contacts.normal, positions, loads, pairs)
+    weights = supported_loads(sides, contacts.normal, positions, loads, cloth_of)
     for c in range(found.shape[0]):
         if found[c]:
             continue
