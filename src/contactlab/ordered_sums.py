@@ -12,7 +12,7 @@ from .compiling import njit
 
 
 @njit(cache=True, inline="always")  # inlined: conjugate gradients call it in their loop
-def dot(a: np.ndarray, b: np.ndarray) -> float:
+def ordered_dot(a: np.ndarray, b: np.ndarray) -> float:
     """a · b of two (N,) arrays, summed from index 0 up."""
     total = 0.0
     for i in range(a.shape[0]):

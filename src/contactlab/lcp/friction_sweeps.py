@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..compiling import njit
-from ..ordered_sums import dot
+from ..ordered_sums import ordered_dot
 from .disk import _disk_solve
 
 _SQRT_HALF = math.sqrt(0.5)
@@ -162,7 +162,7 @@ def _start(indptr, indices, data, q, mu, r, pyramid):
     of r) for r (m,), q (m,) with m = 3 nc."""
     m = q.shape[0]
     u = np.empty(m)
-    norm_q = math.sqrt(dot(q, q))  # in index order: the same bits compiled and as Python
+    norm_q = math.sqrt(ordered_dot(q, q))  # in index order: the same bits compiled and as Python
     return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
 
 

@@ -22,7 +22,7 @@ import scipy.sparse as sp
 from ..compiling import njit
 from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import factor_symmetric
-from ..ordered_sums import dot
+from ..ordered_sums import ordered_dot
 from ..rotations import world_tensors
 from .jacobian_rows import ContactRows, along_rows, contact_velocity, row_products
 from .penalty_springs import ContactSprings, SpringSettings
@@ -173,17 +173,17 @@ def spring_conjugate_gradients(
         r[i] = rhs[i] - Ap[i]
         z[i] = r[i] / diagonal[i]
         p[i] = z[i]
-    scale = max(np.sqrt(dot(rhs, rhs)), 1e-300)
-    rz = dot(r, z)
+    scale = max(np.sqrt(ordered_dot(rhs, rhs)), 1e-300)
+    rz = ordered_dot(r, z)
     iterations = 0
-    while iterations < most and np.sqrt(dot(r, r)) > tolerance * scale and rz != 0.0:
+    while iterations < most and np.sqrt(ordered_dot(r, r)) > tolerance * scale and rz != 0.0:
         system_product(system, p, kept, Ap)
-        alpha = rz / dot(p, Ap)
+        alpha = rz / ordered_dot(p, Ap)
         for i in range(N):
             x[i] += alpha * p[i]
             r[i] -= alpha * Ap[i]
             z[i] = r[i] / diagonal[i]
-        following = dot(r, z)
+        following = ordered_dot(r, z)
         beta = following / rz
         for i in range(N):
             p[i] = z[i] + beta * p[i]
@@ -192,7 +192,7 @@ def spring_conjugate_gradients(
     system_product(system, x, kept, Ap)
     for i in range(N):
         Ap[i] -= rhs[i]
-    return x, np.sqrt(dot(Ap, Ap)) / scale, iterations
+    return x, np.sqrt(ordered_dot(Ap, Ap)) / scale, iterations
 
 
 @njit(cache=True)
