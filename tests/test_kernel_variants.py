@@ -8,7 +8,8 @@ import subprocess
 import sys
 
 from contactlab import kernel_variants
-from contactlab.compiling import NOTICE, PackageStampedLocator
+from contactlab.compare import compare
+from contactlab.compiling import NOTICE, PackageStampedLocator, one_notice
 from contactlab.first_run import CHOICE
 from contactlab.methods import get, make_options
 from contactlab.scene import load_scene
@@ -67,6 +68,24 @@ def test_the_compile_estimate_is_the_median_of_this_machines_compiles(tmp_path, 
     assert kernel_variants.compile_estimate() == 40.0  # loads (0 s) left out
     (tmp_path / kernel_variants.VARIANTS_FILE).write_text("not json")
     assert kernel_variants.compiled_variants() == {}  # a damaged record: every kind probes again
+
+
+def test_a_compare_of_kinds_not_compiled_says_their_wait_together_once(tmp_path, monkeypatch, capsys):
+    """A compare whose kinds this machine has no record of says, once and before its runs, the
+    wait of all of them: impulse and constraints share a loop, projection has its own, so two
+    kinds at the 45 s estimate (nothing recorded) each. Measured before: ``compare box_pyramid``
+    said "about 45 s" and compiled for 225 s. Once recorded, nothing is said."""
+    monkeypatch.setattr(kernel_variants, "_record", lambda: tmp_path / kernel_variants.VARIANTS_FILE)
+    methods = ["impulse", "constraints", "projection"]
+    with one_notice():  # as a command runs it: the notice once, whatever the runs then compile
+        compare("bouncing_ball", methods, tmp_path / "a", duration=0.02, video=False, workers=1)
+    said = [line for line in capsys.readouterr().err.splitlines() if line.startswith(NOTICE)]
+    total = 2 * kernel_variants.DEFAULT_COMPILE_SECONDS
+    assert len(said) == 1 and f"about {total:.0f} s on this machine for 2 kinds of run" in said[0], said
+    assert len(kernel_variants.compiled_variants()) == 2  # the runs recorded both kinds
+    with one_notice():
+        compare("bouncing_ball", methods, tmp_path / "b", duration=0.02, video=False, workers=1)
+    assert NOTICE not in capsys.readouterr().err
 
 
 def test_an_uncachable_kernel_warns_instead_of_failing(tmp_path):

@@ -33,6 +33,7 @@ import json
 import os
 import statistics
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -42,6 +43,7 @@ from .compiling import PackageStampedLocator
 
 if TYPE_CHECKING:
     from .model import Model
+    from .scene import Scene
 
 VARIANTS_FILE = "variants.json"
 DEFAULT_COMPILE_SECONDS = 45.0  # a first kind on 2 cores (the demo's loop: 51–64 s; another kind 30–40 s)
@@ -120,10 +122,24 @@ def compile_estimate() -> float:
     return float(statistics.median(spent)) if spent else DEFAULT_COMPILE_SECONDS
 
 
-def compiling_notice() -> str:
-    """The line a run that compiles prints as it starts to: that it compiles, for about how long
-    here (:func:`compile_estimate`), and that it happens once."""
+def compiling_notice(kinds: int = 1) -> str:
+    """The line a run (or a command of several runs) that compiles prints as it starts to: that
+    it compiles, for about how long here (:func:`compile_estimate` for each of ``kinds`` kinds of
+    run), and that it happens once."""
+    many = f" for {kinds} kinds of run" if kinds > 1 else ""
     return (
-        f"compiling contact kernels for first use… about {compile_estimate():.0f} s on this machine, "
+        f"compiling contact kernels for first use… about {kinds * compile_estimate():.0f} s on this machine{many}, "
         "once (later runs load them from the cache; 'contactlab compile' builds every kind ahead)"
     )
+
+
+def uncompiled(scenes: Iterable[Scene]) -> set[str]:
+    """The kinds of run among ``scenes`` (each stepped by its own method, options and integrator)
+    that this machine has no record of compiling: what a command of those runs will compile. Runs
+    the compiled loop does not step (cloth, meshes) are left out, and everything is where the
+    kernels run as Python."""
+    if interpreted():
+        return set()
+    known = compiled_variants()
+    kinds = {variant_of(scene.model, scene.method, scene.options[scene.method], scene.integrator) for scene in scenes}
+    return {kind for kind in kinds if kind is not None and kind not in known}

@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from .. import cluster, interrupts
+from .. import cluster, compiling, interrupts, kernel_variants
 from .. import peers as peers_package
 from ..closed_form import Check
 from ..errors import InputError, SimulationDiverged
@@ -243,6 +243,10 @@ def _run_all(
                 },
             )
         )
+    # a compare of several kinds of run compiles each: the wait said is theirs together, once
+    pending = kernel_variants.uncompiled(scenes[name] for name, _ in jobs if name not in peer_names)
+    if len(pending) > 1:
+        compiling.say(kernel_variants.compiling_notice(len(pending)))
     if _parallel(workers, scheduler, scenes, video is not None):
         before = stamps(_outputs(jobs))
         try:
