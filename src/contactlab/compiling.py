@@ -67,6 +67,7 @@ except ImportError:  # no POSIX file locks (Windows): Numba's own saving, unlock
 __all__ = [
     "NOTICE",
     "FirstCompile",
+    "expect",
     "notices_to",
     "one_notice",
     "say",
@@ -87,6 +88,8 @@ _sending = threading.local()
 worker's job compiles in its own thread, and a worker may run several jobs at once)"""
 _said_in_command: list[bool] = []
 """one entry per :func:`one_notice` open: whether the command has said the notice"""
+_command_notice: list[str | None] = []
+"""one entry per :func:`one_notice` open: the notice the command says in place of a run's (:func:`expect`)"""
 
 
 def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> None:
@@ -101,6 +104,7 @@ def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> No
         if _said_in_command[-1]:
             return
         _said_in_command[-1] = True
+        message = _command_notice[-1] or message
     if write is None:
         print(message, file=sys.stderr, flush=True)
     else:
@@ -112,10 +116,20 @@ def one_notice() -> Iterator[None]:
     """Within the block (a command), the compile notice is said once at most, however many runs
     compile in this process or on its cluster's workers (:func:`say`)."""
     _said_in_command.append(False)
+    _command_notice.append(None)
     try:
         yield
     finally:
         _said_in_command.pop()
+        _command_notice.pop()
+
+
+def expect(message: str) -> None:
+    """Within :func:`one_notice` (a command), the notice said at the command's first compile, if
+    one comes, in place of the compiling run's own: a command of several kinds of run says the
+    wait of all of them. Outside a command, nothing."""
+    if _command_notice:
+        _command_notice[-1] = message
 
 
 @contextmanager

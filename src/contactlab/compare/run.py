@@ -243,10 +243,10 @@ def _run_all(
                 },
             )
         )
-    # a compare of several kinds of run compiles each: the wait said is theirs together, once
+    # a compare of several kinds of run compiles each: its compile notice says their wait together
     pending = kernel_variants.uncompiled(scenes[name] for name, _ in jobs if name not in peer_names)
     if len(pending) > 1:
-        compiling.say(kernel_variants.compiling_notice(len(pending)))
+        compiling.expect(kernel_variants.compiling_notice(len(pending)))
     if _parallel(workers, scheduler, scenes, video is not None):
         before = stamps(_outputs(jobs))
         try:
