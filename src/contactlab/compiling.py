@@ -86,10 +86,9 @@ NOTICE = "compiling contact kernels for first use…"  # how that line starts (s
 _sending = threading.local()
 """``send``: where the notice goes instead of standard error in this thread (:func:`notices_to`; a
 worker's job compiles in its own thread, and a worker may run several jobs at once)"""
-_said_in_command: list[bool] = []
-"""one entry per :func:`one_notice` open: whether the command has said the notice"""
-_command_notice: list[str | None] = []
-"""one entry per :func:`one_notice` open: the notice the command says in place of a run's (:func:`expect`)"""
+_commands: list[list] = []
+"""one entry per :func:`one_notice` open, [whether the command has said the notice, the notice it
+says in place of a run's (:func:`expect`) or None]"""
 
 
 def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> None:
@@ -100,11 +99,12 @@ def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> No
     if send is not None:
         send(message)
         return
-    if _said_in_command:
-        if _said_in_command[-1]:
+    if _commands:
+        command = _commands[-1]
+        if command[0]:
             return
-        _said_in_command[-1] = True
-        message = _command_notice[-1] or message
+        command[0] = True
+        message = command[1] or message
     if write is None:
         print(message, file=sys.stderr, flush=True)
     else:
@@ -115,21 +115,19 @@ def say(message: str = NOTICE, write: Callable[[str], None] | None = None) -> No
 def one_notice() -> Iterator[None]:
     """Within the block (a command), the compile notice is said once at most, however many runs
     compile in this process or on its cluster's workers (:func:`say`)."""
-    _said_in_command.append(False)
-    _command_notice.append(None)
+    _commands.append([False, None])
     try:
         yield
     finally:
-        _said_in_command.pop()
-        _command_notice.pop()
+        _commands.pop()
 
 
 def expect(message: str) -> None:
     """Within :func:`one_notice` (a command), the notice said at the command's first compile, if
     one comes, in place of the compiling run's own: a command of several kinds of run says the
     wait of all of them. Outside a command, nothing."""
-    if _command_notice:
-        _command_notice[-1] = message
+    if _commands:
+        _commands[-1][1] = message
 
 
 @contextmanager
