@@ -234,13 +234,19 @@ def test_cloth_sticks_on_an_incline_only_when_tan_theta_is_below_mu(friction, st
 
 
 @pytest.mark.parametrize("method", ["projection", "impulse", "constraints"])
-@pytest.mark.parametrize("cloth_samples, pierced", [(0, True), (4, False)])
-def test_triangle_samples_stop_a_corner_poking_through_a_coarse_cloth(cloth_samples, pierced, method):
+@pytest.mark.parametrize(
+    "cloth_samples, cloth_faces, pierced", [(0, False, True), (4, False, False), (0, True, False)]
+)
+def test_triangle_samples_or_face_contacts_stop_a_corner_poking_through_a_coarse_cloth(
+    cloth_samples, cloth_faces, pierced, method
+):
     # a 2 × 2-vertex cloth (two triangles, 0.5 m) dropped centred on a 0.1 m post: its
-    # vertices never touch the post, only samples inside its triangles can (P2c)
+    # vertices never touch the post, only samples inside its triangles (P2c) or the post's
+    # corners met by the triangles (collision.cloth's face contacts, on by default) can
     post = ("box", dict(half_extents=(0.05, 0.05, 0.1), position=(0.0, 0.0, 0.1)))
     model = cloth_over([post, ("plane", dict(normal=(0, 0, 1)))], size=0.5, resolution=2, height=0.3)
-    run = simulate(model, method, dt=0.004, duration=0.6, options={"cloth_samples": cloth_samples}, record_every=10)
+    options = {"cloth_samples": cloth_samples, "cloth_faces": cloth_faces}
+    run = simulate(model, method, dt=0.004, duration=0.6, options=options, record_every=10)
     lowest = run.state.particle_position[:, 2].min()
     if pierced:
         assert lowest < 0.05  # fell past the post to the floor

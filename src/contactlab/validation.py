@@ -204,6 +204,15 @@ def check_counts(options: object, least: Mapping[str, int]) -> None:
         sixty_four_bits(whole_number(getattr(options, name), name, minimum), name)
 
 
+def check_flags(options: object, names: Collection[str]) -> None:
+    """InputError naming the first attribute of ``options`` among ``names`` that is not True or
+    False: the switches of a method's Options."""
+    for name in names:
+        value = getattr(options, name)
+        if not isinstance(value, bool):
+            raise InputError(name, f"expected true or false, found {value!r}")
+
+
 def as_array(value: Any, name: str, what: str) -> np.ndarray:
     """``value`` as a float array of any shape; InputError naming ``name`` "expected ``what``"
     for strings, ragged lists and ints beyond the float range."""

@@ -20,7 +20,7 @@ from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..errors import InputError
 from ..model import derived
 from .broad_phase import GRID_FROM, boxes_overlapping, static_pairs
-from .cloth import cloth_sample_contacts
+from .cloth import cloth_face_contacts, cloth_sample_contacts
 from .cloth_self import cloth_self_contacts
 from .contact_output import FEATURE_BITS as FEATURE_BITS  # re-exported: contact ids are (pair << it) | feature
 from .families import keeps_manifolds, pair_families
@@ -439,6 +439,7 @@ def collide_keeping(
     samples: int = 2,
     cloth_samples: int = 0,
     particle_motion: np.ndarray | None = None,
+    cloth_faces: bool = True,
 ) -> tuple[Contacts, Manifolds | None]:
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
     to keep for the next step: (Contacts, Manifolds or None).
@@ -458,7 +459,9 @@ def collide_keeping(
     this is how nothing tunnels through a thin wall, however fast it moves).
 
     cloth_samples: besides its vertices (particles), sample every cloth triangle k × k times
-    against the static obstacles (P2c, see collision.cloth); 0: vertices only. The vertices of
+    against the static obstacles (P2c, see collision.cloth); 0: vertices only. Either way a box's
+    or sphere's edge or corner that reaches a triangle between its vertices makes a contact there
+    (``collision.cloth.cloth_face_contacts``) unless ``cloth_faces`` is False. The vertices of
     one cloth make no particle contacts with each other (their springs keep them apart); the
     cloths whose ``self_collision`` is on meet themselves and each other as surfaces instead,
     vertex–triangle and edge–edge (collision.cloth_self); particle_motion (P, 3) [m], each
@@ -498,11 +501,14 @@ def collide_keeping(
         a, b, point, unit, depth, feature = (np.concatenate(column) for column in zip(*parts))
         if len(a):
             found = Contacts.concatenate([found, _assemble(model, a, b, point, unit, depth, feature, dynamic + O)])
-    if cloth_samples > 0 and len(getattr(model, "triangles", ())):
+    if len(model.triangles):
         reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
-        found = Contacts.concatenate(
-            [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
-        )
+        if cloth_faces:
+            found = Contacts.concatenate([found, cloth_face_contacts(model, state, reach_cloth, (dynamic + O) ** 2)])
+        if cloth_samples > 0:
+            found = Contacts.concatenate(
+                [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
+            )
     if len(model.triangles) and model.cloth_self_collision.any():
         found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep, particle_motion)])
     return found, (Manifolds(*made) if tolerance > 0.0 else None)

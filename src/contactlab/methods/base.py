@@ -13,7 +13,7 @@ import numpy as np
 
 from ..collision import GRANULARITIES, NORMALS, collide_keeping
 from ..contacts import Contacts
-from ..validation import check_choices, check_counts, number
+from ..validation import check_choices, check_counts, check_flags, number
 
 if TYPE_CHECKING:
     from ..collision.manifolds import Manifolds
@@ -62,11 +62,15 @@ class CollisionOptions:
     """samples per triangle edge for granularity = "samples" """
     cloth_samples: int = 0
     """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
+    cloth_faces: bool = True
+    """a box's or sphere's edge or corner reaching a cloth triangle between its vertices makes a
+    contact there (collision.cloth); False: the cloth meets obstacles at its vertices (and samples) only"""
 
     def __post_init__(self):
         self._number("contact_margin", 0.0)
         check_choices(self, {"granularity": GRANULARITIES, "normal": NORMALS})
         check_counts(self, {"samples": 1, "cloth_samples": 0})
+        check_flags(self, ("cloth_faces",))
 
     def _settle(self, name: str, value: Any) -> None:
         """Field ``name`` set to its checked ``value`` while the Options are built (they are frozen)."""
@@ -102,6 +106,7 @@ class CollisionOptions:
             self.samples,
             self.cloth_samples,
             particle_motion,
+            self.cloth_faces,
         )
 
 

@@ -38,7 +38,7 @@ from ..dynamics.generalized import stacked, unstacked
 from ..dynamics.integrators import advance_positions, carrying_springs, free_velocities, moved
 from ..errors import InputError
 from ..state import Carry, State
-from ..validation import check_choices, check_counts
+from ..validation import check_choices, check_counts, check_flags
 from .base import KeptManifoldOptions, StepInfo
 from .blocks import solve_in_blocks
 from .jacobian_rows import ContactRows, contact_velocity, row_products
@@ -171,10 +171,7 @@ class VelocityOptions(KeptManifoldOptions):
         self._number("slop", 0.0)
         self._number("max_push_velocity", 0.0)
         self._number("contact_hertz", 0.0)
-        if not isinstance(self.block_solve, bool):
-            raise InputError("block_solve", f"expected true or false, found {self.block_solve!r}")
-        if not isinstance(self.time_of_impact, bool):
-            raise InputError("time_of_impact", f"expected true or false, found {self.time_of_impact!r}")
+        check_flags(self, ("block_solve", "time_of_impact"))
 
 
 LOAD_PATH_FROM = 2  # bodies and particles: fewer cannot rest on one another (guess_new_impulses)
