@@ -21,7 +21,7 @@ def run_example(name, *args, cwd):
 
 def test_every_example_is_tested():
     scripts = {name for name in os.listdir(EXAMPLES) if name.endswith(".py")}
-    tested = {"bouncing_ball.py", "compare_methods.py", "lcp_column.py", "cloth_export.py"}
+    tested = {"bouncing_ball.py", "compare_methods.py", "lcp_column.py", "cloth_export.py", "own_loop.py"}
     assert scripts == tested
 
 
@@ -32,6 +32,17 @@ def test_bouncing_ball_rebounds(tmp_path):
         assert heights[method] == pytest.approx([0.64, 0.4096], rel=1e-3)
     assert heights["penalty"] == pytest.approx([0.64, 0.4096], rel=0.03)
     assert "does not bounce" in out.splitlines()[2]  # projection
+
+
+def test_own_loop_reads_the_apexes_and_holds_the_ball_as_its_control_says(tmp_path):
+    out = run_example("own_loop.py", cwd=tmp_path)
+    apexes = re.findall(r"apex \d: ([\d.]+) m \(closed form ([\d.]+) m\)", out)
+    assert len(apexes) == 2
+    for measured, exact in apexes:
+        assert float(measured) == pytest.approx(float(exact), rel=1e-3)  # the step's accuracy, as bouncing_ball
+    held, caught, expected = map(float, re.search(r"at ([\d.]+) m \(caught at ([\d.]+) m, n g dt² lower: ([\d.]+) m\)", out).groups())
+    assert held == pytest.approx(expected, abs=1e-6) and held < caught  # n g dt² below, to the printed digits
+    assert "through the compiled loop: True" in out
 
 
 def test_lcp_column_three_solvers_agree_with_the_weights(tmp_path):

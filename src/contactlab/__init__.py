@@ -30,6 +30,7 @@ _LAZY = {
     "Model": "model",
     "Run": "simulation",
     "simulate": "simulation",
+    "Stepper": "simulation",
     "State": "state",
     "set_threads": "threads",
 }
@@ -41,6 +42,7 @@ __all__ = [
     "Contacts",
     "collide",
     "simulate",
+    "Stepper",
     "Run",
     "InputError",
     "SimulationDiverged",

@@ -30,7 +30,7 @@ from .record import Recorder, streaming_recorder
 from .state import State, array_shapes
 from .store import TrajectoryFile
 from .threads import ThreadChooser
-from .validation import MAX_STEPS, one_of, run_length
+from .validation import MAX_STEPS, one_of, run_length, whole_number
 
 
 @dataclass
@@ -274,6 +274,89 @@ def simulate(
             if recorder.sink is not None:  # not a run to keep (a bug, a full disk): nothing of it remains
                 recorder.sink.discard()
             raise
+
+
+class Stepper:
+    """A run you step yourself, in your own loop, at the speed ``simulate`` steps it.
+
+    Built once from the model, the method, its options, dt [s] and the integrator (checked as
+    :func:`simulate` checks them, the same InputError for the same bad argument), from ``state``
+    (default: the model's initial state, copied). Each :meth:`step` makes steps through the same
+    stepping ``simulate`` uses — the compiled loop wherever it serves the scene, with no Python
+    between the steps of one call, else the method's own ``step`` — so the numbers are bit for bit
+    those of ``simulate`` with the same arguments. Between calls, :attr:`state` is the state
+    reached: read it (sensors, your own recording) and write into its arrays in place (control:
+    a velocity set, a body moved); the next step starts from what you wrote.
+
+    Example — a ball dropped on the floor, its apexes read in the loop::
+
+        stepper = Stepper(model, "impulse", dt=0.001)
+        while stepper.time < 2.0:
+            stepper.step()
+            z, vz = stepper.state.body_position[0, 2], stepper.state.body_velocity[0, 2]
+
+    Nothing is recorded, health-checked (beyond a state that stops being finite or passes
+    ``health.HARD_SPEED``, which raises SimulationDiverged) or timed here: ``simulate`` does that,
+    over the same stepping. ``compiled_loop`` as for ``simulate``."""
+
+    def __init__(
+        self,
+        model: Model,
+        method: str = "impulse",
+        dt: float = 0.004,
+        options: Any = None,
+        integrator: str = "symplectic_euler",
+        *,
+        state: State | None = None,
+        compiled_loop: bool | None = None,
+    ) -> None:
+        _, options, dt, _, _ = _checked_arguments(model, method, dt, dt, options, integrator, 1, state, "custom")
+        check_supported(model)
+        if compiled_loop not in (None, True, False):
+            raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+        self.model, self.method, self.options, self.integrator, self.dt = model, method, options, integrator, dt
+        start = model.state() if state is None else state.copy()
+        self._notice = FirstCompile(kernel_variants.compiling_notice)
+        with compile_notice(self._notice):
+            self.stepping = velocity_loop.stepper_for(model, method, options, integrator, dt, start, compiled_loop)
+        self.steps_made = 0
+        """steps made since it was built"""
+        no_rows = velocity_loop.empty_samples(model, 0)._asdict()
+        self._no_rows = lambda count: no_rows  # a step records nothing: samples of no row
+
+    @property
+    def compiled(self) -> bool:
+        """Whether it steps through the compiled loop (else through the method's ``step``)."""
+        return self.stepping.compiled
+
+    @property
+    def state(self) -> State:
+        """The State reached, its arrays the ones the next step starts from: write into them in
+        place to change it (``state.copy()`` keeps one as it is now)."""
+        return self.stepping.reached()
+
+    @property
+    def time(self) -> float:
+        """[s] the time reached."""
+        return float(self.stepping.reached().time)
+
+    def step(self, steps: int = 1) -> None:
+        """Make ``steps`` (a whole number ≥ 1) steps of dt. Raises SimulationDiverged, with the
+        time, where a step leaves a non-finite value or a speed above ``health.HARD_SPEED``."""
+        whole_number(steps, "steps", 1)
+        first = self.steps_made + 1
+        with compile_notice(self._notice):
+            made, diverged, _ = self.stepping.advance(steps, first, 0, NEVER_SAMPLED, HARD_SPEED, self._no_rows)
+        self.steps_made += made
+        if diverged:
+            raise SimulationDiverged(
+                f"the state stopped being finite or passed {HARD_SPEED:g} m/s at t = {self.time:.6g} s; "
+                f"use a smaller dt than {self.dt:g} s",
+                time=self.time,
+            )
+
+
+NEVER_SAMPLED = 2**62  # a record_every no step index reaches: Stepper.step records nothing
 
 
 class _Clock(NamedTuple):
