@@ -184,9 +184,10 @@ def cloth_over(obstacles, size=0.6, resolution=9, height=0.3, friction=0.4, orie
 
 
 def obstacle_depths(model, state):
-    """Depths beyond the thickness of every cloth vertex against every obstacle (particle–obstacle contacts)."""
+    """Depths beyond the thickness of every cloth vertex against every obstacle (particle–obstacle
+    contacts: one particle on side A, not a triangle's point between three)."""
     contacts = collide(model, state)
-    static = (contacts.body_b < 0) & (contacts.particles_b[:, 0] < 0)
+    static = (contacts.body_b < 0) & (contacts.particles_b[:, 0] < 0) & (contacts.particles_a[:, 1] < 0)
     return contacts.depth[static]
 
 

@@ -74,9 +74,10 @@ def kinetic(
     return energy
 
 
-def potential_energy(model: Model, state: State) -> float:
+def potential_energy(model: Model, state: State, cloth: float | None = None) -> float:
     """Gravitational potential −m g·x (zero at the origin) plus the elastic energy
-    Σ ½ k (l − L)² of the cloth springs [J]."""
+    Σ ½ k (l − L)² of the cloth springs [J]; ``cloth``: the cloth's elastic energy [J] as an
+    engine with a cloth model of its own computed it (a peer's), in place of the springs'."""
     return float(
         gravitational(
             model.body_mass,
@@ -85,7 +86,7 @@ def potential_energy(model: Model, state: State) -> float:
             state.particle_position,
             np.asarray(model.gravity, dtype=float),
         )
-        + spring_energy(model, state.particle_position)
+        + (spring_energy(model, state.particle_position) if cloth is None else cloth)
     )
 
 
@@ -115,8 +116,8 @@ def sample_of(model: Model, state: State, contacts: Contacts, info: Any = None) 
     """One sample of a run, the series of SERIES by name: ``state``'s time and arrays, its
     energies [J] and the deepest overlap [m] among ``contacts`` (those of a collision pass at its
     own positions), with what the step that made it says (``info``, a method's StepInfo: its
-    contact count, sweeps, last change and elastic energy; None, no step: the count of
-    ``contacts``, no sweeps, no elastic energy)."""
+    contact count, sweeps, last change and elastic energy, and a peer's ``cloth_energy`` where it
+    has one; None, no step: the count of ``contacts``, no sweeps, no elastic energy)."""
     return dict(
         time=state.time,
         body_position=state.body_position,
@@ -126,7 +127,7 @@ def sample_of(model: Model, state: State, contacts: Contacts, info: Any = None) 
         particle_position=state.particle_position,
         particle_velocity=state.particle_velocity,
         energy_kinetic=kinetic_energy(model, state),
-        energy_potential=potential_energy(model, state),
+        energy_potential=potential_energy(model, state, getattr(info, "cloth_energy", None)),
         energy_elastic=info.energy_elastic if info else 0.0,
         max_penetration=max_penetration(contacts),
         contact_count=info.contacts.count if info else contacts.count,

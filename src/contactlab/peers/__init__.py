@@ -13,8 +13,10 @@ the duration at dt in the engine at its defaults, and records a sample every ``r
 steps through contactlab's own Recorder: the same arrays, energies, collision-pass penetration
 and summary keys as :func:`contactlab.simulate`, in memory or streamed to a trajectory file, so
 render, view, export, the plots, the comparison's measures and the closed-form checks treat it
-as a method's run. A scene the engine cannot be given (cloth, particles, a kinematic path, a
-non-convex mesh for MuJoCo) raises :class:`Inexpressible`, whose ``reasons`` say what and why;
+as a method's run; a cloth's vertices are its particles, as in contactlab (MuJoCo's flex:
+contactlab.peers.mujoco_cloth). A scene the engine cannot be given (cloth for pybullet,
+particles, a kinematic path, a non-convex mesh for MuJoCo) raises :class:`Inexpressible`, whose
+``reasons`` say what and why;
 an engine that is not installed is an InputError that names the extra to install.
 
 ``contactlab compare SCENE --peers mujoco,pybullet`` and a study's ``peers = [...]`` run them
@@ -145,10 +147,13 @@ def run_scene(
 def describe(settings: dict[str, Any]) -> str:
     """One sentence of a peer run's engine and settings (its summary's ``options``)."""
     if settings.get("engine") == "mujoco":
+        integrator = f"{settings['integrator']} integrator"
+        if settings.get("cloth"):
+            integrator += " (set for the cloth: MuJoCo integrates a flex's elasticity implicitly with no other)"
         return (
             f"MuJoCo {settings['version']} at its defaults: {settings['solver']} solver, at most "
-            f"{settings['iterations']} iterations, {settings['cone']} friction cone, {settings['integrator']} "
-            "integrator, soft contacts (docs/peers.md has the mapping)."
+            f"{settings['iterations']} iterations, {settings['cone']} friction cone, {integrator}, soft contacts "
+            "(docs/peers.md has the mapping)."
         )
     return (
         f"pybullet {settings['version']} at its defaults: {settings['solver']} solver, {settings['iterations']} "

@@ -5,9 +5,12 @@ contactlab body (its frame the body's centre of mass and principal axes, its mas
 moments given as an explicit ``<inertial>``, so MuJoCo computes none of its own), one geom per
 shape: sphere, box (half extents), capsule (radius, half length along z), a convex body or
 obstacle as a mesh of its hull's corners (MuJoCo takes their convex hull), a plane as an
-infinite plane geom, a convex triangle-mesh obstacle as a mesh. ``<option>`` sets the time step
-and gravity; everything else is MuJoCo's default (Newton solver, at most 100 iterations, the
-pyramidal friction cone, Euler integration, soft contacts with solimp 0.9 0.95 0.001).
+infinite plane geom, a convex triangle-mesh obstacle as a mesh; each cloth a 2D flex after
+them (contactlab.peers.mujoco_cloth). ``<option>`` sets the time step and gravity, and the
+``discrete`` integrator where the scene has cloth (the only one that integrates a flex's
+elasticity implicitly); everything else is MuJoCo's default (Newton solver, at most 100
+iterations, the pyramidal friction cone, Euler integration, soft contacts with solimp 0.9 0.95
+0.001).
 
 Materials: MuJoCo gives a contact the larger of its two geoms' friction coefficients and the
 mean of their ``solref``. It has no restitution coefficient: a contact is a spring-damper of
@@ -32,6 +35,7 @@ import numpy as np
 from ..model import Model
 from ..state import State
 from . import translate
+from .mujoco_cloth import Flexes
 
 NAME = "mujoco"
 TIME_CONSTANT = 0.02  # s: MuJoCo's default solref time constant, kept for a material that does not bounce
@@ -72,12 +76,17 @@ class World:
                 + self._geom(solid, f"body{b}", friction, damping, assets, placed=False)
                 + "</body>"
             )
+        self.flexes = Flexes(model, lambda material: self._contact(material, friction, damping))
+        self.notes += self.flexes.notes
+        integrator = ' integrator="discrete"' if model.cloth_count else ""  # the cloth's elasticity needs it
         self.xml = (
-            f'<mujoco model="contactlab"><option timestep="{float(dt)!r}" gravity="{_numbers(model.gravity)}"/>'
-            f"<asset>{''.join(assets)}</asset><worldbody>{''.join(world)}</worldbody></mujoco>"
+            f'<mujoco model="contactlab"><option timestep="{float(dt)!r}" gravity="{_numbers(model.gravity)}"'
+            f"{integrator}/><asset>{''.join(assets)}</asset><worldbody>{''.join(world)}{self.flexes.bodies}"
+            f"</worldbody>{self.flexes.deformable}</mujoco>"
         )
         self.mj_model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.mj_model)
+        self.flexes.bind(self.mj_model)
         self._start(model)
         self.settings = {
             "engine": NAME,
@@ -87,6 +96,7 @@ class World:
             "cone": mujoco.mjtCone(self.mj_model.opt.cone).name.removeprefix("mjCONE_").lower(),
             "integrator": "MuJoCo "
             + _spelt(mujoco.mjtIntegrator(self.mj_model.opt.integrator).name.removeprefix("mjINT_")),
+            "cloth": bool(model.cloth_count),
         }
 
     def _materials(self, model, dt):
@@ -128,9 +138,7 @@ class World:
     def _geom(self, solid, name, friction, damping, assets, placed=True):
         """The MJCF geom of ``solid`` (its pose written where ``placed``: an obstacle's; a body's
         geom sits at its body's frame), adding a mesh asset where it needs one."""
-        m = solid.material
-        constant = TIME_CONSTANT if damping[m] >= 1.0 else self.time_constant  # a bouncing material's
-        common = f'friction="{float(friction[m])!r} {TORSION} {ROLLING}" solref="{constant!r} {float(damping[m])!r}"'
+        common = self._contact(solid.material, friction, damping)
         pose = f' pos="{_numbers(solid.position)}" quat="{_numbers(solid.orientation)}"' if placed else ""
         if solid.kind == "plane":
             return f'<geom name="{name}" type="plane" size="0 0 1"{pose} {common}/>'
@@ -144,6 +152,14 @@ class World:
             pose = ""
         return f'<geom name="{name}" type="mesh" mesh="{name}"{pose} {common}/>'
 
+    def _contact(self, material, friction, damping):
+        """The contact attributes of a geom or flex of ``material``: its friction and solref."""
+        constant = TIME_CONSTANT if damping[material] >= 1.0 else self.time_constant  # a bouncing material's
+        return (
+            f'friction="{float(friction[material])!r} {TORSION} {ROLLING}" '
+            f'solref="{constant!r} {float(damping[material])!r}"'
+        )
+
     def _start(self, model):
         """The initial state: poses as built; velocities (the free joint's angular one is in the body frame)."""
         state = model.initial
@@ -152,14 +168,16 @@ class World:
             R = _matrix(state.body_orientation[b])
             self.data.qvel[dof : dof + 3] = state.body_velocity[b]
             self.data.qvel[dof + 3 : dof + 6] = R.T @ state.body_angular_velocity[b]
+        self.flexes.start(self.data)
         mujoco.mj_forward(self.mj_model, self.data)
 
     def step(self, force: np.ndarray | None = None, torque: np.ndarray | None = None) -> None:
         """One time step, with the external ``force`` (B, 3) [N] and ``torque`` (B, 3) [N m]
         (world frame, at the centres of mass) held over it; None: none."""
         if force is not None and torque is not None:
-            self.data.xfrc_applied[1:, :3] = force
-            self.data.xfrc_applied[1:, 3:] = torque
+            bodies = slice(1, 1 + self.model.body_count)  # a cloth's vertex bodies come after them
+            self.data.xfrc_applied[bodies, :3] = force
+            self.data.xfrc_applied[bodies, 3:] = torque
         mujoco.mj_step(self.mj_model, self.data)
 
     def state(self, time: float | None = None) -> State:
@@ -175,9 +193,13 @@ class World:
             orientation[b] = d.qpos[q + 3 : q + 7] / np.linalg.norm(d.qpos[q + 3 : q + 7])
             velocity[b] = d.qvel[v : v + 3]
             angular[b] = _matrix(orientation[b]) @ d.qvel[v + 3 : v + 6]
-        empty = np.zeros((0, 3))
         now = float(d.time if time is None else time)
-        return State(now, position, orientation, velocity, angular, empty, empty.copy())
+        return State(now, position, orientation, velocity, angular, *self.flexes.read(d))
+
+    def cloth_energy(self, state: State) -> float:
+        """The elastic energy [J] of MuJoCo's flexes at ``state``'s particle positions
+        (contactlab.peers.mujoco_cloth.Flexes.energy): the cloth's own, not contactlab's springs'."""
+        return self.flexes.energy(state.particle_position)
 
     def contacts(self) -> int:
         """The contacts of the last step."""

@@ -4,7 +4,8 @@ The engine's world (contactlab.peers.mujoco.World or contactlab.peers.pybullet.W
 this module times its step calls alone (contactlab.simulation.Tally: the first step left out,
 the rate over ~0.1 s windows), applies the scene's external forces at each step's start time,
 reads the state back every ``record_every`` steps into contactlab's Recorder (positions,
-energies by contactlab.diagnostics from the model's masses and inertias, the deepest overlap by
+energies by contactlab.diagnostics from the model's masses and inertias, a cloth's elastic
+energy the engine's own cloth's (``world.cloth_energy``), the deepest overlap by
 contactlab's own collision pass on the engine's positions, the engine's contact count and
 solver iterations) and writes the summary :func:`contactlab.simulate` writes, with the
 engine's settings as its ``options``.
@@ -43,6 +44,14 @@ class _Info(NamedTuple):
     solver_iterations: int
     solver_residual: float = 0.0
     energy_elastic: float = 0.0
+    cloth_energy: float | None = None  # J: the engine's own cloth's elastic energy (None: contactlab's springs')
+
+
+def _info(world, model, state, count, sweeps):
+    """The _Info of a sample of ``state``: ``count`` contacts, ``sweeps`` iterations, and the
+    engine's own cloth energy where the scene has cloth."""
+    cloth = world.cloth_energy(state) if model.cloth_count else None
+    return _Info(_Counted(count), sweeps, cloth_energy=cloth)
 
 
 def run_world(
@@ -81,7 +90,7 @@ def run_world(
 def _stepped(world, model, dt, steps, recorder, scene_name, progress):
     started = time.perf_counter()
     state = model.state()
-    recorder.sample(state, _Info(_Counted(0), 0))
+    recorder.sample(state, _info(world, model, state, 0, 0))
     tally, iterations, most = Tally(), [], 0
     loads = model.drive is not None and model.drive.has_loads
     failed = None
@@ -99,7 +108,7 @@ def _stepped(world, model, dt, steps, recorder, scene_name, progress):
                 began = time.perf_counter()
                 state = world.state(step * dt)
                 state.time = step * dt
-                recorder.sample(state, _Info(_Counted(count), sweeps or 0))
+                recorder.sample(state, _info(world, model, state, count, sweeps or 0))
                 tally.recording_seconds += time.perf_counter() - began
                 if not state.is_finite():
                     failed = step * dt

@@ -6,9 +6,12 @@ their engine's terms:
 
 * :func:`solids`: each body's and each static obstacle's collision shape as a :class:`Solid`
   (kind, sizes [m], pose, material, a convex body's hull corners, a mesh's triangles);
-* :func:`gaps`: one sentence for each thing in the model a peer cannot express (cloth,
-  particles, a kinematic path, a non-convex mesh for MuJoCo), so the caller reports it instead
-  of running a different scene;
+* :func:`sheets`: each cloth as a :class:`Sheet` (its vertices in the model's particle order,
+  triangles, masses, pinned vertices, thickness, material) with the isotropic membrane closest
+  to its spring network (:func:`membrane`), for an engine whose cloth is a continuum;
+* :func:`gaps`: one sentence for each thing in the model a peer cannot express (cloth for
+  pybullet, particles, a kinematic path, a non-convex mesh for MuJoCo), so the caller reports it
+  instead of running a different scene;
 * :func:`pair_targets` and :func:`closest_values`: contactlab's contact materials (μ = √(μ_a μ_b),
   ε = max(ε_a, ε_b) of the two colliders' materials) against an engine that keeps one value per
   shape and combines two by its own rule (pybullet multiplies, MuJoCo takes the larger friction
@@ -32,6 +35,8 @@ from ..model import Model
 
 PEERS = ("mujoco", "pybullet")  # the engines contactlab.peers can run a scene in
 MATCHED = 1e-9  # a combined value this close to contactlab's is the same
+POISSON = 1.0 / 3.0  # the Poisson ratio of the isotropic membrane closest to any network of central springs
+FLEX_MUJOCO = (4, 0)  # the MuJoCo whose 2D flex elasticity has the constants its documentation states
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,104 @@ class Solid:
     normal: np.ndarray | None = None
     vertices: np.ndarray | None = None
     triangles: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Sheet:
+    """One cloth a peer is given, in SI units; V vertices, F triangles.
+
+    particles (V,) int: the model's particle index of each vertex, in order (a cloth's vertices
+    are consecutive particles); triangles (F, 3) int: indices into these V vertices,
+    counter-clockwise seen from the front; position (V, 3) [m] and velocity (V, 3) [m/s]: the
+    initial state; mass (V,) [kg]; pinned (V,) bool: held in place; thickness [m]: the contact
+    radius of every vertex; material: index into the model's materials; self_collision: whether
+    it meets itself as a surface; stretch_modulus E t [N/m] and rayleigh β [s]: the membrane of
+    :func:`membrane` (its Poisson ratio is POISSON)."""
+
+    name: str
+    particles: np.ndarray
+    triangles: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    mass: np.ndarray
+    pinned: np.ndarray
+    thickness: float
+    material: int
+    self_collision: bool
+    stretch_modulus: float
+    rayleigh: float
+
+
+def membrane(
+    position: np.ndarray,
+    triangles: np.ndarray,
+    spring_particles: np.ndarray,
+    stiffness: np.ndarray,
+    rest_length: np.ndarray,
+    damping: np.ndarray,
+) -> tuple[float, float]:
+    """(E t [N/m], β [s]): the isotropic membrane (Poisson ratio POISSON) closest to a network of
+    springs, and the Rayleigh damping coefficient closest to its dashpots.
+
+    position (V, 3) [m], triangles (F, 3) and spring_particles (S, 2) index the same vertices;
+    stiffness k (S,) [N/m], rest_length L (S,) [m], damping c (S,) [N s/m]. Under a small uniform
+    strain ε of the sheet (area A) a spring along the unit vector n stretches by L n·ε·n, so the
+    network stores the energy of the membrane stiffness C = Σ k L² n⊗n⊗n⊗n / A. The isotropic C
+    closest to it (the Frobenius norm) is its average over the directions in the plane: Lamé
+    λ = μ = Σ k L² / (8 A) for any directions, which is Poisson's ratio 1/3 (the Cauchy
+    relation of central springs) and E t = 4 μ (λ + μ) / (λ + 2 μ) = Σ k L² / (3 A). Under a
+    uniform dilation it stores exactly the network's energy; a lattice's stiffer and softer
+    directions (a square grid's lines and diagonals) are averaged. The dashpots c (v_j − v_i)·u
+    are the same sum with c for k, so Rayleigh damping β C matches their average with
+    β = Σ c L² / Σ k L² (0 without springs)."""
+    a, b, c = (position[triangles[:, k]] for k in range(3))
+    area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    squared = np.asarray(rest_length, dtype=float) ** 2
+    weight = float(np.asarray(stiffness, dtype=float) @ squared)
+    if area <= 0.0 or weight <= 0.0:
+        return 0.0, 0.0
+    return weight / (3.0 * area), float(np.asarray(damping, dtype=float) @ squared) / weight
+
+
+def sheets(model: Model) -> list[Sheet]:
+    """Every cloth of ``model`` as a :class:`Sheet`, in the model's cloth order, posed as its
+    initial state has it."""
+    state = model.initial
+    cloth_of = np.asarray(model.particle_cloth)
+    springs = np.asarray(model.spring_particles)
+    triangles = np.asarray(model.triangles)
+    found = []
+    for c, name in enumerate(model.cloth_names):
+        particles = np.flatnonzero(cloth_of == c)
+        first = int(particles[0])
+        own = cloth_of[springs[:, 0]] == c if len(springs) else np.zeros(0, dtype=bool)
+        faces = triangles[cloth_of[triangles[:, 0]] == c] - first
+        position = np.array(state.particle_position[particles])
+        stretch, rayleigh = membrane(
+            position,
+            faces,
+            springs[own] - first,
+            np.asarray(model.spring_stiffness)[own],
+            np.asarray(model.spring_rest_length)[own],
+            np.asarray(model.spring_damping)[own],
+        )
+        found.append(
+            Sheet(
+                name,
+                particles,
+                faces,
+                position,
+                np.array(state.particle_velocity[particles]),
+                np.array(model.particle_mass[particles], dtype=float),
+                np.array(model.particle_pinned[particles], dtype=bool),
+                float(model.particle_radius[first]),
+                int(model.particle_material[first]),
+                bool(model.cloth_self_collision[c]),
+                stretch,
+                rayleigh,
+            )
+        )
+    return found
 
 
 def hull_vertices(model: Model, hull: int) -> np.ndarray:
@@ -161,10 +264,7 @@ def gaps(model: Model, peer: str) -> list[str]:
     cloth = int(np.count_nonzero(model.particle_cloth >= 0))
     free = model.particle_count - cloth
     if model.cloth_count:
-        found.append(
-            f"contactlab's mass-spring cloth ({model.cloth_count} cloth, {cloth} vertices) has no counterpart in "
-            f"{peer}'s rigid bodies that contactlab translates"
-        )
+        found += _cloth_gaps(model, peer, cloth)
     if free:
         found.append(
             f"{free} free particles (3 degrees of freedom each, a contact radius that may be 0) are no rigid "
@@ -187,15 +287,60 @@ def gaps(model: Model, peer: str) -> list[str]:
     return found
 
 
+def _cloth_gaps(model: Model, peer: str, vertices: int) -> list[str]:
+    """The sentences of :func:`gaps` for the model's cloths (``vertices`` of them in all)."""
+    if peer == "pybullet":
+        return [
+            f"contactlab's mass-spring cloth ({model.cloth_count} cloth, {vertices} vertices) has no faithful "
+            "counterpart in pybullet: its deformable cloth (loadSoftBody, in a world reset for deformables) gives "
+            "every edge of its triangle mesh one spring stiffness and every bending link another, where contactlab's "
+            "stretch, shear (both diagonals of a grid cell, one of which no triangle has) and bend springs have their "
+            "own, and that world steps the rigid bodies with another solver than the one the rest of the scene is "
+            "translated for"
+        ]
+    found = []
+    version = _installed("mujoco")
+    if version is not None and version < FLEX_MUJOCO:
+        found.append(
+            f"the cloth is given to MuJoCo as a flex with continuum elasticity, whose 2D constants MuJoCo "
+            f"{'.'.join(map(str, version))} states otherwise than it computes (fixed in MuJoCo "
+            f"{'.'.join(map(str, FLEX_MUJOCO))}): install MuJoCo {'.'.join(map(str, FLEX_MUJOCO))} or later"
+        )
+    thin = [
+        name
+        for c, name in enumerate(model.cloth_names)
+        if not model.particle_radius[model.particle_cloth == c].min() > 0
+    ]
+    if thin:
+        found.append(
+            f"the cloth {', '.join(map(repr, thin[:3]))} has thickness 0, and a MuJoCo 2D flex needs a positive radius "
+            "to collide"
+        )
+    return found
+
+
+def _installed(package: str) -> tuple[int, ...] | None:
+    """The (major, minor) version of an installed ``package``, None where it is not installed or unreadable."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return tuple(int(part) for part in version(package).split(".")[:2])
+    except (PackageNotFoundError, ValueError):
+        return None
+
+
 def pair_targets(model: Model) -> dict[tuple[int, int], tuple[float, float]]:
     """(material a, material b), a ≤ b -> (μ, ε) contactlab gives their contacts, for every pair
-    of materials that can meet in this scene: two bodies' (a material with itself only when two
-    bodies have it), and a body's with an obstacle's (obstacles never meet)."""
-    body = [int(m) for m in model.body_material]
+    of materials that can meet in this scene: two movers' (a body, or a cloth; a material with
+    itself only when two movers have it or a cloth that meets itself does), and a mover's with an
+    obstacle's (obstacles never meet)."""
+    cloths = [int(model.particle_material[model.particle_cloth == c][0]) for c in range(model.cloth_count)]
+    body = [int(m) for m in model.body_material] + cloths
+    selves = {m for c, m in enumerate(cloths) if model.cloth_self_collision[c]}
     pairs = set()
     for i, a in enumerate(sorted(set(body))):
         for b in sorted(set(body))[i:]:
-            if a != b or body.count(a) > 1:
+            if a != b or body.count(a) > 1 or a in selves:
                 pairs.add((a, b))
     for a in set(body):
         for b in {int(m) for m in model.obstacle_material}:
@@ -239,10 +384,11 @@ def uniform(targets: dict[tuple[int, int], float], count: int, value: Callable[[
 
 
 def static_only(model: Model) -> np.ndarray:
-    """(M,) bool: the materials only static obstacles use (no body has them)."""
+    """(M,) bool: the materials only static obstacles use (no body or particle has them)."""
     only = np.zeros(len(model.material_names), dtype=bool)
     only[np.asarray(model.obstacle_material, dtype=int)] = True
     only[np.asarray(model.body_material, dtype=int)] = False
+    only[np.asarray(model.particle_material, dtype=int)] = False
     return only
 
 
