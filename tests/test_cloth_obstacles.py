@@ -21,8 +21,9 @@ def cloth(vertices_xy, height, rod=None, sphere=None, resolution=(2, 2), size=(0
     (a box of half extents ``rod`` at the origin) or a sphere ((radius, centre z))."""
     b = ModelBuilder()
     b.add_material("cotton", friction=0.4, restitution=0.0)
-    b.add_cloth(size=size, resolution=resolution, mass=0.01, position=(0.0, 0.0, height), thickness=THICKNESS,
-                material="cotton")
+    b.add_cloth(
+        size=size, resolution=resolution, mass=0.01, position=(0.0, 0.0, height), thickness=THICKNESS, material="cotton"
+    )
     if rod is not None:
         b.add_obstacle("box", half_extents=rod, position=(0.0, 0.0, 0.0), material="cotton")
     if sphere is not None:
@@ -75,8 +76,9 @@ def test_a_triangle_whose_vertex_is_nearest_makes_no_face_contact():
     # a sphere under a corner of the square: the vertex's own contact sees it
     b = ModelBuilder()
     b.add_material("cotton")
-    b.add_cloth(size=(0.1, 0.1), resolution=(2, 2), mass=0.01, position=(0.0, 0.0, 0.01), thickness=THICKNESS,
-                material="cotton")
+    b.add_cloth(
+        size=(0.1, 0.1), resolution=(2, 2), mass=0.01, position=(0.0, 0.0, 0.01), thickness=THICKNESS, material="cotton"
+    )
     b.add_obstacle("sphere", radius=0.008, position=(0.05, 0.05, 0.0), material="cotton")
     model = b.finalize()
     assert face_contacts(model).count == 0
@@ -94,9 +96,18 @@ def sheet_over_rod():
     b = ModelBuilder()
     b.add_material("cotton", friction=0.4, restitution=0.0)
     size = 23 * 0.043
-    b.add_cloth(size=(size, size), resolution=(24, 24), mass=0.3, position=(0.0, 0.0, 0.6),
-                stretch_stiffness=2000.0, shear_stiffness=200.0, bend_stiffness=2.0, damping=0.02,
-                thickness=THICKNESS, material="cotton")
+    b.add_cloth(
+        size=(size, size),
+        resolution=(24, 24),
+        mass=0.3,
+        position=(0.0, 0.0, 0.6),
+        stretch_stiffness=2000.0,
+        shear_stiffness=200.0,
+        bend_stiffness=2.0,
+        damping=0.02,
+        thickness=THICKNESS,
+        material="cotton",
+    )
     b.add_obstacle("box", half_extents=(0.7, 0.02, 0.02), position=(0.0, 0.0, 0.5), material="cotton")
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="cotton")
     return b.finalize()

@@ -296,9 +296,9 @@ def test_compiling_before_the_first_step_is_said_and_counted_once(path, monkeypa
         return call
 
     if path == "loop":
-        monkeypatch.setattr(velocity_loop.Stepper, "sample", compiling_first(velocity_loop.Stepper.sample))
+        monkeypatch.setattr(velocity_loop.LoopStepper, "sample", compiling_first(velocity_loop.LoopStepper.sample))
         monkeypatch.setattr(
-            velocity_loop.Stepper, "advance", compiling_on_a_later_call(velocity_loop.Stepper.advance, 2)
+            velocity_loop.LoopStepper, "advance", compiling_on_a_later_call(velocity_loop.LoopStepper.advance, 2)
         )
     else:
         monkeypatch.setattr(

@@ -130,7 +130,8 @@ def test_compilation_during_the_run_is_timed_apart_from_the_steps(path, monkeypa
         return call
 
     if path == "loop":
-        monkeypatch.setattr(velocity_loop.Stepper, "advance", compiling_on_call(2, velocity_loop.Stepper.advance))
+        stepper = velocity_loop.LoopStepper
+        monkeypatch.setattr(stepper, "advance", compiling_on_call(2, stepper.advance))
     else:
         monkeypatch.setattr(impulse, "step", compiling_on_call(5, impulse.step))
     b = ModelBuilder()

@@ -40,7 +40,9 @@ def test_own_loop_reads_the_apexes_and_holds_the_ball_as_its_control_says(tmp_pa
     assert len(apexes) == 2
     for measured, exact in apexes:
         assert float(measured) == pytest.approx(float(exact), rel=1e-3)  # the step's accuracy, as bouncing_ball
-    held, caught, expected = map(float, re.search(r"at ([\d.]+) m \(caught at ([\d.]+) m, n g dt² lower: ([\d.]+) m\)", out).groups())
+    held, caught, expected = map(
+        float, re.search(r"at ([\d.]+) m \(caught at ([\d.]+) m, n g dt² lower: ([\d.]+) m\)", out).groups()
+    )
     assert held == pytest.approx(expected, abs=1e-6) and held < caught  # n g dt² below, to the printed digits
     assert "through the compiled loop: True" in out
 

@@ -56,7 +56,7 @@ def test_a_tiny_run_on_a_compiled_loop_reaches_its_full_chunk_in_four_calls(monk
     chunk (16 steps at most), then 256, then the rest: four calls into the loop for 720 steps."""
     model = ball_on_plane()
     simulate(model, "impulse", 1 / 240, 3.0, compiled_loop=True)
-    calls = _counting(monkeypatch, velocity_loop.Stepper, "advance")
+    calls = _counting(monkeypatch, velocity_loop.LoopStepper, "advance")
     run = simulate(model, "impulse", 1 / 240, 3.0)
     assert run.summary["stepping"] == "compiled loop"
     chunks = [args[1] for args in calls]

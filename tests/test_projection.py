@@ -235,9 +235,7 @@ def test_cloth_sticks_on_an_incline_only_when_tan_theta_is_below_mu(friction, st
 
 
 @pytest.mark.parametrize("method", ["projection", "impulse", "constraints"])
-@pytest.mark.parametrize(
-    "cloth_samples, cloth_faces, pierced", [(0, False, True), (4, False, False), (0, True, False)]
-)
+@pytest.mark.parametrize("cloth_samples, cloth_faces, pierced", [(0, False, True), (4, False, False), (0, True, False)])
 def test_triangle_samples_or_face_contacts_stop_a_corner_poking_through_a_coarse_cloth(
     cloth_samples, cloth_faces, pierced, method
 ):

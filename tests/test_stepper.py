@@ -9,8 +9,14 @@ from contactlab import ModelBuilder, Stepper, simulate
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.scene import load_scene
 
-ARRAYS = ("body_position", "body_orientation", "body_velocity", "body_angular_velocity", "particle_position",
-          "particle_velocity")
+ARRAYS = (
+    "body_position",
+    "body_orientation",
+    "body_velocity",
+    "body_angular_velocity",
+    "particle_position",
+    "particle_velocity",
+)
 
 
 def same_state(a, b):
@@ -20,8 +26,9 @@ def same_state(a, b):
 def small_cloth():
     b = ModelBuilder()
     b.add_material("cotton", friction=0.4, restitution=0.0)
-    b.add_cloth(size=(0.2, 0.2), resolution=(4, 4), mass=0.02, position=(0.0, 0.0, 0.03), thickness=0.004,
-                material="cotton")
+    b.add_cloth(
+        size=(0.2, 0.2), resolution=(4, 4), mass=0.02, position=(0.0, 0.0, 0.03), thickness=0.004, material="cotton"
+    )
     b.add_obstacle("plane", normal=(0, 0, 1), offset=0.0, material="cotton")
     return b.finalize()
 
@@ -65,8 +72,12 @@ def test_what_the_loop_writes_into_the_state_is_where_the_next_step_starts():
 
 @pytest.mark.parametrize(
     "arguments, field",
-    [({"dt": 0.0}, "dt"), ({"method": "verlet"}, "method"), ({"options": {"iterations": -1}}, "iterations"),
-     ({"compiled_loop": "yes"}, "compiled_loop")],
+    [
+        ({"dt": 0.0}, "dt"),
+        ({"method": "verlet"}, "method"),
+        ({"options": {"iterations": -1}}, "iterations"),
+        ({"compiled_loop": "yes"}, "compiled_loop"),
+    ],
 )
 def test_bad_arguments_name_their_field_as_simulates_do(arguments, field):
     with pytest.raises(InputError, match=field):

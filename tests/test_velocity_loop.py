@@ -189,7 +189,7 @@ def test_projection_takes_the_loop_and_compiles_only_its_own_step():
     scene = load_scene("box_stack")
     model, options = scene.model, get("projection").Options(passes=3)
     stepper = velocity_loop.stepper_for(model, "projection", options, scene.integrator, scene.dt, model.state())
-    assert isinstance(stepper, velocity_loop.Stepper) and stepper.settings.passes == 3
+    assert isinstance(stepper, velocity_loop.LoopStepper) and stepper.settings.passes == 3
     methods = ("constraints", "impulse", "projection")
     assert [getattr(stepper.spec, name) for name in methods] == [False, False, True]
     assert stepper.loop is velocity_loop.LOOPS["projection"]

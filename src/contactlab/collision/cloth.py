@@ -13,10 +13,11 @@ Samples thin the gaps, they do not close them: a rod narrower than the samples' 
 passes between them. So every method also gets, at its defaults, the *face contacts*
 (``cloth_face_contacts``): for each triangle near a box or sphere obstacle, the point of the
 triangle closest to it (for a sphere the point closest to its centre; for a box alternating
-projections between the two convex sets, which meet the closest pair of disjoint ones), made a contact where that point lies on an edge or inside the
-face and comes closer to the obstacle than every vertex by more than half the thickness — an
-obstacle's edge or corner between the vertices, which the vertices' own contacts do not see. A
-plane is always nearest a vertex; a static mesh keeps its vertex and sample contacts.
+projections between the two convex sets, which meet the closest pair of disjoint ones), made a
+contact where that point lies on an edge or inside the face and comes closer to the obstacle
+than every vertex by more than half the thickness — an obstacle's edge or corner between the
+vertices, which the vertices' own contacts do not see. A plane is always nearest a vertex; a
+static mesh keeps its vertex and sample contacts.
 """
 
 from __future__ import annotations
@@ -225,7 +226,9 @@ def _faces_against(positions, triangles, owned, thickness, kind, params, positio
             if weights[k] == 0.0 and not corner_point:  # on the edge opposite corner k: corners k+1, k+2
                 on_edge = True
                 mine = owned[t, (k + 1) % 3]
-        half = 0.5 * (wa * thickness[triangles[t, 0]] + wb * thickness[triangles[t, 1]] + wc * thickness[triangles[t, 2]])
+        half = 0.5 * (
+            wa * thickness[triangles[t, 0]] + wb * thickness[triangles[t, 1]] + wc * thickness[triangles[t, 2]]
+        )
         depth = 2.0 * half - signed
         if corner_point or (on_edge and not mine) or depth < -margin or signed > nearest_vertex - half:
             continue

@@ -41,7 +41,7 @@ or not (external forces and kinematic paths given as constants or keyframes, con
 the loop and the methods' steps evaluate them with the same compiled ``drive_velocities``). A
 scene with cloth or meshes, another granularity, explicit Euler, or an assembled solver steps
 through the methods' ``step``, and so does a scene with a force or a path given as a Python
-function, which compiled code cannot call. That path is a Stepper too (``StitchedStepper``):
+function, which compiled code cannot call. That path is a Stepping too (``StitchedStepper``):
 ``simulate`` advances, records and checks every run alike, in chunks, whichever steps it.
 
 Arrays, as in the rest of contactlab: B bodies, P particles, O obstacles, N = B + P + O
@@ -128,7 +128,7 @@ def run_steps(
     iterations made)."""
     motion, carried, time = start
     steps, first_index, last_index, record_every, max_speed = schedule
-    written = np.int64(0)  # int64, not the literal 0: record is compiled once for run and for Stepper.sample
+    written = np.int64(0)  # int64, not the literal 0: record is compiled once for run and for LoopStepper.sample
     most = 0
     sweeps_made = 0
     implicit_steps = 0
@@ -186,7 +186,7 @@ LOOPS = {
 
 class Stepping:
     """What ``simulate`` advances a run with, whichever path steps it (``stepper_for``): the
-    compiled loop (Stepper, PenaltyStepper) or the method's own ``step`` (StitchedStepper).
+    compiled loop (LoopStepper, PenaltyStepper) or the method's own ``step`` (StitchedStepper).
 
     ``advance(steps, first_index, last_index, record_every, max_speed, rows)`` makes that many steps
     from the state reached and returns the samples it recorded; ``sample(rows)`` records the state
@@ -249,7 +249,7 @@ class Stepping:
         raise NotImplementedError
 
 
-class Stepper(Stepping):
+class LoopStepper(Stepping):
     """Steps one run of ``method`` on ``model`` through the compiled loop (``run_steps``)."""
 
     def __init__(
@@ -261,7 +261,7 @@ class Stepper(Stepping):
         self.spec = specialization(model, method, options)
 
     def _start(self, model, method, state, kept):
-        """What every Stepper holds: the model, the method, the state's time, arrays (copies) and
+        """What every LoopStepper holds: the model, the method, the state's time, arrays (copies) and
         carried values beside the ``kept`` manifolds, the tallies."""
         self.model, self.method = model, method
         self.carried = _carried(kept, *state.carried.of(method))
@@ -330,8 +330,8 @@ class Stepper(Stepping):
         return State(self.time, *self.motion)
 
 
-class PenaltyStepper(Stepper):
-    """A Stepper of a penalty run (``penalty_step``): its anchors carried as ``penalty.step`` carries
+class PenaltyStepper(LoopStepper):
+    """A LoopStepper of a penalty run (``penalty_step``): its anchors carried as ``penalty.step`` carries
     them, no manifolds kept."""
 
     def __init__(self, model: Model, options: PenaltyOptions, integrator: str, dt: float, state: State) -> None:
@@ -460,11 +460,11 @@ def stepper_for(
     state: State,
     compiled_loop: bool | None = None,
 ) -> Stepping:
-    """The Stepper of this run: through the compiled loop wherever it serves the scene
+    """The Stepping of this run: through the compiled loop wherever it serves the scene
     (``applies``) unless ``compiled_loop`` is False (None and True: the loop wherever it
     serves), else through the method's ``step`` (StitchedStepper)."""
     if compiled_loop is False or not applies(model, method, options, integrator):
         return StitchedStepper(model, method, options, integrator, dt, state)
     if method == "penalty":
         return PenaltyStepper(model, options, integrator, dt, state)
-    return Stepper(model, method, options, integrator, dt, state)
+    return LoopStepper(model, method, options, integrator, dt, state)
