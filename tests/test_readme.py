@@ -232,16 +232,31 @@ def test_the_docs_figures_on_cloth_self_contact_are_the_benchmarks():
 
 
 def test_the_docs_sweep_speedup_is_the_benchmark():
-    """docs/sweep.md's speed-up of a local cluster is benchmarks/results/sweep_speedup.md's
-    (benchmarks/sweep_speedup.py), with its date, machine, load and cells' length."""
+    """docs/sweep.md's table of a local cluster against the cells in series is
+    benchmarks/results/sweep_speedup.md's (benchmarks/sweep_speedup.py), with its date, machine
+    and loads, and the study size from which the cluster pays is the file's and the one
+    ``cluster.LOCAL_CLUSTER_PAYS_FROM`` holds (issue 59)."""
+    from contactlab import cluster
+
     root = Path(__file__).parent.parent
-    results = root / "benchmarks" / "results" / "sweep_speedup.md"
-    idle = _table_rows(results)[0]
-    date, cpu = re.search(r"on (\d{4}-\d\d-\d\d): ([^,]+), 2 cores", results.read_text()).groups()
-    load = float(re.search(r"load ([\d.]+) at start", idle[0]).group(1))
+    results = (root / "benchmarks" / "results" / "sweep_speedup.md").read_text()
+    rows = [
+        row for row in _table_rows(root / "benchmarks" / "results" / "sweep_speedup.md") if row[0].startswith("idle")
+    ]
+    date, cpu = re.search(r"on (\d{4}-\d\d-\d\d): ([^,]+), 2 cores", results).groups()
+    loads = [float(re.search(r"load ([\d.]+) at start", row[0]).group(1)) for row in rows]
+    pays = re.search(
+        r"Idle: the sweep, its cluster's start counted, pays from about (\d+) s of cells in series", results
+    )
     text = " ".join((root / "docs" / "sweep.md").read_text().split())
-    assert f"Its committed run ({date}, {cpu}, 2 cores, load {load:.1f}) found the cluster {idle[4]} as fast" in text
-    assert f"whose cells took {round(float(idle[2]) / 16)} s each on average" in text
+    assert (
+        f"Its committed run ({date}, {cpu}, 2 cores, load {min(loads):.1f}–{max(loads):.1f} at the studies' starts)"
+        in text
+    )
+    for row in rows:
+        assert f"| {row[2]} | {row[3]} s | {row[6]} s | {row[7]} |" in text, row
+    assert f"A local cluster on 2 cores pays from about {pays.group(1)} s of cells in series" in text
+    assert cluster.LOCAL_CLUSTER_PAYS_FROM == float(pays.group(1))
 
 
 def _table(text, header):

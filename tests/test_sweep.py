@@ -666,6 +666,43 @@ def test_a_single_cell_runs_here_and_says_so(tmp_path):
     assert {"cells", "results.parquet", "report.html"} <= set(os.listdir(tmp_path / "out"))
 
 
+class _NoClusterStarted(Exception):
+    pass
+
+
+def _refusing_connect(*arguments, **options):
+    raise _NoClusterStarted
+
+
+def test_a_study_too_small_to_repay_a_cluster_runs_here_and_says_so(tmp_path, monkeypatch):
+    # issue 59: a local cluster takes seconds to start; a study of less work than that ran slower
+    # on one (0.28x for 16 cells of 0.8 s in all, benchmarks/results/sweep_speedup.md)
+    from contactlab import cluster, sweep
+
+    monkeypatch.setattr(cluster, "connect", _refusing_connect)
+    study = write(tmp_path, BALL_STUDY.replace("[1.0]", "[0.2]"))
+    lines = []
+    table = sweep.run(study, tmp_path / "out", log=lines.append)
+    assert lines[0] == "8 cells: 0 done already, 8 to run"
+    first = table["cell_seconds"][0] - table["compile_seconds"][0]
+    assert lines[1] == (
+        f"the first cell ran in {first:.2g} s: the 7 others (about {7 * first:.2g} s) run here too "
+        "(a local cluster repays its start from about 5 s of cells)"
+    )
+    assert table["status"].tolist() == ["ok"] * 8 and set(table["worker"]) == {"local"}
+
+
+def test_a_study_worth_a_cluster_spreads_the_cells_after_the_first(tmp_path, monkeypatch):
+    from contactlab import cluster, sweep
+
+    monkeypatch.setattr(cluster, "LOCAL_CLUSTER_PAYS_FROM", 0.0)  # any study repays it
+    monkeypatch.setattr(cluster, "connect", _refusing_connect)
+    study = write(tmp_path, BALL_STUDY.replace("[1.0]", "[0.2]"))
+    with pytest.raises(_NoClusterStarted):
+        sweep.run(study, tmp_path / "out")
+    assert len(os.listdir(tmp_path / "out" / "cells")) == 1  # the first cell ran here, and stays done
+
+
 def test_a_study_of_many_short_runs_steps_its_cells_through_the_compiled_loop():
     # issue 36: a study is thousands of short runs, each of which stepped the loop's body from
     # Python (about 30 ms a 720-step ball run against 3 ms through the compiled loop) unless the

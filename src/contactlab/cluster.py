@@ -65,6 +65,8 @@ HANDSHAKE_TIMEOUT = 3.0  # s: how long what listens there may take to say it is 
 POLL_SECONDS = 0.1  # s: how often the wait for results looks for a signal
 MIN_WINDOW = 32  # jobs in flight at least (run_tasks)
 STOP_SECONDS = 1.0  # s: how long an interrupted command waits for a local worker to end its job and exit
+LOCAL_CLUSTER_PAYS_FROM = 5.0  # s of cells in series from which a 2-core local cluster, its start counted, is faster
+# (benchmarks/results/sweep_speedup.md: 0.70x at 2.8 s, 1.15x at 7.0 s); a sweep with less runs in its own process
 IDLE_PROBE_SECONDS = 0.3  # s: how long default_workers watches the machine's load
 WORKER_MEMORY = 2**29  # bytes of free memory a local worker process needs: about 240 MB at rest, and its runs
 

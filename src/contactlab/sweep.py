@@ -1,11 +1,13 @@
 """Sweeps: every cell of a study (contactlab.study) run on a Dask cluster, one row per cell.
 
     from contactlab import sweep
-    table = sweep.run("examples/studies/ball_dt.toml")          # a local cluster, one worker per core
+    table = sweep.run("examples/studies/ball_dt.toml")          # here, or a local cluster where it pays
     table = sweep.run(study, scheduler="tcp://10.0.0.5:8786")    # an existing one
 
 Cells go to the cluster through :mod:`contactlab.cluster`; each runs in a worker process on
-one thread (``simulate(..., threads=1)``: the cluster's parallelism is the cells). As each
+one thread (``simulate(..., threads=1)``: the cluster's parallelism is the cells); with no
+cluster asked for, a study of less work than a local cluster repays runs in this process
+(``cluster.LOCAL_CLUSTER_PAYS_FROM``). As each
 cell finishes, its row is written to ``OUT/cells/<key>.parquet`` (atomically), so an
 interrupted sweep keeps every cell it finished and a rerun of the study skips them: the key
 hashes the cell's scene text, method, settings, what it records and the contactlab version
@@ -55,7 +57,9 @@ def run(
     """Run every cell of ``study`` (a Study or the path of a study file) not done already in
     ``out`` (default ``out/<study name>-sweep``) on ``client``, or on a cluster from
     :func:`contactlab.cluster.connect` (``scheduler``: an address; ``workers``: local worker
-    processes); returns the table (pandas.DataFrame, one row per cell, in the study's order).
+    processes; neither: this process for a study of less than ``cluster.LOCAL_CLUSTER_PAYS_FROM``
+    [s] of cells at its first cell's pace, else a local cluster); returns the table
+    (pandas.DataFrame, one row per cell, in the study's order).
     ``log``: a function given one line of news (the dashboard's address, cells skipped)."""
     import pandas as pd
 
@@ -81,11 +85,12 @@ def run(
                 trajectories = stamps(job["trajectory"] for _, job in jobs if job["trajectory"])
                 if client is not None:
                     _run_jobs(client, jobs, cells_folder, progress, say, counts)
-                elif scheduler is None and workers is None and len(jobs) == 1:  # nothing to spread
+                elif scheduler is None and workers is None:  # no cluster asked for: one only where it pays
                     say(counts)
-                    say("1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)")
-                    key, job = jobs[0]
-                    _write_row(cells_folder, key, run_cell(job))
+                    rest = _run_here_while_small(jobs, cells_folder, say)
+                    if rest:
+                        with cluster.connect() as connected:
+                            _run_jobs(connected, rest, cells_folder, progress, say, f"{len(rest)} cells to spread")
                 else:
                     with cluster.connect(scheduler, workers) as connected:  # the counts once it is reached
                         _run_jobs(connected, jobs, cells_folder, progress, say, counts)
@@ -101,6 +106,29 @@ def run(
 
         write_report(study, table, out)
         return table
+
+
+def _run_here_while_small(jobs, cells_folder, say):
+    """With no cluster asked for, run the first of ``jobs`` (key, job) in this process; if the
+    others would take less than ``cluster.LOCAL_CLUSTER_PAYS_FROM`` [s] in series at its pace (its
+    stepping: the seconds it spent compiling left out), run them here too, saying so. Returns the
+    jobs left for a local cluster (none, or all but the first)."""
+    key, job = jobs[0]
+    if len(jobs) == 1:
+        say("1 cell to run: it runs here (a local cluster would only add the seconds it takes to start)")
+    row = run_cell(job)
+    _write_row(cells_folder, key, row)
+    rest = jobs[1:]
+    pace = max(0.0, float(row.get("cell_seconds") or 0.0) - float(row.get("compile_seconds") or 0.0))
+    if not rest or pace * len(rest) >= cluster.LOCAL_CLUSTER_PAYS_FROM:
+        return rest
+    say(
+        f"the first cell ran in {pace:.2g} s: the {len(rest)} others (about {pace * len(rest):.2g} s) run here too "
+        f"(a local cluster repays its start from about {cluster.LOCAL_CLUSTER_PAYS_FROM:g} s of cells)"
+    )
+    for key, job in rest:
+        _write_row(cells_folder, key, run_cell(job))
+    return []
 
 
 def _jobs(cells, study, out):
