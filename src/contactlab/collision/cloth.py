@@ -163,6 +163,15 @@ def edge_owned(model: Model) -> np.ndarray:
     return owned.reshape(-1, 3)
 
 
+@njit(cache=True)
+def _distance(kind, params, position, rotation, x):
+    """[m] the signed distance of x (3,) from the obstacle (``shape_signed_distance``'s), a
+    sphere's without the arrays that function returns (the face contacts ask it of every vertex)."""
+    if kind == shapes.SPHERE:
+        return np.sqrt((x[0] - position[0]) ** 2 + (x[1] - position[1]) ** 2 + (x[2] - position[2]) ** 2) - params[0]
+    return shape_signed_distance(kind, params, position, rotation, x)[0]
+
+
 def faces_against(positions, triangles, owned, thickness, surface, margin):
     """``cloth_face_contacts`` for one obstacle (a ShapeObstacle): (triangle (F,) int64, weights
     (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
@@ -196,9 +205,6 @@ def _faces_against(positions, triangles, owned, thickness, kind, params, positio
             apart = apart or low > position[i] + extent[i] or high < position[i] - extent[i]
         if apart:
             continue
-        nearest_vertex = np.inf
-        for corner in (a, b, c):
-            nearest_vertex = min(nearest_vertex, shape_signed_distance(kind, params, position, rotation, corner)[0])
         if kind == shapes.SPHERE:  # nearest the sphere: nearest its centre
             wa, wb, wc, _ = closest_on_triangle(position, a, b, c)
         else:
@@ -215,23 +221,32 @@ def _faces_against(positions, triangles, owned, thickness, kind, params, positio
         wa, wb, wc = wa if wa >= EDGE_SNAP else 0.0, wb if wb >= EDGE_SNAP else 0.0, wc if wc >= EDGE_SNAP else 0.0
         total = wa + wb + wc
         wa, wb, wc = wa / total, wb / total, wc / total
-        for i in range(3):
-            x[i] = wa * a[i] + wb * b[i] + wc * c[i]
-        signed, normal, closest = shape_signed_distance(kind, params, position, rotation, x)
         weights = (wa, wb, wc)
-        corner_point = max(wa, wb, wc) >= 1.0
-        on_edge = False
+        if max(wa, wb, wc) >= 1.0:  # a corner: the vertex's own contact
+            continue
         mine = True
         for k in range(3):
-            if weights[k] == 0.0 and not corner_point:  # on the edge opposite corner k: corners k+1, k+2
-                on_edge = True
+            if weights[k] == 0.0:  # on the edge opposite corner k (corners k + 1, k + 2): its first triangle's
                 mine = owned[t, (k + 1) % 3]
+        if not mine:
+            continue
+        for i in range(3):
+            x[i] = wa * a[i] + wb * b[i] + wc * c[i]
+        signed = _distance(kind, params, position, rotation, x)
         half = 0.5 * (
             wa * thickness[triangles[t, 0]] + wb * thickness[triangles[t, 1]] + wc * thickness[triangles[t, 2]]
         )
         depth = 2.0 * half - signed
-        if corner_point or (on_edge and not mine) or depth < -margin or signed > nearest_vertex - half:
+        if depth < -margin:
             continue
+        nearest_vertex = min(
+            _distance(kind, params, position, rotation, a),
+            _distance(kind, params, position, rotation, b),
+            _distance(kind, params, position, rotation, c),
+        )
+        if signed > nearest_vertex - half:  # no nearer than the vertices: theirs are the contacts
+            continue
+        _, normal, closest = shape_signed_distance(kind, params, position, rotation, x)
         found_triangle[count] = t
         found[count, 0], found[count, 1], found[count, 2] = wa, wb, wc
         for i in range(3):
