@@ -289,7 +289,15 @@ def test_cloth_with_implicit_springs_and_hard_constraints_runs_where_explicit_pr
         simulate(model, "projection", dt=1 / 60, duration=1.0)
     run = simulate(model, "constraints", dt=1 / 60, duration=1.5, integrator="backward_euler")
     assert run.state.is_finite()
-    assert run.summary["max_penetration"] < 0.002
+    # the overlap, counted from the thickness at the vertices and between them (the sphere
+    # reaches the triangles' middles, 75 mm from their corners): what the landing step lets in,
+    # the stabilization pushes out a step at a time (a fifth of it a step), down to the slop
+    slop = 0.0005
+    excess = run.arrays["max_penetration"] - slop
+    landed = int(np.argmax(excess > 0.0))
+    assert landed > 0 and np.all(np.diff(excess[landed : landed + 20]) < 0.0)  # one sample a step
+    assert excess[landed + 60] < 0.01 * excess[landed]  # a second after the landing
+    assert excess[-1] < 1e-6
     kinetic = run.arrays["energy_kinetic"]
     assert kinetic[-1] < 0.05 * kinetic.max()  # it landed and is settling
 

@@ -345,8 +345,12 @@ class Stepper:
         time, where a step leaves a non-finite value or a speed above ``health.HARD_SPEED``."""
         whole_number(steps, "steps", 1)
         first = self.steps_made + 1
-        with compile_notice(self._notice):
-            made, diverged, _ = self.stepping.advance(steps, first, 0, NEVER_SAMPLED, HARD_SPEED, self._no_rows)
+        arguments = (steps, first, 0, NEVER_SAMPLED, HARD_SPEED, self._no_rows)
+        if self.steps_made and self.stepping.compiled:  # the loop compiled whole at its first call
+            made, diverged, _ = self.stepping.advance(*arguments)
+        else:  # a first call, or the methods' step, whose stages compile as a run first meets them
+            with compile_notice(self._notice):
+                made, diverged, _ = self.stepping.advance(*arguments)
         self.steps_made += made
         if diverged:
             raise SimulationDiverged(

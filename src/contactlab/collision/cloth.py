@@ -33,7 +33,7 @@ from ..model import derived
 from .cloth_self import closest_on_triangle
 from .contact_output import FEATURE_BITS
 from .granularity import SURFACES, surface_contacts
-from .signed_distance import model_obstacle, shape_signed_distance
+from .signed_distance import ShapeObstacle, model_obstacle, shape_signed_distance
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -172,7 +172,14 @@ def _distance(kind, params, position, rotation, x):
     return shape_signed_distance(kind, params, position, rotation, x)[0]
 
 
-def faces_against(positions, triangles, owned, thickness, surface, margin):
+def faces_against(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    owned: np.ndarray,
+    thickness: np.ndarray,
+    surface: ShapeObstacle,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``cloth_face_contacts`` for one obstacle (a ShapeObstacle): (triangle (F,) int64, weights
     (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
     return _faces_against(

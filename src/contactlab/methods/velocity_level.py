@@ -301,6 +301,23 @@ def earliest_impacts(
     return tau_body, tau_particle
 
 
+@njit(cache=True, inline="always")
+def impact_of(gap: float, normal_velocity: float, gravity_normal: float, h: float) -> tuple[float, float]:
+    """(τ, u) of a contact that closes within the step of h [s]: τ = d₀ / (−h v_n), at most 1,
+    the fraction of the step at which its gap d₀ [m] (0 where ≤ 0) closes at the normal velocity
+    v_n < 0 [m/s], and its velocity at that moment u = v_n + g_n (τ − ½) h [m/s] (symplectic
+    Euler is leapfrog: v_n is the velocity at mid-step)."""
+    closes = min(gap / (-normal_velocity * h), 1.0) if gap > 0.0 else 0.0
+    return closes, normal_velocity + gravity_normal * (closes - 0.5) * h
+
+
+@njit(cache=True, inline="always")
+def bounce_target(restitution: float, impact: float, gravity_normal: float, closes: float, h: float) -> float:
+    """[m/s] the mid-step normal velocity at which a contact that met at the impact velocity u
+    [m/s] at τ (``impact_of``) leaves: −ε u + g_n (½ − τ) h."""
+    return -restitution * impact + gravity_normal * (0.5 - closes) * h
+
+
 @njit(cache=True)
 def impact_targets(
     gap_at_start: np.ndarray,
@@ -325,15 +342,14 @@ def impact_targets(
     tau = np.empty(C)
     for c in range(C):
         gap, vn = gap_at_start[c], normal_velocity[c]
-        closing = vn < 0.0 and gap + h * vn <= 0.0
-        closes = min(gap / (-vn * h), 1.0) if gap > 0.0 and closing else 0.0
-        impact = vn + gravity_normal[c] * (closes - 0.5) * h
-        if closing and restitution[c] > 0.0 and impact < -threshold:
-            target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes) * h
-            tau[c] = closes
-        else:
-            target[c] = resting_target(gap, settings)
-            tau[c] = -1.0
+        if vn < 0.0 and gap + h * vn <= 0.0 and restitution[c] > 0.0:  # closing within the step: a bounce?
+            closes, impact = impact_of(gap, vn, gravity_normal[c], h)
+            if impact < -threshold:
+                target[c] = bounce_target(restitution[c], impact, gravity_normal[c], closes, h)
+                tau[c] = closes
+                continue
+        target[c] = resting_target(gap, settings)
+        tau[c] = -1.0
     return target, tau
 
 
@@ -391,10 +407,9 @@ def resolve_collisions(
             vn = contact_velocity(c, rows, u)[0]
             if vn >= 0.0 or gap_at_start[c] + dt * vn > 0.0:  # separating, or still open at the end
                 continue
-            closes[c] = min(1.0, gap_at_start[c] / (-vn * dt)) if gap_at_start[c] > 0.0 else 0.0
-            impact = vn + gravity_normal[c] * (closes[c] - 0.5) * dt
+            closes[c], impact = impact_of(gap_at_start[c], vn, gravity_normal[c], dt)
             if impact < -threshold:
-                target[c] = -restitution[c] * impact + gravity_normal[c] * (0.5 - closes[c]) * dt
+                target[c] = bounce_target(restitution[c], impact, gravity_normal[c], closes[c], dt)
                 tau[c] = closes[c] if tau[c] < 0.0 else min(tau[c], closes[c])
                 impulses[c, 0] = impulses[c, 1] = impulses[c, 2] = 0.0
                 members[count] = c

@@ -248,6 +248,14 @@ class Stepping:
         """The state as it stands into the first row of ``samples``."""
         raise NotImplementedError
 
+    def state(self) -> State:
+        """The State reached, to keep: it carries what the method's ``step`` carries."""
+        raise NotImplementedError
+
+    def reached(self) -> State:
+        """The State reached, for a look: its arrays those the next ``advance`` starts from."""
+        raise NotImplementedError
+
 
 class LoopStepper(Stepping):
     """Steps one run of ``method`` on ``model`` through the compiled loop (``run_steps``)."""

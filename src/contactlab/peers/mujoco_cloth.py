@@ -31,6 +31,7 @@ after ``mj_step``), velocities their ``qvel``; a pinned vertex stays where it is
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -132,7 +133,7 @@ class Flexes:
         squares = np.einsum("fij,fij->f", strain, strain)
         return float(self._area @ (self._shear * squares + 0.5 * self._lame * trace * trace))
 
-    def bind(self, mj_model) -> None:
+    def bind(self, mj_model: Any) -> None:
         """Find each free vertex's slide joints in the compiled ``mj_model``."""
         free = [
             (sheet.particles[v], _name(c, v))
@@ -145,11 +146,11 @@ class Flexes:
         self._qpos = np.asarray(mj_model.jnt_qposadr)[joints][:, None] + AXES  # (free, 3)
         self._dof = np.asarray(mj_model.jnt_dofadr)[joints][:, None] + AXES
 
-    def start(self, data) -> None:
+    def start(self, data: Any) -> None:
         """Give the free vertices their initial velocities in ``data`` (their positions are the bodies')."""
         data.qvel[self._dof] = self.velocity[self._free]
 
-    def read(self, data) -> tuple[np.ndarray, np.ndarray]:
+    def read(self, data: Any) -> tuple[np.ndarray, np.ndarray]:
         """(position (P, 3) [m], velocity (P, 3) [m/s]) of every particle in ``data``: a pinned
         vertex where it started, at rest."""
         position, velocity = self.position.copy(), np.zeros((self.particles, 3))
