@@ -428,3 +428,43 @@ def test_the_constraints_pages_convergence_figures_are_the_benchmark():
     sliding = facts["change_by_sliding"]
     assert f"a median change {sliding['sliding_median'] / sliding['sticking_median']:.1f} times the sticking" in text
     assert f"There are only {every['sliding']} of them ({top_percent['sliding']} in the top 1 %)" in text
+
+
+def test_the_peers_pages_figures_are_the_benchmarks():
+    """docs/peers.md's stopping distances on sliding_block, its bounce ratios on bouncing_ball,
+    the example report's verdicts and MuJoCo's note are benchmarks/results/results.json's
+    (`benchmarks/peers.py --only scenes`), with its date, machine and load (issue 59)."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "results.json").read_text())
+    runs, date = result["runs"], result["machine"]["date"]
+    cpu = result["machine"]["cpu"].replace("(R)", "").replace(" Processor", "")  # Intel Xeon
+    page = (root / "docs" / "peers.md").read_text()
+    text = " ".join(page.split())
+
+    def check(run, quantity):
+        return next(c for c in runs[run]["checks"] if c["quantity"] == quantity)
+
+    mujoco, pybullet = (check(f"builtin-sliding_block/{peer}", "stopping distance") for peer in ("mujoco", "pybullet"))
+    assert (
+        f"MuJoCo stops the block at {mujoco['measured']:.3f} m, pybullet at {pybullet['measured']:.3f} m (closed form "
+        f"{mujoco['expected']:.3f} m; {date}, {cpu}, 2 cores: `benchmarks/results/results.json`, "
+        "`builtin-sliding_block/…`)" in text
+    )
+    ball = [f"builtin-bouncing_ball/{engine}" for engine in ("mujoco", "pybullet", "contactlab-impulse")]
+    loads = {load for run in ball for load in runs[run]["load"]}
+    assert len(loads) == 1
+    assert f"({date}, {cpu}, 2 cores, load {loads.pop():.1f}: `benchmarks/results/results.json`, " in text
+
+    def returned(run, bounce):
+        """The share of its speed the ball keeps at a bounce: √ of the ratio of its heights (ε = 0.8)."""
+        first = check(run, "rebound 1 apex")
+        heights = [first["expected"] / 0.8**2, first["measured"], check(run, "rebound 2 apex")["measured"]]
+        return (heights[bounce] / heights[bounce - 1]) ** 0.5
+
+    assert f"MuJoCo's first bounce returns {returned(ball[0], 1):.2f} of the speed where ε = 0.8" in text
+    assert f"pybullet's first bounce returns {returned(ball[1], 1):.2f}, its second {returned(ball[1], 2):.2f}" in text
+    for run, name in zip(ball, ("mujoco", "pybullet", "impulse")):
+        assert f"| {name} | ok | {runs[run]['expectations']} |" in page, name
+    assert f"- mujoco: {runs[ball[0]]['engine_notes'][0]}" in page
