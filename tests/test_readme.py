@@ -468,3 +468,38 @@ def test_the_peers_pages_figures_are_the_benchmarks():
     for run, name in zip(ball, ("mujoco", "pybullet", "impulse")):
         assert f"| {name} | ok | {runs[run]['expectations']} |" in page, name
     assert f"- mujoco: {runs[ball[0]]['engine_notes'][0]}" in page
+
+
+def test_the_lcp_pages_counts_are_the_benchmarks():
+    """docs/lcp.md's counts outside its tables are its results files': redblack's colors on the
+    4000-sphere pile (results.json), apgd's steps to 1e-8, nsgs' error on the rock pile after
+    10 000 sweeps and newton's steps there (fclib_newton.md) (issue 59)."""
+    import json
+
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results"
+    text = " ".join((root / "docs" / "lcp.md").read_text().split())
+    colors = json.loads((results / "results.json").read_text())["runs"]["lcp/redblack"]["colors"]
+    assert f"one per color (`redblack`'s {colors} on the 4000-sphere pile)" in text
+    rows = _table((results / "fclib_newton.md").read_text(), _header(results / "fclib_newton.md", "| file | nc |"))
+
+    def apgd(name):
+        file = next(cells for key, cells in rows.items() if key.startswith(name))
+        assert "no" not in file[9]  # solved
+        return file[8]
+
+    assert (
+        f"At tol 1e-8 with 10 000 steps apgd takes {apgd('Capsules-i100')} steps on Capsules-i100, "
+        f"{apgd('Capsules-i101')} on Capsules-i101, {apgd('Capsules-i125')} on Capsules-i125, "
+        f"{apgd('BoxesStack1')} on BoxesStack1 and {apgd('local_problem_test')} on local_problem_test" in text
+    )
+    shown = _table(
+        (root / "docs" / "lcp.md").read_text(),
+        "| file | nc | newton steps | newton error | newton ms | nsgs sweeps | nsgs error | nsgs ms |",
+    )
+    solved = sum("no" not in rows[name][6] for name in shown)
+    assert all("no" not in rows[name][3] for name in shown)
+    assert f"newton solved all {len(shown)} to 1e-8 (nsgs {solved}, its Capsules-i101 error within rounding" in text
+    pile = rows["RockPile_tob1.dat"]
+    assert pile[5] == "10000" and f"nsgs gets to {pile[6].split()[0].replace('e-05', 'e-5')} in 10 000 sweeps" in text
+    assert float(pile[3]) <= 1e-8 and f"the one kept, solves it in {pile[2]} steps" in text
