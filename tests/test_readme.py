@@ -316,3 +316,190 @@ def test_the_lcp_pages_figures_are_the_benchmarks():
 def _header(path, start):
     """The first line of ``path`` that starts with ``start`` (a table's header)."""
     return next(line for line in path.read_text().splitlines() if line.startswith(start))
+
+
+def _page_text(*parts):
+    """A page of docs/ with its lines joined by single spaces (a figure may be wrapped anywhere)."""
+    return " ".join(Path(__file__).parent.parent.joinpath("docs", *parts).read_text().split())
+
+
+def test_the_methods_pages_figures_are_the_benchmarks():
+    """docs/methods/*.md quote benchmarks/results/results.json (benchmarks/peers.py) for the
+    20-level pyramid under penalty and impulse, the 64 × 64 cloth under constraints and
+    redblack_blocks against pgs, rounded as the pages have them, with the file's date, machine
+    and loads (issue 59)."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "results.json").read_text())
+    runs, date = result["runs"], result["machine"]["date"]
+    cpu = result["machine"]["cpu"].replace("(R)", "").replace(" Processor", "")  # Intel Xeon
+    assert result["machine"]["cores"] == 2
+    penalty, pybullet = runs["pyramid/contactlab-penalty"], runs["pyramid/pybullet"]
+    loads = penalty["load"] + pybullet["load"]
+    text = _page_text("methods", "penalty.md")
+    assert (
+        f"({date}, {cpu}, 2 cores, load {min(loads):.2f}–{max(loads):.2f}: `benchmarks/results/results.json`," in text
+    )
+    assert (
+        f"the pyramid under penalty steps at {penalty['steps_per_second']:.0f} steps/s against pybullet's "
+        f"{pybullet['steps_per_second']:.0f}, every box within {1e3 * penalty['drift']:.1f} mm." in text
+    )
+    impulse = runs["pyramid/contactlab-impulse"]
+    text = _page_text("methods", "impulse.md")
+    assert (
+        f"every box of that pyramid stays within {1e3 * impulse['drift']:.2f} mm over 5 s at "
+        f"{impulse['sweeps_per_step']:.2f} sweeps a step ({date}, {cpu}, 2 cores, load "
+        f"{impulse['load'][0]:.2f}: `benchmarks/results/results.json`, `pyramid/contactlab-impulse`)" in text
+    )
+    cloth = runs["cloth64/contactlab-constraints"]
+    text = _page_text("methods", "constraints.md")
+    assert (
+        f"({date}, {cpu}, 2 cores, load {cloth['load'][0]:.1f}: `benchmarks/results/results.json`, "
+        f"`cloth64/contactlab-constraints`) a 64 × 64 cloth steps at {cloth['steps_per_second']:.2f} steps/s" in text
+    )
+    assert cloth["vertices"] == 64 * 64
+    blocks = runs["lcp/pgs"]["seconds"] / runs["lcp/redblack_blocks"]["seconds"]
+    assert f"the assembled LCP: {blocks:.2f}× `pgs` on the 4000-sphere pile" in text
+
+
+def _sci(value):
+    """``value`` as the pages write it: two digits, the exponent without its padding (3.5e-2)."""
+    mantissa, exponent = f"{value:.1e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def _thousands(count):
+    """``count`` with thousands set apart by a space, as the pages write them (3 197)."""
+    return f"{count:,}".replace(",", " ")
+
+
+def test_the_constraints_pages_convergence_figures_are_the_benchmark():
+    """docs/methods/constraints.md's sweeps, changes and errors on the settled pile and pyramid
+    are benchmarks/results/convergence.json's (benchmarks/convergence.py), as the page rounds them."""
+    import json
+
+    import numpy as np
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "convergence.json").read_text())
+    pile, pyramid = result["pile1000"], result["pyramid20"]
+    text = _page_text("methods", "constraints.md")
+    methods_order = next(name for name in pile["curves"] if name.startswith("methods' order"))
+    change = np.array(pile["curves"][methods_order]["change"])
+    facts = pile["facts"]
+    assert f"On the pile's step ({_thousands(facts['contacts'])} contacts, none new)" in text
+    assert facts["new"] == 0
+    assert f"the first sweep changes a contact velocity by {_sci(change[0])} m/s" in text
+    assert (
+        f"After 10 sweeps the change is {_sci(change[9])}, after 50 it is {_sci(change[49])}, "
+        f"after 100 it is {_sci(change[99])} and after 150 it is {_sci(change[149])} m/s" in text
+    )
+    fast, slow = (100 * (1 - (change[b - 1] / change[a - 1]) ** (1 / (b - a))) for a, b in ((50, 100), (100, 150)))
+    assert f"by about {fast:.1f} % a sweep between sweeps 50 and 100, and by only {slow:.0f} % between" in text
+    assert f"({facts['mean_sweeps_while_settling']:.1f} over the 1.5 s settle" in text
+    assert f"Even a tolerance of 1e-5 m/s costs {np.argmax(change < 1e-5) + 1} sweeps here" in text
+    assert f"still costs {np.argmax(change < 1e-5) + 1} sweeps on this step" in text
+    colours = next(name for name in pile["curves"] if name.startswith("coloured"))
+    assert f"a {colours.split('(')[1].split()[0]}-colour graph colouring" in text
+
+    def stop(curve):
+        return int(np.argmax(np.array(curve["change"]) <= 1e-7)) + 1
+
+    top = stop(pyramid["curves"][methods_order])
+    orders = [name for name in pyramid["curves"] if name.startswith(("bottom", "collision", "random", "coloured"))]
+    assert len(orders) == 4
+    others = sorted(stop(pyramid["curves"][name]) for name in orders)
+    assert stop(pyramid["curves"]["top down"]) == top
+    assert f"top down reaches the tolerance in {top} sweeps, against {others[0]}–{others[-1]} for" in text
+    lowest = min(min(curve["error"]) for curve in pyramid["curves"].values())
+    assert round(lowest, 5) == 4e-5  # "no solver drives the natural-map error below about 4e-5"
+    newton, error = pile["curves"]["newton"], np.array(pile["curves"][methods_order]["error"])
+    steps = dict(zip(newton["sweeps"], newton["error"]))
+    assert (
+        f"error of {_sci(steps[1])} after 1 and 2 steps and {_sci(steps[4])} after 4. The sweeps reach those errors "
+        f"in {np.argmax(error <= steps[1]) + 1} and {np.argmax(error <= steps[4]) + 1} sweeps" in text
+    )
+    assert steps[2] == steps[1] and f"a {_thousands(3 * facts['contacts'])}-row matrix" in text
+    top_percent, every = facts["top_percent"], facts["all_contacts"]
+    assert (
+        f"have a median height of {top_percent['median_height']:.2f} m, against {every['median_height']:.2f} m" in text
+    )
+    sliding = facts["change_by_sliding"]
+    assert f"a median change {sliding['sliding_median'] / sliding['sticking_median']:.1f} times the sticking" in text
+    assert f"There are only {every['sliding']} of them ({top_percent['sliding']} in the top 1 %)" in text
+
+
+def test_the_peers_pages_figures_are_the_benchmarks():
+    """docs/peers.md's stopping distances on sliding_block, its bounce ratios on bouncing_ball,
+    the example report's verdicts and MuJoCo's note are benchmarks/results/results.json's
+    (`benchmarks/peers.py --only scenes`), with its date, machine and load (issue 59)."""
+    import json
+
+    root = Path(__file__).parent.parent
+    result = json.loads((root / "benchmarks" / "results" / "results.json").read_text())
+    runs, date = result["runs"], result["machine"]["date"]
+    cpu = result["machine"]["cpu"].replace("(R)", "").replace(" Processor", "")  # Intel Xeon
+    page = (root / "docs" / "peers.md").read_text()
+    text = " ".join(page.split())
+
+    def check(run, quantity):
+        return next(c for c in runs[run]["checks"] if c["quantity"] == quantity)
+
+    mujoco, pybullet = (check(f"builtin-sliding_block/{peer}", "stopping distance") for peer in ("mujoco", "pybullet"))
+    assert (
+        f"MuJoCo stops the block at {mujoco['measured']:.3f} m, pybullet at {pybullet['measured']:.3f} m (closed form "
+        f"{mujoco['expected']:.3f} m; {date}, {cpu}, 2 cores: `benchmarks/results/results.json`, "
+        "`builtin-sliding_block/…`)" in text
+    )
+    ball = [f"builtin-bouncing_ball/{engine}" for engine in ("mujoco", "pybullet", "contactlab-impulse")]
+    loads = {load for run in ball for load in runs[run]["load"]}
+    assert len(loads) == 1
+    assert f"({date}, {cpu}, 2 cores, load {loads.pop():.1f}: `benchmarks/results/results.json`, " in text
+
+    def returned(run, bounce):
+        """The share of its speed the ball keeps at a bounce: √ of the ratio of its heights (ε = 0.8)."""
+        first = check(run, "rebound 1 apex")
+        heights = [first["expected"] / 0.8**2, first["measured"], check(run, "rebound 2 apex")["measured"]]
+        return (heights[bounce] / heights[bounce - 1]) ** 0.5
+
+    assert f"MuJoCo's first bounce returns {returned(ball[0], 1):.2f} of the speed where ε = 0.8" in text
+    assert f"pybullet's first bounce returns {returned(ball[1], 1):.2f}, its second {returned(ball[1], 2):.2f}" in text
+    for run, name in zip(ball, ("mujoco", "pybullet", "impulse")):
+        assert f"| {name} | ok | {runs[run]['expectations']} |" in page, name
+    assert f"- mujoco: {runs[ball[0]]['engine_notes'][0]}" in page
+
+
+def test_the_lcp_pages_counts_are_the_benchmarks():
+    """docs/lcp.md's counts outside its tables are its results files': redblack's colors on the
+    4000-sphere pile (results.json), apgd's steps to 1e-8, nsgs' error on the rock pile after
+    10 000 sweeps and newton's steps there (fclib_newton.md) (issue 59)."""
+    import json
+
+    root = Path(__file__).parent.parent
+    results = root / "benchmarks" / "results"
+    text = " ".join((root / "docs" / "lcp.md").read_text().split())
+    colors = json.loads((results / "results.json").read_text())["runs"]["lcp/redblack"]["colors"]
+    assert f"one per color (`redblack`'s {colors} on the 4000-sphere pile)" in text
+    rows = _table((results / "fclib_newton.md").read_text(), _header(results / "fclib_newton.md", "| file | nc |"))
+
+    def apgd(name):
+        file = next(cells for key, cells in rows.items() if key.startswith(name))
+        assert "no" not in file[9]  # solved
+        return file[8]
+
+    assert (
+        f"At tol 1e-8 with 10 000 steps apgd takes {apgd('Capsules-i100')} steps on Capsules-i100, "
+        f"{apgd('Capsules-i101')} on Capsules-i101, {apgd('Capsules-i125')} on Capsules-i125, "
+        f"{apgd('BoxesStack1')} on BoxesStack1 and {apgd('local_problem_test')} on local_problem_test" in text
+    )
+    shown = _table(
+        (root / "docs" / "lcp.md").read_text(),
+        "| file | nc | newton steps | newton error | newton ms | nsgs sweeps | nsgs error | nsgs ms |",
+    )
+    solved = sum("no" not in rows[name][6] for name in shown)
+    assert all("no" not in rows[name][3] for name in shown)
+    assert f"newton solved all {len(shown)} to 1e-8 (nsgs {solved}, its Capsules-i101 error within rounding" in text
+    pile = rows["RockPile_tob1.dat"]
+    assert pile[5] == "10000" and f"nsgs gets to {pile[6].split()[0].replace('e-05', 'e-5')} in 10 000 sweeps" in text
+    assert float(pile[3]) <= 1e-8 and f"the one kept, solves it in {pile[2]} steps" in text
