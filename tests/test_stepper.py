@@ -8,15 +8,7 @@ import pytest
 from contactlab import ModelBuilder, Stepper, simulate
 from contactlab.errors import InputError, SimulationDiverged
 from contactlab.scene import load_scene
-
-ARRAYS = (
-    "body_position",
-    "body_orientation",
-    "body_velocity",
-    "body_angular_velocity",
-    "particle_position",
-    "particle_velocity",
-)
+from contactlab.state import ARRAYS
 
 
 def same_state(a, b):
