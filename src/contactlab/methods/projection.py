@@ -81,8 +81,6 @@ class Options(KeptManifoldOptions):
     """detect-and-project rounds per step"""
     contact_margin: float = 0.001
     """m: gaps this small are detected too"""
-    cloth_samples: int = 2
-    """samples per cloth triangle edge against obstacles (P2c); 0: vertices only"""
     slop: float = 0.0005
     """m of penetration left alone (the rest is projected out)"""
     warm_start: float = 1.0
