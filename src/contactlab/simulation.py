@@ -181,6 +181,12 @@ def _check_state(model, state):
         raise InputError("state", "has a time, position or velocity that is not a finite number")
 
 
+def _check_compiled_loop(compiled_loop: Any) -> None:
+    """InputError naming ``compiled_loop`` unless it is None, True or False (simulate's and a Stepper's)."""
+    if compiled_loop not in (None, True, False):
+        raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+
+
 def _kind(value):
     """What ``value`` is, for a message: its type's qualified name."""
     kind = type(value)
@@ -250,8 +256,7 @@ def simulate(
         )
         chooser = ThreadChooser(threads)
         state = model.state() if state is None else state.copy()
-        if compiled_loop not in (None, True, False):
-            raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+        _check_compiled_loop(compiled_loop)
         # the run's clock and compile tally start here: the plausibility check's collide() is the
         # first to need the collision kernels, and compiles them on an empty cache
         clock = _Clock(
@@ -312,8 +317,7 @@ class Stepper:
     ) -> None:
         _, options, dt, _, _ = _checked_arguments(model, method, dt, dt, options, integrator, 1, state, "custom")
         check_supported(model)
-        if compiled_loop not in (None, True, False):
-            raise InputError("compiled_loop", f"expected None, True or False, found {compiled_loop!r}")
+        _check_compiled_loop(compiled_loop)
         self.model, self.method, self.options, self.integrator, self.dt = model, method, options, integrator, dt
         start = model.state() if state is None else state.copy()
         self._notice = FirstCompile(kernel_variants.compiling_notice)

@@ -33,7 +33,7 @@ from ..model import derived
 from .cloth_self import closest_on_triangle
 from .contact_output import FEATURE_BITS
 from .granularity import SURFACES, surface_contacts
-from .signed_distance import ShapeObstacle, model_obstacle, shape_signed_distance
+from .signed_distance import model_obstacle, shape_signed_distance
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -71,31 +71,49 @@ def cloth_sample_contacts(
         if not keep.any():
             continue
         triangle = found.feature[keep] // per_triangle
-        material_a = model.particle_material[found.vertices[keep, 0]]
-        material_b = np.full(keep.sum(), model.obstacle_material[o])
-        count = int(keep.sum())
-        t1, t2 = tangent_basis(found.normal[keep])
-        friction, restitution = model.pair_materials(material_a, material_b)
+        pair = feature_base + triangle * model.obstacle_count + o
         parts.append(
-            Contacts(
-                body_a=np.full(count, -1),
-                body_b=np.full(count, -1),
-                particles_a=found.vertices[keep],
-                particles_b=np.full((count, 3), -1),
-                weights_a=found.weights[keep],
-                weights_b=np.zeros((count, 3)),
-                point=found.point[keep],
-                normal=found.normal[keep],
-                depth=depth[keep],
-                tangent1=t1,
-                tangent2=t2,
-                friction=friction,
-                restitution=restitution,
-                feature_id=((feature_base + triangle * model.obstacle_count + o) << 24)
-                | (found.feature[keep] % per_triangle),
+            triangle_contacts(
+                model,
+                o,
+                (found.vertices[keep], found.weights[keep]),
+                (found.point[keep], found.normal[keep], depth[keep]),
+                (pair << FEATURE_BITS) | (found.feature[keep] % per_triangle),
             )
         )
     return Contacts.concatenate(parts)
+
+
+def triangle_contacts(
+    model: Model, obstacle: int, on_cloth: tuple[np.ndarray, np.ndarray], where: tuple, ids: np.ndarray
+) -> Contacts:
+    """C contacts of points of cloth triangles with static ``obstacle``: ``on_cloth`` = (each
+    point's triangle corners (C, 3) as particles, its barycentric weights (C, 3)), ``where`` =
+    (point (C, 3) [m], normal (C, 3) from the obstacle into the cloth, depth (C,) [m]), the
+    contact ``ids`` (C,); the friction and restitution of the cloth's material with the obstacle's."""
+    vertices, weights = on_cloth
+    point, normal, depth = where
+    count = len(vertices)
+    t1, t2 = tangent_basis(normal)
+    friction, restitution = model.pair_materials(
+        model.particle_material[vertices[:, 0]], np.full(count, model.obstacle_material[obstacle])
+    )
+    return Contacts(
+        body_a=np.full(count, -1),
+        body_b=np.full(count, -1),
+        particles_a=vertices,
+        particles_b=np.full((count, 3), -1),
+        weights_a=weights,
+        weights_b=np.zeros((count, 3)),
+        point=point,
+        normal=normal,
+        depth=depth,
+        tangent1=t1,
+        tangent2=t2,
+        friction=friction,
+        restitution=restitution,
+        feature_id=ids,
+    )
 
 
 FACE = (1 << FEATURE_BITS) - 1  # a face contact's feature within its (triangle, obstacle) pair: no sample's index
@@ -116,37 +134,18 @@ def cloth_face_contacts(model: Model, state: State, margin: float, feature_base:
     parts = []
     positions = np.asarray(state.particle_position, dtype=float)
     thickness = np.asarray(model.particle_radius, dtype=float)
+    owned = edge_owned(model)
     for o in obstacles:
-        surface = model_obstacle(model, o)
         triangle, weights, point, normal, depth = faces_against(
-            positions, triangles, edge_owned(model), thickness, surface, float(margin)
+            positions, triangles, owned, thickness, *model_obstacle(model, o), float(margin)
         )
-        if len(triangle) == 0:
-            continue
-        count = len(triangle)
-        vertices = triangles[triangle]
-        t1, t2 = tangent_basis(normal)
-        friction, restitution = model.pair_materials(
-            model.particle_material[vertices[:, 0]], np.full(count, model.obstacle_material[o])
-        )
-        parts.append(
-            Contacts(
-                body_a=np.full(count, -1),
-                body_b=np.full(count, -1),
-                particles_a=vertices,
-                particles_b=np.full((count, 3), -1),
-                weights_a=weights,
-                weights_b=np.zeros((count, 3)),
-                point=point,
-                normal=normal,
-                depth=depth,
-                tangent1=t1,
-                tangent2=t2,
-                friction=friction,
-                restitution=restitution,
-                feature_id=((feature_base + triangle * model.obstacle_count + o) << FEATURE_BITS) | FACE,
+        if len(triangle):
+            pair = feature_base + triangle * model.obstacle_count + o
+            parts.append(
+                triangle_contacts(
+                    model, o, (triangles[triangle], weights), (point, normal, depth), (pair << FEATURE_BITS) | FACE
+                )
             )
-        )
     return Contacts.concatenate(parts)
 
 
@@ -172,25 +171,22 @@ def _distance(kind, params, position, rotation, x):
     return shape_signed_distance(kind, params, position, rotation, x)[0]
 
 
+@njit(cache=True)
 def faces_against(
     positions: np.ndarray,
     triangles: np.ndarray,
     owned: np.ndarray,
     thickness: np.ndarray,
-    surface: ShapeObstacle,
+    kind: int,
+    params: np.ndarray,
+    position: np.ndarray,
+    rotation: np.ndarray,
     margin: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``cloth_face_contacts`` for one obstacle (a ShapeObstacle): (triangle (F,) int64, weights
-    (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
-    return _faces_against(
-        positions, triangles, owned, thickness, surface.kind, surface.params, surface.position, surface.rotation, margin
-    )
-
-
-@njit(cache=True)
-def _faces_against(positions, triangles, owned, thickness, kind, params, position, rotation, margin):
-    """``faces_against`` compiled: positions (P, 3) [m], triangles (T, 3), owned (T, 3) bool
-    (``edge_owned``), thickness (P,) [m], the obstacle as ``shape_signed_distance`` takes it."""
+    """``cloth_face_contacts`` for one obstacle, compiled: positions (P, 3) [m], triangles (T, 3),
+    owned (T, 3) bool (``edge_owned``), thickness (P,) [m], the obstacle as
+    ``shape_signed_distance`` takes it (a ShapeObstacle's fields), margin [m]. Returns (triangle
+    (F,) int64, weights (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
     T = triangles.shape[0]
     # the obstacle's bounds: a sphere's radius, a box's half extents turned into the world
     extent = np.empty(3)
@@ -200,7 +196,7 @@ def _faces_against(positions, triangles, owned, thickness, kind, params, positio
             for a in range(3):
                 extent[i] += abs(rotation[i, a]) * params[a]
     found_triangle = np.empty(T, dtype=np.int64)
-    found = np.empty((T, 12))  # weights, point, normal, depth
+    found = np.empty((T, 10))  # weights, point, normal, depth
     count = 0
     x = np.empty(3)
     for t in range(T):
