@@ -30,7 +30,7 @@ their pulls onto the particles: no Python loop per spring or per particle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import namedtuple
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -43,7 +43,9 @@ if TYPE_CHECKING:
 
     from ..model import Model
 
-Springs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # what ``_springs`` gathers
+SpringArrays = namedtuple("SpringArrays", ("particles", "stiffness", "rest_length", "damping"))
+SpringArrays.__doc__ = """The model's spring arrays as the compiled kernels take them: particles (S, 2) int64,
+stiffness k (S,) [N/m], rest length L (S,) [m], damping c (S,) [N s/m]."""
 TINY_LENGTH = 1e-12  # m: a spring shorter than this has no direction; its axis is taken as zero
 
 
@@ -52,10 +54,9 @@ def _axes(model, particle_position):
     return spring_axes(model.spring_particles, _float_rows(particle_position))
 
 
-def _springs(model):
-    """The model's spring arrays as the compiled kernels take them, gathered once: (particles (S, 2),
-    stiffness k (S,) [N/m], rest length L (S,) [m], damping c (S,) [N s/m])."""
-    return (model.spring_particles, model.spring_stiffness, model.spring_rest_length, model.spring_damping)
+def spring_arrays(model: Model) -> SpringArrays:
+    """The model's ``SpringArrays``."""
+    return SpringArrays(model.spring_particles, model.spring_stiffness, model.spring_rest_length, model.spring_damping)
 
 
 def _float_rows(array):
@@ -88,7 +89,7 @@ def spring_axes(spring_particles: np.ndarray, particle_position: np.ndarray) -> 
 
 @njit(cache=True)
 def _tension(springs, particle_position, particle_velocity, damped, s):
-    """(k (l − L) + c (v_j − v_i)·u [N], u (3 floats)) of spring s of ``springs`` (``_springs``);
+    """(k (l − L) + c (v_j − v_i)·u [N], u (3 floats)) of spring s of ``springs`` (``spring_arrays``);
     without the damping term unless ``damped``."""
     spring_particles, stiffness, rest_length, damping = springs
     i, j = spring_particles[s, 0], spring_particles[s, 1]
@@ -105,8 +106,8 @@ def _tension(springs, particle_position, particle_velocity, damped, s):
 
 
 @njit(cache=True)
-def forces(springs: Springs, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool) -> np.ndarray:
-    """``spring_forces`` on the model's spring arrays ``springs`` (``_springs``): f_i = tension · u
+def forces(springs: SpringArrays, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool) -> np.ndarray:
+    """``spring_forces`` on the model's spring arrays ``springs`` (``spring_arrays``): f_i = tension · u
     on i, −f_i on j, summed into (P, 3) [N] in one pass over the springs. The pulls on the i ends
     and on the j ends are summed apart, in spring order, and subtracted at the end: a fixed order
     (reruns give the same bits) that also matches the bincount sums of the NumPy version this
@@ -135,74 +136,104 @@ def spring_forces(
         return np.zeros((len(particle_position), 3))
     x = _float_rows(particle_position)
     v = x if particle_velocity is None else _float_rows(particle_velocity)
-    return forces(_springs(model), x, v, particle_velocity is not None)
+    return forces(spring_arrays(model), x, v, particle_velocity is not None)
 
 
-@dataclass(frozen=True)
-class SpringPattern:
-    """Where each spring's four 3×3 blocks sit in a CSR matrix (3P, 3P) that also holds the whole
-    diagonal: the sparsity of K, D and the backward Euler matrix, fixed by the cloth's topology,
-    so a step fills the values and never sorts indices. nnz entries."""
-
-    indptr: np.ndarray
-    """(3P + 1,) int64"""
-    indices: np.ndarray
-    """(nnz,) int64, column of each entry, sorted within a row"""
-    rows: np.ndarray
-    """(nnz,) int64, row of each entry"""
-    slots: np.ndarray
-    """(S, 4, 3, 3) int64, entry of blocks (i, i), (j, j), (i, j), (j, i)"""
-    diagonal: np.ndarray
-    """(3P,) int64, entry of each diagonal element"""
-
-    def values(self, blocks: np.ndarray) -> np.ndarray:
-        """Entries (nnz,) of the matrix with −B on each spring's (i, i) and (j, j) blocks and +B on
-        its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); springs sharing an entry add."""
-        return pattern_values(self.slots, _float_rows(blocks), len(self.indices))
-
-    def matrix(self, values: np.ndarray) -> sp.csr_matrix:
-        """The CSR matrix (3P, 3P) with entries ``values`` (nnz,)."""
-        import scipy.sparse as sp  # SciPy on first use: it is a tenth of `import contactlab`
-
-        n = len(self.indptr) - 1
-        return sp.csr_matrix((values, self.indices, self.indptr), shape=(n, n))
+BlockPattern = namedtuple("BlockPattern", ("start", "column", "slots", "diagonal"))
+BlockPattern.__doc__ = """Where the springs' 3×3 blocks sit in a block CSR matrix over the P particles
+(3P × 3P in nb blocks) that also holds every particle's diagonal block: the sparsity of K, D and
+the backward Euler matrix, fixed by the cloth's topology, so a step fills the values and never
+sorts indices. ``start`` (P + 1,) int64, the first block of each row; ``column`` (nb,) int64,
+each block's particle column, sorted within a row; ``slots`` (S, 4) int64, the blocks (i, i),
+(j, j), (i, j), (j, i) of each spring; ``diagonal`` (P,) int64, each particle's (p, p) block."""
 
 
 @derived
-def spring_pattern(model: Model) -> SpringPattern:
-    """The ``SpringPattern`` of ``model``'s springs (``spring_particles`` (S, 2) among its P
+def spring_blocks(model: Model) -> BlockPattern:
+    """The ``BlockPattern`` of ``model``'s springs (``spring_particles`` (S, 2) among its P
     particles): fixed by the topology, built on first use and kept with the model."""
-    n = 3 * model.particle_count
+    P, S = model.particle_count, model.spring_count
     i, j = model.spring_particles[:, 0], model.spring_particles[:, 1]
-    dof = np.arange(3)
-    first = 3 * np.stack([i, j, i, j], axis=1)[:, :, None, None] + dof[None, None, :, None]
-    second = 3 * np.stack([i, j, j, i], axis=1)[:, :, None, None] + dof[None, None, None, :]
-    keys = np.concatenate([(first * n + second).ravel(), np.arange(n) * (n + 1)])
+    keys = np.concatenate([i * P + j, j * P + i, np.arange(P) * (P + 1)])
     unique, entry = np.unique(keys, return_inverse=True)
-    rows = unique // n
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-    slots = entry[: keys.size - n].reshape(len(i), 4, 3, 3)
-    return SpringPattern(indptr, unique % n, rows, slots, entry[keys.size - n :])
+    start = np.concatenate([[0], np.cumsum(np.bincount(unique // P, minlength=P))]).astype(np.int64)
+    diagonal = entry[2 * S :].astype(np.int64)
+    slots = np.stack([diagonal[i], diagonal[j], entry[:S], entry[S : 2 * S]], axis=1).astype(np.int64)
+    return BlockPattern(start, (unique % P).astype(np.int64), slots, diagonal)
+
+
+def block_matrix(pattern: BlockPattern, value: np.ndarray) -> sp.csr_matrix:
+    """The CSR matrix (3P, 3P) of the blocks ``value`` (nb, 3, 3) on ``pattern`` (every stored
+    entry kept, zeros included: the pattern is the same each step)."""
+    import scipy.sparse as sp  # SciPy on first use: it is a tenth of `import contactlab`
+
+    n = 3 * (len(pattern.start) - 1)
+    return sp.bsr_matrix((value, pattern.column, pattern.start), shape=(n, n)).tocsr()
 
 
 @njit(cache=True)
-def pattern_values(slots: np.ndarray, blocks: np.ndarray, nnz: int) -> np.ndarray:
-    """``SpringPattern.values``, compiled: −B_s added at the entries ``slots`` (S, 4, 3, 3) of the
-    (i, i) and (j, j) blocks, +B_s at those of (i, j) and (j, i), for blocks (S, 3, 3); (nnz,).
-    Entries shared by several springs are summed in spring order (reruns give the same bits)."""
-    values = np.zeros(nnz)
+def pattern_values(pattern: BlockPattern, blocks: np.ndarray) -> np.ndarray:
+    """The blocks (nb, 3, 3) of the matrix with −B_s on each spring's (i, i) and (j, j) blocks and
+    +B_s on its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); blocks shared by
+    several springs are summed in spring order (reruns give the same bits)."""
+    value = np.zeros((pattern.column.shape[0], 3, 3))
+    slots = pattern.slots
     for s in range(slots.shape[0]):
         for block in range(4):
             sign = -1.0 if block < 2 else 1.0
             for a in range(3):
                 for b in range(3):
-                    values[slots[s, block, a, b]] += sign * blocks[s, a, b]
-    return values
+                    value[slots[s, block], a, b] += sign * blocks[s, a, b]
+    return value
 
 
 @njit(cache=True)
-def blocks_of(springs: Springs, particle_position: np.ndarray, clamp_compressed: bool) -> tuple[np.ndarray, np.ndarray]:
-    """``jacobian_blocks`` on the model's spring arrays ``springs`` (``_springs``), (S,):
+def backward_euler_system(
+    pattern: BlockPattern,
+    springs: SpringArrays,
+    particle_mass: np.ndarray,
+    particle_pinned: np.ndarray,
+    gravity: np.ndarray,
+    particle_position: np.ndarray,
+    particle_velocity: np.ndarray,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The particles' backward Euler step under gravity (3,) [m/s²] and the springs, linearized at
+    the positions x (P, 3) [m] and velocities v (P, 3) [m/s], over h [s]:
+    M (v⁺ − v) = h f(x + h v⁺, v⁺) with f ≈ f + K (x⁺ − x) + D (v⁺ − v), so
+
+        (M − h D − h² K) Δv = h (f + h K v),        Δv = v⁺ − v,
+
+    K with the compressed springs' transverse stiffness clamped (symmetric positive definite:
+    module docstring). Returns (A's blocks (nb, 3, 3) [kg] on ``pattern``, the right-hand side
+    (P, 3) [kg m/s]). A pinned particle's row and column are the identity's and its right-hand
+    side 0: its Δv is 0 and it couples to nothing."""
+    x, v = particle_position, particle_velocity
+    force = forces(springs, x, v, True)
+    stiffness, damping = blocks_of(springs, x, True)
+    value = pattern_values(pattern, -h * damping - h * h * stiffness)  # − h D − h² K
+    pull = spring_block_product(springs[0], stiffness, v)  # K v
+    rhs = np.empty(x.shape)
+    for p in range(x.shape[0]):
+        for a in range(3):
+            value[pattern.diagonal[p], a, a] += particle_mass[p]  # + M
+            held = particle_pinned[p]
+            rhs[p, a] = 0.0 if held else h * ((particle_mass[p] * gravity[a] + force[p, a]) + h * pull[p, a])
+    slots = pattern.slots
+    for s in range(slots.shape[0]):
+        i, j = springs[0][s, 0], springs[0][s, 1]
+        if particle_pinned[i] or particle_pinned[j]:  # no coupling through a pinned particle
+            value[slots[s, 2]] = 0.0
+            value[slots[s, 3]] = 0.0
+    for p in range(x.shape[0]):
+        if particle_pinned[p]:  # hold it: 1 · Δv = 0
+            value[pattern.diagonal[p]] = np.eye(3)
+    return value, rhs
+
+
+@njit(cache=True)
+def blocks_of(springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``jacobian_blocks`` on the model's spring arrays ``springs`` (``spring_arrays``), (S,):
     K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ) and D_s = c u uᵀ (S, 3, 3), written as
     k (u uᵀ + (1 − L/l)(I − u uᵀ)); 1 − L/l is 0 for a spring without direction and clamped at 0
     if ``clamp_compressed``."""
@@ -229,7 +260,7 @@ def jacobian_blocks(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
-    return blocks_of(_springs(model), _float_rows(particle_position), clamp_compressed)
+    return blocks_of(spring_arrays(model), _float_rows(particle_position), clamp_compressed)
 
 
 @njit(cache=True)
@@ -263,7 +294,7 @@ def spring_jacobians(
 ) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """(K, D): the Jacobians ∂f/∂x [N/m] and ∂f/∂v [N s/m] of ``spring_forces``, SciPy CSR
     matrices (3P, 3P), symmetric, with the blocks of the module docstring (on the pattern of
-    ``spring_pattern(model)``, whose diagonal is always stored).
+    ``spring_blocks(model)``, whose diagonal is always stored).
 
     K leaves out the position derivative of the damping force (exact when the damping is 0 or
     the velocities are equal along each spring). ``clamp_compressed``: drop the negative
@@ -278,8 +309,8 @@ def spring_jacobians(
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
     stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)
-    pattern = spring_pattern(model)
-    return pattern.matrix(pattern.values(stiffness)), pattern.matrix(pattern.values(damping))
+    pattern = spring_blocks(model)
+    return tuple(block_matrix(pattern, pattern_values(pattern, blocks)) for blocks in (stiffness, damping))
 
 
 def spring_energy(model: Model, particle_position: np.ndarray) -> float:

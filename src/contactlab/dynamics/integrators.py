@@ -33,7 +33,7 @@ from .. import rotations
 from ..compiling import njit
 from ..driving import drive_velocities
 from ..model import derived
-from .cloth import block_product, jacobian_blocks, spring_forces, spring_pattern
+from .cloth import BlockPattern, backward_euler_system, block_matrix, spring_arrays, spring_blocks, spring_forces
 from .sparse_cholesky import CholeskyFactor, cholesky
 
 if TYPE_CHECKING:
@@ -200,34 +200,38 @@ class ParticleSystem:
     coupled: np.ndarray
 
 
-def particle_system(
-    model: Model, state: State, dt: float, particle_force: np.ndarray | None = None, clamp_compressed: bool = True
-) -> ParticleSystem:
-    """The backward Euler step of the particles under gravity, cloth springs and
-    ``particle_force`` (P, 3) [N], linearized at ``state`` (see ``ParticleSystem``).
+def particle_system(model: Model, state: State, dt: float) -> ParticleSystem:
+    """The backward Euler step of the particles under gravity and the cloth springs, linearized at
+    ``state`` (see ``ParticleSystem``; ``cloth.backward_euler_system`` builds it).
 
-    Velocity form: M (v⁺ − v) = h f(x + h v⁺, v⁺), with f ≈ f + K (x⁺ − x) + D (v⁺ − v), so
-    (M − h D − h² K) Δv = h (f + h K v), Δv = v⁺ − v. A method may add its own implicit terms
-    (contact springs) to ``matrix`` and ``rhs`` and solve them together (``solve_particle_system``).
-    """
-    x, v = state.particle_position, state.particle_velocity
-    h = dt
-    P = len(x)
-    force = model.particle_mass[:, None] * model.gravity + spring_forces(model, x, v)
-    if particle_force is not None:
-        force = force + particle_force
-    stiffness, damping = jacobian_blocks(model, x, clamp_compressed)
-    pattern = spring_pattern(model)
-    values = pattern.values(-h * damping - h * h * stiffness)  # − h D − h² K
-    values[pattern.diagonal] += np.repeat(model.particle_mass, 3)  # + M
-    free = np.repeat(~model.particle_pinned, 3)
-    values[~(free[pattern.rows] & free[pattern.indices])] = 0.0  # a pinned DOF's row and column
-    values[pattern.diagonal[~free]] = 1.0  # hold it: 1 · Δv = 0
-    rhs = np.where(free, h * (force + h * block_product(model, stiffness, v)).ravel(), 0.0)
-    coupled = np.zeros(P, dtype=bool)
+    A method may add its own implicit terms (contact springs) to ``matrix`` and ``rhs`` and solve
+    them together (``solve_particle_system``)."""
+    pattern = spring_blocks(model)
+    value, rhs = _system_of(model, state, dt)
+    return ParticleSystem(block_matrix(pattern, value), rhs.reshape(-1), coupled_particles(model))
+
+
+def _system_of(model: Model, state: State, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``cloth.backward_euler_system`` of ``model`` at ``state`` over dt [s]: (blocks (nb, 3, 3),
+    rhs (P, 3))."""
+    return backward_euler_system(
+        spring_blocks(model),
+        spring_arrays(model),
+        model.particle_mass,
+        model.particle_pinned,
+        np.asarray(model.gravity, dtype=float),
+        np.array(state.particle_position, dtype=float),
+        np.array(state.particle_velocity, dtype=float),
+        dt,
+    )
+
+
+@derived
+def coupled_particles(model: Model) -> np.ndarray:
+    """(P,) bool: the particles the backward Euler step solves together (in a spring, not pinned)."""
+    coupled = np.zeros(model.particle_count, dtype=bool)
     coupled[model.spring_particles.ravel()] = True
-    coupled &= ~model.particle_pinned
-    return ParticleSystem(pattern.matrix(values), rhs, coupled)
+    return coupled & ~model.particle_pinned
 
 
 def factor_symmetric(matrix: sp.spmatrix) -> CholeskyFactor | spla.SuperLU:
@@ -298,6 +302,52 @@ def solve_coupled(
     return delta, iterations
 
 
+def spring_step(
+    model: Model, state: State, dt: float, tolerance: float = 1e-6, solver: str = "cg"
+) -> np.ndarray:
+    """Δv (P, 3) [m/s] of the particles' backward Euler step (``cloth.backward_euler_system``) at
+    ``state`` over dt [s], as ``solve_particle_system`` gives it, without SciPy unless the conjugate
+    gradients do not converge or ``solver`` is "direct": ``backward_euler_solve`` on the system's
+    blocks, from last step's Δv (``state.carried.springs``: the draped cloth's next is close)."""
+    value, rhs = _system_of(model, state, dt)
+    coupled = coupled_particles(model)
+    if solver == "cg":
+        guess = state.carried.springs
+        guess = np.zeros((0, 3)) if guess is None else np.asarray(guess, dtype=float)
+        most = max(100, 3 * int(coupled.sum()))
+        delta, _, converged = backward_euler_solve(spring_blocks(model), value, rhs, coupled, guess, (tolerance, most))
+        if converged:
+            return delta
+    matrix = block_matrix(spring_blocks(model), value)
+    return solve_coupled(matrix, rhs.reshape(-1), np.repeat(coupled, 3), tolerance, "direct")[0].reshape(-1, 3)
+
+
+@njit(cache=True)
+def backward_euler_solve(
+    pattern: BlockPattern, value: np.ndarray, rhs: np.ndarray, coupled: np.ndarray, guess: np.ndarray, stop: tuple
+) -> tuple[np.ndarray, int, bool]:
+    """Δv (P, 3) of A Δv = rhs for the blocks ``value`` (nb, 3, 3) on ``pattern`` and rhs (P, 3)
+    (``cloth.backward_euler_system``): the particles outside ``coupled`` (P,) bool from their
+    diagonal (m I, or the identity of a pinned one), the coupled ones by
+    ``block_conjugate_gradients`` from ``guess`` (P, 3) (empty: from the diagonal's answer) until
+    ``stop`` = (relative tolerance, most iterations). Returns (Δv, iterations, converged)."""
+    P = rhs.shape[0]
+    delta, b, y = np.empty((P, 3)), np.zeros((P, 3)), np.zeros((P, 3))
+    for p in range(P):
+        for a in range(3):
+            alone = rhs[p, a] / value[pattern.diagonal[p], a, a]
+            if not coupled[p]:
+                delta[p, a] = alone
+            else:
+                b[p, a] = rhs[p, a]
+                y[p, a] = guess[p, a] if guess.shape[0] == P else alone
+    iterations, converged = block_conjugate_gradients((pattern.start, pattern.column, value), b, y, stop[0], stop[1])
+    for p in range(P):
+        if coupled[p]:
+            delta[p] = y[p]
+    return delta, iterations, converged
+
+
 def conjugate_gradients(
     matrix: sp.spmatrix, rhs: np.ndarray, guess: np.ndarray, active: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, int, bool]:
@@ -318,22 +368,46 @@ def conjugate_gradients(
 @njit(cache=True)
 def _block_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
     """``conjugate_gradients`` compiled, on A as its CSR arrays ``csr`` = (indptr (N + 1,) int64,
-    indices (nnz,) int64, data (nnz,) float64), over the 3 × 3 blocks of ``_active_blocks``."""
+    indices (nnz,) int64, data (nnz,) float64): ``block_conjugate_gradients`` over the 3 × 3
+    blocks of ``_active_blocks``."""
     indptr, indices, data = csr
     x = guess.copy()
     triples, start, column, value = _active_blocks(indptr, indices, data, active)
     t = triples.shape[0]
     b, y = np.zeros((t, 3)), np.zeros((t, 3))
-    scale = 0.0
     for k in range(t):
         for d in range(3):
             dof = 3 * triples[k] + d
             if active[dof]:
                 b[k, d], y[k, d] = rhs[dof], x[dof]
-                scale += rhs[dof] * rhs[dof]
-    if scale == 0.0:  # rhs = 0: so is x
-        x[active] = 0.0
-        return x, 0, True
+    iterations, converged = block_conjugate_gradients((start, column, value), b, y, tolerance, most)
+    for k in range(t):
+        for d in range(3):
+            if active[3 * triples[k] + d]:
+                x[3 * triples[k] + d] = y[k, d]
+    return x, iterations, converged
+
+
+@njit(cache=True)
+def block_conjugate_gradients(
+    blocks: tuple, b: np.ndarray, y: np.ndarray, tolerance: float, most: int
+) -> tuple[int, bool]:
+    """A y = b for A symmetric positive definite in block CSR, ``blocks`` = (start (t + 1,) int64,
+    column (nb,) int64, value (nb, 3, 3)), b and y (t, 3), by conjugate gradients with the block
+    Jacobi preconditioner (the inverse of A's 3 × 3 diagonal blocks: a particle's x, y, z, a
+    body's linear or angular velocity), from y (changed in place), until |r| < tolerance |b| or
+    ``most`` iterations (the stopping rule of SciPy's ``cg`` with atol = 0). A block product
+    reads one column index per nine entries. One thread, sums in index order: the same bits on
+    every rerun. Returns (iterations, converged)."""
+    start, column, value = blocks
+    t = b.shape[0]
+    scale = 0.0
+    for k in range(t):
+        for d in range(3):
+            scale += b[k, d] * b[k, d]
+    if scale == 0.0:  # b = 0: so is y
+        y[:] = 0.0
+        return 0, True
     inverse = _diagonal_inverses(start, column, value)
     r, z, p, q = np.empty((t, 3)), np.empty((t, 3)), np.zeros((t, 3)), np.empty((t, 3))
     limit = tolerance * np.sqrt(scale)
@@ -366,11 +440,7 @@ def _block_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
                 r[k, d] -= alpha * q[k, d]
         residual, current = _precondition(inverse, r, z)
         iterations += 1
-    for k in range(t):
-        for d in range(3):
-            if active[3 * triples[k] + d]:
-                x[3 * triples[k] + d] = y[k, d]
-    return x, iterations, converged
+    return iterations, converged
 
 
 @njit(cache=True)
@@ -520,11 +590,7 @@ def free_velocities(
     body_velocity, angular, particle_velocity = _flight(model, state, dt, integrator)
     if model.spring_count:
         if integrator == "backward_euler":
-            system = particle_system(model, state, dt)
-            guess = state.carried.springs  # last step's Δv: the draped cloth's next is close
-            particle_velocity = state.particle_velocity + solve_particle_system(
-                system, model, linear_tolerance, linear_solver, guess
-            )
+            particle_velocity = state.particle_velocity + spring_step(model, state, dt, linear_tolerance, linear_solver)
         else:
             springs = spring_forces(model, state.particle_position, state.particle_velocity)
             particle_velocity += dt * springs * model.particle_inverse_mass[:, None]
