@@ -187,9 +187,106 @@ def pattern_values(pattern: BlockPattern, blocks: np.ndarray) -> np.ndarray:
     return value
 
 
+SpringOperator = namedtuple("SpringOperator", ("particles", "along", "across", "axis", "mass", "pinned"))
+SpringOperator.__doc__ = """The backward Euler matrix A = M − h D − h² K of the particles, matrix-free: each spring's
+share C_s = h D_s + h² K_s = along_s u uᵀ + across_s I (``spring_terms``), so that
+A x = M x + Σ_s (C_s (x_i − x_j) on i, − C_s (x_i − x_j) on j) (``spring_product``): per spring
+five numbers rather than four 3 × 3 blocks. ``particles`` (S, 2) int64; ``along``, ``across``
+(S,) [kg]; ``axis`` u (S, 3); ``mass`` (P,) [kg]; ``pinned`` (P,) bool, whose rows and columns
+are the identity's (their Δv is 0 and they couple to nothing)."""
+
+
+@njit(cache=True)
+def spring_terms(springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool) -> tuple:
+    """Each spring's stiffness block K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ) (module docstring) as
+    K_s = along u uᵀ + across I: (axis u (S, 3), along = k (1 − t) (S,) [N/m], across = k t (S,)
+    [N/m]) with t = 1 − L/l, 0 for a spring without direction, clamped at 0 if
+    ``clamp_compressed``."""
+    spring_particles, stiffness, rest_length, _ = springs
+    S = spring_particles.shape[0]
+    axis, along, across = np.empty((S, 3)), np.empty(S), np.empty(S)
+    for s in range(S):
+        length, axis[s, 0], axis[s, 1], axis[s, 2] = _axis(particle_position, spring_particles[s, 0], spring_particles[s, 1])
+        transverse = 1.0 - rest_length[s] / length if length > TINY_LENGTH else 0.0
+        if clamp_compressed:
+            transverse = max(transverse, 0.0)
+        along[s] = stiffness[s] * (1.0 - transverse)
+        across[s] = stiffness[s] * transverse
+    return axis, along, across
+
+
+@njit(cache=True)
+def spring_product(operator: SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
+    """out = A x (P, 3) for the ``SpringOperator`` A and x (P, 3), in spring order (the same bits
+    on every rerun); a pinned particle's row 0 (its x is 0 wherever this is used)."""
+    mass, particles = operator.mass, operator.particles
+    for p in range(x.shape[0]):
+        for a in range(3):
+            out[p, a] = mass[p] * x[p, a]
+    for s in range(particles.shape[0]):
+        i, j = particles[s, 0], particles[s, 1]
+        u = operator.axis[s]
+        d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        along = operator.along[s] * (u[0] * d0 + u[1] * d1 + u[2] * d2)
+        across = operator.across[s]
+        w0, w1, w2 = along * u[0] + across * d0, along * u[1] + across * d1, along * u[2] + across * d2
+        out[i, 0] += w0
+        out[i, 1] += w1
+        out[i, 2] += w2
+        out[j, 0] -= w0
+        out[j, 1] -= w1
+        out[j, 2] -= w2
+    for p in range(x.shape[0]):
+        if operator.pinned[p]:
+            out[p] = 0.0
+
+
+@njit(cache=True)
+def operator_diagonal(operator: SpringOperator) -> np.ndarray:
+    """A's diagonal blocks (P, 3, 3) [kg]: m I + Σ C_s over the particle's springs (the identity
+    for a pinned particle)."""
+    P = operator.mass.shape[0]
+    diagonal = np.zeros((P, 3, 3))
+    for p in range(P):
+        for a in range(3):
+            diagonal[p, a, a] = operator.mass[p]
+    for s in range(operator.particles.shape[0]):
+        u = operator.axis[s]
+        for end in range(2):
+            p = operator.particles[s, end]
+            for a in range(3):
+                for b in range(3):
+                    diagonal[p, a, b] += operator.along[s] * u[a] * u[b]
+                diagonal[p, a, a] += operator.across[s]
+    for p in range(P):
+        if operator.pinned[p]:
+            diagonal[p] = np.eye(3)
+    return diagonal
+
+
+@njit(cache=True)
+def operator_blocks(pattern: BlockPattern, operator: SpringOperator) -> np.ndarray:
+    """A's blocks (nb, 3, 3) [kg] on ``pattern`` (for a sparse matrix: ``block_matrix``): the
+    diagonal blocks of ``operator_diagonal``, − C_s on each spring's (i, j) and (j, i) blocks
+    (0 where either end is pinned), springs sharing a block summed in spring order."""
+    value = np.zeros((pattern.column.shape[0], 3, 3))
+    diagonal = operator_diagonal(operator)
+    for p in range(diagonal.shape[0]):
+        value[pattern.diagonal[p]] = diagonal[p]
+    for s in range(operator.particles.shape[0]):
+        if operator.pinned[operator.particles[s, 0]] or operator.pinned[operator.particles[s, 1]]:
+            continue
+        u = operator.axis[s]
+        for a in range(3):
+            for b in range(3):
+                share = operator.along[s] * u[a] * u[b] + (operator.across[s] if a == b else 0.0)
+                value[pattern.slots[s, 2], a, b] -= share
+                value[pattern.slots[s, 3], a, b] -= share
+    return value
+
+
 @njit(cache=True)
 def backward_euler_system(
-    pattern: BlockPattern,
     springs: SpringArrays,
     particle_mass: np.ndarray,
     particle_pinned: np.ndarray,
@@ -197,7 +294,7 @@ def backward_euler_system(
     particle_position: np.ndarray,
     particle_velocity: np.ndarray,
     h: float,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[SpringOperator, np.ndarray]:
     """The particles' backward Euler step under gravity (3,) [m/s²] and the springs, linearized at
     the positions x (P, 3) [m] and velocities v (P, 3) [m/s], over h [s]:
     M (v⁺ − v) = h f(x + h v⁺, v⁺) with f ≈ f + K (x⁺ − x) + D (v⁺ − v), so
@@ -205,52 +302,49 @@ def backward_euler_system(
         (M − h D − h² K) Δv = h (f + h K v),        Δv = v⁺ − v,
 
     K with the compressed springs' transverse stiffness clamped (symmetric positive definite:
-    module docstring). Returns (A's blocks (nb, 3, 3) [kg] on ``pattern``, the right-hand side
-    (P, 3) [kg m/s]). A pinned particle's row and column are the identity's and its right-hand
-    side 0: its Δv is 0 and it couples to nothing."""
+    module docstring). Returns (A as a ``SpringOperator``, the right-hand side (P, 3) [kg m/s],
+    0 for a pinned particle)."""
     x, v = particle_position, particle_velocity
+    particles, damping = springs[0], springs[3]
     force = forces(springs, x, v, True)
-    stiffness, damping = blocks_of(springs, x, True)
-    value = pattern_values(pattern, -h * damping - h * h * stiffness)  # − h D − h² K
-    pull = spring_block_product(springs[0], stiffness, v)  # K v
+    axis, along, across = spring_terms(springs, x, True)
+    pull = np.zeros(x.shape)  # K v
+    for s in range(particles.shape[0]):
+        i, j = particles[s, 0], particles[s, 1]
+        u = axis[s]
+        d0, d1, d2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
+        stretch = along[s] * (u[0] * d0 + u[1] * d1 + u[2] * d2)
+        w0, w1, w2 = stretch * u[0] + across[s] * d0, stretch * u[1] + across[s] * d1, stretch * u[2] + across[s] * d2
+        pull[i, 0] += w0
+        pull[i, 1] += w1
+        pull[i, 2] += w2
+        pull[j, 0] -= w0
+        pull[j, 1] -= w1
+        pull[j, 2] -= w2
     rhs = np.empty(x.shape)
     for p in range(x.shape[0]):
         for a in range(3):
-            value[pattern.diagonal[p], a, a] += particle_mass[p]  # + M
             held = particle_pinned[p]
             rhs[p, a] = 0.0 if held else h * ((particle_mass[p] * gravity[a] + force[p, a]) + h * pull[p, a])
-    slots = pattern.slots
-    for s in range(slots.shape[0]):
-        i, j = springs[0][s, 0], springs[0][s, 1]
-        if particle_pinned[i] or particle_pinned[j]:  # no coupling through a pinned particle
-            value[slots[s, 2]] = 0.0
-            value[slots[s, 3]] = 0.0
-    for p in range(x.shape[0]):
-        if particle_pinned[p]:  # hold it: 1 · Δv = 0
-            value[pattern.diagonal[p]] = np.eye(3)
-    return value, rhs
+    operator = SpringOperator(
+        particles, h * damping + h * h * along, h * h * across, axis, particle_mass, particle_pinned
+    )
+    return operator, rhs
 
 
 @njit(cache=True)
 def blocks_of(springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool) -> tuple[np.ndarray, np.ndarray]:
     """``jacobian_blocks`` on the model's spring arrays ``springs`` (``spring_arrays``), (S,):
-    K_s = k u uᵀ + k (1 − L/l)(I − u uᵀ) and D_s = c u uᵀ (S, 3, 3), written as
-    k (u uᵀ + (1 − L/l)(I − u uᵀ)); 1 − L/l is 0 for a spring without direction and clamped at 0
-    if ``clamp_compressed``."""
-    spring_particles, stiffness, rest_length, damping = springs
-    S = spring_particles.shape[0]
+    K_s = along u uᵀ + across I (``spring_terms``) and D_s = c u uᵀ (S, 3, 3)."""
+    damping = springs[3]
+    axis, along, across = spring_terms(springs, particle_position, clamp_compressed)
+    S = axis.shape[0]
     K, D = np.empty((S, 3, 3)), np.empty((S, 3, 3))
     for s in range(S):
-        length, ux, uy, uz = _axis(particle_position, spring_particles[s, 0], spring_particles[s, 1])
-        transverse = 1.0 - rest_length[s] / length if length > TINY_LENGTH else 0.0
-        if clamp_compressed:
-            transverse = max(transverse, 0.0)
-        u = (ux, uy, uz)
         for a in range(3):
             for b in range(3):
-                outer = u[a] * u[b]
-                identity = 1.0 if a == b else 0.0
-                K[s, a, b] = stiffness[s] * (outer + transverse * (identity - outer))
+                outer = axis[s, a] * axis[s, b]
+                K[s, a, b] = along[s] * outer + (across[s] if a == b else 0.0)
                 D[s, a, b] = damping[s] * outer
     return K, D
 
@@ -261,29 +355,6 @@ def jacobian_blocks(
     """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
     positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
     return blocks_of(spring_arrays(model), _float_rows(particle_position), clamp_compressed)
-
-
-@njit(cache=True)
-def spring_block_product(spring_particles: np.ndarray, blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """``block_product`` on the springs' particles (S, 2): B_s (v_j − v_i) added on i and
-    subtracted on j, each end's sum kept apart in spring order (as ``forces``); (P, 3)."""
-    P = vectors.shape[0]
-    on_i, on_j = np.zeros((P, 3)), np.zeros((P, 3))
-    for s in range(spring_particles.shape[0]):
-        i, j = spring_particles[s, 0], spring_particles[s, 1]
-        for a in range(3):
-            pull = 0.0
-            for b in range(3):
-                pull += blocks[s, a, b] * (vectors[j, b] - vectors[i, b])
-            on_i[i, a] += pull
-            on_j[j, a] += pull
-    return on_i - on_j
-
-
-def block_product(model: Model, blocks: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """(Σ_s B_s over the springs, assembled as in ``SpringPattern.values``) applied to ``vectors``
-    (P, 3): each spring adds B_s (v_j − v_i) on i and its opposite on j; (P, 3)."""
-    return spring_block_product(model.spring_particles, _float_rows(blocks), _float_rows(vectors))
 
 
 def spring_jacobians(

@@ -24,16 +24,29 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 from .. import rotations
 from ..compiling import njit
 from ..driving import drive_velocities
 from ..model import derived
-from .cloth import BlockPattern, backward_euler_system, block_matrix, spring_arrays, spring_blocks, spring_forces
+from .cloth import (
+    SpringOperator,
+    backward_euler_system,
+    block_matrix,
+    operator_blocks,
+    operator_diagonal,
+    spring_arrays,
+    spring_blocks,
+    spring_forces,
+    spring_product,
+)
 from .sparse_cholesky import CholeskyFactor, cholesky
 
 if TYPE_CHECKING:
@@ -207,15 +220,13 @@ def particle_system(model: Model, state: State, dt: float) -> ParticleSystem:
     A method may add its own implicit terms (contact springs) to ``matrix`` and ``rhs`` and solve
     them together (``solve_particle_system``)."""
     pattern = spring_blocks(model)
-    value, rhs = _system_of(model, state, dt)
-    return ParticleSystem(block_matrix(pattern, value), rhs.reshape(-1), coupled_particles(model))
+    operator, rhs = _system_of(model, state, dt)
+    return ParticleSystem(block_matrix(pattern, operator_blocks(pattern, operator)), rhs.reshape(-1), coupled_particles(model))
 
 
-def _system_of(model: Model, state: State, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``cloth.backward_euler_system`` of ``model`` at ``state`` over dt [s]: (blocks (nb, 3, 3),
-    rhs (P, 3))."""
+def _system_of(model: Model, state: State, dt: float) -> tuple[SpringOperator, np.ndarray]:
+    """``cloth.backward_euler_system`` of ``model`` at ``state`` over dt [s]: (A, rhs (P, 3))."""
     return backward_euler_system(
-        spring_blocks(model),
         spring_arrays(model),
         model.particle_mass,
         model.particle_pinned,
@@ -309,39 +320,40 @@ def spring_step(
     ``state`` over dt [s], as ``solve_particle_system`` gives it, without SciPy unless the conjugate
     gradients do not converge or ``solver`` is "direct": ``backward_euler_solve`` on the system's
     blocks, from last step's Δv (``state.carried.springs``: the draped cloth's next is close)."""
-    value, rhs = _system_of(model, state, dt)
+    operator, rhs = _system_of(model, state, dt)
     coupled = coupled_particles(model)
     if solver == "cg":
         guess = state.carried.springs
         guess = np.zeros((0, 3)) if guess is None else np.asarray(guess, dtype=float)
         most = max(100, 3 * int(coupled.sum()))
-        delta, _, converged = backward_euler_solve(spring_blocks(model), value, rhs, coupled, guess, (tolerance, most))
+        delta, _, converged = backward_euler_solve(operator, rhs, coupled, guess, (tolerance, most))
         if converged:
             return delta
-    matrix = block_matrix(spring_blocks(model), value)
+    matrix = block_matrix(spring_blocks(model), operator_blocks(spring_blocks(model), operator))
     return solve_coupled(matrix, rhs.reshape(-1), np.repeat(coupled, 3), tolerance, "direct")[0].reshape(-1, 3)
 
 
 @njit(cache=True)
 def backward_euler_solve(
-    pattern: BlockPattern, value: np.ndarray, rhs: np.ndarray, coupled: np.ndarray, guess: np.ndarray, stop: tuple
+    operator: SpringOperator, rhs: np.ndarray, coupled: np.ndarray, guess: np.ndarray, stop: tuple
 ) -> tuple[np.ndarray, int, bool]:
-    """Δv (P, 3) of A Δv = rhs for the blocks ``value`` (nb, 3, 3) on ``pattern`` and rhs (P, 3)
+    """Δv (P, 3) of A Δv = rhs for A as a ``cloth.SpringOperator`` and rhs (P, 3)
     (``cloth.backward_euler_system``): the particles outside ``coupled`` (P,) bool from their
     diagonal (m I, or the identity of a pinned one), the coupled ones by
     ``block_conjugate_gradients`` from ``guess`` (P, 3) (empty: from the diagonal's answer) until
     ``stop`` = (relative tolerance, most iterations). Returns (Δv, iterations, converged)."""
     P = rhs.shape[0]
+    diagonal = operator_diagonal(operator)
     delta, b, y = np.empty((P, 3)), np.zeros((P, 3)), np.zeros((P, 3))
     for p in range(P):
         for a in range(3):
-            alone = rhs[p, a] / value[pattern.diagonal[p], a, a]
+            alone = rhs[p, a] / diagonal[p, a, a]
             if not coupled[p]:
                 delta[p, a] = alone
             else:
                 b[p, a] = rhs[p, a]
                 y[p, a] = guess[p, a] if guess.shape[0] == P else alone
-    iterations, converged = block_conjugate_gradients((pattern.start, pattern.column, value), b, y, stop[0], stop[1])
+    iterations, converged = block_conjugate_gradients(operator, diagonal, b, y, stop)
     for p in range(P):
         if coupled[p]:
             delta[p] = y[p]
@@ -380,7 +392,8 @@ def _block_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
             dof = 3 * triples[k] + d
             if active[dof]:
                 b[k, d], y[k, d] = rhs[dof], x[dof]
-    iterations, converged = block_conjugate_gradients((start, column, value), b, y, tolerance, most)
+    matrix = BlockMatrix(start, column, value, _diagonal_blocks(start, column))
+    iterations, converged = block_conjugate_gradients(matrix, value[matrix.diagonal_at], b, y, (tolerance, most))
     for k in range(t):
         for d in range(3):
             if active[3 * triples[k] + d]:
@@ -388,18 +401,40 @@ def _block_conjugate_gradients(csr, rhs, guess, active, tolerance, most):
     return x, iterations, converged
 
 
+BlockMatrix = namedtuple("BlockMatrix", ("start", "column", "value", "diagonal_at"))
+BlockMatrix.__doc__ = """A symmetric matrix in block CSR: start (t + 1,) int64, column (nb,) int64 sorted within
+each row, value (nb, 3, 3), diagonal_at (t,) int64 the position of each row's diagonal block."""
+
+
+def product(operator: BlockMatrix | SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
+    """out = A x (t, 3) for the operator A of the conjugate gradients: a ``BlockMatrix``
+    (``_symmetric_product``) or a cloth's ``SpringOperator`` (``cloth.spring_product``); in
+    compiled code chosen by the operator's type, when the caller is compiled."""
+    if isinstance(operator, BlockMatrix):
+        _symmetric_product(operator, x, out)
+    else:
+        spring_product(operator, x, out)
+
+
+@overload(product)
+def _product_compiled(operator, x, out):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
+    if isinstance(operator, types.NamedTuple) and operator.instance_class is BlockMatrix:
+        return lambda operator, x, out: _symmetric_product(operator, x, out)
+    return lambda operator, x, out: spring_product(operator, x, out)
+
+
 @njit(cache=True)
 def block_conjugate_gradients(
-    blocks: tuple, b: np.ndarray, y: np.ndarray, tolerance: float, most: int
+    operator: BlockMatrix | SpringOperator, diagonal: np.ndarray, b: np.ndarray, y: np.ndarray, stop: tuple
 ) -> tuple[int, bool]:
-    """A y = b for A symmetric positive definite in block CSR, ``blocks`` = (start (t + 1,) int64,
-    column (nb,) int64, value (nb, 3, 3)), b and y (t, 3), by conjugate gradients with the block
-    Jacobi preconditioner (the inverse of A's 3 × 3 diagonal blocks: a particle's x, y, z, a
-    body's linear or angular velocity), from y (changed in place), until |r| < tolerance |b| or
-    ``most`` iterations (the stopping rule of SciPy's ``cg`` with atol = 0). A block product
-    reads one column index per nine entries. One thread, sums in index order: the same bits on
+    """A y = b for A symmetric positive definite (``product``'s operator: a ``BlockMatrix`` or
+    a cloth's ``SpringOperator``), b and y (t, 3), by conjugate gradients with the block Jacobi
+    preconditioner (the inverse of A's 3 × 3 diagonal blocks ``diagonal`` (t, 3, 3): a particle's
+    x, y, z, a body's linear or angular velocity), from y (changed in place), until
+    |r| < tolerance |b| or a most of iterations, ``stop`` = (tolerance, most) (the stopping
+    rule of SciPy's ``cg`` with atol = 0). One thread, sums in index order: the same bits on
     every rerun. Returns (iterations, converged)."""
-    start, column, value = blocks
+    tolerance, most = stop
     t = b.shape[0]
     scale = 0.0
     for k in range(t):
@@ -408,10 +443,10 @@ def block_conjugate_gradients(
     if scale == 0.0:  # b = 0: so is y
         y[:] = 0.0
         return 0, True
-    inverse = _diagonal_inverses(start, column, value)
+    inverse = _diagonal_inverses(diagonal)
     r, z, p, q = np.empty((t, 3)), np.empty((t, 3)), np.zeros((t, 3)), np.empty((t, 3))
     limit = tolerance * np.sqrt(scale)
-    _block_product(start, column, value, y, q)
+    product(operator, y, q)
     for k in range(t):
         for d in range(3):
             r[k, d] = b[k, d] - q[k, d]
@@ -427,7 +462,7 @@ def block_conjugate_gradients(
         for k in range(t):
             for d in range(3):
                 p[k, d] = z[k, d] + beta * p[k, d]
-        _block_product(start, column, value, p, q)
+        product(operator, p, q)
         curvature = 0.0
         for k in range(t):
             for d in range(3):
@@ -515,30 +550,53 @@ def _sort_blocks(column, value, first, stop):
 
 
 @njit(cache=True)
-def _block_product(start, column, value, x, out):
-    """out = A x for A in block CSR (start, column, value (nb, 3, 3)), x and out (t, 3)."""
+def _symmetric_product(matrix, x, out):
+    """out = A x for the ``BlockMatrix`` A, x and out (t, 3), reading only its diagonal blocks and
+    those above: each block B at (r, c), c > r, adds B x_c to row r and Bᵀ x_r to row c (the half
+    of the blocks a full product would read again transposed)."""
+    start, column, value, diagonal_at = matrix
+    out[:] = 0.0
     for row in range(start.shape[0] - 1):
-        o0 = o1 = o2 = 0.0
-        for e in range(start[row], start[row + 1]):
+        d = diagonal_at[row]
+        x0, x1, x2 = x[row, 0], x[row, 1], x[row, 2]
+        o0 = value[d, 0, 0] * x0 + value[d, 0, 1] * x1 + value[d, 0, 2] * x2
+        o1 = value[d, 1, 0] * x0 + value[d, 1, 1] * x1 + value[d, 1, 2] * x2
+        o2 = value[d, 2, 0] * x0 + value[d, 2, 1] * x1 + value[d, 2, 2] * x2
+        for e in range(d + 1, start[row + 1]):
             c = column[e]
-            x0, x1, x2 = x[c, 0], x[c, 1], x[c, 2]
-            o0 += value[e, 0, 0] * x0 + value[e, 0, 1] * x1 + value[e, 0, 2] * x2
-            o1 += value[e, 1, 0] * x0 + value[e, 1, 1] * x1 + value[e, 1, 2] * x2
-            o2 += value[e, 2, 0] * x0 + value[e, 2, 1] * x1 + value[e, 2, 2] * x2
-        out[row, 0], out[row, 1], out[row, 2] = o0, o1, o2
+            y0, y1, y2 = x[c, 0], x[c, 1], x[c, 2]
+            o0 += value[e, 0, 0] * y0 + value[e, 0, 1] * y1 + value[e, 0, 2] * y2
+            o1 += value[e, 1, 0] * y0 + value[e, 1, 1] * y1 + value[e, 1, 2] * y2
+            o2 += value[e, 2, 0] * y0 + value[e, 2, 1] * y1 + value[e, 2, 2] * y2
+            out[c, 0] += value[e, 0, 0] * x0 + value[e, 1, 0] * x1 + value[e, 2, 0] * x2
+            out[c, 1] += value[e, 0, 1] * x0 + value[e, 1, 1] * x1 + value[e, 2, 1] * x2
+            out[c, 2] += value[e, 0, 2] * x0 + value[e, 1, 2] * x1 + value[e, 2, 2] * x2
+        out[row, 0] += o0
+        out[row, 1] += o1
+        out[row, 2] += o2
 
 
 @njit(cache=True)
-def _diagonal_inverses(start, column, value):
-    """(t, 3, 3): the inverse of each diagonal block of the block CSR matrix (each symmetric
-    positive definite), by Gauss-Jordan elimination without pivoting."""
+def _diagonal_blocks(start, column):
+    """(t,) int64: where each row's diagonal block is in the block CSR arrays (every row has one)."""
     t = start.shape[0] - 1
-    inverse = np.zeros((t, 3, 3))
-    a = np.empty((3, 3))
+    at = np.empty(t, dtype=np.int64)
     for k in range(t):
         for e in range(start[k], start[k + 1]):
             if column[e] == k:
-                a[:] = value[e]
+                at[k] = e
+    return at
+
+
+@njit(cache=True)
+def _diagonal_inverses(diagonal):
+    """(t, 3, 3): the inverse of each of the blocks ``diagonal`` (t, 3, 3) (each symmetric
+    positive definite), by Gauss-Jordan elimination without pivoting."""
+    t = diagonal.shape[0]
+    inverse = np.zeros((t, 3, 3))
+    a = np.empty((3, 3))
+    for k in range(t):
+        a[:] = diagonal[k]
         out = inverse[k]
         for i in range(3):
             out[i, i] = 1.0
