@@ -26,10 +26,9 @@ from __future__ import annotations
 
 from collections import namedtuple
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
-from numba import types
 from numba.extending import overload
 
 from .. import rotations
@@ -406,34 +405,36 @@ BlockMatrix.__doc__ = """A symmetric matrix in block CSR: start (t + 1,) int64, 
 each row, value (nb, 3, 3), diagonal_at (t,) int64 the position of each row's diagonal block."""
 
 
-def product(operator: BlockMatrix | SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
-    """out = A x (t, 3) for the operator A of the conjugate gradients: a ``BlockMatrix``
-    (``_symmetric_product``) or a cloth's ``SpringOperator`` (``cloth.spring_product``); in
-    compiled code chosen by the operator's type, when the caller is compiled."""
-    if isinstance(operator, BlockMatrix):
-        _symmetric_product(operator, x, out)
-    else:
-        spring_product(operator, x, out)
+PRODUCTS: dict[type, Callable] = {}
+"""The product of each kind of operator ``block_conjugate_gradients`` takes, by its type: a
+compiled function (operator, x, out) that sets out = A x, x and out (t, 3). A ``BlockMatrix``'s
+and a cloth's ``SpringOperator``'s are registered here, a higher layer's where it is defined
+(penalty's ``SpringSystem``): each kind compiles the conjugate gradients once, for every scene."""
+
+
+def product(operator: Any, x: np.ndarray, out: np.ndarray) -> None:
+    """out = A x by the product ``PRODUCTS`` registers for the operator's type."""
+    PRODUCTS[type(operator)](operator, x, out)
 
 
 @overload(product)
 def _product_compiled(operator, x, out):  # type: ignore[no-untyped-def]  # Numba: unannotated as the impl
-    if isinstance(operator, types.NamedTuple) and operator.instance_class is BlockMatrix:
-        return lambda operator, x, out: _symmetric_product(operator, x, out)
-    return lambda operator, x, out: spring_product(operator, x, out)
+    kernel = PRODUCTS[operator.instance_class]
+    return lambda operator, x, out: kernel(operator, x, out)
 
 
 @njit(cache=True)
 def block_conjugate_gradients(
-    operator: BlockMatrix | SpringOperator, diagonal: np.ndarray, b: np.ndarray, y: np.ndarray, stop: tuple
+    operator: Any, diagonal: np.ndarray, b: np.ndarray, y: np.ndarray, stop: tuple
 ) -> tuple[int, bool]:
-    """A y = b for A symmetric positive definite (``product``'s operator: a ``BlockMatrix`` or
-    a cloth's ``SpringOperator``), b and y (t, 3), by conjugate gradients with the block Jacobi
-    preconditioner (the inverse of A's 3 × 3 diagonal blocks ``diagonal`` (t, 3, 3): a particle's
-    x, y, z, a body's linear or angular velocity), from y (changed in place), until
-    |r| < tolerance |b| or a most of iterations, ``stop`` = (tolerance, most) (the stopping
-    rule of SciPy's ``cg`` with atol = 0). One thread, sums in index order: the same bits on
-    every rerun. Returns (iterations, converged)."""
+    """A y = b for A symmetric positive definite, b and y (t, 3), by conjugate gradients with the
+    block Jacobi preconditioner (the inverse of A's 3 × 3 diagonal blocks ``diagonal`` (t, 3, 3):
+    a particle's x, y, z, a body's linear or angular velocity), from y (changed in place), until
+    |r| < tolerance |b| or a most of iterations, ``stop`` = (tolerance, most) (the stopping rule
+    of SciPy's ``cg`` with atol = 0). A is ``operator`` as its type's product applies it
+    (``PRODUCTS``: a ``BlockMatrix``, a cloth's ``SpringOperator``, the penalty springs'
+    ``SpringSystem``). One thread, sums in index order:
+    the same bits on every rerun. Returns (iterations, converged)."""
     tolerance, most = stop
     t = b.shape[0]
     scale = 0.0
@@ -574,6 +575,10 @@ def _symmetric_product(matrix, x, out):
         out[row, 0] += o0
         out[row, 1] += o1
         out[row, 2] += o2
+
+
+PRODUCTS[BlockMatrix] = _symmetric_product
+PRODUCTS[SpringOperator] = spring_product
 
 
 @njit(cache=True)

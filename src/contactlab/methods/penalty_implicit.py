@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from ..compiling import njit
 from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
-from ..dynamics.integrators import factor_symmetric
+from ..dynamics.integrators import PRODUCTS, block_conjugate_gradients, factor_symmetric
 from ..ordered_sums import ordered_dot
 from ..rotations import world_tensors
 from .jacobian_rows import ContactRows, along_rows, contact_velocity, row_products
@@ -96,13 +96,15 @@ class SpringSystem(NamedTuple):
     """M's blocks (``mass_blocks``)"""
     free: np.ndarray
     """(N,) F = diag(free): 1.0 for a DOF that moves, 0.0 for a pinned particle's or a kinematic body's"""
+    scratch: np.ndarray
+    """(N,) the products' scratch (``system_product``'s ``kept``)"""
 
 
 @njit(cache=True)
 def system_product(system: SpringSystem, x: np.ndarray, kept: np.ndarray, out: np.ndarray) -> np.ndarray:
     """out = A x (N,) for the ``system`` A; ``kept`` (N,) is scratch. Allocates nothing: the
     conjugate gradients call it every iteration. Returns out."""
-    rows, weight, mass, free = system
+    rows, weight, mass, free, _ = system
     N = x.shape[0]
     for i in range(N):
         kept[i] = free[i] * x[i]
@@ -119,7 +121,7 @@ def system_product(system: SpringSystem, x: np.ndarray, kept: np.ndarray, out: n
 @njit(cache=True)
 def system_diagonal(system: SpringSystem) -> np.ndarray:
     """The diagonal of A (``SpringSystem``) (N,): M's and Σ W (J_row,i)² over the rows."""
-    rows, weight, mass, free = system
+    rows, weight, mass, free, _ = system
     body_mass, inertia, particle_mass = mass
     B = body_mass.shape[0]
     diagonal = np.empty(free.shape[0])
@@ -157,42 +159,36 @@ def system_diagonal(system: SpringSystem) -> np.ndarray:
 
 
 @njit(cache=True)
+def block_product(system: SpringSystem, x: np.ndarray, out: np.ndarray) -> None:
+    """out = A x (``system_product``) on x and out as (N / 3, 3), the layout of
+    ``block_conjugate_gradients``."""
+    system_product(system, x.reshape(-1), system.scratch, out.reshape(-1))
+
+
+PRODUCTS[SpringSystem] = block_product  # what the conjugate gradients apply to a SpringSystem
+
+
+@njit(cache=True)
 def spring_conjugate_gradients(
     system: SpringSystem, rhs: np.ndarray, guess: np.ndarray, tolerance: float, most: int
 ) -> tuple[np.ndarray, float, int]:
-    """A v = rhs (``SpringSystem``) by conjugate gradients with the Jacobi preconditioner
-    diag(A), from ``guess`` (N,), until |r| ≤ tolerance |rhs| or ``most`` iterations. Returns
-    (v (N,), |A v − rhs| / |rhs|, iterations)."""
+    """A v = rhs (``SpringSystem``) by ``integrators.block_conjugate_gradients`` with the Jacobi
+    preconditioner diag(A) (its 3 × 3 blocks' diagonals; 1 for a DOF with no mass and no
+    spring, left as it is), from ``guess`` (N,), until |r| < tolerance |rhs| or ``most``
+    iterations. Returns (v (N,), |A v − rhs| / |rhs|, iterations)."""
     N = rhs.shape[0]
     diagonal = system_diagonal(system)
-    x, r, z, p, Ap, kept = guess.copy(), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
-    system_product(system, x, kept, Ap)
+    blocks = np.zeros((N // 3, 3, 3))
     for i in range(N):
-        if diagonal[i] == 0.0:  # a DOF with no mass and no spring: left as it is
-            diagonal[i] = 1.0
-        r[i] = rhs[i] - Ap[i]
-        z[i] = r[i] / diagonal[i]
-        p[i] = z[i]
-    scale = max(np.sqrt(ordered_dot(rhs, rhs)), 1e-300)
-    rz = ordered_dot(r, z)
-    iterations = 0
-    while iterations < most and np.sqrt(ordered_dot(r, r)) > tolerance * scale and rz != 0.0:
-        system_product(system, p, kept, Ap)
-        alpha = rz / ordered_dot(p, Ap)
-        for i in range(N):
-            x[i] += alpha * p[i]
-            r[i] -= alpha * Ap[i]
-            z[i] = r[i] / diagonal[i]
-        following = ordered_dot(r, z)
-        beta = following / rz
-        for i in range(N):
-            p[i] = z[i] + beta * p[i]
-        rz = following
-        iterations += 1
-    system_product(system, x, kept, Ap)
+        blocks[i // 3, i % 3, i % 3] = diagonal[i] if diagonal[i] != 0.0 else 1.0
+    v = guess.copy()
+    iterations, _ = block_conjugate_gradients(
+        system, blocks, rhs.reshape((N // 3, 3)), v.reshape((N // 3, 3)), (tolerance, most)
+    )
+    residual = system_product(system, v, system.scratch, np.empty(N))
     for i in range(N):
-        Ap[i] -= rhs[i]
-    return x, np.sqrt(ordered_dot(Ap, Ap)) / scale, iterations
+        residual[i] -= rhs[i]
+    return v, np.sqrt(ordered_dot(residual, residual)) / max(np.sqrt(ordered_dot(rhs, rhs)), 1e-300), iterations
 
 
 @njit(cache=True)
@@ -261,6 +257,7 @@ def implicit_spring_velocities(
     weight, pull = np.empty((C, 3)), np.empty((C, 3))
     normal, trial, elongation = np.zeros(C), np.zeros((C, 2)), np.zeros((C, 2))
     base = mass_product(mass, v_free, np.empty(v_free.shape[0]))
+    scratch = np.empty(v_free.shape[0])  # the conjugate gradients' products
     v_new, residual, passes, linear_iterations = v_free, 0.0, 0, 0
     held = False  # whether the slip forces are held at μ k δ (the step did not settle)
     while passes < 2 * settings.implicit_iterations:
@@ -275,7 +272,7 @@ def implicit_spring_velocities(
         if is_driven:
             rhs -= free * transpose_product(rows, weight * driven, np.zeros(v_free.shape[0]))
         v_new, residual, iterations = spring_conjugate_gradients(
-            SpringSystem(rows, weight, mass, free), rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
+            SpringSystem(rows, weight, mass, free, scratch), rhs, v_new, settings.linear_tolerance, 10 * v_free.shape[0]
         )
         linear_iterations += iterations
         # the forces at the new state say which springs act
