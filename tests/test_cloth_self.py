@@ -9,8 +9,9 @@ from hypothesis import strategies as st
 
 from contactlab import ModelBuilder, simulate
 from contactlab.collision import collide
-from contactlab.collision.broad_phase import boxes_between
+from contactlab.collision.broad_phase import elements_between
 from contactlab.collision.cloth_self import (
+    allowed_gap,
     closest_on_segments,
     closest_on_triangle,
     cloth_elements,
@@ -199,29 +200,43 @@ def test_the_health_check_stops_a_run_at_an_edge_through_a_triangle_but_not_at_t
 
 
 # -- detection ---------------------------------------------------------------------------------------
-def brute_force(model, position, reach):
-    """Every vertex–triangle and edge–edge pair of the model tested one by one: {id: depth}."""
+def brute_force_contacts(model, position, reach):
+    """Every vertex–triangle pair of the model, by vertex then triangle, then every edge–edge
+    pair, by first then second edge, tested one by one: a list of the contacts as tuples (id,
+    particles_a, weights_a, particles_b, weights_b, depth, point, normal), in that order."""
     elements = cloth_elements(model)
     radius = model.particle_radius
     total = model.body_count + model.particle_count + model.obstacle_count
-    found = {}
-    point, normal = np.empty((1, 3)), np.empty((1, 3))
-    for f, corners in enumerate(elements.triangles):
-        for v in elements.vertices:
+    found = []
+    for v in elements.vertices:
+        for f, corners in enumerate(elements.triangles):
+            corners = tuple(int(c) for c in corners)
             if v in corners:
                 continue
-            hit, depth, *_ = vertex_triangle(position, radius, reach, np.array([v]), corners, point, normal, 0)
-            if hit:
-                found[(((v * total + corners[0]) << 24) | (2 * elements.triangle_index[f] + 1))] = depth
+            weights, (defined, depth, point, normal) = vertex_triangle(
+                position[v], *position[list(corners)], radius[v], radius[list(corners)].max()
+            )
+            if defined and depth >= -allowed_gap(reach, (int(v),), corners):
+                feature = ((v * total + corners[0]) << 24) | (2 * elements.triangle_index[f] + 1)
+                found.append((feature, (v, -1, -1), (1, 0, 0), corners, weights, depth, point, normal))
     edges = elements.edges
     for i in range(len(edges)):
         for j in range(i + 1, len(edges)):
             if set(edges[i]) & set(edges[j]):
                 continue
-            hit, depth, *_ = edge_edge(position, radius, reach, edges[i], edges[j], point, normal, 0)
-            if hit:
-                found[(((edges[i][0] * total + edges[i][1]) << 24) | (2 * j + 2))] = depth
+            first, second = tuple(int(p) for p in edges[i]), tuple(int(p) for p in edges[j])
+            (s, t), (defined, depth, point, normal) = edge_edge(
+                *position[list(first)], *position[list(second)], radius[list(first)].max(), radius[list(second)].max()
+            )
+            if defined and depth >= -allowed_gap(reach, first, second):
+                feature = ((first[0] * total + first[1]) << 24) | (2 * j + 2)
+                found.append((feature, (*first, -1), (1 - s, s, 0), (*second, -1), (1 - t, t, 0), depth, point, normal))
     return found
+
+
+def brute_force(model, position, reach):
+    """``brute_force_contacts`` as {id: depth}."""
+    return {contact[0]: contact[5] for contact in brute_force_contacts(model, position, reach)}
 
 
 @settings(max_examples=25, deadline=None)
@@ -272,19 +287,89 @@ def test_a_sheet_falling_flat_makes_no_contact_with_itself():
     assert cloth_self_contacts(model, model.state(), 0.001, sweep).count > 10 * P
 
 
+def folded_cloth(n=8):
+    """A 0.2 m square sheet (n × n vertices) folded in two along x = 0.02 m: the part beyond
+    lies over the rest 1.5 thicknesses up (within the two thicknesses of it), 1 mm crumpled."""
+    b = ModelBuilder()
+    b.add_material("cotton", friction=0.4, restitution=0.2)
+    b.add_cloth(size=(0.2, 0.2), resolution=(n, n), mass=0.02, thickness=THICKNESS, material="cotton")
+    model = b.finalize()
+    position = model.state().particle_position.copy()
+    beyond = position[:, 0] > 0.02
+    position[beyond, 0] = 0.04 - position[beyond, 0]
+    position[beyond, 2] += 1.5 * THICKNESS
+    return model, position + 0.001 * np.random.default_rng(3).normal(size=position.shape)
+
+
+@pytest.mark.parametrize("moving", [False, True])
+def test_on_a_folded_cloth_detection_gives_the_contacts_of_a_test_of_every_pair_in_their_order(moving):
+    """The whole of each contact (ids, particles, weights, depth, point, normal, materials) and
+    their order — vertex–triangle by vertex then triangle, then edge–edge by first then second
+    edge — as every pair tested one by one gives them, at rest and with the halves moving apart
+    and across each other."""
+    model, position = folded_cloth()
+    P = model.particle_count
+    motion = np.zeros((P, 3))
+    if moving:
+        motion[position[:, 2] > 0.5 * THICKNESS] = (0.002, -0.001, 0.003)
+    state = model.state()
+    state.particle_position[:] = position
+    contacts = cloth_self_contacts(model, state, 0.0005, None, motion)
+    expected = brute_force_contacts(model, position, (motion, np.zeros(P), 0.0005))
+    assert contacts.count == len(expected) > 50
+    assert is_self_contact(contacts).all()
+    assert contacts.feature_id.tolist() == [c[0] for c in expected]
+    for field, k in (("particles_a", 1), ("weights_a", 2), ("particles_b", 3), ("weights_b", 4), ("depth", 5)):
+        np.testing.assert_allclose(
+            getattr(contacts, field), [c[k] for c in expected], rtol=0, atol=1e-15, err_msg=field
+        )
+    np.testing.assert_allclose(contacts.point, [c[6] for c in expected], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(contacts.normal, [c[7] for c in expected], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(contacts.friction, 0.4)
+    np.testing.assert_allclose(contacts.restitution, 0.2)
+    edge_edges = (contacts.feature_id & 1) == 0
+    assert edge_edges.any() and not edge_edges[: np.argmax(edge_edges)].any()  # vertex–triangle first
+
+
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), count_a=st.integers(0, 60), count_b=st.integers(0, 60), same=st.booleans())
-def test_boxes_between_two_sets_are_those_a_test_of_every_pair_finds(seed, count_a, count_b, same):
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    count_a=st.integers(0, 60),
+    count_b=st.integers(0, 60),
+    same=st.booleans(),
+    corners=st.tuples(st.integers(1, 3), st.integers(1, 3)),
+)
+def test_elements_between_two_sets_are_those_a_test_of_every_pair_finds(seed, count_a, count_b, same, corners):
+    """Elements of 1 to 3 corners, sizes over two orders of magnitude, a third of their corners
+    shared with another element: the pairs whose grown boxes overlap and that share no corner,
+    in (i, j) order."""
     rng = np.random.default_rng(seed)
-    sizes = np.exp(rng.normal(-3.0, 1.0, size=(count_a + count_b, 1)))  # sizes over two orders of magnitude
-    lower = rng.random((count_a + count_b, 3))
-    upper = lower + sizes * rng.random((count_a + count_b, 3))
-    a, b = (slice(0, count_a), slice(0, count_a)) if same else (slice(0, count_a), slice(count_a, None))
-    found = boxes_between(lower[a], upper[a], lower[b], upper[b], same)
-    overlap = ((lower[a][:, None] <= upper[b][None]) & (lower[b][None] <= upper[a][:, None])).all(axis=2)
+    k_a, k_b = (corners[0], corners[0]) if same else corners
+    count_b = count_a if same else count_b
+
+    def corner_points(count, k):  # each element's corners within its own size of a random point
+        size = np.exp(rng.normal(-3.0, 1.0, size=(count, 1, 1)))
+        return (rng.random((count, 1, 3)) + size * rng.random((count, k, 3))).reshape(-1, 3)
+
+    position = np.concatenate([corner_points(count_a, k_a), corner_points(0 if same else count_b, k_b)])
+    corners_a = np.arange(count_a * k_a, dtype=np.int64).reshape(count_a, k_a)
+    corners_b = corners_a if same else count_a * k_a + np.arange(count_b * k_b, dtype=np.int64).reshape(count_b, k_b)
+    if len(position):  # a third of the corners taken from another element
+        shared = rng.random(corners_b.shape) < 1 / 3
+        corners_b[shared] = rng.integers(0, len(position), size=shared.sum())
+    grow = 0.01 * rng.random(len(position))
+    found = elements_between(position, grow, corners_a, corners_b, same)
+
+    def boxes(c):
+        g = grow[c].max(axis=1, initial=0.0)[:, None]
+        return position[c].min(axis=1, initial=np.inf) - g, position[c].max(axis=1, initial=-np.inf) + g
+
+    (lower_a, upper_a), (lower_b, upper_b) = boxes(corners_a), boxes(corners_b)
+    overlap = ((lower_a[:, None] <= upper_b[None]) & (lower_b[None] <= upper_a[:, None])).all(axis=2)
+    overlap &= ~(corners_a[:, None, :, None] == corners_b[None, :, None, :]).any(axis=(2, 3))
     if same:
         overlap = np.triu(overlap, k=1)
-    assert sorted(map(tuple, found.tolist())) == sorted(zip(*(index.tolist() for index in np.nonzero(overlap))))
+    assert found.tolist() == [list(pair) for pair in zip(*(index.tolist() for index in np.nonzero(overlap)))]
 
 
 @settings(max_examples=50, deadline=None)

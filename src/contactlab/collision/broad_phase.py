@@ -13,6 +13,9 @@ Three algorithms, one answer (``overlapping_pairs`` picks):
   box, each box entered in every cell it touches (a large box in many), pairs tested only
   within a cell. O(n + k) for piles of similar sizes, whatever their arrangement, but a
   dense pile puts 10 boxes or more in a cell and tests about 10 candidates per true pair.
+
+Between two sets of mesh elements (cloth self-contact: vertices and triangles, edges and
+edges), ``elements_between`` gives the pairs whose boxes overlap and that share no corner.
 """
 
 from __future__ import annotations
@@ -259,82 +262,230 @@ def grid_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def boxes_between(
-    lower_a: np.ndarray, upper_a: np.ndarray, lower_b: np.ndarray, upper_b: np.ndarray, same: bool
+def element_boxes(
+    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> None:
+    """Write into ``lower``, ``upper`` (K, 3) [m] the boxes of the elements ``corners`` (K, k)
+    int (vertices: k = 1, edges 2, triangles 3) about their particles' ``position`` (P, 3) [m],
+    grown by the largest ``grow`` (P,) [m] of their corners."""
+    for e in range(corners.shape[0]):
+        g = 0.0
+        for m in range(corners.shape[1]):
+            g = max(g, grow[corners[e, m]])
+        for d in range(3):
+            low = high = position[corners[e, 0], d]
+            for m in range(1, corners.shape[1]):
+                low = min(low, position[corners[e, m], d])
+                high = max(high, position[corners[e, m], d])
+            lower[e, d] = low - g
+            upper[e, d] = high + g
+
+
+ELEMENT_GRID_CELLS = 8  # elements_between's grid: at most 8 cells per box of set B (+ 64)
+
+
+@njit(cache=True)
+def elements_between(
+    position: np.ndarray, grow: np.ndarray, corners_a: np.ndarray, corners_b: np.ndarray, same: bool
 ) -> np.ndarray:
-    """Pairs (i, j) (K, 2) int64 of a box i of set A (``lower_a``, ``upper_a`` (NA, 3) [m]) and a
-    box j of set B (NB, 3) that overlap; ``same``: A is B, and only i < j is given. By a uniform
-    hash grid over B alone, as ``grid_pairs`` builds its grid (cells twice the median of B's
-    largest extents, a box entered in every cell it touches), but A's boxes only look B's up, so
-    that no pair within one set is ever tested (cloth self-contact: vertices against triangles,
-    not triangles against triangles), and the entries are put in order by a counting sort on
-    their hash, not a sort. A pair is reported from the cell of the larger of its lower corners
-    only, so once; in the order of A's boxes."""
-    na, nb = lower_a.shape[0], lower_b.shape[0]
-    pairs = np.empty((max(16, 4 * max(na, nb)), 2), dtype=np.int64)
+    """Pairs (i, j) (K, 2) int64, sorted, of an element i of set A and an element j of set B
+    that have no corner in common and whose boxes overlap; ``same``: A is B (``corners_b`` is
+    ``corners_a``), and only i < j is given.
+
+    An element is a few particles, its corners: ``corners_a`` (NA, ka) and ``corners_b``
+    (NB, kb) int index ``position`` (P, 3) [m] (a vertex: k = 1, an edge 2, a triangle 3). Its
+    box bounds its corners, grown by the largest ``grow`` (P,) [m] of them (``element_boxes``).
+    Cloth self-contact asks for vertices against triangles and edges against edges, so that no
+    triangle is tested against a triangle; the health check for edges against triangles.
+
+    A dense grid over B alone: cells of edge the mean of B's largest box extents (larger where
+    that would make more than ELEMENT_GRID_CELLS cells per box, + 64; one cell where the boxes
+    are not finite), each box of B in the one cell of its lower corner, counting-sorted into
+    the cells' order with its bounds beside it. A box of A looks up the cells that the lower
+    corner of a box of B overlapping it can lie in: along each axis from its own lower corner
+    less B's widest extent (less a rounding-proof 1e-9 of it) to its upper corner, so that
+    every pair is met once, none within one set; where A is B, only the cells from that of its
+    own lower corner on, in the grid's order (x, then y, then z): a pair with a box in an
+    earlier cell is met from that box, one in the same cell from the lower of the two. The
+    elements of B sharing a corner with the box of A, most of those overlapping it in a mesh
+    (its neighbours), are marked before it looks and passed over as the boxes are compared.
+    Cost: some ten to forty boxes of B compared per box of A on a cloth, more where one box of
+    B is much wider than the rest along an axis."""
+    na, nb = corners_a.shape[0], corners_b.shape[0]
     if na == 0 or nb == 0:
-        return pairs[:0]
-    cell, low, high, count = _grid_cells(lower_b, upper_b)
-    slots = 1
-    while slots < 2 * count:
-        slots *= 2
-    start = np.zeros(slots + 1, dtype=np.int64)
+        return np.empty((0, 2), dtype=np.int64)
+    lower_b, upper_b = np.empty((nb, 3)), np.empty((nb, 3))
+    element_boxes(position, grow, corners_b, lower_b, upper_b)
+    if same:
+        lower_a, upper_a = lower_b, upper_b
+    else:
+        lower_a, upper_a = np.empty((na, 3)), np.empty((na, 3))
+        element_boxes(position, grow, corners_a, lower_a, upper_a)
+    cell, origin, dims, widest = _element_grid(lower_b, upper_b)
+    # B's boxes by cell: start (cells + 1,) of each cell's run, its members and their boxes (lower
+    # then upper corner) in that order, and each member's place in it
+    home = np.empty(nb, dtype=np.int64)
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
     for j in range(nb):
-        for x in range(low[j, 0], high[j, 0] + 1):
-            for y in range(low[j, 1], high[j, 1] + 1):
-                for z in range(low[j, 2], high[j, 2] + 1):
-                    start[_slot(x, y, z, slots) + 1] += 1
-    for h in range(slots):
-        start[h + 1] += start[h]
+        x = _axis_cell(lower_b[j, 0], origin[0], cell, dims[0])
+        y = _axis_cell(lower_b[j, 1], origin[1], cell, dims[1])
+        z = _axis_cell(lower_b[j, 2], origin[2], cell, dims[2])
+        home[j] = (x * dims[1] + y) * dims[2] + z
+        start[home[j] + 1] += 1
+    for c in range(start.shape[0] - 1):
+        start[c + 1] += start[c]
+    place, members, boxes = np.empty(nb, dtype=np.int64), np.empty(nb, dtype=np.int64), np.empty((nb, 6))
     fill = start[:-1].copy()
-    members = np.empty(count, dtype=np.int64)
-    cells = np.empty((count, 3), dtype=np.int64)
     for j in range(nb):
-        for x in range(low[j, 0], high[j, 0] + 1):
-            for y in range(low[j, 1], high[j, 1] + 1):
-                for z in range(low[j, 2], high[j, 2] + 1):
-                    h = _slot(x, y, z, slots)
-                    members[fill[h]] = j
-                    cells[fill[h], 0], cells[fill[h], 1], cells[fill[h], 2] = x, y, z
-                    fill[h] += 1
+        place[j] = fill[home[j]]
+        members[place[j]] = j
+        for d in range(3):
+            boxes[place[j], d], boxes[place[j], 3 + d] = lower_b[j, d], upper_b[j, d]
+        fill[home[j]] += 1
+    around, incident = _incident(corners_b, place, position.shape[0])
+    mark = np.full(nb, -1, dtype=np.int64)  # mark[k] = i: B's k-th box in the grid shares a corner with i
+    near = np.empty(nb, dtype=np.int64)  # the grid places of the boxes meeting i
+    low, high = np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64)
+    pairs = np.empty((max(16, na + nb), 2), dtype=np.int64)
     found = 0
     for i in range(na):
-        lo0, hi0 = np.int64(np.floor(lower_a[i, 0] / cell)), np.int64(np.floor(upper_a[i, 0] / cell))
-        lo1, hi1 = np.int64(np.floor(lower_a[i, 1] / cell)), np.int64(np.floor(upper_a[i, 1] / cell))
-        lo2, hi2 = np.int64(np.floor(lower_a[i, 2] / cell)), np.int64(np.floor(upper_a[i, 2] / cell))
-        for x in range(lo0, hi0 + 1):
-            for y in range(lo1, hi1 + 1):
-                for z in range(lo2, hi2 + 1):
-                    h = _slot(x, y, z, slots)
-                    for k in range(start[h], start[h + 1]):
-                        j = members[k]
-                        if (same and j <= i) or cells[k, 0] != x or cells[k, 1] != y or cells[k, 2] != z:
-                            continue  # the pair's other order, or another cell of the same hash
-                        if not (
-                            lower_b[j, 0] <= upper_a[i, 0]
-                            and lower_a[i, 0] <= upper_b[j, 0]
-                            and lower_b[j, 1] <= upper_a[i, 1]
-                            and lower_a[i, 1] <= upper_b[j, 1]
-                            and lower_b[j, 2] <= upper_a[i, 2]
-                            and lower_a[i, 2] <= upper_b[j, 2]
-                        ):
-                            continue
-                        if max(lo0, low[j, 0]) != x or max(lo1, low[j, 1]) != y or max(lo2, low[j, 2]) != z:
-                            continue  # reported from the cell of the larger lower corner
-                        if found == pairs.shape[0]:
-                            grown = np.empty((2 * found, 2), dtype=np.int64)
-                            for row in range(found):
-                                grown[row, 0], grown[row, 1] = pairs[row, 0], pairs[row, 1]
-                            pairs = grown
-                        pairs[found, 0], pairs[found, 1] = i, j
-                        found += 1
-    return pairs[:found]
+        for m in range(corners_a.shape[1]):
+            p = corners_a[i, m]
+            for q in range(around[p], around[p + 1]):
+                mark[incident[q]] = i
+        for d in range(3):
+            reach = lower_a[i, d] - widest[d]
+            low[d] = _axis_cell(reach - 1e-9 * (abs(reach) + widest[d]), origin[d], cell, dims[d])
+            high[d] = _axis_cell(upper_a[i, d], origin[d], cell, dims[d])
+        own = np.int64(-1)  # where A is B: the cell of i's lower corner, from which it looks on
+        if same:
+            x = _axis_cell(lower_a[i, 0], origin[0], cell, dims[0])
+            y = _axis_cell(lower_a[i, 1], origin[1], cell, dims[1])
+            z = _axis_cell(lower_a[i, 2], origin[2], cell, dims[2])
+            own, low[0] = (x * dims[1] + y) * dims[2] + z, x
+        l0, l1, l2 = lower_a[i, 0], lower_a[i, 1], lower_a[i, 2]
+        u0, u1, u2 = upper_a[i, 0], upper_a[i, 1], upper_a[i, 2]
+        n = 0
+        for x in range(low[0], high[0] + 1):
+            for y in range(low[1], high[1] + 1):
+                row = (x * dims[1] + y) * dims[2]
+                first, last = max(row + low[2], own), row + high[2]  # where A is B: no cell before i's own
+                for k in range(start[first], start[max(first, last + 1)]):
+                    near[n] = k  # kept where it meets i: no branch (as likely as not on a cloth)
+                    n += (
+                        (boxes[k, 0] <= u0)
+                        & (l0 <= boxes[k, 3])
+                        & (boxes[k, 1] <= u1)
+                        & (l1 <= boxes[k, 4])
+                        & (boxes[k, 2] <= u2)
+                        & (l2 <= boxes[k, 5])
+                        & (mark[k] != i)
+                    )
+        if found + n > pairs.shape[0]:
+            pairs = _grown(pairs, found + n)
+        for m in range(n):
+            j = members[near[m]]
+            if same and j < i and home[j] == own:
+                continue  # in i's own cell: met from j too, which reports it
+            pairs[found, 0], pairs[found, 1] = (min(i, j), max(i, j)) if same else (i, j)
+            found += 1
+    return _sorted_pairs(pairs[:found], na)
+
+
+@njit(cache=True)
+def _grown(pairs: np.ndarray, needed: int) -> np.ndarray:
+    """A copy of ``pairs`` (K, 2) int64 with room for ``needed`` rows at least, twice K or more."""
+    grown = np.empty((max(2 * pairs.shape[0], needed), 2), dtype=np.int64)
+    for row in range(pairs.shape[0]):  # not a slice assignment: see _append_pair
+        grown[row, 0], grown[row, 1] = pairs[row, 0], pairs[row, 1]
+    return grown
+
+
+@njit(cache=True)
+def _element_grid(lower: np.ndarray, upper: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """``elements_between``'s grid over the boxes ``lower``, ``upper`` (N, 3) [m], N > 0: (the
+    cell's edge [m], the origin (3,) [m] and the number of cells (3,) int64 along each axis, the
+    boxes' widest extent (3,) [m] along each)."""
+    n = lower.shape[0]
+    widest, origin, top = np.zeros(3), np.full(3, np.inf), np.full(3, -np.inf)
+    total = largest = 0.0
+    for j in range(n):
+        extent = 0.0
+        for d in range(3):
+            extent = max(extent, upper[j, d] - lower[j, d])
+            widest[d] = max(widest[d], upper[j, d] - lower[j, d])
+            origin[d] = min(origin[d], lower[j, d])
+            top[d] = max(top[d], lower[j, d])
+        total += extent
+        largest = max(largest, extent)
+    cell = total / n
+    if not cell > 0.0:
+        cell = max(1e-9, largest)
+    dims = np.ones(3, dtype=np.int64)
+    for _ in range(64):  # cells of twice the edge until few enough; 64 times: bounds not finite
+        count = 1.0
+        for d in range(3):
+            count *= np.floor((top[d] - origin[d]) / cell) + 1.0
+        if count <= ELEMENT_GRID_CELLS * n + 64:
+            for d in range(3):
+                dims[d] = np.int64((top[d] - origin[d]) / cell) + 1
+            break
+        cell *= 2.0
+    return cell, origin, dims, widest
 
 
 @njit(cache=True, inline="always")
-def _slot(x: int, y: int, z: int, slots: int) -> int:
-    """The hash table slot of cell (x, y, z) among ``slots`` (a power of two)."""
-    return ((x * 73856093) ^ (y * 19349663) ^ (z * 83492791)) & (slots - 1)
+def _axis_cell(x: float, origin: float, cell: float, dims: int) -> int:
+    """The grid cell (0 … dims − 1) of coordinate x [m] along one axis: clamped at both ends, 0
+    for NaN; never decreasing as x grows."""
+    t = (x - origin) / cell
+    if not t > 0.0:
+        return 0
+    if t >= dims - 1:
+        return dims - 1
+    return np.int64(t)
+
+
+@njit(cache=True)
+def _incident(corners: np.ndarray, place: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The elements ``corners`` (N, k) around each of ``count`` particles, by their ``place``
+    (N,): (start (count + 1,), places) int64, particle p's in places[start[p]:start[p + 1]]."""
+    start = np.zeros(count + 1, dtype=np.int64)
+    for j in range(corners.shape[0]):
+        for m in range(corners.shape[1]):
+            start[corners[j, m] + 1] += 1
+    for p in range(count):
+        start[p + 1] += start[p]
+    fill = start[:-1].copy()
+    places = np.empty(start[count], dtype=np.int64)
+    for j in range(corners.shape[0]):
+        for m in range(corners.shape[1]):
+            places[fill[corners[j, m]]] = place[j]
+            fill[corners[j, m]] += 1
+    return start, places
+
+
+@njit(cache=True)
+def _sorted_pairs(pairs: np.ndarray, count: int) -> np.ndarray:
+    """``pairs`` (K, 2) int64, their first entries in 0 … count − 1, sorted by (first, second): a
+    counting sort by the first, then an insertion sort of each first's few seconds."""
+    start = np.zeros(count + 1, dtype=np.int64)
+    for k in range(pairs.shape[0]):
+        start[pairs[k, 0] + 1] += 1
+    for i in range(count):
+        start[i + 1] += start[i]
+    out = np.empty_like(pairs)
+    fill = start[:-1].copy()
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        b = fill[i]
+        out[b, 0] = i
+        while b > start[i] and out[b - 1, 1] > j:
+            out[b, 1] = out[b - 1, 1]
+            b -= 1
+        out[b, 1] = j
+        fill[i] += 1
+    return out
 
 
 def brute_force_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -29,11 +29,14 @@ not each particle's own: a sheet falling flat at 3 m/s makes no contact with its
 each particle's swept distance is known (``collide`` called with ``sweep`` alone), the bound is
 the sum of the two sides' largest sweeps.
 
-The broad phase is ``broad_phase.boxes_between``: a hashed grid of the triangles' boxes that
-the vertices' boxes look up, and one of the edges' boxes that they look up themselves (no
-triangle is tested against a triangle). Each box is an element's at the step's start, grown by
-its thickness, half the margin and how far its particles move relative to their mean
-displacement (``reach_growth``): the cost grows with the number of vertices and of near pairs.
+The broad phase is ``broad_phase.elements_between``: a grid of the triangles' boxes that the
+vertices' boxes look up, and one of the edges' boxes that they look up themselves (no triangle
+is tested against a triangle), passing over the pairs that share a particle (most of the pairs
+whose boxes overlap: neighbours). Each box is an element's at the step's start, grown by its
+thickness, half the margin and how far its particles move relative to their mean displacement
+(``reach_growth``): the cost grows with the number of vertices and of near pairs. The
+contacts come vertex–triangle first, by vertex then triangle, then edge–edge, by first then
+second edge: an order of the elements alone, the same on every run.
 
 Contact ids: a self-contact names two of its particles as its collider pair, so that
 ``half_thickness_sums`` reads its pass-through depth r_A + r_B from them, and its element in
@@ -45,15 +48,14 @@ index in ``ClothElements.edges``). Particle–particle contacts have feature 0: 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from ..compiling import njit
 from ..contacts import ContactArrays, Contacts, tangent_frames
 from ..model import derived
-from .broad_phase import boxes_between
+from .broad_phase import elements_between
 from .contact_output import FEATURE_BITS
 
 if TYPE_CHECKING:
@@ -61,10 +63,10 @@ if TYPE_CHECKING:
     from ..state import State
 
 
-@dataclass(frozen=True)
-class ClothElements:
+class ClothElements(NamedTuple):
     """The elements of the cloths whose ``self_collision`` is on, or of every cloth
-    (:func:`every_cloth_element`), by global particle indices."""
+    (:func:`every_cloth_element`), by global particle indices (a named tuple: compiled code
+    takes it whole)."""
 
     triangles: np.ndarray
     """(F', 3) int64, the corners of each triangle"""
@@ -112,6 +114,40 @@ def _elements(model: Model, only_self_colliding: bool) -> ClothElements:
     )
 
 
+class SelfContactModel(NamedTuple):
+    """What ``self_contact_arrays`` takes of a Model: built once and kept with it
+    (:func:`self_contact_model`)."""
+
+    elements: ClothElements
+    """the elements of the self-colliding cloths (``cloth_elements``)"""
+    radius: np.ndarray
+    """(P,) [m], each particle's radius (its cloth's thickness)"""
+    material: np.ndarray
+    """(P,) int64, each particle's material"""
+    material_friction: np.ndarray
+    """(M,), each material's friction coefficient"""
+    material_restitution: np.ndarray
+    """(M,), each material's restitution"""
+    body_count: int
+    """B, the bodies before the particles among the colliders"""
+    total: int
+    """N = B + P + O, the collider count of the contact ids"""
+
+
+@derived
+def self_contact_model(model: Model) -> SelfContactModel:
+    """The SelfContactModel of ``model``, built once and kept with it."""
+    return SelfContactModel(
+        cloth_elements(model),
+        np.ascontiguousarray(model.particle_radius, dtype=float),
+        np.ascontiguousarray(model.particle_material, dtype=np.int64),
+        np.ascontiguousarray(model.material_friction, dtype=float),
+        np.ascontiguousarray(model.material_restitution, dtype=float),
+        int(model.body_count),
+        int(model.body_count + model.particle_count + model.obstacle_count),
+    )
+
+
 def cloth_self_contacts(
     model: Model, state: State, margin: float, sweep: np.ndarray | None, particle_motion: np.ndarray | None = None
 ) -> Contacts:
@@ -121,8 +157,8 @@ def cloth_self_contacts(
     predicted displacement over the coming step, whose relative part widens the reach (see the
     module); None: the sweep (B + P,) [m] of each body and particle bounds it instead (None too:
     standing still)."""
-    elements = cloth_elements(model)
-    if elements.empty:
+    cloth = self_contact_model(model)
+    if cloth.elements.empty:
         return Contacts.empty()
     P = model.particle_count
     if particle_motion is not None:
@@ -130,22 +166,8 @@ def cloth_self_contacts(
     else:
         motion = np.zeros((P, 3))
         spare = np.array(sweep[model.body_count :], dtype=float) if sweep is not None else np.zeros(P)
-    return Contacts.from_arrays(
-        self_contact_arrays(
-            np.ascontiguousarray(state.particle_position, dtype=float),
-            np.asarray(model.particle_radius, dtype=float),
-            (motion, spare, float(margin)),
-            np.asarray(model.particle_material, dtype=np.int64),
-            np.asarray(model.material_friction, dtype=float),
-            np.asarray(model.material_restitution, dtype=float),
-            elements.triangles,
-            elements.triangle_index,
-            elements.edges,
-            elements.vertices,
-            model.body_count,
-            model.body_count + P + model.obstacle_count,
-        )
-    )
+    position = np.ascontiguousarray(state.particle_position, dtype=float)
+    return Contacts.from_arrays(self_contact_arrays(position, (motion, spare, float(margin)), cloth))
 
 
 def is_self_contact(contacts: Contacts) -> np.ndarray:
@@ -157,34 +179,18 @@ def is_self_contact(contacts: Contacts) -> np.ndarray:
 # ---- the compiled detection ----------------------------------------------------------------------
 
 
+Point = np.ndarray | tuple[float, float, float]
+"""A point (3,) [m]: a row of an array, or three floats (``_point``: no array view to make in a
+loop over pairs)."""
+
 Reach = tuple[np.ndarray, np.ndarray, float]
 """What widens a pair's reach beyond the thicknesses: (motion (P, 3) [m], each particle's
 predicted displacement; spare (P,) [m], a distance each particle may move besides; margin [m])."""
 
 
 @njit(cache=True)
-def element_boxes(
-    position: np.ndarray, grow: np.ndarray, corners: np.ndarray, lower: np.ndarray, upper: np.ndarray
-) -> None:
-    """Write into ``lower``, ``upper`` (K, 3) [m] the boxes of the elements ``corners`` (K, k)
-    int (vertices: k = 1, edges 2, triangles 3) about their particles' ``position`` (P, 3) [m],
-    grown by the largest ``grow`` (P,) [m] of their corners."""
-    for e in range(corners.shape[0]):
-        g = 0.0
-        for m in range(corners.shape[1]):
-            g = max(g, grow[corners[e, m]])
-        for d in range(3):
-            low = high = position[corners[e, 0], d]
-            for m in range(1, corners.shape[1]):
-                low = min(low, position[corners[e, m], d])
-                high = max(high, position[corners[e, m], d])
-            lower[e, d] = low - g
-            upper[e, d] = high + g
-
-
-@njit(cache=True)
 def allowed_gap(reach: Reach, side_a: np.ndarray, side_b: np.ndarray) -> float:
-    """The largest gap [m] at which the particles ``side_a`` and ``side_b`` (int arrays) make a
+    """The largest gap [m] at which the particles ``side_a`` and ``side_b`` (ints: tuples) make a
     contact: the margin, the most any particle of one side moves relative to one of the other,
     and each side's largest spare distance (see ``Reach``)."""
     motion, spare, margin = reach
@@ -200,8 +206,8 @@ def allowed_gap(reach: Reach, side_a: np.ndarray, side_b: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
-    """The point of triangle (a, b, c) (3,) [m] closest to x (3,) [m], as its barycentric weights
+def closest_on_triangle(x: Point, a: Point, b: Point, c: Point) -> tuple[float, float, float, bool]:
+    """The point of triangle (a, b, c) (3,) [m] closest to x (3,) [m] (arrays or tuples), as its barycentric weights
     (w_a, w_b, w_c), and whether it lies strictly inside the triangle (not on an edge or a
     corner). Ericson, *Real-Time Collision Detection*, 5.1.5; a degenerate triangle (two corners
     at one point, or all three on a line) gives the closest of its corner and edge points."""
@@ -245,7 +251,7 @@ def closest_on_triangle(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
 
 
 @njit(cache=True)
-def _closest_on_edges(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, float, float, bool]:
+def _closest_on_edges(x: Point, a: Point, b: Point, c: Point) -> tuple[float, float, float, bool]:
     """``closest_on_triangle`` for a triangle with no area: the closest point of its three edges,
     as barycentric weights, never inside."""
     corners = (a, b, c)
@@ -265,9 +271,9 @@ def _closest_on_edges(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
 
 
 @njit(cache=True)
-def closest_on_segments(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> tuple[float, float]:
+def closest_on_segments(p1: Point, q1: Point, p2: Point, q2: Point) -> tuple[float, float]:
     """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2)
-    of two segments (3,) [m] each; an end where clamped (exactly 0 or 1). Ericson, *Real-Time
+    of two segments (3,) [m] each (arrays or tuples); an end where clamped (exactly 0 or 1). Ericson, *Real-Time
     Collision Detection*, 5.1.9; for (nearly) parallel segments the closest of the pairs that put
     one segment's end against the other and of their crossing, s = 0 first (a tie: the overlap of
     parallel segments)."""
@@ -321,7 +327,7 @@ def _clamped_pair(s: float, a: float, b: float, c: float, e: float, f: float) ->
 
 
 @njit(cache=True, inline="always")
-def _gap_squared(s: float, t: float, p1: np.ndarray, p2: np.ndarray, d1: tuple, d2: tuple) -> float:
+def _gap_squared(s: float, t: float, p1: Point, p2: Point, d1: tuple, d2: tuple) -> float:
     """|p1 + s d1 − (p2 + t d2)|² [m²]."""
     gap = 0.0
     for k in range(3):
@@ -329,39 +335,39 @@ def _gap_squared(s: float, t: float, p1: np.ndarray, p2: np.ndarray, d1: tuple, 
     return gap
 
 
+@njit(cache=True, inline="always")
+def _point(position: np.ndarray, i: int) -> tuple[float, float, float]:
+    """Row i of ``position`` (P, 3) [m] as three floats."""
+    return position[i, 0], position[i, 1], position[i, 2]
+
+
+Touch = tuple[bool, float, tuple[float, float, float], tuple[float, float, float]]
+"""What ``vertex_triangle`` and ``edge_edge`` say of a pair of elements besides their weights:
+(whether a contact's normal is defined, its depth δ [m], its point (3,) [m] midway between the
+surfaces, its unit normal (3,) from side B to side A). It is a contact where the normal is
+defined and δ ≥ −``allowed_gap``."""
+
+
 @njit(cache=True)
 def vertex_triangle(
-    position: np.ndarray,
-    radius: np.ndarray,
-    reach: Reach,
-    vertex: np.ndarray,
-    corners: np.ndarray,
-    point: np.ndarray,
-    normal: np.ndarray,
-    row: int,
-) -> tuple[bool, float, float, float, float]:
-    """The vertex–triangle test of the particle ``vertex`` (1,) against the triangle of particles
-    ``corners`` (3,) (see the module), ``reach`` as ``allowed_gap`` takes it. Returns (a
-    contact?, depth [m], the weights (w_a, w_b, w_c)); a contact's point, midway between the
-    surfaces [m], and normal, from the triangle to the vertex, go to row ``row`` of ``point``
-    and ``normal`` (n, 3). In scalars: most candidate pairs are too far apart, and leave having
-    allocated nothing."""
-    v = vertex[0]
-    a, b, c = position[corners[0]], position[corners[1]], position[corners[2]]
-    x = position[v]
+    x: Point, a: Point, b: Point, c: Point, radius_a: float, radius_b: float
+) -> tuple[tuple[float, float, float], Touch]:
+    """The vertex–triangle test (see the module) of the vertex at x (3,) [m] of radius
+    ``radius_a`` [m] against the triangle (a, b, c) (3,) [m] of thickness ``radius_b`` (its
+    corners' largest radius). Returns (the weights (w_a, w_b, w_c) of the triangle's closest
+    point, the ``Touch``). Points and numbers alone, no array: called on every pair the
+    broad phase finds, it costs no more than its arithmetic."""
     wa, wb, wc, inside = closest_on_triangle(x, a, b, c)
     g0 = x[0] - (wa * a[0] + wb * b[0] + wc * c[0])
     g1 = x[1] - (wa * a[1] + wb * b[1] + wc * c[1])
     g2 = x[2] - (wa * a[2] + wb * b[2] + wc * c[2])
     distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-    side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
-    depth = radius[v] + side_radius - distance
-    if depth < -allowed_gap(reach, vertex, corners):
-        return False, depth, wa, wb, wc
+    depth = radius_a + radius_b - distance
     e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     f0, f1, f2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
     n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
     area = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    defined = True
     if inside and area > 0.0:  # over the inside: the face normal, on the vertex's side
         side = 1.0 if n0 * g0 + n1 * g1 + n2 * g2 >= 0.0 else -1.0
         n0, n1, n2 = side * n0 / area, side * n1 / area, side * n2 / area
@@ -370,43 +376,32 @@ def vertex_triangle(
     elif area > 0.0:
         n0, n1, n2 = n0 / area, n1 / area, n2 / area
     else:  # a vertex on the corner of a degenerate triangle: no direction to push along
-        return False, depth, wa, wb, wc
-    lift = side_radius - 0.5 * depth  # from the triangle's closest point to midway
-    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-    point[row, 0] = x[0] - g0 + lift * n0
-    point[row, 1] = x[1] - g1 + lift * n1
-    point[row, 2] = x[2] - g2 + lift * n2
-    return True, depth, wa, wb, wc
+        defined = False
+    lift = radius_b - 0.5 * depth  # from the triangle's closest point to midway
+    point = (x[0] - g0 + lift * n0, x[1] - g1 + lift * n1, x[2] - g2 + lift * n2)
+    return (wa, wb, wc), (defined, depth, point, (n0, n1, n2))
 
 
 @njit(cache=True)
 def edge_edge(
-    position: np.ndarray,
-    radius: np.ndarray,
-    reach: Reach,
-    first: np.ndarray,
-    second: np.ndarray,
-    point: np.ndarray,
-    normal: np.ndarray,
-    row: int,
-) -> tuple[bool, float, float, float]:
-    """The edge–edge test of the edges of particles ``first`` (2,) and ``second`` (2,) (see the
-    module), ``reach`` as ``allowed_gap`` takes it. Returns (a contact?, depth [m], s, t); a
-    contact's point [m] and normal, from the second edge to the first, go to row ``row`` of
-    ``point`` and ``normal`` (n, 3), as ``vertex_triangle``'s."""
-    p1, q1, p2, q2 = position[first[0]], position[first[1]], position[second[0]], position[second[1]]
+    p1: Point, q1: Point, p2: Point, q2: Point, radius_a: float, radius_b: float
+) -> tuple[tuple[float, float], Touch]:
+    """The edge–edge test (see the module) of the edge p1–q1 (3,) [m] of thickness
+    ``radius_a`` [m] against the edge p2–q2 of ``radius_b``. Returns ((s, t), the weights of the
+    second end of each edge at their closest points, the ``Touch``), its normal undefined
+    where a closest point is an end of its edge (0 or 1: a vertex near an edge, which the
+    vertex–triangle contacts find) — most pairs, which leave here. As ``vertex_triangle``: no
+    array."""
     s, t = closest_on_segments(p1, q1, p2, q2)
+    nowhere = (0.0, 0.0, 0.0)
     if not (0.0 < s < 1.0 and 0.0 < t < 1.0):
-        return False, 0.0, s, t
+        return (s, t), (False, 0.0, nowhere, nowhere)
     y0, y1, y2 = p2[0] + t * (q2[0] - p2[0]), p2[1] + t * (q2[1] - p2[1]), p2[2] + t * (q2[2] - p2[2])
     g0 = p1[0] + s * (q1[0] - p1[0]) - y0
     g1 = p1[1] + s * (q1[1] - p1[1]) - y1
     g2 = p1[2] + s * (q1[2] - p1[2]) - y2
     distance = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-    radius_b = max(radius[second[0]], radius[second[1]])
-    depth = max(radius[first[0]], radius[first[1]]) + radius_b - distance
-    if depth < -allowed_gap(reach, first, second):
-        return False, depth, s, t
+    depth = radius_a + radius_b - distance
     if distance > 0.0:
         n0, n1, n2 = g0 / distance, g1 / distance, g2 / distance
     else:  # the edges cross: the normal of the plane of the two
@@ -415,123 +410,87 @@ def edge_edge(
         n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
         length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         if length == 0.0:
-            return False, depth, s, t
+            return (s, t), (False, depth, nowhere, nowhere)
         n0, n1, n2 = n0 / length, n1 / length, n2 / length
     lift = radius_b - 0.5 * depth
-    normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-    point[row, 0], point[row, 1], point[row, 2] = y0 + lift * n0, y1 + lift * n1, y2 + lift * n2
-    return True, depth, s, t
+    return (s, t), (True, depth, (y0 + lift * n0, y1 + lift * n1, y2 + lift * n2), (n0, n1, n2))
 
 
 @njit(cache=True)
-def self_contact_arrays(
-    position: np.ndarray,
-    radius: np.ndarray,
-    reach: Reach,
-    material: np.ndarray,
-    material_friction: np.ndarray,
-    material_restitution: np.ndarray,
-    triangles: np.ndarray,
-    triangle_index: np.ndarray,
-    edges: np.ndarray,
-    vertices: np.ndarray,
-    body_count: int,
-    total: int,
-) -> ContactArrays:
-    """``cloth_self_contacts``, compiled: the ContactArrays of the vertex–triangle contacts, then
-    the edge–edge ones, each in the broad phase's (sorted) pair order.
+def self_contact_arrays(position: np.ndarray, reach: Reach, cloth: SelfContactModel) -> ContactArrays:
+    """``cloth_self_contacts``, compiled: the ContactArrays of the vertex–triangle contacts, by
+    vertex then triangle, then of the edge–edge ones, by first then second edge (the broad
+    phase's order).
 
-    position (P, 3) [m]; radius (P,) [m]; reach, a ``Reach``; material (P,) int and the
-    materials' friction and restitution (M,); the elements (``ClothElements``): triangles
-    (F', 3), triangle_index (F',), edges (E, 2), vertices (V,); body_count B and total
-    N = B + P + O, the collider count of the contact ids."""
-    V, F, E = vertices.shape[0], triangles.shape[0], edges.shape[0]
+    position (P, 3) [m]; reach, a ``Reach``; cloth, the model's ``SelfContactModel``. Only the
+    pairs that the broad phase finds near and sharing no particle are tested, in scalars: a
+    few times as many as the contacts."""
+    elements, radius = cloth.elements, cloth.radius
+    triangles, edges, vertices = elements.triangles, elements.edges, elements.vertices
     grow = reach_growth(radius, reach, vertices)
-    vertex_lower, vertex_upper = np.empty((V, 3)), np.empty((V, 3))
-    element_boxes(position, grow, vertices.reshape(V, 1), vertex_lower, vertex_upper)
-    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
-    element_boxes(position, grow, triangles, triangle_lower, triangle_upper)
-    near = boxes_between(vertex_lower, vertex_upper, triangle_lower, triangle_upper, False)
-    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
-    element_boxes(position, grow, edges, edge_lower, edge_upper)
-    edge_pairs = boxes_between(edge_lower, edge_upper, edge_lower, edge_upper, True)
-    # pairs sharing a particle never make a contact (most of what the boxes find: neighbours):
-    # passed over before anything is allocated for them
-    near_kept = np.empty(near.shape[0], dtype=np.int64)
-    kept = 0
-    for k in range(near.shape[0]):
-        v, corners = vertices[near[k, 0]], triangles[near[k, 1]]
-        if v != corners[0] and v != corners[1] and v != corners[2]:
-            near_kept[kept] = k
-            kept += 1
-    near_kept = near_kept[:kept]
-    edges_kept = np.empty(edge_pairs.shape[0], dtype=np.int64)
-    kept = 0
-    for k in range(edge_pairs.shape[0]):
-        first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
-        if first[0] != second[0] and first[0] != second[1] and first[1] != second[0] and first[1] != second[1]:
-            edges_kept[kept] = k
-            kept += 1
-    edges_kept = edges_kept[:kept]
-    capacity = near_kept.shape[0] + edges_kept.shape[0]
-    particles = np.full((2, capacity, 3), -1, dtype=np.int64)
-    weights = np.zeros((2, capacity, 3))
-    point = np.empty((capacity, 3))
-    normal = np.empty((capacity, 3))
-    depth = np.empty(capacity)
-    friction = np.empty(capacity)
-    restitution = np.empty(capacity)
+    near = elements_between(position, grow, vertices.reshape(vertices.shape[0], 1), triangles, False)
+    edge_pairs = elements_between(position, grow, edges, edges, True)
+    capacity = near.shape[0] + edge_pairs.shape[0]
+    particles_a = np.full((capacity, 3), -1, dtype=np.int64)
+    particles_b = np.full((capacity, 3), -1, dtype=np.int64)
+    weights_a, weights_b = np.zeros((capacity, 3)), np.zeros((capacity, 3))
+    point, normal = np.empty((capacity, 3)), np.empty((capacity, 3))
+    depth, friction, restitution = np.empty(capacity), np.empty(capacity), np.empty(capacity)
     feature_id = np.empty(capacity, dtype=np.int64)
+    B, N = cloth.body_count, cloth.total
     count = 0
-    for k in near_kept:
-        i, f = near[k, 0], near[k, 1]
-        v = vertices[i]
-        corners = triangles[f]
-        found, d, wa, wb, wc = vertex_triangle(
-            position, radius, reach, vertices[i : i + 1], corners, point, normal, count
-        )
-        if not found:
+    for k in range(near.shape[0]):
+        f = near[k, 1]
+        v = vertices[near[k, 0]]
+        corners = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+        a, b, c = _point(position, corners[0]), _point(position, corners[1]), _point(position, corners[2])
+        side_radius = max(radius[corners[0]], radius[corners[1]], radius[corners[2]])
+        weights, (defined, d, at, unit) = vertex_triangle(_point(position, v), a, b, c, radius[v], side_radius)
+        if not defined or d < -allowed_gap(reach, (v,), corners):
             continue
-        particles[0, count, 0] = v
-        weights[0, count, 0] = 1.0
-        for m in range(3):
-            particles[1, count, m] = corners[m]
-        weights[1, count, 0], weights[1, count, 1], weights[1, count, 2] = wa, wb, wc
-        pair = (body_count + v) * total + body_count + corners[0]
-        feature_id[count] = (pair << FEATURE_BITS) | (2 * triangle_index[f] + 1)
+        particles_a[count, 0] = v
+        weights_a[count, 0] = 1.0
+        particles_b[count, 0], particles_b[count, 1], particles_b[count, 2] = corners
+        weights_b[count, 0], weights_b[count, 1], weights_b[count, 2] = weights
+        pair = (B + v) * N + B + corners[0]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * elements.triangle_index[f] + 1)
         depth[count] = d
-        friction[count], restitution[count] = _materials(
-            material[v], material[corners[0]], material_friction, material_restitution
-        )
+        point[count, 0], point[count, 1], point[count, 2] = at
+        normal[count, 0], normal[count, 1], normal[count, 2] = unit
+        friction[count], restitution[count] = _materials(cloth, v, corners[0])
         count += 1
-    for k in edges_kept:
-        first, second = edges[edge_pairs[k, 0]], edges[edge_pairs[k, 1]]
-        found, d, s, t = edge_edge(position, radius, reach, first, second, point, normal, count)
-        if not found:
+    for k in range(edge_pairs.shape[0]):
+        e, g = edge_pairs[k, 0], edge_pairs[k, 1]
+        first, second = (edges[e, 0], edges[e, 1]), (edges[g, 0], edges[g, 1])
+        p1, q1 = _point(position, first[0]), _point(position, first[1])
+        p2, q2 = _point(position, second[0]), _point(position, second[1])
+        radius_a, radius_b = max(radius[first[0]], radius[first[1]]), max(radius[second[0]], radius[second[1]])
+        (s, t), (defined, d, at, unit) = edge_edge(p1, q1, p2, q2, radius_a, radius_b)
+        if not defined or d < -allowed_gap(reach, first, second):
             continue
-        particles[0, count, 0], particles[0, count, 1] = first[0], first[1]
-        weights[0, count, 0], weights[0, count, 1] = 1.0 - s, s
-        particles[1, count, 0], particles[1, count, 1] = second[0], second[1]
-        weights[1, count, 0], weights[1, count, 1] = 1.0 - t, t
-        pair = (body_count + first[0]) * total + body_count + first[1]
-        feature_id[count] = (pair << FEATURE_BITS) | (2 * edge_pairs[k, 1] + 2)
+        particles_a[count, 0], particles_a[count, 1] = first
+        weights_a[count, 0], weights_a[count, 1] = 1.0 - s, s
+        particles_b[count, 0], particles_b[count, 1] = second
+        weights_b[count, 0], weights_b[count, 1] = 1.0 - t, t
+        pair = (B + first[0]) * N + B + first[1]
+        feature_id[count] = (pair << FEATURE_BITS) | (2 * g + 2)
         depth[count] = d
-        friction[count], restitution[count] = _materials(
-            material[first[0]], material[second[0]], material_friction, material_restitution
-        )
+        point[count, 0], point[count, 1], point[count, 2] = at
+        normal[count, 0], normal[count, 1], normal[count, 2] = unit
+        friction[count], restitution[count] = _materials(cloth, first[0], second[0])
         count += 1
-    unit = np.ascontiguousarray(normal[:count])
-    t1, t2 = tangent_frames(unit)
+    unit_normal = np.ascontiguousarray(normal[:count])
+    t1, t2 = tangent_frames(unit_normal)
     nobody = np.full(count, -1, dtype=np.int64)
     return ContactArrays(
         nobody,
         nobody.copy(),
-        particles[0, :count].copy(),
-        particles[1, :count].copy(),
-        weights[0, :count].copy(),
-        weights[1, :count].copy(),
+        particles_a[:count].copy(),
+        particles_b[:count].copy(),
+        weights_a[:count].copy(),
+        weights_b[:count].copy(),
         point[:count].copy(),
-        unit,
+        unit_normal,
         depth[:count].copy(),
         t1,
         t2,
@@ -561,9 +520,13 @@ def reach_growth(radius: np.ndarray, reach: Reach, vertices: np.ndarray) -> np.n
 
 
 @njit(cache=True, inline="always")
-def _materials(a: int, b: int, material_friction: np.ndarray, material_restitution: np.ndarray) -> tuple[float, float]:
-    """(μ, ε) of materials a and b combined as ``Model.pair_materials`` does."""
-    return np.sqrt(material_friction[a] * material_friction[b]), max(material_restitution[a], material_restitution[b])
+def _materials(cloth: SelfContactModel, i: int, j: int) -> tuple[float, float]:
+    """(μ, ε) of the materials of particles i and j combined as ``Model.pair_materials`` does."""
+    a, b = cloth.material[i], cloth.material[j]
+    return (
+        np.sqrt(cloth.material_friction[a] * cloth.material_friction[b]),
+        max(cloth.material_restitution[a], cloth.material_restitution[b]),
+    )
 
 
 # ---- crossings: the health check's test --------------------------------------------------------
@@ -585,27 +548,17 @@ def crossings(model: Model, particle_position: np.ndarray, every_cloth: bool = F
 @njit(cache=True)
 def edge_triangle_crossings(position: np.ndarray, triangles: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """``crossings``, compiled: the broad phase over the edges' and triangles' boxes, then for
-    each (edge, triangle) pair with no shared corner whether the segment's ends lie strictly on
+    each (edge, triangle) pair with no shared corner (by edge, then triangle) whether the segment's ends lie strictly on
     the two sides of the triangle's plane and the point where it meets the plane inside the
     triangle (closed; an edge lying in the plane is not counted). position (P, 3) [m], triangles
     (F', 3), edges (E, 2). Returns (K, 2) int64 (edge, triangle)."""
-    E, F = edges.shape[0], triangles.shape[0]
-    zero = np.zeros(position.shape[0])
-    edge_lower, edge_upper = np.empty((E, 3)), np.empty((E, 3))
-    element_boxes(position, zero, edges, edge_lower, edge_upper)
-    triangle_lower, triangle_upper = np.empty((F, 3)), np.empty((F, 3))
-    element_boxes(position, zero, triangles, triangle_lower, triangle_upper)
-    near = boxes_between(edge_lower, edge_upper, triangle_lower, triangle_upper, False)
+    near = elements_between(position, np.zeros(position.shape[0]), edges, triangles, False)
     out = np.empty((near.shape[0], 2), dtype=np.int64)
     count = 0
     for k in range(near.shape[0]):
         e, f = near[k, 0], near[k, 1]
         a, b = edges[e, 0], edges[e, 1]
         corners = triangles[f]
-        if a == corners[0] or a == corners[1] or a == corners[2] or b == corners[0] or b == corners[1]:
-            continue
-        if b == corners[2]:
-            continue
         if segment_crosses_triangle(
             position[a], position[b], position[corners[0]], position[corners[1]], position[corners[2]]
         ):
