@@ -76,7 +76,7 @@ class Comparison:
 
 
 @dataclass
-class _Outcome:
+class Outcome:
     """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message),
     set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
 
@@ -200,7 +200,7 @@ def _run_all(
     workers=None,
     scheduler=None,
     peer_names=(),
-) -> tuple[list[_Outcome], dict[str, str], str]:
+) -> tuple[list[Outcome], dict[str, str], str]:
     """Load the scene for every method, then run it with each and in each of ``peer_names``
     (contactlab.peers), streaming each trajectory to out/<method>/trajectory.h5 and rendering it
     (``video``: fps, or None), one after another or on a Dask cluster (:func:`_parallel`);
@@ -268,7 +268,7 @@ def _run_all(
         for category, message in result["warnings"]:
             warnings.warn(message, category, stacklevel=2)
         if "gap" in result:  # a peer that cannot express the scene: its row says why
-            outcomes.append(_Outcome(name, scenes[name], gap=result["gap"]))
+            outcomes.append(Outcome(name, scenes[name], gap=result["gap"]))
             remove_empty([os.path.join(out, name)])
             continue
         if "input_error" in result:
@@ -282,7 +282,7 @@ def _run_all(
         trajectory = os.path.join(out, name, TRAJECTORY)
         created.add(trajectory, *result.get("media", {}).values())
         run = Run(None, open_trajectory(trajectory), result["summary"])
-        outcome = _Outcome(
+        outcome = Outcome(
             name, scenes[name], warnings=[message for _, message in result["warnings"]], media=result.get("media", {})
         )
         if name in peer_names:
