@@ -34,6 +34,7 @@ once with the model) are placed in the world as one triangle soup.
 from __future__ import annotations
 
 from collections import namedtuple
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -52,6 +53,25 @@ GRANULARITIES = ("object", "vertex", "samples")  # P2a, P2b, P2c
 NORMALS = ("object", "vertex")  # P4, P5
 SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)  # static kinds handled here
 POLYTOPES = (shapes.BOX, shapes.CONVEX)
+
+
+@dataclass(frozen=True)
+class DetectionSettings:
+    """How contacts are detected: ``collide``'s settings, as a method's CollisionOptions holds
+    them (``methods.base.CollisionOptions`` and ``collision.collide_keeping`` explain each: the
+    margin [m], the granularity and normal of boxes and hulls on static surfaces, the samples per
+    triangle edge, the cloth's samples and whether its faces meet obstacles);
+    :func:`surface_contacts` reads the margin, granularity, normal and samples."""
+
+    margin: float = 0.0
+    granularity: str = "vertex"
+    normal: str = "object"
+    samples: int = 2
+    cloth_samples: int = 0
+    cloth_faces: bool = True
+
+
+DEFAULT_SETTINGS = DetectionSettings()  # the corner contacts with the surface's normal, no margin
 
 
 SurfaceContacts = namedtuple("SurfaceContacts", ["point", "normal", "depth", "vertices", "weights", "feature"])
@@ -82,10 +102,7 @@ def surface_contacts(
     vertices: np.ndarray,
     triangles: np.ndarray,
     obstacle: ShapeObstacle | TriangleMesh,
-    granularity: str = "vertex",
-    normal: str = "object",
-    margin: float = 0.0,
-    samples: int = 2,
+    settings: DetectionSettings = DEFAULT_SETTINGS,
     max_depth: float | None = None,
     object_vertex_normals: np.ndarray | None = None,
 ) -> SurfaceContacts:
@@ -94,6 +111,7 @@ def surface_contacts(
     vertices: (V, 3) world positions of A [m]; triangles: (T, 3) int, wound outward.
     obstacle: a :class:`ShapeObstacle` (:func:`plane_obstacle`, :func:`sphere_obstacle`,
     :func:`box_obstacle`) or a static :class:`~contactlab.meshes.TriangleMesh`.
+    settings: a :class:`DetectionSettings` (its cloth fields are not read), of which:
     granularity: ``"object"`` (P2a: one contact, at the deepest vertex), ``"vertex"`` (P2b: one
     per vertex with depth ≥ −margin) or ``"samples"`` (P2c: one per sample with depth ≥ −margin,
     ``samples × samples`` per triangle). normal: ``"object"`` (P4: B's normal at its closest
@@ -102,6 +120,7 @@ def surface_contacts(
     against a mesh, how deep a penetration is looked for (default: the mesh's ``max_depth``).
     object_vertex_normals: (V, 3) to reuse, else computed from A.
     """
+    granularity, normal, margin, samples = settings.granularity, settings.normal, settings.margin, settings.samples
     if granularity not in GRANULARITIES:
         raise InputError("granularity", f"expected one of {', '.join(GRANULARITIES)}, found {granularity!r}")
     if normal not in NORMALS:
@@ -247,16 +266,8 @@ def polytope_contacts(
             if model.obstacle_shape[o] == shapes.MESH
             else model_obstacle(model, o)
         )
-        found = surface_contacts(
-            world,
-            triangles,
-            surface,
-            "vertex" if granularity == "object" else granularity,
-            normal,
-            margin,
-            samples,
-            object_vertex_normals=own_normals,
-        )
+        settings = DetectionSettings(margin, "vertex" if granularity == "object" else granularity, normal, samples)
+        found = surface_contacts(world, triangles, surface, settings, object_vertex_normals=own_normals)
         if granularity == "samples":
             triangle = found.feature // samples_per_triangle
             body = triangle_body[triangle]
