@@ -57,6 +57,7 @@ import scipy.sparse.linalg as spla
 from ..errors import InputError
 from ._checks import choice, finite_vector, positive_float, positive_int, square_csr
 from .friction_sweeps import (
+    Sweeping,
     apgd_step,
     diagonal_blocks,
     extrapolate,
@@ -294,14 +295,11 @@ def solve_friction_contact(
         r, iterations, error, restarts = solve_newton(csr, q, mu, r, tol, max_iterations, int(warm_sweeps))
     else:
         blocks = diagonal_blocks(csr, nc)
-        indptr = csr.indptr.astype(np.int64)
-        indices = csr.indices.astype(np.int64)
+        problem = Sweeping(csr.indptr.astype(np.int64), csr.indices.astype(np.int64), csr.data, q, mu, blocks)
         if method == "nsgs":
-            iterations, error = nsgs_sweeps(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
+            iterations, error = nsgs_sweeps(problem, r, tol, max_iterations, pyramid)
         else:
-            iterations, error = staggered_sweeps(
-                indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid, 25
-            )
+            iterations, error = staggered_sweeps(problem, r, tol, max_iterations, pyramid, 25)
     u = (Wr if method == "apgd" and m else csr @ r) + q
     converged = bool(error <= tol)
     if converged:

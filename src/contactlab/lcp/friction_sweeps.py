@@ -11,6 +11,7 @@ semi-smooth Newton solver (:mod:`contactlab.lcp.newton`) warm starts and restart
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,6 +21,10 @@ from ..ordered_sums import ordered_dot
 from .disk import disk_solve
 
 _SQRT_HALF = math.sqrt(0.5)
+
+# the problem the sweeps solve: W in CSR arrays (indptr, indices, data), q (m,), μ (nc,) and W's
+# 3×3 diagonal blocks (nc, 3, 3) (``diagonal_blocks``)
+Sweeping = namedtuple("Sweeping", ["indptr", "indices", "data", "q", "mu", "blocks"])
 
 
 @njit(cache=True)
@@ -180,19 +185,10 @@ def _start(indptr, indices, data, q, mu, r, pyramid):
 
 
 @njit(cache=True)
-def nsgs_sweeps(
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    data: np.ndarray,
-    q: np.ndarray,
-    mu: np.ndarray,
-    blocks: np.ndarray,
-    r: np.ndarray,
-    tol: float,
-    max_iterations: int,
-    pyramid: bool,
-) -> tuple[int, float]:
-    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
+def nsgs_sweeps(problem: Sweeping, r: np.ndarray, tol: float, max_iterations: int, pyramid: bool) -> tuple[int, float]:
+    """Non-smooth Gauss-Seidel (SPEC F4a) of ``problem`` (a :data:`Sweeping`) on r (m,), in
+    place. Returns (sweeps, error)."""
+    indptr, indices, data, q, mu, blocks = problem
     nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error
@@ -218,23 +214,15 @@ def nsgs_sweeps(
 
 @njit(cache=True)
 def staggered_sweeps(
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    data: np.ndarray,
-    q: np.ndarray,
-    mu: np.ndarray,
-    blocks: np.ndarray,
-    r: np.ndarray,
-    tol: float,
-    max_iterations: int,
-    pyramid: bool,
-    inner: int,
+    problem: Sweeping, r: np.ndarray, tol: float, max_iterations: int, pyramid: bool, inner: int
 ) -> tuple[int, float]:
-    """Staggered normal/friction iteration (SPEC F4b) on r (m,), in place. Returns (rounds, error).
+    """Staggered normal/friction iteration (SPEC F4b) of ``problem`` (a :data:`Sweeping`) on
+    r (m,), in place. Returns (rounds, error).
 
     Each round: up to ``inner`` projected Gauss-Seidel sweeps over all normal rows (frictions
     fixed), then up to ``inner`` sweeps of exact friction solves over all contacts (normals
     fixed); a phase stops early when its largest change is below ``tol/10`` of the largest r."""
+    indptr, indices, data, q, mu, blocks = problem
     nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error

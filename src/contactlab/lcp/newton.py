@@ -104,7 +104,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..compiling import njit
-from .friction_sweeps import diagonal_blocks, fill_velocity_error, nsgs_sweeps
+from .friction_sweeps import Sweeping, diagonal_blocks, fill_velocity_error, nsgs_sweeps
 
 NONMONOTONE_WEIGHT = 0.9  # η of Zhang & Hager's reference (0: monotone Armijo)
 ARMIJO_SLOPE = 1e-4  # ψ must fall by ARMIJO_SLOPE · t · ψ (a Newton step predicts 2 t ψ)
@@ -317,7 +317,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
     u = np.empty(m)
 
     if warm_sweeps > 0:
-        nsgs_sweeps(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, warm_sweeps, False)
+        nsgs_sweeps(Sweeping(w_indptr, w_indices, w_data, q, mu, blocks), r, tol, warm_sweeps, False)
     error = fill_velocity_error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)  # also u = W r + q
     best_r, best_error = r.copy(), error
     if error <= tol:
@@ -379,7 +379,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
             # stalled: Gauss–Seidel sweeps from here (twice as many as last time), another ρ
             restarts += 1
             sweeps = WATCHDOG_SWEEPS * 2 ** min(restarts - 1, WATCHDOG_DOUBLINGS)
-            nsgs_sweeps(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, sweeps, False)
+            nsgs_sweeps(Sweeping(w_indptr, w_indices, w_data, q, mu, blocks), r, tol, sweeps, False)
             rho = RHO_FACTORS[(restarts - 1) % len(RHO_FACTORS)] * base_rho
             error = fill_velocity_error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
             best_error = _keep_best(r, error, best_r, best_error)
