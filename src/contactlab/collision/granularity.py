@@ -34,7 +34,6 @@ once with the model) are placed in the world as one triangle soup.
 from __future__ import annotations
 
 from collections import namedtuple
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,20 +54,17 @@ SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)  # static kind
 POLYTOPES = (shapes.BOX, shapes.CONVEX)
 
 
-@dataclass(frozen=True)
-class DetectionSettings:
-    """How contacts are detected: ``collide``'s settings, as a method's CollisionOptions holds
-    them (``methods.base.CollisionOptions`` and ``collision.collide_keeping`` explain each: the
-    margin [m], the granularity and normal of boxes and hulls on static surfaces, the samples per
-    triangle edge, the cloth's samples and whether its faces meet obstacles);
-    :func:`surface_contacts` reads the margin, granularity, normal and samples."""
-
-    margin: float = 0.0
-    granularity: str = "vertex"
-    normal: str = "object"
-    samples: int = 2
-    cloth_samples: int = 0
-    cloth_faces: bool = True
+DetectionSettings = namedtuple(
+    "DetectionSettings",
+    ["margin", "granularity", "normal", "samples", "cloth_samples", "cloth_faces"],
+    defaults=(0.0, "vertex", "object", 2, 0, True),
+)
+DetectionSettings.__doc__ = """How contacts are detected: ``collide``'s settings, as a method's CollisionOptions holds
+them (``methods.base.CollisionOptions`` and ``collision.collide_keeping`` explain each): margin [m] (gaps
+down to −margin become contacts), granularity and normal of boxes and hulls on static surfaces, samples per
+triangle edge, cloth_samples (per cloth triangle edge against obstacles) and cloth_faces (whether an
+obstacle's edge or corner meets a cloth triangle between its vertices). :func:`surface_contacts` reads the
+margin, granularity, normal and samples."""
 
 
 DEFAULT_SETTINGS = DetectionSettings()  # the corner contacts with the surface's normal, no margin
