@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from contactlab import ModelBuilder, collide, simulate
-from contactlab.collision import _bounds, collide_keeping, colliders, state_poses
+from contactlab.collision import DetectionSettings, _bounds, collide_keeping, colliders, state_poses
 from contactlab.collision.broad_phase import overlapping_pairs
 
 
@@ -103,7 +103,7 @@ def hull_stack(seed=0):
 
 def measure_kept(name, model, state, repeat, tolerance=1e-4, margin=0.002):
     """Fresh ``collide`` against ``collide_keeping`` reusing the manifolds of a call 10 µm back."""
-    _, kept = collide_keeping(model, state, None, tolerance, margin)
+    _, kept = collide_keeping(model, state, None, tolerance, DetectionSettings(margin))
     moved = state.copy()
     moved.body_position += 1e-5
     collide(model, moved, margin)
@@ -112,7 +112,7 @@ def measure_kept(name, model, state, repeat, tolerance=1e-4, margin=0.002):
         t0 = time.perf_counter()
         collide(model, moved, margin)
         t1 = time.perf_counter()
-        contacts, _ = collide_keeping(model, moved, kept, tolerance, margin)
+        contacts, _ = collide_keeping(model, moved, kept, tolerance, DetectionSettings(margin))
         t2 = time.perf_counter()
         fresh.append(t1 - t0)
         reused.append(t2 - t1)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, simulate
-from contactlab.collision import collide, collide_keeping
+from contactlab.collision import DetectionSettings, collide, collide_keeping
 from contactlab.collision.cloth import FACE, cloth_face_contacts
 from contactlab.collision.contact_output import FEATURE_BITS
 from contactlab.errors import InputError, SimulationDiverged
@@ -42,7 +42,7 @@ def test_a_rod_under_the_middle_of_a_square_meets_one_triangle_at_its_diagonal_o
     # lie over its top face
     model = cloth(None, 0.003 + 0.005, rod=(0.005, 0.2, 0.005))
     found = face_contacts(model)
-    vertex_contacts = collide_keeping(model, model.state(), None, 0.0, 0.002, cloth_faces=False)[0]
+    vertex_contacts = collide_keeping(model, model.state(), None, 0.0, DetectionSettings(0.002, cloth_faces=False))[0]
     assert vertex_contacts.count == 0  # the vertices are 45 mm from the rod
     assert found.count >= 1
     # each contact: its weights sum to 1 and reproduce a point on the cloth 3 mm over the rod's top

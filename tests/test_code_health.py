@@ -48,21 +48,40 @@ def test_no_module_is_longer_than_a_thousand_lines():
 # of the loop (issue 36, item 5); what belongs together travels as one named value (a LoopModel, a
 # Motion, a Specialization, (u, targets, warm start, order) of a solve)
 MOST_PARAMETERS = 8
+# issue 57 extends the rule to the collision
 
 
-def test_no_function_of_the_methods_takes_more_than_eight_parameters():
+def test_no_function_of_the_methods_or_the_collision_takes_more_than_eight_parameters():
     import ast
 
     crowded = []
-    for path in sorted((PACKAGE / "methods").glob("*.py")):
+    for path in sorted([*(PACKAGE / "methods").glob("*.py"), *(PACKAGE / "collision").glob("*.py")]):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 arguments = node.args
                 count = len(arguments.posonlyargs) + len(arguments.args) + len(arguments.kwonlyargs)
                 count += (arguments.vararg is not None) + (arguments.kwarg is not None)
+                name = f"{path.parent.name}/{path.name} {getattr(node, 'name', 'lambda')}"
                 if count > MOST_PARAMETERS:
-                    crowded.append(f"{path.name}:{node.lineno} {getattr(node, 'name', 'lambda')} ({count})")
+                    crowded.append(f"{name}:{node.lineno} ({count})")
     assert crowded == []
+
+
+def test_no_module_imports_a_private_name_of_another():
+    """Issue 57: what a module takes from another of the package is public there (a name with a
+    leading underscore is the module's own)."""
+    import ast
+
+    private = []
+    for name in _modules():
+        for node in ast.walk(ast.parse((PACKAGE / name).read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("contactlab")):
+                private += [
+                    f"{name}:{node.lineno} {alias.name}"
+                    for alias in node.names
+                    if alias.name.startswith("_") and not alias.name.startswith("__")
+                ]
+    assert private == []
 
 
 # the public names two modules may both define: one interface, each module its own case of it —

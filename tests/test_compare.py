@@ -209,10 +209,10 @@ def test_the_verdicts_match_the_checks_and_the_paragraph_names_what_was_missed(c
 
 def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
     from contactlab.compare.report import _speed_sentence
-    from contactlab.compare.run import _Outcome
+    from contactlab.compare.run import Outcome
 
     def outcome(name, median, low, high):
-        made = _Outcome(name, None)
+        made = Outcome(name, None)
         made.row = {
             "steps_per_second": median,
             "steps_per_second_median": median,
@@ -238,7 +238,7 @@ def test_speeds_whose_middle_halves_overlap_are_called_within_noise():
 
 
 def _drift_outcome(name, drift):
-    made = run._Outcome(name, None)
+    made = run.Outcome(name, None)
     made.row = {"energy_drift_J": drift}
     return made
 
@@ -265,7 +265,7 @@ def test_penetrations_of_rounding_size_are_not_ranked():
     impulse (3.4e-7 mm) behind it: both are no overlap at all. Depths under 0.001 mm are alike."""
 
     def outcome(name, depth):
-        made = run._Outcome(name, None)
+        made = run.Outcome(name, None)
         made.row = {"max_penetration_mm": depth}
         return made
 

@@ -22,7 +22,7 @@ from contactlab.lcp import (
 )
 from contactlab.lcp.coloring import level_blocks
 from contactlab.lcp.friction import largest_eigenvalue
-from contactlab.lcp.friction_sweeps import _project_cone
+from contactlab.lcp.friction_sweeps import project_cone
 
 # nsgs leaves these above 1e-6 in 3000 sweeps: the two BoxesStack ones (marked hard in the data README), the rock
 # pile (3.4e-5) and the spheres in a box (1.0e-5); newton solves all four (tests/test_newton.py)
@@ -391,7 +391,7 @@ def test_cone_projection_is_the_moreau_split(rng):
     mu = rng.uniform(0.0, 1.5, nc)
     mu[:20] = 0.0
     z = rng.normal(size=3 * nc) * rng.uniform(0.1, 10.0, 3 * nc)
-    p = _project_cone(z, mu).reshape(-1, 3)
+    p = project_cone(z, mu).reshape(-1, 3)
     rest = z.reshape(-1, 3) - p
     eps = 1e-12 * np.abs(z).max()
     assert np.all(np.linalg.norm(p[:, 1:], axis=1) <= mu * p[:, 0] + eps)

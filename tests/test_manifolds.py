@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from contactlab import ModelBuilder, collide, rotations, simulate
-from contactlab.collision import collide_keeping
+from contactlab.collision import DetectionSettings, collide_keeping
 from contactlab.errors import InputError
 from contactlab.methods import constraints, impulse
 
@@ -29,7 +29,7 @@ def box_on_plane(tilt=0.0, height=0.05):
 
 
 def keep(model, state, manifolds, tolerance=TOL, margin=MARGIN):
-    return collide_keeping(model, state, manifolds, tolerance, margin)
+    return collide_keeping(model, state, manifolds, tolerance, DetectionSettings(margin))
 
 
 def same_contacts(a, b):
@@ -119,7 +119,7 @@ def test_a_wider_reach_than_computed_recomputes():
     model, state, _ = box_off_an_edge(0.005)
     contacts, kept = keep(model, state, None)
     assert contacts.count == 0 and len(kept) == 1 and kept.count[0] == 0  # near, not touching: kept empty
-    contacts, again = collide_keeping(model, state, kept, TOL, MARGIN, np.array([0.0, 0.004]))
+    contacts, again = collide_keeping(model, state, kept, TOL, DetectionSettings(MARGIN), np.array([0.0, 0.004]))
     assert contacts.count == 2  # the edge's two ends
     np.testing.assert_allclose(contacts.depth, -0.005, rtol=0, atol=1e-12)
     assert again.count[0] == 2

@@ -8,7 +8,7 @@ python-fcl's GJK distance.
 import numpy as np
 import pytest
 
-from contactlab.collision.granularity import sample_points, surface_contacts, triangle_samples
+from contactlab.collision.granularity import DetectionSettings, sample_points, surface_contacts, triangle_samples
 from contactlab.collision.mesh_contacts import shapes_against_mesh
 from contactlab.collision.mesh_sweep import sweep_sphere_mesh
 from contactlab.collision.polytope_mesh import box_mesh
@@ -405,11 +405,11 @@ def test_p2_granularities_on_a_plane(samples):
     V, T = cloth_pushed_into_plane()
     plane = plane_obstacle((0.0, 0.0, 2.0), 0.0)  # z = 0, normal normalized
     below = -V[:, 2]
-    whole = surface_contacts(V, T, plane, granularity="object")
+    whole = surface_contacts(V, T, plane, DetectionSettings(granularity="object"))
     assert len(whole.depth) == 1
     assert whole.depth[0] == pytest.approx(below.max())
     assert whole.vertices[0, 0] == np.argmax(below) and np.all(whole.vertices[0, 1:] == -1)
-    per_vertex = surface_contacts(V, T, plane, granularity="vertex")
+    per_vertex = surface_contacts(V, T, plane, DetectionSettings(granularity="vertex"))
     assert len(per_vertex.depth) == np.count_nonzero(below >= 0.0)
     np.testing.assert_allclose(per_vertex.depth, below[per_vertex.vertices[:, 0]])
     np.testing.assert_allclose(per_vertex.normal, np.tile([0.0, 0.0, 1.0], (len(per_vertex.depth), 1)))
@@ -418,7 +418,7 @@ def test_p2_granularities_on_a_plane(samples):
     assert pattern.shape == (samples * samples, 3) and np.all(pattern > 0.0)
     np.testing.assert_allclose(pattern.mean(axis=0), 1.0 / 3.0)
     sample_z = np.einsum("sk,tk->ts", pattern, V[T][:, :, 2])
-    sampled = surface_contacts(V, T, plane, granularity="samples", samples=samples)
+    sampled = surface_contacts(V, T, plane, DetectionSettings(granularity="samples", samples=samples))
     assert len(sampled.depth) == np.count_nonzero(sample_z <= 0.0)
     np.testing.assert_allclose(sampled.weights.sum(axis=1), 1.0)
     x = np.einsum("ck,ckd->cd", sampled.weights, V[sampled.vertices])
@@ -426,11 +426,11 @@ def test_p2_granularities_on_a_plane(samples):
     np.testing.assert_allclose(sampled.point, x + 0.5 * sampled.depth[:, None] * [0.0, 0.0, 1.0], atol=1e-15)
     assert np.all(sampled.vertices == T[sampled.feature // (samples * samples)])
     # margin: gaps down to −margin are included
-    with_margin = surface_contacts(V, T, plane, granularity="vertex", margin=0.05)
+    with_margin = surface_contacts(V, T, plane, DetectionSettings(granularity="vertex", margin=0.05))
     assert len(with_margin.depth) == np.count_nonzero(below >= -0.05)
     for bad in (dict(granularity="triangle"), dict(normal="average"), dict(granularity="samples", samples=0)):
         with pytest.raises(InputError):
-            surface_contacts(V, T, plane, **bad)
+            surface_contacts(V, T, plane, DetectionSettings(**bad))
 
 
 @pytest.mark.parametrize("samples", [1, 2, 3])
@@ -441,7 +441,9 @@ def test_compiled_samples_are_the_barycentric_sums_in_order(samples):
     pattern = triangle_samples(samples)
     expected = np.einsum("sk,tkd->tsd", pattern, V[T]).reshape(-1, 3)
     np.testing.assert_array_equal(sample_points(V, T.astype(np.int64), pattern), expected)
-    sampled = surface_contacts(V, T, plane_obstacle((0.0, 0.0, 1.0), 0.0), granularity="samples", samples=samples)
+    sampled = surface_contacts(
+        V, T, plane_obstacle((0.0, 0.0, 1.0), 0.0), DetectionSettings(granularity="samples", samples=samples)
+    )
     np.testing.assert_array_equal(sampled.weights, pattern[sampled.feature % len(pattern)])
     np.testing.assert_array_equal(sampled.point[:, :2], expected[sampled.feature, :2])
 
@@ -451,16 +453,18 @@ def test_p2b_against_sphere_and_mesh_obstacles():
     # a mesh floor gives the same vertices and depths as the plane
     floor = square(half=3.0)
     plane = plane_obstacle((0.0, 0.0, 1.0), 0.0)
-    on_plane = surface_contacts(V, T, plane, granularity="vertex")
-    on_mesh = surface_contacts(V, T, floor, granularity="vertex", max_depth=0.5)
+    on_plane = surface_contacts(V, T, plane, DetectionSettings(granularity="vertex"))
+    on_mesh = surface_contacts(V, T, floor, DetectionSettings(granularity="vertex"), max_depth=0.5)
     np.testing.assert_array_equal(on_mesh.vertices, on_plane.vertices)
     np.testing.assert_allclose(on_mesh.depth, on_plane.depth, atol=1e-14)
     np.testing.assert_allclose(on_mesh.normal, on_plane.normal, atol=1e-15)
-    sampled = surface_contacts(V, T, floor, granularity="samples", samples=2, max_depth=0.5)
-    assert len(sampled.depth) == len(surface_contacts(V, T, plane, granularity="samples", samples=2).depth)
+    sampled = surface_contacts(V, T, floor, DetectionSettings(granularity="samples", samples=2), max_depth=0.5)
+    assert len(sampled.depth) == len(
+        surface_contacts(V, T, plane, DetectionSettings(granularity="samples", samples=2)).depth
+    )
     # a sphere obstacle of radius 0.5 at (0, 0, −0.45): vertices within it
     ball = sphere_obstacle((0.0, 0.0, -0.45), 0.5)
-    contacts = surface_contacts(V, T, ball, granularity="vertex")
+    contacts = surface_contacts(V, T, ball, DetectionSettings(granularity="vertex"))
     gaps = np.linalg.norm(V - [0.0, 0.0, -0.45], axis=1) - 0.5
     assert len(contacts.depth) == np.count_nonzero(gaps <= 0.0) > 0
     np.testing.assert_allclose(contacts.depth, -gaps[contacts.vertices[:, 0]])
@@ -487,7 +491,7 @@ def test_p4_jumps_across_the_medial_axis_and_p5_is_continuous():
     for x in np.linspace(0.85, 0.95, 201):
         V = base + [x, 0.0, 0.9]
         for choice in ("object", "vertex"):
-            c = surface_contacts(V, T, box, granularity="vertex", normal=choice)
+            c = surface_contacts(V, T, box, DetectionSettings(granularity="vertex", normal=choice))
             row = np.nonzero(c.vertices[:, 0] == 0)[0]
             assert len(row) == 1
             assert c.depth[row[0]] == pytest.approx(min(1.0 - x, 0.1))  # depth continuous

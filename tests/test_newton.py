@@ -163,10 +163,10 @@ def test_a_friction_disk_far_smaller_than_the_pull_gives_the_point_against_it(ra
     divided by zero, which Hypothesis found through μ = 2.2e-308 in a Newton watchdog sweep), and
     for a subnormal radius 1/radius overflowed and it returned NaN. Subnormal radii keep 44 bits
     or more here, so rtol 1e-12 still holds."""
-    from contactlab.lcp.disk import _disk_solve
+    from contactlab.lcp.disk import disk_solve
 
     b = np.array([1.0, -0.5])
-    x = np.array(_disk_solve(2.0, 1.0, 1.0, 2.0, b[0], b[1], radius))
+    x = np.array(disk_solve(2.0, 1.0, 1.0, 2.0, b[0], b[1], radius))
     np.testing.assert_allclose(x / radius, -b / np.linalg.norm(b), rtol=1e-12)
 
 

@@ -63,12 +63,12 @@ def test_posed_vertices_follow_the_bodies_and_planes_lie_on_their_plane():
 
 
 def test_the_written_out_icosphere_is_trimeshs_bit_for_bit():
-    """contactlab._icosphere spares every run with a sphere the import of trimesh."""
-    from contactlab import _icosphere
+    """contactlab.icosphere spares every run with a sphere the import of trimesh."""
+    from contactlab import icosphere
     from contactlab.surfaces import SPHERE_SUBDIVISIONS, _unit_sphere
 
     mesh = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
     vertices, triangles = _unit_sphere()
     assert vertices.tobytes() == np.asarray(mesh.vertices, dtype=float).tobytes()
     np.testing.assert_array_equal(triangles, mesh.faces)
-    assert len(_icosphere.VERTICES) == 42 and len(_icosphere.TRIANGLES) == 80
+    assert len(icosphere.VERTICES) == 42 and len(icosphere.TRIANGLES) == 80

@@ -204,7 +204,7 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     velocity by more than the tolerance, well before the cap, though one more sweep's largest
     single update is still far above it."""
     from contactlab import simulate
-    from contactlab.collision import collide_keeping, swept_distances
+    from contactlab.collision import DetectionSettings, collide_keeping, swept_distances
     from contactlab.contacts import values_by_id
     from contactlab.methods import impulse
     from contactlab.methods.loop_stages import loop_settings
@@ -223,16 +223,9 @@ def test_a_stack_stops_on_a_sweeps_net_change_where_single_updates_never_settle(
     state = simulate(model, "impulse", dt, 0.35, state=state).state
     options = impulse.Options()
     v, w, p = free_velocities(model, state, dt)
+    settings = DetectionSettings(options.contact_margin, options.granularity, options.normal, options.samples)
     contacts, _ = collide_keeping(
-        model,
-        state,
-        state.carried.manifolds,
-        options.manifold_tolerance,
-        options.contact_margin,
-        swept_distances(model, v, w, p, dt),
-        options.granularity,
-        options.normal,
-        options.samples,
+        model, state, state.carried.manifolds, options.manifold_tolerance, settings, swept_distances(model, v, w, p, dt)
     )
     rows = jacobian_rows.rows_of(model, contacts, state.body_position, state.body_orientation)
     order = sequential.solve_order(contacts, model.gravity)

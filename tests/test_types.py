@@ -63,7 +63,7 @@ def _public_functions(path):
 
 
 def _package_modules():
-    """Every module of the package outside private modules and folders (``_icosphere.py``)."""
+    """Every module of the package outside private modules and folders (``lcp/_checks.py``)."""
     return [
         path
         for path in sorted(PACKAGE.rglob("*.py"))

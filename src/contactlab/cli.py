@@ -190,13 +190,18 @@ def _measured_arguments(command):
     command.add_argument("scene", help="a built-in scene name or a path to a .toml file")
     command.add_argument("measured", nargs="+", metavar="MEASURED.h5", help="measured-motion files (docs/validate.md)")
     command.add_argument("--methods", help="comma-separated methods (default: all four)")
+    _set_argument(command, "materials.0.friction=0.3")
+
+
+def _set_argument(command, example):
+    """--set KEY=VALUE, repeatable: a scene field overridden by its dotted path (``example``)."""
     command.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override any scene field by dotted path, e.g. materials.0.friction=0.3",
+        help=f"override any scene field by dotted path, e.g. {example}",
     )
 
 
@@ -204,14 +209,7 @@ def _scene_arguments(command):
     command.add_argument("scene", help="a built-in scene name (see 'contactlab scenes') or a path to a .toml file")
     command.add_argument("--dt", help="time step in seconds (default: the scene's)")
     command.add_argument("--duration", help="simulated time in seconds (default: the scene's)")
-    command.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override any scene field by dotted path, e.g. bodies.0.velocity=[3,0,0]",
-    )
+    _set_argument(command, "bodies.0.velocity=[3,0,0]")
     command.add_argument(
         "--threads",
         default="auto",
@@ -219,6 +217,17 @@ def _scene_arguments(command):
         help="threads of the compiled sweeps: a number, or auto (default: all cores, or one "
         "while that is faster on a busy machine); results are the same on any count",
     )
+
+
+def _on_cluster(args):
+    """The keywords of a batch the command line starts (compare, sweep, fit, fclib): the Dask
+    scheduler and workers its options name, with a progress bar."""
+    return dict(scheduler=args.scheduler, workers=args.workers, progress=True)
+
+
+def _to_stderr(line):
+    """A log line of a long command, on stderr (stdout keeps the results)."""
+    print(line, file=sys.stderr)
 
 
 def _scene_overrides(args):
@@ -392,12 +401,10 @@ def _compare(args):
         args.out,
         overrides=_scene_overrides(args),
         video=not args.no_video,
-        progress=True,
         fps=args.fps,
         allow_divergence=args.allow_divergence,
-        workers=args.workers,
-        scheduler=args.scheduler,
         peers=args.peers,
+        **_on_cluster(args),
     )
     print(comparison.summary_text)
     print(
@@ -410,16 +417,9 @@ def _sweep(args):
     from . import sweep
     from .study import load_study
 
-    study = load_study(args.study, log=lambda line: print(line, file=sys.stderr))
+    study = load_study(args.study, log=_to_stderr)
     out = args.out or os.path.join("out", f"{study.name}-sweep")
-    table = sweep.run(
-        study,
-        out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        progress=True,
-        log=lambda line: print(line, file=sys.stderr),
-    )
+    table = sweep.run(study, out, log=_to_stderr, **_on_cluster(args))
     counts = ", ".join(f"{count} {status}" for status, count in table["status"].value_counts().items())
     print(f"{study.name}: {len(table)} cells ({counts}).")
     print(
@@ -461,10 +461,8 @@ def _fit(args):
         args.out,
         overrides=args.overrides,
         evaluations=args.evaluations,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        progress=True,
-        log=lambda line: print(line, file=sys.stderr),
+        log=_to_stderr,
+        **_on_cluster(args),
     )
     for method, entry in result.methods.items():
         values = ", ".join(f"{path} = {value:.4g}" for path, value in entry["values"].items())
@@ -566,16 +564,8 @@ def _command(args, argv):
         elif args.command == "fclib":
             from .fclib_bench import bench
 
-            result = bench(
-                args.directory,
-                args.solvers,
-                args.out,
-                scheduler=args.scheduler,
-                workers=args.workers,
-                tol=args.tol,
-                repeats=args.repeats,
-                progress=True,
-            )
+            cluster = _on_cluster(args)
+            result = bench(args.directory, args.solvers, args.out, tol=args.tol, repeats=args.repeats, **cluster)
             solved = result.table.groupby("solver", sort=False)["converged"].sum()
             problems = result.table["problem"].nunique()
             print(

@@ -37,7 +37,7 @@ from .errors import InputError, first_line, shorten
 from .fclib import read_problem
 from .folder_lock import held
 from .lcp import natural_map_error, solve_friction_contact
-from .plots import DPI, STYLES, _figure
+from .plots import DPI, STYLES, new_figure
 from .record import atomic_path, make_folders, undo_written
 from .threads import available_threads
 
@@ -189,7 +189,7 @@ def performance_profile(
 def profile_figure(taus: np.ndarray, fractions: Mapping[str, np.ndarray], title: str) -> Figure:
     """A Figure of the profile (:func:`performance_profile`'s output): one step line per solver,
     τ on a log2 axis from 1 to past the largest ratio."""
-    figure, (ax,) = _figure(title)
+    figure, (ax,) = new_figure(title)
     right = max(2.0, float(taus[-1]) * 2**0.25)  # room to see the last step
     for index, (solver, values) in enumerate(fractions.items()):
         ax.step(

@@ -121,7 +121,9 @@ def draw(ax: Axes, lines: Iterable[Any], ylabel: str, *, log: bool = False, lege
         ax.legend(loc="best", fontsize="small")
 
 
-def _figure(title, rows=1):
+def new_figure(title: str | None, rows: int = 1) -> tuple[Figure, np.ndarray]:
+    """A Figure of ``rows`` axes stacked, sharing x (an array of them), titled ``title`` (none: untitled);
+    every plot of the package starts from it."""
     figure = Figure(figsize=SIZE_INCHES, dpi=DPI, layout="constrained")
     FigureCanvasAgg(figure)
     axes = figure.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
@@ -144,20 +146,20 @@ def build_figures(
     prefix = f"{title}: " if title else ""
     figures = {}
 
-    figure, (ax,) = _figure(f"{prefix}{'total energy' if comparing else 'energy'}")
+    figure, (ax,) = new_figure(f"{prefix}{'total energy' if comparing else 'energy'}")
     draw(ax, _energy_lines(runs, components), "total energy (J)" if comparing else "energy (J)")
     figures["energy"] = figure
 
-    figure, (ax,) = _figure(f"{prefix}deepest penetration")
+    figure, (ax,) = new_figure(f"{prefix}deepest penetration")
     draw(ax, _series(runs, "max_penetration", 1000.0), "max penetration (mm)")
     figures["penetration"] = figure
 
-    figure, (ax,) = _figure(f"{prefix}contacts")
+    figure, (ax,) = new_figure(f"{prefix}contacts")
     draw(ax, _series(runs, "contact_count"), "contacts in the step")
     figures["contacts"] = figure
 
     note = " — units differ by method" if comparing and len(runs) > 1 else ""
-    figure, (top, bottom) = _figure(f"{prefix}contact solver{note}", rows=2)
+    figure, (top, bottom) = new_figure(f"{prefix}contact solver{note}", rows=2)
     lines, log = _residual_lines(runs)
     draw(top, lines, RESIDUAL_LABEL, log=log)
     top.set_xlabel("")
@@ -166,7 +168,7 @@ def build_figures(
     return figures
 
 
-def _save(figures, directory) -> dict:
+def save_figures(figures: Mapping[str, Figure], directory: str) -> dict[str, str]:
     """Write each Figure as ``directory/<name>.png``; on failure remove what this call wrote
     (and the folders it created)."""
     made, written = make_folders(os.fspath(directory)), {}
@@ -192,7 +194,7 @@ def write_plots(arrays: Mapping[str, Any], directory: str, *, title: str | None 
     contacts: contact_count; residual: solver_residual [method units] (log axis when it spans
     decades) above solver_iterations. All against time [s]."""
     label = "run" if title is None else str(title)
-    return _save(build_figures({label: arrays}, components=True, title=title), directory)
+    return save_figures(build_figures({label: arrays}, components=True, title=title), directory)
 
 
 def write_comparison_plots(
@@ -200,4 +202,4 @@ def write_comparison_plots(
 ) -> dict[str, str]:
     """``runs``: {method name: trajectory arrays}. The same four pictures with one line per
     method (the energy plot: each method's total energy [J]); returns {"energy": path, ...}."""
-    return _save(build_figures(dict(runs), components=False, title=title), directory)
+    return save_figures(build_figures(dict(runs), components=False, title=title), directory)

@@ -47,7 +47,7 @@ from .errors import InputError
 from .methods import AVAILABLE
 from .peers import PEERS, engine
 from .scene.loader import read_source, scene_from_raw
-from .scene.schema import _did_you_mean, show
+from .scene.schema import did_you_mean, show
 from .scene.toml import parse_toml
 
 RECORD = ("summary", "trajectory")
@@ -173,7 +173,7 @@ def _grid_cells(grid):
     peers = _list(grid["peers"], "grid.peers") if "peers" in grid else []
     for peer in peers:
         if not isinstance(peer, str) or peer not in PEERS:
-            raise InputError("grid.peers", f"unknown peer {show(peer)}{_did_you_mean(peer, PEERS)}")
+            raise InputError("grid.peers", f"unknown peer {show(peer)}{did_you_mean(peer, PEERS)}")
         engine(peer, "grid.peers")  # installed, or the one line that says what to install
     axes = _table(grid.get("set", {}), "grid.set")
     values = []
@@ -218,7 +218,7 @@ def _checked_cells(specs, base, record, log=None):
         if not isinstance(method, str) or method not in (*AVAILABLE, *PEERS):
             raise InputError(
                 _field(where, "method"),
-                f"unknown method {show(method)}{_did_you_mean(method, (*AVAILABLE, *PEERS))}",
+                f"unknown method {show(method)}{did_you_mean(method, (*AVAILABLE, *PEERS))}",
             )
         if method in PEERS:
             engine(method, _field(where, "method") if where != "grid" else "grid.peers")
@@ -348,4 +348,4 @@ def _check_keys(table, known, where):
     for key in table:
         if key not in known:
             place = f"{where}.{key}" if where else key
-            raise InputError(place, f"unknown key{_did_you_mean(key, known)}")
+            raise InputError(place, f"unknown key{did_you_mean(key, known)}")

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import _icosphere, rotations, shapes
+from . import icosphere, rotations, shapes
 
 if TYPE_CHECKING:
     from .model import Model
@@ -49,9 +49,9 @@ def _hull_surface(hulls, index):
 @functools.cache
 def _unit_sphere():
     """(vertices (42, 3), triangles (80, 3)) of the unit icosphere of SPHERE_SUBDIVISIONS = 1:
-    trimesh.creation.icosphere's, written out in contactlab._icosphere (no trimesh import)."""
-    return _read_only(np.array(_icosphere.VERTICES, dtype=float)), _read_only(
-        np.array(_icosphere.TRIANGLES, dtype=np.int64)
+    trimesh.creation.icosphere's, written out in contactlab.icosphere (no trimesh import)."""
+    return _read_only(np.array(icosphere.VERTICES, dtype=float)), _read_only(
+        np.array(icosphere.TRIANGLES, dtype=np.int64)
     )
 
 

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
-from .plots import STYLES, _figure, _save
+from .plots import STYLES, new_figure, save_figures
 from .record import atomic_path
 
 if TYPE_CHECKING:
@@ -128,7 +128,7 @@ def cost(rows: pd.DataFrame) -> pd.Series:
 def _pareto_figure(scene, rows):
     label, error = accuracy(rows)
     costs = cost(rows)
-    figure, (ax,) = _figure(f"{scene}: error against cost")
+    figure, (ax,) = new_figure(f"{scene}: error against cost")
     for method, group in rows.groupby("method", sort=False):
         points = _finite(costs[group.index], error[group.index])
         unmeasured = len(group) - len(points[0])  # no finite error: a check never reached
@@ -148,7 +148,7 @@ def _pareto_figure(scene, rows):
 
 def _convergence_figure(scene, rows, axes):
     label, error = accuracy(rows)
-    figure, (ax,) = _figure(f"{scene}: convergence in dt")
+    figure, (ax,) = new_figure(f"{scene}: convergence in dt")
     others = [axis for axis in axes if axis != DT_AXIS and axis in rows and rows[axis].nunique() > 1]
     styles = {}
     for (method, *setting), group in rows.groupby(["method", *others], sort=False, dropna=False):
@@ -173,7 +173,7 @@ def _convergence_figure(scene, rows, axes):
 
 
 def _iterations_figure(scene, rows, axis):
-    figure, (top, bottom) = _figure(f"{scene}: solver against {axis}", rows=2)
+    figure, (top, bottom) = new_figure(f"{scene}: solver against {axis}", rows=2)
     for method, group in rows.groupby("method", sort=False):
         group = group.sort_values(axis)
         look = {"color": METHOD_COLOURS.get(method), "marker": METHOD_MARKERS.get(method, "o"), "label": method}
@@ -214,7 +214,7 @@ def figures(study: Study, table: pd.DataFrame) -> dict[str, Figure]:
 
 def write_report(study: Study, table: pd.DataFrame, out: str) -> dict[str, str]:
     """The plots and ``report.html`` of ``study``'s ``table`` into ``out``; name -> path."""
-    paths = _save(figures(study, table), os.path.join(out, "plots"))
+    paths = save_figures(figures(study, table), os.path.join(out, "plots"))
     path = os.path.join(out, "report.html")
     with atomic_path(path) as temporary, open(temporary, "w", encoding="utf-8") as stream:
         stream.write(_html(study, table, paths, out))

@@ -27,6 +27,7 @@ from .families import keeps_manifolds, pair_families
 from .geometry import norm
 from .granularity import GRANULARITIES as GRANULARITIES  # re-exported: the option values
 from .granularity import NORMALS as NORMALS
+from .granularity import DetectionSettings as DetectionSettings  # re-exported: collide_keeping takes it
 from .granularity import polytope_contacts
 from .manifolds import Manifolds, reuse_or_generate
 from .mesh_contacts import MAX_PER_SHAPE, MESH_PARTNERS, shapes_against_mesh
@@ -313,20 +314,7 @@ def detect(
     point, normal, depth, feature, owner, made = _kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance)
     if depth.shape[0] == 0:
         return no_contacts(), made, True
-    contacts = assemble_contacts(
-        pairs[owner, 0],
-        pairs[owner, 1],
-        point,
-        normal,
-        depth,
-        feature,
-        table.body_count,
-        dynamic - table.body_count,
-        table.materials,
-        table.material_friction,
-        table.material_restitution,
-        table.kinds.shape[0],
-    )
+    contacts = assemble_contacts(pairs[owner, 0], pairs[owner, 1], point, normal, depth, feature, table)
     return contacts, made, True
 
 
@@ -338,20 +326,7 @@ def _kept_or_fresh(keeping, table, plan, pairs, at, reach, kept, tolerance):  # 
     signature of the function it implements, annotations included.)"""
     if keeping is None or not tolerance > 0.0:
         return _fresh(table, plan, pairs, at, reach, kept)
-    found, made = reuse_or_generate(
-        pairs,
-        table.kinds,
-        table.params,
-        at[0],
-        at[1],
-        reach,
-        table.radius,
-        plan.hull_store,
-        plan.families,
-        kept,
-        tolerance,
-        table.kinds.shape[0],
-    )
+    found, made = reuse_or_generate(table, plan, pairs, at, reach, kept, tolerance)
     return (*found, made)
 
 
@@ -409,8 +384,6 @@ def no_contacts() -> ContactArrays:
     return ContactArrays(ids, ids, whole, whole, real, real, real, real, flat, real, real, flat, flat, ids)
 
 
-# collide takes collide_keeping's parameters less the manifolds (deliberately repeated: the
-# public signature says each default where a user reads it)
 def collide(
     model: Model,
     state: State,
@@ -423,26 +396,22 @@ def collide(
 ) -> Contacts:
     """All contacts of the state, including gaps down to −margin [m]; the contacts of
     :func:`collide_keeping` with nothing kept."""
-    return collide_keeping(model, state, None, 0.0, margin, sweep, granularity, normal, samples, cloth_samples)[0]
+    settings = DetectionSettings(margin, granularity, normal, samples, cloth_samples)
+    return collide_keeping(model, state, None, 0.0, settings, sweep)[0]
 
 
-# the parameters of collide, with the manifolds to reuse and their tolerance (see collide)
 def collide_keeping(
     model: Model,
     state: State,
     manifolds: Manifolds | None,
     tolerance: float,
-    margin: float = 0.0,
+    settings: DetectionSettings,
     sweep: np.ndarray | None = None,
-    granularity: str = "vertex",
-    normal: str = "object",
-    samples: int = 2,
-    cloth_samples: int = 0,
     particle_motion: np.ndarray | None = None,
-    cloth_faces: bool = True,
 ) -> tuple[Contacts, Manifolds | None]:
     """All contacts of the state, including gaps down to −margin [m], and the contact manifolds
-    to keep for the next step: (Contacts, Manifolds or None).
+    to keep for the next step: (Contacts, Manifolds or None), detected as ``settings`` (a
+    :class:`DetectionSettings`: margin, granularity, normal, samples, cloth_samples, cloth_faces) say.
 
     manifolds: what the last step's call returned (None: nothing kept); tolerance [m]: how far
     a pair of boxes, hulls or planes may have moved, relative to each other, and still reuse
@@ -468,6 +437,8 @@ def collide_keeping(
     particle's predicted displacement over the step, lets those reach only as far as the
     particles move relative to each other (None: as far as the sweep).
     """
+    margin, granularity, normal, samples = settings.margin, settings.granularity, settings.normal, settings.samples
+    cloth_samples = settings.cloth_samples
     B, P, O = model.body_count, model.particle_count, model.obstacle_count
     dynamic = B + P
     table, plan = colliders(model), detection_plan(model)
@@ -500,15 +471,16 @@ def collide_keeping(
     if parts:
         a, b, point, unit, depth, feature = (np.concatenate(column) for column in zip(*parts))
         if len(a):
-            found = Contacts.concatenate([found, _assemble(model, a, b, point, unit, depth, feature, dynamic + O)])
+            # the pairs' contacts found outside ``detect`` (meshes, other granularities)
+            outside = Contacts.from_arrays(assemble_contacts(a, b, point, unit, depth, feature, table))
+            found = Contacts.concatenate([found, outside])
     if len(model.triangles):
         reach_cloth = margin + (sweep[B:].max(initial=0.0) if sweep is not None else 0.0)
-        if cloth_faces:
+        if settings.cloth_faces:
             found = Contacts.concatenate([found, cloth_face_contacts(model, state, reach_cloth, (dynamic + O) ** 2)])
         if cloth_samples > 0:
-            found = Contacts.concatenate(
-                [found, cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)]
-            )
+            sampled = cloth_sample_contacts(model, state, cloth_samples, normal, reach_cloth, (dynamic + O) ** 2)
+            found = Contacts.concatenate([found, sampled])
     if len(model.triangles) and model.cloth_self_collision.any():
         found = Contacts.concatenate([found, cloth_self_contacts(model, state, margin, sweep, particle_motion)])
     return found, (Manifolds(*made) if tolerance > 0.0 else None)
@@ -635,27 +607,6 @@ def mesh_contacts(
     return a, b, point, normal, depth, feature
 
 
-def _assemble(model, a, b, point, normal, depth, feature, total):
-    """The Contacts of the pairs' contacts found outside ``detect`` (meshes, other granularities)."""
-    table = colliders(model)
-    return Contacts.from_arrays(
-        assemble_contacts(
-            a,
-            b,
-            point,
-            normal,
-            depth,
-            feature,
-            model.body_count,
-            model.particle_count,
-            table.materials,
-            table.material_friction,
-            table.material_restitution,
-            total,
-        )
-    )
-
-
 @njit(cache=True)
 def assemble_contacts(
     a: np.ndarray,
@@ -664,18 +615,22 @@ def assemble_contacts(
     normal: np.ndarray,
     depth: np.ndarray,
     feature: np.ndarray,
-    body_count: int,
-    particle_count: int,
-    materials: np.ndarray,
-    material_friction: np.ndarray,
-    material_restitution: np.ndarray,
-    total: int,
+    table: Colliders,
 ) -> ContactArrays:
-    """The ContactArrays of contacts found between global colliders a and b (C,) int64, with
-    point, normal (C, 3), depth (C,) [m] and feature (C,) int64 from the narrow phase: each side
-    a body (index < B), a particle (weight 1) or static; the tangents (``tangent_basis``); the
-    pair's materials combined as ``Model.pair_materials`` does (μ = √(μ_a μ_b), ε the larger);
-    the persistent id (collider pair a · total + b) << FEATURE_BITS | feature."""
+    """The ContactArrays of contacts found between global colliders a and b (C,) int64 of
+    ``table``, with point, normal (C, 3), depth (C,) [m] and feature (C,) int64 from the narrow
+    phase: each side a body (index < B), a particle (weight 1) or static; the tangents
+    (``tangent_basis``); the pair's materials combined as ``Model.pair_materials`` does
+    (μ = √(μ_a μ_b), ε the larger); the persistent id (collider pair a · N + b) << FEATURE_BITS |
+    feature, N the colliders."""
+    materials, material_friction, material_restitution = (
+        table.materials,
+        table.material_friction,
+        table.material_restitution,
+    )
+    total = table.kinds.shape[0]
+    body_count = table.body_count
+    particle_count = total - table.obstacle_position.shape[0] - body_count
     C = a.shape[0]
     body = np.full((2, C), -1, dtype=np.int64)
     particles = np.full((2, C, 3), -1, dtype=np.int64)

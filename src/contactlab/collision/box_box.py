@@ -146,22 +146,21 @@ def sat_overlaps(
 
 
 @njit(cache=True)
-def _clip(source, source_label, count, coordinate, sign, limit, target, target_label, distance):
-    """Clip polygon ``source`` (rows (u, v, h), labelled by incident corner) to sign·x[coordinate] ≤ limit;
-    ``distance`` is scratch space. Returns the new count (see clipping.clip_polygon)."""
-    for k in range(count):
-        distance[k] = sign * source[k, coordinate] - limit
-    return clip_polygon(source, source_label, count, distance, target, target_label)
-
-
-@njit(cache=True)
-def _face_contacts(reference, axis, outward_sign, incident, owner, contact_normal, margin, scale, scratch, out, slot):
-    """Clip the incident box's face against face ``axis`` of the reference box, whose outward
-    normal is ``outward_sign · contact_normal``. Each box is (centre (3,) [m], rotation (3, 3),
-    half extents (3,) [m]); ``scratch`` = (≥ 100 floats, ≥ 48 integers)."""
+def _face_contacts(box_a, box_b, face, contact_normal, margin, real, out, slot):
+    """Clip the incident box's face against reference face ``face`` (0..2: A's face on that
+    axis, 3..5: B's on axis face − 3), whose outward normal is ``contact_normal`` on B and its
+    opposite on A; the other box is the incident one. Each box is (centre (3,) [m], rotation
+    (3, 3), half extents (3,) [m]); ``real``: ≥ 100 floats of scratch."""
+    owner = 1 if face >= 3 else 0  # 0: the reference face is A's, 1: B's
+    if owner == 1:
+        reference, incident, axis, outward_sign = box_b, box_a, face - 3, 1.0
+    else:
+        reference, incident, axis, outward_sign = box_a, box_b, face, -1.0
     center_ref, rotation_ref, half_ref = reference
     center_inc, rotation_inc, half_inc = incident
-    real, whole = scratch
+    # the tie tolerance's length: the largest half extent of the pair (box_box's)
+    scale = max(max(half_ref[0], half_ref[1], half_ref[2]), max(half_inc[0], half_inc[1], half_inc[2]))
+    whole = np.empty(48, dtype=np.int64)
     out_point, out_normal, out_depth, out_feature = out
     m0 = outward_sign * contact_normal[0]
     m1 = outward_sign * contact_normal[1]
@@ -230,17 +229,10 @@ def _face_contacts(reference, axis, outward_sign, incident, owner, contact_norma
         coordinate = plane // 2
         sign = 1.0 if plane % 2 == 0 else -1.0
         limit = hu if coordinate == 0 else hv
-        count = _clip(
-            polygon[source],
-            labels[source],
-            count,
-            coordinate,
-            sign,
-            limit,
-            polygon[1 - source],
-            labels[1 - source],
-            distance,
-        )
+        # clip the polygon (rows (u, v, h), labelled by incident corner) to sign·x[coordinate] ≤ limit
+        for k in range(count):
+            distance[k] = sign * polygon[source, k, coordinate] - limit
+        count = clip_polygon(polygon[source], labels[source], count, distance, polygon[1 - source], labels[1 - source])
         source = 1 - source
     points = polygon[0]
     # the polygon lies inside both faces: its size sets the tolerance for straight corners
@@ -297,9 +289,14 @@ def _face_contacts(reference, axis, outward_sign, incident, owner, contact_norma
 
 
 @njit(cache=True)
-def _edge_contact(center_a, rotation_a, half_a, i, center_b, rotation_b, half_b, j, normal, depth, ends, out, slot):
-    """One contact midway between the closest points of edge ∥a_i of A and edge ∥b_j of B
-    (``ends``: (2, 3) scratch)."""
+def _edge_contact(box_a, box_b, edge_axis, normal, depth, ends, out, slot):
+    """One contact midway between the closest points of edge ∥a_i of A and edge ∥b_j of B, the
+    SAT's axis ``edge_axis`` = 6 + 3 i + j (a_i × b_j); each box (centre (3,) [m], rotation (3, 3),
+    half extents (3,) [m]); ``ends``: (2, 3) scratch."""
+    center_a, rotation_a, half_a = box_a
+    center_b, rotation_b, half_b = box_b
+    i = (edge_axis - 6) // 3
+    j = (edge_axis - 6) % 3
     out_point, out_normal, out_depth, out_feature = out
     # supporting edges: A's edge furthest along −n, B's furthest along +n
     pa = ends[0]
@@ -386,35 +383,14 @@ def box_box(
     else:
         use_b = over_b < over_a
     face = best_b if use_b else best_a
+    box_a = (center_a, rotation_a, half_a)
+    box_b = (center_b, rotation_b, half_b)
     if best_e != _NO_AXIS:
         over_e = overlap[best_e]
         if overlap[face] > over_e + FACE_REL_TOL * abs(over_e) + absolute:
             # the edge axis is clearly better than any face
-            i = (best_e - 6) // 3
-            j = (best_e - 6) % 3
             ends = work[60:66].reshape((2, 3))
-            return _edge_contact(
-                center_a,
-                rotation_a,
-                half_a,
-                i,
-                center_b,
-                rotation_b,
-                half_b,
-                j,
-                normal[best_e],
-                over_e,
-                ends,
-                out,
-                slot,
-            )
-    contact_normal = normal[face]
-    owner = int(use_b)
-    box_a = (center_a, rotation_a, half_a)
-    box_b = (center_b, rotation_b, half_b)
-    scratch = (work[60:], np.empty(48, dtype=np.int64))
-    if use_b:
-        # reference face on B: its outward normal is the contact normal; incident box A
-        return _face_contacts(box_b, face - 3, 1.0, box_a, owner, contact_normal, margin, scale, scratch, out, slot)
-    # reference face on A: its outward normal points from A towards B; incident box B
-    return _face_contacts(box_a, face, -1.0, box_b, owner, contact_normal, margin, scale, scratch, out, slot)
+            return _edge_contact(box_a, box_b, best_e, normal[best_e], over_e, ends, out, slot)
+    # reference face on B (face 3..5): its outward normal is the contact normal, incident box A;
+    # on A: its outward normal points from A towards B, incident box B
+    return _face_contacts(box_a, box_b, face, normal[face], margin, work[60:], out, slot)

@@ -14,7 +14,7 @@ from .contact_output import PairOutput, write_local_contact
 from .geometry import axpy, clamp, column, dot, midpoint, norm, scaled, unit_axis, unrotate
 from .primitive_pairs import Box
 from .segment_box import face_interval, face_patch, segment_box_closest
-from .segment_patch import dominant_face_contacts, edge_cross_point, write_patch_ends
+from .segment_patch import Closest, dominant_face_contacts, edge_cross_point, write_patch_ends
 
 BOX_REL_EPS = 1e-9  # capsule–box tolerances, × the pair's size (sum of half lengths, radius, half extents)
 CROSS_AXIS_EPS = 1e-8  # |axis × box edge| below this: no SAT axis of its own (a face axis covers it)
@@ -141,8 +141,8 @@ def _segment_outside(segment, s, distance, half_extents, tol, sink, slot):
     # dominant face's patch on its side; the other end of that patch is kept too
     part = face_interval(origin, direction, half_length_a, half_extents, face_axis, tol)
     plane = (unit_axis(face_axis, face_sign), half_extents[face_axis])
-    closest = (point_local, normal_local, depth)
-    return dominant_face_contacts(segment, s, part, closest, plane, face, tol, sink, slot)
+    closest = Closest(point_local, normal_local, depth, s)
+    return dominant_face_contacts(segment, part, closest, plane, face, tol, sink, slot)
 
 
 @njit(cache=True)

@@ -59,6 +59,8 @@ Everything is compiled (``@njit(cache=True)``), float64, no fastmath.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from ..compiling import njit
@@ -68,9 +70,13 @@ from .contact_output import Frame, PairOutput, write_local_contact
 from .convex import HullArrays
 from .geometry import axpy, clamp, column, dot, midpoint, scaled, segment_closest_parameters, unrotate
 from .hull_faces import projects_into_face, segment_over_face
-from .segment_patch import dominant_face_contacts, edge_cross_point, face_patch_ends, write_patch_ends
+from .segment_patch import Closest, dominant_face_contacts, edge_cross_point, face_patch_ends, write_patch_ends
 
 MAX_CONTACTS = 2
+
+# the hull's edge nearest a segment apart from it: its number, the segment's parameter s [m] and
+# the edge's point q (3,) [m] closest to each other, their distance [m], and whether q is an end
+NearestEdge = namedtuple("NearestEdge", ["edge", "s", "q", "distance", "at_vertex"])
 CAPSULE_CONVEX_CROSS_FEATURE = 255
 
 
@@ -215,7 +221,8 @@ def capsule_convex(
             if face_id >= 0 and face_distance <= edge_distance + tol:
                 # the closest point lies inside a face: a face patch
                 return _face_patch(segment, hull, face_id, face_s, tol, sink, slot)
-            return _apart_edge(segment, edge_s, edge_q, edge_distance, edge_id, edge_at_end, hull, tol, sink, slot)
+            nearest = NearestEdge(edge_id, edge_s, edge_q, edge_distance, edge_at_end)
+            return _apart_edge(segment, nearest, hull, tol, sink, slot)
 
     # touching or overlapping: the separating axis with the least overlap (faces win near ties)
     if best_edge < 0 or best_face_overlap <= best_edge_overlap + tol:
@@ -243,10 +250,11 @@ def capsule_convex(
 
 
 @njit(cache=True)
-def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, tol, sink, slot):
+def _apart_edge(segment, nearest, hull, tol, sink, slot):
     """Case 1 of the module docstring when the hull's closest point ``q`` lies on edge ``edge``
-    (``at_vertex``: at one of its ends); ``s`` is the segment's closest parameter; ``sink`` as in
-    :mod:`.segment_patch`."""
+    (``at_vertex``: at one of its ends), at ``distance`` [m] from the segment's point at its
+    parameter ``s`` (the :data:`NearestEdge` ``nearest``); ``sink`` as in :mod:`.segment_patch`."""
+    edge, s, q, distance, at_vertex = nearest
     origin, direction, half_length_a, radius_a = segment
     vertices, face_normal, face_offset, _, _, edge_vertex, _ = hull
     depth = radius_a - distance
@@ -281,6 +289,6 @@ def _apart_edge(segment, s, q, distance, edge, at_vertex, hull, tol, sink, slot)
             highest = height
             face = f
     part = segment_over_face(origin, direction, half_length_a, hull, face, tol)
-    closest = (midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth)
+    closest = Closest(midpoint(axpy(p, -radius_a, normal_local), q), normal_local, depth, s)
     plane = (face_normal[face], face_offset[face])
-    return dominant_face_contacts(segment, s, part, closest, plane, face, tol, sink, slot)
+    return dominant_face_contacts(segment, part, closest, plane, face, tol, sink, slot)

@@ -32,8 +32,8 @@ from ..contacts import Contacts, tangent_basis
 from ..model import derived
 from .cloth_self import closest_on_triangle
 from .contact_output import FEATURE_BITS
-from .granularity import SURFACES, surface_contacts
-from .signed_distance import model_obstacle, shape_signed_distance
+from .granularity import SURFACES, DetectionSettings, surface_contacts
+from .signed_distance import ShapeObstacle, model_obstacle, shape_signed_distance
 
 if TYPE_CHECKING:
     from ..model import Model
@@ -65,7 +65,9 @@ def cloth_sample_contacts(
             if model.obstacle_shape[o] == shapes.MESH
             else model_obstacle(model, o)
         )
-        found = surface_contacts(state.particle_position, triangles, surface, "samples", normal, reach, samples)
+        found = surface_contacts(
+            state.particle_position, triangles, surface, DetectionSettings(reach, "samples", normal, samples)
+        )
         depth = found.depth + np.einsum("ck,ck->c", found.weights, thickness[found.vertices])
         keep = depth >= -margin
         if not keep.any():
@@ -137,7 +139,7 @@ def cloth_face_contacts(model: Model, state: State, margin: float, feature_base:
     owned = edge_owned(model)
     for o in obstacles:
         triangle, weights, point, normal, depth = faces_against(
-            positions, triangles, owned, thickness, *model_obstacle(model, o), float(margin)
+            positions, triangles, owned, thickness, model_obstacle(model, o), float(margin)
         )
         if len(triangle):
             pair = feature_base + triangle * model.obstacle_count + o
@@ -177,16 +179,14 @@ def faces_against(
     triangles: np.ndarray,
     owned: np.ndarray,
     thickness: np.ndarray,
-    kind: int,
-    params: np.ndarray,
-    position: np.ndarray,
-    rotation: np.ndarray,
+    obstacle: ShapeObstacle,
     margin: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``cloth_face_contacts`` for one obstacle, compiled: positions (P, 3) [m], triangles (T, 3),
-    owned (T, 3) bool (``edge_owned``), thickness (P,) [m], the obstacle as
-    ``shape_signed_distance`` takes it (a ShapeObstacle's fields), margin [m]. Returns (triangle
-    (F,) int64, weights (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
+    owned (T, 3) bool (``edge_owned``), thickness (P,) [m], the ``obstacle`` (a ShapeObstacle,
+    whose fields ``shape_signed_distance`` takes), margin [m]. Returns (triangle (F,) int64,
+    weights (F, 3), point (F, 3) [m], normal (F, 3), depth (F,) [m]) of the F contacts."""
+    kind, params, position, rotation = obstacle
     T = triangles.shape[0]
     # the obstacle's bounds: a sphere's radius, a box's half extents turned into the world
     extent = np.empty(3)

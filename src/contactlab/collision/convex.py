@@ -49,6 +49,8 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from ..compiling import njit
@@ -64,14 +66,15 @@ SPHERE_FEATURE = 0
 # takes them as this one argument (as :func:`hull_view` and :func:`contactlab.hulls.hull_arrays` give them).
 HullArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
+# the candidate contacts of a hull on a plane or a face (``write_reduced``): points (·, 3) [m]
+# in the hull's frame, their height (·,) [m] above the plane, and keep[:count], the rows kept
+Candidates = namedtuple("Candidates", ["points", "height", "keep", "count"])
+
 
 @njit(cache=True)
 def write_reduced(
     frame: Frame,
-    points: np.ndarray,
-    height: np.ndarray,
-    keep: np.ndarray,
-    count: int,
+    candidates: Candidates,
     axis: np.ndarray,
     tie: float,
     direction: np.ndarray,
@@ -80,14 +83,16 @@ def write_reduced(
     slot: int,
 ) -> int:
     """The contacts of a hull on a plane (``convex_plane``) or on a face (hull–hull,
-    :func:`.convex_convex._face_contacts`): of the candidates ``keep[:count]``, rows of ``points``
-    (·, 3) [m] in ``frame`` = (centre (3,) [m], rotation (3, 3) → world) at ``height`` (·,) [m]
-    above the plane (unit normal ``axis`` (3,) in that frame), at most 4 (``reduce_to_four``;
-    depth ties within ``tie`` [m]), written from ``slot`` on and moved halfway down to the plane:
+    :func:`.convex_convex._face_contacts`): of the ``candidates`` (:data:`Candidates`)
+    ``keep[:count]``, rows of ``points`` (·, 3) [m] in ``frame`` = (centre (3,) [m], rotation
+    (3, 3) → world) at ``height`` (·,) [m] above the plane (unit normal ``axis`` (3,) in that
+    frame), at most 4 (``reduce_to_four``; depth ties within ``tie`` [m]), written from ``slot``
+    on and moved halfway down to the plane:
     point = frame point − height / 2 · ``direction`` (the plane normal in the world, (3,)),
     normal = ``sign`` · direction, depth = −height. Returns how many; ``keep[:n]`` names them
     (the caller writes their features)."""
     center, rotation = frame
+    points, height, keep, count = candidates
     out_point, out_normal, out_depth, _ = out
     if count > MAX_CONTACTS:
         count = reduce_to_four(points, height, keep, count, axis, tie, np.empty(count))
@@ -142,7 +147,14 @@ def convex_plane(frame: Frame, hull: HullArrays, plane: np.ndarray, margin: floa
         return 0
     # reduced in the hull's frame (the plane normal there is l), as hull–hull reduces its clipped points
     count = write_reduced(
-        frame, vertices, height, keep, count, np.array([l0, l1, l2]), REDUCE_TIE * extent, plane[:3], 1.0, out, slot
+        frame,
+        Candidates(vertices, height, keep, count),
+        np.array([l0, l1, l2]),
+        REDUCE_TIE * extent,
+        plane[:3],
+        1.0,
+        out,
+        slot,
     )
     used = np.zeros(256, dtype=np.bool_)
     for k in range(count):

@@ -54,12 +54,14 @@ Everything here is compiled (``@njit(cache=True)``), float64, without fastmath.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from ..compiling import njit
 from .contact_output import Frame, PairOutput
 from .contact_polygon import MAX_POINTS, REDUCE_TIE, claim_feature, clip_polygon, drop_collinear
-from .convex import HullArrays, write_reduced
+from .convex import Candidates, HullArrays, write_reduced
 from .convex_sat import convex_convex_sat
 from .geometry import segment_closest_parameters
 
@@ -68,6 +70,12 @@ FACE_REL_TOL = 0.05  # relative tolerance favouring faces over edges, and the la
 FACE_ABS_TOL = 1e-5  # absolute part of that tolerance, × the larger hull radius [-]
 DEPTH_TOL = 1e-9  # a nearly straight clipped corner deeper than its neighbours by this × size is kept
 COLLINEAR_TOL = 1e-4  # clipped corners this close to straight (× the shorter face's shortest edge) are dropped
+
+# how one face is clipped (``_face_contacts``): the reference face's number on its hull, the
+# sign of the contact normal along its outward normal (+1 on B, −1 on A), the margin [m], the
+# pair's size [m] (for tolerances), and whether the deepest incident vertex stands in when the
+# clipping leaves nothing. Scalars only: the record costs a call nothing.
+FaceClip = namedtuple("FaceClip", ["face", "sign", "margin", "scale", "fallback"])
 
 _FNV_OFFSET = 2166136261
 _FNV_PRIME = 16777619
@@ -132,16 +140,18 @@ def _face_area(points, face_vertex_start, face_vertex_index, f, normal):
 
 
 @njit(cache=True)
-def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback, frame_a, out, slot):
-    """Clip the incident face against reference face ``ref_face``; everything in A's frame.
+def _face_contacts(reference, incident, clip, frame_a, out, slot):
+    """Clip the incident face against reference face ``clip.face`` (a :data:`FaceClip`);
+    everything in A's frame.
 
     ``reference``, ``incident``: the two hulls in A's frame, each (vertices (·, 3), face normals
-    (·, 3), face offsets (·,), face_vertex_start, face_vertex_index); ``sign`` = +1 when the
+    (·, 3), face offsets (·,), face_vertex_start, face_vertex_index); ``clip.sign`` = +1 when the
     reference face is on B (contact normal = its outward normal), −1 when on A. If clipping
-    leaves nothing within the margin, the incident hull's deepest vertex is the one contact
-    when ``fallback``, else nothing. ``frame_a`` = (centre (3,) [m], rotation (3, 3)) of A.
+    leaves nothing within ``clip.margin``, the incident hull's deepest vertex is the one contact
+    when ``clip.fallback``, else nothing. ``frame_a`` = (centre (3,) [m], rotation (3, 3)) of A.
     Writes world contacts; returns their count.
     """
+    ref_face, sign, margin, scale, fallback = clip
     ref_points, ref_normals, ref_offsets, ref_fvs, ref_fvi = reference
     ref_normal, ref_offset = ref_normals[ref_face], ref_offsets[ref_face]
     inc_points, inc_normal, _, inc_fvs, inc_fvi = incident
@@ -239,7 +249,7 @@ def _face_contacts(reference, ref_face, incident, sign, margin, scale, fallback,
     for c in range(3):
         direction[c] = rotation_a[c, 0] * m0 + rotation_a[c, 1] * m1 + rotation_a[c, 2] * m2
     kept = write_reduced(
-        frame_a, points, height, keep, kept, ref_normal, REDUCE_TIE * scale, direction, sign, out, slot
+        frame_a, Candidates(points, height, keep, kept), ref_normal, REDUCE_TIE * scale, direction, sign, out, slot
     )
     used = np.zeros(256, dtype=np.bool_)
     for k in range(kept):
@@ -309,13 +319,17 @@ def convex_convex(
         fallback = kind == exact
         if kind == 2:
             edges = (int(result[5]), int(result[6]))
-            return _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, edges, axis, over_e, frame_a, out, slot)
+            return _edge_contact(
+                (vertices_a, edge_vertex_a), (vb, edge_vertex_b), edges, axis, over_e, frame_a, out, slot
+            )
         if kind == 1:
             # reference face on B (its outward normal is the contact normal); incident hull A
-            count = _face_contacts(local_b, face_b, local_a, 1.0, margin, scale, fallback, frame_a, out, slot)
+            clip = FaceClip(face_b, 1.0, margin, scale, fallback)
+            count = _face_contacts(local_b, local_a, clip, frame_a, out, slot)
         else:
             # reference face on A (its outward normal points from A to B); incident hull B
-            count = _face_contacts(local_a, face_a, local_b, -1.0, margin, scale, fallback, frame_a, out, slot)
+            clip = FaceClip(face_a, -1.0, margin, scale, fallback)
+            count = _face_contacts(local_a, local_b, clip, frame_a, out, slot)
         if count > 0:
             return count
     return 0
@@ -336,9 +350,12 @@ def _segment(p, q):
 
 
 @njit(cache=True)
-def _edge_contact(vertices_a, edge_vertex_a, vb, edge_vertex_b, edges, axis, overlap, frame_a, out, slot):
-    """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B (all in
-    A's frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it)."""
+def _edge_contact(edges_a, edges_b, edges, axis, overlap, frame_a, out, slot):
+    """One contact midway between the closest points of edge ``ea`` of A and ``eb`` of B
+    (``edges``), each hull's edges given as (vertices (·, 3), edge_vertex (E, 2)), all in A's
+    frame; ``axis`` (3,) unit from A towards B, ``overlap`` [m] the depth on it."""
+    vertices_a, edge_vertex_a = edges_a
+    vb, edge_vertex_b = edges_b
     ea, eb = edges
     origin, rotation_a = frame_a
     out_point, out_normal, out_depth, out_feature = out

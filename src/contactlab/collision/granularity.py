@@ -54,6 +54,22 @@ SURFACES = (shapes.PLANE, shapes.SPHERE, shapes.BOX, shapes.MESH)  # static kind
 POLYTOPES = (shapes.BOX, shapes.CONVEX)
 
 
+DetectionSettings = namedtuple(
+    "DetectionSettings",
+    ["margin", "granularity", "normal", "samples", "cloth_samples", "cloth_faces"],
+    defaults=(0.0, "vertex", "object", 2, 0, True),
+)
+DetectionSettings.__doc__ = """How contacts are detected: ``collide``'s settings, as a method's CollisionOptions holds
+them (``methods.base.CollisionOptions`` and ``collision.collide_keeping`` explain each): margin [m] (gaps
+down to −margin become contacts), granularity and normal of boxes and hulls on static surfaces, samples per
+triangle edge, cloth_samples (per cloth triangle edge against obstacles) and cloth_faces (whether an
+obstacle's edge or corner meets a cloth triangle between its vertices). :func:`surface_contacts` reads the
+margin, granularity, normal and samples."""
+
+
+DEFAULT_SETTINGS = DetectionSettings()  # the corner contacts with the surface's normal, no margin
+
+
 SurfaceContacts = namedtuple("SurfaceContacts", ["point", "normal", "depth", "vertices", "weights", "feature"])
 SurfaceContacts.__doc__ = """Contacts of a mesh-like object A against a static surface B (C contacts).
 
@@ -82,10 +98,7 @@ def surface_contacts(
     vertices: np.ndarray,
     triangles: np.ndarray,
     obstacle: ShapeObstacle | TriangleMesh,
-    granularity: str = "vertex",
-    normal: str = "object",
-    margin: float = 0.0,
-    samples: int = 2,
+    settings: DetectionSettings = DEFAULT_SETTINGS,
     max_depth: float | None = None,
     object_vertex_normals: np.ndarray | None = None,
 ) -> SurfaceContacts:
@@ -94,6 +107,7 @@ def surface_contacts(
     vertices: (V, 3) world positions of A [m]; triangles: (T, 3) int, wound outward.
     obstacle: a :class:`ShapeObstacle` (:func:`plane_obstacle`, :func:`sphere_obstacle`,
     :func:`box_obstacle`) or a static :class:`~contactlab.meshes.TriangleMesh`.
+    settings: a :class:`DetectionSettings` (its cloth fields are not read), of which:
     granularity: ``"object"`` (P2a: one contact, at the deepest vertex), ``"vertex"`` (P2b: one
     per vertex with depth ≥ −margin) or ``"samples"`` (P2c: one per sample with depth ≥ −margin,
     ``samples × samples`` per triangle). normal: ``"object"`` (P4: B's normal at its closest
@@ -102,6 +116,7 @@ def surface_contacts(
     against a mesh, how deep a penetration is looked for (default: the mesh's ``max_depth``).
     object_vertex_normals: (V, 3) to reuse, else computed from A.
     """
+    granularity, normal, margin, samples = settings.granularity, settings.normal, settings.margin, settings.samples
     if granularity not in GRANULARITIES:
         raise InputError("granularity", f"expected one of {', '.join(GRANULARITIES)}, found {granularity!r}")
     if normal not in NORMALS:
@@ -247,16 +262,8 @@ def polytope_contacts(
             if model.obstacle_shape[o] == shapes.MESH
             else model_obstacle(model, o)
         )
-        found = surface_contacts(
-            world,
-            triangles,
-            surface,
-            "vertex" if granularity == "object" else granularity,
-            normal,
-            margin,
-            samples,
-            object_vertex_normals=own_normals,
-        )
+        settings = DetectionSettings(margin, "vertex" if granularity == "object" else granularity, normal, samples)
+        found = surface_contacts(world, triangles, surface, settings, object_vertex_normals=own_normals)
         if granularity == "samples":
             triangle = found.feature // samples_per_triangle
             body = triangle_body[triangle]

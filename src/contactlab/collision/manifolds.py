@@ -23,13 +23,19 @@ with a sphere, capsule or particle) is computed afresh.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .. import shapes
 from ..compiling import njit
 from .narrow_phase import MAX_PER_PAIR, generate_contacts
+
+# a step's pairs as the reuse reads them: pairs (K, 2) of global colliders, their keys (K,) int64
+# (a · total + b), whether each keeps manifolds (K,) bool (``kept_pairs``), their reach (K,) [m]
+KeyedPairs = namedtuple("KeyedPairs", ["pairs", "keys", "keeps", "reach"])
 
 
 @dataclass(frozen=True)
@@ -89,11 +95,13 @@ def kept_pairs(kinds: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rotations_, kept, tolerance):
-    """For each pair k (K,), the row of its kept manifold if that is still valid, else −1 (see
-    the module's docstring). ``keeps`` (K,) bool: pairs that keep manifolds; ``radius`` (N,)
-    bounding radii [m]; ``kept`` the last manifolds' eight fields (keys sorted), of which the
-    keys, reaches, centres and rotations are read."""
+def _still_valid(keyed, radius, at, kept, tolerance):
+    """For each pair k (K,) of ``keyed`` (:data:`KeyedPairs`), the row of its kept manifold if
+    that is still valid, else −1 (see the module's docstring). ``radius`` (N,) bounding radii
+    [m]; ``at`` = (centres (N, 3) [m], rotations (N, 3, 3)); ``kept`` the last manifolds' eight
+    fields (keys sorted), of which the keys, reaches, centres and rotations are read."""
+    pairs, keys, keeps, pair_reach = keyed
+    centers, rotations_ = at
     kept_keys, reach_then, center_then, rotation_then = kept[0], kept[1], kept[2], kept[3]
     K = pairs.shape[0]
     row = np.full(K, -1, dtype=np.int64)
@@ -161,26 +169,18 @@ def _copy3(destination, source):
 
 
 @njit(cache=True)
-def _combine(
-    pairs,
-    keys,
-    keeps,
-    pair_reach,
-    computed_reach,
-    row,
-    centers,
-    rotations_,
-    fresh,
-    kept,
-):
+def _combine(keyed, computed_reach, row, at, fresh, kept):
     """The step's contacts in pair order, and the manifolds to keep, sorted by key.
 
-    Pair k takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
+    Pair k of ``keyed`` (:data:`KeyedPairs`), at ``at`` = (centres (N, 3) [m], rotations
+    (N, 3, 3)), takes its kept manifold's contacts refreshed at the current poses when ``row[k]``
     ≥ 0 (the manifold itself is kept as it is), else its ``fresh`` contacts (point, normal,
     depth, feature, owner, as ``generate_contacts`` gave them, owner indexing ``pairs``),
     recorded as a new manifold when ``keeps[k]``. ``kept``: the last manifolds, the eight fields
     as ``reuse_or_generate`` takes them. Contacts deeper in the gap than ``pair_reach`` [m] are
     left out."""
+    pairs, keys, keeps, pair_reach = keyed
+    centers, rotations_ = at
     point, normal, depth, feature, owner = fresh
     _, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
     K, S = pairs.shape[0], MAX_PER_PAIR
@@ -284,30 +284,28 @@ def _combine(
 
 @njit(cache=True)
 def reuse_or_generate(
+    table: Any,
+    plan: Any,
     pairs: np.ndarray,
-    kinds: np.ndarray,
-    params: np.ndarray,
-    centers: np.ndarray,
-    rots: np.ndarray,
+    at: tuple[np.ndarray, np.ndarray],
     reach: np.ndarray,
-    radius: np.ndarray,
-    hull_store: tuple[np.ndarray, ...] | None,
-    families: tuple[bool | None, ...],
     kept: tuple[np.ndarray, ...],
     tolerance: float,
-    total: int,
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
     """``generate_contacts`` over ``pairs`` (K, 2), reusing the still valid manifolds ``kept`` (the
     last step's, as the tuple of Manifolds' eight fields) of ``kept_pairs``, with motion
-    ``tolerance`` [m] > 0 (``collision.detect`` calls it): the colliders' kinds (N,), params (N, 4),
-    centres (N, 3) [m], rotations (N, 3, 3) and bounding ``radius`` (N,) [m]; ``reach`` (N,) per
-    collider [m]; ``total`` = N (for the keys); ``hull_store`` and ``families`` as
-    ``generate_contacts`` takes them. Returns ((point, normal, depth, feature, owner), the eight
-    fields of the manifolds to keep). Contacts come in pair order, as from ``generate_contacts``;
-    a pair that keeps nothing gets exactly what ``generate_contacts`` gives it."""
+    ``tolerance`` [m] > 0 (``collision.detect`` calls it): ``table`` the colliders (a
+    ``collision.Colliders``: their kinds (N,), params (N, 4) and bounding radii (N,) [m] are
+    read), at ``at`` = (centres (N, 3) [m], rotations (N, 3, 3)); ``reach`` (N,) per collider [m];
+    ``plan`` (``collision.Plan``) the hull store and families ``generate_contacts`` takes.
+    Returns ((point, normal, depth, feature, owner), the eight fields of the manifolds to keep).
+    Contacts come in pair order, as from ``generate_contacts``; a pair that keeps nothing gets
+    exactly what ``generate_contacts`` gives it."""
     kept_keys, kept_reach, kept_center, kept_rotation, kept_count, kept_witness, kept_normal, kept_feature = kept
+    kinds, params = table.kinds, table.params
+    centers, rots = at
     first, second = pairs[:, 0], pairs[:, 1]
-    keys = first * total + second
+    keys = first * kinds.shape[0] + second
     pair_reach = reach[first] + reach[second]
     keeps = kept_pairs(kinds, pairs)
     if not keeps.any():  # a pile of spheres: nothing to keep, nothing to look up
@@ -321,22 +319,15 @@ def reuse_or_generate(
             kept_normal[:0],
             kept_feature[:0],
         )
-        return generate_contacts(pairs, kinds, params, centers, rots, pair_reach, hull_store, families), empty
-    row = _still_valid(pairs, keys, keeps, pair_reach, radius, centers, rots, kept, tolerance)
+        return (
+            generate_contacts(pairs, kinds, params, centers, rots, pair_reach, plan.hull_store, plan.families),
+            empty,
+        )
+    keyed = KeyedPairs(pairs, keys, keeps, pair_reach)
+    row = _still_valid(keyed, table.radius, at, kept, tolerance)
     fresh = np.nonzero(row < 0)[0]
     widened = pair_reach + tolerance * keeps  # a kept manifold reaches a tolerance further
     point, normal, depth, feature, owner = generate_contacts(
-        pairs[fresh], kinds, params, centers, rots, widened[fresh], hull_store, families
+        pairs[fresh], kinds, params, centers, rots, widened[fresh], plan.hull_store, plan.families
     )
-    return _combine(
-        pairs,
-        keys,
-        keeps,
-        pair_reach,
-        widened,
-        row,
-        centers,
-        rots,
-        (point, normal, depth, feature, fresh[owner]),
-        kept,
-    )
+    return _combine(keyed, widened, row, at, (point, normal, depth, feature, fresh[owner]), kept)

@@ -53,19 +53,20 @@ def _vertex_then_edge(
     vertex: tuple[float, float, float],
     a: tuple[float, float, float],
     edge: tuple[float, float, float],
-    vertex_region: int,
-    edge_region: int,
+    regions: tuple[int, int],
 ) -> tuple[float, float, float, float, int]:
     """Ericson's test of a triangle's ``vertex`` (b or c; 3 scalars [m]), then of the ``edge`` from
     its corner ``a`` to it, for a point p given by its projections: ``own``, ``across`` = (p −
     vertex) on that edge and on the other edge from a; ``along_edge``, ``along_other`` = (p − a)
     on them. Returns the edge's barycentric test value (vc for b, vb for c in
-    ``closest_point_on_triangle``), and the closest point (qx, qy, qz) with ``vertex_region`` or
-    ``edge_region`` when p lies in one, else region −1 (and a point of no meaning).
+    ``closest_point_on_triangle``), and the closest point (qx, qy, qz) with the vertex's or the
+    edge's region (``regions`` = (vertex region, edge region)) when p lies in one, else region −1
+    (and a point of no meaning).
 
     Inlined, and given no array: as a called function (returning a region or none) capsule-mesh
     contacts ran ~13 % slower, and an inlined copy given the arrays p, a and the vertex counted
     their references (~45 % slower queries)."""
+    vertex_region, edge_region = regions
     if own >= 0.0 and across <= own:
         return 0.0, vertex[0], vertex[1], vertex[2], vertex_region
     barycentric = along_edge * across - own * along_other
@@ -94,11 +95,11 @@ def closest_point_on_triangle(
     # vertex b then edge ab, vertex c then edge ac: one test, ab and ac swapped (d6, d5 play d3, d4)
     corner = (a[0], a[1], a[2])
     d3, d4 = edge_projections(p, b, ab, ac)
-    vc, qx, qy, qz, region = _vertex_then_edge(d3, d4, d1, d2, (b[0], b[1], b[2]), corner, ab, VERTEX1, EDGE0)
+    vc, qx, qy, qz, region = _vertex_then_edge(d3, d4, d1, d2, (b[0], b[1], b[2]), corner, ab, (VERTEX1, EDGE0))
     if region >= 0:
         return qx, qy, qz, region
     d6, d5 = edge_projections(p, c, ac, ab)
-    vb, qx, qy, qz, region = _vertex_then_edge(d6, d5, d2, d1, (c[0], c[1], c[2]), corner, ac, VERTEX2, EDGE2)
+    vb, qx, qy, qz, region = _vertex_then_edge(d6, d5, d2, d1, (c[0], c[1], c[2]), corner, ac, (VERTEX2, EDGE2))
     if region >= 0:
         return qx, qy, qz, region
     va = d3 * d6 - d5 * d4

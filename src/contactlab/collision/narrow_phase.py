@@ -17,6 +17,7 @@ spheres and boxes, :mod:`~contactlab.collision.capsule`, :mod:`~contactlab.colli
 which of them a scene needs in :mod:`~contactlab.collision.families`.
 """
 
+from collections import namedtuple
 from typing import Any
 
 import numpy as np
@@ -41,6 +42,10 @@ from .families import scene_families as scene_families
 from .primitive_pairs import box_plane, sphere_box, sphere_plane, sphere_sphere
 
 MAX_PER_PAIR = 8
+
+# the colliders where they stand, as the pairs' loop reads them: kinds (N,) int64, params (N, 4),
+# centres (N, 3) [m], rotations (N, 3, 3) body → world
+Placed = namedtuple("Placed", ["kinds", "params", "centers", "rotations"])
 
 
 @njit(cache=True)
@@ -91,19 +96,20 @@ def _rank(kind):
     return 9
 
 
-def _pairs_loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
-    """The contacts of every pair k of ``pairs`` (K, 2), reaching gaps down to ``reach[k]``,
+def _pairs_loop(families, pairs, placed, reach, hull_store, out, out_owner, slot):
+    """The contacts of every pair k of ``pairs`` (K, 2) of the colliders ``placed`` (a
+    :data:`Placed`), reaching gaps down to ``reach[k]``,
     written from row ``slot`` on in pair order, with ``out_owner`` = k; returns how many were
     written. Each pair is taken in canonical order (rank of A ≤ rank of B; computed swapped and
     its normals flipped otherwise). A pair whose family is ``None`` in ``families`` (see
     FAMILIES), or that has no routine, gets none. Compiled, the overload below; run as Python
     (``NUMBA_DISABLE_JIT=1``), this body runs the same loop."""
     loop = _loop_for(tuple(family is not None for family in families))
-    return loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot)
+    return loop(families, pairs, placed, reach, hull_store, out, out_owner, slot)
 
 
 @overload(_pairs_loop)
-def _pairs_loop_for(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
+def _pairs_loop_for(families, pairs, placed, reach, hull_store, out, out_owner, slot):
     """The loop for one families type. Its ``None`` entries are the constant False here, so
     Numba drops those routines' branches before typing and never compiles them."""
     if not isinstance(families, types.BaseTuple) or len(families) != len(FAMILIES):
@@ -131,7 +137,8 @@ def _loop_for(present: tuple[bool, ...]) -> Any:
         has_convex_plane,
     ) = present
 
-    def loop(families, pairs, kinds, params, centers, rotations_, reach, hull_store, out, out_owner, slot):
+    def loop(families, pairs, placed, reach, hull_store, out, out_owner, slot):
+        kinds, params, centers, rotations_ = placed
         count = slot
         for k in range(pairs.shape[0]):
             a, b = pairs[k, 0], pairs[k, 1]
@@ -239,10 +246,7 @@ def collide_pair(a: Collider, b: Collider, margin: float, hull_store: tuple, out
     return _pairs_loop(
         ALL_FAMILIES,
         np.array([[0, 1]], dtype=np.int64),
-        kinds,
-        params,
-        centers,
-        rotations_,
+        Placed(kinds, params, centers, rotations_),
         np.full(1, margin),
         hull_store,
         out,
@@ -281,10 +285,7 @@ def generate_contacts(
     count = _pairs_loop(
         families,
         pairs,
-        kinds,
-        params,
-        centers,
-        rotations_,
+        Placed(kinds, params, centers, rotations_),
         reach,
         hull_store,
         (point, normal, depth, feature),

@@ -20,6 +20,8 @@ An edge is ``(center, direction, half_length)`` (:data:`Edge`), in B's frame.
 Compiled (``@njit(cache=True)``), float64, no fastmath.
 """
 
+from collections import namedtuple
+
 import numpy as np
 
 from ..compiling import njit
@@ -31,7 +33,9 @@ Plane = tuple[np.ndarray, float]  # (unit outward normal (3,), offset [m]) of a 
 Edge = tuple[np.ndarray, np.ndarray, float]  # (centre (3,) [m], unit direction (3,), half length [m]) of an edge of B
 Part = tuple[float, float]  # (lo, hi) [m]: the part lo ≤ s ≤ hi of the segment
 Sink = tuple[float, Frame | None, PairOutput]  # (margin [m], B's frame or None, out): contacts kept and where
-Closest = tuple[np.ndarray, np.ndarray, float]  # (point (3,) [m], unit normal (3,), depth [m]), B's frame
+# a segment's closest contact: point (3,) [m], unit normal (3,), depth [m], in B's frame, and
+# the segment's parameter s [m] there
+Closest = namedtuple("Closest", ["point", "normal", "depth", "s"])
 
 
 @njit(cache=True)
@@ -87,7 +91,7 @@ def face_patch_ends(
 
 @njit(cache=True)
 def dominant_face_contacts(
-    segment: Segment, s: float, part: Part, closest: Closest, plane: Plane, face: int, tol: float, sink: Sink, slot: int
+    segment: Segment, part: Part, closest: Closest, plane: Plane, face: int, tol: float, sink: Sink, slot: int
 ) -> int:
     """The closest-point contact of a segment crossing an edge at an angle or passing a corner
     (``closest``, :data:`Closest`, in B's frame, at the segment's closest parameter ``s`` [m]),
@@ -96,7 +100,7 @@ def dominant_face_contacts(
     (:func:`plane_contact`) when it is longer than ``tol`` and apart from ``s``. Features as
     :func:`face_patch_ends` gives them, so contacts keep their numbers while a capsule slides
     over a face and tips over its edge. Returns how many it wrote from ``slot`` on."""
-    point_local, normal_local, depth = closest
+    point_local, normal_local, depth, s = closest
     lo, hi = part
     _, frame, out = sink
     if lo <= hi:

@@ -18,7 +18,7 @@ from ..plots import total_energy
 if TYPE_CHECKING:
     from ..closed_form import Check
     from ..model import Model
-    from .run import _Outcome
+    from .run import Outcome
 
 TIMINGS = (
     "steps_per_second",
@@ -140,7 +140,7 @@ def _check_column(check) -> str:
     return f"{check.quantity} error ({check.unit})"
 
 
-def fill_rows(outcomes: Sequence[_Outcome]) -> None:
+def fill_rows(outcomes: Sequence[Outcome]) -> None:
     """Give each outcome (contactlab.compare.run) its ``row``: identity, status, metrics, and one
     error column per check quantity any of them has (None where a run has no such check), and
     its ``checks`` (contactlab.closed_form.Check)."""
@@ -167,7 +167,7 @@ def fill_rows(outcomes: Sequence[_Outcome]) -> None:
         outcome.row = {key: outcome.row.get(key, errors.get(key)) for key in [*ROW_KEYS, *check_columns]}
 
 
-def blew_up(outcome: _Outcome) -> str:
+def blew_up(outcome: Outcome) -> str:
     """The status of a run a health check stopped: "blew up at t = … s" (simulated time)."""
     return f"blew up at t = {outcome.failed_at:.4g} s" if outcome.failed_at is not None else "blew up"
 
@@ -180,7 +180,7 @@ def dissipative(model: Model) -> bool:
     )
 
 
-def same_computation(outcomes: Sequence[_Outcome]) -> list[tuple[list[str], float]]:
+def same_computation(outcomes: Sequence[Outcome]) -> list[tuple[list[str], float]]:
     """(method names, largest difference [m]) of each group of runs whose positions,
     orientations and particles agree within SAME_WITHIN at every sample: rounding, not physics."""
     ran = [outcome for outcome in outcomes if outcome.run is not None]

@@ -25,7 +25,7 @@ from .measures import ROW_KEYS, blew_up, dissipative, same_computation
 if TYPE_CHECKING:
     from ..closed_form import Check
     from ..scene import Scene
-    from .run import _Outcome
+    from .run import Outcome
 
 # ---- the table: cells built once, written as CSV, Markdown and HTML ------------------------------
 
@@ -126,7 +126,7 @@ def _check_cell(check):
     return f"{check.measured:.4g} ({check.error:+.2g}){word}"
 
 
-def table_cells(outcomes: Sequence[_Outcome]) -> tuple[list[str], list[list[str]]]:
+def table_cells(outcomes: Sequence[Outcome]) -> tuple[list[str], list[list[str]]]:
     """(headings, rows of cell texts) of the report table: the CSV's columns, with each check
     shown as "measured (error)" under a heading that carries its expected value."""
     headings = [heading for _, heading, _ in COLUMNS]
@@ -316,7 +316,7 @@ def _expectation_sentence(ran):
     return "The scene's stated expectations: " + "; ".join(parts) + "."
 
 
-def paragraph(scene: Scene, outcomes: Sequence[_Outcome], skipped: Mapping[str, str]) -> str:
+def paragraph(scene: Scene, outcomes: Sequence[Outcome], skipped: Mapping[str, str]) -> str:
     """The plain-words paragraph: fastest, least penetration, best energy, expectations met,
     failures and the methods left out (``skipped``: name → why)."""
     ran = [outcome for outcome in outcomes if outcome.run]
@@ -432,7 +432,7 @@ def _check_lines(outcomes):
 
 def report_texts(
     scene: Scene,
-    outcomes: Sequence[_Outcome],
+    outcomes: Sequence[Outcome],
     summary_text: str,
     table: tuple[list[str], list[list[str]]],
     plot_paths: Mapping[str, str],

@@ -76,7 +76,7 @@ class Comparison:
 
 
 @dataclass
-class _Outcome:
+class Outcome:
     """One method's run: ``run`` (contactlab.simulation.Run) or ``failure`` (the divergence message),
     set here; measures.fill_rows gives it its ``row`` and ``checks``, and report reads it."""
 
@@ -188,23 +188,15 @@ def _parallel(workers, scheduler, scenes, video) -> bool:
 
 
 def _run_all(
-    scene_source,
-    names,
-    named,
-    overrides,
-    progress,
-    allow_divergence,
-    out,
-    created,
-    video,
-    workers=None,
-    scheduler=None,
-    peer_names=(),
-) -> tuple[list[_Outcome], dict[str, str], str]:
+    scene_source, names, named, overrides, out, created, each, where, peer_names=()
+) -> tuple[list[Outcome], dict[str, str], str]:
     """Load the scene for every method, then run it with each and in each of ``peer_names``
-    (contactlab.peers), streaming each trajectory to out/<method>/trajectory.h5 and rendering it
-    (``video``: fps, or None), one after another or on a Dask cluster (:func:`_parallel`);
-    folders and files noted in ``created``. Returns (outcomes, skipped {method: why}, out)."""
+    (contactlab.peers), streaming each trajectory to out/<method>/trajectory.h5 and rendering it,
+    one after another or on a Dask cluster (:func:`_parallel`) ``where`` = (workers, scheduler)
+    says; folders and files noted in ``created``. ``each``: what every run's job carries,
+    {"video": fps or None, "allow_divergence", "progress"}. Returns (outcomes, skipped {method:
+    why}, out)."""
+    workers, scheduler = where
     scenes = {name: load_scene(scene_source, [*overrides, f"simulation.method={name}"]) for name in names}
     if peer_names:  # the peers run the scene as its file has it: its method is not theirs
         as_written = load_scene(scene_source, overrides)
@@ -219,9 +211,7 @@ def _run_all(
                 **scene.origin(overrides),
                 "peer": name,
                 "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)),
-                "video": video,
-                "allow_divergence": allow_divergence,
-                "progress": progress,
+                **each,
             }
             jobs.append((name, peer_job))
             continue
@@ -237,9 +227,7 @@ def _run_all(
                 {
                     **scene.origin([*overrides, f"simulation.method={name}"]),
                     "trajectory": os.path.abspath(os.path.join(out, name, TRAJECTORY)),
-                    "video": video,
-                    "allow_divergence": allow_divergence,
-                    "progress": progress,
+                    **each,
                 },
             )
         )
@@ -247,13 +235,13 @@ def _run_all(
     pending = kernel_variants.uncompiled(scenes[name] for name, _ in jobs if name not in peer_names)
     if len(pending) > 1:
         compiling.expect(kernel_variants.compiling_notice(len(pending)))
-    if _parallel(workers, scheduler, scenes, video is not None):
+    if _parallel(workers, scheduler, scenes, each["video"] is not None):
         before = stamps(_outputs(jobs))
         try:
             with cluster.connect(scheduler, workers) as client:
                 for job in jobs:
                     job[1]["progress"] = False  # the bar is over the methods
-                results = dict(cluster.run_tasks(client, run_method, jobs, progress, "methods"))
+                results = dict(cluster.run_tasks(client, run_method, jobs, each["progress"], "methods"))
         except BaseException:  # the workers have stopped: what they completed, as a run here notes it
             for path in replaced(before):
                 interrupts.note_written(path)
@@ -268,7 +256,7 @@ def _run_all(
         for category, message in result["warnings"]:
             warnings.warn(message, category, stacklevel=2)
         if "gap" in result:  # a peer that cannot express the scene: its row says why
-            outcomes.append(_Outcome(name, scenes[name], gap=result["gap"]))
+            outcomes.append(Outcome(name, scenes[name], gap=result["gap"]))
             remove_empty([os.path.join(out, name)])
             continue
         if "input_error" in result:
@@ -282,7 +270,7 @@ def _run_all(
         trajectory = os.path.join(out, name, TRAJECTORY)
         created.add(trajectory, *result.get("media", {}).values())
         run = Run(None, open_trajectory(trajectory), result["summary"])
-        outcome = _Outcome(
+        outcome = Outcome(
             name, scenes[name], warnings=[message for _, message in result["warnings"]], media=result.get("media", {})
         )
         if name in peer_names:
@@ -475,19 +463,9 @@ def compare(
     video = _video_fps(video, fps)  # a missing renderer or a bad fps fails before the runs
     created = _Created()
     try:
+        each = {"video": video, "allow_divergence": allow_divergence, "progress": progress}
         outcomes, skipped, out = _run_all(
-            scene_source,
-            names,
-            named,
-            overrides,
-            progress,
-            allow_divergence,
-            out,
-            created,
-            video,
-            workers,
-            scheduler,
-            peer_names,
+            scene_source, names, named, overrides, out, created, each, (workers, scheduler), peer_names
         )
         scene = outcomes[0].scene
         fill_rows(outcomes)

@@ -9,7 +9,7 @@ so Newton's watchdog sweeps) solves, for one contact with its normal impulse r_N
 not come from this contact's own friction [velocity]; r_T [impulse]). It is a trust-region
 subproblem, solved here by the secular equation in Moré and Sorensen's form. μ r_N spans every
 float, down to subnormal numbers (μ = 2.2e-308 came from a property test), so the equation is
-solved in units of the radius, where nothing overflows (:func:`_disk_solve`).
+solved in units of the radius, where nothing overflows (:func:`disk_solve`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,9 @@ def _length(x, y):
 
 
 @njit(cache=True)
-def _disk_solve(a00, a01, a10, a11, b1, b2, radius):
+def disk_solve(
+    a00: float, a01: float, a10: float, a11: float, b1: float, b2: float, radius: float
+) -> tuple[float, float]:
     """Minimizer of ½ xᵀ A x + bᵀ x over ‖x‖ ≤ radius (A 2×2, symmetric part PSD): returns (x1, x2).
 
     Unconstrained if that lies in the disk, else (A + νI) x = −b with ν > 0 chosen by safeguarded

@@ -57,14 +57,15 @@ import scipy.sparse.linalg as spla
 from ..errors import InputError
 from ._checks import choice, finite_vector, positive_float, positive_int, square_csr
 from .friction_sweeps import (
-    _apgd_step,
-    _diagonal_blocks,
-    _extrapolate,
-    _natural_map_norms,
-    _nsgs,
-    _project_cone,
-    _residual,
-    _staggered,
+    Sweeping,
+    apgd_step,
+    diagonal_blocks,
+    extrapolate,
+    natural_map_norms,
+    normalized_residual,
+    nsgs_sweeps,
+    project_cone,
+    staggered_sweeps,
 )
 from .newton import solve_newton
 
@@ -132,7 +133,7 @@ def natural_map_error(
     r = finite_vector(r, q.shape[0], "r")
     normalization = choice(normalization, ("max", "q", "fclib", "none"), "normalization")
     u = csr @ r + q
-    absolute, norm_r, norm_u = _natural_map_norms(mu, r, u, False)
+    absolute, norm_r, norm_u = natural_map_norms(mu, r, u, False)
     norm_q = float(np.linalg.norm(q))
     if normalization == "max":
         scale = max(norm_q, norm_r, norm_u)
@@ -192,7 +193,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     norm_q = math.sqrt(float(q @ q))
 
     def error_of(r, Wr):
-        return _residual(mu, r, Wr + q, False, norm_q)
+        return normalized_residual(mu, r, Wr + q, False, norm_q)
 
     Wr = product(r)
     best, best_W, best_error = r.copy(), Wr, error_of(r, Wr)
@@ -203,7 +204,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
     phase_lowest = math.inf  # lowest error since the last restart
     for iteration in range(1, max_iterations + 1):
         new = np.empty_like(r)
-        uphill = _apgd_step(y, Wy, q, mu, step, r, new)  # new = P_K(y − step û(W y + q))
+        uphill = apgd_step(y, Wy, q, mu, step, r, new)  # new = P_K(y − step û(W y + q))
         W_new = product(new)
         error = error_of(new, W_new)
         if error < best_error:
@@ -216,7 +217,7 @@ def _apgd(product, q, mu, r, tol, max_iterations, lipschitz):
         if uphill > 0.0 or error > RESTART_RISE * phase_lowest:
             beta, next_theta = 0.0, 1.0  # restart the momentum
             phase_lowest = error
-        y, Wy = _extrapolate(new, r, beta), _extrapolate(W_new, Wr, beta)
+        y, Wy = extrapolate(new, r, beta), extrapolate(W_new, Wr, beta)
         r, Wr, theta = new, W_new, next_theta
     return best, best_W, max_iterations, best_error
 
@@ -278,7 +279,7 @@ def solve_friction_contact(
         raise InputError("warm_sweeps", f"expected a non-negative integer, got {warm_sweeps!r}.")
     m = q.shape[0]
     nc = m // 3
-    r = np.zeros(m) if r0 is None else _project_cone(finite_vector(r0, m, "r0"), mu)
+    r = np.zeros(m) if r0 is None else project_cone(finite_vector(r0, m, "r0"), mu)
     pyramid = friction_model == "pyramid"
     if m == 0:
         iterations, error = 0, 0.0
@@ -293,15 +294,12 @@ def solve_friction_contact(
     elif method == "newton":
         r, iterations, error, restarts = solve_newton(csr, q, mu, r, tol, max_iterations, int(warm_sweeps))
     else:
-        blocks = _diagonal_blocks(csr, nc)
-        indptr = csr.indptr.astype(np.int64)
-        indices = csr.indices.astype(np.int64)
+        blocks = diagonal_blocks(csr, nc)
+        problem = Sweeping(csr.indptr.astype(np.int64), csr.indices.astype(np.int64), csr.data, q, mu, blocks)
         if method == "nsgs":
-            iterations, error = _nsgs(indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid)
+            iterations, error = nsgs_sweeps(problem, r, tol, max_iterations, pyramid)
         else:
-            iterations, error = _staggered(
-                indptr, indices, csr.data, q, mu, blocks, r, tol, max_iterations, pyramid, 25
-            )
+            iterations, error = staggered_sweeps(problem, r, tol, max_iterations, pyramid, 25)
     u = (Wr if method == "apgd" and m else csr @ r) + q
     converged = bool(error <= tol)
     if converged:

@@ -1,24 +1,30 @@
 """The compiled sweeps of the 3D friction problem (:mod:`contactlab.lcp.friction` states it):
-non-smooth Gauss-Seidel (``_nsgs``, SPEC F4a) and the normal/friction alternation
-(``_staggered``, SPEC F4b) on the reactions r (m,) = (3·nc,) in place, W in CSR arrays
-(``indptr``, ``indices``, ``data``) and its 3×3 diagonal blocks (``_diagonal_blocks``), and the
-normalized natural-map error they stop on (``_error``), with the pieces of apgd's step: one
+non-smooth Gauss-Seidel (``nsgs_sweeps``, SPEC F4a) and the normal/friction alternation
+(``staggered_sweeps``, SPEC F4b) on the reactions r (m,) = (3·nc,) in place, W in CSR arrays
+(``indptr``, ``indices``, ``data``) and its 3×3 diagonal blocks (``diagonal_blocks``), and the
+normalized natural-map error they stop on (``fill_velocity_error``), with the pieces of apgd's step: one
 contact's cone projection (``_cone_point``, which the error's natural map uses too), the gradient
-step (``_apgd_step``) and the extrapolation. ``solve_friction_contact`` runs them; the
+step (``apgd_step``) and the extrapolation. ``solve_friction_contact`` runs them; the
 semi-smooth Newton solver (:mod:`contactlab.lcp.newton`) warm starts and restarts with NSGS.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..compiling import njit
 from ..ordered_sums import ordered_dot
-from .disk import _disk_solve
+from .disk import disk_solve
 
 _SQRT_HALF = math.sqrt(0.5)
+
+# the problem the sweeps solve: W in CSR arrays (indptr, indices, data), q (m,), μ (nc,) and W's
+# 3×3 diagonal blocks (nc, 3, 3) (``diagonal_blocks``)
+Sweeping = namedtuple("Sweeping", ["indptr", "indices", "data", "q", "mu", "blocks"])
 
 
 @njit(cache=True)
@@ -44,7 +50,7 @@ def _cone_point(m_a, zn, z1, z2):
 
 
 @njit(cache=True)
-def _natural_map_norms(mu, r, u, pyramid):
+def natural_map_norms(mu: np.ndarray, r: np.ndarray, u: np.ndarray, pyramid: bool) -> tuple[float, float, float]:
     """(‖F(r)‖, ‖r‖, ‖u‖) for reactions r (m,) and velocities u (m,) = W r + q: F the cone's
     natural map, or the box split form for the pyramid (:mod:`contactlab.lcp.friction`)."""
     total = 0.0
@@ -71,10 +77,10 @@ def _natural_map_norms(mu, r, u, pyramid):
 
 
 @njit(cache=True)
-def _residual(mu, r, u, pyramid, norm_q):
+def normalized_residual(mu: np.ndarray, r: np.ndarray, u: np.ndarray, pyramid: bool, norm_q: float) -> float:
     """The normalized natural-map error ‖F(r)‖ / max(|q|, ‖r‖, ‖u‖) (1 for a zero maximum) of r
     (m,) at u (m,) = W r + q, |q| given."""
-    absolute, norm_r, norm_u = _natural_map_norms(mu, r, u, pyramid)
+    absolute, norm_r, norm_u = natural_map_norms(mu, r, u, pyramid)
     scale = max(norm_q, norm_r, norm_u)
     if scale <= 0.0:
         scale = 1.0
@@ -82,16 +88,26 @@ def _residual(mu, r, u, pyramid, norm_q):
 
 
 @njit(cache=True)
-def _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q):
+def fill_velocity_error(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    q: np.ndarray,
+    mu: np.ndarray,
+    r: np.ndarray,
+    u: np.ndarray,
+    pyramid: bool,
+    norm_q: float,
+) -> float:
     """Fill ``u = W r + q`` and return the normalized residual (cone natural map, or box split form)."""
     m = q.shape[0]
     for i in range(m):
         u[i] = _row_dot(indptr, indices, data, r, i) + q[i]
-    return _residual(mu, r, u, pyramid, norm_q)
+    return normalized_residual(mu, r, u, pyramid, norm_q)
 
 
 @njit(cache=True)
-def _project_cone(r, mu):
+def project_cone(r: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """Each contact's (r_N, r_T) of r (3·nc,) projected on its cone ‖r_T‖ ≤ μ r_N (Euclidean), a
     new (3·nc,)."""
     out = np.empty_like(r)
@@ -102,7 +118,9 @@ def _project_cone(r, mu):
 
 
 @njit(cache=True)
-def _apgd_step(y, Wy, q, mu, step, r, new):
+def apgd_step(
+    y: np.ndarray, Wy: np.ndarray, q: np.ndarray, mu: np.ndarray, step: float, r: np.ndarray, new: np.ndarray
+) -> float:
     """One projected gradient step of apgd (:func:`contactlab.lcp.friction._apgd`) from y (m,)
     with W y (m,): ``new = P_K(y − step · û)``, û = W y + q + [μ‖u_T‖, 0, 0] (De Saxcé's
     velocity, the gradient), written into ``new`` (m,). Returns ûᵀ (new − r) for the last
@@ -119,7 +137,7 @@ def _apgd_step(y, Wy, q, mu, step, r, new):
 
 
 @njit(cache=True)
-def _extrapolate(new, old, beta):
+def extrapolate(new: np.ndarray, old: np.ndarray, beta: float) -> np.ndarray:
     """Nesterov's extrapolation new + β (new − old), a new array (m,)."""
     out = np.empty_like(new)
     for i in range(new.shape[0]):
@@ -151,7 +169,7 @@ def _friction_update(blocks, a, r, i, ut1, ut2, m_a, pyramid):
     # b = u_T − W_TT r_T: the part of u_T that does not come from this contact's own friction
     b1 = ut1 - a00 * r[i + 1] - a01 * r[i + 2]
     b2 = ut2 - a10 * r[i + 1] - a11 * r[i + 2]
-    x1, x2 = _disk_solve(a00, a01, a10, a11, b1, b2, m_a * rn)
+    x1, x2 = disk_solve(a00, a01, a10, a11, b1, b2, m_a * rn)
     r[i + 1] = x1
     r[i + 2] = x2
 
@@ -163,12 +181,14 @@ def _start(indptr, indices, data, q, mu, r, pyramid):
     m = q.shape[0]
     u = np.empty(m)
     norm_q = math.sqrt(ordered_dot(q, q))  # in index order: the same bits compiled and as Python
-    return m // 3, u, norm_q, _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+    return m // 3, u, norm_q, fill_velocity_error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
 
 
 @njit(cache=True)
-def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid):
-    """Non-smooth Gauss-Seidel (SPEC F4a) on r (m,), in place. Returns (sweeps, error)."""
+def nsgs_sweeps(problem: Sweeping, r: np.ndarray, tol: float, max_iterations: int, pyramid: bool) -> tuple[int, float]:
+    """Non-smooth Gauss-Seidel (SPEC F4a) of ``problem`` (a :data:`Sweeping`) on r (m,), in
+    place. Returns (sweeps, error)."""
+    indptr, indices, data, q, mu, blocks = problem
     nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error
@@ -186,19 +206,23 @@ def _nsgs(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid)
                 ut1 += blocks[a, 1, 0] * delta
                 ut2 += blocks[a, 2, 0] * delta
             _friction_update(blocks, a, r, i, ut1, ut2, mu[a], pyramid)
-        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+        error = fill_velocity_error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
         if error <= tol:
             return sweep, error
     return max_iterations, error
 
 
 @njit(cache=True)
-def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyramid, inner):
-    """Staggered normal/friction iteration (SPEC F4b) on r (m,), in place. Returns (rounds, error).
+def staggered_sweeps(
+    problem: Sweeping, r: np.ndarray, tol: float, max_iterations: int, pyramid: bool, inner: int
+) -> tuple[int, float]:
+    """Staggered normal/friction iteration (SPEC F4b) of ``problem`` (a :data:`Sweeping`) on
+    r (m,), in place. Returns (rounds, error).
 
     Each round: up to ``inner`` projected Gauss-Seidel sweeps over all normal rows (frictions
     fixed), then up to ``inner`` sweeps of exact friction solves over all contacts (normals
     fixed); a phase stops early when its largest change is below ``tol/10`` of the largest r."""
+    indptr, indices, data, q, mu, blocks = problem
     nc, u, norm_q, error = _start(indptr, indices, data, q, mu, r, pyramid)
     if error <= tol:
         return 0, error
@@ -231,13 +255,13 @@ def _staggered(indptr, indices, data, q, mu, blocks, r, tol, max_iterations, pyr
                 size = max(size, abs(r[i]))
             if change <= 0.1 * tol * size:
                 break
-        error = _error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
+        error = fill_velocity_error(indptr, indices, data, q, mu, r, u, pyramid, norm_q)
         if error <= tol:
             return rnd, error
     return max_iterations, error
 
 
-def _diagonal_blocks(csr, nc):
+def diagonal_blocks(csr: sp.csr_matrix, nc: int) -> np.ndarray:
     """The 3×3 diagonal blocks W_αα, shape (nc, 3, 3)."""
     base = 3 * np.arange(nc)
     rows = (base[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), dtype=np.int64)

@@ -59,7 +59,7 @@ watchdog below deals with the stall.
 Alart–Curnier function can also cycle between regimes: a single ill-conditioned contact with
 μ = 1.7 does). If the natural-map error has not fallen below 0.9 × its last mark in 30 iterations, the
 solver runs non-smooth Gauss–Seidel sweeps from the iterate where it stands
-(:func:`contactlab.lcp.friction_sweeps._nsgs`; 20 the first time, twice as many at each later restart,
+(:func:`contactlab.lcp.friction_sweeps.nsgs_sweeps`; 20 the first time, twice as many at each later restart,
 at most 5120), multiplies ρ by the next factor of (10, 0.1, 1) (another ρ, another merit
 landscape, the same zeros), and restarts the non-monotone reference. The doubling makes the
 method at least as robust as nsgs given enough iterations. On 9000 random small SPD problems
@@ -104,7 +104,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..compiling import njit
-from .friction_sweeps import _diagonal_blocks, _error, _nsgs
+from .friction_sweeps import Sweeping, diagonal_blocks, fill_velocity_error, nsgs_sweeps
 
 NONMONOTONE_WEIGHT = 0.9  # η of Zhang & Hager's reference (0: monotone Armijo)
 ARMIJO_SLOPE = 1e-4  # ψ must fall by ARMIJO_SLOPE · t · ψ (a Newton step predicts 2 t ψ)
@@ -308,7 +308,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
     w_indptr = csr.indptr.astype(np.int64)
     w_indices = csr.indices.astype(np.int64)
     w_data = csr.data
-    blocks = _diagonal_blocks(csr, nc)
+    blocks = diagonal_blocks(csr, nc)
     base_rho = split_rho(blocks)
     rho = base_rho.copy()
     diagonal = np.abs(csr.diagonal())
@@ -317,8 +317,8 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
     u = np.empty(m)
 
     if warm_sweeps > 0:
-        _nsgs(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, warm_sweeps, False)
-    error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)  # also u = W r + q
+        nsgs_sweeps(Sweeping(w_indptr, w_indices, w_data, q, mu, blocks), r, tol, warm_sweeps, False)
+    error = fill_velocity_error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)  # also u = W r + q
     best_r, best_error = r.copy(), error
     if error <= tol:
         return best_r, 0, best_error, 0
@@ -368,7 +368,7 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
                 break
             step *= 0.5
         r += step * direction
-        error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
+        error = fill_velocity_error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
 
         best_error = _keep_best(r, error, best_r, best_error)
         if error <= tol:
@@ -379,9 +379,9 @@ def _solve_unit(csr, q, mu, r, tol, max_iterations, warm_sweeps):
             # stalled: Gauss–Seidel sweeps from here (twice as many as last time), another ρ
             restarts += 1
             sweeps = WATCHDOG_SWEEPS * 2 ** min(restarts - 1, WATCHDOG_DOUBLINGS)
-            _nsgs(w_indptr, w_indices, w_data, q, mu, blocks, r, tol, sweeps, False)
+            nsgs_sweeps(Sweeping(w_indptr, w_indices, w_data, q, mu, blocks), r, tol, sweeps, False)
             rho = RHO_FACTORS[(restarts - 1) % len(RHO_FACTORS)] * base_rho
-            error = _error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
+            error = fill_velocity_error(w_indptr, w_indices, w_data, q, mu, r, u, False, norm_q)
             best_error = _keep_best(r, error, best_r, best_error)
             if error <= tol:  # as when it was kept: best_error > tol until now, so this error is the best
                 return best_r, iteration, best_error, restarts

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..collision import GRANULARITIES, NORMALS, collide_keeping
+from ..collision import GRANULARITIES, NORMALS, DetectionSettings, collide_keeping
 from ..contacts import Contacts
 from ..validation import check_choices, check_counts, check_flags, number
 
@@ -94,20 +94,10 @@ class CollisionOptions:
         manifolds to carry; pairs that moved less than ``tolerance`` [m] keep theirs from
         ``manifolds`` (last step's; None or 0: nothing kept, as ``collide``); particle_motion
         (P, 3) [m]: the particles' predicted displacements, for cloth self-contact (None: the sweep)."""
-        return collide_keeping(
-            model,
-            state,
-            manifolds,
-            tolerance,
-            self.contact_margin,
-            sweep,
-            self.granularity,
-            self.normal,
-            self.samples,
-            self.cloth_samples,
-            particle_motion,
-            self.cloth_faces,
+        settings = DetectionSettings(
+            self.contact_margin, self.granularity, self.normal, self.samples, self.cloth_samples, self.cloth_faces
         )
+        return collide_keeping(model, state, manifolds, tolerance, settings, sweep, particle_motion)
 
 
 @dataclass(frozen=True)

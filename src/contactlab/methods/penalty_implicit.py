@@ -37,6 +37,22 @@ if TYPE_CHECKING:
     from .penalty import Options
 
 
+GO_ON, STOP, HOLD = 0, 1, 2  # what ``pass_verdict`` says of a pass
+
+
+@njit(cache=True, inline="always")
+def pass_verdict(settled: bool, held: bool, passes: int, iterations: int, slipping: bool) -> int:
+    """After pass ``passes`` of the springs' fixed point (``implicit_spring_velocities`` and
+    ``implicit_velocities`` alike): STOP when the springs ``settled``, or when ``held`` slip
+    forces have had their ``iterations`` more passes; at pass ``iterations``, STOP when nothing is
+    ``slipping``, else HOLD the slip forces (and settle the engaged springs afresh); else GO_ON."""
+    if settled or (held and passes == 2 * iterations):
+        return STOP
+    if passes == iterations:
+        return HOLD if slipping else STOP
+    return GO_ON
+
+
 @njit(cache=True)
 def mass_blocks(
     body_mass: np.ndarray, body_inertia: np.ndarray, rotation: np.ndarray, particle_mass: np.ndarray
@@ -308,11 +324,10 @@ def implicit_spring_velocities(
                     slip_force[c, d]
                 )
                 slip_force[c, d] = force
-        if settled or (held and passes == 2 * settings.implicit_iterations):
+        verdict = pass_verdict(settled, held, passes, settings.implicit_iterations, slips.any())
+        if verdict == STOP:
             break
-        if passes == settings.implicit_iterations:
-            if not slips.any():
-                break
+        if verdict == HOLD:
             held = True  # unsettled slip forces: hold them, and settle the engaged springs afresh
             for c in range(C):
                 engaged[c] = guess[c]
@@ -399,11 +414,10 @@ def implicit_velocities(
             and np.allclose(new_slip_force, slip_force, rtol=1e-6, atol=1e-9 * max(1.0, limit.max(initial=0.0)))
         )
         engaged, sticks, slip_force = now_engaged, now_sticks, new_slip_force
-        if settled or (held and passes == 2 * options.implicit_iterations):
+        verdict = pass_verdict(settled, held, passes, options.implicit_iterations, bool(slips.any()))
+        if verdict == STOP:
             break
-        if passes == options.implicit_iterations:
-            if not slips.any():
-                break
+        if verdict == HOLD:
             held = True  # unsettled slip forces: hold them, and settle the engaged springs afresh
             engaged, sticks = guess, guess & (springs.friction > 0.0) & ~slips
             slip_force = slip_direction * np.where(guess, held_limit, 0.0)[:, None]

@@ -185,19 +185,8 @@ def solids(model: Model) -> tuple[list[Solid], list[Solid]]:
     state = model.initial
     bodies = []
     for b in range(model.body_count):
-        kind, size = _sized(model.body_shape[b], model.body_params[b])
-        vertices = hull_vertices(model, int(model.body_params[b, 0])) if kind == "convex" else None
-        bodies.append(
-            Solid(
-                kind,
-                size,
-                np.array(state.body_position[b]),
-                np.array(state.body_orientation[b]),
-                int(model.body_material[b]),
-                body=b,
-                vertices=vertices,
-            )
-        )
+        shape = (model.body_shape[b], model.body_params[b], int(model.body_material[b]))
+        bodies.append(_placed(model, shape, state.body_position[b], state.body_orientation[b], body=b))
     obstacles = []
     for o in range(model.obstacle_count):
         kind, size = _sized(model.obstacle_shape[o], model.obstacle_params[o])
@@ -219,18 +208,18 @@ def solids(model: Model) -> tuple[list[Solid], list[Solid]]:
                 )
             )
         else:
-            vertices = hull_vertices(model, int(params[0])) if kind == "convex" else None
-            obstacles.append(
-                Solid(
-                    kind,
-                    size,
-                    np.array(model.obstacle_position[o]),
-                    np.array(model.obstacle_orientation[o]),
-                    material,
-                    vertices=vertices,
-                )
-            )
+            shape = (model.obstacle_shape[o], params, material)
+            obstacles.append(_placed(model, shape, model.obstacle_position[o], model.obstacle_orientation[o]))
     return bodies, obstacles
+
+
+def _placed(model: Model, shape: tuple, position: np.ndarray, orientation: np.ndarray, body: int = -1) -> Solid:
+    """The Solid of a body or an obstacle that stands somewhere (not a plane or a mesh): its
+    ``shape`` = (kind, params (4,), material), at ``position`` with ``orientation``; a hull's
+    vertices with it."""
+    kind, size = _sized(shape[0], shape[1])
+    vertices = hull_vertices(model, int(shape[1][0])) if kind == "convex" else None
+    return Solid(kind, size, np.array(position), np.array(orientation), shape[2], body=body, vertices=vertices)
 
 
 def _z_onto(normal: np.ndarray) -> np.ndarray:

@@ -131,7 +131,7 @@ class Choice:
                 field, f"the {self.what} {show(value)} is not supported yet; use one of {', '.join(self.values)}"
             )
         if value not in self.values:
-            raise InputError(field, f"unknown {self.what} {show(value)}{_did_you_mean(value, self.values)}")
+            raise InputError(field, f"unknown {self.what} {show(value)}{did_you_mean(value, self.values)}")
         return value
 
     def describe(self) -> str:
@@ -340,9 +340,7 @@ class MethodTables:
             raise InputError(field, f"expected tables [method.NAME], found {show(value)}")
         for name, table in value.items():
             if name not in self.names:
-                raise InputError(
-                    path_join(field, name), f"unknown method {show(name)}{_did_you_mean(name, self.names)}"
-                )
+                raise InputError(path_join(field, name), f"unknown method {show(name)}{did_you_mean(name, self.names)}")
             if not isinstance(table, dict):
                 raise InputError(path_join(field, name), f"expected a table of options, found {show(table)}")
         return {name: dict(table) for name, table in value.items()}
@@ -370,7 +368,8 @@ def taking(name: str, table: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
     return tuple(shape for shape, names in table.items() if name in names)
 
 
-def _did_you_mean(word, known):
+def did_you_mean(word: object, known: Collection[str]) -> str:
+    """The end of a message naming an unknown ``word``: the closest of ``known``, else all of them."""
     close = difflib.get_close_matches(str(word), list(known), n=1)
     if close:
         return f"; did you mean {show(close[0])}?"
@@ -514,7 +513,7 @@ def validate_table(
     shape_key = "shape" if shapes is not None else None
     for name in table:
         if name not in keys:
-            raise InputError(path_join(path, name), f"unknown key{_did_you_mean(name, keys)}")
+            raise InputError(path_join(path, name), f"unknown key{did_you_mean(name, keys)}")
     for name, key in keys.items():
         if key.required and name not in table:
             hint = f" (one of {', '.join(key.kind.values)})" if isinstance(key.kind, Choice) else ""
