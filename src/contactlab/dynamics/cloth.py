@@ -106,7 +106,9 @@ def _tension(springs, particle_position, particle_velocity, damped, s):
 
 
 @njit(cache=True)
-def forces(springs: SpringArrays, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool) -> np.ndarray:
+def forces(
+    springs: SpringArrays, particle_position: np.ndarray, particle_velocity: np.ndarray, damped: bool
+) -> np.ndarray:
     """``spring_forces`` on the model's spring arrays ``springs`` (``spring_arrays``): f_i = tension · u
     on i, −f_i on j, summed into (P, 3) [N] in one pass over the springs. The pulls on the i ends
     and on the j ends are summed apart, in spring order, and subtracted at the end: a fixed order
@@ -206,7 +208,9 @@ def spring_terms(springs: SpringArrays, particle_position: np.ndarray, clamp_com
     S = spring_particles.shape[0]
     axis, along, across = np.empty((S, 3)), np.empty(S), np.empty(S)
     for s in range(S):
-        length, axis[s, 0], axis[s, 1], axis[s, 2] = _axis(particle_position, spring_particles[s, 0], spring_particles[s, 1])
+        length, axis[s, 0], axis[s, 1], axis[s, 2] = _axis(
+            particle_position, spring_particles[s, 0], spring_particles[s, 1]
+        )
         transverse = 1.0 - rest_length[s] / length if length > TINY_LENGTH else 0.0
         if clamp_compressed:
             transverse = max(transverse, 0.0)
@@ -216,19 +220,17 @@ def spring_terms(springs: SpringArrays, particle_position: np.ndarray, clamp_com
 
 
 @njit(cache=True)
-def spring_product(operator: SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
-    """out = A x (P, 3) for the ``SpringOperator`` A and x (P, 3), in spring order (the same bits
-    on every rerun); a pinned particle's row 0 (its x is 0 wherever this is used)."""
-    mass, particles = operator.mass, operator.particles
-    for p in range(x.shape[0]):
-        for a in range(3):
-            out[p, a] = mass[p] * x[p, a]
+def add_spring_terms(terms: SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
+    """out += Σ_s (C_s (x_i − x_j) on i, − C_s (x_i − x_j) on j) for x and out (P, 3), each
+    spring's C_s = along_s u uᵀ + across_s I of ``terms`` (a ``SpringOperator``'s, or K's own
+    terms: then out −= K x), in spring order."""
+    particles = terms.particles
     for s in range(particles.shape[0]):
         i, j = particles[s, 0], particles[s, 1]
-        u = operator.axis[s]
+        u = terms.axis[s]
         d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
-        along = operator.along[s] * (u[0] * d0 + u[1] * d1 + u[2] * d2)
-        across = operator.across[s]
+        along = terms.along[s] * (u[0] * d0 + u[1] * d1 + u[2] * d2)
+        across = terms.across[s]
         w0, w1, w2 = along * u[0] + across * d0, along * u[1] + across * d1, along * u[2] + across * d2
         out[i, 0] += w0
         out[i, 1] += w1
@@ -236,6 +238,16 @@ def spring_product(operator: SpringOperator, x: np.ndarray, out: np.ndarray) -> 
         out[j, 0] -= w0
         out[j, 1] -= w1
         out[j, 2] -= w2
+
+
+@njit(cache=True)
+def spring_product(operator: SpringOperator, x: np.ndarray, out: np.ndarray) -> None:
+    """out = A x (P, 3) for the ``SpringOperator`` A and x (P, 3), in spring order (the same bits
+    on every rerun); a pinned particle's row 0 (its x is 0 wherever this is used)."""
+    for p in range(x.shape[0]):
+        for a in range(3):
+            out[p, a] = operator.mass[p] * x[p, a]
+    add_spring_terms(operator, x, out)
     for p in range(x.shape[0]):
         if operator.pinned[p]:
             out[p] = 0.0
@@ -308,24 +320,14 @@ def backward_euler_system(
     particles, damping = springs[0], springs[3]
     force = forces(springs, x, v, True)
     axis, along, across = spring_terms(springs, x, True)
-    pull = np.zeros(x.shape)  # K v
-    for s in range(particles.shape[0]):
-        i, j = particles[s, 0], particles[s, 1]
-        u = axis[s]
-        d0, d1, d2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
-        stretch = along[s] * (u[0] * d0 + u[1] * d1 + u[2] * d2)
-        w0, w1, w2 = stretch * u[0] + across[s] * d0, stretch * u[1] + across[s] * d1, stretch * u[2] + across[s] * d2
-        pull[i, 0] += w0
-        pull[i, 1] += w1
-        pull[i, 2] += w2
-        pull[j, 0] -= w0
-        pull[j, 1] -= w1
-        pull[j, 2] -= w2
+    stiffness = SpringOperator(particles, along, across, axis, particle_mass, particle_pinned)
+    pull = np.zeros(x.shape)  # − K v
+    add_spring_terms(stiffness, v, pull)
     rhs = np.empty(x.shape)
     for p in range(x.shape[0]):
         for a in range(3):
             held = particle_pinned[p]
-            rhs[p, a] = 0.0 if held else h * ((particle_mass[p] * gravity[a] + force[p, a]) + h * pull[p, a])
+            rhs[p, a] = 0.0 if held else h * ((particle_mass[p] * gravity[a] + force[p, a]) - h * pull[p, a])
     operator = SpringOperator(
         particles, h * damping + h * h * along, h * h * across, axis, particle_mass, particle_pinned
     )
@@ -333,7 +335,9 @@ def backward_euler_system(
 
 
 @njit(cache=True)
-def blocks_of(springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool) -> tuple[np.ndarray, np.ndarray]:
+def blocks_of(
+    springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool
+) -> tuple[np.ndarray, np.ndarray]:
     """``jacobian_blocks`` on the model's spring arrays ``springs`` (``spring_arrays``), (S,):
     K_s = along u uᵀ + across I (``spring_terms``) and D_s = c u uᵀ (S, 3, 3)."""
     damping = springs[3]

@@ -25,8 +25,9 @@ Shapes: B bodies, P particles. Forces [N], torques [N m], world frame.
 from __future__ import annotations
 
 from collections import namedtuple
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba.extending import overload
@@ -220,7 +221,9 @@ def particle_system(model: Model, state: State, dt: float) -> ParticleSystem:
     them together (``solve_particle_system``)."""
     pattern = spring_blocks(model)
     operator, rhs = _system_of(model, state, dt)
-    return ParticleSystem(block_matrix(pattern, operator_blocks(pattern, operator)), rhs.reshape(-1), coupled_particles(model))
+    return ParticleSystem(
+        block_matrix(pattern, operator_blocks(pattern, operator)), rhs.reshape(-1), coupled_particles(model)
+    )
 
 
 def _system_of(model: Model, state: State, dt: float) -> tuple[SpringOperator, np.ndarray]:
@@ -312,9 +315,7 @@ def solve_coupled(
     return delta, iterations
 
 
-def spring_step(
-    model: Model, state: State, dt: float, tolerance: float = 1e-6, solver: str = "cg"
-) -> np.ndarray:
+def spring_step(model: Model, state: State, dt: float, tolerance: float = 1e-6, solver: str = "cg") -> np.ndarray:
     """Δv (P, 3) [m/s] of the particles' backward Euler step (``cloth.backward_euler_system``) at
     ``state`` over dt [s], as ``solve_particle_system`` gives it, without SciPy unless the conjugate
     gradients do not converge or ``solver`` is "direct": ``backward_euler_solve`` on the system's

@@ -20,8 +20,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..compiling import njit
-from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..dynamics.integrators import PRODUCTS, block_conjugate_gradients, factor_symmetric
+from ..dynamics.integrators import conjugate_gradients as sparse_conjugate_gradients
 from ..ordered_sums import ordered_dot
 from ..rotations import world_tensors
 from .jacobian_rows import ContactRows, along_rows, contact_velocity, row_products
