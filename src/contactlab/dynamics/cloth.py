@@ -173,22 +173,6 @@ def block_matrix(pattern: BlockPattern, value: np.ndarray) -> sp.csr_matrix:
     return sp.bsr_matrix((value, pattern.column, pattern.start), shape=(n, n)).tocsr()
 
 
-@njit(cache=True)
-def pattern_values(pattern: BlockPattern, blocks: np.ndarray) -> np.ndarray:
-    """The blocks (nb, 3, 3) of the matrix with −B_s on each spring's (i, i) and (j, j) blocks and
-    +B_s on its (i, j) and (j, i) blocks, for the springs' blocks B (S, 3, 3); blocks shared by
-    several springs are summed in spring order (reruns give the same bits)."""
-    value = np.zeros((pattern.column.shape[0], 3, 3))
-    slots = pattern.slots
-    for s in range(slots.shape[0]):
-        for block in range(4):
-            sign = -1.0 if block < 2 else 1.0
-            for a in range(3):
-                for b in range(3):
-                    value[slots[s, block], a, b] += sign * blocks[s, a, b]
-    return value
-
-
 SpringOperator = namedtuple("SpringOperator", ("particles", "along", "across", "axis", "mass", "pinned"))
 SpringOperator.__doc__ = """The backward Euler matrix A = M − h D − h² K of the particles, matrix-free: each spring's
 share C_s = h D_s + h² K_s = along_s u uᵀ + across_s I (``spring_terms``), so that
@@ -334,33 +318,6 @@ def backward_euler_system(
     return operator, rhs
 
 
-@njit(cache=True)
-def blocks_of(
-    springs: SpringArrays, particle_position: np.ndarray, clamp_compressed: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """``jacobian_blocks`` on the model's spring arrays ``springs`` (``spring_arrays``), (S,):
-    K_s = along u uᵀ + across I (``spring_terms``) and D_s = c u uᵀ (S, 3, 3)."""
-    damping = springs[3]
-    axis, along, across = spring_terms(springs, particle_position, clamp_compressed)
-    S = axis.shape[0]
-    K, D = np.empty((S, 3, 3)), np.empty((S, 3, 3))
-    for s in range(S):
-        for a in range(3):
-            for b in range(3):
-                outer = axis[s, a] * axis[s, b]
-                K[s, a, b] = along[s] * outer + (across[s] if a == b else 0.0)
-                D[s, a, b] = damping[s] * outer
-    return K, D
-
-
-def jacobian_blocks(
-    model: Model, particle_position: np.ndarray, clamp_compressed: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each spring's blocks K_s [N/m] and D_s [N s/m] (S, 3, 3) of the module docstring, at
-    positions (P, 3) [m]; ``clamp_compressed`` as in ``spring_jacobians``."""
-    return blocks_of(spring_arrays(model), _float_rows(particle_position), clamp_compressed)
-
-
 def spring_jacobians(
     model: Model,
     particle_position: np.ndarray,
@@ -383,9 +340,13 @@ def spring_jacobians(
 
         empty = sp.csr_matrix((3 * count, 3 * count))
         return empty, empty.copy()
-    stiffness, damping = jacobian_blocks(model, particle_position, clamp_compressed)
-    pattern = spring_blocks(model)
-    return tuple(block_matrix(pattern, pattern_values(pattern, blocks)) for blocks in (stiffness, damping))
+    springs, pattern = spring_arrays(model), spring_blocks(model)
+    axis, along, across = spring_terms(springs, _float_rows(particle_position), clamp_compressed)
+    massless, free = np.zeros(count), np.zeros(count, dtype=bool)
+    # K = −(the matrix whose spring shares are K_s, massless): −Σ K_s on the diagonal, +K_s off it; D likewise
+    K = SpringOperator(springs.particles, along, across, axis, massless, free)
+    D = SpringOperator(springs.particles, springs.damping, np.zeros_like(across), axis, massless, free)
+    return block_matrix(pattern, -operator_blocks(pattern, K)), block_matrix(pattern, -operator_blocks(pattern, D))
 
 
 def spring_energy(model: Model, particle_position: np.ndarray) -> float:

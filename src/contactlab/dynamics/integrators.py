@@ -219,11 +219,8 @@ def particle_system(model: Model, state: State, dt: float) -> ParticleSystem:
 
     A method may add its own implicit terms (contact springs) to ``matrix`` and ``rhs`` and solve
     them together (``solve_particle_system``)."""
-    pattern = spring_blocks(model)
     operator, rhs = _system_of(model, state, dt)
-    return ParticleSystem(
-        block_matrix(pattern, operator_blocks(pattern, operator)), rhs.reshape(-1), coupled_particles(model)
-    )
+    return ParticleSystem(_matrix_of(model, operator), rhs.reshape(-1), coupled_particles(model))
 
 
 def _system_of(model: Model, state: State, dt: float) -> tuple[SpringOperator, np.ndarray]:
@@ -237,6 +234,13 @@ def _system_of(model: Model, state: State, dt: float) -> tuple[SpringOperator, n
         np.array(state.particle_velocity, dtype=float),
         dt,
     )
+
+
+def _matrix_of(model: Model, operator: SpringOperator) -> sp.csr_matrix:
+    """The SciPy CSR matrix (3P, 3P) of ``model``'s backward Euler ``operator``, on its fixed block
+    pattern (``cloth.spring_blocks``)."""
+    pattern = spring_blocks(model)
+    return block_matrix(pattern, operator_blocks(pattern, operator))
 
 
 @derived
@@ -329,8 +333,9 @@ def spring_step(model: Model, state: State, dt: float, tolerance: float = 1e-6, 
         delta, _, converged = backward_euler_solve(operator, rhs, coupled, guess, (tolerance, most))
         if converged:
             return delta
-    matrix = block_matrix(spring_blocks(model), operator_blocks(spring_blocks(model), operator))
-    return solve_coupled(matrix, rhs.reshape(-1), np.repeat(coupled, 3), tolerance, "direct")[0].reshape(-1, 3)
+    return solve_coupled(_matrix_of(model, operator), rhs.reshape(-1), np.repeat(coupled, 3), tolerance, "direct")[
+        0
+    ].reshape(-1, 3)
 
 
 @njit(cache=True)
